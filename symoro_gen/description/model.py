@@ -1,0 +1,159 @@
+"""Value types describing a robot: MDH rows, drive chain, the whole robot."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
+
+import sympy as sp
+
+from ..params import DRIVE_KINDS, INERTIAL_KINDS, param_name
+
+REVOLUTE, PRISMATIC, FIXED = 0, 1, 2
+
+
+def q_symbol(j: int) -> sp.Symbol:
+    """Joint position symbol of joint j (frame j)."""
+    return sp.Symbol(f"q{j}", real=True)
+
+
+def dq_symbol(j: int) -> sp.Symbol:
+    return sp.Symbol(f"dq{j}", real=True)
+
+
+def ddq_symbol(j: int) -> sp.Symbol:
+    return sp.Symbol(f"ddq{j}", real=True)
+
+
+@dataclass(frozen=True)
+class MdhRow:
+    """One frame of a Khalil-Kleinfinger MDH table.
+
+    T(ant, j) = Rot(z, gamma) Trans(z, b) Rot(x, alpha) Trans(x, d) Rot(z, theta) Trans(z, r).
+    Geometric fields are sympy expressions; ``theta`` (revolute) or ``r`` (prismatic) contains
+    the joint symbol ``q<j>``.
+    """
+
+    j: int
+    ant: int
+    sigma: int
+    mu: int
+    gamma: sp.Expr
+    b: sp.Expr
+    alpha: sp.Expr
+    d: sp.Expr
+    theta: sp.Expr
+    r: sp.Expr
+    drive: tuple[str, ...] = DRIVE_KINDS
+
+    @property
+    def is_moving(self) -> bool:
+        return self.sigma in (REVOLUTE, PRISMATIC)
+
+
+@dataclass(frozen=True)
+class DriveChain:
+    """Motor-side to joint-side mapping (for recordings made on the motor side).
+
+    ``q_motor = diag(ratios) @ coupling @ (directions * (q_joint - offsets))`` in the
+    convention: motor k turns by ``ratios[k] * sum_j coupling[k][j] * q_j``;
+    joint torques are ``tau = (diag(ratios) @ coupling)^T tau_motor``.
+    """
+
+    ratios: tuple[float, ...]
+    coupling: tuple[tuple[float, ...], ...]
+    offsets: tuple[float, ...]
+    directions: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """A parsed, validated robot file."""
+
+    name: str
+    rows: tuple[MdhRow, ...]
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    values: Mapping[str, float] = field(default_factory=dict)
+    payload: int | None = None
+    nominal: Mapping[str, float] | None = None
+    source: str = ""
+    file: str = "<string>"
+    file_hash: str = ""
+    drive_chain: DriveChain | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "values", MappingProxyType(dict(self.values)))
+        if self.nominal is not None:
+            object.__setattr__(self, "nominal", MappingProxyType(dict(self.nominal)))
+
+    # ---- derived views -------------------------------------------------
+    @property
+    def joints(self) -> tuple[MdhRow, ...]:
+        """The moving frames (revolute or prismatic), in joint order."""
+        return tuple(r for r in self.rows if r.is_moving)
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joints)
+
+    def row(self, j: int) -> MdhRow:
+        return self.rows[j - 1]
+
+    @property
+    def q(self) -> tuple[sp.Symbol, ...]:
+        return tuple(q_symbol(r.j) for r in self.joints)
+
+    @property
+    def dq(self) -> tuple[sp.Symbol, ...]:
+        return tuple(dq_symbol(r.j) for r in self.joints)
+
+    @property
+    def ddq(self) -> tuple[sp.Symbol, ...]:
+        return tuple(ddq_symbol(r.j) for r in self.joints)
+
+    @property
+    def standard_names(self) -> tuple[str, ...]:
+        """Names of the robot's standard parameters (payload excluded), column order."""
+        names: list[str] = []
+        for r in self.joints:
+            names += [param_name(k, r.j) for k in INERTIAL_KINDS]
+            names += [param_name(k, r.j) for k in DRIVE_KINDS if k in r.drive]
+        return tuple(names)
+
+    @property
+    def payload_names(self) -> tuple[str, ...]:
+        if self.payload is None:
+            return ()
+        return tuple(param_name(k, self.payload) for k in INERTIAL_KINDS)
+
+    @property
+    def geometry_symbols(self) -> tuple[sp.Symbol, ...]:
+        return tuple(sp.Symbol(k, real=True) for k in sorted(self.values))
+
+    def geometry_subs(self) -> dict[sp.Symbol, float]:
+        return {sp.Symbol(k, real=True): float(v) for k, v in self.values.items()}
+
+    def children(self, j: int) -> tuple[int, ...]:
+        return tuple(r.j for r in self.rows if r.ant == j)
+
+    def ancestors(self, j: int) -> tuple[int, ...]:
+        """Frames from j's antecedent down to the base (0 excluded)."""
+        out = []
+        a = self.row(j).ant
+        while a != 0:
+            out.append(a)
+            a = self.row(a).ant
+        return tuple(out)
+
+    def nominal_vector(self) -> "tuple[float, ...] | None":
+        """Nominal standard parameters in ``standard_names`` order (missing ones 0), or None."""
+        if self.nominal is None:
+            return None
+        return tuple(float(self.nominal.get(n, 0.0)) for n in self.standard_names)
+
+    def nominal_payload(self) -> "tuple[float, ...] | None":
+        if self.nominal is None or self.payload is None:
+            return None
+        if not any(n in self.nominal for n in self.payload_names):
+            return None
+        return tuple(float(self.nominal.get(n, 0.0)) for n in self.payload_names)

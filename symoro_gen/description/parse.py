@@ -1,0 +1,327 @@
+"""Parse and validate TOML robot files into :class:`RobotDescription`.
+
+Every problem found is collected and reported at once in a :class:`RobotFileError`
+naming file, frame and field.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+from pathlib import Path
+
+import sympy as sp
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - python < 3.11
+    import tomli as tomllib  # type: ignore
+
+from ..errors import Problem, RobotFileError
+from ..params import DRIVE_KINDS, INERTIAL_KINDS, PARAM_KINDS
+from .expr import ExprError, parse_expression
+from .model import FIXED, PRISMATIC, REVOLUTE, DriveChain, MdhRow, RobotDescription, q_symbol
+
+TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain"}
+FRAME_REQUIRED = ("j", "ant", "sigma", "alpha", "d", "theta", "r")
+FRAME_OPTIONAL = ("mu", "gamma", "b", "drive")
+CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_RESERVED = {"q", "pi", "sin", "cos", "tan", "sqrt", "atan2"}
+
+
+def robots_dir() -> Path:
+    """Folder holding the shipped robot files (``$SYMORO_ROBOTS`` overrides)."""
+    env = os.environ.get("SYMORO_ROBOTS")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "robots"
+
+
+def resolve_robot_path(name_or_path: str | os.PathLike) -> Path:
+    """A robot name in ``robots/`` (``"lwr4"``) or the path of a ``.toml`` file."""
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or p.exists():
+        if not p.exists():
+            raise RobotFileError([Problem(str(p), "", "", "file not found")])
+        return p
+    cand = robots_dir() / f"{name_or_path}.toml"
+    if not cand.exists():
+        known = sorted(x.stem for x in robots_dir().glob("*.toml"))
+        raise RobotFileError(
+            [Problem(str(name_or_path), "", "", f"no such robot; known robots: {', '.join(known) or 'none'}")]
+        )
+    return cand
+
+
+def load_robot(name_or_path: str | os.PathLike) -> RobotDescription:
+    """Parse a robot given by name (``robots/<name>.toml``) or path."""
+    path = resolve_robot_path(name_or_path)
+    return parse_robot_text(path.read_bytes().decode("utf-8"), file=str(path))
+
+
+def parse_robot(path: str | os.PathLike) -> RobotDescription:
+    """Parse the TOML robot file at ``path``."""
+    p = Path(path)
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise RobotFileError([Problem(str(p), "", "", "file not found")]) from None
+    except UnicodeDecodeError as exc:
+        raise RobotFileError([Problem(str(p), "", "", f"not UTF-8 text ({exc.reason})")]) from None
+    return parse_robot_text(text, file=str(p))
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
+    """Parse robot-file text; ``file`` is used in messages only."""
+    probs: list[Problem] = []
+
+    def bad(where: str, fld: str, msg: str) -> None:
+        probs.append(Problem(file, where, fld, msg))
+
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RobotFileError([Problem(file, "", "", f"malformed TOML: {exc}")]) from None
+
+    for k in sorted(set(doc) - TOP_KEYS):
+        bad("top level", k, f"unknown field (allowed: {', '.join(sorted(TOP_KEYS))})")
+
+    name = doc.get("name", Path(file).stem if file != "<string>" else "")
+    if not isinstance(name, str) or not _NAME_RE.match(name or ""):
+        bad("top level", "name", f"robot name must be an identifier, got {name!r}")
+        name = "robot"
+    source = doc.get("source", "")
+    if not isinstance(source, str):
+        bad("top level", "source", "must be a string")
+        source = ""
+
+    gravity = doc.get("gravity", [0.0, 0.0, -9.81])
+    if not (isinstance(gravity, list) and len(gravity) == 3 and all(_is_number(g) for g in gravity)):
+        bad("top level", "gravity", f"must be a list of 3 numbers, got {gravity!r}")
+        gravity = [0.0, 0.0, -9.81]
+
+    default_drive = doc.get("drive", list(DRIVE_KINDS))
+    default_drive = _check_drive(default_drive, "top level", bad) or ()
+
+    # geometric constants
+    values_raw = doc.get("values", {})
+    values: dict[str, float] = {}
+    if not isinstance(values_raw, dict):
+        bad("[values]", "", "must be a table of NAME = number")
+    else:
+        for k, v in values_raw.items():
+            if k in _RESERVED or not _NAME_RE.match(k):
+                bad("[values]", k, "reserved or invalid symbol name")
+            elif not _is_number(v):
+                bad("[values]", k, f"value must be a number, got {v!r}")
+            else:
+                values[k] = float(v)
+
+    frames = doc.get("frames")
+    rows: list[MdhRow] = []
+    used_symbols: dict[str, str] = {}
+    if not isinstance(frames, list) or not frames:
+        bad("top level", "frames", "missing: the MDH table must be given as [[frames]] entries")
+        frames = []
+    for idx, fr in enumerate(frames, start=1):
+        where = f"frame {fr.get('j', idx) if isinstance(fr, dict) else idx}"
+        if not isinstance(fr, dict):
+            bad(where, "", "each [[frames]] entry must be a table")
+            continue
+        for k in sorted(set(fr) - set(FRAME_REQUIRED) - set(FRAME_OPTIONAL)):
+            bad(where, k, f"unknown field (allowed: {', '.join(FRAME_REQUIRED + FRAME_OPTIONAL)})")
+        missing = [k for k in FRAME_REQUIRED if k not in fr]
+        for k in missing:
+            bad(where, k, "missing field")
+        j = fr.get("j")
+        if not (isinstance(j, int) and not isinstance(j, bool)) or j != idx:
+            bad(where, "j", f"frames must be numbered 1, 2, ... in order; entry {idx} has j = {j!r}")
+            j = idx
+        sigma = fr.get("sigma", 0)
+        if sigma not in (0, 1, 2) or isinstance(sigma, bool):
+            bad(where, "sigma", f"must be 0 (revolute), 1 (prismatic) or 2 (fixed), got {sigma!r}")
+            sigma = 0
+        ant = fr.get("ant", j - 1)
+        if not (isinstance(ant, int) and not isinstance(ant, bool)):
+            bad(where, "ant", f"must be an integer frame number, got {ant!r}")
+            ant = j - 1
+        elif ant < 0 or ant >= j:
+            what = "points forward (ant must be < j)" if ant >= j else "is out of range (ant >= 0)"
+            bad(where, "ant", f"antecedent {ant} {what}")
+            ant = j - 1
+        mu = fr.get("mu", 0 if sigma == FIXED else 1)
+        if mu not in (0, 1) or isinstance(mu, bool):
+            bad(where, "mu", f"must be 0 (passive) or 1 (actuated), got {mu!r}")
+            mu = 1
+        if sigma == FIXED and mu == 1:
+            bad(where, "mu", "a fixed frame (sigma = 2) cannot be actuated")
+        drive = fr.get("drive", None)
+        if drive is None:
+            drive = tuple(default_drive) if (sigma != FIXED and mu == 1) else ()
+        else:
+            drive = _check_drive(drive, where, bad) or ()
+            if sigma == FIXED and drive:
+                bad(where, "drive", "a fixed frame has no drive chain")
+        q = q_symbol(j)
+        syms = {k: sp.Symbol(k, real=True) for k in values_raw if isinstance(k, str)} if isinstance(values_raw, dict) else {}
+        syms["q"] = q
+        ex: dict[str, sp.Expr] = {}
+        for k in ("gamma", "b", "alpha", "d", "theta", "r"):
+            raw = fr.get(k, 0)
+            try:
+                e = parse_expression(raw, syms)
+            except ExprError as exc:
+                bad(where, k, str(exc))
+                e = sp.Integer(0)
+            for s in e.free_symbols:
+                if s != q:
+                    used_symbols.setdefault(s.name, where)
+            ex[k] = e
+        # joint variable placement
+        var_field = {REVOLUTE: "theta", PRISMATIC: "r"}.get(sigma)
+        for k, e in ex.items():
+            if q in e.free_symbols and k != var_field:
+                if sigma == FIXED:
+                    bad(where, k, "a fixed frame (sigma = 2) has no joint variable q")
+                else:
+                    bad(where, k, f"joint variable q may only appear in {var_field} for sigma = {sigma}")
+        if var_field and var_field not in missing:
+            e = ex[var_field]
+            if q not in e.free_symbols:
+                bad(where, var_field, f"must contain the joint variable q (e.g. \"q\" or \"q - pi/2\"), got {fr.get(var_field)!r}")
+            elif sp.diff(e, q) not in (1, -1) or sp.diff(e, q, 2) != 0:
+                bad(where, var_field, f"must be q + constant (or -q + constant), got {fr.get(var_field)!r}")
+        rows.append(MdhRow(j=j, ant=ant, sigma=sigma, mu=mu, drive=tuple(drive), **ex))
+
+    for s, where in sorted(used_symbols.items()):
+        if s not in values:
+            bad(where, "values", f"symbol {s!r} has no numeric value (add it under [values])")
+
+    # moving frames first, fixed ones after
+    seen_fixed = None
+    for r in rows:
+        if r.sigma == FIXED:
+            seen_fixed = seen_fixed or r.j
+        elif seen_fixed is not None:
+            bad(f"frame {r.j}", "sigma", f"moving frames must come before fixed ones (frame {seen_fixed} is fixed)")
+    if rows and not any(r.is_moving for r in rows):
+        bad("top level", "frames", "the robot has no moving joint")
+
+    payload = doc.get("payload")
+    if payload is not None:
+        if not (isinstance(payload, int) and not isinstance(payload, bool)):
+            bad("top level", "payload", f"must be the frame number of the payload, got {payload!r}")
+            payload = None
+        elif not (1 <= payload <= len(rows)):
+            bad("top level", "payload", f"payload frame {payload} does not exist (frames 1..{len(rows)})")
+            payload = None
+        elif rows[payload - 1].sigma != FIXED:
+            bad(f"frame {payload}", "sigma", "the payload frame must be fixed (sigma = 2)")
+            payload = None
+
+    nominal = None
+    if "nominal" in doc:
+        raw = doc["nominal"]
+        nominal = {}
+        if not isinstance(raw, dict):
+            bad("[nominal]", "", "must be a table of PARAM = number")
+        else:
+            allowed = set()
+            for r in rows:
+                if r.is_moving:
+                    allowed |= {f"{k}{r.j}" for k in INERTIAL_KINDS}
+                    allowed |= {f"{k}{r.j}" for k in r.drive}
+            if payload is not None:
+                allowed |= {f"{k}{payload}" for k in INERTIAL_KINDS}
+            for k, v in raw.items():
+                if k not in allowed:
+                    bad("[nominal]", k, "not a standard parameter of this robot")
+                elif not _is_number(v):
+                    bad("[nominal]", k, f"value must be a number, got {v!r}")
+                else:
+                    nominal[k] = float(v)
+
+    chain = None
+    if "drive_chain" in doc:
+        chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in rows), bad)
+
+    if probs:
+        raise RobotFileError(probs)
+    return RobotDescription(
+        name=name,
+        rows=tuple(rows),
+        gravity=tuple(float(g) for g in gravity),
+        values=values,
+        payload=payload,
+        nominal=nominal,
+        source=source,
+        file=file,
+        file_hash=hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        drive_chain=chain,
+    )
+
+
+def _check_drive(drive, where, bad):
+    if not isinstance(drive, list) or not all(isinstance(x, str) for x in drive):
+        bad(where, "drive", f"must be a list among {list(DRIVE_KINDS)}, got {drive!r}")
+        return None
+    unknown = [x for x in drive if x.upper() not in DRIVE_KINDS]
+    if unknown:
+        bad(where, "drive", f"unknown drive-chain parameter(s) {unknown}; allowed {list(DRIVE_KINDS)}")
+        return None
+    up = {x.upper() for x in drive}
+    return tuple(k for k in DRIVE_KINDS if k in up)
+
+
+def _parse_chain(raw, n, bad) -> DriveChain | None:
+    where = "[drive_chain]"
+    if not isinstance(raw, dict):
+        bad(where, "", "must be a table")
+        return None
+    for k in sorted(set(raw) - CHAIN_KEYS):
+        bad(where, k, f"unknown field (allowed: {', '.join(sorted(CHAIN_KEYS))})")
+    ok = True
+
+    def vec(key, default):
+        nonlocal ok
+        v = raw.get(key, default)
+        if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
+            bad(where, key, f"must be a list of {n} numbers, got {v!r}")
+            ok = False
+            return default
+        return [float(x) for x in v]
+
+    ratios = vec("ratios", [1.0] * n)
+    offsets = vec("offsets", [0.0] * n)
+    directions = vec("directions", [1.0] * n)
+    if any(x == 0 for x in ratios):
+        bad(where, "ratios", "gear ratios must be non-zero")
+        ok = False
+    if any(x not in (1.0, -1.0) for x in directions):
+        bad(where, "directions", "joint directions must be +1 or -1")
+        ok = False
+    eye = [[1.0 if i == k else 0.0 for k in range(n)] for i in range(n)]
+    coupling = raw.get("coupling", eye)
+    if not (isinstance(coupling, list) and len(coupling) == n and all(
+        isinstance(row, list) and len(row) == n and all(_is_number(x) for x in row) for row in coupling
+    )):
+        bad(where, "coupling", f"must be a {n}x{n} matrix (list of {n} lists of {n} numbers)")
+        ok = False
+        coupling = eye
+    else:
+        import numpy as np
+
+        if abs(np.linalg.det(np.asarray(coupling, float))) < 1e-12:
+            bad(where, "coupling", "coupling matrix is singular")
+            ok = False
+    if not ok:
+        return None
+    return DriveChain(
+        ratios=tuple(ratios),
+        coupling=tuple(tuple(float(x) for x in row) for row in coupling),
+        offsets=tuple(offsets),
+        directions=tuple(directions),
+    )

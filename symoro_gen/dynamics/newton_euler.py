@@ -1,0 +1,220 @@
+"""Customized symbolic recursive Newton-Euler giving the regressor IDM_st.
+
+Forward recursion once (angular velocity, angular acceleration, linear acceleration of
+every frame origin, gravity included as an acceleration of the base); then, for each
+standard parameter, its elementary wrench on its own link is carried back towards the
+base and projected on every joint axis it meets (backward contributions per parameter).
+Intermediate variables are kept as named symbols (see :mod:`.graph`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+
+from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
+from ..params import INERTIAL_KINDS, param_name
+from .graph import ExprGraph, GraphBuilder
+from .transforms import constant_rotation, rot_z
+
+
+@dataclass(frozen=True)
+class SymbolicRegressor:
+    """The standard regressor IDM_st (n x n_st) and the payload one (n x 10), as a graph.
+
+    ``graph.outputs`` maps ``(i, name)`` to the entry on joint row ``i`` (0-based, in
+    ``joint_frames`` order) of the column of parameter ``name`` (standard or payload).
+    """
+
+    robot: RobotDescription
+    graph: ExprGraph
+    standard_names: tuple[str, ...]
+    payload_names: tuple[str, ...]
+    joint_frames: tuple[int, ...]
+
+    def column(self, name: str) -> dict[int, sp.Expr]:
+        return {i: e for (i, n), e in self.graph.outputs.items() if n == name}
+
+
+def joint_sign(row) -> int:
+    """+1 when the joint variable enters theta (or r) as +q, -1 for -q."""
+    e = row.theta if row.sigma == REVOLUTE else row.r
+    return int(sp.diff(e, q_symbol(row.j)))
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _matvec(M, v):
+    return [sum((M[i, k] * v[k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+
+
+def _matTvec(M, v):
+    return [sum((M[k, i] * v[k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+
+
+def _inertia_matrix(kind: str):
+    """The 3x3 inertia matrix that a unit value of ``kind`` contributes."""
+    E = sp.zeros(3, 3)
+    idx = {"XX": (0, 0), "XY": (0, 1), "XZ": (0, 2), "YY": (1, 1), "YZ": (1, 2), "ZZ": (2, 2)}[kind]
+    E[idx] = 1
+    E[idx[::-1]] = 1
+    return E
+
+
+def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegressor:
+    """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler.
+
+    Parameters
+    ----------
+    robot : RobotDescription
+    progress : callable, optional
+        Called as ``progress(stage, j)`` per link (for progress bars).
+
+    Returns
+    -------
+    SymbolicRegressor
+    """
+    g = GraphBuilder()
+    rows = robot.rows
+    nframes = len(rows)
+    joint_frames = tuple(r.j for r in robot.joints)
+    row_of = {f: i for i, f in enumerate(joint_frames)}
+
+    # per-frame rotation ant_R_j (entries simplified: named sin/cos) and position ant_P_j
+    R: dict[int, sp.Matrix] = {}
+    P: dict[int, list] = {}
+    for row in rows:
+        Rc = constant_rotation(row)
+        th = row.theta
+        if th.free_symbols - set(robot.geometry_symbols) or not th.is_number:
+            S = g.name(sp.sin(th), f"S{row.j}")
+            C = g.name(sp.cos(th), f"C{row.j}")
+            Rz = sp.Matrix([[C, -S, 0], [S, C, 0], [0, 0, 1]])
+        else:
+            Rz = rot_z(th)
+        Rm = (Rc * Rz).applyfunc(sp.expand)
+        R[row.j] = Rm
+        r_ = row.r
+        pos = rot_z(row.gamma) * sp.Matrix([row.d, -r_ * sp.sin(row.alpha), row.b + r_ * sp.cos(row.alpha)])
+        P[row.j] = [g.name(sp.expand(pos[i]), f"P{row.j}{'xyz'[i]}") for i in range(3)]
+
+    zero = [sp.Integer(0)] * 3
+    w = {0: zero}
+    wd = {0: zero}
+    # gravity enters as an upward acceleration of the base
+    vd = {0: [sp.Integer(int(-x)) if float(x).is_integer() else sp.Float(-x) for x in robot.gravity]}
+    U: dict[int, sp.Matrix] = {}
+
+    def u_matrix(j):
+        if j in U:
+            return U[j]
+        W, Wd = w[j], wd[j]
+        wx, wy, wz = W
+        m = sp.Matrix(
+            [
+                [-(wy * wy) - wz * wz, wx * wy - Wd[2], wx * wz + Wd[1]],
+                [wx * wy + Wd[2], -(wx * wx) - wz * wz, wy * wz - Wd[0]],
+                [wx * wz - Wd[1], wy * wz + Wd[0], -(wx * wx) - wy * wy],
+            ]
+        )
+        names = [["XX", "XY", "XZ"], ["YX", "YY", "YZ"], ["ZX", "ZY", "ZZ"]]
+        U[j] = sp.Matrix(3, 3, lambda a, b: g.name(sp.expand(m[a, b]), f"U{j}{names[a][b]}"))
+        return U[j]
+
+    for row in rows:
+        j, a = row.j, row.ant
+        Rm = R[j]
+        wa = _matTvec(Rm, w[a])
+        wa = g.vec([sp.expand(x) for x in wa], f"wi{j}")
+        wda = g.vec([sp.expand(x) for x in _matTvec(Rm, wd[a])], f"wdi{j}")
+        # acceleration of origin j in frame ant, then rotated
+        if a == 0:
+            acc_a = list(vd[0])
+        else:
+            Ua = u_matrix(a)
+            acc_a = [vd[a][i] + sum((Ua[i, k] * P[j][k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+            acc_a = g.vec([sp.expand(x) for x in acc_a], f"va{j}")
+        vj = g.vec([sp.expand(x) for x in _matTvec(Rm, acc_a)], f"vd{j}")
+        if row.sigma == REVOLUTE:
+            sg = joint_sign(row)
+            qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
+            w[j] = [wa[0], wa[1], g.name(wa[2] + qd, f"w{j}z")]
+            wd[j] = g.vec([wda[0] + qd * wa[1], wda[1] - qd * wa[0], wda[2] + qdd], f"wd{j}")
+            vd[j] = vj
+        elif row.sigma == PRISMATIC:
+            sg = joint_sign(row)
+            qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
+            w[j], wd[j] = wa, wda
+            # + 2 w x (qd z) + qdd z
+            vd[j] = g.vec([vj[0] + 2 * qd * wa[1], vj[1] - 2 * qd * wa[0], vj[2] + qdd], f"vd{j}")
+        else:
+            w[j], wd[j], vd[j] = wa, wda, vj
+        if progress:
+            progress("forward", j)
+
+    outputs: dict[tuple[int, str], sp.Expr] = {}
+
+    def add(i: int, name: str, e) -> None:
+        e = sp.sympify(e)
+        if e != 0:
+            outputs[(i, name)] = outputs.get((i, name), 0) + e
+
+    def carry(k: int, name: str, f: list, n: list) -> None:
+        """Project the wrench (f, n) of link k on joint k, then carry it to the base."""
+        j = k
+        tag = name
+        while j != 0:
+            row = rows[j - 1]
+            if row.sigma == REVOLUTE:
+                add(row_of[j], name, joint_sign(row) * n[2])
+            elif row.sigma == PRISMATIC:
+                add(row_of[j], name, joint_sign(row) * f[2])
+            a = row.ant
+            if a == 0:
+                break
+            # is anything upstream a joint?  if not, stop.
+            if not any(rows[x - 1].is_moving for x in robot.ancestors(j)):
+                break
+            Rm = R[j]
+            fa = g.vec([sp.expand(x) for x in _matvec(Rm, f)], f"F{tag}_{a}")
+            cr = _cross(P[j], fa)
+            na = g.vec([sp.expand(x + y) for x, y in zip(_matvec(Rm, n), cr)], f"N{tag}_{a}")
+            f, n, j = fa, na, a
+
+    names_std: list[str] = []
+    for row in rows:
+        is_payload = robot.payload is not None and row.j == robot.payload
+        if not row.is_moving and not is_payload:
+            continue
+        k = row.j
+        Uk = u_matrix(k)
+        W, Wd, V = w[k], wd[k], vd[k]
+        for kind in INERTIAL_KINDS:
+            name = param_name(kind, k)
+            if kind in ("XX", "XY", "XZ", "YY", "YZ", "ZZ"):
+                E = _inertia_matrix(kind)
+                Jw = _matvec(E, W)
+                n_ = [sp.expand(x + y) for x, y in zip(_matvec(E, Wd), _cross(W, Jw))]
+                f_ = [sp.Integer(0)] * 3
+            elif kind == "M":
+                f_, n_ = list(V), [sp.Integer(0)] * 3
+            else:
+                e = {"MX": [1, 0, 0], "MY": [0, 1, 0], "MZ": [0, 0, 1]}[kind]
+                f_ = [Uk[i, "XYZ".index(kind[1])] for i in range(3)]
+                n_ = _cross(e, V)
+            n_ = g.vec(n_, f"n{name}_")
+            carry(k, name, f_, n_)
+        if row.is_moving:
+            i = row_of[k]
+            extra = {"IA": ddq_symbol(k), "FV": dq_symbol(k), "FS": sp.sign(dq_symbol(k)), "OFF": sp.Integer(1)}
+            for kind in row.drive:
+                add(i, param_name(kind, k), extra[kind])
+        if progress:
+            progress("backward", k)
+
+    inputs = tuple(q_symbol(f) for f in joint_frames) + tuple(dq_symbol(f) for f in joint_frames)
+    inputs += tuple(ddq_symbol(f) for f in joint_frames) + robot.geometry_symbols
+    graph = ExprGraph(inputs, tuple(g.defs), outputs)
+    return SymbolicRegressor(robot, graph, robot.standard_names, robot.payload_names, joint_frames)

@@ -1,0 +1,130 @@
+"""Plain numeric recursive Newton-Euler (an independent reference for the symbolic model).
+
+Works directly from the MDH table with numpy, vectorised over samples; no sympy graph.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..description.model import PRISMATIC, REVOLUTE, RobotDescription, q_symbol
+from ..params import INERTIAL_KINDS
+from .newton_euler import joint_sign
+
+
+def _num(e, subs):
+    return float(e.subs(subs)) if hasattr(e, "subs") else float(e)
+
+
+def _rot_x(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rot_z_batch(th):
+    c, s = np.cos(th), np.sin(th)
+    o, z = np.ones_like(th), np.zeros_like(th)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def _skew_apply(w, v):
+    return np.cross(w, v)
+
+
+def inverse_dynamics(robot: RobotDescription, q, dq, ddq, chi_std, chi_payload=None):
+    """Joint torques by numeric Newton-Euler.
+
+    Parameters
+    ----------
+    robot : RobotDescription
+    q, dq, ddq : array_like, shape (N, n) or (n,)
+        Joint positions [rad or m], velocities, accelerations.
+    chi_std : array_like, shape (len(robot.standard_names),)
+        Standard parameters in ``robot.standard_names`` order.
+    chi_payload : array_like, shape (10,), optional
+        Payload inertial parameters (XX..M of the payload frame).
+
+    Returns
+    -------
+    ndarray, shape (N, n) (or (n,) for 1-D inputs)
+    """
+    q, dq, ddq = (np.asarray(x, float) for x in (q, dq, ddq))
+    one = q.ndim == 1
+    q, dq, ddq = (np.atleast_2d(x) for x in (q, dq, ddq))
+    N = q.shape[0]
+    subs = robot.geometry_subs()
+    vals = dict(zip(robot.standard_names, np.asarray(chi_std, float)))
+    if chi_payload is not None and robot.payload is not None:
+        vals.update(zip(robot.payload_names, np.asarray(chi_payload, float)))
+    col = {f: i for i, f in enumerate(r.j for r in robot.joints)}
+
+    w, wd, vd, Rs, Ps = {}, {}, {}, {}, {}
+    w[0] = np.zeros((N, 3))
+    wd[0] = np.zeros((N, 3))
+    vd[0] = np.tile(-np.asarray(robot.gravity, float), (N, 1))
+    for row in robot.rows:
+        j, a = row.j, row.ant
+        gam, b, al, d = (_num(x, subs) for x in (row.gamma, row.b, row.alpha, row.d))
+        if row.sigma == REVOLUTE:
+            qj = q[:, col[j]]
+            sgn = sgn_of(row)
+            th = _num(row.theta.subs(q_symbol(j), 0), subs) + sgn * qj
+            r = np.full(N, _num(row.r, subs))
+        elif row.sigma == PRISMATIC:
+            qj = q[:, col[j]]
+            sgn = sgn_of(row)
+            r = _num(row.r.subs(q_symbol(j), 0), subs) + sgn * qj
+            th = np.full(N, _num(row.theta, subs))
+        else:
+            th = np.full(N, _num(row.theta, subs))
+            r = np.full(N, _num(row.r, subs))
+        Rc = _rot_z_batch(np.array([gam]))[0] @ _rot_x(al)
+        R = Rc @ _rot_z_batch(th)  # (N,3,3)
+        P = (_rot_z_batch(np.array([gam]))[0] @ np.stack([np.full(N, d), -r * np.sin(al), b + r * np.cos(al)], 0)).T
+        Rs[j], Ps[j] = R, P
+        RT = np.transpose(R, (0, 2, 1))
+        wa = np.einsum("nij,nj->ni", RT, w[a])
+        wda = np.einsum("nij,nj->ni", RT, wd[a])
+        acc = vd[a] + np.cross(wd[a], P) + np.cross(w[a], np.cross(w[a], P))
+        vj = np.einsum("nij,nj->ni", RT, acc)
+        z = np.array([0.0, 0.0, 1.0])
+        if row.sigma == REVOLUTE:
+            qd, qdd = sgn * dq[:, col[j]], sgn * ddq[:, col[j]]
+            w[j] = wa + qd[:, None] * z
+            wd[j] = wda + qdd[:, None] * z + np.cross(wa, qd[:, None] * z)
+            vd[j] = vj
+        elif row.sigma == PRISMATIC:
+            qd, qdd = sgn * dq[:, col[j]], sgn * ddq[:, col[j]]
+            w[j], wd[j] = wa, wda
+            vd[j] = vj + 2 * np.cross(wa, qd[:, None] * z) + qdd[:, None] * z
+        else:
+            w[j], wd[j], vd[j] = wa, wda, vj
+
+    f = {j: np.zeros((N, 3)) for j in range(len(robot.rows) + 1)}
+    n = {j: np.zeros((N, 3)) for j in range(len(robot.rows) + 1)}
+    tau = np.zeros((N, robot.n_joints))
+    for row in reversed(robot.rows):
+        j = row.j
+        p = {k: vals.get(f"{k}{j}", 0.0) for k in INERTIAL_KINDS}
+        J = np.array([[p["XX"], p["XY"], p["XZ"]], [p["XY"], p["YY"], p["YZ"]], [p["XZ"], p["YZ"], p["ZZ"]]])
+        MS = np.array([p["MX"], p["MY"], p["MZ"]])
+        F = p["M"] * vd[j] + np.cross(wd[j], MS) + np.cross(w[j], np.cross(w[j], MS))
+        Nm = (wd[j] @ J.T) + np.cross(w[j], w[j] @ J.T) + np.cross(MS, vd[j])
+        fj = F + f[j]
+        nj = Nm + n[j]
+        if row.is_moving:
+            i = col[j]
+            t = nj[:, 2] if row.sigma == REVOLUTE else fj[:, 2]
+            t = t * (sgn_of(row))
+            t = t + vals.get(f"IA{j}", 0.0) * ddq[:, i] + vals.get(f"FV{j}", 0.0) * dq[:, i]
+            t = t + vals.get(f"FS{j}", 0.0) * np.sign(dq[:, i]) + vals.get(f"OFF{j}", 0.0)
+            tau[:, i] = t
+        a = row.ant
+        fa = np.einsum("nij,nj->ni", Rs[j], fj)
+        f[a] = f[a] + fa
+        n[a] = n[a] + np.einsum("nij,nj->ni", Rs[j], nj) + np.cross(Ps[j], fa)
+    return tau[0] if one else tau
+
+
+def sgn_of(row) -> float:
+    """+1 when the joint variable enters as +q, -1 for -q."""
+    return float(joint_sign(row))

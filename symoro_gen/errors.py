@@ -1,0 +1,75 @@
+"""Error types of symoro_gen.
+
+One base class, :class:`SymoroError`; every concrete error also derives from the
+builtin exception a caller would naturally catch (``ValueError`` or ``TypeError``).
+Messages name the file, the frame/line/joint and the field at fault.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class SymoroError(Exception):
+    """Base class of all errors raised on purpose by symoro_gen."""
+
+    hint: str | None = None
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One problem found in an input file.
+
+    Attributes
+    ----------
+    file : str
+        Path of the file (or ``"<string>"``).
+    where : str
+        Location inside the file: ``"frame 3"``, ``"line 12"``, ``"column tau2, rows 10-20"``...
+    field : str
+        The field at fault (``"sigma"``, ``"ant"``...), or ``""``.
+    message : str
+        What is wrong.
+    """
+
+    file: str
+    where: str
+    field: str
+    message: str
+
+    def __str__(self) -> str:
+        loc = ", ".join(p for p in (self.file, self.where, f"field '{self.field}'" if self.field else "") if p)
+        return f"{loc}: {self.message}"
+
+
+class RobotFileError(SymoroError, ValueError):
+    """A robot description file is invalid; lists every problem found."""
+
+    def __init__(self, problems: list[Problem] | tuple[Problem, ...], hint: str | None = None):
+        self.problems = tuple(problems)
+        self.hint = hint
+        n = len(self.problems)
+        head = f"{n} problem{'s' if n != 1 else ''} in robot description"
+        super().__init__(head + ":\n" + "\n".join(f"  - {p}" for p in self.problems))
+
+
+class DataFileError(SymoroError, ValueError):
+    """A measured-data file is invalid (names file, column and row range)."""
+
+    def __init__(self, problems: list[Problem] | tuple[Problem, ...], hint: str | None = None):
+        self.problems = tuple(problems)
+        self.hint = hint
+        n = len(self.problems)
+        head = f"{n} problem{'s' if n != 1 else ''} in data"
+        super().__init__(head + ":\n" + "\n".join(f"  - {p}" for p in self.problems))
+
+
+class ModelError(SymoroError, ValueError):
+    """A model cannot be built, loaded or used as asked (wrong shapes, unknown robot...)."""
+
+
+class IdentificationError(SymoroError, ValueError):
+    """An identification problem cannot be solved as posed."""
+
+
+class ShapeError(SymoroError, TypeError):
+    """An array argument has the wrong shape or type."""

@@ -1,0 +1,35 @@
+"""The one place that defines the standard-parameter order and names.
+
+Per moving link j, in frame j at its origin (Khalil-Kleinfinger)::
+
+    XXj XYj XZj YYj YZj ZZj MXj MYj MZj Mj IAj FVj FSj OFFj
+
+IA, FV, FS, OFF are the drive-chain terms of joint j (rotor inertia, viscous and
+Coulomb friction, offset); a robot file may exclude some of them per joint.
+A payload (fixed link, sigma = 2) has only the 10 inertial ones.
+"""
+from __future__ import annotations
+
+INERTIAL_KINDS: tuple[str, ...] = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M")
+DRIVE_KINDS: tuple[str, ...] = ("IA", "FV", "FS", "OFF")
+PARAM_KINDS: tuple[str, ...] = INERTIAL_KINDS + DRIVE_KINDS
+
+#: index of each inertial kind inside the 10-vector
+INERTIAL_INDEX = {k: i for i, k in enumerate(INERTIAL_KINDS)}
+
+
+def param_name(kind: str, frame: int) -> str:
+    """SYMORO-style name of a standard parameter: ``param_name("XX", 2) == "XX2"``."""
+    if kind not in PARAM_KINDS:
+        raise ValueError(f"unknown parameter kind {kind!r}; expected one of {PARAM_KINDS}")
+    return f"{kind}{frame}"
+
+
+def split_name(name: str) -> tuple[str, int, bool]:
+    """Inverse of :func:`param_name`, also for regrouped names: ``"XX2R" -> ("XX", 2, True)``."""
+    base = name[:-1] if name.endswith("R") else name
+    regrouped = name.endswith("R")
+    for kind in sorted(PARAM_KINDS, key=len, reverse=True):
+        if base.startswith(kind) and base[len(kind):].isdigit():
+            return kind, int(base[len(kind):]), regrouped
+    raise ValueError(f"not a standard parameter name: {name!r}")
