@@ -1,0 +1,73 @@
+"""Measured (or simulated) joint trajectories: the value type data loaders return."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def _frozen_array(x, name, ndim):
+    if x is None:
+        return None
+    a = np.array(x, dtype=float, copy=True)
+    if a.ndim != ndim:
+        raise ValueError(f"{name} must be {ndim}-D, got shape {a.shape}")
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """One experiment (one file): joint-side samples.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Time [s], strictly increasing.
+    q : ndarray, shape (N, n)
+        Joint positions [rad or m], joint side, MDH convention.
+    tau : ndarray, shape (N, n)
+        Joint torques/forces [N m or N] (or the raw signal v_tau whose gain is identified).
+    dq, ddq : ndarray, shape (N, n), optional
+        Velocities and accelerations when the file provides them.
+    source : str
+        File name (used in messages).
+    loaded : bool
+        True when the payload is mounted during this experiment.
+    meta : dict
+        Free-form provenance.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    tau: np.ndarray
+    dq: np.ndarray | None = None
+    ddq: np.ndarray | None = None
+    source: str = "<memory>"
+    loaded: bool = False
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t", _frozen_array(self.t, "t", 1))
+        for k in ("q", "tau", "dq", "ddq"):
+            object.__setattr__(self, k, _frozen_array(getattr(self, k), k, 2))
+        N = self.t.shape[0]
+        for k in ("q", "tau", "dq", "ddq"):
+            a = getattr(self, k)
+            if a is not None and a.shape[0] != N:
+                raise ValueError(f"{self.source}: {k} has {a.shape[0]} samples, t has {N}")
+        if self.tau.shape[1] != self.q.shape[1]:
+            raise ValueError(f"{self.source}: q has {self.q.shape[1]} joints, tau has {self.tau.shape[1]}")
+
+    @property
+    def n_samples(self) -> int:
+        return self.t.shape[0]
+
+    @property
+    def n_joints(self) -> int:
+        return self.q.shape[1]
+
+    @property
+    def dt(self) -> float:
+        """Median sampling period [s]."""
+        return float(np.median(np.diff(self.t)))
