@@ -128,3 +128,22 @@ def inverse_dynamics(robot: RobotDescription, q, dq, ddq, chi_std, chi_payload=N
 def sgn_of(row) -> float:
     """+1 when the joint variable enters as +q, -1 for -q."""
     return float(joint_sign(row))
+
+
+def numeric_regressor(robot: RobotDescription, q, dq, ddq):
+    """Standard and payload regressor columns by numeric Newton-Euler (slow; a reference).
+
+    Returns
+    -------
+    (W_std, W_payload) : ndarrays of shapes (N, n, n_st) and (N, n, 10) (payload one empty
+    ``(N, n, 0)`` when the robot has no payload).
+    """
+    q, dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (q, dq, ddq))
+    ns, npay = len(robot.standard_names), len(robot.payload_names)
+    cols = []
+    for k in range(ns + npay):
+        e = np.zeros(ns + npay)
+        e[k] = 1.0
+        cols.append(inverse_dynamics(robot, q, dq, ddq, e[:ns], e[ns:] if npay else None))
+    W = np.stack(cols, axis=-1) if cols else np.zeros(q.shape + (0,))
+    return W[..., :ns], W[..., ns:]
