@@ -1,0 +1,107 @@
+"""The ``symoro-gen`` command.
+
+Errors meant for users print as one line of what is wrong and where, plus a hint, and
+exit with status 2; ``--debug`` shows the traceback instead.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import SymoroError
+
+
+def _progress(quiet: bool):
+    """A per-stage progress callback (tqdm when available and on a TTY), or None."""
+    if quiet or not sys.stderr.isatty():
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    bar = tqdm(desc="newton-euler", unit="link", leave=False)
+
+    def cb(stage, j):
+        bar.set_description(stage)
+        bar.update(1)
+
+    return cb
+
+
+def cmd_generate(args) -> int:
+    from .description import load_robot
+    from .emit.package import emit_robot
+
+    robot = load_robot(args.robot)
+    out = Path(args.out) if args.out else Path(__file__).resolve().parents[1] / "generated"
+    m = emit_robot(robot, out, progress=_progress(args.quiet))
+    if not args.quiet:
+        print(
+            f"{m.robot}: {m.n_standard} standard -> {m.n_base} base parameters; base regressor "
+            f"{m.base_ops.mul} mul, {m.base_ops.div} div, {m.base_ops.add} add -> {m.path}"
+        )
+    return 0
+
+
+def cmd_import_par(args) -> int:
+    from .description.par import import_par, write_robot_toml
+
+    text = import_par(args.file)
+    if args.output:
+        write_robot_toml(text, args.output, overwrite=args.force)
+        if not args.quiet:
+            print(f"wrote {args.output}")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="symoro-gen", description=__doc__.splitlines()[0])
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress, no chatter")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    g = sub.add_parser("generate", help="MDH robot file -> generated/<robot>/ (NumPy + CasADi regressors)")
+    g.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
+    g.add_argument("--out", help="output folder (default: generated/ of the repository)")
+    g.set_defaults(func=cmd_generate)
+
+    ip = sub.add_parser("import-par", help="SYMORO+/OpenSYMORO .par file -> robot .toml")
+    ip.add_argument("file")
+    ip.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
+    ip.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    ip.set_defaults(func=cmd_import_par)
+
+    for extra in _EXTRA_COMMANDS:
+        extra(sub)
+    return p
+
+
+_EXTRA_COMMANDS: list = []
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except SymoroError as exc:
+        if args.debug:
+            raise
+        msg = str(exc)
+        print(f"symoro-gen: error: {msg}", file=sys.stderr)
+        hint = getattr(exc, "hint", None)
+        if hint:
+            print(f"hint: {hint}", file=sys.stderr)
+        return 2
+    except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
+        if args.debug:
+            raise
+        print(f"symoro-gen: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,72 @@
+"""Emission properties: deterministic, atomic, faithful to the committed generated/ folder."""
+import filecmp
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from symoro_gen import load_model
+from symoro_gen.description import load_robot, parse_robot_text
+from symoro_gen.emit import package
+from symoro_gen.emit.package import emit_robot, tool_versions
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _same_tree(a: Path, b: Path) -> list:
+    diffs = []
+    names = sorted(p.name for p in a.iterdir() if p.name != "__pycache__")
+    assert names == sorted(p.name for p in b.iterdir() if p.name != "__pycache__")
+    for n in names:
+        if (a / n).read_bytes() != (b / n).read_bytes():
+            diffs.append(n)
+    return diffs
+
+
+def test_regeneration_is_byte_identical(tmp_path):
+    robot = load_robot("scara")
+    emit_robot(robot, tmp_path / "a")
+    emit_robot(robot, tmp_path / "b")
+    assert _same_tree(tmp_path / "a" / "scara", tmp_path / "b" / "scara") == []
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in (ROOT / "robots").glob("*.toml")))
+def test_committed_generated_matches_generator(tmp_path, name):
+    man = json.loads((ROOT / "generated" / name / "manifest.json").read_text())
+    if man["tool_versions"] != tool_versions():
+        pytest.skip(f"tool versions differ from the committed generation: {man['tool_versions']} vs {tool_versions()}")
+    emit_robot(load_robot(name), tmp_path)
+    assert _same_tree(ROOT / "generated" / name, tmp_path / name) == [], "run `make robots` and commit generated/"
+
+
+def test_failed_emission_leaves_previous_package_intact(tmp_path, monkeypatch):
+    robot = load_robot("scara")
+    emit_robot(robot, tmp_path)
+    before = {p.name: p.read_bytes() for p in (tmp_path / "scara").iterdir()}
+
+    def boom(*a, **k):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(package, "relations_markdown", boom)
+    with pytest.raises(RuntimeError):
+        emit_robot(robot, tmp_path)
+    after = {p.name: p.read_bytes() for p in (tmp_path / "scara").iterdir() if p.name != "__pycache__"}
+    assert after == before
+    assert [p.name for p in tmp_path.iterdir()] == ["scara"], "no temporary folder left behind"
+
+
+def test_symbolic_geometry_is_substituted_in_code_but_kept_in_relations(tmp_path):
+    text = (ROOT / "robots" / "rx90.toml").read_text().replace("D3 = 0.45", "D3 = 0.5")
+    robot = parse_robot_text(text, file="rx90_variant.toml")
+    emit_robot(robot, tmp_path)
+    md = (tmp_path / "rx90" / "base_parameters.md").read_text()
+    assert "D3" in md and "RL4" in md  # symbolic in relations
+    m = load_model(tmp_path / "rx90")
+    assert m.GEOMETRY["D3"] == 0.5
+    from symoro_gen.dynamics.numeric import inverse_dynamics
+
+    rng = np.random.default_rng(0)
+    q, dq, ddq = rng.normal(size=(3, 10, 6))
+    chi = rng.normal(size=len(m.STANDARD_NAMES))
+    assert np.allclose(m.torque(q, dq, ddq, chi), inverse_dynamics(robot, q, dq, ddq, chi), atol=1e-10)

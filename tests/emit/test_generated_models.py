@@ -1,0 +1,121 @@
+"""The committed generated models against independent references.
+
+Identities: emitted NumPy regressor == numeric Newton-Euler == CasADi function; base
+regressor x base parameters == standard regressor x standard parameters; number of base
+parameters == numeric rank of the standard regressor; committed files == generator.
+"""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import symoro_gen
+from symoro_gen import load_model
+from symoro_gen.baseparams.regroup import numeric_rank
+from symoro_gen.description import load_robot
+from symoro_gen.dynamics.numeric import inverse_dynamics, numeric_regressor
+
+ROOT = Path(__file__).resolve().parents[2]
+ROBOTS = sorted(p.stem for p in (ROOT / "robots").glob("*.toml"))
+REL = 1e-9
+
+
+def _states(rng, N, n):
+    return rng.uniform(-np.pi, np.pi, (N, n)), rng.normal(0, 2, (N, n)), rng.normal(0, 5, (N, n))
+
+
+@pytest.fixture(params=ROBOTS)
+def robot_and_model(request):
+    return load_robot(request.param), load_model(request.param)
+
+
+def test_every_robot_file_has_a_generated_model():
+    for name in ROBOTS:
+        assert (ROOT / "generated" / name / "__init__.py").exists(), f"run `make robot ROBOT={name}`"
+
+
+def test_contract_names_and_shapes(robot_and_model):
+    robot, m = robot_and_model
+    assert m.ROBOT == robot.name and m.N_JOINTS == robot.n_joints
+    assert m.STANDARD_NAMES == robot.standard_names
+    assert m.PAYLOAD_NAMES == robot.payload_names
+    assert all(isinstance(n, str) for n in m.BASE_NAMES)
+    n, nb, ns = m.N_JOINTS, len(m.BASE_NAMES), len(m.STANDARD_NAMES)
+    rng = np.random.default_rng(1)
+    q, dq, ddq = _states(rng, 5, n)
+    assert m.regressor(q, dq, ddq).shape == (5, n, nb)
+    assert m.regressor(q[0], dq[0], ddq[0]).shape == (n, nb)
+    assert m.standard_regressor(q, dq, ddq).shape == (5, n, ns)
+    assert m.payload_regressor(q, dq, ddq).shape == (5, n, len(m.PAYLOAD_NAMES))
+    assert m.base_parameters(np.zeros(ns)).shape == (nb,)
+    assert m.torque(q, dq, ddq, np.zeros(ns)).shape == (5, n)
+    with pytest.raises(ValueError, match="q must have shape"):
+        m.regressor(np.zeros((5, n + 1)), dq, ddq)
+
+
+def test_emitted_equals_numeric_newton_euler(robot_and_model):
+    robot, m = robot_and_model
+    rng = np.random.default_rng(2)
+    q, dq, ddq = _states(rng, 40, m.N_JOINTS)
+    chi = rng.normal(size=len(m.STANDARD_NAMES))
+    pay = rng.normal(size=len(m.PAYLOAD_NAMES)) if m.PAYLOAD_NAMES else None
+    tau_ref = inverse_dynamics(robot, q, dq, ddq, chi, pay)
+    tau = m.torque(q, dq, ddq, chi, pay)
+    assert np.max(np.abs(tau - tau_ref)) <= REL * np.max(np.abs(tau_ref))
+    Ws_ref, Wp_ref = numeric_regressor(robot, q, dq, ddq)
+    scale = max(1.0, np.abs(Ws_ref).max())
+    assert np.max(np.abs(m.standard_regressor(q, dq, ddq) - Ws_ref)) <= REL * scale
+    if m.PAYLOAD_NAMES:
+        assert np.max(np.abs(m.payload_regressor(q, dq, ddq) - Wp_ref)) <= REL * scale
+
+
+def test_base_identity_and_rank(robot_and_model):
+    robot, m = robot_and_model
+    rng = np.random.default_rng(3)
+    q, dq, ddq = _states(rng, 60, m.N_JOINTS)
+    Ws = m.standard_regressor(q, dq, ddq)
+    Wb = m.regressor(q, dq, ddq)
+    chi = rng.normal(size=len(m.STANDARD_NAMES))
+    lhs = Wb @ m.base_parameters(chi)
+    rhs = Ws @ chi
+    assert np.max(np.abs(lhs - rhs)) <= REL * max(1.0, np.abs(rhs).max())
+    Wflat = Ws.reshape(-1, Ws.shape[-1])
+    assert numeric_rank(Wflat) == len(m.BASE_NAMES)
+    assert numeric_rank(Wb.reshape(-1, Wb.shape[-1])) == len(m.BASE_NAMES)
+
+
+def test_casadi_function_equals_numpy(robot_and_model):
+    _, m = robot_and_model
+    f = m.casadi_regressor()
+    assert f.name_in() == ["q", "dq", "ddq"]
+    rng = np.random.default_rng(4)
+    q, dq, ddq = _states(rng, 5, m.N_JOINTS)
+    for k in range(5):
+        Yc = np.array(f(q[k], dq[k], ddq[k]))
+        Yn = m.regressor(q[k], dq[k], ddq[k])
+        assert np.max(np.abs(Yc - Yn)) <= REL * max(1.0, np.abs(Yn).max())
+
+
+def test_manifest_and_header(robot_and_model):
+    robot, m = robot_and_model
+    folder = ROOT / "generated" / robot.name
+    man = json.loads((folder / "manifest.json").read_text())
+    assert man["robot_file_sha256"] == robot.file_hash, "generated/ is stale: run `make robots`"
+    assert man["base_names"] == list(m.BASE_NAMES)
+    assert man["counts"]["base"] == len(m.BASE_NAMES)
+    assert robot.file_hash in (folder / "__init__.py").read_text().splitlines()[1]
+    assert (folder / f"regressor_{robot.name}.c").read_text().count("casadi_f0") >= 1
+    md = (folder / "base_parameters.md").read_text()
+    for n in m.BASE_NAMES:
+        if n.endswith("R"):
+            assert f"{n} = " in md
+
+
+def test_lwr4_counts_match_the_papers_model():
+    m = load_model("lwr4")
+    # Table I model without IA (torque sensors after the gearbox): 7 x 13 standard
+    assert len(m.STANDARD_NAMES) == 91
+    for n in ("XX2R", "ZZ2R", "MY2R", "XX4R", "ZZ4R", "MY4R", "MY5R", "MY6R"):
+        assert n in m.BASE_NAMES, n  # regrouped parameters listed in Table II of the LWR4 paper
+    assert m.PAYLOAD_NAMES == ("XX8", "XY8", "XZ8", "YY8", "YZ8", "ZZ8", "MX8", "MY8", "MZ8", "M8")
