@@ -6,6 +6,7 @@ naming file, frame and field.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import re
 from pathlib import Path
@@ -71,7 +72,8 @@ def parse_robot(path: str | os.PathLike) -> RobotDescription:
 
 
 def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    """A finite int or float (TOML booleans, inf and nan excluded)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
@@ -84,7 +86,9 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise RobotFileError([Problem(file, "", "", f"malformed TOML: {exc}")]) from None
+        m = re.search(r"at line (\d+), column (\d+)", str(exc))
+        where = f"line {m.group(1)}, column {m.group(2)}" if m else ""
+        raise RobotFileError([Problem(file, where, "", f"malformed TOML: {exc}")]) from None
 
     for k in sorted(set(doc) - TOP_KEYS):
         bad("top level", k, f"unknown field (allowed: {', '.join(sorted(TOP_KEYS))})")
@@ -116,7 +120,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             if k in _RESERVED or not _NAME_RE.match(k):
                 bad("[values]", k, "reserved or invalid symbol name")
             elif not _is_number(v):
-                bad("[values]", k, f"value must be a number, got {v!r}")
+                bad("[values]", k, f"value must be a finite number, got {v!r}")
             else:
                 values[k] = float(v)
 
@@ -211,6 +215,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         bad("top level", "frames", "the robot has no moving joint")
 
     payload = doc.get("payload")
+    payload_given = payload  # kept to avoid a cascade of [nominal] errors when the payload itself is bad
     if payload is not None:
         if not (isinstance(payload, int) and not isinstance(payload, bool)):
             bad("top level", "payload", f"must be the frame number of the payload, got {payload!r}")
@@ -236,7 +241,12 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
                     allowed |= {f"{k}{r.j}" for k in r.drive}
             if payload is not None:
                 allowed |= {f"{k}{payload}" for k in INERTIAL_KINDS}
+            rejected_payload = set()
+            if payload is None and isinstance(payload_given, int) and not isinstance(payload_given, bool):
+                rejected_payload = {f"{k}{payload_given}" for k in INERTIAL_KINDS}
             for k, v in raw.items():
+                if k in rejected_payload:
+                    continue  # the payload entry is already reported
                 if k not in allowed:
                     bad("[nominal]", k, "not a standard parameter of this robot")
                 elif not _is_number(v):
