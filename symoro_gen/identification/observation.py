@@ -5,6 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import IdentificationError
+
 
 @dataclass(frozen=True)
 class ObservationSystem:
@@ -31,16 +33,34 @@ class ObservationSystem:
     weights: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        # IdentificationError derives from ValueError (what this constructor always raised)
         W = np.asarray(self.W, float)
         Y = np.asarray(self.Y, float).reshape(-1)
         if W.ndim != 2 or W.shape[0] != Y.shape[0]:
-            raise ValueError(f"W {W.shape} and Y {Y.shape} do not match")
+            raise IdentificationError(
+                f"ObservationSystem: W {W.shape} and Y {Y.shape} do not match (W must be (r, c), Y (r,))")
         if len(self.names) != W.shape[1]:
-            raise ValueError(f"{len(self.names)} names for {W.shape[1]} columns")
+            raise IdentificationError(f"ObservationSystem: {len(self.names)} names for {W.shape[1]} columns of W")
+        names = tuple(self.names)
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise IdentificationError(f"ObservationSystem: duplicate column names {dup}")
+        joint = np.asarray(self.joint, int).reshape(-1)
+        if joint.shape[0] != Y.shape[0]:
+            raise IdentificationError(
+                f"ObservationSystem: joint has {joint.shape[0]} entries for {Y.shape[0]} rows")
+        if joint.size and joint.min() < 0:
+            raise IdentificationError("ObservationSystem: joint indices must be >= 0 (0-based)")
         object.__setattr__(self, "W", W)
         object.__setattr__(self, "Y", Y)
-        object.__setattr__(self, "names", tuple(self.names))
-        object.__setattr__(self, "joint", np.asarray(self.joint, int).reshape(-1))
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "joint", joint)
+        if self.weights is not None:
+            w = np.asarray(self.weights, float).reshape(-1)
+            if w.shape[0] != Y.shape[0]:
+                raise IdentificationError(
+                    f"ObservationSystem: weights has {w.shape[0]} entries for {Y.shape[0]} rows")
+            object.__setattr__(self, "weights", w)
 
     @property
     def n_joints(self) -> int:

@@ -1,0 +1,174 @@
+"""Identification with a payload (LWR4 paper eq. 5 and 7; Khalil, Gautier & Lemoine 2007).
+
+* :func:`fit_with_known_payload`: robot base parameters and the unknown payload parameters from an
+  unloaded and a loaded experiment, ``[[W_a, 0, 0], [W_b, W_ul, W_kl]] [chi; chi_ul; chi_kl]``,
+  with the known part ``W_kl chi_kl`` moved to the left-hand side.
+* :func:`identify_payload`: payload parameters only, the robot model being known
+  (LWR4 Table IV, RX-90 Sec. IV: payload mass re-identified with its %sigma).
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Mapping, Sequence
+
+import numpy as np
+import scipy.linalg
+
+from ..errors import IdentificationError
+from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, identify)
+from .observation import ObservationSystem
+from .result import IdentificationResult
+from .systems import apply_gains, fix_parameters, stack_systems
+
+
+def payload_columns(unloaded: ObservationSystem, loaded: ObservationSystem,
+                    payload_names: Sequence[str] | None = None) -> tuple[str, ...]:
+    """Names of the payload columns: given, or those of ``loaded`` absent from ``unloaded``."""
+    missing = [n for n in unloaded.names if n not in loaded.names]
+    if missing:
+        raise IdentificationError(
+            f"the loaded system lacks robot columns {missing} of the unloaded one; both must come "
+            f"from the same model")
+    if payload_names is None:
+        pay = tuple(n for n in loaded.names if n not in unloaded.names)
+    else:
+        pay = tuple(payload_names)
+        bad = [n for n in pay if n not in loaded.names]
+        if bad:
+            raise IdentificationError(f"payload parameters {bad} are not columns of the loaded system")
+    if not pay:
+        raise IdentificationError(
+            "the loaded system has no payload column (columns of the loaded system absent from the "
+            "unloaded one); assemble it with the payload regressor")
+    return pay
+
+
+def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSystem,
+                           known: Mapping[str, float], method: str = "wls", *,
+                           essential: bool = False, r_sigma: float = 30.0, weighting: str | None = None,
+                           payload_names: Sequence[str] | None = None, gains=None,
+                           rank_tol: float = RANK_TOL, cond_warn: float = COND_WARN,
+                           rel_std_warn_pct: float = REL_STD_WARN_PCT, zero_col_tol: float = ZERO_COL_TOL
+                           ) -> IdentificationResult:
+    """Robot base parameters + unknown payload parameters with a partly known payload (eq. 7).
+
+    Parameters
+    ----------
+    unloaded : ObservationSystem
+        ``Y_a = W_a chi``, columns: robot base parameters.
+    loaded : ObservationSystem
+        ``Y_b = W_b chi + W_L chi_L``, columns: the same robot parameters + the payload's (e.g.
+        ``XX8 ... M8``).
+    known : mapping name -> value
+        Known payload parameters chi_kl (e.g. ``{"M8": 4.6136}``; may be empty).
+    method : {"ols", "wls", "tls"}
+    essential, r_sigma, weighting
+        See :func:`identify`.
+    payload_names : sequence of str, optional
+        Payload columns; default: columns of ``loaded`` not in ``unloaded``.
+    gains : Gains or array_like (n_joints,), optional
+        Measurements scaled by these gains first (``tau = g v``).
+
+    Returns
+    -------
+    IdentificationResult
+        Parameters ``chi`` and ``chi_ul``; ``fixed`` holds ``chi_kl``.
+    """
+    pay = payload_columns(unloaded, loaded, payload_names)
+    bad = [k for k in known if k not in pay]
+    if bad:
+        raise IdentificationError(f"known parameters {bad} are not payload columns {pay}")
+    if gains is not None:
+        unloaded, loaded = apply_gains(unloaded, gains), apply_gains(loaded, gains)
+    system = fix_parameters(stack_systems(unloaded, loaded), known)
+    res = identify(system, method=method, essential=essential, r_sigma=r_sigma, weighting=weighting,
+                   rank_tol=rank_tol, cond_warn=cond_warn, rel_std_warn_pct=rel_std_warn_pct,
+                   zero_col_tol=zero_col_tol)
+    return dataclasses.replace(res, fixed=tuple(known.items()))
+
+
+def identify_payload(loaded: ObservationSystem, robot: Mapping[str, float] | IdentificationResult,
+                     payload_names: Sequence[str] | None = None, *, known: Mapping[str, float] | None = None,
+                     gains=None, method: str = "wls", weighting: str | None = None,
+                     rank_tol: float = RANK_TOL, cond_warn: float = COND_WARN,
+                     rel_std_warn_pct: float = REL_STD_WARN_PCT, zero_col_tol: float = ZERO_COL_TOL
+                     ) -> IdentificationResult:
+    """Payload parameters with the robot model known (LWR4 Table IV, RX-90 Sec. IV).
+
+    ``Y_b - W_b chi_robot - W_kl chi_kl = W_L' chi_L' + rho``, solved for the identifiable subset
+    ``chi_L'`` of the payload parameters (independent payload columns chosen by a column-pivoted QR
+    of the unit-norm columns; the others are reported in a warning and left out).
+
+    Parameters
+    ----------
+    loaded : ObservationSystem
+        Loaded experiment: robot columns + payload columns.
+    robot : mapping name -> value, or IdentificationResult
+        Robot parameters (a result's :meth:`~IdentificationResult.parameter_map`, eliminated ones 0).
+        Entries named like payload columns are ignored.
+    payload_names : sequence of str, optional
+        Payload columns; default: the columns of ``loaded`` not in ``robot``.
+    known : mapping, optional
+        Known payload parameters, moved to the left-hand side too.
+    gains : Gains or array_like (n_joints,), optional
+        Measurements scaled by these gains (``tau = g v``, LWR4 Sec. IV-C).
+    method : {"ols", "wls", "tls"}
+
+    Returns
+    -------
+    IdentificationResult
+        Payload parameters (e.g. ``M8`` with its %sigma, Table IV); ``fixed`` holds the robot
+        values and known payload values used.
+    """
+    robot_map = robot.parameter_map() if isinstance(robot, IdentificationResult) else dict(robot)
+    known = dict(known or {})
+    if payload_names is None:
+        pay = tuple(n for n in loaded.names if n not in robot_map and n not in known)
+    else:
+        pay = tuple(payload_names)
+        bad = [n for n in pay if n not in loaded.names]
+        if bad:
+            raise IdentificationError(f"payload parameters {bad} are not columns of the loaded system")
+    unknown_pay = tuple(n for n in pay if n not in known)
+    if not unknown_pay:
+        raise IdentificationError("identify_payload: no payload parameter left to identify")
+    robot_cols = [n for n in loaded.names if n not in pay]
+    missing = [n for n in robot_cols if n not in robot_map]
+    if missing:
+        raise IdentificationError(
+            f"identify_payload: robot parameter(s) {missing} of the loaded system have no value; "
+            f"give them in `robot` (or list them in payload_names)")
+    fixed = {n: float(robot_map[n]) for n in robot_cols}
+    fixed.update({k: float(v) for k, v in known.items() if k in loaded.names})
+    bad = [k for k in known if k not in loaded.names]
+    if bad:
+        raise IdentificationError(f"known payload parameters {bad} are not columns of the loaded system")
+    if gains is not None:
+        loaded = apply_gains(loaded, gains)
+    system = fix_parameters(loaded, fixed)
+    # identifiable subset of the payload columns
+    W = system.W
+    norms = np.linalg.norm(W, axis=0)
+    top = norms.max() if norms.size else 0.0
+    zero = norms <= zero_col_tol * top if top > 0 else np.ones(norms.shape, bool)
+    warnings = []
+    if zero.any():
+        warnings.append(f"payload parameter(s) {[system.names[i] for i in np.flatnonzero(zero)]} have no "
+                        f"effect on these data and are not identified")
+    cand = np.flatnonzero(~zero)
+    if cand.size == 0:
+        raise IdentificationError("identify_payload: the payload columns of W are all zero "
+                                  "(payload not excited by these data)")
+    _, Rq, piv = scipy.linalg.qr(W[:, cand] / norms[cand], mode="economic", pivoting=True)
+    d = np.abs(np.diag(Rq))
+    rank = int(np.sum(d > rank_tol * d[0]))
+    chosen = np.sort(cand[piv[:rank]])
+    dropped = [system.names[i] for i in cand[piv[rank:]]]
+    if dropped:
+        warnings.append(f"payload parameter(s) {dropped} are not separately identifiable from these data "
+                        f"(their columns depend on the others): left out, the others absorb their effect")
+    sub = ObservationSystem(W[:, chosen], system.Y, tuple(system.names[i] for i in chosen), system.joint,
+                            system.weights)
+    res = identify(sub, method=method, weighting=weighting, rank_tol=rank_tol, cond_warn=cond_warn,
+                   rel_std_warn_pct=rel_std_warn_pct, zero_col_tol=zero_col_tol)
+    return dataclasses.replace(res, fixed=tuple(fixed.items()), warnings=tuple(warnings) + res.warnings)
