@@ -54,6 +54,19 @@ def _matTvec(M, v):
     return [sum((M[k, i] * v[k] for k in range(3)), sp.Integer(0)) for i in range(3)]
 
 
+def _inertia_moment(kind: str, wd, p) -> list:
+    """Moment E_kind wd + w x (E_kind w) of a unit inertia component, from the products p of w."""
+    wdx, wdy, wdz = wd
+    return {
+        "XX": [wdx, p["xz"], -p["xy"]],
+        "XY": [wdy - p["xz"], wdx + p["yz"], p["xx"] - p["yy"]],
+        "XZ": [wdz + p["xy"], p["zz"] - p["xx"], wdx - p["yz"]],
+        "YY": [-p["yz"], wdy, p["xy"]],
+        "YZ": [p["yy"] - p["zz"], wdz - p["xy"], wdy + p["xz"]],
+        "ZZ": [p["yz"], -p["xz"], wdz],
+    }[kind]
+
+
 def _inertia_matrix(kind: str):
     """The 3x3 inertia matrix that a unit value of ``kind`` contributes."""
     E = sp.zeros(3, 3)
@@ -107,36 +120,53 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
     vd = {0: [sp.Integer(int(-x)) if float(x).is_integer() else sp.Float(-x) for x in robot.gravity]}
     U: dict[int, sp.Matrix] = {}
 
+    WW: dict[int, dict[str, sp.Expr]] = {}
+
+    def products(j):
+        """The six products of angular-velocity components of frame j, named once."""
+        if j not in WW:
+            wx, wy, wz = w[j]
+            WW[j] = {
+                "xx": g.name(wx * wx, f"WW{j}xx"),
+                "yy": g.name(wy * wy, f"WW{j}yy"),
+                "zz": g.name(wz * wz, f"WW{j}zz"),
+                "xy": g.name(wx * wy, f"WW{j}xy"),
+                "xz": g.name(wx * wz, f"WW{j}xz"),
+                "yz": g.name(wy * wz, f"WW{j}yz"),
+            }
+        return WW[j]
+
     def u_matrix(j):
+        """U_j = skew(wd_j) + skew(w_j)^2, entries named."""
         if j in U:
             return U[j]
-        W, Wd = w[j], wd[j]
-        wx, wy, wz = W
+        Wd = wd[j]
+        p = products(j)
         m = sp.Matrix(
             [
-                [-(wy * wy) - wz * wz, wx * wy - Wd[2], wx * wz + Wd[1]],
-                [wx * wy + Wd[2], -(wx * wx) - wz * wz, wy * wz - Wd[0]],
-                [wx * wz - Wd[1], wy * wz + Wd[0], -(wx * wx) - wy * wy],
+                [-p["yy"] - p["zz"], p["xy"] - Wd[2], p["xz"] + Wd[1]],
+                [p["xy"] + Wd[2], -p["xx"] - p["zz"], p["yz"] - Wd[0]],
+                [p["xz"] - Wd[1], p["yz"] + Wd[0], -p["xx"] - p["yy"]],
             ]
         )
         names = [["XX", "XY", "XZ"], ["YX", "YY", "YZ"], ["ZX", "ZY", "ZZ"]]
-        U[j] = sp.Matrix(3, 3, lambda a, b: g.name(sp.expand(m[a, b]), f"U{j}{names[a][b]}"))
+        U[j] = sp.Matrix(3, 3, lambda a, b: g.name(m[a, b], f"U{j}{names[a][b]}"))
         return U[j]
 
     for row in rows:
         j, a = row.j, row.ant
         Rm = R[j]
         wa = _matTvec(Rm, w[a])
-        wa = g.vec([sp.expand(x) for x in wa], f"wi{j}")
-        wda = g.vec([sp.expand(x) for x in _matTvec(Rm, wd[a])], f"wdi{j}")
+        wa = g.vec(wa, f"wi{j}")
+        wda = g.vec(_matTvec(Rm, wd[a]), f"wdi{j}")
         # acceleration of origin j in frame ant, then rotated
         if a == 0:
             acc_a = list(vd[0])
         else:
             Ua = u_matrix(a)
             acc_a = [vd[a][i] + sum((Ua[i, k] * P[j][k] for k in range(3)), sp.Integer(0)) for i in range(3)]
-            acc_a = g.vec([sp.expand(x) for x in acc_a], f"va{j}")
-        vj = g.vec([sp.expand(x) for x in _matTvec(Rm, acc_a)], f"vd{j}")
+            acc_a = g.vec(acc_a, f"va{j}")
+        vj = g.vec(_matTvec(Rm, acc_a), f"vd{j}")
         if row.sigma == REVOLUTE:
             sg = joint_sign(row)
             qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
@@ -178,9 +208,9 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
             if not any(rows[x - 1].is_moving for x in robot.ancestors(j)):
                 break
             Rm = R[j]
-            fa = g.vec([sp.expand(x) for x in _matvec(Rm, f)], f"F{tag}_{a}")
+            fa = g.vec(_matvec(Rm, f), f"F{tag}_{a}")
             cr = _cross(P[j], fa)
-            na = g.vec([sp.expand(x + y) for x, y in zip(_matvec(Rm, n), cr)], f"N{tag}_{a}")
+            na = g.vec([x + y for x, y in zip(_matvec(Rm, n), cr)], f"N{tag}_{a}")
             f, n, j = fa, na, a
 
     names_std: list[str] = []
@@ -194,9 +224,8 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
         for kind in INERTIAL_KINDS:
             name = param_name(kind, k)
             if kind in ("XX", "XY", "XZ", "YY", "YZ", "ZZ"):
-                E = _inertia_matrix(kind)
-                Jw = _matvec(E, W)
-                n_ = [sp.expand(x + y) for x, y in zip(_matvec(E, Wd), _cross(W, Jw))]
+                # N = E wd + w x (E w), written with the named products of w
+                n_ = _inertia_moment(kind, Wd, products(k))
                 f_ = [sp.Integer(0)] * 3
             elif kind == "M":
                 f_, n_ = list(V), [sp.Integer(0)] * 3

@@ -45,10 +45,62 @@ class _Printer(PythonCodePrinter):
 
 
 _printer = _Printer()
+_FUNC = {sp.sin: "np.sin", sp.cos: "np.cos", sp.sign: "np.sign", sp.tan: "np.tan"}
+
+
+def _fast(e) -> str | None:
+    """Direct printing of the forms the model produces (sums of signed products of symbols,
+    numbers, small powers and sin/cos/sign calls); None for anything else."""
+    if e.is_Symbol:
+        return e.name
+    if e.is_Number:
+        return _printer.doprint(e)
+    if e.is_Mul:
+        coeff, rest = e.as_coeff_Mul()
+        parts = []
+        for f in sp.Mul.make_args(rest):
+            t = _fast(f)
+            if t is None:
+                return None
+            if f.is_Add:
+                t = f"({t})"
+            parts.append(t)
+        body = "*".join(parts)
+        if coeff == 1:
+            return body
+        if coeff == -1:
+            return "-" + body
+        c = _printer.doprint(coeff)
+        return f"({c})*{body}" if coeff < 0 else f"{c}*{body}"
+    if e.is_Add:
+        out = ""
+        for i, t in enumerate(e.args):
+            s = _fast(t)
+            if s is None:
+                return None
+            if i == 0:
+                out = s
+            elif s.startswith("-"):
+                out += " - " + s[1:]
+            elif s.startswith("(-"):
+                out += " + " + s
+            else:
+                out += " + " + s
+        return out
+    if e.is_Pow:
+        b, x = e.as_base_exp()
+        if x.is_Integer and 1 < int(x) <= 4 and b.is_Symbol:
+            return "*".join([b.name] * int(x))
+        return None
+    if e.func in _FUNC and len(e.args) == 1:
+        a = _fast(e.args[0])
+        return None if a is None else f"{_FUNC[e.func]}({a})"
+    return None
 
 
 def print_expr(e: sp.Expr) -> str:
-    return _printer.doprint(e)
+    s = _fast(e)
+    return s if s is not None else _printer.doprint(e)
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from ..dynamics.graph import ExprGraph
 from ..dynamics.newton_euler import SymbolicRegressor, build_regressor
 from .codegen import OpCount, count_ops, print_expr
 from .numpy_backend import kernel_source
+from .optimize import optimize
 
 
 @dataclass(frozen=True)
@@ -265,8 +266,8 @@ def build():
 '''
 
 
-def _casadi_kernel_source(graph: ExprGraph, robot: RobotDescription, names) -> str:
-    src = kernel_source(graph, robot.n_joints, names, "base_kernel", robot.q, robot.dq, robot.ddq)
+def _casadi_kernel_source(src: str) -> str:
+    """The NumPy base kernel rewritten for CasADi SX inputs."""
     return src.replace("np.sin(", "sin(").replace("np.cos(", "cos(").replace("np.sign(", "sign(").replace("np.pi", "3.141592653589793")
 
 
@@ -299,13 +300,14 @@ def emit_from(reg: SymbolicRegressor, bp: BaseParameterMap, out_dir) -> EmittedM
     out_dir = Path(out_dir)
     target = out_dir / robot.name
     header = _header(robot)
-    g_base = base_graph(reg, bp)
-    g_std = reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(reg.standard_names)})
-    g_pay = reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(reg.payload_names)})
+    g_base = optimize(base_graph(reg, bp))
+    g_std = optimize(reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(reg.standard_names)}))
+    g_pay = optimize(reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(reg.payload_names)}))
     n = robot.n_joints
+    base_src = kernel_source(g_base, n, bp.base_names, "base_kernel", robot.q, robot.dq, robot.ddq)
     kern = [
         header + '"""NumPy kernels (generated): fill out[joint, column, sample]."""\nimport numpy as np\n\n',
-        kernel_source(g_base, n, bp.base_names, "base_kernel", robot.q, robot.dq, robot.ddq),
+        base_src,
         "\n",
         kernel_source(g_std, n, reg.standard_names, "standard_kernel", robot.q, robot.dq, robot.ddq),
         "\n",
@@ -327,7 +329,7 @@ def emit_from(reg: SymbolicRegressor, bp: BaseParameterMap, out_dir) -> EmittedM
         relations="\n".join(_relation_code(bp, subs)),
     )
     files["_casadi.py"] = _CASADI_TEMPLATE.format(
-        header=header, robot=robot.name, n=n, nb=len(bp.base_names), kernel=_casadi_kernel_source(g_base, robot, bp.base_names)
+        header=header, robot=robot.name, n=n, nb=len(bp.base_names), kernel=_casadi_kernel_source(base_src)
     )
     ops = graph_ops(g_base)
     files["base_parameters.md"] = relations_markdown(robot, bp, ops)

@@ -1,0 +1,210 @@
+"""Graph optimisations applied before printing.
+
+``rotation_pairs``: a plane rotation by theta_j needs 4 multiplications when written
+``u = C a - S b; v = S a + C b``. When both outputs are used, the 3-multiplication form
+``k1 = C (a + b); u = k1 - b (C + S); v = k1 + a (S - C)`` (Gauss) is used instead, with
+``C + S`` and ``S - C`` computed once per joint.
+"""
+from __future__ import annotations
+
+import sympy as sp
+
+from ..dynamics.graph import ExprGraph
+
+
+def _term(t):
+    """Split a product ``sign * X * Y`` into (sign, frozenset{X, Y}) when it has that shape."""
+    coeff, rest = t.as_coeff_Mul()
+    if coeff not in (1, -1):
+        return None
+    f = sp.Mul.make_args(rest)
+    if len(f) != 2 or not all(x.is_Symbol for x in f):
+        return None
+    return int(coeff), f
+
+
+def _match(e, trig):
+    """e == s1 * C * a + s2 * S * b with C, S the cos/sin of the same joint -> (j, s1, a, s2, b)."""
+    if not e.is_Add or len(e.args) != 2:
+        return None
+    parts = [_term(t) for t in e.args]
+    if None in parts:
+        return None
+    info = []
+    for s, f in parts:
+        k = [x for x in f if x in trig]
+        if len(k) != 1:
+            return None
+        other = f[0] if f[1] is k[0] else f[1]
+        info.append((trig[k[0]], s, other))
+    (ja, kind_a, sa, xa), (jb, kind_b, sb, xb) = [(t[0][0], t[0][1], t[1], t[2]) for t in info]
+    if ja != jb or kind_a == kind_b:
+        return None
+    if kind_a == "C":
+        return ja, "C", sa, xa, sb, xb  # sa*C*xa + sb*S*xb
+    return ja, "C", sb, xb, sa, xa
+
+
+def rotation_pairs(graph: ExprGraph) -> ExprGraph:
+    """Rewrite paired rotations with 3 multiplications (see module docstring)."""
+    trig: dict = {}
+    for s, e in graph.defs:
+        if isinstance(e, sp.cos):
+            trig[s] = (s.name[1:], "C")
+        elif isinstance(e, sp.sin):
+            trig[s] = (s.name[1:], "S")
+    csym = {v: k for k, v in trig.items()}
+    # candidate "C-led" (u = s1 C a + s2 S b) and "S-led" (v = s3 S a + s4 C b) expressions
+    items = list(graph.defs) + [(("out",) + k, e) for k, e in sorted(graph.outputs.items(), key=lambda kv: str(kv[0]))]
+    by_pair: dict = {}
+    for key, e in items:
+        m = _match(e, trig)
+        if m is None:
+            continue
+        j, _, sc, xc, ss, xs = m
+        # C multiplies xc, S multiplies xs: u-type if we call a = xc, b = xs; v-type if a = xs, b = xc.
+        by_pair.setdefault((j, frozenset((xc, xs))), []).append((key, sc, xc, ss, xs))
+    replace: dict = {}
+    new_defs_for: dict = {}
+    used_joints = set()
+    for (j, pair), lst in by_pair.items():
+        if len(pair) != 2 or len(lst) < 2:
+            continue
+        done = False
+        for i1 in range(len(lst)):
+            if done:
+                break
+            for i2 in range(len(lst)):
+                if i1 == i2:
+                    continue
+                k1, s1, a, s2, b = lst[i1]  # u = s1 C a + s2 S b
+                k2, s4, b2, s3, a2 = lst[i2]  # v = s4 C b2 + s3 S a2  -> need a2 == a, b2 == b
+                if a2 != a or b2 != b or s1 * s2 * s3 * s4 != -1:
+                    continue
+                C = csym[(j, "C")]
+                S = csym[(j, "S")]
+                bp = -s1 * s2 * b  # b' = -s1 s2 b
+                new_defs_for[(k1, k2)] = (j, C, a, bp, s1, s3)
+                used_joints.add(j)
+                done = True
+                break
+    if not new_defs_for:
+        return graph
+    # build new defs
+    extra_at: dict = {}
+    jdefs = {}
+    for j in sorted(used_joints):
+        C, S = csym[(j, "C")], csym[(j, "S")]
+        jdefs[j] = (sp.Symbol(f"CpS{j}", real=True), C + S, sp.Symbol(f"SmC{j}", real=True), S - C)
+    order = {k: i for i, (k, _) in enumerate(items)}
+    joint_at: dict = {}
+    for n, ((k1, k2), (j, C, a, bp, s1, s3)) in enumerate(new_defs_for.items()):
+        K = sp.Symbol(f"rot{n}", real=True)
+        CpS, _, SmC, _ = jdefs[j]
+        replace[k1] = s1 * (K - bp * CpS)
+        replace[k2] = s3 * (K + a * SmC)
+        first = k1 if order[k1] < order[k2] else k2
+        extra_at[first] = [(K, C * (a + bp))]
+        joint_at[first] = j
+    placed_joint: set = set()
+
+    def emit_extra(key, sink):
+        j = joint_at[key]
+        if j not in placed_joint:  # the joint's C+S and S-C before their first use
+            CpS, ce, SmC, se = jdefs[j]
+            sink += [(CpS, ce), (SmC, se)]
+            placed_joint.add(j)
+        sink += extra_at[key]
+
+    defs: list = []
+    for s, e in graph.defs:
+        if s in extra_at:
+            emit_extra(s, defs)
+        defs.append((s, replace.get(s, e)))
+    outs = {}
+    tail: list = []
+    for k, e in graph.outputs.items():
+        key = ("out",) + k
+        if key in extra_at:
+            emit_extra(key, tail)
+        outs[k] = replace.get(key, e)
+    return ExprGraph(graph.inputs, tuple(defs) + tuple(tail), outs)
+
+
+def _products_in(e):
+    """Two-symbol products (up to sign) appearing as terms or factors of e."""
+    out = []
+    for m in e.atoms(sp.Mul):
+        coeff, rest = m.as_coeff_Mul()
+        f = sp.Mul.make_args(rest)
+        syms = [x for x in f if x.is_Symbol]
+        if len(syms) == 2 and len(f) == 2:
+            out.append(frozenset(syms) if syms[0] != syms[1] else (syms[0],))
+        for x in f:
+            if x.is_Pow and x.exp == 2 and x.base.is_Symbol:
+                out.append((x.base,))
+    return out
+
+
+def share_products(graph: ExprGraph) -> ExprGraph:
+    """Name every product of two symbols (or square) used more than once, and reuse it."""
+    count: dict = {}
+    for _, e in graph.defs:
+        for p in _products_in(e):
+            count[p] = count.get(p, 0) + 1
+    for e in graph.outputs.values():
+        for p in _products_in(e):
+            count[p] = count.get(p, 0) + 1
+    shared = sorted((p for p, c in count.items() if c > 1), key=lambda p: sorted(s.name for s in p))
+    if not shared:
+        return graph
+    sym_of = {}
+    for i, p in enumerate(shared):
+        sym_of[p] = sp.Symbol(f"pr{i}", real=True)
+
+    def expr_of(p):
+        return p[0] * p[0] if isinstance(p, tuple) else sp.Mul(*sorted(p, key=lambda s: s.name))
+
+    subs = {expr_of(p): sym_of[p] for p in shared}
+    # place each product right after the last of its operands is defined
+    pos = {s: i for i, (s, _) in enumerate(graph.defs)}
+    place: dict = {}
+    for p in shared:
+        ops = p if isinstance(p, tuple) else tuple(p)
+        k = max((pos.get(s, -1) for s in ops), default=-1)
+        place.setdefault(k, []).append(p)
+    def rewrite(e):
+        rep = {}
+        for m in e.atoms(sp.Mul):
+            coeff, rest = m.as_coeff_Mul()
+            f = sp.Mul.make_args(rest)
+            if rest in subs:
+                rep[m] = coeff * subs[rest]
+            elif len(f) > 2:
+                # a longer product containing a shared pair: factor it out
+                for a in range(len(f)):
+                    for b in range(a + 1, len(f)):
+                        pair = f[a] * f[b]
+                        if pair in subs:
+                            others = [x for k, x in enumerate(f) if k not in (a, b)]
+                            rep[m] = coeff * subs[pair] * sp.Mul(*others)
+                            break
+                    if m in rep:
+                        break
+            else:
+                for x in f:
+                    if x.is_Pow and x in subs:
+                        rep[m] = coeff * subs[x] * sp.Mul(*[y for y in f if y is not x])
+        return e.xreplace(rep) if rep else e
+
+    defs = [(sym_of[p], expr_of(p)) for p in place.get(-1, [])]
+    for i, (s, e) in enumerate(graph.defs):
+        defs.append((s, rewrite(e)))
+        defs += [(sym_of[p], expr_of(p)) for p in place.get(i, [])]
+    outs = {k: rewrite(e) for k, e in graph.outputs.items()}
+    return ExprGraph(graph.inputs, tuple(defs), outs)
+
+
+def optimize(graph: ExprGraph) -> ExprGraph:
+    """All passes, in order."""
+    return share_products(rotation_pairs(graph))
