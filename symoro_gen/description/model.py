@@ -55,9 +55,17 @@ class MdhRow:
 class DriveChain:
     """Motor-side to joint-side mapping (for recordings made on the motor side).
 
-    ``q_motor = diag(ratios) @ coupling @ (directions * (q_joint - offsets))`` in the
-    convention: motor k turns by ``ratios[k] * sum_j coupling[k][j] * q_j``;
-    joint torques are ``tau = (diag(ratios) @ coupling)^T tau_motor``.
+    With ``R = diag(ratios) @ coupling`` and ``D = diag(directions)`` (entries +-1)::
+
+        q_motor   = R @ D @ (q_joint - offsets)       (motor k turns by ratios[k] * sum_j coupling[k][j] * q~_j)
+        q_joint   = D @ inv(R) @ q_motor + offsets    (velocities, accelerations: without offsets)
+        tau_joint = D @ R.T @ tau_motor               (power balance tau_joint . dq_joint = tau_motor . dq_motor)
+
+    ``offsets`` is the joint position (MDH convention) when the motor reads zero, e.g. the TX40's
+    ``q2 -= pi/2, q3 += pi/2`` is ``offsets = [0, -pi/2, pi/2, 0, 0, 0]``; its wrist (motor 6 turns
+    as ``32 (q5 + q6)``) is ``ratios[5] = 32, coupling[5] = [0, 0, 0, 0, 1, 1]``, which gives the
+    joint-5 torque ``45 tau_m5 + 32 tau_m6``. Applied by
+    :func:`symoro_gen.preprocessing.drive_chain.motor_to_joint`.
     """
 
     ratios: tuple[float, ...]

@@ -1,0 +1,18 @@
+"""Simulation for demos and tests (the truth is known): exciting trajectories, random physical
+parameters and payloads, synthetic recordings with gains and noise."""
+from .numeric_model import NumericModel, numeric_model
+from .parameters import (
+    ParameterSet,
+    check_physical_consistency,
+    random_link_inertial,
+    random_payload,
+    random_physical_parameters,
+)
+from .recording import simulate_recording, true_torques
+from .trajectories import Motion, double_s_times, fourier_trajectory, ptp_trajectory
+
+__all__ = [
+    "Motion", "fourier_trajectory", "ptp_trajectory", "double_s_times", "ParameterSet",
+    "random_physical_parameters", "random_payload", "random_link_inertial", "check_physical_consistency",
+    "simulate_recording", "true_torques", "NumericModel", "numeric_model",
+]

@@ -1,0 +1,490 @@
+"""Assemble the observation system ``Y = W chi + rho`` from trajectories (RX-90 paper eq. 14-16).
+
+For each experiment (one :class:`~symoro_gen.preprocessing.trajectory.Trajectory`, never mixed with
+another one):
+
+1. ``q`` is low-passed by a zero-phase Butterworth filter and differentiated by central differences
+   (band-pass estimates of ``q, dq, ddq``, see :mod:`symoro_gen.preprocessing.filtering`);
+   ``edge_samples`` samples are then dropped at both ends (filter edge effects);
+2. the model's base regressor (columns ``model.BASE_NAMES``) and, with ``payload_columns=True``, its
+   payload regressor (columns ``model.PAYLOAD_NAMES``; zeros for experiments without the payload,
+   eq. 7 of the LWR4 paper) are evaluated on every remaining sample;
+3. ``Y`` (the measured torques) and every column of ``W`` are decimated in parallel (same zero-phase
+   low-pass, one sample in ``n_d`` kept), so ``Y = W chi`` still holds;
+4. optionally the rows of joint j where the (decimated) velocity of joint j is below
+   ``min_velocity`` are removed (samples where the Coulomb-friction model ``sign(dq)`` is unreliable);
+5. rows are grouped per joint: all rows of joint 1 (experiment after experiment), then joint 2...
+
+The filter settings are chosen per experiment by :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`
+unless given (``cutoff_hz``, ``n_d``, ``dynamics_bandwidth_hz``...). :func:`assemble_observation`
+returns them with the system (``Assembly.summary()``).
+
+:func:`iter_observation_chunks` is the streaming variant: it processes each experiment in blocks of
+samples with overlapping margins (the Butterworth transient, ~10 periods of the cut-off, and the
+FIR half-length ``10 n_d``), so memory stays bounded whatever the recording length, and yields
+:class:`ObservationSystem` chunks (rows grouped per joint within each chunk). With the default FIR
+decimation the rows it yields are those of :func:`build_observation` (to ~1e-10 relative at block
+borders, from the truncated Butterworth transient). :func:`build_observation` is the concatenation of
+those chunks, regrouped per joint.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Callable, Iterable, Iterator
+
+import numpy as np
+from scipy import signal
+
+from ..errors import DataFileError, ModelError, Problem, ShapeError
+from ..preprocessing.filtering import (
+    FilterSettings,
+    _fir_decimate_padded,
+    _group_size,
+    butterworth_settle_samples,
+    choose_filter_settings,
+    decimation_filter,
+    filter_and_differentiate,
+    fir_buffer_length,
+    min_filter_samples,
+)
+from ..preprocessing.trajectory import Trajectory
+from .observation import ObservationSystem
+
+__all__ = [
+    "ExperimentReport",
+    "Assembly",
+    "observation_settings",
+    "assemble_observation",
+    "build_observation",
+    "iter_observation_chunks",
+]
+
+
+@dataclass(frozen=True)
+class ExperimentReport:
+    """What the assembly did with one experiment.
+
+    Attributes
+    ----------
+    index : int
+        0-based position of the experiment in the input.
+    source : str
+        ``Trajectory.source``.
+    loaded : bool
+        Payload mounted.
+    n_samples : int
+        Samples in the recording.
+    settings : FilterSettings
+        Filters used.
+    rows_per_joint : tuple of int
+        Rows kept per joint (after decimation and velocity removal).
+    removed_low_velocity : tuple of int
+        Rows removed per joint by ``min_velocity``.
+    """
+
+    index: int
+    source: str
+    loaded: bool
+    n_samples: int
+    settings: FilterSettings
+    rows_per_joint: tuple[int, ...]
+    removed_low_velocity: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Assembly:
+    """An observation system with its provenance.
+
+    Attributes
+    ----------
+    system : ObservationSystem
+        ``W`` (r, c), ``Y`` (r,), column names, joint of each row.
+    experiments : tuple of ExperimentReport
+    row_experiment : ndarray of int, shape (r,)
+        Index of the experiment each row comes from.
+    row_time : ndarray, shape (r,)
+        Time [s] of each row's sample in its recording.
+    """
+
+    system: ObservationSystem
+    experiments: tuple[ExperimentReport, ...]
+    row_experiment: np.ndarray
+    row_time: np.ndarray
+
+    def summary(self) -> str:
+        s = self.system
+        lines = [f"Observation system: {s.W.shape[0]} rows x {s.W.shape[1]} columns, "
+                 f"{s.n_joints} joints, {len(self.experiments)} experiment(s)"]
+        for e in self.experiments:
+            lines.append(f"\n[{e.index}] {e.source} ({'loaded' if e.loaded else 'unloaded'}, {e.n_samples} samples)")
+            lines += ["    " + x for x in e.settings.summary().splitlines()]
+            lines.append(f"    rows per joint: {', '.join(str(r) for r in e.rows_per_joint)}")
+            if any(e.removed_low_velocity):
+                lines.append(f"    removed (|dq| < min_velocity): {', '.join(str(r) for r in e.removed_low_velocity)}")
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Options:
+    cutoff_hz: float | None
+    n_d: int | None
+    dynamics_bandwidth_hz: float | None
+    order: int
+    ftype: str
+    edge_samples: int | None
+    payload_columns: bool
+    min_velocity: object
+    use_recorded_derivatives: bool
+    max_chunk_mb: float
+    chunk_samples: int | None
+    regressor_batch: int
+    rule_kw: dict
+
+
+def _as_trajectories(trajectories) -> Iterable[Trajectory]:
+    if isinstance(trajectories, Trajectory):
+        return (trajectories,)
+    return trajectories
+
+
+def observation_settings(trajectory: Trajectory, *, cutoff_hz=None, n_d=None, dynamics_bandwidth_hz=None,
+                         order: int = 4, ftype: str = "fir", edge_samples=None, **rule_kw) -> FilterSettings:
+    """The :class:`FilterSettings` the assembly uses for ``trajectory`` (same keywords)."""
+    fs = 1.0 / trajectory.dt
+    return choose_filter_settings(fs, trajectory.q, dynamics_bandwidth_hz=dynamics_bandwidth_hz, cutoff_hz=cutoff_hz,
+                                  n_d=n_d, order=order, ftype=ftype, edge_samples=edge_samples, **rule_kw)
+
+
+def _names(model, payload_columns: bool) -> tuple[tuple[str, ...], int, int]:
+    try:
+        base = tuple(model.BASE_NAMES)
+    except AttributeError:
+        raise ModelError("model has no BASE_NAMES: pass a generated model (symoro_gen.load_model) "
+                         "or symoro_gen.simulate.numeric_model(robot)") from None
+    pay: tuple[str, ...] = ()
+    if payload_columns:
+        pay = tuple(getattr(model, "PAYLOAD_NAMES", ()))
+        if not pay:
+            raise ModelError(f"payload_columns=True but model {getattr(model, 'ROBOT', '?')} has no payload frame")
+    return base + pay, len(base), len(pay)
+
+
+def _eval_regressor(fn, what, q, dq, ddq, n, c):
+    W = np.asarray(fn(q, dq, ddq), float)
+    if W.shape != (q.shape[0], n, c):
+        raise ShapeError(f"model.{what} returned shape {W.shape}, expected {(q.shape[0], n, c)}")
+    return W
+
+
+def _velocity_threshold(min_velocity, n) -> np.ndarray | None:
+    if min_velocity is None:
+        return None
+    v = np.broadcast_to(np.asarray(min_velocity, float), (n,)).copy()
+    if (v < 0).any():
+        raise ValueError("min_velocity must be >= 0")
+    return v
+
+
+@dataclass
+class _Block:
+    Wd: np.ndarray  # (k, n, c)
+    Yd: np.ndarray  # (k, n)
+    dqd: np.ndarray  # (k, n)
+    td: np.ndarray  # (k,)
+
+
+def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Options, nb: int, npay: int
+                       ) -> Iterator[_Block]:
+    """Decimated blocks of one experiment (before velocity removal and regrouping)."""
+    n = traj.n_joints
+    N = traj.n_samples
+    src = traj.source
+    if n != int(getattr(model, "N_JOINTS", n)):
+        raise ShapeError(f"{src}: trajectory has {n} joints, model {getattr(model, 'ROBOT', '?')} has {model.N_JOINTS}")
+    use_rec = opts.use_recorded_derivatives
+    if use_rec and (traj.dq is None or traj.ddq is None):
+        raise DataFileError([Problem(src, "", "dq/ddq", "use_recorded_derivatives=True but the trajectory has "
+                                     "no recorded velocities/accelerations")])
+    e = st.edge_samples
+    nd = st.n_d
+    Nseg = N - 2 * e
+    need = max(min_filter_samples(st.order, nd, st.ftype), nd)
+    if N < min_filter_samples(st.order) or Nseg < need:
+        raise DataFileError([Problem(src, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
+                                     f"{2 * e} dropped at the edges, at least {need} must remain "
+                                     f"(cut-off {st.cutoff_hz:.4g} Hz, n_d = {nd})")])
+    c = nb + npay
+    C = n * c + 2 * n
+    payload_on = npay > 0 and traj.loaded
+    fs = st.fs
+    margin = 0 if use_rec else butterworth_settle_samples(fs, st.cutoff_hz, st.order) + 2
+    fir = nd > 1 and st.ftype == "fir"
+    iir = nd > 1 and st.ftype == "iir"
+    if fir:
+        h = decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio)
+        L = h.size
+        half = (L - 1) // 2
+        group = _group_size(nd)
+    n_out_total = -(-Nseg // nd)
+    # outputs per block
+    row_bytes = 8.0 * C
+    budget_rows = max(1, int(opts.max_chunk_mb * 1e6 / row_bytes / 2))
+    if iir:
+        per_block = n_out_total
+    elif opts.chunk_samples is not None:
+        per_block = max(1, int(opts.chunk_samples) // nd)
+    elif fir:
+        per_block = max(1, (budget_rows - L) // nd)
+    else:
+        per_block = budget_rows
+    if fir:
+        per_block = max(group, per_block // group * group)
+    batch = max(1, int(opts.regressor_batch))
+
+    def kinematics(a, b):
+        """q, dq, ddq on segment samples [a, b)."""
+        lo_full, hi_full = e + a, e + b
+        if use_rec:
+            return traj.q[lo_full:hi_full], traj.dq[lo_full:hi_full], traj.ddq[lo_full:hi_full]
+        lo = max(0, lo_full - margin)
+        hi = min(N, hi_full + margin)
+        qf, dq, ddq = filter_and_differentiate(traj.q[lo:hi], fs, st.cutoff_hz, st.order, source=src)
+        s = slice(lo_full - lo, hi_full - lo)
+        return qf[s], dq[s], ddq[s]
+
+    def fill(buf, r0, a, b):
+        """Write W, Y, dq of segment samples [a, b) into buffer rows [r0, r0 + b - a)."""
+        Wv = buf[:, : n * c].reshape(buf.shape[0], n, c)
+        q, dq, ddq = kinematics(a, b)
+        for s in range(0, b - a, batch):
+            s2 = min(b - a, s + batch)
+            qs, dqs, ddqs = q[s:s2], dq[s:s2], ddq[s:s2]
+            Wv[r0 + s:r0 + s2, :, :nb] = _eval_regressor(model.regressor, "regressor", qs, dqs, ddqs, n, nb)
+            if payload_on:
+                Wv[r0 + s:r0 + s2, :, nb:] = _eval_regressor(model.payload_regressor, "payload_regressor",
+                                                             qs, dqs, ddqs, n, npay)
+        buf[r0:r0 + b - a, n * c:n * c + n] = traj.tau[e + a:e + b]
+        buf[r0:r0 + b - a, n * c + n:] = dq
+
+    for k0 in range(0, n_out_total, per_block):
+        k1 = min(n_out_total, k0 + per_block)
+        k = k1 - k0
+        if fir:
+            start = k0 * nd - half  # segment index of buffer row 0
+            rows = fir_buffer_length(k, nd, L, group)
+            a = max(0, start)
+            b = min(Nseg, (k1 - 1) * nd + half + 1)
+            buf = np.zeros((rows, C))
+            fill(buf, a - start, a, b)
+            cols = np.flatnonzero(np.any(buf != 0.0, axis=0))
+            out = np.zeros((k, C))
+            if cols.size == C:
+                out[:] = _fir_decimate_padded(buf, h, nd, k, group)
+            elif cols.size:
+                sub = np.ascontiguousarray(buf[:, cols])
+                del buf
+                out[:, cols] = _fir_decimate_padded(sub, h, nd, k, group)
+        elif iir:
+            buf = np.zeros((Nseg, C))
+            fill(buf, 0, 0, Nseg)
+            sos = decimation_filter(nd, ftype="iir", cutoff_ratio=st.cutoff_ratio)
+            cols = np.flatnonzero(np.any(buf != 0.0, axis=0))
+            out = np.zeros((k, C))
+            if cols.size:
+                out[:, cols] = signal.sosfiltfilt(sos, buf[:, cols], axis=0)[::nd]
+        else:
+            out = np.zeros((k, C))
+            fill(out, 0, k0, k1)
+        idx = e + np.arange(k0, k1) * nd
+        yield _Block(Wd=out[:, : n * c].reshape(k, n, c), Yd=out[:, n * c:n * c + n],
+                     dqd=out[:, n * c + n:], td=traj.t[idx])
+
+
+def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, vmin, removed: np.ndarray):
+    """Stack blocks (each tagged with its experiment) per joint, removing low-velocity rows."""
+    Ws, Ys, Js, Es, Ts = [], [], [], [], []
+    for j in range(n):
+        for blk, ex in blocks:
+            keep = slice(None)
+            if vmin is not None:
+                m = np.abs(blk.dqd[:, j]) >= vmin[j]
+                removed[ex, j] += int((~m).sum())
+                keep = m
+            W = blk.Wd[keep, j, :]
+            Ws.append(W)
+            Ys.append(blk.Yd[keep, j])
+            Js.append(np.full(W.shape[0], j))
+            Es.append(np.full(W.shape[0], ex))
+            Ts.append(blk.td[keep])
+    return Ws, Ys, Js, Es, Ts
+
+
+def _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns, min_velocity,
+             use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, rule_kw) -> _Options:
+    return _Options(cutoff_hz=cutoff_hz, n_d=n_d, dynamics_bandwidth_hz=dynamics_bandwidth_hz, order=order,
+                    ftype=ftype, edge_samples=edge_samples, payload_columns=payload_columns,
+                    min_velocity=min_velocity, use_recorded_derivatives=use_recorded_derivatives,
+                    max_chunk_mb=max_chunk_mb, chunk_samples=chunk_samples, regressor_batch=regressor_batch,
+                    rule_kw=dict(rule_kw))
+
+
+def _settings_for(traj: Trajectory, opts: _Options) -> FilterSettings:
+    return observation_settings(traj, cutoff_hz=opts.cutoff_hz, n_d=opts.n_d,
+                                dynamics_bandwidth_hz=opts.dynamics_bandwidth_hz, order=opts.order,
+                                ftype=opts.ftype, edge_samples=opts.edge_samples, **opts.rule_kw)
+
+
+def _check_loaded(traj: Trajectory, payload_columns: bool) -> None:
+    if traj.loaded and not payload_columns:
+        warnings.warn(f"{traj.source}: the payload is mounted but payload_columns=False: its effect stays in "
+                      "the residual", UserWarning, stacklevel=4)
+
+
+def iter_observation_chunks(
+    model,
+    trajectories,
+    *,
+    cutoff_hz: float | None = None,
+    n_d: int | None = None,
+    payload_columns: bool = False,
+    min_velocity=None,
+    dynamics_bandwidth_hz: float | None = None,
+    order: int = 4,
+    ftype: str = "fir",
+    edge_samples: int | None = None,
+    use_recorded_derivatives: bool = False,
+    max_chunk_mb: float = 64.0,
+    chunk_samples: int | None = None,
+    regressor_batch: int = 8192,
+    on_experiment: Callable[[ExperimentReport], None] | None = None,
+    **rule_kw,
+) -> Iterator[ObservationSystem]:
+    """Stream the observation system in chunks of bounded memory.
+
+    Parameters
+    ----------
+    model
+        Generated model (``symoro_gen.load_model(name)``) or any object with ``N_JOINTS``,
+        ``BASE_NAMES``, ``regressor(q, dq, ddq) -> (N, n, nb)`` and, for payload columns,
+        ``PAYLOAD_NAMES``, ``payload_regressor(q, dq, ddq) -> (N, n, 10)``.
+    trajectories : Trajectory or iterable of Trajectory
+        Experiments; may be a lazy iterable (each is read when reached).
+    cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, **rule_kw
+        Filter settings, see :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`
+        (unset values are chosen per experiment by the rules).
+    payload_columns : bool
+        Append the payload columns (zeros for unloaded experiments).
+    min_velocity : float or array_like (n,), optional
+        Remove the rows of joint j where ``|dq_j| < min_velocity[j]`` [rad/s or m/s].
+    use_recorded_derivatives : bool
+        Use the trajectory's ``dq``/``ddq`` (and raw ``q``) instead of filtering ``q``.
+    max_chunk_mb : float
+        Approximate size of the full-rate buffer of one block [MB].
+    chunk_samples : int, optional
+        Full-rate samples per block (overrides ``max_chunk_mb``).
+    regressor_batch : int
+        Samples per call of the model's regressor.
+    on_experiment : callable, optional
+        Called with the :class:`ExperimentReport` of each experiment once it is done.
+
+    Yields
+    ------
+    ObservationSystem
+        Rows of one block of one experiment, grouped per joint; ``names`` = ``BASE_NAMES``
+        (+ ``PAYLOAD_NAMES``).
+    """
+    opts = _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns,
+                    min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, rule_kw)
+    names, nb, npay = _names(model, payload_columns)
+    for ex, traj in enumerate(_as_trajectories(trajectories)):
+        _check_loaded(traj, payload_columns)
+        st = _settings_for(traj, opts)
+        n = traj.n_joints
+        vmin = _velocity_threshold(min_velocity, n)
+        removed = np.zeros((ex + 1, n), int)
+        kept = np.zeros(n, int)
+        for blk in _experiment_blocks(model, traj, st, opts, nb, npay):
+            Ws, Ys, Js, _, _ = _stack_per_joint([(blk, ex)], n, vmin, removed)
+            kept += np.array([w.shape[0] for w in Ws])
+            yield ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names,
+                                    joint=np.concatenate(Js))
+        if on_experiment is not None:
+            on_experiment(ExperimentReport(index=ex, source=traj.source, loaded=traj.loaded, n_samples=traj.n_samples,
+                                           settings=st, rows_per_joint=tuple(int(x) for x in kept),
+                                           removed_low_velocity=tuple(int(x) for x in removed[ex])))
+
+
+def assemble_observation(
+    model,
+    trajectories,
+    *,
+    cutoff_hz: float | None = None,
+    n_d: int | None = None,
+    payload_columns: bool = False,
+    min_velocity=None,
+    dynamics_bandwidth_hz: float | None = None,
+    order: int = 4,
+    ftype: str = "fir",
+    edge_samples: int | None = None,
+    use_recorded_derivatives: bool = False,
+    max_chunk_mb: float = 64.0,
+    chunk_samples: int | None = None,
+    regressor_batch: int = 8192,
+    **rule_kw,
+) -> Assembly:
+    """Build the whole observation system with its provenance (same parameters as
+    :func:`iter_observation_chunks`).
+
+    Returns
+    -------
+    Assembly
+        ``system`` (rows grouped per joint over all experiments), per-experiment reports with the
+        filter settings, and the experiment and time of each row.
+    """
+    opts = _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns,
+                    min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, rule_kw)
+    names, nb, npay = _names(model, payload_columns)
+    trajs = list(_as_trajectories(trajectories))
+    if not trajs:
+        raise ValueError("no trajectory given")
+    n = trajs[0].n_joints
+    for tr in trajs:
+        if tr.n_joints != n:
+            raise ShapeError(f"{tr.source}: {tr.n_joints} joints, {trajs[0].source}: {n}")
+    vmin = _velocity_threshold(min_velocity, n)
+    removed = np.zeros((len(trajs), n), int)
+    blocks: list[tuple[_Block, int]] = []
+    settings = []
+    for ex, traj in enumerate(trajs):
+        _check_loaded(traj, payload_columns)
+        st = _settings_for(traj, opts)
+        settings.append(st)
+        blocks += [(b, ex) for b in _experiment_blocks(model, traj, st, opts, nb, npay)]
+    Ws, Ys, Js, Es, Ts = _stack_per_joint(blocks, n, vmin, removed)
+    E = np.concatenate(Es)
+    J = np.concatenate(Js)
+    system = ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names, joint=J)
+    reports = []
+    for ex, traj in enumerate(trajs):
+        rows = tuple(int(np.sum((E == ex) & (J == j))) for j in range(n))
+        reports.append(ExperimentReport(index=ex, source=traj.source, loaded=traj.loaded, n_samples=traj.n_samples,
+                                        settings=settings[ex], rows_per_joint=rows,
+                                        removed_low_velocity=tuple(int(x) for x in removed[ex])))
+    return Assembly(system=system, experiments=tuple(reports), row_experiment=E, row_time=np.concatenate(Ts))
+
+
+def build_observation(model, trajectories, *, cutoff_hz: float | None = None, n_d: int | None = None,
+                      payload_columns: bool = False, min_velocity=None, **kwargs) -> ObservationSystem:
+    """The observation system ``Y = W chi`` of the experiments (see :func:`assemble_observation`).
+
+    Returns
+    -------
+    ObservationSystem
+        ``W`` (r, c) with columns ``model.BASE_NAMES`` (+ ``model.PAYLOAD_NAMES``), ``Y`` (r,),
+        ``joint`` (r,) 0-based; rows grouped per joint.
+    """
+    return assemble_observation(model, trajectories, cutoff_hz=cutoff_hz, n_d=n_d, payload_columns=payload_columns,
+                                min_velocity=min_velocity, **kwargs).system
