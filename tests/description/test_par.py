@@ -429,3 +429,17 @@ def test_write_robot_toml(tmp_path):
         write_robot_toml(text.replace("sigma = 2", "sigma = 5"), bad)
     assert not bad.exists()
     assert sorted(os.listdir(tmp_path)) == ["rx90_imported.toml"]  # no temporary file left
+
+
+def test_round_trip_shared_strategy():
+    """Round trip over the project's shared random MDH robots (gamma, b, payloads, symbolic constants)."""
+    strategies = pytest.importorskip("tests.strategies", reason="tests/strategies.py (shared robot strategy) absent")
+
+    @settings(max_examples=20, deadline=None)
+    @given(strategies.mdh_robots(2, 6, random_gravity=True))
+    def check(text):
+        robot = parse_robot_text(text)
+        back, _, _ = round_trip(robot)
+        same_robot(robot, back)
+
+    check()
