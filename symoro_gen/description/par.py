@@ -59,13 +59,21 @@ from typing import Mapping
 import sympy as sp
 from sympy.printing.str import StrPrinter
 
-from ..errors import Problem, RobotFileError
+from ..errors import Problem, RobotFileError, SymoroError
 from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from .expr import ExprError, parse_expression
 from .model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, q_symbol
 from .parse import load_robot, parse_robot_text
 
-__all__ = ["import_par", "import_par_text", "export_par", "write_robot_toml", "DEFAULT_GRAVITY_Z"]
+__all__ = ["import_par", "import_par_text", "export_par", "write_robot_toml", "OutputExistsError", "DEFAULT_GRAVITY_Z"]
+
+
+class OutputExistsError(SymoroError, FileExistsError):
+    """The output file exists and overwriting was not asked for (nothing written)."""
+
+    def __init__(self, path: os.PathLike | str):
+        super().__init__(f"{path} exists; not overwritten")
+        self.hint = "pass overwrite=True (--force on the command line) to replace it"
 
 #: gravity used for a symbolic ``G = {0,0,G3}`` without a numeric value (z axis pointing up)
 DEFAULT_GRAVITY_Z = -9.81
@@ -817,13 +825,13 @@ def write_robot_toml(text: str, path: str | os.PathLike, *, overwrite: bool = Fa
     ------
     RobotFileError
         ``text`` is not a valid robot file (nothing written).
-    FileExistsError
-        ``path`` exists and ``overwrite`` is false.
+    OutputExistsError
+        ``path`` exists and ``overwrite`` is false (a ``SymoroError`` and a ``FileExistsError``).
     """
     dest = Path(path)
     parse_robot_text(text, file=str(dest))
     if dest.exists() and not overwrite:
-        raise FileExistsError(f"{dest} exists; not overwritten (pass overwrite=True, or --force on the command line)")
+        raise OutputExistsError(dest)
     fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent if str(dest.parent) else ".")
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
@@ -836,10 +844,10 @@ def write_robot_toml(text: str, path: str | os.PathLike, *, overwrite: bool = Fa
             try:
                 os.link(tmp, dest)  # fails if dest appeared meanwhile: never clobbers
             except FileExistsError:
-                raise FileExistsError(f"{dest} exists; not overwritten (pass overwrite=True)") from None
+                raise OutputExistsError(dest) from None
             except OSError:  # file system without hard links
                 if dest.exists():
-                    raise FileExistsError(f"{dest} exists; not overwritten (pass overwrite=True)") from None
+                    raise OutputExistsError(dest) from None
                 os.replace(tmp, dest)
     finally:
         if os.path.exists(tmp):

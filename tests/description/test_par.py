@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from symoro_gen.description import load_robot, parse_robot_text, q_symbol
 from symoro_gen.description.par import export_par, import_par, import_par_text, write_robot_toml
 from symoro_gen.dynamics.numeric import inverse_dynamics
-from symoro_gen.errors import RobotFileError
+from symoro_gen.errors import RobotFileError, SymoroError
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 RX90_PAR = FIXTURES / "rx90_symoro.par"
@@ -418,8 +418,9 @@ def test_write_robot_toml(tmp_path):
     same_robot(parse_robot_text(text), load_robot(dest))
     # refuses to overwrite, file untouched
     other = import_par(TREE_PAR)
-    with pytest.raises(FileExistsError, match="overwrite"):
+    with pytest.raises(FileExistsError, match="not overwritten") as info:
         write_robot_toml(other, dest)
+    assert isinstance(info.value, SymoroError) and "--force" in info.value.hint
     assert dest.read_text() == text
     write_robot_toml(other, dest, overwrite=True)
     assert dest.read_text() == other
@@ -443,3 +444,21 @@ def test_round_trip_shared_strategy():
         same_robot(robot, back)
 
     check()
+
+
+def test_cli_import_par(tmp_path, capsys):
+    from symoro_gen.cli import main
+
+    out = tmp_path / "rx90.toml"
+    assert main(["--quiet", "import-par", str(RX90_PAR), "-o", str(out)]) == 0
+    assert out.read_text() == import_par(RX90_PAR)
+    before = out.read_text()
+    assert main(["import-par", str(TREE_PAR), "-o", str(out)]) == 2  # exists: refused
+    assert out.read_text() == before and "not overwritten" in capsys.readouterr().err
+    assert main(["--quiet", "import-par", str(TREE_PAR), "-o", str(out), "--force"]) == 0
+    assert "tree3" in out.read_text()
+    bad = tmp_path / "bad.par"
+    bad.write_text(BASE.replace("Type = 1", "Type = 2"))
+    assert main(["import-par", str(bad), "-o", str(tmp_path / "bad.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.par" in err and "line 7" in err and "Type" in err and not (tmp_path / "bad.toml").exists()
