@@ -38,7 +38,7 @@ robots: $(STAMP)
 check-generated: $(STAMP)
 	@set -e; tmp=$$(mktemp -d); \
 	for f in robots/*.toml; do $(PY) -m symoro_gen --quiet generate $$(basename $$f .toml) --out $$tmp; done; \
-	if diff -r --exclude=__pycache__ generated $$tmp; then echo "generated/ matches the generator"; rm -rf $$tmp; \
+	if diff -r --exclude=__pycache__ --exclude=_build generated $$tmp; then echo "generated/ matches the generator"; rm -rf $$tmp; \
 	else echo "generated/ differs from the generator: run 'make robots' and commit"; rm -rf $$tmp; exit 1; fi
 
 test: $(STAMP)

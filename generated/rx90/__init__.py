@@ -16,6 +16,7 @@ casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base re
 """
 import numpy as np
 
+from . import _ccompile
 from ._kernels import base_kernel as _base_kernel
 from ._kernels import payload_kernel as _payload_kernel
 from ._kernels import standard_kernel as _standard_kernel
@@ -31,6 +32,9 @@ ROBOT_FILE_SHA256 = '7530a26874dfcb1e0ec0d9963faa977c03b48f57e0f5a7df2841d3236cc
 _NOMINAL = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 _NOMINAL_PAYLOAD = (0.161, 0.0, 0.0, 0.161, 0.0, 0.035, 0.0, 0.0, 1.003, 7.025)
 _CHUNK = 2048
+_C = _ccompile.load(("base_batch", "standard_batch", "payload_batch"))
+#: "c" when the compiled batch kernels are in use, "numpy" otherwise (no C compiler, or SYMORO_BACKEND=numpy)
+BACKEND = "c" if _C is not None else "numpy"
 
 
 def _inputs(q, dq, ddq):
@@ -47,12 +51,15 @@ def _inputs(q, dq, ddq):
     return arrs, np.ndim(q) == 1
 
 
-def _evaluate(kernel, ncols, q, dq, ddq, out=None):
+def _evaluate(kernel, cname, ncols, q, dq, ddq, out=None):
     (q, dq, ddq), one = _inputs(q, dq, ddq)
     N = q.shape[0]
     res = np.empty((N, N_JOINTS, ncols)) if out is None else out
-    if res.shape != (N, N_JOINTS, ncols):
-        raise ValueError(f"{ROBOT}: out must have shape {(N, N_JOINTS, ncols)}, got {res.shape}")
+    if res.shape != (N, N_JOINTS, ncols) or res.dtype != np.float64 or not res.flags.c_contiguous:
+        raise ValueError(f"{ROBOT}: out must be a C-contiguous float64 array of shape {(N, N_JOINTS, ncols)}")
+    if _C is not None:
+        _C[cname](N, np.ascontiguousarray(q), np.ascontiguousarray(dq), np.ascontiguousarray(ddq), res)
+        return res[0] if one else res
     m = min(_CHUNK, max(N, 1))
     buf = np.zeros((N_JOINTS, ncols, m))
     for s in range(0, N, _CHUNK):
@@ -70,17 +77,17 @@ def regressor(q, dq, ddq, out=None):
     q [rad or m], dq, ddq in joint space (MDH convention of the robot file).
     ``out`` may be a preallocated (N, n, nb) array.
     """
-    return _evaluate(_base_kernel, len(BASE_NAMES), q, dq, ddq, out)
+    return _evaluate(_base_kernel, "base_batch", len(BASE_NAMES), q, dq, ddq, out)
 
 
 def standard_regressor(q, dq, ddq, out=None):
     """Standard regressor IDM_st, shape (N, n, len(STANDARD_NAMES))."""
-    return _evaluate(_standard_kernel, len(STANDARD_NAMES), q, dq, ddq, out)
+    return _evaluate(_standard_kernel, "standard_batch", len(STANDARD_NAMES), q, dq, ddq, out)
 
 
 def payload_regressor(q, dq, ddq, out=None):
     """Payload regressor, shape (N, n, len(PAYLOAD_NAMES)) (0 columns without payload)."""
-    return _evaluate(_payload_kernel, len(PAYLOAD_NAMES), q, dq, ddq, out)
+    return _evaluate(_payload_kernel, "payload_batch", len(PAYLOAD_NAMES), q, dq, ddq, out)
 
 
 def base_parameters(chi_std):

@@ -23,6 +23,7 @@ from ..description.model import RobotDescription
 from ..dynamics.graph import ExprGraph
 from ..dynamics.newton_euler import SymbolicRegressor, build_regressor
 from .codegen import OpCount, count_ops, print_expr
+from .c_backend import C_PRELUDE, c_function
 from .numpy_backend import kernel_source
 from .optimize import optimize
 
@@ -138,6 +139,7 @@ casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base re
 """
 import numpy as np
 
+from . import _ccompile
 from ._kernels import base_kernel as _base_kernel
 from ._kernels import payload_kernel as _payload_kernel
 from ._kernels import standard_kernel as _standard_kernel
@@ -153,6 +155,9 @@ ROBOT_FILE_SHA256 = {sha!r}
 _NOMINAL = {nominal!r}
 _NOMINAL_PAYLOAD = {nominal_payload!r}
 _CHUNK = 2048
+_C = _ccompile.load(("base_batch", "standard_batch", "payload_batch"))
+#: "c" when the compiled batch kernels are in use, "numpy" otherwise (no C compiler, or SYMORO_BACKEND=numpy)
+BACKEND = "c" if _C is not None else "numpy"
 
 
 def _inputs(q, dq, ddq):
@@ -169,12 +174,15 @@ def _inputs(q, dq, ddq):
     return arrs, np.ndim(q) == 1
 
 
-def _evaluate(kernel, ncols, q, dq, ddq, out=None):
+def _evaluate(kernel, cname, ncols, q, dq, ddq, out=None):
     (q, dq, ddq), one = _inputs(q, dq, ddq)
     N = q.shape[0]
     res = np.empty((N, N_JOINTS, ncols)) if out is None else out
-    if res.shape != (N, N_JOINTS, ncols):
-        raise ValueError(f"{{ROBOT}}: out must have shape {{(N, N_JOINTS, ncols)}}, got {{res.shape}}")
+    if res.shape != (N, N_JOINTS, ncols) or res.dtype != np.float64 or not res.flags.c_contiguous:
+        raise ValueError(f"{{ROBOT}}: out must be a C-contiguous float64 array of shape {{(N, N_JOINTS, ncols)}}")
+    if _C is not None:
+        _C[cname](N, np.ascontiguousarray(q), np.ascontiguousarray(dq), np.ascontiguousarray(ddq), res)
+        return res[0] if one else res
     m = min(_CHUNK, max(N, 1))
     buf = np.zeros((N_JOINTS, ncols, m))
     for s in range(0, N, _CHUNK):
@@ -192,17 +200,17 @@ def regressor(q, dq, ddq, out=None):
     q [rad or m], dq, ddq in joint space (MDH convention of the robot file).
     ``out`` may be a preallocated (N, n, nb) array.
     """
-    return _evaluate(_base_kernel, len(BASE_NAMES), q, dq, ddq, out)
+    return _evaluate(_base_kernel, "base_batch", len(BASE_NAMES), q, dq, ddq, out)
 
 
 def standard_regressor(q, dq, ddq, out=None):
     """Standard regressor IDM_st, shape (N, n, len(STANDARD_NAMES))."""
-    return _evaluate(_standard_kernel, len(STANDARD_NAMES), q, dq, ddq, out)
+    return _evaluate(_standard_kernel, "standard_batch", len(STANDARD_NAMES), q, dq, ddq, out)
 
 
 def payload_regressor(q, dq, ddq, out=None):
     """Payload regressor, shape (N, n, len(PAYLOAD_NAMES)) (0 columns without payload)."""
-    return _evaluate(_payload_kernel, len(PAYLOAD_NAMES), q, dq, ddq, out)
+    return _evaluate(_payload_kernel, "payload_batch", len(PAYLOAD_NAMES), q, dq, ddq, out)
 
 
 def base_parameters(chi_std):
@@ -314,6 +322,16 @@ def emit_from(reg: SymbolicRegressor, bp: BaseParameterMap, out_dir) -> EmittedM
         kernel_source(g_pay, n, reg.payload_names, "payload_kernel", robot.q, robot.dq, robot.ddq),
     ]
     files: dict[str, str] = {"_kernels.py": "".join(kern)}
+    files["_kernels.c"] = "\n".join(
+        [
+            header.replace("#", "//"),
+            C_PRELUDE,
+            c_function(g_base, n, bp.base_names, "base_batch", robot.q, robot.dq, robot.ddq),
+            c_function(g_std, n, reg.standard_names, "standard_batch", robot.q, robot.dq, robot.ddq),
+            c_function(g_pay, n, reg.payload_names, "payload_batch", robot.q, robot.dq, robot.ddq),
+        ]
+    )
+    files["_ccompile.py"] = header + (Path(__file__).parent / "ccompile_template.py").read_text()
     files["__init__.py"] = _MODULE_TEMPLATE.format(
         header=header,
         robot=robot.name,

@@ -119,3 +119,30 @@ def test_lwr4_counts_match_the_papers_model():
     for n in ("XX2R", "ZZ2R", "MY2R", "XX4R", "ZZ4R", "MY4R", "MY5R", "MY6R"):
         assert n in m.BASE_NAMES, n  # regrouped parameters listed in Table II of the LWR4 paper
     assert m.PAYLOAD_NAMES == ("XX8", "XY8", "XZ8", "YY8", "YZ8", "ZZ8", "MX8", "MY8", "MZ8", "M8")
+
+
+def test_c_and_numpy_backends_agree(robot_and_model, monkeypatch):
+    robot, m = robot_and_model
+    if m.BACKEND != "c":
+        pytest.skip("no C compiler here: only the NumPy backend is available")
+    rng = np.random.default_rng(5)
+    q, dq, ddq = _states(rng, 300, m.N_JOINTS)
+    dq[::7] = 0.0  # sign(0) must agree too
+    c_vals = [f(q, dq, ddq) for f in (m.regressor, m.standard_regressor, m.payload_regressor)]
+    monkeypatch.setattr(m, "_C", None)
+    np_vals = [f(q, dq, ddq) for f in (m.regressor, m.standard_regressor, m.payload_regressor)]
+    for a, b in zip(c_vals, np_vals):
+        assert a.shape == b.shape
+        assert np.max(np.abs(a - b), initial=0.0) <= REL * max(1.0, np.abs(b).max(initial=0.0))
+
+
+def test_out_argument_is_filled_in_place(robot_and_model):
+    _, m = robot_and_model
+    rng = np.random.default_rng(6)
+    q, dq, ddq = _states(rng, 10, m.N_JOINTS)
+    out = np.full((10, m.N_JOINTS, len(m.BASE_NAMES)), np.nan)
+    r = m.regressor(q, dq, ddq, out=out)
+    assert r is out and np.isfinite(out).all()
+    assert np.array_equal(out, m.regressor(q, dq, ddq))
+    with pytest.raises(ValueError, match="out must be"):
+        m.regressor(q, dq, ddq, out=np.zeros((9, m.N_JOINTS, len(m.BASE_NAMES))))
