@@ -16,8 +16,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def _same_tree(a: Path, b: Path) -> list:
     diffs = []
-    names = sorted(p.name for p in a.iterdir() if p.name != "__pycache__")
-    assert names == sorted(p.name for p in b.iterdir() if p.name != "__pycache__")
+    names = sorted(p.name for p in a.iterdir() if p.name not in ("__pycache__", "_build"))
+    assert names == sorted(p.name for p in b.iterdir() if p.name not in ("__pycache__", "_build"))
     for n in names:
         if (a / n).read_bytes() != (b / n).read_bytes():
             diffs.append(n)
@@ -51,7 +51,7 @@ def test_failed_emission_leaves_previous_package_intact(tmp_path, monkeypatch):
     monkeypatch.setattr(package, "relations_markdown", boom)
     with pytest.raises(RuntimeError):
         emit_robot(robot, tmp_path)
-    after = {p.name: p.read_bytes() for p in (tmp_path / "scara").iterdir() if p.name != "__pycache__"}
+    after = {p.name: p.read_bytes() for p in (tmp_path / "scara").iterdir() if p.name not in ("__pycache__", "_build")}
     assert after == before
     assert [p.name for p in tmp_path.iterdir()] == ["scara"], "no temporary folder left behind"
 
