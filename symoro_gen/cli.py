@@ -57,6 +57,20 @@ def cmd_import_par(args) -> int:
     return 0
 
 
+def cmd_export_par(args) -> int:
+    from .description import load_robot
+    from .description.par import export_par
+
+    text = export_par(load_robot(args.robot))
+    if args.output:
+        from .emit.package import write_text_atomic
+
+        write_text_atomic(Path(args.output), text)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="symoro-gen", description=__doc__.splitlines()[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -73,6 +87,11 @@ def build_parser() -> argparse.ArgumentParser:
     ip.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
     ip.add_argument("--force", action="store_true", help="overwrite an existing output file")
     ip.set_defaults(func=cmd_import_par)
+
+    ep = sub.add_parser("export-par", help="robot .toml -> SYMORO+/OpenSYMORO .par file")
+    ep.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
+    ep.add_argument("-o", "--output", help="write the .par here (default: stdout)")
+    ep.set_defaults(func=cmd_export_par)
 
     for extra in _EXTRA_COMMANDS:
         extra(sub)
