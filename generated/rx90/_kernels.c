@@ -6,9 +6,10 @@
 
 static inline double sym_sign(double x) { return (double)((x > 0.0) - (x < 0.0)); }
 
-void base_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+void base_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
 {
     for (long s = 0; s < N; ++s) {
+        const double* ts = trig + s * 10;
         const double* qs = q + s * 6;
         const double* dqs = dq + s * 6;
         const double* ddqs = ddq + s * 6;
@@ -30,16 +31,16 @@ void base_batch(long N, const double* q, const double* dq, const double* ddq, do
         const double ddq4 = ddqs[3];
         const double ddq5 = ddqs[4];
         const double ddq6 = ddqs[5];
-        const double S2 = sin(q2);
-        const double C2 = cos(q2);
-        const double S3 = sin(q3);
-        const double C3 = cos(q3);
-        const double S4 = sin(q4);
-        const double C4 = cos(q4);
-        const double S5 = sin(q5);
-        const double C5 = cos(q5);
-        const double S6 = sin(q6);
-        const double C6 = cos(q6);
+        const double S2 = ts[5];
+        const double C2 = ts[0];
+        const double S3 = ts[6];
+        const double C3 = ts[1];
+        const double S4 = ts[7];
+        const double C4 = ts[2];
+        const double S5 = ts[8];
+        const double C5 = ts[3];
+        const double S6 = ts[9];
+        const double C6 = ts[4];
         const double wi2x = -S2*dq1;
         const double pr9 = dq2*wi2x;
         const double wi2y = -C2*dq1;
@@ -833,9 +834,10 @@ void base_batch(long N, const double* q, const double* dq, const double* ddq, do
     }
 }
 
-void standard_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+void standard_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
 {
     for (long s = 0; s < N; ++s) {
+        const double* ts = trig + s * 10;
         const double* qs = q + s * 6;
         const double* dqs = dq + s * 6;
         const double* ddqs = ddq + s * 6;
@@ -857,16 +859,16 @@ void standard_batch(long N, const double* q, const double* dq, const double* ddq
         const double ddq4 = ddqs[3];
         const double ddq5 = ddqs[4];
         const double ddq6 = ddqs[5];
-        const double S2 = sin(q2);
-        const double C2 = cos(q2);
-        const double S3 = sin(q3);
-        const double C3 = cos(q3);
-        const double S4 = sin(q4);
-        const double C4 = cos(q4);
-        const double S5 = sin(q5);
-        const double C5 = cos(q5);
-        const double S6 = sin(q6);
-        const double C6 = cos(q6);
+        const double S2 = ts[5];
+        const double C2 = ts[0];
+        const double S3 = ts[6];
+        const double C3 = ts[1];
+        const double S4 = ts[7];
+        const double C4 = ts[2];
+        const double S5 = ts[8];
+        const double C5 = ts[3];
+        const double S6 = ts[9];
+        const double C6 = ts[4];
         const double wi2x = -S2*dq1;
         const double pr18 = dq2*wi2x;
         const double wi2y = -C2*dq1;
@@ -1953,9 +1955,10 @@ void standard_batch(long N, const double* q, const double* dq, const double* ddq
     }
 }
 
-void payload_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+void payload_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
 {
     for (long s = 0; s < N; ++s) {
+        const double* ts = trig + s * 10;
         const double* qs = q + s * 6;
         const double* dqs = dq + s * 6;
         const double* ddqs = ddq + s * 6;
@@ -1977,16 +1980,16 @@ void payload_batch(long N, const double* q, const double* dq, const double* ddq,
         const double ddq4 = ddqs[3];
         const double ddq5 = ddqs[4];
         const double ddq6 = ddqs[5];
-        const double S2 = sin(q2);
-        const double C2 = cos(q2);
-        const double S3 = sin(q3);
-        const double C3 = cos(q3);
-        const double S4 = sin(q4);
-        const double C4 = cos(q4);
-        const double S5 = sin(q5);
-        const double C5 = cos(q5);
-        const double S6 = sin(q6);
-        const double C6 = cos(q6);
+        const double S2 = ts[5];
+        const double C2 = ts[0];
+        const double S3 = ts[6];
+        const double C3 = ts[1];
+        const double S4 = ts[7];
+        const double C4 = ts[2];
+        const double S5 = ts[8];
+        const double C5 = ts[3];
+        const double S6 = ts[9];
+        const double C6 = ts[4];
         const double wi2x = -S2*dq1;
         const double pr3 = dq2*wi2x;
         const double wi2y = -C2*dq1;

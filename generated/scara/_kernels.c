@@ -6,9 +6,10 @@
 
 static inline double sym_sign(double x) { return (double)((x > 0.0) - (x < 0.0)); }
 
-void base_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+void base_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
 {
     for (long s = 0; s < N; ++s) {
+        const double* ts = trig + s * 4;
         const double* qs = q + s * 4;
         const double* dqs = dq + s * 4;
         const double* ddqs = ddq + s * 4;
@@ -23,10 +24,10 @@ void base_batch(long N, const double* q, const double* dq, const double* ddq, do
         const double ddq2 = ddqs[1];
         const double ddq3 = ddqs[2];
         const double ddq4 = ddqs[3];
-        const double S2 = sin(q2);
-        const double C2 = cos(q2);
-        const double S4 = sin(q4);
-        const double C4 = cos(q4);
+        const double S2 = ts[2];
+        const double C2 = ts[0];
+        const double S4 = ts[3];
+        const double C4 = ts[1];
         const double WW1zz = dq1*dq1;
         const double va2x = (-0.35)*WW1zz;
         const double va2y = 0.35*ddq1;
@@ -158,9 +159,10 @@ void base_batch(long N, const double* q, const double* dq, const double* ddq, do
     }
 }
 
-void standard_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+void standard_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
 {
     for (long s = 0; s < N; ++s) {
+        const double* ts = trig + s * 4;
         const double* qs = q + s * 4;
         const double* dqs = dq + s * 4;
         const double* ddqs = ddq + s * 4;
@@ -175,10 +177,10 @@ void standard_batch(long N, const double* q, const double* dq, const double* ddq
         const double ddq2 = ddqs[1];
         const double ddq3 = ddqs[2];
         const double ddq4 = ddqs[3];
-        const double S2 = sin(q2);
-        const double C2 = cos(q2);
-        const double S4 = sin(q4);
-        const double C4 = cos(q4);
+        const double S2 = ts[2];
+        const double C2 = ts[0];
+        const double S4 = ts[3];
+        const double C4 = ts[1];
         const double WW1zz = dq1*dq1;
         const double va2x = (-0.35)*WW1zz;
         const double va2y = 0.35*ddq1;
@@ -458,9 +460,10 @@ void standard_batch(long N, const double* q, const double* dq, const double* ddq
     }
 }
 
-void payload_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+void payload_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
 {
     for (long s = 0; s < N; ++s) {
+        const double* ts = trig + s * 4;
         const double* qs = q + s * 4;
         const double* dqs = dq + s * 4;
         const double* ddqs = ddq + s * 4;

@@ -24,13 +24,22 @@ def _c_expr(e: sp.Expr) -> str:
     return s
 
 
-def c_function(graph: ExprGraph, n_rows: int, col_names, func_name: str, q, dq, ddq) -> str:
+def trig_defs(graph: ExprGraph) -> list:
+    """The sin/cos definitions of a graph (computed outside the C loop, vectorised)."""
+    return [(s, e) for s, e in graph.defs if isinstance(e, (sp.sin, sp.cos))]
+
+
+def c_function(graph: ExprGraph, n_rows: int, col_names, func_name: str, q, dq, ddq, trig: list) -> str:
+    """``trig`` lists the (symbol, sin/cos expr) read from the precomputed ``trig`` array."""
     col = {n: k for k, n in enumerate(col_names)}
     nc = len(col_names)
+    nt = len(trig)
+    tpos = {s: i for i, (s, _) in enumerate(trig)}
     lines = [
-        f"void {func_name}(long N, const double* q, const double* dq, const double* ddq, double* out)",
+        f"void {func_name}(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)",
         "{",
         "    for (long s = 0; s < N; ++s) {",
+        f"        const double* ts = trig + s * {max(nt, 1)};",
         f"        const double* qs = q + s * {n_rows};",
         f"        const double* dqs = dq + s * {n_rows};",
         f"        const double* ddqs = ddq + s * {n_rows};",
@@ -46,7 +55,10 @@ def c_function(graph: ExprGraph, n_rows: int, col_names, func_name: str, q, dq, 
             if s.name in used:
                 lines.append(f"        const double {s.name} = {arr}[{i}];")
     for s, e in graph.defs:
-        lines.append(f"        const double {s.name} = {_c_expr(e)};")
+        if s in tpos:
+            lines.append(f"        const double {s.name} = ts[{tpos[s]}];")
+        else:
+            lines.append(f"        const double {s.name} = {_c_expr(e)};")
     entries = {(i, col[nm]): e for (i, nm), e in graph.outputs.items()}
     for i in range(n_rows):
         for k in range(nc):
@@ -54,3 +66,18 @@ def c_function(graph: ExprGraph, n_rows: int, col_names, func_name: str, q, dq, 
             lines.append(f"        o[{i * nc + k}] = {_c_expr(e) if e is not None else '0.0'};")
     lines += ["    }", "}", ""]
     return "\n".join(lines)
+
+
+def trig_source(trig: list, q_syms, func_name: str = "trig") -> str:
+    """Python ``trig(qT)``: (n, N) joint positions -> (N, len(trig)) sin/cos values (NumPy SIMD)."""
+    lines = [f"def {func_name}(qT):", f"    out = np.empty((qT.shape[1], {max(len(trig), 1)}))"]
+    used = set()
+    for _, e in trig:
+        used |= {x.name for x in e.free_symbols}
+    for i, s in enumerate(q_syms):
+        if s.name in used:
+            lines.append(f"    {s.name} = qT[{i}]")
+    for k, (_, e) in enumerate(trig):
+        lines.append(f"    out[:, {k}] = {print_expr(e)}")
+    lines.append("    return out")
+    return "\n".join(lines) + "\n"

@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 
 _HERE = Path(__file__).resolve().parent
+#: -march=native: the library is built on, and cached for, the machine that runs it
+_FLAGS = ["-O3", "-march=native", "-fPIC", "-shared", "-fno-math-errno"]
 
 
 def _compiler():
@@ -37,7 +39,9 @@ def load(functions):
     if os.environ.get("SYMORO_BACKEND", "").lower() == "numpy":
         return None
     src = (_HERE / "_kernels.c").read_bytes()
-    tag = hashlib.sha256(src).hexdigest()[:16]
+    import platform
+
+    tag = hashlib.sha256(src + " ".join(_FLAGS).encode() + platform.node().encode()).hexdigest()[:16]
     lib_path = None
     for d in _build_dirs():
         cand = d / f"kernels_{tag}.so"
@@ -54,7 +58,7 @@ def load(functions):
                 fd, tmp = tempfile.mkstemp(suffix=".so", dir=d)
                 os.close(fd)
                 r = subprocess.run(
-                    [cc, "-O2", "-fPIC", "-shared", "-fno-math-errno", "-o", tmp, str(_HERE / "_kernels.c"), "-lm"],
+                    [cc, *_FLAGS, "-o", tmp, str(_HERE / "_kernels.c"), "-lm"],
                     capture_output=True,
                     timeout=300,
                 )
@@ -77,6 +81,6 @@ def load(functions):
     for name in functions:
         fn = getattr(lib, name)
         fn.restype = None
-        fn.argtypes = [ctypes.c_long, ptr, ptr, ptr, ptr]
+        fn.argtypes = [ctypes.c_long, ptr, ptr, ptr, ptr, ptr]
         out[name] = fn
     return out
