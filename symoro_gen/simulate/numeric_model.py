@@ -28,6 +28,19 @@ class NumericModel:
 
     robot: RobotDescription
 
+    def _both(self, q, dq, ddq):
+        """Standard and payload columns from one pass, cached for the last inputs (the assembly asks
+        for both on the same samples)."""
+        q, dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (q, dq, ddq))
+        key = (q.shape, q.ctypes.data, dq.ctypes.data, ddq.ctypes.data, float(q.sum()), float(dq.sum()),
+               float(ddq.sum()))
+        cache = self.__dict__.get("_cache")
+        if cache is not None and cache[0] == key:
+            return cache[1]
+        res = numeric_regressor(self.robot, q, dq, ddq)
+        object.__setattr__(self, "_cache", (key, res))
+        return res
+
     @property
     def ROBOT(self) -> str:  # noqa: N802 - module-constant style of the generated interface
         return self.robot.name
@@ -50,7 +63,7 @@ class NumericModel:
 
     def standard_regressor(self, q, dq, ddq):
         """Standard regressor, shape (N, n, n_st)."""
-        return numeric_regressor(self.robot, q, dq, ddq)[0]
+        return self._both(q, dq, ddq)[0]
 
     def regressor(self, q, dq, ddq):
         """Same as :meth:`standard_regressor` (no regrouping), shape (N, n, n_st)."""
@@ -61,7 +74,7 @@ class NumericModel:
         if self.robot.payload is None:
             q = np.atleast_2d(np.asarray(q, float))
             return np.zeros(q.shape + (0,))
-        return numeric_regressor(self.robot, q, dq, ddq)[1]
+        return self._both(q, dq, ddq)[1]
 
     def base_parameters(self, chi_std):
         """Identity (base columns are the standard ones)."""
