@@ -17,7 +17,7 @@ import scipy.linalg
 from ..errors import IdentificationError
 from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, identify)
 from .observation import ObservationSystem
-from .result import IdentificationResult
+from .result import IdentificationResult, per_joint_rel_err
 from .systems import apply_gains, fix_parameters, stack_systems
 
 
@@ -80,11 +80,14 @@ def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSyste
         raise IdentificationError(f"known parameters {bad} are not payload columns {pay}")
     if gains is not None:
         unloaded, loaded = apply_gains(unloaded, gains), apply_gains(loaded, gains)
-    system = fix_parameters(stack_systems(unloaded, loaded), known)
+    full = stack_systems(unloaded, loaded)
+    system = fix_parameters(full, known)
     res = identify(system, method=method, essential=essential, r_sigma=r_sigma, weighting=weighting,
                    rank_tol=rank_tol, cond_warn=cond_warn, rel_std_warn_pct=rel_std_warn_pct,
                    zero_col_tol=zero_col_tol)
-    return dataclasses.replace(res, fixed=tuple(known.items()))
+    # same residual; error norms relative to the measured torques, not to Y - W_kl chi_kl
+    rel_err = per_joint_rel_err(res.residual, full.Y, full.joint, res.rel_err.size)
+    return dataclasses.replace(res, fixed=tuple((k, float(v)) for k, v in known.items()), rel_err=rel_err)
 
 
 def identify_payload(loaded: ObservationSystem, robot: Mapping[str, float] | IdentificationResult,
@@ -171,4 +174,6 @@ def identify_payload(loaded: ObservationSystem, robot: Mapping[str, float] | Ide
                             system.weights)
     res = identify(sub, method=method, weighting=weighting, rank_tol=rank_tol, cond_warn=cond_warn,
                    rel_std_warn_pct=rel_std_warn_pct, zero_col_tol=zero_col_tol)
-    return dataclasses.replace(res, fixed=tuple(fixed.items()), warnings=tuple(warnings) + res.warnings)
+    rel_err = per_joint_rel_err(res.residual, loaded.Y, loaded.joint, res.rel_err.size)
+    return dataclasses.replace(res, fixed=tuple(fixed.items()), warnings=tuple(warnings) + res.warnings,
+                               rel_err=rel_err)

@@ -21,6 +21,10 @@ from ..errors import IdentificationError
 from .observation import ObservationSystem
 
 
+#: summary() lists the known (fixed) parameters one per line up to this many
+MAX_FIXED_LISTED = 12
+
+
 def _frozen(a, dtype=float) -> np.ndarray:
     out = np.array(a, dtype=dtype, copy=True)
     out.setflags(write=False)
@@ -294,8 +298,12 @@ class IdentificationResult:
         lines.append(f"{'Param.':<10}{'Value':>11}{'2 sigma':>11}{'%sigma':>9}")
         for n, v, s, p in zip(self.names, self.values, self.std, self.rel_std_pct):
             lines.append(f"{n:<10}{_fmt(v)}{_fmt(2 * s)}{p:>9.2f}")
-        for n, v in self.fixed:
-            lines.append(f"{n:<10}{_fmt(v)}{'known':>11}{'-':>9}")
+        if len(self.fixed) <= MAX_FIXED_LISTED:
+            for n, v in self.fixed:
+                lines.append(f"{n:<10}{_fmt(v)}{'known':>11}{'-':>9}")
+        else:
+            lines.append(f"({len(self.fixed)} known parameters moved to the left-hand side: "
+                         f"{', '.join(n for n, _ in self.fixed[:5])}, ...)")
         if self.eliminated:
             lines.append(f"cancelled (essential parameters): {', '.join(self.eliminated)}")
         lines.append("")
