@@ -30,7 +30,7 @@ from .essential import essential_raw
 from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, Options, _poor_warning,
                          fit_ols, fit_raw, fit_wls)
 from .observation import ObservationSystem
-from .payload import fit_with_known_payload, payload_columns
+from .payload import fit_with_known_payload, split_experiments
 from .result import Gains, IdentificationResult, _fmt, per_joint_rel_err, relative_std_pct
 
 #: ||W_L^j chi_L|| / ||V_b^j|| below which the payload does not excite joint j (gain not identifiable)
@@ -75,16 +75,14 @@ class DriveGainsResult:
 
 def _robot_and_payload(unloaded, loaded, payload_names):
     check_finite(unloaded, "unloaded system")
-    check_finite(loaded, "loaded system")
-    pay = payload_columns(unloaded, loaded, payload_names)
+    if loaded is not None:
+        check_finite(loaded, "loaded system")
+    unloaded, loaded, pay = split_experiments(unloaded, loaded, payload_names)
     robot = [n for n in loaded.names if n not in pay]
-    extra = [n for n in unloaded.names if n in pay]
-    if extra:
-        raise IdentificationError(f"the unloaded system has payload columns {extra}")
-    return robot, pay
+    return unloaded, loaded, robot, pay
 
 
-def drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem, payload: Mapping[str, float],
+def drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None, payload: Mapping[str, float],
                 joints: Sequence[int] | None = None, *, weighted: bool = True,
                 payload_names: Sequence[str] | None = None,
                 rank_tol: float = RANK_TOL, zero_col_tol: float = ZERO_COL_TOL,
@@ -95,8 +93,10 @@ def drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem, payload:
     Parameters
     ----------
     unloaded : ObservationSystem
-        ``V_a = W_a chi / g`` (rows of every joint; ``Y`` = measured signal v).
-    loaded : ObservationSystem
+        ``V_a = W_a chi / g`` (rows of every joint; ``Y`` = measured signal v). With ``loaded=None``:
+        the combined system of both experiments (payload columns zero on unloaded rows, see
+        :func:`~symoro_gen.identification.payload.split_experiments`; needs ``payload_names``).
+    loaded : ObservationSystem or None
         Same robot columns + payload columns.
     payload : mapping name -> value
         All payload parameters appearing in ``loaded`` (CAD or measured values, SI units).
@@ -118,7 +118,7 @@ def drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem, payload:
     -------
     DriveGainsResult
     """
-    robot, pay = _robot_and_payload(unloaded, loaded, payload_names)
+    unloaded, loaded, robot, pay = _robot_and_payload(unloaded, loaded, payload_names)
     missing = [n for n in pay if n not in payload]
     if missing:
         raise IdentificationError(f"drive gains need every payload parameter; missing values for {missing}")
@@ -195,7 +195,7 @@ def drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem, payload:
     return DriveGainsResult(Gains(tuple(gj), gv, gs, gp), tuple(results), tuple(warnings))
 
 
-def identify_with_drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem,
+def identify_with_drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None,
                               payload: Mapping[str, float], joints: Sequence[int] | None = None,
                               method: str = "wls", *, reidentify_payload: bool = True,
                               payload_names: Sequence[str] | None = None, **tolerances
@@ -221,7 +221,7 @@ def identify_with_drive_gains(unloaded: ObservationSystem, loaded: ObservationSy
     return dataclasses.replace(res, gains=dg.gains, warnings=dg.warnings + res.warnings), dg
 
 
-def sensor_gains(unloaded: ObservationSystem, loaded: ObservationSystem, known: Mapping[str, float],
+def sensor_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None, known: Mapping[str, float],
                  weighting: str | None = "joint", *, essential: bool = False, r_sigma: float = 30.0,
                  payload_names: Sequence[str] | None = None, rank_tol: float = RANK_TOL,
                  cond_warn: float = COND_WARN, rel_std_warn_pct: float = REL_STD_WARN_PCT,
@@ -232,8 +232,9 @@ def sensor_gains(unloaded: ObservationSystem, loaded: ObservationSystem, known: 
     Parameters
     ----------
     unloaded : ObservationSystem
-        ``Y_a`` = sensor signals v, columns: robot base parameters.
-    loaded : ObservationSystem
+        ``Y_a`` = sensor signals v, columns: robot base parameters. With ``loaded=None``: the
+        combined system of both experiments (needs ``payload_names``).
+    loaded : ObservationSystem or None
         Same robot columns + payload columns.
     known : mapping name -> value
         Known payload parameters chi_kl (at least one, e.g. ``{"M8": 4.6136}``: it fixes the scale).
@@ -253,7 +254,7 @@ def sensor_gains(unloaded: ObservationSystem, loaded: ObservationSystem, known: 
     """
     opts = Options(rank_tol=rank_tol, cond_warn=cond_warn, rel_std_warn_pct=rel_std_warn_pct,
                    zero_col_tol=zero_col_tol)
-    robot, pay = _robot_and_payload(unloaded, loaded, payload_names)
+    unloaded, loaded, robot, pay = _robot_and_payload(unloaded, loaded, payload_names)
     bad = [k for k in known if k not in pay]
     if bad:
         raise IdentificationError(f"known parameters {bad} are not payload columns {pay}")

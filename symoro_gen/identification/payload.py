@@ -18,32 +18,71 @@ from ..errors import IdentificationError
 from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, identify)
 from .observation import ObservationSystem
 from .result import IdentificationResult, per_joint_rel_err
-from .systems import apply_gains, fix_parameters, stack_systems
+from .systems import apply_gains, fix_parameters, select_rows, stack_systems
 
 
-def payload_columns(unloaded: ObservationSystem, loaded: ObservationSystem,
-                    payload_names: Sequence[str] | None = None) -> tuple[str, ...]:
-    """Names of the payload columns: given, or those of ``loaded`` absent from ``unloaded``."""
+def split_experiments(unloaded: ObservationSystem, loaded: ObservationSystem | None,
+                      payload_names: Sequence[str] | None = None
+                      ) -> tuple[ObservationSystem, ObservationSystem, tuple[str, ...]]:
+    """Bring the two accepted layouts to (unloaded without payload columns, loaded with them).
+
+    Layouts
+    -------
+    * two systems: ``unloaded`` (robot columns, or robot + all-zero payload columns) and ``loaded``
+      (robot + payload columns);
+    * one combined system (``loaded=None``), as assembled with payload columns: rows whose payload
+      columns are all zero are the unloaded ones. ``payload_names`` is then required.
+
+    Returns
+    -------
+    (unloaded, loaded, payload_names)
+    """
+    if loaded is None:
+        if payload_names is None:
+            raise IdentificationError(
+                "a combined (unloaded + loaded) system needs payload_names to tell the payload columns")
+        pay = tuple(payload_names)
+        bad = [n for n in pay if n not in unloaded.names]
+        if bad:
+            raise IdentificationError(f"payload parameters {bad} are not columns of the system {unloaded.names}")
+        P = unloaded.W[:, [unloaded.names.index(n) for n in pay]]
+        is_loaded = np.any(P != 0.0, axis=1)
+        if not is_loaded.any():
+            raise IdentificationError("the combined system has no loaded row (payload columns all zero)")
+        if is_loaded.all():
+            raise IdentificationError("the combined system has no unloaded row (payload columns never all zero)")
+        combined = unloaded
+        unloaded = select_rows(combined, ~is_loaded)
+        loaded = select_rows(combined, is_loaded)
+    elif payload_names is None:
+        pay = tuple(n for n in loaded.names if n not in unloaded.names)
+    else:
+        pay = tuple(payload_names)
+    bad = [n for n in pay if n not in loaded.names]
+    if bad:
+        raise IdentificationError(f"payload parameters {bad} are not columns of the loaded system")
+    if not pay:
+        raise IdentificationError(
+            "the loaded system has no payload column (columns of the loaded system absent from the "
+            "unloaded one); assemble it with the payload regressor or give payload_names")
+    in_un = [n for n in pay if n in unloaded.names]
+    if in_un:
+        idx = [unloaded.names.index(n) for n in in_un]
+        if np.any(unloaded.W[:, idx] != 0.0):
+            raise IdentificationError(
+                f"the unloaded system has non-zero payload columns {in_un}: is it really unloaded?")
+        keep = [i for i, n in enumerate(unloaded.names) if n not in in_un]
+        unloaded = ObservationSystem(unloaded.W[:, keep], unloaded.Y, tuple(unloaded.names[i] for i in keep),
+                                     unloaded.joint, unloaded.weights)
     missing = [n for n in unloaded.names if n not in loaded.names]
     if missing:
         raise IdentificationError(
             f"the loaded system lacks robot columns {missing} of the unloaded one; both must come "
             f"from the same model")
-    if payload_names is None:
-        pay = tuple(n for n in loaded.names if n not in unloaded.names)
-    else:
-        pay = tuple(payload_names)
-        bad = [n for n in pay if n not in loaded.names]
-        if bad:
-            raise IdentificationError(f"payload parameters {bad} are not columns of the loaded system")
-    if not pay:
-        raise IdentificationError(
-            "the loaded system has no payload column (columns of the loaded system absent from the "
-            "unloaded one); assemble it with the payload regressor")
-    return pay
+    return unloaded, loaded, pay
 
 
-def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSystem,
+def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSystem | None,
                            known: Mapping[str, float], method: str = "wls", *,
                            essential: bool = False, r_sigma: float = 30.0, weighting: str | None = None,
                            payload_names: Sequence[str] | None = None, gains=None,
@@ -55,8 +94,9 @@ def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSyste
     Parameters
     ----------
     unloaded : ObservationSystem
-        ``Y_a = W_a chi``, columns: robot base parameters.
-    loaded : ObservationSystem
+        ``Y_a = W_a chi``, columns: robot base parameters (payload columns allowed if all zero).
+        With ``loaded=None``: the combined system of both experiments (see :func:`split_experiments`).
+    loaded : ObservationSystem or None
         ``Y_b = W_b chi + W_L chi_L``, columns: the same robot parameters + the payload's (e.g.
         ``XX8 ... M8``).
     known : mapping name -> value
@@ -74,7 +114,7 @@ def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSyste
     IdentificationResult
         Parameters ``chi`` and ``chi_ul``; ``fixed`` holds ``chi_kl``.
     """
-    pay = payload_columns(unloaded, loaded, payload_names)
+    unloaded, loaded, pay = split_experiments(unloaded, loaded, payload_names)
     bad = [k for k in known if k not in pay]
     if bad:
         raise IdentificationError(f"known parameters {bad} are not payload columns {pay}")

@@ -183,3 +183,18 @@ def test_sensor_gains_errors(lwr4_sim):
         sensor_gains(un, lo, {})
     with pytest.raises(IdentificationError, match=r"known parameters \['M7'\] are not payload columns"):
         sensor_gains(un, lo, {"M7": 1.0})
+
+
+def test_gains_accept_the_combined_layout(lwr4_sim, rx90_sim):
+    from symoro_gen.identification import stack_systems
+    sim = lwr4_sim
+    un, lo = measured(sim, LWR4_GAINS, 13)
+    ref = sensor_gains(un, lo, {"M8": sim.chi_payload[-1]})
+    res = sensor_gains(stack_systems(un, lo), None, {"M8": sim.chi_payload[-1]}, payload_names=sim.payload_names)
+    np.testing.assert_allclose(res.gains.values, ref.gains.values, rtol=1e-9)
+    sim = rx90_sim
+    un, lo = measured(sim, RX90_GAINS, 14)
+    payload = dict(zip(sim.payload_names, sim.chi_payload))
+    ref = drive_gains(un, lo, payload, joints=[0, 1])
+    res = drive_gains(stack_systems(un, lo), None, payload, joints=[0, 1], payload_names=sim.payload_names)
+    np.testing.assert_allclose(res.gains.values, ref.gains.values, rtol=1e-10)

@@ -126,3 +126,24 @@ def test_payload_errors(lwr4_sim):
     with pytest.raises(IdentificationError, match="no payload parameter left"):
         identify_payload(lo, dict(zip(sim.names, sim.chi_base)), sim.payload_names,
                          known=dict(zip(sim.payload_names, sim.chi_payload)))
+
+
+def test_combined_and_zero_column_layouts_give_the_same_result(lwr4_sim):
+    """The assembler's layout (one system, payload columns zero on unloaded rows) and an unloaded
+    system carrying all-zero payload columns are accepted and equivalent to the two-system form."""
+    sim = lwr4_sim
+    un, lo = noisy(sim, 50)
+    known = {"M8": sim.chi_payload[-1]}
+    ref = fit_with_known_payload(un, lo, known, method="wls")
+    combined = stack_systems(un, lo)
+    res = fit_with_known_payload(combined, None, known, payload_names=sim.payload_names, method="wls")
+    np.testing.assert_allclose(res.values, ref.values, rtol=1e-10)
+    np.testing.assert_allclose(res.rel_err, ref.rel_err, rtol=1e-10)
+    un0 = ObservationSystem(np.column_stack([un.W, np.zeros((un.Y.size, 10))]), un.Y, lo.names, un.joint)
+    res0 = fit_with_known_payload(un0, lo, known, payload_names=sim.payload_names, method="wls")
+    np.testing.assert_allclose(res0.values, ref.values, rtol=1e-10)
+    with pytest.raises(IdentificationError, match="needs payload_names"):
+        fit_with_known_payload(combined, None, known)
+    bad = ObservationSystem(np.column_stack([un.W, np.ones((un.Y.size, 10))]), un.Y, lo.names, un.joint)
+    with pytest.raises(IdentificationError, match="unloaded system has non-zero payload columns"):
+        fit_with_known_payload(bad, lo, known, payload_names=sim.payload_names)
