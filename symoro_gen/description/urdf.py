@@ -1,0 +1,745 @@
+"""Import a serial chain of a URDF as a Khalil-Kleinfinger MDH robot file (TOML text).
+
+Only the standard library's XML parser is used (no urdfdom). The chain from ``base`` to
+``tip`` (revolute, continuous, prismatic and fixed joints, any axis and origin) becomes an
+MDH table built by the Khalil-Kleinfinger construction at the URDF zero configuration:
+
+* ``z_j`` along the axis of moving joint j (the URDF axis, or its opposite when that axis
+  is antiparallel to ``z_{j-1}``: then ``alpha_j = 0`` instead of ``pi`` and the joint
+  variable enters as ``-q``);
+* ``x_j`` along the common normal of ``z_j`` and ``z_{j+1}``, origin ``O_j`` on ``z_j``. Its
+  sign makes the theta offset smallest (``|theta_j(q=0)| <= pi/2`` for j >= 2). For intersecting
+  axes ``x_j = +-(z_j x z_{j+1})``; for parallel axes the normal through the point where
+  ``x_{j-1}`` meets ``z_j`` (``r_j = 0``); for the last joint (and collinear axes)
+  ``x_j = x_{j-1}``;
+* frame 0 is either frame 1 at ``q = 0`` (``base_frame="joint"``, the usual MDH choice,
+  row 1 reduces to ``theta_1 = q``; gravity is expressed in it) or the URDF base link's
+  frame (``base_frame="link"``, row 1 then carries gamma and b as needed);
+* fixed joints are folded into the neighbours' constants; when the tip link is reached
+  through fixed joints after the last moving one, it gets a fixed frame (sigma = 2), a
+  place where a payload can be attached (its inertia stays in the last link).
+
+Constant theta / r values at ``q = 0`` are written as offsets (``q - pi/2``, ``q + RL3``).
+The URDF inertials of every link rigidly attached to moving link j (through fixed joints,
+side branches included) are summed and converted to standard parameters in frame j at its
+origin (``XXj .. ZZj`` inertia about the origin, ``MXj MYj MZj = m c``, ``Mj``) and written
+under ``[nominal]``, with ``FVj`` / ``FSj`` from the joint's ``<dynamics damping friction>``.
+Links fixed to the base are ground and carry nothing. Moving joints off the chain (and
+beyond the tip) are left out with a warning; ``<mimic>`` tags are ignored.
+
+Public functions: :func:`import_urdf`, :func:`import_urdf_text`, :func:`parse_urdf`.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+import warnings
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ModelError, Problem, RobotFileError
+from ..params import INERTIAL_KINDS
+from .parse import parse_robot_text
+
+__all__ = ["import_urdf", "import_urdf_text", "parse_urdf", "UrdfModel", "UrdfJoint", "UrdfLink", "UrdfInertial"]
+
+#: gravitational acceleration in the URDF root frame (ROS convention: z up)
+URDF_GRAVITY = (0.0, 0.0, -9.81)
+MOVING_TYPES = ("revolute", "continuous", "prismatic")
+KNOWN_TYPES = MOVING_TYPES + ("fixed", "floating", "planar")
+
+
+# ---------------------------------------------------------------------------------------------
+# URDF reading
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class UrdfInertial:
+    """``<inertial>`` of a link: mass [kg], pose of the COM frame in the link frame (4x4), inertia about the COM in that frame [kg m^2]."""
+
+    mass: float
+    origin: np.ndarray
+    inertia: np.ndarray
+
+
+@dataclass(frozen=True)
+class UrdfLink:
+    name: str
+    inertial: UrdfInertial | None
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    """A URDF joint; ``origin`` is the child frame in the parent frame at q = 0 (4x4), ``axis`` a unit vector in the child frame."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    origin: np.ndarray
+    axis: np.ndarray
+    damping: float | None = None
+    friction: float | None = None
+
+    @property
+    def is_moving(self) -> bool:
+        return self.type in MOVING_TYPES
+
+
+@dataclass(frozen=True)
+class UrdfModel:
+    """The kinematic tree of a URDF file (links and joints by name)."""
+
+    name: str
+    links: dict
+    joints: dict
+    file: str = "<string>"
+
+    def parent_joint(self, link: str) -> UrdfJoint | None:
+        for jt in self.joints.values():
+            if jt.child == link:
+                return jt
+        return None
+
+    def child_joints(self, link: str) -> list[UrdfJoint]:
+        return [jt for jt in self.joints.values() if jt.parent == link]
+
+    @property
+    def roots(self) -> list[str]:
+        children = {jt.child for jt in self.joints.values()}
+        return [name for name in self.links if name not in children]
+
+
+def _rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """URDF rpy: ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (fixed axes x, y, z)."""
+    cr, sr, cp, sp_, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
+    Rx = np.array([[1.0, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    Ry = np.array([[cp, 0, sp_], [0, 1.0, 0], [-sp_, 0, cp]])
+    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1.0]])
+    return Rz @ Ry @ Rx
+
+
+def _hom(R: np.ndarray, p) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = p
+    return T
+
+
+def _inv(T: np.ndarray) -> np.ndarray:
+    R, p = T[:3, :3], T[:3, 3]
+    return _hom(R.T, -R.T @ p)
+
+
+class _Reader:
+    """Collects problems while reading attributes; optionally snaps near-right angles."""
+
+    def __init__(self, file: str, snap_angles: float = 0.0):
+        self.file = file
+        self.snap_angles = snap_angles
+        self.problems: list[Problem] = []
+
+    def snapped(self, values, period: float):
+        """Values within ``snap_angles`` of a multiple of ``period`` are set to that multiple."""
+        if self.snap_angles <= 0:
+            return values
+        out = []
+        for v in values:
+            k = round(v / period)
+            out.append(k * period if abs(v - k * period) < self.snap_angles else v)
+        return out
+
+    def bad(self, where: str, fld: str, msg: str) -> None:
+        self.problems.append(Problem(self.file, where, fld, msg))
+
+    def floats(self, elem, attr: str, n: int, where: str, fld: str, default=None):
+        raw = elem.get(attr) if elem is not None else None
+        if raw is None:
+            if default is None:
+                self.bad(where, fld, f"missing attribute '{attr}'")
+                return [0.0] * n
+            return list(default)
+        try:
+            vals = [float(x) for x in raw.split()]
+        except ValueError:
+            self.bad(where, fld, f"'{attr}' must be {n} number(s), got {raw!r}")
+            return [0.0] * n if default is None else list(default)
+        if len(vals) != n or not all(math.isfinite(v) for v in vals):
+            self.bad(where, fld, f"'{attr}' must be {n} finite number(s), got {raw!r}")
+            return [0.0] * n if default is None else list(default)
+        return vals
+
+    def origin(self, elem, where: str) -> np.ndarray:
+        o = elem.find("origin")
+        if o is None:
+            return np.eye(4)
+        xyz = self.floats(o, "xyz", 3, where, "origin", default=(0.0, 0.0, 0.0))
+        rpy = self.snapped(self.floats(o, "rpy", 3, where, "origin", default=(0.0, 0.0, 0.0)), math.pi / 2)
+        return _hom(_rpy_matrix(*rpy), xyz)
+
+
+def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0.0) -> UrdfModel:
+    """Read URDF text into a :class:`UrdfModel` (every problem reported at once).
+
+    ``snap_angles`` > 0 [rad]: joint and inertial ``rpy`` values within it of a multiple of
+    pi/2, and joint-axis components within it of 0 or +-1, are made exact (URDFs often write
+    ``1.5708`` for pi/2, which would turn parallel axes into nearly parallel ones with a far
+    away common normal). Default 0: the file's numbers are used as they are.
+
+    Raises
+    ------
+    RobotFileError
+        Malformed XML, missing or bad attributes, unknown joint types, joints naming missing
+        links, a link with two parents.
+    """
+    rd = _Reader(file, snap_angles)
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise RobotFileError([Problem(file, f"line {exc.position[0]}", "", f"malformed XML: {exc}")]) from None
+    if root.tag != "robot":
+        raise RobotFileError([Problem(file, "", "", f"root element must be <robot>, got <{root.tag}>")])
+    links: dict[str, UrdfLink] = {}
+    for el in root.findall("link"):
+        name = el.get("name")
+        if not name:
+            rd.bad("<link>", "name", "link without a name")
+            continue
+        if name in links:
+            rd.bad(f"link {name}", "name", "defined twice")
+        where = f"link {name}"
+        inertial = None
+        ie = el.find("inertial")
+        if ie is not None:
+            me = ie.find("mass")
+            mass = rd.floats(me, "value", 1, where, "inertial/mass")[0] if me is not None else None
+            if mass is None:
+                rd.bad(where, "inertial/mass", "missing <mass value=...>")
+                mass = 0.0
+            elif mass < 0:
+                rd.bad(where, "inertial/mass", f"negative mass {mass}")
+            ine = ie.find("inertia")
+            if ine is None:
+                rd.bad(where, "inertial/inertia", "missing <inertia ixx=... izz=...>")
+                I = np.zeros((3, 3))
+            else:
+                v = {k: rd.floats(ine, k, 1, where, f"inertial/inertia/{k}")[0] for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
+                I = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]])
+            inertial = UrdfInertial(mass, rd.origin(ie, where), I)
+        links[name] = UrdfLink(name, inertial)
+    joints: dict[str, UrdfJoint] = {}
+    parent_of: dict[str, str] = {}
+    for el in root.findall("joint"):
+        name = el.get("name")
+        if not name:
+            rd.bad("<joint>", "name", "joint without a name")
+            continue
+        where = f"joint {name}"
+        if name in joints:
+            rd.bad(where, "name", "defined twice")
+        typ = el.get("type", "")
+        if typ not in KNOWN_TYPES:
+            rd.bad(where, "type", f"unknown joint type {typ!r} (expected one of {', '.join(KNOWN_TYPES)})")
+        pe, ce = el.find("parent"), el.find("child")
+        parent = pe.get("link") if pe is not None else None
+        child = ce.get("link") if ce is not None else None
+        for fld, lk in (("parent", parent), ("child", child)):
+            if not lk:
+                rd.bad(where, fld, f"missing <{fld} link=...>")
+            elif lk not in links:
+                rd.bad(where, fld, f"link {lk!r} is not defined")
+        if child:
+            if child in parent_of:
+                rd.bad(where, "child", f"link {child!r} already has parent joint {parent_of[child]!r} (not a tree)")
+            parent_of[child] = name
+        axis = np.array(rd.snapped(rd.floats(el.find("axis"), "xyz", 3, where, "axis", default=(1.0, 0.0, 0.0)), 1.0))
+        if typ in MOVING_TYPES:
+            nrm = float(np.linalg.norm(axis))
+            if nrm < 1e-12:
+                rd.bad(where, "axis", "zero axis")
+                axis = np.array([1.0, 0.0, 0.0])
+            else:
+                axis = axis / nrm
+        damping = friction = None
+        de = el.find("dynamics")
+        if de is not None:
+            if de.get("damping") is not None:
+                damping = rd.floats(de, "damping", 1, where, "dynamics/damping")[0]
+            if de.get("friction") is not None:
+                friction = rd.floats(de, "friction", 1, where, "dynamics/friction")[0]
+        joints[name] = UrdfJoint(name, typ, parent or "", child or "", rd.origin(el, where), axis, damping, friction)
+    if not links:
+        rd.bad("<robot>", "link", "no link defined")
+    if rd.problems:
+        raise RobotFileError(rd.problems)
+    return UrdfModel(root.get("name", ""), links, joints, file)
+
+
+def parse_urdf(path, *, snap_angles: float = 0.0) -> UrdfModel:
+    """Read the URDF file at ``path`` (see :func:`parse_urdf_text`)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RobotFileError([Problem(str(p), "", "", "file not found")]) from None
+    except UnicodeDecodeError as exc:
+        raise RobotFileError([Problem(str(p), "", "", f"not UTF-8 text ({exc.reason})")]) from None
+    return parse_urdf_text(text, file=str(p), snap_angles=snap_angles)
+
+
+# ---------------------------------------------------------------------------------------------
+# chain selection
+# ---------------------------------------------------------------------------------------------
+def _subtree_has_moving(model: UrdfModel, link: str) -> bool:
+    return any(jt.is_moving or _subtree_has_moving(model, jt.child) for jt in model.child_joints(link))
+
+
+def _select_chain(model: UrdfModel, base: str | None, tip: str | None) -> tuple[str, list[UrdfJoint]]:
+    """Base link and the joints from base to tip (in order)."""
+    f = model.file
+    roots = model.roots
+    if len(roots) != 1:
+        raise RobotFileError([Problem(f, "<robot>", "link", f"expected one root link, found {len(roots)}: {', '.join(roots) or 'none'} (cycle or forest)")])
+    root = roots[0]
+    if base is None:
+        base = root
+    for lk, what in ((base, "base"), (tip, "tip")):
+        if lk is not None and lk not in model.links:
+            raise RobotFileError([Problem(f, f"{what} link", lk, f"no link named {lk!r} (links: {', '.join(model.links)})")])
+    # the base must be fixed to the root (gravity constant in its frame)
+    lk = base
+    while lk != root:
+        jt = model.parent_joint(lk)
+        if jt.is_moving:
+            raise RobotFileError([Problem(f, f"base link {base}", "base", f"the base is carried by moving joint {jt.name!r}; choose a base fixed to the root link {root!r}")])
+        lk = jt.parent
+    if tip is None:
+        lk = base
+        while True:
+            kids = model.child_joints(lk)
+            moving = [jt for jt in kids if jt.is_moving or _subtree_has_moving(model, jt.child)]
+            if len(moving) > 1:
+                raise RobotFileError([Problem(f, f"link {lk}", "tip", "the tree branches here into several moving chains ("
+                                              + ", ".join(jt.name for jt in moving) + "); choose the chain with tip=LINK")])
+            if moving:
+                lk = moving[0].child
+            elif len(kids) == 1:
+                lk = kids[0].child  # a single fixed link (flange, tool) ends the chain
+            else:
+                break
+        tip = lk
+    chain: list[UrdfJoint] = []
+    lk = tip
+    while lk != base:
+        jt = model.parent_joint(lk)
+        if jt is None:
+            raise RobotFileError([Problem(f, f"tip link {tip}", "tip", f"link {tip!r} is not below the base link {base!r}")])
+        chain.append(jt)
+        lk = jt.parent
+    chain.reverse()
+    bad = [jt for jt in chain if jt.type in ("floating", "planar")]
+    if bad:
+        raise RobotFileError([Problem(f, f"joint {jt.name}", "type", f"{jt.type} joints cannot be part of an MDH chain") for jt in bad])
+    if not any(jt.is_moving for jt in chain):
+        raise RobotFileError([Problem(f, f"chain {base} -> {tip}", "", "no moving joint between base and tip")])
+    return base, chain
+
+
+# ---------------------------------------------------------------------------------------------
+# geometry: Khalil-Kleinfinger frames
+# ---------------------------------------------------------------------------------------------
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def _frame(O, x, z) -> np.ndarray:
+    x, z = _unit(np.asarray(x, float)), _unit(np.asarray(z, float))
+    return _hom(np.column_stack([x, np.cross(z, x), z]), O)
+
+
+def _perp(v, z):
+    """Component of v orthogonal to the unit vector z."""
+    return v - (v @ z) * z
+
+
+def _closest(p1, u1, p2, u2):
+    """Feet of the common normal of two non-parallel lines (unit directions)."""
+    w0 = p1 - p2
+    b, d, e = u1 @ u2, u1 @ w0, u2 @ w0
+    den = 1.0 - b * b
+    s, t = (b * e - d) / den, (e - b * d) / den
+    return p1 + s * u1, p2 + t * u2
+
+
+def _pick_sign(x, ref, z):
+    """``x`` or ``-x``, whichever makes the rotation from ``ref`` about ``z`` smallest (ties: +pi/2)."""
+    c = x @ ref
+    if abs(c) > 1e-12:
+        return x if c > 0 else -x
+    return x if np.cross(ref, x) @ z > 0 else -x
+
+
+def _kk_frames(points, axes, base_frame: str, tol: float):
+    """Frames 0..n (4x4 poses in the base-link frame at q = 0) and the joint signs."""
+    n = len(points)
+    X, Z = np.array([1.0, 0, 0]), np.array([0, 0, 1.0])
+    zs, signs = [], []
+    prev_z = Z if base_frame == "link" else None
+    for a in axes:
+        s = -1 if (prev_z is not None and a @ prev_z < -1 + tol) else 1
+        zs.append(s * a)
+        signs.append(s)
+        prev_z = s * a
+    frames = []
+    # anchor A_1 and reference direction for x_1
+    p1, z1 = points[0], zs[0]
+    if base_frame == "link" and np.linalg.norm(np.cross(Z, z1)) > tol:
+        _, anchor = _closest(np.zeros(3), Z, p1, z1)
+    else:
+        anchor = p1 + ((-p1) @ z1) * z1  # closest point of axis 1 to the base origin
+    ref = _perp(X, z1)
+    ref = _unit(ref) if np.linalg.norm(ref) > tol else _unit(_perp(np.array([0, 1.0, 0]), z1))
+    for i in range(n):
+        zi = zs[i]
+        if i == n - 1:
+            O, x, next_anchor = anchor, _unit(_perp(ref, zi)), None
+        else:
+            pn, zn = points[i + 1], zs[i + 1]
+            if np.linalg.norm(np.cross(zi, zn)) > tol:
+                F, G = _closest(anchor, zi, pn, zn)
+                x = _unit(G - F) if np.linalg.norm(G - F) > tol else _unit(np.cross(zi, zn))
+                O, next_anchor = F, G
+            else:
+                w = _perp(pn - anchor, zi)
+                if np.linalg.norm(w) > tol:
+                    x, next_anchor = _unit(w), anchor + w
+                else:
+                    x, next_anchor = _unit(_perp(ref, zi)), anchor
+                O = anchor
+            x = _pick_sign(x, ref, zi)
+        frames.append(_frame(O, x, zi))
+        ref, anchor = x, next_anchor
+    frame0 = np.eye(4) if base_frame == "link" else frames[0].copy()
+    return [frame0] + frames, signs
+
+
+def _mdh_from_transform(T: np.ndarray, tol: float) -> tuple[float, float, float, float, float, float]:
+    """``(gamma, b, alpha, d, theta, r)`` with ``T = Rz(gamma) Tz(b) Rx(alpha) Tx(d) Rz(theta) Tz(r)``.
+
+    gamma is chosen in (-pi/2, pi/2] where possible (0 when the x axis of the antecedent
+    frame already is the common normal), b = 0 for parallel z axes.
+    """
+    x0, y0, z0 = np.eye(3)
+    o, xp, zp = T[:3, 3], T[:3, 0], T[:3, 2]
+    nz = np.cross(z0, zp)
+    if np.linalg.norm(nz) > tol:
+        F0, F1 = _closest(np.zeros(3), z0, o, zp)
+        u = _unit(F1 - F0) if np.linalg.norm(F1 - F0) > tol else _unit(nz)
+    else:
+        F0 = np.zeros(3)
+        F1 = _perp(o, z0)
+        u = _unit(F1) if np.linalg.norm(F1) > tol else x0
+    u = _pick_sign(u, x0, z0)
+    gamma = math.atan2(u @ y0, u @ x0)
+    b = float(F0 @ z0)
+    d = float((F1 - F0) @ u)
+    alpha = math.atan2(np.cross(z0, zp) @ u, z0 @ zp)
+    theta = math.atan2(np.cross(u, xp) @ zp, u @ xp)
+    r = float((o - F1) @ zp)
+    return gamma, b, alpha, d, theta, r
+
+
+def _mdh_transform(gamma, b, alpha, d, theta, r) -> np.ndarray:
+    def rz(a):
+        c, s = math.cos(a), math.sin(a)
+        return _hom(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]), np.zeros(3))
+
+    def rx(a):
+        c, s = math.cos(a), math.sin(a)
+        return _hom(np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]]), np.zeros(3))
+
+    def tr(v):
+        return _hom(np.eye(3), v)
+
+    return rz(gamma) @ tr([0, 0, b]) @ rx(alpha) @ tr([d, 0, 0]) @ rz(theta) @ tr([0, 0, r])
+
+
+# ---------------------------------------------------------------------------------------------
+# formatting
+# ---------------------------------------------------------------------------------------------
+_ANGLES = {0: "0", 1: "pi/2", -1: "-pi/2", 2: "pi", -2: "pi"}
+
+
+def _snap(x: float, tol: float) -> float:
+    x = 0.0 if abs(x) < tol else float(x)
+    return float(f"{x:.12g}")
+
+
+def _angle_str(a: float, tol: float) -> str:
+    k = round(a / (math.pi / 2))
+    if abs(a - k * math.pi / 2) < tol and k in _ANGLES:
+        return _ANGLES[k]
+    return repr(_snap(a, tol))
+
+
+def _num(x: float) -> str:
+    return repr(float(x))
+
+
+def _offset_expr(var: str, off: str) -> str:
+    if off in ("0", "0.0"):
+        return var
+    return f"{var} - {off[1:]}" if off.startswith("-") else f"{var} + {off}"
+
+
+def _identifier(name: str) -> str:
+    s = re.sub(r"\W", "_", name)
+    if not s or s[0].isdigit():
+        s = "r_" + s
+    return s
+
+
+# ---------------------------------------------------------------------------------------------
+# import
+# ---------------------------------------------------------------------------------------------
+def import_urdf(path, base: str | None = None, tip: str | None = None, name: str | None = None, **options) -> str:
+    """A URDF serial chain as robot-file text (TOML) in Khalil-Kleinfinger MDH notation.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The URDF file.
+    base, tip : str, optional
+        Link names bounding the chain. Default: the root link, and the end of the single
+        moving chain below it (followed by a single fixed link if there is one).
+    name : str, optional
+        Robot name (default: the URDF robot name made an identifier).
+    **options
+        See :func:`import_urdf_text` (``base_frame``, ``symbols``, ``gravity``, ``tol``,
+        ``snap_angles``).
+
+    Returns
+    -------
+    str
+        TOML text, loadable with :func:`symoro_gen.description.parse_robot_text`.
+
+    Raises
+    ------
+    RobotFileError
+        Unreadable or malformed URDF, unknown base/tip link, no moving joint in the chain,
+        floating/planar joint in the chain, a branching tree without ``tip``.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RobotFileError([Problem(str(p), "", "", "file not found")]) from None
+    except UnicodeDecodeError as exc:
+        raise RobotFileError([Problem(str(p), "", "", f"not UTF-8 text ({exc.reason})")]) from None
+    return import_urdf_text(text, base=base, tip=tip, name=name, file=str(p), **options)
+
+
+def import_urdf_text(
+    text: str,
+    base: str | None = None,
+    tip: str | None = None,
+    name: str | None = None,
+    *,
+    file: str = "<string>",
+    base_frame: str = "joint",
+    symbols: bool = True,
+    gravity=URDF_GRAVITY,
+    tol: float = 1e-9,
+    snap_angles: float = 0.0,
+) -> str:
+    """URDF text -> robot-file text (see :func:`import_urdf`).
+
+    Parameters
+    ----------
+    text : str
+        URDF XML.
+    base, tip, name : see :func:`import_urdf`.
+    file : str
+        Name used in messages and in the ``source`` line.
+    base_frame : {"joint", "link"}
+        ``"joint"``: frame 0 is frame 1 at ``q = 0`` (MDH habit; row 1 is ``theta1 = q``);
+        ``"link"``: frame 0 is the base link's frame (row 1 carries gamma/b/alpha/d/r).
+    symbols : bool
+        Non-zero lengths as symbols with ``[values]`` (``d3 = "D3"``, ``r3 = "RL3"``,
+        ``b1 = "B1"``) rather than numbers.
+    gravity : sequence of 3 float
+        Gravitational acceleration in the URDF root link's frame [m/s^2].
+    tol : float
+        Geometric tolerance [m, rad] for parallel / intersecting axes and for writing
+        near-zero values and multiples of pi/2 exactly.
+    snap_angles : float
+        Make URDF rpy angles and axis components that are within this [rad] of a right
+        angle (of 0, +-1) exact before building the frames (see :func:`parse_urdf_text`);
+        0 (default) keeps the file's numbers, so the model is exactly the URDF's.
+
+    Returns
+    -------
+    str
+        TOML robot-file text.
+    """
+    if base_frame not in ("joint", "link"):
+        raise ValueError(f"base_frame must be 'joint' or 'link', got {base_frame!r}")
+    model = parse_urdf_text(text, file=file, snap_angles=snap_angles)
+    base, chain = _select_chain(model, base, tip)
+    tip = chain[-1].child
+    f = model.file
+
+    # link poses (base-link frame, q = 0) of the whole subtree below the base
+    pose = {base: np.eye(4)}
+    stack = [base]
+    while stack:
+        lk = stack.pop()
+        for jt in model.child_joints(lk):
+            pose[jt.child] = pose[lk] @ jt.origin
+            stack.append(jt.child)
+
+    # gravity in the base-link frame
+    R_root_base = np.eye(3)
+    lk = base
+    while model.parent_joint(lk) is not None:
+        jt = model.parent_joint(lk)
+        R_root_base = jt.origin[:3, :3] @ R_root_base
+        lk = jt.parent
+    g_base = R_root_base.T @ np.asarray(gravity, float)
+
+    moving = [jt for jt in chain if jt.is_moving]
+    n = len(moving)
+    points = [pose[jt.child][:3, 3] for jt in moving]
+    axes = [_unit(pose[jt.child][:3, :3] @ jt.axis) for jt in moving]
+    frames, signs = _kk_frames(points, axes, base_frame, tol)
+
+    # which moving link carries each link (None: ground); ignored moving side joints
+    owner: dict[str, int | None] = {base: None}
+    ignored: list[str] = []
+    on_chain = {jt.name for jt in chain}
+    k = None
+    for jt in chain:
+        if jt.is_moving:
+            k = moving.index(jt) + 1
+        owner[jt.child] = k
+    for lk in [base] + [jt.child for jt in chain]:
+        stack = [jt for jt in model.child_joints(lk) if jt.name not in on_chain]
+        while stack:
+            jt = stack.pop()
+            if jt.type != "fixed":
+                ignored.append(jt.name)
+                continue
+            owner[jt.child] = owner[jt.parent]
+            stack.extend(model.child_joints(jt.child))
+    if ignored:
+        warnings.warn(
+            f"{f}: moving joints outside the chain {base} -> {tip} are left out of the model "
+            f"(with what they carry): {', '.join(sorted(ignored))}",
+            UserWarning,
+            stacklevel=2,
+        )
+
+    # standard parameters of each moving link, in its MDH frame at the origin
+    inertial = {i: np.zeros(10) for i in range(1, n + 1)}
+    J = {i: np.zeros((3, 3)) for i in range(1, n + 1)}
+    for lk, i in owner.items():
+        ine = model.links[lk].inertial
+        if i is None or ine is None:
+            continue
+        T = _inv(frames[i]) @ pose[lk] @ ine.origin
+        R, c, m = T[:3, :3], T[:3, 3], ine.mass
+        J[i] += R @ ine.inertia @ R.T + m * (c @ c * np.eye(3) - np.outer(c, c))
+        inertial[i][6:9] += m * c
+        inertial[i][9] += m
+    for i in range(1, n + 1):
+        Ji = J[i]
+        inertial[i][:6] = [Ji[0, 0], Ji[0, 1], Ji[0, 2], Ji[1, 1], Ji[1, 2], Ji[2, 2]]
+
+    # rows
+    rows = []
+    for i in range(1, n + 1):
+        T = _inv(frames[i - 1]) @ frames[i]
+        params = _mdh_from_transform(T, tol)
+        err = np.abs(_mdh_transform(*params) - T).max()
+        if err > 1e3 * tol:  # pragma: no cover - internal consistency check
+            raise ModelError(f"{f}: MDH decomposition of joint {moving[i - 1].name} is off by {err:.2e}")
+        rows.append((i, i - 1, 0 if moving[i - 1].type != "prismatic" else 1, params, moving[i - 1]))
+    tip_fixed = chain[-1].type == "fixed"
+    if tip_fixed:
+        T = _inv(frames[n]) @ pose[tip]
+        rows.append((n + 1, n, 2, _mdh_from_transform(T, tol), None))
+
+    # text
+    values: dict[str, float] = {}
+
+    def length(x: float, sym: str) -> str:
+        x = _snap(x, tol)
+        if x == 0.0:
+            return "0"
+        if symbols:
+            values[sym] = x
+            return f'"{sym}"'
+        return _num(x)
+
+    robot_name = name if name is not None else _identifier(model.name or Path(file).stem or "robot")
+    g0 = frames[0][:3, :3].T @ g_base
+    frame_note = "frame 0 = frame 1 at q = 0" if base_frame == "joint" else f"frame 0 = link {base}"
+    source = (
+        f"URDF {Path(file).name} (robot '{model.name}'), chain {base} -> {tip}, {frame_note}; "
+        "imported by symoro_gen.description.urdf.import_urdf; nominal values from the URDF inertials "
+        "(FV, FS from <dynamics damping friction>)"
+    )
+    out_frames = []
+    nominal: list[tuple[str, float]] = []
+    for j, ant, sigma, (gamma, b, alpha, d, theta, r), jt in rows:
+        lines = [f"[[frames]]  # " + (f"URDF joint {jt.name} ({jt.type}), link {jt.child}" if jt else f"fixed frame of the tip link {tip}"),
+                 f"j = {j}", f"ant = {ant}", f"sigma = {sigma}"]
+        g_s, b_s = _angle_str(gamma, tol), length(b, f"B{j}")
+        if g_s != "0" or b_s != "0":
+            lines += [f'gamma = "{g_s}"', f"b = {b_s}"]
+        lines += [f'alpha = "{_angle_str(alpha, tol)}"', f"d = {length(d, f'D{j}')}"]
+        if sigma == 0:
+            var = "q" if signs[j - 1] > 0 else "-q"
+            lines += [f'theta = "{_offset_expr(var, _angle_str(theta, tol))}"', f"r = {length(r, f'RL{j}')}"]
+        elif sigma == 1:
+            var = "q" if signs[j - 1] > 0 else "-q"
+            r_s = length(r, f"RL{j}")
+            r_s = r_s.strip('"') if r_s != "0" else "0"
+            lines += [f'theta = "{_angle_str(theta, tol)}"', f'r = "{_offset_expr(var, r_s)}"']
+        else:
+            lines += [f'theta = "{_angle_str(theta, tol)}"', f"r = {length(r, f'RL{j}')}"]
+        out_frames.append("\n".join(lines))
+        if jt is not None:
+            nominal += [(f"{kind}{j}", v) for kind, v in zip(INERTIAL_KINDS, inertial[j])]
+            if jt.damping is not None:
+                nominal.append((f"FV{j}", jt.damping))
+            if jt.friction is not None:
+                nominal.append((f"FS{j}", jt.friction))
+
+    head = [
+        f"# Imported from {file} by symoro_gen.description.urdf.import_urdf.",
+        f"# Chain {base} -> {tip}: " + ", ".join(f"{jt.name} ({jt.type})" for jt in chain) + ".",
+    ]
+    if ignored:
+        head.append("# Left out (moving joints off the chain, and what they carry): " + ", ".join(sorted(ignored)) + ".")
+    if tip_fixed:
+        head.append(f"# Frame {n + 1} is the tip link {tip} (fixed); its inertia is included in link {n}. "
+                    f"Set payload = {n + 1} to identify a payload there.")
+    head += [
+        f"name = {json.dumps(robot_name)}",
+        f"source = {json.dumps(source)}",
+        "gravity = [" + ", ".join(_num(_snap(x, tol)) for x in g0) + "]",
+    ]
+    parts = ["\n".join(head)]
+    if values:
+        parts.append("[values]\n" + "\n".join(f"{k} = {_num(v)}" for k, v in values.items()))
+    parts += out_frames
+    nominal_lines = ["[nominal]", "# standard parameters in frame j at its origin [kg, kg m, kg m^2]; FV [N m s/rad], FS [N m]"]
+    nominal_lines += [f"{k} = {_num(_snap(v, 1e-15))}" for k, v in nominal]
+    parts.append("\n".join(nominal_lines))
+    out = "\n\n".join(parts) + "\n"
+    parse_robot_text(out, file=f"{file} (imported)")  # the output is a valid robot file, or say why
+    return out
