@@ -695,7 +695,7 @@ def import_urdf_text(
     out_frames = []
     nominal: list[tuple[str, float]] = []
     for j, ant, sigma, (gamma, b, alpha, d, theta, r), jt in rows:
-        lines = [f"[[frames]]  # " + (f"URDF joint {jt.name} ({jt.type}), link {jt.child}" if jt else f"fixed frame of the tip link {tip}"),
+        lines = ["[[frames]]  # " + (f"URDF joint {jt.name} ({jt.type}), link {jt.child}" if jt else f"fixed frame of the tip link {tip}"),
                  f"j = {j}", f"ant = {ant}", f"sigma = {sigma}"]
         g_s, b_s = _angle_str(gamma, tol), length(b, f"B{j}")
         if g_s != "0" or b_s != "0":

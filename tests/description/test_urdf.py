@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import math
 import re
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -336,3 +335,13 @@ def test_name_and_number_options():
     assert parse_robot_text(import_urdf_text(urdf)).name == "random_chain"  # from <robot name="random-chain">
     with pytest.raises(RobotFileError, match="field 'name'"):
         import_urdf_text(urdf, name="not an identifier")
+
+
+def test_link_with_two_parents_is_not_a_tree():
+    text = (
+        "<robot><link name='a'/><link name='b'/><link name='c'/>"
+        "<joint name='j1' type='revolute'><parent link='a'/><child link='c'/></joint>"
+        "<joint name='j2' type='revolute'><parent link='b'/><child link='c'/></joint></robot>"
+    )
+    with pytest.raises(RobotFileError, match="joint j2, field 'child': link 'c' already has parent joint 'j1'"):
+        parse_urdf_text(text, file="two.urdf")
