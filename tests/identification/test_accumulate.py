@@ -124,3 +124,30 @@ def test_weighted_accumulator_applies_chunk_weights():
     ref = np.linalg.lstsq(W * w[:, None], s.Y * w, rcond=None)[0]
     np.testing.assert_allclose(fit_ols(acc).values, ref, rtol=1e-11)
     np.testing.assert_allclose(fit_ols(acc).values, fit_ols(s).values, rtol=1e-11)
+
+
+from hypothesis import given, settings, strategies as st
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_joints=st.integers(1, 4), c=st.integers(1, 8),
+       n_chunks=st.integers(1, 6), zero_frac=st.floats(0.0, 0.7))
+def test_property_streaming_equals_full(seed, n_joints, c, n_chunks, zero_frac):
+    """Random sizes, random per-joint sparsity of the columns (as a serial robot's regressor),
+    random chunking: OLS, WLS and TLS on the accumulator equal those on the whole system."""
+    rng = np.random.default_rng(seed)
+    r = 40 * n_joints + 10 * c
+    joint = rng.integers(0, n_joints, r)
+    joint[:n_joints] = np.arange(n_joints)
+    W = rng.normal(size=(r, c)) * rng.uniform(0.01, 100.0, c)
+    mask = rng.random((n_joints, c)) < zero_frac                       # column k absent from joint j
+    mask[0] = False                                                    # every column excited somewhere
+    W[mask[joint]] = 0.0
+    Y = W @ rng.normal(size=c) + rng.normal(size=r)
+    s = ObservationSystem(W, Y, tuple(f"p{i}" for i in range(c)), joint)
+    acc = accumulate(chunks_of(s, rng, min(n_chunks, r - 1)))
+    for fit in (fit_ols, fit_wls, fit_tls):
+        same_result(fit(acc), fit(s))
+    ref = np.linalg.lstsq(W, Y, rcond=None)[0]                         # independent of the TSQR path
+    res = fit_ols(acc)
+    assert np.all(np.abs(res.values - ref) <= 1e-8 * (np.abs(ref) + res.std))
