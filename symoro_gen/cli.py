@@ -71,6 +71,20 @@ def cmd_export_par(args) -> int:
     return 0
 
 
+def cmd_import_urdf(args) -> int:
+    from .description.par import write_robot_toml
+    from .description.urdf import import_urdf
+
+    text = import_urdf(args.file, base=args.base, tip=args.tip, name=args.name)
+    if args.output:
+        write_robot_toml(text, args.output, overwrite=args.force)
+        if not args.quiet:
+            print(f"wrote {args.output}")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="symoro-gen", description=__doc__.splitlines()[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -87,6 +101,15 @@ def build_parser() -> argparse.ArgumentParser:
     ip.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
     ip.add_argument("--force", action="store_true", help="overwrite an existing output file")
     ip.set_defaults(func=cmd_import_par)
+
+    iu = sub.add_parser("import-urdf", help="serial chain of a URDF -> robot .toml (MDH + nominal parameters)")
+    iu.add_argument("file")
+    iu.add_argument("--base", help="base link (default: the URDF root)")
+    iu.add_argument("--tip", help="tip link (default: the end of the only chain)")
+    iu.add_argument("--name", help="robot name (default: the URDF's)")
+    iu.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
+    iu.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    iu.set_defaults(func=cmd_import_urdf)
 
     ep = sub.add_parser("export-par", help="robot .toml -> SYMORO+/OpenSYMORO .par file")
     ep.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")

@@ -430,3 +430,62 @@ def write_text_atomic(path: Path, text: str) -> None:
 
 def file_digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@dataclass(frozen=True)
+class InMemoryModel:
+    """The generated-module contract without writing files (NumPy kernels only).
+
+    Useful for tests and for robots built on the fly; ``emit_robot`` is the real thing.
+    """
+
+    ROBOT: str
+    N_JOINTS: int
+    STANDARD_NAMES: tuple
+    BASE_NAMES: tuple
+    PAYLOAD_NAMES: tuple
+    _K: np.ndarray
+    _kernels: tuple
+
+    def _eval(self, k, ncols, q, dq, ddq):
+        from .numpy_backend import evaluate
+
+        return evaluate(self._kernels[k], self.N_JOINTS, ncols, q, dq, ddq)
+
+    def regressor(self, q, dq, ddq):
+        return self._eval(0, len(self.BASE_NAMES), q, dq, ddq)
+
+    def standard_regressor(self, q, dq, ddq):
+        return self._eval(1, len(self.STANDARD_NAMES), q, dq, ddq)
+
+    def payload_regressor(self, q, dq, ddq):
+        return self._eval(2, len(self.PAYLOAD_NAMES), q, dq, ddq)
+
+    def base_parameters(self, chi_std):
+        return np.asarray(chi_std, float) @ self._K.T
+
+    def torque(self, q, dq, ddq, chi_std, chi_payload=None):
+        Y = self.regressor(q, dq, ddq) @ self.base_parameters(chi_std)
+        if chi_payload is not None:
+            Y = Y + self.payload_regressor(q, dq, ddq) @ np.asarray(chi_payload, float)
+        return Y
+
+
+def build_in_memory(robot: RobotDescription) -> InMemoryModel:
+    """Newton-Euler, base parameters and optimised NumPy kernels, loaded without files."""
+    from .numpy_backend import load_kernel
+
+    reg = build_regressor(robot)
+    bp = group_base_parameters(reg)
+    subs = robot.geometry_subs()
+    graphs = (
+        optimize(base_graph(reg, bp)),
+        optimize(reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(reg.standard_names)})),
+        optimize(reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(reg.payload_names)})),
+    )
+    names = (bp.base_names, reg.standard_names, reg.payload_names)
+    kernels = tuple(
+        load_kernel(kernel_source(g, robot.n_joints, nm, f"k{i}", robot.q, robot.dq, robot.ddq), f"k{i}")
+        for i, (g, nm) in enumerate(zip(graphs, names))
+    )
+    return InMemoryModel(robot.name, robot.n_joints, reg.standard_names, bp.base_names, reg.payload_names, bp.matrix(subs), kernels)
