@@ -146,3 +146,31 @@ def test_out_argument_is_filled_in_place(robot_and_model):
     assert np.array_equal(out, m.regressor(q, dq, ddq))
     with pytest.raises(ValueError, match="out must be"):
         m.regressor(q, dq, ddq, out=np.zeros((9, m.N_JOINTS, len(m.BASE_NAMES))))
+
+
+def test_emitted_model_equals_pinocchio_rnea(robot_and_model):
+    """The emitted regressor (C or NumPy) x parameters == Pinocchio's RNEA + friction terms."""
+    from tests.oracles.pinocchio_model import pin_torque
+
+    robot, m = robot_and_model
+    rng = np.random.default_rng(7)
+    q, dq, ddq = _states(rng, 20, m.N_JOINTS)
+    chi = rng.normal(size=len(m.STANDARD_NAMES))
+    pay = rng.normal(size=len(m.PAYLOAD_NAMES)) if m.PAYLOAD_NAMES else None
+    ref = pin_torque(robot, q, dq, ddq, chi, pay)
+    tau = m.regressor(q, dq, ddq) @ m.base_parameters(chi)
+    if pay is not None:
+        tau = tau + m.payload_regressor(q, dq, ddq) @ pay
+    assert np.max(np.abs(tau - ref)) <= REL * np.max(np.abs(ref))
+    f = m.casadi_regressor()
+    Yc = np.array(f(q[0], dq[0], ddq[0])) @ m.base_parameters(chi)
+    if pay is not None:
+        Yc = Yc + m.payload_regressor(q[0], dq[0], ddq[0]) @ pay
+    assert np.max(np.abs(Yc - ref[0])) <= REL * np.max(np.abs(ref))
+
+
+def test_generated_package_imports_from_repo_root():
+    import importlib
+
+    mod = importlib.import_module("generated.lwr4")
+    assert mod.ROBOT == "lwr4" and mod.BASE_NAMES == load_model("lwr4").BASE_NAMES
