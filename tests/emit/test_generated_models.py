@@ -150,13 +150,12 @@ def test_out_argument_is_filled_in_place(robot_and_model):
 
 def test_emitted_model_equals_pinocchio_rnea(robot_and_model):
     """The emitted regressor (C or NumPy) x parameters == Pinocchio's RNEA + friction terms."""
-    from tests.oracles.pinocchio_model import pin_torque
+    from tests.oracles.pinocchio_model import pin_torque, random_parameters
 
     robot, m = robot_and_model
     rng = np.random.default_rng(7)
     q, dq, ddq = _states(rng, 20, m.N_JOINTS)
-    chi = rng.normal(size=len(m.STANDARD_NAMES))
-    pay = rng.normal(size=len(m.PAYLOAD_NAMES)) if m.PAYLOAD_NAMES else None
+    chi, pay = random_parameters(robot, rng)  # physically consistent: Pinocchio needs m > 0
     ref = pin_torque(robot, q, dq, ddq, chi, pay)
     tau = m.regressor(q, dq, ddq) @ m.base_parameters(chi)
     if pay is not None:
