@@ -6,6 +6,7 @@ deviation %sigma is cancelled and the simplified model re-estimated, until
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -20,6 +21,8 @@ from .result import EliminationStep, IdentificationResult
 
 #: default stop ratio of the papers
 R_SIGMA = 30.0
+#: relative growth of a joint's error norm (essential vs base model) above which a warning is given
+ERR_GROWTH_WARN = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,8 +106,8 @@ def essential_raw(acc: Accumulator, method: str, r_sigma: float, keep: Sequence[
 def essential_parameters(data: ObservationSystem | Accumulator, r_sigma: float = R_SIGMA,
                          method: str = "ols", weighting: str | None = None, keep: Sequence[str] = (), *,
                          rank_tol: float = RANK_TOL, cond_warn: float = COND_WARN,
-                         rel_std_warn_pct: float = REL_STD_WARN_PCT, zero_col_tol: float = ZERO_COL_TOL
-                         ) -> EssentialResult:
+                         rel_std_warn_pct: float = REL_STD_WARN_PCT, zero_col_tol: float = ZERO_COL_TOL,
+                         err_growth_warn: float = ERR_GROWTH_WARN) -> EssentialResult:
     """Iteratively cancel the parameter with the largest %sigma until max %sigma / min %sigma < r_sigma.
 
     Parameters
@@ -118,6 +121,8 @@ def essential_parameters(data: ObservationSystem | Accumulator, r_sigma: float =
         TLS row weighting.
     keep : sequence of str
         Parameters never cancelled (and left out of the stop ratio).
+    err_growth_warn : float
+        Warn when a joint's relative error norm grows by more than this fraction.
 
     Returns
     -------
@@ -133,4 +138,18 @@ def essential_parameters(data: ObservationSystem | Accumulator, r_sigma: float =
     eliminated = tuple(s.removed for s in history)
     result = make_result(raw, acc, system, opts, eliminated=eliminated, keep=keep)
     initial = make_result(raw0, acc, system, opts, keep=keep)
+    w = growth_warning(initial.rel_err, result.rel_err, err_growth_warn)
+    if w:
+        result = dataclasses.replace(result, warnings=result.warnings + (w,))
     return EssentialResult(result, initial, history, float(r_sigma))
+
+
+def growth_warning(before: np.ndarray, after: np.ndarray, growth: float) -> str | None:
+    """Warning naming the joints whose error norm grew by more than ``growth`` (relative)."""
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero(after > (1.0 + growth) * before)
+    if bad.size == 0:
+        return None
+    listed = ", ".join(f"joint {j + 1} ({before[j]:.3g} -> {after[j]:.3g})" for j in bad)
+    return (f"the essential model fits {listed} much worse than the base model (rel. error norms): "
+            f"parameters that matter there were cancelled; consider a larger r_sigma")

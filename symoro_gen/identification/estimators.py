@@ -34,6 +34,7 @@ REL_STD_WARN_PCT = 30.0   # %sigma above which a parameter is reported as poorly
 ZERO_COL_TOL = 1e-12      # column norm / largest column norm below which a column is "all zero"
 INVOLVED_TOL = 0.1        # |component| / max |component| of a small singular vector naming a parameter
 TLS_GAP_TOL = 1e-6        # (s_{c-1} - s_c) / s_{c-1} below which the TLS solution is called non-unique
+TLS_RESIDUAL_WARN = 1.5   # TLS residual norm / LS residual norm above which TLS is reported as unreliable
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,7 @@ class Options:
     zero_col_tol: float = ZERO_COL_TOL
     involved_tol: float = INVOLVED_TOL
     tls_gap_tol: float = TLS_GAP_TOL
+    tls_residual_warn: float = TLS_RESIDUAL_WARN
 
 
 @dataclass(frozen=True, eq=False)
@@ -317,8 +319,20 @@ def fit_raw(acc: Accumulator, method: str, active: Sequence[int] | None = None,
             blocks = [b / joint_sigma[j] for j, b in enumerate(blocks)]
         elif weighting not in (None, False, "none"):
             raise IdentificationError(f"{what}: unknown TLS weighting {weighting!r}; use None or 'joint'")
-        values, cov, std, sigma, cond, cond_s, warnings = _tls_core(np.vstack(blocks), r, names, opts, what)
+        Mt = np.vstack(blocks)
+        values, cov, std, sigma, cond, cond_s, warnings = _tls_core(Mt, r, names, opts, what)
         label = "TLS-W" if joint_sigma is not None else "TLS"
+        # TLS residual vs the smallest possible (LS) one on the same (weighted) rows: a large excess
+        # means the errors in W are not the i.i.d. ones eq. 14 assumes (e.g. unscaled columns)
+        res_tls = np.linalg.norm(Mt @ np.r_[values, 1.0])
+        Mls = Mt * np.r_[np.ones(len(active)), -1.0]
+        x_ls = np.linalg.lstsq(Mls[:, :-1], Mls[:, -1], rcond=None)[0]
+        res_ls = np.linalg.norm(Mls[:, :-1] @ x_ls - Mls[:, -1])
+        if res_tls > opts.tls_residual_warn * res_ls:
+            warnings.append(
+                f"the TLS residual is {res_tls / res_ls:.3g} times the least-squares one on the same rows: "
+                f"the errors in W are not i.i.d. with those in Y as TLS assumes (eq. 14); the TLS "
+                f"estimate is unreliable - prefer OLS/WLS or scale the columns")
     else:
         raise IdentificationError(f"unknown identification method {method!r}; use 'ols', 'wls' or 'tls'")
     return RawFit(label, active, values, cov, std, sigma, cond, cond_s, joint_sigma, tuple(pre + warnings))

@@ -100,3 +100,12 @@ def test_bad_arguments():
         essential_parameters(system, r_sigma=1.0)
     with pytest.raises(IdentificationError, match=r"keep names \['nope'\]"):
         essential_parameters(system, keep=("nope",))
+
+
+def test_warns_when_the_essential_model_fits_a_joint_much_worse():
+    system, _ = sparse_system(4)
+    ess = essential_parameters(system, r_sigma=1.5)           # far too strict: real parameters go
+    assert any("much worse than the base model" in w and "consider a larger r_sigma" in w
+               for w in ess.result.warnings), ess.result.warnings
+    ok = essential_parameters(system, r_sigma=30)
+    assert not any("much worse" in w for w in ok.result.warnings)

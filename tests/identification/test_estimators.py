@@ -315,3 +315,18 @@ def test_given_row_weights_are_applied_by_ols_and_ignored_by_wls():
     ref = np.linalg.lstsq(s.W * w[:, None], s.Y * w, rcond=None)[0]
     np.testing.assert_allclose(fit_ols(sw).values, ref, rtol=1e-11)
     np.testing.assert_allclose(fit_wls(sw).values, fit_wls(s).values, rtol=1e-12)
+
+
+def test_tls_warns_when_its_error_model_does_not_hold():
+    """Noise in Y only and a weak direction in W (p4 ~ p1) with a singular value of the order of
+    the noise: TLS 'corrects' W along it, its parameters run away and its residual is several times
+    the LS one (what plain TLS does on the real LWR4 recordings); the result says so."""
+    rng = np.random.default_rng(12)
+    s, x, _ = random_system(rng, c=4, sigmas=(1.0,) * 3)
+    W = s.W.copy()
+    W[:, 3] = W[:, 0] + 0.1 * rng.normal(size=s.Y.size)
+    bad = ObservationSystem(W, W @ x + rng.normal(size=s.Y.size), s.names, s.joint)
+    t = fit_tls(bad)
+    assert any("TLS residual is" in w for w in t.warnings), t.warnings
+    assert abs(t.values[0] - x[0]) > 10 * abs(fit_ols(bad).values[0] - x[0])
+    assert not any("TLS residual is" in w for w in fit_tls(s).warnings)
