@@ -17,7 +17,7 @@ and gives the same numbers for both: all computations run on per-joint QR factor
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np

@@ -12,8 +12,8 @@ The statistics follow the papers:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from dataclasses import dataclass
+
 
 import numpy as np
 

@@ -9,7 +9,7 @@ from symoro_gen.errors import IdentificationError
 from symoro_gen.identification import (ObservationSystem, drive_gains, fit_wls, identify_with_drive_gains,
                                        sensor_gains)
 
-from .simdata import joint_noise, payload_parameters
+from .simdata import joint_noise
 
 RX90_GAINS = np.array([0.9238, 0.9533, 1.1032, 0.8737, 1.05, 0.97])     # Table 4 (+ two made up)
 LWR4_GAINS = np.array([1.02, 1.01, 1.02, 1.02, 1.02, 1.05, 0.99])       # Table II
