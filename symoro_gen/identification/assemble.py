@@ -11,8 +11,11 @@ another one):
    eq. 7 of the LWR4 paper) are evaluated on every remaining sample;
 3. ``Y`` (the measured torques) and every column of ``W`` are decimated in parallel (same zero-phase
    low-pass, one sample in ``n_d`` kept), so ``Y = W chi`` still holds;
-4. optionally the rows of joint j where the (decimated) velocity of joint j is below
-   ``min_velocity`` are removed (samples where the Coulomb-friction model ``sign(dq)`` is unreliable);
+4. optionally (``min_velocity``) the rows of joint j whose decimation filter sees a sample where
+   ``|dq_j| < min_velocity`` are removed: near zero velocity the Coulomb term ``sign(dq)`` of the
+   filtered velocity does not match the physical friction (rests, reversals), and the decimation
+   low-pass spreads that mismatch over its whole support (``20 n_d + 1`` samples, also used as the
+   window for ``ftype="iir"``);
 5. rows are grouped per joint: all rows of joint 1 (experiment after experiment), then joint 2...
 
 The filter settings are chosen per experiment by :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`
@@ -36,6 +39,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 from scipy import signal
+from scipy.ndimage import minimum_filter1d
 
 from ..errors import DataFileError, ModelError, Problem, ShapeError
 from ..preprocessing.filtering import (
@@ -192,8 +196,18 @@ def _velocity_threshold(min_velocity, n) -> np.ndarray | None:
 class _Block:
     Wd: np.ndarray  # (k, n, c)
     Yd: np.ndarray  # (k, n)
-    dqd: np.ndarray  # (k, n)
+    dq_min: np.ndarray  # (k, n): smallest |dq| over the decimation filter's support of each row
     td: np.ndarray  # (k,)
+
+
+def _support_min_abs(buf_dq: np.ndarray, valid: slice, support: int, first: int, step: int, k: int) -> np.ndarray:
+    """min |dq| over ``support`` samples centred on buffer rows ``first + i step`` (i < k); rows outside
+    ``valid`` (zero padding beyond the experiment) are ignored."""
+    a = np.full(buf_dq.shape, np.inf)
+    a[valid] = np.abs(buf_dq[valid])
+    if support > 1:
+        a = minimum_filter1d(a, size=support, axis=0, mode="constant", cval=np.inf)
+    return a[first:first + (k - 1) * step + 1:step]
 
 
 def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Options, nb: int, npay: int
@@ -243,6 +257,7 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
     if fir:
         per_block = max(group, per_block // group * group)
     batch = max(1, int(opts.regressor_batch))
+    need_vmin = opts.min_velocity is not None
 
     def kinematics(a, b):
         """q, dq, ddq on segment samples [a, b)."""
@@ -279,10 +294,13 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
             b = min(Nseg, (k1 - 1) * nd + half + 1)
             buf = np.zeros((rows, C))
             fill(buf, a - start, a, b)
-            cols = np.flatnonzero(np.any(buf != 0.0, axis=0))
+            dq_min = _support_min_abs(buf[:, n * c + n:], slice(a - start, b - start), L, half, nd, k) \
+                if need_vmin else None
+            wy = n * c + n  # W and Y columns (dq only serves min_velocity)
+            cols = np.flatnonzero(np.any(buf[:, :wy] != 0.0, axis=0))
             out = np.zeros((k, C))
-            if cols.size == C:
-                out[:] = _fir_decimate_padded(buf, h, nd, k, group)
+            if cols.size == wy:
+                out[:, :wy] = _fir_decimate_padded(buf[:, :wy], h, nd, k, group)
             elif cols.size:
                 sub = np.ascontiguousarray(buf[:, cols])
                 del buf
@@ -290,17 +308,20 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
         elif iir:
             buf = np.zeros((Nseg, C))
             fill(buf, 0, 0, Nseg)
+            dq_min = _support_min_abs(buf[:, n * c + n:], slice(0, Nseg), 20 * nd + 1, 0, nd, k) \
+                if need_vmin else None
             sos = decimation_filter(nd, ftype="iir", cutoff_ratio=st.cutoff_ratio)
-            cols = np.flatnonzero(np.any(buf != 0.0, axis=0))
+            cols = np.flatnonzero(np.any(buf[:, :n * c + n] != 0.0, axis=0))  # W, Y (not dq)
             out = np.zeros((k, C))
             if cols.size:
                 out[:, cols] = signal.sosfiltfilt(sos, buf[:, cols], axis=0)[::nd]
         else:
             out = np.zeros((k, C))
             fill(out, 0, k0, k1)
+            dq_min = np.abs(out[:, n * c + n:]) if need_vmin else None
         idx = e + np.arange(k0, k1) * nd
-        yield _Block(Wd=out[:, : n * c].reshape(k, n, c), Yd=out[:, n * c:n * c + n],
-                     dqd=out[:, n * c + n:], td=traj.t[idx])
+        yield _Block(Wd=out[:, : n * c].reshape(k, n, c), Yd=out[:, n * c:n * c + n], dq_min=dq_min,
+                     td=traj.t[idx])
 
 
 def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, vmin, removed: np.ndarray):
@@ -310,7 +331,7 @@ def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, vmin, removed: np
         for blk, ex in blocks:
             keep = slice(None)
             if vmin is not None:
-                m = np.abs(blk.dqd[:, j]) >= vmin[j]
+                m = blk.dq_min[:, j] >= vmin[j]
                 removed[ex, j] += int((~m).sum())
                 keep = m
             W = blk.Wd[keep, j, :]
@@ -378,7 +399,8 @@ def iter_observation_chunks(
     payload_columns : bool
         Append the payload columns (zeros for unloaded experiments).
     min_velocity : float or array_like (n,), optional
-        Remove the rows of joint j where ``|dq_j| < min_velocity[j]`` [rad/s or m/s].
+        Remove the rows of joint j whose decimation-filter support (``20 n_d + 1`` full-rate samples
+        around the row's sample) contains a filtered velocity ``|dq_j| < min_velocity[j]`` [rad/s or m/s].
     use_recorded_derivatives : bool
         Use the trajectory's ``dq``/``ddq`` (and raw ``q``) instead of filtering ``q``.
     max_chunk_mb : float

@@ -288,6 +288,9 @@ def choose_filter_settings(
             raise ValueError(f"n_d must be a positive integer, got {n_d!r}")
         notes.append("n_d given")
     fp = cutoff_ratio * fs / (2.0 * nd) if nd > 1 else float("inf")
+    if fp > fc:
+        notes.append(f"the decimation low-pass ({fp:.4g} Hz) passes frequencies the Butterworth filter "
+                     f"({fc:.4g} Hz) removed from q: there W (filtered) and Y (raw) disagree")
     if edge_samples is None:
         edge = int(math.ceil(EDGE_PERIODS * fs / fc))
     else:
