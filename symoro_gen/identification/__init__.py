@@ -1,11 +1,21 @@
 """Identification: observation systems, LS / WLS / TLS with statistics, essential parameters,
 payload, drive gains, torque-sensor gains, streaming accumulation.
 
-Typical use::
+Every function takes :class:`ObservationSystem` values (or an :class:`Accumulator` of streamed
+chunks for the plain estimators) and returns an immutable result with ``summary()`` and
+``to_dict()`` (the JSON contract: ``parameters`` {names, values, std, rel_std_pct}, ``rel_err``,
+``cond``, ``sigma``, ``gains`` {values, rel_std_pct} when identified).
 
-    from symoro_gen.identification import identify, sensor_gains
-    res = identify(system, method="wls", essential=True)
-    print(res.summary()); json.dump(res.to_dict(), f)
+How the ``symoro-gen identify`` options map onto the functions (``unloaded``/``loaded``: systems of
+the DATA and --loaded files; or one combined system with ``loaded=None, payload_names=...``)::
+
+    --method M [--essential]           identify(system, method=M, essential=...)
+    --validate DATA                    result.rel_err_on(validation_system)        (Table III)
+    --loaded DATA --payload N=V        fit_with_known_payload(unloaded, loaded, {N: V}, method=M)
+    --gains sensor                     sensor_gains(unloaded, loaded, {N: V}, essential=...)  (IDIM-TLS)
+    --gains drive                      identify_with_drive_gains(unloaded, loaded, payload, method=M)
+    payload mass with robot known      identify_payload(loaded, result, payload_names, gains=...)  (Table IV)
+    streamed data                      fit_ols(accumulate(iter_observation_chunks(...)))
 """
 from .accumulate import Accumulator, accumulate
 from .essential import EssentialResult, essential_parameters
