@@ -42,7 +42,7 @@ check-generated: $(STAMP)
 	else echo "generated/ differs from the generator: run 'make robots' and commit"; rm -rf $$tmp; exit 1; fi
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
