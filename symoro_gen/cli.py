@@ -121,7 +121,28 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-_EXTRA_COMMANDS: list = []
+def _identify_parser(sub):
+    from .identification.cli import add_identify_parser
+
+    add_identify_parser(sub)
+
+
+def _demo_parser(sub):
+    d = sub.add_parser("demo", help="the main job on a built-in simulated example (LWR4 sensor-gain calibration)")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--duration", type=float, default=20.0, help="seconds per simulated recording")
+    d.set_defaults(func=lambda a: __import__("symoro_gen.demo", fromlist=["run_demo"]).run_demo(a))
+
+
+def _diagnose_parser(sub):
+    try:
+        from .diagnostics.cli import add_diagnose_parser
+    except ImportError:
+        return
+    add_diagnose_parser(sub)
+
+
+_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser]
 
 
 def main(argv=None) -> int:

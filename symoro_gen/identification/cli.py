@@ -1,0 +1,92 @@
+"""``symoro-gen identify``: recorded data -> identified parameters, gains, validation (JSON/Markdown)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ..errors import IdentificationError
+
+
+def _payload_values(items, names) -> dict:
+    out = {}
+    for it in items or ():
+        if "=" not in it:
+            raise IdentificationError(f"--payload {it!r}: expected NAME=VALUE, e.g. M8=4.6136")
+        k, v = it.split("=", 1)
+        k = k.strip()
+        if k not in names:
+            raise IdentificationError(f"--payload {k}: not a payload parameter of this robot ({', '.join(names) or 'none'})")
+        try:
+            out[k] = float(v)
+        except ValueError:
+            raise IdentificationError(f"--payload {k}={v!r}: value is not a number") from None
+    return out
+
+
+def run_identify(args) -> dict:
+    from ..modelcache import model_for
+    from ..preprocessing.load import load_trajectories
+    from . import fit_with_known_payload, identify, identify_with_drive_gains, sensor_gains
+    from .assemble import build_observation
+
+    robot, model = model_for(args.robot)
+    kw = dict(n_joints=robot.n_joints, drive_chain=robot.drive_chain)
+    unloaded = load_trajectories(args.data, loaded=False, **kw)
+    loaded = load_trajectories(args.loaded, loaded=True, **kw) if args.loaded else ()
+    known = _payload_values(args.payload, model.PAYLOAD_NAMES)
+    if (args.gains or known) and not loaded:
+        raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
+    obs = dict(cutoff_hz=args.cutoff, n_d=args.decimate)
+    has_payload = bool(loaded)
+    sys_u = build_observation(model, unloaded, payload_columns=False, **obs)
+    sys_l = build_observation(model, loaded, payload_columns=True, **obs) if loaded else None
+    if args.gains == "sensor":
+        res = sensor_gains(sys_u, sys_l, known, essential=args.essential, r_sigma=args.r_sigma)
+    elif args.gains == "drive":
+        res, _ = identify_with_drive_gains(sys_u, sys_l, known, method=args.method)
+    elif loaded:
+        res = fit_with_known_payload(sys_u, sys_l, known, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
+    else:
+        res = identify(sys_u, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
+    out = {"robot": robot.name, "data": [str(p) for p in args.data], "loaded": [str(p) for p in args.loaded or ()]}
+    out.update(res.to_dict())
+    val = None
+    if args.validate:
+        vtr = load_trajectories(args.validate, loaded=args.validate_loaded, **kw)
+        sys_v = build_observation(model, vtr, payload_columns=bool(args.validate_loaded) or has_payload, **obs)
+        val = res.rel_err_on(sys_v)
+        out["validation"] = {"data": [str(p) for p in args.validate], "rel_err": [float(x) for x in val]}
+    if args.json:
+        from ..emit.package import write_text_atomic
+
+        write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
+    text = res.summary()
+    if val is not None:
+        text += "\n\nValidation (relative error norm per joint): " + "  ".join(f"{x:.4f}" for x in val)
+    if args.report:
+        from ..emit.package import write_text_atomic
+
+        md = f"# Identification of `{robot.name}`\n\nData: {', '.join(map(str, args.data))}\n\n```\n{text}\n```\n"
+        write_text_atomic(Path(args.report), md)
+    if not args.quiet:
+        print(text)
+    return out
+
+
+def add_identify_parser(sub) -> None:
+    p = sub.add_parser("identify", help="identify base parameters (and gains) from recorded data")
+    p.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
+    p.add_argument("data", nargs="+", help="recordings without payload (CSV/NPZ/MAT, or q=..,tau=..,dt=.. spec)")
+    p.add_argument("--method", choices=("ols", "wls", "tls"), default="wls")
+    p.add_argument("--validate", nargs="+", help="validation recordings (relative error norms, Table III)")
+    p.add_argument("--validate-loaded", action="store_true", help="the validation recordings carry the payload")
+    p.add_argument("--loaded", nargs="+", help="recordings with the payload mounted")
+    p.add_argument("--payload", nargs="+", metavar="NAME=VALUE", help="known payload parameters, e.g. M8=4.6136")
+    p.add_argument("--gains", choices=("sensor", "drive"), help="also identify torque-sensor (IDIM-TLS) or drive gains")
+    p.add_argument("--essential", action="store_true", help="reduce to the essential parameters")
+    p.add_argument("--r-sigma", type=float, default=30.0, help="stop ratio of the essential procedure (default 30)")
+    p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
+    p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
+    p.add_argument("--json", help="write the results as JSON here")
+    p.add_argument("--report", help="write a Markdown report here")
+    p.set_defaults(func=lambda a: (run_identify(a), 0)[1])
