@@ -56,6 +56,17 @@ def run_identify(args) -> dict:
         sys_v = build_observation(model, vtr, payload_columns=bool(args.validate_loaded) or has_payload, **obs)
         val = res.rel_err_on(sys_v)
         out["validation"] = {"data": [str(p) for p in args.validate], "rel_err": [float(x) for x in val]}
+    if args.reference:
+        from .reference import compare_with_reference, format_comparison
+
+        rows = compare_with_reference(res, args.reference)
+        out["reference"] = [
+            {"expression": r.expression, "name": r.name, "ref": r.ref, "ref_rel_std_pct": r.ref_rel_std_pct,
+             "agree_2sigma": r.agree_2sigma} for r in rows
+        ]
+        ref_text = format_comparison(rows)
+    else:
+        ref_text = ""
     if args.json:
         from ..emit.package import write_text_atomic
 
@@ -63,6 +74,8 @@ def run_identify(args) -> dict:
     text = res.summary()
     if val is not None:
         text += "\n\nValidation (relative error norm per joint): " + "  ".join(f"{x:.4f}" for x in val)
+    if ref_text:
+        text += "\n\nBeside the reference table " + str(args.reference) + ":\n" + ref_text
     if args.report:
         from ..emit.package import write_text_atomic
 
@@ -87,6 +100,7 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--r-sigma", type=float, default=30.0, help="stop ratio of the essential procedure (default 30)")
     p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
     p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
+    p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", help="write a Markdown report here")
     p.set_defaults(func=lambda a: (run_identify(a), 0)[1])
