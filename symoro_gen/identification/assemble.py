@@ -176,13 +176,6 @@ def _names(model, payload_columns: bool) -> tuple[tuple[str, ...], int, int]:
     return base + pay, len(base), len(pay)
 
 
-def _eval_regressor(fn, what, q, dq, ddq, n, c):
-    W = np.asarray(fn(q, dq, ddq), float)
-    if W.shape != (q.shape[0], n, c):
-        raise ShapeError(f"model.{what} returned shape {W.shape}, expected {(q.shape[0], n, c)}")
-    return W
-
-
 def _velocity_threshold(min_velocity, n) -> np.ndarray | None:
     if min_velocity is None:
         return None
@@ -210,14 +203,82 @@ def _support_min_abs(buf_dq: np.ndarray, valid: slice, support: int, first: int,
     return a[first:first + (k - 1) * step + 1:step]
 
 
-def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Options, nb: int, npay: int
+class _Evaluator:
+    """Calls a model's regressors into reused arrays and keeps only its structurally non-zero columns.
+
+    The columns of ``W`` (per joint row) that are zero for random states are zero for all states
+    (the entries are analytic functions of q, dq, ddq, or literal zeros); they are neither copied nor
+    filtered.
+    """
+
+    def __init__(self, model, n: int, nb: int, npay: int, batch: int, rng_seed: int = 12345):
+        self.model, self.n, self.nb, self.npay, self.batch = model, n, nb, npay, batch
+        rng = np.random.default_rng(rng_seed)
+        q, dq, ddq = (rng.uniform(-2.0, 2.0, (16, n)) for _ in range(3))
+        self.out_ok = {}
+        Wb = self._call("regressor", q, dq, ddq, nb)
+        self.nz_base = np.flatnonzero(np.any(Wb.reshape(16, n * nb) != 0.0, axis=0))
+        if npay:
+            Wp = self._call("payload_regressor", q, dq, ddq, npay)
+            self.nz_pay = np.flatnonzero(np.any(Wp.reshape(16, n * npay) != 0.0, axis=0))
+        else:
+            self.nz_pay = np.zeros(0, int)
+        self._tmp = {}
+
+    def _call(self, what, q, dq, ddq, ncol, out=None):
+        fn = getattr(self.model, what)
+        if out is not None and self.out_ok.get(what, True):
+            try:
+                W = fn(q, dq, ddq, out=out)
+                self.out_ok[what] = True
+            except TypeError:
+                self.out_ok[what] = False
+                W = fn(q, dq, ddq)
+        else:
+            W = fn(q, dq, ddq)
+        W = np.asarray(W, float)
+        if W.shape != (q.shape[0], self.n, ncol):
+            raise ShapeError(f"model.{what} returned shape {W.shape}, expected {(q.shape[0], self.n, ncol)}")
+        return W
+
+    def columns(self, payload_on: bool) -> np.ndarray:
+        """Flat indices into ``(n, nb + npay)`` of the columns kept for an experiment."""
+        c = self.nb + self.npay
+        j, i = np.divmod(self.nz_base, self.nb)
+        cols = [j * c + i]
+        if payload_on:
+            j, i = np.divmod(self.nz_pay, self.npay)
+            cols.append(j * c + self.nb + i)
+        return np.concatenate(cols)
+
+    def write(self, dst_base: np.ndarray, dst_pay: np.ndarray | None, q, dq, ddq) -> None:
+        """Kept columns of W on samples (q, dq, ddq): base ones into ``dst_base`` (m, nz_base.size),
+        payload ones into ``dst_pay`` (m, nz_pay.size) when given (C-contiguous row blocks)."""
+        m = q.shape[0]
+        for s in range(0, m, self.batch):
+            s2 = min(m, s + self.batch)
+            k = s2 - s
+            tb = self._tmp.get("b")
+            if tb is None or tb.shape[0] < k:
+                tb = self._tmp["b"] = np.empty((max(k, self.batch), self.n, self.nb))
+            Wb = self._call("regressor", q[s:s2], dq[s:s2], ddq[s:s2], self.nb, out=tb[:k])
+            np.take(Wb.reshape(k, -1), self.nz_base, axis=1, out=dst_base[s:s2], mode="clip")
+            if dst_pay is not None:
+                tp = self._tmp.get("p")
+                if tp is None or tp.shape[0] < k:
+                    tp = self._tmp["p"] = np.empty((max(k, self.batch), self.n, self.npay))
+                Wp = self._call("payload_regressor", q[s:s2], dq[s:s2], ddq[s:s2], self.npay, out=tp[:k])
+                np.take(Wp.reshape(k, -1), self.nz_pay, axis=1, out=dst_pay[s:s2], mode="clip")
+
+
+def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Options, ev: _Evaluator
                        ) -> Iterator[_Block]:
     """Decimated blocks of one experiment (before velocity removal and regrouping)."""
     n = traj.n_joints
     N = traj.n_samples
     src = traj.source
-    if n != int(getattr(model, "N_JOINTS", n)):
-        raise ShapeError(f"{src}: trajectory has {n} joints, model {getattr(model, 'ROBOT', '?')} has {model.N_JOINTS}")
+    if n != ev.n:
+        raise ShapeError(f"{src}: trajectory has {n} joints, model {getattr(model, 'ROBOT', '?')} has {ev.n}")
     use_rec = opts.use_recorded_derivatives
     if use_rec and (traj.dq is None or traj.ddq is None):
         raise DataFileError([Problem(src, "", "dq/ddq", "use_recorded_derivatives=True but the trajectory has "
@@ -230,9 +291,11 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
         raise DataFileError([Problem(src, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
                                      f"{2 * e} dropped at the edges, at least {need} must remain "
                                      f"(cut-off {st.cutoff_hz:.4g} Hz, n_d = {nd})")])
-    c = nb + npay
-    C = n * c + 2 * n
-    payload_on = npay > 0 and traj.loaded
+    c = ev.nb + ev.npay
+    payload_on = ev.npay > 0 and traj.loaded
+    keep = ev.columns(payload_on)  # flat (n, c) indices of the buffer's W columns
+    Cw = keep.size
+    Cb = Cw + n  # buffer: kept W columns, then Y
     fs = st.fs
     margin = 0 if use_rec else butterworth_settle_samples(fs, st.cutoff_hz, st.order) + 2
     fir = nd > 1 and st.ftype == "fir"
@@ -244,8 +307,7 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
         group = _group_size(nd)
     n_out_total = -(-Nseg // nd)
     # outputs per block
-    row_bytes = 8.0 * C
-    budget_rows = max(1, int(opts.max_chunk_mb * 1e6 / row_bytes / 2))
+    budget_rows = max(1, int(opts.max_chunk_mb * 1e6 / (8.0 * Cb)))
     if iir:
         per_block = n_out_total
     elif opts.chunk_samples is not None:
@@ -256,7 +318,7 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
         per_block = budget_rows
     if fir:
         per_block = max(group, per_block // group * group)
-    batch = max(1, int(opts.regressor_batch))
+    per_block = min(per_block, n_out_total)
     need_vmin = opts.min_velocity is not None
 
     def kinematics(a, b):
@@ -270,20 +332,29 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
         s = slice(lo_full - lo, hi_full - lo)
         return qf[s], dq[s], ddq[s]
 
-    def fill(buf, r0, a, b):
-        """Write W, Y, dq of segment samples [a, b) into buffer rows [r0, r0 + b - a)."""
-        Wv = buf[:, : n * c].reshape(buf.shape[0], n, c)
+    def fill(bufs, dqbuf, r0, a, b):
+        """W (kept columns), Y and dq of segment samples [a, b) into rows [r0, r0 + b - a)."""
         q, dq, ddq = kinematics(a, b)
-        for s in range(0, b - a, batch):
-            s2 = min(b - a, s + batch)
-            qs, dqs, ddqs = q[s:s2], dq[s:s2], ddq[s:s2]
-            Wv[r0 + s:r0 + s2, :, :nb] = _eval_regressor(model.regressor, "regressor", qs, dqs, ddqs, n, nb)
-            if payload_on:
-                Wv[r0 + s:r0 + s2, :, nb:] = _eval_regressor(model.payload_regressor, "payload_regressor",
-                                                             qs, dqs, ddqs, n, npay)
-        buf[r0:r0 + b - a, n * c:n * c + n] = traj.tau[e + a:e + b]
-        buf[r0:r0 + b - a, n * c + n:] = dq
+        r1 = r0 + b - a
+        ev.write(bufs[0][r0:r1], bufs[1][r0:r1] if payload_on else None, q, dq, ddq)
+        bufs[-1][r0:r1] = traj.tau[e + a:e + b]
+        if dqbuf is not None:
+            dqbuf[r0:r1] = dq
 
+    def unpack(decs, k: int):
+        Wd = np.zeros((k, n * c))
+        Wd[:, keep] = np.concatenate(decs[:-1], axis=1)
+        return Wd.reshape(k, n, c), decs[-1]
+
+    if fir:
+        rows_max = fir_buffer_length(per_block, nd, L, group)
+    elif iir:
+        rows_max = Nseg
+    else:
+        rows_max = per_block
+    widths = [ev.nz_base.size] + ([ev.nz_pay.size] if payload_on else []) + [n]
+    bufs = [np.empty((rows_max, w)) for w in widths]  # base W, payload W, Y: reused for every block
+    dqbuf = np.empty((rows_max, n)) if need_vmin else None
     for k0 in range(0, n_out_total, per_block):
         k1 = min(n_out_total, k0 + per_block)
         k = k1 - k0
@@ -292,36 +363,27 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
             rows = fir_buffer_length(k, nd, L, group)
             a = max(0, start)
             b = min(Nseg, (k1 - 1) * nd + half + 1)
-            buf = np.zeros((rows, C))
-            fill(buf, a - start, a, b)
-            dq_min = _support_min_abs(buf[:, n * c + n:], slice(a - start, b - start), L, half, nd, k) \
-                if need_vmin else None
-            wy = n * c + n  # W and Y columns (dq only serves min_velocity)
-            cols = np.flatnonzero(np.any(buf[:, :wy] != 0.0, axis=0))
-            out = np.zeros((k, C))
-            if cols.size == wy:
-                out[:, :wy] = _fir_decimate_padded(buf[:, :wy], h, nd, k, group)
-            elif cols.size:
-                sub = np.ascontiguousarray(buf[:, cols])
-                del buf
-                out[:, cols] = _fir_decimate_padded(sub, h, nd, k, group)
+            r0, r1 = a - start, b - start
+            Bs = [x[:rows] for x in bufs]
+            for x in Bs:  # zero padding beyond the experiment's ends (as resample_poly)
+                x[:r0] = 0.0
+                x[r1:] = 0.0
+            fill(Bs, dqbuf, r0, a, b)
+            dq_min = _support_min_abs(dqbuf[:rows], slice(r0, r1), L, half, nd, k) if need_vmin else None
+            decs = [_fir_decimate_padded(x, h, nd, k, group) for x in Bs]
         elif iir:
-            buf = np.zeros((Nseg, C))
-            fill(buf, 0, 0, Nseg)
-            dq_min = _support_min_abs(buf[:, n * c + n:], slice(0, Nseg), 20 * nd + 1, 0, nd, k) \
-                if need_vmin else None
+            fill(bufs, dqbuf, 0, 0, Nseg)
+            dq_min = _support_min_abs(dqbuf, slice(0, Nseg), 20 * nd + 1, 0, nd, k) if need_vmin else None
             sos = decimation_filter(nd, ftype="iir", cutoff_ratio=st.cutoff_ratio)
-            cols = np.flatnonzero(np.any(buf[:, :n * c + n] != 0.0, axis=0))  # W, Y (not dq)
-            out = np.zeros((k, C))
-            if cols.size:
-                out[:, cols] = signal.sosfiltfilt(sos, buf[:, cols], axis=0)[::nd]
+            decs = [signal.sosfiltfilt(sos, x, axis=0)[::nd] for x in bufs]
         else:
-            out = np.zeros((k, C))
-            fill(out, 0, k0, k1)
-            dq_min = np.abs(out[:, n * c + n:]) if need_vmin else None
+            Bs = [x[:k] for x in bufs]
+            fill(Bs, dqbuf, 0, k0, k1)
+            dq_min = np.abs(dqbuf[:k]) if need_vmin else None
+            decs = [x.copy() for x in Bs]
+        Wd, Yd = unpack(decs, k)
         idx = e + np.arange(k0, k1) * nd
-        yield _Block(Wd=out[:, : n * c].reshape(k, n, c), Yd=out[:, n * c:n * c + n], dq_min=dq_min,
-                     td=traj.t[idx])
+        yield _Block(Wd=Wd, Yd=Yd, dq_min=dq_min, td=traj.t[idx])
 
 
 def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, vmin, removed: np.ndarray):
@@ -421,14 +483,17 @@ def iter_observation_chunks(
     opts = _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns,
                     min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, rule_kw)
     names, nb, npay = _names(model, payload_columns)
+    ev = None
     for ex, traj in enumerate(_as_trajectories(trajectories)):
+        if ev is None:
+            ev = _Evaluator(model, traj.n_joints, nb, npay, max(1, int(regressor_batch)))
         _check_loaded(traj, payload_columns)
         st = _settings_for(traj, opts)
         n = traj.n_joints
         vmin = _velocity_threshold(min_velocity, n)
         removed = np.zeros((ex + 1, n), int)
         kept = np.zeros(n, int)
-        for blk in _experiment_blocks(model, traj, st, opts, nb, npay):
+        for blk in _experiment_blocks(model, traj, st, opts, ev):
             Ws, Ys, Js, _, _ = _stack_per_joint([(blk, ex)], n, vmin, removed)
             kept += np.array([w.shape[0] for w in Ws])
             yield ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names,
@@ -478,13 +543,14 @@ def assemble_observation(
             raise ShapeError(f"{tr.source}: {tr.n_joints} joints, {trajs[0].source}: {n}")
     vmin = _velocity_threshold(min_velocity, n)
     removed = np.zeros((len(trajs), n), int)
+    ev = _Evaluator(model, n, nb, npay, max(1, int(regressor_batch)))
     blocks: list[tuple[_Block, int]] = []
     settings = []
     for ex, traj in enumerate(trajs):
         _check_loaded(traj, payload_columns)
         st = _settings_for(traj, opts)
         settings.append(st)
-        blocks += [(b, ex) for b in _experiment_blocks(model, traj, st, opts, nb, npay)]
+        blocks += [(b, ex) for b in _experiment_blocks(model, traj, st, opts, ev)]
     Ws, Ys, Js, Es, Ts = _stack_per_joint(blocks, n, vmin, removed)
     E = np.concatenate(Es)
     J = np.concatenate(Js)

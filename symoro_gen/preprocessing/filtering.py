@@ -137,7 +137,7 @@ class FilterSettings:
 # rules
 # ---------------------------------------------------------------------------------------------
 def estimate_dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999,
-                                min_bandwidth_hz: float = 1.0) -> float:
+                                min_bandwidth_hz: float = 1.0, max_segment: int = 2 ** 16) -> float:
     """Frequency below which ``energy_fraction`` of the position energy lies (max over joints).
 
     Parameters
@@ -150,6 +150,8 @@ def estimate_dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999,
         Fraction of the energy of the linearly detrended, Hann-windowed positions.
     min_bandwidth_hz : float
         Floor of the result [Hz].
+    max_segment : int
+        Longer recordings are analysed by Welch's method with segments of this length.
 
     Returns
     -------
@@ -161,10 +163,13 @@ def estimate_dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999,
         q = q[:, None]
     if q.shape[0] < 8:
         return float(min_bandwidth_hz)
-    qd = signal.detrend(q, axis=0, type="linear")
-    w = np.hanning(q.shape[0])[:, None]
-    P = np.abs(np.fft.rfft(qd * w, axis=0)) ** 2
-    f = np.fft.rfftfreq(q.shape[0], 1.0 / fs)
+    if q.shape[0] <= max_segment:
+        qd = signal.detrend(q, axis=0, type="linear")
+        w = np.hanning(q.shape[0])[:, None]
+        P = np.abs(np.fft.rfft(qd * w, axis=0)) ** 2
+        f = np.fft.rfftfreq(q.shape[0], 1.0 / fs)
+    else:  # long recordings: Welch average of linearly detrended segments (bounded memory)
+        f, P = signal.welch(q, fs=fs, window="hann", nperseg=max_segment, detrend="linear", axis=0)
     best = 0.0
     tot = P.sum(axis=0)
     for j in range(q.shape[1]):

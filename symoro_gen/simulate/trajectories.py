@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Motion", "fourier_trajectory", "ptp_trajectory", "double_s_times"]
+__all__ = ["Motion", "FourierSeries", "fourier_trajectory", "ptp_trajectory", "double_s_times"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +31,9 @@ class Motion:
         Positions [rad or m], velocities, accelerations (exact, not differentiated numerically).
     via_times : ndarray, shape (m,), optional
         Times at which the via-points are reached (PTP only).
+    series : FourierSeries, optional
+        The scaled series (Fourier only): ``series.evaluate(t)`` samples the same motion at other
+        times, e.g. block by block for very long simulated recordings.
     """
 
     t: np.ndarray
@@ -38,9 +41,40 @@ class Motion:
     dq: np.ndarray
     ddq: np.ndarray
     via_times: np.ndarray | None = None
+    series: "FourierSeries | None" = None
 
     def __iter__(self):
         return iter((self.t, self.q, self.dq, self.ddq))
+
+
+@dataclass(frozen=True)
+class FourierSeries:
+    """``q_j(t) = q0_j + sum_l [a_jl sin(w l t) - b_jl (cos(w l t) - 1)] / (w l)``.
+
+    Attributes
+    ----------
+    q0 : ndarray (n,)
+    a, b : ndarray (n, L)
+        Coefficients [rad/s].
+    w : float
+        Base angular frequency [rad/s].
+    """
+
+    q0: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    w: float
+
+    def evaluate(self, t) -> Motion:
+        """Exact ``q, dq, ddq`` at times ``t`` (shape (N,)) [s]."""
+        t = np.asarray(t, float)
+        wl = self.w * np.arange(1, self.a.shape[1] + 1)
+        S = np.sin(np.outer(t, wl))
+        Cc = np.cos(np.outer(t, wl))
+        q = (S / wl) @ self.a.T - ((Cc - 1.0) / wl) @ self.b.T + self.q0
+        dq = Cc @ self.a.T + S @ self.b.T
+        ddq = -(S * wl) @ self.a.T + (Cc * wl) @ self.b.T
+        return Motion(t=t, q=q, dq=dq, ddq=ddq, series=self)
 
 
 def _per_joint(x, n, name) -> np.ndarray:
@@ -79,6 +113,7 @@ def fourier_trajectory(n_joints: int, duration: float, dt: float, rng: np.random
     Returns
     -------
     Motion
+        With ``series``, the scaled :class:`FourierSeries` (to sample more of the same motion).
     """
     if duration <= 0 or dt <= 0:
         raise ValueError("duration and dt must be positive")
@@ -90,20 +125,17 @@ def fourier_trajectory(n_joints: int, duration: float, dt: float, rng: np.random
     scale = ls ** (-float(decay))
     a = rng.standard_normal((n, n_harmonics)) * scale
     b = rng.standard_normal((n, n_harmonics)) * scale
-    wl = w * ls  # (L,)
-    S = np.sin(np.outer(t, wl))  # (N, L)
-    Cc = np.cos(np.outer(t, wl))
-    q = (S / wl) @ a.T - ((Cc - 1.0) / wl) @ b.T
-    dq = Cc @ a.T + S @ b.T
-    ddq = -(S * wl) @ a.T + (Cc * wl) @ b.T
+    raw = FourierSeries(q0=np.zeros(n), a=a, b=b, w=w).evaluate(t)
+    q, dq, ddq = raw.q, raw.dq, raw.ddq
     amp = _per_joint(amplitude, n, "amplitude")
     vm = _per_joint(vmax, n, "vmax")
     am = _per_joint(amax, n, "amax")
     with np.errstate(divide="ignore"):
         k = np.minimum.reduce([amp / np.abs(q).max(0), vm / np.abs(dq).max(0), am / np.abs(ddq).max(0)])
     k = np.where(np.isfinite(k), k, 0.0)
-    q0 = np.zeros(n) if q0 is None else np.broadcast_to(np.asarray(q0, float), (n,))
-    return Motion(t=t, q=q * k + q0, dq=dq * k, ddq=ddq * k)
+    q0 = np.zeros(n) if q0 is None else np.broadcast_to(np.asarray(q0, float), (n,)).copy()
+    series = FourierSeries(q0=q0, a=a * k[:, None], b=b * k[:, None], w=w)
+    return Motion(t=t, q=q * k + q0, dq=dq * k, ddq=ddq * k, series=series)
 
 
 def double_s_times(h: float, vmax: float, amax: float, jmax: float) -> tuple[float, float, float]:

@@ -47,9 +47,6 @@ def test_noiseless_assembly_satisfies_y_equals_w_chi(rx90_case):
     """Numeric (independent) regressor adapter, base = standard columns: Y == W chi to filtering accuracy."""
     robot, chi, pl, unloaded, loaded = rx90_case
     model = numeric_model(robot)
-    # smooth Fourier motion, default rules
-    S0 = build_observation(model, unloaded)
-    assert _per_joint_rel_err(S0, chi).max() < 1e-5
     # + PTP motion with the payload. Its acceleration has corners (jerk steps) that the central
     # differences at 500 Hz resolve to ~1e-4; it rests at its via-points, where sign(filtered dq) is not
     # the sign(0) of the Coulomb friction, so the rows whose filter sees |dq| < 0.02 rad/s are removed.
@@ -60,12 +57,6 @@ def test_noiseless_assembly_satisfies_y_equals_w_chi(rx90_case):
     x = np.concatenate([chi, pl])
     err = _per_joint_rel_err(S, x)
     assert err.max() < 5e-4, err
-    kept_all = build_observation(model, [unloaded, loaded], payload_columns=True, dynamics_bandwidth_hz=2.0)
-    assert _per_joint_rel_err(kept_all, x).max() > 10 * err.max()  # what min_velocity is for
-    # without filtering (true derivatives recorded), the identity is exact
-    ex = [simulate_recording(robot, unloaded.t, unloaded.q, *_derivs(unloaded, robot), chi, keep_derivatives=True)]
-    S2 = build_observation(model, ex, use_recorded_derivatives=True, n_d=5, cutoff_hz=20.0)
-    assert _per_joint_rel_err(S2, chi).max() < 1e-12
     # rows grouped per joint; payload columns zero on the unloaded experiment's rows
     assert np.all(np.diff(S.joint) >= 0)
     pay = S.W[:, len(chi):]
@@ -77,6 +68,24 @@ def test_noiseless_assembly_satisfies_y_equals_w_chi(rx90_case):
         assert 0.8 * FS / (2 * s.n_d) >= 5 * s.dynamics_bandwidth_hz
         assert sum(e.rows_per_joint) == np.sum(A.row_experiment == e.index)
     assert "parallel decimation" in A.summary() and "loaded" in A.summary()
+
+
+def test_generated_model_same_identity(rx90_case):
+    """The emitted rx90 model (base columns) on the same data; what min_velocity and filtering are for."""
+    robot, chi, pl, unloaded, loaded = rx90_case
+    gen = symoro_gen.load_model("rx90")
+    xb = np.concatenate([gen.base_parameters(chi), pl])
+    # smooth Fourier motion, default rules
+    assert _per_joint_rel_err(build_observation(gen, unloaded), xb[:-10]).max() < 1e-5
+    with_rests = build_observation(gen, [unloaded, loaded], payload_columns=True, dynamics_bandwidth_hz=2.0)
+    without = build_observation(gen, [unloaded, loaded], payload_columns=True, dynamics_bandwidth_hz=2.0,
+                                min_velocity=0.02)
+    assert _per_joint_rel_err(without, xb).max() < 5e-4
+    assert _per_joint_rel_err(with_rests, xb).max() > 10 * _per_joint_rel_err(without, xb).max()
+    # without filtering (true derivatives recorded), the identity is exact
+    ex = [simulate_recording(robot, unloaded.t, unloaded.q, *_derivs(unloaded, robot), chi, keep_derivatives=True)]
+    S2 = build_observation(gen, ex, use_recorded_derivatives=True, n_d=5, cutoff_hz=20.0)
+    assert _per_joint_rel_err(S2, xb[:-10]).max() < 1e-12
 
 
 def _derivs(tr, robot):
@@ -92,8 +101,7 @@ def _derivs(tr, robot):
 def test_rows_are_the_decimated_samples(rx90_case):
     """One column of W and Y are exactly the decimation of their full-rate samples (edges dropped)."""
     robot, chi, pl, unloaded, _ = rx90_case
-    model = numeric_model(robot)
-    S = build_observation(model, [unloaded], n_d=4, cutoff_hz=15.0, edge_samples=25)
+    S = build_observation(symoro_gen.load_model("rx90"), [unloaded], n_d=4, cutoff_hz=15.0, edge_samples=25)
     j = 2
     Yj = S.Y[S.joint == j]
     np.testing.assert_allclose(Yj, decimate(unloaded.tau[25:-25, j], 4), atol=1e-12)
@@ -133,7 +141,7 @@ def test_generated_model_and_streaming_agree():
 
 def test_min_velocity_removes_only_slow_rows():
     robot = load_robot("scara")
-    model = numeric_model(robot)
+    model = symoro_gen.load_model("scara")
     rng = np.random.default_rng(5)
     chi = random_physical_parameters(robot, rng)
     P = np.array([[0, 0, 0, 0], [1.0, -1.0, 0.1, 2.0], [1.0, -1.0, 0.1, 2.0], [-0.5, 0.5, 0.0, -1.0]])
@@ -159,19 +167,20 @@ def test_min_velocity_removes_only_slow_rows():
             i = int(round(tk * FS))
             assert np.abs(m.dq[max(e, i - half):min(len(m.t) - e, i + half + 1), j]).min() > 0.8 * vmin[j]
     # rests and reversals removed: Y == W chi up to the differentiation accuracy of a jerk-limited profile
-    assert _per_joint_rel_err(cut.system, np.asarray(chi)).max() < 5e-4
-    assert _per_joint_rel_err(full.system, np.asarray(chi)).max() > 1e-2
+    xb = model.base_parameters(np.asarray(chi))
+    assert _per_joint_rel_err(cut.system, xb).max() < 5e-4
+    assert _per_joint_rel_err(full.system, xb).max() > 1e-2
 
 
 def test_iir_option_matches_fir_consistency(rx90_case):
     robot, chi, pl, unloaded, _ = rx90_case
-    S = build_observation(numeric_model(robot), unloaded, ftype="iir", n_d=8, cutoff_hz=20.0)
-    assert _per_joint_rel_err(S, chi).max() < 1e-5
+    gen = symoro_gen.load_model("rx90")
+    S = build_observation(gen, unloaded, ftype="iir", n_d=8, cutoff_hz=20.0)
+    assert _per_joint_rel_err(S, gen.base_parameters(chi)).max() < 1e-5
 
 
 def test_errors():
-    robot = load_robot("scara")
-    model = numeric_model(robot)
+    model = symoro_gen.load_model("scara")
     t = np.arange(60) / FS
     short = Trajectory(t=t, q=np.zeros((60, 4)), tau=np.zeros((60, 4)), source="short.csv")
     with pytest.raises(DataFileError, match=r"short\.csv.*too short to filter and decimate: 60 samples"):

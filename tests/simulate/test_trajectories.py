@@ -103,3 +103,7 @@ def test_fourier_bounds_and_derivatives():
     # analytic derivatives: compare with central differences
     np.testing.assert_allclose((q[2:] - q[:-2]) / (2 * dt), dq[1:-1], atol=1e-5)
     np.testing.assert_allclose((dq[2:] - dq[:-2]) / (2 * dt), ddq[1:-1], atol=1e-4)
+    # the series samples the same motion block by block (long simulated recordings)
+    part = m.series.evaluate(t[1234:2345])
+    np.testing.assert_allclose(part.q, q[1234:2345], atol=1e-12)
+    np.testing.assert_allclose(part.ddq, ddq[1234:2345], atol=1e-10)
