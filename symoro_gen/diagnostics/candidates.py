@@ -1,0 +1,409 @@
+"""The library of candidate effects: each is a set of extra columns of ``W``.
+
+A candidate *family* is one physical effect on one joint (or pair of joints, or all joints); when the
+effect has a non-linear parameter (Stribeck velocity, ripple order) the family has one member per
+value of a 1-D search grid, and the search counts in the multiple-testing correction. Columns are
+evaluated on the full-rate band-pass signals and decimated in parallel with ``W`` (see
+:mod:`.frame`), except the two linearisations around the current fit (``elasticity``, ``gain``),
+which are evaluated on the decimated signals.
+
+Kinds (names as in the JSON output) and their columns on the rows of joint j (q, dq, ddq band-pass
+estimates from the measured positions; tau_hat the torque of the declared model fitted to the data,
+low-passed like q - not the measured torque, whose noise is that of Y, see :mod:`.frame`; t the time
+since the start of the recording):
+
+==================  =====================================================================================
+``stribeck``        ``sign(dq_j) exp(-(dq_j/v_s)^2)``, 1-D search over ``v_s`` (log grid 1-50 % of |dq_j|)
+``load_friction``   ``|tau_hat,j| sign(dq_j)`` (dry friction growing with the transmitted torque)
+``position_ripple`` ``sin(k q_j), cos(k q_j)``, search over the order k >= 2 within the decimation band
+``spring``          ``s, s^2, s^3`` with ``s = (q_j - c_j) / h_j`` (mid-range, half-range of q_j)
+``elasticity``      ``-d tau_hat / d eps`` along ``q_j += eps tau_j`` (with its derivatives): the torque
+                    error of a position measured on the motor side, ``q_link = q_motor - tau/K``
+                    (LWR4 paper eq. 17) linearised in ``c_j = 1/K_j`` [rad/(N m)], on *every* joint's rows
+``time_delay``      ``-d tau_hat,j / dt`` (``tau_meas(t) = tau(t - d)`` to first order in the lag d [s]);
+                    one family per joint and one for all joints (same lag)
+``gain``            ``tau_hat_j`` (model torque of joint j): ``Y_j = tau_j / g_j`` gives
+                    ``Y_j = tau_hat_j + (1/g_j - 1) tau_hat_j``; identifiable only relative to the other
+                    joints through the dynamic coupling (a common scale of all joints is not: it needs a
+                    known payload, see :func:`symoro_gen.identification.sensor_gains`)
+``drift``           ``t/T, (t/T)^2`` (T the longest identification experiment)
+``coupling``        one-way ``k -> j``: ``ddq_k, dq_k`` on joint j rows; shared (coupled wrist, a motor
+                    turning with ``q_j + q_k``): ``ddq_j + ddq_k, dq_j + dq_k, sign(dq_j + dq_k)`` on the
+                    rows of j *and* k
+``rotor_inertia``   ``ddq_j``
+``offset``          ``1``
+==================  =====================================================================================
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .frame import Frame, model_torque
+
+__all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
+           "nuisance_columns"]
+
+KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity", "time_delay", "gain",
+         "drift", "coupling", "rotor_inertia", "offset")
+ALL = KINDS
+
+#: signal against which each kind is best seen (plots and the structure table)
+REVEAL = {"stribeck": "dq", "load_friction": "tau_hat", "position_ripple": "q", "spring": "q",
+          "elasticity": "tau_hat", "time_delay": "dtau_hat", "gain": "tau_hat", "drift": "t", "coupling": "ddq",
+          "rotor_inertia": "ddq", "offset": "t", "placebo": "t"}
+
+#: Stribeck velocity grid: ``n`` points from ``lo`` to ``hi`` times the 98th percentile of |dq_j|
+STRIBECK_GRID = (0.01, 0.5, 8)
+#: ... and never below this many standard deviations of the velocity noise: below it the sign of the
+#: band-pass velocity chatters at reversals and its Coulomb column is smoothed by the noise (an
+#: artefact of the processing, not friction)
+STRIBECK_NOISE_FLOOR = 5.0
+#: ripple orders tried (kept when ``k * |dq|_98 / (2 pi)`` lies below half the decimation cut-off)
+RIPPLE_ORDERS = (2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32)
+#: relative step of the central differences of the elasticity linearisation
+ELASTIC_STEP = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class FitContext:
+    """The current fit, for the candidates linearised around it.
+
+    Attributes
+    ----------
+    model
+        Generated-model interface.
+    theta : dict name -> value
+        Declared-model parameters (base + payload) of the current fit.
+    predictions : dict
+        ``id(frame) -> (r,)`` current model prediction (declared + added effects) on each frame.
+    """
+
+    model: object
+    theta: dict
+    predictions: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class Family:
+    """One candidate effect (one member per search value).
+
+    Attributes
+    ----------
+    kind : str
+    joint : int or None
+        0-based joint whose equations it adds to (None: all joints).
+    partner : int or None
+        Other joint of a coupling.
+    variant : str
+        ``"one-way"`` / ``"shared"`` for couplings, ``"all"`` for the common time delay...
+    params : tuple of str
+        Short parameter names (``Fst``, ``mu``...).
+    grid_label : str or None
+        Name of the searched parameter; ``grid`` its values.
+    reveal : str
+        Row signal (key of ``Frame.sig``) the effect shows against.
+    reveal_joint : int or None
+        Joint of that signal (default ``joint``).
+    depends_on_fit : bool
+        Columns are a linearisation around the current fit (recomputed each round).
+    build : callable
+        ``build(frame, ctx) -> list of (r, p) arrays`` (one per grid value).
+    build_at : callable, optional
+        ``build_at(frame, ctx, value) -> (r, p)`` for any value of a continuous searched parameter
+        (refined between grid points once the family is chosen).
+    """
+
+    kind: str
+    joint: int | None
+    params: tuple[str, ...]
+    build: Callable
+    partner: int | None = None
+    variant: str = ""
+    grid_label: str | None = None
+    grid: tuple[float, ...] = ()
+    reveal: str = "t"
+    reveal_joint: int | None = None
+    depends_on_fit: bool = False
+    placebo: bool = False
+    info: tuple = ()
+    build_at: Callable | None = None
+
+    @property
+    def key(self) -> tuple:
+        return (self.kind, self.joint, self.partner, self.variant)
+
+    @property
+    def n_members(self) -> int:
+        return max(1, len(self.grid))
+
+    @property
+    def p(self) -> int:
+        return len(self.params)
+
+    @property
+    def label(self) -> str:
+        if self.kind == "coupling":
+            a, b = self.joint + 1, self.partner + 1
+            return f"coupling{a}{'<' if self.variant == 'one-way' else '+'}{b}"
+        return f"{self.kind}{'' if self.joint is None else self.joint + 1}"
+
+    def names(self) -> tuple[str, ...]:
+        """Full parameter names (columns of the augmented system)."""
+        return tuple(f"{self.label}.{p}" for p in self.params)
+
+
+# ------------------------------------------------------------------------------------------------
+def _col(x):
+    return np.asarray(x, float).reshape(-1, 1)
+
+
+def _sign(x):
+    return np.sign(x)
+
+
+def _stats(frame: Frame):
+    dq = frame.samples()["dq"]
+    q = frame.samples()["q"]
+    v98 = np.quantile(np.abs(dq), 0.98, axis=0)
+    qmin, qmax = q.min(axis=0), q.max(axis=0)
+    return v98, qmin, qmax
+
+
+def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Sequence[int] = RIPPLE_ORDERS,
+                  stribeck_grid=STRIBECK_GRID) -> list[Family]:
+    """Candidate families for the joints of ``frame`` (the identification frame fixes the search
+    grids and scalings, reused unchanged on validation data).
+
+    Parameters
+    ----------
+    frame : Frame
+        Identification data.
+    kinds : sequence of str
+        Subset of :data:`KINDS`.
+    """
+    bad = [k for k in kinds if k not in KINDS]
+    if bad:
+        raise ValueError(f"unknown candidate kind(s) {bad}; known: {', '.join(KINDS)}")
+    n = frame.n_joints
+    v98, qmin, qmax = _stats(frame)
+    dq_noise = np.max([ex.dq_noise for ex in frame.experiments], axis=0)
+    T = max(float(ex.t[-1]) for ex in frame.experiments)
+    T = T if T > 0 else 1.0
+    fdec = min(ex.settings.decimation_cutoff_hz for ex in frame.experiments)
+    out: list[Family] = []
+    ks = set(kinds)
+    for j in range(n):
+        if "stribeck" in ks and v98[j] > 0:
+            lo, hi, m = stribeck_grid
+            vlo = max(lo * v98[j], STRIBECK_NOISE_FLOOR * dq_noise[j])
+            grid = tuple(float(v) for v in np.geomspace(vlo, max(hi * v98[j], 2 * vlo), int(m)))
+
+            def b_str(fr, ctx, j=j, grid=grid):
+                X = fr.full_rate_columns(
+                    lambda ex: {j: np.stack([_sign(ex.dq[:, j]) * np.exp(-(ex.dq[:, j] / vs) ** 2) for vs in grid], 1)},
+                    len(grid))
+                return [X[:, i:i + 1] for i in range(len(grid))]
+
+            def b_str_at(fr, ctx, vs, j=j):
+                return fr.full_rate_columns(
+                    lambda ex: {j: _col(_sign(ex.dq[:, j]) * np.exp(-(ex.dq[:, j] / vs) ** 2))}, 1)
+
+            out.append(Family("stribeck", j, ("Fst",), b_str, grid_label="vs", grid=grid, reveal="dq",
+                              build_at=b_str_at))
+        if "load_friction" in ks:
+            out.append(Family("load_friction", j, ("mu",), lambda fr, ctx, j=j: [fr.full_rate_columns(
+                lambda ex: {j: _col(np.abs(ex.tau_hat[:, j]) * _sign(ex.dq[:, j]))}, 1)], reveal="tau_hat",
+                depends_on_fit=True))
+        if "position_ripple" in ks:
+            span = qmax[j] - qmin[j]
+            orders = tuple(float(k) for k in ripple_orders
+                           if (not math.isfinite(fdec) or k * v98[j] / (2 * math.pi) <= 0.5 * fdec)
+                           and k * span >= math.pi)
+            if orders:
+                def b_rip(fr, ctx, j=j, orders=orders):
+                    X = fr.full_rate_columns(lambda ex: {j: np.concatenate(
+                        [np.stack([np.sin(k * ex.q[:, j]), np.cos(k * ex.q[:, j])], 1) for k in orders], 1)},
+                        2 * len(orders))
+                    return [X[:, 2 * i:2 * i + 2] for i in range(len(orders))]
+
+                out.append(Family("position_ripple", j, ("a_sin", "a_cos"), b_rip, grid_label="k", grid=orders,
+                                  reveal="q"))
+        if "spring" in ks and qmax[j] > qmin[j]:
+            c, h = 0.5 * (qmax[j] + qmin[j]), 0.5 * (qmax[j] - qmin[j])
+
+            def b_spr(fr, ctx, j=j, c=c, h=h):
+                def f(ex):
+                    s = (ex.q[:, j] - c) / h
+                    return {j: np.stack([s, s * s, s * s * s], 1)}
+                return [fr.full_rate_columns(f, 3)]
+
+            out.append(Family("spring", j, ("k1", "k2", "k3"), b_spr, reveal="q",
+                              info=(("center", float(c)), ("half_range", float(h)))))
+        if "elasticity" in ks:
+            out.append(Family("elasticity", j, ("c",), lambda fr, ctx, j=j: [_elasticity_column(fr, ctx, j)],
+                              reveal="tau_hat", depends_on_fit=True))
+        if "time_delay" in ks:
+            out.append(Family("time_delay", j, ("d",), lambda fr, ctx, j=j: [fr.full_rate_columns(
+                lambda ex: {j: _col(-ex.dtau_hat[:, j])}, 1)], reveal="dtau_hat", depends_on_fit=True))
+        if "gain" in ks:
+            out.append(Family("gain", j, ("gamma",), lambda fr, ctx, j=j: [_gain_column(fr, ctx, j)],
+                              reveal="tau_hat", depends_on_fit=True))
+        if "drift" in ks:
+            out.append(Family("drift", j, ("a1", "a2"), lambda fr, ctx, j=j, T=T: [fr.full_rate_columns(
+                lambda ex: {j: np.stack([ex.t / T, (ex.t / T) ** 2], 1)}, 2)], reveal="t"))
+        if "rotor_inertia" in ks:
+            out.append(Family("rotor_inertia", j, ("IA",), lambda fr, ctx, j=j: [fr.full_rate_columns(
+                lambda ex: {j: _col(ex.ddq[:, j])}, 1)], reveal="ddq"))
+        if "offset" in ks:
+            out.append(Family("offset", j, ("OFF",), lambda fr, ctx, j=j: [fr.full_rate_columns(
+                lambda ex: {j: np.ones((ex.n_samples, 1))}, 1)], reveal="t"))
+    if "time_delay" in ks and n > 1:
+        out.append(Family("time_delay", None, ("d",), lambda fr, ctx: [fr.full_rate_columns(
+            lambda ex: {k: _col(-ex.dtau_hat[:, k]) for k in range(n)}, 1)], variant="all", reveal="dtau_hat",
+            depends_on_fit=True))
+    if "coupling" in ks:
+        for j in range(n):
+            for k in range(n):
+                if k == j:
+                    continue
+                out.append(Family("coupling", j, ("IA", "FV"), lambda fr, ctx, j=j, k=k: [fr.full_rate_columns(
+                    lambda ex: {j: np.stack([ex.ddq[:, k], ex.dq[:, k]], 1)}, 2)], partner=k, variant="one-way",
+                    reveal="ddq", reveal_joint=k))
+                if k > j:
+                    def b_sh(fr, ctx, j=j, k=k):
+                        def f(ex):
+                            a = ex.ddq[:, j] + ex.ddq[:, k]
+                            v = ex.dq[:, j] + ex.dq[:, k]
+                            X = np.stack([a, v, _sign(v)], 1)
+                            return {j: X, k: X}
+                        return [fr.full_rate_columns(f, 3)]
+
+                    out.append(Family("coupling", j, ("IAm", "FVm", "FSm"), b_sh, partner=k, variant="shared",
+                                      reveal="ddq", reveal_joint=k))
+    return out
+
+
+def nuisance_columns(frame: Frame, names: Sequence[str], dq_noise: np.ndarray) -> np.ndarray:
+    """Columns absorbing the Coulomb-column error that velocity noise causes at reversals.
+
+    The declared model's Coulomb column of joint j is ``sign(dq_j)`` of the *band-pass* velocity; with a
+    velocity noise of standard deviation ``s_j`` the torque actually follows, on average,
+    ``erf(dq_j / (sqrt(2) s_j))`` of it. The column ``erf(dq_j / (sqrt(2) s_j)) - sign(dq_j)`` (one per joint
+    with a Coulomb parameter ``FS<j>`` in ``names`` and ``s_j > 0``) is added to the design the candidates
+    are scored against, so that this processing artefact is not taken for Stribeck friction or
+    anything else concentrated at reversals.
+
+    Returns
+    -------
+    ndarray, shape (r, m)
+    """
+    from scipy.special import erf
+
+    cols = []
+    for j in range(frame.n_joints):
+        s = float(dq_noise[j])
+        if s <= 0 or not any(nm.startswith("FS") and nm[2:].rstrip("R") == str(j + 1) for nm in names):
+            continue
+        cols.append(frame.full_rate_columns(
+            lambda ex, j=j, s=s: {j: _col(erf(ex.dq[:, j] / (math.sqrt(2.0) * s)) - _sign(ex.dq[:, j]))}, 1))
+    return np.hstack(cols) if cols else np.zeros((frame.n_rows, 0))
+
+
+def placebo_families(frame: Frame, rng: np.random.Generator, per_joint: int, *, n_sines: int = 3) -> list[Family]:
+    """Placebo candidates: 2 columns of random smooth functions of time on one joint's rows (random
+    frequencies between ``1/T`` and the dynamics bandwidth). They have no physical meaning; an
+    effect must do better than all of them (a calibration of the null that makes no white-noise
+    assumption)."""
+    out = []
+    T = max(float(ex.t[-1]) for ex in frame.experiments) or 1.0
+    fmax = max(ex.settings.dynamics_bandwidth_hz for ex in frame.experiments)
+    for j in range(frame.n_joints):
+        for i in range(per_joint):
+            f = np.exp(rng.uniform(math.log(1.0 / T), math.log(max(fmax, 2.0 / T)), size=(2, n_sines)))
+            ph = rng.uniform(0, 2 * math.pi, size=(2, n_sines))
+
+            def b(fr, ctx, j=j, f=f, ph=ph):
+                return [fr.full_rate_columns(lambda ex: {j: np.stack(
+                    [np.sin(2 * math.pi * f[c][:, None] * ex.t[None, :] + ph[c][:, None]).sum(0) for c in range(2)],
+                    1)}, 2)]
+
+            out.append(Family("placebo", j, ("p1", "p2"), b, variant=f"#{i + 1}", reveal="t", placebo=True))
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+def _rows_by_sample(frame: Frame, j: int) -> np.ndarray:
+    """Rows of joint j in sample order (sample s of :meth:`Frame.samples` is the s-th row of joint j)."""
+    return frame.rows_of(j)
+
+
+def _gain_column(frame: Frame, ctx: FitContext, j: int) -> np.ndarray:
+    pred = ctx.predictions[id(frame)]
+    X = np.zeros((frame.n_rows, 1))
+    rows = frame.rows_of(j)
+    X[rows, 0] = pred[rows]
+    return X
+
+
+def _elasticity_column(frame: Frame, ctx: FitContext, m: int) -> np.ndarray:
+    """``-d tau_hat/d eps`` (all joints' rows) along ``(q_m, dq_m, ddq_m) += eps (tau_m, dtau_m, ddtau_m)``.
+
+    Coulomb terms are left out of the derivative (sign(dq) has none almost everywhere)."""
+    S = frame.samples()
+    q, dq, ddq = S["q"], S["dq"], S["ddq"]
+    d0, d1, d2 = S["tau_hat"][:, m], S["dtau_hat"][:, m], S["ddtau_hat"][:, m]
+    loaded = np.array([frame.experiments[e].loaded for e in S["experiment"]], bool)
+    h = ELASTIC_STEP / max(float(np.abs(d0).max()), 1e-12)
+
+    def shifted(sg):
+        a, b, c = q.copy(), dq.copy(), ddq.copy()
+        a[:, m] += sg * h * d0
+        b[:, m] += sg * h * d1
+        c[:, m] += sg * h * d2
+        out = model_torque(ctx.model, ctx.theta, a, b, c, False, skip_prefix=("FS",))
+        if loaded.any():
+            out[loaded] = model_torque(ctx.model, ctx.theta, a[loaded], b[loaded], c[loaded], True,
+                                       skip_prefix=("FS",))
+        return out
+
+    J = (shifted(1.0) - shifted(-1.0)) / (2 * h)   # (s, n)
+    X = np.zeros((frame.n_rows, 1))
+    for j in range(frame.n_joints):
+        rows = _rows_by_sample(frame, j)
+        X[rows, 0] = -J[:, j]
+    return X
+
+
+def describe_params(family: Family, value, values: np.ndarray, std: np.ndarray) -> dict:
+    """Physical reading of an effect's identified parameters (units in the keys' docs).
+
+    Returns
+    -------
+    dict
+        E.g. ``{"vs": ..., "Fst": ...}`` for Stribeck, ``{"K": ...}`` [N m/rad] for elasticity,
+        ``{"delay_s": ...}``, ``{"scale": ..., "g": ...}`` for gain, ``{"k": ..., "amplitude": ...}``.
+    """
+    v = [float(x) for x in values]
+    out: dict = {}
+    if family.grid and value is not None:
+        out[family.grid_label] = float(value)
+    k = family.kind
+    if k == "elasticity":
+        out["K_Nm_per_rad"] = (1.0 / v[0]) if v[0] != 0 else math.inf
+    elif k == "time_delay":
+        out["delay_s"] = v[0]
+    elif k == "gain":
+        out["scale"] = 1.0 + v[0]
+        out["g"] = 1.0 / (1.0 + v[0]) if v[0] != -1 else math.inf
+    elif k == "position_ripple":
+        out["amplitude"] = math.hypot(v[0], v[1])
+        out["phase_rad"] = math.atan2(v[1], v[0])
+    elif k == "spring":
+        info = dict(family.info)
+        out.update(info)
+        out["dtau_dq_at_center"] = v[0] / info.get("half_range", 1.0)
+    return out

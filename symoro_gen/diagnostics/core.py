@@ -1,0 +1,525 @@
+"""Close the loop on measured data: residual -> candidate effect -> augmented re-identification.
+
+:func:`diagnose` identifies the declared model, then repeats:
+
+1. weight the rows of joint j by ``1/sigma_j`` (the current residual's standard deviation per joint)
+   and project every candidate's columns out of the span of the current model's columns;
+2. for each candidate family (:mod:`.candidates`) compute on the *identification* data the F test of
+   the added columns (divided by the long-run factor of the residual, so serially correlated residuals
+   do not pass for evidence; Bonferroni over the family's 1-D search grid), and on the *validation*
+   data the decrease of the squared error of the re-identified model, both as a score (sum over joints
+   of the fractional decrease of the squared error norm) and as a z statistic against the null
+   distribution of that decrease when the columns are useless (mean ``-m``, standard deviation
+   ``2 sqrt(kappa m)``, ``m`` the expected squared prediction change from the estimation noise);
+3. a candidate is *eligible* when its corrected p-value < ``significance / n_candidates``
+   (Bonferroni over the round), ``z > Phi^-1(1 - significance / n_candidates)``, it lowers the
+   validation error norm of its joint by at least ``min_rel_improvement``, and it beats every
+   *placebo* (random smooth columns of time on the same joint, drawn with ``rng``) on both statistics;
+4. the eligible candidate with the best validation score is added, the model re-identified with the
+   chosen method (OLS/WLS/TLS), and the loop goes on until nothing is eligible or ``max_effects``.
+
+Everything the loop computed is in the :class:`~.report.ResidualReport`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from scipy import stats as sst
+
+from ..errors import IdentificationError
+from ..identification.estimators import identify
+from ..identification.observation import ObservationSystem
+from ..preprocessing.trajectory import Trajectory
+from .candidates import (ALL, REVEAL, Family, FitContext, describe_params, make_families, nuisance_columns,
+                         placebo_families)
+from .frame import Frame, attach_model_torque, build_frame, common_bandwidth, split_holdout
+from .report import CandidateScore, Effect, ResidualReport
+from .stats import bonferroni, hac_covariance, hac_lag, wald_test
+from .structure import residual_structure
+
+__all__ = ["diagnose", "SIGNIFICANCE", "MAX_EFFECTS", "HOLDOUT", "MIN_REL_IMPROVEMENT", "IDENTIFIABILITY_TOL"]
+
+#: family-wise level of each round (Bonferroni over the candidates)
+SIGNIFICANCE = 0.01
+#: at most this many effects are added
+MAX_EFFECTS = 5
+#: share of each experiment held out (its end) when no validation data are given
+HOLDOUT = 0.3
+#: a candidate must lower the validation error norm of (one of) its joint(s) by this fraction
+MIN_REL_IMPROVEMENT = 0.02
+#: a column with less than this share of its norm outside the model's span is "already in the model"
+IDENTIFIABILITY_TOL = 1e-3
+#: placebo candidates per joint and round
+N_PLACEBO = 3
+#: fixed-point passes re-linearising effects that depend on the fit (model torque, elasticity, gain)
+RELINEARISE_PASSES = 2
+#: tolerance on log(value) of the continuous refinement of a searched parameter
+REFINE_XATOL = 0.02
+
+
+# ------------------------------------------------------------------------------------------------
+def _align(system: ObservationSystem, names: Sequence[str]) -> ObservationSystem:
+    """``system`` with columns ``names`` (missing ones zero, e.g. payload columns of unloaded data)."""
+    col = {n: i for i, n in enumerate(system.names)}
+    extra = [n for n in system.names if n not in set(names)]
+    if extra:
+        raise IdentificationError(f"validation data have columns {extra} the identification data lack")
+    W = np.zeros((system.Y.size, len(names)))
+    for i, n in enumerate(names):
+        if n in col:
+            W[:, i] = system.W[:, col[n]]
+    return ObservationSystem(W, system.Y, tuple(names), system.joint)
+
+
+def _joint_sigma(resid: np.ndarray, joint: np.ndarray, n: int, k: int, floor_rel: float = 1e-9) -> np.ndarray:
+    r = resid.size
+    rss = np.bincount(joint, weights=resid ** 2, minlength=n)
+    cnt = np.bincount(joint, minlength=n).astype(float)
+    dof = np.maximum(cnt - k * cnt / max(r, 1), 1.0)
+    s = np.sqrt(rss / dof)
+    top = s.max() if s.size else 1.0
+    return np.maximum(s, floor_rel * max(top, 1e-300))
+
+
+@dataclass(frozen=True, eq=False)
+class _Design:
+    """Current augmented model and its weighted projection (one round)."""
+
+    names: tuple
+    A: np.ndarray       # (r, k) identification columns (declared + added)
+    Av: np.ndarray      # (rv, k)
+    w: np.ndarray       # (r,) row weights 1/sigma_j
+    wv: np.ndarray      # (rv,)
+    U: np.ndarray       # (r, rank) orthonormal basis of A*w
+    pinv: np.ndarray    # (k, r) pseudo-inverse of A*w
+    theta: np.ndarray   # (k,) weighted LS estimate
+    e_w: np.ndarray     # (r,) weighted residual
+    e_v: np.ndarray     # (rv,) unweighted validation residual
+    rank: int
+
+
+def _design(names, A, Y, joint, Av, Yv, jv, n, rank_tol=1e-10, w_resid=None) -> _Design:
+    k = A.shape[1]
+    resid0 = w_resid if w_resid is not None else Y - A @ np.linalg.lstsq(A, Y, rcond=None)[0]
+    sig = _joint_sigma(resid0, joint, n, k)
+    w = 1.0 / sig[joint]
+    Aw = A * w[:, None]
+    U, s, Vt = np.linalg.svd(Aw, full_matrices=False)
+    rank = int(np.sum(s > rank_tol * s[0]))
+    U, s, Vt = U[:, :rank], s[:rank], Vt[:rank]
+    pinv = (Vt.T / s) @ U.T
+    theta = pinv @ (Y * w)
+    e_w = Y * w - Aw @ theta
+    e_v = Yv - Av @ theta
+    sv = _joint_sigma(e_v, jv, n, 0)
+    wv = 1.0 / sv[jv]
+    return _Design(tuple(names), A, Av, w, wv, U, pinv, theta, e_w, e_v, rank)
+
+
+@dataclass
+class _Eval:
+    member: int
+    score: float
+    p_value: float
+    z: float
+    ident: float
+    rel_before: np.ndarray
+    rel_after: np.ndarray
+    reason: str = ""
+
+
+def _rel_err(e, y, joint, n):
+    a = np.bincount(joint, weights=e ** 2, minlength=n)
+    b = np.bincount(joint, weights=y ** 2, minlength=n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.sqrt(a / b)
+
+
+class _Scorer:
+    """Evaluates candidate columns against the current design.
+
+    Identification: Wald test of the added coefficients with a HAC (Newey-West) covariance.
+    Validation: decrease ``dec`` of the weighted squared error; under "useless columns" its mean is
+    ``-m`` (``m = E||prediction change||^2`` from the estimation noise of the coefficients) and its
+    variance ``4 tr(S_v C_b)`` (HAC of the validation residual along the prediction change), so
+    ``z = (dec + m) / (2 sqrt(tr(S_v C_b)))``."""
+
+    def __init__(self, D: _Design, F: Frame, V: Frame, n: int, ident_tol: float):
+        self.D, self.F, self.V, self.n = D, F, V, n
+        self.ident_tol = ident_tol
+        self.r = F.n_rows
+        self.gid = F.system.joint * 100000 + F.row_experiment
+        self.gv = V.system.joint * 100000 + V.row_experiment
+        self.yv = V.system.Y
+        self.rv0 = np.bincount(V.system.joint, weights=D.e_v ** 2, minlength=n)
+        self.lag = max(hac_lag(D.e_w[F.system.joint == j], F.row_experiment[F.system.joint == j])
+                       for j in range(n))
+        evw = D.e_v * D.wv
+        self.lag_v = max(hac_lag(evw[V.system.joint == j], V.row_experiment[V.system.joint == j])
+                         for j in range(n))
+        self.rel_before = _rel_err(D.e_v, self.yv, V.system.joint, n)
+
+    def rss(self, X: np.ndarray) -> float:
+        """Weighted identification residual sum of squares with the columns X added."""
+        Xw = X * self.D.w[:, None]
+        Xp = Xw - self.D.U @ (self.D.U.T @ Xw)
+        b = np.linalg.lstsq(Xp, self.D.e_w, rcond=None)[0]
+        e = self.D.e_w - Xp @ b
+        return float(e @ e)
+
+    def evaluate(self, X: np.ndarray, Xv: np.ndarray) -> _Eval | str:
+        D = self.D
+        p = X.shape[1]
+        Xw = X * D.w[:, None]
+        norms = np.sqrt(np.einsum("ij,ij->j", Xw, Xw))
+        if not np.all(norms > 0):
+            return "not excited (zero column)"
+        Xs = Xw / norms
+        C = D.U.T @ Xs
+        Xp = Xs - D.U @ C
+        ratio = np.sqrt(np.einsum("ij,ij->j", Xp, Xp))
+        ident = float(ratio.min())
+        if ident < self.ident_tol:
+            return f"already in the model (identifiability {ident:.1e})"
+        G = Xp.T @ Xp
+        try:
+            Ginv = np.linalg.inv(G)
+        except np.linalg.LinAlgError:
+            return "its columns are collinear"
+        b = Ginv @ (Xp.T @ D.e_w)
+        e1 = D.e_w - Xp @ b
+        S = hac_covariance(Xp * e1[:, None], self.gid, self.lag)
+        Cb = Ginv @ S @ Ginv
+        dof = max(self.r - D.rank - p, 1)
+        _, pval = wald_test(b, Cb * self.r / dof, dof)
+        beta = b / norms                      # coefficients of X
+        dtheta = -D.pinv @ (Xw @ beta)        # change of the current model's coefficients
+        dv = D.Av @ dtheta + Xv @ beta
+        ev1 = D.e_v - dv
+        rv1 = np.bincount(self.V.system.joint, weights=ev1 ** 2, minlength=self.n)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(self.rv0 > 0, (self.rv0 - rv1) / self.rv0, 0.0)
+        score = float(np.sum(frac))
+        wv = D.wv
+        dec = float(np.sum((D.e_v ** 2 - ev1 ** 2) * wv ** 2))
+        # prediction change on validation (weighted) per unit of the scaled coefficients b
+        Mv = (Xv * wv[:, None]) / norms - (D.Av * wv[:, None]) @ (D.pinv @ Xs)
+        m = float(np.einsum("ij,jk,ik->", Mv, Cb, Mv))
+        Sv = hac_covariance(Mv * (ev1 * wv)[:, None], self.gv, self.lag_v)
+        var = float(np.sum(Sv * Cb))
+        z = (dec + m) / (2.0 * math.sqrt(max(var, 1e-300)))
+        after = _rel_err(ev1, self.yv, self.V.system.joint, self.n)
+        return _Eval(0, score, pval, float(z), ident, self.rel_before, after)
+
+
+# ------------------------------------------------------------------------------------------------
+def _affected(fam: Family, n: int) -> list[int]:
+    if fam.joint is None:
+        return list(range(n))
+    if fam.kind == "elasticity":
+        return list(range(n))
+    out = [fam.joint]
+    if fam.partner is not None and fam.variant == "shared":
+        out.append(fam.partner)
+    return out
+
+
+def _own(fam: Family, n: int) -> list[int]:
+    """Joints whose validation error must improve (the effect's own joints)."""
+    if fam.joint is None:
+        return list(range(n))
+    out = [fam.joint]
+    if fam.partner is not None and fam.variant == "shared":
+        out.append(fam.partner)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Added:
+    family: Family
+    value: float | None    # searched parameter (None: no search)
+    X: np.ndarray
+    Xv: np.ndarray
+
+
+def _build_one(fam: Family, frame: Frame, ctx: FitContext, value) -> np.ndarray:
+    if fam.build_at is not None and value is not None:
+        return fam.build_at(frame, ctx, value)
+    if fam.grid:
+        return fam.build(frame, ctx)[fam.grid.index(value)]
+    return fam.build(frame, ctx)[0]
+
+
+def _refine(fam: Family, member: int, F: Frame, ctx: FitContext, scorer: "_Scorer",
+            xatol: float = REFINE_XATOL) -> float:
+    """Continuous 1-D search (log scale, bounded by the grid neighbours) of the searched parameter,
+    minimising the weighted identification residual."""
+    from scipy.optimize import minimize_scalar
+
+    g = np.log(np.asarray(fam.grid, float))
+    lo = g[max(member - 1, 0)]
+    hi = g[min(member + 1, g.size - 1)]
+    if hi <= lo:
+        return float(fam.grid[member])
+
+    def rss(x):
+        return scorer.rss(fam.build_at(F, ctx, float(np.exp(x))))
+
+    r = minimize_scalar(rss, bounds=(lo, hi), method="bounded", options={"xatol": xatol})
+    best = float(np.exp(r.x)) if r.fun <= rss(g[member]) else float(fam.grid[member])
+    return best
+
+
+def _fit(system: ObservationSystem, method: str):
+    return identify(system, method=method)
+
+
+def _as_list(trajectories) -> list[Trajectory]:
+    if isinstance(trajectories, Trajectory):
+        return [trajectories]
+    out = list(trajectories)
+    if not out:
+        raise ValueError("no trajectory given")
+    return out
+
+
+def diagnose(model, trajectories, *, validation=None, method: str = "ols", candidates: Sequence[str] = ALL,
+             significance: float = SIGNIFICANCE, max_effects: int = MAX_EFFECTS, holdout: float = HOLDOUT,
+             min_rel_improvement: float = MIN_REL_IMPROVEMENT, n_placebo: int = N_PLACEBO,
+             identifiability_tol: float = IDENTIFIABILITY_TOL, rng: np.random.Generator | None = None,
+             dynamics_bandwidth_hz: float | None = None, structure: bool = True, **filter_kw) -> ResidualReport:
+    """Find what the declared model misses, add it, and measure the gain on validation data.
+
+    Parameters
+    ----------
+    model
+        Generated model (``symoro_gen.load_model(name)``, ``build_in_memory(robot)``): ``N_JOINTS``,
+        ``BASE_NAMES``, ``regressor(q, dq, ddq) -> (N, n, nb)`` (and ``PAYLOAD_NAMES``,
+        ``payload_regressor`` for loaded experiments).
+    trajectories : Trajectory or sequence of Trajectory
+        Identification experiments (only ``t``, ``q`` and ``tau`` are used).
+    validation : Trajectory or sequence of Trajectory, optional
+        Validation experiments; default: the last ``holdout`` share of each identification experiment.
+    method : {"ols", "wls", "tls"}
+        Estimator of the reported identifications (candidate scoring always uses per-joint weighted LS).
+    candidates : sequence of str
+        Kinds to try (default all, :data:`~.candidates.KINDS`).
+    significance : float
+        Family-wise level of each round.
+    max_effects : int
+        Most effects added.
+    holdout : float
+        Share held out when ``validation`` is None.
+    min_rel_improvement : float
+        Smallest relative decrease of the validation error norm of the effect's joint.
+    n_placebo : int
+        Placebo candidates per joint and round (0: none).
+    identifiability_tol : float
+        Candidates with a column (almost) in the span of the model are skipped.
+    rng : numpy.random.Generator, optional
+        Draws the placebos (default ``np.random.default_rng(0)``: reproducible).
+    dynamics_bandwidth_hz : float, optional
+        ``f_dyn`` of the filter rules, default the largest estimate over the identification data;
+        the same value is used for every experiment (identification and validation).
+    structure : bool
+        Run the residual-structure tests (:func:`.structure.residual_structure`).
+    **filter_kw
+        ``cutoff_hz``, ``n_d``, ``order``, ``ftype`` for the assembler.
+
+    Returns
+    -------
+    ResidualReport
+    """
+    if method.lower() not in ("ols", "wls", "tls"):
+        raise IdentificationError(f"unknown identification method {method!r}; use 'ols', 'wls' or 'tls'")
+    if not 0 < significance < 1:
+        raise ValueError(f"significance must lie in (0, 1), got {significance!r}")
+    method = method.lower()
+    rng = np.random.default_rng(0) if rng is None else rng
+    ident = _as_list(trajectories)
+    if validation is None:
+        ident, valid = split_holdout(ident, holdout)
+        vdesc = f"last {100 * holdout:.0f} % of each identification experiment (held out)"
+    else:
+        valid = _as_list(validation)
+        vdesc = ", ".join(tr.source for tr in valid)
+    fdyn = dynamics_bandwidth_hz if dynamics_bandwidth_hz is not None else common_bandwidth(ident)
+    F = build_frame(model, ident, dynamics_bandwidth_hz=fdyn, **filter_kw)
+    V = build_frame(model, valid, dynamics_bandwidth_hz=fdyn, payload_columns=bool(
+        set(F.system.names) - set(model.BASE_NAMES)), **filter_kw)
+    n = F.n_joints
+    decl = F.system.names
+    Vs = _align(V.system, decl)
+    Y, J = F.system.Y, F.system.joint
+    Yv, Jv = Vs.Y, Vs.joint
+    warnings: list[str] = []
+
+    res0 = _fit(F.system, method)
+    val0 = res0.rel_err_on(Vs)
+    families = make_families(F, candidates)
+    added: list[_Added] = []
+    tried: list[CandidateScore] = []
+    placebo_scores: list[CandidateScore] = []
+    effects_meta: list[dict] = []
+    round_resid = [(res0.residual, Yv - res0.predict(Vs))]
+    res = res0
+    dq_noise = np.max([ex.dq_noise for ex in F.experiments], axis=0)
+    N_id = nuisance_columns(F, decl, dq_noise)
+    N_v = nuisance_columns(V, decl, dq_noise)
+    nn = tuple(f"_nuisance{i}" for i in range(N_id.shape[1]))
+
+    def augmented():
+        names = list(decl)
+        A, Av = [F.system.W], [Vs.W]
+        for ad in added:
+            names += list(ad.family.names())
+            A.append(ad.X)
+            Av.append(ad.Xv)
+        return tuple(names), np.hstack(A), np.hstack(Av)
+
+    def context(names, theta, A, Av):
+        th = dict(zip(names, theta))
+        return FitContext(model=model, theta={k: th[k] for k in decl},
+                          predictions={id(F): A @ theta, id(V): Av @ theta})
+
+    def refresh(result):
+        """Model torque of the current fit on both frames; rebuild the columns linearised around it."""
+        nonlocal F, V, added
+        names, A, Av = augmented()
+        theta = np.array([result.value(nm) for nm in names])
+        F = attach_model_torque(F, model, {k: result.value(k) for k in decl})
+        V = attach_model_torque(V, model, {k: result.value(k) for k in decl})
+        ctx = context(names, theta, A, Av)
+        added = [_Added(ad.family, ad.value, _build_one(ad.family, F, ctx, ad.value),
+                        _build_one(ad.family, V, ctx, ad.value)) if ad.family.depends_on_fit else ad
+                 for ad in added]
+
+    refresh(res0)
+    for rnd in range(1, max_effects + 1):
+        names, A, Av = augmented()
+        resid_user = Y - A @ np.array([res.value(nm) for nm in names])
+        D = _design(names + nn, np.hstack([A, N_id]), Y, J, np.hstack([Av, N_v]), Yv, Jv, n, w_resid=resid_user)
+        ctx = context(names, D.theta[:len(names)], A, Av)
+        scorer = _Scorer(D, F, V, n, identifiability_tol)
+        done = {ad.family.key for ad in added}
+        fams = [f for f in families if f.key not in done]
+        plac = placebo_families(F, rng, n_placebo) if n_placebo > 0 else []
+        evals = []
+        for fam in fams + plac:
+            Xs = fam.build(F, ctx)
+            Xvs = fam.build(V, ctx)
+            best, reasons = None, []
+            for i, (X, Xv) in enumerate(zip(Xs, Xvs)):
+                ev = scorer.evaluate(X, Xv)
+                if isinstance(ev, str):
+                    reasons.append(ev)
+                    continue
+                ev.member = i
+                if best is None or ev.p_value < best.p_value or (ev.p_value == best.p_value and ev.score > best.score):
+                    best = ev
+            if best is not None:
+                best.p_value = bonferroni(best.p_value, fam.n_members)
+            evals.append((fam, best, reasons[0] if reasons and best is None else "", Xs, Xvs))
+        tested = [e for e in evals if e[1] is not None and not e[0].placebo]
+        m_tests = max(len(tested), 1)
+        thr = significance / m_tests
+        zcrit = float(sst.norm.isf(thr))
+        pl = [(f, e) for f, e, *_ in evals if f.placebo and e is not None]
+
+        def placebo_bounds(own):
+            ps = [e for f, e in pl if f.joint in own]
+            if not ps:
+                return 1.0, -math.inf
+            return min(e.p_value for e in ps), max(e.z for e in ps)
+
+        eligible = []
+        for fam, ev, why, Xs, Xvs in evals:
+            search = {fam.grid_label: fam.grid[ev.member]} if (ev is not None and fam.grid) else {}
+            if ev is None:
+                cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, None, None, None,
+                                    thr, 0.0, False, why or "not evaluated", search)
+            else:
+                own = _own(fam, n)
+                gain = max(float((ev.rel_before[j] - ev.rel_after[j]) / ev.rel_before[j])
+                           if ev.rel_before[j] > 0 else 0.0 for j in own)
+                reason = []
+                if not fam.placebo:
+                    if ev.p_value >= thr:
+                        reason.append(f"p {ev.p_value:.1e} >= {thr:.1e}")
+                    if ev.z <= zcrit:
+                        reason.append(f"z_val {ev.z:.1f} <= {zcrit:.1f}")
+                    if gain < min_rel_improvement:
+                        reason.append(f"validation gain {100 * gain:.2f} % < {100 * min_rel_improvement:g} %")
+                    pp, pz = placebo_bounds(own)
+                    if not reason and (ev.p_value >= pp or ev.z <= pz):
+                        reason.append("not better than a placebo")
+                cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, ev.score,
+                                    ev.p_value, ev.z, thr, ev.ident, not reason and not fam.placebo,
+                                    "; ".join(reason), search, tuple(float(x) for x in ev.rel_before),
+                                    tuple(float(x) for x in ev.rel_after))
+                if cs.eligible:
+                    eligible.append((ev.score, fam, ev, Xs[ev.member], Xvs[ev.member], cs))
+            (placebo_scores if fam.placebo else tried).append(cs)
+        if not eligible:
+            break
+        eligible.sort(key=lambda t: -t[0])
+        _, fam, ev, X, Xv, cs = eligible[0]
+        value = fam.grid[ev.member] if fam.grid else None
+        if fam.build_at is not None:
+            value = _refine(fam, ev.member, F, ctx, scorer)
+            X, Xv = fam.build_at(F, ctx, value), fam.build_at(V, ctx, value)
+        added.append(_Added(fam, value, X, Xv))
+        effects_meta.append(dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd))
+        # re-identify; re-linearise the effects that depend on the fit (new model torque, new columns)
+        names, A, Av = augmented()
+        res = _fit(ObservationSystem(A, Y, names, J), method)
+        for _ in range(RELINEARISE_PASSES):
+            refresh(res)
+            names, A, Av = augmented()
+            res = _fit(ObservationSystem(A, Y, names, J), method)
+        th = np.array([res.value(nm) for nm in names])
+        round_resid.append((Y - A @ th, Yv - Av @ th))
+    else:
+        warnings.append(f"stopped at max_effects = {max_effects}: more effects may be significant")
+
+    names, A, Av = augmented()
+    if added:
+        res = _fit(ObservationSystem(A, Y, names, J), method)
+    Vaug = ObservationSystem(Av, Yv, names, Jv)
+    val1 = res.rel_err_on(Vaug)
+    effects = []
+    for meta in effects_meta:
+        fam, mem = meta["family"], meta["value"]
+        idx = [res.index(nm) for nm in fam.names()]
+        vals, std, pct = res.values[idx], res.std[idx], res.rel_std_pct[idx]
+        effects.append(Effect(kind=fam.kind, label=fam.label, variant=fam.variant, joint=fam.joint,
+                              partner=fam.partner, names=fam.names(), values=vals, std=std, rel_std_pct=pct,
+                              physical=describe_params(fam, mem, vals, std), score=meta["score"], p_value=meta["p"],
+                              z_validation=meta["z"], round=meta["round"], reveal=REVEAL.get(fam.kind, "t"),
+                              reveal_joint=fam.reveal_joint if fam.reveal_joint is not None else fam.joint))
+    s_before = residual_structure(F, res0.residual, significance=significance) if structure else ()
+    s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
+                                 significance=significance) if structure else ()
+    if any(s.significant for s in s_after) and not effects:
+        warnings.append("structure is left in the residual (see 'structure') that no candidate explains better "
+                        "than noise and the placebos on the validation data")
+    st = F.experiments[0].settings
+    settings = {
+        "method": method, "significance": significance, "max_effects": max_effects,
+        "min_rel_improvement": min_rel_improvement, "n_placebo": n_placebo,
+        "identifiability_tol": identifiability_tol, "candidates": list(candidates),
+        "validation": vdesc, "holdout": holdout if validation is None else None,
+        "identification_sources": [tr.source for tr in ident], "validation_sources": [tr.source for tr in valid],
+        "dynamics_bandwidth_hz": fdyn, "cutoff_hz": st.cutoff_hz, "n_d": st.n_d,
+        "rows_identification": int(F.n_rows), "rows_validation": int(V.n_rows),
+    }
+    plot_data = {"frame": F, "vframe": V, "round_resid": round_resid}
+    return ResidualReport(robot=str(getattr(model, "ROBOT", "?")), method=method, n_joints=n,
+                          before_rel_err=np.asarray(res0.rel_err), before_validation_rel_err=np.asarray(val0),
+                          after_rel_err=np.asarray(res.rel_err), after_validation_rel_err=np.asarray(val1),
+                          effects=tuple(effects), tried=tuple(tried), placebos=tuple(placebo_scores),
+                          structure_before=s_before, structure_after=s_after, result_before=res0, result_after=res,
+                          settings=settings, warnings=tuple(warnings + list(res.warnings)), plot_data=plot_data)

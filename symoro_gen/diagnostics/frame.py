@@ -1,0 +1,365 @@
+"""Observation systems with the signals behind each row, for residual analysis and extra columns.
+
+:func:`build_frame` calls the public assembler
+(:func:`symoro_gen.identification.assemble.assemble_observation`) for ``W`` and ``Y`` and recomputes,
+with the very filter settings it reports, the full-rate band-pass signals of every experiment
+(``q, dq, ddq`` from the positions). :func:`attach_model_torque` adds the torque transmitted according
+to a fitted model, ``tau_hat = IDM(q, dq, ddq) chi`` low-passed by the same zero-phase Butterworth,
+and its derivatives ``dtau_hat, ddtau_hat``: candidate columns that depend on the torque use it
+rather than the measured torque, whose noise is the noise of ``Y`` and would correlate with it
+(errors-in-variables: a column holding the measurement noise of ``Y`` "explains" that noise).
+Candidate effects are functions of these signals; their columns
+are evaluated at full rate and decimated in parallel with the same FIR/IIR filter as ``W`` and ``Y``
+(RX-90 paper eq. 15), so ``Y = [W X] [chi; beta]`` keeps holding after decimation. The decimated
+torques are checked against the assembler's ``Y`` (rows must line up).
+
+Rows are grouped per joint as in the assembler: all rows of joint 1 (experiment after experiment),
+then joint 2...
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from ..errors import IdentificationError
+from ..identification.assemble import assemble_observation
+from ..identification.observation import ObservationSystem
+from ..preprocessing.filtering import (
+    FilterSettings,
+    decimate,
+    estimate_dynamics_bandwidth,
+    filter_and_differentiate,
+)
+from ..preprocessing.trajectory import Trajectory
+
+__all__ = ["Experiment", "Frame", "build_frame", "attach_model_torque", "model_torque", "split_holdout",
+           "common_bandwidth", "noise_gains", "T_ORIGIN_KEY"]
+
+#: ``Trajectory.meta`` key holding the time origin [s] of the original recording (kept by hold-out splits)
+T_ORIGIN_KEY = "diagnose_t_origin"
+#: relative tolerance of the check "decimated measured torque == assembler's Y"
+ALIGN_RTOL = 1e-6
+
+SIGNALS = ("q", "dq", "ddq", "tau")
+MODEL_SIGNALS = ("tau_hat", "dtau_hat", "ddtau_hat")
+#: samples per call of the model's regressor when computing tau_hat at full rate
+REGRESSOR_BATCH = 8192
+
+
+@dataclass(frozen=True, eq=False)
+class Experiment:
+    """Full-rate signals of one experiment, edge samples dropped.
+
+    Attributes
+    ----------
+    source : str
+    loaded : bool
+    settings : FilterSettings
+        Those the assembler used.
+    t : ndarray, shape (M,)
+        Time since the start of the original recording [s].
+    q, dq, ddq : ndarray, shape (M, n)
+        Band-pass estimates from the measured positions [rad, rad/s, rad/s^2 (m...)].
+    tau : ndarray, shape (M, n)
+        Measured torques [N m].
+    tau_hat, dtau_hat, ddtau_hat : ndarray, shape (M, n), or None
+        Model torque low-passed by the position Butterworth, and its derivatives [N m, N m/s, N m/s^2]
+        (None until :func:`attach_model_torque`).
+    n_rows : int
+        Decimated rows of this experiment (per joint).
+    q_noise, dq_noise : ndarray, shape (n,)
+        Estimated standard deviations of the white noise on the measured positions and of what is
+        left of it in the band-pass velocity (from the part of ``q`` above the cut-off).
+    """
+
+    source: str
+    loaded: bool
+    settings: FilterSettings
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    tau: np.ndarray
+    n_rows: int
+    q_noise: np.ndarray
+    dq_noise: np.ndarray
+    tau_hat: np.ndarray | None = None
+    dtau_hat: np.ndarray | None = None
+    ddtau_hat: np.ndarray | None = None
+
+    @property
+    def n_samples(self) -> int:
+        return self.t.shape[0]
+
+    def decimate(self, x: np.ndarray) -> np.ndarray:
+        """Parallel decimation of full-rate columns ``x`` (M, ...) with this experiment's filter."""
+        st = self.settings
+        return decimate(x, st.n_d, ftype=st.ftype, cutoff_ratio=st.cutoff_ratio, source=self.source)
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """An observation system with, for each row, the signals of its sample.
+
+    Attributes
+    ----------
+    system : ObservationSystem
+        ``W`` (r, c) of the declared model (base + payload columns), ``Y`` (r,), ``joint`` (r,).
+    experiments : tuple of Experiment
+    row_experiment : ndarray of int, shape (r,)
+    row_index : ndarray of int, shape (r,)
+        Index of the row's sample among the decimated samples of its experiment.
+    sig : dict of str -> ndarray, shape (r, n)
+        Decimated signals of *all* joints at each row's sample: ``q dq ddq tau`` (and ``tau_hat
+        dtau_hat ddtau_hat`` once attached);
+        ``t`` (r,) is the time since the start of the recording [s].
+    """
+
+    system: ObservationSystem
+    experiments: tuple[Experiment, ...]
+    row_experiment: np.ndarray
+    row_index: np.ndarray
+    sig: Mapping[str, np.ndarray]
+
+    @property
+    def n_rows(self) -> int:
+        return self.system.Y.size
+
+    @property
+    def n_joints(self) -> int:
+        return self.experiments[0].q.shape[1]
+
+    @property
+    def joint(self) -> np.ndarray:
+        return self.system.joint
+
+    def rows_of(self, j: int) -> np.ndarray:
+        return np.flatnonzero(self.system.joint == j)
+
+    def full_rate_columns(self, fn: Callable[[Experiment], Mapping[int, np.ndarray]], p: int) -> np.ndarray:
+        """Columns evaluated at full rate and decimated in parallel.
+
+        Parameters
+        ----------
+        fn : callable
+            ``fn(experiment) -> {joint: array (M, p)}``: the columns on the rows of each joint
+            (joints not in the mapping get zeros).
+        p : int
+            Number of columns.
+
+        Returns
+        -------
+        ndarray, shape (r, p)
+        """
+        X = np.zeros((self.n_rows, p))
+        for e, ex in enumerate(self.experiments):
+            parts = fn(ex)
+            if not parts:
+                continue
+            keys = sorted(parts)
+            full = np.concatenate([np.asarray(parts[j], float).reshape(ex.n_samples, p) for j in keys], axis=1)
+            dec = ex.decimate(full)
+            for i, j in enumerate(keys):
+                m = (self.row_experiment == e) & (self.system.joint == j)
+                X[m] = dec[self.row_index[m], i * p:(i + 1) * p]
+        return X
+
+    def row_columns(self, fn: Callable[[int, np.ndarray], np.ndarray], p: int) -> np.ndarray:
+        """Columns computed from the decimated row signals: ``fn(j, rows) -> (len(rows), p)`` per joint."""
+        X = np.zeros((self.n_rows, p))
+        for j in range(self.n_joints):
+            rows = self.rows_of(j)
+            if rows.size:
+                X[rows] = np.asarray(fn(j, rows), float).reshape(rows.size, p)
+        return X
+
+    def samples(self) -> dict[str, np.ndarray]:
+        """Decimated signals per sample (one entry per decimated sample, not per row):
+        arrays (s, n) and ``t`` (s,), plus ``experiment`` (s,) - rows of joint 0 define the samples."""
+        rows = self.rows_of(0)
+        out = {k: v[rows] for k, v in self.sig.items()}
+        out["experiment"] = self.row_experiment[rows]
+        return out
+
+
+def common_bandwidth(trajectories: Sequence[Trajectory], **kw) -> float:
+    """The largest estimated dynamics bandwidth ``f_dyn`` of the experiments [Hz] (one filter rule for all)."""
+    return max(estimate_dynamics_bandwidth(tr.q, 1.0 / tr.dt, **kw) for tr in trajectories)
+
+
+def split_holdout(trajectories: Sequence[Trajectory], fraction: float) -> tuple[list[Trajectory], list[Trajectory]]:
+    """Split each experiment in a leading part (identification) and a contiguous trailing part
+    (validation) holding ``fraction`` of its samples. Both keep the time origin of the recording."""
+    if not 0.0 < fraction < 1.0:
+        raise ValueError(f"holdout fraction must lie in (0, 1), got {fraction!r}")
+    ident, valid = [], []
+    for tr in trajectories:
+        N = tr.n_samples
+        k = int(round(N * (1.0 - fraction)))
+        t0 = float(tr.meta.get(T_ORIGIN_KEY, tr.t[0]))
+        for a, b, out in ((0, k, ident), (k, N, valid)):
+            meta = dict(tr.meta)
+            meta[T_ORIGIN_KEY] = t0
+            out.append(Trajectory(t=tr.t[a:b], q=tr.q[a:b], tau=tr.tau[a:b],
+                                  dq=None if tr.dq is None else tr.dq[a:b],
+                                  ddq=None if tr.ddq is None else tr.ddq[a:b],
+                                  source=f"{tr.source}[rows {a + 1}-{b}]", loaded=tr.loaded, meta=meta))
+    return ident, valid
+
+
+def _row_signals(exps, keys, row_exp, row_idx, n) -> dict:
+    """Decimated signals ``keys`` of every experiment as one (r, n) array per signal (all joints per row)."""
+    r = row_exp.size
+    sig = {k: np.zeros((r, n)) for k in keys}
+    for e, ex in enumerate(exps):
+        dec = ex.decimate(np.concatenate([getattr(ex, k) for k in keys], axis=1))
+        if dec.shape[0] != ex.n_rows:
+            raise IdentificationError(f"{ex.source}: {dec.shape[0]} decimated samples, the assembler kept "
+                                      f"{ex.n_rows} rows per joint: cannot line the signals up")
+        m = row_exp == e
+        for i, k in enumerate(keys):
+            sig[k][m] = dec[row_idx[m], i * n:(i + 1) * n]
+    return sig
+
+
+def model_torque(model, theta: Mapping[str, float], q, dq, ddq, loaded: bool = False, *,
+                 batch: int = REGRESSOR_BATCH, skip_prefix: tuple = ()) -> np.ndarray:
+    """``IDM(q, dq, ddq) chi`` of the declared model (base + payload columns) at every sample.
+
+    Parameters
+    ----------
+    theta : mapping name -> value
+        Parameters by column name (``BASE_NAMES``, ``PAYLOAD_NAMES``); missing ones count as 0.
+    q, dq, ddq : ndarray, shape (N, n)
+    loaded : bool
+        Add the payload columns.
+    skip_prefix : tuple of str
+        Parameters whose name starts with one of these count as 0 (e.g. ``("FS",)``).
+
+    Returns
+    -------
+    ndarray, shape (N, n)
+    """
+    base = tuple(model.BASE_NAMES)
+    tb = np.array([0.0 if nm.startswith(skip_prefix) and skip_prefix else float(theta.get(nm, 0.0)) for nm in base])
+    pay = tuple(getattr(model, "PAYLOAD_NAMES", ())) if loaded else ()
+    tp = np.array([float(theta.get(nm, 0.0)) for nm in pay])
+    use_pay = bool(pay) and np.any(tp != 0)
+    N = q.shape[0]
+    out = np.empty((N, q.shape[1]))
+    for s in range(0, N, batch):
+        e = min(N, s + batch)
+        out[s:e] = np.asarray(model.regressor(q[s:e], dq[s:e], ddq[s:e]), float) @ tb
+        if use_pay:
+            out[s:e] += np.asarray(model.payload_regressor(q[s:e], dq[s:e], ddq[s:e]), float) @ tp
+    return out
+
+
+def attach_model_torque(frame: "Frame", model, theta: Mapping[str, float]) -> "Frame":
+    """A copy of ``frame`` with the model torque ``tau_hat`` (and derivatives) of parameters ``theta``.
+
+    ``tau_hat`` is computed at full rate from the band-pass kinematics, then low-passed by the
+    experiment's Butterworth and differentiated like the positions."""
+    exps = []
+    for ex in frame.experiments:
+        st = ex.settings
+        th = model_torque(model, theta, ex.q, ex.dq, ex.ddq, ex.loaded)
+        tf, d1, d2 = filter_and_differentiate(th, st.fs, st.cutoff_hz, st.order, source=ex.source)
+        exps.append(replace(ex, tau_hat=tf, dtau_hat=d1, ddtau_hat=d2))
+    sig = dict(frame.sig)
+    sig.update(_row_signals(exps, MODEL_SIGNALS, frame.row_experiment, frame.row_index, frame.n_joints))
+    return Frame(system=frame.system, experiments=tuple(exps), row_experiment=frame.row_experiment,
+                 row_index=frame.row_index, sig=sig)
+
+
+def noise_gains(fs: float, cutoff_hz: float, order: int = 4, n_freq: int = 4096) -> tuple[float, float]:
+    """For white noise on ``q``: std of ``q - lowpass(q)`` and of the band-pass velocity, per unit std.
+
+    Computed from the frequency responses (zero-phase Butterworth ``|H|^2``; central difference
+    ``sin(w)/dt``), averaged over [0, fs/2] where white noise spreads its variance evenly."""
+    from scipy import signal
+
+    sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
+    f = np.linspace(0.0, fs / 2.0, n_freq)
+    _, h = signal.sosfreqz(sos, worN=f, fs=fs)
+    H2 = np.abs(h) ** 2
+    hp = math.sqrt(float(np.mean((1.0 - H2) ** 2)))
+    dv = math.sqrt(float(np.mean((H2 * np.sin(2 * math.pi * f / fs) * fs) ** 2)))
+    return hp, dv
+
+
+def _experiment(tr: Trajectory, st: FilterSettings, n_rows: int) -> Experiment:
+    fs = st.fs
+    e = st.edge_samples
+    qf, dq, ddq = filter_and_differentiate(tr.q, fs, st.cutoff_hz, st.order, source=tr.source)
+    hp, dv = noise_gains(fs, st.cutoff_hz, st.order)
+    core = slice(e, tr.n_samples - e) if tr.n_samples > 2 * e + 8 else slice(None)
+    q_noise = np.std(np.asarray(tr.q, float)[core] - qf[core], axis=0) / max(hp, 1e-12)
+    seg = slice(e, tr.n_samples - e)
+    t0 = float(tr.meta.get(T_ORIGIN_KEY, tr.t[0]))
+    return Experiment(source=tr.source, loaded=tr.loaded, settings=st, t=np.asarray(tr.t[seg], float) - t0,
+                      q=qf[seg], dq=dq[seg], ddq=ddq[seg], tau=np.asarray(tr.tau[seg], float), n_rows=n_rows,
+                      q_noise=q_noise, dq_noise=q_noise * dv)
+
+
+def build_frame(model, trajectories: Sequence[Trajectory], *, dynamics_bandwidth_hz: float | None = None,
+                payload_columns: bool | None = None, align_rtol: float = ALIGN_RTOL, **filter_kw) -> Frame:
+    """Assemble ``Y = W chi`` with the public assembler and attach the signals of each row.
+
+    Parameters
+    ----------
+    model
+        Generated-model interface (``N_JOINTS``, ``BASE_NAMES``, ``regressor``...).
+    trajectories : sequence of Trajectory
+    dynamics_bandwidth_hz : float, optional
+        ``f_dyn`` for the filter rules (same for every experiment); default: estimated per experiment.
+    payload_columns : bool, optional
+        Default: True when an experiment is loaded and the model has payload columns.
+    align_rtol : float
+        Tolerance of the row-alignment check.
+    **filter_kw
+        ``cutoff_hz``, ``n_d``, ``order``, ``ftype``... passed to the assembler.
+
+    Returns
+    -------
+    Frame
+    """
+    trajs = list(trajectories)
+    if not trajs:
+        raise ValueError("no trajectory given")
+    if payload_columns is None:
+        payload_columns = any(tr.loaded for tr in trajs) and bool(tuple(getattr(model, "PAYLOAD_NAMES", ())))
+    asm = assemble_observation(model, trajs, dynamics_bandwidth_hz=dynamics_bandwidth_hz,
+                               payload_columns=payload_columns, **filter_kw)
+    sysm = asm.system
+    n = trajs[0].n_joints
+    exps = []
+    for ex_rep, tr in zip(asm.experiments, trajs):
+        rows = set(ex_rep.rows_per_joint)
+        if len(rows) != 1:
+            raise IdentificationError(f"{tr.source}: rows per joint differ {ex_rep.rows_per_joint}; "
+                                      "diagnose needs every joint on every sample (no min_velocity removal)")
+        exps.append(_experiment(tr, ex_rep.settings, rows.pop()))
+    r = sysm.Y.size
+    row_exp = np.asarray(asm.row_experiment, int)
+    row_idx = np.zeros(r, int)
+    for j in range(n):
+        for e in range(len(exps)):
+            m = np.flatnonzero((sysm.joint == j) & (row_exp == e))
+            row_idx[m] = np.arange(m.size)
+    sig = _row_signals(exps, SIGNALS, row_exp, row_idx, n)
+    tt = np.zeros(r)
+    for e, ex in enumerate(exps):
+        m = row_exp == e
+        # time: the sample's own time (not low-passed)
+        tt[m] = ex.t[np.minimum(row_idx[m] * ex.settings.n_d, ex.n_samples - 1)]
+    sig["t"] = tt
+    own_tau = sig["tau"][np.arange(r), sysm.joint]
+    scale = np.abs(sysm.Y).max() if r else 1.0
+    if not np.allclose(own_tau, sysm.Y, rtol=0.0, atol=align_rtol * max(scale, 1e-300)):
+        raise IdentificationError("internal: the decimated measured torques do not match the assembler's Y "
+                                  "(filter settings or row order changed); cannot attach signals to rows")
+    return Frame(system=sysm, experiments=tuple(exps), row_experiment=row_exp, row_index=row_idx, sig=sig)

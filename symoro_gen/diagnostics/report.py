@@ -1,0 +1,327 @@
+"""The result of :func:`symoro_gen.diagnostics.diagnose`: effects added, candidates tried, errors
+before and after, with ``summary()``, ``to_dict()`` (the JSON contract of the ``diagnose`` command),
+``to_markdown()`` and ``write_plots()``."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..identification.result import IdentificationResult
+from .structure import SIGNAL_LABELS, StructureItem
+
+__all__ = ["CandidateScore", "Effect", "ResidualReport"]
+
+
+def _f(x):
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _fl(a):
+    return [_f(x) for x in np.asarray(a, float).reshape(-1)]
+
+
+def _j(j):
+    return None if j is None else int(j) + 1
+
+
+@dataclass(frozen=True)
+class CandidateScore:
+    """How one candidate family did in one round.
+
+    Attributes
+    ----------
+    round : int
+        1-based round of the loop.
+    kind, label, variant : str
+    joint, partner : int or None
+        0-based.
+    score : float or None
+        Sum over joints of the fractional decrease of the squared validation error norm
+        (``(||rho_j||^2 - ||rho_j'||^2) / ||rho_j||^2``); None when not evaluated.
+    p_value : float or None
+        F test on the identification data, corrected for serial correlation and for the 1-D search
+        (Bonferroni over the grid); compare with ``threshold``.
+    z_validation : float or None
+        Validation decrease of the weighted squared error, in standard deviations of its null
+        distribution (adding useless columns).
+    threshold : float or None
+        Per-test level (significance / number of candidates this round).
+    identifiability : float
+        Smallest share of a candidate column's norm outside the span of the current model's columns.
+    eligible : bool
+        Passed every criterion.
+    reason : str
+        Why not eligible (empty when eligible).
+    search : dict
+        Best value of the searched parameter (e.g. ``{"vs": 0.05}``).
+    val_rel_err_before, val_rel_err_after : tuple of float
+        Validation relative error norms per joint without and with the candidate.
+    """
+
+    round: int
+    kind: str
+    label: str
+    joint: int | None
+    partner: int | None
+    variant: str
+    score: float | None
+    p_value: float | None
+    z_validation: float | None
+    threshold: float | None
+    identifiability: float
+    eligible: bool
+    reason: str
+    search: dict = field(default_factory=dict)
+    val_rel_err_before: tuple = ()
+    val_rel_err_after: tuple = ()
+
+    def to_dict(self) -> dict:
+        return {"round": self.round, "kind": self.kind, "label": self.label, "joint": _j(self.joint),
+                "partner": _j(self.partner), "variant": self.variant, "score": _f(self.score),
+                "p_value": _f(self.p_value), "z_validation": _f(self.z_validation),
+                "threshold": _f(self.threshold), "identifiability": _f(self.identifiability),
+                "eligible": self.eligible, "reason": self.reason,
+                "search": {k: _f(v) for k, v in self.search.items()}}
+
+
+@dataclass(frozen=True, eq=False)
+class Effect:
+    """An effect added to the model.
+
+    Attributes
+    ----------
+    kind, label, variant : str
+    joint, partner : int or None
+        0-based.
+    names : tuple of str
+        Its columns in the augmented model.
+    values, std, rel_std_pct : ndarray
+        Identified (final model, the chosen method) values, standard deviations and %sigma.
+    physical : dict
+        Physical reading (searched parameter, stiffness, delay, gain...).
+    score, p_value, z_validation : float
+        Evidence when it was added (see :class:`CandidateScore`).
+    round : int
+    reveal : str
+        Row signal it shows against; ``reveal_joint`` its joint.
+    """
+
+    kind: str
+    label: str
+    variant: str
+    joint: int | None
+    partner: int | None
+    names: tuple
+    values: np.ndarray
+    std: np.ndarray
+    rel_std_pct: np.ndarray
+    physical: dict
+    score: float
+    p_value: float
+    z_validation: float
+    round: int
+    reveal: str
+    reveal_joint: int | None
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "joint": _j(self.joint), "partner": _j(self.partner), "variant": self.variant,
+                "label": self.label,
+                "params": {n: _f(v) for n, v in zip(self.names, self.values)},
+                "std": {n: _f(v) for n, v in zip(self.names, self.std)},
+                "rel_std_pct": {n: _f(v) for n, v in zip(self.names, self.rel_std_pct)},
+                "physical": {k: _f(v) for k, v in self.physical.items()},
+                "score": _f(self.score), "p_value": _f(self.p_value), "z_validation": _f(self.z_validation),
+                "round": self.round}
+
+
+@dataclass(frozen=True, eq=False)
+class ResidualReport:
+    """What the residual says the declared model misses, and how much adding it helps.
+
+    Attributes
+    ----------
+    robot, method : str
+    n_joints : int
+    before_rel_err, before_validation_rel_err : ndarray, shape (n,)
+        Relative error norms ``||rho_j|| / ||Y_j||`` of the declared model on identification and
+        validation data.
+    after_rel_err, after_validation_rel_err : ndarray, shape (n,)
+        The same with every effect added.
+    effects : tuple of Effect
+        In the order added.
+    tried : tuple of CandidateScore
+        Every candidate of every round.
+    placebos : tuple of CandidateScore
+        The placebo candidates (random smooth columns) of every round.
+    structure_before, structure_after : tuple of StructureItem
+        Structure tests of the identification residual.
+    result_before, result_after : IdentificationResult
+    settings : dict
+        Significance, hold-out, sources, filter settings...
+    warnings : tuple of str
+    plot_data : dict
+        Arrays for :meth:`write_plots` (not part of the JSON).
+    """
+
+    robot: str
+    method: str
+    n_joints: int
+    before_rel_err: np.ndarray
+    before_validation_rel_err: np.ndarray
+    after_rel_err: np.ndarray
+    after_validation_rel_err: np.ndarray
+    effects: tuple
+    tried: tuple
+    placebos: tuple
+    structure_before: tuple
+    structure_after: tuple
+    result_before: IdentificationResult
+    result_after: IdentificationResult
+    settings: dict
+    warnings: tuple = ()
+    plot_data: dict = field(default_factory=dict, repr=False)
+
+    # ------------------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """JSON contract: ``before``/``after`` {``rel_err``, ``validation_rel_err``}, ``effects`` (order
+        added: ``kind``, ``joint`` 1-based or null, ``params``, ``score``...), ``tried`` (every candidate
+        with its score), plus ``placebos``, ``structure``, ``settings``, ``warnings``."""
+        return {
+            "robot": self.robot,
+            "method": self.method,
+            "n_joints": self.n_joints,
+            "before": {"rel_err": _fl(self.before_rel_err), "validation_rel_err": _fl(self.before_validation_rel_err)},
+            "after": {"rel_err": _fl(self.after_rel_err), "validation_rel_err": _fl(self.after_validation_rel_err)},
+            "effects": [e.to_dict() for e in self.effects],
+            "tried": [c.to_dict() for c in self.tried],
+            "placebos": [c.to_dict() for c in self.placebos],
+            "structure": {"before": [s.to_dict() for s in self.structure_before if s.significant],
+                          "after": [s.to_dict() for s in self.structure_after if s.significant]},
+            "settings": self.settings,
+            "warnings": list(self.warnings),
+        }
+
+    def best_tried(self, round: int = 1, k: int = 10) -> list[CandidateScore]:
+        """The ``k`` best-scored candidates of a round."""
+        cs = [c for c in self.tried if c.round == round and c.score is not None]
+        return sorted(cs, key=lambda c: -c.score)[:k]
+
+    def _error_table(self) -> list[str]:
+        n = self.n_joints
+        head = "            " + "".join(f"{'joint ' + str(j + 1):>10}" for j in range(n))
+        rows = [head]
+        for lab, a in (("ident before", self.before_rel_err), ("ident after", self.after_rel_err),
+                       ("valid before", self.before_validation_rel_err),
+                       ("valid after", self.after_validation_rel_err)):
+            rows.append(f"{lab:<12}" + "".join(f"{x:>10.4f}" for x in a))
+        return rows
+
+    def summary(self, n_tried: int = 8) -> str:
+        """Errors before/after, the effects added with their parameters and %sigma, the best candidates of
+        each round, structure left, numbered warnings."""
+        L = [f"Residual diagnosis of {self.robot} (IDIM-{self.method.upper()}), "
+             f"{len(self.effects)} effect(s) added",
+             f"validation: {self.settings.get('validation', '?')}",
+             "", "Relative error norms ||rho_j||/||Y_j||"]
+        L += self._error_table()
+        L.append("")
+        if self.effects:
+            L.append("Effects added (in order):")
+            for i, e in enumerate(self.effects, 1):
+                who = "all joints" if e.joint is None else f"joint {e.joint + 1}"
+                if e.partner is not None:
+                    who += f" ({e.variant}, with joint {e.partner + 1})"
+                L.append(f" {i}. {e.kind} on {who}: score {e.score:.3f}, p = {e.p_value:.2e}, "
+                         f"z_val = {e.z_validation:.1f}")
+                for n, v, s, p in zip(e.names, e.values, e.std, e.rel_std_pct):
+                    L.append(f"      {n:<28}{v:>12.4g}  %sigma {p:8.2f}")
+                if e.physical:
+                    L.append("      " + ", ".join(f"{k} = {v:.4g}" for k, v in e.physical.items()))
+        else:
+            L.append("No effect added: no candidate was significant on the identification data and "
+                     "better than noise on the validation data.")
+        rounds = sorted({c.round for c in self.tried})
+        for r in rounds:
+            best = self.best_tried(r, n_tried)
+            if not best:
+                continue
+            L.append("")
+            L.append(f"Round {r}: best candidates by validation score")
+            L.append(f"  {'candidate':<22}{'score':>8}{'p':>11}{'thresh':>10}{'z_val':>8}  verdict")
+            for c in best:
+                L.append(f"  {c.label + (' ' + c.variant if c.variant and c.kind != 'coupling' else ''):<22}"
+                         f"{c.score:>8.3f}{c.p_value:>11.2e}{c.threshold:>10.1e}{c.z_validation:>8.1f}  "
+                         f"{'eligible' if c.eligible else c.reason}")
+        left = [s for s in self.structure_after if s.significant]
+        if left:
+            L.append("")
+            L.append("Structure left in the identification residual (explained variance, Bonferroni p):")
+            for s in sorted(left, key=lambda s: -s.eta2)[:12]:
+                L.append(f"  joint {s.joint + 1} vs {s.label}: {100 * s.eta2:.1f} %, p = {s.p_value:.1e}")
+        if self.warnings:
+            L.append("")
+            L.append("Warnings:")
+            L += [f"[{i}] {w}" for i, w in enumerate(self.warnings, 1)]
+        return "\n".join(L)
+
+    def to_markdown(self, plots: list | None = None) -> str:
+        """A Markdown report (tables of errors, effects, candidates; links to plots)."""
+        n = self.n_joints
+        L = [f"# Residual diagnosis: {self.robot} (IDIM-{self.method.upper()})", "",
+             f"Validation: {self.settings.get('validation', '?')}", "",
+             "| | " + " | ".join(f"joint {j + 1}" for j in range(n)) + " |",
+             "|---|" + "---:|" * n]
+        for lab, a in (("identification, before", self.before_rel_err), ("identification, after", self.after_rel_err),
+                       ("validation, before", self.before_validation_rel_err),
+                       ("validation, after", self.after_validation_rel_err)):
+            L.append(f"| {lab} | " + " | ".join(f"{x:.4f}" for x in a) + " |")
+        L.append("")
+        L.append("## Effects added")
+        if not self.effects:
+            L.append("None.")
+        for i, e in enumerate(self.effects, 1):
+            who = "all joints" if e.joint is None else f"joint {e.joint + 1}"
+            if e.partner is not None:
+                who += f" ({e.variant} with joint {e.partner + 1})"
+            L.append(f"{i}. **{e.kind}** on {who} - score {e.score:.3f}, p = {e.p_value:.2e}, "
+                     f"z_val = {e.z_validation:.1f}")
+            for nme, v, p in zip(e.names, e.values, e.rel_std_pct):
+                L.append(f"   - `{nme}` = {v:.4g} (%sigma {p:.2f})")
+            for k, v in e.physical.items():
+                L.append(f"   - {k} = {v:.4g}")
+        L.append("")
+        L.append("## Candidates (best 10 of each round)")
+        for r in sorted({c.round for c in self.tried}):
+            L.append(f"### Round {r}")
+            L.append("| candidate | score | p | threshold | z_val | verdict |")
+            L.append("|---|---:|---:|---:|---:|---|")
+            for c in self.best_tried(r, 10):
+                L.append(f"| {c.label} {c.variant} | {c.score:.3f} | {c.p_value:.2e} | {c.threshold:.1e} | "
+                         f"{c.z_validation:.1f} | {'eligible' if c.eligible else c.reason} |")
+        if plots:
+            L.append("")
+            L.append("## Plots")
+            for p in plots:
+                L.append(f"![{Path(p).stem}]({p})")
+        if self.warnings:
+            L.append("")
+            L.append("## Warnings")
+            L += [f"{i}. {w}" for i, w in enumerate(self.warnings, 1)]
+        return "\n".join(L) + "\n"
+
+    def write_plots(self, folder) -> list[Path]:
+        """Residual before/after each effect against the signal that revealed it, and the error norms
+        (needs matplotlib; Agg backend). Returns the files written (empty without matplotlib)."""
+        from .plots import write_plots
+
+        return write_plots(self, folder)
+
+    def __repr__(self) -> str:
+        return (f"ResidualReport(robot={self.robot!r}, method={self.method!r}, "
+                f"effects={[e.label for e in self.effects]})")
