@@ -46,6 +46,7 @@ from ..preprocessing.filtering import (
     FilterSettings,
     _fir_decimate_padded,
     _group_size,
+    blas_threads,
     butterworth_settle_samples,
     choose_filter_settings,
     decimation_filter,
@@ -145,6 +146,7 @@ class _Options:
     max_chunk_mb: float
     chunk_samples: int | None
     regressor_batch: int
+    blas_threads: int | None
     rule_kw: dict
 
 
@@ -370,7 +372,8 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
                 x[r1:] = 0.0
             fill(Bs, dqbuf, r0, a, b)
             dq_min = _support_min_abs(dqbuf[:rows], slice(r0, r1), L, half, nd, k) if need_vmin else None
-            decs = [_fir_decimate_padded(x, h, nd, k, group) for x in Bs]
+            with blas_threads(opts.blas_threads):
+                decs = [_fir_decimate_padded(x, h, nd, k, group) for x in Bs]
         elif iir:
             fill(bufs, dqbuf, 0, 0, Nseg)
             dq_min = _support_min_abs(dqbuf, slice(0, Nseg), 20 * nd + 1, 0, nd, k) if need_vmin else None
@@ -406,12 +409,12 @@ def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, vmin, removed: np
 
 
 def _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns, min_velocity,
-             use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, rule_kw) -> _Options:
+             use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads, rule_kw) -> _Options:
     return _Options(cutoff_hz=cutoff_hz, n_d=n_d, dynamics_bandwidth_hz=dynamics_bandwidth_hz, order=order,
                     ftype=ftype, edge_samples=edge_samples, payload_columns=payload_columns,
                     min_velocity=min_velocity, use_recorded_derivatives=use_recorded_derivatives,
                     max_chunk_mb=max_chunk_mb, chunk_samples=chunk_samples, regressor_batch=regressor_batch,
-                    rule_kw=dict(rule_kw))
+                    blas_threads=blas_threads, rule_kw=dict(rule_kw))
 
 
 def _settings_for(traj: Trajectory, opts: _Options) -> FilterSettings:
@@ -442,6 +445,7 @@ def iter_observation_chunks(
     max_chunk_mb: float = 64.0,
     chunk_samples: int | None = None,
     regressor_batch: int = 8192,
+    blas_threads: int | None = 1,
     on_experiment: Callable[[ExperimentReport], None] | None = None,
     **rule_kw,
 ) -> Iterator[ObservationSystem]:
@@ -471,6 +475,9 @@ def iter_observation_chunks(
         Full-rate samples per block (overrides ``max_chunk_mb``).
     regressor_batch : int
         Samples per call of the model's regressor.
+    blas_threads : int or None
+        OpenBLAS threads during the decimation products (default 1: on a loaded machine several
+        threads synchronising over many medium-size products are much slower); None leaves it as is.
     on_experiment : callable, optional
         Called with the :class:`ExperimentReport` of each experiment once it is done.
 
@@ -481,7 +488,8 @@ def iter_observation_chunks(
         (+ ``PAYLOAD_NAMES``).
     """
     opts = _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns,
-                    min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, rule_kw)
+                    min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads,
+                    rule_kw)
     names, nb, npay = _names(model, payload_columns)
     ev = None
     for ex, traj in enumerate(_as_trajectories(trajectories)):
@@ -520,6 +528,7 @@ def assemble_observation(
     max_chunk_mb: float = 64.0,
     chunk_samples: int | None = None,
     regressor_batch: int = 8192,
+    blas_threads: int | None = 1,
     **rule_kw,
 ) -> Assembly:
     """Build the whole observation system with its provenance (same parameters as
@@ -532,7 +541,8 @@ def assemble_observation(
         filter settings, and the experiment and time of each row.
     """
     opts = _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns,
-                    min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, rule_kw)
+                    min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads,
+                    rule_kw)
     names, nb, npay = _names(model, payload_columns)
     trajs = list(_as_trajectories(trajectories))
     if not trajs:

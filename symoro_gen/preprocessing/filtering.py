@@ -39,7 +39,9 @@ Two decimation filters are offered (both zero-phase):
 """
 from __future__ import annotations
 
+import ctypes
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -168,8 +170,14 @@ def estimate_dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999,
         w = np.hanning(q.shape[0])[:, None]
         P = np.abs(np.fft.rfft(qd * w, axis=0)) ** 2
         f = np.fft.rfftfreq(q.shape[0], 1.0 / fs)
-    else:  # long recordings: Welch average of linearly detrended segments (bounded memory)
-        f, P = signal.welch(q, fs=fs, window="hann", nperseg=max_segment, detrend="linear", axis=0)
+    else:  # long recordings: Welch average of linearly detrended, half-overlapping segments
+        m = int(max_segment)
+        w = np.hanning(m)[:, None]
+        f = np.fft.rfftfreq(m, 1.0 / fs)
+        P = np.zeros((f.size, q.shape[1]))
+        for s in range(0, q.shape[0] - m + 1, m // 2):
+            seg = signal.detrend(q[s:s + m], axis=0, type="linear")
+            P += np.abs(np.fft.rfft(seg * w, axis=0)) ** 2
     best = 0.0
     tot = P.sum(axis=0)
     for j in range(q.shape[1]):
@@ -384,6 +392,54 @@ def filter_and_differentiate(q, fs: float, cutoff_hz: float, order: int = 4, *, 
 # ---------------------------------------------------------------------------------------------
 # decimation
 # ---------------------------------------------------------------------------------------------
+_BLAS_CONTROLS: list | None = None
+
+
+def _openblas_thread_controls() -> list:
+    """(get, set) thread-count functions of the OpenBLAS libraries loaded in this process (Linux)."""
+    global _BLAS_CONTROLS
+    if _BLAS_CONTROLS is not None:
+        return _BLAS_CONTROLS
+    out = []
+    try:
+        with open("/proc/self/maps") as f:
+            paths = sorted({ln.split()[-1] for ln in f if "openblas" in ln.lower() and ".so" in ln})
+    except OSError:
+        paths = []
+    for p in paths:
+        try:
+            lib = ctypes.CDLL(p)
+        except OSError:
+            continue
+        for prefix in ("scipy_openblas", "openblas"):
+            for suffix in ("64_", "_64", ""):
+                get = getattr(lib, f"{prefix}_get_num_threads{suffix}", None)
+                set_ = getattr(lib, f"{prefix}_set_num_threads{suffix}", None)
+                if get is not None and set_ is not None:
+                    out.append((get, set_))
+                    break
+    _BLAS_CONTROLS = out
+    return out
+
+
+@contextmanager
+def blas_threads(n: int | None = 1):
+    """Run the enclosed BLAS calls with ``n`` OpenBLAS threads (restored afterwards; ``None``: unchanged).
+
+    The FIR decimation makes many medium-size matrix products; on a loaded machine a multi-threaded
+    OpenBLAS spends most of their time synchronising its threads (measured 4x slower on 2 shared cores).
+    """
+    controls = _openblas_thread_controls() if n is not None else []
+    before = [get() for get, _ in controls]
+    for _, set_ in controls:
+        set_(int(n))
+    try:
+        yield
+    finally:
+        for (_, set_), k in zip(controls, before):
+            set_(k)
+
+
 def decimation_filter(n_d: int, *, ftype: str = "fir", cutoff_ratio: float = DECIMATION_CUTOFF_RATIO,
                       iir_order: int = 8):
     """Coefficients of the decimation low-pass.
@@ -490,7 +546,8 @@ def decimate(x, n_d: int, *, axis: int = 0, ftype: str = "fir", cutoff_ratio: fl
         y = signal.sosfiltfilt(sos, flat, axis=0)[::n_d]
     elif ftype == "fir":
         h = decimation_filter(n_d, ftype="fir", cutoff_ratio=cutoff_ratio)
-        y = _fir_decimate(np.ascontiguousarray(flat), h, n_d)
+        with blas_threads(1):
+            y = _fir_decimate(np.ascontiguousarray(flat), h, n_d)
     else:
         raise ValueError(f"ftype must be 'fir' or 'iir', got {ftype!r}")
     return np.moveaxis(y.reshape((y.shape[0],) + xm.shape[1:]), 0, axis)
