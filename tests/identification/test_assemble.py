@@ -195,3 +195,18 @@ def test_errors():
         warnings.simplefilter("always")
         build_observation(model, loaded, cutoff_hz=10.0, n_d=10)
     assert any("payload is mounted but payload_columns=False" in str(w.message) for w in rec)
+
+
+def test_experiments_never_mix(rx90_case):
+    """Two files = two experiments: their rows are exactly those of each file assembled alone."""
+    robot, chi, pl, unloaded, loaded = rx90_case
+    gen = symoro_gen.load_model("rx90")
+    kw = dict(payload_columns=True, cutoff_hz=20.0, n_d=10)
+    both = assemble_observation(gen, [unloaded, loaded], **kw)
+    alone = [build_observation(gen, tr, **kw) for tr in (unloaded, loaded)]
+    for j in range(6):
+        rows = both.system.joint == j
+        expect = np.concatenate([a.W[a.joint == j] for a in alone])
+        np.testing.assert_array_equal(both.system.W[rows], expect)
+        np.testing.assert_array_equal(both.row_experiment[rows],
+                                      np.repeat([0, 1], [np.sum(a.joint == j) for a in alone]))

@@ -372,3 +372,19 @@ def test_drive_chain_applied_on_load(tmp_path):
     np.testing.assert_allclose(tr.q, q, atol=1e-12)
     np.testing.assert_allclose(tr.tau, tau, atol=1e-10)
     assert tr.meta["drive_chain"]
+
+
+def test_matlab_v73_refused_with_hint(tmp_path):
+    hdr = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Jan  1 00:00:00 2024 HDF5 schema 1.00 ."
+    p = tmp_path / "v73.mat"
+    p.write_bytes(hdr.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02" + b"IM" + b"\x00" * 512)
+    with pytest.raises(DataFileError) as e:
+        load_trajectory(p, n_joints=3)
+    assert "v73.mat" in str(e.value) and "v7.3 (HDF5)" in str(e.value) and "-v7" in e.value.hint
+
+
+def test_npz_arrays_of_different_lengths(tmp_path):
+    t, q, tau = _signals()
+    np.savez(tmp_path / "d.npz", t=t, q=q, tau=tau[:150])
+    with pytest.raises(DataFileError, match=r"d\.npz: arrays have different numbers of samples \(t: 200, q: 200, tau: 150\)"):
+        load_trajectory(tmp_path / "d.npz", n_joints=3)
