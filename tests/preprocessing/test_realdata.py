@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 
 from symoro_gen.description import parse_robot_text
 from symoro_gen.dynamics.numeric import inverse_dynamics
-from symoro_gen.preprocessing import choose_filter_settings, filter_and_differentiate, load_trajectory
+from symoro_gen.preprocessing import DataWarning, choose_filter_settings, filter_and_differentiate, load_trajectory
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 TX40 = DATA / "staubli_tx40_figaroh"
@@ -37,8 +38,17 @@ def _tx40_robot():
 @pytest.mark.skipif(not TX40.exists(), reason=f"real data folder {TX40} absent")
 def test_tx40_split_recording_to_joint_side():
     robot = _tx40_robot()
-    tr = load_trajectory("q=pos_read_data.csv,tau=curr_data.csv,dt=0.0002", robot=robot,
-                         drive_chain=robot.drive_chain, base_dir=TX40 / "data")
+    spec = "q=pos_read_data.csv,tau=curr_data.csv,dt=0.0002"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)  # joint-side values look sane
+        tr = load_trajectory(spec, robot=robot, drive_chain=robot.drive_chain, base_dir=TX40 / "data")
+    # forgetting the drive chain: motor angles (up to 201 rad) are flagged, column by column
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        load_trajectory(spec, robot=robot, base_dir=TX40 / "data")
+    msgs = [str(w.message) for w in rec if issubclass(w.category, DataWarning)]
+    assert len(msgs) == 6 and any("pos_read_data.csv, column q4: max |q| = 201.1" in m and "motor-side" in m
+                                  for m in msgs)
     assert (tr.n_samples, tr.n_joints) == (45000, 6)
     assert tr.dt == pytest.approx(2e-4)
     # MDH zero at the start and end rest poses (offsets q2 -= pi/2, q3 += pi/2 applied)
@@ -67,7 +77,9 @@ def test_tx40_split_recording_to_joint_side():
 @pytest.mark.skipif(not LWR4.exists(), reason=f"real data folder {LWR4} absent")
 @pytest.mark.parametrize("k", [1, 3])
 def test_lwr4_npz(k):
-    tr = load_trajectory(LWR4 / f"measurements_{k}.npz", n_joints=7)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        tr = load_trajectory(LWR4 / f"measurements_{k}.npz", n_joints=7)
     assert (tr.n_samples, tr.n_joints) == (5027, 7)
     assert tr.dt == pytest.approx(0.005, rel=1e-3)  # 200 Hz, time-stamp jitter accepted
     assert 0 < tr.meta["dt_max_rel_jitter"] < 0.5
