@@ -85,6 +85,32 @@ def cmd_import_urdf(args) -> int:
     return 0
 
 
+def cmd_export_urdf(args) -> int:
+    import json
+
+    from .description import load_robot
+    from .description.urdf_export import export_urdf
+    from .errors import ModelError
+
+    robot = load_robot(args.robot)
+    params = None
+    if args.params:
+        try:
+            d = json.loads(Path(args.params).read_text())
+            p = d["parameters"]
+            params = {n: v for n, v in zip(p["names"], p["values"]) if v is not None}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ModelError(f"{args.params}: not a result of `symoro-gen identify` ({exc})") from None
+    text = export_urdf(robot, params=params)
+    if args.output:
+        from .emit.package import write_text_atomic
+
+        write_text_atomic(Path(args.output), text)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="symoro-gen", description=__doc__.splitlines()[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -110,6 +136,12 @@ def build_parser() -> argparse.ArgumentParser:
     iu.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
     iu.add_argument("--force", action="store_true", help="overwrite an existing output file")
     iu.set_defaults(func=cmd_import_urdf)
+
+    eu = sub.add_parser("export-urdf", help="robot .toml (optionally with identified parameters) -> URDF")
+    eu.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
+    eu.add_argument("--params", help="JSON result of `symoro-gen identify` (standard parameters it names are used)")
+    eu.add_argument("-o", "--output", help="write the URDF here (default: stdout)")
+    eu.set_defaults(func=cmd_export_urdf)
 
     ep = sub.add_parser("export-par", help="robot .toml -> SYMORO+/OpenSYMORO .par file")
     ep.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")

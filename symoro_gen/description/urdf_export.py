@@ -1,0 +1,149 @@
+"""MDH robot -> URDF (``symoro-gen export-urdf``), loadable by Pinocchio and ROS tools.
+
+Frame j of the MDH table becomes link ``link<j>`` (frame 0 is ``base_link``); the joint from
+``link<ant>`` to ``link<j>`` has the constant part of T(ant, j) (q = 0) as origin and z (or -z for a
+``-q`` joint) as axis. Standard parameters at the frame origin become URDF inertials at the centre
+of mass; FV and FS become ``<dynamics damping friction>``.
+
+Identified parameters (``--params result.json`` of ``symoro-gen identify``) replace the nominal
+values of the parameters they name when those are standard ones (base parameters without ``R``);
+regrouped ones cannot be split back and are ignored (listed in the warnings). Each link is then made
+physically meaningful: mass >= ``min_mass``, inertia at the centre of mass symmetric positive
+definite and satisfying the triangle inequalities (eigenvalues raised as needed).
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, q_symbol
+from ..dynamics.newton_euler import joint_sign
+from ..params import INERTIAL_KINDS
+
+
+def _rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rz(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+def constant_transform(robot: RobotDescription, j: int) -> np.ndarray:
+    """4x4 T(ant, j) at q = 0."""
+    row = robot.row(j)
+    subs = dict(robot.geometry_subs())
+    subs[q_symbol(j)] = 0
+    g, b, al, d, th, r = (float(x.subs(subs)) for x in (row.gamma, row.b, row.alpha, row.d, row.theta, row.r))
+    R = _rz(g) @ _rx(al) @ _rz(th)
+    p = _rz(g) @ np.array([d, -r * math.sin(al), b + r * math.cos(al)])
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:
+    """URDF roll-pitch-yaw (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    pitch = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
+    if abs(math.cos(pitch)) < 1e-12:
+        roll = math.atan2(-R[1, 2], R[1, 1])
+        yaw = 0.0
+    else:
+        roll = math.atan2(R[2, 1], R[2, 2])
+        yaw = math.atan2(R[1, 0], R[0, 0])
+    return roll, pitch, yaw
+
+
+def physical_inertial(p10, *, min_mass: float = 1e-6, min_inertia: float = 1e-9):
+    """(mass, com, inertia at com) from standard parameters at the frame origin, made physical."""
+    XX, XY, XZ, YY, YZ, ZZ, MX, MY, MZ, M = (float(x) for x in p10)
+    m = max(M, min_mass)
+    c = np.array([MX, MY, MZ]) / m
+    J = np.array([[XX, XY, XZ], [XY, YY, YZ], [XZ, YZ, ZZ]])
+    Ic = J - m * (c @ c * np.eye(3) - np.outer(c, c))
+    w, V = np.linalg.eigh((Ic + Ic.T) / 2)
+    w = np.maximum(w, min_inertia)
+    # triangle inequalities on principal moments
+    for _ in range(3):
+        for k in range(3):
+            others = w[(k + 1) % 3] + w[(k + 2) % 3]
+            if w[k] > others:
+                w[(k + 1) % 3] += (w[k] - others) / 2 + min_inertia
+                w[(k + 2) % 3] += (w[k] - others) / 2 + min_inertia
+    return m, c, V @ np.diag(w) @ V.T
+
+
+def _fmt(x: float) -> str:
+    return repr(float(x))
+
+
+def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, params: dict | None = None) -> str:
+    """URDF text of ``robot``.
+
+    Parameters
+    ----------
+    robot : RobotDescription
+    chi_std, chi_payload : array_like, optional
+        Standard / payload parameters (default: the robot file's nominal values, zeros when absent).
+    params : dict, optional
+        ``name -> value`` overriding standard parameters (e.g. identified ones); regrouped
+        names (``...R``) are ignored with a warning.
+    """
+    names = list(robot.standard_names)
+    chi = np.zeros(len(names)) if chi_std is None and robot.nominal_vector() is None else np.array(
+        chi_std if chi_std is not None else robot.nominal_vector(), float)
+    vals = dict(zip(names, chi))
+    pay = chi_payload if chi_payload is not None else robot.nominal_payload()
+    if robot.payload is not None and pay is not None:
+        vals.update(zip(robot.payload_names, np.asarray(pay, float)))
+    ignored = []
+    for k, v in (params or {}).items():
+        if k in vals or k in robot.payload_names:
+            vals[k] = float(v)
+        else:
+            ignored.append(k)
+    if ignored:
+        warnings.warn(f"export-urdf: parameters not applied (regrouped or unknown): {', '.join(ignored)}", stacklevel=2)
+    out = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>",
+           f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({robot.source[:120]}) -->",
+           '  <link name="base_link"/>']
+    for row in robot.rows:
+        j = row.j
+        p10 = [vals.get(f"{k}{j}", 0.0) for k in INERTIAL_KINDS]
+        out.append(f'  <link name="link{j}">')
+        if any(p10):
+            m, c, Ic = physical_inertial(p10)
+            out += [
+                "    <inertial>",
+                f'      <origin xyz="{_fmt(c[0])} {_fmt(c[1])} {_fmt(c[2])}" rpy="0 0 0"/>',
+                f'      <mass value="{_fmt(m)}"/>',
+                f'      <inertia ixx="{_fmt(Ic[0, 0])}" ixy="{_fmt(Ic[0, 1])}" ixz="{_fmt(Ic[0, 2])}" '
+                f'iyy="{_fmt(Ic[1, 1])}" iyz="{_fmt(Ic[1, 2])}" izz="{_fmt(Ic[2, 2])}"/>',
+                "    </inertial>",
+            ]
+        out.append("  </link>")
+        T = constant_transform(robot, j)
+        rpy = rpy_from_matrix(T[:3, :3])
+        parent = "base_link" if row.ant == 0 else f"link{row.ant}"
+        kind = {REVOLUTE: "revolute", PRISMATIC: "prismatic", FIXED: "fixed"}[row.sigma]
+        out.append(f'  <joint name="joint{j}" type="{kind}">')
+        out.append(f'    <parent link="{parent}"/>')
+        out.append(f'    <child link="link{j}"/>')
+        out.append(f'    <origin xyz="{_fmt(T[0, 3])} {_fmt(T[1, 3])} {_fmt(T[2, 3])}" '
+                   f'rpy="{_fmt(rpy[0])} {_fmt(rpy[1])} {_fmt(rpy[2])}"/>')
+        if row.sigma != FIXED:
+            s = joint_sign(row)
+            out.append(f'    <axis xyz="0 0 {s}"/>')
+            lim = "3.141592653589793" if row.sigma == REVOLUTE else "10.0"
+            out.append(f'    <limit lower="-{lim}" upper="{lim}" effort="1000.0" velocity="100.0"/>')
+            fv, fs = vals.get(f"FV{j}", 0.0), vals.get(f"FS{j}", 0.0)
+            if fv or fs:
+                out.append(f'    <dynamics damping="{_fmt(max(fv, 0.0))}" friction="{_fmt(max(fs, 0.0))}"/>')
+        out.append("  </joint>")
+    out.append("</robot>")
+    return "\n".join(out) + "\n"
