@@ -11,11 +11,12 @@ another one):
    eq. 7 of the LWR4 paper) are evaluated on every remaining sample;
 3. ``Y`` (the measured torques) and every column of ``W`` are decimated in parallel (same zero-phase
    low-pass, one sample in ``n_d`` kept), so ``Y = W chi`` still holds;
-4. optionally (``min_velocity``) the rows of joint j whose decimation filter sees a sample where
-   ``|dq_j| < min_velocity`` are removed: near zero velocity the Coulomb term ``sign(dq)`` of the
-   filtered velocity does not match the physical friction (rests, reversals), and the decimation
-   low-pass spreads that mismatch over its whole support (``20 n_d + 1`` samples, also used as the
-   window for ``ftype="iir"``);
+4. optionally (``min_velocity``) the rows of joint j that depend on samples where ``|dq_j| <
+   min_velocity`` are removed: near zero velocity the Coulomb term ``sign(dq)`` of the filtered
+   velocity does not match the physical friction (rests, reversals), and the decimation low-pass
+   spreads that mismatch over the rows around it. A row is removed when more than ``slow_weight_tol``
+   (1 %) of its filter's absolute weights fall on such samples (the FIR weights of ``20 n_d + 1``
+   samples are also used to judge the rows of ``ftype="iir"``);
 5. rows are grouped per joint: all rows of joint 1 (experiment after experiment), then joint 2...
 
 The filter settings are chosen per experiment by :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`
@@ -52,6 +53,7 @@ from scipy.ndimage import minimum_filter1d
 from ..errors import DataFileError, ModelError, Problem, ShapeError
 from ..preprocessing.filtering import (
     FilterSettings,
+    _fir_decimate,
     _fir_decimate_padded,
     _group_size,
     blas_threads,
@@ -150,6 +152,7 @@ class _Options:
     edge_samples: int | None
     payload_columns: bool
     min_velocity: object
+    slow_weight_tol: float
     use_recorded_derivatives: bool
     max_chunk_mb: float
     chunk_samples: int | None
@@ -199,18 +202,15 @@ def _velocity_threshold(min_velocity, n) -> np.ndarray | None:
 class _Block:
     Wd: np.ndarray  # (k, n, c)
     Yd: np.ndarray  # (k, n)
-    dq_min: np.ndarray  # (k, n): smallest |dq| over the decimation filter's support of each row
+    slow: np.ndarray | None  # (k, n): share of each row's filter weight on samples with |dq_j| < min_velocity_j
     td: np.ndarray  # (k,)
 
 
-def _support_min_abs(buf_dq: np.ndarray, valid: slice, support: int, first: int, step: int, k: int) -> np.ndarray:
-    """min |dq| over ``support`` samples centred on buffer rows ``first + i step`` (i < k); rows outside
-    ``valid`` (zero padding beyond the experiment) are ignored."""
-    a = np.full(buf_dq.shape, np.inf)
-    a[valid] = np.abs(buf_dq[valid])
-    if support > 1:
-        a = minimum_filter1d(a, size=support, axis=0, mode="constant", cval=np.inf)
-    return a[first:first + (k - 1) * step + 1:step]
+def _slow_indicator(dq: np.ndarray, vmin: np.ndarray, valid: slice) -> np.ndarray:
+    """1.0 where |dq_j| < vmin_j on the valid rows, 0.0 elsewhere (zero padding is not 'slow')."""
+    out = np.zeros(dq.shape)
+    out[valid] = np.abs(dq[valid]) < vmin
+    return out
 
 
 class _Evaluator:
@@ -329,7 +329,12 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
     if fir:
         per_block = max(group, per_block // group * group)
     per_block = min(per_block, n_out_total)
-    need_vmin = opts.min_velocity is not None
+    vmin = _velocity_threshold(opts.min_velocity, n)
+    need_vmin = vmin is not None
+    if need_vmin:  # weights of the decimation filter, normalised, to measure each row's exposure to slow samples
+        habs = np.abs(decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio)) if nd > 1 else None
+        if habs is not None:
+            habs /= habs.sum()
 
     def kinematics(a, b):
         """q, dq, ddq on segment samples [a, b)."""
@@ -379,32 +384,34 @@ def _experiment_blocks(model, traj: Trajectory, st: FilterSettings, opts: _Optio
                 x[:r0] = 0.0
                 x[r1:] = 0.0
             fill(Bs, dqbuf, r0, a, b)
-            dq_min = _support_min_abs(dqbuf[:rows], slice(r0, r1), L, half, nd, k) if need_vmin else None
             with blas_threads(opts.blas_threads):
                 decs = [_fir_decimate_padded(x, h, nd, k, group) for x in Bs]
+                slow = _fir_decimate_padded(_slow_indicator(dqbuf[:rows], vmin, slice(r0, r1)), habs, nd, k,
+                                            group) if need_vmin else None
         elif iir:
             fill(bufs, dqbuf, 0, 0, Nseg)
-            dq_min = _support_min_abs(dqbuf, slice(0, Nseg), 20 * nd + 1, 0, nd, k) if need_vmin else None
+            with blas_threads(opts.blas_threads):
+                slow = _fir_decimate(_slow_indicator(dqbuf, vmin, slice(0, Nseg)), habs, nd) if need_vmin else None
             sos = decimation_filter(nd, ftype="iir", cutoff_ratio=st.cutoff_ratio)
             decs = [signal.sosfiltfilt(sos, x, axis=0)[::nd] for x in bufs]
         else:
             Bs = [x[:k] for x in bufs]
             fill(Bs, dqbuf, 0, k0, k1)
-            dq_min = np.abs(dqbuf[:k]) if need_vmin else None
+            slow = _slow_indicator(dqbuf[:k], vmin, slice(0, k)) if need_vmin else None
             decs = [x.copy() for x in Bs]
         Wd, Yd = unpack(decs, k)
         idx = e + np.arange(k0, k1) * nd
-        yield _Block(Wd=Wd, Yd=Yd, dq_min=dq_min, td=traj.t[idx])
+        yield _Block(Wd=Wd, Yd=Yd, slow=slow, td=traj.t[idx])
 
 
-def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, vmin, removed: np.ndarray):
+def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, tol: float, removed: np.ndarray):
     """Stack blocks (each tagged with its experiment) per joint, removing low-velocity rows."""
     Ws, Ys, Js, Es, Ts = [], [], [], [], []
     for j in range(n):
         for blk, ex in blocks:
             keep = slice(None)
-            if vmin is not None:
-                m = blk.dq_min[:, j] >= vmin[j]
+            if blk.slow is not None:
+                m = blk.slow[:, j] <= tol
                 removed[ex, j] += int((~m).sum())
                 keep = m
             W = blk.Wd[keep, j, :]
@@ -417,10 +424,11 @@ def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, vmin, removed: np
 
 
 def _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns, min_velocity,
-             use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads, rule_kw) -> _Options:
+             slow_weight_tol, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads, rule_kw) -> _Options:
     return _Options(cutoff_hz=cutoff_hz, n_d=n_d, dynamics_bandwidth_hz=dynamics_bandwidth_hz, order=order,
                     ftype=ftype, edge_samples=edge_samples, payload_columns=payload_columns,
-                    min_velocity=min_velocity, use_recorded_derivatives=use_recorded_derivatives,
+                    min_velocity=min_velocity, slow_weight_tol=float(slow_weight_tol),
+                    use_recorded_derivatives=use_recorded_derivatives,
                     max_chunk_mb=max_chunk_mb, chunk_samples=chunk_samples, regressor_batch=regressor_batch,
                     blas_threads=blas_threads, rule_kw=dict(rule_kw))
 
@@ -445,6 +453,7 @@ def iter_observation_chunks(
     n_d: int | None = None,
     payload_columns: bool = False,
     min_velocity=None,
+    slow_weight_tol: float = 0.01,
     dynamics_bandwidth_hz: float | None = None,
     order: int = 4,
     ftype: str = "fir",
@@ -473,8 +482,11 @@ def iter_observation_chunks(
     payload_columns : bool
         Append the payload columns (zeros for unloaded experiments).
     min_velocity : float or array_like (n,), optional
-        Remove the rows of joint j whose decimation-filter support (``20 n_d + 1`` full-rate samples
-        around the row's sample) contains a filtered velocity ``|dq_j| < min_velocity[j]`` [rad/s or m/s].
+        Remove the rows of joint j that depend on slow samples: those where more than
+        ``slow_weight_tol`` of the (absolute, normalised) decimation-filter weights fall on full-rate
+        samples with a filtered velocity ``|dq_j| < min_velocity[j]`` [rad/s or m/s].
+    slow_weight_tol : float
+        See ``min_velocity`` (default 1 %: no slow sample near the centre of a kept row).
     use_recorded_derivatives : bool
         Use the trajectory's ``dq``/``ddq`` (and raw ``q``) instead of filtering ``q``.
     max_chunk_mb : float
@@ -496,7 +508,7 @@ def iter_observation_chunks(
         (+ ``PAYLOAD_NAMES``).
     """
     opts = _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns,
-                    min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads,
+                    min_velocity, slow_weight_tol, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads,
                     rule_kw)
     names, nb, npay = _names(model, payload_columns)
     ev = None
@@ -506,11 +518,11 @@ def iter_observation_chunks(
         _check_loaded(traj, payload_columns)
         st = _settings_for(traj, opts)
         n = traj.n_joints
-        vmin = _velocity_threshold(min_velocity, n)
+        _velocity_threshold(min_velocity, n)  # validates
         removed = np.zeros((ex + 1, n), int)
         kept = np.zeros(n, int)
         for blk in _experiment_blocks(model, traj, st, opts, ev):
-            Ws, Ys, Js, _, _ = _stack_per_joint([(blk, ex)], n, vmin, removed)
+            Ws, Ys, Js, _, _ = _stack_per_joint([(blk, ex)], n, opts.slow_weight_tol, removed)
             kept += np.array([w.shape[0] for w in Ws])
             yield ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names,
                                     joint=np.concatenate(Js))
@@ -528,6 +540,7 @@ def assemble_observation(
     n_d: int | None = None,
     payload_columns: bool = False,
     min_velocity=None,
+    slow_weight_tol: float = 0.01,
     dynamics_bandwidth_hz: float | None = None,
     order: int = 4,
     ftype: str = "fir",
@@ -549,7 +562,7 @@ def assemble_observation(
         filter settings, and the experiment and time of each row.
     """
     opts = _options(cutoff_hz, n_d, dynamics_bandwidth_hz, order, ftype, edge_samples, payload_columns,
-                    min_velocity, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads,
+                    min_velocity, slow_weight_tol, use_recorded_derivatives, max_chunk_mb, chunk_samples, regressor_batch, blas_threads,
                     rule_kw)
     names, nb, npay = _names(model, payload_columns)
     trajs = list(_as_trajectories(trajectories))
@@ -559,7 +572,7 @@ def assemble_observation(
     for tr in trajs:
         if tr.n_joints != n:
             raise ShapeError(f"{tr.source}: {tr.n_joints} joints, {trajs[0].source}: {n}")
-    vmin = _velocity_threshold(min_velocity, n)
+    _velocity_threshold(min_velocity, n)  # validates
     removed = np.zeros((len(trajs), n), int)
     ev = _Evaluator(model, n, nb, npay, max(1, int(regressor_batch)))
     blocks: list[tuple[_Block, int]] = []
@@ -569,7 +582,7 @@ def assemble_observation(
         st = _settings_for(traj, opts)
         settings.append(st)
         blocks += [(b, ex) for b in _experiment_blocks(model, traj, st, opts, ev)]
-    Ws, Ys, Js, Es, Ts = _stack_per_joint(blocks, n, vmin, removed)
+    Ws, Ys, Js, Es, Ts = _stack_per_joint(blocks, n, opts.slow_weight_tol, removed)
     E = np.concatenate(Es)
     J = np.concatenate(Js)
     system = ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names, joint=J)

@@ -155,17 +155,19 @@ def test_min_velocity_removes_only_slow_rows():
     kept = np.array(cut.experiments[0].rows_per_joint)
     assert np.all(removed > 0)  # the dwells at rest are removed
     np.testing.assert_array_equal(kept + removed, full.experiments[0].rows_per_joint)
-    # the kept rows are a subset of the full rows; the true velocity stays away from 0 over each
-    # kept row's filter support (20 n_d + 1 samples)
-    half = 10 * 5
-    e = cut.experiments[0].settings.edge_samples  # samples beyond the edges enter the filter as zeros
+    # the kept rows are a subset of the full rows; no slow sample near a kept row's centre (where the
+    # decimation filter's weights exceed the 1 % tolerance), but slow samples in the far tails are tolerated
+    core = 5 // 2
+    tails_seen = False
     for j in range(4):
         tf = full.row_time[full.system.joint == j]
         tc = cut.row_time[cut.system.joint == j]
         assert tc.size > 50 and set(np.round(tc, 9)) <= set(np.round(tf, 9))
         for tk in tc:
             i = int(round(tk * FS))
-            assert np.abs(m.dq[max(e, i - half):min(len(m.t) - e, i + half + 1), j]).min() > 0.8 * vmin[j]
+            assert np.abs(m.dq[i - core:i + core + 1, j]).min() > 0.8 * vmin[j]
+            tails_seen |= bool(np.abs(m.dq[max(0, i - 50):i + 51, j]).min() < 0.5 * vmin[j])
+    assert tails_seen
     # rests and reversals removed: Y == W chi up to the differentiation accuracy of a jerk-limited profile
     xb = model.base_parameters(np.asarray(chi))
     assert _per_joint_rel_err(cut.system, xb).max() < 5e-4
