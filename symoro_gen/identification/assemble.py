@@ -41,14 +41,12 @@ filtered; the FIR decimation runs as dense matrix products with one OpenBLAS thr
 """
 from __future__ import annotations
 
-import math
 import warnings
 from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
 from scipy import signal
-from scipy.ndimage import minimum_filter1d
 
 from ..errors import DataFileError, ModelError, Problem, ShapeError
 from ..preprocessing.filtering import (
