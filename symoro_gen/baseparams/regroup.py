@@ -26,7 +26,7 @@ import sympy as sp
 
 from ..description.model import PRISMATIC, REVOLUTE
 from ..dynamics.newton_euler import SymbolicRegressor
-from ..dynamics.transforms import constant_rotation, position
+from ..dynamics.transforms import constant_rotation, position, rot_z
 from ..params import INERTIAL_KINDS, param_name
 
 _J_KINDS = ("XX", "XY", "XZ", "YY", "YZ", "ZZ")
@@ -87,9 +87,6 @@ def _regroup_closed_form(reg: SymbolicRegressor):
     eliminated: list[str] = []
     no_effect: list[str] = []
 
-    def J_of(j):
-        return sp.Matrix(3, 3, lambda a, b: cur.get(param_name(_J_KINDS[_pos(a, b)], j), 0))
-
     def add_J(a, dJ):
         for k, (r, c) in _J_INDEX.items():
             cur[param_name(k, a)] = cur[param_name(k, a)] + dJ[r, c]
@@ -124,14 +121,9 @@ def _regroup_closed_form(reg: SymbolicRegressor):
             if a == 0:
                 no_effect.append(f"XX{j}..ZZ{j} (rotation inertia of a link moving in translation from the base)")
                 continue
-            Rj = constant_rotation(row) * _rot_z(row.theta)
+            Rj = constant_rotation(row) * rot_z(row.theta)
             add_J(a, (Rj * Jj * Rj.T).applyfunc(sp.expand))
     return cur, eliminated, no_effect
-
-
-def _rot_z(th):
-    c, s = sp.cos(th), sp.sin(th)
-    return sp.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
 def _kind_at(r, c):
@@ -139,10 +131,6 @@ def _kind_at(r, c):
         if (a, b) == (r, c) or (b, a) == (r, c):
             return k
     raise KeyError((r, c))
-
-
-def _pos(a, b):
-    return _J_KINDS.index(_kind_at(a, b))
 
 
 def _sample_columns(reg: SymbolicRegressor, names, n_samples: int, rng: np.random.Generator) -> np.ndarray:
@@ -174,6 +162,8 @@ def group_base_parameters(
     rng: np.random.Generator | None = None,
     n_samples: int = 60,
     rank_tol: float = 1e-9,
+    dependency_tol: float = 1e-7,
+    coefficient_tol: float = 1e-8,
 ) -> BaseParameterMap:
     """Base parameters of the robot of ``reg`` (closed-form rules + numeric sweep).
 
@@ -185,8 +175,13 @@ def group_base_parameters(
     n_samples : int
         Random states used by the numeric sweep.
     rank_tol : float
-        Relative tolerance: a column whose distance to the span of the previous kept
-        columns is below ``rank_tol`` times its norm is dependent.
+        A column whose norm is below ``rank_tol`` times the largest one has no effect.
+    dependency_tol : float
+        A column whose distance to the span of the previously kept columns is below
+        ``dependency_tol`` times its norm is dependent (regrouped into them).
+    coefficient_tol : float
+        Regrouping coefficients smaller than this are dropped; within it of a simple
+        rational they are written exactly.
     """
     rng = np.random.default_rng(0) if rng is None else rng
     robot = reg.robot
@@ -215,7 +210,7 @@ def group_base_parameters(
             del cur[name]
             continue
         resid = c - Q @ (Q.T @ c) if Q.shape[1] else c
-        if np.linalg.norm(resid) > 1e-7 * norms[k] * max(1.0, np.sqrt(len(accepted)) * 0 + 1):
+        if np.linalg.norm(resid) > dependency_tol * norms[k]:
             accepted.append(k)
             qv = resid - Q @ (Q.T @ resid) if Q.shape[1] else resid
             Q = np.column_stack([Q, qv / np.linalg.norm(qv)])
@@ -223,11 +218,10 @@ def group_base_parameters(
         # dependent: c = W_acc beta
         Wa = W[:, accepted]
         beta, *_ = np.linalg.lstsq(Wa, c, rcond=None)
-        tol = 1e-8
         for kk, b in zip(accepted, beta):
-            if abs(b) > tol:
+            if abs(b) > coefficient_tol:
                 tgt = kept_order[kk]
-                cur[tgt] = cur[tgt] + _nice(float(b), tol) * cur[name]
+                cur[tgt] = cur[tgt] + _nice(float(b), coefficient_tol) * cur[name]
                 if tgt not in numeric:
                     numeric.append(tgt)
         eliminated.append(name)

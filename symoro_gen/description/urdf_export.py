@@ -21,17 +21,8 @@ import numpy as np
 
 from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, q_symbol
 from ..dynamics.newton_euler import joint_sign
+from ..dynamics.transforms import numeric_transform
 from ..params import INERTIAL_KINDS
-
-
-def _rx(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
-
-
-def _rz(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
 
 
 def constant_transform(robot: RobotDescription, j: int) -> np.ndarray:
@@ -39,12 +30,7 @@ def constant_transform(robot: RobotDescription, j: int) -> np.ndarray:
     row = robot.row(j)
     subs = dict(robot.geometry_subs())
     subs[q_symbol(j)] = 0
-    g, b, al, d, th, r = (float(x.subs(subs)) for x in (row.gamma, row.b, row.alpha, row.d, row.theta, row.r))
-    R = _rz(g) @ _rx(al) @ _rz(th)
-    p = _rz(g) @ np.array([d, -r * math.sin(al), b + r * math.cos(al)])
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, p
-    return T
+    return numeric_transform(*(float(x.subs(subs)) for x in (row.gamma, row.b, row.alpha, row.d, row.theta, row.r)))
 
 
 def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:

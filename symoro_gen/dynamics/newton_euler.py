@@ -67,13 +67,6 @@ def _inertia_moment(kind: str, wd, p) -> list:
     }[kind]
 
 
-def _inertia_matrix(kind: str):
-    """The 3x3 inertia matrix that a unit value of ``kind`` contributes."""
-    E = sp.zeros(3, 3)
-    idx = {"XX": (0, 0), "XY": (0, 1), "XZ": (0, 2), "YY": (1, 1), "YZ": (1, 2), "ZZ": (2, 2)}[kind]
-    E[idx] = 1
-    E[idx[::-1]] = 1
-    return E
 
 
 def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegressor:
@@ -194,7 +187,6 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
     def carry(k: int, name: str, f: list, n: list) -> None:
         """Project the wrench (f, n) of link k on joint k, then carry it to the base."""
         j = k
-        tag = name
         while j != 0:
             row = rows[j - 1]
             if row.sigma == REVOLUTE:
@@ -208,9 +200,9 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
             if not any(rows[x - 1].is_moving for x in robot.ancestors(j)):
                 break
             Rm = R[j]
-            fa = g.vec(_matvec(Rm, f), f"F{tag}_{a}")
+            fa = g.vec(_matvec(Rm, f), f"F{name}_{a}")
             cr = _cross(P[j], fa)
-            na = g.vec([x + y for x, y in zip(_matvec(Rm, n), cr)], f"N{tag}_{a}")
+            na = g.vec([x + y for x, y in zip(_matvec(Rm, n), cr)], f"N{name}_{a}")
             f, n, j = fa, na, a
 
     names_std: list[str] = []

@@ -22,12 +22,6 @@ def constant_rotation(row: MdhRow) -> sp.Matrix:
     return rot_z(row.gamma) * rot_x(row.alpha)
 
 
-def rotation(row: MdhRow, theta=None) -> sp.Matrix:
-    """ant_R_j = Rot(z, gamma) Rot(x, alpha) Rot(z, theta)."""
-    th = row.theta if theta is None else theta
-    return constant_rotation(row) * rot_z(th)
-
-
 def position(row: MdhRow, r=None) -> sp.Matrix:
     """ant_P_j, origin of frame j in frame ant."""
     rr = row.r if r is None else r

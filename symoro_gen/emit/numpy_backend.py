@@ -45,36 +45,18 @@ def load_kernel(source: str, func_name: str):
     return mod.__dict__[func_name]
 
 
-def as_batch(x, n: int, name: str) -> tuple[np.ndarray, bool]:
-    """Validate an input of shape (N, n) or (n,); return (N, n) float array and whether it was 1-D."""
-    a = np.asarray(x, dtype=float)
-    if a.ndim == 1 and a.shape[0] == n:
-        return a[None, :], True
-    if a.ndim == 2 and a.shape[1] == n:
-        return a, False
-    raise ValueError(f"{name} must have shape (N, {n}) or ({n},), got {a.shape}")
-
-
-def evaluate(kernel, n_rows: int, n_cols: int, q, dq, ddq, *, chunk: int = 2048, out=None) -> np.ndarray:
-    """Evaluate a kernel over samples in cache-sized chunks; returns (N, n_rows, n_cols)."""
-    n = n_rows
-    q, one = as_batch(q, q.shape[-1] if hasattr(q, "shape") else len(q), "q")
-    n_in = q.shape[1]
-    dq, _ = as_batch(dq, n_in, "dq")
-    ddq, _ = as_batch(ddq, n_in, "ddq")
+def evaluate(kernel, n_rows: int, n_cols: int, q, dq, ddq, *, chunk: int = 2048) -> np.ndarray:
+    """Evaluate a kernel over samples in cache-sized chunks; returns (N, n_rows, n_cols), (n_rows, n_cols) for 1-D inputs."""
+    q, dq, ddq = (np.asarray(x, dtype=float) for x in (q, dq, ddq))
+    one = q.ndim == 1
+    q, dq, ddq = (np.atleast_2d(x) for x in (q, dq, ddq))
+    if not (q.shape == dq.shape == ddq.shape) or q.ndim != 2:
+        raise ValueError(f"q, dq, ddq must have the same shape (N, n), got {q.shape}, {dq.shape}, {ddq.shape}")
     N = q.shape[0]
-    if dq.shape[0] != N or ddq.shape[0] != N:
-        raise ValueError(f"q, dq, ddq must have the same number of samples, got {N}, {dq.shape[0]}, {ddq.shape[0]}")
-    res = np.empty((N, n, n_cols)) if out is None else out
-    buf = np.zeros((n, n_cols, min(chunk, max(N, 1))))
+    res = np.empty((N, n_rows, n_cols))
     for s in range(0, N, chunk):
         e = min(N, s + chunk)
-        m = e - s
-        b = buf[:, :, :m] if m != buf.shape[2] else buf
-        if m != buf.shape[2]:
-            b = np.zeros((n, n_cols, m))
-        else:
-            b.fill(0.0)
-        kernel(q[s:e].T.copy(), dq[s:e].T.copy(), ddq[s:e].T.copy(), b)
+        b = np.zeros((n_rows, n_cols, e - s))
+        kernel(np.ascontiguousarray(q[s:e].T), np.ascontiguousarray(dq[s:e].T), np.ascontiguousarray(ddq[s:e].T), b)
         res[s:e] = b.transpose(2, 0, 1)
     return res[0] if one else res
