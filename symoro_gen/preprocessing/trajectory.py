@@ -7,9 +7,14 @@ import numpy as np
 
 
 def _frozen_array(x, name, ndim):
+    """A read-only float array: copied, unless it already is a read-only float64 array (for
+    example a memory-mapped file opened read-only), which nobody can change through us."""
     if x is None:
         return None
-    a = np.array(x, dtype=float, copy=True)
+    if isinstance(x, np.ndarray) and x.dtype == np.float64 and not x.flags.writeable:
+        a = x
+    else:
+        a = np.array(x, dtype=float, copy=True)
     if a.ndim != ndim:
         raise ValueError(f"{name} must be {ndim}-D, got shape {a.shape}")
     a.setflags(write=False)
