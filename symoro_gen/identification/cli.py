@@ -36,7 +36,7 @@ def run_identify(args) -> dict:
     known = _payload_values(args.payload, model.PAYLOAD_NAMES)
     if (args.gains or known) and not loaded:
         raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
-    obs = dict(cutoff_hz=args.cutoff, n_d=args.decimate)
+    obs = dict(cutoff_hz=args.cutoff, n_d=args.decimate, min_velocity=args.min_velocity)
     has_payload = bool(loaded)
     sys_u = build_observation(model, unloaded, payload_columns=False, **obs)
     sys_l = build_observation(model, loaded, payload_columns=True, **obs) if loaded else None
@@ -100,6 +100,8 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--r-sigma", type=float, default=30.0, help="stop ratio of the essential procedure (default 30)")
     p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
     p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
+    p.add_argument("--min-velocity", type=float, help="drop rows that depend on samples slower than this [rad/s] "
+                   "(Coulomb friction is ill-defined near zero velocity)")
     p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", help="write a Markdown report here")
