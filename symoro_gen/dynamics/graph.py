@@ -90,6 +90,15 @@ class ExprGraph:
         inputs = tuple(i for i in self.inputs if i not in subs)
         return ExprGraph(inputs, defs, outs)
 
+    def used_names(self) -> set:
+        """Names of all symbols the definitions and outputs use (to load only needed inputs)."""
+        used: set = set()
+        for _, e in self.defs:
+            used |= {x.name for x in e.free_symbols}
+        for e in self.outputs.values():
+            used |= {x.name for x in e.free_symbols}
+        return used
+
     def inline_all(self) -> dict:
         """Outputs as closed expressions of the inputs (for small checks only)."""
         env: dict = {}

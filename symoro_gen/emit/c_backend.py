@@ -45,11 +45,7 @@ def c_function(graph: ExprGraph, n_rows: int, col_names, func_name: str, q, dq, 
         f"        const double* ddqs = ddq + s * {n_rows};",
         f"        double* o = out + s * {n_rows * nc};",
     ]
-    used = set()
-    for _, e in graph.defs:
-        used |= {x.name for x in e.free_symbols}
-    for e in graph.outputs.values():
-        used |= {x.name for x in e.free_symbols}
+    used = graph.used_names()
     for arr, syms in (("qs", q), ("dqs", dq), ("ddqs", ddq)):
         for i, s in enumerate(syms):
             if s.name in used:

@@ -18,11 +18,7 @@ def kernel_source(graph: ExprGraph, n_rows: int, col_names, func_name: str, inpu
     """
     col = {n: k for k, n in enumerate(col_names)}
     lines = [f"def {func_name}(q, dq, ddq, out):"]
-    used = set()
-    for _, e in graph.defs:
-        used |= {s.name for s in e.free_symbols}
-    for e in graph.outputs.values():
-        used |= {s.name for s in e.free_symbols}
+    used = graph.used_names()
     for arr, syms in (("q", inputs_q), ("dq", inputs_dq), ("ddq", inputs_ddq)):
         for i, s in enumerate(syms):
             if s.name in used:
