@@ -63,6 +63,7 @@ from ..preprocessing.filtering import (
     min_filter_samples,
 )
 from ..preprocessing.trajectory import Trajectory
+from ..progress import ProgressCounter
 from .observation import ObservationSystem
 
 __all__ = [
@@ -163,6 +164,29 @@ def _as_trajectories(trajectories) -> Iterable[Trajectory]:
     if isinstance(trajectories, Trajectory):
         return (trajectories,)
     return trajectories
+
+
+def _sample_progress(progress, trajectories) -> ProgressCounter:
+    """Progress over the full-rate samples of the experiments (total known unless a lazy iterable)."""
+    if isinstance(trajectories, Trajectory):
+        total = trajectories.n_samples
+    elif isinstance(trajectories, (list, tuple)):
+        total = sum(t.n_samples for t in trajectories)
+    else:
+        total = None
+    return ProgressCounter(progress, total=total, desc="assembling W", unit="sample", unit_scale=True)
+
+
+def _blocks_with_progress(blocks, n_samples: int, n_d: int, step) -> Iterator:
+    """Pass the blocks of one experiment through, reporting its samples to ``step`` (they add up to
+    ``n_samples`` once the experiment is done)."""
+    done = 0
+    for blk in blocks:
+        inc = min(blk.Yd.shape[0] * n_d, n_samples - done)
+        done += inc
+        step(inc)
+        yield blk
+    step(n_samples - done)
 
 
 def observation_settings(trajectory: Trajectory, *, cutoff_hz=None, n_d=None, dynamics_bandwidth_hz=None,
@@ -462,6 +486,7 @@ def iter_observation_chunks(
     regressor_batch: int = 8192,
     blas_threads: int | None = 1,
     on_experiment: Callable[[ExperimentReport], None] | None = None,
+    progress=None,
     **rule_kw,
 ) -> Iterator[ObservationSystem]:
     """Stream the observation system in chunks of bounded memory.
@@ -498,6 +523,10 @@ def iter_observation_chunks(
         threads synchronising over many medium-size products are much slower); None leaves it as is.
     on_experiment : callable, optional
         Called with the :class:`ExperimentReport` of each experiment once it is done.
+    progress : None, bool or callable
+        None: a bar over the samples when the ambient mode allows it (the command line, see
+        :mod:`symoro_gen.progress`); False: none; a callable: called with the number of full-rate
+        samples just processed (they add up to each experiment's ``n_samples``).
 
     Yields
     ------
@@ -510,6 +539,7 @@ def iter_observation_chunks(
                     rule_kw)
     names, nb, npay = _names(model, payload_columns)
     ev = None
+    prog = _sample_progress(progress, trajectories)
     for ex, traj in enumerate(_as_trajectories(trajectories)):
         if ev is None:
             ev = _Evaluator(model, traj.n_joints, nb, npay, max(1, int(regressor_batch)))
@@ -519,7 +549,8 @@ def iter_observation_chunks(
         _velocity_threshold(min_velocity, n)  # validates
         removed = np.zeros((ex + 1, n), int)
         kept = np.zeros(n, int)
-        for blk in _experiment_blocks(model, traj, st, opts, ev):
+        for blk in _blocks_with_progress(_experiment_blocks(model, traj, st, opts, ev), traj.n_samples, st.n_d,
+                                         prog.step):
             Ws, Ys, Js, _, _ = _stack_per_joint([(blk, ex)], n, opts.slow_weight_tol, removed)
             kept += np.array([w.shape[0] for w in Ws])
             yield ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names,
@@ -528,6 +559,7 @@ def iter_observation_chunks(
             on_experiment(ExperimentReport(index=ex, source=traj.source, loaded=traj.loaded, n_samples=traj.n_samples,
                                            settings=st, rows_per_joint=tuple(int(x) for x in kept),
                                            removed_low_velocity=tuple(int(x) for x in removed[ex])))
+    prog.close()
 
 
 def assemble_observation(
@@ -548,10 +580,11 @@ def assemble_observation(
     chunk_samples: int | None = None,
     regressor_batch: int = 8192,
     blas_threads: int | None = 1,
+    progress=None,
     **rule_kw,
 ) -> Assembly:
     """Build the whole observation system with its provenance (same parameters as
-    :func:`iter_observation_chunks`).
+    :func:`iter_observation_chunks`, including ``progress``).
 
     Returns
     -------
@@ -575,11 +608,14 @@ def assemble_observation(
     ev = _Evaluator(model, n, nb, npay, max(1, int(regressor_batch)))
     blocks: list[tuple[_Block, int]] = []
     settings = []
+    prog = _sample_progress(progress, trajs)
     for ex, traj in enumerate(trajs):
         _check_loaded(traj, payload_columns)
         st = _settings_for(traj, opts)
         settings.append(st)
-        blocks += [(b, ex) for b in _experiment_blocks(model, traj, st, opts, ev)]
+        blocks += [(b, ex) for b in _blocks_with_progress(_experiment_blocks(model, traj, st, opts, ev),
+                                                          traj.n_samples, st.n_d, prog.step)]
+    prog.close()
     Ws, Ys, Js, Es, Ts = _stack_per_joint(blocks, n, opts.slow_weight_tol, removed)
     E = np.concatenate(Es)
     J = np.concatenate(Js)

@@ -749,18 +749,26 @@ def load_trajectory(
     return Trajectory(t=t, q=q, tau=tau, dq=dq, ddq=ddq, source=source, loaded=bool(loaded), meta=meta)
 
 
-def load_trajectories(paths: Iterable, **kwargs) -> tuple[Trajectory, ...]:
+def load_trajectories(paths: Iterable, *, progress=None, **kwargs) -> tuple[Trajectory, ...]:
     """Load several experiments (one per path/spec); same keyword arguments as :func:`load_trajectory`.
 
     Problems of all files are reported together in one :class:`DataFileError`.
+
+    ``progress``: None shows a per-file bar when the ambient mode allows it (the command line, see
+    :mod:`symoro_gen.progress`), False none, a callable is called with 1 after each file.
     """
+    from ..progress import progress_updates
+
+    paths = list(paths)
     out: list[Trajectory] = []
     probs: list[Problem] = []
-    for p in paths:
-        try:
-            out.append(load_trajectory(p, **kwargs))
-        except DataFileError as exc:
-            probs.extend(exc.problems)
+    with progress_updates(progress, total=len(paths), desc="loading data", unit="file") as step:
+        for p in paths:
+            try:
+                out.append(load_trajectory(p, **kwargs))
+            except DataFileError as exc:
+                probs.extend(exc.problems)
+            step(1)
     if probs:
         raise DataFileError(probs)
     return tuple(out)
