@@ -29,6 +29,11 @@ def run_identify(args) -> dict:
     from . import fit_with_known_payload, identify, identify_with_drive_gains, sensor_gains
     from .assemble import build_observation
 
+    if args.report:  # before the long computation: a bad suffix or a missing matplotlib fails at once
+        from ..report import check_report_path, require_matplotlib
+
+        check_report_path(args.report)
+        require_matplotlib()
     robot, model = model_for(args.robot)
     kw = dict(n_joints=robot.n_joints, drive_chain=robot.drive_chain)
     unloaded = load_trajectories(args.data, loaded=False, **kw)
@@ -40,17 +45,18 @@ def run_identify(args) -> dict:
     has_payload = bool(loaded)
     sys_u = build_observation(model, unloaded, payload_columns=False, **obs)
     sys_l = build_observation(model, loaded, payload_columns=True, **obs) if loaded else None
+    dg = None
     if args.gains == "sensor":
         res = sensor_gains(sys_u, sys_l, known, essential=args.essential, r_sigma=args.r_sigma)
     elif args.gains == "drive":
-        res, _ = identify_with_drive_gains(sys_u, sys_l, known, method=args.method)
+        res, dg = identify_with_drive_gains(sys_u, sys_l, known, method=args.method)
     elif loaded:
         res = fit_with_known_payload(sys_u, sys_l, known, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
     else:
         res = identify(sys_u, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
     out = {"robot": robot.name, "data": [str(p) for p in args.data], "loaded": [str(p) for p in args.loaded or ()]}
     out.update(res.to_dict())
-    val = None
+    val = sys_v = None
     if args.validate:
         vtr = load_trajectories(args.validate, loaded=args.validate_loaded, **kw)
         sys_v = build_observation(model, vtr, payload_columns=bool(args.validate_loaded) or has_payload, **obs)
@@ -77,13 +83,35 @@ def run_identify(args) -> dict:
     if ref_text:
         text += "\n\nBeside the reference table " + str(args.reference) + ":\n" + ref_text
     if args.report:
-        from ..emit.package import write_text_atomic
-
-        md = f"# Identification of `{robot.name}`\n\nData: {', '.join(map(str, args.data))}\n\n```\n{text}\n```\n"
-        write_text_atomic(Path(args.report), md)
+        _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, rows if args.reference else None)
     if not args.quiet:
         print(text)
     return out
+
+
+def _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, reference) -> None:
+    """``--report OUT.html|OUT.md``: tables, measured vs reconstructed torques, singular values of W;
+    with loaded validation data, the payload re-identified with the robot known (Table IV)."""
+    from ..report import write_report
+    from .payload import identify_payload
+
+    loaded = sys_l is not None
+    ident = [("identification data" + (" (unloaded)" if loaded else ""), sys_u)]
+    if loaded:
+        ident.append(("identification data (loaded)", sys_l))
+    valid = [("validation data" + (" (loaded)" if args.validate_loaded else ""), sys_v)] if sys_v is not None else []
+    payload, notes = None, []
+    pay_in_val = sys_v is not None and args.validate_loaded and any(n in sys_v.names for n in model.PAYLOAD_NAMES)
+    if pay_in_val:
+        try:
+            payload = identify_payload(sys_v, res, payload_names=[n for n in model.PAYLOAD_NAMES if n in sys_v.names],
+                                       gains=res.gains, method=args.method)
+        except IdentificationError as exc:
+            notes.append(f"payload not re-identified on the validation data: {exc}")
+    sources = {"identification data": list(args.data), "loaded": list(args.loaded or ()),
+               "validation data": list(args.validate or ())}
+    write_report(args.report, res, robot=robot.name, sources=sources, identification=ident, validation=valid,
+                 payload_names=model.PAYLOAD_NAMES, payload=payload, drive=dg, reference=reference, notes=notes)
 
 
 def add_identify_parser(sub) -> None:
@@ -104,5 +132,7 @@ def add_identify_parser(sub) -> None:
                    "(Coulomb friction is ill-defined near zero velocity)")
     p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
     p.add_argument("--json", help="write the results as JSON here")
-    p.add_argument("--report", help="write a Markdown report here")
+    p.add_argument("--report", metavar="OUT.html|OUT.md",
+                   help="write a report here: tables and plots, one self-contained .html page or .md with its "
+                        "images in OUT_files/ (plots need the 'plots' extra: matplotlib)")
     p.set_defaults(func=lambda a: (run_identify(a), 0)[1])

@@ -66,6 +66,12 @@ class DriveGainsResult:
             lines += ["", "Warnings:"] + [f"[{i}] {w}" for i, w in enumerate(self.warnings, 1)]
         return "\n".join(lines)
 
+    def _repr_html_(self) -> str:
+        """Jupyter: the gains with 2 sigma, %sigma and cond(W) per joint as an HTML table, then warnings."""
+        from ..report.tables import drive_gains_html
+
+        return drive_gains_html(self)
+
     def to_dict(self) -> dict:
         return {"gains": self.gains.to_dict(), "warnings": list(self.warnings),
                 "per_joint": [{"joint": j + 1, "cond": r.cond, "sigma": r.sigma,

@@ -99,6 +99,12 @@ class Gains:
                 g[j] = v
         return g
 
+    def _repr_html_(self) -> str:
+        """Jupyter: the gains as an HTML table (gain, joint, value, 2 sigma, %sigma)."""
+        from ..report.tables import gains_html
+
+        return gains_html(self)
+
     def to_dict(self) -> dict:
         return {
             "names": list(self.names),
@@ -344,6 +350,13 @@ class IdentificationResult:
         if self.gains is not None:
             out["gains"] = self.gains.to_dict()
         return out
+
+    def _repr_html_(self) -> str:
+        """Jupyter: :meth:`summary` as HTML tables (gains, parameters with 2 sigma and %sigma, relative
+        error norms per joint, numbered warnings)."""
+        from ..report.tables import result_html
+
+        return result_html(self)
 
     def __repr__(self) -> str:
         return (f"IdentificationResult(method={self.method!r}, n_params={self.n_params}, "
