@@ -1,41 +1,55 @@
 """The ``symoro-gen`` command.
 
-Errors meant for users print as one line of what is wrong and where, plus a hint, and
-exit with status 2; ``--debug`` shows the traceback instead.
+Errors meant for users print as one line of what is wrong and where (one line per problem when a
+file has several), then a ``hint:`` line, and exit with status 2; ``--debug`` also prints the
+traceback. Unexpected failures (bugs) exit with status 1. Progress bars go to standard error when
+it is a terminal (``SYMORO_PROGRESS=1`` forces them, ``=0`` or ``--quiet`` hides them).
 """
 from __future__ import annotations
 
 import argparse
 import sys
+import traceback
+import warnings
 from pathlib import Path
 
-from .errors import SymoroError
+from .errors import DataFileError, IdentificationError, ModelError, RobotFileError, ShapeError, SymoroError
+
+EXIT_USER_ERROR = 2
+EXIT_INTERNAL_ERROR = 1
+EXIT_INTERRUPTED = 130
 
 
-def _progress(quiet: bool):
-    """A per-stage progress callback (tqdm when available and on a TTY), or None."""
-    if quiet or not sys.stderr.isatty():
-        return None
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return None
-    bar = tqdm(desc="newton-euler", unit="link", leave=False)
+class OptionError(SymoroError, ValueError):
+    """A command-line option has a value the command cannot use."""
 
-    def cb(stage, j):
-        bar.set_description(stage)
-        bar.update(1)
 
-    return cb
+def generation_steps(robot) -> int:
+    """Steps of the generation bar: Newton-Euler forward (per frame) and backward (per moving or
+    payload frame) passes, base parameters, emission."""
+    backward = sum(1 for r in robot.rows if r.is_moving or (robot.payload is not None and r.j == robot.payload))
+    return len(robot.rows) + backward + 2
 
 
 def cmd_generate(args) -> int:
+    from .baseparams.regroup import group_base_parameters
     from .description import load_robot
-    from .emit.package import emit_robot
+    from .dynamics.newton_euler import build_regressor
+    from .emit.package import emit_from
+    from .loader import generated_dir
+    from .progress import progress_bar, stage_callback
 
     robot = load_robot(args.robot)
-    out = Path(args.out) if args.out else Path(__file__).resolve().parents[1] / "generated"
-    m = emit_robot(robot, out, progress=_progress(args.quiet))
+    out = Path(args.out) if args.out else generated_dir()
+    # the steps of emit_robot, one bar over them
+    with progress_bar(generation_steps(robot), f"{robot.name}", unit="step") as bar:
+        reg = build_regressor(robot, progress=stage_callback(bar, prefix=f"{robot.name}: newton-euler "))
+        bar.set_description(f"{robot.name}: base parameters")
+        bp = group_base_parameters(reg)
+        bar.update(1)
+        bar.set_description(f"{robot.name}: emission (NumPy, C, CasADi)")
+        m = emit_from(reg, bp, out)
+        bar.update(1)
     if not args.quiet:
         print(
             f"{m.robot}: {m.n_standard} standard -> {m.n_base} base parameters; base regressor "
@@ -150,6 +164,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     for extra in _EXTRA_COMMANDS:
         extra(sub)
+    for sp_ in sub.choices.values():  # also accepted after the command name
+        opts = {o for a in sp_._actions for o in a.option_strings}
+        if "--quiet" not in opts:
+            sp_.add_argument("--quiet", "-q", action="store_true", default=argparse.SUPPRESS,
+                             help="no progress bars, no chatter")
+        if "--debug" not in opts:
+            sp_.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help="show the traceback of an error")
     return p
 
 
@@ -177,25 +199,125 @@ def _diagnose_parser(sub):
 _EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser]
 
 
+def _check_options(args) -> None:
+    """Option values the commands cannot use, caught before any work (one error per option)."""
+    checks = (
+        ("cutoff", "--cutoff", lambda v: v > 0, "must be a positive frequency in Hz"),
+        ("decimate", "--decimate", lambda v: v >= 1, "must be an integer >= 1"),
+        ("r_sigma", "--r-sigma", lambda v: v > 1, "must be > 1 (the ratio max %sigma / min %sigma)"),
+        ("duration", "--duration", lambda v: v > 0, "must be a positive number of seconds"),
+    )
+    for attr, flag, ok, what in checks:
+        v = getattr(args, attr, None)
+        if v is not None and not ok(v):
+            raise OptionError(f"{flag} {v:g}: {what}")
+
+
+_OUTPUT_OPTIONS = ("output", "out", "json", "report", "plots")
+
+
+def _os_error_message(exc: OSError, args) -> str:
+    """``cannot write OUT: reason`` when the failure is about an output the user named."""
+    names = [str(x) for x in (exc.filename, exc.filename2) if x is not None]
+    for attr in _OUTPUT_OPTIONS:
+        out = getattr(args, attr, None)
+        if not out:
+            continue
+        po = Path(out).absolute()
+        for fn in names:
+            pf = Path(fn).absolute()
+            if pf == po or po in pf.parents or pf in po.parents or (pf.parent == po.parent and po.name in pf.name):
+                return f"cannot write {out}: {exc.strerror or exc}"
+    reason = exc.strerror or str(exc)
+    return f"{names[0]}: {reason}" if names else reason
+
+
+_DOCS = "docs/"
+
+
+def _default_hint(exc: BaseException, args) -> str:
+    """A hint for errors that carry none."""
+    cmd = getattr(args, "command", "") or ""
+    text = str(exc)
+    if isinstance(exc, RobotFileError):
+        if cmd == "import-par":
+            return f"the input must be a SYMORO+/OpenSYMORO .par file (geometric table Ant, Sigma, d, R, Alpha, Theta); see {_DOCS}tutorial-model.md"
+        if cmd == "import-urdf":
+            return f"the URDF must hold a serial chain of revolute, prismatic or fixed joints; --base/--tip pick it (see {_DOCS}tutorial-model.md)"
+        if "no such robot" in text or "file not found" in text:
+            return "give a robot name from robots/ (e.g. lwr4) or the path of a robot .toml file"
+        return f"every problem is listed above; the robot-file format is described in {_DOCS}robot-file.md"
+    if isinstance(exc, DataFileError):
+        return (f"data files: CSV with header t,q1..qn,tau1..taun, NPZ/MAT arrays, or q=FILE,tau=FILE,dt=SECONDS "
+                f"for split recordings; see {_DOCS}data-files.md")
+    if isinstance(exc, OptionError):
+        return f"see `symoro-gen {cmd} --help`"
+    if isinstance(exc, ShapeError):
+        return "the data do not match the robot: check its number of joints and the file's columns"
+    if isinstance(exc, ModelError):
+        return "(re)generate the model with `symoro-gen generate ROBOT`; see " + _DOCS + "generated-module.md"
+    if isinstance(exc, IdentificationError):
+        return f"see `symoro-gen {cmd} --help` and {_DOCS}tutorial-identification.md"
+    if isinstance(exc, OSError):
+        return "check that the path exists, is the right kind (file or folder) and that its folder is writable"
+    return f"check the options of `symoro-gen {cmd} --help`; --debug shows where it failed"
+
+
+def _message(exc: BaseException, args) -> str:
+    problems = getattr(exc, "problems", None)
+    if problems and len(problems) == 1:
+        return str(problems[0])  # one problem: one line
+    if isinstance(exc, OSError):
+        return _os_error_message(exc, args)
+    if isinstance(exc, SymoroError):
+        return str(exc)
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+
+
+def _format_warning(message, category, filename, lineno, line=None) -> str:
+    """Warnings as ``symoro-gen: warning: ...`` lines (no source line of the library)."""
+    return f"symoro-gen: warning: {message}\n"
+
+
+def _report_error(exc: BaseException, args, internal: bool) -> None:
+    from .progress import close_all
+
+    close_all()
+    if getattr(args, "debug", False):
+        traceback.print_exception(exc, file=sys.stderr)
+    if internal:
+        print(f"symoro-gen: internal error: {type(exc).__name__}: {_message(exc, args)}", file=sys.stderr)
+        print("hint: this is a bug in symoro-gen; rerun with --debug and report the traceback", file=sys.stderr)
+        return
+    print(f"symoro-gen: error: {_message(exc, args)}", file=sys.stderr)
+    print(f"hint: {getattr(exc, 'hint', None) or _default_hint(exc, args)}", file=sys.stderr)
+
+
 def main(argv=None) -> int:
+    from .progress import progress_mode
+
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
-    except SymoroError as exc:
-        if args.debug:
-            raise
-        msg = str(exc)
-        print(f"symoro-gen: error: {msg}", file=sys.stderr)
-        hint = getattr(exc, "hint", None)
-        if hint:
-            print(f"hint: {hint}", file=sys.stderr)
-        return 2
-    except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
-        if args.debug:
-            raise
-        print(f"symoro-gen: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
-        return 2
+        with warnings.catch_warnings():
+            warnings.formatwarning = _format_warning
+            _check_options(args)
+            with progress_mode("off" if args.quiet else "auto"):
+                return int(args.func(args) or 0)
+    except (SymoroError, OSError, ValueError, TypeError) as exc:
+        # bad input: robot or data files, options, paths (ValueError/TypeError: the library's checks
+        # of arguments it was handed)
+        _report_error(exc, args, internal=False)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        from .progress import close_all
+
+        close_all()
+        print("symoro-gen: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # noqa: BLE001 - last resort: one line and a hint instead of a raw traceback
+        _report_error(exc, args, internal=True)
+        return EXIT_INTERNAL_ERROR
 
 
 if __name__ == "__main__":

@@ -1,0 +1,180 @@
+"""Errors for users: status 2, one line of what is wrong and where, a ``hint:`` line, no traceback
+(``--debug`` adds it); nothing written. Every command path with a bad input of each kind."""
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from symoro_gen import cli
+from symoro_gen.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+PAR = ROOT / "tests" / "description" / "fixtures" / "rx90_symoro.par"
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    """A good simulated SCARA recording, one with a NaN, and a regular file (an unwritable parent)."""
+    from symoro_gen.modelcache import model_for
+    from symoro_gen.simulate.parameters import random_physical_parameters
+    from symoro_gen.simulate.recording import simulate_recording
+    from symoro_gen.simulate.trajectories import fourier_trajectory
+
+    rng = np.random.default_rng(11)
+    robot, model = model_for("scara")
+    chi = random_physical_parameters(robot, rng)
+    chi = getattr(chi, "chi_std", chi)
+    t, q, dq, ddq = fourier_trajectory(robot.n_joints, 6.0, 0.002, rng)
+    tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
+    d = tmp_path_factory.mktemp("data")
+    n = robot.n_joints
+    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
+    a = np.column_stack([tr.t, tr.q, tr.tau])
+    np.savetxt(d / "good.csv", a, delimiter=",", header=head, comments="")
+    a[10, 2] = np.nan
+    np.savetxt(d / "nan.csv", a, delimiter=",", header=head, comments="")
+    (d / "a_file").write_text("not a folder\n")
+    (d / "bad.par").write_text("garbage\n")
+    (d / "bad.urdf").write_text("<robot")
+    bad_robot = (ROOT / "robots" / "scara.toml").read_text().replace("sigma = 1", "sigma = 7")
+    (d / "bad_robot.toml").write_text(bad_robot)
+    return d
+
+
+def _case(d: Path):
+    good, nan, afile = str(d / "good.csv"), str(d / "nan.csv"), d / "a_file"
+    out_under_file = str(afile / "out.json")
+    return {
+        # name: (argv, substrings of the error line)
+        "generate: missing robot file": (["generate", str(d / "missing.toml")], ["missing.toml", "file not found"]),
+        "generate: unknown robot": (["generate", "no_such_robot"], ["no_such_robot", "no such robot", "lwr4"]),
+        "generate: bad robot file": (["generate", str(d / "bad_robot.toml"), "--out", str(d / "gen")],
+                                     ["bad_robot.toml", "frame 3", "sigma"]),
+        "generate: unwritable output": (["generate", "scara", "--out", str(afile)], ["cannot write", "a_file"]),
+        "import-par: missing file": (["import-par", str(d / "none.par")], ["none.par", "file not found"]),
+        "import-par: unwritable output": (["import-par", str(PAR), "-o", str(afile / "x.toml")],
+                                          ["cannot write", "x.toml"]),
+        "import-urdf: malformed": (["import-urdf", str(d / "bad.urdf")], ["bad.urdf", "line 1", "malformed XML"]),
+        "export-par: unknown robot": (["export-par", "no_such_robot"], ["no such robot"]),
+        "export-par: unwritable output": (["export-par", "scara", "-o", str(afile / "x.par")], ["cannot write", "x.par"]),
+        "identify: unknown robot": (["identify", "no_such_robot", good], ["no such robot"]),
+        "identify: missing data": (["identify", "scara", str(d / "missing.csv")], ["missing.csv", "file not found"]),
+        "identify: NaN in data": (["identify", "scara", nan], ["nan.csv", "rows 11", "q2", "NaN"]),
+        "identify: wrong robot for data": (["identify", "rx90", good], ["good.csv", "q*", "tau*", "6 joints"]),
+        "identify: bad --payload": (["identify", "scara", good, "--loaded", good, "--payload", "M5"],
+                                    ["--payload", "NAME=VALUE"]),
+        "identify: --payload on a robot without payload": (["identify", "scara", good, "--loaded", good,
+                                                             "--payload", "M5=1"], ["--payload M5", "not a payload"]),
+        "identify: bad --cutoff": (["identify", "scara", good, "--cutoff", "-5"], ["--cutoff -5", "positive"]),
+        "identify: bad --decimate": (["identify", "scara", good, "--decimate", "0"], ["--decimate 0"]),
+        "identify: unwritable --json": (["identify", "scara", good, "--json", out_under_file], ["cannot write", "out.json"]),
+        "identify: missing --validate": (["identify", "scara", good, "--validate", str(d / "v.csv")], ["v.csv"]),
+        "demo: bad --duration": (["demo", "--duration", "0"], ["--duration 0"]),
+    }
+
+
+CASES = list(_case(Path("/x")))
+SEVERAL = {"generate: bad robot file", "identify: wrong robot for data"}  # files with several problems
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_user_error_is_one_line_plus_hint(name, data, capsys):
+    argv, expect = _case(data)[name]
+    assert main(argv) == 2
+    cap = capsys.readouterr()
+    err = cap.err.rstrip("\n").splitlines()
+    assert "Traceback" not in cap.err
+    assert err[0].startswith("symoro-gen: error: ")
+    assert err[-1].startswith("hint: ") and len(err[-1]) > len("hint: ") + 10
+    if name not in SEVERAL:
+        assert len(err) == 2, cap.err  # what is wrong and where, then the hint
+    else:  # several problems: a header, one line per problem (file, where, field), the hint
+        assert re.fullmatch(r"symoro-gen: error: \d+ problems in (robot description|data):", err[0])
+        assert all(line.startswith("  - ") for line in err[1:-1]) and len(err) >= 4
+    for s in expect:
+        assert s in "\n".join(err[:-1]), (s, err)
+    assert not (data / "gen").exists() and not (data / "a_file" / "out.json").exists()
+
+
+def test_debug_adds_the_traceback(data, capsys):
+    argv = ["identify", "scara", str(data / "nan.csv")]
+    assert main(["--debug"] + argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("Traceback (most recent call last)") and "DataFileError" in err
+    tail = err.rstrip("\n").splitlines()[-2:]
+    assert tail[0].startswith("symoro-gen: error: ") and "nan.csv" in tail[0] and tail[1].startswith("hint: ")
+    assert main(argv + ["--debug"]) == 2  # also accepted after the command
+    assert "Traceback" in capsys.readouterr().err
+
+
+def test_several_problems_all_listed(data, capsys):
+    bad = data / "two.toml"
+    text = (ROOT / "robots" / "scara.toml").read_text().replace("sigma = 1", "sigma = 7").replace("ant = 2", "ant = 5")
+    bad.write_text(text)
+    assert main(["generate", str(bad), "--out", str(data / "gen")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert re.fullmatch(r"symoro-gen: error: \d+ problems in robot description:", err[0])
+    assert any("sigma" in x for x in err[1:-1]) and any("ant" in x for x in err[1:-1])
+    assert "robot-file" in err[-1]
+
+
+def test_unexpected_failure_is_an_internal_error(monkeypatch, capsys):
+    def boom(args):
+        raise RuntimeError("something broke\nsecond line")
+
+    monkeypatch.setattr(cli, "cmd_export_par", boom)
+    assert main(["export-par", "scara"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["symoro-gen: internal error: RuntimeError: something broke",
+                   "hint: this is a bug in symoro-gen; rerun with --debug and report the traceback"]
+    assert main(["--debug", "export-par", "scara"]) == 1
+    assert "Traceback" in capsys.readouterr().err
+
+
+def test_interrupt(monkeypatch, capsys):
+    def stop(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "cmd_export_par", stop)
+    assert main(["export-par", "scara"]) == 130
+    assert capsys.readouterr().err == "symoro-gen: interrupted\n"
+
+
+def test_warnings_are_one_line(data, capsys):
+    """A data warning (unit check) prints as one ``symoro-gen: warning:`` line, not a source excerpt."""
+    a = np.loadtxt(data / "good.csv", delimiter=",", skiprows=1)
+    a[:, 1] *= 180 / np.pi  # q1 in degrees
+    f = data / "deg.csv"
+    np.savetxt(f, a, delimiter=",", header=(data / "good.csv").read_text().splitlines()[0], comments="")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, "-m", "symoro_gen", "--quiet", "identify", "scara", str(f), "--method", "ols"],
+                       capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 0, r.stderr
+    err = r.stderr
+    lines = [x for x in err.splitlines() if "q1" in x]
+    assert lines and all(x.startswith("symoro-gen: warning: ") for x in lines)
+    assert "warnings.warn" not in err
+
+
+def _commands():
+    import argparse
+
+    parser = cli.build_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return sub.choices
+
+
+def test_diagnose_bad_input(data, capsys):
+    if "diagnose" not in _commands():
+        pytest.skip("the diagnose command is not there yet (issue 4)")
+    cases = [(["diagnose", "scara", str(data / "missing.csv")], "missing.csv"),
+             (["diagnose", "scara", str(data / "nan.csv")], "nan.csv"),
+             (["diagnose", "no_such_robot", str(data / "good.csv")], "no such robot")]
+    for argv, what in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.rstrip("\n").splitlines()
+        assert err[0].startswith("symoro-gen: error: ") and what in err[0] and err[-1].startswith("hint: ")
