@@ -185,7 +185,7 @@ def singular_values_figure(name: str, s: np.ndarray, *, title: str, caption: str
     floor = s[pos].min() * 0.1 if pos.any() else 1e-16
     ax.semilogy(np.arange(1, s.size + 1), np.where(pos, s, floor), "o-", color=AFTER, ms=3.5, lw=1.0)
     ax.set_xlabel("index of the singular value", fontsize=9)
-    ax.set_ylabel("singular value (unit-norm columns)", fontsize=9)
+    ax.set_ylabel("singular value", fontsize=9)
     ax.grid(True, which="both", color="#e0e0e0", lw=0.6)
     ax.tick_params(labelsize=8)
     ax.set_title(title, fontsize=10, loc="left")

@@ -1,0 +1,128 @@
+"""Reports with gains and a payload (LWR4 torque-sensor calibration, simulated, truth known) and of a
+residual diagnosis (RX-90 with a Stribeck friction its model lacks)."""
+import json
+import re
+
+import numpy as np
+import pytest
+
+from .pngcheck import IMG_RE, decode_png, embedded_images, ink_stats
+from .test_markdown import LINK_RE, _md_table
+
+pytest.importorskip("matplotlib", reason="report plots need matplotlib (the 'plots' extra)")
+
+LWR4_DURATION_S = 5.0
+
+
+def _write_csv(path, tr):
+    n = tr.q.shape[1]
+    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
+    np.savetxt(path, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=head, comments="")
+
+
+def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path):
+    """identify --gains sensor with a known payload mass and loaded validation data: the gains table,
+    the known mass and the mass re-identified on the validation data (Table IV), four plots."""
+    from symoro_gen.cli import main
+    from symoro_gen.demo import PAYLOAD_MASS, TRUE_GAINS, demo_payload
+    from symoro_gen.modelcache import model_for
+    from symoro_gen.simulate.recording import simulate_recording
+    from symoro_gen.simulate.trajectories import fourier_trajectory
+
+    rng = np.random.default_rng(1)
+    robot, model = model_for("lwr4")
+    chi = model.nominal_parameters()
+    files = []
+    for k, loaded in enumerate((False, True, True)):
+        t, q, dq, ddq = fourier_trajectory(robot.n_joints, LWR4_DURATION_S, 0.005, rng, vmax=1.5, amax=6.0)
+        tr = simulate_recording(model, t, q, dq, ddq, chi, chi_payload=demo_payload() if loaded else None,
+                                gains=TRUE_GAINS, noise_q=2e-5, noise_tau=0.02, rng=rng, loaded=loaded)
+        files.append(tmp_path / f"rec{k}.csv")
+        _write_csv(files[-1], tr)
+    out = tmp_path / "gains.md"
+    assert main(["--quiet", "identify", "lwr4", str(files[0]), "--loaded", str(files[1]), "--payload",
+                 f"M8={PAYLOAD_MASS}", "--gains", "sensor", "--validate", str(files[2]), "--validate-loaded",
+                 "--json", str(tmp_path / "gains.json"), "--report", str(out)]) == 0
+    res = json.loads((tmp_path / "gains.json").read_text())
+    md = out.read_text(encoding="utf-8")
+    gains = _md_table(md, "Gain")
+    assert [r[0] for r in gains] == [f"g{j}" for j in range(1, 8)]
+    assert [float(r[2]) for r in gains] == pytest.approx(TRUE_GAINS, rel=5e-3)
+    assert [float(r[4]) for r in gains] == pytest.approx(res["gains"]["rel_std_pct"], abs=0.006)
+    assert f"Payload mass in the identification: M8 = {PAYLOAD_MASS:g} kg (known, weighed)" in md
+    m = re.search(r"Payload mass re-identified on the validation data, robot known \(Table IV\): M8 = ([0-9.]+) kg", md)
+    assert m and float(m.group(1)) == pytest.approx(PAYLOAD_MASS, rel=0.01)
+    payload_rows = _md_table(md, "Parameter")  # the first parameter table is the payload's
+    assert [r[0] for r in payload_rows] == list(model.PAYLOAD_NAMES)
+    assert payload_rows[-1][1:] == ["4.6136", "-", "-", "known"]
+    errs = {r[0]: [float(x) for x in r[1:]] for r in _md_table(md, "Data")}
+    assert set(errs) == {"identification (as fitted)", "identification data (unloaded)",
+                         "identification data (loaded)", "validation data (loaded)"}
+    assert errs["validation data (loaded)"] == pytest.approx(res["validation"]["rel_err"], abs=6e-5)
+    links = LINK_RE.findall(md)
+    assert [s.split("/")[-1] for s in links] == [
+        "torque-identification-data-unloaded.png", "torque-identification-data-loaded.png",
+        "torque-validation-data-loaded.png", "singular-values.png"]
+    for s in links:
+        rgb = decode_png((tmp_path / s).read_bytes())
+        assert rgb.shape[1] == 1100 and ink_stats(rgb)[0] > 0.03
+
+
+@pytest.fixture(scope="module")
+def diagnosis():
+    """diagnose() on RX-90 recordings with a Stribeck friction on joint 2 (0-based 1) the model lacks."""
+    dg = pytest.importorskip("symoro_gen.diagnostics", reason="diagnostics package not available")
+    from symoro_gen.modelcache import model_for
+    from symoro_gen.preprocessing.trajectory import Trajectory
+    from symoro_gen.simulate.parameters import random_physical_parameters
+    from symoro_gen.simulate.recording import true_torques
+    from symoro_gen.simulate.trajectories import fourier_trajectory
+
+    rng = np.random.default_rng(5)
+    robot, model = model_for("rx90")
+    p = random_physical_parameters(robot, rng)
+    chi = getattr(p, "chi_std", p)
+    trs = []
+    for k in range(2):
+        t, q, dq, ddq = fourier_trajectory(robot.n_joints, 8.0, 0.002, rng)
+        tau = true_torques(model, q, dq, ddq, chi)
+        qm, tm = dg.inject_effect("stribeck", t, q, dq, ddq, tau, joint=1, Fst=3.0, vs=0.1)
+        trs.append(Trajectory(t, qm + rng.normal(0, 1e-5, q.shape), tm + rng.normal(0, 0.05, tau.shape),
+                              source=f"simulated {k}"))
+    return dg.diagnose(model, trs[:1], validation=trs[1:], method="wls", candidates=("stribeck", "offset", "drift"))
+
+
+def test_diagnosis_report_plots_the_residual_before_and_after_each_effect(diagnosis, tmp_path):
+    from symoro_gen.report import diagnosis_plot_series, write_report
+
+    rep = diagnosis
+    assert [(e.kind, e.joint) for e in rep.effects][:1] == [("stribeck", 1)]
+    html = write_report(tmp_path / "diag.html", diagnosis=rep).read_text(encoding="utf-8")
+    # the residual series the plots are drawn from are the ones the diagnosis reports its errors of
+    ser = diagnosis_plot_series(rep)
+    assert ser is not None and len(ser["rounds"]) == len(rep.effects) + 1
+    for rounds, y, joint, key in ((ser["rounds"], ser["Y"], ser["joint"], ""), (ser["rounds"], ser["Yv"],
+                                                                                 ser["jointv"], "validation_")):
+        i = 0 if key == "" else 1
+        for r, errs in ((rounds[0][i], getattr(rep, f"before_{key}rel_err")), (rounds[-1][i], getattr(rep, f"after_{key}rel_err"))):
+            e = np.sqrt(np.bincount(joint, r ** 2) / np.bincount(joint, y ** 2))
+            assert e == pytest.approx(errs, rel=1e-6)
+    # one residual figure per effect, identification and validation panels, non-blank
+    ids = re.findall(r'<figure id="fig-([a-z0-9-]+)">', html)
+    assert ids[0] == "diagnosis-errors"
+    assert [f"diagnosis-effect-{i}-{e.kind}" for i, e in enumerate(rep.effects, 1)] == \
+           [s for s in ids if s.startswith("diagnosis-effect-")]
+    assert ids[-2:] == ["diagnosis-torque-identification", "diagnosis-torque-validation"]
+    imgs = dict(zip(ids, embedded_images(html)))
+    png, w, h = imgs["diagnosis-effect-1-stribeck"]
+    rgb = decode_png(png)
+    assert rgb.shape == (h, w, 3) == (390, 1100, 3)
+    assert ink_stats(rgb)[0] > 0.03
+    # tables: errors before/after and the effect with its parameters
+    text = IMG_RE.sub("", html)
+    assert "Effects added, in order" in text and "<td>stribeck</td><td>joint 2</td>" in text
+    for lab, errs in (("validation, before", rep.before_validation_rel_err), ("validation, after", rep.after_validation_rel_err)):
+        row = re.search(rf"<td>{lab}</td>((?:<td class=\"num\">[^<]*</td>)+)", text).group(1)
+        assert [float(x) for x in re.findall(r">([^<]*)<", row) if x] == pytest.approx(errs, abs=6e-5)
+    md = write_report(tmp_path / "diag.md", diagnosis=rep).read_text(encoding="utf-8")
+    assert "diag_files/diagnosis-effect-1-stribeck.png" in md
