@@ -17,7 +17,7 @@ from .document import (REPORT_SUFFIXES, Heading, ItemList, Paragraph, Preformatt
                        report_kind, write_report_files)
 from .plots import (DPI, MAX_POINTS, N_BINS, error_bars_figure, require_matplotlib, residual_figure,
                     singular_values_figure, torque_figure)
-from .tables import (_dedupe, drive_gains_table, fmt_err, fmt_pct, fmt_value, gains_table, parameter_table,
+from .tables import (unique_in_order, drive_gains_table, fmt_pct, fmt_value, gains_table, parameter_table,
                      payload_mass_text, payload_table, reference_table, rel_err_table, result_overview,
                      warnings_block)
 
@@ -35,6 +35,8 @@ def _labelled(systems, default: str) -> list[tuple[str, object]]:
         return [(str(k), v) for k, v in systems.items() if v is not None]
     if hasattr(systems, "W") and hasattr(systems, "Y"):
         return [(default, systems)]
+    if isinstance(systems, tuple) and len(systems) == 2 and isinstance(systems[0], str):
+        return [(systems[0], systems[1])] if systems[1] is not None else []
     out = []
     items = list(systems)
     for k, s in enumerate(items):
@@ -395,7 +397,7 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
     if reference:
         B.append(Heading("Reference"))
         B.append(reference_table(reference))
-    warns = _dedupe(list(getattr(result, "warnings", ()) if result is not None else ())
+    warns = unique_in_order(list(getattr(result, "warnings", ()) if result is not None else ())
                     + list(getattr(drive, "warnings", ()) if drive is not None else ())
                     + list(getattr(payload, "warnings", ()) if payload is not None else ())
                     + list(getattr(diagnosis, "warnings", ()) if diagnosis is not None else ()))

@@ -148,7 +148,7 @@ p.caption { font-weight: bold; margin: 2px 0 4px 0; }
 table { border-collapse: collapse; font-size: 13px; }
 th, td { border: 1px solid #c8c8c8; padding: 2px 8px; }
 th { background: #eef1f5; }
-td.num, th.num { text-align: right; font-variant-numeric: tabular-nums; }
+td.num, th.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
 tr.poor td { background: #fff3e0; }
 tr.added td { background: #e8f5e9; }
 figure { margin: 10px 0 18px 0; }

@@ -15,7 +15,7 @@ from .document import Heading, ItemList, Paragraph, Table, render_html_fragment
 
 __all__ = ["fmt_value", "fmt_pct", "parameter_table", "gains_table", "drive_gains_table", "rel_err_table",
            "payload_table", "reference_table", "warnings_block", "result_blocks", "result_html", "gains_html",
-           "drive_gains_html", "POOR_PCT", "is_mass_name"]
+           "drive_gains_html", "POOR_PCT", "is_mass_name", "unique_in_order"]
 
 #: %sigma above which a parameter row is marked as poorly identified (the estimators' warning level)
 POOR_PCT = 30.0
@@ -176,7 +176,7 @@ def warnings_block(warnings: Sequence[str]) -> list:
     return [Heading("Warnings", 3), ItemList(tuple(str(w) for w in warnings), ordered=True)]
 
 
-def _dedupe(items) -> tuple[str, ...]:
+def unique_in_order(items) -> tuple[str, ...]:
     out: list[str] = []
     for w in items:
         if w not in out:
