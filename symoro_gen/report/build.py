@@ -21,7 +21,7 @@ from .tables import (unique_in_order, drive_gains_table, fmt_pct, fmt_value, gai
                      payload_mass_text, payload_table, reference_table, rel_err_table, result_overview,
                      warnings_block)
 
-__all__ = ["build_report", "write_report", "check_report_path", "scaled_singular_values", "diagnosis_plot_series"]
+__all__ = ["build_report", "write_report", "check_report_path", "diagnosis_html", "scaled_singular_values", "diagnosis_plot_series"]
 
 #: best candidates listed per round of a diagnosis
 N_CANDIDATES = 10
@@ -248,6 +248,16 @@ def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int,
                            ser["Yv"], ser["Yv"] - rv, ser["jointv"], n, rel_err=diag.after_validation_rel_err,
                            max_points=max_points, dpi=dpi))
     return B
+
+
+def diagnosis_html(diagnosis) -> str:
+    """HTML tables of a :class:`~symoro_gen.diagnostics.ResidualReport` (errors before/after, effects
+    added, best candidates per round, structure left, warnings), without plots: for ``_repr_html_``."""
+    from .document import render_html_fragment
+
+    blocks = _diagnosis_blocks(diagnosis, False, MAX_POINTS, N_BINS, DPI, [])
+    blocks += warnings_block(getattr(diagnosis, "warnings", ()))
+    return '<div class="symoro-gen-diagnosis">' + render_html_fragment(blocks) + "</div>"
 
 
 # ---- the report ------------------------------------------------------------------------------------

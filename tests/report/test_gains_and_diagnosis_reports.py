@@ -126,3 +126,19 @@ def test_diagnosis_report_plots_the_residual_before_and_after_each_effect(diagno
         assert [float(x) for x in re.findall(r">([^<]*)<", row) if x] == pytest.approx(errs, abs=6e-5)
     md = write_report(tmp_path / "diag.md", diagnosis=rep).read_text(encoding="utf-8")
     assert "diag_files/diagnosis-effect-1-stribeck.png" in md
+
+
+def test_diagnosis_html_tables_without_plots(diagnosis):
+    from symoro_gen.report import diagnosis_html
+
+    from .test_repr_html import parse
+
+    html = diagnosis_html(diagnosis)
+    assert "<img" not in html
+    p = parse(html)
+    errs = next(t for t in p.tables if t[0][1][0] == "Data")
+    assert [r[1][0] for r in errs[1:]] == ["identification, before", "identification, after", "validation, before",
+                                          "validation, after"]
+    assert [float(x) for x in errs[4][1][1:]] == pytest.approx(diagnosis.after_validation_rel_err, abs=6e-5)
+    effects = next(t for t in p.tables if t[0][1][:3] == ["#", "Effect", "Where"])
+    assert [(c[1], c[2]) for _, c in effects[1:]] == [(e.kind, f"joint {e.joint + 1}") for e in diagnosis.effects]
