@@ -188,6 +188,7 @@ _OPEN: "weakref.WeakSet" = weakref.WeakSet()
 def close_all() -> None:
     """Close every bar still open (the command line calls it before printing an error)."""
     for bar in list(_OPEN):
+        _OPEN.discard(bar)
         try:
             bar.close()
         except (ValueError, OSError):  # stream already closed

@@ -1,0 +1,302 @@
+"""Run the documentation: every command and code block of ``docs/*.md`` is executed, in order, in a
+scratch copy of the repository's layout, so the docs cannot rot.
+
+Markdown conventions (see ``docs/README.md``)
+---------------------------------------------
+* ```` ```console ```` blocks: lines starting with ``$ `` are shell commands (a trailing ``\\``
+  continues a command on the next line); the lines after a command, up to the next ``$ ``, are its
+  expected output. Each expected line must match one line of the actual output (stdout and stderr
+  merged), in order, after stripping blanks; ``...`` inside a line matches anything, a line that
+  is only ``...`` stands for lines left out. A command must exit with status 0 unless marked.
+* ```` ```python ```` blocks run as standalone scripts (``python block.py``): every block has its
+  own imports; they may ``assert``.
+* An HTML comment on the line before a block marks it (invisible on GitHub)::
+
+      <!-- test: skip=REASON -->     not run (the reason is required)
+      <!-- test: realdata -->        needs ../shared/data (skipped when absent)
+      <!-- test: exit=2 -->          the command(s) must exit with this status
+      <!-- test: needs=diagnose -->  needs that symoro-gen command (skipped, reported pending, until it lands)
+      <!-- test: file=PATH -->       the block's text is written to PATH (a robot file, a URDF...)
+      <!-- test: output -->          expected output of the preceding python block (same matching rules)
+      <!-- test: schema=identify --> the JSON written by the command's --json must validate against
+                                     docs/schemas/identify.schema.json
+
+  Several marks are separated by ``;``.
+
+The scratch workspace mirrors a checkout: ``robots/`` (a copy), ``generated/`` (a copy, where
+``symoro-gen generate`` writes: ``SYMORO_GENERATED``), ``../shared/data`` (a link to the real
+recordings when present), and ``symoro-gen`` / ``python`` on ``PATH`` running this checkout.
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs"
+SHARED_DATA = ROOT.parent / "shared" / "data"
+RUNNABLE = ("console", "python")
+SHELL_LANGS = ("sh", "bash", "shell", "zsh")
+_MARK_RE = re.compile(r"^\s*<!--\s*test:\s*(.*?)\s*-->\s*$")
+_FENCE_RE = re.compile(r"^(\s*)(`{3,})\s*([\w+-]*)\s*(.*)$")
+
+
+@dataclass
+class Block:
+    """One fenced block of a Markdown file."""
+
+    doc: Path
+    line: int  # 1-based line of the opening fence
+    lang: str
+    text: str
+    marks: dict = field(default_factory=dict)
+
+    @property
+    def where(self) -> str:
+        return f"{self.doc.relative_to(ROOT)}:{self.line}"
+
+
+def parse_marks(text: str) -> dict:
+    marks: dict = {}
+    for item in (x.strip() for x in text.split(";")):
+        if not item:
+            continue
+        k, _, v = item.partition("=")
+        marks[k.strip()] = v.strip() if _ else True
+    return marks
+
+
+def parse_blocks(path: Path) -> list[Block]:
+    """The fenced blocks of ``path`` with the marks of the comment just before each."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    blocks: list[Block] = []
+    i = 0
+    pending: dict = {}
+    while i < len(lines):
+        m = _MARK_RE.match(lines[i])
+        if m:
+            pending = parse_marks(m.group(1))
+            i += 1
+            continue
+        f = _FENCE_RE.match(lines[i])
+        if f:
+            fence, lang = f.group(2), f.group(3).lower()
+            start = i
+            body = []
+            i += 1
+            while i < len(lines) and not lines[i].strip().startswith(fence):
+                body.append(lines[i])
+                i += 1
+            blocks.append(Block(path, start + 1, lang, "\n".join(body) + "\n", pending))
+            pending = {}
+            i += 1
+            continue
+        if lines[i].strip():
+            pending = {}  # a mark applies to the block right after it only
+        i += 1
+    return blocks
+
+
+@dataclass
+class Command:
+    cmd: str
+    expected: list[str]
+    line: int
+
+
+def parse_console(block: Block) -> list[Command]:
+    """Commands (``$ ``) of a console block with their expected output lines."""
+    cmds: list[Command] = []
+    lines = block.text.splitlines()
+    i = 0
+    while i < len(lines):
+        ln = lines[i]
+        if ln.startswith("$ "):
+            cmd = ln[2:]
+            start = i
+            while cmd.endswith("\\") and i + 1 < len(lines):
+                i += 1
+                cmd = cmd[:-1].rstrip() + " " + lines[i].strip()
+            cmds.append(Command(cmd, [], block.line + 1 + start))
+        elif cmds:
+            cmds[-1].expected.append(ln)
+        elif ln.strip():
+            raise AssertionError(f"{block.where}: console block text before the first `$ ` command: {ln!r}")
+        i += 1
+    return cmds
+
+
+def _line_regex(expected: str) -> re.Pattern:
+    parts = [re.escape(p) for p in expected.strip().split("...")]
+    return re.compile(".*".join(parts))
+
+
+def match_output(expected: list[str], actual: str) -> str | None:
+    """None when every expected line matches an actual line, in order; else what is missing."""
+    act = [a.strip() for a in actual.splitlines()]
+    k = 0
+    for e in expected:
+        e = e.strip()
+        if not e or e == "...":
+            continue
+        rx = _line_regex(e)
+        while k < len(act) and not rx.fullmatch(act[k]):
+            k += 1
+        if k == len(act):
+            return e
+        k += 1
+    return None
+
+
+class Workspace:
+    """A scratch checkout layout with ``symoro-gen`` and ``python`` on PATH."""
+
+    def __init__(self, base: Path):
+        self.base = base
+        self.cwd = base / "repo"
+        self.cwd.mkdir(parents=True)
+        shutil.copytree(ROOT / "robots", self.cwd / "robots")
+        shutil.copytree(ROOT / "generated", self.cwd / "generated",
+                        ignore=shutil.ignore_patterns("__pycache__", ".*"))
+        if SHARED_DATA.is_dir():
+            (base / "shared").mkdir()
+            (base / "shared" / "data").symlink_to(SHARED_DATA)
+        bin_ = base / "bin"
+        bin_.mkdir()
+        py = shlex.quote(sys.executable)
+        for name, line in (("symoro-gen", f'exec {py} -m symoro_gen "$@"'), ("python", f'exec {py} "$@"'),
+                           ("python3", f'exec {py} "$@"')):
+            p = bin_ / name
+            p.write_text(f"#!/bin/sh\n{line}\n")
+            p.chmod(0o755)
+        self.env = dict(os.environ)
+        self.env.update(
+            PATH=f"{bin_}{os.pathsep}{os.environ.get('PATH', '')}",
+            PYTHONPATH=str(ROOT),
+            SYMORO_GENERATED=str(self.cwd / "generated"),
+            SYMORO_ROBOTS=str(self.cwd / "robots"),
+            OPENBLAS_NUM_THREADS="1",
+            MPLBACKEND="Agg",
+            COLUMNS="120",
+        )
+        self.env.pop("SYMORO_PROGRESS", None)
+        self.n_py = 0
+
+    @property
+    def has_data(self) -> bool:
+        return (self.base / "shared" / "data").is_dir()
+
+    def sh(self, cmd: str, timeout: float) -> subprocess.CompletedProcess:
+        return subprocess.run(["bash", "-c", cmd], cwd=self.cwd, env=self.env, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True, timeout=timeout)
+
+    def python(self, code: str, timeout: float) -> subprocess.CompletedProcess:
+        self.n_py += 1
+        f = self.base / f"doc_block_{self.n_py}.py"
+        f.write_text(code)
+        return subprocess.run([sys.executable, str(f)], cwd=self.cwd, env=self.env, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True, timeout=timeout)
+
+
+def available_commands() -> set[str]:
+    import argparse
+
+    from symoro_gen.cli import build_parser
+
+    (sub,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+    return set(sub.choices)
+
+
+def json_out_of(cmd: str) -> str | None:
+    toks = shlex.split(cmd)
+    for a, b in zip(toks, toks[1:]):
+        if a == "--json":
+            return b
+    return None
+
+
+@dataclass
+class RunLog:
+    ran: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+
+
+def run_doc(path: Path, ws: Workspace, *, validate_json, timeout: float = 300.0) -> RunLog:
+    """Run every block of ``path`` in ``ws``; raise AssertionError at the first failure."""
+    log = RunLog()
+    commands = available_commands()
+    last_py_out: str | None = None
+    for b in parse_blocks(path):
+        marks = b.marks
+        if b.lang in SHELL_LANGS:
+            raise AssertionError(f"{b.where}: use ```console (with `$ ` prompts) so the test runs it, not ```{b.lang}")
+        if "skip" in marks:
+            if marks["skip"] is True or not str(marks["skip"]).strip():
+                raise AssertionError(f"{b.where}: `test: skip` needs a reason (skip=...)")
+            log.skipped.append(f"{b.where}: skip ({marks['skip']})")
+            continue
+        if marks.get("realdata") and not ws.has_data:
+            log.skipped.append(f"{b.where}: real data absent ({SHARED_DATA})")
+            last_py_out = None
+            continue
+        need = marks.get("needs")
+        if need and need not in commands:
+            log.skipped.append(f"{b.where}: pending (`symoro-gen {need}` is not there yet)")
+            last_py_out = None
+            continue
+        if "file" in marks:
+            dst = ws.cwd / marks["file"]
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            dst.write_text(b.text)
+            log.ran.append(f"{b.where}: wrote {marks['file']}")
+            continue
+        if marks.get("output"):
+            if last_py_out is None:
+                raise AssertionError(f"{b.where}: `test: output` block without a python block run before it")
+            miss = match_output(b.text.splitlines(), last_py_out)
+            if miss is not None:
+                raise AssertionError(f"{b.where}: expected output line not found: {miss!r}\n--- actual ---\n{last_py_out}")
+            continue
+        if b.lang == "python":
+            r = ws.python(b.text, timeout)
+            if r.returncode != 0:
+                raise AssertionError(f"{b.where}: python block failed (status {r.returncode}):\n{r.stdout}")
+            last_py_out = r.stdout
+            log.ran.append(f"{b.where}: python")
+            continue
+        if b.lang != "console":
+            continue
+        want = int(marks.get("exit", 0))
+        for c in parse_console(b):
+            r = ws.sh(c.cmd, timeout)
+            if r.returncode != want:
+                raise AssertionError(f"{b.where} (line {c.line}): `{c.cmd}` exited {r.returncode}, expected {want}:\n"
+                                     f"{r.stdout}")
+            miss = match_output(c.expected, r.stdout)
+            if miss is not None:
+                raise AssertionError(f"{b.where} (line {c.line}): `{c.cmd}`: expected output line not found: "
+                                     f"{miss!r}\n--- actual ---\n{r.stdout}")
+            if marks.get("schema"):
+                out = json_out_of(c.cmd)
+                if out is None:
+                    raise AssertionError(f"{b.where}: `schema=` mark on a command without --json: {c.cmd}")
+                validate_json(ws.cwd / out, marks["schema"], f"{b.where} (line {c.line})")
+            log.ran.append(f"{b.where} (line {c.line}): {c.cmd}")
+        last_py_out = None
+    return log
+
+
+def strict_json(path: Path):
+    """Parse JSON refusing NaN/Infinity (not JSON)."""
+
+    def bad(x):
+        raise ValueError(f"{path}: {x} is not valid JSON")
+
+    return json.loads(Path(path).read_text(), parse_constant=bad)
