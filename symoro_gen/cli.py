@@ -125,7 +125,10 @@ def cmd_export_urdf(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser; with ``command`` (the sub-command about to run) the other commands whose
+    registration imports heavy modules (identify, diagnose: SciPy...) are left out, which makes a
+    light command start in well under a second."""
     p = argparse.ArgumentParser(prog="symoro-gen", description=__doc__.splitlines()[0])
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress, no chatter")
@@ -163,7 +166,8 @@ def build_parser() -> argparse.ArgumentParser:
     ep.set_defaults(func=cmd_export_par)
 
     for extra in _EXTRA_COMMANDS:
-        extra(sub)
+        if command is None or _EXTRA_NAMES.get(extra) == command:
+            extra(sub)
     for sp_ in sub.choices.values():  # also accepted after the command name
         opts = {o for a in sp_._actions for o in a.option_strings}
         if "--quiet" not in opts:
@@ -197,6 +201,17 @@ def _diagnose_parser(sub):
 
 
 _EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser]
+_EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _demo_parser: "demo"}
+_LIGHT_COMMANDS = ("generate", "import-par", "import-urdf", "export-par", "export-urdf")
+
+
+def _command_of(argv) -> str | None:
+    """The sub-command named in ``argv`` (first word after the global flags), if any."""
+    for a in argv:
+        if a in ("--debug", "--quiet", "-q"):
+            continue
+        return a if not a.startswith("-") else None
+    return None
 
 
 def _check_options(args) -> None:
@@ -296,7 +311,9 @@ def _report_error(exc: BaseException, args, internal: bool) -> None:
 def main(argv=None) -> int:
     from .progress import progress_mode
 
-    parser = build_parser()
+    cmd = _command_of(sys.argv[1:] if argv is None else argv)
+    light = cmd in _LIGHT_COMMANDS or cmd in _EXTRA_NAMES.values()
+    parser = build_parser(cmd if light else None)
     args = parser.parse_args(argv)
     try:
         with warnings.catch_warnings():
