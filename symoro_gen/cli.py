@@ -8,6 +8,7 @@ it is a terminal (``SYMORO_PROGRESS=1`` forces them, ``=0`` or ``--quiet`` hides
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import traceback
 import warnings
@@ -18,6 +19,7 @@ from .errors import DataFileError, IdentificationError, ModelError, RobotFileErr
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1
 EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141  # as a shell reports a process killed by SIGPIPE
 
 
 class OptionError(SymoroError, ValueError):
@@ -320,7 +322,15 @@ def main(argv=None) -> int:
             warnings.formatwarning = _format_warning
             _check_options(args)
             with progress_mode("off" if args.quiet else "auto"):
-                return int(args.func(args) or 0)
+                status = int(args.func(args) or 0)
+            sys.stdout.flush()
+            return status
+    except BrokenPipeError:  # the reader went away (`symoro-gen ... | head`): stop quietly
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        except (OSError, ValueError, AttributeError):  # stdout is not a real file (tests)
+            pass
+        return EXIT_BROKEN_PIPE
     except (SymoroError, OSError, ValueError, TypeError) as exc:
         # bad input: robot or data files, options, paths (ValueError/TypeError: the library's checks
         # of arguments it was handed)

@@ -178,3 +178,13 @@ def test_diagnose_bad_input(data, capsys):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err.rstrip("\n").splitlines()
         assert err[0].startswith("symoro-gen: error: ") and what in err[0] and err[-1].startswith("hint: ")
+
+
+def test_closed_pipe_is_not_an_error():
+    """`symoro-gen ... | head`: the reader goes away; no error message, no traceback."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen([sys.executable, "-m", "symoro_gen", "export-par", "lwr4"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, env=env)
+    p.stdout.close()  # nobody reads
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141 and err == "", err
