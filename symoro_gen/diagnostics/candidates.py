@@ -5,7 +5,7 @@ effect has a non-linear parameter (Stribeck velocity, ripple order) the family h
 value of a 1-D search grid, and the search counts in the multiple-testing correction. Columns are
 evaluated on the full-rate band-pass signals and decimated in parallel with ``W`` (see
 :mod:`.frame`), except the two linearisations around the current fit (``elasticity``, ``gain``),
-which are evaluated on the decimated signals.
+which are evaluated on the decimated signals, and rebuilt around each new fit.
 
 Kinds (names as in the JSON output) and their columns on the rows of joint j (q, dq, ddq band-pass
 estimates from the measured positions; tau_hat the torque of the declared model fitted to the data,
@@ -17,9 +17,11 @@ since the start of the recording):
 ``load_friction``   ``|tau_hat,j| sign(dq_j)`` (dry friction growing with the transmitted torque)
 ``position_ripple`` ``sin(k q_j), cos(k q_j)``, search over the order k >= 2 within the decimation band
 ``spring``          ``s, s^2, s^3`` with ``s = (q_j - c_j) / h_j`` (mid-range, half-range of q_j)
-``elasticity``      ``-d tau_hat / d eps`` along ``q_j += eps tau_j`` (with its derivatives): the torque
-                    error of a position measured on the motor side, ``q_link = q_motor - tau/K``
-                    (LWR4 paper eq. 17) linearised in ``c_j = 1/K_j`` [rad/(N m)], on *every* joint's rows
+``elasticity``      ``(tau_hat(q - c tau_j e_j) - tau_hat(q)) / c`` (with the derivatives of tau_j on dq, ddq,
+                    and the Coulomb term of joint j by its own secant): the torque error of a position
+                    measured on the motor side, ``q_link = q_motor - tau/K`` (LWR4 paper eq. 17), as a
+                    secant in ``c_j = 1/K_j`` [rad/(N m)] searched on a signed log grid and refined, on
+                    *every* joint's rows
 ``time_delay``      ``-d tau_hat,j / dt`` (``tau_meas(t) = tau(t - d)`` to first order in the lag d [s]);
                     one family per joint and one for all joints (same lag)
 ``gain``            ``tau_hat_j`` (model torque of joint j): ``Y_j = tau_j / g_j`` gives
@@ -66,6 +68,16 @@ STRIBECK_NOISE_FLOOR = 5.0
 RIPPLE_ORDERS = (2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32)
 #: relative step of the central differences of the elasticity linearisation
 ELASTIC_STEP = 1e-6
+#: compliance grid of the elasticity search: +-ELASTIC_GRID values per sign, log-spaced, the largest
+#: deflecting the joint by ELASTIC_MAX_DEFLECTION [rad] at the 98th percentile of |tau_j|, the smallest
+#: ELASTIC_RANGE times less
+ELASTIC_GRID = 5
+ELASTIC_MAX_DEFLECTION = 0.05
+ELASTIC_RANGE = 300.0
+#: include the Coulomb secant in the elasticity column (off: at velocity reversals it is a sum of
+#: pulses that correlate with the Coulomb errors the velocity noise causes there, and gave false
+#: positives on noisy data; it matters only when Coulomb friction is large against the stiffness)
+ELASTIC_COULOMB = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,6 +127,9 @@ class Family:
     build_at : callable, optional
         ``build_at(frame, ctx, value) -> (r, p)`` for any value of a continuous searched parameter
         (refined between grid points once the family is chosen).
+    self_consistent : bool
+        The searched parameter is the coefficient itself (a secant column): after each fit the column
+        is rebuilt at the fitted coefficient (fixed point).
     """
 
     kind: str
@@ -131,6 +146,7 @@ class Family:
     placebo: bool = False
     info: tuple = ()
     build_at: Callable | None = None
+    self_consistent: bool = False
 
     @property
     def key(self) -> tuple:
@@ -190,6 +206,7 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
         raise ValueError(f"unknown candidate kind(s) {bad}; known: {', '.join(KINDS)}")
     n = frame.n_joints
     v98, qmin, qmax = _stats(frame)
+    tau98 = np.quantile(np.abs(frame.samples()["tau"]), 0.98, axis=0)
     dq_noise = np.max([ex.dq_noise for ex in frame.experiments], axis=0)
     T = max(float(ex.t[-1]) for ex in frame.experiments)
     T = T if T > 0 else 1.0
@@ -243,9 +260,19 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
 
             out.append(Family("spring", j, ("k1", "k2", "k3"), b_spr, reveal="q",
                               info=(("center", float(c)), ("half_range", float(h)))))
-        if "elasticity" in ks:
-            out.append(Family("elasticity", j, ("c",), lambda fr, ctx, j=j: [_elasticity_column(fr, ctx, j)],
-                              reveal="tau_hat", depends_on_fit=True))
+        if "elasticity" in ks and tau98[j] > 0:
+            c_hi = ELASTIC_MAX_DEFLECTION / tau98[j]
+            mags = np.geomspace(c_hi / ELASTIC_RANGE, c_hi, ELASTIC_GRID)
+            grid = tuple(float(x) for x in np.concatenate([-mags[::-1], mags]))
+
+            def b_el(fr, ctx, j=j, grid=grid):
+                return [_elasticity_smooth(fr, ctx, j, c) + _elasticity_coulomb(fr, ctx, j, c) for c in grid]
+
+            def b_el_at(fr, ctx, c, j=j):
+                return _elasticity_smooth(fr, ctx, j, c) + _elasticity_coulomb(fr, ctx, j, c)
+
+            out.append(Family("elasticity", j, ("c",), b_el, grid_label="c_search", grid=grid, reveal="tau_hat",
+                              depends_on_fit=True, build_at=b_el_at, self_consistent=True))
         if "time_delay" in ks:
             out.append(Family("time_delay", j, ("d",), lambda fr, ctx, j=j: [fr.full_rate_columns(
                 lambda ex: {j: _col(-ex.dtau_hat[:, j])}, 1)], reveal="dtau_hat", depends_on_fit=True))
@@ -314,10 +341,11 @@ def nuisance_columns(frame: Frame, names: Sequence[str], dq_noise: np.ndarray) -
 
 
 def placebo_families(frame: Frame, rng: np.random.Generator, per_joint: int, *, n_sines: int = 3) -> list[Family]:
-    """Placebo candidates: 2 columns of random smooth functions of time on one joint's rows (random
-    frequencies between ``1/T`` and the dynamics bandwidth). They have no physical meaning; an
-    effect must do better than all of them (a calibration of the null that makes no white-noise
-    assumption)."""
+    """Placebo candidates on each joint's rows, ``per_joint`` of each sort: 2 columns of random smooth
+    functions of time (random frequencies between ``1/T`` and the dynamics bandwidth), and 2 random
+    linear combinations of every joint's standardised position, velocity and acceleration. They have
+    no physical meaning; an effect must do better than all of them (a calibration of the null that
+    makes no white-noise assumption)."""
     out = []
     T = max(float(ex.t[-1]) for ex in frame.experiments) or 1.0
     fmax = max(ex.settings.dynamics_bandwidth_hz for ex in frame.experiments)
@@ -331,7 +359,29 @@ def placebo_families(frame: Frame, rng: np.random.Generator, per_joint: int, *, 
                     [np.sin(2 * math.pi * f[c][:, None] * ex.t[None, :] + ph[c][:, None]).sum(0) for c in range(2)],
                     1)}, 2)]
 
-            out.append(Family("placebo", j, ("p1", "p2"), b, variant=f"#{i + 1}", reveal="t", placebo=True))
+            out.append(Family("placebo", j, ("p1", "p2"), b, variant=f"time#{i + 1}", reveal="t", placebo=True))
+    # motion placebos: random combinations of every joint's standardised q, dq, ddq - as smooth and as
+    # locked to the (often repeated) excitation as the physical candidates, so a coincidental fit of a
+    # deterministic artefact that repeats in the validation data is not taken for an effect
+    S = frame.samples()
+    scale = {k: np.maximum(np.std(S[k], axis=0), 1e-300) for k in ("q", "dq", "ddq")}
+    center = {k: np.mean(S[k], axis=0) for k in ("q", "dq", "ddq")}
+    n = frame.n_joints
+    for j in range(n):
+        for i in range(per_joint):
+            coef = rng.standard_normal((2, 3, n))
+
+            def bm(fr, ctx, j=j, coef=coef):
+                def f(ex):
+                    cols = []
+                    for c in range(2):
+                        x = sum(((getattr(ex, k) - center[k]) / scale[k]) @ coef[c, a]
+                                for a, k in enumerate(("q", "dq", "ddq")))
+                        cols.append(x)
+                    return {j: np.stack(cols, 1)}
+                return [fr.full_rate_columns(f, 2)]
+
+            out.append(Family("placebo", j, ("p1", "p2"), bm, variant=f"motion#{i + 1}", reveal="t", placebo=True))
     return out
 
 
@@ -342,40 +392,70 @@ def _rows_by_sample(frame: Frame, j: int) -> np.ndarray:
 
 
 def _gain_column(frame: Frame, ctx: FitContext, j: int) -> np.ndarray:
-    pred = ctx.predictions[id(frame)]
+    """The declared model's torque of joint j on its rows (the smoothed ``tau_hat``, see
+    :func:`.frame.attach_model_torque`, rather than ``W chi`` whose acceleration noise is the residual's)."""
     X = np.zeros((frame.n_rows, 1))
     rows = frame.rows_of(j)
-    X[rows, 0] = pred[rows]
+    X[rows, 0] = frame.sig["tau_hat"][rows, j]
     return X
 
 
-def _elasticity_column(frame: Frame, ctx: FitContext, m: int) -> np.ndarray:
-    """``-d tau_hat/d eps`` (all joints' rows) along ``(q_m, dq_m, ddq_m) += eps (tau_m, dtau_m, ddtau_m)``.
+_UNSHIFTED: dict = {}   # one-entry cache of the unshifted model torque (frame, context) of the elasticity secant
 
-    Coulomb terms are left out of the derivative (sign(dq) has none almost everywhere)."""
+
+def _elasticity_smooth(frame: Frame, ctx: FitContext, m: int, c: float) -> np.ndarray:
+    """Secant ``(tau_hat(x - c d) - tau_hat(x)) / c`` of the model torque (all joints' rows, Coulomb terms
+    left out, see :func:`_elasticity_coulomb`) with ``x = (q, dq, ddq)`` and ``d`` = joint m's model
+    torque and its derivatives on joint m: the torque error of a link position ``q_m - c tau_m``
+    measured as ``q_m``. ``c -> 0`` gives the tangent ``-d tau_hat / d eps``."""
     S = frame.samples()
     q, dq, ddq = S["q"], S["dq"], S["ddq"]
     d0, d1, d2 = S["tau_hat"][:, m], S["dtau_hat"][:, m], S["ddtau_hat"][:, m]
     loaded = np.array([frame.experiments[e].loaded for e in S["experiment"]], bool)
-    h = ELASTIC_STEP / max(float(np.abs(d0).max()), 1e-12)
 
-    def shifted(sg):
-        a, b, c = q.copy(), dq.copy(), ddq.copy()
-        a[:, m] += sg * h * d0
-        b[:, m] += sg * h * d1
-        c[:, m] += sg * h * d2
-        out = model_torque(ctx.model, ctx.theta, a, b, c, False, skip_prefix=("FS",))
+    def torque(sg):
+        a, b, cc = q.copy(), dq.copy(), ddq.copy()
+        a[:, m] += sg * d0
+        b[:, m] += sg * d1
+        cc[:, m] += sg * d2
+        out = model_torque(ctx.model, ctx.theta, a, b, cc, False, skip_prefix=("FS",))
         if loaded.any():
-            out[loaded] = model_torque(ctx.model, ctx.theta, a[loaded], b[loaded], c[loaded], True,
+            out[loaded] = model_torque(ctx.model, ctx.theta, a[loaded], b[loaded], cc[loaded], True,
                                        skip_prefix=("FS",))
         return out
 
-    J = (shifted(1.0) - shifted(-1.0)) / (2 * h)   # (s, n)
+    if c == 0.0:
+        h = ELASTIC_STEP / max(float(np.abs(d0).max()), 1e-12)
+        J = -(torque(h) - torque(-h)) / (2 * h)
+    else:
+        key = (id(frame), id(ctx))
+        if _UNSHIFTED.get("key") != key:   # tau_hat(x) is the same for every joint and every c
+            _UNSHIFTED.clear()
+            _UNSHIFTED.update(key=key, tau=torque(0.0))
+        J = (torque(-c) - _UNSHIFTED["tau"]) / c
     X = np.zeros((frame.n_rows, 1))
     for j in range(frame.n_joints):
         rows = _rows_by_sample(frame, j)
-        X[rows, 0] = -J[:, j]
+        X[rows, 0] = J[:, j]
     return X
+
+
+def _coulomb_value(theta: dict, j: int) -> float:
+    for nm, v in theta.items():
+        if nm.startswith("FS") and nm[2:].rstrip("R") == str(j + 1):
+            return float(v)
+    return 0.0
+
+
+def _elasticity_coulomb(frame: Frame, ctx: FitContext, m: int, c: float) -> np.ndarray:
+    """Secant of the Coulomb term of joint m: with the link velocity ``dq_m - c dtau_m`` the torque has
+    ``FS_m sign(dq_m - c dtau_m)`` where the model has ``FS_m sign(dq_m)``; the column is their decimated
+    difference divided by c (the sign function has no useful tangent)."""
+    fs = _coulomb_value(ctx.theta, m)
+    if not ELASTIC_COULOMB or fs == 0.0 or c == 0.0:
+        return np.zeros((frame.n_rows, 1))
+    return frame.full_rate_columns(lambda ex: {m: _col(
+        fs * (_sign(ex.dq[:, m] - c * ex.dtau_hat[:, m]) - _sign(ex.dq[:, m])) / c)}, 1)
 
 
 def describe_params(family: Family, value, values: np.ndarray, std: np.ndarray) -> dict:

@@ -37,7 +37,7 @@ from .candidates import (ALL, REVEAL, Family, FitContext, describe_params, make_
                          placebo_families)
 from .frame import Frame, attach_model_torque, build_frame, common_bandwidth, split_holdout
 from .report import CandidateScore, Effect, ResidualReport
-from .stats import bonferroni, hac_covariance, hac_lag, wald_test
+from .stats import bonferroni, hac_covariance, hac_lag, segments_of, wald_test
 from .structure import residual_structure
 
 __all__ = ["diagnose", "SIGNIFICANCE", "MAX_EFFECTS", "HOLDOUT", "MIN_REL_IMPROVEMENT", "IDENTIFIABILITY_TOL"]
@@ -56,6 +56,12 @@ IDENTIFIABILITY_TOL = 1e-3
 N_PLACEBO = 3
 #: fixed-point passes re-linearising effects that depend on the fit (model torque, elasticity, gain)
 RELINEARISE_PASSES = 2
+#: a candidate column must spread over at least this many rows (participation ratio (sum x^2)^2 / sum x^4 of
+#: its part outside the model's span), and this share of the rows of one joint
+MIN_SUPPORT_ROWS = 20
+MIN_SUPPORT_SHARE = 0.05
+#: floor of 1 - h_ii in the HC3 scaling of the residuals
+MIN_ONE_MINUS_LEVERAGE = 0.05
 #: tolerance on log(value) of the continuous refinement of a searched parameter
 REFINE_XATOL = 0.02
 
@@ -107,9 +113,11 @@ def _design(names, A, Y, joint, Av, Yv, jv, n, rank_tol=1e-10, w_resid=None) -> 
     sig = _joint_sigma(resid0, joint, n, k)
     w = 1.0 / sig[joint]
     Aw = A * w[:, None]
-    U, s, Vt = np.linalg.svd(Aw, full_matrices=False)
+    R = np.linalg.qr(Aw, mode="r")           # Aw = Q R; R = Ur S Vt  =>  Aw Vt' S^-1 = Q Ur (orthonormal)
+    _, s, Vt = np.linalg.svd(R)
     rank = int(np.sum(s > rank_tol * s[0]))
-    U, s, Vt = U[:, :rank], s[:rank], Vt[:rank]
+    s, Vt = s[:rank], Vt[:rank]
+    U = Aw @ (Vt.T / s)
     pinv = (Vt.T / s) @ U.T
     theta = pinv @ (Y * w)
     e_w = Y * w - Aw @ theta
@@ -141,18 +149,21 @@ def _rel_err(e, y, joint, n):
 class _Scorer:
     """Evaluates candidate columns against the current design.
 
-    Identification: Wald test of the added coefficients with a HAC (Newey-West) covariance.
+    Identification: Wald test of the added coefficients with a HAC (Newey-West) covariance, residuals
+    scaled by ``1/(1 - h_ii)`` (HC3, robust to columns concentrated on a few high-leverage rows); the
+    p-value is the larger of that test and of the white-noise one.
     Validation: decrease ``dec`` of the weighted squared error; under "useless columns" its mean is
     ``-m`` (``m = E||prediction change||^2`` from the estimation noise of the coefficients) and its
     variance ``4 tr(S_v C_b)`` (HAC of the validation residual along the prediction change), so
     ``z = (dec + m) / (2 sqrt(tr(S_v C_b)))``."""
 
-    def __init__(self, D: _Design, F: Frame, V: Frame, n: int, ident_tol: float):
+    def __init__(self, D: _Design, F: Frame, V: Frame, n: int, ident_tol: float, min_support: float):
         self.D, self.F, self.V, self.n = D, F, V, n
+        self.min_support = min_support
         self.ident_tol = ident_tol
         self.r = F.n_rows
-        self.gid = F.system.joint * 100000 + F.row_experiment
-        self.gv = V.system.joint * 100000 + V.row_experiment
+        self.gid = segments_of(F.system.joint * 100000 + F.row_experiment, F.n_rows)
+        self.gv = segments_of(V.system.joint * 100000 + V.row_experiment, V.n_rows)
         self.yv = V.system.Y
         self.rv0 = np.bincount(V.system.joint, weights=D.e_v ** 2, minlength=n)
         self.lag = max(hac_lag(D.e_w[F.system.joint == j], F.row_experiment[F.system.joint == j])
@@ -161,6 +172,8 @@ class _Scorer:
         self.lag_v = max(hac_lag(evw[V.system.joint == j], V.row_experiment[V.system.joint == j])
                          for j in range(n))
         self.rel_before = _rel_err(D.e_v, self.yv, V.system.joint, n)
+        self.lev0 = np.einsum("ij,ij->i", D.U, D.U)
+        self.Avw = D.Av * D.wv[:, None]
 
     def rss(self, X: np.ndarray) -> float:
         """Weighted identification residual sum of squares with the columns X added."""
@@ -184,6 +197,11 @@ class _Scorer:
         ident = float(ratio.min())
         if ident < self.ident_tol:
             return f"already in the model (identifiability {ident:.1e})"
+        x2 = Xp * Xp
+        support = float(np.min(np.sum(x2, axis=0) ** 2 / np.maximum(np.sum(x2 * x2, axis=0), 1e-300)))
+        if support < self.min_support:
+            return (f"concentrated on too few rows (effective support {support:.0f} < {self.min_support:.0f}): "
+                    "no statistical evidence possible")
         G = Xp.T @ Xp
         try:
             Ginv = np.linalg.inv(G)
@@ -191,10 +209,20 @@ class _Scorer:
             return "its columns are collinear"
         b = Ginv @ (Xp.T @ D.e_w)
         e1 = D.e_w - Xp @ b
-        S = hac_covariance(Xp * e1[:, None], self.gid, self.lag)
-        Cb = Ginv @ S @ Ginv
+        # residuals scaled by 1/(1 - leverage) (HC3): a column concentrated on a few rows would otherwise
+        # fit them away and shrink its own variance
+        lev = np.einsum("ij,jk,ik->i", Xp, Ginv, Xp) + self.lev0
+        e3 = e1 / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0)
+        S = hac_covariance(Xp * e3[:, None], max_lag=self.lag, segments=self.gid)
         dof = max(self.r - D.rank - p, 1)
-        _, pval = wald_test(b, Cb * self.r / dof, dof)
+        # HAC covariance, but never smaller than the white-noise one (sigma^2 G^-1): in few effective
+        # samples the HAC estimate can be nearly singular and make any direction look significant
+        Cb = Ginv @ S @ Ginv * (self.r / dof)
+        Ci = Ginv * float(e1 @ e1) / dof
+        _, p_hac = wald_test(b, Cb, dof)
+        _, p_iid = wald_test(b, Ci, dof)
+        pval = max(p_hac, p_iid)
+        Cb = Cb if np.trace(Cb @ np.linalg.pinv(Ci)) >= p else Ci
         beta = b / norms                      # coefficients of X
         dtheta = -D.pinv @ (Xw @ beta)        # change of the current model's coefficients
         dv = D.Av @ dtheta + Xv @ beta
@@ -206,10 +234,10 @@ class _Scorer:
         wv = D.wv
         dec = float(np.sum((D.e_v ** 2 - ev1 ** 2) * wv ** 2))
         # prediction change on validation (weighted) per unit of the scaled coefficients b
-        Mv = (Xv * wv[:, None]) / norms - (D.Av * wv[:, None]) @ (D.pinv @ Xs)
+        Mv = (Xv * wv[:, None]) / norms - self.Avw @ (D.pinv @ Xs)
         m = float(np.einsum("ij,jk,ik->", Mv, Cb, Mv))
-        Sv = hac_covariance(Mv * (ev1 * wv)[:, None], self.gv, self.lag_v)
-        var = float(np.sum(Sv * Cb))
+        Sv = hac_covariance(Mv * (ev1 * wv)[:, None], max_lag=self.lag_v, segments=self.gv)
+        var = max(float(np.sum(Sv * Cb)), float(np.mean((ev1 * wv) ** 2)) * m)
         z = (dec + m) / (2.0 * math.sqrt(max(var, 1e-300)))
         after = _rel_err(ev1, self.yv, self.V.system.joint, self.n)
         return _Eval(0, score, pval, float(z), ident, self.rel_before, after)
@@ -228,8 +256,9 @@ def _affected(fam: Family, n: int) -> list[int]:
 
 
 def _own(fam: Family, n: int) -> list[int]:
-    """Joints whose validation error must improve (the effect's own joints)."""
-    if fam.joint is None:
+    """Joints whose validation error must improve (the effect's own joints; elasticity of one joint
+    changes the torque of all)."""
+    if fam.joint is None or fam.kind == "elasticity":
         return list(range(n))
     out = [fam.joint]
     if fam.partner is not None and fam.variant == "shared":
@@ -259,18 +288,19 @@ def _refine(fam: Family, member: int, F: Frame, ctx: FitContext, scorer: "_Score
     minimising the weighted identification residual."""
     from scipy.optimize import minimize_scalar
 
-    g = np.log(np.asarray(fam.grid, float))
-    lo = g[max(member - 1, 0)]
-    hi = g[min(member + 1, g.size - 1)]
+    v = float(fam.grid[member])
+    sgn = 1.0 if v > 0 else -1.0
+    same = sorted(abs(x) for x in fam.grid if (x > 0) == (v > 0))
+    i = same.index(abs(v))
+    lo, hi = math.log(same[max(i - 1, 0)]), math.log(same[min(i + 1, len(same) - 1)])
     if hi <= lo:
-        return float(fam.grid[member])
+        return v
 
     def rss(x):
-        return scorer.rss(fam.build_at(F, ctx, float(np.exp(x))))
+        return scorer.rss(fam.build_at(F, ctx, sgn * float(np.exp(x))))
 
     r = minimize_scalar(rss, bounds=(lo, hi), method="bounded", options={"xatol": xatol})
-    best = float(np.exp(r.x)) if r.fun <= rss(g[member]) else float(fam.grid[member])
-    return best
+    return sgn * float(np.exp(r.x)) if r.fun <= rss(math.log(abs(v))) else v
 
 
 def _fit(system: ObservationSystem, method: str):
@@ -382,8 +412,10 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
 
     def context(names, theta, A, Av):
         th = dict(zip(names, theta))
+        td = np.array([th[k] for k in decl])
+        # predictions of the declared model alone (the gain column scales it: Y_j = (1 + gamma) W_j chi)
         return FitContext(model=model, theta={k: th[k] for k in decl},
-                          predictions={id(F): A @ theta, id(V): Av @ theta})
+                          predictions={id(F): F.system.W @ td, id(V): Vs.W @ td})
 
     def refresh(result):
         """Model torque of the current fit on both frames; rebuild the columns linearised around it."""
@@ -393,9 +425,19 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
         F = attach_model_torque(F, model, {k: result.value(k) for k in decl})
         V = attach_model_torque(V, model, {k: result.value(k) for k in decl})
         ctx = context(names, theta, A, Av)
-        added = [_Added(ad.family, ad.value, _build_one(ad.family, F, ctx, ad.value),
-                        _build_one(ad.family, V, ctx, ad.value)) if ad.family.depends_on_fit else ad
-                 for ad in added]
+        new = []
+        for ad in added:
+            if not ad.family.depends_on_fit:
+                new.append(ad)
+                continue
+            value = ad.value
+            if ad.family.self_consistent:   # secant column: rebuild it at the fitted coefficient
+                b = result.value(ad.family.names()[0])
+                if b != 0.0 and np.isfinite(b):
+                    value = float(b)
+            new.append(_Added(ad.family, value, _build_one(ad.family, F, ctx, value),
+                              _build_one(ad.family, V, ctx, value)))
+        added = new
 
     refresh(res0)
     for rnd in range(1, max_effects + 1):
@@ -403,7 +445,7 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
         resid_user = Y - A @ np.array([res.value(nm) for nm in names])
         D = _design(names + nn, np.hstack([A, N_id]), Y, J, np.hstack([Av, N_v]), Yv, Jv, n, w_resid=resid_user)
         ctx = context(names, D.theta[:len(names)], A, Av)
-        scorer = _Scorer(D, F, V, n, identifiability_tol)
+        scorer = _Scorer(D, F, V, n, identifiability_tol, max(MIN_SUPPORT_ROWS, MIN_SUPPORT_SHARE * F.n_rows / n))
         done = {ad.family.key for ad in added}
         fams = [f for f in families if f.key not in done]
         plac = placebo_families(F, rng, n_placebo) if n_placebo > 0 else []
@@ -476,10 +518,13 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
         # re-identify; re-linearise the effects that depend on the fit (new model torque, new columns)
         names, A, Av = augmented()
         res = _fit(ObservationSystem(A, Y, names, J), method)
-        for _ in range(RELINEARISE_PASSES):
+        passes = RELINEARISE_PASSES if any(ad.family.depends_on_fit for ad in added) else 0
+        for _ in range(passes):
             refresh(res)
             names, A, Av = augmented()
             res = _fit(ObservationSystem(A, Y, names, J), method)
+        if not passes:
+            refresh(res)      # model torque of the new fit for the next round's candidates
         th = np.array([res.value(nm) for nm in names])
         round_resid.append((Y - A @ th, Yv - Av @ th))
     else:
@@ -491,8 +536,9 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
     Vaug = ObservationSystem(Av, Yv, names, Jv)
     val1 = res.rel_err_on(Vaug)
     effects = []
+    final_value = {ad.family.key: ad.value for ad in added}
     for meta in effects_meta:
-        fam, mem = meta["family"], meta["value"]
+        fam, mem = meta["family"], final_value.get(meta["family"].key, meta["value"])
         idx = [res.index(nm) for nm in fam.names()]
         vals, std, pct = res.values[idx], res.std[idx], res.rel_std_pct[idx]
         effects.append(Effect(kind=fam.kind, label=fam.label, variant=fam.variant, joint=fam.joint,

@@ -18,6 +18,7 @@ then joint 2...
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 from typing import Callable, Mapping, Sequence
@@ -35,6 +36,18 @@ from ..preprocessing.filtering import (
 )
 from ..preprocessing.trajectory import Trajectory
 
+try:  # the FIR kernel of ``decimate`` without recomputing its taps at every call (same numbers)
+    from ..preprocessing.filtering import _fir_decimate, decimation_filter
+except ImportError:  # pragma: no cover - private helper renamed: fall back to the public function
+    _fir_decimate = None
+
+
+@functools.lru_cache(maxsize=32)
+def _fir_taps(n_d: int, cutoff_ratio: float) -> np.ndarray:
+    h = decimation_filter(n_d, ftype="fir", cutoff_ratio=cutoff_ratio)
+    h.setflags(write=False)
+    return h
+
 __all__ = ["Experiment", "Frame", "build_frame", "attach_model_torque", "model_torque", "split_holdout",
            "common_bandwidth", "noise_gains", "T_ORIGIN_KEY"]
 
@@ -45,6 +58,8 @@ ALIGN_RTOL = 1e-6
 
 SIGNALS = ("q", "dq", "ddq", "tau")
 MODEL_SIGNALS = ("tau_hat", "dtau_hat", "ddtau_hat")
+#: the model torque of the candidates is low-passed at this many times the dynamics bandwidth
+MODEL_TORQUE_BANDWIDTH_FACTOR = 2.5
 #: samples per call of the model's regressor when computing tau_hat at full rate
 REGRESSOR_BATCH = 8192
 
@@ -95,8 +110,12 @@ class Experiment:
         return self.t.shape[0]
 
     def decimate(self, x: np.ndarray) -> np.ndarray:
-        """Parallel decimation of full-rate columns ``x`` (M, ...) with this experiment's filter."""
+        """Parallel decimation of full-rate columns ``x`` (M, ...) with this experiment's filter
+        (:func:`symoro_gen.preprocessing.filtering.decimate`, FIR taps cached)."""
         st = self.settings
+        x = np.asarray(x, float)
+        if st.ftype == "fir" and st.n_d > 1 and _fir_decimate is not None and x.ndim == 2:
+            return _fir_decimate(np.ascontiguousarray(x), _fir_taps(st.n_d, st.cutoff_ratio), st.n_d)
         return decimate(x, st.n_d, ftype=st.ftype, cutoff_ratio=st.cutoff_ratio, source=self.source)
 
 
@@ -261,13 +280,19 @@ def model_torque(model, theta: Mapping[str, float], q, dq, ddq, loaded: bool = F
 def attach_model_torque(frame: "Frame", model, theta: Mapping[str, float]) -> "Frame":
     """A copy of ``frame`` with the model torque ``tau_hat`` (and derivatives) of parameters ``theta``.
 
-    ``tau_hat`` is computed at full rate from the band-pass kinematics, then low-passed by the
-    experiment's Butterworth and differentiated like the positions."""
+    ``tau_hat`` is computed at full rate from the band-pass kinematics, then low-passed by a zero-phase
+    Butterworth at ``MODEL_TORQUE_BANDWIDTH_FACTOR`` times the dynamics bandwidth (at most the position
+    cut-off) and differentiated like the positions. The band-pass acceleration carries the position
+    noise amplified by ``(2 pi f)^2`` up to the decimation cut-off; a model torque built from it would
+    carry that noise, which is (minus) the noise the residual gets from ``W``: columns made of it would
+    correlate with the residual (errors in variables). Below ``2.5 f_dyn`` little of it is left while the
+    torque of the motion (below ``f_dyn``) passes unchanged (gain > 0.998)."""
     exps = []
     for ex in frame.experiments:
         st = ex.settings
         th = model_torque(model, theta, ex.q, ex.dq, ex.ddq, ex.loaded)
-        tf, d1, d2 = filter_and_differentiate(th, st.fs, st.cutoff_hz, st.order, source=ex.source)
+        fc = min(st.cutoff_hz, MODEL_TORQUE_BANDWIDTH_FACTOR * st.dynamics_bandwidth_hz)
+        tf, d1, d2 = filter_and_differentiate(th, st.fs, fc, st.order, source=ex.source)
         exps.append(replace(ex, tau_hat=tf, dtau_hat=d1, ddtau_hat=d2))
     sig = dict(frame.sig)
     sig.update(_row_signals(exps, MODEL_SIGNALS, frame.row_experiment, frame.row_index, frame.n_joints))

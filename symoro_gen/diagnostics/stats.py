@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats as sst
 
-__all__ = ["long_run_factor", "hac_covariance", "hac_lag", "wald_test", "nested_f_test", "binned_anova", "fisher_g_test", "bonferroni", "AnovaResult"]
+__all__ = ["long_run_factor", "segments_of", "hac_covariance", "hac_lag", "wald_test", "nested_f_test", "binned_anova", "fisher_g_test", "bonferroni", "AnovaResult"]
 
 #: the long-run factor is floored at 1 (never makes a test less conservative than the white-noise one)
 MIN_LONG_RUN = 1.0
@@ -105,9 +105,17 @@ def hac_lag(e, groups=None, *, rho_stop: float = 0.1, max_share: float = 0.25) -
     return int(min(max(L0, 2 * lag), cap))
 
 
-def hac_covariance(Z, groups=None, max_lag: int = 4) -> np.ndarray:
+def segments_of(groups, n: int) -> list[np.ndarray]:
+    """Row indices of each contiguous-time segment (``groups`` labels, or one segment)."""
+    return _segments(groups, n)
+
+
+def hac_covariance(Z, groups=None, max_lag: int = 4, *, segments: list | None = None) -> np.ndarray:
     """Heteroscedasticity and autocorrelation consistent (Newey-West, Bartlett weights) covariance of
     the sum of the rows of ``Z``.
+
+    Computed exactly as ``(1/(L+1)) sum_t M_t M_t'`` with ``M_t`` the sums of ``L+1`` consecutive rows
+    (zero-padded), which equals ``sum_{|l|<=L} (1 - |l|/(L+1)) sum_t z_t z_{t+l}'``.
 
     Parameters
     ----------
@@ -117,6 +125,8 @@ def hac_covariance(Z, groups=None, max_lag: int = 4) -> np.ndarray:
         Segments; lags never cross them.
     max_lag : int
         Bartlett bandwidth L (weights ``1 - l/(L+1)``).
+    segments : list of index arrays, optional
+        Precomputed :func:`segments_of` (instead of ``groups``).
 
     Returns
     -------
@@ -126,14 +136,22 @@ def hac_covariance(Z, groups=None, max_lag: int = 4) -> np.ndarray:
     if Z.ndim == 1:
         Z = Z[:, None]
     p = Z.shape[1]
+    L = max(int(max_lag), 0)
     S = np.zeros((p, p))
-    for idx in _segments(groups, Z.shape[0]):
+    segs = segments if segments is not None else _segments(groups, Z.shape[0])
+    for idx in segs:
         z = Z[idx]
-        S += z.T @ z
-        for l in range(1, min(max_lag, z.shape[0] - 1) + 1):
-            w = 1.0 - l / (max_lag + 1.0)
-            C = z[l:].T @ z[:-l]
-            S += w * (C + C.T)
+        if L == 0:
+            S += z.T @ z
+            continue
+        c = np.zeros((z.shape[0] + L + 1, p))
+        np.cumsum(z, axis=0, out=c[1:z.shape[0] + 1])
+        c[z.shape[0] + 1:] = c[z.shape[0]]
+        # M_t = c[t + L + 1] - c[t] for t = -L .. N-1 (c extended by 0 before the start)
+        top = c                                   # c[k], k = 0 .. N+L
+        low = np.vstack([np.zeros((L + 1, p)), c[:-(L + 1)]])
+        M = top - low
+        S += (M.T @ M) / (L + 1.0)
     return S
 
 
@@ -187,7 +205,7 @@ class AnovaResult:
     F, p_value : float
         Statistic (divided by the long-run factor) and its p-value.
     centers, means : ndarray, shape (B,)
-        Median signal value and mean residual of each bin.
+        Mean signal value and mean residual of each bin.
     """
 
     eta2: float
@@ -235,7 +253,7 @@ def binned_anova(resid, signal, *, n_bins: int = 16, groups=None, inflation: flo
     infl = long_run_factor(within, groups) if inflation is None else inflation
     F = (ssb / (Bk - 1)) / (ssw / (N - Bk)) / infl
     p = float(sst.f.sf(F, Bk - 1, N - Bk))
-    centers = np.array([np.median(s[b == i]) if ok[i] else np.nan for i in range(B)])
+    centers = np.bincount(b, weights=s, minlength=B) / np.maximum(cnt, 1)
     return AnovaResult(ssb / sst_ if sst_ > 0 else 0.0, float(F), p, centers[ok], means[ok])
 
 

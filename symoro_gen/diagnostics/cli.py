@@ -1,0 +1,89 @@
+"""``symoro-gen diagnose``: identify, find what the residual says the model misses, add it, re-identify.
+
+    symoro-gen diagnose ROBOT DATA... [--validate DATA...] [--method ols|wls|tls] [--json OUT]
+                        [--report OUT.md|OUT.html] [--plots DIR]
+
+ROBOT is a robot name (robots/, generated/) or a robot .toml file; DATA are recordings the loaders of
+:mod:`symoro_gen.preprocessing.load` read (CSV/NPZ/MAT or a ``q=..,tau=..,dt=..`` spec), mapped to the
+joint side by the robot file's drive chain. Without ``--validate`` the last ``--holdout`` share of each
+recording is held out for validation. The JSON keys ``before``, ``after`` (``rel_err``,
+``validation_rel_err``), ``effects`` (``kind``, ``joint``, ``params``, ``score``) and ``tried`` are a contract.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+__all__ = ["add_diagnose_parser", "run_diagnose"]
+
+
+def run_diagnose(args) -> dict:
+    """Run the command; returns the JSON dictionary."""
+    import numpy as np
+
+    from ..modelcache import model_for
+    from ..preprocessing.load import load_trajectories
+    from .candidates import KINDS
+    from .core import diagnose
+
+    if args.report:  # fail before the long computation on a bad suffix
+        from ..report import check_report_path
+
+        check_report_path(args.report)
+    kinds = KINDS if not args.candidates else tuple(args.candidates)
+    robot, model = model_for(args.robot)
+    kw = dict(n_joints=robot.n_joints, drive_chain=robot.drive_chain)
+    data = load_trajectories(args.data, **kw)
+    valid = load_trajectories(args.validate, **kw) if args.validate else None
+    filt = {k: v for k, v in (("cutoff_hz", args.cutoff), ("n_d", args.decimate)) if v is not None}
+    rep = diagnose(model, data, validation=valid, method=args.method, candidates=kinds,
+                   significance=args.significance, max_effects=args.max_effects, holdout=args.holdout,
+                   rng=np.random.default_rng(args.seed), **filt)
+    out = rep.to_dict()
+    out["data"] = [str(p) for p in args.data]
+    out["validate"] = [str(p) for p in args.validate or ()]
+    if args.json:
+        from ..emit.package import write_text_atomic
+
+        write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
+    if args.plots:
+        files = rep.write_plots(args.plots)
+        if not files and not args.quiet:
+            print("note: no plots written (matplotlib is not installed: pip install 'symoro_gen[plots]')")
+    if args.report:
+        from ..report import write_report
+
+        write_report(args.report, diagnosis=rep, robot=robot.name,
+                     sources={"identification data": [str(p) for p in args.data],
+                              "validation data": [str(p) for p in args.validate or ()]},
+                     text=rep.summary())
+    if not args.quiet:
+        print(rep.summary())
+    return out
+
+
+def add_diagnose_parser(subparsers) -> None:
+    """Register ``diagnose`` on an argparse sub-parser collection."""
+    from .candidates import KINDS
+    from .core import HOLDOUT, MAX_EFFECTS, SIGNIFICANCE
+
+    p = subparsers.add_parser("diagnose", help="find the effects the model misses in the residual, add them, "
+                                               "re-identify, report errors before/after")
+    p.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
+    p.add_argument("data", nargs="+", help="identification recordings (CSV/NPZ/MAT, or q=..,tau=..,dt=.. spec)")
+    p.add_argument("--validate", nargs="+", help="validation recordings (default: hold out the end of each recording)")
+    p.add_argument("--method", choices=("ols", "wls", "tls"), default="ols")
+    p.add_argument("--candidates", nargs="+", choices=KINDS, metavar="KIND",
+                   help=f"effect kinds to try (default all: {', '.join(KINDS)})")
+    p.add_argument("--significance", type=float, default=SIGNIFICANCE,
+                   help=f"family-wise level of each round (default {SIGNIFICANCE})")
+    p.add_argument("--max-effects", type=int, default=MAX_EFFECTS, help=f"most effects added (default {MAX_EFFECTS})")
+    p.add_argument("--holdout", type=float, default=HOLDOUT,
+                   help=f"share of each recording held out when --validate is not given (default {HOLDOUT})")
+    p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
+    p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the placebo candidates")
+    p.add_argument("--json", help="write the results as JSON here")
+    p.add_argument("--report", metavar="OUT.md|OUT.html", help="write a report (tables and plots) here")
+    p.add_argument("--plots", metavar="DIR", help="write the plots as PNG files in this folder")
+    p.set_defaults(func=lambda a: (run_diagnose(a), 0)[1])

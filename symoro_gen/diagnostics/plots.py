@@ -1,0 +1,41 @@
+"""PNG plots of a residual diagnosis, written to a folder (``symoro-gen diagnose --plots DIR``).
+
+The figures are those of the diagnosis section of :mod:`symoro_gen.report` (matplotlib, Agg backend):
+relative error norms per joint before/after, and for every effect added the residual of its joint
+before and after it, against the signal that revealed it (identification and validation data), plus
+measured vs reconstructed torques of the final model.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+__all__ = ["write_plots"]
+
+
+def write_plots(report, folder) -> list[Path]:
+    """Write the diagnosis figures of ``report`` (a :class:`~.report.ResidualReport`) as PNG files.
+
+    Returns
+    -------
+    list of Path
+        Files written, ``folder/<figure name>.png``; empty when matplotlib is not installed.
+    """
+    try:
+        from ..report import MissingDependencyError, build_report
+    except ImportError:  # pragma: no cover - report package absent
+        return []
+    try:
+        rep = build_report(diagnosis=report, robot=report.robot, plots=True)
+    except MissingDependencyError:
+        return []
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    for fig in rep.figures:
+        p = folder / f"{fig.name}.png"
+        tmp = p.with_name(p.name + ".tmp")
+        tmp.write_bytes(fig.png)
+        os.replace(tmp, p)
+        out.append(p)
+    return out

@@ -1,0 +1,62 @@
+"""Simulated recordings for the diagnosis tests: a known robot, a known effect injected with the
+physical models of :mod:`symoro_gen.diagnostics.inject`, noise on q and torque; only t, q and tau are
+given to the tool."""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+import symoro_gen
+from symoro_gen.description import load_robot, parse_robot_text
+from symoro_gen.diagnostics import inject_effect
+from symoro_gen.preprocessing.trajectory import Trajectory
+from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
+
+#: encoder noise [rad] (m for prismatic joints) and torque noise [N m]
+NOISE_Q = 1e-5
+NOISE_TAU = 0.05
+DURATION = 40.0
+DT = 0.002
+
+
+@functools.lru_cache(maxsize=None)
+def robot_and_model(name: str):
+    """``scara``, ``lwr4`` (generated) or ``scara_bare`` (SCARA declared without rotor inertias and
+    offsets, built in memory: the model that misses ``rotor_inertia`` and ``offset``)."""
+    if name == "scara_bare":
+        from pathlib import Path
+
+        from symoro_gen.emit.package import build_in_memory
+
+        txt = (Path(__file__).resolve().parents[2] / "robots" / "scara.toml").read_text()
+        txt = txt.replace('drive = ["IA", "FV", "FS", "OFF"]', 'drive = ["FV", "FS"]')
+        assert 'drive = ["FV", "FS"]' in txt
+        robot = parse_robot_text(txt)
+        return robot, build_in_memory(robot)
+    return load_robot(name), symoro_gen.load_model(name)
+
+
+def recording(name: str, seed: int, kind: str | None = None, joint: int | None = None, *,
+              noise_q: float = NOISE_Q, noise_tau: float = NOISE_TAU, duration: float = DURATION, dt: float = DT,
+              lwr_friction: bool = True, **params):
+    """(model, Trajectory) of robot ``name`` along a random Fourier excitation, with ``kind`` injected.
+
+    LWR4 simulations use LWR-like friction (FS 0.1-0.5 N m, Table II of the LWR4 paper) unless
+    ``lwr_friction`` is False.
+    """
+    robot, model = robot_and_model(name)
+    rng = np.random.default_rng(seed)
+    n = model.N_JOINTS
+    amp = np.ones(n)
+    if name.startswith("scara"):
+        amp[2] = 0.1   # prismatic joint [m]
+    t, q, dq, ddq = fourier_trajectory(n, duration, dt, rng, base_frequency_hz=0.1, amplitude=amp)
+    kw = dict(fs_range=(0.1, 0.5), fv_range=(0.1, 1.0)) if (name == "lwr4" and lwr_friction) else {}
+    chi = np.asarray(random_physical_parameters(robot, rng, **kw))
+    tau = true_torques(model, q, dq, ddq, chi)
+    qm, taum = (q, tau) if kind is None else inject_effect(kind, t, q, dq, ddq, tau, joint=joint, **params)
+    qm = qm + noise_q * rng.standard_normal(q.shape)
+    taum = taum + noise_tau * rng.standard_normal(q.shape)
+    src = f"{name} seed {seed}" + (f" + {kind}" if kind else "")
+    return model, Trajectory(t=t, q=qm, tau=taum, source=src)

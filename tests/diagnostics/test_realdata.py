@@ -1,0 +1,78 @@
+"""The loop on the real recordings of ../shared/data (skipped when absent).
+
+* KUKA LWR4+ (FloBaRoID): identify on measurements 1 and 3, validate on 2. The declared model is the
+  paper's (Coulomb + viscous + offset, no rotor inertia). The loop must run, name what it adds, and
+  the validation error of the joints it works on must drop.
+* Staubli TX40 (figaroh), declared *without* the coupled-wrist motor terms (Iam6, fvm6, fsm6 of
+  TX40_config.yaml): the loop must trace the wrist residual to a shared coupling of joints 5 and 6,
+  with values near the published priors.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.realdata
+
+LWR4 = Path("kuka_lwr4_flobaroid") / "data" / "KUKA" / "HW"
+TX40 = Path("staubli_tx40_figaroh") / "data"
+
+
+@pytest.fixture(scope="module")
+def lwr4_report(shared_data):
+    import symoro_gen
+    from symoro_gen.diagnostics import diagnose
+    from symoro_gen.preprocessing.load import load_trajectory
+
+    paths = [shared_data / LWR4 / f"measurements_{i}.npz" for i in (1, 2, 3)]
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        pytest.skip(f"LWR4 recordings not found: {missing}")
+    tr = [load_trajectory(p, n_joints=7) for p in paths]
+    return diagnose(symoro_gen.load_model("lwr4"), [tr[0], tr[2]], validation=[tr[1]], method="ols")
+
+
+def test_lwr4_loop_runs_and_names_what_it_adds(lwr4_report):
+    rep = lwr4_report
+    from symoro_gen.diagnostics import KINDS
+
+    assert rep.effects, rep.summary()
+    assert all(e.kind in KINDS for e in rep.effects)
+    # the declared model's validation errors (plain OLS, Coulomb + viscous + offset): the large wrist and
+    # joint-1 errors the issue quotes, and joints 2 and 4 well modelled
+    b = rep.before_validation_rel_err
+    assert b[1] < 0.05 and b[3] < 0.05 and b[6] > 0.5 and b[0] > 0.15, b
+    # every effect's own joint(s) predict the unseen file better at the end
+    a = rep.after_validation_rel_err
+    own = {e.joint for e in rep.effects if e.joint is not None}
+    for j in own:
+        assert a[j] < b[j], (j, b, a)
+    assert a[6] < 0.5 * b[6], (b, a)          # the wrist joint 7 error is at least halved
+    assert np.mean(a) < np.mean(b)
+    d = rep.to_dict()
+    assert [e["kind"] for e in d["effects"]] == [e.kind for e in rep.effects]
+
+
+def test_tx40_finds_the_coupled_wrist(shared_data):
+    from symoro_gen.diagnostics import diagnose
+    from symoro_gen.modelcache import model_for
+    from symoro_gen.preprocessing.load import load_trajectory
+
+    folder = shared_data / TX40
+    if not (folder / "pos_read_data.csv").is_file():
+        pytest.skip(f"TX40 recording not found in {folder}")
+    robot, model = model_for("tx40")
+    tr = load_trajectory("q=pos_read_data.csv,tau=curr_data.csv,dt=0.0002", robot=robot,
+                         drive_chain=robot.drive_chain, base_dir=folder)
+    rep = diagnose(model, tr, max_effects=2)
+    first = rep.effects[0]
+    assert (first.kind, first.variant, first.joint, first.partner) == ("coupling", "shared", 4, 5), rep.summary()
+    # published priors (TX40_config.yaml): Iam6 = 0.00964 kg m^2, fvm6 = 0.616 N m s/rad, fsm6 = 1.95 N m
+    iam, fvm, fsm = first.values
+    assert iam == pytest.approx(0.00964, rel=0.5)
+    assert fvm == pytest.approx(0.616, rel=0.25)
+    assert fsm == pytest.approx(1.95, rel=0.25)
+    assert rep.after_validation_rel_err[4] < 0.5 * rep.before_validation_rel_err[4]
+    assert rep.after_validation_rel_err[5] < rep.before_validation_rel_err[5]

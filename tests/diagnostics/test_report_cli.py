@@ -1,0 +1,100 @@
+"""ResidualReport contract (JSON keys, summary, Markdown, plots) and the ``symoro-gen diagnose`` command."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from symoro_gen.diagnostics import ResidualReport, diagnose
+
+from .simdata import recording
+
+
+@pytest.fixture(scope="module")
+def stribeck_report():
+    model, tr = recording("scara", 11, "stribeck", 1, Fst=1.0, vs=0.1)
+    return diagnose(model, tr)
+
+
+def test_json_contract(stribeck_report):
+    rep = stribeck_report
+    assert isinstance(rep, ResidualReport)
+    d = json.loads(json.dumps(rep.to_dict()))          # plain JSON types
+    n = rep.n_joints
+    for k in ("before", "after"):
+        assert set(d[k]) >= {"rel_err", "validation_rel_err"}
+        assert len(d[k]["rel_err"]) == n and len(d[k]["validation_rel_err"]) == n
+    assert d["effects"] and set(d["effects"][0]) >= {"kind", "joint", "params", "score"}
+    assert d["effects"][0]["joint"] == 2                  # 1-based
+    assert all(set(c) >= {"kind", "joint", "score"} for c in d["tried"])
+    kinds_round1 = {c["kind"] for c in d["tried"] if c["round"] == 1}
+    assert "stribeck" in kinds_round1 and "elasticity" in kinds_round1
+    # errors: before from the declared model, after with the effect (validation of joint 2 dropped)
+    assert d["after"]["validation_rel_err"][1] < d["before"]["validation_rel_err"][1]
+
+
+def test_summary_and_markdown(stribeck_report):
+    s = stribeck_report.summary()
+    assert "stribeck on joint 2" in s and "%sigma" in s and "valid after" in s
+    md = stribeck_report.to_markdown(plots=["plots/x.png"])
+    assert "| validation, after |" in md and "**stribeck** on joint 2" in md and "![x](plots/x.png)" in md
+
+
+def test_write_plots(stribeck_report, tmp_path):
+    pytest.importorskip("matplotlib")
+    files = stribeck_report.write_plots(tmp_path / "plots")
+    names = {f.name for f in files}
+    assert any(n.startswith("diagnosis-effect-1-stribeck") for n in names), names
+    assert all(f.stat().st_size > 1000 for f in files)
+
+
+def _write_csv(path, tr):
+    n = tr.n_joints
+    head = ["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)]
+    np.savetxt(path, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=",".join(head), comments="")
+
+
+def test_cli_diagnose(tmp_path, capsys):
+    from symoro_gen.cli import main
+
+    _, tr = recording("scara", 12, "offset", 3, offset=0.3)
+    # the declared scara has OFF4: an offset is not missing, so inject a drift instead
+    _, tr = recording("scara", 12, "drift", 3, rate=0.01)
+    csv = tmp_path / "rec.csv"
+    _write_csv(csv, tr)
+    out = tmp_path / "out.json"
+    rc = main(["diagnose", "scara", str(csv), "--json", str(out), "--max-effects", "2", "--quiet"])
+    assert rc == 0
+    d = json.loads(out.read_text())
+    assert d["effects"][0]["kind"] == "drift" and d["effects"][0]["joint"] == 4
+    assert d["data"] == [str(csv)] and "validation_rel_err" in d["after"]
+
+
+def test_cli_validate_and_candidates(tmp_path):
+    from symoro_gen.cli import main
+
+    _, tr = recording("scara", 13, "spring", 0, stiffness=-5.0)
+    _, tv = recording("scara", 13, "spring", 0, stiffness=-5.0, duration=20.0)
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    _write_csv(a, tr)
+    _write_csv(b, tv)
+    out = tmp_path / "o.json"
+    rc = main(["diagnose", "scara", str(a), "--validate", str(b), "--candidates", "spring", "offset",
+               "--json", str(out), "--quiet"])
+    assert rc == 0
+    d = json.loads(out.read_text())
+    assert {c["kind"] for c in d["tried"]} == {"spring", "offset"}
+    assert d["effects"][0]["kind"] == "spring" and d["effects"][0]["joint"] == 1
+    assert d["settings"]["validation_sources"] == [str(b)]
+
+
+def test_cli_rejects_bad_report_suffix(tmp_path, capsys):
+    from symoro_gen.cli import main
+
+    _, tr = recording("scara", 14, duration=10.0)
+    csv = tmp_path / "r.csv"
+    _write_csv(csv, tr)
+    rc = main(["diagnose", "scara", str(csv), "--report", str(tmp_path / "r.pdf")])
+    assert rc == 2
+    assert "suffix" in capsys.readouterr().err
