@@ -62,6 +62,8 @@ MIN_SUPPORT_ROWS = 20
 MIN_SUPPORT_SHARE = 0.05
 #: floor of 1 - h_ii in the HC3 scaling of the residuals
 MIN_ONE_MINUS_LEVERAGE = 0.05
+#: structure tests explaining at least this share of a joint's residual are listed in the warnings
+STRUCTURE_WARN_ETA2 = 0.2
 #: tolerance on log(value) of the continuous refinement of a searched parameter
 REFINE_XATOL = 0.02
 
@@ -395,6 +397,7 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
     placebo_scores: list[CandidateScore] = []
     effects_meta: list[dict] = []
     round_resid = [(res0.residual, Yv - res0.predict(Vs))]
+    placebo_hits: dict = {}
     res = res0
     dq_noise = np.max([ex.dq_noise for ex in F.experiments], axis=0)
     N_id = nuisance_columns(F, decl, dq_noise)
@@ -505,6 +508,11 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
                 if cs.eligible:
                     eligible.append((ev.score, fam, ev, Xs[ev.member], Xvs[ev.member], cs))
             (placebo_scores if fam.placebo else tried).append(cs)
+            if fam.placebo and ev is not None and ev.p_value < thr and ev.z > zcrit:
+                gain = max(float((ev.rel_before[j] - ev.rel_after[j]) / ev.rel_before[j])
+                           if ev.rel_before[j] > 0 else 0.0 for j in _own(fam, n))
+                if gain >= min_rel_improvement:
+                    placebo_hits.setdefault(fam.joint, []).append((rnd, fam.variant, ev.score))
         if not eligible:
             break
         eligible.sort(key=lambda t: -t[0])
@@ -549,9 +557,21 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
     s_before = residual_structure(F, res0.residual, significance=significance) if structure else ()
     s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
                                  significance=significance) if structure else ()
-    if any(s.significant for s in s_after) and not effects:
-        warnings.append("structure is left in the residual (see 'structure') that no candidate explains better "
-                        "than noise and the placebos on the validation data")
+    if placebo_hits:
+        lst = ", ".join(f"joint {j + 1} (score up to {max(sc for *_, sc in h):.2f})"
+                        for j, h in sorted(placebo_hits.items()))
+        warnings.append(
+            f"placebo columns (random combinations of time or motion signals, no physical meaning) pass the "
+            f"significance and validation tests on {lst}: there the residual holds structure that the library "
+            f"does not describe specifically (an effect outside the library, or an error of the declared model "
+            f"such as its geometry or a joint zero); a candidate on such a joint is added only when it beats "
+            f"every placebo")
+    strong = [x for x in s_after if x.significant and x.eta2 >= STRUCTURE_WARN_ETA2]
+    if strong:
+        top = sorted(strong, key=lambda x: -x.eta2)[:3]
+        warnings.append("structure left in the identification residual: " + "; ".join(
+            f"joint {x.joint + 1} vs {x.label} ({100 * x.eta2:.0f} % explained)" for x in top)
+            + " (see 'structure')")
     st = F.experiments[0].settings
     settings = {
         "method": method, "significance": significance, "max_effects": max_effects,
@@ -568,4 +588,4 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
                           after_rel_err=np.asarray(res.rel_err), after_validation_rel_err=np.asarray(val1),
                           effects=tuple(effects), tried=tuple(tried), placebos=tuple(placebo_scores),
                           structure_before=s_before, structure_after=s_after, result_before=res0, result_after=res,
-                          settings=settings, warnings=tuple(warnings + list(res.warnings)), plot_data=plot_data)
+                          settings=settings, warnings=tuple(warnings), plot_data=plot_data)

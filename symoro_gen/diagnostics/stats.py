@@ -12,9 +12,10 @@
   velocity chatters.
 * :func:`binned_anova` - structure of a residual against a signal: one-way ANOVA of the residual over
   quantile bins of the signal; ``eta2`` is the fraction of the residual variance explained by the
-  bin means (explained variance), the p-value that of ``F = (SSB/(B-1)) / (SSW/(N-B))`` corrected.
-* :func:`fisher_g_test` - a periodic component in the residual: Fisher's g = largest periodogram
-  ordinate / sum of ordinates, exact p-value under Gaussian white noise.
+  bin means (explained variance); the p-value is that of a Wald test of equal bin means with a HAC
+  covariance (or of ``F = (SSB/(B-1)) / (SSW/(N-B))`` divided by the long-run factor).
+* :func:`fisher_g_test` - a periodic component in the residual: the largest periodogram ordinate
+  against the local level of the spectrum (robust to coloured residuals).
 * :func:`bonferroni` - multiple-testing correction of a family of p-values.
 """
 from __future__ import annotations
@@ -215,7 +216,8 @@ class AnovaResult:
     means: np.ndarray
 
 
-def binned_anova(resid, signal, *, n_bins: int = 16, groups=None, inflation: float | None = None) -> AnovaResult:
+def binned_anova(resid, signal, *, n_bins: int = 16, groups=None, inflation: float | None = None,
+                 robust: bool = True) -> AnovaResult:
     """Structure of ``resid`` against ``signal`` (quantile bins).
 
     Parameters
@@ -224,18 +226,24 @@ def binned_anova(resid, signal, *, n_bins: int = 16, groups=None, inflation: flo
     n_bins : int
         Number of quantile bins (fewer when the signal takes few values).
     groups : array_like, optional
-        Segments for the long-run factor of the within-bin residual.
+        Contiguous-time segments (serial correlation is estimated within them).
     inflation : float, optional
-        Long-run factor to use (default: computed from the within-bin residual).
+        Long-run factor dividing the classical F statistic (default: estimated from the within-bin
+        residual).
+    robust : bool
+        Also test the bin means with a Wald test whose covariance is HAC (Newey-West on the within-bin
+        residual, :func:`hac_covariance`), for heteroscedastic residuals (bursts at velocity
+        reversals...), and keep the larger p-value.
     """
     r = np.asarray(resid, float)
     s = np.asarray(signal, float)
     N = r.size
+    empty = AnovaResult(0.0, 0.0, 1.0, np.zeros(0), np.zeros(0))
     if N < 3 * n_bins or not np.isfinite(s).all() or np.ptp(s) == 0:
-        return AnovaResult(0.0, 0.0, 1.0, np.zeros(0), np.zeros(0))
+        return empty
     edges = np.unique(np.quantile(s, np.linspace(0, 1, n_bins + 1)))
     if edges.size < 3:
-        return AnovaResult(0.0, 0.0, 1.0, np.zeros(0), np.zeros(0))
+        return empty
     b = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, edges.size - 2)
     B = edges.size - 1
     cnt = np.bincount(b, minlength=B).astype(float)
@@ -249,22 +257,48 @@ def binned_anova(resid, signal, *, n_bins: int = 16, groups=None, inflation: flo
     sst_ = ssb + ssw
     Bk = int(ok.sum())
     if Bk < 2 or ssw <= 0:
-        return AnovaResult(0.0, 0.0, 1.0, np.zeros(0), np.zeros(0))
+        return empty
+    centers = np.bincount(b, weights=s, minlength=B) / np.maximum(cnt, 1)
+    if robust:
+        keep = np.flatnonzero(ok)
+        Z = np.zeros((N, keep.size))
+        col = -np.ones(B, int)
+        col[keep] = np.arange(keep.size)
+        Z[np.arange(N), col[b]] = within
+        S = hac_covariance(Z, groups, hac_lag(within, groups))
+        Cm = S / np.outer(cnt[keep], cnt[keep])
+        d = means[keep][:-1] - means[keep][-1]
+        K = np.hstack([np.eye(keep.size - 1), -np.ones((keep.size - 1, 1))])
+        W, p_hac = wald_test(d, K @ Cm @ K.T)
     infl = long_run_factor(within, groups) if inflation is None else inflation
     F = (ssb / (Bk - 1)) / (ssw / (N - Bk)) / infl
     p = float(sst.f.sf(F, Bk - 1, N - Bk))
-    centers = np.bincount(b, weights=s, minlength=B) / np.maximum(cnt, 1)
-    return AnovaResult(ssb / sst_ if sst_ > 0 else 0.0, float(F), p, centers[ok], means[ok])
+    if robust:   # the larger p-value: HAC Wald tests of many bins are unstable in few effective samples
+        F = min(F, W / (keep.size - 1))
+        p = max(p, p_hac)
+    return AnovaResult(ssb / sst_ if sst_ > 0 else 0.0, float(F), float(p), centers[ok], means[ok])
 
 
-def fisher_g_test(x, dt: float) -> tuple[float, float, float]:
-    """Largest periodic component of ``x`` (detrended): Fisher's g test.
+def fisher_g_test(x, dt: float, *, f_max: float | None = None, local_bins: int = 8) -> tuple[float, float, float]:
+    """Largest periodic component of ``x`` (mean removed).
+
+    The periodogram ordinate at the peak is compared with the local level of the spectrum (median of
+    the ``2 local_bins`` neighbouring ordinates / ln 2, the mean of an exponential variable) rather than
+    with a white-noise level, so a coloured residual spectrum (filters, decimation) is not taken for a
+    periodic component; p-value ``m exp(-I_peak / level)`` (Bonferroni over the ``m`` ordinates tested).
+
+    Parameters
+    ----------
+    x : array_like, shape (N,)
+    dt : float
+        Sampling period [s].
+    f_max : float, optional
+        Highest frequency searched [Hz] (e.g. below the decimation filter's transition band).
 
     Returns
     -------
     (frequency_hz, share, p_value)
-        Frequency of the largest periodogram ordinate, its share of the (non-DC) energy ``g``, and
-        the exact p-value of ``g`` under Gaussian white noise (Fisher 1929).
+        Frequency of the peak, its share of the (non-DC) energy, and the p-value.
     """
     x = np.asarray(x, float)
     x = x - x.mean()
@@ -276,15 +310,17 @@ def fisher_g_test(x, dt: float) -> tuple[float, float, float]:
     P = P[1:(n - 1) // 2 + 1]
     f = f[1:(n - 1) // 2 + 1]
     tot = P.sum()
-    if tot <= 0 or P.size < 2:
+    if tot <= 0 or P.size < 2 * local_bins + 1:
         return 0.0, 0.0, 1.0
-    i = int(np.argmax(P))
-    g = float(P[i] / tot)
-    m = P.size
-    # exact P(G > g) = sum_k (-1)^(k-1) C(m,k) (1 - k g)^(m-1); its first term is an upper bound that is
-    # accurate where it matters (small p) and avoids the cancellation of the alternating sum
-    p = m * (1.0 - g) ** (m - 1)
-    return float(f[i]), g, float(min(max(p, 0.0), 1.0))
+    sel = np.flatnonzero(f <= f_max) if f_max is not None else np.arange(P.size)
+    if sel.size == 0:
+        return 0.0, 0.0, 1.0
+    i = int(sel[np.argmax(P[sel])])
+    lo, hi = max(0, i - local_bins), min(P.size, i + local_bins + 1)
+    neigh = np.r_[P[lo:i], P[i + 1:hi]]
+    level = float(np.median(neigh)) / math.log(2.0) if neigh.size else float(np.mean(P))
+    p = sel.size * math.exp(-P[i] / max(level, 1e-300))
+    return float(f[i]), float(P[i] / tot), float(min(max(p, 0.0), 1.0))
 
 
 def bonferroni(p: float, m: int) -> float:

@@ -1,9 +1,10 @@
 """Structure left in a residual, per joint, against the signals of the recording.
 
-For joint j the residual ``rho_j`` is tested against its own velocity (binned), position, measured
-torque, acceleration, the time, the velocity and acceleration of every other joint (one-way ANOVA
-over quantile bins, :func:`.stats.binned_anova`: explained variance ``eta2`` and a p-value corrected
-for serial correlation), and in frequency (Fisher's g test of the largest periodogram ordinate).
+For joint j the residual ``rho_j`` is tested against its own velocity (binned), position, model torque,
+acceleration, the time, the velocity and acceleration of every other joint (one-way ANOVA over
+quantile bins, :func:`.stats.binned_anova`: explained variance ``eta2`` and a p-value robust to
+serial correlation and heteroscedasticity), and in frequency (largest periodogram ordinate against the
+local level of the spectrum, :func:`.stats.fisher_g_test`).
 All p-values of one analysis are Bonferroni-corrected together; ``significant`` means corrected
 p < ``significance``.
 """
@@ -14,9 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .frame import Frame
-from .stats import binned_anova, bonferroni, fisher_g_test, long_run_factor
+from .stats import binned_anova, bonferroni, fisher_g_test
 
 __all__ = ["StructureItem", "residual_structure", "SIGNAL_LABELS"]
+
+#: the frequency test searches below this share of the decimation cut-off (above it the decimation
+#: filter shapes the residual spectrum)
+FREQUENCY_BAND = 0.8
 
 SIGNAL_LABELS = {"dq": "velocity", "q": "position", "tau_hat": "torque", "ddq": "acceleration", "t": "time",
                  "dtau_hat": "torque rate", "frequency": "frequency"}
@@ -98,21 +103,22 @@ def residual_structure(frame: Frame, residual: np.ndarray, *, significance: floa
             continue
         r = residual[rows]
         groups = frame.row_experiment[rows]
-        infl = long_run_factor(r, groups)
         tests = [("dq", j), ("q", j), ("tau_hat", j), ("ddq", j), ("t", None)]
         if others:
             tests += [(s, k) for k in range(n) if k != j for s in ("dq", "ddq")]
         for sig, k in tests:
             x = frame.sig["t"][rows] if sig == "t" else frame.sig[sig][rows, k]
-            a = binned_anova(r, x, n_bins=n_bins, groups=groups, inflation=None)
+            a = binned_anova(r, x, n_bins=n_bins, groups=groups)
             raw.append((j, sig, k, a.eta2, a.p_value, None))
-        # frequency: per experiment, keep the strongest
+        # frequency: per experiment (below the decimation filter's transition band), keep the strongest
         best = (0.0, 0.0, 1.0)
-        for e in np.unique(groups):
+        exps = np.unique(groups)
+        for e in exps:
             m = groups == e
             dt = float(np.median(np.diff(frame.sig["t"][rows][m]))) if m.sum() > 2 else 1.0
-            f, g, p = fisher_g_test(r[m], dt)
-            p = min(1.0, p * max(infl, 1.0))
+            fmax = FREQUENCY_BAND * frame.experiments[int(e)].settings.decimation_cutoff_hz
+            f, g, p = fisher_g_test(r[m], dt, f_max=fmax if np.isfinite(fmax) else None)
+            p = min(1.0, p * exps.size)
             if p < best[2] or best[2] == 1.0 and g > best[1]:
                 best = (f, g, p)
         raw.append((j, "frequency", None, best[1], best[2], best[0]))
