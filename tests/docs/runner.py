@@ -16,6 +16,7 @@ Markdown conventions (see ``docs/README.md``)
       <!-- test: realdata -->        needs ../shared/data (skipped when absent)
       <!-- test: exit=2 -->          the command(s) must exit with this status
       <!-- test: needs=diagnose -->  needs that symoro-gen command (skipped, reported pending, until it lands)
+      <!-- test: module=matplotlib --> needs that Python module (an optional extra)
       <!-- test: file=PATH -->       the block's text is written to PATH (a robot file, a URDF...)
       <!-- test: output -->          expected output of the preceding python block (same matching rules)
       <!-- test: schema=identify --> the JSON written by the command's --json must validate against
@@ -23,19 +24,28 @@ Markdown conventions (see ``docs/README.md``)
 
   Several marks are separated by ``;``.
 
-The scratch workspace mirrors a checkout: ``robots/`` (a copy), ``generated/`` (a copy, where
+The scratch workspace mirrors a checkout: ``robots/`` (a copy), ``docs/`` (a link), ``generated/`` (a copy, where
 ``symoro-gen generate`` writes: ``SYMORO_GENERATED``), ``../shared/data`` (a link to the real
 recordings when present), and ``symoro-gen`` / ``python`` on ``PATH`` running this checkout.
+Generated models use the NumPy backend there (``SYMORO_BACKEND=numpy``): compiling the C kernels
+of every model a page generates would take most of the time budget.
 """
 from __future__ import annotations
 
+import contextlib
+import importlib.util
+import io
 import json
 import os
 import re
+import runpy
 import shlex
 import shutil
 import subprocess
 import sys
+import time
+import traceback
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -60,7 +70,8 @@ class Block:
 
     @property
     def where(self) -> str:
-        return f"{self.doc.relative_to(ROOT)}:{self.line}"
+        doc = self.doc.relative_to(ROOT) if self.doc.is_relative_to(ROOT) else self.doc
+        return f"{doc}:{self.line}"
 
 
 def parse_marks(text: str) -> dict:
@@ -163,6 +174,7 @@ class Workspace:
         self.cwd = base / "repo"
         self.cwd.mkdir(parents=True)
         shutil.copytree(ROOT / "robots", self.cwd / "robots")
+        (self.cwd / "docs").symlink_to(DOCS)  # read only: the schemas
         shutil.copytree(ROOT / "generated", self.cwd / "generated",
                         ignore=shutil.ignore_patterns("__pycache__", ".*"))
         if SHARED_DATA.is_dir():
@@ -184,6 +196,7 @@ class Workspace:
             SYMORO_ROBOTS=str(self.cwd / "robots"),
             OPENBLAS_NUM_THREADS="1",
             MPLBACKEND="Agg",
+            SYMORO_BACKEND="numpy",  # no C compilation of each model the docs generate (the C kernels are tested elsewhere)
             COLUMNS="120",
         )
         self.env.pop("SYMORO_PROGRESS", None)
@@ -194,6 +207,9 @@ class Workspace:
         return (self.base / "shared" / "data").is_dir()
 
     def sh(self, cmd: str, timeout: float) -> subprocess.CompletedProcess:
+        argv = _plain_symoro_gen(cmd)
+        if argv is not None and not SUBPROCESS_ONLY:
+            return self._in_process(lambda: _run_main(argv), cmd)
         return subprocess.run(["bash", "-c", cmd], cwd=self.cwd, env=self.env, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, timeout=timeout)
 
@@ -201,8 +217,76 @@ class Workspace:
         self.n_py += 1
         f = self.base / f"doc_block_{self.n_py}.py"
         f.write_text(code)
+        if not SUBPROCESS_ONLY:
+            return self._in_process(lambda: _run_script(f), str(f))
         return subprocess.run([sys.executable, str(f)], cwd=self.cwd, env=self.env, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True, timeout=timeout)
+
+    def _in_process(self, fn, what: str) -> subprocess.CompletedProcess:
+        """Run ``fn() -> status`` here, as the subprocess would: in the workspace, with its
+        environment, stdout and stderr merged, warnings printed (not recorded by pytest)."""
+        buf = io.StringIO()
+        old_cwd, old_env, old_argv = os.getcwd(), dict(os.environ), sys.argv[:]
+        os.chdir(self.cwd)
+        os.environ.clear()
+        os.environ.update(self.env)
+        try:
+            with warnings.catch_warnings(), contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+                warnings.simplefilter("default")
+                warnings.showwarning = _print_warning
+                status = fn()
+        finally:
+            os.chdir(old_cwd)
+            os.environ.clear()
+            os.environ.update(old_env)
+            sys.argv[:] = old_argv
+        return subprocess.CompletedProcess(what, status, buf.getvalue(), None)
+
+
+#: run every command and block in a subprocess (slower, closest to a user's shell): SYMORO_DOCS_SUBPROCESS=1
+SUBPROCESS_ONLY = os.environ.get("SYMORO_DOCS_SUBPROCESS", "") == "1"
+_SHELL_CHARS = set("|&;<>$`*?()[]{}~!#\\'\"\n")
+
+
+def _plain_symoro_gen(cmd: str) -> list[str] | None:
+    """The arguments of ``cmd`` when it is a plain ``symoro-gen ...`` call the test can run in this
+    process (no pipes, redirections, variables or globs: those go through the shell)."""
+    try:
+        toks = shlex.split(cmd)
+    except ValueError:
+        return None
+    if not toks or toks[0] != "symoro-gen":
+        return None
+    # quoted arguments are fine (a spec string); shell syntax outside quotes is not
+    unquoted = re.sub(r"'[^']*'|\"[^\"]*\"", "", cmd)
+    if set(unquoted) & _SHELL_CHARS or "$" in cmd or re.match(r"^\w+=", cmd):
+        return None
+    return toks[1:]
+
+
+def _run_main(argv: list[str]) -> int:
+    from symoro_gen.cli import main
+
+    try:
+        return int(main(argv) or 0)
+    except SystemExit as exc:  # argparse: --help, usage errors
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+
+
+def _run_script(path: Path) -> int:
+    sys.argv[:] = [str(path)]
+    try:
+        runpy.run_path(str(path), run_name="__main__")
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except Exception:  # noqa: BLE001 - the block's failure is the test's report
+        traceback.print_exc()
+        return 1
+    return 0
+
+
+def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
 
 def available_commands() -> set[str]:
@@ -246,6 +330,11 @@ def run_doc(path: Path, ws: Workspace, *, validate_json, timeout: float = 300.0)
             log.skipped.append(f"{b.where}: real data absent ({SHARED_DATA})")
             last_py_out = None
             continue
+        mod = marks.get("module")
+        if mod and importlib.util.find_spec(mod) is None:
+            log.skipped.append(f"{b.where}: needs the Python module {mod}")
+            last_py_out = None
+            continue
         need = marks.get("needs")
         if need and need not in commands:
             log.skipped.append(f"{b.where}: pending (`symoro-gen {need}` is not there yet)")
@@ -265,16 +354,19 @@ def run_doc(path: Path, ws: Workspace, *, validate_json, timeout: float = 300.0)
                 raise AssertionError(f"{b.where}: expected output line not found: {miss!r}\n--- actual ---\n{last_py_out}")
             continue
         if b.lang == "python":
+            t0 = time.perf_counter()
             r = ws.python(b.text, timeout)
             if r.returncode != 0:
                 raise AssertionError(f"{b.where}: python block failed (status {r.returncode}):\n{r.stdout}")
             last_py_out = r.stdout
-            log.ran.append(f"{b.where}: python")
+            log.ran.append(f"{b.where}: python ({time.perf_counter() - t0:.1f} s)")
             continue
         if b.lang != "console":
             continue
         want = int(marks.get("exit", 0))
+        validated = 0
         for c in parse_console(b):
+            t0 = time.perf_counter()
             r = ws.sh(c.cmd, timeout)
             if r.returncode != want:
                 raise AssertionError(f"{b.where} (line {c.line}): `{c.cmd}` exited {r.returncode}, expected {want}:\n"
@@ -283,12 +375,13 @@ def run_doc(path: Path, ws: Workspace, *, validate_json, timeout: float = 300.0)
             if miss is not None:
                 raise AssertionError(f"{b.where} (line {c.line}): `{c.cmd}`: expected output line not found: "
                                      f"{miss!r}\n--- actual ---\n{r.stdout}")
-            if marks.get("schema"):
-                out = json_out_of(c.cmd)
-                if out is None:
-                    raise AssertionError(f"{b.where}: `schema=` mark on a command without --json: {c.cmd}")
+            out = json_out_of(c.cmd) if marks.get("schema") else None
+            if out is not None:
                 validate_json(ws.cwd / out, marks["schema"], f"{b.where} (line {c.line})")
-            log.ran.append(f"{b.where} (line {c.line}): {c.cmd}")
+                validated += 1
+            log.ran.append(f"{b.where} (line {c.line}): {c.cmd[:70]} ({time.perf_counter() - t0:.1f} s)")
+        if marks.get("schema") and not validated:
+            raise AssertionError(f"{b.where}: `schema=` mark but no command of the block writes --json")
         last_py_out = None
     return log
 
