@@ -1,8 +1,9 @@
 """Benchmark: ``diagnose`` on 60 s of 7-joint data at 1 kHz with all candidate kinds (target <= 60 s).
 
 Simulated KUKA LWR4 recording (generated model ``lwr4``, random physical parameters with LWR-like
-friction, Fourier excitation), a Stribeck friction injected on joint 2, noise on q and torque; the last
-30 % held out for validation. Prints the wall time of each stage and the effects found.
+friction, Fourier excitation) with three effects the model lacks (Stribeck friction on joint 2, a
+10 ms torque lag on joint 1, a position ripple on joint 6: four rounds of the loop), noise on q and
+torque; the last 30 % held out for validation. Prints the wall time and the effects found.
 
     PYTHONPATH=. python bench/bench_diagnose.py [--seconds 60] [--rate 1000]
 """
@@ -40,6 +41,8 @@ def main(argv=None) -> int:
     chi = np.asarray(random_physical_parameters(robot, rng, fs_range=(0.1, 0.5), fv_range=(0.1, 1.0)))
     tau = true_torques(model, q, dq, ddq, chi)
     qm, taum = inject_effect("stribeck", t, q, dq, ddq, tau, joint=1, Fst=0.5, vs=0.05)
+    _, taum = inject_effect("time_delay", t, q, dq, ddq, taum, joint=0, delay=0.01)
+    _, taum = inject_effect("position_ripple", t, q, dq, ddq, taum, joint=5, amplitude=0.2, k=8)
     qm = qm + 1e-5 * rng.standard_normal(qm.shape)
     taum = taum + 0.05 * rng.standard_normal(taum.shape)
     tr = Trajectory(t=t, q=qm, tau=taum, source="simulated lwr4")

@@ -17,6 +17,18 @@ from pathlib import Path
 __all__ = ["add_diagnose_parser", "run_diagnose"]
 
 
+def _check_options(args) -> None:
+    from ..cli import OptionError
+
+    checks = (("significance", "--significance", lambda v: 0 < v < 1, "must lie between 0 and 1"),
+              ("holdout", "--holdout", lambda v: 0 < v < 1, "must lie between 0 and 1 (a share of each recording)"),
+              ("max_effects", "--max-effects", lambda v: v >= 0, "must be >= 0"))
+    for attr, flag, ok, what in checks:
+        v = getattr(args, attr, None)
+        if v is not None and not ok(v):
+            raise OptionError(f"{flag} {v:g}: {what}")
+
+
 def run_diagnose(args) -> dict:
     """Run the command; returns the JSON dictionary."""
     import numpy as np
@@ -26,6 +38,7 @@ def run_diagnose(args) -> dict:
     from .candidates import KINDS
     from .core import diagnose
 
+    _check_options(args)
     if args.report:  # fail before the long computation on a bad suffix
         from ..report import check_report_path
 

@@ -1,24 +1,51 @@
 """Close the loop on measured data: residual -> candidate effect -> augmented re-identification.
 
-:func:`diagnose` identifies the declared model, then repeats:
+:func:`diagnose` identifies the declared model (the chosen method, OLS/WLS/TLS), then repeats:
 
-1. weight the rows of joint j by ``1/sigma_j`` (the current residual's standard deviation per joint)
-   and project every candidate's columns out of the span of the current model's columns;
-2. for each candidate family (:mod:`.candidates`) compute on the *identification* data the F test of
-   the added columns (divided by the long-run factor of the residual, so serially correlated residuals
-   do not pass for evidence; Bonferroni over the family's 1-D search grid), and on the *validation*
-   data the decrease of the squared error of the re-identified model, both as a score (sum over joints
-   of the fractional decrease of the squared error norm) and as a z statistic against the null
-   distribution of that decrease when the columns are useless (mean ``-m``, standard deviation
-   ``2 sqrt(kappa m)``, ``m`` the expected squared prediction change from the estimation noise);
-3. a candidate is *eligible* when its corrected p-value < ``significance / n_candidates``
-   (Bonferroni over the round), ``z > Phi^-1(1 - significance / n_candidates)``, it lowers the
-   validation error norm of its joint by at least ``min_rel_improvement``, and it beats every
-   *placebo* (random smooth columns of time on the same joint, drawn with ``rng``) on both statistics;
-4. the eligible candidate with the best validation score is added, the model re-identified with the
-   chosen method (OLS/WLS/TLS), and the loop goes on until nothing is eligible or ``max_effects``.
+1. weight the rows of joint j by ``1/sigma_j`` (the current residual's standard deviation per joint),
+   add *nuisance* columns that absorb what velocity noise does to the Coulomb column at reversals
+   (:func:`.candidates.nuisance_columns`), and project every candidate's columns out of the span of
+   the current model's columns (a column mostly inside it is "already in the model" and skipped);
+2. for each candidate family (:mod:`.candidates`) compute on the *identification* data a Wald test of
+   the added coefficients with a heteroscedasticity- and autocorrelation-consistent covariance
+   (Newey-West, residuals scaled by ``1/(1 - h_ii)``), keeping the larger of its p-value and of the
+   white-noise F test's, with a Bonferroni factor for the family's 1-D search grid; and on the
+   *validation* data the decrease of the squared error when the model re-identified with the columns
+   predicts it: a score (sum over joints of the fractional decrease of the squared error norm) and a z
+   statistic against the null distribution of that decrease when the columns are useless (mean
+   ``-m``, ``m`` the expected squared prediction change from the estimation noise; standard deviation
+   from the HAC variance of the validation residual along that change);
+3. a candidate is *eligible* when its p-value < ``significance / n_candidates`` (Bonferroni over the
+   round), ``z > Phi^-1(1 - significance / n_candidates)``, it lowers the validation error norm of its
+   joint (of any joint for ``elasticity``) by at least ``min_rel_improvement``, its columns spread over
+   enough rows to give evidence at all, and it beats every *placebo* of its joint(s) on both
+   statistics (random smooth functions of time, and random combinations of every joint's position,
+   velocity and acceleration, drawn with ``rng``: a calibration of the null that does not rest on a
+   noise model and that also catches coincidental fits of deterministic artefacts repeated in the
+   validation data);
+4. the eligible candidate with the best validation score is added (its searched parameter refined
+   continuously between grid points), the model re-identified with the chosen method, the model
+   torque and the columns linearised around the fit rebuilt (fixed point), and the loop goes on
+   until nothing is eligible or ``max_effects``.
 
 Everything the loop computed is in the :class:`~.report.ResidualReport`.
+
+Known limits
+------------
+* Candidates are scored with per-joint weighted least squares whatever ``method``; the reported
+  identifications (errors before/after, effect parameters and %sigma) use ``method``.
+* ``gain``: only the gain of one joint relative to the others is identifiable (through the dynamic
+  coupling); a common scale of all joints needs a known payload. On robots whose joints are weakly
+  coupled (a SCARA) a gain error of one joint looks like that of another.
+* ``elasticity`` of a joint carrying most of the gravity torque (LWR4 joint 2) is partly absorbed by
+  the gravity parameters; stiffness estimates are biased low there. The Coulomb term of the deflection
+  is left out of the column (it gave false positives on noisy data), so large Coulomb friction against
+  a soft joint is picked up as ``time_delay`` or ``load_friction`` instead.
+* ``position_ripple`` is in the joint angle only, orders 2-32 within the decimated band; a ripple at
+  the motor angle (gear ratio times faster) is filtered out by the decimation.
+* Hold-out validation on a repeated (periodic) excitation validates deterministic processing
+  artefacts as well as physical effects; the motion placebos guard against the coincidental ones.
+  Separate validation recordings are better.
 """
 from __future__ import annotations
 
@@ -557,6 +584,7 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
     s_before = residual_structure(F, res0.residual, significance=significance) if structure else ()
     s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
                                  significance=significance) if structure else ()
+    warnings += [f"final identification: {w}" for w in res.warnings if "TLS" in w or "rank-deficient" in w]
     if placebo_hits:
         lst = ", ".join(f"joint {j + 1} (score up to {max(sc for *_, sc in h):.2f})"
                         for j, h in sorted(placebo_hits.items()))

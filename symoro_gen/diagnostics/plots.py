@@ -12,6 +12,9 @@ from pathlib import Path
 
 __all__ = ["write_plots"]
 
+#: every figure of a diagnosis is named ``diagnosis-*.png``; older ones in the folder are replaced
+STEM = "diagnosis-"
+
 
 def write_plots(report, folder) -> list[Path]:
     """Write the diagnosis figures of ``report`` (a :class:`~.report.ResidualReport`) as PNG files.
@@ -19,7 +22,8 @@ def write_plots(report, folder) -> list[Path]:
     Returns
     -------
     list of Path
-        Files written, ``folder/<figure name>.png``; empty when matplotlib is not installed.
+        Files written, ``folder/<figure name>.png``; empty when matplotlib is not installed. Files
+        ``diagnosis-*.png`` of an earlier diagnosis in the folder that this one does not write are removed.
     """
     try:
         from ..report import MissingDependencyError, build_report
@@ -31,6 +35,10 @@ def write_plots(report, folder) -> list[Path]:
         return []
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    names = {f"{fig.name}.png" for fig in rep.figures}
+    for old in folder.glob(f"{STEM}*.png"):   # figures of an earlier diagnosis in the same folder
+        if old.name not in names:
+            old.unlink()
     out = []
     for fig in rep.figures:
         p = folder / f"{fig.name}.png"

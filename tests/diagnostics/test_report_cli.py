@@ -98,3 +98,13 @@ def test_cli_rejects_bad_report_suffix(tmp_path, capsys):
     rc = main(["diagnose", "scara", str(csv), "--report", str(tmp_path / "r.pdf")])
     assert rc == 2
     assert "suffix" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("opt", [["--significance", "1.5"], ["--holdout", "0"], ["--max-effects", "-1"]])
+def test_cli_rejects_bad_options_before_loading(opt, capsys):
+    from symoro_gen.cli import main
+
+    rc = main(["diagnose", "scara", "no-such-file.csv"] + opt)
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert opt[0] in err and "no-such-file" not in err

@@ -1,0 +1,58 @@
+"""Rows and signals of the diagnosis frames line up with the assembler's observation system."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from symoro_gen.diagnostics.frame import (T_ORIGIN_KEY, attach_model_torque, build_frame, common_bandwidth,
+                                          split_holdout)
+
+from .simdata import recording
+
+
+@pytest.fixture(scope="module")
+def scara_frame():
+    model, tr = recording("scara", 21, noise_q=1e-4)
+    return model, tr, build_frame(model, [tr], dynamics_bandwidth_hz=common_bandwidth([tr]))
+
+
+def test_full_rate_columns_equal_the_model_columns(scara_frame):
+    """sign(dq_j), dq_j, ddq_j evaluated at full rate and decimated == the FS, FV, IA columns of W."""
+    model, _, F = scara_frame
+    W = F.system.W
+    for name, fn in (("FS2", lambda ex: {1: np.sign(ex.dq[:, 1:2])}), ("FV4", lambda ex: {3: ex.dq[:, 3:4]}),
+                     ("IA4", lambda ex: {3: ex.ddq[:, 3:4]})):
+        X = F.full_rate_columns(fn, 1)[:, 0]
+        ref = W[:, F.system.names.index(name)]
+        np.testing.assert_allclose(X, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+
+
+def test_row_signals_and_model_torque(scara_frame):
+    model, tr, F = scara_frame
+    J = F.system.joint
+    # the measured torque of each row is Y
+    np.testing.assert_allclose(F.sig["tau"][np.arange(J.size), J], F.system.Y, atol=1e-9)
+    # the model torque of the fitted parameters predicts Y (to the noise)
+    th = np.linalg.lstsq(F.system.W, F.system.Y, rcond=None)[0]
+    G = attach_model_torque(F, model, dict(zip(F.system.names, th)))
+    pred = G.sig["tau_hat"][np.arange(J.size), J]
+    rel = np.linalg.norm(pred - F.system.Y) / np.linalg.norm(F.system.Y)
+    assert rel < 0.02, rel
+    # the rows' time is the sample time of the decimated samples
+    t = G.sig["t"][F.rows_of(0)]
+    assert np.all(np.diff(t) > 0) and np.allclose(np.diff(t), np.diff(t)[0])
+
+
+def test_position_noise_estimate(scara_frame):
+    _, _, F = scara_frame
+    np.testing.assert_allclose(F.experiments[0].q_noise, 1e-4, rtol=0.1)
+
+
+def test_holdout_keeps_the_time_origin():
+    _, tr = recording("scara", 22, duration=10.0)
+    a, b = split_holdout([tr], 0.3)
+    assert a[0].n_samples + b[0].n_samples == tr.n_samples
+    assert b[0].n_samples == pytest.approx(0.3 * tr.n_samples, abs=1)
+    assert a[0].meta[T_ORIGIN_KEY] == b[0].meta[T_ORIGIN_KEY] == tr.t[0]
+    with pytest.raises(ValueError):
+        split_holdout([tr], 1.0)
