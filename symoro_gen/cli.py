@@ -274,7 +274,8 @@ def _default_hint(exc: BaseException, args) -> str:
     if isinstance(exc, ModelError):
         return "(re)generate the model with `symoro-gen generate ROBOT`; see " + _DOCS + "generated-module.md"
     if isinstance(exc, IdentificationError):
-        return f"see `symoro-gen {cmd} --help` and {_DOCS}tutorial-identification.md"
+        page = "tutorial-diagnosis.md" if cmd == "diagnose" else "tutorial-identification.md"
+        return f"see `symoro-gen {cmd} --help` and {_DOCS}{page}"
     if isinstance(exc, OSError):
         return "check that the path exists, is the right kind (file or folder) and that its folder is writable"
     return f"check the options of `symoro-gen {cmd} --help`; --debug shows where it failed"
