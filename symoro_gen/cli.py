@@ -195,10 +195,8 @@ def _demo_parser(sub):
 
 
 def _diagnose_parser(sub):
-    try:
-        from .diagnostics.cli import add_diagnose_parser
-    except ImportError:
-        return
+    from .diagnostics.cli import add_diagnose_parser
+
     add_diagnose_parser(sub)
 
 
