@@ -59,6 +59,7 @@ from scipy import stats as sst
 from ..errors import IdentificationError
 from ..identification.estimators import identify
 from ..identification.observation import ObservationSystem
+from ..progress import progress_bar
 from ..preprocessing.trajectory import Trajectory
 from .candidates import (ALL, REVEAL, Family, FitContext, describe_params, make_families, nuisance_columns,
                          placebo_families)
@@ -480,7 +481,9 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
         fams = [f for f in families if f.key not in done]
         plac = placebo_families(F, rng, n_placebo) if n_placebo > 0 else []
         evals = []
+        bar = progress_bar(len(fams) + len(plac), f"diagnose: round {rnd}", unit="candidate")
         for fam in fams + plac:
+            bar.update(1)
             Xs = fam.build(F, ctx)
             Xvs = fam.build(V, ctx)
             best, reasons = None, []
@@ -495,6 +498,7 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
             if best is not None:
                 best.p_value = bonferroni(best.p_value, fam.n_members)
             evals.append((fam, best, reasons[0] if reasons and best is None else "", Xs, Xvs))
+        bar.close()
         tested = [e for e in evals if e[1] is not None and not e[0].placebo]
         m_tests = max(len(tested), 1)
         thr = significance / m_tests

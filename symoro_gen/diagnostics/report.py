@@ -222,6 +222,12 @@ class ResidualReport:
             rows.append(f"{lab:<12}" + "".join(f"{x:>10.4f}" for x in a))
         return rows
 
+    def _repr_html_(self) -> str:
+        """Tables of the diagnosis (Jupyter)."""
+        from ..report import diagnosis_html
+
+        return diagnosis_html(self)
+
     def summary(self, n_tried: int = 8) -> str:
         """Errors before/after, the effects added with their parameters and %sigma, the best candidates of
         each round, structure left, numbered warnings."""

@@ -108,3 +108,21 @@ def test_cli_rejects_bad_options_before_loading(opt, capsys):
     assert rc == 2
     err = capsys.readouterr().err
     assert opt[0] in err and "no-such-file" not in err
+
+
+def test_repr_html_tables(stribeck_report):
+    html = stribeck_report._repr_html_()
+    assert "<table" in html and "stribeck" in html
+
+
+def test_progress_bar_over_candidates(monkeypatch, capsys):
+    """With bars forced on, diagnose reports its candidate rounds on stderr; off by default."""
+    from symoro_gen.progress import progress_mode
+
+    model, tr = recording("scara", 12)
+    monkeypatch.setenv("SYMORO_PROGRESS", "1")
+    with progress_mode("auto"):  # what the CLI sets unless --quiet
+        diagnose(model, tr, max_effects=1)
+    assert "diagnose: round 1" in capsys.readouterr().err
+    diagnose(model, tr, max_effects=1)  # library default: no bars
+    assert "diagnose: round" not in capsys.readouterr().err
