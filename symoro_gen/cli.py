@@ -60,45 +60,42 @@ def cmd_generate(args) -> int:
     return 0
 
 
-def cmd_import_par(args) -> int:
-    from .description.par import import_par, write_robot_toml
-
-    text = import_par(args.file)
-    if args.output:
-        write_robot_toml(text, args.output, overwrite=args.force)
-        if not args.quiet:
-            print(f"wrote {args.output}")
-    else:
+def _output(text: str, args, *, robot_file: bool = False) -> int:
+    """Write a command's text to ``--output`` (atomically; robot files validated, never overwritten
+    without ``--force``) or to standard output."""
+    if not args.output:
         sys.stdout.write(text)
+        return 0
+    if robot_file:
+        from .description.par import write_robot_toml
+
+        write_robot_toml(text, args.output, overwrite=args.force)
+    else:
+        from .emit.package import write_text_atomic
+
+        write_text_atomic(Path(args.output), text)
+    if not args.quiet:
+        print(f"wrote {args.output}")
     return 0
+
+
+def cmd_import_par(args) -> int:
+    from .description.par import import_par
+
+    return _output(import_par(args.file), args, robot_file=True)
 
 
 def cmd_export_par(args) -> int:
     from .description import load_robot
     from .description.par import export_par
 
-    text = export_par(load_robot(args.robot))
-    if args.output:
-        from .emit.package import write_text_atomic
-
-        write_text_atomic(Path(args.output), text)
-    else:
-        sys.stdout.write(text)
-    return 0
+    return _output(export_par(load_robot(args.robot)), args)
 
 
 def cmd_import_urdf(args) -> int:
-    from .description.par import write_robot_toml
     from .description.urdf import import_urdf
 
-    text = import_urdf(args.file, base=args.base, tip=args.tip, name=args.name)
-    if args.output:
-        write_robot_toml(text, args.output, overwrite=args.force)
-        if not args.quiet:
-            print(f"wrote {args.output}")
-    else:
-        sys.stdout.write(text)
-    return 0
+    return _output(import_urdf(args.file, base=args.base, tip=args.tip, name=args.name), args, robot_file=True)
 
 
 def cmd_export_urdf(args) -> int:
@@ -117,14 +114,7 @@ def cmd_export_urdf(args) -> int:
             params = {n: v for n, v in zip(p["names"], p["values"]) if v is not None}
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise ModelError(f"{args.params}: not a result of `symoro-gen identify` ({exc})") from None
-    text = export_urdf(robot, params=params)
-    if args.output:
-        from .emit.package import write_text_atomic
-
-        write_text_atomic(Path(args.output), text)
-    else:
-        sys.stdout.write(text)
-    return 0
+    return _output(export_urdf(robot, params=params), args)
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
