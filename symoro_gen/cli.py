@@ -71,7 +71,7 @@ def _output(text: str, args, *, robot_file: bool = False) -> int:
 
         write_robot_toml(text, args.output, overwrite=args.force)
     else:
-        from .emit.package import write_text_atomic
+        from .atomic import write_text_atomic
 
         write_text_atomic(Path(args.output), text)
     if not args.quiet:

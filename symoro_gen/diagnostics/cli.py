@@ -56,7 +56,7 @@ def run_diagnose(args) -> dict:
     out["data"] = [str(p) for p in args.data]
     out["validate"] = [str(p) for p in args.validate or ()]
     if args.json:
-        from ..emit.package import write_text_atomic
+        from ..atomic import write_text_atomic
 
         write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
     if args.plots:

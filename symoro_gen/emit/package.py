@@ -18,6 +18,7 @@ import numpy as np
 import sympy as sp
 
 from .. import __version__
+from ..atomic import ordinary_mode
 from ..baseparams.regroup import BaseParameterMap, group_base_parameters
 from ..description.model import RobotDescription
 from ..dynamics.graph import ExprGraph
@@ -399,6 +400,7 @@ def write_package_atomic(target: Path, files: dict[str, str]) -> None:
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
+        os.chmod(tmp, ordinary_mode(is_dir=True))  # mkdtemp makes it private
         for name, text in files.items():
             (tmp / name).write_text(text, encoding="utf-8", newline="\n")
         old = None
@@ -410,21 +412,6 @@ def write_package_atomic(target: Path, files: dict[str, str]) -> None:
             shutil.rmtree(old, ignore_errors=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write one text file through a temporary sibling and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
         raise
 
 

@@ -74,7 +74,7 @@ def run_identify(args) -> dict:
     else:
         ref_text = ""
     if args.json:
-        from ..emit.package import write_text_atomic
+        from ..atomic import write_text_atomic
 
         write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
     text = res.summary()

@@ -16,6 +16,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..atomic import ordinary_mode, write_bytes_atomic
 from ..errors import SymoroError
 
 __all__ = ["ReportError", "Heading", "Paragraph", "Table", "Figure", "ItemList", "Preformatted", "Report", "png_size",
@@ -279,31 +280,12 @@ def asset_folder(path) -> Path:
     return path.with_name(path.stem + "_files")
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def _write_bytes_atomic(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it private; a report is an ordinary file
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _replace_folder_atomic(folder: Path, files: dict[str, bytes]) -> None:
     """Write ``files`` into a temporary sibling folder, then swap it in place of ``folder``."""
     tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".tmp", dir=folder.parent))
     old = None
     try:
-        os.chmod(tmp, 0o777 & ~_umask())
+        os.chmod(tmp, ordinary_mode(is_dir=True))
         for name, data in files.items():
             (tmp / name).write_bytes(data)
         if folder.exists():
@@ -343,10 +325,10 @@ def write_report_files(report: Report, path) -> Path:
         raise ReportError(f"report {path}: unknown suffix {path.suffix!r}; use one of {', '.join(REPORT_SUFFIXES)}")
     path.parent.mkdir(parents=True, exist_ok=True)
     if kind == "html":
-        _write_bytes_atomic(path, report.to_html().encode("utf-8"))
+        write_bytes_atomic(path, report.to_html().encode("utf-8"))
     else:
         folder = asset_folder(path)
         if report.figures:
             _replace_folder_atomic(folder, {f"{fig.name}.png": fig.png for fig in report.figures})
-        _write_bytes_atomic(path, report.to_markdown(folder.name).encode("utf-8"))
+        write_bytes_atomic(path, report.to_markdown(folder.name).encode("utf-8"))
     return path

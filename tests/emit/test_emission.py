@@ -70,3 +70,20 @@ def test_symbolic_geometry_is_substituted_in_code_but_kept_in_relations(tmp_path
     q, dq, ddq = rng.normal(size=(3, 10, 6))
     chi = rng.normal(size=len(m.STANDARD_NAMES))
     assert np.allclose(m.torque(q, dq, ddq, chi), inverse_dynamics(robot, q, dq, ddq, chi), atol=1e-10)
+
+
+def test_written_files_have_ordinary_permissions(tmp_path):
+    """Atomic writes go through mkstemp/mkdtemp (private); outputs must still be ordinary files."""
+    import os
+
+    from symoro_gen.atomic import write_text_atomic
+
+    old = os.umask(0o022)
+    try:
+        emit_robot(load_robot("scara"), tmp_path)
+        write_text_atomic(tmp_path / "x.json", "{}\n")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "scara").stat().st_mode & 0o777 == 0o755
+    assert (tmp_path / "scara" / "__init__.py").stat().st_mode & 0o777 == 0o644
+    assert (tmp_path / "x.json").stat().st_mode & 0o777 == 0o644
