@@ -20,7 +20,6 @@ from . import _ccompile
 from ._kernels import base_kernel as _base_kernel
 from ._kernels import payload_kernel as _payload_kernel
 from ._kernels import standard_kernel as _standard_kernel
-from ._kernels import trig as _trig
 
 ROBOT = 'lwr4'
 N_JOINTS = 7
@@ -59,8 +58,7 @@ def _evaluate(kernel, cname, ncols, q, dq, ddq, out=None):
     if res.shape != (N, N_JOINTS, ncols) or res.dtype != np.float64 or not res.flags.c_contiguous:
         raise ValueError(f"{ROBOT}: out must be a C-contiguous float64 array of shape {(N, N_JOINTS, ncols)}")
     if _C is not None:
-        trig = _trig(np.ascontiguousarray(q.T))
-        _C[cname](N, np.ascontiguousarray(q), np.ascontiguousarray(dq), np.ascontiguousarray(ddq), trig, res)
+        _C[cname](N, np.ascontiguousarray(q), np.ascontiguousarray(dq), np.ascontiguousarray(ddq), res)
         return res[0] if one else res
     m = min(_CHUNK, max(N, 1))
     buf = np.zeros((N_JOINTS, ncols, m))

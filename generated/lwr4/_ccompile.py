@@ -84,6 +84,6 @@ def load(functions):
     for name in functions:
         fn = getattr(lib, name)
         fn.restype = None
-        fn.argtypes = [ctypes.c_long, ptr, ptr, ptr, ptr, ptr]
+        fn.argtypes = [ctypes.c_long, ptr, ptr, ptr, ptr]
         out[name] = fn
     return out

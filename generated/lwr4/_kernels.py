@@ -2376,25 +2376,3 @@ def payload_kernel(q, dq, ddq, out):
     out[1, 9] = NM7_2z
     out[2, 9] = NM7_3z
     out[3, 9] = NM7_4z
-
-def trig(qT):
-    out = np.empty((qT.shape[1], 12))
-    q2 = qT[1]
-    q3 = qT[2]
-    q4 = qT[3]
-    q5 = qT[4]
-    q6 = qT[5]
-    q7 = qT[6]
-    out[:, 0] = np.cos(q2)
-    out[:, 1] = np.cos(q3)
-    out[:, 2] = np.cos(q4)
-    out[:, 3] = np.cos(q5)
-    out[:, 4] = np.cos(q6)
-    out[:, 5] = np.cos(q7)
-    out[:, 6] = np.sin(q2)
-    out[:, 7] = np.sin(q3)
-    out[:, 8] = np.sin(q4)
-    out[:, 9] = np.sin(q5)
-    out[:, 10] = np.sin(q6)
-    out[:, 11] = np.sin(q7)
-    return out

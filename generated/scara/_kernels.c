@@ -2,32 +2,65 @@
 // Robot file: scara.toml sha256=b700a3291203d37352a1bf02ebb3705c9a791ce50a34a2aa955aa34b2e1c5640
 // Do not edit: regenerate with `make robot ROBOT=scara`.
 
+/* Inputs (N, n) and output (N, n, ncols) are row-major (sample-major). */
+#define _GNU_SOURCE
 #include <math.h>
 
 static inline double sym_sign(double x) { return (double)((x > 0.0) - (x < 0.0)); }
 
-void base_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
+#if defined(__GNUC__)
+#define SYM_SIMD 1
+#define SYM_LANES 4
+typedef double sym_vd __attribute__((vector_size(8 * SYM_LANES)));
+static inline sym_vd sym_vload(const double* p, long stride)
+{
+    sym_vd v;
+    for (int k = 0; k < SYM_LANES; ++k) v[k] = p[k * stride];
+    return v;
+}
+static inline sym_vd sym_vsign(sym_vd x)
+{
+    sym_vd r;
+    for (int k = 0; k < SYM_LANES; ++k) r[k] = sym_sign(x[k]);
+    return r;
+}
+static inline void sym_vsincos(sym_vd x, sym_vd* sn, sym_vd* cs)
+{
+    for (int k = 0; k < SYM_LANES; ++k) sincos(x[k], &(*sn)[k], &(*cs)[k]);
+}
+static inline sym_vd sym_vsin(sym_vd x)
+{
+    sym_vd r;
+    for (int k = 0; k < SYM_LANES; ++k) r[k] = sin(x[k]);
+    return r;
+}
+static inline sym_vd sym_vcos(sym_vd x)
+{
+    sym_vd r;
+    for (int k = 0; k < SYM_LANES; ++k) r[k] = cos(x[k]);
+    return r;
+}
+#endif
+
+
+static void base_batch_scalar(long N, const double* q, const double* dq, const double* ddq, double* out)
 {
     for (long s = 0; s < N; ++s) {
-        const double* ts = trig + s * 4;
-        const double* qs = q + s * 4;
-        const double* dqs = dq + s * 4;
-        const double* ddqs = ddq + s * 4;
         double* o = out + s * 88;
-        const double q2 = qs[1];
-        const double q4 = qs[3];
-        const double dq1 = dqs[0];
-        const double dq2 = dqs[1];
-        const double dq3 = dqs[2];
-        const double dq4 = dqs[3];
-        const double ddq1 = ddqs[0];
-        const double ddq2 = ddqs[1];
-        const double ddq3 = ddqs[2];
-        const double ddq4 = ddqs[3];
-        const double S2 = ts[2];
-        const double C2 = ts[0];
-        const double S4 = ts[3];
-        const double C4 = ts[1];
+        const double q2 = q[s * 4 + 1];
+        const double q4 = q[s * 4 + 3];
+        const double dq1 = dq[s * 4 + 0];
+        const double dq2 = dq[s * 4 + 1];
+        const double dq3 = dq[s * 4 + 2];
+        const double dq4 = dq[s * 4 + 3];
+        const double ddq1 = ddq[s * 4 + 0];
+        const double ddq2 = ddq[s * 4 + 1];
+        const double ddq3 = ddq[s * 4 + 2];
+        const double ddq4 = ddq[s * 4 + 3];
+        const double S2 = sin(q2);
+        const double C2 = cos(q2);
+        const double S4 = sin(q4);
+        const double C4 = cos(q4);
         const double WW1zz = dq1*dq1;
         const double va2x = (-0.35)*WW1zz;
         const double va2y = 0.35*ddq1;
@@ -159,28 +192,212 @@ void base_batch(long N, const double* q, const double* dq, const double* ddq, co
     }
 }
 
-void standard_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
+#ifdef SYM_SIMD
+void base_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+{
+    long s = 0;
+    for (; s + SYM_LANES <= N; s += SYM_LANES) {
+        const sym_vd q2 = sym_vload(q + s * 4 + 1, 4);
+        const sym_vd q4 = sym_vload(q + s * 4 + 3, 4);
+        const sym_vd dq1 = sym_vload(dq + s * 4 + 0, 4);
+        const sym_vd dq2 = sym_vload(dq + s * 4 + 1, 4);
+        const sym_vd dq3 = sym_vload(dq + s * 4 + 2, 4);
+        const sym_vd dq4 = sym_vload(dq + s * 4 + 3, 4);
+        const sym_vd ddq1 = sym_vload(ddq + s * 4 + 0, 4);
+        const sym_vd ddq2 = sym_vload(ddq + s * 4 + 1, 4);
+        const sym_vd ddq3 = sym_vload(ddq + s * 4 + 2, 4);
+        const sym_vd ddq4 = sym_vload(ddq + s * 4 + 3, 4);
+        sym_vd S2, C2;
+        sym_vsincos(q2, &S2, &C2);
+        sym_vd S4, C4;
+        sym_vsincos(q4, &S4, &C4);
+        const sym_vd WW1zz = dq1*dq1;
+        const sym_vd va2x = (-0.35)*WW1zz;
+        const sym_vd va2y = 0.35*ddq1;
+        const sym_vd CpS2 = C2 + S2;
+        const sym_vd SmC2 = S2 - C2;
+        const sym_vd rot0 = C2*(va2x - va2y);
+        const sym_vd vd2x = rot0 + CpS2*va2y;
+        const sym_vd vd2y = -rot0 - SmC2*va2x;
+        const sym_vd w2z = dq1 + dq2;
+        const sym_vd wd2z = ddq1 + ddq2;
+        const sym_vd WW2zz = w2z*w2z;
+        const sym_vd va3x = vd2x + (-0.3)*WW2zz;
+        const sym_vd va3y = vd2y + 0.3*wd2z;
+        const sym_vd vd3z = 9.81 + ddq3;
+        const sym_vd CpS4 = C4 + S4;
+        const sym_vd SmC4 = S4 - C4;
+        const sym_vd rot1 = C4*(va3x - va3y);
+        const sym_vd vd4x = rot1 + CpS4*va3y;
+        const sym_vd vd4y = -rot1 - SmC4*va3x;
+        const sym_vd w4z = dq4 + w2z;
+        const sym_vd wd4z = ddq4 + wd2z;
+        const sym_vd rot2 = C2*(WW2zz + wd2z);
+        const sym_vd NXZ2_1x = rot2 - CpS2*WW2zz;
+        const sym_vd NXZ2_1y = rot2 + SmC2*wd2z;
+        const sym_vd NMX2_1z = vd2y + 0.35*NXZ2_1x;
+        const sym_vd NMY2_1z = -vd2x + (-0.35)*NXZ2_1y;
+        const sym_vd NMZ3_1x = -C2*va3y - S2*va3x;
+        const sym_vd NM3_2z = 0.3*va3y;
+        const sym_vd NM3_1z = NM3_2z + (-0.35)*NMZ3_1x;
+        const sym_vd WW4zz = w4z*w4z;
+        const sym_vd rot3 = C4*(WW4zz + wd4z);
+        const sym_vd NXZ4_3x = rot3 - CpS4*WW4zz;
+        const sym_vd NXZ4_3y = rot3 + SmC4*wd4z;
+        const sym_vd rot4 = C2*(NXZ4_3x + NXZ4_3y);
+        const sym_vd NXZ4_1x = rot4 - CpS2*NXZ4_3y;
+        const sym_vd NXZ4_1y = rot4 + NXZ4_3x*SmC2;
+        const sym_vd NMX4_2z = vd4y + 0.3*NXZ4_3x;
+        const sym_vd NMX4_1z = NMX4_2z + 0.35*NXZ4_1x;
+        const sym_vd NMY4_2z = -vd4x + (-0.3)*NXZ4_3y;
+        const sym_vd NMY4_1z = NMY4_2z + (-0.35)*NXZ4_1y;
+        const sym_vd o0_0 = ddq1;
+        const sym_vd o0_1 = dq1;
+        const sym_vd o0_2 = sym_vsign(dq1);
+        const sym_vd o0_4 = wd2z;
+        const sym_vd o0_5 = NMX2_1z;
+        const sym_vd o0_6 = NMY2_1z;
+        const sym_vd o0_11 = NM3_1z;
+        const sym_vd o0_15 = wd4z;
+        const sym_vd o0_16 = NMX4_1z;
+        const sym_vd o0_17 = NMY4_1z;
+        const sym_vd o1_4 = wd2z;
+        const sym_vd o1_5 = vd2y;
+        const sym_vd o1_6 = -vd2x;
+        const sym_vd o1_7 = ddq2;
+        const sym_vd o1_8 = dq2;
+        const sym_vd o1_9 = sym_vsign(dq2);
+        const sym_vd o1_11 = NM3_2z;
+        const sym_vd o1_15 = wd4z;
+        const sym_vd o1_16 = NMX4_2z;
+        const sym_vd o1_17 = NMY4_2z;
+        const sym_vd o2_11 = vd3z;
+        const sym_vd o2_12 = ddq3;
+        const sym_vd o2_13 = dq3;
+        const sym_vd o2_14 = sym_vsign(dq3);
+        const sym_vd o3_15 = wd4z;
+        const sym_vd o3_16 = vd4y;
+        const sym_vd o3_17 = -vd4x;
+        const sym_vd o3_18 = ddq4;
+        const sym_vd o3_19 = dq4;
+        const sym_vd o3_20 = sym_vsign(dq4);
+        for (int l = 0; l < SYM_LANES; ++l) {
+            double* o = out + (s + l) * 88;
+            o[0] = o0_0[l];
+            o[1] = o0_1[l];
+            o[2] = o0_2[l];
+            o[3] = 1.0;
+            o[4] = o0_4[l];
+            o[5] = o0_5[l];
+            o[6] = o0_6[l];
+            o[7] = 0.0;
+            o[8] = 0.0;
+            o[9] = 0.0;
+            o[10] = 0.0;
+            o[11] = o0_11[l];
+            o[12] = 0.0;
+            o[13] = 0.0;
+            o[14] = 0.0;
+            o[15] = o0_15[l];
+            o[16] = o0_16[l];
+            o[17] = o0_17[l];
+            o[18] = 0.0;
+            o[19] = 0.0;
+            o[20] = 0.0;
+            o[21] = 0.0;
+            o[22] = 0.0;
+            o[23] = 0.0;
+            o[24] = 0.0;
+            o[25] = 0.0;
+            o[26] = o1_4[l];
+            o[27] = o1_5[l];
+            o[28] = o1_6[l];
+            o[29] = o1_7[l];
+            o[30] = o1_8[l];
+            o[31] = o1_9[l];
+            o[32] = 1.0;
+            o[33] = o1_11[l];
+            o[34] = 0.0;
+            o[35] = 0.0;
+            o[36] = 0.0;
+            o[37] = o1_15[l];
+            o[38] = o1_16[l];
+            o[39] = o1_17[l];
+            o[40] = 0.0;
+            o[41] = 0.0;
+            o[42] = 0.0;
+            o[43] = 0.0;
+            o[44] = 0.0;
+            o[45] = 0.0;
+            o[46] = 0.0;
+            o[47] = 0.0;
+            o[48] = 0.0;
+            o[49] = 0.0;
+            o[50] = 0.0;
+            o[51] = 0.0;
+            o[52] = 0.0;
+            o[53] = 0.0;
+            o[54] = 0.0;
+            o[55] = o2_11[l];
+            o[56] = o2_12[l];
+            o[57] = o2_13[l];
+            o[58] = o2_14[l];
+            o[59] = 0.0;
+            o[60] = 0.0;
+            o[61] = 0.0;
+            o[62] = 0.0;
+            o[63] = 0.0;
+            o[64] = 0.0;
+            o[65] = 0.0;
+            o[66] = 0.0;
+            o[67] = 0.0;
+            o[68] = 0.0;
+            o[69] = 0.0;
+            o[70] = 0.0;
+            o[71] = 0.0;
+            o[72] = 0.0;
+            o[73] = 0.0;
+            o[74] = 0.0;
+            o[75] = 0.0;
+            o[76] = 0.0;
+            o[77] = 0.0;
+            o[78] = 0.0;
+            o[79] = 0.0;
+            o[80] = 0.0;
+            o[81] = o3_15[l];
+            o[82] = o3_16[l];
+            o[83] = o3_17[l];
+            o[84] = o3_18[l];
+            o[85] = o3_19[l];
+            o[86] = o3_20[l];
+            o[87] = 1.0;
+        }
+    }
+    base_batch_scalar(N - s, q + s * 4, dq + s * 4, ddq + s * 4, out + s * 88);
+}
+#else
+void base_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+{ base_batch_scalar(N, q, dq, ddq, out); }
+#endif
+
+static void standard_batch_scalar(long N, const double* q, const double* dq, const double* ddq, double* out)
 {
     for (long s = 0; s < N; ++s) {
-        const double* ts = trig + s * 4;
-        const double* qs = q + s * 4;
-        const double* dqs = dq + s * 4;
-        const double* ddqs = ddq + s * 4;
         double* o = out + s * 224;
-        const double q2 = qs[1];
-        const double q4 = qs[3];
-        const double dq1 = dqs[0];
-        const double dq2 = dqs[1];
-        const double dq3 = dqs[2];
-        const double dq4 = dqs[3];
-        const double ddq1 = ddqs[0];
-        const double ddq2 = ddqs[1];
-        const double ddq3 = ddqs[2];
-        const double ddq4 = ddqs[3];
-        const double S2 = ts[2];
-        const double C2 = ts[0];
-        const double S4 = ts[3];
-        const double C4 = ts[1];
+        const double q2 = q[s * 4 + 1];
+        const double q4 = q[s * 4 + 3];
+        const double dq1 = dq[s * 4 + 0];
+        const double dq2 = dq[s * 4 + 1];
+        const double dq3 = dq[s * 4 + 2];
+        const double dq4 = dq[s * 4 + 3];
+        const double ddq1 = ddq[s * 4 + 0];
+        const double ddq2 = ddq[s * 4 + 1];
+        const double ddq3 = ddq[s * 4 + 2];
+        const double ddq4 = ddq[s * 4 + 3];
+        const double S2 = sin(q2);
+        const double C2 = cos(q2);
+        const double S4 = sin(q4);
+        const double C4 = cos(q4);
         const double WW1zz = dq1*dq1;
         const double va2x = (-0.35)*WW1zz;
         const double va2y = 0.35*ddq1;
@@ -460,13 +677,372 @@ void standard_batch(long N, const double* q, const double* dq, const double* ddq
     }
 }
 
-void payload_batch(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)
+#ifdef SYM_SIMD
+void standard_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+{
+    long s = 0;
+    for (; s + SYM_LANES <= N; s += SYM_LANES) {
+        const sym_vd q2 = sym_vload(q + s * 4 + 1, 4);
+        const sym_vd q4 = sym_vload(q + s * 4 + 3, 4);
+        const sym_vd dq1 = sym_vload(dq + s * 4 + 0, 4);
+        const sym_vd dq2 = sym_vload(dq + s * 4 + 1, 4);
+        const sym_vd dq3 = sym_vload(dq + s * 4 + 2, 4);
+        const sym_vd dq4 = sym_vload(dq + s * 4 + 3, 4);
+        const sym_vd ddq1 = sym_vload(ddq + s * 4 + 0, 4);
+        const sym_vd ddq2 = sym_vload(ddq + s * 4 + 1, 4);
+        const sym_vd ddq3 = sym_vload(ddq + s * 4 + 2, 4);
+        const sym_vd ddq4 = sym_vload(ddq + s * 4 + 3, 4);
+        sym_vd S2, C2;
+        sym_vsincos(q2, &S2, &C2);
+        sym_vd S4, C4;
+        sym_vsincos(q4, &S4, &C4);
+        const sym_vd WW1zz = dq1*dq1;
+        const sym_vd va2x = (-0.35)*WW1zz;
+        const sym_vd va2y = 0.35*ddq1;
+        const sym_vd CpS2 = C2 + S2;
+        const sym_vd SmC2 = S2 - C2;
+        const sym_vd rot0 = C2*(va2x - va2y);
+        const sym_vd vd2x = rot0 + CpS2*va2y;
+        const sym_vd vd2y = -rot0 - SmC2*va2x;
+        const sym_vd w2z = dq1 + dq2;
+        const sym_vd wd2z = ddq1 + ddq2;
+        const sym_vd WW2zz = w2z*w2z;
+        const sym_vd va3x = vd2x + (-0.3)*WW2zz;
+        const sym_vd va3y = vd2y + 0.3*wd2z;
+        const sym_vd vd3z = 9.81 + ddq3;
+        const sym_vd CpS4 = C4 + S4;
+        const sym_vd SmC4 = S4 - C4;
+        const sym_vd rot1 = C4*(va3x - va3y);
+        const sym_vd vd4x = rot1 + CpS4*va3y;
+        const sym_vd vd4y = -rot1 - SmC4*va3x;
+        const sym_vd w4z = dq4 + w2z;
+        const sym_vd wd4z = ddq4 + wd2z;
+        const sym_vd rot2 = C2*(WW2zz + wd2z);
+        const sym_vd NXZ2_1x = rot2 - CpS2*WW2zz;
+        const sym_vd NXZ2_1y = rot2 + SmC2*wd2z;
+        const sym_vd NMX2_1z = vd2y + 0.35*NXZ2_1x;
+        const sym_vd NMY2_1z = -vd2x + (-0.35)*NXZ2_1y;
+        const sym_vd NMZ2_1x = -C2*vd2y - S2*vd2x;
+        const sym_vd NM2_1z = (-0.35)*NMZ2_1x;
+        const sym_vd NMX3_2z = va3y + 0.3*wd2z;
+        const sym_vd NMX3_1z = NMX3_2z + 0.35*NXZ2_1x;
+        const sym_vd NMY3_2z = -va3x + (-0.3)*WW2zz;
+        const sym_vd NMY3_1z = NMY3_2z + (-0.35)*NXZ2_1y;
+        const sym_vd NMZ3_1x = -C2*va3y - S2*va3x;
+        const sym_vd NM3_2z = 0.3*va3y;
+        const sym_vd NM3_1z = NM3_2z + (-0.35)*NMZ3_1x;
+        const sym_vd WW4zz = w4z*w4z;
+        const sym_vd rot3 = C4*(WW4zz + wd4z);
+        const sym_vd NXZ4_3x = rot3 - CpS4*WW4zz;
+        const sym_vd NXZ4_3y = rot3 + SmC4*wd4z;
+        const sym_vd rot4 = C2*(NXZ4_3x + NXZ4_3y);
+        const sym_vd NXZ4_1x = rot4 - CpS2*NXZ4_3y;
+        const sym_vd NXZ4_1y = rot4 + NXZ4_3x*SmC2;
+        const sym_vd NMX4_2z = vd4y + 0.3*NXZ4_3x;
+        const sym_vd NMX4_1z = NMX4_2z + 0.35*NXZ4_1x;
+        const sym_vd NMY4_2z = -vd4x + (-0.3)*NXZ4_3y;
+        const sym_vd NMY4_1z = NMY4_2z + (-0.35)*NXZ4_1y;
+        const sym_vd rot5 = C4*(vd4y - vd4x);
+        const sym_vd NMZ4_3x = -rot5 - CpS4*vd4x;
+        const sym_vd NMZ4_3y = -rot5 - SmC4*vd4y;
+        const sym_vd NMZ4_1x = C2*NMZ4_3x - NMZ4_3y*S2;
+        const sym_vd NM4_2z = (-0.3)*NMZ4_3x;
+        const sym_vd NM4_1z = NM4_2z + (-0.35)*NMZ4_1x;
+        const sym_vd o0_5 = ddq1;
+        const sym_vd o0_10 = ddq1;
+        const sym_vd o0_11 = dq1;
+        const sym_vd o0_12 = sym_vsign(dq1);
+        const sym_vd o0_19 = wd2z;
+        const sym_vd o0_20 = NMX2_1z;
+        const sym_vd o0_21 = NMY2_1z;
+        const sym_vd o0_23 = NM2_1z;
+        const sym_vd o0_33 = wd2z;
+        const sym_vd o0_34 = NMX3_1z;
+        const sym_vd o0_35 = NMY3_1z;
+        const sym_vd o0_37 = NM3_1z;
+        const sym_vd o0_47 = wd4z;
+        const sym_vd o0_48 = NMX4_1z;
+        const sym_vd o0_49 = NMY4_1z;
+        const sym_vd o0_51 = NM4_1z;
+        const sym_vd o1_19 = wd2z;
+        const sym_vd o1_20 = vd2y;
+        const sym_vd o1_21 = -vd2x;
+        const sym_vd o1_24 = ddq2;
+        const sym_vd o1_25 = dq2;
+        const sym_vd o1_26 = sym_vsign(dq2);
+        const sym_vd o1_33 = wd2z;
+        const sym_vd o1_34 = NMX3_2z;
+        const sym_vd o1_35 = NMY3_2z;
+        const sym_vd o1_37 = NM3_2z;
+        const sym_vd o1_47 = wd4z;
+        const sym_vd o1_48 = NMX4_2z;
+        const sym_vd o1_49 = NMY4_2z;
+        const sym_vd o1_51 = NM4_2z;
+        const sym_vd o2_37 = vd3z;
+        const sym_vd o2_38 = ddq3;
+        const sym_vd o2_39 = dq3;
+        const sym_vd o2_40 = sym_vsign(dq3);
+        const sym_vd o2_51 = vd3z;
+        const sym_vd o3_47 = wd4z;
+        const sym_vd o3_48 = vd4y;
+        const sym_vd o3_49 = -vd4x;
+        const sym_vd o3_52 = ddq4;
+        const sym_vd o3_53 = dq4;
+        const sym_vd o3_54 = sym_vsign(dq4);
+        for (int l = 0; l < SYM_LANES; ++l) {
+            double* o = out + (s + l) * 224;
+            o[0] = 0.0;
+            o[1] = 0.0;
+            o[2] = 0.0;
+            o[3] = 0.0;
+            o[4] = 0.0;
+            o[5] = o0_5[l];
+            o[6] = 0.0;
+            o[7] = 0.0;
+            o[8] = 0.0;
+            o[9] = 0.0;
+            o[10] = o0_10[l];
+            o[11] = o0_11[l];
+            o[12] = o0_12[l];
+            o[13] = 1.0;
+            o[14] = 0.0;
+            o[15] = 0.0;
+            o[16] = 0.0;
+            o[17] = 0.0;
+            o[18] = 0.0;
+            o[19] = o0_19[l];
+            o[20] = o0_20[l];
+            o[21] = o0_21[l];
+            o[22] = 0.0;
+            o[23] = o0_23[l];
+            o[24] = 0.0;
+            o[25] = 0.0;
+            o[26] = 0.0;
+            o[27] = 0.0;
+            o[28] = 0.0;
+            o[29] = 0.0;
+            o[30] = 0.0;
+            o[31] = 0.0;
+            o[32] = 0.0;
+            o[33] = o0_33[l];
+            o[34] = o0_34[l];
+            o[35] = o0_35[l];
+            o[36] = 0.0;
+            o[37] = o0_37[l];
+            o[38] = 0.0;
+            o[39] = 0.0;
+            o[40] = 0.0;
+            o[41] = 0.0;
+            o[42] = 0.0;
+            o[43] = 0.0;
+            o[44] = 0.0;
+            o[45] = 0.0;
+            o[46] = 0.0;
+            o[47] = o0_47[l];
+            o[48] = o0_48[l];
+            o[49] = o0_49[l];
+            o[50] = 0.0;
+            o[51] = o0_51[l];
+            o[52] = 0.0;
+            o[53] = 0.0;
+            o[54] = 0.0;
+            o[55] = 0.0;
+            o[56] = 0.0;
+            o[57] = 0.0;
+            o[58] = 0.0;
+            o[59] = 0.0;
+            o[60] = 0.0;
+            o[61] = 0.0;
+            o[62] = 0.0;
+            o[63] = 0.0;
+            o[64] = 0.0;
+            o[65] = 0.0;
+            o[66] = 0.0;
+            o[67] = 0.0;
+            o[68] = 0.0;
+            o[69] = 0.0;
+            o[70] = 0.0;
+            o[71] = 0.0;
+            o[72] = 0.0;
+            o[73] = 0.0;
+            o[74] = 0.0;
+            o[75] = o1_19[l];
+            o[76] = o1_20[l];
+            o[77] = o1_21[l];
+            o[78] = 0.0;
+            o[79] = 0.0;
+            o[80] = o1_24[l];
+            o[81] = o1_25[l];
+            o[82] = o1_26[l];
+            o[83] = 1.0;
+            o[84] = 0.0;
+            o[85] = 0.0;
+            o[86] = 0.0;
+            o[87] = 0.0;
+            o[88] = 0.0;
+            o[89] = o1_33[l];
+            o[90] = o1_34[l];
+            o[91] = o1_35[l];
+            o[92] = 0.0;
+            o[93] = o1_37[l];
+            o[94] = 0.0;
+            o[95] = 0.0;
+            o[96] = 0.0;
+            o[97] = 0.0;
+            o[98] = 0.0;
+            o[99] = 0.0;
+            o[100] = 0.0;
+            o[101] = 0.0;
+            o[102] = 0.0;
+            o[103] = o1_47[l];
+            o[104] = o1_48[l];
+            o[105] = o1_49[l];
+            o[106] = 0.0;
+            o[107] = o1_51[l];
+            o[108] = 0.0;
+            o[109] = 0.0;
+            o[110] = 0.0;
+            o[111] = 0.0;
+            o[112] = 0.0;
+            o[113] = 0.0;
+            o[114] = 0.0;
+            o[115] = 0.0;
+            o[116] = 0.0;
+            o[117] = 0.0;
+            o[118] = 0.0;
+            o[119] = 0.0;
+            o[120] = 0.0;
+            o[121] = 0.0;
+            o[122] = 0.0;
+            o[123] = 0.0;
+            o[124] = 0.0;
+            o[125] = 0.0;
+            o[126] = 0.0;
+            o[127] = 0.0;
+            o[128] = 0.0;
+            o[129] = 0.0;
+            o[130] = 0.0;
+            o[131] = 0.0;
+            o[132] = 0.0;
+            o[133] = 0.0;
+            o[134] = 0.0;
+            o[135] = 0.0;
+            o[136] = 0.0;
+            o[137] = 0.0;
+            o[138] = 0.0;
+            o[139] = 0.0;
+            o[140] = 0.0;
+            o[141] = 0.0;
+            o[142] = 0.0;
+            o[143] = 0.0;
+            o[144] = 0.0;
+            o[145] = 0.0;
+            o[146] = 0.0;
+            o[147] = 0.0;
+            o[148] = 0.0;
+            o[149] = o2_37[l];
+            o[150] = o2_38[l];
+            o[151] = o2_39[l];
+            o[152] = o2_40[l];
+            o[153] = 1.0;
+            o[154] = 0.0;
+            o[155] = 0.0;
+            o[156] = 0.0;
+            o[157] = 0.0;
+            o[158] = 0.0;
+            o[159] = 0.0;
+            o[160] = 0.0;
+            o[161] = 0.0;
+            o[162] = 0.0;
+            o[163] = o2_51[l];
+            o[164] = 0.0;
+            o[165] = 0.0;
+            o[166] = 0.0;
+            o[167] = 0.0;
+            o[168] = 0.0;
+            o[169] = 0.0;
+            o[170] = 0.0;
+            o[171] = 0.0;
+            o[172] = 0.0;
+            o[173] = 0.0;
+            o[174] = 0.0;
+            o[175] = 0.0;
+            o[176] = 0.0;
+            o[177] = 0.0;
+            o[178] = 0.0;
+            o[179] = 0.0;
+            o[180] = 0.0;
+            o[181] = 0.0;
+            o[182] = 0.0;
+            o[183] = 0.0;
+            o[184] = 0.0;
+            o[185] = 0.0;
+            o[186] = 0.0;
+            o[187] = 0.0;
+            o[188] = 0.0;
+            o[189] = 0.0;
+            o[190] = 0.0;
+            o[191] = 0.0;
+            o[192] = 0.0;
+            o[193] = 0.0;
+            o[194] = 0.0;
+            o[195] = 0.0;
+            o[196] = 0.0;
+            o[197] = 0.0;
+            o[198] = 0.0;
+            o[199] = 0.0;
+            o[200] = 0.0;
+            o[201] = 0.0;
+            o[202] = 0.0;
+            o[203] = 0.0;
+            o[204] = 0.0;
+            o[205] = 0.0;
+            o[206] = 0.0;
+            o[207] = 0.0;
+            o[208] = 0.0;
+            o[209] = 0.0;
+            o[210] = 0.0;
+            o[211] = 0.0;
+            o[212] = 0.0;
+            o[213] = 0.0;
+            o[214] = 0.0;
+            o[215] = o3_47[l];
+            o[216] = o3_48[l];
+            o[217] = o3_49[l];
+            o[218] = 0.0;
+            o[219] = 0.0;
+            o[220] = o3_52[l];
+            o[221] = o3_53[l];
+            o[222] = o3_54[l];
+            o[223] = 1.0;
+        }
+    }
+    standard_batch_scalar(N - s, q + s * 4, dq + s * 4, ddq + s * 4, out + s * 224);
+}
+#else
+void standard_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+{ standard_batch_scalar(N, q, dq, ddq, out); }
+#endif
+
+static void payload_batch_scalar(long N, const double* q, const double* dq, const double* ddq, double* out)
 {
     for (long s = 0; s < N; ++s) {
-        const double* ts = trig + s * 4;
-        const double* qs = q + s * 4;
-        const double* dqs = dq + s * 4;
-        const double* ddqs = ddq + s * 4;
         double* o = out + s * 0;
     }
 }
+
+#ifdef SYM_SIMD
+void payload_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+{
+    long s = 0;
+    for (; s + SYM_LANES <= N; s += SYM_LANES) {
+        for (int l = 0; l < SYM_LANES; ++l) {
+            double* o = out + (s + l) * 0;
+        }
+    }
+    payload_batch_scalar(N - s, q + s * 4, dq + s * 4, ddq + s * 4, out + s * 0);
+}
+#else
+void payload_batch(long N, const double* q, const double* dq, const double* ddq, double* out)
+{ payload_batch_scalar(N, q, dq, ddq, out); }
+#endif

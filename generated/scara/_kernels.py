@@ -208,13 +208,3 @@ def standard_kernel(q, dq, ddq, out):
 
 def payload_kernel(q, dq, ddq, out):
     pass
-
-def trig(qT):
-    out = np.empty((qT.shape[1], 4))
-    q2 = qT[1]
-    q4 = qT[3]
-    out[:, 0] = np.cos(q2)
-    out[:, 1] = np.cos(q4)
-    out[:, 2] = np.sin(q2)
-    out[:, 3] = np.sin(q4)
-    return out

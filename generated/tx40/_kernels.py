@@ -1507,22 +1507,3 @@ def standard_kernel(q, dq, ddq, out):
 
 def payload_kernel(q, dq, ddq, out):
     pass
-
-def trig(qT):
-    out = np.empty((qT.shape[1], 10))
-    q2 = qT[1]
-    q3 = qT[2]
-    q4 = qT[3]
-    q5 = qT[4]
-    q6 = qT[5]
-    out[:, 0] = np.cos(q2)
-    out[:, 1] = np.cos(q3)
-    out[:, 2] = np.cos(q4)
-    out[:, 3] = np.cos(q5)
-    out[:, 4] = np.cos(q6)
-    out[:, 5] = np.sin(q2)
-    out[:, 6] = np.sin(q3)
-    out[:, 7] = np.sin(q4)
-    out[:, 8] = np.sin(q5)
-    out[:, 9] = np.sin(q6)
-    return out

@@ -1,7 +1,9 @@
 """C backend: the same optimised graph as straight-line C with a batch loop over samples.
 
-Each function ``<name>_batch(N, q, dq, ddq, out)`` reads (N, n) row-major inputs and writes
-every entry (structural zeros included) of a row-major (N, n, ncols) output.
+Each function ``<name>(N, q, dq, ddq, out)`` reads (N, n) row-major inputs and writes every
+entry (structural zeros included) of a row-major (N, n, ncols) output. With GCC/Clang vector
+extensions, ``LANES`` samples are evaluated together (one SIMD lane each); a scalar loop does the
+remainder, and is the whole function for other compilers.
 """
 from __future__ import annotations
 
@@ -10,9 +12,49 @@ import sympy as sp
 from ..dynamics.graph import ExprGraph
 from .codegen import print_expr
 
-C_PRELUDE = """#include <math.h>
+#: samples evaluated together in the SIMD loop
+LANES = 4
 
-static inline double sym_sign(double x) { return (double)((x > 0.0) - (x < 0.0)); }
+C_PRELUDE = f"""/* Inputs (N, n) and output (N, n, ncols) are row-major (sample-major). */
+#define _GNU_SOURCE
+#include <math.h>
+
+static inline double sym_sign(double x) {{ return (double)((x > 0.0) - (x < 0.0)); }}
+
+#if defined(__GNUC__)
+#define SYM_SIMD 1
+#define SYM_LANES {LANES}
+typedef double sym_vd __attribute__((vector_size(8 * SYM_LANES)));
+static inline sym_vd sym_vload(const double* p, long stride)
+{{
+    sym_vd v;
+    for (int k = 0; k < SYM_LANES; ++k) v[k] = p[k * stride];
+    return v;
+}}
+static inline sym_vd sym_vsign(sym_vd x)
+{{
+    sym_vd r;
+    for (int k = 0; k < SYM_LANES; ++k) r[k] = sym_sign(x[k]);
+    return r;
+}}
+static inline void sym_vsincos(sym_vd x, sym_vd* sn, sym_vd* cs)
+{{
+    for (int k = 0; k < SYM_LANES; ++k) sincos(x[k], &(*sn)[k], &(*cs)[k]);
+}}
+static inline sym_vd sym_vsin(sym_vd x)
+{{
+    sym_vd r;
+    for (int k = 0; k < SYM_LANES; ++k) r[k] = sin(x[k]);
+    return r;
+}}
+static inline sym_vd sym_vcos(sym_vd x)
+{{
+    sym_vd r;
+    for (int k = 0; k < SYM_LANES; ++k) r[k] = cos(x[k]);
+    return r;
+}}
+#endif
+
 """
 
 
@@ -24,56 +66,72 @@ def _c_expr(e: sp.Expr) -> str:
     return s
 
 
-def trig_defs(graph: ExprGraph) -> list:
-    """The sin/cos definitions of a graph (computed outside the C loop, vectorised)."""
-    return [(s, e) for s, e in graph.defs if isinstance(e, (sp.sin, sp.cos))]
+def _vec(code: str) -> str:
+    """Scalar C expression -> the same on sym_vd lanes."""
+    return code.replace("sym_sign(", "sym_vsign(").replace("sin(", "sym_vsin(").replace("cos(", "sym_vcos(")
 
 
-def c_function(graph: ExprGraph, n_rows: int, col_names, func_name: str, q, dq, ddq, trig: list) -> str:
-    """``trig`` lists the (symbol, sin/cos expr) read from the precomputed ``trig`` array."""
-    col = {n: k for k, n in enumerate(col_names)}
-    nc = len(col_names)
-    nt = len(trig)
-    tpos = {s: i for i, (s, _) in enumerate(trig)}
-    lines = [
-        f"void {func_name}(long N, const double* q, const double* dq, const double* ddq, const double* trig, double* out)",
-        "{",
-        "    for (long s = 0; s < N; ++s) {",
-        f"        const double* ts = trig + s * {max(nt, 1)};",
-        f"        const double* qs = q + s * {n_rows};",
-        f"        const double* dqs = dq + s * {n_rows};",
-        f"        const double* ddqs = ddq + s * {n_rows};",
-        f"        double* o = out + s * {n_rows * nc};",
-    ]
+def _inputs(graph: ExprGraph, n_rows: int, q, dq, ddq, ctype: str, load) -> list[str]:
     used = graph.used_names()
-    for arr, syms in (("qs", q), ("dqs", dq), ("ddqs", ddq)):
+    out = []
+    for arr, syms in (("q", q), ("dq", dq), ("ddq", ddq)):
         for i, s in enumerate(syms):
             if s.name in used:
-                lines.append(f"        const double {s.name} = {arr}[{i}];")
+                out.append(f"        const {ctype} {s.name} = {load(arr, i)};")
+    return out
+
+
+def _vector_defs(graph: ExprGraph) -> list[str]:
+    """Definitions on vectors; a sin and a cos of the same angle become one sincos per lane."""
+    cos_of = {e.args[0]: s for s, e in graph.defs if isinstance(e, sp.cos)}
+    sin_of = {e.args[0]: s for s, e in graph.defs if isinstance(e, sp.sin)}
+    paired = {a for a in sin_of if a in cos_of}
+    lines, done = [], set()
     for s, e in graph.defs:
-        if s in tpos:
-            lines.append(f"        const double {s.name} = ts[{tpos[s]}];")
-        else:
-            lines.append(f"        const double {s.name} = {_c_expr(e)};")
+        if isinstance(e, (sp.sin, sp.cos)) and e.args[0] in paired:
+            a = e.args[0]
+            if a not in done:
+                sn, cs = sin_of[a].name, cos_of[a].name
+                lines.append(f"        sym_vd {sn}, {cs};")
+                lines.append(f"        sym_vsincos({_vec(_c_expr(a))}, &{sn}, &{cs});")
+                done.add(a)
+            continue
+        lines.append(f"        const sym_vd {s.name} = {_vec(_c_expr(e))};")
+    return lines
+
+
+def c_function(graph: ExprGraph, n_rows: int, col_names, func_name: str, q, dq, ddq) -> str:
+    """C source of the batch function ``func_name`` (SIMD loop + scalar remainder)."""
+    col = {n: k for k, n in enumerate(col_names)}
+    nc = len(col_names)
     entries = {(i, col[nm]): e for (i, nm), e in graph.outputs.items()}
+    sig = "(long N, const double* q, const double* dq, const double* ddq, double* out)"
+
+    scalar = [f"static void {func_name}_scalar{sig}", "{", "    for (long s = 0; s < N; ++s) {",
+              f"        double* o = out + s * {n_rows * nc};"]
+    scalar += _inputs(graph, n_rows, q, dq, ddq, "double", lambda a, i: f"{a}[s * {n_rows} + {i}]")
+    scalar += [f"        const double {s.name} = {_c_expr(e)};" for s, e in graph.defs]
     for i in range(n_rows):
         for k in range(nc):
             e = entries.get((i, k))
-            lines.append(f"        o[{i * nc + k}] = {_c_expr(e) if e is not None else '0.0'};")
-    lines += ["    }", "}", ""]
-    return "\n".join(lines)
+            scalar.append(f"        o[{i * nc + k}] = {_c_expr(e) if e is not None else '0.0'};")
+    scalar += ["    }", "}"]
 
-
-def trig_source(trig: list, q_syms, func_name: str = "trig") -> str:
-    """Python ``trig(qT)``: (n, N) joint positions -> (N, len(trig)) sin/cos values (NumPy SIMD)."""
-    lines = [f"def {func_name}(qT):", f"    out = np.empty((qT.shape[1], {max(len(trig), 1)}))"]
-    used = set()
-    for _, e in trig:
-        used |= {x.name for x in e.free_symbols}
-    for i, s in enumerate(q_syms):
-        if s.name in used:
-            lines.append(f"    {s.name} = qT[{i}]")
-    for k, (_, e) in enumerate(trig):
-        lines.append(f"    out[:, {k}] = {print_expr(e)}")
-    lines.append("    return out")
-    return "\n".join(lines) + "\n"
+    simd = [f"void {func_name}{sig}", "{", "    long s = 0;", "    for (; s + SYM_LANES <= N; s += SYM_LANES) {"]
+    simd += _inputs(graph, n_rows, q, dq, ddq, "sym_vd", lambda a, i: f"sym_vload({a} + s * {n_rows} + {i}, {n_rows})")
+    simd += _vector_defs(graph)
+    for (i, k), e in sorted(entries.items()):
+        if e.free_symbols:
+            simd.append(f"        const sym_vd o{i}_{k} = {_vec(_c_expr(e))};")
+    total = n_rows * nc
+    simd += ["        for (int l = 0; l < SYM_LANES; ++l) {", f"            double* o = out + (s + l) * {total};"]
+    for x in range(total):
+        i, k = divmod(x, nc)
+        e = entries.get((i, k))
+        v = "0.0" if e is None else (f"o{i}_{k}[l]" if e.free_symbols else _c_expr(e))
+        simd.append(f"            o[{x}] = {v};")
+    simd += ["        }", "    }",
+             f"    {func_name}_scalar(N - s, q + s * {n_rows}, dq + s * {n_rows}, ddq + s * {n_rows}, out + s * {n_rows * nc});",
+             "}"]
+    fallback = [f"void {func_name}{sig}", f"{{ {func_name}_scalar(N, q, dq, ddq, out); }}"]
+    return "\n".join(scalar + ["", "#ifdef SYM_SIMD"] + simd + ["#else"] + fallback + ["#endif", ""])

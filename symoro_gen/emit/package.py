@@ -24,7 +24,7 @@ from ..description.model import RobotDescription
 from ..dynamics.graph import ExprGraph
 from ..dynamics.newton_euler import SymbolicRegressor, build_regressor
 from .codegen import OpCount, count_ops, print_expr
-from .c_backend import C_PRELUDE, c_function, trig_defs, trig_source
+from .c_backend import C_PRELUDE, c_function
 from .numpy_backend import kernel_source
 from .optimize import optimize
 
@@ -144,7 +144,6 @@ from . import _ccompile
 from ._kernels import base_kernel as _base_kernel
 from ._kernels import payload_kernel as _payload_kernel
 from ._kernels import standard_kernel as _standard_kernel
-from ._kernels import trig as _trig
 
 ROBOT = {robot!r}
 N_JOINTS = {n}
@@ -183,8 +182,7 @@ def _evaluate(kernel, cname, ncols, q, dq, ddq, out=None):
     if res.shape != (N, N_JOINTS, ncols) or res.dtype != np.float64 or not res.flags.c_contiguous:
         raise ValueError(f"{{ROBOT}}: out must be a C-contiguous float64 array of shape {{(N, N_JOINTS, ncols)}}")
     if _C is not None:
-        trig = _trig(np.ascontiguousarray(q.T))
-        _C[cname](N, np.ascontiguousarray(q), np.ascontiguousarray(dq), np.ascontiguousarray(ddq), trig, res)
+        _C[cname](N, np.ascontiguousarray(q), np.ascontiguousarray(dq), np.ascontiguousarray(ddq), res)
         return res[0] if one else res
     m = min(_CHUNK, max(N, 1))
     buf = np.zeros((N_JOINTS, ncols, m))
@@ -324,17 +322,14 @@ def emit_from(reg: SymbolicRegressor, bp: BaseParameterMap, out_dir) -> EmittedM
         "\n",
         kernel_source(g_pay, n, reg.payload_names, "payload_kernel", robot.q, robot.dq, robot.ddq),
     ]
-    # sin/cos of every joint angle, shared by the three C kernels, computed by NumPy
-    trig = sorted({(s, e) for g in (g_base, g_std, g_pay) for s, e in trig_defs(g)}, key=lambda se: se[0].name)
-    kern += ["\n", trig_source(trig, robot.q)]
     files: dict[str, str] = {"_kernels.py": "".join(kern)}
     files["_kernels.c"] = "\n".join(
         [
             header.replace("#", "//"),
             C_PRELUDE,
-            c_function(g_base, n, bp.base_names, "base_batch", robot.q, robot.dq, robot.ddq, trig),
-            c_function(g_std, n, reg.standard_names, "standard_batch", robot.q, robot.dq, robot.ddq, trig),
-            c_function(g_pay, n, reg.payload_names, "payload_batch", robot.q, robot.dq, robot.ddq, trig),
+            c_function(g_base, n, bp.base_names, "base_batch", robot.q, robot.dq, robot.ddq),
+            c_function(g_std, n, reg.standard_names, "standard_batch", robot.q, robot.dq, robot.ddq),
+            c_function(g_pay, n, reg.payload_names, "payload_batch", robot.q, robot.dq, robot.ddq),
         ]
     )
     files["_ccompile.py"] = header + (Path(__file__).parent / "ccompile_template.py").read_text()

@@ -173,3 +173,17 @@ def test_generated_package_imports_from_repo_root():
 
     mod = importlib.import_module("generated.lwr4")
     assert mod.ROBOT == "lwr4" and mod.BASE_NAMES == load_model("lwr4").BASE_NAMES
+
+
+def test_c_kernel_any_alignment_and_sample_count(robot_and_model):
+    """SIMD lanes + scalar remainder, aligned (non-temporal stores) or not: same values."""
+    _, m = robot_and_model
+    rng = np.random.default_rng(8)
+    nb = len(m.BASE_NAMES)
+    for N in (1, 3, 4, 5, 11):
+        q, dq, ddq = _states(rng, N, m.N_JOINTS)
+        ref = np.stack([m.regressor(q[k], dq[k], ddq[k]) for k in range(N)])
+        raw = np.empty(N * m.N_JOINTS * nb + 1)
+        unaligned = raw[1:].reshape(N, m.N_JOINTS, nb)
+        assert np.array_equal(m.regressor(q, dq, ddq, out=unaligned), ref)
+        assert np.array_equal(m.regressor(q, dq, ddq), ref)
