@@ -86,6 +86,8 @@ __all__ = [
     "observation_settings",
     "assemble",
     "iter_chunks",
+    "merge_metric_basis",
+    "basis_text",
 ]
 
 
@@ -676,3 +678,31 @@ def assemble(
         row_time[m] = np.asarray(traj.t, float)[S[m]]
     return Assembly(system=system, experiments=tuple(reports), row_experiment=E, row_time=row_time,
                     row_sample=S, row_index=np.concatenate(Ks).astype(int), options=opts, signals=tuple(signals))
+
+
+def merge_metric_basis(assemblies) -> dict:
+    """One ``rel_err_basis`` for several assemblies (cut-offs and decimation factors of every experiment,
+    rows and samples summed)."""
+    parts = [a.metric_basis() for a in assemblies]
+    if not parts:
+        return {}
+    out = dict(parts[0])
+    for p in parts[1:]:
+        out["cutoff_hz"] = out["cutoff_hz"] + p["cutoff_hz"]
+        out["n_d"] = out["n_d"] + p["n_d"]
+        out["rows"] += p["rows"]
+        out["samples"] += p["samples"]
+    return out
+
+
+def basis_text(basis: dict | None) -> str:
+    """``"filtered, decimated system (cut-off 21.5 Hz, n_d = 10)"`` from a ``rel_err_basis``."""
+    if not basis:
+        return "filtered, decimated system"
+    cut = sorted({round(float(c), 4) for c in basis.get("cutoff_hz", ())})
+    nd = sorted({int(x) for x in basis.get("n_d", ())})
+    txt = (f"filtered, decimated system (Butterworth cut-off {', '.join(f'{c:.4g}' for c in cut)} Hz, "
+           f"n_d = {', '.join(str(x) for x in nd)}, {basis.get('rows', '?')} rows")
+    if basis.get("min_velocity") is not None:
+        txt += f", rows slower than {basis['min_velocity']} rad/s removed"
+    return txt + ")"

@@ -17,6 +17,7 @@ from .document import (REPORT_SUFFIXES, Heading, ItemList, Paragraph, Preformatt
                        report_kind, write_report_files)
 from .plots import (DPI, MAX_POINTS, N_BINS, error_bars_figure, require_matplotlib, residual_figure,
                     singular_values_figure, torque_figure)
+from ..observations.assembly import basis_text
 from .tables import (unique_in_order, drive_gains_table, fmt_pct, fmt_value, gains_table, parameter_table,
                      payload_mass_text, payload_table, reference_table, rel_err_table, result_overview,
                      warnings_block)
@@ -265,7 +266,8 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
                  sources: Mapping[str, Sequence[str]] | None = None, identification=None, validation=None,
                  payload_names: Sequence[str] | None = None, payload=None, drive=None, reference=None,
                  diagnosis=None, text: str | None = None, notes: Sequence[str] = (), plots: bool = True,
-                 max_points: int = MAX_POINTS, n_bins: int = N_BINS, dpi: int = DPI) -> Report:
+                 max_points: int = MAX_POINTS, n_bins: int = N_BINS, dpi: int = DPI,
+                 raw_errors: Sequence[tuple[str, Sequence[float]]] = ()) -> Report:
     """A report of an identification (and/or a residual diagnosis): the papers' tables and plots.
 
     Parameters
@@ -303,6 +305,10 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
         Bins of the binned-mean curves of residual plots.
     dpi : int
         Figure resolution (figures are ``11 * dpi`` pixels wide).
+    raw_errors : sequence of (label, errors per joint)
+        Raw-torque relative error norms (the model at full rate on the filtered states against the
+        unfiltered measured torque, ``rel_err_raw``) listed below the filtered ones; the result's own
+        ``rel_err_raw`` (identification data) is listed first when it has one.
 
     Returns
     -------
@@ -337,12 +343,19 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
 
     if result is not None and (ident or valid or diagnosis is None):
         n = result.n_joints
-        rows = [("identification (as fitted)", result.rel_err)]
+        basis = basis_text(getattr(result, "rel_err_basis", None))
+        rows = [("identification (as fitted), filtered", result.rel_err)]
         if len(ident) > 1:
-            rows += [(lab, result.rel_err_on(s)) for lab, s in ident if _can_predict(result, s)]
-        rows += [(lab, result.rel_err_on(s)) for lab, s in valid if _can_predict(result, s)]
+            rows += [(f"{lab}, filtered", result.rel_err_on(s)) for lab, s in ident if _can_predict(result, s)]
+        rows += [(f"{lab}, filtered", result.rel_err_on(s)) for lab, s in valid if _can_predict(result, s)]
+        raw = list(raw_errors)
+        if getattr(result, "rel_err_raw", None) is not None:
+            raw.insert(0, ("identification data", result.rel_err_raw))
+        rows += [(f"{lab}, raw torque", e) for lab, e in raw]
         B.append(Heading("Quality of the torque reconstruction"))
-        B.append(rel_err_table(rows, n))
+        B.append(rel_err_table(rows, n, caption=(
+            f"Relative error norms ‖ρ_j‖/‖Y_j‖ per joint. 'filtered': on the {basis}; 'raw torque': the model "
+            "at full rate on the filtered states against the unfiltered measured torque, every sample")))
         gains = getattr(result, "gains", None)
         if drive is not None or gains is not None:
             B.append(Heading("Gains"))
