@@ -157,6 +157,20 @@ def _effect_who(e) -> str:
     return who
 
 
+def _setting(diag, key: str) -> str:
+    st = diag.settings if isinstance(getattr(diag, "settings", None), Mapping) else {}
+    v = st.get(key)
+    return "?" if v is None else f"{float(v):.4g}"
+
+
+def raw_err_table(rows, n_joints: int) -> Table:
+    """Raw-torque relative error norms (``rel_err_raw``), its own table with a header saying so."""
+    t = rel_err_table(rows, n_joints, caption=(
+        "Relative error norms on the raw measured torque: ‖τ_j − τ̂_j‖/‖τ_j‖, the model at full rate on the "
+        "filtered states against the unfiltered torque, every sample (no row selection)"))
+    return Table(("Data (raw measured torque)",) + tuple(t.header[1:]), t.rows, t.caption)
+
+
 def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int, notes: list) -> list:
     n = diag.n_joints
     B: list = [Heading("Residual diagnosis"),
@@ -167,7 +181,13 @@ def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int,
                             ("identification, after", diag.after_rel_err),
                             ("validation, before", diag.before_validation_rel_err),
                             ("validation, after", diag.after_validation_rel_err)], n,
-                           "Relative error norms ‖ρ_j‖/‖Y_j‖ before and after the effects added"))
+                           "Relative error norms ‖ρ_j‖/‖Y_j‖ before and after the effects added, on the filtered, "
+                           f"decimated system (cut-off {_setting(diag, 'cutoff_hz')} Hz, "
+                           f"n_d = {_setting(diag, 'n_d')})"))
+    raw_b = getattr(diag, "before_validation_rel_err_raw", None)
+    raw_a = getattr(diag, "after_validation_rel_err_raw", None)
+    if raw_b is not None and raw_a is not None:
+        B.append(raw_err_table([("validation, before", raw_b), ("validation, after", raw_a)], n))
     if diag.effects:
         rows = []
         for i, e in enumerate(diag.effects, 1):
@@ -344,18 +364,17 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
     if result is not None and (ident or valid or diagnosis is None):
         n = result.n_joints
         basis = basis_text(getattr(result, "rel_err_basis", None))
-        rows = [("identification (as fitted), filtered", result.rel_err)]
+        rows = [("identification (as fitted)", result.rel_err)]
         if len(ident) > 1:
-            rows += [(f"{lab}, filtered", result.rel_err_on(s)) for lab, s in ident if _can_predict(result, s)]
-        rows += [(f"{lab}, filtered", result.rel_err_on(s)) for lab, s in valid if _can_predict(result, s)]
+            rows += [(lab, result.rel_err_on(s)) for lab, s in ident if _can_predict(result, s)]
+        rows += [(lab, result.rel_err_on(s)) for lab, s in valid if _can_predict(result, s)]
         raw = list(raw_errors)
         if getattr(result, "rel_err_raw", None) is not None:
             raw.insert(0, ("identification data", result.rel_err_raw))
-        rows += [(f"{lab}, raw torque", e) for lab, e in raw]
         B.append(Heading("Quality of the torque reconstruction"))
-        B.append(rel_err_table(rows, n, caption=(
-            f"Relative error norms ‖ρ_j‖/‖Y_j‖ per joint. 'filtered': on the {basis}; 'raw torque': the model "
-            "at full rate on the filtered states against the unfiltered measured torque, every sample")))
+        B.append(rel_err_table(rows, n, caption=f"Relative error norms ‖ρ_j‖/‖Y_j‖ per joint on the {basis}"))
+        if raw:
+            B.append(raw_err_table(raw, n))
         gains = getattr(result, "gains", None)
         if drive is not None or gains is not None:
             B.append(Heading("Gains"))
