@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
+from scipy.special import erf
 
 from .frame import Frame, model_torque
 
@@ -328,8 +329,6 @@ def nuisance_columns(frame: Frame, names: Sequence[str], dq_noise: np.ndarray) -
     -------
     ndarray, shape (r, m)
     """
-    from scipy.special import erf
-
     cols = []
     for j in range(frame.n_joints):
         s = float(dq_noise[j])

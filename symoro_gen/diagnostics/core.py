@@ -58,7 +58,7 @@ from scipy import stats as sst
 from scipy.optimize import minimize_scalar
 
 from ..errors import IdentificationError
-from ..identification.estimators import identify
+from ..identification.method import identify
 from ..identification.result import IdentificationResult
 from ..model import IdentificationModel
 from ..observations.system import ObservationSystem

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..identification.result import IdentificationResult
+from ..report import diagnosis_html
+from .plots import write_plots
 from .structure import SIGNAL_LABELS, StructureItem
 
 __all__ = ["CandidateScore", "Effect", "ResidualReport"]
@@ -271,8 +273,6 @@ class ResidualReport:
 
     def _repr_html_(self) -> str:
         """Tables of the diagnosis (Jupyter)."""
-        from ..report import diagnosis_html
-
         return diagnosis_html(self)
 
     def summary(self, n_tried: int = 8) -> str:
@@ -375,8 +375,6 @@ class ResidualReport:
     def write_plots(self, folder) -> list[Path]:
         """Residual before/after each effect against the signal that revealed it, and the error norms
         (needs matplotlib; Agg backend). Returns the files written (empty without matplotlib)."""
-        from .plots import write_plots
-
         return write_plots(self, folder)
 
     def __repr__(self) -> str:

@@ -19,7 +19,8 @@ the DATA and --loaded files; or one combined system with ``loaded=None, payload_
 """
 from .accumulate import Accumulator, accumulate
 from .essential import EssentialResult, essential_parameters
-from .estimators import fit_ols, fit_tls, fit_wls, identify
+from .estimators import fit_ols, fit_tls, fit_wls
+from .method import identify
 from .gains import DriveGainsResult, drive_gains, identify_with_drive_gains, sensor_gains
 from .observation import ObservationSystem
 from .payload import fit_with_known_payload, identify_payload

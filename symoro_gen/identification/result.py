@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import IdentificationError
+from ..report.tables import gains_html, result_html
 from ..model import IdentificationModel
 from ..observations.assembly import Assembly, basis_text, merge_metric_basis
 from ..observations.raw import raw_error_sums
@@ -107,8 +108,6 @@ class Gains:
 
     def _repr_html_(self) -> str:
         """Jupyter: the gains as an HTML table (gain, joint, value, 2 sigma, %sigma)."""
-        from ..report.tables import gains_html
-
         return gains_html(self)
 
     def to_dict(self) -> dict:
@@ -410,8 +409,6 @@ class IdentificationResult:
     def _repr_html_(self) -> str:
         """Jupyter: :meth:`summary` as HTML tables (gains, parameters with 2 sigma and %sigma, relative
         error norms per joint, numbered warnings)."""
-        from ..report.tables import result_html
-
         return result_html(self)
 
     def __repr__(self) -> str:
