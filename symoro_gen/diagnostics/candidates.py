@@ -45,6 +45,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.special import erf
 
+from ..model import IdentificationModel
 from .frame import Frame, model_torque
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
@@ -87,7 +88,7 @@ class FitContext:
 
     Attributes
     ----------
-    model
+    model : IdentificationModel
         Generated-model interface.
     theta : dict name -> value
         Declared-model parameters (base + payload) of the current fit.
@@ -95,7 +96,7 @@ class FitContext:
         ``id(frame) -> (r,)`` current model prediction (declared + added effects) on each frame.
     """
 
-    model: object
+    model: IdentificationModel
     theta: dict
     predictions: dict = field(default_factory=dict)
 

@@ -6,6 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import IdentificationError
+from ..model import IdentificationModel
 from ..observations.assembly import assemble
 from ..observations.options import AssemblyOptions
 from .result import _json_float, basis_text
@@ -91,11 +92,11 @@ def run_identify(args) -> dict:
         write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
     text = res.summary()
     if val is not None:
-        text += ("\n\nValidation, relative error norm per joint (every sample, no row selection)\n"
-                 f"  on the {basis_text(asm_v.metric_basis())}:\n  "
-                 + "  ".join(f"{x:.4f}" for x in val)
-                 + "\n  on the raw measured torque (model at full rate on the filtered states):\n  "
-                 + "  ".join(f"{x:.4f}" for x in val_raw))
+        vb = asm_v.metric_basis()
+        text += ("\n\nValidation (relative error norm per joint): every sample, no row selection\n"
+                 f"  on the {basis_text(vb)}:\n    " + "  ".join(f"{x:.4f}" for x in val)
+                 + f"\n  on the raw measured torque (model at full rate on the filtered states, {vb['samples']} samples):"
+                 "\n    " + "  ".join(f"{x:.4f}" for x in val_raw))
     if ref_text:
         text += "\n\nBeside the reference table " + str(args.reference) + ":\n" + ref_text
     if args.report:
@@ -105,7 +106,7 @@ def run_identify(args) -> dict:
     return out
 
 
-def _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, reference, val_raw=None) -> None:
+def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l, sys_v, reference, val_raw=None) -> None:
     """``--report OUT.html|OUT.md``: tables, measured vs reconstructed torques, singular values of W;
     with loaded validation data, the payload re-identified with the robot known (Table IV)."""
     from ..report import write_report
