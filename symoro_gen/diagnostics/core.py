@@ -462,7 +462,7 @@ def _context(data: _Data, F: Frame, V: Frame, names: Sequence[str], theta: np.nd
 def _relinearise(data: _Data, F: Frame, V: Frame, added: Sequence[_Added], result: IdentificationResult
                  ) -> tuple[Frame, Frame, tuple[_Added, ...]]:
     """Model torque of ``result`` on both frames; the effects that depend on the fit rebuilt around it."""
-    names, A, Av = _augmented(data, added)
+    names, _, _ = _augmented(data, added)
     theta = np.array([result.value(nm) for nm in names])
     decl_theta = {k: result.value(k) for k in data.decl}
     F = attach_model_torque(F, data.model, decl_theta)

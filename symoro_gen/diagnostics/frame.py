@@ -31,7 +31,7 @@ from ..errors import IdentificationError
 from ..model import IdentificationModel
 from ..observations.assembly import Assembly, ExperimentSignals, assemble
 from ..observations.options import AssemblyOptions
-from ..observations.raw import REGRESSOR_BATCH, full_rate_torque
+from ..observations.raw import full_rate_torque
 from ..observations.system import ObservationSystem
 from ..preprocessing.filtering import (
     FilterSettings,

@@ -95,7 +95,7 @@ def run_identify(args) -> dict:
         vb = asm_v.metric_basis()
         text += ("\n\nValidation (relative error norm per joint): every sample, no row selection\n"
                  f"  on the {basis_text(vb)}:\n    " + "  ".join(f"{x:.4f}" for x in val)
-                 + f"\n  on the raw measured torque (model at full rate on the filtered states, {vb['samples']} samples):"
+                 + f"\n  on the raw measured torque (model at full rate on the filtered states, {vb['samples']} samples per joint):"
                  "\n    " + "  ".join(f"{x:.4f}" for x in val_raw))
     if ref_text:
         text += "\n\nBeside the reference table " + str(args.reference) + ":\n" + ref_text

@@ -364,7 +364,7 @@ class IdentificationResult:
         lines.append("  ".join(f"joint {j + 1}: {e:.4f}" for j, e in enumerate(self.rel_err)))
         if self.rel_err_raw is not None:
             lines.append("Rel. err. norm on the raw measured torque (model at full rate on the filtered states, "
-                         f"{self.rel_err_basis.get('samples', '?') if self.rel_err_basis else '?'} samples)")
+                         f"{self.rel_err_basis.get('samples', '?') if self.rel_err_basis else '?'} samples per joint)")
             lines.append("  ".join(f"joint {j + 1}: {e:.4f}" for j, e in enumerate(self.rel_err_raw)))
         if self.joint_sigma is not None:
             lines.append("row weights 1/sigma_j with sigma_j = "

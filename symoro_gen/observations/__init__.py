@@ -8,10 +8,28 @@ and the filtered signals the later stages (identification errors, diagnosis) use
 * :func:`full_rate_torque`, :func:`raw_error_sums`, :func:`rel_err_raw` - the model at full rate on the
   filtered states against the raw measured torque (the ``rel_err_raw`` metric).
 """
-from .assembly import Assembly, ExperimentReport, ExperimentSignals, assemble, iter_chunks, observation_settings
+from .assembly import (
+           Assembly,
+           ExperimentReport,
+           ExperimentSignals,
+           assemble,
+           iter_chunks,
+           observation_settings,
+)
 from .options import AssemblyOptions
 from .raw import full_rate_torque, raw_error_sums, rel_err_raw
 from .system import ObservationSystem
 
-__all__ = ["Assembly", "AssemblyOptions", "ExperimentReport", "ExperimentSignals", "ObservationSystem", "assemble",
-           "iter_chunks", "observation_settings", "full_rate_torque", "raw_error_sums", "rel_err_raw"]
+__all__ = [
+           "Assembly",
+           "AssemblyOptions",
+           "ExperimentReport",
+           "ExperimentSignals",
+           "ObservationSystem",
+           "assemble",
+           "full_rate_torque",
+           "iter_chunks",
+           "observation_settings",
+           "raw_error_sums",
+           "rel_err_raw",
+]

@@ -53,8 +53,8 @@ filtered; the FIR decimation runs as dense matrix products with one OpenBLAS thr
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 from scipy import signal
@@ -80,14 +80,14 @@ from .options import AssemblyOptions
 from .system import ObservationSystem
 
 __all__ = [
+    "Assembly",
     "ExperimentReport",
     "ExperimentSignals",
-    "Assembly",
-    "observation_settings",
     "assemble",
+    "basis_text",
     "iter_chunks",
     "merge_metric_basis",
-    "basis_text",
+    "observation_settings",
 ]
 
 
@@ -702,7 +702,7 @@ def basis_text(basis: dict | None) -> str:
     cut = sorted({round(float(c), 4) for c in basis.get("cutoff_hz", ())})
     nd = sorted({int(x) for x in basis.get("n_d", ())})
     txt = (f"filtered, decimated system (Butterworth cut-off {', '.join(f'{c:.4g}' for c in cut)} Hz, "
-           f"n_d = {', '.join(str(x) for x in nd)}, {basis.get('rows', '?')} rows")
+           f"n_d = {', '.join(str(x) for x in nd)}, {basis.get('rows', '?')} rows of all joints")
     if basis.get("min_velocity") is not None:
         txt += f", rows slower than {basis['min_velocity']} rad/s removed"
     return txt + ")"

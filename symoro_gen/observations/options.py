@@ -14,9 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from ..preprocessing.filtering import CUTOFF_FACTOR, DECIMATION_CUTOFF_RATIO, DECIMATION_MARGIN
+from ..preprocessing.filtering import (
+    CUTOFF_FACTOR,
+    DECIMATION_CUTOFF_RATIO,
+    DECIMATION_MARGIN,
+)
 
-__all__ = ["AssemblyOptions", "RULE_FIELDS"]
+__all__ = ["RULE_FIELDS", "AssemblyOptions"]
 
 #: fields passed to :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings` as they are
 RULE_FIELDS = ("dynamics_bandwidth_hz", "cutoff_hz", "n_d", "order", "ftype", "edge_samples", "cutoff_factor",
@@ -132,7 +136,7 @@ class AssemblyOptions:
         object.__setattr__(self, "slow_weight_tol", float(self.slow_weight_tol))
 
     @classmethod
-    def from_keywords(cls, **kw: Any) -> "AssemblyOptions":
+    def from_keywords(cls, **kw: Any) -> AssemblyOptions:
         """Options from the keywords of the former functions (``build_observation(..., cutoff_hz=...)``).
 
         An unknown keyword raises ``TypeError`` naming it, as a function call would."""

@@ -11,14 +11,14 @@ decimation filter smooths.
 """
 from __future__ import annotations
 
-from typing import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 import numpy as np
 
 from ..model import IdentificationModel
 from .assembly import Assembly, ExperimentSignals
 
-__all__ = ["full_rate_torque", "raw_error_sums", "rel_err_raw", "REGRESSOR_BATCH"]
+__all__ = ["REGRESSOR_BATCH", "full_rate_torque", "raw_error_sums", "rel_err_raw"]
 
 #: samples per call of the model's regressor
 REGRESSOR_BATCH = 8192

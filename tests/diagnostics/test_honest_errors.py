@@ -38,7 +38,7 @@ def test_raw_error_of_the_declared_model_matches_the_observations_stage(stribeck
 def test_effect_at_full_rate_cuts_the_raw_error_of_its_joint(stribeck):
     """The Stribeck effect found on joint 2 lowers that joint's raw-torque validation error too, and the
     raw error stays above the filtered one (torque noise outside the decimated band)."""
-    _, tr, rep = stribeck
+    _, _, rep = stribeck
     assert [(e.kind, e.joint) for e in rep.effects][:1] == [("stribeck", 1)]
     assert rep.after_validation_rel_err_raw[1] < 0.6 * rep.before_validation_rel_err_raw[1]
     assert np.all(rep.after_validation_rel_err_raw >= rep.after_validation_rel_err - 1e-12)

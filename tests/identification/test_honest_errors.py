@@ -13,9 +13,18 @@ import pytest
 
 from symoro_gen.identification import identify
 from symoro_gen.modelcache import model_for
-from symoro_gen.observations import AssemblyOptions, assemble, iter_chunks, raw_error_sums
+from symoro_gen.observations import (
+    AssemblyOptions,
+    assemble,
+    iter_chunks,
+    raw_error_sums,
+)
 from symoro_gen.preprocessing.filtering import filter_and_differentiate
-from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
+from symoro_gen.simulate import (
+    fourier_trajectory,
+    random_physical_parameters,
+    simulate_recording,
+)
 
 NOISE_TAU = 0.5      # N m: large against the decimation band, so the two metrics must differ
 
@@ -97,7 +106,7 @@ def test_true_model_raw_error_is_the_torque_noise(scara):
 
 
 def test_identified_result_reports_both_metrics(scara):
-    model, recs, _, theta = scara
+    model, recs, _, _ = scara
     asm = assemble(model, recs[:1], AssemblyOptions(n_d=10, cutoff_hz=15.0))
     res = identify(asm.system, method="ols").with_raw_error(model, asm)
     assert res.rel_err_raw is not None and res.rel_err_raw.shape == res.rel_err.shape

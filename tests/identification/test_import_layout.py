@@ -30,7 +30,7 @@ def _modules():
 @pytest.mark.parametrize("name", [n for n, _ in _modules()])
 def test_module_imports_alone_in_a_fresh_interpreter(name):
     r = subprocess.run([sys.executable, "-c", f"import {name}"], capture_output=True, text=True,
-                       cwd=PKG.parent, timeout=300)
+                       cwd=PKG.parent, timeout=300, check=False)
     assert r.returncode == 0, r.stderr[-2000:]
 
 
@@ -54,6 +54,7 @@ def test_observations_do_not_import_later_stages():
     code = ("import sys, symoro_gen.observations; "
             "print(sorted(m for m in sys.modules if m.startswith(('symoro_gen.identification', "
             "'symoro_gen.diagnostics'))))")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=PKG.parent, timeout=300)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=PKG.parent, timeout=300,
+                       check=False)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.strip() == "[]", r.stdout
