@@ -333,7 +333,7 @@ class _Evaluator:
         self.model, self.n, self.nb, self.npay, self.batch = model, n, nb, npay, batch
         rng = np.random.default_rng(rng_seed)
         q, dq, ddq = (rng.uniform(-2.0, 2.0, (16, n)) for _ in range(3))
-        self.out_ok = {}
+        self.out_ok: dict[str, bool] = {}
         Wb = self._call("regressor", q, dq, ddq, nb)
         self.nz_base = np.flatnonzero(np.any(Wb.reshape(16, n * nb) != 0.0, axis=0))
         if npay:
@@ -341,7 +341,7 @@ class _Evaluator:
             self.nz_pay = np.flatnonzero(np.any(Wp.reshape(16, n * npay) != 0.0, axis=0))
         else:
             self.nz_pay = np.zeros(0, int)
-        self._tmp = {}
+        self._tmp: dict[str, np.ndarray] = {}
 
     def _call(self, what, q, dq, ddq, ncol, out=None):
         fn = getattr(self.model, what)
@@ -440,6 +440,7 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
     per_block = min(per_block, n_out_total)
     vmin = opts.velocity_threshold(n)
     need_vmin = vmin is not None
+    habs: np.ndarray | None = None
     if need_vmin:  # weights of the decimation filter, normalised, to measure each row's exposure to slow samples
         habs = np.abs(decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio)) if nd > 1 else None
         if habs is not None:
@@ -497,18 +498,19 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
             fill(Bs, dqbuf, r0, a, b)
             with blas_threads(opts.blas_threads):
                 decs = [_fir_decimate_padded(x, h, nd, k, group) for x in Bs]
-                slow = _fir_decimate_padded(_slow_indicator(dqbuf[:rows], vmin, slice(r0, r1)), habs, nd, k,
-                                            group) if need_vmin else None
+                slow = _fir_decimate_padded(_slow_indicator(dqbuf[:rows], vmin, slice(r0, r1)), habs, nd, k, group) \
+                    if vmin is not None and dqbuf is not None and habs is not None else None
         elif iir:
             fill(bufs, dqbuf, 0, 0, Nseg)
             with blas_threads(opts.blas_threads):
-                slow = _fir_decimate(_slow_indicator(dqbuf, vmin, slice(0, Nseg)), habs, nd) if need_vmin else None
+                slow = _fir_decimate(_slow_indicator(dqbuf, vmin, slice(0, Nseg)), habs, nd) \
+                    if vmin is not None and dqbuf is not None and habs is not None else None
             sos = decimation_filter(nd, ftype="iir", cutoff_ratio=st.cutoff_ratio)
             decs = [signal.sosfiltfilt(sos, x, axis=0)[::nd] for x in bufs]
         else:
             Bs = [x[:k] for x in bufs]
             fill(Bs, dqbuf, 0, k0, k1)
-            slow = _slow_indicator(dqbuf[:k], vmin, slice(0, k)) if need_vmin else None
+            slow = _slow_indicator(dqbuf[:k], vmin, slice(0, k)) if vmin is not None and dqbuf is not None else None
             decs = [x.copy() for x in Bs]
         Wd, Yd = unpack(decs, k)
         idx = e + np.arange(k0, k1) * nd
