@@ -43,7 +43,9 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
+from scipy.special import erf
 
+from ..model import IdentificationModel
 from .frame import Frame, model_torque
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
@@ -86,7 +88,7 @@ class FitContext:
 
     Attributes
     ----------
-    model
+    model : IdentificationModel
         Generated-model interface.
     theta : dict name -> value
         Declared-model parameters (base + payload) of the current fit.
@@ -94,7 +96,7 @@ class FitContext:
         ``id(frame) -> (r,)`` current model prediction (declared + added effects) on each frame.
     """
 
-    model: object
+    model: IdentificationModel
     theta: dict
     predictions: dict = field(default_factory=dict)
 
@@ -328,8 +330,6 @@ def nuisance_columns(frame: Frame, names: Sequence[str], dq_noise: np.ndarray) -
     -------
     ndarray, shape (r, m)
     """
-    from scipy.special import erf
-
     cols = []
     for j in range(frame.n_joints):
         s = float(dq_noise[j])

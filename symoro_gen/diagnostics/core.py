@@ -50,25 +50,28 @@ Known limits
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
 from scipy import stats as sst
+from scipy.optimize import minimize_scalar
 
 from ..errors import IdentificationError
-from ..identification.estimators import identify
-from ..identification.observation import ObservationSystem
+from ..identification.method import identify
+from ..identification.result import IdentificationResult
+from ..model import IdentificationModel
+from ..observations.system import ObservationSystem
 from ..progress import progress_bar
 from ..preprocessing.trajectory import Trajectory
-from .candidates import (ALL, REVEAL, Family, FitContext, describe_params, make_families, nuisance_columns,
-                         placebo_families)
-from .frame import Frame, attach_model_torque, build_frame, common_bandwidth, split_holdout
+from .candidates import (_UNSHIFTED, ALL, REVEAL, Family, FitContext, describe_params, make_families,
+                         nuisance_columns, placebo_families)
+from .frame import Frame, attach_model_torque, build_frame, common_bandwidth, model_torque, split_holdout
 from .report import CandidateScore, Effect, ResidualReport
 from .stats import bonferroni, hac_covariance, hac_lag, segments_of, wald_test
 from .structure import residual_structure
 
-__all__ = ["diagnose", "SIGNIFICANCE", "MAX_EFFECTS", "HOLDOUT", "MIN_REL_IMPROVEMENT", "IDENTIFIABILITY_TOL"]
+__all__ = ["diagnose", "DiagnoseSettings", "SIGNIFICANCE", "MAX_EFFECTS", "HOLDOUT", "MIN_REL_IMPROVEMENT", "IDENTIFIABILITY_TOL"]
 
 #: family-wise level of each round (Bonferroni over the candidates)
 SIGNIFICANCE = 0.01
@@ -316,8 +319,6 @@ def _refine(fam: Family, member: int, F: Frame, ctx: FitContext, scorer: "_Score
             xatol: float = REFINE_XATOL) -> float:
     """Continuous 1-D search (log scale, bounded by the grid neighbours) of the searched parameter,
     minimising the weighted identification residual."""
-    from scipy.optimize import minimize_scalar
-
     v = float(fam.grid[member])
     sgn = 1.0 if v > 0 else -1.0
     same = sorted(abs(x) for x in fam.grid if (x > 0) == (v > 0))
@@ -333,7 +334,7 @@ def _refine(fam: Family, member: int, F: Frame, ctx: FitContext, scorer: "_Score
     return sgn * float(np.exp(r.x)) if r.fun <= rss(math.log(abs(v))) else v
 
 
-def _fit(system: ObservationSystem, method: str):
+def _fit(system: ObservationSystem, method: str) -> IdentificationResult:
     return identify(system, method=method)
 
 
@@ -346,16 +347,442 @@ def _as_list(trajectories) -> list[Trajectory]:
     return out
 
 
-def diagnose(model, trajectories, *, validation=None, method: str = "ols", candidates: Sequence[str] = ALL,
-             significance: float = SIGNIFICANCE, max_effects: int = MAX_EFFECTS, holdout: float = HOLDOUT,
-             min_rel_improvement: float = MIN_REL_IMPROVEMENT, n_placebo: int = N_PLACEBO,
+# ------------------------------------------------------------------------------------------------
+# The stages of diagnose(): assemble -> fit baseline -> (score candidates -> accept and re-identify)*
+# -> final re-identification -> report. Each stage takes and returns frozen values.
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DiagnoseSettings:
+    """The settings of one diagnosis (see :func:`diagnose` for their meaning)."""
+
+    method: str
+    candidates: tuple[str, ...]
+    significance: float
+    max_effects: int
+    holdout: float
+    min_rel_improvement: float
+    n_placebo: int
+    identifiability_tol: float
+    structure: bool
+
+    def __post_init__(self) -> None:
+        if self.method.lower() not in ("ols", "wls", "tls"):
+            raise IdentificationError(f"unknown identification method {self.method!r}; use 'ols', 'wls' or 'tls'")
+        if not 0 < self.significance < 1:
+            raise ValueError(f"significance must lie in (0, 1), got {self.significance!r}")
+        object.__setattr__(self, "method", self.method.lower())
+        object.__setattr__(self, "candidates", tuple(self.candidates))
+
+
+@dataclass(frozen=True, eq=False)
+class _Data:
+    """Stage 1 (assemble): identification and validation frames of the declared model.
+
+    ``F``/``V`` are the identification/validation frames (from the observations stage), ``Vs`` the
+    validation system with the identification system's columns, ``decl`` the declared columns."""
+
+    model: IdentificationModel
+    F: Frame
+    V: Frame
+    Vs: ObservationSystem
+    decl: tuple[str, ...]
+    ident: tuple[Trajectory, ...]
+    valid: tuple[Trajectory, ...]
+    vdesc: str
+    fdyn: float
+    held_out: bool
+
+    @property
+    def n(self) -> int:
+        return self.F.n_joints
+
+
+@dataclass(frozen=True, eq=False)
+class _Baseline:
+    """Stage 2 (fit baseline): the declared model identified, its validation error, the candidate
+    families and the nuisance columns of the scoring design."""
+
+    res0: IdentificationResult
+    val0: np.ndarray
+    families: tuple[Family, ...]
+    N_id: np.ndarray
+    N_v: np.ndarray
+    nuisance_names: tuple[str, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class _State:
+    """The loop's state after a round: frames with the current model torque, the effects added
+    (columns linearised around the current fit), the current fit, and what every round recorded."""
+
+    F: Frame
+    V: Frame
+    added: tuple[_Added, ...]
+    res: IdentificationResult
+    effects_meta: tuple[dict, ...] = ()
+    tried: tuple[CandidateScore, ...] = ()
+    placebos: tuple[CandidateScore, ...] = ()
+    round_resid: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
+    placebo_hits: tuple[tuple[int | None, int, str, float], ...] = ()   # (joint, round, variant, score)
+    stopped_at_max: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class _Round:
+    """Stage 3 (score candidates) of one round: the scores, and the eligible candidates by score."""
+
+    tried: tuple[CandidateScore, ...]
+    placebos: tuple[CandidateScore, ...]
+    placebo_hits: tuple[tuple[int | None, int, str, float], ...]
+    eligible: tuple[tuple, ...]   # (score, family, _Eval, X, Xv, CandidateScore), best first
+    ctx: FitContext
+    scorer: _Scorer
+
+
+def _augmented(data: _Data, added: Sequence[_Added]) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """Names and identification/validation columns of the declared model plus the added effects."""
+    names = list(data.decl)
+    A, Av = [data.F.system.W], [data.Vs.W]
+    for ad in added:
+        names += list(ad.family.names())
+        A.append(ad.X)
+        Av.append(ad.Xv)
+    return tuple(names), np.hstack(A), np.hstack(Av)
+
+
+def _context(data: _Data, F: Frame, V: Frame, names: Sequence[str], theta: np.ndarray) -> FitContext:
+    """The fit the candidates are linearised around (declared parameters and predictions of the
+    declared model alone: the gain column scales it, ``Y_j = (1 + gamma) W_j chi``)."""
+    th = dict(zip(names, theta))
+    td = np.array([th[k] for k in data.decl])
+    return FitContext(model=data.model, theta={k: th[k] for k in data.decl},
+                      predictions={id(F): F.system.W @ td, id(V): data.Vs.W @ td})
+
+
+def _relinearise(data: _Data, F: Frame, V: Frame, added: Sequence[_Added], result: IdentificationResult
+                 ) -> tuple[Frame, Frame, tuple[_Added, ...]]:
+    """Model torque of ``result`` on both frames; the effects that depend on the fit rebuilt around it."""
+    names, _, _ = _augmented(data, added)
+    theta = np.array([result.value(nm) for nm in names])
+    decl_theta = {k: result.value(k) for k in data.decl}
+    F = attach_model_torque(F, data.model, decl_theta)
+    V = attach_model_torque(V, data.model, decl_theta)
+    ctx = _context(data, F, V, names, theta)
+    new = []
+    for ad in added:
+        if not ad.family.depends_on_fit:
+            new.append(ad)
+            continue
+        value = ad.value
+        if ad.family.self_consistent:   # secant column: rebuild it at the fitted coefficient
+            b = result.value(ad.family.names()[0])
+            if b != 0.0 and np.isfinite(b):
+                value = float(b)
+        new.append(_Added(ad.family, value, _build_one(ad.family, F, ctx, value), _build_one(ad.family, V, ctx, value)))
+    return F, V, tuple(new)
+
+
+def _stage_assemble(model: IdentificationModel, trajectories, validation, holdout: float,
+                    dynamics_bandwidth_hz: float | None, filter_kw: dict) -> _Data:
+    """Stage 1: split off the validation data (or take the given ones), choose one ``f_dyn`` and
+    assemble both with the observations stage (:func:`.frame.build_frame`)."""
+    ident = _as_list(trajectories)
+    if validation is None:
+        ident, valid = split_holdout(ident, holdout)
+        vdesc = f"last {100 * holdout:.0f} % of each identification experiment (held out)"
+    else:
+        valid = _as_list(validation)
+        vdesc = ", ".join(tr.source for tr in valid)
+    fdyn = dynamics_bandwidth_hz if dynamics_bandwidth_hz is not None else common_bandwidth(ident)
+    F = build_frame(model, ident, dynamics_bandwidth_hz=fdyn, **filter_kw)
+    V = build_frame(model, valid, dynamics_bandwidth_hz=fdyn, payload_columns=bool(
+        set(F.system.names) - set(model.BASE_NAMES)), **filter_kw)
+    decl = F.system.names
+    return _Data(model=model, F=F, V=V, Vs=_align(V.system, decl), decl=decl, ident=tuple(ident),
+                 valid=tuple(valid), vdesc=vdesc, fdyn=float(fdyn), held_out=validation is None)
+
+
+def _stage_baseline(data: _Data, cfg: DiagnoseSettings) -> _Baseline:
+    """Stage 2: identify the declared model (``cfg.method``), its validation error, the candidate
+    families and the nuisance columns (velocity noise at Coulomb reversals)."""
+    res0 = _fit(data.F.system, cfg.method)
+    val0 = res0.rel_err_on(data.Vs)
+    families = make_families(data.F, cfg.candidates)
+    dq_noise = np.max([ex.dq_noise for ex in data.F.experiments], axis=0)
+    N_id = nuisance_columns(data.F, data.decl, dq_noise)
+    N_v = nuisance_columns(data.V, data.decl, dq_noise)
+    return _Baseline(res0=res0, val0=np.asarray(val0), families=tuple(families), N_id=N_id, N_v=N_v,
+                     nuisance_names=tuple(f"_nuisance{i}" for i in range(N_id.shape[1])))
+
+
+def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: DiagnoseSettings,
+                 rng: np.random.Generator) -> _Round:
+    """Stage 3: score every candidate family not yet added, and the placebos, against the current
+    design (:class:`_Scorer`); decide which candidates are eligible (p-value, validation z, validation
+    gain of their own joints, better than every placebo of their joints)."""
+    n = data.n
+    F, V = state.F, state.V
+    Y, J = F.system.Y, F.system.joint
+    names, A, Av = _augmented(data, state.added)
+    resid_user = Y - A @ np.array([state.res.value(nm) for nm in names])
+    D = _design(names + base.nuisance_names, np.hstack([A, base.N_id]), Y, J, np.hstack([Av, base.N_v]),
+                data.Vs.Y, data.Vs.joint, n, w_resid=resid_user)
+    ctx = _context(data, F, V, names, D.theta[:len(names)])
+    scorer = _Scorer(D, F, V, n, cfg.identifiability_tol, max(MIN_SUPPORT_ROWS, MIN_SUPPORT_SHARE * F.n_rows / n))
+    done = {ad.family.key for ad in state.added}
+    fams = [f for f in base.families if f.key not in done]
+    plac = placebo_families(F, rng, cfg.n_placebo) if cfg.n_placebo > 0 else []
+    evals = []
+    bar = progress_bar(len(fams) + len(plac), f"diagnose: round {rnd}", unit="candidate")
+    for fam in fams + plac:
+        bar.update(1)
+        Xs = fam.build(F, ctx)
+        Xvs = fam.build(V, ctx)
+        best, reasons = None, []
+        for i, (X, Xv) in enumerate(zip(Xs, Xvs)):
+            ev = scorer.evaluate(X, Xv)
+            if isinstance(ev, str):
+                reasons.append(ev)
+                continue
+            ev.member = i
+            if best is None or ev.p_value < best.p_value or (ev.p_value == best.p_value and ev.score > best.score):
+                best = ev
+        if best is not None:
+            best.p_value = bonferroni(best.p_value, fam.n_members)
+        evals.append((fam, best, reasons[0] if reasons and best is None else "", Xs, Xvs))
+    bar.close()
+    tested = [e for e in evals if e[1] is not None and not e[0].placebo]
+    thr = cfg.significance / max(len(tested), 1)
+    zcrit = float(sst.norm.isf(thr))
+    pl = [(f, e) for f, e, *_ in evals if f.placebo and e is not None]
+
+    def placebo_bounds(own):
+        ps = [e for f, e in pl if f.joint in own]
+        if not ps:
+            return 1.0, -math.inf
+        return min(e.p_value for e in ps), max(e.z for e in ps)
+
+    def gain_of(ev, own):
+        return max(float((ev.rel_before[j] - ev.rel_after[j]) / ev.rel_before[j])
+                   if ev.rel_before[j] > 0 else 0.0 for j in own)
+
+    eligible, tried, placebos, hits = [], [], [], []
+    for fam, ev, why, Xs, Xvs in evals:
+        search = {fam.grid_label: fam.grid[ev.member]} if (ev is not None and fam.grid) else {}
+        if ev is None:
+            cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, None, None, None,
+                                thr, 0.0, False, why or "not evaluated", search)
+        else:
+            own = _own(fam, n)
+            gain = gain_of(ev, own)
+            reason = []
+            if not fam.placebo:
+                if ev.p_value >= thr:
+                    reason.append(f"p {ev.p_value:.1e} >= {thr:.1e}")
+                if ev.z <= zcrit:
+                    reason.append(f"z_val {ev.z:.1f} <= {zcrit:.1f}")
+                if gain < cfg.min_rel_improvement:
+                    reason.append(f"validation gain {100 * gain:.2f} % < {100 * cfg.min_rel_improvement:g} %")
+                pp, pz = placebo_bounds(own)
+                if not reason and (ev.p_value >= pp or ev.z <= pz):
+                    reason.append("not better than a placebo")
+            cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, ev.score,
+                                ev.p_value, ev.z, thr, ev.ident, not reason and not fam.placebo,
+                                "; ".join(reason), search, tuple(float(x) for x in ev.rel_before),
+                                tuple(float(x) for x in ev.rel_after))
+            if cs.eligible:
+                eligible.append((ev.score, fam, ev, Xs[ev.member], Xvs[ev.member], cs))
+        (placebos if fam.placebo else tried).append(cs)
+        if fam.placebo and ev is not None and ev.p_value < thr and ev.z > zcrit:
+            if gain_of(ev, _own(fam, n)) >= cfg.min_rel_improvement:
+                hits.append((fam.joint, rnd, fam.variant, ev.score))
+    eligible.sort(key=lambda t: -t[0])
+    return _Round(tried=tuple(tried), placebos=tuple(placebos), placebo_hits=tuple(hits), eligible=tuple(eligible),
+                  ctx=ctx, scorer=scorer)
+
+
+def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: DiagnoseSettings) -> _State:
+    """Stage 4 (accept, refine, re-identify): add the best eligible candidate (its searched parameter
+    refined continuously), re-identify with ``cfg.method`` and re-linearise the effects that depend on
+    the fit (fixed point, :data:`RELINEARISE_PASSES`)."""
+    F, V = state.F, state.V
+    Y, J = F.system.Y, F.system.joint
+    _, fam, ev, X, Xv, _cs = scored.eligible[0]
+    value = fam.grid[ev.member] if fam.grid else None
+    if fam.build_at is not None:
+        value = _refine(fam, ev.member, F, scored.ctx, scored.scorer)
+        X, Xv = fam.build_at(F, scored.ctx, value), fam.build_at(V, scored.ctx, value)
+    added = state.added + (_Added(fam, value, X, Xv),)
+    meta = dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd)
+    names, A, Av = _augmented(data, added)
+    res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
+    passes = RELINEARISE_PASSES if any(ad.family.depends_on_fit for ad in added) else 0
+    for _ in range(passes):
+        F, V, added = _relinearise(data, F, V, added, res)
+        names, A, Av = _augmented(data, added)
+        res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
+    if not passes:
+        F, V, added = _relinearise(data, F, V, added, res)   # model torque of the new fit for the next round
+    th = np.array([res.value(nm) for nm in names])
+    return replace(state, F=F, V=V, added=added, res=res, effects_meta=state.effects_meta + (meta,),
+                   round_resid=state.round_resid + ((Y - A @ th, data.Vs.Y - Av @ th),))
+
+
+def _stage_loop(data: _Data, base: _Baseline, cfg: DiagnoseSettings, rng: np.random.Generator) -> _State:
+    """Stages 3-4 repeated: score, accept the best, re-identify, until nothing is eligible or
+    ``max_effects``."""
+    F, V, added = _relinearise(data, data.F, data.V, (), base.res0)
+    state = _State(F=F, V=V, added=added, res=base.res0,
+                   round_resid=((base.res0.residual, data.Vs.Y - base.res0.predict(data.Vs)),))
+    for rnd in range(1, cfg.max_effects + 1):
+        scored = _stage_score(data, base, state, rnd, cfg, rng)
+        state = replace(state, tried=state.tried + scored.tried, placebos=state.placebos + scored.placebos,
+                        placebo_hits=state.placebo_hits + scored.placebo_hits)
+        if not scored.eligible:
+            return state
+        state = _stage_accept(data, state, scored, rnd, cfg)
+    return replace(state, stopped_at_max=True)
+
+
+def _full_rate_frame(V: Frame) -> Frame:
+    """``V`` at full rate: one row per full-rate sample and joint, no decimation (the experiments'
+    ``decimate`` is the identity), the signals of the assembly (``tau`` raw). Effect columns built on
+    it are the effects at full rate."""
+    exps = tuple(replace(ex, settings=replace(ex.settings, n_d=1), n_rows=ex.n_samples) for ex in V.experiments)
+    n = V.n_joints
+    keys = [k for k in ("q", "dq", "ddq", "tau", "tau_hat", "dtau_hat", "ddtau_hat")
+            if getattr(exps[0], k, None) is not None]
+    J, E, R = [], [], []
+    for j in range(n):
+        for e, ex in enumerate(exps):
+            J.append(np.full(ex.n_samples, j))
+            E.append(np.full(ex.n_samples, e))
+            R.append(np.arange(ex.n_samples))
+    joint, row_exp, row_idx = np.concatenate(J), np.concatenate(E), np.concatenate(R)
+    sig = {}
+    for k in keys:   # all joints' signals at each row's sample
+        full = np.zeros((joint.size, n))
+        for e, ex in enumerate(exps):
+            m = row_exp == e
+            full[m] = getattr(ex, k)[row_idx[m]]
+        sig[k] = full
+    t = np.zeros(joint.size)
+    for e, ex in enumerate(exps):
+        m = row_exp == e
+        t[m] = ex.t[row_idx[m]]
+    sig["t"] = t
+    tau_own = sig["tau"][np.arange(joint.size), joint]
+    system = ObservationSystem(np.zeros((joint.size, 0)), tau_own, (), joint)
+    return Frame(system=system, experiments=exps, row_experiment=row_exp, row_index=row_idx, sig=sig)
+
+
+def _validation_rel_err_raw(data: _Data, V: Frame, res: IdentificationResult, added: Sequence[_Added]
+                            ) -> np.ndarray:
+    """Validation ``rel_err_raw`` of ``res`` (declared model + ``added`` effects): the model at full rate
+    on the filtered states (the assembly's) against the raw measured torque, per joint, every sample."""
+    theta = {k: res.value(k) for k in data.decl}
+    loaded_cols = bool(V.assembly is not None and V.assembly.options.payload_columns)
+    R = _full_rate_frame(V)
+    pred = np.zeros(R.n_rows)
+    for e, ex in enumerate(R.experiments):
+        tq = model_torque(data.model, theta, ex.q, ex.dq, ex.ddq, loaded=ex.loaded and loaded_cols)
+        m = R.row_experiment == e
+        pred[m] = tq[R.row_index[m], R.system.joint[m]]
+    if added:
+        ctx = FitContext(model=data.model, theta=dict(theta), predictions={id(R): pred.copy()})
+        _UNSHIFTED.clear()   # the elasticity secant caches the unshifted torque by frame identity
+        for ad in added:
+            X = _build_one(ad.family, R, ctx, ad.value)
+            pred += X @ np.array([res.value(nm) for nm in ad.family.names()])
+        _UNSHIFTED.clear()
+    return _rel_err(R.system.Y - pred, R.system.Y, R.system.joint, data.n)
+
+
+def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSettings) -> ResidualReport:
+    """Stage 5-6 (re-identify, report): the final model identified with every effect, its errors on
+    both metrics, the effects with their physical reading, residual structure, warnings."""
+    n = data.n
+    Y, J = data.F.system.Y, data.F.system.joint
+    names, A, Av = _augmented(data, state.added)
+    res = state.res
+    if state.added:
+        res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
+    val1 = res.rel_err_on(ObservationSystem(Av, data.Vs.Y, names, data.Vs.joint))
+    val0_raw = _validation_rel_err_raw(data, state.V, base.res0, ())
+    val1_raw = _validation_rel_err_raw(data, state.V, res, state.added)
+    warnings: list[str] = []
+    if state.stopped_at_max:
+        warnings.append(f"stopped at max_effects = {cfg.max_effects}: more effects may be significant")
+    effects = []
+    final_value = {ad.family.key: ad.value for ad in state.added}
+    for meta in state.effects_meta:
+        fam, mem = meta["family"], final_value.get(meta["family"].key, meta["value"])
+        idx = [res.index(nm) for nm in fam.names()]
+        vals, std, pct = res.values[idx], res.std[idx], res.rel_std_pct[idx]
+        effects.append(Effect(kind=fam.kind, label=fam.label, variant=fam.variant, joint=fam.joint,
+                              partner=fam.partner, names=fam.names(), values=vals, std=std, rel_std_pct=pct,
+                              physical=describe_params(fam, mem, vals, std), score=meta["score"], p_value=meta["p"],
+                              z_validation=meta["z"], round=meta["round"], reveal=REVEAL.get(fam.kind, "t"),
+                              reveal_joint=fam.reveal_joint if fam.reveal_joint is not None else fam.joint))
+    F = state.F
+    s_before = residual_structure(F, base.res0.residual, significance=cfg.significance) if cfg.structure else ()
+    s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
+                                 significance=cfg.significance) if cfg.structure else ()
+    warnings += [f"final identification: {w}" for w in res.warnings if "TLS" in w or "rank-deficient" in w]
+    hits: dict = {}
+    for joint, rnd, variant, score in state.placebo_hits:
+        hits.setdefault(joint, []).append((rnd, variant, score))
+    if hits:
+        lst = ", ".join(f"joint {j + 1} (score up to {max(sc for *_, sc in h):.2f})" for j, h in sorted(hits.items()))
+        warnings.append(
+            f"placebo columns (random combinations of time or motion signals, no physical meaning) pass the "
+            f"significance and validation tests on {lst}: there the residual holds structure that the library "
+            f"does not describe specifically (an effect outside the library, or an error of the declared model "
+            f"such as its geometry or a joint zero); a candidate on such a joint is added only when it beats "
+            f"every placebo")
+    strong = [x for x in s_after if x.significant and x.eta2 >= STRUCTURE_WARN_ETA2]
+    if strong:
+        top = sorted(strong, key=lambda x: -x.eta2)[:3]
+        warnings.append("structure left in the identification residual: " + "; ".join(
+            f"joint {x.joint + 1} vs {x.label} ({100 * x.eta2:.0f} % explained)" for x in top)
+            + " (see 'structure')")
+    st = F.experiments[0].settings
+    settings = {
+        "method": cfg.method, "significance": cfg.significance, "max_effects": cfg.max_effects,
+        "min_rel_improvement": cfg.min_rel_improvement, "n_placebo": cfg.n_placebo,
+        "identifiability_tol": cfg.identifiability_tol, "candidates": list(cfg.candidates),
+        "validation": data.vdesc, "holdout": cfg.holdout if data.held_out else None,
+        "identification_sources": [tr.source for tr in data.ident], "validation_sources": [tr.source for tr in data.valid],
+        "dynamics_bandwidth_hz": data.fdyn, "cutoff_hz": st.cutoff_hz, "n_d": st.n_d,
+        "rows_identification": int(F.n_rows), "rows_validation": int(state.V.n_rows),
+        "samples_validation": int(sum(ex.n_samples for ex in state.V.experiments)),
+    }
+    plot_data = {"frame": F, "vframe": state.V, "round_resid": list(state.round_resid)}
+    return ResidualReport(robot=str(getattr(data.model, "ROBOT", "?")), method=cfg.method, n_joints=n,
+                          before_rel_err=np.asarray(base.res0.rel_err), before_validation_rel_err=base.val0,
+                          after_rel_err=np.asarray(res.rel_err), after_validation_rel_err=np.asarray(val1),
+                          effects=tuple(effects), tried=state.tried, placebos=state.placebos,
+                          structure_before=s_before, structure_after=s_after, result_before=base.res0,
+                          result_after=res, settings=settings, warnings=tuple(warnings), plot_data=plot_data,
+                          before_validation_rel_err_raw=np.asarray(val0_raw),
+                          after_validation_rel_err_raw=np.asarray(val1_raw))
+
+
+def diagnose(model: IdentificationModel, trajectories, *, validation=None, method: str = "ols",
+             candidates: Sequence[str] = ALL, significance: float = SIGNIFICANCE, max_effects: int = MAX_EFFECTS,
+             holdout: float = HOLDOUT, min_rel_improvement: float = MIN_REL_IMPROVEMENT, n_placebo: int = N_PLACEBO,
              identifiability_tol: float = IDENTIFIABILITY_TOL, rng: np.random.Generator | None = None,
              dynamics_bandwidth_hz: float | None = None, structure: bool = True, **filter_kw) -> ResidualReport:
     """Find what the declared model misses, add it, and measure the gain on validation data.
 
+    The stages (each a function over frozen values): :func:`_stage_assemble` (observations stage:
+    identification and validation frames) -> :func:`_stage_baseline` (declared model identified) ->
+    :func:`_stage_loop` (:func:`_stage_score` the candidates, :func:`_stage_accept` the best, re-identify;
+    repeated) -> :func:`_stage_report` (final re-identification, errors on both metrics, report).
+
     Parameters
     ----------
-    model
+    model : IdentificationModel
         Generated model (``symoro_gen.load_model(name)``, ``build_in_memory(robot)``): ``N_JOINTS``,
         ``BASE_NAMES``, ``regressor(q, dq, ddq) -> (N, n, nb)`` (and ``PAYLOAD_NAMES``,
         ``payload_regressor`` for loaded experiments).
@@ -387,237 +814,20 @@ def diagnose(model, trajectories, *, validation=None, method: str = "ols", candi
     structure : bool
         Run the residual-structure tests (:func:`.structure.residual_structure`).
     **filter_kw
-        ``cutoff_hz``, ``n_d``, ``order``, ``ftype`` for the assembler.
+        ``cutoff_hz``, ``n_d``, ``order``, ``ftype`` for the assembly
+        (:class:`~symoro_gen.observations.AssemblyOptions`).
 
     Returns
     -------
     ResidualReport
+        Errors before/after on the filtered, decimated system (``*_rel_err``, the papers' metric) and,
+        on validation data, on the raw measured torque (``*_validation_rel_err_raw``).
     """
-    if method.lower() not in ("ols", "wls", "tls"):
-        raise IdentificationError(f"unknown identification method {method!r}; use 'ols', 'wls' or 'tls'")
-    if not 0 < significance < 1:
-        raise ValueError(f"significance must lie in (0, 1), got {significance!r}")
-    method = method.lower()
+    cfg = DiagnoseSettings(method=method, candidates=tuple(candidates), significance=significance,
+                           max_effects=max_effects, holdout=holdout, min_rel_improvement=min_rel_improvement,
+                           n_placebo=n_placebo, identifiability_tol=identifiability_tol, structure=structure)
     rng = np.random.default_rng(0) if rng is None else rng
-    ident = _as_list(trajectories)
-    if validation is None:
-        ident, valid = split_holdout(ident, holdout)
-        vdesc = f"last {100 * holdout:.0f} % of each identification experiment (held out)"
-    else:
-        valid = _as_list(validation)
-        vdesc = ", ".join(tr.source for tr in valid)
-    fdyn = dynamics_bandwidth_hz if dynamics_bandwidth_hz is not None else common_bandwidth(ident)
-    F = build_frame(model, ident, dynamics_bandwidth_hz=fdyn, **filter_kw)
-    V = build_frame(model, valid, dynamics_bandwidth_hz=fdyn, payload_columns=bool(
-        set(F.system.names) - set(model.BASE_NAMES)), **filter_kw)
-    n = F.n_joints
-    decl = F.system.names
-    Vs = _align(V.system, decl)
-    Y, J = F.system.Y, F.system.joint
-    Yv, Jv = Vs.Y, Vs.joint
-    warnings: list[str] = []
-
-    res0 = _fit(F.system, method)
-    val0 = res0.rel_err_on(Vs)
-    families = make_families(F, candidates)
-    added: list[_Added] = []
-    tried: list[CandidateScore] = []
-    placebo_scores: list[CandidateScore] = []
-    effects_meta: list[dict] = []
-    round_resid = [(res0.residual, Yv - res0.predict(Vs))]
-    placebo_hits: dict = {}
-    res = res0
-    dq_noise = np.max([ex.dq_noise for ex in F.experiments], axis=0)
-    N_id = nuisance_columns(F, decl, dq_noise)
-    N_v = nuisance_columns(V, decl, dq_noise)
-    nn = tuple(f"_nuisance{i}" for i in range(N_id.shape[1]))
-
-    def augmented():
-        names = list(decl)
-        A, Av = [F.system.W], [Vs.W]
-        for ad in added:
-            names += list(ad.family.names())
-            A.append(ad.X)
-            Av.append(ad.Xv)
-        return tuple(names), np.hstack(A), np.hstack(Av)
-
-    def context(names, theta, A, Av):
-        th = dict(zip(names, theta))
-        td = np.array([th[k] for k in decl])
-        # predictions of the declared model alone (the gain column scales it: Y_j = (1 + gamma) W_j chi)
-        return FitContext(model=model, theta={k: th[k] for k in decl},
-                          predictions={id(F): F.system.W @ td, id(V): Vs.W @ td})
-
-    def refresh(result):
-        """Model torque of the current fit on both frames; rebuild the columns linearised around it."""
-        nonlocal F, V, added
-        names, A, Av = augmented()
-        theta = np.array([result.value(nm) for nm in names])
-        F = attach_model_torque(F, model, {k: result.value(k) for k in decl})
-        V = attach_model_torque(V, model, {k: result.value(k) for k in decl})
-        ctx = context(names, theta, A, Av)
-        new = []
-        for ad in added:
-            if not ad.family.depends_on_fit:
-                new.append(ad)
-                continue
-            value = ad.value
-            if ad.family.self_consistent:   # secant column: rebuild it at the fitted coefficient
-                b = result.value(ad.family.names()[0])
-                if b != 0.0 and np.isfinite(b):
-                    value = float(b)
-            new.append(_Added(ad.family, value, _build_one(ad.family, F, ctx, value),
-                              _build_one(ad.family, V, ctx, value)))
-        added = new
-
-    refresh(res0)
-    for rnd in range(1, max_effects + 1):
-        names, A, Av = augmented()
-        resid_user = Y - A @ np.array([res.value(nm) for nm in names])
-        D = _design(names + nn, np.hstack([A, N_id]), Y, J, np.hstack([Av, N_v]), Yv, Jv, n, w_resid=resid_user)
-        ctx = context(names, D.theta[:len(names)], A, Av)
-        scorer = _Scorer(D, F, V, n, identifiability_tol, max(MIN_SUPPORT_ROWS, MIN_SUPPORT_SHARE * F.n_rows / n))
-        done = {ad.family.key for ad in added}
-        fams = [f for f in families if f.key not in done]
-        plac = placebo_families(F, rng, n_placebo) if n_placebo > 0 else []
-        evals = []
-        bar = progress_bar(len(fams) + len(plac), f"diagnose: round {rnd}", unit="candidate")
-        for fam in fams + plac:
-            bar.update(1)
-            Xs = fam.build(F, ctx)
-            Xvs = fam.build(V, ctx)
-            best, reasons = None, []
-            for i, (X, Xv) in enumerate(zip(Xs, Xvs)):
-                ev = scorer.evaluate(X, Xv)
-                if isinstance(ev, str):
-                    reasons.append(ev)
-                    continue
-                ev.member = i
-                if best is None or ev.p_value < best.p_value or (ev.p_value == best.p_value and ev.score > best.score):
-                    best = ev
-            if best is not None:
-                best.p_value = bonferroni(best.p_value, fam.n_members)
-            evals.append((fam, best, reasons[0] if reasons and best is None else "", Xs, Xvs))
-        bar.close()
-        tested = [e for e in evals if e[1] is not None and not e[0].placebo]
-        m_tests = max(len(tested), 1)
-        thr = significance / m_tests
-        zcrit = float(sst.norm.isf(thr))
-        pl = [(f, e) for f, e, *_ in evals if f.placebo and e is not None]
-
-        def placebo_bounds(own):
-            ps = [e for f, e in pl if f.joint in own]
-            if not ps:
-                return 1.0, -math.inf
-            return min(e.p_value for e in ps), max(e.z for e in ps)
-
-        eligible = []
-        for fam, ev, why, Xs, Xvs in evals:
-            search = {fam.grid_label: fam.grid[ev.member]} if (ev is not None and fam.grid) else {}
-            if ev is None:
-                cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, None, None, None,
-                                    thr, 0.0, False, why or "not evaluated", search)
-            else:
-                own = _own(fam, n)
-                gain = max(float((ev.rel_before[j] - ev.rel_after[j]) / ev.rel_before[j])
-                           if ev.rel_before[j] > 0 else 0.0 for j in own)
-                reason = []
-                if not fam.placebo:
-                    if ev.p_value >= thr:
-                        reason.append(f"p {ev.p_value:.1e} >= {thr:.1e}")
-                    if ev.z <= zcrit:
-                        reason.append(f"z_val {ev.z:.1f} <= {zcrit:.1f}")
-                    if gain < min_rel_improvement:
-                        reason.append(f"validation gain {100 * gain:.2f} % < {100 * min_rel_improvement:g} %")
-                    pp, pz = placebo_bounds(own)
-                    if not reason and (ev.p_value >= pp or ev.z <= pz):
-                        reason.append("not better than a placebo")
-                cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, ev.score,
-                                    ev.p_value, ev.z, thr, ev.ident, not reason and not fam.placebo,
-                                    "; ".join(reason), search, tuple(float(x) for x in ev.rel_before),
-                                    tuple(float(x) for x in ev.rel_after))
-                if cs.eligible:
-                    eligible.append((ev.score, fam, ev, Xs[ev.member], Xvs[ev.member], cs))
-            (placebo_scores if fam.placebo else tried).append(cs)
-            if fam.placebo and ev is not None and ev.p_value < thr and ev.z > zcrit:
-                gain = max(float((ev.rel_before[j] - ev.rel_after[j]) / ev.rel_before[j])
-                           if ev.rel_before[j] > 0 else 0.0 for j in _own(fam, n))
-                if gain >= min_rel_improvement:
-                    placebo_hits.setdefault(fam.joint, []).append((rnd, fam.variant, ev.score))
-        if not eligible:
-            break
-        eligible.sort(key=lambda t: -t[0])
-        _, fam, ev, X, Xv, cs = eligible[0]
-        value = fam.grid[ev.member] if fam.grid else None
-        if fam.build_at is not None:
-            value = _refine(fam, ev.member, F, ctx, scorer)
-            X, Xv = fam.build_at(F, ctx, value), fam.build_at(V, ctx, value)
-        added.append(_Added(fam, value, X, Xv))
-        effects_meta.append(dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd))
-        # re-identify; re-linearise the effects that depend on the fit (new model torque, new columns)
-        names, A, Av = augmented()
-        res = _fit(ObservationSystem(A, Y, names, J), method)
-        passes = RELINEARISE_PASSES if any(ad.family.depends_on_fit for ad in added) else 0
-        for _ in range(passes):
-            refresh(res)
-            names, A, Av = augmented()
-            res = _fit(ObservationSystem(A, Y, names, J), method)
-        if not passes:
-            refresh(res)      # model torque of the new fit for the next round's candidates
-        th = np.array([res.value(nm) for nm in names])
-        round_resid.append((Y - A @ th, Yv - Av @ th))
-    else:
-        warnings.append(f"stopped at max_effects = {max_effects}: more effects may be significant")
-
-    names, A, Av = augmented()
-    if added:
-        res = _fit(ObservationSystem(A, Y, names, J), method)
-    Vaug = ObservationSystem(Av, Yv, names, Jv)
-    val1 = res.rel_err_on(Vaug)
-    effects = []
-    final_value = {ad.family.key: ad.value for ad in added}
-    for meta in effects_meta:
-        fam, mem = meta["family"], final_value.get(meta["family"].key, meta["value"])
-        idx = [res.index(nm) for nm in fam.names()]
-        vals, std, pct = res.values[idx], res.std[idx], res.rel_std_pct[idx]
-        effects.append(Effect(kind=fam.kind, label=fam.label, variant=fam.variant, joint=fam.joint,
-                              partner=fam.partner, names=fam.names(), values=vals, std=std, rel_std_pct=pct,
-                              physical=describe_params(fam, mem, vals, std), score=meta["score"], p_value=meta["p"],
-                              z_validation=meta["z"], round=meta["round"], reveal=REVEAL.get(fam.kind, "t"),
-                              reveal_joint=fam.reveal_joint if fam.reveal_joint is not None else fam.joint))
-    s_before = residual_structure(F, res0.residual, significance=significance) if structure else ()
-    s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
-                                 significance=significance) if structure else ()
-    warnings += [f"final identification: {w}" for w in res.warnings if "TLS" in w or "rank-deficient" in w]
-    if placebo_hits:
-        lst = ", ".join(f"joint {j + 1} (score up to {max(sc for *_, sc in h):.2f})"
-                        for j, h in sorted(placebo_hits.items()))
-        warnings.append(
-            f"placebo columns (random combinations of time or motion signals, no physical meaning) pass the "
-            f"significance and validation tests on {lst}: there the residual holds structure that the library "
-            f"does not describe specifically (an effect outside the library, or an error of the declared model "
-            f"such as its geometry or a joint zero); a candidate on such a joint is added only when it beats "
-            f"every placebo")
-    strong = [x for x in s_after if x.significant and x.eta2 >= STRUCTURE_WARN_ETA2]
-    if strong:
-        top = sorted(strong, key=lambda x: -x.eta2)[:3]
-        warnings.append("structure left in the identification residual: " + "; ".join(
-            f"joint {x.joint + 1} vs {x.label} ({100 * x.eta2:.0f} % explained)" for x in top)
-            + " (see 'structure')")
-    st = F.experiments[0].settings
-    settings = {
-        "method": method, "significance": significance, "max_effects": max_effects,
-        "min_rel_improvement": min_rel_improvement, "n_placebo": n_placebo,
-        "identifiability_tol": identifiability_tol, "candidates": list(candidates),
-        "validation": vdesc, "holdout": holdout if validation is None else None,
-        "identification_sources": [tr.source for tr in ident], "validation_sources": [tr.source for tr in valid],
-        "dynamics_bandwidth_hz": fdyn, "cutoff_hz": st.cutoff_hz, "n_d": st.n_d,
-        "rows_identification": int(F.n_rows), "rows_validation": int(V.n_rows),
-    }
-    plot_data = {"frame": F, "vframe": V, "round_resid": round_resid}
-    return ResidualReport(robot=str(getattr(model, "ROBOT", "?")), method=method, n_joints=n,
-                          before_rel_err=np.asarray(res0.rel_err), before_validation_rel_err=np.asarray(val0),
-                          after_rel_err=np.asarray(res.rel_err), after_validation_rel_err=np.asarray(val1),
-                          effects=tuple(effects), tried=tuple(tried), placebos=tuple(placebo_scores),
-                          structure_before=s_before, structure_after=s_after, result_before=res0, result_after=res,
-                          settings=settings, warnings=tuple(warnings), plot_data=plot_data)
+    data = _stage_assemble(model, trajectories, validation, holdout, dynamics_bandwidth_hz, filter_kw)
+    base = _stage_baseline(data, cfg)
+    state = _stage_loop(data, base, cfg, rng)
+    return _stage_report(data, base, state, cfg)

@@ -1,19 +1,20 @@
 """Observation systems with the signals behind each row, for residual analysis and extra columns.
 
-:func:`build_frame` calls the public assembler
-(:func:`symoro_gen.identification.assemble.assemble_observation`) for ``W`` and ``Y`` and recomputes,
-with the very filter settings it reports, the full-rate band-pass signals of every experiment
-(``q, dq, ddq`` from the positions). :func:`attach_model_torque` adds the torque transmitted according
-to a fitted model, ``tau_hat = IDM(q, dq, ddq) chi`` low-passed by the same zero-phase Butterworth,
-and its derivatives ``dtau_hat, ddtau_hat``: candidate columns that depend on the torque use it
-rather than the measured torque, whose noise is the noise of ``Y`` and would correlate with it
-(errors-in-variables: a column holding the measurement noise of ``Y`` "explains" that noise).
-Candidate effects are functions of these signals; their columns
-are evaluated at full rate and decimated in parallel with the same FIR/IIR filter as ``W`` and ``Y``
-(RX-90 paper eq. 15), so ``Y = [W X] [chi; beta]`` keeps holding after decimation. The decimated
-torques are checked against the assembler's ``Y`` (rows must line up).
+:func:`build_frame` runs the assembly stage (:func:`symoro_gen.observations.assemble`, Gautier's
+band-pass filtering and parallel decimation, RX-90 paper eq. 14-16) and builds the :class:`Frame`
+from the :class:`~symoro_gen.observations.Assembly` it returns (:func:`frame_from_assembly`): the
+full-rate band-pass ``q, dq, ddq`` of every experiment, the decimated measured torques of all joints
+and the sample behind every row all come from the assembly; nothing is filtered a second time.
+:func:`attach_model_torque` adds the torque transmitted according to a fitted model,
+``tau_hat = IDM(q, dq, ddq) chi`` low-passed by a zero-phase Butterworth, and its derivatives
+``dtau_hat, ddtau_hat``: candidate columns that depend on the torque use it rather than the measured
+torque, whose noise is the noise of ``Y`` and would correlate with it (errors-in-variables: a column
+holding the measurement noise of ``Y`` "explains" that noise). Candidate effects are functions of
+these signals; their columns are evaluated at full rate and decimated in parallel with the same
+FIR/IIR filter as ``W`` and ``Y`` (RX-90 paper eq. 15), so ``Y = [W X] [chi; beta]`` keeps holding
+after decimation.
 
-Rows are grouped per joint as in the assembler: all rows of joint 1 (experiment after experiment),
+Rows are grouped per joint as in the assembly: all rows of joint 1 (experiment after experiment),
 then joint 2...
 """
 from __future__ import annotations
@@ -24,22 +25,23 @@ from dataclasses import dataclass, replace
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
+from scipy import signal
 
 from ..errors import IdentificationError
-from ..identification.assemble import assemble_observation
-from ..identification.observation import ObservationSystem
+from ..model import IdentificationModel
+from ..observations.assembly import Assembly, ExperimentSignals, assemble
+from ..observations.options import AssemblyOptions
+from ..observations.raw import full_rate_torque
+from ..observations.system import ObservationSystem
 from ..preprocessing.filtering import (
     FilterSettings,
+    _fir_decimate,
     decimate,
+    decimation_filter,
     estimate_dynamics_bandwidth,
     filter_and_differentiate,
 )
 from ..preprocessing.trajectory import Trajectory
-
-try:  # the FIR kernel of ``decimate`` without recomputing its taps at every call (same numbers)
-    from ..preprocessing.filtering import _fir_decimate, decimation_filter
-except ImportError:  # pragma: no cover - private helper renamed: fall back to the public function
-    _fir_decimate = None
 
 
 @functools.lru_cache(maxsize=32)
@@ -48,20 +50,17 @@ def _fir_taps(n_d: int, cutoff_ratio: float) -> np.ndarray:
     h.setflags(write=False)
     return h
 
-__all__ = ["Experiment", "Frame", "build_frame", "attach_model_torque", "model_torque", "split_holdout",
-           "common_bandwidth", "noise_gains", "T_ORIGIN_KEY"]
+
+__all__ = ["Experiment", "Frame", "build_frame", "frame_from_assembly", "attach_model_torque", "model_torque",
+           "split_holdout", "common_bandwidth", "noise_gains", "T_ORIGIN_KEY"]
 
 #: ``Trajectory.meta`` key holding the time origin [s] of the original recording (kept by hold-out splits)
 T_ORIGIN_KEY = "diagnose_t_origin"
-#: relative tolerance of the check "decimated measured torque == assembler's Y"
-ALIGN_RTOL = 1e-6
 
 SIGNALS = ("q", "dq", "ddq", "tau")
 MODEL_SIGNALS = ("tau_hat", "dtau_hat", "ddtau_hat")
 #: the model torque of the candidates is low-passed at this many times the dynamics bandwidth
 MODEL_TORQUE_BANDWIDTH_FACTOR = 2.5
-#: samples per call of the model's regressor when computing tau_hat at full rate
-REGRESSOR_BATCH = 8192
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,7 +72,7 @@ class Experiment:
     source : str
     loaded : bool
     settings : FilterSettings
-        Those the assembler used.
+        Those the assembly used.
     t : ndarray, shape (M,)
         Time since the start of the original recording [s].
     q, dq, ddq : ndarray, shape (M, n)
@@ -114,7 +113,7 @@ class Experiment:
         (:func:`symoro_gen.preprocessing.filtering.decimate`, FIR taps cached)."""
         st = self.settings
         x = np.asarray(x, float)
-        if st.ftype == "fir" and st.n_d > 1 and _fir_decimate is not None and x.ndim == 2:
+        if st.ftype == "fir" and st.n_d > 1 and x.ndim == 2:
             return _fir_decimate(np.ascontiguousarray(x), _fir_taps(st.n_d, st.cutoff_ratio), st.n_d)
         return decimate(x, st.n_d, ftype=st.ftype, cutoff_ratio=st.cutoff_ratio, source=self.source)
 
@@ -135,6 +134,8 @@ class Frame:
         Decimated signals of *all* joints at each row's sample: ``q dq ddq tau`` (and ``tau_hat
         dtau_hat ddtau_hat`` once attached);
         ``t`` (r,) is the time since the start of the recording [s].
+    assembly : Assembly or None
+        The assembly the frame was built from (full-rate signals, provenance, options).
     """
 
     system: ObservationSystem
@@ -142,6 +143,7 @@ class Frame:
     row_experiment: np.ndarray
     row_index: np.ndarray
     sig: Mapping[str, np.ndarray]
+    assembly: Assembly | None = None
 
     @property
     def n_rows(self) -> int:
@@ -244,40 +246,11 @@ def _row_signals(exps, keys, row_exp, row_idx, n) -> dict:
     return sig
 
 
-def model_torque(model, theta: Mapping[str, float], q, dq, ddq, loaded: bool = False, *,
-                 batch: int = REGRESSOR_BATCH, skip_prefix: tuple = ()) -> np.ndarray:
-    """``IDM(q, dq, ddq) chi`` of the declared model (base + payload columns) at every sample.
-
-    Parameters
-    ----------
-    theta : mapping name -> value
-        Parameters by column name (``BASE_NAMES``, ``PAYLOAD_NAMES``); missing ones count as 0.
-    q, dq, ddq : ndarray, shape (N, n)
-    loaded : bool
-        Add the payload columns.
-    skip_prefix : tuple of str
-        Parameters whose name starts with one of these count as 0 (e.g. ``("FS",)``).
-
-    Returns
-    -------
-    ndarray, shape (N, n)
-    """
-    base = tuple(model.BASE_NAMES)
-    tb = np.array([0.0 if nm.startswith(skip_prefix) and skip_prefix else float(theta.get(nm, 0.0)) for nm in base])
-    pay = tuple(getattr(model, "PAYLOAD_NAMES", ())) if loaded else ()
-    tp = np.array([float(theta.get(nm, 0.0)) for nm in pay])
-    use_pay = bool(pay) and np.any(tp != 0)
-    N = q.shape[0]
-    out = np.empty((N, q.shape[1]))
-    for s in range(0, N, batch):
-        e = min(N, s + batch)
-        out[s:e] = np.asarray(model.regressor(q[s:e], dq[s:e], ddq[s:e]), float) @ tb
-        if use_pay:
-            out[s:e] += np.asarray(model.payload_regressor(q[s:e], dq[s:e], ddq[s:e]), float) @ tp
-    return out
+#: ``IDM(q, dq, ddq) chi`` at every sample (:func:`symoro_gen.observations.full_rate_torque`)
+model_torque = full_rate_torque
 
 
-def attach_model_torque(frame: "Frame", model, theta: Mapping[str, float]) -> "Frame":
+def attach_model_torque(frame: "Frame", model: IdentificationModel, theta: Mapping[str, float]) -> "Frame":
     """A copy of ``frame`` with the model torque ``tau_hat`` (and derivatives) of parameters ``theta``.
 
     ``tau_hat`` is computed at full rate from the band-pass kinematics, then low-passed by a zero-phase
@@ -296,8 +269,7 @@ def attach_model_torque(frame: "Frame", model, theta: Mapping[str, float]) -> "F
         exps.append(replace(ex, tau_hat=tf, dtau_hat=d1, ddtau_hat=d2))
     sig = dict(frame.sig)
     sig.update(_row_signals(exps, MODEL_SIGNALS, frame.row_experiment, frame.row_index, frame.n_joints))
-    return Frame(system=frame.system, experiments=tuple(exps), row_experiment=frame.row_experiment,
-                 row_index=frame.row_index, sig=sig)
+    return replace(frame, experiments=tuple(exps), sig=sig)
 
 
 def noise_gains(fs: float, cutoff_hz: float, order: int = 4, n_freq: int = 4096) -> tuple[float, float]:
@@ -305,8 +277,6 @@ def noise_gains(fs: float, cutoff_hz: float, order: int = 4, n_freq: int = 4096)
 
     Computed from the frequency responses (zero-phase Butterworth ``|H|^2``; central difference
     ``sin(w)/dt``), averaged over [0, fs/2] where white noise spreads its variance evenly."""
-    from scipy import signal
-
     sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
     f = np.linspace(0.0, fs / 2.0, n_freq)
     _, h = signal.sosfreqz(sos, worN=f, fs=fs)
@@ -316,37 +286,77 @@ def noise_gains(fs: float, cutoff_hz: float, order: int = 4, n_freq: int = 4096)
     return hp, dv
 
 
-def _experiment(tr: Trajectory, st: FilterSettings, n_rows: int) -> Experiment:
-    fs = st.fs
-    e = st.edge_samples
-    qf, dq, ddq = filter_and_differentiate(tr.q, fs, st.cutoff_hz, st.order, source=tr.source)
-    hp, dv = noise_gains(fs, st.cutoff_hz, st.order)
-    core = slice(e, tr.n_samples - e) if tr.n_samples > 2 * e + 8 else slice(None)
-    q_noise = np.std(np.asarray(tr.q, float)[core] - qf[core], axis=0) / max(hp, 1e-12)
-    seg = slice(e, tr.n_samples - e)
-    t0 = float(tr.meta.get(T_ORIGIN_KEY, tr.t[0]))
-    return Experiment(source=tr.source, loaded=tr.loaded, settings=st, t=np.asarray(tr.t[seg], float) - t0,
-                      q=qf[seg], dq=dq[seg], ddq=ddq[seg], tau=np.asarray(tr.tau[seg], float), n_rows=n_rows,
-                      q_noise=q_noise, dq_noise=q_noise * dv)
+def _experiment(sg: ExperimentSignals, t_origin: float) -> Experiment:
+    """The frame's view of one experiment of the assembly: its full-rate signals, and the position noise
+    estimated from what the Butterworth removed (``q_raw - q``)."""
+    st = sg.settings
+    hp, dv = noise_gains(st.fs, st.cutoff_hz, st.order)
+    q_noise = np.std(sg.q_raw - sg.q, axis=0) / max(hp, 1e-12)
+    return Experiment(source=sg.source, loaded=sg.loaded, settings=st, t=sg.t - t_origin, q=sg.q, dq=sg.dq,
+                      ddq=sg.ddq, tau=sg.tau_raw, n_rows=int(sg.tau_rows.shape[0]), q_noise=q_noise,
+                      dq_noise=q_noise * dv)
 
 
-def build_frame(model, trajectories: Sequence[Trajectory], *, dynamics_bandwidth_hz: float | None = None,
-                payload_columns: bool | None = None, align_rtol: float = ALIGN_RTOL, **filter_kw) -> Frame:
-    """Assemble ``Y = W chi`` with the public assembler and attach the signals of each row.
+def frame_from_assembly(asm: Assembly, t_origins: Sequence[float] | None = None) -> Frame:
+    """The :class:`Frame` of an :class:`~symoro_gen.observations.Assembly` built with ``keep_signals``.
 
     Parameters
     ----------
-    model
+    asm : Assembly
+        Every joint must have a row on every decimated sample (no ``min_velocity`` removal).
+    t_origins : sequence of float, optional
+        Time origin of each experiment's original recording (``Experiment.t`` and ``sig["t"]`` are
+        counted from it); default the first recorded time of each experiment.
+
+    Returns
+    -------
+    Frame
+        ``sig["tau"]`` holds the assembly's decimated measured torques (``Y`` of each row is
+        ``sig["tau"][row, joint]``); ``q, dq, ddq`` are the assembly's full-rate signals decimated
+        with the same filter.
+    """
+    if not asm.signals:
+        raise IdentificationError("the assembly kept no signals (AssemblyOptions.keep_signals=False): "
+                                  "cannot build a diagnosis frame from it")
+    for rep in asm.experiments:
+        if len(set(rep.rows_per_joint)) != 1:
+            raise IdentificationError(f"{rep.source}: rows per joint differ {rep.rows_per_joint}; "
+                                      "diagnose needs every joint on every sample (no min_velocity removal)")
+    if t_origins is None:
+        t_origins = [float(sg.t[0]) - sg.first / sg.settings.fs for sg in asm.signals]
+    exps = tuple(_experiment(sg, float(t0)) for sg, t0 in zip(asm.signals, t_origins))
+    sysm = asm.system
+    n = exps[0].q.shape[1]
+    row_exp = np.asarray(asm.row_experiment, int)
+    row_idx = np.asarray(asm.row_index, int)
+    sig = _row_signals(exps, SIGNALS[:3], row_exp, row_idx, n)
+    tau = np.zeros((row_exp.size, n))
+    tt = np.zeros(row_exp.size)
+    for e, sg in enumerate(asm.signals):
+        m = row_exp == e
+        tau[m] = sg.tau_rows[row_idx[m]]
+        tt[m] = asm.row_time[m] - float(t_origins[e])
+    sig["tau"] = tau
+    sig["t"] = tt
+    return Frame(system=sysm, experiments=exps, row_experiment=row_exp, row_index=row_idx, sig=sig, assembly=asm)
+
+
+def build_frame(model: IdentificationModel, trajectories: Sequence[Trajectory], *,
+                dynamics_bandwidth_hz: float | None = None, payload_columns: bool | None = None,
+                **filter_kw) -> Frame:
+    """Assemble ``Y = W chi`` (:func:`symoro_gen.observations.assemble`) and attach the signals of each row.
+
+    Parameters
+    ----------
+    model : IdentificationModel
         Generated-model interface (``N_JOINTS``, ``BASE_NAMES``, ``regressor``...).
     trajectories : sequence of Trajectory
     dynamics_bandwidth_hz : float, optional
         ``f_dyn`` for the filter rules (same for every experiment); default: estimated per experiment.
     payload_columns : bool, optional
         Default: True when an experiment is loaded and the model has payload columns.
-    align_rtol : float
-        Tolerance of the row-alignment check.
     **filter_kw
-        ``cutoff_hz``, ``n_d``, ``order``, ``ftype``... passed to the assembler.
+        ``cutoff_hz``, ``n_d``, ``order``, ``ftype``... (fields of :class:`~symoro_gen.observations.AssemblyOptions`).
 
     Returns
     -------
@@ -357,34 +367,8 @@ def build_frame(model, trajectories: Sequence[Trajectory], *, dynamics_bandwidth
         raise ValueError("no trajectory given")
     if payload_columns is None:
         payload_columns = any(tr.loaded for tr in trajs) and bool(tuple(getattr(model, "PAYLOAD_NAMES", ())))
-    asm = assemble_observation(model, trajs, dynamics_bandwidth_hz=dynamics_bandwidth_hz,
-                               payload_columns=payload_columns, **filter_kw)
-    sysm = asm.system
-    n = trajs[0].n_joints
-    exps = []
-    for ex_rep, tr in zip(asm.experiments, trajs):
-        rows = set(ex_rep.rows_per_joint)
-        if len(rows) != 1:
-            raise IdentificationError(f"{tr.source}: rows per joint differ {ex_rep.rows_per_joint}; "
-                                      "diagnose needs every joint on every sample (no min_velocity removal)")
-        exps.append(_experiment(tr, ex_rep.settings, rows.pop()))
-    r = sysm.Y.size
-    row_exp = np.asarray(asm.row_experiment, int)
-    row_idx = np.zeros(r, int)
-    for j in range(n):
-        for e in range(len(exps)):
-            m = np.flatnonzero((sysm.joint == j) & (row_exp == e))
-            row_idx[m] = np.arange(m.size)
-    sig = _row_signals(exps, SIGNALS, row_exp, row_idx, n)
-    tt = np.zeros(r)
-    for e, ex in enumerate(exps):
-        m = row_exp == e
-        # time: the sample's own time (not low-passed)
-        tt[m] = ex.t[np.minimum(row_idx[m] * ex.settings.n_d, ex.n_samples - 1)]
-    sig["t"] = tt
-    own_tau = sig["tau"][np.arange(r), sysm.joint]
-    scale = np.abs(sysm.Y).max() if r else 1.0
-    if not np.allclose(own_tau, sysm.Y, rtol=0.0, atol=align_rtol * max(scale, 1e-300)):
-        raise IdentificationError("internal: the decimated measured torques do not match the assembler's Y "
-                                  "(filter settings or row order changed); cannot attach signals to rows")
-    return Frame(system=sysm, experiments=tuple(exps), row_experiment=row_exp, row_index=row_idx, sig=sig)
+    opts = AssemblyOptions.from_keywords(dynamics_bandwidth_hz=dynamics_bandwidth_hz,
+                                         payload_columns=payload_columns, keep_signals=True, **filter_kw)
+    asm = assemble(model, trajs, opts)
+    t0 = [float(tr.meta.get(T_ORIGIN_KEY, tr.t[0])) for tr in trajs]
+    return frame_from_assembly(asm, t0)

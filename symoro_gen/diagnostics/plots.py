@@ -10,6 +10,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ..report import MissingDependencyError, build_report
+
 __all__ = ["write_plots"]
 
 #: every figure of a diagnosis is named ``diagnosis-*.png``; older ones in the folder are replaced
@@ -25,10 +27,6 @@ def write_plots(report, folder) -> list[Path]:
         Files written, ``folder/<figure name>.png``; empty when matplotlib is not installed. Files
         ``diagnosis-*.png`` of an earlier diagnosis in the folder that this one does not write are removed.
     """
-    try:
-        from ..report import MissingDependencyError, build_report
-    except ImportError:  # pragma: no cover - report package absent
-        return []
     try:
         rep = build_report(diagnosis=report, robot=report.robot, plots=True)
     except MissingDependencyError:

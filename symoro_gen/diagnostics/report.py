@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..identification.result import IdentificationResult
+from ..report import diagnosis_html
+from .plots import write_plots
 from .structure import SIGNAL_LABELS, StructureItem
 
 __all__ = ["CandidateScore", "Effect", "ResidualReport"]
@@ -24,6 +26,10 @@ def _f(x):
 
 def _fl(a):
     return [_f(x) for x in np.asarray(a, float).reshape(-1)]
+
+
+def _num(x) -> str:
+    return "?" if x is None else f"{float(x):.4g}"
 
 
 def _j(j):
@@ -152,7 +158,8 @@ class ResidualReport:
         Relative error norms ``||rho_j|| / ||Y_j||`` of the declared model on identification and
         validation data.
     after_rel_err, after_validation_rel_err : ndarray, shape (n,)
-        The same with every effect added.
+        The same with every effect added. Both are on the filtered, decimated system (the papers'
+        metric; cut-off and ``n_d`` in ``settings``).
     effects : tuple of Effect
         In the order added.
     tried : tuple of CandidateScore
@@ -167,6 +174,9 @@ class ResidualReport:
     warnings : tuple of str
     plot_data : dict
         Arrays for :meth:`write_plots` (not part of the JSON).
+    before_validation_rel_err_raw, after_validation_rel_err_raw : ndarray, shape (n,), or None
+        Validation relative error norms on the raw measured torque: the model (declared, then with every
+        effect) at full rate on the filtered states against the unfiltered torque, every sample.
     """
 
     robot: str
@@ -186,18 +196,36 @@ class ResidualReport:
     settings: dict
     warnings: tuple = ()
     plot_data: dict = field(default_factory=dict, repr=False)
+    before_validation_rel_err_raw: np.ndarray | None = None
+    after_validation_rel_err_raw: np.ndarray | None = None
+
+    def error_basis(self) -> dict:
+        """What each error norm is computed on (the JSON ``error_basis``)."""
+        st = self.settings if isinstance(self.settings, dict) else {}
+        return {
+            "rel_err": "||Y_j - W_j chi|| / ||Y_j|| on the filtered, decimated identification system",
+            "validation_rel_err": "the same on the filtered, decimated validation system",
+            "validation_rel_err_raw": "||tau_j - tau_hat_j|| / ||tau_j||: the model at full rate on the filtered "
+                                      "states against the raw measured validation torque, every sample",
+            "cutoff_hz": st.get("cutoff_hz"), "n_d": st.get("n_d"),
+            "rows_identification": st.get("rows_identification"), "rows_validation": st.get("rows_validation"),
+            "samples_validation": st.get("samples_validation"),
+        }
 
     # ------------------------------------------------------------------------------------------
     def to_dict(self) -> dict:
-        """JSON contract: ``before``/``after`` {``rel_err``, ``validation_rel_err``}, ``effects`` (order
+        """JSON contract: ``before``/``after`` {``rel_err``, ``validation_rel_err``, ``validation_rel_err_raw``},
+        ``error_basis`` (what each is computed on), ``effects`` (order
         added: ``kind``, ``joint`` 1-based or null, ``params``, ``score``...), ``tried`` (every candidate
         with its score), plus ``placebos``, ``structure``, ``settings``, ``warnings``."""
         return {
             "robot": self.robot,
             "method": self.method,
             "n_joints": self.n_joints,
-            "before": {"rel_err": _fl(self.before_rel_err), "validation_rel_err": _fl(self.before_validation_rel_err)},
-            "after": {"rel_err": _fl(self.after_rel_err), "validation_rel_err": _fl(self.after_validation_rel_err)},
+            "before": self._errors(self.before_rel_err, self.before_validation_rel_err,
+                                   self.before_validation_rel_err_raw),
+            "after": self._errors(self.after_rel_err, self.after_validation_rel_err, self.after_validation_rel_err_raw),
+            "error_basis": self.error_basis(),
             "effects": [e.to_dict() for e in self.effects],
             "tried": [c.to_dict() for c in self.tried],
             "placebos": [c.to_dict() for c in self.placebos],
@@ -206,6 +234,24 @@ class ResidualReport:
             "settings": self.settings,
             "warnings": list(self.warnings),
         }
+
+    def error_rows(self) -> list[tuple[str, np.ndarray]]:
+        """Labelled rows of the error table (the labels say which metric)."""
+        rows = [("identification, before", self.before_rel_err),
+                ("identification, after", self.after_rel_err),
+                ("validation, before", self.before_validation_rel_err),
+                ("validation, after", self.after_validation_rel_err)]
+        if self.before_validation_rel_err_raw is not None and self.after_validation_rel_err_raw is not None:
+            rows += [("validation, before (raw torque)", self.before_validation_rel_err_raw),
+                     ("validation, after (raw torque)", self.after_validation_rel_err_raw)]
+        return rows
+
+    @staticmethod
+    def _errors(ident, valid, valid_raw) -> dict:
+        out = {"rel_err": _fl(ident), "validation_rel_err": _fl(valid)}
+        if valid_raw is not None:
+            out["validation_rel_err_raw"] = _fl(valid_raw)
+        return out
 
     def best_tried(self, round: int = 1, k: int = 10) -> list[CandidateScore]:
         """The ``k`` best-scored candidates of a round."""
@@ -216,16 +262,17 @@ class ResidualReport:
         n = self.n_joints
         head = "            " + "".join(f"{'joint ' + str(j + 1):>10}" for j in range(n))
         rows = [head]
-        for lab, a in (("ident before", self.before_rel_err), ("ident after", self.after_rel_err),
-                       ("valid before", self.before_validation_rel_err),
-                       ("valid after", self.after_validation_rel_err)):
+        table = [("ident before", self.before_rel_err), ("ident after", self.after_rel_err),
+                 ("valid before", self.before_validation_rel_err), ("valid after", self.after_validation_rel_err)]
+        if self.before_validation_rel_err_raw is not None and self.after_validation_rel_err_raw is not None:
+            table += [("raw before", self.before_validation_rel_err_raw),
+                      ("raw after", self.after_validation_rel_err_raw)]
+        for lab, a in table:
             rows.append(f"{lab:<12}" + "".join(f"{x:>10.4f}" for x in a))
         return rows
 
     def _repr_html_(self) -> str:
         """Tables of the diagnosis (Jupyter)."""
-        from ..report import diagnosis_html
-
         return diagnosis_html(self)
 
     def summary(self, n_tried: int = 8) -> str:
@@ -234,7 +281,9 @@ class ResidualReport:
         L = [f"Residual diagnosis of {self.robot} (IDIM-{self.method.upper()}), "
              f"{len(self.effects)} effect(s) added",
              f"validation: {self.settings.get('validation', '?')}",
-             "", "Relative error norms ||rho_j||/||Y_j||"]
+             "", "Relative error norms ||rho_j||/||Y_j||: 'ident'/'valid' on the filtered, decimated system "
+             f"(cut-off {_num(self.settings.get('cutoff_hz'))} Hz, n_d = {self.settings.get('n_d', '?')}); 'raw' on the "
+             "raw measured validation torque (model at full rate on the filtered states)"]
         L += self._error_table()
         L.append("")
         if self.effects:
@@ -283,10 +332,12 @@ class ResidualReport:
              f"Validation: {self.settings.get('validation', '?')}", "",
              "| | " + " | ".join(f"joint {j + 1}" for j in range(n)) + " |",
              "|---|" + "---:|" * n]
-        for lab, a in (("identification, before", self.before_rel_err), ("identification, after", self.after_rel_err),
-                       ("validation, before", self.before_validation_rel_err),
-                       ("validation, after", self.after_validation_rel_err)):
+        for lab, a in self.error_rows():
             L.append(f"| {lab} | " + " | ".join(f"{x:.4f}" for x in a) + " |")
+        L.append("")
+        L.append(f"Rows without '(raw torque)': relative error norms on the filtered, decimated system (cut-off "
+                 f"{_num(self.settings.get('cutoff_hz'))} Hz, n_d = {self.settings.get('n_d', '?')}); '(raw torque)': "
+                 "the model at full rate on the filtered states against the raw measured torque, every sample.")
         L.append("")
         L.append("## Effects added")
         if not self.effects:
@@ -324,8 +375,6 @@ class ResidualReport:
     def write_plots(self, folder) -> list[Path]:
         """Residual before/after each effect against the signal that revealed it, and the error norms
         (needs matplotlib; Agg backend). Returns the files written (empty without matplotlib)."""
-        from .plots import write_plots
-
         return write_plots(self, folder)
 
     def __repr__(self) -> str:

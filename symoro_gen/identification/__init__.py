@@ -10,16 +10,21 @@ How the ``symoro-gen identify`` options map onto the functions (``unloaded``/``l
 the DATA and --loaded files; or one combined system with ``loaded=None, payload_names=...``)::
 
     --method M [--essential]           identify(system, method=M, essential=...)
-    --validate DATA                    result.rel_err_on(validation_system)        (Table III)
+    --validate DATA                    result.rel_err_on(validation_system)        (Table III, filtered)
+                                       result.rel_err_raw_on(model, assembly)      (raw measured torque)
     --loaded DATA --payload N=V        fit_with_known_payload(unloaded, loaded, {N: V}, method=M)
     --gains sensor                     sensor_gains(unloaded, loaded, {N: V}, essential=...)  (IDIM-TLS)
     --gains drive                      identify_with_drive_gains(unloaded, loaded, payload, method=M)
     payload mass with robot known      identify_payload(loaded, result, payload_names, gains=...)  (Table IV)
-    streamed data                      fit_ols(accumulate(iter_observation_chunks(...)))
+    streamed data                      fit_ols(accumulate(observations.iter_chunks(model, data, options)))
+
+The systems come from the observations stage (:mod:`symoro_gen.observations`: ``assemble(model,
+trajectories, AssemblyOptions(...))``); :mod:`.assemble` keeps the former keyword entry points.
 """
 from .accumulate import Accumulator, accumulate
 from .essential import EssentialResult, essential_parameters
-from .estimators import fit_ols, fit_tls, fit_wls, identify
+from .estimators import fit_ols, fit_tls, fit_wls
+from .method import identify
 from .gains import DriveGainsResult, drive_gains, identify_with_drive_gains, sensor_gains
 from .observation import ObservationSystem
 from .payload import fit_with_known_payload, identify_payload

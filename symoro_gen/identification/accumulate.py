@@ -198,7 +198,7 @@ def accumulate(chunks: Iterable[ObservationSystem], names: Sequence[str] | None 
     Parameters
     ----------
     chunks : iterable of ObservationSystem
-        E.g. the streaming chunk iterator of :mod:`symoro_gen.identification.assemble`.
+        E.g. the streaming chunk iterator of :func:`symoro_gen.observations.iter_chunks`.
     names : sequence of str, optional
         Column labels; taken from the first chunk when omitted.
     weighted : bool

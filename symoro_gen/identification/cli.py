@@ -2,9 +2,14 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 from ..errors import IdentificationError
+from ..model import IdentificationModel
+from ..observations.assembly import assemble
+from ..observations.options import AssemblyOptions
+from .result import _json_float, basis_text
 
 
 def _payload_values(items, names) -> dict:
@@ -27,7 +32,6 @@ def run_identify(args) -> dict:
     from ..modelcache import model_for
     from ..preprocessing.load import load_trajectories
     from . import fit_with_known_payload, identify, identify_with_drive_gains, sensor_gains
-    from .assemble import build_observation
 
     if args.report:  # before the long computation: a bad suffix or a missing matplotlib fails at once
         from ..report import check_report_path, require_matplotlib
@@ -41,10 +45,13 @@ def run_identify(args) -> dict:
     known = _payload_values(args.payload, model.PAYLOAD_NAMES)
     if (args.gains or known) and not loaded:
         raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
-    obs = dict(cutoff_hz=args.cutoff, n_d=args.decimate, min_velocity=args.min_velocity)
+    # --min-velocity (row selection) applies to the identification rows only; validation uses every sample
+    opts = AssemblyOptions(cutoff_hz=args.cutoff, n_d=args.decimate, min_velocity=args.min_velocity)
     has_payload = bool(loaded)
-    sys_u = build_observation(model, unloaded, payload_columns=False, **obs)
-    sys_l = build_observation(model, loaded, payload_columns=True, **obs) if loaded else None
+    asm_u = assemble(model, unloaded, replace(opts, payload_columns=False))
+    asm_l = assemble(model, loaded, replace(opts, payload_columns=True)) if loaded else None
+    sys_u = asm_u.system
+    sys_l = asm_l.system if asm_l is not None else None
     dg = None
     if args.gains == "sensor":
         res = sensor_gains(sys_u, sys_l, known, essential=args.essential, r_sigma=args.r_sigma)
@@ -54,14 +61,20 @@ def run_identify(args) -> dict:
         res = fit_with_known_payload(sys_u, sys_l, known, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
     else:
         res = identify(sys_u, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
+    res = res.with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
     out = {"robot": robot.name, "data": [str(p) for p in args.data], "loaded": [str(p) for p in args.loaded or ()]}
     out.update(res.to_dict())
-    val = sys_v = None
+    val = val_raw = sys_v = None
     if args.validate:
         vtr = load_trajectories(args.validate, loaded=args.validate_loaded, **kw)
-        sys_v = build_observation(model, vtr, payload_columns=bool(args.validate_loaded) or has_payload, **obs)
+        asm_v = assemble(model, vtr, replace(opts, min_velocity=None,
+                                             payload_columns=bool(args.validate_loaded) or has_payload))
+        sys_v = asm_v.system
         val = res.rel_err_on(sys_v)
-        out["validation"] = {"data": [str(p) for p in args.validate], "rel_err": [float(x) for x in val]}
+        val_raw = res.rel_err_raw_on(model, asm_v)
+        out["validation"] = {"data": [str(p) for p in args.validate], "rel_err": [_json_float(x) for x in val],
+                             "rel_err_raw": [_json_float(x) for x in val_raw],
+                             "rel_err_basis": asm_v.metric_basis()}
     if args.reference:
         from .reference import compare_with_reference, format_comparison
 
@@ -79,17 +92,21 @@ def run_identify(args) -> dict:
         write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
     text = res.summary()
     if val is not None:
-        text += "\n\nValidation (relative error norm per joint): " + "  ".join(f"{x:.4f}" for x in val)
+        vb = asm_v.metric_basis()
+        text += ("\n\nValidation (relative error norm per joint): every sample, no row selection\n"
+                 f"  on the {basis_text(vb)}:\n    " + "  ".join(f"{x:.4f}" for x in val)
+                 + f"\n  on the raw measured torque (model at full rate on the filtered states, {vb['samples']} samples per joint):"
+                 "\n    " + "  ".join(f"{x:.4f}" for x in val_raw))
     if ref_text:
         text += "\n\nBeside the reference table " + str(args.reference) + ":\n" + ref_text
     if args.report:
-        _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, rows if args.reference else None)
+        _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, rows if args.reference else None, val_raw)
     if not args.quiet:
         print(text)
     return out
 
 
-def _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, reference) -> None:
+def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l, sys_v, reference, val_raw=None) -> None:
     """``--report OUT.html|OUT.md``: tables, measured vs reconstructed torques, singular values of W;
     with loaded validation data, the payload re-identified with the robot known (Table IV)."""
     from ..report import write_report
@@ -100,6 +117,7 @@ def _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, reference) -
     if loaded:
         ident.append(("identification data (loaded)", sys_l))
     valid = [("validation data" + (" (loaded)" if args.validate_loaded else ""), sys_v)] if sys_v is not None else []
+    raw = [(valid[0][0], val_raw)] if valid and val_raw is not None else []
     payload, notes = None, []
     pay_in_val = sys_v is not None and args.validate_loaded and any(n in sys_v.names for n in model.PAYLOAD_NAMES)
     if pay_in_val:
@@ -111,7 +129,8 @@ def _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, reference) -
     sources = {"identification data": list(args.data), "loaded": list(args.loaded or ()),
                "validation data": list(args.validate or ())}
     write_report(args.report, res, robot=robot.name, sources=sources, identification=ident, validation=valid,
-                 payload_names=model.PAYLOAD_NAMES, payload=payload, drive=dg, reference=reference, notes=notes)
+                 payload_names=model.PAYLOAD_NAMES, payload=payload, drive=dg, reference=reference, notes=notes,
+                 raw_errors=raw)
 
 
 def add_identify_parser(sub) -> None:
@@ -128,8 +147,8 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--r-sigma", type=float, default=30.0, help="stop ratio of the essential procedure (default 30)")
     p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
     p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
-    p.add_argument("--min-velocity", type=float, help="drop rows that depend on samples slower than this [rad/s] "
-                   "(Coulomb friction is ill-defined near zero velocity)")
+    p.add_argument("--min-velocity", type=float, help="drop identification rows that depend on samples slower than "
+                   "this [rad/s] (Coulomb friction is ill-defined near zero velocity); validation errors use every sample")
     p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md",

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import IdentificationError
+from ..report.tables import drive_gains_html
 from .accumulate import check_finite, factor_system
 from .essential import essential_raw
 from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, Options, _poor_warning,
@@ -68,8 +69,6 @@ class DriveGainsResult:
 
     def _repr_html_(self) -> str:
         """Jupyter: the gains with 2 sigma, %sigma and cond(W) per joint as an HTML table, then warnings."""
-        from ..report.tables import drive_gains_html
-
         return drive_gains_html(self)
 
     def to_dict(self) -> dict:

@@ -15,7 +15,8 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import IdentificationError
-from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, identify)
+from .estimators import COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL
+from .method import identify
 from .observation import ObservationSystem
 from .result import IdentificationResult, per_joint_rel_err
 from .systems import apply_gains, fix_parameters, select_rows, stack_systems

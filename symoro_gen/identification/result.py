@@ -7,18 +7,25 @@ The statistics follow the papers:
 * ``cov`` is :math:`C_{\\hat\\chi\\hat\\chi}` (RX-90 eq. 20, LWR4 eq. 16), ``std`` its diagonal's
   square root and ``rel_std_pct`` :math:`\\%\\sigma_{\\hat\\chi_i} = 100\\,\\sigma_{\\hat\\chi_i}/|\\hat\\chi_i|`
   (eq. 21);
-* ``rel_err`` the relative error norms :math:`\\|\\rho^j\\|/\\|Y^j\\|` per joint (LWR4 Table III).
+* ``rel_err`` the relative error norms :math:`\\|\\rho^j\\|/\\|Y^j\\|` per joint (LWR4 Table III), on
+  the filtered, decimated system (the papers' metric); ``rel_err_raw`` the same norm of the model
+  evaluated at full rate on the filtered states against the *raw* measured torque
+  (:mod:`symoro_gen.observations.raw`), when the caller attached it (:meth:`IdentificationResult.with_raw_error`).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 
 import numpy as np
 
 from ..errors import IdentificationError
-from .observation import ObservationSystem
+from ..report.tables import gains_html, result_html
+from ..model import IdentificationModel
+from ..observations.assembly import Assembly, basis_text, merge_metric_basis
+from ..observations.raw import raw_error_sums
+from ..observations.system import ObservationSystem
 
 
 #: summary() lists the known (fixed) parameters one per line up to this many
@@ -101,8 +108,6 @@ class Gains:
 
     def _repr_html_(self) -> str:
         """Jupyter: the gains as an HTML table (gain, joint, value, 2 sigma, %sigma)."""
-        from ..report.tables import gains_html
-
         return gains_html(self)
 
     def to_dict(self) -> dict:
@@ -175,6 +180,13 @@ class IdentificationResult:
         Parameters cancelled by the essential-parameter procedure (their value is 0).
     warnings : tuple of str
         Numbered in :meth:`summary`; ill-conditioning, rank deficiency, poorly identified parameters.
+    rel_err_raw : ndarray, shape (n_joints,) or None
+        ``||g_j tau_j - IDM_j chi|| / ||g_j tau_j||`` per joint: the model at full rate on the filtered
+        states against the raw measured torque of the identification data (None until attached by
+        :meth:`with_raw_error`).
+    rel_err_basis : dict or None
+        What ``rel_err`` and ``rel_err_raw`` are computed on (cut-off, decimation factor, rows,
+        samples; :meth:`symoro_gen.observations.Assembly.metric_basis`).
     """
 
     method: str
@@ -194,6 +206,8 @@ class IdentificationResult:
     fixed: tuple[tuple[str, float], ...] = ()
     eliminated: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
+    rel_err_raw: np.ndarray | None = None
+    rel_err_basis: dict | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "names", tuple(self.names))
@@ -208,6 +222,8 @@ class IdentificationResult:
             raise IdentificationError(f"IdentificationResult: cov has shape {cov.shape}, expected {(c, c)}")
         object.__setattr__(self, "cov", cov)
         object.__setattr__(self, "rel_err", _frozen(self.rel_err).reshape(-1))
+        if self.rel_err_raw is not None:
+            object.__setattr__(self, "rel_err_raw", _frozen(self.rel_err_raw).reshape(-1))
         if self.residual is not None:
             object.__setattr__(self, "residual", _frozen(self.residual).reshape(-1))
         if self.joint_sigma is not None:
@@ -286,6 +302,37 @@ class IdentificationResult:
         rho = y - self.predict(system)
         return per_joint_rel_err(rho, y, system.joint, system.n_joints)
 
+    def rel_err_raw_on(self, model: IdentificationModel, *assemblies: Assembly) -> np.ndarray:
+        """Raw-torque relative error norms per joint on the full-rate samples of ``assemblies``.
+
+        The identified model ``IDM(q, dq, ddq) chi`` is evaluated at every full-rate sample on the
+        assembly's band-pass states and compared with the *unfiltered* measured torque (scaled by the
+        identified gains), ``||g_j tau_j - IDM_j chi|| / ||g_j tau_j||``; every sample counts (no row
+        selection). Assemblies must keep their signals (``AssemblyOptions.keep_signals``).
+
+        Returns
+        -------
+        ndarray, shape (n_joints,)
+        """
+        if not assemblies:
+            raise IdentificationError("rel_err_raw_on: no assembly given")
+        n = assemblies[0].signals[0].q.shape[1] if assemblies[0].signals else self.n_joints
+        g = self.gains.as_vector(max(n, self.n_joints))[:n] if self.gains is not None else None
+        theta = self.parameter_map()
+        rho2, y2 = np.zeros(n), np.zeros(n)
+        for a in assemblies:
+            r, y = raw_error_sums(model, theta, a, gains=g)
+            rho2 += r
+            y2 += y
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.sqrt(rho2 / y2)
+
+    def with_raw_error(self, model: IdentificationModel, *assemblies: Assembly) -> "IdentificationResult":
+        """A copy with ``rel_err_raw`` on the identification ``assemblies`` and ``rel_err_basis`` (what
+        each norm is computed on)."""
+        basis = merge_metric_basis(assemblies)
+        return replace(self, rel_err_raw=self.rel_err_raw_on(model, *assemblies), rel_err_basis=basis)
+
     # ---- reporting ------------------------------------------------------
     def summary(self) -> str:
         """Tables like the papers': parameters (value, 2 sigma, %sigma), gains, relative error
@@ -313,8 +360,12 @@ class IdentificationResult:
         if self.eliminated:
             lines.append(f"cancelled (essential parameters): {', '.join(self.eliminated)}")
         lines.append("")
-        lines.append("Rel. err. norm ||rho_j||/||Y_j||")
+        lines.append("Rel. err. norm ||rho_j||/||Y_j|| on the " + basis_text(self.rel_err_basis))
         lines.append("  ".join(f"joint {j + 1}: {e:.4f}" for j, e in enumerate(self.rel_err)))
+        if self.rel_err_raw is not None:
+            lines.append("Rel. err. norm on the raw measured torque (model at full rate on the filtered states, "
+                         f"{self.rel_err_basis.get('samples', '?') if self.rel_err_basis else '?'} samples per joint)")
+            lines.append("  ".join(f"joint {j + 1}: {e:.4f}" for j, e in enumerate(self.rel_err_raw)))
         if self.joint_sigma is not None:
             lines.append("row weights 1/sigma_j with sigma_j = "
                          + ", ".join(f"{s:.3g}" for s in self.joint_sigma))
@@ -345,6 +396,10 @@ class IdentificationResult:
             "eliminated": list(self.eliminated),
             "warnings": list(self.warnings),
         }
+        if self.rel_err_raw is not None:
+            out["rel_err_raw"] = [_json_float(v) for v in self.rel_err_raw]
+        if self.rel_err_basis is not None:
+            out["rel_err_basis"] = self.rel_err_basis
         if self.joint_sigma is not None:
             out["joint_sigma"] = [_json_float(v) for v in self.joint_sigma]
         if self.gains is not None:
@@ -354,8 +409,6 @@ class IdentificationResult:
     def _repr_html_(self) -> str:
         """Jupyter: :meth:`summary` as HTML tables (gains, parameters with 2 sigma and %sigma, relative
         error norms per joint, numbered warnings)."""
-        from ..report.tables import result_html
-
         return result_html(self)
 
     def __repr__(self) -> str:
@@ -373,3 +426,4 @@ def per_joint_rel_err(rho: np.ndarray, y: np.ndarray, joint: np.ndarray, n_joint
     counts = np.bincount(joint, minlength=n_joints)
     out[counts == 0] = np.nan
     return out
+

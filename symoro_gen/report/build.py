@@ -17,6 +17,7 @@ from .document import (REPORT_SUFFIXES, Heading, ItemList, Paragraph, Preformatt
                        report_kind, write_report_files)
 from .plots import (DPI, MAX_POINTS, N_BINS, error_bars_figure, require_matplotlib, residual_figure,
                     singular_values_figure, torque_figure)
+from ..observations.assembly import basis_text
 from .tables import (unique_in_order, drive_gains_table, fmt_pct, fmt_value, gains_table, parameter_table,
                      payload_mass_text, payload_table, reference_table, rel_err_table, result_overview,
                      warnings_block)
@@ -156,6 +157,20 @@ def _effect_who(e) -> str:
     return who
 
 
+def _setting(diag, key: str) -> str:
+    st = diag.settings if isinstance(getattr(diag, "settings", None), Mapping) else {}
+    v = st.get(key)
+    return "?" if v is None else f"{float(v):.4g}"
+
+
+def raw_err_table(rows, n_joints: int) -> Table:
+    """Raw-torque relative error norms (``rel_err_raw``), its own table with a header saying so."""
+    t = rel_err_table(rows, n_joints, caption=(
+        "Relative error norms on the raw measured torque: ‖τ_j − τ̂_j‖/‖τ_j‖, the model at full rate on the "
+        "filtered states against the unfiltered torque, every sample (no row selection)"))
+    return Table(("Data (raw measured torque)",) + tuple(t.header[1:]), t.rows, t.caption)
+
+
 def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int, notes: list) -> list:
     n = diag.n_joints
     B: list = [Heading("Residual diagnosis"),
@@ -166,7 +181,13 @@ def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int,
                             ("identification, after", diag.after_rel_err),
                             ("validation, before", diag.before_validation_rel_err),
                             ("validation, after", diag.after_validation_rel_err)], n,
-                           "Relative error norms ‖ρ_j‖/‖Y_j‖ before and after the effects added"))
+                           "Relative error norms ‖ρ_j‖/‖Y_j‖ before and after the effects added, on the filtered, "
+                           f"decimated system (cut-off {_setting(diag, 'cutoff_hz')} Hz, "
+                           f"n_d = {_setting(diag, 'n_d')})"))
+    raw_b = getattr(diag, "before_validation_rel_err_raw", None)
+    raw_a = getattr(diag, "after_validation_rel_err_raw", None)
+    if raw_b is not None and raw_a is not None:
+        B.append(raw_err_table([("validation, before", raw_b), ("validation, after", raw_a)], n))
     if diag.effects:
         rows = []
         for i, e in enumerate(diag.effects, 1):
@@ -265,7 +286,8 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
                  sources: Mapping[str, Sequence[str]] | None = None, identification=None, validation=None,
                  payload_names: Sequence[str] | None = None, payload=None, drive=None, reference=None,
                  diagnosis=None, text: str | None = None, notes: Sequence[str] = (), plots: bool = True,
-                 max_points: int = MAX_POINTS, n_bins: int = N_BINS, dpi: int = DPI) -> Report:
+                 max_points: int = MAX_POINTS, n_bins: int = N_BINS, dpi: int = DPI,
+                 raw_errors: Sequence[tuple[str, Sequence[float]]] = ()) -> Report:
     """A report of an identification (and/or a residual diagnosis): the papers' tables and plots.
 
     Parameters
@@ -303,6 +325,10 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
         Bins of the binned-mean curves of residual plots.
     dpi : int
         Figure resolution (figures are ``11 * dpi`` pixels wide).
+    raw_errors : sequence of (label, errors per joint)
+        Raw-torque relative error norms (the model at full rate on the filtered states against the
+        unfiltered measured torque, ``rel_err_raw``) listed below the filtered ones; the result's own
+        ``rel_err_raw`` (identification data) is listed first when it has one.
 
     Returns
     -------
@@ -337,12 +363,18 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
 
     if result is not None and (ident or valid or diagnosis is None):
         n = result.n_joints
+        basis = basis_text(getattr(result, "rel_err_basis", None))
         rows = [("identification (as fitted)", result.rel_err)]
         if len(ident) > 1:
             rows += [(lab, result.rel_err_on(s)) for lab, s in ident if _can_predict(result, s)]
         rows += [(lab, result.rel_err_on(s)) for lab, s in valid if _can_predict(result, s)]
+        raw = list(raw_errors)
+        if getattr(result, "rel_err_raw", None) is not None:
+            raw.insert(0, ("identification data", result.rel_err_raw))
         B.append(Heading("Quality of the torque reconstruction"))
-        B.append(rel_err_table(rows, n))
+        B.append(rel_err_table(rows, n, caption=f"Relative error norms ‖ρ_j‖/‖Y_j‖ per joint on the {basis}"))
+        if raw:
+            B.append(raw_err_table(raw, n))
         gains = getattr(result, "gains", None)
         if drive is not None or gains is not None:
             B.append(Heading("Gains"))

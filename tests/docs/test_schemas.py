@@ -90,6 +90,8 @@ def test_identify_output_matches_schema(scara_files):
     p = res["parameters"]
     assert len(p["names"]) == len(p["values"]) == len(p["std"]) == len(p["rel_std_pct"])
     assert len(res["rel_err"]) == len(res["validation"]["rel_err"]) == 4
+    assert len(res["rel_err_raw"]) == len(res["validation"]["rel_err_raw"]) == 4
+    assert res["rel_err_basis"]["n_d"] and res["validation"]["rel_err_basis"]["samples"] > 0
 
 
 def test_identify_with_gains_matches_schema(tmp_path):
@@ -144,6 +146,7 @@ def test_diagnose_output_matches_schema(diagnose_report):
     assert d["effects"], "the injected Stribeck friction should be found"
     assert d["effects"][0]["kind"] == "stribeck" and d["effects"][0]["joint"] == 1
     assert len(d["before"]["rel_err"]) == len(d["after"]["validation_rel_err"]) == 4
+    assert len(d["before"]["validation_rel_err_raw"]) == len(d["after"]["validation_rel_err_raw"]) == 4
 
 
 def test_diagnose_cli_output_matches_schema(scara_files):
@@ -162,7 +165,7 @@ def test_diagnose_cli_output_matches_schema(scara_files):
 # ---------------------------------------------------------------------------------------------
 GOOD_IDENTIFY = {"robot": "scara", "data": ["a.csv"], "method": "OLS",
                  "parameters": {"names": ["ZZ1R"], "values": [1.0], "std": [0.1], "rel_std_pct": [10.0]},
-                 "rel_err": [0.1, 0.2], "cond": 12.0, "sigma": 0.3}
+                 "rel_err": [0.1, 0.2], "rel_err_raw": [0.2, 0.3], "cond": 12.0, "sigma": 0.3}
 
 
 @pytest.mark.parametrize("break_it, where", [
@@ -173,6 +176,10 @@ GOOD_IDENTIFY = {"robot": "scara", "data": ["a.csv"], "method": "OLS",
     (lambda d: d["parameters"]["names"].__setitem__(0, 3), "$.parameters.names[0]"),
     (lambda d: d.__setitem__("gains", {"values": [1.0]}), "missing required key 'rel_std_pct'"),
     (lambda d: d.__setitem__("validation", {"rel_err": "0.1"}), "$.validation.rel_err"),
+    (lambda d: d.pop("rel_err_raw"), "missing required key 'rel_err_raw'"),
+    (lambda d: d.__setitem__("validation", {"rel_err": [0.1, 0.2]}), "missing required key 'rel_err_raw'"),
+    (lambda d: d.__setitem__("rel_err_basis", {"rel_err": "x", "rel_err_raw": "y", "cutoff_hz": [0.0], "n_d": [1],
+                                               "rows": 1, "samples": 1}), "$.rel_err_basis.cutoff_hz[0]"),
 ])
 def test_validator_catches_broken_identify(break_it, where):
     assert validate(GOOD_IDENTIFY, SCHEMAS["identify"]) == []
@@ -183,8 +190,8 @@ def test_validator_catches_broken_identify(break_it, where):
 
 
 def test_validator_catches_broken_diagnose():
-    good = {"before": {"rel_err": [0.1], "validation_rel_err": [0.2]},
-            "after": {"rel_err": [0.05], "validation_rel_err": [0.1]},
+    good = {"before": {"rel_err": [0.1], "validation_rel_err": [0.2], "validation_rel_err_raw": [0.3]},
+            "after": {"rel_err": [0.05], "validation_rel_err": [0.1], "validation_rel_err_raw": [0.2]},
             "effects": [{"kind": "stribeck", "joint": 1, "params": {"FST1": 1.2}, "score": 0.3}],
             "tried": [{"kind": "spring", "joint": None, "score": 0.01}]}
     assert validate(good, SCHEMAS["diagnose"]) == []
@@ -192,6 +199,7 @@ def test_validator_catches_broken_diagnose():
         (lambda d: d["effects"][0].__setitem__("kind", "magic"), "not one of"),
         (lambda d: d["effects"][0].__setitem__("joint", 0), "$.effects[0].joint"),
         (lambda d: d["after"].pop("validation_rel_err"), "validation_rel_err"),
+        (lambda d: d["before"].pop("validation_rel_err_raw"), "missing required key 'validation_rel_err_raw'"),
         (lambda d: d["tried"][0].pop("score"), "missing required key 'score'"),
     ):
         bad = copy.deepcopy(good)

@@ -1,0 +1,710 @@
+"""The assembly stage: trajectories -> the observation system ``Y = W chi + rho`` with its provenance.
+
+This implements the pre-processing of Gautier's identification method (M. Gautier, "Dynamic
+identification of robots with power model", ICRA 1997; M. Gautier & S. Briot, "New method for global
+identification of the joint drive gains of robots using a known inertial payload" (the RX-90 paper),
+eq. 14-16: band-pass filtering of ``q`` and *parallel decimation* of ``Y`` and of every column of
+``W``, so that the decimated system keeps the identity ``Y = W chi``; the LWR4 paper, Sec. IV, uses
+the same procedure). One signature: :func:`assemble` and :func:`iter_chunks` take ``(model,
+trajectories, options)`` with an :class:`~symoro_gen.observations.options.AssemblyOptions`.
+
+For each experiment (one :class:`~symoro_gen.preprocessing.trajectory.Trajectory`, never mixed with
+another one):
+
+1. ``q`` is low-passed by a zero-phase Butterworth filter and differentiated by central differences
+   (band-pass estimates of ``q, dq, ddq``, see :mod:`symoro_gen.preprocessing.filtering`);
+   ``edge_samples`` samples are then dropped at both ends (filter edge effects);
+2. the model's base regressor (columns ``model.BASE_NAMES``) and, with ``payload_columns=True``, its
+   payload regressor (columns ``model.PAYLOAD_NAMES``; zeros for experiments without the payload,
+   eq. 7 of the LWR4 paper) are evaluated on every remaining sample;
+3. ``Y`` (the measured torques) and every column of ``W`` are decimated in parallel (same zero-phase
+   low-pass, one sample in ``n_d`` kept), so ``Y = W chi`` still holds;
+4. optionally (``min_velocity``) the rows of joint j that depend on samples where ``|dq_j| <
+   min_velocity`` are removed: near zero velocity the Coulomb term ``sign(dq)`` of the filtered
+   velocity does not match the physical friction (rests, reversals), and the decimation low-pass
+   spreads that mismatch over the rows around it. A row is removed when more than ``slow_weight_tol``
+   (1 %) of its filter's absolute weights fall on such samples (the FIR weights of ``20 n_d + 1``
+   samples are also used to judge the rows of ``ftype="iir"``);
+5. rows are grouped per joint: all rows of joint 1 (experiment after experiment), then joint 2...
+
+The filter settings are chosen per experiment by :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`
+unless given (``cutoff_hz``, ``n_d``, ``dynamics_bandwidth_hz``...). :func:`assemble`
+returns them with the system (``Assembly.summary()``), the sample behind every row (experiment,
+full-rate sample index, time, joint) and, with ``options.keep_signals``, the filtered signals of each
+experiment (:class:`ExperimentSignals`) that the later stages need (diagnosis, raw-torque errors): they
+never filter again.
+
+:func:`iter_chunks` is the streaming variant: it processes each experiment in blocks of
+samples with overlapping margins (the Butterworth transient, ~10 periods of the cut-off, and the
+FIR half-length ``10 n_d``), so memory stays bounded whatever the recording length, and yields
+:class:`ObservationSystem` chunks (rows grouped per joint within each chunk). With the default FIR
+decimation the rows it yields are those of :func:`assemble` (to ~1e-10 relative at block
+borders, from the truncated Butterworth transient). :func:`assemble` is the concatenation of
+those chunks, regrouped per joint. ``ftype="iir"`` (SciPy's/Matlab's default ``decimate``) needs a
+whole experiment in memory at once.
+
+Cost: the columns of ``W`` that are structurally zero (found once per model from random states;
+about half of them, since joint j's row only depends on the links j..n) are neither copied nor
+filtered; the FIR decimation runs as dense matrix products with one OpenBLAS thread by default
+(``blas_threads``). Measured on the shared 2-core machine: one hour of simulated 7-joint data at
+1 kHz (LWR4, 3.6 M samples, 64 base + 10 payload columns, ``n_d = 80``) is assembled in ~18 s
+(~7 s of it in the generated regressor) with ~110 MB above the trajectory itself.
+"""
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from ..errors import DataFileError, ModelError, Problem, ShapeError
+from ..model import IdentificationModel
+from ..preprocessing.filtering import (
+    FilterSettings,
+    _fir_decimate,
+    _fir_decimate_padded,
+    _group_size,
+    blas_threads,
+    butterworth_settle_samples,
+    choose_filter_settings,
+    decimation_filter,
+    filter_and_differentiate,
+    fir_buffer_length,
+    min_filter_samples,
+)
+from ..preprocessing.trajectory import Trajectory
+from ..progress import ProgressCounter
+from .options import AssemblyOptions
+from .system import ObservationSystem
+
+__all__ = [
+    "Assembly",
+    "ExperimentReport",
+    "ExperimentSignals",
+    "assemble",
+    "basis_text",
+    "iter_chunks",
+    "merge_metric_basis",
+    "observation_settings",
+]
+
+
+@dataclass(frozen=True)
+class ExperimentReport:
+    """What the assembly did with one experiment.
+
+    Attributes
+    ----------
+    index : int
+        0-based position of the experiment in the input.
+    source : str
+        ``Trajectory.source``.
+    loaded : bool
+        Payload mounted.
+    n_samples : int
+        Samples in the recording.
+    settings : FilterSettings
+        Filters used.
+    rows_per_joint : tuple of int
+        Rows kept per joint (after decimation and velocity removal).
+    removed_low_velocity : tuple of int
+        Rows removed per joint by ``min_velocity``.
+    """
+
+    index: int
+    source: str
+    loaded: bool
+    n_samples: int
+    settings: FilterSettings
+    rows_per_joint: tuple[int, ...]
+    removed_low_velocity: tuple[int, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class ExperimentSignals:
+    """The signals of one experiment as the assembly computed them (full rate, edge samples dropped).
+
+    Attributes
+    ----------
+    index : int
+        0-based position of the experiment in the input.
+    source : str
+    loaded : bool
+    settings : FilterSettings
+        The filters used (cut-off, ``n_d``, edge samples...).
+    first : int
+        Full-rate index, in the recording, of the first kept sample (``settings.edge_samples``).
+    t : ndarray, shape (M,)
+        Time of each kept sample, as recorded [s].
+    q, dq, ddq : ndarray, shape (M, n)
+        Band-pass estimates (zero-phase Butterworth of ``q`` then central differences; the recorded
+        values with ``use_recorded_derivatives``) on which ``W`` was evaluated.
+    q_raw : ndarray, shape (M, n)
+        Measured positions.
+    tau_raw : ndarray, shape (M, n)
+        Measured torques, unfiltered: the reference of the raw-torque error ``rel_err_raw``.
+    tau_rows : ndarray, shape (K, n)
+        Measured torques of all joints low-passed and decimated in parallel with ``W`` (``Y`` of
+        joint j is ``tau_rows[:, j]`` before any row removal), one row per decimated sample.
+    decimated_samples : ndarray of int, shape (K,)
+        Full-rate index, in the recording, of each decimated sample.
+    """
+
+    index: int
+    source: str
+    loaded: bool
+    settings: FilterSettings
+    first: int
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    q_raw: np.ndarray
+    tau_raw: np.ndarray
+    tau_rows: np.ndarray
+    decimated_samples: np.ndarray
+
+    @property
+    def n_samples(self) -> int:
+        """Kept full-rate samples M."""
+        return int(self.t.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class Assembly:
+    """An observation system with its provenance.
+
+    Attributes
+    ----------
+    system : ObservationSystem
+        ``W`` (r, c), ``Y`` (r,), column names, joint of each row (``system.joint``).
+    experiments : tuple of ExperimentReport
+    row_experiment : ndarray of int, shape (r,)
+        Index of the experiment each row comes from.
+    row_time : ndarray, shape (r,)
+        Time [s] of each row's sample in its recording.
+    row_sample : ndarray of int, shape (r,)
+        Full-rate index, in its recording, of each row's (decimated) sample.
+    row_index : ndarray of int, shape (r,)
+        Index of each row's sample among the decimated samples of its experiment
+        (``signals[e].tau_rows[row_index]``).
+    options : AssemblyOptions
+        The options it was built with.
+    signals : tuple of ExperimentSignals
+        Per experiment (empty when ``options.keep_signals`` is False).
+    """
+
+    system: ObservationSystem
+    experiments: tuple[ExperimentReport, ...]
+    row_experiment: np.ndarray
+    row_time: np.ndarray
+    row_sample: np.ndarray
+    row_index: np.ndarray
+    options: AssemblyOptions
+    signals: tuple[ExperimentSignals, ...] = ()
+
+    @property
+    def row_joint(self) -> np.ndarray:
+        """0-based joint of each row (``system.joint``)."""
+        return self.system.joint
+
+    @property
+    def n_joints(self) -> int:
+        return self.system.n_joints
+
+    def metric_basis(self) -> dict:
+        """What ``rel_err`` on this system is computed on: filter cut-off(s), decimation factor(s),
+        rows, and the full-rate samples the raw error uses (the JSON ``rel_err_basis``)."""
+        st = [e.settings for e in self.experiments]
+        return {
+            "rel_err": "||Y_j - W_j chi|| / ||Y_j|| on the filtered, decimated observation system",
+            "rel_err_raw": "||tau_j - IDM_j(q, dq, ddq) chi|| / ||tau_j||: the model at full rate on the "
+                           "filtered states against the raw measured torque",
+            "cutoff_hz": [float(s.cutoff_hz) for s in st],
+            "n_d": [int(s.n_d) for s in st],
+            "min_velocity": self.options.min_velocity,
+            "rows": int(self.system.Y.size),
+            "samples": int(sum(s.n_samples for s in self.signals)),
+        }
+
+    def summary(self) -> str:
+        s = self.system
+        lines = [f"Observation system: {s.W.shape[0]} rows x {s.W.shape[1]} columns, "
+                 f"{s.n_joints} joints, {len(self.experiments)} experiment(s)"]
+        for e in self.experiments:
+            lines.append(f"\n[{e.index}] {e.source} ({'loaded' if e.loaded else 'unloaded'}, {e.n_samples} samples)")
+            lines += ["    " + x for x in e.settings.summary().splitlines()]
+            lines.append(f"    rows per joint: {', '.join(str(r) for r in e.rows_per_joint)}")
+            if any(e.removed_low_velocity):
+                lines.append(f"    removed (|dq| < min_velocity): {', '.join(str(r) for r in e.removed_low_velocity)}")
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+def _as_trajectories(trajectories: Trajectory | Iterable[Trajectory]) -> Iterable[Trajectory]:
+    if isinstance(trajectories, Trajectory):
+        return (trajectories,)
+    return trajectories
+
+
+def _sample_progress(progress, trajectories) -> ProgressCounter:
+    """Progress over the full-rate samples of the experiments (total known unless a lazy iterable)."""
+    if isinstance(trajectories, Trajectory):
+        total = trajectories.n_samples
+    elif isinstance(trajectories, (list, tuple)):
+        total = sum(t.n_samples for t in trajectories)
+    else:
+        total = None
+    return ProgressCounter(progress, total=total, desc="assembling W", unit="sample", unit_scale=True)
+
+
+def _blocks_with_progress(blocks, n_samples: int, n_d: int, step) -> Iterator:
+    """Pass the blocks of one experiment through, reporting its samples to ``step`` (they add up to
+    ``n_samples`` once the experiment is done)."""
+    done = 0
+    for blk in blocks:
+        inc = min(blk.Yd.shape[0] * n_d, n_samples - done)
+        done += inc
+        step(inc)
+        yield blk
+    step(n_samples - done)
+
+
+def observation_settings(trajectory: Trajectory, options: AssemblyOptions | None = None) -> FilterSettings:
+    """The :class:`FilterSettings` the assembly uses for ``trajectory`` with ``options``
+    (Gautier's rules for the values left unset)."""
+    opts = AssemblyOptions() if options is None else options
+    fs = 1.0 / trajectory.dt
+    return choose_filter_settings(fs, trajectory.q, **opts.rule_keywords())
+
+
+def _names(model: IdentificationModel, payload_columns: bool) -> tuple[tuple[str, ...], int, int]:
+    try:
+        base = tuple(model.BASE_NAMES)
+    except AttributeError:
+        raise ModelError("model has no BASE_NAMES: pass a generated model (symoro_gen.load_model) "
+                         "or symoro_gen.simulate.numeric_model(robot)") from None
+    pay: tuple[str, ...] = ()
+    if payload_columns:
+        pay = tuple(getattr(model, "PAYLOAD_NAMES", ()))
+        if not pay:
+            raise ModelError(f"payload_columns=True but model {getattr(model, 'ROBOT', '?')} has no payload frame")
+    return base + pay, len(base), len(pay)
+
+
+class _SignalSink:
+    """Full-rate buffers of one experiment's filtered kinematics (written block by block)."""
+
+    def __init__(self, m: int, n: int):
+        self.q = np.empty((m, n))
+        self.dq = np.empty((m, n))
+        self.ddq = np.empty((m, n))
+
+    def write(self, a: int, b: int, q, dq, ddq) -> None:
+        self.q[a:b], self.dq[a:b], self.ddq[a:b] = q, dq, ddq
+
+
+@dataclass
+class _Block:
+    Wd: np.ndarray  # (k, n, c)
+    Yd: np.ndarray  # (k, n)
+    slow: np.ndarray | None  # (k, n): share of each row's filter weight on samples with |dq_j| < min_velocity_j
+    idx: np.ndarray  # (k,) full-rate sample index in the recording
+
+
+def _slow_indicator(dq: np.ndarray, vmin: np.ndarray, valid: slice) -> np.ndarray:
+    """1.0 where |dq_j| < vmin_j on the valid rows, 0.0 elsewhere (zero padding is not 'slow')."""
+    out = np.zeros(dq.shape)
+    out[valid] = np.abs(dq[valid]) < vmin
+    return out
+
+
+class _Evaluator:
+    """Calls a model's regressors into reused arrays and keeps only its structurally non-zero columns.
+
+    The columns of ``W`` (per joint row) that are zero for random states are zero for all states
+    (the entries are analytic functions of q, dq, ddq, or literal zeros); they are neither copied nor
+    filtered.
+    """
+
+    def __init__(self, model: IdentificationModel, n: int, nb: int, npay: int, batch: int, rng_seed: int = 12345):
+        self.model, self.n, self.nb, self.npay, self.batch = model, n, nb, npay, batch
+        rng = np.random.default_rng(rng_seed)
+        q, dq, ddq = (rng.uniform(-2.0, 2.0, (16, n)) for _ in range(3))
+        self.out_ok: dict[str, bool] = {}
+        Wb = self._call("regressor", q, dq, ddq, nb)
+        self.nz_base = np.flatnonzero(np.any(Wb.reshape(16, n * nb) != 0.0, axis=0))
+        if npay:
+            Wp = self._call("payload_regressor", q, dq, ddq, npay)
+            self.nz_pay = np.flatnonzero(np.any(Wp.reshape(16, n * npay) != 0.0, axis=0))
+        else:
+            self.nz_pay = np.zeros(0, int)
+        self._tmp: dict[str, np.ndarray] = {}
+
+    def _call(self, what, q, dq, ddq, ncol, out=None):
+        fn = getattr(self.model, what)
+        if out is not None and self.out_ok.get(what, True):
+            try:
+                W = fn(q, dq, ddq, out=out)
+                self.out_ok[what] = True
+            except TypeError:
+                self.out_ok[what] = False
+                W = fn(q, dq, ddq)
+        else:
+            W = fn(q, dq, ddq)
+        W = np.asarray(W, float)
+        if W.shape != (q.shape[0], self.n, ncol):
+            raise ShapeError(f"model.{what} returned shape {W.shape}, expected {(q.shape[0], self.n, ncol)}")
+        return W
+
+    def columns(self, payload_on: bool) -> np.ndarray:
+        """Flat indices into ``(n, nb + npay)`` of the columns kept for an experiment."""
+        c = self.nb + self.npay
+        j, i = np.divmod(self.nz_base, self.nb)
+        cols = [j * c + i]
+        if payload_on:
+            j, i = np.divmod(self.nz_pay, self.npay)
+            cols.append(j * c + self.nb + i)
+        return np.concatenate(cols)
+
+    def write(self, dst_base: np.ndarray, dst_pay: np.ndarray | None, q, dq, ddq) -> None:
+        """Kept columns of W on samples (q, dq, ddq): base ones into ``dst_base`` (m, nz_base.size),
+        payload ones into ``dst_pay`` (m, nz_pay.size) when given (C-contiguous row blocks)."""
+        m = q.shape[0]
+        for s in range(0, m, self.batch):
+            s2 = min(m, s + self.batch)
+            k = s2 - s
+            tb = self._tmp.get("b")
+            if tb is None or tb.shape[0] < k:
+                tb = self._tmp["b"] = np.empty((max(k, self.batch), self.n, self.nb))
+            Wb = self._call("regressor", q[s:s2], dq[s:s2], ddq[s:s2], self.nb, out=tb[:k])
+            np.take(Wb.reshape(k, -1), self.nz_base, axis=1, out=dst_base[s:s2], mode="clip")
+            if dst_pay is not None:
+                tp = self._tmp.get("p")
+                if tp is None or tp.shape[0] < k:
+                    tp = self._tmp["p"] = np.empty((max(k, self.batch), self.n, self.npay))
+                Wp = self._call("payload_regressor", q[s:s2], dq[s:s2], ddq[s:s2], self.npay, out=tp[:k])
+                np.take(Wp.reshape(k, -1), self.nz_pay, axis=1, out=dst_pay[s:s2], mode="clip")
+
+
+def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterSettings, opts: AssemblyOptions,
+                       ev: _Evaluator, sink: _SignalSink | None = None) -> Iterator[_Block]:
+    """Decimated blocks of one experiment (before velocity removal and regrouping); the filtered
+    kinematics go to ``sink`` when given."""
+    n = traj.n_joints
+    N = traj.n_samples
+    src = traj.source
+    if n != ev.n:
+        raise ShapeError(f"{src}: trajectory has {n} joints, model {getattr(model, 'ROBOT', '?')} has {ev.n}")
+    use_rec = opts.use_recorded_derivatives
+    if use_rec and (traj.dq is None or traj.ddq is None):
+        raise DataFileError([Problem(src, "", "dq/ddq", "use_recorded_derivatives=True but the trajectory has "
+                                     "no recorded velocities/accelerations")])
+    e = st.edge_samples
+    nd = st.n_d
+    Nseg = N - 2 * e
+    need = max(min_filter_samples(st.order, nd, st.ftype), nd)
+    if N < min_filter_samples(st.order) or Nseg < need:
+        raise DataFileError([Problem(src, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
+                                     f"{2 * e} dropped at the edges, at least {need} must remain "
+                                     f"(cut-off {st.cutoff_hz:.4g} Hz, n_d = {nd})")])
+    c = ev.nb + ev.npay
+    payload_on = ev.npay > 0 and traj.loaded
+    keep = ev.columns(payload_on)  # flat (n, c) indices of the buffer's W columns
+    Cw = keep.size
+    Cb = Cw + n  # buffer: kept W columns, then Y
+    fs = st.fs
+    margin = 0 if use_rec else butterworth_settle_samples(fs, st.cutoff_hz, st.order) + 2
+    fir = nd > 1 and st.ftype == "fir"
+    iir = nd > 1 and st.ftype == "iir"
+    if fir:
+        h = decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio)
+        L = h.size
+        half = (L - 1) // 2
+        group = _group_size(nd)
+    n_out_total = -(-Nseg // nd)
+    # outputs per block
+    budget_rows = max(1, int(opts.max_chunk_mb * 1e6 / (8.0 * Cb)))
+    if iir:
+        per_block = n_out_total
+    elif opts.chunk_samples is not None:
+        per_block = max(1, int(opts.chunk_samples) // nd)
+    elif fir:
+        per_block = max(1, (budget_rows - L) // nd)
+    else:
+        per_block = budget_rows
+    if fir:
+        per_block = max(group, per_block // group * group)
+    per_block = min(per_block, n_out_total)
+    vmin = opts.velocity_threshold(n)
+    need_vmin = vmin is not None
+    habs: np.ndarray | None = None
+    if need_vmin:  # weights of the decimation filter, normalised, to measure each row's exposure to slow samples
+        habs = np.abs(decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio)) if nd > 1 else None
+        if habs is not None:
+            habs /= habs.sum()
+
+    def kinematics(a, b):
+        """q, dq, ddq on segment samples [a, b)."""
+        lo_full, hi_full = e + a, e + b
+        if use_rec:
+            return traj.q[lo_full:hi_full], traj.dq[lo_full:hi_full], traj.ddq[lo_full:hi_full]
+        lo = max(0, lo_full - margin)
+        hi = min(N, hi_full + margin)
+        qf, dq, ddq = filter_and_differentiate(traj.q[lo:hi], fs, st.cutoff_hz, st.order, source=src)
+        s = slice(lo_full - lo, hi_full - lo)
+        return qf[s], dq[s], ddq[s]
+
+    def fill(bufs, dqbuf, r0, a, b):
+        """W (kept columns), Y and dq of segment samples [a, b) into rows [r0, r0 + b - a)."""
+        q, dq, ddq = kinematics(a, b)
+        r1 = r0 + b - a
+        ev.write(bufs[0][r0:r1], bufs[1][r0:r1] if payload_on else None, q, dq, ddq)
+        bufs[-1][r0:r1] = traj.tau[e + a:e + b]
+        if dqbuf is not None:
+            dqbuf[r0:r1] = dq
+        if sink is not None:
+            sink.write(a, b, q, dq, ddq)
+
+    def unpack(decs, k: int):
+        Wd = np.zeros((k, n * c))
+        Wd[:, keep] = np.concatenate(decs[:-1], axis=1)
+        return Wd.reshape(k, n, c), decs[-1]
+
+    if fir:
+        rows_max = fir_buffer_length(per_block, nd, L, group)
+    elif iir:
+        rows_max = Nseg
+    else:
+        rows_max = per_block
+    widths = [ev.nz_base.size] + ([ev.nz_pay.size] if payload_on else []) + [n]
+    bufs = [np.empty((rows_max, w)) for w in widths]  # base W, payload W, Y: reused for every block
+    dqbuf = np.empty((rows_max, n)) if need_vmin else None
+    for k0 in range(0, n_out_total, per_block):
+        k1 = min(n_out_total, k0 + per_block)
+        k = k1 - k0
+        if fir:
+            start = k0 * nd - half  # segment index of buffer row 0
+            rows = fir_buffer_length(k, nd, L, group)
+            a = max(0, start)
+            b = min(Nseg, (k1 - 1) * nd + half + 1)
+            r0, r1 = a - start, b - start
+            Bs = [x[:rows] for x in bufs]
+            for x in Bs:  # zero padding beyond the experiment's ends (as resample_poly)
+                x[:r0] = 0.0
+                x[r1:] = 0.0
+            fill(Bs, dqbuf, r0, a, b)
+            with blas_threads(opts.blas_threads):
+                decs = [_fir_decimate_padded(x, h, nd, k, group) for x in Bs]
+                slow = _fir_decimate_padded(_slow_indicator(dqbuf[:rows], vmin, slice(r0, r1)), habs, nd, k, group) \
+                    if vmin is not None and dqbuf is not None and habs is not None else None
+        elif iir:
+            fill(bufs, dqbuf, 0, 0, Nseg)
+            with blas_threads(opts.blas_threads):
+                slow = _fir_decimate(_slow_indicator(dqbuf, vmin, slice(0, Nseg)), habs, nd) \
+                    if vmin is not None and dqbuf is not None and habs is not None else None
+            sos = decimation_filter(nd, ftype="iir", cutoff_ratio=st.cutoff_ratio)
+            decs = [signal.sosfiltfilt(sos, x, axis=0)[::nd] for x in bufs]
+        else:
+            Bs = [x[:k] for x in bufs]
+            fill(Bs, dqbuf, 0, k0, k1)
+            slow = _slow_indicator(dqbuf[:k], vmin, slice(0, k)) if vmin is not None and dqbuf is not None else None
+            decs = [x.copy() for x in Bs]
+        Wd, Yd = unpack(decs, k)
+        idx = e + np.arange(k0, k1) * nd
+        yield _Block(Wd=Wd, Yd=Yd, slow=slow, idx=idx)
+
+
+def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, tol: float, removed: np.ndarray):
+    """Stack blocks (each tagged with its experiment) per joint, removing low-velocity rows.
+
+    Returns lists (per joint and block) of W rows, Y, joint, experiment, full-rate sample index and
+    decimated-sample index within the block."""
+    Ws, Ys, Js, Es, Ss, Ks = [], [], [], [], [], []
+    for j in range(n):
+        for blk, ex in blocks:
+            keep = np.ones(blk.Yd.shape[0], bool)
+            if blk.slow is not None:
+                keep = blk.slow[:, j] <= tol
+                removed[ex, j] += int((~keep).sum())
+            W = blk.Wd[keep, j, :]
+            Ws.append(W)
+            Ys.append(blk.Yd[keep, j])
+            Js.append(np.full(W.shape[0], j))
+            Es.append(np.full(W.shape[0], ex))
+            Ss.append(blk.idx[keep])
+            Ks.append(np.flatnonzero(keep))
+    return Ws, Ys, Js, Es, Ss, Ks
+
+
+def _check_loaded(traj: Trajectory, payload_columns: bool) -> None:
+    if traj.loaded and not payload_columns:
+        warnings.warn(f"{traj.source}: the payload is mounted but payload_columns=False: its effect stays in "
+                      "the residual", UserWarning, stacklevel=4)
+
+
+def iter_chunks(
+    model: IdentificationModel,
+    trajectories: Trajectory | Iterable[Trajectory],
+    options: AssemblyOptions | None = None,
+    *,
+    on_experiment: Callable[[ExperimentReport], None] | None = None,
+    progress=None,
+) -> Iterator[ObservationSystem]:
+    """Stream the observation system in chunks of bounded memory (RX-90 paper eq. 14-16).
+
+    Parameters
+    ----------
+    model : IdentificationModel
+        Generated model (``symoro_gen.load_model(name)``) or any object with ``N_JOINTS``,
+        ``BASE_NAMES``, ``regressor(q, dq, ddq) -> (N, n, nb)`` and, for payload columns,
+        ``PAYLOAD_NAMES``, ``payload_regressor(q, dq, ddq) -> (N, n, 10)``.
+    trajectories : Trajectory or iterable of Trajectory
+        Experiments; may be a lazy iterable (each is read when reached).
+    options : AssemblyOptions, optional
+        Filters, decimation, row selection, chunking (default: the papers' rules for everything);
+        ``keep_signals`` is ignored (nothing full-rate is kept).
+    on_experiment : callable, optional
+        Called with the :class:`ExperimentReport` of each experiment once it is done.
+    progress : None, bool or callable
+        None: a bar over the samples when the ambient mode allows it (the command line, see
+        :mod:`symoro_gen.progress`); False: none; a callable: called with the number of full-rate
+        samples just processed (they add up to each experiment's ``n_samples``).
+
+    Yields
+    ------
+    ObservationSystem
+        Rows of one block of one experiment, grouped per joint; ``names`` = ``BASE_NAMES``
+        (+ ``PAYLOAD_NAMES``).
+    """
+    opts = AssemblyOptions() if options is None else options
+    names, nb, npay = _names(model, opts.payload_columns)
+    ev = None
+    prog = _sample_progress(progress, trajectories)
+    for ex, traj in enumerate(_as_trajectories(trajectories)):
+        if ev is None:
+            ev = _Evaluator(model, traj.n_joints, nb, npay, opts.regressor_batch)
+        _check_loaded(traj, opts.payload_columns)
+        st = observation_settings(traj, opts)
+        n = traj.n_joints
+        opts.velocity_threshold(n)  # validates
+        removed = np.zeros((ex + 1, n), int)
+        kept = np.zeros(n, int)
+        for blk in _blocks_with_progress(_experiment_blocks(model, traj, st, opts, ev), traj.n_samples, st.n_d,
+                                         prog.step):
+            Ws, Ys, Js, *_ = _stack_per_joint([(blk, ex)], n, opts.slow_weight_tol, removed)
+            kept += np.array([w.shape[0] for w in Ws])
+            yield ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names,
+                                    joint=np.concatenate(Js))
+        if on_experiment is not None:
+            on_experiment(ExperimentReport(index=ex, source=traj.source, loaded=traj.loaded, n_samples=traj.n_samples,
+                                           settings=st, rows_per_joint=tuple(int(x) for x in kept),
+                                           removed_low_velocity=tuple(int(x) for x in removed[ex])))
+    prog.close()
+
+
+def assemble(
+    model: IdentificationModel,
+    trajectories: Trajectory | Sequence[Trajectory],
+    options: AssemblyOptions | None = None,
+    *,
+    progress=None,
+) -> Assembly:
+    """The whole observation system with its provenance and, with ``options.keep_signals``, the
+    filtered signals of every experiment (same parameters as :func:`iter_chunks`).
+
+    Returns
+    -------
+    Assembly
+        ``system`` (rows grouped per joint over all experiments), per-experiment reports with the
+        filter settings, the experiment, sample, time and joint of each row, and the
+        :class:`ExperimentSignals`.
+    """
+    opts = AssemblyOptions() if options is None else options
+    names, nb, npay = _names(model, opts.payload_columns)
+    trajs = list(_as_trajectories(trajectories))
+    if not trajs:
+        raise ValueError("no trajectory given")
+    n = trajs[0].n_joints
+    for tr in trajs:
+        if tr.n_joints != n:
+            raise ShapeError(f"{tr.source}: {tr.n_joints} joints, {trajs[0].source}: {n}")
+    opts.velocity_threshold(n)  # validates
+    removed = np.zeros((len(trajs), n), int)
+    ev = _Evaluator(model, n, nb, npay, opts.regressor_batch)
+    blocks: list[tuple[_Block, int]] = []
+    offsets: list[int] = []     # decimated-sample index of each block's first row within its experiment
+    settings = []
+    signals = []
+    prog = _sample_progress(progress, trajs)
+    for ex, traj in enumerate(trajs):
+        _check_loaded(traj, opts.payload_columns)
+        st = observation_settings(traj, opts)
+        settings.append(st)
+        e, N = st.edge_samples, traj.n_samples
+        sink = _SignalSink(max(N - 2 * e, 0), n) if opts.keep_signals else None
+        mine = [b for b in _blocks_with_progress(_experiment_blocks(model, traj, st, opts, ev, sink),
+                                                 traj.n_samples, st.n_d, prog.step)]
+        k0 = 0
+        for b in mine:
+            blocks.append((b, ex))
+            offsets.append(k0)
+            k0 += b.Yd.shape[0]
+        if sink is not None:
+            seg = slice(e, N - e)
+            signals.append(ExperimentSignals(
+                index=ex, source=traj.source, loaded=traj.loaded, settings=st, first=e,
+                t=np.asarray(traj.t[seg], float), q=sink.q, dq=sink.dq, ddq=sink.ddq,
+                q_raw=np.asarray(traj.q[seg], float), tau_raw=np.asarray(traj.tau[seg], float),
+                tau_rows=np.concatenate([b.Yd for b in mine], axis=0),
+                decimated_samples=np.concatenate([b.idx for b in mine])))
+    prog.close()
+    Ws, Ys, Js, Es, Ss, Ks = _stack_per_joint(blocks, n, opts.slow_weight_tol, removed)
+    nblk = len(blocks)
+    Ks = [k + offsets[i % nblk] for i, k in enumerate(Ks)]   # block-local -> experiment decimated index
+    E = np.concatenate(Es)
+    J = np.concatenate(Js)
+    S = np.concatenate(Ss).astype(int)
+    system = ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names, joint=J)
+    reports = []
+    for ex, traj in enumerate(trajs):
+        rows = tuple(int(np.sum((E == ex) & (J == j))) for j in range(n))
+        reports.append(ExperimentReport(index=ex, source=traj.source, loaded=traj.loaded, n_samples=traj.n_samples,
+                                        settings=settings[ex], rows_per_joint=rows,
+                                        removed_low_velocity=tuple(int(x) for x in removed[ex])))
+    row_time = np.empty(S.size)
+    for ex, traj in enumerate(trajs):
+        m = E == ex
+        row_time[m] = np.asarray(traj.t, float)[S[m]]
+    return Assembly(system=system, experiments=tuple(reports), row_experiment=E, row_time=row_time,
+                    row_sample=S, row_index=np.concatenate(Ks).astype(int), options=opts, signals=tuple(signals))
+
+
+def merge_metric_basis(assemblies) -> dict:
+    """One ``rel_err_basis`` for several assemblies (cut-offs and decimation factors of every experiment,
+    rows and samples summed)."""
+    parts = [a.metric_basis() for a in assemblies]
+    if not parts:
+        return {}
+    out = dict(parts[0])
+    for p in parts[1:]:
+        out["cutoff_hz"] = out["cutoff_hz"] + p["cutoff_hz"]
+        out["n_d"] = out["n_d"] + p["n_d"]
+        out["rows"] += p["rows"]
+        out["samples"] += p["samples"]
+    return out
+
+
+def basis_text(basis: dict | None) -> str:
+    """``"filtered, decimated system (cut-off 21.5 Hz, n_d = 10)"`` from a ``rel_err_basis``."""
+    if not basis:
+        return "filtered, decimated system"
+    cut = sorted({round(float(c), 4) for c in basis.get("cutoff_hz", ())})
+    nd = sorted({int(x) for x in basis.get("n_d", ())})
+    txt = (f"filtered, decimated system (Butterworth cut-off {', '.join(f'{c:.4g}' for c in cut)} Hz, "
+           f"n_d = {', '.join(str(x) for x in nd)}, {basis.get('rows', '?')} rows of all joints")
+    if basis.get("min_velocity") is not None:
+        txt += f", rows slower than {basis['min_velocity']} rad/s removed"
+    return txt + ")"
