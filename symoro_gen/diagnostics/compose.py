@@ -20,7 +20,9 @@ Modulating signals (the documented set)
                  "a part gripped half-way through the recording".
 Continuous signals are standardised on the joint's rows, ``m = (s - mean) / std``, so the composed
 column is the *change* of the effect with the signal; the effect itself at the mean level is the
-declared model's (or a plain candidate's). The step is not centred.
+declared model's (friction, offset, rotor inertia) or a plain candidate's accepted before (a plain
+position ripple): pass it in ``A``. The step is not centred. A composed column (almost) in the span of
+``A`` (less than ``IDENTIFIABILITY_TOL`` of its norm outside) is skipped.
 
 Each composed candidate is named in words (:meth:`Composed.describe`), e.g. "viscous friction of joint 3
 growing with |tau_hat3|", "constant (gravity-like) torque on joint 2 appearing at t = 12.1 s".
@@ -61,6 +63,8 @@ RIPPLE_ORDERS = (1, 2, 3, 4, 5, 6, 8, 12, 16)
 N_STEP_TIMES = 17
 #: family-wise level
 ALPHA = 0.01
+#: a column with less than this share of its norm outside the model's span is skipped
+IDENTIFIABILITY_TOL = 1e-3
 #: floor of 1 - h_ii in the HC3 scaling of the residual
 MIN_ONE_MINUS_LEVERAGE = 0.05
 
@@ -327,7 +331,8 @@ class _Tester:
         Xw = X * self.w[:, None]
         Xp = Xw - self.U @ (self.U.T @ Xw)
         G = Xp.T @ Xp
-        if not np.all(np.diag(G) > 1e-12 * max(float(np.sum(Xw * Xw)), 1e-300)):
+        # a column (almost) in the span of the model is "already in the model" (as IDENTIFIABILITY_TOL of .core)
+        if not np.all(np.diag(G) > IDENTIFIABILITY_TOL ** 2 * np.maximum(np.einsum("ij,ij->j", Xw, Xw), 1e-300)):
             return None
         try:
             Ginv = np.linalg.inv(G)

@@ -16,8 +16,9 @@ Viscous laws
     * ``linear``    ``Fv dq`` (declared);
     * ``power``     ``Fv |dq|^delta sign(dq)``, ``delta`` on a grid then refined.
 
-Selection: the Coulomb law is chosen first (with the linear viscous term), then the viscous law (with
-the chosen Coulomb law), each by the out-of-fold relative error norm of the joint's rows under
+Selection (coordinate descent): the Coulomb law is chosen first (with the linear viscous term), then
+the viscous law (with the chosen Coulomb law), then, if the viscous law changed, the Coulomb law again
+with it (a ``|dq|^delta`` knee can pass for a Stribeck dip and vice versa); each choice by the out-of-fold relative error norm of the joint's rows under
 time-blocked K-fold cross-validation (:mod:`.stability`: ``K`` contiguous blocks per experiment, no
 shuffling; fold ``k`` holds out block ``k`` of every experiment and the whole model - base parameters
 of all joints and the candidate friction columns - is fitted on the other blocks). A law replaces the
@@ -280,27 +281,42 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
         X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar), viscous_columns(vlaw, v, vpar)]), pc + 1)
         return cv.rel_err(X, rows)
 
-    tried = [LawFit("sign", None, err("sign", None))]
-    best_c = tried[0]
-    if "tanh" in laws:
-        v, e = _search(lambda v: err("tanh", v), grid, refine)
-        fit = LawFit("tanh", v, e)
-        tried.append(fit)
-        if e < best_c.cv_rel_err * (1.0 - min_gain):
-            best_c = fit
-    if "stribeck" in laws:
-        vs, e = _search(lambda v: err("stribeck", v), grid, refine=False)
-        fit = LawFit("stribeck", vs, e)
-        tried.append(fit)
-        if e < best_c.cv_rel_err * (1.0 - min_gain):
-            best_c = fit
-    best_v = LawFit("linear", None, best_c.cv_rel_err)
-    if "power" in laws and len(delta_grid):
-        d, e = _search(lambda d: err(best_c.law, best_c.param, "power", d), np.asarray(delta_grid, float), refine)
-        fit = LawFit("power", d, e)
-        tried.append(fit)
-        if e < best_v.cv_rel_err * (1.0 - min_gain):
-            best_v = fit
+    tried: list[LawFit] = []
+
+    def choose_coulomb(vlaw, vpar):
+        best = LawFit("sign", None, err("sign", None, vlaw, vpar))
+        tried.append(best)
+        for law in ("tanh", "stribeck"):
+            if law not in laws:
+                continue
+            p, e = _search(lambda v: err(law, v, vlaw, vpar), grid, refine and law == "tanh")
+            fit = LawFit(law, p, e)
+            tried.append(fit)
+            if e < best.cv_rel_err * (1.0 - min_gain):
+                best = fit
+        return best
+
+    def choose_viscous(c):
+        best = LawFit("linear", None, err(c.law, c.param))
+        if "power" in laws and len(delta_grid):
+            d, e = _search(lambda d: err(c.law, c.param, "power", d), np.asarray(delta_grid, float), refine)
+            fit = LawFit("power", d, e)
+            tried.append(fit)
+            if e < best.cv_rel_err * (1.0 - min_gain):
+                best = fit
+        return best
+
+    # coordinate descent: Coulomb law (linear viscous), viscous law (chosen Coulomb), and once more the
+    # Coulomb law with a non-linear viscous term (|dq|^delta with delta < 1 mimics a Stribeck/tanh knee)
+    best_c = choose_coulomb("linear", None)
+    best_v = choose_viscous(best_c)
+    if best_v.law != "linear":
+        c2 = choose_coulomb(best_v.law, best_v.param)
+        if c2.law != best_c.law:
+            best_c = c2
+            best_v = choose_viscous(c2)
+            if best_v.law == "linear":
+                best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err)
     choice = FrictionChoice(j, best_c, best_v, tuple(tried), {}, n_folds, unit)
     # coefficients of the chosen laws on all rows (weighted LS of the whole model)
     X = columns(choice.columns, 2 + (choice.coulomb.law == "stribeck"))
