@@ -27,6 +27,9 @@ Which signals
 For a flagged joint, the permutation importance of each signal (Breiman 2001; each column permuted
 in the held-out block, the drop of out-of-fold ``R^2``), summed over the joint's signals of the same
 name; the signals carrying at least ``IMPORTANCE_SHARE`` of the total are listed, most important first.
+On a periodic excitation (Fourier series) every signal is a function of the motion's phase, so the
+trees may use another joint's signal as a proxy: the signals listed are those the model used, a hint
+rather than a cause.
 
 ``scikit-learn`` is an optional dependency (extra ``diagnose``), imported when this runs.
 """
