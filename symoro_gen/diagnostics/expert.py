@@ -34,7 +34,7 @@ from .friction import select_friction, velocity_grid
 from .stability import N_FOLDS, _wls_basis, time_blocks
 
 __all__ = ["stacked_regressor", "FilteredData", "filtered_data", "ExpertModel", "fit_expert", "expert_columns",
-           "joint_rel_err"]
+           "joint_rel_err", "DeclaredFit", "fit_declared"]
 
 #: samples per call of the model's regressor
 BATCH = 8192
@@ -220,16 +220,53 @@ class ExpertModel:
     def errors(self, model: IdentificationModel, data: FilteredData) -> tuple[np.ndarray, np.ndarray]:
         """``(rel_err, rel_err_raw)`` per joint on ``data``: filtered decimated system, and full rate against
         the raw measured torque."""
-        n = data.n_joints
-        pred = data.columns(lambda ex: expert_columns(model, ex.q, ex.dq, ex.ddq, self.v)) @ self.theta
-        filt = joint_rel_err(data.Y - pred, data.Y, data.joint, n)
-        num, den = np.zeros(n), np.zeros(n)
-        for ex in data.experiments:
-            e = ex.tau - self.torque(model, ex.q, ex.dq, ex.ddq)
-            num += np.sum(e ** 2, axis=0)
-            den += np.sum(ex.tau ** 2, axis=0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return filt, np.sqrt(num / den)
+        return _errors(lambda q, dq, ddq: expert_columns(model, q, dq, ddq, self.v), self.theta, data)
+
+
+def _errors(cols: Callable, theta: np.ndarray, data: FilteredData) -> tuple[np.ndarray, np.ndarray]:
+    n = data.n_joints
+    pred = data.columns(lambda ex: cols(ex.q, ex.dq, ex.ddq)) @ theta
+    filt = joint_rel_err(data.Y - pred, data.Y, data.joint, n)
+    num, den = np.zeros(n), np.zeros(n)
+    for ex in data.experiments:
+        for s in range(0, ex.q.shape[0], BATCH):
+            e = min(ex.q.shape[0], s + BATCH)
+            err = ex.tau[s:e] - cols(ex.q[s:e], ex.dq[s:e], ex.ddq[s:e]) @ theta
+            num += np.sum(err ** 2, axis=0)
+            den += np.sum(ex.tau[s:e] ** 2, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return filt, np.sqrt(num / den)
+
+
+@dataclass(frozen=True)
+class DeclaredFit:
+    """The declared model (``model.BASE_NAMES``) fitted by (weighted) LS on the same rows: the "before"."""
+
+    theta: np.ndarray
+    method: str
+    rel_err: np.ndarray
+
+    def errors(self, model: IdentificationModel, data: FilteredData) -> tuple[np.ndarray, np.ndarray]:
+        """``(rel_err, rel_err_raw)`` per joint on ``data`` (see :meth:`ExpertModel.errors`)."""
+        return _errors(lambda q, dq, ddq: _regressor(model, q, dq, ddq), self.theta, data)
+
+
+def _regressor(model: IdentificationModel, q, dq, ddq) -> np.ndarray:
+    out = []
+    for s in range(0, q.shape[0], BATCH):
+        e = min(q.shape[0], s + BATCH)
+        out.append(np.asarray(model.regressor(q[s:e], dq[s:e], ddq[s:e]), float))
+    return np.concatenate(out)
+
+
+def fit_declared(model: IdentificationModel, data: FilteredData, *, method: str = "ols") -> DeclaredFit:
+    """Fit the declared model's base parameters by ``method`` (``ols``/``wls``) LS on ``data``."""
+    method = method.lower()
+    if method not in ("ols", "wls"):
+        raise IdentificationError(f"declared fit: unknown method {method!r}; use 'ols' or 'wls'")
+    W = data.columns(lambda ex: _regressor(model, ex.q, ex.dq, ex.ddq))
+    theta = _wls(W, data.Y, data.joint, data.n_joints, method)
+    return DeclaredFit(theta, method, joint_rel_err(data.Y - W @ theta, data.Y, data.joint, data.n_joints))
 
 
 def _wls(M: np.ndarray, y: np.ndarray, joint: np.ndarray, n: int, method: str) -> np.ndarray:
