@@ -8,6 +8,8 @@ in memory, last 30 % held out) it prints, per joint, the validation relative err
 
 * the declared model fitted by LS ("declared", diagnose's "before"),
 * the expert model: declared base parameters + Fc tanh(dq/v) (v by time-blocked CV) + Fv dq + offset,
+* the declared model with the friction law of each joint chosen by time-blocked CV
+  (:func:`symoro_gen.diagnostics.friction.select_friction`; "declared+laws"),
 * the loop's final model ("loop after"),
 
 on the filtered, decimated system (``filt``) and, where available, at full rate against the raw measured
@@ -33,7 +35,9 @@ import symoro_gen  # noqa: E402
 from symoro_gen.description import load_robot, parse_robot_text  # noqa: E402
 from symoro_gen.description.urdf import import_urdf  # noqa: E402
 from symoro_gen.diagnostics import diagnose  # noqa: E402
-from symoro_gen.diagnostics.expert import filtered_data, fit_declared, fit_expert  # noqa: E402
+from symoro_gen.diagnostics.expert import filtered_data, fit_declared, fit_expert, fit_linear  # noqa: E402
+from symoro_gen.diagnostics.friction import (friction_column_indices, replaced_friction_columns,  # noqa: E402
+                                             select_friction, velocity_grid)
 from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth  # noqa: E402
 from symoro_gen.preprocessing.load import load_trajectories, load_trajectory  # noqa: E402
 from symoro_gen.preprocessing.trajectory import Trajectory  # noqa: E402
@@ -94,6 +98,23 @@ def run(name, model, ident, valid, method: str) -> None:
     d_f, d_r = dec.errors(model, vdata)
     e_f, e_r = ex.errors(model, vdata)
     t_ex = time.perf_counter() - t0
+    # friction-law selection per joint (item 1), on the declared model's decimated columns
+    t0 = time.perf_counter()
+    W = data.columns(lambda ex: np.asarray(model.regressor(ex.q, ex.dq, ex.ddq), float))
+    blocks = data.blocks()
+    choices = []
+    for j in range(model.N_JOINTS):
+        fs, fv = friction_column_indices(model.BASE_NAMES, j)
+        if not fs or not fv:
+            continue
+        ch = select_friction(np.delete(W, fs + fv, axis=1), data.Y, data.joint, j, np.zeros(data.Y.size), blocks,
+                             columns=lambda f, p, j=j: data.joint_columns(j, f, p),
+                             v_grid=velocity_grid(np.concatenate([e.dq[:, j] for e in data.experiments])))
+        choices.append(ch)
+    _, cols = replaced_friction_columns(model, choices)
+    fl = fit_linear(cols, data, method=method)
+    l_f, l_r = fl.errors(vdata)
+    t_fr = time.perf_counter() - t0
     t0 = time.perf_counter()
     rep = diagnose(model, ident, validation=valid, method=method, dynamics_bandwidth_hz=fdyn)
     t_loop = time.perf_counter() - t0
@@ -102,14 +123,19 @@ def run(name, model, ident, valid, method: str) -> None:
           f"expert {t_ex:.1f} s, diagnose {t_loop:.1f} s ({len(rep.effects)} effect(s): "
           + ", ".join(f"{e.kind}{'' if e.joint is None else e.joint + 1}" for e in rep.effects) + ")")
     print("expert v [rad/s]: " + " ".join(f"{v:.3g}" for v in ex.v))
+    print(f"friction laws by time-blocked CV ({t_fr:.1f} s):")
+    for ch in choices:
+        print("  " + ch.describe())
     raw_after = getattr(rep, "after_validation_rel_err_raw", None)
     rows = [
         ("declared (ours)      filt", d_f),
         ("diagnose before      filt", rep.before_validation_rel_err),
         ("expert               filt", e_f),
+        ("declared+laws        filt", l_f),
         ("loop after           filt", rep.after_validation_rel_err),
         ("declared (ours)      raw ", d_r),
         ("expert               raw ", e_r),
+        ("declared+laws        raw ", l_r),
         ("loop after           raw ", raw_after),
     ]
     n = model.N_JOINTS

@@ -34,10 +34,13 @@ from .friction import select_friction, velocity_grid
 from .stability import N_FOLDS, _wls_basis, time_blocks
 
 __all__ = ["stacked_regressor", "FilteredData", "filtered_data", "ExpertModel", "fit_expert", "expert_columns",
-           "joint_rel_err", "DeclaredFit", "fit_declared"]
+           "joint_rel_err", "DeclaredFit", "fit_declared",
+           "LinearFit", "fit_linear"]
 
 #: samples per call of the model's regressor
 BATCH = 8192
+#: index in :func:`.friction.velocity_grid` of the starting velocity scale of every joint
+N_VELOCITY_START = 9
 
 
 def stacked_regressor(model: IdentificationModel, q, dq, ddq) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -259,6 +262,35 @@ def _regressor(model: IdentificationModel, q, dq, ddq) -> np.ndarray:
     return np.concatenate(out)
 
 
+@dataclass(frozen=True, eq=False)
+class LinearFit:
+    """Any per-sample regressor ``columns(q, dq, ddq) -> (N, n, k)`` fitted by (weighted) LS."""
+
+    columns: Callable
+    theta: np.ndarray
+    method: str
+    rel_err: np.ndarray
+
+    def errors(self, data: FilteredData) -> tuple[np.ndarray, np.ndarray]:
+        """``(rel_err, rel_err_raw)`` per joint on ``data`` (see :meth:`ExpertModel.errors`)."""
+        return _errors(self.columns, self.theta, data)
+
+
+def fit_linear(columns: Callable, data: FilteredData, *, method: str = "ols") -> LinearFit:
+    """Fit the coefficients of a per-sample regressor ``columns(q, dq, ddq) -> (N, n, k)`` on ``data``
+    (decimated in parallel with ``Y``) by ``method`` (``ols``/``wls``) least squares."""
+    method = method.lower()
+    if method not in ("ols", "wls"):
+        raise IdentificationError(f"linear fit: unknown method {method!r}; use 'ols' or 'wls'")
+
+    def batched(q, dq, ddq):
+        return np.concatenate([np.asarray(columns(q[s:s + BATCH], dq[s:s + BATCH], ddq[s:s + BATCH]), float)
+                               for s in range(0, q.shape[0], BATCH)])
+    W = data.columns(lambda ex: batched(ex.q, ex.dq, ex.ddq))
+    theta = _wls(W, data.Y, data.joint, data.n_joints, method)
+    return LinearFit(columns, theta, method, joint_rel_err(data.Y - W @ theta, data.Y, data.joint, data.n_joints))
+
+
 def fit_declared(model: IdentificationModel, data: FilteredData, *, method: str = "ols") -> DeclaredFit:
     """Fit the declared model's base parameters by ``method`` (``ols``/``wls``) LS on ``data``."""
     method = method.lower()
@@ -326,6 +358,3 @@ def fit_expert(model: IdentificationModel, data: FilteredData, *, method: str = 
     rel = joint_rel_err(data.Y - base @ theta, data.Y, data.joint, n)
     return ExpertModel(names, theta, v, method, cv, rel)
 
-
-#: index in :func:`.friction.velocity_grid` of the starting velocity scale of every joint
-N_VELOCITY_START = 9

@@ -38,10 +38,12 @@ import numpy as np
 from scipy import optimize
 
 from ..errors import IdentificationError
+from ..model import IdentificationModel
 from .stability import N_FOLDS, BlockedLS, _wls_basis
 
 __all__ = ["COULOMB_LAWS", "VISCOUS_LAWS", "MIN_GAIN", "coulomb_columns", "viscous_columns", "LawFit",
-           "FrictionChoice", "select_friction", "law_errors", "friction_column_indices", "velocity_grid", "DELTA_GRID"]
+           "FrictionChoice", "select_friction", "law_errors", "friction_column_indices", "velocity_grid", "DELTA_GRID",
+           "replaced_friction_columns"]
 
 COULOMB_LAWS = ("sign", "tanh", "stribeck")
 VISCOUS_LAWS = ("linear", "power")
@@ -335,3 +337,31 @@ def law_errors(choice: FrictionChoice) -> dict[str, float]:
     """``{law label: CV relative error}`` of every law tried (for JSON/report tables)."""
     return {c.label: float(c.cv_rel_err) for c in choice.candidates}
 
+
+
+def replaced_friction_columns(model: IdentificationModel, choices: Sequence[FrictionChoice]
+                              ) -> tuple[tuple[str, ...], Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]]:
+    """The declared model with the friction laws of ``choices`` in place of its ``FS``/``FV`` columns.
+
+    Returns
+    -------
+    names : tuple of str
+        Column names: the declared base columns without the replaced joints' ``FS<j>``, ``FV<j>``, then
+        :meth:`FrictionChoice.names` of each choice.
+    columns : callable
+        ``columns(q, dq, ddq) -> (N, n, len(names))`` per-sample regressor.
+    """
+    names = tuple(model.BASE_NAMES)
+    drop = sorted(i for ch in choices for i in sum(friction_column_indices(names, ch.joint), []))
+    keep = [i for i in range(len(names)) if i not in set(drop)]
+    out_names = tuple(names[i] for i in keep) + tuple(nm for ch in choices for nm in ch.names())
+
+    def columns(q, dq, ddq):
+        R = np.asarray(model.regressor(q, dq, ddq), float)
+        parts = [R[:, :, keep]]
+        for ch in choices:
+            C = np.zeros((R.shape[0], R.shape[1], len(ch.names())))
+            C[:, ch.joint, :] = ch.columns(np.asarray(dq, float)[:, ch.joint])
+            parts.append(C)
+        return np.concatenate(parts, axis=2)
+    return out_names, columns
