@@ -43,6 +43,8 @@ from symoro_gen.preprocessing.load import load_trajectories, load_trajectory  # 
 from symoro_gen.preprocessing.trajectory import Trajectory  # noqa: E402
 
 HOLDOUT = 0.3
+#: sign(dq) is smoothed at this many standard deviations of the velocity noise
+V_FLOOR_NOISE = 3.0
 
 
 def split(tr: Trajectory, fraction: float = HOLDOUT) -> tuple[Trajectory, Trajectory]:
@@ -64,7 +66,8 @@ def lwr4(data: Path):
 def tx40(data: Path):
     d = data / "staubli_tx40_figaroh" / "data"
     spec = f"q={d / 'pos_read_data.csv'},tau={d / 'curr_data.csv'},dt=0.0002"
-    (tr,) = load_trajectories([spec], robot=load_robot("tx40"))
+    robot = load_robot("tx40")
+    (tr,) = load_trajectories([spec], n_joints=robot.n_joints, drive_chain=robot.drive_chain)
     a, b = split(tr)
     return "Staubli TX40 (last 30 % held out)", symoro_gen.load_model("tx40"), [a], [b]
 
@@ -109,7 +112,8 @@ def run(name, model, ident, valid, method: str) -> None:
             continue
         ch = select_friction(np.delete(W, fs + fv, axis=1), data.Y, data.joint, j, np.zeros(data.Y.size), blocks,
                              columns=lambda f, p, j=j: data.joint_columns(j, f, p),
-                             v_grid=velocity_grid(np.concatenate([e.dq[:, j] for e in data.experiments])))
+                             v_grid=velocity_grid(np.concatenate([e.dq[:, j] for e in data.experiments])),
+                             v_floor=V_FLOOR_NOISE * max(float(data.dq_noise[j]), 1e-9))
         choices.append(ch)
     _, cols = replaced_friction_columns(model, choices)
     fl = fit_linear(cols, data, method=method)

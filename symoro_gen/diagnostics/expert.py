@@ -30,6 +30,7 @@ from ..identification.assemble import observation_settings
 from ..model import IdentificationModel
 from ..preprocessing.filtering import FilterSettings, decimate, filter_and_differentiate
 from ..preprocessing.trajectory import Trajectory
+from .frame import noise_gains
 from .friction import select_friction, velocity_grid
 from .stability import N_FOLDS, _wls_basis, time_blocks
 
@@ -76,6 +77,7 @@ class _Exp:
     dq: np.ndarray
     ddq: np.ndarray
     tau: np.ndarray        # raw measured torque on the same (edge-trimmed) samples
+    dq_noise: np.ndarray   # (n,) std of the white position noise left in the band-pass velocity
 
     def decimate(self, x: np.ndarray) -> np.ndarray:
         st = self.settings
@@ -106,6 +108,12 @@ class FilteredData:
     @property
     def n_joints(self) -> int:
         return self.experiments[0].q.shape[1]
+
+    @property
+    def dq_noise(self) -> np.ndarray:
+        """Standard deviation of the position noise left in the band-pass velocity, per joint (largest over
+        the experiments; from the part of ``q`` above the cut-off, :func:`.frame.noise_gains`)."""
+        return np.max([ex.dq_noise for ex in self.experiments], axis=0)
 
     def columns(self, f: Callable[[_Exp], np.ndarray]) -> np.ndarray:
         """Decimated rows of per-sample columns: ``f(experiment) -> (M, n, p)`` (slice ``[:, j, :]`` is the
@@ -151,7 +159,9 @@ def filtered_data(trajectories: Sequence[Trajectory], *, dynamics_bandwidth_hz: 
         qf, dq, ddq = filter_and_differentiate(tr.q, st.fs, st.cutoff_hz, st.order, source=tr.source)
         e = st.edge_samples
         seg = slice(e, tr.n_samples - e)
-        exps.append(_Exp(tr.source, st, qf[seg], dq[seg], ddq[seg], np.asarray(tr.tau, float)[seg]))
+        hp, dv = noise_gains(st.fs, st.cutoff_hz, st.order)
+        q_noise = np.std(np.asarray(tr.q, float)[seg] - qf[seg], axis=0) / max(hp, 1e-12)
+        exps.append(_Exp(tr.source, st, qf[seg], dq[seg], ddq[seg], np.asarray(tr.tau, float)[seg], q_noise * dv))
     n = trajs[0].n_joints
     decs = [ex.decimate(ex.tau) for ex in exps]
     for j in range(n):

@@ -11,7 +11,9 @@ Coulomb laws (coefficients linear, shape parameter searched)
       scalar minimisation of the CV error in ``log v`` between the grid neighbours);
     * ``stribeck``  ``(Fc + (Fs - Fc) exp(-(dq/vs)^2)) sign(dq)``: linear in ``Fc`` and ``Fs - Fc``
       for a fixed ``vs`` (columns ``sign(dq)`` and ``exp(-(dq/vs)^2) sign(dq)``), ``vs`` on a grid
-      (Armstrong-Helouvry, Dupont & Canudas de Wit 1994, eq. 5);
+      (Armstrong-Helouvry, Dupont & Canudas de Wit 1994, eq. 5); when ``tanh`` is tried too, the
+      ``sign(dq)`` is smoothed by ``tanh(dq/v)`` at the ``v`` the tanh search found (at the bottom of
+      the grid this is ``sign``; otherwise the Stribeck law does not chatter at standstill either);
 Viscous laws
     * ``linear``    ``Fv dq`` (declared);
     * ``power``     ``Fv |dq|^delta sign(dq)``, ``delta`` on a grid then refined.
@@ -55,16 +57,17 @@ DELTA_GRID = (0.2, 0.35, 0.5, 0.65, 0.8, 1.25, 1.5, 2.0)
 N_VELOCITY_GRID = 14
 
 
-def coulomb_columns(law: str, dq: np.ndarray, param: float | None = None) -> np.ndarray:
+def coulomb_columns(law: str, dq: np.ndarray, param: float | None = None, smooth: float | None = None) -> np.ndarray:
     """Columns of a Coulomb law at velocities ``dq`` (N,): (N, 1) for ``sign``/``tanh``, (N, 2) for
-    ``stribeck`` (coefficients ``Fc`` and ``Fs - Fc``)."""
+    ``stribeck`` (coefficients ``Fc`` and ``Fs - Fc``; its ``sign(dq)`` replaced by ``tanh(dq/smooth)``
+    when ``smooth`` is given)."""
     dq = np.asarray(dq, float)
     if law == "sign":
-        return np.sign(dq)[:, None]
+        return (np.sign(dq) if smooth is None else np.tanh(dq / float(smooth)))[:, None]
     if law == "tanh":
         return np.tanh(dq / float(param))[:, None]
     if law == "stribeck":
-        s = np.sign(dq)
+        s = np.sign(dq) if smooth is None else np.tanh(dq / float(smooth))
         return np.column_stack([s, np.exp(-(dq / float(param)) ** 2) * s])
     raise ValueError(f"unknown Coulomb law {law!r}; use one of {COULOMB_LAWS}")
 
@@ -91,11 +94,14 @@ class LawFit:
         ``v`` (tanh), ``vs`` (Stribeck) [rad/s or m/s], ``delta`` (power); None for sign/linear.
     cv_rel_err : float
         Out-of-fold relative error norm of the joint's rows.
+    smooth : float or None
+        ``sign`` and Stribeck: velocity scale ``v`` of the ``tanh(dq/v)`` replacing ``sign(dq)``.
     """
 
     law: str
     param: float | None
     cv_rel_err: float
+    smooth: float | None = None
 
     @property
     def label(self) -> str:
@@ -151,7 +157,7 @@ class FrictionChoice:
 
     def columns(self, dq: np.ndarray) -> np.ndarray:
         """Columns of the chosen laws at velocities ``dq``: Coulomb column(s) then the viscous one."""
-        return np.hstack([coulomb_columns(self.coulomb.law, dq, self.coulomb.param),
+        return np.hstack([coulomb_columns(self.coulomb.law, dq, self.coulomb.param, self.coulomb.smooth),
                           viscous_columns(self.viscous.law, dq, self.viscous.param)])
 
     def names(self) -> tuple[str, ...]:
@@ -166,11 +172,15 @@ class FrictionChoice:
         if self.coulomb.law == "tanh":
             parts.append(f"Coulomb \u2192 tanh, v = {self.coulomb.param:.3g} {self.unit}")
         elif self.coulomb.law == "stribeck":
-            parts.append(f"Coulomb \u2192 Stribeck, vs = {self.coulomb.param:.3g} {self.unit}")
+            parts.append(f"Coulomb \u2192 Stribeck, vs = {self.coulomb.param:.3g} {self.unit}"
+                         + (f" (sign smoothed by tanh, v = {self.coulomb.smooth:.3g} {self.unit})"
+                            if self.coulomb.smooth is not None else ""))
         if self.viscous.law == "power":
             parts.append(f"viscous \u2192 |dq|^\u03b4, \u03b4 = {self.viscous.param:.3g}")
         if not parts:
-            return (f"joint {self.joint + 1}: Coulomb sign(dq) + viscous dq kept "
+            sm = (f", sign smoothed at v = {self.coulomb.smooth:.3g} {self.unit}"
+                  if self.coulomb.smooth is not None else "")
+            return (f"joint {self.joint + 1}: Coulomb sign(dq) + viscous dq kept{sm} "
                     f"(CV error {self.declared_cv_rel_err:.4g}, {self.n_folds} time-blocked folds)")
         return (f"joint {self.joint + 1}: " + "; ".join(parts)
                 + f" (CV error {self.declared_cv_rel_err:.4g} \u2192 {self.cv_rel_err:.4g}, "
@@ -214,7 +224,7 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
                     columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray] | None = None,
                     laws: Sequence[str] = COULOMB_LAWS + VISCOUS_LAWS, min_gain: float = MIN_GAIN,
                     v_grid: np.ndarray | None = None, delta_grid: Sequence[float] = DELTA_GRID,
-                    refine: bool = True, unit: str = "rad/s") -> FrictionChoice:
+                    refine: bool = True, unit: str = "rad/s", v_floor: float | None = None) -> FrictionChoice:
     """Choose the Coulomb and viscous laws of joint ``j`` by time-blocked cross-validation.
 
     Parameters
@@ -250,6 +260,11 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
         Refine ``v`` and ``delta`` continuously between grid points.
     unit : str
         Velocity unit in the description.
+    v_floor : float, optional
+        Smallest velocity scale of any ``sign`` in the laws, e.g. 3 times the standard deviation of the
+        velocity noise: ``sign(dq)`` becomes ``tanh(dq / v_floor)`` (so the declared law does not chatter
+        on noise at standstill, where identification data without rest phases give no evidence either
+        way), and the tanh search starts there. Default: none (a true ``sign``).
 
     Returns
     -------
@@ -275,33 +290,43 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
             X[rows] = np.asarray(f(dq[rows]), float).reshape(-1, p)
             return X
     grid = velocity_grid(dq[rows]) if v_grid is None else np.asarray(v_grid, float)
+    if v_floor is not None:
+        if not v_floor > 0:
+            raise ValueError(f"select_friction: v_floor must be > 0, got {v_floor!r}")
+        grid = np.unique(np.r_[v_floor, grid[grid > v_floor]])
+        if grid.size < 3:
+            grid = v_floor * np.geomspace(1.0, 10.0, 4)
     cv = BlockedLS(A, y, blocks, weights)
     n_folds = len(cv.folds)
 
-    def err(claw, cpar, vlaw="linear", vpar=None):
+    def err(claw, cpar, vlaw="linear", vpar=None, smooth=None):
         pc = 2 if claw == "stribeck" else 1
-        X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar), viscous_columns(vlaw, v, vpar)]), pc + 1)
+        X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]),
+                    pc + 1)
         return cv.rel_err(X, rows)
 
     tried: list[LawFit] = []
 
     def choose_coulomb(vlaw, vpar):
-        best = LawFit("sign", None, err("sign", None, vlaw, vpar))
+        best = LawFit("sign", None, err("sign", None, vlaw, vpar, v_floor), v_floor)
         tried.append(best)
+        smooth = v_floor
         for law in ("tanh", "stribeck"):
             if law not in laws:
                 continue
-            p, e = _search(lambda v: err(law, v, vlaw, vpar), grid, refine and law == "tanh")
-            fit = LawFit(law, p, e)
+            p, e = _search(lambda v: err(law, v, vlaw, vpar, smooth), grid, refine and law == "tanh")
+            fit = LawFit(law, p, e, smooth if law == "stribeck" else None)
+            if law == "tanh":
+                smooth = p
             tried.append(fit)
             if e < best.cv_rel_err * (1.0 - min_gain):
                 best = fit
         return best
 
     def choose_viscous(c):
-        best = LawFit("linear", None, err(c.law, c.param))
+        best = LawFit("linear", None, err(c.law, c.param, smooth=c.smooth))
         if "power" in laws and len(delta_grid):
-            d, e = _search(lambda d: err(c.law, c.param, "power", d), np.asarray(delta_grid, float), refine)
+            d, e = _search(lambda d: err(c.law, c.param, "power", d, c.smooth), np.asarray(delta_grid, float), refine)
             fit = LawFit("power", d, e)
             tried.append(fit)
             if e < best.cv_rel_err * (1.0 - min_gain):
@@ -318,7 +343,7 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
             best_c = c2
             best_v = choose_viscous(c2)
             if best_v.law == "linear":
-                best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err)
+                best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err, c2.smooth)
     choice = FrictionChoice(j, best_c, best_v, tuple(tried), {}, n_folds, unit)
     # coefficients of the chosen laws on all rows (weighted LS of the whole model)
     X = columns(choice.columns, 2 + (choice.coulomb.law == "stribeck"))

@@ -101,9 +101,9 @@ def test_tx40_expert_beats_the_declared_coulomb_on_joint_4(shared_data):
     d = shared_data / "staubli_tx40_figaroh" / "data"
     if not (d / "pos_read_data.csv").is_file():
         pytest.skip(f"TX40 recording not found in {d}")
-    with pytest.warns(Warning):     # motor-side positions beyond 4 pi before the drive chain
-        (tr,) = load_trajectories([f"q={d / 'pos_read_data.csv'},tau={d / 'curr_data.csv'},dt=0.0002"],
-                                  robot=load_robot("tx40"))
+    robot = load_robot("tx40")
+    (tr,) = load_trajectories([f"q={d / 'pos_read_data.csv'},tau={d / 'curr_data.csv'},dt=0.0002"],
+                              n_joints=robot.n_joints, drive_chain=robot.drive_chain)
     k = int(round(0.7 * tr.n_samples))
     ident = Trajectory(t=tr.t[:k], q=tr.q[:k], tau=tr.tau[:k], source="tx40 ident")
     valid = Trajectory(t=tr.t[k:], q=tr.q[k:], tau=tr.tau[k:], source="tx40 valid")
