@@ -11,8 +11,8 @@ import pytest
 import symoro_gen
 from symoro_gen.description import load_robot
 from symoro_gen.diagnostics.expert import stacked_regressor
-from symoro_gen.diagnostics.friction import (coulomb_columns, friction_column_indices, law_errors, select_friction,
-                                             viscous_columns)
+from symoro_gen.diagnostics.friction import (FrictionChoice, LawFit, coulomb_columns, friction_column_indices,
+                                             law_errors, select_friction, viscous_columns)
 from symoro_gen.diagnostics.stability import time_blocks
 from symoro_gen.errors import IdentificationError
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters
@@ -31,7 +31,7 @@ def scara_rows(seed: int, duration: float = 30.0, dt: float = 0.01):
     return dict(model=model, rng=rng, t=t, q=q, dq=dq, ddq=ddq, theta=theta, W=W, J=J, S=S)
 
 
-def case(seed, j, coulomb=("sign", None), viscous=("linear", None)):
+def case(seed, j, coulomb=("sign", None), viscous=("linear", None), **kw):
     d = scara_rows(seed)
     W, J, S, th = d["W"], d["J"], d["S"], d["theta"]
     fs, fv = friction_column_indices(d["model"].BASE_NAMES, j)
@@ -46,7 +46,7 @@ def case(seed, j, coulomb=("sign", None), viscous=("linear", None)):
         y[rows] += 1.5 * th[fs[0]] * C[:, 1]
     A = np.delete(W, fs + fv, axis=1)
     blocks = time_blocks(np.zeros(y.size, int), S, 5)
-    return select_friction(A, y, J, j, d["dq"][S, j], blocks), th[fs[0]], th[fv[0]]
+    return select_friction(A, y, J, j, d["dq"][S, j], blocks, **kw), th[fs[0]], th[fv[0]]
 
 
 def test_tanh_friction_is_chosen_with_its_velocity_scale():
@@ -94,3 +94,17 @@ def test_bad_input_is_named():
         select_friction(d["W"], y, d["J"], 0, np.zeros(y.size), blocks)
     with pytest.raises(ValueError, match="unknown laws"):
         select_friction(d["W"], y, d["J"], 0, d["dq"][d["S"], 0], blocks, laws=("coulomb",))
+
+
+def test_v_floor_smooths_sign_and_bounds_the_search():
+    ch, _, _ = case(1, 1, coulomb=("tanh", 0.05), v_floor=0.002)
+    sign = [c for c in ch.candidates if c.law == "sign"]
+    assert sign and all(c.smooth == 0.002 for c in sign)
+    assert all(c.param >= 0.002 for c in ch.candidates if c.law == "tanh")
+    kept = FrictionChoice(1, sign[0], LawFit("linear", None, sign[0].cv_rel_err), tuple(sign))
+    assert "sign smoothed at v = 0.002" in kept.describe()
+    np.testing.assert_allclose(kept.columns(np.array([-1.0, 0.0, 0.001]))[:, 0], np.tanh([-500.0, 0.0, 0.5]))
+    ch, _, _ = case(1, 1, coulomb=("tanh", 0.05), v_floor=0.002)
+    assert ch.coulomb.law == "tanh" and ch.coulomb.param == pytest.approx(0.05, rel=0.15)
+    with pytest.raises(ValueError, match="v_floor"):
+        case(1, 1, v_floor=0.0)
