@@ -31,16 +31,25 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import symoro_gen  # noqa: E402
-from symoro_gen.description import load_robot, parse_robot_text  # noqa: E402
-from symoro_gen.description.urdf import import_urdf  # noqa: E402
-from symoro_gen.diagnostics import diagnose  # noqa: E402
-from symoro_gen.diagnostics.expert import filtered_data, fit_declared, fit_expert, fit_linear  # noqa: E402
-from symoro_gen.diagnostics.friction import (friction_column_indices, replaced_friction_columns,  # noqa: E402
-                                             select_friction, velocity_grid)
-from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth  # noqa: E402
-from symoro_gen.preprocessing.load import load_trajectories, load_trajectory  # noqa: E402
-from symoro_gen.preprocessing.trajectory import Trajectory  # noqa: E402
+import symoro_gen
+from symoro_gen.description import load_robot, parse_robot_text
+from symoro_gen.description.urdf import import_urdf
+from symoro_gen.diagnostics import diagnose
+from symoro_gen.diagnostics.expert import (
+    filtered_data,
+    fit_declared,
+    fit_expert,
+    fit_linear,
+)
+from symoro_gen.diagnostics.friction import (
+    friction_column_indices,
+    replaced_friction_columns,
+    select_friction,
+    velocity_grid,
+)
+from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
+from symoro_gen.preprocessing.load import load_trajectories, load_trajectory
+from symoro_gen.preprocessing.trajectory import Trajectory
 
 HOLDOUT = 0.3
 #: sign(dq) is smoothed at this many standard deviations of the velocity noise
@@ -49,7 +58,7 @@ V_FLOOR_NOISE = 3.0
 
 def split(tr: Trajectory, fraction: float = HOLDOUT) -> tuple[Trajectory, Trajectory]:
     """Leading part (identification) and trailing ``fraction`` (validation) of one recording."""
-    k = int(round(tr.n_samples * (1.0 - fraction)))
+    k = round(tr.n_samples * (1.0 - fraction))
     parts = []
     for a, b in ((0, k), (k, tr.n_samples)):
         parts.append(Trajectory(t=tr.t[a:b], q=tr.q[a:b], tau=tr.tau[a:b], source=f"{tr.source}[rows {a + 1}-{b}]",

@@ -43,8 +43,8 @@ columns through :meth:`Composed.columns`.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -52,8 +52,18 @@ from ..errors import IdentificationError
 from .stability import _wls_basis
 from .stats import hac_covariance, hac_lag, segments_of, wald_test
 
-__all__ = ["EFFECTS", "SIGNALS", "RIPPLE_ORDERS", "N_STEP_TIMES", "RowSignals", "Composed", "ComposedResult",
-           "library", "score_composed", "holm"]
+__all__ = [
+    "EFFECTS",
+    "N_STEP_TIMES",
+    "RIPPLE_ORDERS",
+    "SIGNALS",
+    "Composed",
+    "ComposedResult",
+    "RowSignals",
+    "holm",
+    "library",
+    "score_composed",
+]
 
 EFFECTS = ("viscous", "coulomb", "ripple", "constant", "inertia")
 SIGNALS = ("time", "q_own", "q_other", "abs_tau", "tau", "abs_dq", "temperature", "step")

@@ -20,8 +20,8 @@ holding); :func:`stacked_regressor` stacks a regressor (N, n, k) into joint-majo
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -34,9 +34,19 @@ from .frame import noise_gains
 from .friction import select_friction, velocity_grid
 from .stability import N_FOLDS, _wls_basis, time_blocks
 
-__all__ = ["stacked_regressor", "FilteredData", "filtered_data", "ExpertModel", "fit_expert", "expert_columns",
-           "joint_rel_err", "DeclaredFit", "fit_declared",
-           "LinearFit", "fit_linear"]
+__all__ = [
+    "DeclaredFit",
+    "ExpertModel",
+    "FilteredData",
+    "LinearFit",
+    "expert_columns",
+    "filtered_data",
+    "fit_declared",
+    "fit_expert",
+    "fit_linear",
+    "joint_rel_err",
+    "stacked_regressor",
+]
 
 #: samples per call of the model's regressor
 BATCH = 8192
@@ -360,7 +370,7 @@ def fit_expert(model: IdentificationModel, data: FilteredData, *, method: str = 
         ch = select_friction(A, data.Y, data.joint, j, np.zeros(data.Y.size), blocks, weights=weights,
                              columns=lambda f, p, j=j: data.joint_columns(j, f, p), laws=("tanh",),
                              min_gain=0.0, v_grid=velocity_grid(dq_all[:, j]))
-        tanh = [c_ for c_ in ch.candidates if c_.law == "tanh"][0]
+        tanh = next(c_ for c_ in ch.candidates if c_.law == "tanh")
         v[j] = tanh.param
         cv[j] = tanh.cv_rel_err
         base[:, c] = data.joint_columns(j, lambda x, vj=v[j]: np.tanh(x / vj)[:, None], 1)[:, 0]

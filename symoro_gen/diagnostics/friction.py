@@ -33,8 +33,8 @@ full-rate velocity of the joint and decimates it (``Frame.full_rate_columns`` st
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 from scipy import optimize
@@ -43,9 +43,21 @@ from ..errors import IdentificationError
 from ..model import IdentificationModel
 from .stability import N_FOLDS, BlockedLS, _wls_basis
 
-__all__ = ["COULOMB_LAWS", "VISCOUS_LAWS", "MIN_GAIN", "coulomb_columns", "viscous_columns", "LawFit",
-           "FrictionChoice", "select_friction", "law_errors", "friction_column_indices", "velocity_grid", "DELTA_GRID",
-           "replaced_friction_columns"]
+__all__ = [
+    "COULOMB_LAWS",
+    "DELTA_GRID",
+    "MIN_GAIN",
+    "VISCOUS_LAWS",
+    "FrictionChoice",
+    "LawFit",
+    "coulomb_columns",
+    "friction_column_indices",
+    "law_errors",
+    "replaced_friction_columns",
+    "select_friction",
+    "velocity_grid",
+    "viscous_columns",
+]
 
 COULOMB_LAWS = ("sign", "tanh", "stribeck")
 VISCOUS_LAWS = ("linear", "power")
@@ -314,7 +326,7 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
         for law in ("tanh", "stribeck"):
             if law not in laws:
                 continue
-            p, e = _search(lambda v: err(law, v, vlaw, vpar, smooth), grid, refine and law == "tanh")
+            p, e = _search(lambda v, law=law, sm=smooth: err(law, v, vlaw, vpar, sm), grid, refine and law == "tanh")
             fit = LawFit(law, p, e, smooth if law == "stribeck" else None)
             if law == "tanh":
                 smooth = p
@@ -377,7 +389,7 @@ def replaced_friction_columns(model: IdentificationModel, choices: Sequence[Fric
         ``columns(q, dq, ddq) -> (N, n, len(names))`` per-sample regressor.
     """
     names = tuple(model.BASE_NAMES)
-    drop = sorted(i for ch in choices for i in sum(friction_column_indices(names, ch.joint), []))
+    drop = sorted(i for ch in choices for part in friction_column_indices(names, ch.joint) for i in part)
     keep = [i for i in range(len(names)) if i not in set(drop)]
     out_names = tuple(names[i] for i in keep) + tuple(nm for ch in choices for nm in ch.names())
 

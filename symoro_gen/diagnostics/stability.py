@@ -33,17 +33,28 @@ Acceptance rules
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Callable, Hashable, Iterable, Mapping, Sequence
 
 import numpy as np
 from scipy import stats as sst
 
 from .stats import hac_covariance, hac_lag, segments_of
 
-__all__ = ["N_FOLDS", "MIN_SELECTION_FREQUENCY", "time_blocks", "blocked_folds", "BlockedLS",
-           "selection_frequency", "stable", "CoefficientCI", "coefficient_ci", "Agreement",
-           "ols_wls_agreement", "placebo_stop"]
+__all__ = [
+    "MIN_SELECTION_FREQUENCY",
+    "N_FOLDS",
+    "Agreement",
+    "BlockedLS",
+    "CoefficientCI",
+    "blocked_folds",
+    "coefficient_ci",
+    "ols_wls_agreement",
+    "placebo_stop",
+    "selection_frequency",
+    "stable",
+    "time_blocks",
+]
 
 #: default number of contiguous time blocks (= folds)
 N_FOLDS = 5

@@ -35,8 +35,8 @@ rather than a cause.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -57,8 +57,8 @@ IMPORTANCE_SHARE = 0.1
 #: most signals listed
 MAX_SIGNALS = 3
 #: gradient-boosting settings (small: the residual has a few thousand rows per joint)
-HGB_PARAMS = dict(max_iter=60, learning_rate=0.15, max_leaf_nodes=15, min_samples_leaf=40, l2_regularization=1.0,
-                  early_stopping=False)
+HGB_PARAMS = {"max_iter": 60, "learning_rate": 0.15, "max_leaf_nodes": 15, "min_samples_leaf": 40,
+              "l2_regularization": 1.0, "early_stopping": False}
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,13 @@ import itertools
 import numpy as np
 import pytest
 
-from symoro_gen.diagnostics.compose import Composed, RowSignals, holm, library, score_composed
+from symoro_gen.diagnostics.compose import (
+    Composed,
+    RowSignals,
+    holm,
+    library,
+    score_composed,
+)
 from symoro_gen.diagnostics.stability import BlockedLS, time_blocks
 
 from .test_friction import scara_rows
@@ -87,7 +93,7 @@ def test_clean_data_name_nothing(seed):
 
 
 def test_library_counts_and_words():
-    d, sig, _, _ = setup(31, duration=10.0, dt=0.05)
+    _, sig, _, _ = setup(31, duration=10.0, dt=0.05)
     fams = library(sig)
     # per joint: 5 effects x 7 signals (no temperature), q_other for 3 other joints, constant x q skipped
     per_joint = 5 * (6 + 3) - (1 + 3)

@@ -8,9 +8,19 @@ import pytest
 
 import symoro_gen
 from symoro_gen.description import load_robot
-from symoro_gen.diagnostics.expert import _regressor, filtered_data, fit_declared, fit_expert, fit_linear
-from symoro_gen.diagnostics.friction import (friction_column_indices, replaced_friction_columns, select_friction,
-                                             velocity_grid)
+from symoro_gen.diagnostics.expert import (
+    _regressor,
+    filtered_data,
+    fit_declared,
+    fit_expert,
+    fit_linear,
+)
+from symoro_gen.diagnostics.friction import (
+    friction_column_indices,
+    replaced_friction_columns,
+    select_friction,
+    velocity_grid,
+)
 from symoro_gen.errors import IdentificationError
 from symoro_gen.identification.assemble import assemble_observation
 from symoro_gen.preprocessing.trajectory import Trajectory
@@ -104,7 +114,7 @@ def test_tx40_expert_beats_the_declared_coulomb_on_joint_4(shared_data):
     robot = load_robot("tx40")
     (tr,) = load_trajectories([f"q={d / 'pos_read_data.csv'},tau={d / 'curr_data.csv'},dt=0.0002"],
                               n_joints=robot.n_joints, drive_chain=robot.drive_chain)
-    k = int(round(0.7 * tr.n_samples))
+    k = round(0.7 * tr.n_samples)
     ident = Trajectory(t=tr.t[:k], q=tr.q[:k], tau=tr.tau[:k], source="tx40 ident")
     valid = Trajectory(t=tr.t[k:], q=tr.q[k:], tau=tr.tau[k:], source="tx40 valid")
     model = symoro_gen.load_model("tx40")

@@ -11,8 +11,15 @@ import pytest
 import symoro_gen
 from symoro_gen.description import load_robot
 from symoro_gen.diagnostics.expert import stacked_regressor
-from symoro_gen.diagnostics.friction import (FrictionChoice, LawFit, coulomb_columns, friction_column_indices,
-                                             law_errors, select_friction, viscous_columns)
+from symoro_gen.diagnostics.friction import (
+    FrictionChoice,
+    LawFit,
+    coulomb_columns,
+    friction_column_indices,
+    law_errors,
+    select_friction,
+    viscous_columns,
+)
 from symoro_gen.diagnostics.stability import time_blocks
 from symoro_gen.errors import IdentificationError
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters
@@ -28,7 +35,7 @@ def scara_rows(seed: int, duration: float = 30.0, dt: float = 0.01):
     t, q, dq, ddq = fourier_trajectory(4, duration, dt, rng, base_frequency_hz=0.1, amplitude=amp)
     theta = np.asarray(model.base_parameters(np.asarray(random_physical_parameters(robot, rng))))
     W, J, S = stacked_regressor(model, q, dq, ddq)
-    return dict(model=model, rng=rng, t=t, q=q, dq=dq, ddq=ddq, theta=theta, W=W, J=J, S=S)
+    return {"model": model, "rng": rng, "t": t, "q": q, "dq": dq, "ddq": ddq, "theta": theta, "W": W, "J": J, "S": S}
 
 
 def case(seed, j, coulomb=("sign", None), viscous=("linear", None), **kw):

@@ -5,8 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from symoro_gen.diagnostics.stability import (BlockedLS, blocked_folds, coefficient_ci, ols_wls_agreement,
-                                              placebo_stop, selection_frequency, stable, time_blocks)
+from symoro_gen.diagnostics.stability import (
+    BlockedLS,
+    blocked_folds,
+    coefficient_ci,
+    ols_wls_agreement,
+    placebo_stop,
+    selection_frequency,
+    stable,
+    time_blocks,
+)
 
 
 def test_time_blocks_are_contiguous_equal_and_shared_by_the_joints_of_a_sample():

@@ -6,10 +6,14 @@ import pytest
 
 pytest.importorskip("sklearn", reason="scikit-learn (extra 'diagnose') is needed for the unexplained-structure model")
 
-from symoro_gen.diagnostics.unexplained import Unexplained, signal_matrix, unexplained_structure  # noqa: E402
-from symoro_gen.simulate import fourier_trajectory  # noqa: E402
+from symoro_gen.diagnostics.unexplained import (
+    Unexplained,
+    signal_matrix,
+    unexplained_structure,
+)
+from symoro_gen.simulate import fourier_trajectory
 
-from .test_friction import scara_rows  # noqa: E402
+from .test_friction import scara_rows
 
 
 def play_operator(x: np.ndarray, half_width: float) -> np.ndarray:
@@ -24,7 +28,7 @@ def play_operator(x: np.ndarray, half_width: float) -> np.ndarray:
 
 def test_hysteresis_outside_the_library_is_flagged_on_its_joint():
     d = scara_rows(41, duration=24.0, dt=0.02)
-    W, J, S, q = d["W"], d["J"], d["S"], d["q"]
+    W, J, q = d["W"], d["J"], d["q"]
     rng = d["rng"]
     y = W @ d["theta"] + 0.05 * rng.standard_normal(W.shape[0])
     # joint 2 (index 1): a backlash hysteresis torque 3 (q - play(q)), play half-width 0.15 rad
