@@ -117,6 +117,13 @@ class RowSignals:
     def n_joints(self) -> int:
         return self.q.shape[1]
 
+    def subset(self, rows: np.ndarray) -> RowSignals:
+        """The signals of some rows (boolean mask or indices), e.g. the training rows of a fold."""
+        def take(x):
+            return None if x is None else np.asarray(x)[rows]
+        return RowSignals(take(self.joint), take(self.t), take(self.q), take(self.dq), take(self.ddq),
+                          take(self.tau_hat), take(self.temperature))
+
     @property
     def n_rows(self) -> int:
         return self.joint.size

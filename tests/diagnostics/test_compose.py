@@ -15,7 +15,7 @@ from symoro_gen.diagnostics.compose import (
     library,
     score_composed,
 )
-from symoro_gen.diagnostics.stability import BlockedLS, time_blocks
+from symoro_gen.diagnostics.stability import BlockedLS, selection_frequency, stable, time_blocks
 
 from .test_friction import scara_rows
 
@@ -130,3 +130,22 @@ def test_holm_matches_the_step_down_definition():
             assert {int(k) for k in np.flatnonzero(adj <= alpha)} == rejected
     assert list(holm([0.01, 0.04, 0.03])) == pytest.approx([0.03, 0.06, 0.06])
     assert not list(itertools.chain(holm([])))
+
+
+def test_selection_frequency_over_time_blocked_folds():
+    """A real modulated effect is named in every fold; on clean data nothing is named in any fold."""
+    d, sig, y, tau = setup(12, duration=20.0, dt=0.02)
+    j, _, _, extra = _effects(d, tau)["viscous x |tau|"]
+    y_eff = y.copy()
+    y_eff[sig.joint == j] += extra
+    blocks = time_blocks(np.zeros(y.size, int), d["S"], 5)
+
+    def names(yy):
+        def select(train):
+            res = score_composed(d["W"][train], yy[train], sig.subset(train))
+            return [r.candidate.family for r in res[:1] if r.significant]
+        return select
+    f = selection_frequency(names(y_eff), blocks)
+    assert f == {("viscous", 1, "abs_tau", None): 1.0}
+    assert stable(f) == [("viscous", 1, "abs_tau", None)]
+    assert selection_frequency(names(y), blocks) == {}
