@@ -15,7 +15,12 @@ from symoro_gen.diagnostics.compose import (
     library,
     score_composed,
 )
-from symoro_gen.diagnostics.stability import BlockedLS, selection_frequency, stable, time_blocks
+from symoro_gen.diagnostics.stability import (
+    BlockedLS,
+    selection_frequency,
+    stable,
+    time_blocks,
+)
 
 from .test_friction import scara_rows
 
