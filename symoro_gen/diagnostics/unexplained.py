@@ -42,7 +42,7 @@ import numpy as np
 
 from .stability import N_FOLDS, blocked_folds, time_blocks
 
-__all__ = ["MIN_SHARE", "NULL_MARGIN", "Unexplained", "signal_matrix", "unexplained_structure"]
+__all__ = ["MIN_SHARE", "NULL_MARGIN", "Unexplained", "rows_to_samples", "signal_matrix", "unexplained_structure"]
 
 #: smallest share of residual variance ever flagged
 MIN_SHARE = 0.05
@@ -104,7 +104,40 @@ def signal_matrix(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, tau_hat: np.nd
     return np.hstack(parts), tuple(names)
 
 
-def _oof(X, e, folds, seed, importance=False, rng=None):
+def rows_to_samples(values: np.ndarray, joint: np.ndarray, experiment: np.ndarray, index: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stacked rows (joint-major, as the observation systems) to one line per sample.
+
+    Parameters
+    ----------
+    values : ndarray, shape (r,) or (r, m)
+        Per-row values (e.g. the residual) - for per-row signals of all joints ``(r, n)``, take the rows
+        of one joint instead.
+    joint, experiment, index : ndarray of int, shape (r,)
+        Joint (0-based), experiment and sample index within the experiment of each row.
+
+    Returns
+    -------
+    per_sample : ndarray, shape (s, n) (or (s, n, m))
+        Value of each joint at each sample (samples ordered by experiment, then index).
+    sample_experiment, sample_index : ndarray of int, shape (s,)
+    """
+    values = np.asarray(values, float)
+    joint, experiment, index = (np.asarray(x) for x in (joint, experiment, index))
+    keys = np.unique(np.column_stack([experiment, index]), axis=0)
+    s = keys.shape[0]
+    n = int(joint.max()) + 1
+    pos = {(int(e), int(i)): k for k, (e, i) in enumerate(keys)}
+    where = np.array([pos[(int(e), int(i))] for e, i in zip(experiment, index)])
+    out = np.full((s, n) + values.shape[1:], np.nan)
+    out[where, joint] = values
+    if np.isnan(out).any():
+        raise ValueError("rows_to_samples: some joints lack rows at some samples (every joint must have a row "
+                         "at every sample)")
+    return out, keys[:, 0], keys[:, 1]
+
+
+def _oof(X, e, folds, seed):
     from sklearn.ensemble import HistGradientBoostingRegressor
 
     pred = np.empty_like(e)

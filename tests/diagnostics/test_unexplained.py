@@ -8,6 +8,7 @@ pytest.importorskip("sklearn", reason="scikit-learn (extra 'diagnose') is needed
 
 from symoro_gen.diagnostics.unexplained import (
     Unexplained,
+    rows_to_samples,
     signal_matrix,
     unexplained_structure,
 )
@@ -79,3 +80,18 @@ def test_smooth_coloured_noise_is_not_flagged(seed):
 def test_shape_errors_are_named():
     with pytest.raises(ValueError, match="disagree"):
         unexplained_structure(np.zeros((10, 2)), np.zeros((9, 3)), ["a", "b", "c"])
+
+
+def test_rows_to_samples_inverts_the_joint_major_stacking():
+    # 2 experiments of 4 and 3 samples, 3 joints, rows joint-major then experiment
+    exp = np.tile(np.r_[0, 0, 0, 0, 1, 1, 1], 3)
+    idx = np.tile(np.r_[0, 1, 2, 3, 0, 1, 2], 3)
+    joint = np.repeat(np.arange(3), 7)
+    vals = 100 * joint + 10 * exp + idx
+    out, e, i = rows_to_samples(vals, joint, exp, idx)
+    assert out.shape == (7, 3)
+    np.testing.assert_array_equal(e, [0, 0, 0, 0, 1, 1, 1])
+    np.testing.assert_array_equal(i, [0, 1, 2, 3, 0, 1, 2])
+    np.testing.assert_array_equal(out, 100 * np.arange(3)[None, :] + (10 * e + i)[:, None])
+    with pytest.raises(ValueError, match="lack rows"):
+        rows_to_samples(vals[:-1], joint[:-1], exp[:-1], idx[:-1])
