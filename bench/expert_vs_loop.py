@@ -13,7 +13,8 @@ in memory, last 30 % held out) it prints, per joint, the validation relative err
 * the loop's final model ("loop after"),
 
 on the filtered, decimated system (``filt``) and, where available, at full rate against the raw measured
-torque (``raw``; the loop's report has no raw metric yet: ``-``).
+torque (``raw``; the loop's report has no raw metric yet: ``-``), then the share of the loop's final
+identification residual that boosted trees predict out of fold (:mod:`symoro_gen.diagnostics.unexplained`).
 
 Usage (from the project root)::
 
@@ -46,6 +47,11 @@ from symoro_gen.diagnostics.friction import (
     replaced_friction_columns,
     select_friction,
     velocity_grid,
+)
+from symoro_gen.diagnostics.unexplained import (
+    rows_to_samples,
+    signal_matrix,
+    unexplained_structure,
 )
 from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
 from symoro_gen.preprocessing.load import load_trajectories, load_trajectory
@@ -157,6 +163,28 @@ def run(name, model, ident, valid, method: str) -> None:
         print(f"{label:28s}" + "".join(f" {fmt(None if vals is None else float(vals[j]))}" for j in range(n)))
     worse = [j + 1 for j in range(n) if rep.after_validation_rel_err[j] > e_f[j]]
     print(f"loop worse than the expert (filtered) on joints: {worse or 'none'}")
+    unexplained(rep)
+
+
+def unexplained(rep) -> None:
+    """Structure left in the loop's final identification residual (issue 10 item 4), from the report's
+    plot data (frame and residual of the last round)."""
+    try:
+        F = rep.plot_data["frame"]
+        resid = rep.plot_data["round_resid"][-1][0]
+    except (AttributeError, KeyError, IndexError, TypeError):
+        print("unexplained: the report has no frame/residual to analyse")
+        return
+    t0 = time.perf_counter()
+    E, e_exp, e_idx = rows_to_samples(resid, F.system.joint, F.row_experiment, F.row_index)
+    S = F.samples()
+    X, names = signal_matrix(S["q"], S["dq"], S["ddq"], S.get("tau_hat"), S["t"])
+    out = unexplained_structure(E, X, names, experiment=e_exp, order=e_idx)
+    print(f"structure left that no candidate explains ({time.perf_counter() - t0:.1f} s; out-of-fold R^2 of "
+          "boosted trees on q, dq, ddq, tau_hat, t; threshold from block-permuted residuals):")
+    for u in out:
+        print(f"  joint {u.joint}: share {u.share:.2f} (threshold {u.threshold:.2f})"
+              + (f"  FLAGGED, depends on {', '.join(u.signals)}" if u.flagged else ""))
 
 
 def main(argv=None) -> int:
