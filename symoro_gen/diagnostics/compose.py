@@ -30,8 +30,12 @@ growing with |tau_hat3|", "constant (gravity-like) torque on joint 2 appearing a
 Testing and multiple-testing control
 ------------------------------------
 Each candidate is tested on the rows given (all joints, the model's coefficients re-fitted with it) by
-a Wald test of its coefficients with a HAC (Newey-West) covariance, never smaller than the
-white-noise one (as :mod:`.core`). A *family* is one (effect, joint, signal, source joint); its grid
+a Wald test of its *modulated* coefficients with a HAC (Newey-West) covariance, never smaller than the
+white-noise one (as :mod:`.core`). The plain effect's columns (:meth:`Composed.plain_columns`, e.g. a
+ripple of the same order, a constant, ``dq_j``) are added to the model for that test (partialled out)
+when they are not in it already, so a plain effect the model lacks is not taken for a modulated one
+(on the LWR4 recordings a plain ripple of joint 7 otherwise passes as "modulated by" any signal that
+differs between the experiments); the reported decrease of the joint's residual is the modulation's. A *family* is one (effect, joint, signal, source joint); its grid
 (ripple orders x step times) is searched and its smallest p-value is Bonferroni-corrected by the
 number of grid points ``G`` (``min(1, G p_min)``). The family-wise error over the whole composed
 library - every effect x signal x joint combination - is then controlled by Holm's step-down
@@ -44,7 +48,7 @@ columns through :meth:`Composed.columns`.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -73,6 +77,8 @@ RIPPLE_ORDERS = (1, 2, 3, 4, 5, 6, 8, 12, 16)
 N_STEP_TIMES = 17
 #: family-wise level
 ALPHA = 0.01
+#: modulating signals correlated above this on a joint's rows are aliases (one result lists the others)
+ALIAS_CORRELATION = 0.995
 #: a column with less than this share of its norm outside the model's span is skipped
 IDENTIFIABILITY_TOL = 1e-3
 #: floor of 1 - h_ii in the HC3 scaling of the residual
@@ -214,6 +220,15 @@ class Composed:
         X[rows] = E * self._signal(sig, rows)[:, None]
         return X
 
+    def plain_columns(self, sig: RowSignals) -> np.ndarray:
+        """The unmodulated effect's columns (r, p) on the joint's rows: partialled out of every test, so that a
+        composed candidate is evidence of the *modulation*, not of the effect itself."""
+        rows = np.flatnonzero(sig.joint == self.joint)
+        E = self._effect(sig, rows)
+        X = np.zeros((sig.n_rows, E.shape[1]))
+        X[rows] = E
+        return X
+
     def names(self) -> tuple[str, ...]:
         """Coefficient names, e.g. ``viscous3*abs_tau3``."""
         j = self.joint + 1
@@ -318,6 +333,10 @@ class ComposedResult:
     significant : bool
         ``p_adjusted < alpha``.
     description : str
+    aliases : tuple of Composed
+        Candidates of the same effect whose modulating signal is the same on these data (correlation
+        above ``ALIAS_CORRELATION``, e.g. joints driven by one waveform): the data cannot tell them apart;
+        they are not listed separately.
     """
 
     candidate: Composed
@@ -329,6 +348,7 @@ class ComposedResult:
     rss_drop: float
     significant: bool
     description: str
+    aliases: tuple = ()
 
 
 class _Tester:
@@ -344,9 +364,28 @@ class _Tester:
         self.lag = hac_lag(self.e0, groups)
         self.rss_joint = np.bincount(joint, weights=self.e0 ** 2, minlength=int(joint.max()) + 1)
 
-    def __call__(self, X, j):
+    def _with_plain(self, P):
+        """Basis, residual, leverage, rank and joint RSS with the plain effect's columns ``P`` added to the
+        model (the part of them outside its span; none when they are already in it)."""
+        base = (self.U, self.e0, self.lev0, self.rank, self.rss_joint)
+        if P is None or not P.shape[1]:
+            return base
+        Pw = P * self.w[:, None]
+        Pp = Pw - self.U @ (self.U.T @ Pw)
+        keep = np.einsum("ij,ij->j", Pp, Pp) > IDENTIFIABILITY_TOL ** 2 * np.maximum(np.einsum("ij,ij->j", Pw, Pw),
+                                                                                      1e-300)
+        if not keep.any():
+            return base
+        Q, R = np.linalg.qr(Pp[:, keep])
+        Q = Q[:, np.abs(np.diag(R)) > 1e-10 * np.abs(np.diag(R)).max()]
+        e0 = self.e0 - Q @ (Q.T @ self.e0)
+        rss = np.bincount(self.joint, weights=e0 ** 2, minlength=self.rss_joint.size)
+        return (np.hstack([self.U, Q]), e0, self.lev0 + np.einsum("ij,ij->i", Q, Q), self.rank + Q.shape[1], rss)
+
+    def __call__(self, X, j, P=None):
+        U, e0, lev0, rank, rss_joint = self._with_plain(P)
         Xw = X * self.w[:, None]
-        Xp = Xw - self.U @ (self.U.T @ Xw)
+        Xp = Xw - U @ (U.T @ Xw)
         G = Xp.T @ Xp
         # a column (almost) in the span of the model is "already in the model" (as IDENTIFIABILITY_TOL of .core)
         if not np.all(np.diag(G) > IDENTIFIABILITY_TOL ** 2 * np.maximum(np.einsum("ij,ij->j", Xw, Xw), 1e-300)):
@@ -355,18 +394,18 @@ class _Tester:
             Ginv = np.linalg.inv(G)
         except np.linalg.LinAlgError:
             return None
-        b = Ginv @ (Xp.T @ self.e0)
-        e = self.e0 - Xp @ b
+        b = Ginv @ (Xp.T @ e0)
+        e = e0 - Xp @ b
         r, p = e.size, X.shape[1]
-        dof = max(r - self.rank - p, 1)
-        lev = np.einsum("ij,jk,ik->i", Xp, Ginv, Xp) + self.lev0
+        dof = max(r - rank - p, 1)
+        lev = np.einsum("ij,jk,ik->i", Xp, Ginv, Xp) + lev0
         e3 = e / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0)
         S = hac_covariance(Xp * e3[:, None], max_lag=self.lag, segments=self.segs)
         Ch = Ginv @ S @ Ginv * (r / dof)
         Ci = Ginv * float(e @ e) / dof
         pv = max(wald_test(b, Ch, dof)[1], wald_test(b, Ci, dof)[1])
         m = self.joint == j
-        drop = 1.0 - float(np.sum(e[m] ** 2)) / max(self.rss_joint[j], 1e-300)
+        drop = 1.0 - float(np.sum(e[m] ** 2)) / max(rss_joint[j], 1e-300)
         return pv, b, drop
 
 
@@ -409,8 +448,9 @@ def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np
     rows = []
     for fam in fams:
         best = None
+        plain = fam[0].plain_columns(sig) if fam else None
         for c in fam:
-            out = tester(c.columns(sig), c.joint)
+            out = tester(c.columns(sig), c.joint, plain if c.effect != "ripple" else c.plain_columns(sig))
             if out is None:
                 continue
             if best is None or out[0] < best[1][0] or (out[0] == best[1][0] and out[2] > best[1][2]):
@@ -424,5 +464,31 @@ def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np
     res = [ComposedResult(c, g, float(o[0]), float(f), float(a), np.asarray(o[1]), float(o[2]), bool(a < alpha),
                           c.describe(o[1])) for (c, g, o), f, a in zip(rows, pf, adj)]
     res.sort(key=lambda r: (r.p_adjusted, -r.rss_drop))
-    return res
+    return _merge_aliases(res, sig)
+
+
+def _merge_aliases(res: list[ComposedResult], sig: RowSignals) -> list[ComposedResult]:
+    """Fold results whose modulating signals are indistinguishable on the data into the best-ranked one."""
+    kept: list[tuple[ComposedResult, np.ndarray, list]] = []
+    for r in res:
+        c = r.candidate
+        rows = np.flatnonzero(sig.joint == c.joint)
+        m = c._signal(sig, rows)
+        for k, (r0, m0, al) in enumerate(kept):
+            c0 = r0.candidate
+            if (c0.effect, c0.joint, c0.order) != (c.effect, c.joint, c.order):
+                continue
+            den = float(np.linalg.norm(m) * np.linalg.norm(m0))
+            if den > 0 and abs(float(m @ m0 - m.mean() * m0.sum())) / den > ALIAS_CORRELATION:
+                al.append(c)
+                break
+        else:
+            kept.append((r, m, []))
+    out = []
+    for r, _, al in kept:
+        if al:
+            words = ", ".join(a.describe().rsplit(" with ", 1)[-1] for a in al)
+            r = replace(r, aliases=tuple(al), description=f"{r.description} (indistinguishable here from: {words})")
+        out.append(r)
+    return out
 

@@ -154,3 +154,20 @@ def test_selection_frequency_over_time_blocked_folds():
     assert f == {("viscous", 1, "abs_tau", None): 1.0}
     assert stable(f) == [("viscous", 1, "abs_tau", None)]
     assert selection_frequency(names(y), blocks) == {}
+
+
+def test_signals_the_data_cannot_tell_apart_are_reported_as_aliases():
+    d, sig, y, tau = setup(11)
+    j, _, _, extra = _effects(d, tau)["inertia x q_other"]
+    y = y.copy()
+    y[sig.joint == j] += extra
+    q = sig.q.copy()
+    q[:, 2] = 3.0 * q[:, 0] + 1.0          # joint 3 driven by the waveform of joint 1 (as on the LWR4 recordings)
+    sig2 = RowSignals(sig.joint, sig.t, q, sig.dq, sig.ddq, sig.tau_hat)
+    res = score_composed(d["W"], y, sig2, joints=[j])
+    top = res[0]
+    assert (top.candidate.effect, top.candidate.signal) == ("inertia", "q_other")
+    assert {top.candidate.source} | {a.source for a in top.aliases} == {0, 2}
+    assert "indistinguishable here from: q" in top.description
+    listed = [r.candidate.source for r in res if (r.candidate.effect, r.candidate.signal) == ("inertia", "q_other")]
+    assert sorted(listed) == [top.candidate.source, 1]      # q1 and q3 listed once; q2 on its own
