@@ -1,0 +1,404 @@
+"""Friction-law selection per joint by time-blocked cross-validation (issue 10, item 1).
+
+The declared models carry the classical friction of the identification papers, ``FS_j sign(dq_j) +
+FV_j dq_j`` (RX-90 paper eq. 2, Coulomb + viscous). At standstill and velocity reversals the
+Coulomb column of a filtered velocity chatters; real drives often follow a smooth or a Stribeck law
+instead. For each joint this module *replaces* the law rather than adding columns to it:
+
+Coulomb laws (coefficients linear, shape parameter searched)
+    * ``sign``      ``Fc sign(dq)`` (declared);
+    * ``tanh``      ``Fc tanh(dq / v)``, ``v`` on a log grid then refined continuously (bounded
+      scalar minimisation of the CV error in ``log v`` between the grid neighbours);
+    * ``stribeck``  ``(Fc + (Fs - Fc) exp(-(dq/vs)^2)) sign(dq)``: linear in ``Fc`` and ``Fs - Fc``
+      for a fixed ``vs`` (columns ``sign(dq)`` and ``exp(-(dq/vs)^2) sign(dq)``), ``vs`` on a grid
+      (Armstrong-Helouvry, Dupont & Canudas de Wit 1994, eq. 5); when ``tanh`` is tried too, the
+      ``sign(dq)`` is smoothed by ``tanh(dq/v)`` at the ``v`` the tanh search found (at the bottom of
+      the grid this is ``sign``; otherwise the Stribeck law does not chatter at standstill either);
+Viscous laws
+    * ``linear``    ``Fv dq`` (declared);
+    * ``power``     ``Fv |dq|^delta sign(dq)``, ``delta`` on a grid then refined.
+
+Selection (coordinate descent): the Coulomb law is chosen first (with the linear viscous term), then
+the viscous law (with the chosen Coulomb law), then, if the viscous law changed, the Coulomb law again
+with it (a ``|dq|^delta`` knee can pass for a Stribeck dip and vice versa); each choice by the out-of-fold relative error norm of the joint's rows under
+time-blocked K-fold cross-validation (:mod:`.stability`: ``K`` contiguous blocks per experiment, no
+shuffling; fold ``k`` holds out block ``k`` of every experiment and the whole model - base parameters
+of all joints and the candidate friction columns - is fitted on the other blocks). A law replaces the
+simpler one (order ``sign < tanh < stribeck``, ``linear < power``) only if it lowers the CV error by
+more than ``min_gain`` (relative): ties keep the declared law.
+
+Columns are evaluated on the rows by default (the decimated velocity); a caller that decimates columns
+in parallel with ``W`` (RX-90 paper eq. 15) passes ``columns(f)``, which evaluates ``f`` on the
+full-rate velocity of the joint and decimates it (``Frame.full_rate_columns`` style).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize
+
+from ..errors import IdentificationError
+from ..model import IdentificationModel
+from .stability import N_FOLDS, BlockedLS, _wls_basis
+
+__all__ = [
+    "COULOMB_LAWS",
+    "DELTA_GRID",
+    "MIN_GAIN",
+    "VISCOUS_LAWS",
+    "FrictionChoice",
+    "LawFit",
+    "coulomb_columns",
+    "friction_column_indices",
+    "law_errors",
+    "replaced_friction_columns",
+    "select_friction",
+    "velocity_grid",
+    "viscous_columns",
+]
+
+COULOMB_LAWS = ("sign", "tanh", "stribeck")
+VISCOUS_LAWS = ("linear", "power")
+#: a more complex law must lower the CV relative error of its joint by this fraction
+MIN_GAIN = 0.01
+#: exponents of the non-linear viscous law searched
+DELTA_GRID = (0.2, 0.35, 0.5, 0.65, 0.8, 1.25, 1.5, 2.0)
+#: points of the log grid of the velocity scales (v of tanh, vs of Stribeck)
+N_VELOCITY_GRID = 14
+
+
+def coulomb_columns(law: str, dq: np.ndarray, param: float | None = None, smooth: float | None = None) -> np.ndarray:
+    """Columns of a Coulomb law at velocities ``dq`` (N,): (N, 1) for ``sign``/``tanh``, (N, 2) for
+    ``stribeck`` (coefficients ``Fc`` and ``Fs - Fc``; its ``sign(dq)`` replaced by ``tanh(dq/smooth)``
+    when ``smooth`` is given)."""
+    dq = np.asarray(dq, float)
+    if law == "sign":
+        return (np.sign(dq) if smooth is None else np.tanh(dq / float(smooth)))[:, None]
+    if law == "tanh":
+        return np.tanh(dq / float(param))[:, None]
+    if law == "stribeck":
+        s = np.sign(dq) if smooth is None else np.tanh(dq / float(smooth))
+        return np.column_stack([s, np.exp(-(dq / float(param)) ** 2) * s])
+    raise ValueError(f"unknown Coulomb law {law!r}; use one of {COULOMB_LAWS}")
+
+
+def viscous_columns(law: str, dq: np.ndarray, param: float | None = None) -> np.ndarray:
+    """Column of a viscous law: ``dq`` (``linear``) or ``|dq|^delta sign(dq)`` (``power``), shape (N, 1)."""
+    dq = np.asarray(dq, float)
+    if law == "linear":
+        return dq[:, None]
+    if law == "power":
+        return (np.abs(dq) ** float(param) * np.sign(dq))[:, None]
+    raise ValueError(f"unknown viscous law {law!r}; use one of {VISCOUS_LAWS}")
+
+
+@dataclass(frozen=True)
+class LawFit:
+    """One law with its searched parameter and its cross-validated error.
+
+    Attributes
+    ----------
+    law : str
+        ``sign``, ``tanh``, ``stribeck``, ``linear`` or ``power``.
+    param : float or None
+        ``v`` (tanh), ``vs`` (Stribeck) [rad/s or m/s], ``delta`` (power); None for sign/linear.
+    cv_rel_err : float
+        Out-of-fold relative error norm of the joint's rows.
+    smooth : float or None
+        ``sign`` and Stribeck: velocity scale ``v`` of the ``tanh(dq/v)`` replacing ``sign(dq)``.
+    """
+
+    law: str
+    param: float | None
+    cv_rel_err: float
+    smooth: float | None = None
+
+    @property
+    def label(self) -> str:
+        if self.law == "tanh":
+            return f"tanh(v={self.param:.3g})"
+        if self.law == "stribeck":
+            return f"stribeck(vs={self.param:.3g})"
+        if self.law == "power":
+            return f"power(delta={self.param:.3g})"
+        return self.law
+
+
+@dataclass(frozen=True)
+class FrictionChoice:
+    """The friction law chosen for one joint.
+
+    Attributes
+    ----------
+    joint : int
+        0-based.
+    coulomb, viscous : LawFit
+        Chosen laws.
+    candidates : tuple of LawFit
+        Every law tried (best parameter of each), in the order tried; ``candidates[0]`` is the
+        declared ``sign`` + ``linear``.
+    coefficients : dict str -> float
+        Coefficients of the chosen laws fitted on all rows: ``Fc`` (and ``Fs`` for Stribeck), ``Fv``.
+    n_folds : int
+    unit : str
+        Velocity unit of ``v``/``vs``.
+    """
+
+    joint: int
+    coulomb: LawFit
+    viscous: LawFit
+    candidates: tuple
+    coefficients: Mapping[str, float] = field(default_factory=dict)
+    n_folds: int = N_FOLDS
+    unit: str = "rad/s"
+
+    @property
+    def declared_cv_rel_err(self) -> float:
+        return self.candidates[0].cv_rel_err
+
+    @property
+    def cv_rel_err(self) -> float:
+        """Out-of-fold error of the chosen combination."""
+        return self.viscous.cv_rel_err if self.viscous.law != "linear" else self.coulomb.cv_rel_err
+
+    @property
+    def replaced(self) -> bool:
+        return self.coulomb.law != "sign" or self.viscous.law != "linear"
+
+    def columns(self, dq: np.ndarray) -> np.ndarray:
+        """Columns of the chosen laws at velocities ``dq``: Coulomb column(s) then the viscous one."""
+        return np.hstack([coulomb_columns(self.coulomb.law, dq, self.coulomb.param, self.coulomb.smooth),
+                          viscous_columns(self.viscous.law, dq, self.viscous.param)])
+
+    def names(self) -> tuple[str, ...]:
+        """Parameter names of :meth:`columns` (``FS3``, ``FSS3``, ``FV3`` for joint 3)."""
+        j = self.joint + 1
+        c = (f"FS{j}", f"FSS{j}") if self.coulomb.law == "stribeck" else (f"FS{j}",)
+        return c + (f"FV{j}",)
+
+    def describe(self) -> str:
+        """The replacement in words: ``"joint 3: Coulomb -> tanh, v = 0.012 rad/s (CV error 0.081 -> 0.064)"``."""
+        parts = []
+        if self.coulomb.law == "tanh":
+            parts.append(f"Coulomb \u2192 tanh, v = {self.coulomb.param:.3g} {self.unit}")
+        elif self.coulomb.law == "stribeck":
+            parts.append(f"Coulomb \u2192 Stribeck, vs = {self.coulomb.param:.3g} {self.unit}"
+                         + (f" (sign smoothed by tanh, v = {self.coulomb.smooth:.3g} {self.unit})"
+                            if self.coulomb.smooth is not None else ""))
+        if self.viscous.law == "power":
+            parts.append(f"viscous \u2192 |dq|^\u03b4, \u03b4 = {self.viscous.param:.3g}")
+        if not parts:
+            sm = (f", sign smoothed at v = {self.coulomb.smooth:.3g} {self.unit}"
+                  if self.coulomb.smooth is not None else "")
+            return (f"joint {self.joint + 1}: Coulomb sign(dq) + viscous dq kept{sm} "
+                    f"(CV error {self.declared_cv_rel_err:.4g}, {self.n_folds} time-blocked folds)")
+        return (f"joint {self.joint + 1}: " + "; ".join(parts)
+                + f" (CV error {self.declared_cv_rel_err:.4g} \u2192 {self.cv_rel_err:.4g}, "
+                  f"{self.n_folds} time-blocked folds)")
+
+
+def friction_column_indices(names: Sequence[str], joint: int) -> tuple[list[int], list[int]]:
+    """Indices of the declared Coulomb (``FS<j>``) and viscous (``FV<j>``) columns of ``joint`` (0-based)
+    in the column names of a model, e.g. ``model.BASE_NAMES``."""
+    j = joint + 1
+    fs = [i for i, n in enumerate(names) if n == f"FS{j}"]
+    fv = [i for i, n in enumerate(names) if n == f"FV{j}"]
+    return fs, fv
+
+
+def velocity_grid(dq: np.ndarray, n: int = N_VELOCITY_GRID) -> np.ndarray:
+    """Log grid of velocity scales from ``1e-3`` to ``0.5`` times the 95th percentile of ``|dq|``."""
+    s = float(np.quantile(np.abs(np.asarray(dq, float)), 0.95))
+    if not s > 0:
+        raise IdentificationError("friction: the joint does not move (95th percentile of |dq| is 0)")
+    return s * np.geomspace(1e-3, 0.5, n)
+
+
+def _search(err: Callable[[float], float], grid: np.ndarray, refine: bool, log: bool = True):
+    """Best grid point of ``err``, then a bounded continuous refinement between its neighbours."""
+    vals = np.array([err(float(g)) for g in grid])
+    i = int(np.nanargmin(vals))
+    best, best_err = float(grid[i]), float(vals[i])
+    if refine and grid.size > 2:
+        lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+        tr = (np.log, np.exp) if log else ((lambda x: x), (lambda x: x))
+        res = optimize.minimize_scalar(lambda x: err(float(tr[1](x))), bounds=(tr[0](lo), tr[0](hi)),
+                                       method="bounded", options={"xatol": 0.01})
+        if res.success and res.fun < best_err:
+            best, best_err = float(tr[1](res.x)), float(res.fun)
+    return best, best_err
+
+
+def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq: np.ndarray, blocks: np.ndarray, *,
+                    weights: np.ndarray | None = None,
+                    columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray] | None = None,
+                    laws: Sequence[str] = COULOMB_LAWS + VISCOUS_LAWS, min_gain: float = MIN_GAIN,
+                    v_grid: np.ndarray | None = None, delta_grid: Sequence[float] = DELTA_GRID,
+                    refine: bool = True, unit: str = "rad/s", v_floor: float | None = None) -> FrictionChoice:
+    """Choose the Coulomb and viscous laws of joint ``j`` by time-blocked cross-validation.
+
+    Parameters
+    ----------
+    A : ndarray, shape (r, k)
+        The declared model's design *without* joint ``j``'s friction columns (FS, FV; drop them with
+        :func:`friction_column_indices`), with every other column (base parameters of all joints,
+        offsets, other joints' friction, already accepted effects).
+    y : ndarray, shape (r,)
+        Measured torques of the rows.
+    joint : ndarray of int, shape (r,)
+        0-based joint of each row.
+    j : int
+        The joint (0-based).
+    dq : ndarray, shape (r,)
+        Velocity of joint ``j`` at each row (used on the rows of joint ``j`` unless ``columns`` is given).
+    blocks : ndarray of int, shape (r,)
+        Time blocks of the rows (:func:`.stability.time_blocks`); one fold per block.
+    weights : ndarray, shape (r,), optional
+        Row weights of the fits (WLS: ``1/sigma_joint``); default 1 (OLS).
+    columns : callable, optional
+        ``columns(f, p) -> (r, p)``: the (decimated) columns of ``f(dq_j_full_rate) -> (M, p)`` on the
+        rows of joint ``j`` (zeros elsewhere). Default: ``f`` applied to ``dq`` on joint ``j``'s rows.
+    laws : sequence of str
+        Laws allowed (``sign`` and ``linear`` are always tried: the declared reference).
+    min_gain : float
+        Relative decrease of the CV error a more complex law needs to replace a simpler one.
+    v_grid : ndarray, optional
+        Velocity scales searched (default :func:`velocity_grid` of ``dq`` on joint ``j``'s rows).
+    delta_grid : sequence of float
+        Exponents of the ``power`` viscous law.
+    refine : bool
+        Refine ``v`` and ``delta`` continuously between grid points.
+    unit : str
+        Velocity unit in the description.
+    v_floor : float, optional
+        Smallest velocity scale of any ``sign`` in the laws, e.g. 3 times the standard deviation of the
+        velocity noise: ``sign(dq)`` becomes ``tanh(dq / v_floor)`` (so the declared law does not chatter
+        on noise at standstill, where identification data without rest phases give no evidence either
+        way), and the tanh search starts there. Default: none (a true ``sign``).
+
+    Returns
+    -------
+    FrictionChoice
+    """
+    A = np.asarray(A, float)
+    y = np.asarray(y, float)
+    joint = np.asarray(joint)
+    dq = np.asarray(dq, float)
+    r = y.size
+    if A.shape[0] != r or joint.shape != (r,) or dq.shape != (r,) or np.shape(blocks) != (r,):
+        raise ValueError(f"select_friction: A {A.shape}, y {y.shape}, joint {joint.shape}, dq {dq.shape} and "
+                         f"blocks {np.shape(blocks)} must have one entry per row")
+    rows = joint == j
+    if not rows.any():
+        raise IdentificationError(f"friction: joint {j + 1} has no rows")
+    bad = [x for x in laws if x not in COULOMB_LAWS + VISCOUS_LAWS]
+    if bad:
+        raise ValueError(f"select_friction: unknown laws {bad}; use {COULOMB_LAWS + VISCOUS_LAWS}")
+    if columns is None:
+        def columns(f, p):
+            X = np.zeros((r, p))
+            X[rows] = np.asarray(f(dq[rows]), float).reshape(-1, p)
+            return X
+    grid = velocity_grid(dq[rows]) if v_grid is None else np.asarray(v_grid, float)
+    if v_floor is not None:
+        if not v_floor > 0:
+            raise ValueError(f"select_friction: v_floor must be > 0, got {v_floor!r}")
+        grid = np.unique(np.r_[v_floor, grid[grid > v_floor]])
+        if grid.size < 3:
+            grid = v_floor * np.geomspace(1.0, 10.0, 4)
+    cv = BlockedLS(A, y, blocks, weights)
+    n_folds = len(cv.folds)
+
+    def err(claw, cpar, vlaw="linear", vpar=None, smooth=None):
+        pc = 2 if claw == "stribeck" else 1
+        X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]),
+                    pc + 1)
+        return cv.rel_err(X, rows)
+
+    tried: list[LawFit] = []
+
+    def choose_coulomb(vlaw, vpar):
+        best = LawFit("sign", None, err("sign", None, vlaw, vpar, v_floor), v_floor)
+        tried.append(best)
+        smooth = v_floor
+        for law in ("tanh", "stribeck"):
+            if law not in laws:
+                continue
+            p, e = _search(lambda v, law=law, sm=smooth: err(law, v, vlaw, vpar, sm), grid, refine and law == "tanh")
+            fit = LawFit(law, p, e, smooth if law == "stribeck" else None)
+            if law == "tanh":
+                smooth = p
+            tried.append(fit)
+            if e < best.cv_rel_err * (1.0 - min_gain):
+                best = fit
+        return best
+
+    def choose_viscous(c):
+        best = LawFit("linear", None, err(c.law, c.param, smooth=c.smooth))
+        if "power" in laws and len(delta_grid):
+            d, e = _search(lambda d: err(c.law, c.param, "power", d, c.smooth), np.asarray(delta_grid, float), refine)
+            fit = LawFit("power", d, e)
+            tried.append(fit)
+            if e < best.cv_rel_err * (1.0 - min_gain):
+                best = fit
+        return best
+
+    # coordinate descent: Coulomb law (linear viscous), viscous law (chosen Coulomb), and once more the
+    # Coulomb law with a non-linear viscous term (|dq|^delta with delta < 1 mimics a Stribeck/tanh knee)
+    best_c = choose_coulomb("linear", None)
+    best_v = choose_viscous(best_c)
+    if best_v.law != "linear":
+        c2 = choose_coulomb(best_v.law, best_v.param)
+        if c2.law != best_c.law:
+            best_c = c2
+            best_v = choose_viscous(c2)
+            if best_v.law == "linear":
+                best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err, c2.smooth)
+    choice = FrictionChoice(j, best_c, best_v, tuple(tried), {}, n_folds, unit)
+    # coefficients of the chosen laws on all rows (weighted LS of the whole model)
+    X = columns(choice.columns, 2 + (choice.coulomb.law == "stribeck"))
+    w = np.ones(r) if weights is None else np.asarray(weights, float)
+    M = np.hstack([A, X]) * w[:, None]
+    _, pinv, _ = _wls_basis(M)
+    theta = pinv @ (y * w)
+    bx = theta[A.shape[1]:]
+    coef = {"Fc": float(bx[0]), "Fv": float(bx[-1])}
+    if choice.coulomb.law == "stribeck":
+        coef["Fs"] = float(bx[0] + bx[1])
+    return FrictionChoice(j, best_c, best_v, tuple(tried), coef, n_folds, unit)
+
+
+def law_errors(choice: FrictionChoice) -> dict[str, float]:
+    """``{law label: CV relative error}`` of every law tried (for JSON/report tables)."""
+    return {c.label: float(c.cv_rel_err) for c in choice.candidates}
+
+
+
+def replaced_friction_columns(model: IdentificationModel, choices: Sequence[FrictionChoice]
+                              ) -> tuple[tuple[str, ...], Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]]:
+    """The declared model with the friction laws of ``choices`` in place of its ``FS``/``FV`` columns.
+
+    Returns
+    -------
+    names : tuple of str
+        Column names: the declared base columns without the replaced joints' ``FS<j>``, ``FV<j>``, then
+        :meth:`FrictionChoice.names` of each choice.
+    columns : callable
+        ``columns(q, dq, ddq) -> (N, n, len(names))`` per-sample regressor.
+    """
+    names = tuple(model.BASE_NAMES)
+    drop = sorted(i for ch in choices for part in friction_column_indices(names, ch.joint) for i in part)
+    keep = [i for i in range(len(names)) if i not in set(drop)]
+    out_names = tuple(names[i] for i in keep) + tuple(nm for ch in choices for nm in ch.names())
+
+    def columns(q, dq, ddq):
+        R = np.asarray(model.regressor(q, dq, ddq), float)
+        parts = [R[:, :, keep]]
+        for ch in choices:
+            C = np.zeros((R.shape[0], R.shape[1], len(ch.names())))
+            C[:, ch.joint, :] = ch.columns(np.asarray(dq, float)[:, ch.joint])
+            parts.append(C)
+        return np.concatenate(parts, axis=2)
+    return out_names, columns

@@ -1,0 +1,335 @@
+"""Stability of what the diagnosis loop names: time-blocked folds, selection frequency, confidence
+intervals, OLS-vs-WLS agreement and the placebo stop rule (issue 10, item 3).
+
+Everything here works on plain arrays and small frozen dataclasses, so that the staged
+``diagnose`` can call it at any stage.
+
+Time-blocked cross-validation
+-----------------------------
+:func:`time_blocks` cuts every experiment into ``n_blocks`` *contiguous* blocks of equal length (rows in
+time order, never shuffled); fold ``k`` holds out block ``k`` of every experiment (:func:`blocked_folds`).
+Rows of the decimated system are low-passed at the decimation cut-off, so neighbouring rows are
+correlated over a few filter lengths: a shuffled K-fold would leak that correlation from the training
+rows into the test rows and reward over-fitting (Arlot & Celisse 2010, "A survey of cross-validation
+procedures for model selection", sec. 8.1; Bergmeir & Benitez 2012 for blocked CV of dependent data).
+With a few long blocks, the leak is limited to one filter length at each block edge.
+
+:class:`BlockedLS` fits a weighted least-squares model ``y ~ A`` on each fold's training rows once
+and then evaluates extra columns ``X`` against it in ``O(r k p)`` (projection of ``X`` out of the span
+of ``A``, Frisch-Waugh-Lovell), which makes 1-D searches over a grid of column shapes cheap.
+
+Acceptance rules
+----------------
+* :func:`selection_frequency` - run a selection on the training rows of each fold and count, for every
+  named effect, the share of folds that select it; :func:`stable` keeps those selected in *most* folds
+  (``> MIN_SELECTION_FREQUENCY``).
+* :func:`coefficient_ci` - HAC (Newey-West) covariance of the added coefficients, per-parameter
+  Student-t intervals and the joint Wald test of "no effect"; an effect is kept only when the Wald
+  test rejects ``beta = 0`` at ``level`` (its confidence ellipsoid excludes the origin).
+* :func:`ols_wls_agreement` - the effects named under OLS and under WLS: their intersection, and a
+  message when they differ (keep only the common ones, issue 10 item 3).
+* :func:`placebo_stop` - joints on which a placebo column passed the tests: the loop stops there.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats as sst
+
+from .stats import hac_covariance, hac_lag, segments_of
+
+__all__ = [
+    "MIN_SELECTION_FREQUENCY",
+    "N_FOLDS",
+    "Agreement",
+    "BlockedLS",
+    "CoefficientCI",
+    "blocked_folds",
+    "coefficient_ci",
+    "ols_wls_agreement",
+    "placebo_stop",
+    "selection_frequency",
+    "stable",
+    "time_blocks",
+]
+
+#: default number of contiguous time blocks (= folds)
+N_FOLDS = 5
+#: an effect is stable when selected in more than this share of the folds ("most folds")
+MIN_SELECTION_FREQUENCY = 0.5
+#: relative singular-value tolerance of the fold fits
+RANK_TOL = 1e-10
+
+
+def time_blocks(experiment: np.ndarray, order: np.ndarray, n_blocks: int = N_FOLDS) -> np.ndarray:
+    """Contiguous time blocks: block id (0 .. n_blocks-1) of every row.
+
+    Parameters
+    ----------
+    experiment : array_like of int, shape (r,)
+        Experiment of each row.
+    order : array_like, shape (r,)
+        Position of the row in time within its experiment (sample index or time); rows of several joints
+        at the same sample get the same block.
+    n_blocks : int
+        Blocks per experiment (>= 2).
+
+    Returns
+    -------
+    ndarray of int, shape (r,)
+        Block ``k`` of every experiment is the ``k``-th contiguous ``1/n_blocks`` of its time span.
+    """
+    experiment = np.asarray(experiment)
+    order = np.asarray(order, float)
+    if experiment.shape != order.shape or experiment.ndim != 1:
+        raise ValueError(f"time_blocks: experiment {experiment.shape} and order {order.shape} must be equal 1-D shapes")
+    if int(n_blocks) < 2:
+        raise ValueError(f"time_blocks: n_blocks must be >= 2, got {n_blocks!r}")
+    out = np.zeros(order.size, int)
+    for e in np.unique(experiment):
+        m = experiment == e
+        o = order[m]
+        u = np.unique(o)
+        # equal numbers of distinct samples per block
+        rank = np.searchsorted(u, o)
+        out[m] = np.minimum((rank * n_blocks) // max(u.size, 1), n_blocks - 1)
+    return out
+
+
+def blocked_folds(blocks: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(train, test)`` boolean masks, one fold per block id (test = that block of every experiment)."""
+    blocks = np.asarray(blocks)
+    return [(blocks != b, blocks == b) for b in np.unique(blocks)]
+
+
+def _wls_basis(Aw: np.ndarray):
+    """Orthonormal basis U, pseudo-inverse and rank of the weighted design."""
+    if Aw.shape[1] == 0:
+        return np.zeros((Aw.shape[0], 0)), np.zeros((0, Aw.shape[0])), 0
+    U, s, Vt = np.linalg.svd(Aw, full_matrices=False)
+    rank = int(np.sum(s > RANK_TOL * s[0])) if s.size and s[0] > 0 else 0
+    U, s, Vt = U[:, :rank], s[:rank], Vt[:rank]
+    return U, (Vt.T / s) @ U.T, rank
+
+
+@dataclass(frozen=True, eq=False)
+class _Fold:
+    train: np.ndarray
+    test: np.ndarray
+    w: np.ndarray          # weights of the training rows
+    U: np.ndarray          # orthonormal basis of A_train * w
+    pinv: np.ndarray       # (k, r_train)
+    e0: np.ndarray         # weighted training residual of y on A
+    pred0: np.ndarray      # test prediction of A alone
+
+
+class BlockedLS:
+    """Weighted LS of ``y`` on ``A`` on the training rows of each time-blocked fold, reused for many
+    candidate column sets ``X`` (added to ``A``).
+
+    Parameters
+    ----------
+    A : ndarray, shape (r, k)
+        The fixed part of the design (may have zero columns).
+    y : ndarray, shape (r,)
+    blocks : ndarray of int, shape (r,)
+        :func:`time_blocks`.
+    weights : ndarray, shape (r,), optional
+        Row weights of the fit (e.g. ``1/sigma_j`` for WLS); default 1.
+    """
+
+    def __init__(self, A: np.ndarray, y: np.ndarray, blocks: np.ndarray, weights: np.ndarray | None = None):
+        A = np.asarray(A, float)
+        y = np.asarray(y, float)
+        if A.ndim != 2 or A.shape[0] != y.size:
+            raise ValueError(f"BlockedLS: A {A.shape} and y {y.shape} do not have the same rows")
+        w = np.ones(y.size) if weights is None else np.asarray(weights, float)
+        if w.shape != y.shape or not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise ValueError("BlockedLS: weights must be finite, non-negative and one per row")
+        self.A, self.y, self.w = A, y, w
+        self.folds: list[_Fold] = []
+        for tr, te in blocked_folds(blocks):
+            wt = w[tr]
+            U, pinv, _ = _wls_basis(A[tr] * wt[:, None])
+            yw = y[tr] * wt
+            th = pinv @ yw
+            self.folds.append(_Fold(tr, te, wt, U, pinv, yw - U @ (U.T @ yw), A[te] @ th))
+
+    def oof_residual(self, X: np.ndarray | None = None) -> np.ndarray:
+        """Out-of-fold residual ``y - prediction`` of every row (each row predicted by the fold that
+        holds it out), with the columns ``X`` (r, p) added to ``A``."""
+        out = np.empty(self.y.size)
+        for f in self.folds:
+            pred = f.pred0
+            if X is not None and X.shape[1]:
+                Xw = X[f.train] * f.w[:, None]
+                Xp = Xw - f.U @ (f.U.T @ Xw)
+                b = np.linalg.lstsq(Xp, f.e0, rcond=None)[0]
+                pred = pred + X[f.test] @ b - self.A[f.test] @ (f.pinv @ (Xw @ b))
+            out[f.test] = self.y[f.test] - pred
+        return out
+
+    def rel_err(self, X: np.ndarray | None, rows: np.ndarray) -> float:
+        """Out-of-fold relative error norm ``||e||/||y||`` on the rows ``rows`` (mask or indices)."""
+        e = self.oof_residual(X)[rows]
+        den = float(np.sum(self.y[rows] ** 2))
+        return math.sqrt(float(e @ e) / den) if den > 0 else math.inf
+
+
+# ------------------------------------------------------------------------------------------------
+def selection_frequency(select: Callable[[np.ndarray], Iterable[Hashable]], blocks: np.ndarray) -> dict:
+    """Share of the time-blocked folds in which each effect is selected.
+
+    Parameters
+    ----------
+    select : callable
+        ``select(train_mask) -> iterable of keys`` (e.g. ``(kind, joint, modulation)``): the effects a
+        selection run on the training rows names.
+    blocks : ndarray of int, shape (r,)
+        :func:`time_blocks` of the rows.
+
+    Returns
+    -------
+    dict key -> float in [0, 1]
+    """
+    folds = blocked_folds(blocks)
+    count: dict = {}
+    for tr, _ in folds:
+        for key in set(select(tr)):
+            count[key] = count.get(key, 0) + 1
+    return {k: c / len(folds) for k, c in count.items()}
+
+
+def stable(freq: Mapping, min_frequency: float = MIN_SELECTION_FREQUENCY) -> list:
+    """Keys selected in more than ``min_frequency`` of the folds, most frequent first."""
+    return [k for k, f in sorted(freq.items(), key=lambda kv: -kv[1]) if f > min_frequency]
+
+
+@dataclass(frozen=True)
+class CoefficientCI:
+    """Confidence intervals of added coefficients.
+
+    Attributes
+    ----------
+    values, std : ndarray, shape (p,)
+        Estimates and HAC standard deviations.
+    low, high : ndarray, shape (p,)
+        Per-parameter Student-t intervals at ``level``.
+    p_value : float
+        Joint Wald test of ``beta = 0`` (F(p, dof)).
+    excludes_zero : bool
+        ``p_value < 1 - level``: the joint confidence region excludes "no effect".
+    level : float
+    """
+
+    values: np.ndarray
+    std: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    p_value: float
+    excludes_zero: bool
+    level: float
+
+
+def coefficient_ci(A: np.ndarray, X: np.ndarray, y: np.ndarray, *, weights: np.ndarray | None = None,
+                   groups: np.ndarray | None = None, level: float = 0.99) -> CoefficientCI:
+    """Confidence intervals of the coefficients of ``X`` in the weighted LS fit ``y ~ [A X]``.
+
+    The covariance is Newey-West (Bartlett weights, lag by :func:`.stats.hac_lag` on the residual,
+    lags not crossing ``groups``) of the Frisch-Waugh-Lovell regression of the residual on ``X``
+    projected out of ``A``, never smaller than the white-noise one (as in :mod:`.core`): a residual
+    that is serially correlated or heteroscedastic does not make a spurious effect "significant".
+
+    Parameters
+    ----------
+    A : ndarray, shape (r, k)
+    X : ndarray, shape (r, p)
+    y : ndarray, shape (r,)
+    weights : ndarray, shape (r,), optional
+    groups : ndarray, shape (r,), optional
+        Contiguous-time segments (e.g. ``joint * 100000 + experiment``).
+    level : float
+        Confidence level in (0, 1).
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"coefficient_ci: level must lie in (0, 1), got {level!r}")
+    X = np.asarray(X, float).reshape(len(y), -1)
+    w = np.ones(len(y)) if weights is None else np.asarray(weights, float)
+    U, _, rank = _wls_basis(np.asarray(A, float) * w[:, None])
+    Xw = X * w[:, None]
+    Xp = Xw - U @ (U.T @ Xw)
+    yw = np.asarray(y, float) * w
+    e0 = yw - U @ (U.T @ yw)
+    G = Xp.T @ Xp
+    p = X.shape[1]
+    Ginv = np.linalg.pinv(G)
+    b = Ginv @ (Xp.T @ e0)
+    e = e0 - Xp @ b
+    dof = max(len(y) - rank - p, 1)
+    segs = segments_of(groups, len(y))
+    lag = hac_lag(e, groups)
+    S = hac_covariance(Xp * e[:, None], max_lag=lag, segments=segs)
+    C_hac = Ginv @ S @ Ginv * (len(y) / dof)
+    C_iid = Ginv * float(e @ e) / dof
+    C = C_hac if np.trace(C_hac @ np.linalg.pinv(C_iid)) >= p else C_iid
+    std = np.sqrt(np.maximum(np.diag(C), 0.0))
+    tq = float(sst.t.ppf(0.5 + level / 2.0, dof))
+    try:
+        W = float(b @ np.linalg.solve(C, b))
+    except np.linalg.LinAlgError:
+        W = float(b @ np.linalg.pinv(C) @ b)
+    pv = float(sst.f.sf(max(W, 0.0) / p, p, dof))
+    return CoefficientCI(b, std, b - tq * std, b + tq * std, pv, bool(pv < 1.0 - level), level)
+
+
+@dataclass(frozen=True)
+class Agreement:
+    """Effects named under two estimators.
+
+    Attributes
+    ----------
+    common : tuple
+        Keys named by both, in the order of the first list.
+    only_first, only_second : tuple
+    message : str or None
+        Says which effects depend on the estimator (None when both name the same effects).
+    """
+
+    common: tuple
+    only_first: tuple
+    only_second: tuple
+    message: str | None
+
+
+def ols_wls_agreement(first: Sequence[Hashable], second: Sequence[Hashable], *,
+                      labels: tuple[str, str] = ("OLS", "WLS"), describe: Callable[[Hashable], str] = str) -> Agreement:
+    """Intersection of the effects named by two estimators (keys such as ``(kind, joint, modulation)``);
+    the loop keeps only the common ones and reports the others with ``message``."""
+    s1, s2 = list(dict.fromkeys(first)), list(dict.fromkeys(second))
+    common = tuple(k for k in s1 if k in set(s2))
+    a = tuple(k for k in s1 if k not in set(s2))
+    b = tuple(k for k in s2 if k not in set(s1))
+    msg = None
+    if a or b:
+        parts = []
+        if a:
+            parts.append(f"only {labels[0]} names " + ", ".join(describe(k) for k in a))
+        if b:
+            parts.append(f"only {labels[1]} names " + ", ".join(describe(k) for k in b))
+        msg = ("the named effects depend on the estimator: " + "; ".join(parts)
+               + f"; kept only the {len(common)} effect(s) both name")
+    return Agreement(common, a, b, msg)
+
+
+def placebo_stop(placebo_passed: Mapping[int, bool] | Iterable[int]) -> frozenset:
+    """Joints (0-based) on which the loop stops: a placebo column (no physical meaning) passed the
+    significance and validation tests there, so the residual of that joint holds structure the library
+    cannot name specifically and any candidate accepted on it would be a coincidence of the same kind.
+
+    ``placebo_passed``: ``{joint: passed}`` or the joints where one passed."""
+    if isinstance(placebo_passed, Mapping):
+        return frozenset(int(j) for j, ok in placebo_passed.items() if ok)
+    return frozenset(int(j) for j in placebo_passed)

@@ -1,0 +1,254 @@
+"""What is still missing after the loop: structure in the residual that no candidate explains
+(issue 10, item 4).
+
+For each joint ``j``, a non-parametric model (scikit-learn's ``HistGradientBoostingRegressor``,
+gradient-boosted trees) predicts the final residual ``e_j`` from the signals of *all* joints
+(``q, dq, ddq, tau_hat`` and the time since the start of the experiment). It is fitted and evaluated
+out of fold on contiguous time blocks (:func:`.stability.time_blocks`; ``K`` blocks per experiment,
+no shuffling), so a model that only memorises serially correlated noise scores ``R^2 <= 0``. The
+share of the residual variance that is predictable but unexplained is the out-of-fold ``R^2``,
+clipped to [0, 1].
+
+Noise calibration
+-----------------
+The threshold is calibrated on the residual itself: the same out-of-fold model is fitted ``n_null``
+times on the residual *block-permuted* against the signals: within each experiment the residual is
+rotated by a random offset, cut into blocks of its correlation length (twice the lag where its
+autocorrelation falls below 0.1, at most ``MAX_BLOCK_SHARE`` of the experiment) and the blocks are
+shuffled (a moving-block permutation, Kuensch 1989). This keeps the residual's distribution and its
+short-range autocorrelation (coloured noise stays coloured) and breaks its alignment with the signals,
+also for periodic excitations, where a plain circular time shift would keep the residual a function of
+the motion's phase. What the trees "predict" then is chance. A joint is flagged when its share exceeds
+``max(MIN_SHARE, max(null R^2) + NULL_MARGIN)``; white-noise residuals give a share ~0 and are not
+flagged.
+
+Which signals
+-------------
+For a flagged joint, the permutation importance of each signal (Breiman 2001; each column permuted
+in the held-out block, the drop of out-of-fold ``R^2``), summed over the joint's signals of the same
+name; the signals carrying at least ``IMPORTANCE_SHARE`` of the total are listed, most important first.
+On a periodic excitation (Fourier series) every signal is a function of the motion's phase, so the
+trees may use another joint's signal as a proxy: the signals listed are those the model used, a hint
+rather than a cause.
+
+``scikit-learn`` is an optional dependency (extra ``diagnose``), imported when this runs.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .stability import N_FOLDS, blocked_folds, time_blocks
+
+__all__ = ["MIN_SHARE", "NULL_MARGIN", "Unexplained", "rows_to_samples", "signal_matrix", "unexplained_structure"]
+
+#: smallest share of residual variance ever flagged
+MIN_SHARE = 0.05
+#: margin above the largest time-shifted (null) share
+NULL_MARGIN = 0.05
+#: time-shift null fits per joint
+N_NULL = 3
+#: longest block of the block permutation, as a share of the experiment
+MAX_BLOCK_SHARE = 0.05
+#: a signal is listed when it carries this share of the total permutation importance
+IMPORTANCE_SHARE = 0.1
+#: most signals listed
+MAX_SIGNALS = 3
+#: gradient-boosting settings (small: the residual has a few thousand rows per joint)
+HGB_PARAMS = {"max_iter": 60, "learning_rate": 0.15, "max_leaf_nodes": 15, "min_samples_leaf": 40,
+              "l2_regularization": 1.0, "early_stopping": False}
+
+
+@dataclass(frozen=True)
+class Unexplained:
+    """Structure left in one joint's residual.
+
+    Attributes
+    ----------
+    joint : int
+        1-based (the JSON contract of issue 10).
+    share : float
+        Out-of-fold R^2 of the residual, in [0, 1].
+    threshold : float
+        Noise-calibrated threshold it was compared with.
+    flagged : bool
+    signals : tuple of str
+        Signals it depends on (permutation importance), most important first.
+    """
+
+    joint: int
+    share: float
+    threshold: float
+    flagged: bool
+    signals: tuple
+
+    def to_dict(self) -> dict:
+        return {"joint": self.joint, "share": self.share, "signals": list(self.signals)}
+
+
+def signal_matrix(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, tau_hat: np.ndarray | None, t: np.ndarray
+                  ) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Feature matrix (s, 4n + 1) and names (``q1 .. qn, dq1.., ddq1.., tau_hat1.., t``) per sample."""
+    q = np.asarray(q, float)
+    n = q.shape[1]
+    parts, names = [], []
+    for nm, x in (("q", q), ("dq", dq), ("ddq", ddq), ("tau_hat", tau_hat)):
+        if x is None:
+            continue
+        parts.append(np.asarray(x, float))
+        names += [f"{nm}{j + 1}" for j in range(n)]
+    parts.append(np.asarray(t, float)[:, None])
+    names.append("t")
+    return np.hstack(parts), tuple(names)
+
+
+def rows_to_samples(values: np.ndarray, joint: np.ndarray, experiment: np.ndarray, index: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stacked rows (joint-major, as the observation systems) to one line per sample.
+
+    Parameters
+    ----------
+    values : ndarray, shape (r,) or (r, m)
+        Per-row values (e.g. the residual) - for per-row signals of all joints ``(r, n)``, take the rows
+        of one joint instead.
+    joint, experiment, index : ndarray of int, shape (r,)
+        Joint (0-based), experiment and sample index within the experiment of each row.
+
+    Returns
+    -------
+    per_sample : ndarray, shape (s, n) (or (s, n, m))
+        Value of each joint at each sample (samples ordered by experiment, then index).
+    sample_experiment, sample_index : ndarray of int, shape (s,)
+    """
+    values = np.asarray(values, float)
+    joint, experiment, index = (np.asarray(x) for x in (joint, experiment, index))
+    keys = np.unique(np.column_stack([experiment, index]), axis=0)
+    s = keys.shape[0]
+    n = int(joint.max()) + 1
+    pos = {(int(e), int(i)): k for k, (e, i) in enumerate(keys)}
+    where = np.array([pos[(int(e), int(i))] for e, i in zip(experiment, index)])
+    out = np.full((s, n) + values.shape[1:], np.nan)
+    out[where, joint] = values
+    if np.isnan(out).any():
+        raise ValueError("rows_to_samples: some joints lack rows at some samples (every joint must have a row "
+                         "at every sample)")
+    return out, keys[:, 0], keys[:, 1]
+
+
+def _oof(X, e, folds, seed):
+    from sklearn.ensemble import HistGradientBoostingRegressor
+
+    pred = np.empty_like(e)
+    models = []
+    for tr, te in folds:
+        m = HistGradientBoostingRegressor(random_state=seed, **HGB_PARAMS).fit(X[tr], e[tr])
+        pred[te] = m.predict(X[te])
+        models.append(m)
+    return pred, models
+
+
+def _r2(e, pred):
+    ss = float(np.sum((e - e.mean()) ** 2))
+    return 1.0 - float(np.sum((e - pred) ** 2)) / ss if ss > 0 else 0.0
+
+
+def _block_length(e: np.ndarray, n: int) -> int:
+    """Twice the lag where the residual's autocorrelation first falls below 0.1, at most
+    ``MAX_BLOCK_SHARE`` of the experiment (at least 1)."""
+    x = e - e.mean()
+    c0 = float(x @ x)
+    cap = max(1, int(MAX_BLOCK_SHARE * n))
+    if c0 <= 0:
+        return 1
+    for k in range(1, cap + 1):
+        if float(x[k:] @ x[:-k]) / c0 < 0.1:
+            return max(1, min(2 * k, cap))
+    return cap
+
+
+def _block_permute(e, experiment, rng):
+    """The residual cut into blocks of its correlation length, blocks shuffled within each experiment."""
+    out = np.empty_like(e)
+    for x in np.unique(experiment):
+        idx = np.flatnonzero(experiment == x)
+        ex = np.roll(e[idx], int(rng.integers(idx.size)))
+        L = _block_length(ex, idx.size)
+        blocks = [ex[i:i + L] for i in range(0, idx.size, L)]
+        out[idx] = np.concatenate([blocks[i] for i in rng.permutation(len(blocks))])
+    return out
+
+
+def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Sequence[str], *,
+                          experiment: np.ndarray | None = None, order: np.ndarray | None = None,
+                          n_folds: int = N_FOLDS, n_null: int = N_NULL, min_share: float = MIN_SHARE,
+                          null_margin: float = NULL_MARGIN, seed: int = 0, joints: Sequence[int] | None = None
+                          ) -> list[Unexplained]:
+    """Share of each joint's residual that the signals predict out of fold, with a noise-calibrated threshold.
+
+    Parameters
+    ----------
+    residual : ndarray, shape (s, n)
+        Final residual per sample and joint (decimated rows of each joint, in sample order).
+    features : ndarray, shape (s, f)
+        Signals per sample (:func:`signal_matrix`).
+    names : sequence of str
+        Feature names; ``q3`` and the like (signal name + 1-based joint) are reported as they are.
+    experiment : ndarray of int, shape (s,), optional
+        Experiment of each sample (default: one).
+    order : ndarray, shape (s,), optional
+        Sample index within the experiment (default: position in the array).
+    n_folds : int
+        Contiguous time blocks per experiment.
+    n_null : int
+        Time-shift null fits per joint.
+    min_share, null_margin : float
+        Threshold ``max(min_share, max(null) + null_margin)``.
+    seed : int
+        Seeds the shifts, the permutations and the trees.
+    joints : sequence of int, optional
+        0-based joints to analyse (default all).
+
+    Returns
+    -------
+    list of Unexplained
+        One per joint analysed (``flagged`` says which go to the JSON ``unexplained`` list).
+    """
+    E = np.asarray(residual, float)
+    if E.ndim == 1:
+        E = E[:, None]
+    X = np.asarray(features, float)
+    s, n = E.shape
+    if X.shape[0] != s or len(names) != X.shape[1]:
+        raise ValueError(f"unexplained_structure: residual {E.shape}, features {X.shape} and {len(names)} names disagree")
+    experiment = np.zeros(s, int) if experiment is None else np.asarray(experiment)
+    order = np.arange(s) if order is None else np.asarray(order)
+    folds = blocked_folds(time_blocks(experiment, order, n_folds))
+    rng = np.random.default_rng(seed)
+    out = []
+    for j in (range(n) if joints is None else joints):
+        e = E[:, j]
+        pred, models = _oof(X, e, folds, seed)
+        share = float(np.clip(_r2(e, pred), 0.0, 1.0))
+        null = [float(np.clip(_r2(es, _oof(X, es, folds, seed)[0]), 0.0, 1.0))
+                for es in (_block_permute(e, experiment, rng) for _ in range(n_null))]
+        thr = max(min_share, (max(null) if null else 0.0) + null_margin)
+        flagged = share > thr
+        sigs: tuple = ()
+        if flagged:
+            base = _r2(e, pred)
+            imp = np.zeros(X.shape[1])
+            for c in range(X.shape[1]):
+                p2 = np.empty_like(e)
+                for (tr, te), m in zip(folds, models):
+                    Xt = X[te].copy()
+                    Xt[:, c] = rng.permutation(Xt[:, c])
+                    p2[te] = m.predict(Xt)
+                imp[c] = max(base - _r2(e, p2), 0.0)
+            tot = imp.sum()
+            if tot > 0:
+                ordr = np.argsort(-imp)
+                sigs = tuple(names[c] for c in ordr[:MAX_SIGNALS] if imp[c] >= IMPORTANCE_SHARE * tot)
+        out.append(Unexplained(int(j) + 1, share, float(thr), bool(flagged), sigs))
+    return out
