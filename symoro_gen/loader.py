@@ -57,9 +57,17 @@ def _manifest_sha(p: Path) -> str | None:
 
 
 def import_package(path: str | os.PathLike) -> IdentificationModel:
-    """Import the generated package in folder ``path`` (once per process and folder)."""
+    """Import the generated package in folder ``path`` (once per process, folder and package content).
+
+    The module is named ``_symoro_generated_<name>_<sha256 of the path>_<sha256 of __init__.py>``:
+    deterministic across processes, and a package regenerated in place is imported afresh.
+    """
     p = Path(path).resolve()
-    modname = f"_symoro_generated_{p.name}_{hashlib.sha256(str(p).encode()).hexdigest()[:12]}"
+    try:
+        content = hashlib.sha256((p / "__init__.py").read_bytes()).hexdigest()[:8]
+    except OSError as exc:
+        raise ModelError(f"cannot read generated model at {p}: {exc.strerror or exc}") from None
+    modname = f"_symoro_generated_{p.name}_{hashlib.sha256(str(p).encode()).hexdigest()[:12]}_{content}"
     if modname in sys.modules:
         return cast(IdentificationModel, sys.modules[modname])
     spec = importlib.util.spec_from_file_location(modname, p / "__init__.py", submodule_search_locations=[str(p)])
