@@ -14,7 +14,14 @@ import traceback
 import warnings
 from pathlib import Path
 
-from .errors import DataFileError, IdentificationError, ModelError, RobotFileError, ShapeError, SymoroError
+from .errors import (
+    DataFileError,
+    IdentificationError,
+    ModelError,
+    RobotFileError,
+    ShapeError,
+    SymoroError,
+)
 
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1

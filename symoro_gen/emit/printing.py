@@ -156,7 +156,7 @@ class OpCount:
     div: int = 0
     func: int = 0
 
-    def __add__(self, o: "OpCount") -> "OpCount":
+    def __add__(self, o: OpCount) -> OpCount:
         return OpCount(self.mul + o.mul, self.add + o.add, self.div + o.div, self.func + o.func)
 
     @property

@@ -11,4 +11,4 @@ lazily by the first evaluation, and falls back to NumPy with one warning when it
 from .ccompile import BuildResult, CBuildError, build_library
 from .model import GeneratedModel
 
-__all__ = ["GeneratedModel", "build_library", "BuildResult", "CBuildError"]
+__all__ = ["BuildResult", "CBuildError", "GeneratedModel", "build_library"]

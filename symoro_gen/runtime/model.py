@@ -14,7 +14,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from .batch import evaluate_kernel
 from .casadi import build_function
-from .ccompile import BuildResult, CBuildError, build_library, compiler, find_library, load_functions
+from .ccompile import (
+    BuildResult,
+    CBuildError,
+    build_library,
+    compiler,
+    find_library,
+    load_functions,
+)
 from .inputs import joint_states, output_array
 
 #: (robot, C file) pairs already warned about in this process: one fallback warning per model
@@ -94,7 +101,7 @@ class GeneratedModel:
             return "numpy"
         return "c" if (find_library(self.c_path) is not None or compiler() is not None) else "numpy"
 
-    def numpy_only(self) -> "GeneratedModel":
+    def numpy_only(self) -> GeneratedModel:
         """The same model evaluated with the NumPy kernels only (for comparisons)."""
         m = object.__new__(GeneratedModel)
         m.__dict__.update(self.__dict__)

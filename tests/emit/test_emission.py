@@ -1,5 +1,4 @@
 """Emission properties: deterministic, atomic, faithful to the committed generated/ folder."""
-import filecmp
 import json
 from pathlib import Path
 
@@ -54,8 +53,8 @@ def test_compare_packages_ignores_only_tool_versions(tmp_path):
 
 def test_generated_files_carry_no_tool_version_and_no_numpy_repr(tmp_path):
     """The files depend on the robot file and the generator only (issue 8: determinism)."""
-    import sympy
     import numpy
+    import sympy
 
     emit_robot(load_robot("lwr4"), tmp_path)
     for p in (tmp_path / "lwr4").iterdir():

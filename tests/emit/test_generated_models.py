@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import symoro_gen
 from symoro_gen import load_model
 from symoro_gen.baseparams.regroup import numeric_rank
 from symoro_gen.description import load_robot
@@ -71,7 +70,7 @@ def test_emitted_equals_numeric_newton_euler(robot_and_model):
 
 
 def test_base_identity_and_rank(robot_and_model):
-    robot, m = robot_and_model
+    _robot, m = robot_and_model
     rng = np.random.default_rng(3)
     q, dq, ddq = _states(rng, 60, m.N_JOINTS)
     Ws = m.standard_regressor(q, dq, ddq)
@@ -125,8 +124,8 @@ def test_lwr4_counts_match_the_papers_model():
     assert m.PAYLOAD_NAMES == ("XX8", "XY8", "XZ8", "YY8", "YZ8", "ZZ8", "MX8", "MY8", "MZ8", "M8")
 
 
-def test_c_and_numpy_backends_agree(robot_and_model, monkeypatch):
-    robot, m = robot_and_model
+def test_c_and_numpy_backends_agree(robot_and_model):
+    _, m = robot_and_model
     rng = np.random.default_rng(5)
     q, dq, ddq = _states(rng, 300, m.N_JOINTS)
     dq[::7] = 0.0  # sign(0) must agree too

@@ -59,7 +59,7 @@ def _to_sx(e: sp.Expr, env: dict, ca: Any) -> Any:
             out = out * a
         return out
     if e.is_Pow:
-        b, x = e.as_base_exp()
+        x = e.as_base_exp()[1]
         if x.is_Integer:
             return args[0] ** int(x)
         return ca.power(args[0], args[1])
