@@ -16,7 +16,7 @@ endif
 .PHONY: help install robot robots check-generated test bench demo clean
 
 help:
-	@echo "make demo | make test | make robot ROBOT=<name> | make robots | make check-generated | make bench"
+	@echo "make demo | make test | make robot ROBOT=<name> (generate + build) | make robots | make check-generated | make bench"
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -29,17 +29,17 @@ $(STAMP): pyproject.toml $(if $(VIRTUAL_ENV),,$(VENV)/bin/python)
 
 install: $(STAMP)
 
+# generate, then compile the C kernels (otherwise compiled on first use)
 robot: $(STAMP)
 	$(PY) -m symoro_gen generate $(ROBOT)
+	$(PY) -m symoro_gen build $(ROBOT)
 
 robots: $(STAMP)
 	@set -e; for f in robots/*.toml; do $(PY) -m symoro_gen generate $$(basename $$f .toml); done
 
+# every file of generated/ against a fresh generation, tool versions recorded in manifest.json excepted
 check-generated: $(STAMP)
-	@set -e; tmp=$$(mktemp -d); \
-	for f in robots/*.toml; do $(PY) -m symoro_gen --quiet generate $$(basename $$f .toml) --out $$tmp; done; \
-	if diff -r --exclude=__pycache__ --exclude=_build generated $$tmp; then echo "generated/ matches the generator"; rm -rf $$tmp; \
-	else echo "generated/ differs from the generator: run 'make robots' and commit"; rm -rf $$tmp; exit 1; fi
+	$(PY) -m symoro_gen.emit.check
 
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q

@@ -1,7 +1,8 @@
 """Generator benchmarks (issue 2), on the LWR4 with all 14 parameters per joint.
 
 Prints each figure and its ratio to its anchor:
-* generation end to end (parse, Newton-Euler, base parameters, emit NumPy + CasADi + C);
+* generation end to end (parse, Newton-Euler, base parameters, emit NumPy + CasADi + C source);
+* compiling the C kernels (`build()`, done once; importing compiles nothing);
   anchors: SymPyBotics 3.2 s, OpenSYMORO 0.4-0.6 s (measured on this machine class; not re-run);
 * operation count of the emitted base regressor; anchors SymPyBotics 730 mul / 458 add,
   OpenSYMORO 801 / 456;
@@ -69,6 +70,10 @@ def main() -> int:
     results["mul"] = ops.mul + ops.div
 
     m = load_model(out / "lwr4_full")
+    t = time.perf_counter()
+    built = m.build()  # importing compiled nothing: compile the C kernels now (symoro-gen build)
+    print(f"[build] C kernels compiled in {time.perf_counter() - t:.1f} s -> {built.path.name} "
+          f"({(out / 'lwr4_full' / 'regressor_lwr4_full.c').stat().st_size / 1e3:.0f} kB of C)")
     rng = np.random.default_rng(0)
     n = m.N_JOINTS
     q = rng.uniform(-np.pi, np.pi, (N_SAMPLES, n))

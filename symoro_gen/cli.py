@@ -14,7 +14,14 @@ import traceback
 import warnings
 from pathlib import Path
 
-from .errors import DataFileError, IdentificationError, ModelError, RobotFileError, ShapeError, SymoroError
+from .errors import (
+    DataFileError,
+    IdentificationError,
+    ModelError,
+    RobotFileError,
+    ShapeError,
+    SymoroError,
+)
 
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1
@@ -37,12 +44,14 @@ def cmd_generate(args) -> int:
     from .baseparams.regroup import group_base_parameters
     from .description import load_robot
     from .dynamics.newton_euler import build_regressor
-    from .emit.package import emit_from
+    from .emit.package import check_name, check_replaceable, emit_from
     from .loader import generated_dir
     from .progress import progress_bar, stage_callback
 
     robot = load_robot(args.robot)
     out = Path(args.out) if args.out else generated_dir()
+    check_name(robot)
+    check_replaceable(out / robot.name, robot.name, args.force)  # before the (long) generation
     # the steps of emit_robot, one bar over them
     with progress_bar(generation_steps(robot), f"{robot.name}", unit="step") as bar:
         reg = build_regressor(robot, progress=stage_callback(bar, prefix=f"{robot.name}: newton-euler "))
@@ -50,13 +59,27 @@ def cmd_generate(args) -> int:
         bp = group_base_parameters(reg)
         bar.update(1)
         bar.set_description(f"{robot.name}: emission (NumPy, C, CasADi)")
-        m = emit_from(reg, bp, out)
+        m = emit_from(reg, bp, out, force=args.force)
         bar.update(1)
     if not args.quiet:
         print(
             f"{m.robot}: {m.n_standard} standard -> {m.n_base} base parameters; base regressor "
             f"{m.base_ops.mul} mul, {m.base_ops.div} div, {m.base_ops.add} add -> {m.path}"
         )
+    return 0
+
+
+def cmd_build(args) -> int:
+    """Compile the C kernels of a generated package (``symoro-gen build ROBOT``)."""
+    from .loader import load_model
+
+    m = load_model(args.robot)
+    model = getattr(m, "_MODEL", None)
+    if model is None:
+        raise ModelError(f"{args.robot}: not a generated package with C kernels")
+    res = model.build(force=args.force, timeout=args.timeout)
+    if not args.quiet:
+        print(f"{m.ROBOT}: C kernels {'compiled' if res.compiled else 'already built'} -> {res.path}")
     return 0
 
 
@@ -129,7 +152,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     g = sub.add_parser("generate", help="MDH robot file -> generated/<robot>/ (NumPy + CasADi regressors)")
     g.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
     g.add_argument("--out", help="output folder (default: generated/ of the repository)")
+    g.add_argument("--force", action="store_true",
+                   help="replace OUT/<robot> even when it is not a package a previous `generate` wrote")
     g.set_defaults(func=cmd_generate)
+
+    b = sub.add_parser("build", help="compile the C kernels of a generated package (otherwise done on first use)")
+    b.add_argument("robot", help="robot name, generated package folder, or robot .toml file")
+    b.add_argument("--force", action="store_true", help="compile even when a library of this source exists")
+    b.add_argument("--timeout", type=float, default=None, help="seconds before the compiler is killed (default 900)")
+    b.set_defaults(func=cmd_build)
 
     ip = sub.add_parser("import-par", help="SYMORO+/OpenSYMORO .par file -> robot .toml")
     ip.add_argument("file")
@@ -192,7 +223,7 @@ def _diagnose_parser(sub):
 
 _EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser]
 _EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _demo_parser: "demo"}
-_LIGHT_COMMANDS = ("generate", "import-par", "import-urdf", "export-par", "export-urdf")
+_LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf")
 
 
 def _command_of(argv) -> str | None:

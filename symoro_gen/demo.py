@@ -29,7 +29,7 @@ def demo_payload() -> np.ndarray:
 def run_demo(args=None) -> int:
     from .identification import sensor_gains
     from .identification.assemble import build_observation
-    from .modelcache import model_for
+    from .loader import model_for
     from .simulate.recording import simulate_recording
     from .simulate.trajectories import fourier_trajectory
 

@@ -1,50 +1,183 @@
-"""Load an emitted model: ``load_model("lwr4")`` or ``load_model("path/to/generated/lwr4")``."""
+"""The one door to a model: :func:`load_model`.
+
+``load_model("lwr4")``, ``load_model("path/to/generated/lwr4")``, ``load_model("path/to/robot.toml")``
+or ``load_model(robot_description)`` all return an :class:`~symoro_gen.model.IdentificationModel`
+(a generated package). A robot file or description is generated when needed:
+
+* the repository's ``generated/<name>/`` is used when it was generated from the same file (same
+  sha256), and is never written by this function;
+* a robot file outside the repository is generated next to it, into ``<dir>/generated/<name>/``
+  when that folder is writable (and is not something else than a generated package);
+* otherwise into the user cache, ``$XDG_CACHE_HOME/symoro_gen/models/<file sha256[:16]>/<name>/``.
+
+:func:`model_for` returns the robot description too.
+"""
 from __future__ import annotations
 
+import hashlib
 import importlib.util
+import json
 import os
 import sys
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, cast
 
 from .errors import ModelError
+from .model import IdentificationModel, check_model
+
+if TYPE_CHECKING:
+    from .description.model import RobotDescription
+
+#: the repository holding this package (``generated/`` and ``robots/`` live there)
+REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 def generated_dir() -> Path:
     """Default folder of generated models (``$SYMORO_GENERATED`` overrides)."""
     env = os.environ.get("SYMORO_GENERATED")
-    return Path(env) if env else Path(__file__).resolve().parents[1] / "generated"
+    return Path(env) if env else REPO_ROOT / "generated"
 
 
-def load_model(name_or_path: str | os.PathLike):
-    """Import a generated model package by robot name or folder path.
+def cache_dir() -> Path:
+    """User cache of models generated from robot files (``$XDG_CACHE_HOME/symoro_gen/models``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "symoro_gen" / "models"
 
-    Returns
-    -------
-    module
-        With the generated-module contract (``regressor``, ``BASE_NAMES``...).
+
+def _is_package(p: Path) -> bool:
+    return (p / "__init__.py").is_file()
+
+
+def _manifest_sha(p: Path) -> str | None:
+    try:
+        return json.loads((p / "manifest.json").read_text(encoding="utf-8")).get("robot_file_sha256")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def import_package(path: str | os.PathLike) -> IdentificationModel:
+    """Import the generated package in folder ``path`` (once per process, folder and package content).
+
+    The module is named ``_symoro_generated_<name>_<sha256 of the path>_<sha256 of __init__.py>``:
+    deterministic across processes, and a package regenerated in place is imported afresh.
     """
-    p = Path(name_or_path)
-    if not (p / "__init__.py").exists():
-        cand = generated_dir() / str(name_or_path)
-        if not (cand / "__init__.py").exists():
-            known = sorted(x.name for x in generated_dir().glob("*") if (x / "__init__.py").exists())
-            raise ModelError(
-                f"no generated model {str(name_or_path)!r} (looked in {p} and {cand}); "
-                f"known: {', '.join(known) or 'none'}. Run `make robot ROBOT={p.name}` or `symoro-gen generate {p.name}`."
-            )
-        p = cand
-    p = p.resolve()
-    modname = f"_symoro_generated_{p.name}_{abs(hash(str(p))) % 10**8}"
+    p = Path(path).resolve()
+    try:
+        content = hashlib.sha256((p / "__init__.py").read_bytes()).hexdigest()[:8]
+    except OSError as exc:
+        raise ModelError(f"cannot read generated model at {p}: {exc.strerror or exc}") from None
+    modname = f"_symoro_generated_{p.name}_{hashlib.sha256(str(p).encode()).hexdigest()[:12]}_{content}"
     if modname in sys.modules:
-        return sys.modules[modname]
+        return cast(IdentificationModel, sys.modules[modname])
     spec = importlib.util.spec_from_file_location(modname, p / "__init__.py", submodule_search_locations=[str(p)])
     if spec is None or spec.loader is None:
         raise ModelError(f"cannot import generated model at {p}")
-    mod = importlib.util.module_from_spec(spec)
+    mod: ModuleType = importlib.util.module_from_spec(spec)
     sys.modules[modname] = mod
     try:
         spec.loader.exec_module(mod)
     except Exception as exc:
         del sys.modules[modname]
-        raise ModelError(f"generated model at {p} failed to import: {exc}") from exc
-    return mod
+        raise ModelError(f"generated model at {p} failed to import: {exc}; regenerate it with "
+                         f"`symoro-gen generate`") from exc
+    return check_model(mod)
+
+
+def _inside_repo(path: Path) -> bool:
+    try:
+        path.resolve().relative_to(REPO_ROOT)
+    except ValueError:
+        return False
+    return True
+
+
+def _generate(robot: RobotDescription, out_dir: Path) -> Path:
+    # sympy and the Newton-Euler/emission stack (~0.5 s to import) only when generating
+    from .emit.package import emit_robot, written_by_generate
+
+    target = out_dir / robot.name
+    if target.exists() and not written_by_generate(target, robot.name):
+        raise ModelError(f"{target} exists and is not a generated package of {robot.name}")
+    emit_robot(robot, out_dir)
+    return target
+
+
+def _model_of_robot(robot: RobotDescription) -> IdentificationModel:
+    repo = generated_dir() / robot.name
+    if _is_package(repo) and _manifest_sha(repo) == robot.file_hash:
+        return import_package(repo)
+    f = Path(robot.file)
+    if robot.file and f.is_file() and not _inside_repo(f):
+        beside = f.resolve().parent / "generated"
+        target = beside / robot.name
+        if _is_package(target) and _manifest_sha(target) == robot.file_hash:
+            return import_package(target)
+        try:
+            writable = (beside.is_dir() or os.access(beside.parent, os.W_OK)) and (
+                not beside.exists() or os.access(beside, os.W_OK))
+        except OSError:
+            writable = False
+        if writable and (not target.exists() or (target / "manifest.json").is_file()):
+            return import_package(_generate(robot, beside))
+    cached = cache_dir() / robot.file_hash[:16]
+    if not (_is_package(cached / robot.name) and _manifest_sha(cached / robot.name) == robot.file_hash):
+        _generate(robot, cached)
+    return import_package(cached / robot.name)
+
+
+def load_model(source: str | os.PathLike | RobotDescription) -> IdentificationModel:
+    """The identification model of a robot, generating it when needed.
+
+    Parameters
+    ----------
+    source : str, path or RobotDescription
+        A robot name (``generated/<name>/``, else ``robots/<name>.toml``), a generated package
+        folder, a robot ``.toml`` file, or a parsed :class:`~symoro_gen.description.model.RobotDescription`.
+
+    Returns
+    -------
+    IdentificationModel
+        The generated package (module) of the robot.
+
+    Raises
+    ------
+    ModelError
+        Unknown robot (the known ones are listed) or a package that does not import.
+    """
+    if not isinstance(source, (str, os.PathLike)):
+        from .description.model import RobotDescription  # sympy: only for descriptions
+
+        if not isinstance(source, RobotDescription):
+            raise ModelError(f"load_model: expected a robot name, a path or a RobotDescription, got {type(source).__name__}")
+        return _model_of_robot(source)
+    p = Path(source)
+    if _is_package(p):
+        return import_package(p)
+    if p.suffix == ".toml" or p.is_file():
+        from .description import load_robot  # sympy: only for robot files
+
+        return _model_of_robot(load_robot(p))
+    cand = generated_dir() / str(source)
+    if _is_package(cand):
+        return import_package(cand)
+    from .description import robots_dir  # sympy: only for robot files
+
+    if (robots_dir() / f"{source}.toml").is_file() and p.name == str(source):
+        from .description import load_robot
+
+        return _model_of_robot(load_robot(str(source)))
+    known = sorted(x.name for x in generated_dir().glob("*") if _is_package(x))
+    raise ModelError(
+        f"no generated model {str(source)!r} (looked in {p} and {cand}); "
+        f"known: {', '.join(known) or 'none'}. Run `symoro-gen generate {p.name}` (or `make robot ROBOT={p.name}`)."
+    )
+
+
+def model_for(robot_or_name: str | os.PathLike | RobotDescription) -> tuple[RobotDescription, IdentificationModel]:
+    """``(robot description, model)`` for a robot name, robot file or description (see :func:`load_model`)."""
+    from .description import load_robot
+    from .description.model import RobotDescription
+
+    robot = robot_or_name if isinstance(robot_or_name, RobotDescription) else load_robot(robot_or_name)
+    return robot, load_model(robot)

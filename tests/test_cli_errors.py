@@ -19,7 +19,7 @@ PAR = ROOT / "tests" / "description" / "fixtures" / "rx90_symoro.par"
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     """A good simulated SCARA recording, one with a NaN, and a regular file (an unwritable parent)."""
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.simulate.parameters import random_physical_parameters
     from symoro_gen.simulate.recording import simulate_recording
     from symoro_gen.simulate.trajectories import fourier_trajectory

@@ -21,7 +21,7 @@ def _write_csv(path, t, q, tau):
 
 
 def test_identify_cli_json_contract(tmp_path):
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.simulate.parameters import random_physical_parameters
     from symoro_gen.simulate.recording import simulate_recording
     from symoro_gen.simulate.trajectories import fourier_trajectory

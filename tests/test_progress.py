@@ -187,7 +187,7 @@ def test_generate_output_unchanged_by_progress(tmp_path, monkeypatch):
 # ---------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.simulate.parameters import random_physical_parameters
     from symoro_gen.simulate.recording import simulate_recording
     from symoro_gen.simulate.trajectories import fourier_trajectory

@@ -33,7 +33,7 @@ def run_diagnose(args) -> dict:
     """Run the command; returns the JSON dictionary."""
     import numpy as np
 
-    from ..modelcache import model_for
+    from ..loader import model_for
     from ..preprocessing.load import load_trajectories
     from .candidates import KINDS
     from .core import diagnose

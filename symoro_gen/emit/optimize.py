@@ -135,7 +135,7 @@ def _products_in(e):
     """Two-symbol products (up to sign) appearing as terms or factors of e."""
     out = []
     for m in e.atoms(sp.Mul):
-        coeff, rest = m.as_coeff_Mul()
+        _coeff, rest = m.as_coeff_Mul()
         f = sp.Mul.make_args(rest)
         syms = [x for x in f if x.is_Symbol]
         if len(syms) == 2 and len(f) == 2:

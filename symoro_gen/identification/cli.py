@@ -29,7 +29,7 @@ def _payload_values(items, names) -> dict:
 
 
 def run_identify(args) -> dict:
-    from ..modelcache import model_for
+    from ..loader import model_for
     from ..preprocessing.load import load_trajectories
     from . import fit_with_known_payload, identify, identify_with_drive_gains, sensor_gains
 

@@ -57,7 +57,7 @@ def test_lwr4_loop_runs_and_names_what_it_adds(lwr4_report):
 
 def test_tx40_finds_the_coupled_wrist(shared_data):
     from symoro_gen.diagnostics import diagnose
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.preprocessing.load import load_trajectory
 
     folder = shared_data / TX40

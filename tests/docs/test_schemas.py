@@ -64,7 +64,7 @@ def _csv(path, tr):
 
 @pytest.fixture(scope="module")
 def scara_files(tmp_path_factory):
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
 
     rng = np.random.default_rng(5)
@@ -97,7 +97,7 @@ def test_identify_output_matches_schema(scara_files):
 def test_identify_with_gains_matches_schema(tmp_path):
     """LWR4 torque-sensor gains with a known payload mass (the demo's job through the command)."""
     from symoro_gen.demo import TRUE_GAINS, demo_payload
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.simulate import fourier_trajectory, simulate_recording
 
     rng = np.random.default_rng(0)
@@ -123,7 +123,7 @@ def test_identify_with_gains_matches_schema(tmp_path):
 def diagnose_report():
     """A diagnosis of simulated data with a Stribeck effect injected on joint 1."""
     from symoro_gen.diagnostics import diagnose, inject_effect
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.preprocessing.trajectory import Trajectory
     from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
 

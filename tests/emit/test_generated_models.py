@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import symoro_gen
 from symoro_gen import load_model
 from symoro_gen.baseparams.regroup import numeric_rank
 from symoro_gen.description import load_robot
@@ -71,7 +70,7 @@ def test_emitted_equals_numeric_newton_euler(robot_and_model):
 
 
 def test_base_identity_and_rank(robot_and_model):
-    robot, m = robot_and_model
+    _robot, m = robot_and_model
     rng = np.random.default_rng(3)
     q, dq, ddq = _states(rng, 60, m.N_JOINTS)
     Ws = m.standard_regressor(q, dq, ddq)
@@ -105,7 +104,11 @@ def test_manifest_and_header(robot_and_model):
     assert man["base_names"] == list(m.BASE_NAMES)
     assert man["counts"]["base"] == len(m.BASE_NAMES)
     assert robot.file_hash in (folder / "__init__.py").read_text().splitlines()[1]
-    assert (folder / f"regressor_{robot.name}.c").read_text().count("casadi_f0") >= 1
+    c = (folder / f"regressor_{robot.name}.c").read_text()
+    for kind in ("base", "standard", "payload"):  # the documented API: one comment block, three functions
+        sig = f"void {robot.name}_{kind}_regressor(long N, const double* q, const double* dq, const double* ddq, double* out)"
+        assert c.index(f" *   {sig};") < c.index("*/") < c.index(sig + "\n{")
+    assert sorted(p.name for p in folder.glob("*.c")) == [f"regressor_{robot.name}.c"], "one C file"
     md = (folder / "base_parameters.md").read_text()
     for n in m.BASE_NAMES:
         if n.endswith("R"):
@@ -121,16 +124,17 @@ def test_lwr4_counts_match_the_papers_model():
     assert m.PAYLOAD_NAMES == ("XX8", "XY8", "XZ8", "YY8", "YZ8", "ZZ8", "MX8", "MY8", "MZ8", "M8")
 
 
-def test_c_and_numpy_backends_agree(robot_and_model, monkeypatch):
-    robot, m = robot_and_model
-    if m.BACKEND != "c":
-        pytest.skip("no C compiler here: only the NumPy backend is available")
+def test_c_and_numpy_backends_agree(robot_and_model):
+    _, m = robot_and_model
     rng = np.random.default_rng(5)
     q, dq, ddq = _states(rng, 300, m.N_JOINTS)
     dq[::7] = 0.0  # sign(0) must agree too
     c_vals = [f(q, dq, ddq) for f in (m.regressor, m.standard_regressor, m.payload_regressor)]
-    monkeypatch.setattr(m, "_C", None)
-    np_vals = [f(q, dq, ddq) for f in (m.regressor, m.standard_regressor, m.payload_regressor)]
+    if m.BACKEND != "c":
+        pytest.skip("no C compiler here: only the NumPy backend is available")
+    mn = m._MODEL.numpy_only()
+    np_vals = [f(q, dq, ddq) for f in (mn.regressor, mn.standard_regressor, mn.payload_regressor)]
+    assert mn.backend == "numpy"
     for a, b in zip(c_vals, np_vals):
         assert a.shape == b.shape
         assert np.max(np.abs(a - b), initial=0.0) <= REL * max(1.0, np.abs(b).max(initial=0.0))
@@ -185,5 +189,7 @@ def test_c_kernel_any_alignment_and_sample_count(robot_and_model):
         ref = np.stack([m.regressor(q[k], dq[k], ddq[k]) for k in range(N)])
         raw = np.empty(N * m.N_JOINTS * nb + 1)
         unaligned = raw[1:].reshape(N, m.N_JOINTS, nb)
-        assert np.array_equal(m.regressor(q, dq, ddq, out=unaligned), ref)
-        assert np.array_equal(m.regressor(q, dq, ddq), ref)
+        # SIMD lanes and the scalar remainder may round one step differently (issue 15: 1.8e-15 seen)
+        tol = 1e-13 * max(1.0, np.abs(ref).max())
+        assert np.max(np.abs(m.regressor(q, dq, ddq, out=unaligned) - ref)) <= tol
+        assert np.max(np.abs(m.regressor(q, dq, ddq) - ref)) <= tol

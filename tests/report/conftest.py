@@ -24,7 +24,7 @@ def _write_csv(path, t, q, tau):
 @pytest.fixture(scope="session")
 def rx90_recordings(tmp_path_factory):
     """Paths of two simulated RX-90 CSV recordings (identification, validation)."""
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.simulate.parameters import random_physical_parameters
     from symoro_gen.simulate.recording import simulate_recording
     from symoro_gen.simulate.trajectories import fourier_trajectory

@@ -25,7 +25,7 @@ def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path):
     the known mass and the mass re-identified on the validation data (Table IV), four plots."""
     from symoro_gen.cli import main
     from symoro_gen.demo import PAYLOAD_MASS, TRUE_GAINS, demo_payload
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.simulate.recording import simulate_recording
     from symoro_gen.simulate.trajectories import fourier_trajectory
 
@@ -72,7 +72,7 @@ def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path):
 def diagnosis():
     """diagnose() on RX-90 recordings with a Stribeck friction on joint 2 (0-based 1) the model lacks."""
     dg = pytest.importorskip("symoro_gen.diagnostics", reason="diagnostics package not available")
-    from symoro_gen.modelcache import model_for
+    from symoro_gen.loader import model_for
     from symoro_gen.preprocessing.trajectory import Trajectory
     from symoro_gen.simulate.parameters import random_physical_parameters
     from symoro_gen.simulate.recording import true_torques

@@ -1,0 +1,44 @@
+"""NumPy backend: straight-line vectorised kernels printed from an :class:`ExprGraph`."""
+from __future__ import annotations
+
+import types
+from collections.abc import Callable, Sequence
+
+import numpy as np
+import sympy as sp
+
+from ...dynamics.graph import ExprGraph
+from ..printing import NUMPY, print_expr
+
+
+def kernel_source(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str,
+                  inputs_q: Sequence[sp.Symbol], inputs_dq: Sequence[sp.Symbol],
+                  inputs_ddq: Sequence[sp.Symbol]) -> str:
+    """Python source of ``func_name(q, dq, ddq, out)`` filling ``out[i, k, :]``.
+
+    ``q, dq, ddq`` are (n, M) arrays (one row per joint); ``out`` is a zeroed
+    (n_rows, len(col_names), M) array; only non-zero entries are written.
+    """
+    col = {n: k for k, n in enumerate(col_names)}
+    lines = [f"def {func_name}(q, dq, ddq, out):"]
+    used = graph.used_names()
+    for arr, syms in (("q", inputs_q), ("dq", inputs_dq), ("ddq", inputs_ddq)):
+        for i, s in enumerate(syms):
+            if s.name in used:
+                lines.append(f"    {s.name} = {arr}[{i}]")
+    for s, e in graph.defs:
+        lines.append(f"    {s.name} = {print_expr(e, NUMPY)}")
+    for (i, name) in sorted(graph.outputs, key=lambda k: (col[k[1]], k[0])):
+        lines.append(f"    out[{i}, {col[name]}] = {print_expr(graph.outputs[(i, name)], NUMPY)}")
+    if len(lines) == 1:
+        lines.append("    pass")
+    return "\n".join(lines) + "\n"
+
+
+def load_kernel(source: str, func_name: str) -> Callable:
+    """Compile kernel source in a private module namespace and return the function."""
+    mod = types.ModuleType(f"_symoro_kernel_{func_name}")
+    mod.__dict__["np"] = np
+    code = compile(source, f"<symoro kernel {func_name}>", "exec")
+    exec(code, mod.__dict__)  # noqa: S102 - our own generated code, private namespace
+    return mod.__dict__[func_name]

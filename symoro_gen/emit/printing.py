@@ -1,0 +1,209 @@
+"""Printing sympy expressions of an :class:`~symoro_gen.dynamics.graph.ExprGraph` as code, and
+counting their operations.
+
+One printer serves the three backends (NumPy, C, CasADi); they differ only by the names of the
+elementary functions (:class:`Dialect`). The output is deterministic: it depends on the expression
+and the dialect, never on NumPy's ``repr`` (floats print as ``repr(float(x))``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+from sympy.printing.pycode import PythonCodePrinter
+
+
+@dataclass(frozen=True)
+class Dialect:
+    """Names of the elementary functions in one target language.
+
+    Attributes
+    ----------
+    funcs : tuple of (str, str)
+        ``(sympy function name, printed name)`` for sin, cos, tan, sign.
+    power : str
+        Name of the general power function (``x**y`` with a non-small exponent).
+    pi : str
+        Literal of pi.
+    """
+
+    funcs: tuple
+    power: str
+    pi: str
+
+    def func(self, name: str) -> str | None:
+        return dict(self.funcs).get(name)
+
+
+NUMPY = Dialect((("sin", "np.sin"), ("cos", "np.cos"), ("tan", "np.tan"), ("sign", "np.sign")), "np.power", "np.pi")
+C_SCALAR = Dialect((("sin", "sin"), ("cos", "cos"), ("tan", "tan"), ("sign", "sym_sign")), "pow", "3.141592653589793")
+C_VECTOR = Dialect((("sin", "sym_vsin"), ("cos", "sym_vcos"), ("sign", "sym_vsign")), "", "3.141592653589793")
+CASADI = Dialect((("sin", "ca.sin"), ("cos", "ca.cos"), ("tan", "ca.tan"), ("sign", "ca.sign")), "ca.power", "3.141592653589793")
+
+
+class _Printer(PythonCodePrinter):
+    """Fallback printer for forms outside the fast path: x**2 as x*x, functions by dialect."""
+
+    def __init__(self, dialect: Dialect):
+        super().__init__({"fully_qualified_modules": False, "standard": "python3"})
+        self.dialect = dialect
+
+    def _print_Pow(self, expr, rational=False):
+        b, e = expr.as_base_exp()
+        if e.is_Integer and 1 < int(e) <= 4:
+            s = self.parenthesize(b, 100)
+            return "*".join([s] * int(e))
+        if e == -1:
+            return "1.0/" + self.parenthesize(b, 100)
+        if not self.dialect.power:
+            raise ValueError(f"expression not printable in this backend: {expr}")
+        return f"{self.dialect.power}({self._print(b)}, {self._print(e)})"
+
+    def _print_Function(self, e):
+        name = self.dialect.func(type(e).__name__)
+        if name is None or len(e.args) != 1:
+            raise ValueError(f"expression not printable in this backend: {e}")
+        return f"{name}({self._print(e.args[0])})"
+
+    _print_sin = _print_cos = _print_tan = _print_sign = _print_Function
+
+    def _print_Pi(self, e):
+        return self.dialect.pi
+
+    def _print_Float(self, e):
+        return repr(float(e))
+
+    def _print_Rational(self, e):
+        return f"{float(e.p)}/{float(e.q)}"
+
+    def _print_Integer(self, e):
+        return f"{int(e)}.0" if abs(int(e)) < 2**53 else str(int(e))
+
+
+_PRINTERS: dict = {}
+
+
+def _printer(d: Dialect) -> _Printer:
+    p = _PRINTERS.get(d)
+    if p is None:
+        p = _PRINTERS[d] = _Printer(d)
+    return p
+
+
+def _fast(e, d: Dialect) -> str | None:
+    """Direct printing of the forms the model produces (sums of signed products of symbols,
+    numbers, small powers and sin/cos/sign calls); None for anything else."""
+    if e.is_Symbol:
+        return e.name
+    if e.is_Number:
+        return _printer(d).doprint(e)
+    if e.is_Mul:
+        coeff, rest = e.as_coeff_Mul()
+        parts = []
+        for f in sp.Mul.make_args(rest):
+            t = _fast(f, d)
+            if t is None:
+                return None
+            if f.is_Add:
+                t = f"({t})"
+            parts.append(t)
+        body = "*".join(parts)
+        if coeff == 1:
+            return body
+        if coeff == -1:
+            return "-" + body
+        c = _printer(d).doprint(coeff)
+        return f"({c})*{body}" if coeff < 0 else f"{c}*{body}"
+    if e.is_Add:
+        out = ""
+        for i, t in enumerate(e.args):
+            s = _fast(t, d)
+            if s is None:
+                return None
+            if i == 0:
+                out = s
+            elif s.startswith("-"):
+                out += " - " + s[1:]
+            else:
+                out += " + " + s
+        return out
+    if e.is_Pow:
+        b, x = e.as_base_exp()
+        if x.is_Integer and 1 < int(x) <= 4 and b.is_Symbol:
+            return "*".join([b.name] * int(x))
+        return None
+    if isinstance(e, sp.Function) and len(e.args) == 1:
+        name = d.func(type(e).__name__)
+        if name is None:
+            return None
+        a = _fast(e.args[0], d)
+        return None if a is None else f"{name}({a})"
+    return None
+
+
+def print_expr(e: sp.Expr, dialect: Dialect = NUMPY) -> str:
+    """Source text of ``e`` in ``dialect`` (raises ValueError for a function the dialect lacks)."""
+    s = _fast(e, dialect)
+    return s if s is not None else _printer(dialect).doprint(e)
+
+
+@dataclass(frozen=True)
+class OpCount:
+    """Operation counts of printed expressions."""
+
+    mul: int = 0
+    add: int = 0
+    div: int = 0
+    func: int = 0
+
+    def __add__(self, o: OpCount) -> OpCount:
+        return OpCount(self.mul + o.mul, self.add + o.add, self.div + o.div, self.func + o.func)
+
+    @property
+    def mul_div_pow(self) -> int:
+        """Multiplications + divisions (powers counted as their multiplications)."""
+        return self.mul + self.div
+
+    def as_dict(self) -> dict:
+        return {"mul": self.mul, "div": self.div, "add": self.add, "func": self.func}
+
+
+def count_ops(e: sp.Expr) -> OpCount:
+    """Operation count of one expression as it will be printed (x**2 = 1 mul, -x = 0)."""
+    if e.is_Atom:
+        return OpCount()
+    c = OpCount()
+    if e.is_Add:
+        c = c + OpCount(add=len(e.args) - 1)
+    elif e.is_Mul:
+        coeff, rest = e.as_coeff_Mul()
+        factors = sp.Mul.make_args(rest)
+        n = len(factors) - 1 + (0 if coeff in (1, -1) else 1)
+        c = c + OpCount(mul=max(n, 0))
+        for f in factors:
+            c = c + count_ops(f)
+        return c
+    elif e.is_Pow:
+        b, ex = e.as_base_exp()
+        if ex.is_Integer and ex > 1:
+            c = c + OpCount(mul=int(ex) - 1)
+        elif ex == -1:
+            c = c + OpCount(div=1)
+        else:
+            c = c + OpCount(func=1)
+        return c + count_ops(b)
+    elif isinstance(e, sp.Function):
+        c = c + OpCount(func=1)
+    for a in e.args:
+        c = c + count_ops(a)
+    return c
+
+
+def graph_ops(graph) -> OpCount:
+    """Operation count of a whole graph (definitions and outputs)."""
+    c = OpCount()
+    for _, e in graph.defs:
+        c = c + count_ops(e)
+    for e in graph.outputs.values():
+        c = c + count_ops(e)
+    return c
