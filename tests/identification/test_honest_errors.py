@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from symoro_gen.identification import identify
-from symoro_gen.modelcache import model_for
+from symoro_gen.loader import model_for
 from symoro_gen.observations import (
     AssemblyOptions,
     assemble,
