@@ -26,7 +26,7 @@ import sympy as sp
 
 from ..description.model import PRISMATIC, REVOLUTE
 from ..dynamics.newton_euler import SymbolicRegressor
-from ..dynamics.transforms import constant_rotation, position, rot_z
+from ..description.mdh import constant_rotation, position, rot_z
 from ..params import INERTIAL_KINDS, param_name
 
 _J_KINDS = ("XX", "XY", "XZ", "YY", "YZ", "ZZ")
