@@ -13,6 +13,7 @@ from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.description.urdf import import_urdf, import_urdf_text, parse_urdf_text
 from symoro_gen.dynamics.numeric import inverse_dynamics
 from symoro_gen.errors import RobotFileError
+from symoro_gen.simulate import random_states
 
 ROOT = Path(__file__).resolve().parents[2]
 LWR_URDF = ROOT.parent / "shared" / "data" / "kuka_lwr4_flobaroid" / "model" / "kuka_lwr4.urdf"
@@ -40,7 +41,7 @@ def joint_relative_errors(a, b):
 
 
 def _states(rng, n, N=N_SAMPLES):
-    return rng.uniform(-np.pi, np.pi, (N, n)), rng.normal(0, 2, (N, n)), rng.normal(0, 5, (N, n))
+    return random_states(rng, N, n)
 
 
 def _check_against_pinocchio(toml_text: str, urdf_text: str, rng, rtol=RTOL):
