@@ -19,10 +19,10 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .model import FIXED, PRISMATIC, REVOLUTE, RobotDescription
+from ..params import INERTIAL_KINDS
 from .inertia import com_from_standard
 from .mdh import joint_sign, row_transform
-from ..params import INERTIAL_KINDS
+from .model import FIXED, PRISMATIC, REVOLUTE, RobotDescription
 
 
 def constant_transform(robot: RobotDescription, j: int) -> np.ndarray:

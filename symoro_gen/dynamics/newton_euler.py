@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import sympy as sp
 
+from ..description.mdh import constant_rotation, joint_sign, position, rot_z
 from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
 from ..params import INERTIAL_KINDS, param_name
-from ..description.mdh import constant_rotation, joint_sign, position, rot_z
 from .graph import ExprGraph, GraphBuilder
 
 

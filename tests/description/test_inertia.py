@@ -21,9 +21,9 @@ def _cloud(rng, k=9):
     return m, r
 
 
-def _moments(m, r, about=np.zeros(3)):
+def _moments(m, r, about=(0.0, 0.0, 0.0)):
     """Inertia about ``about``: sum of m (|x|^2 E - x x^T), x = r - about (the definition)."""
-    x = r - about
+    x = r - np.asarray(about)
     return np.einsum("k,kij->ij", m, np.einsum("ka,ka->k", x, x)[:, None, None] * np.eye(3) - x[:, :, None] * x[:, None, :])
 
 

@@ -5,7 +5,13 @@ import pytest
 import sympy as sp
 
 from symoro_gen.description import load_robot, parse_robot_text
-from symoro_gen.description.mdh import joint_sign, row_transform, row_values, symbolic_transform, transform
+from symoro_gen.description.mdh import (
+    joint_sign,
+    row_transform,
+    row_values,
+    symbolic_transform,
+    transform,
+)
 from symoro_gen.description.model import q_symbol
 
 
@@ -70,7 +76,7 @@ def test_minus_q_joint_and_array_q():
     q = np.array([0.0, 0.5, -1.0])
     th = row_values(r1, {}, q)[4]
     np.testing.assert_allclose(th, np.pi / 2 - q)
-    gam, b, al, d, th2, r = row_values(r2, {}, q)
+    _, _, al, _, th2, r = row_values(r2, {}, q)
     np.testing.assert_allclose(r, 0.1 - q)
     assert np.shape(th2) == (3,) and float(al) == pytest.approx(np.pi / 2)
     assert isinstance(row_values(r2, {}, 0.3)[5], float)
