@@ -6,7 +6,6 @@ import json
 import numpy as np
 import pytest
 
-from symoro_gen.cli import main
 
 from .jsonschema_lite import ANNOTATIONS, KEYWORDS, validate
 from .runner import DOCS, strict_json
@@ -80,11 +79,10 @@ def scara_files(tmp_path_factory):
     return d, files
 
 
-def test_identify_output_matches_schema(scara_files):
+def test_identify_output_matches_schema(scara_files, cli):
     d, files = scara_files
     out = d / "r.json"
-    assert main(["--quiet", "identify", "scara", files[0], "--validate", files[1], "--method", "ols",
-                 "--json", str(out)]) == 0
+    cli("--quiet", "identify", "scara", files[0], "--validate", files[1], "--method", "ols", "--json", out, rc=0)
     res = strict_json(out)
     check(res, "identify")
     p = res["parameters"]
@@ -92,7 +90,7 @@ def test_identify_output_matches_schema(scara_files):
     assert len(res["rel_err"]) == len(res["validation"]["rel_err"]) == 4
 
 
-def test_identify_with_gains_matches_schema(tmp_path):
+def test_identify_with_gains_matches_schema(tmp_path, cli):
     """LWR4 torque-sensor gains with a known payload mass (the demo's job through the command)."""
     from symoro_gen.demo import TRUE_GAINS, demo_payload
     from symoro_gen.modelcache import model_for
@@ -109,8 +107,8 @@ def test_identify_with_gains_matches_schema(tmp_path):
         files[kind] = tmp_path / f"{kind}.npz"
         np.savez(files[kind], t=tr.t, q=tr.q, tau=tr.tau)
     out = tmp_path / "g.json"
-    assert main(["--quiet", "identify", "lwr4", str(files["unloaded"]), "--loaded", str(files["loaded"]),
-                 "--payload", "M8=4.6136", "--gains", "sensor", "--json", str(out)]) == 0
+    cli("--quiet", "identify", "lwr4", files["unloaded"], "--loaded", files["loaded"], "--payload", "M8=4.6136",
+        "--gains", "sensor", "--json", out, rc=0)
     res = strict_json(out)
     check(res, "identify")
     g = res["gains"]
@@ -146,14 +144,14 @@ def test_diagnose_output_matches_schema(diagnose_report):
     assert len(d["before"]["rel_err"]) == len(d["after"]["validation_rel_err"]) == 4
 
 
-def test_diagnose_cli_output_matches_schema(scara_files):
+def test_diagnose_cli_output_matches_schema(scara_files, cli):
     from .runner import available_commands
 
     if "diagnose" not in available_commands():
         pytest.skip("the diagnose command is not there yet (issue 4)")
     d, files = scara_files
     out = d / "diag.json"
-    assert main(["--quiet", "diagnose", "scara", files[0], "--validate", files[1], "--json", str(out)]) == 0
+    cli("--quiet", "diagnose", "scara", files[0], "--validate", files[1], "--json", out, rc=0)
     check(strict_json(out), "diagnose")
 
 

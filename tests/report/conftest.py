@@ -44,26 +44,23 @@ def rx90_recordings(tmp_path_factory):
     return files
 
 
-def _identify_report(rec, out_dir, name):
-    from symoro_gen.cli import main
-
+def _identify_report(cli, rec, out_dir, name):
     report = out_dir / name
     js = out_dir / (report.stem + ".json")
-    rc = main(["--quiet", "identify", "rx90", str(rec[0]), "--validate", str(rec[1]), "--method", "wls",
-               "--json", str(js), "--report", str(report)])
-    assert rc == 0
+    cli("--quiet", "identify", "rx90", rec[0], "--validate", rec[1], "--method", "wls", "--json", js,
+        "--report", report, rc=0)
     return report, json.loads(js.read_text())
 
 
 @pytest.fixture(scope="session")
-def rx90_html_report(rx90_recordings, tmp_path_factory):
+def rx90_html_report(rx90_recordings, tmp_path_factory, cli):
     """``(path of report.html, JSON of the same run)``."""
     pytest.importorskip("matplotlib", reason="report plots need matplotlib (the 'plots' extra)")
-    return _identify_report(rx90_recordings, tmp_path_factory.mktemp("html_report"), "report.html")
+    return _identify_report(cli, rx90_recordings, tmp_path_factory.mktemp("html_report"), "report.html")
 
 
 @pytest.fixture(scope="session")
-def rx90_md_report(rx90_recordings, tmp_path_factory):
+def rx90_md_report(rx90_recordings, tmp_path_factory, cli):
     """``(path of report.md, JSON of the same run)``."""
     pytest.importorskip("matplotlib", reason="report plots need matplotlib (the 'plots' extra)")
-    return _identify_report(rx90_recordings, tmp_path_factory.mktemp("md_report"), "report.md")
+    return _identify_report(cli, rx90_recordings, tmp_path_factory.mktemp("md_report"), "report.md")

@@ -20,10 +20,9 @@ def _write_csv(path, tr):
     np.savetxt(path, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=head, comments="")
 
 
-def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path):
+def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path, cli):
     """identify --gains sensor with a known payload mass and loaded validation data: the gains table,
     the known mass and the mass re-identified on the validation data (Table IV), four plots."""
-    from symoro_gen.cli import main
     from symoro_gen.demo import PAYLOAD_MASS, TRUE_GAINS, demo_payload
     from symoro_gen.modelcache import model_for
     from symoro_gen.simulate.recording import simulate_recording
@@ -40,9 +39,9 @@ def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path):
         files.append(tmp_path / f"rec{k}.csv")
         _write_csv(files[-1], tr)
     out = tmp_path / "gains.md"
-    assert main(["--quiet", "identify", "lwr4", str(files[0]), "--loaded", str(files[1]), "--payload",
-                 f"M8={PAYLOAD_MASS}", "--gains", "sensor", "--validate", str(files[2]), "--validate-loaded",
-                 "--json", str(tmp_path / "gains.json"), "--report", str(out)]) == 0
+    cli("--quiet", "identify", "lwr4", files[0], "--loaded", files[1], "--payload", f"M8={PAYLOAD_MASS}",
+        "--gains", "sensor", "--validate", files[2], "--validate-loaded", "--json", tmp_path / "gains.json",
+        "--report", out, rc=0)
     res = json.loads((tmp_path / "gains.json").read_text())
     md = out.read_text(encoding="utf-8")
     gains = _md_table(md, "Gain")
