@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from symoro_gen import cli as cli_module
+from symoro_gen.simulate import write_recording_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 PAR = ROOT / "tests" / "description" / "fixtures" / "rx90_symoro.par"
@@ -28,10 +29,9 @@ def data(tmp_path_factory):
     t, q, dq, ddq = fourier_trajectory(robot.n_joints, 6.0, 0.002, rng)
     tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
     d = tmp_path_factory.mktemp("data")
-    n = robot.n_joints
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
+    write_recording_csv(d / "good.csv", tr)
+    head = (d / "good.csv").read_text().splitlines()[0]
     a = np.column_stack([tr.t, tr.q, tr.tau])
-    np.savetxt(d / "good.csv", a, delimiter=",", header=head, comments="")
     a[10, 2] = np.nan
     np.savetxt(d / "nan.csv", a, delimiter=",", header=head, comments="")
     (d / "a_file").write_text("not a folder\n")

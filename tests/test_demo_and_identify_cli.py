@@ -2,19 +2,14 @@
 import json
 
 import numpy as np
-import pytest
+
+from symoro_gen.simulate import write_recording_csv
 
 
 def test_demo_recovers_sensor_gains(cli):
     out = cli("demo", "--duration", "10", rc=0).out
     errs = [float(line.split("error")[1].split("%")[0]) for line in out.splitlines() if line.strip().startswith("g") and "identified" in line]
     assert len(errs) == 7 and max(abs(e) for e in errs) < 0.5  # gains within 0.5 %
-
-
-def _write_csv(path, t, q, tau):
-    n = q.shape[1]
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
-    np.savetxt(path, np.column_stack([t, q, tau]), delimiter=",", header=head, comments="")
 
 
 def test_identify_cli_json_contract(tmp_path, cli):
@@ -32,7 +27,7 @@ def test_identify_cli_json_contract(tmp_path, cli):
         t, q, dq, ddq = fourier_trajectory(robot.n_joints, 15.0, 0.002, rng)
         tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.05, rng=rng)
         f = tmp_path / f"rec{k}.csv"
-        _write_csv(f, tr.t, tr.q, tr.tau)
+        write_recording_csv(f, tr)
         files.append(str(f))
     out = tmp_path / "res.json"
     cli("--quiet", "identify", "rx90", files[0], "--validate", files[1], "--method", "ols", "--json", out, rc=0)

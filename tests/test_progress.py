@@ -8,6 +8,7 @@ import pytest
 
 from symoro_gen import progress as P
 from symoro_gen.cli import generation_steps
+from symoro_gen.simulate import write_recording_csv
 
 
 class _Tty(io.StringIO):
@@ -196,12 +197,11 @@ def recordings(tmp_path_factory):
     d = tmp_path_factory.mktemp("rec")
     files, trajs = [], []
     n = robot.n_joints
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
     for k in range(2):
         t, q, dq, ddq = fourier_trajectory(n, 6.0, 0.002, rng)
         tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
         f = d / f"rec{k}.csv"
-        np.savetxt(f, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=head, comments="")
+        write_recording_csv(f, tr)
         files.append(str(f))
         trajs.append(tr)
     return robot, model, files, trajs

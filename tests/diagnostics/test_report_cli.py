@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 
 from symoro_gen.diagnostics import ResidualReport, diagnose
+from symoro_gen.simulate import write_recording_csv
 
 from .simdata import recording
 
@@ -49,18 +49,12 @@ def test_write_plots(stribeck_report, tmp_path):
     assert all(f.stat().st_size > 1000 for f in files)
 
 
-def _write_csv(path, tr):
-    n = tr.n_joints
-    head = ["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)]
-    np.savetxt(path, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=",".join(head), comments="")
-
-
 def test_cli_diagnose(tmp_path, cli):
     _, tr = recording("scara", 12, "offset", 3, offset=0.3)
     # the declared scara has OFF4: an offset is not missing, so inject a drift instead
     _, tr = recording("scara", 12, "drift", 3, rate=0.01)
     csv = tmp_path / "rec.csv"
-    _write_csv(csv, tr)
+    write_recording_csv(csv, tr)
     out = tmp_path / "out.json"
     cli("diagnose", "scara", csv, "--json", out, "--max-effects", "2", "--quiet", rc=0)
     d = json.loads(out.read_text())
@@ -72,8 +66,8 @@ def test_cli_validate_and_candidates(tmp_path, cli):
     _, tr = recording("scara", 13, "spring", 0, stiffness=-5.0)
     _, tv = recording("scara", 13, "spring", 0, stiffness=-5.0, duration=20.0)
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    _write_csv(a, tr)
-    _write_csv(b, tv)
+    write_recording_csv(a, tr)
+    write_recording_csv(b, tv)
     out = tmp_path / "o.json"
     cli("diagnose", "scara", a, "--validate", b, "--candidates", "spring", "offset", "--json", out, "--quiet", rc=0)
     d = json.loads(out.read_text())
@@ -85,7 +79,7 @@ def test_cli_validate_and_candidates(tmp_path, cli):
 def test_cli_rejects_bad_report_suffix(tmp_path, cli):
     _, tr = recording("scara", 14, duration=10.0)
     csv = tmp_path / "r.csv"
-    _write_csv(csv, tr)
+    write_recording_csv(csv, tr)
     assert "suffix" in cli("diagnose", "scara", csv, "--report", tmp_path / "r.pdf", rc=2).err
 
 

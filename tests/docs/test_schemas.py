@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from symoro_gen.simulate import write_recording_csv
 
 from .jsonschema_lite import ANNOTATIONS, KEYWORDS, validate
 from .runner import DOCS, strict_json
@@ -55,12 +56,6 @@ def check(instance, name):
     jsonschema.validate(instance, SCHEMAS[name])
 
 
-def _csv(path, tr):
-    n = tr.q.shape[1]
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
-    np.savetxt(path, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=head, comments="")
-
-
 @pytest.fixture(scope="module")
 def scara_files(tmp_path_factory):
     from symoro_gen.modelcache import model_for
@@ -74,7 +69,7 @@ def scara_files(tmp_path_factory):
     for k in range(2):
         t, q, dq, ddq = fourier_trajectory(robot.n_joints, 8.0, 0.002, rng)
         tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
-        _csv(d / f"rec{k}.csv", tr)
+        write_recording_csv(d / f"rec{k}.csv", tr)
         files.append(str(d / f"rec{k}.csv"))
     return d, files
 

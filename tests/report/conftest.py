@@ -9,16 +9,12 @@ import json
 import numpy as np
 import pytest
 
+from symoro_gen.simulate import write_recording_csv
+
 DURATION_S = 8.0
 DT_S = 0.002
 NOISE_TAU = 0.5   # N m: visible in the torque plots
 NOISE_Q = 1e-5    # rad
-
-
-def _write_csv(path, t, q, tau):
-    n = q.shape[1]
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
-    np.savetxt(path, np.column_stack([t, q, tau]), delimiter=",", header=head, comments="")
 
 
 @pytest.fixture(scope="session")
@@ -39,7 +35,7 @@ def rx90_recordings(tmp_path_factory):
         t, q, dq, ddq = fourier_trajectory(robot.n_joints, DURATION_S, DT_S, rng)
         tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=NOISE_Q, noise_tau=NOISE_TAU, rng=rng)
         f = folder / f"rec{k}.csv"
-        _write_csv(f, tr.t, tr.q, tr.tau)
+        write_recording_csv(f, tr)
         files.append(f)
     return files
 

@@ -107,7 +107,7 @@ def test_failed_write_leaves_the_previous_report_and_no_temporary(tmp_path, monk
     def boom(src, dst):
         raise OSError("disk full")
 
-    monkeypatch.setattr(document.os, "replace", boom)
+    monkeypatch.setattr(os, "replace", boom)  # the rename of symoro_gen.atomic
     with pytest.raises(OSError, match="disk full"):
         document.write_report_files(_tiny_report("new"), out)
     monkeypatch.undo()
