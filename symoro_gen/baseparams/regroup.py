@@ -29,7 +29,7 @@ from ..dynamics.newton_euler import SymbolicRegressor
 from ..description.mdh import constant_rotation, position, rot_z
 from ..params import INERTIAL_KINDS, param_name
 
-_J_KINDS = ("XX", "XY", "XZ", "YY", "YZ", "ZZ")
+_J_KINDS = INERTIAL_KINDS[:6]
 _J_INDEX = {"XX": (0, 0), "XY": (0, 1), "XZ": (0, 2), "YY": (1, 1), "YZ": (1, 2), "ZZ": (2, 2)}
 
 

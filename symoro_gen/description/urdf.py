@@ -43,7 +43,7 @@ import numpy as np
 
 from ..errors import ModelError, Problem, RobotFileError
 from ..params import INERTIAL_KINDS
-from .inertia import parallel_axis, six_from_matrix
+from .inertia import matrix_from_six, parallel_axis, six_from_matrix
 from .mdh import transform as mdh_transform
 from .parse import parse_robot_text
 
@@ -229,7 +229,7 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
                 I = np.zeros((3, 3))
             else:
                 v = {k: rd.floats(ine, k, 1, where, f"inertial/inertia/{k}")[0] for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
-                I = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]])
+                I = matrix_from_six([v[k] for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")])
             inertial = UrdfInertial(mass, rd.origin(ie, where), I)
         links[name] = UrdfLink(name, inertial)
     joints: dict[str, UrdfJoint] = {}

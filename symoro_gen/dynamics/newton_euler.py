@@ -208,7 +208,7 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
         W, Wd, V = w[k], wd[k], vd[k]
         for kind in INERTIAL_KINDS:
             name = param_name(kind, k)
-            if kind in ("XX", "XY", "XZ", "YY", "YZ", "ZZ"):
+            if kind in INERTIAL_KINDS[:6]:
                 # N = E wd + w x (E w), written with the named products of w
                 n_ = _inertia_moment(kind, Wd, products(k))
                 f_ = [sp.Integer(0)] * 3
