@@ -1,8 +1,12 @@
 """description/inertia.py against bodies whose moments are summed directly (clouds of point masses)
 and against Pinocchio's own conversion (``pin.Inertia``)."""
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+import symoro_gen
 from symoro_gen.description.inertia import (
     check_physical_consistency,
     com_from_standard,
@@ -79,3 +83,19 @@ def test_inconsistent_bodies_are_named():
     assert any("positive definite" in x for x in check_physical_consistency(neg))
     with pytest.raises(ValueError, match="10 inertial parameters"):
         com_from_standard([1.0, 2.0])
+
+
+#: patterns of the conventions that have one home (issue 8): a second copy in the package fails here
+_ONE_HOME = {
+    "parallel-axis theorem": (re.compile(r"np\.eye\(3\)\s*-\s*np\.outer\("), "description/inertia.py"),
+    "tuple of the ten inertial names": (re.compile(r'"XX",\s*"XY",\s*"XZ",\s*"YY",\s*"YZ",\s*"ZZ",\s*"MX"'),
+                                        "params.py"),
+    "elementary MDH rotation": (re.compile(r"def _?n?(rot_[xz]|r[xz])\("), "description/mdh.py"),
+}
+
+
+def test_conventions_have_one_home():
+    pkg = Path(symoro_gen.__file__).parent
+    for what, (pattern, home) in _ONE_HOME.items():
+        where = [str(p.relative_to(pkg)) for p in sorted(pkg.rglob("*.py")) if pattern.search(p.read_text())]
+        assert where == [home], f"{what}: expected only in {home}, found in {where}"
