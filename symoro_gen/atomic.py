@@ -12,9 +12,9 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Mapping
+from collections.abc import Mapping
 
-__all__ = ["ordinary_mode", "write_bytes_atomic", "write_text_atomic", "replace_folder_atomic"]
+__all__ = ["ordinary_mode", "replace_folder_atomic", "write_bytes_atomic", "write_text_atomic"]
 
 
 def _umask() -> int:

@@ -4,7 +4,12 @@ import stat
 
 import pytest
 
-from symoro_gen.atomic import ordinary_mode, replace_folder_atomic, write_bytes_atomic, write_text_atomic
+from symoro_gen.atomic import (
+    ordinary_mode,
+    replace_folder_atomic,
+    write_bytes_atomic,
+    write_text_atomic,
+)
 
 
 def _mode(p):

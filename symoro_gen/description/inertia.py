@@ -37,8 +37,14 @@ import numpy as np
 from ..params import INERTIAL_KINDS
 
 __all__ = [
-    "INERTIAL_KINDS", "matrix_from_six", "six_from_matrix", "parallel_axis", "standard_from_com",
-    "com_from_standard", "pseudo_inertia", "check_physical_consistency",
+    "INERTIAL_KINDS",
+    "check_physical_consistency",
+    "com_from_standard",
+    "matrix_from_six",
+    "parallel_axis",
+    "pseudo_inertia",
+    "six_from_matrix",
+    "standard_from_com",
 ]
 
 
@@ -170,7 +176,7 @@ def check_physical_consistency(p10, *, tol: float = 1e-12) -> list[str]:
     >>> check_physical_consistency(standard_from_com(1.0, [0, 0, 0], np.diag([0.01, 0.01, 0.1])))[0][:29]
     'triangle inequality violated '
     """
-    M, c, IG = com_from_standard(p10)
+    M, _, IG = com_from_standard(p10)
     if not M > 0:
         return [f"mass {M} <= 0"]
     out = []

@@ -27,7 +27,7 @@ Examples
 """
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 import sympy as sp
@@ -35,8 +35,15 @@ import sympy as sp
 from .model import FIXED, PRISMATIC, REVOLUTE, MdhRow, q_symbol
 
 __all__ = [
-    "rot_x", "rot_z", "constant_rotation", "position", "symbolic_transform", "joint_sign",
-    "transform", "row_values", "row_transform",
+    "constant_rotation",
+    "joint_sign",
+    "position",
+    "rot_x",
+    "rot_z",
+    "row_transform",
+    "row_values",
+    "symbolic_transform",
+    "transform",
 ]
 
 
