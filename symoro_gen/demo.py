@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .description.inertia import standard_from_com
+
 TRUE_GAINS = np.array([1.02, 1.01, 1.02, 1.02, 1.02, 1.05, 0.99])  # Table II of the LWR4 paper
 PAYLOAD_MASS = 4.6136
 
@@ -22,8 +24,7 @@ def demo_payload() -> np.ndarray:
     m = PAYLOAD_MASS
     c = np.array([0.0575, -0.059, 0.06])  # MX8, MY8 of Table II are about 0.265, -0.272
     Ic = np.diag([0.012, 0.012, 0.008])
-    J = Ic + m * (c @ c * np.eye(3) - np.outer(c, c))
-    return np.array([J[0, 0], J[0, 1], J[0, 2], J[1, 1], J[1, 2], J[2, 2], *(m * c), m])
+    return standard_from_com(m, c, Ic)
 
 
 def run_demo(args=None) -> int:

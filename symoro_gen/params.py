@@ -14,19 +14,43 @@ INERTIAL_KINDS: tuple[str, ...] = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY
 DRIVE_KINDS: tuple[str, ...] = ("IA", "FV", "FS", "OFF")
 PARAM_KINDS: tuple[str, ...] = INERTIAL_KINDS + DRIVE_KINDS
 
-#: index of each inertial kind inside the 10-vector
+#: index of each inertial kind inside the 10-vector (conversions: :mod:`symoro_gen.description.inertia`)
 INERTIAL_INDEX = {k: i for i, k in enumerate(INERTIAL_KINDS)}
 
 
 def param_name(kind: str, frame: int) -> str:
-    """SYMORO-style name of a standard parameter: ``param_name("XX", 2) == "XX2"``."""
+    """SYMORO-style name of a standard parameter.
+
+    Examples
+    --------
+    >>> param_name("XX", 2)
+    'XX2'
+    >>> [param_name(k, 7) for k in DRIVE_KINDS]
+    ['IA7', 'FV7', 'FS7', 'OFF7']
+    >>> param_name("ZZR", 1)
+    Traceback (most recent call last):
+    ...
+    ValueError: unknown parameter kind 'ZZR'; expected one of ('XX', 'XY', 'XZ', 'YY', 'YZ', 'ZZ', 'MX', 'MY', 'MZ', 'M', 'IA', 'FV', 'FS', 'OFF')
+    """
     if kind not in PARAM_KINDS:
         raise ValueError(f"unknown parameter kind {kind!r}; expected one of {PARAM_KINDS}")
     return f"{kind}{frame}"
 
 
 def split_name(name: str) -> tuple[str, int, bool]:
-    """Inverse of :func:`param_name`, also for regrouped names: ``"XX2R" -> ("XX", 2, True)``."""
+    """Inverse of :func:`param_name`, also for regrouped names (``R`` suffix).
+
+    Examples
+    --------
+    >>> split_name("XX2R")
+    ('XX', 2, True)
+    >>> split_name("M10"), split_name("MX3")
+    (('M', 10, False), ('MX', 3, False))
+    >>> split_name("Q1")
+    Traceback (most recent call last):
+    ...
+    ValueError: not a standard parameter name: 'Q1'
+    """
     base = name[:-1] if name.endswith("R") else name
     regrouped = name.endswith("R")
     for kind in sorted(PARAM_KINDS, key=len, reverse=True):

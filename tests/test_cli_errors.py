@@ -1,16 +1,14 @@
 """Errors for users: status 2, one line of what is wrong and where, a ``hint:`` line, no traceback
 (``--debug`` adds it); nothing written. Every command path with a bad input of each kind."""
-import os
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from symoro_gen import cli
-from symoro_gen.cli import main
+from symoro_gen import cli as cli_module
+from symoro_gen.simulate import write_recording_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 PAR = ROOT / "tests" / "description" / "fixtures" / "rx90_symoro.par"
@@ -31,10 +29,9 @@ def data(tmp_path_factory):
     t, q, dq, ddq = fourier_trajectory(robot.n_joints, 6.0, 0.002, rng)
     tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
     d = tmp_path_factory.mktemp("data")
-    n = robot.n_joints
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
+    write_recording_csv(d / "good.csv", tr)
+    head = (d / "good.csv").read_text().splitlines()[0]
     a = np.column_stack([tr.t, tr.q, tr.tau])
-    np.savetxt(d / "good.csv", a, delimiter=",", header=head, comments="")
     a[10, 2] = np.nan
     np.savetxt(d / "nan.csv", a, delimiter=",", header=head, comments="")
     (d / "a_file").write_text("not a folder\n")
@@ -82,10 +79,9 @@ SEVERAL = {"generate: bad robot file", "identify: wrong robot for data"}  # file
 
 
 @pytest.mark.parametrize("name", CASES)
-def test_user_error_is_one_line_plus_hint(name, data, capsys):
+def test_user_error_is_one_line_plus_hint(name, data, cli):
     argv, expect = _case(data)[name]
-    assert main(argv) == 2
-    cap = capsys.readouterr()
+    cap = cli(*argv, rc=2)
     err = cap.err.rstrip("\n").splitlines()
     assert "Traceback" not in cap.err
     assert err[0].startswith("symoro-gen: error: ")
@@ -100,60 +96,51 @@ def test_user_error_is_one_line_plus_hint(name, data, capsys):
     assert not (data / "gen").exists() and not (data / "a_file" / "out.json").exists()
 
 
-def test_debug_adds_the_traceback(data, capsys):
+def test_debug_adds_the_traceback(data, cli):
     argv = ["identify", "scara", str(data / "nan.csv")]
-    assert main(["--debug"] + argv) == 2
-    err = capsys.readouterr().err
+    err = cli("--debug", *argv, rc=2).err
     assert err.startswith("Traceback (most recent call last)") and "DataFileError" in err
     tail = err.rstrip("\n").splitlines()[-2:]
     assert tail[0].startswith("symoro-gen: error: ") and "nan.csv" in tail[0] and tail[1].startswith("hint: ")
-    assert main(argv + ["--debug"]) == 2  # also accepted after the command
-    assert "Traceback" in capsys.readouterr().err
+    assert "Traceback" in cli(*argv, "--debug", rc=2).err  # also accepted after the command
 
 
-def test_several_problems_all_listed(data, capsys):
+def test_several_problems_all_listed(data, cli):
     bad = data / "two.toml"
     text = (ROOT / "robots" / "scara.toml").read_text().replace("sigma = 1", "sigma = 7").replace("ant = 2", "ant = 5")
     bad.write_text(text)
-    assert main(["generate", str(bad), "--out", str(data / "gen")]) == 2
-    err = capsys.readouterr().err.splitlines()
+    err = cli("generate", bad, "--out", data / "gen", rc=2).err.splitlines()
     assert re.fullmatch(r"symoro-gen: error: \d+ problems in robot description:", err[0])
     assert any("sigma" in x for x in err[1:-1]) and any("ant" in x for x in err[1:-1])
     assert "robot-file" in err[-1]
 
 
-def test_unexpected_failure_is_an_internal_error(monkeypatch, capsys):
+def test_unexpected_failure_is_an_internal_error(monkeypatch, cli):
     def boom(args):
         raise RuntimeError("something broke\nsecond line")
 
-    monkeypatch.setattr(cli, "cmd_export_par", boom)
-    assert main(["export-par", "scara"]) == 1
-    err = capsys.readouterr().err.splitlines()
+    monkeypatch.setattr(cli_module, "cmd_export_par", boom)
+    err = cli("export-par", "scara", rc=1).err.splitlines()
     assert err == ["symoro-gen: internal error: RuntimeError: something broke",
                    "hint: this is a bug in symoro-gen; rerun with --debug and report the traceback"]
-    assert main(["--debug", "export-par", "scara"]) == 1
-    assert "Traceback" in capsys.readouterr().err
+    assert "Traceback" in cli("--debug", "export-par", "scara", rc=1).err
 
 
-def test_interrupt(monkeypatch, capsys):
+def test_interrupt(monkeypatch, cli):
     def stop(args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli, "cmd_export_par", stop)
-    assert main(["export-par", "scara"]) == 130
-    assert capsys.readouterr().err == "symoro-gen: interrupted\n"
+    monkeypatch.setattr(cli_module, "cmd_export_par", stop)
+    assert cli("export-par", "scara", rc=130).err == "symoro-gen: interrupted\n"
 
 
-def test_warnings_are_one_line(data, capsys):
+def test_warnings_are_one_line(data, cli):
     """A data warning (unit check) prints as one ``symoro-gen: warning:`` line, not a source excerpt."""
     a = np.loadtxt(data / "good.csv", delimiter=",", skiprows=1)
     a[:, 1] *= 180 / np.pi  # q1 in degrees
     f = data / "deg.csv"
     np.savetxt(f, a, delimiter=",", header=(data / "good.csv").read_text().splitlines()[0], comments="")
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run([sys.executable, "-m", "symoro_gen", "--quiet", "identify", "scara", str(f), "--method", "ols"],
-                       capture_output=True, text=True, env=env, timeout=300)
-    assert r.returncode == 0, r.stderr
+    r = cli.subprocess("--quiet", "identify", "scara", f, "--method", "ols", rc=0)
     err = r.stderr
     lines = [x for x in err.splitlines() if "q1" in x]
     assert lines and all(x.startswith("symoro-gen: warning: ") for x in lines)
@@ -163,28 +150,25 @@ def test_warnings_are_one_line(data, capsys):
 def _commands():
     import argparse
 
-    parser = cli.build_parser()
+    parser = cli_module.build_parser()
     (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     return sub.choices
 
 
-def test_diagnose_bad_input(data, capsys):
+def test_diagnose_bad_input(data, cli):
     if "diagnose" not in _commands():
         pytest.skip("the diagnose command is not there yet (issue 4)")
     cases = [(["diagnose", "scara", str(data / "missing.csv")], "missing.csv"),
              (["diagnose", "scara", str(data / "nan.csv")], "nan.csv"),
              (["diagnose", "no_such_robot", str(data / "good.csv")], "no such robot")]
     for argv, what in cases:
-        assert main(argv) == 2, argv
-        err = capsys.readouterr().err.rstrip("\n").splitlines()
+        err = cli(*argv, rc=2).err_lines
         assert err[0].startswith("symoro-gen: error: ") and what in err[0] and err[-1].startswith("hint: ")
 
 
-def test_closed_pipe_is_not_an_error():
+def test_closed_pipe_is_not_an_error(cli):
     """`symoro-gen ... | head`: the reader goes away; no error message, no traceback."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    p = subprocess.Popen([sys.executable, "-m", "symoro_gen", "export-par", "lwr4"], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, env=env)
+    p = cli.popen("export-par", "lwr4", stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     p.stdout.close()  # nobody reads
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141 and err == "", err

@@ -2,25 +2,17 @@
 import json
 
 import numpy as np
-import pytest
 
-from symoro_gen.cli import main
+from symoro_gen.simulate import write_recording_csv
 
 
-def test_demo_recovers_sensor_gains(capsys):
-    assert main(["demo", "--duration", "10"]) == 0
-    out = capsys.readouterr().out
+def test_demo_recovers_sensor_gains(cli):
+    out = cli("demo", "--duration", "10", rc=0).out
     errs = [float(line.split("error")[1].split("%")[0]) for line in out.splitlines() if line.strip().startswith("g") and "identified" in line]
     assert len(errs) == 7 and max(abs(e) for e in errs) < 0.5  # gains within 0.5 %
 
 
-def _write_csv(path, t, q, tau):
-    n = q.shape[1]
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
-    np.savetxt(path, np.column_stack([t, q, tau]), delimiter=",", header=head, comments="")
-
-
-def test_identify_cli_json_contract(tmp_path):
+def test_identify_cli_json_contract(tmp_path, cli):
     from symoro_gen.loader import model_for
     from symoro_gen.simulate.parameters import random_physical_parameters
     from symoro_gen.simulate.recording import simulate_recording
@@ -35,10 +27,10 @@ def test_identify_cli_json_contract(tmp_path):
         t, q, dq, ddq = fourier_trajectory(robot.n_joints, 15.0, 0.002, rng)
         tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.05, rng=rng)
         f = tmp_path / f"rec{k}.csv"
-        _write_csv(f, tr.t, tr.q, tr.tau)
+        write_recording_csv(f, tr)
         files.append(str(f))
     out = tmp_path / "res.json"
-    assert main(["--quiet", "identify", "rx90", files[0], "--validate", files[1], "--method", "ols", "--json", str(out)]) == 0
+    cli("--quiet", "identify", "rx90", files[0], "--validate", files[1], "--method", "ols", "--json", out, rc=0)
     d = json.loads(out.read_text())
     p = d["parameters"]
     assert set(p) >= {"names", "values", "std", "rel_std_pct"}
@@ -54,8 +46,7 @@ def test_identify_cli_json_contract(tmp_path):
     assert np.mean(np.abs(v - truth)[good] <= 3 * s[good] + 1e-9) > 0.9
 
 
-def test_identify_cli_bad_data_exits_2(tmp_path, capsys):
+def test_identify_cli_bad_data_exits_2(tmp_path, cli):
     bad = tmp_path / "bad.csv"
     bad.write_text("t,q1,tau1\n0,0,0\n")
-    assert main(["identify", "rx90", str(bad)]) == 2
-    assert "bad.csv" in capsys.readouterr().err
+    assert "bad.csv" in cli("identify", "rx90", bad, rc=2).err

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from symoro_gen import progress as P
-from symoro_gen.cli import generation_steps, main
+from symoro_gen.cli import generation_steps
+from symoro_gen.simulate import write_recording_csv
 
 
 class _Tty(io.StringIO):
@@ -106,10 +107,9 @@ def test_generation_stage_count_matches_newton_euler():
         assert len(calls) + 2 == generation_steps(robot)
 
 
-def test_generate_quiet_without_terminal(tmp_path, capsys):
-    # capsys' stderr is not a terminal: no bar even without --quiet
-    assert main(["generate", "scara", "--out", str(tmp_path)]) == 0
-    cap = capsys.readouterr()
+def test_generate_quiet_without_terminal(tmp_path, cli):
+    # the captured stderr is not a terminal: no bar even without --quiet
+    cap = cli("generate", "scara", "--out", tmp_path, rc=0)
     assert cap.err == "" and "22 base parameters" in cap.out
 
 
@@ -137,10 +137,10 @@ class _SpyBar:
 SPIES: list = []
 
 
-def test_generate_stages_on_the_bar(tmp_path, monkeypatch):
+def test_generate_stages_on_the_bar(tmp_path, monkeypatch, cli):
     SPIES.clear()
     monkeypatch.setattr(P, "progress_bar", _SpyBar)
-    assert main(["--quiet", "generate", "lwr4", "--out", str(tmp_path)]) == 0
+    cli("--quiet", "generate", "lwr4", "--out", tmp_path, rc=0)
     (bar,) = SPIES
     assert bar.n == bar.total == 8 + 8 + 2  # 8 frames forward, 7 links + payload backward, base, emission
     text = " | ".join(bar.descs)
@@ -148,32 +148,30 @@ def test_generate_stages_on_the_bar(tmp_path, monkeypatch):
         assert stage in text
 
 
-def test_generate_bar_when_forced(tmp_path, capsys, monkeypatch):
+def test_generate_bar_when_forced(tmp_path, monkeypatch, cli):
     monkeypatch.setenv(P.ENV_VAR, "1")
-    assert main(["generate", "scara", "--out", str(tmp_path)]) == 0
-    err = capsys.readouterr().err
+    err = cli("generate", "scara", "--out", tmp_path, rc=0).err
     assert "scara" in err and "/10 [" in err  # a bar over the 10 steps
     # --quiet wins over the environment
-    assert main(["--quiet", "generate", "scara", "--out", str(tmp_path)]) == 0
-    assert capsys.readouterr().err == ""
+    assert cli("--quiet", "generate", "scara", "--out", tmp_path, rc=0).err == ""
 
 
-def test_generate_bar_on_fake_terminal(tmp_path, monkeypatch):
+def test_generate_bar_on_fake_terminal(tmp_path, monkeypatch, cli):
     tty = _Tty()
     monkeypatch.setattr(sys, "stderr", tty)
-    assert main(["generate", "scara", "--out", str(tmp_path), "--quiet"]) == 0
+    cli("generate", "scara", "--out", tmp_path, "--quiet", rc=0, capture=False)  # stderr: the fake terminal
     assert tty.getvalue() == ""
-    assert main(["generate", "scara", "--out", str(tmp_path)]) == 0
+    cli("generate", "scara", "--out", tmp_path, rc=0, capture=False)
     assert "/10 [" in tty.getvalue()
 
 
-def test_generate_output_unchanged_by_progress(tmp_path, monkeypatch):
+def test_generate_output_unchanged_by_progress(tmp_path, monkeypatch, cli):
     """The command's staged generation writes exactly what emit_robot writes."""
     from symoro_gen.description import load_robot
     from symoro_gen.emit.package import emit_robot
 
     monkeypatch.setenv(P.ENV_VAR, "1")
-    assert main(["generate", "scara", "--out", str(tmp_path / "cli")]) == 0
+    cli("generate", "scara", "--out", tmp_path / "cli", rc=0)
     emit_robot(load_robot("scara"), tmp_path / "lib")
     a, b = tmp_path / "cli" / "scara", tmp_path / "lib" / "scara"
     names = sorted(p.name for p in a.iterdir() if p.is_file())
@@ -199,12 +197,11 @@ def recordings(tmp_path_factory):
     d = tmp_path_factory.mktemp("rec")
     files, trajs = [], []
     n = robot.n_joints
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
     for k in range(2):
         t, q, dq, ddq = fourier_trajectory(n, 6.0, 0.002, rng)
         tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
         f = d / f"rec{k}.csv"
-        np.savetxt(f, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=head, comments="")
+        write_recording_csv(f, tr)
         files.append(str(f))
         trajs.append(tr)
     return robot, model, files, trajs
@@ -234,14 +231,11 @@ def test_assembly_progress_counts_samples_and_changes_nothing(recordings):
     assert sum(got) == total and len(got) >= len(chunks)
 
 
-def test_identify_bars_only_when_forced(recordings, tmp_path, capsys, monkeypatch):
+def test_identify_bars_only_when_forced(recordings, tmp_path, monkeypatch, cli):
     _, _, files, _ = recordings
     args = ["identify", "scara", files[0], "--validate", files[1], "--method", "ols", "--json", str(tmp_path / "r.json")]
-    assert main(args) == 0
-    assert "assembling W" not in capsys.readouterr().err
+    assert "assembling W" not in cli(*args, rc=0).err
     monkeypatch.setenv(P.ENV_VAR, "1")
-    assert main(args) == 0
-    err = capsys.readouterr().err
+    err = cli(*args, rc=0).err
     assert "loading data" in err and "assembling W" in err
-    assert main(["--quiet"] + args) == 0
-    assert capsys.readouterr().err == ""
+    assert cli("--quiet", *args, rc=0).err == ""

@@ -26,10 +26,10 @@ import sympy as sp
 
 from ..description.model import PRISMATIC, REVOLUTE
 from ..dynamics.newton_euler import SymbolicRegressor
-from ..dynamics.transforms import constant_rotation, position, rot_z
+from ..description.mdh import constant_rotation, position, rot_z
 from ..params import INERTIAL_KINDS, param_name
 
-_J_KINDS = ("XX", "XY", "XZ", "YY", "YZ", "ZZ")
+_J_KINDS = INERTIAL_KINDS[:6]
 _J_INDEX = {"XX": (0, 0), "XY": (0, 1), "XZ": (0, 2), "YY": (1, 1), "YZ": (1, 2), "ZZ": (2, 2)}
 
 

@@ -31,7 +31,19 @@ class MdhRow:
 
     T(ant, j) = Rot(z, gamma) Trans(z, b) Rot(x, alpha) Trans(x, d) Rot(z, theta) Trans(z, r).
     Geometric fields are sympy expressions; ``theta`` (revolute) or ``r`` (prismatic) contains
-    the joint symbol ``q<j>``.
+    the joint symbol ``q<j>``. The transform itself, numeric and symbolic, and the joint sign are in
+    :mod:`symoro_gen.description.mdh`.
+
+    Examples
+    --------
+    A revolute joint 2 on frame 1, turned by ``pi/2`` about x, offset ``D2`` along x:
+
+    >>> row = MdhRow(j=2, ant=1, sigma=REVOLUTE, mu=1, gamma=sp.S(0), b=sp.S(0), alpha=sp.pi / 2,
+    ...              d=sp.Symbol("D2"), theta=q_symbol(2), r=sp.S(0))
+    >>> row.is_moving, row.drive
+    (True, ('IA', 'FV', 'FS', 'OFF'))
+    >>> MdhRow(3, 2, FIXED, 0, *[sp.S(0)] * 6).is_moving
+    False
     """
 
     j: int

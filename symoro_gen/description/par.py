@@ -51,7 +51,6 @@ import json
 import math
 import os
 import re
-import tempfile
 from collections import Counter
 from pathlib import Path
 from typing import Mapping
@@ -59,6 +58,7 @@ from typing import Mapping
 import sympy as sp
 from sympy.printing.str import StrPrinter
 
+from ..atomic import write_text_atomic
 from ..errors import Problem, RobotFileError, SymoroError
 from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from .expr import ExprError, parse_expression
@@ -804,7 +804,7 @@ def _par_expr(e: sp.Expr) -> str:
 
 # ============================================================================ writing
 def write_robot_toml(text: str, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Validate robot-file text and write it atomically (temporary file + ``os.replace``).
+    """Validate robot-file text and write it atomically (:func:`symoro_gen.atomic.write_text_atomic`).
 
     Parameters
     ----------
@@ -832,24 +832,10 @@ def write_robot_toml(text: str, path: str | os.PathLike, *, overwrite: bool = Fa
     parse_robot_text(text, file=str(dest))
     if dest.exists() and not overwrite:
         raise OutputExistsError(dest)
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent if str(dest.parent) else ".")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        if overwrite:
-            os.replace(tmp, dest)
-        else:
-            try:
-                os.link(tmp, dest)  # fails if dest appeared meanwhile: never clobbers
-            except FileExistsError:
-                raise OutputExistsError(dest) from None
-            except OSError:  # file system without hard links
-                if dest.exists():
-                    raise OutputExistsError(dest) from None
-                os.replace(tmp, dest)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        write_text_atomic(dest, text, overwrite=overwrite)  # never clobbers a file appearing meanwhile
+    except FileExistsError:
+        if dest.exists() and not overwrite:
+            raise OutputExistsError(dest) from None
+        raise
     return dest

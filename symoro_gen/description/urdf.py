@@ -43,6 +43,8 @@ import numpy as np
 
 from ..errors import ModelError, Problem, RobotFileError
 from ..params import INERTIAL_KINDS
+from .inertia import matrix_from_six, parallel_axis, six_from_matrix
+from .mdh import transform as mdh_transform
 from .parse import parse_robot_text
 
 __all__ = ["import_urdf", "import_urdf_text", "parse_urdf", "UrdfModel", "UrdfJoint", "UrdfLink", "UrdfInertial"]
@@ -227,7 +229,7 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
                 I = np.zeros((3, 3))
             else:
                 v = {k: rd.floats(ine, k, 1, where, f"inertial/inertia/{k}")[0] for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
-                I = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]])
+                I = matrix_from_six([v[k] for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")])
             inertial = UrdfInertial(mass, rd.origin(ie, where), I)
         links[name] = UrdfLink(name, inertial)
     joints: dict[str, UrdfJoint] = {}
@@ -452,21 +454,6 @@ def _mdh_from_transform(T: np.ndarray, tol: float) -> tuple[float, float, float,
     return gamma, b, alpha, d, theta, r
 
 
-def _mdh_transform(gamma, b, alpha, d, theta, r) -> np.ndarray:
-    def rz(a):
-        c, s = math.cos(a), math.sin(a)
-        return _hom(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]), np.zeros(3))
-
-    def rx(a):
-        c, s = math.cos(a), math.sin(a)
-        return _hom(np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]]), np.zeros(3))
-
-    def tr(v):
-        return _hom(np.eye(3), v)
-
-    return rz(gamma) @ tr([0, 0, b]) @ rx(alpha) @ tr([d, 0, 0]) @ rz(theta) @ tr([0, 0, r])
-
-
 # ---------------------------------------------------------------------------------------------
 # formatting
 # ---------------------------------------------------------------------------------------------
@@ -651,19 +638,19 @@ def import_urdf_text(
             continue
         T = _inv(frames[i]) @ pose[lk] @ ine.origin
         R, c, m = T[:3, :3], T[:3, 3], ine.mass
-        J[i] += R @ ine.inertia @ R.T + m * (c @ c * np.eye(3) - np.outer(c, c))
+        J[i] += parallel_axis(R @ ine.inertia @ R.T, m, c)
         inertial[i][6:9] += m * c
         inertial[i][9] += m
     for i in range(1, n + 1):
         Ji = J[i]
-        inertial[i][:6] = [Ji[0, 0], Ji[0, 1], Ji[0, 2], Ji[1, 1], Ji[1, 2], Ji[2, 2]]
+        inertial[i][:6] = six_from_matrix(Ji)
 
     # rows
     rows = []
     for i in range(1, n + 1):
         T = _inv(frames[i - 1]) @ frames[i]
         params = _mdh_from_transform(T, tol)
-        err = np.abs(_mdh_transform(*params) - T).max()
+        err = np.abs(mdh_transform(*params) - T).max()
         if err > 1e3 * tol:  # pragma: no cover - internal consistency check
             raise ModelError(f"{f}: MDH decomposition of joint {moving[i - 1].name} is off by {err:.2e}")
         rows.append((i, i - 1, 0 if moving[i - 1].type != "prismatic" else 1, params, moving[i - 1]))

@@ -19,18 +19,15 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, q_symbol
-from ..dynamics.newton_euler import joint_sign
-from ..dynamics.transforms import numeric_transform
 from ..params import INERTIAL_KINDS
+from .inertia import com_from_standard
+from .mdh import joint_sign, row_transform
+from .model import FIXED, PRISMATIC, REVOLUTE, RobotDescription
 
 
 def constant_transform(robot: RobotDescription, j: int) -> np.ndarray:
     """4x4 T(ant, j) at q = 0."""
-    row = robot.row(j)
-    subs = dict(robot.geometry_subs())
-    subs[q_symbol(j)] = 0
-    return numeric_transform(*(float(x.subs(subs)) for x in (row.gamma, row.b, row.alpha, row.d, row.theta, row.r)))
+    return row_transform(robot.row(j), robot.geometry_subs(), q=0.0)
 
 
 def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:
@@ -47,11 +44,8 @@ def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:
 
 def physical_inertial(p10, *, min_mass: float = 1e-6, min_inertia: float = 1e-9):
     """(mass, com, inertia at com) from standard parameters at the frame origin, made physical."""
-    XX, XY, XZ, YY, YZ, ZZ, MX, MY, MZ, M = (float(x) for x in p10)
-    m = max(M, min_mass)
-    c = np.array([MX, MY, MZ]) / m
-    J = np.array([[XX, XY, XZ], [XY, YY, YZ], [XZ, YZ, ZZ]])
-    Ic = J - m * (c @ c * np.eye(3) - np.outer(c, c))
+    p = [float(x) for x in p10]
+    m, c, Ic = com_from_standard(p[:9] + [max(p[9], min_mass)])
     w, V = np.linalg.eigh((Ic + Ic.T) / 2)
     w = np.maximum(w, min_inertia)
     # triangle inequalities on principal moments

@@ -7,9 +7,9 @@ measured vs reconstructed torques of the final model.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
+from ..atomic import write_bytes_atomic
 from ..report import MissingDependencyError, build_report
 
 __all__ = ["write_plots"]
@@ -40,8 +40,6 @@ def write_plots(report, folder) -> list[Path]:
     out = []
     for fig in rep.figures:
         p = folder / f"{fig.name}.png"
-        tmp = p.with_name(p.name + ".tmp")
-        tmp.write_bytes(fig.png)
-        os.replace(tmp, p)
+        write_bytes_atomic(p, fig.png)
         out.append(p)
     return out

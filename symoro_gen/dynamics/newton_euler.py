@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import sympy as sp
 
+from ..description.mdh import constant_rotation, joint_sign, position, rot_z
 from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
 from ..params import INERTIAL_KINDS, param_name
 from .graph import ExprGraph, GraphBuilder
-from .transforms import constant_rotation, rot_z
 
 
 @dataclass(frozen=True)
@@ -34,12 +34,6 @@ class SymbolicRegressor:
 
     def column(self, name: str) -> dict[int, sp.Expr]:
         return {i: e for (i, n), e in self.graph.outputs.items() if n == name}
-
-
-def joint_sign(row) -> int:
-    """+1 when the joint variable enters theta (or r) as +q, -1 for -q."""
-    e = row.theta if row.sigma == REVOLUTE else row.r
-    return int(sp.diff(e, q_symbol(row.j)))
 
 
 def _cross(a, b):
@@ -102,8 +96,7 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
             Rz = rot_z(th)
         Rm = (Rc * Rz).applyfunc(sp.expand)
         R[row.j] = Rm
-        r_ = row.r
-        pos = rot_z(row.gamma) * sp.Matrix([row.d, -r_ * sp.sin(row.alpha), row.b + r_ * sp.cos(row.alpha)])
+        pos = position(row)
         P[row.j] = [g.name(sp.expand(pos[i]), f"P{row.j}{'xyz'[i]}") for i in range(3)]
 
     zero = [sp.Integer(0)] * 3
@@ -215,7 +208,7 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
         W, Wd, V = w[k], wd[k], vd[k]
         for kind in INERTIAL_KINDS:
             name = param_name(kind, k)
-            if kind in ("XX", "XY", "XZ", "YY", "YZ", "ZZ"):
+            if kind in INERTIAL_KINDS[:6]:
                 # N = E wd + w x (E w), written with the named products of w
                 n_ = _inertia_moment(kind, Wd, products(k))
                 f_ = [sp.Integer(0)] * 3

@@ -6,28 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..description.model import PRISMATIC, REVOLUTE, RobotDescription, q_symbol
+from ..description.inertia import matrix_from_six
+from ..description.mdh import joint_sign, row_values, transform
+from ..description.model import PRISMATIC, REVOLUTE, RobotDescription
 from ..params import INERTIAL_KINDS
-from .newton_euler import joint_sign
-
-
-def _num(e, subs):
-    return float(e.subs(subs)) if hasattr(e, "subs") else float(e)
-
-
-def _rot_x(a):
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
-
-
-def _rot_z_batch(th):
-    c, s = np.cos(th), np.sin(th)
-    o, z = np.ones_like(th), np.zeros_like(th)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
-
-
-def _skew_apply(w, v):
-    return np.cross(w, v)
 
 
 def inverse_dynamics(robot: RobotDescription, q, dq, ddq, chi_std, chi_payload=None):
@@ -63,23 +45,12 @@ def inverse_dynamics(robot: RobotDescription, q, dq, ddq, chi_std, chi_payload=N
     vd[0] = np.tile(-np.asarray(robot.gravity, float), (N, 1))
     for row in robot.rows:
         j, a = row.j, row.ant
-        gam, b, al, d = (_num(x, subs) for x in (row.gamma, row.b, row.alpha, row.d))
-        if row.sigma == REVOLUTE:
-            qj = q[:, col[j]]
-            sgn = sgn_of(row)
-            th = _num(row.theta.subs(q_symbol(j), 0), subs) + sgn * qj
-            r = np.full(N, _num(row.r, subs))
-        elif row.sigma == PRISMATIC:
-            qj = q[:, col[j]]
-            sgn = sgn_of(row)
-            r = _num(row.r.subs(q_symbol(j), 0), subs) + sgn * qj
-            th = np.full(N, _num(row.theta, subs))
+        if row.is_moving:
+            sgn = joint_sign(row)
+            T = transform(*row_values(row, subs, q[:, col[j]]))
         else:
-            th = np.full(N, _num(row.theta, subs))
-            r = np.full(N, _num(row.r, subs))
-        Rc = _rot_z_batch(np.array([gam]))[0] @ _rot_x(al)
-        R = Rc @ _rot_z_batch(th)  # (N,3,3)
-        P = (_rot_z_batch(np.array([gam]))[0] @ np.stack([np.full(N, d), -r * np.sin(al), b + r * np.cos(al)], 0)).T
+            T = np.broadcast_to(transform(*row_values(row, subs)), (N, 4, 4))
+        R, P = T[:, :3, :3], T[:, :3, 3]  # (N,3,3), (N,3)
         Rs[j], Ps[j] = R, P
         RT = np.transpose(R, (0, 2, 1))
         wa = np.einsum("nij,nj->ni", RT, w[a])
@@ -105,7 +76,7 @@ def inverse_dynamics(robot: RobotDescription, q, dq, ddq, chi_std, chi_payload=N
     for row in reversed(robot.rows):
         j = row.j
         p = {k: vals.get(f"{k}{j}", 0.0) for k in INERTIAL_KINDS}
-        J = np.array([[p["XX"], p["XY"], p["XZ"]], [p["XY"], p["YY"], p["YZ"]], [p["XZ"], p["YZ"], p["ZZ"]]])
+        J = matrix_from_six([p[k] for k in INERTIAL_KINDS[:6]])
         MS = np.array([p["MX"], p["MY"], p["MZ"]])
         F = p["M"] * vd[j] + np.cross(wd[j], MS) + np.cross(w[j], np.cross(w[j], MS))
         Nm = (wd[j] @ J.T) + np.cross(w[j], w[j] @ J.T) + np.cross(MS, vd[j])
@@ -114,7 +85,7 @@ def inverse_dynamics(robot: RobotDescription, q, dq, ddq, chi_std, chi_payload=N
         if row.is_moving:
             i = col[j]
             t = nj[:, 2] if row.sigma == REVOLUTE else fj[:, 2]
-            t = t * (sgn_of(row))
+            t = t * joint_sign(row)
             t = t + vals.get(f"IA{j}", 0.0) * ddq[:, i] + vals.get(f"FV{j}", 0.0) * dq[:, i]
             t = t + vals.get(f"FS{j}", 0.0) * np.sign(dq[:, i]) + vals.get(f"OFF{j}", 0.0)
             tau[:, i] = t
@@ -123,11 +94,6 @@ def inverse_dynamics(robot: RobotDescription, q, dq, ddq, chi_std, chi_payload=N
         f[a] = f[a] + fa
         n[a] = n[a] + np.einsum("nij,nj->ni", Rs[j], nj) + np.cross(Ps[j], fa)
     return tau[0] if one else tau
-
-
-def sgn_of(row) -> float:
-    """+1 when the joint variable enters as +q, -1 for -q."""
-    return float(joint_sign(row))
 
 
 def numeric_regressor(robot: RobotDescription, q, dq, ddq):

@@ -9,14 +9,11 @@ from __future__ import annotations
 
 import base64
 import html
-import os
-import shutil
 import struct
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..atomic import ordinary_mode, write_bytes_atomic
+from ..atomic import replace_folder_atomic, write_bytes_atomic
 from ..errors import SymoroError
 
 __all__ = ["ReportError", "Heading", "Paragraph", "Table", "Figure", "ItemList", "Preformatted", "Report", "png_size",
@@ -282,27 +279,9 @@ def asset_folder(path) -> Path:
 
 def _replace_folder_atomic(folder: Path, files: dict[str, bytes]) -> None:
     """Write ``files`` into a temporary sibling folder, then swap it in place of ``folder``."""
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".tmp", dir=folder.parent))
-    old = None
-    try:
-        os.chmod(tmp, ordinary_mode(is_dir=True))
-        for name, data in files.items():
-            (tmp / name).write_bytes(data)
-        if folder.exists():
-            if not folder.is_dir():
-                raise ReportError(f"{folder} exists and is not a folder: cannot write the report's images there")
-            old = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".old", dir=folder.parent))
-            old.rmdir()
-            os.replace(folder, old)
-        os.replace(tmp, folder)
-    except BaseException:
-        if tmp.exists():
-            shutil.rmtree(tmp)
-        if old is not None and old.exists() and not folder.exists():
-            os.replace(old, folder)
-        raise
-    if old is not None and old.exists():
-        shutil.rmtree(old)
+    if folder.exists() and not folder.is_dir():
+        raise ReportError(f"{folder} exists and is not a folder: cannot write the report's images there")
+    replace_folder_atomic(folder, files)
 
 
 def write_report_files(report: Report, path) -> Path:

@@ -4,7 +4,7 @@ Each link is a random solid ellipsoid: mass ``M > 0``, centre of mass ``c`` in a
 moments ``M/5 (b^2 + c^2, ...)`` (so the inertia at the centre of mass is positive definite and
 satisfies the triangle inequalities strictly), random orientation; the standard parameters are
 expressed in frame j at its origin (Khalil-Kleinfinger): ``J_O = I_G + M (|c|^2 1 - c c^T)``,
-``MS = M c``. Drive terms (rotor inertia, viscous and Coulomb friction, offset) are drawn in
+``MS = M c`` (:func:`symoro_gen.description.inertia.standard_from_com`). Drive terms (rotor inertia, viscous and Coulomb friction, offset) are drawn in
 plausible ranges for an industrial arm.
 """
 from __future__ import annotations
@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..description.inertia import check_physical_consistency, com_from_standard, standard_from_com
 from ..description.model import RobotDescription
 from ..params import DRIVE_KINDS, INERTIAL_KINDS
 
@@ -87,38 +88,11 @@ def random_link_inertial(rng: np.random.Generator, *, mass_range=(0.5, 10.0), co
     Ip = m / 5.0 * np.array([b * b + cc * cc, a * a + cc * cc, a * a + b * b])
     R = _random_rotation(rng)
     IG = R @ np.diag(Ip) @ R.T
-    J = IG + m * (c @ c * np.eye(3) - np.outer(c, c))
-    return np.array([J[0, 0], J[0, 1], J[0, 2], J[1, 1], J[1, 2], J[2, 2], *(m * c), m])
+    return standard_from_com(m, c, IG)
 
 
-def inertial_at_com(p10) -> tuple[float, np.ndarray, np.ndarray]:
-    """``(M, c, I_G)`` from ``XX XY XZ YY YZ ZZ MX MY MZ M`` (inverse parallel-axis theorem)."""
-    XX, XY, XZ, YY, YZ, ZZ, MX, MY, MZ, M = (float(x) for x in p10)
-    J = np.array([[XX, XY, XZ], [XY, YY, YZ], [XZ, YZ, ZZ]])
-    ms = np.array([MX, MY, MZ])
-    c = ms / M if M != 0 else np.zeros(3)
-    IG = J - M * (c @ c * np.eye(3) - np.outer(c, c))
-    return M, c, IG
-
-
-def check_physical_consistency(p10, *, tol: float = 1e-12) -> list[str]:
-    """Reasons why 10 inertial parameters are not those of a rigid body (empty list if they are).
-
-    Checks ``M > 0``, ``I_G`` positive definite and the triangle inequalities of its principal moments.
-    """
-    M, c, IG = inertial_at_com(p10)
-    out = []
-    if not M > 0:
-        return [f"mass {M} <= 0"]
-    ev = np.linalg.eigvalsh(IG)
-    scale = max(abs(ev).max(), 1e-300)
-    if ev.min() <= tol * scale:
-        out.append(f"inertia at the centre of mass not positive definite (eigenvalues {ev})")
-    for i in range(3):
-        if ev[i] > ev[(i + 1) % 3] + ev[(i + 2) % 3] + tol * scale:
-            out.append(f"triangle inequality violated by principal moments {ev}")
-            break
-    return out
+#: ``(M, c, I_G)`` from the 10 inertial parameters (kept name; see :mod:`symoro_gen.description.inertia`)
+inertial_at_com = com_from_standard
 
 
 def random_physical_parameters(robot: RobotDescription, rng: np.random.Generator, *, mass_range=(0.5, 10.0),

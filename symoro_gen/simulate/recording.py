@@ -1,14 +1,17 @@
 """Synthetic recordings: torques of a known model along a known motion, with gains and noise."""
 from __future__ import annotations
 
+import io
+
 import numpy as np
 
+from ..atomic import write_text_atomic
 from ..description.model import RobotDescription
 from ..dynamics.numeric import inverse_dynamics
 from ..preprocessing.drive_chain import joint_to_motor
 from ..preprocessing.trajectory import Trajectory
 
-__all__ = ["true_torques", "simulate_recording"]
+__all__ = ["true_torques", "simulate_recording", "write_recording_csv"]
 
 
 def true_torques(model_or_robot, q, dq, ddq, chi_std, chi_payload=None, *, chunk_samples: int = 50_000):
@@ -115,3 +118,22 @@ def simulate_recording(model_or_robot, t, q, dq, ddq, chi_std, *, chi_payload=No
             "motor_side": drive_chain is not None}
     return Trajectory(t=np.asarray(t, float), q=q_meas, tau=tau_meas, dq=dq_out, ddq=ddq_out, source=source,
                       loaded=(chi_payload is not None) if loaded is None else bool(loaded), meta=meta)
+
+
+def write_recording_csv(path, recording: Trajectory) -> None:
+    """Write a recording as the CSV that ``symoro-gen identify`` reads: ``t,q1..qn,tau1..taun``.
+
+    One header line, then one row per sample (full precision), written atomically.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    recording : Trajectory
+        Its ``t``, ``q`` and ``tau`` are written (velocities and accelerations are not).
+    """
+    n = recording.q.shape[1]
+    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
+    buf = io.StringIO()
+    np.savetxt(buf, np.column_stack([recording.t, recording.q, recording.tau]), delimiter=",", header=head,
+               comments="")
+    write_text_atomic(path, buf.getvalue())

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Motion", "FourierSeries", "fourier_trajectory", "ptp_trajectory", "double_s_times"]
+__all__ = ["Motion", "FourierSeries", "fourier_trajectory", "ptp_trajectory", "double_s_times", "random_states"]
 
 
 @dataclass(frozen=True)
@@ -249,3 +249,27 @@ def ptp_trajectory(via_points, vmax, amax, jmax, dt: float, *, dwell: float = 0.
     q[via_idx] = P  # exact via-points
     t = np.arange(q.shape[0]) * dt
     return Motion(t=t, q=q, dq=np.concatenate(dqs), ddq=np.concatenate(ddqs), via_times=t[via_idx])
+
+
+def random_states(rng: np.random.Generator, N: int, n: int, q_range: float = np.pi,
+                  dq_scale: float = 2.0, ddq_scale: float = 5.0):
+    """Independent random joint states (no trajectory): for sampling a regressor at ``N`` points.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    N, n : int
+        Samples and joints.
+    q_range : float
+        Positions uniform in ``[-q_range, q_range]`` [rad or m].
+    dq_scale, ddq_scale : float
+        Standard deviations of the normal velocities and accelerations.
+
+    Returns
+    -------
+    q, dq, ddq : ndarrays, shape (N, n)
+    """
+    q = rng.uniform(-q_range, q_range, (N, n))
+    dq = rng.normal(0.0, dq_scale, (N, n))
+    ddq = rng.normal(0.0, ddq_scale, (N, n))
+    return q, dq, ddq

@@ -11,13 +11,14 @@ from symoro_gen.baseparams.regroup import numeric_rank
 from symoro_gen.description import parse_robot_text
 from symoro_gen.dynamics.numeric import inverse_dynamics
 from symoro_gen.emit.package import build_in_memory
+from symoro_gen.simulate import random_states
 from tests.strategies import mdh_robots
 
 REL = 1e-9
 
 
 def _states(rng, n, N):
-    return rng.uniform(-np.pi, np.pi, (N, n)), rng.normal(0, 2, (N, n)), rng.normal(0, 5, (N, n))
+    return random_states(rng, N, n)
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])

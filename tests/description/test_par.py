@@ -449,19 +449,16 @@ def test_round_trip_shared_strategy():
     check()
 
 
-def test_cli_import_par(tmp_path, capsys):
-    from symoro_gen.cli import main
-
+def test_cli_import_par(tmp_path, cli):
     out = tmp_path / "rx90.toml"
-    assert main(["--quiet", "import-par", str(RX90_PAR), "-o", str(out)]) == 0
+    cli("--quiet", "import-par", RX90_PAR, "-o", out, rc=0)
     assert out.read_text() == import_par(RX90_PAR)
     before = out.read_text()
-    assert main(["import-par", str(TREE_PAR), "-o", str(out)]) == 2  # exists: refused
-    assert out.read_text() == before and "not overwritten" in capsys.readouterr().err
-    assert main(["--quiet", "import-par", str(TREE_PAR), "-o", str(out), "--force"]) == 0
+    err = cli("import-par", TREE_PAR, "-o", out, rc=2).err  # exists: refused
+    assert out.read_text() == before and "not overwritten" in err
+    cli("--quiet", "import-par", TREE_PAR, "-o", out, "--force", rc=0)
     assert "tree3" in out.read_text()
     bad = tmp_path / "bad.par"
     bad.write_text(BASE.replace("Type = 1", "Type = 2"))
-    assert main(["import-par", str(bad), "-o", str(tmp_path / "bad.toml")]) == 2
-    err = capsys.readouterr().err
+    err = cli("import-par", bad, "-o", tmp_path / "bad.toml", rc=2).err
     assert "bad.par" in err and "line 7" in err and "Type" in err and not (tmp_path / "bad.toml").exists()

@@ -9,6 +9,7 @@ import sympy as sp
 
 from symoro_gen.description import load_robot, parse_robot, parse_robot_text, q_symbol
 from symoro_gen.errors import RobotFileError
+from symoro_gen.params import INERTIAL_KINDS, PARAM_KINDS
 
 # A small valid robot: RRP arm + payload frame 4 fixed to frame 3.
 GOOD = """\
@@ -102,7 +103,7 @@ def test_fixture_is_valid(tmp_path):
     robot = parse_robot(p)
     assert robot.n_joints == 3 and robot.payload == 4 and robot.file == str(p)
     assert robot.standard_names[:14] == tuple(
-        f"{k}1" for k in ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M", "IA", "FV", "FS", "OFF")
+        f"{k}1" for k in PARAM_KINDS
     )
 
 
@@ -367,7 +368,7 @@ def test_error_is_a_value_error(tmp_path):
 
 
 # ---------------------------------------------------------------- happy path: shipped robots
-INERTIAL = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M")
+INERTIAL = INERTIAL_KINDS
 
 
 @pytest.mark.parametrize("name, n, drive, n_std, payload", [

@@ -13,9 +13,9 @@ from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.description.urdf import import_urdf, import_urdf_text, parse_urdf_text
 from symoro_gen.dynamics.numeric import inverse_dynamics
 from symoro_gen.errors import RobotFileError
+from symoro_gen.simulate import random_states
 
-ROOT = Path(__file__).resolve().parents[2]
-LWR_URDF = ROOT.parent / "shared" / "data" / "kuka_lwr4_flobaroid" / "model" / "kuka_lwr4.urdf"
+LWR_URDF_IN_DATA = Path("kuka_lwr4_flobaroid") / "model" / "kuka_lwr4.urdf"
 RTOL = 1e-8
 N_SAMPLES = 6
 
@@ -40,7 +40,7 @@ def joint_relative_errors(a, b):
 
 
 def _states(rng, n, N=N_SAMPLES):
-    return rng.uniform(-np.pi, np.pi, (N, n)), rng.normal(0, 2, (N, n)), rng.normal(0, 5, (N, n))
+    return random_states(rng, N, n)
 
 
 def _check_against_pinocchio(toml_text: str, urdf_text: str, rng, rtol=RTOL):
@@ -288,20 +288,25 @@ def test_missing_file():
 
 
 # ---- the LWR4 of the recordings -------------------------------------------------------------
-needs_lwr = pytest.mark.skipif(not LWR_URDF.is_file(), reason=f"LWR4 URDF not available: {LWR_URDF} is absent")
+@pytest.fixture(scope="module")
+def lwr_urdf(shared_data) -> Path:
+    p = shared_data / LWR_URDF_IN_DATA
+    if not p.is_file():
+        pytest.skip(f"LWR4 URDF not available: {p} is absent")
+    return p
 
 
-@needs_lwr
+@pytest.mark.realdata
 @pytest.mark.parametrize("base_frame", ["joint", "link"])
-def test_lwr4_urdf_matches_pinocchio(base_frame):
-    toml = import_urdf(LWR_URDF, base_frame=base_frame)
-    _check_against_pinocchio(toml, LWR_URDF.read_text(), np.random.default_rng(42))
+def test_lwr4_urdf_matches_pinocchio(base_frame, lwr_urdf):
+    toml = import_urdf(lwr_urdf, base_frame=base_frame)
+    _check_against_pinocchio(toml, lwr_urdf.read_text(), np.random.default_rng(42))
 
 
-@needs_lwr
-def test_lwr4_import_is_table_one_of_the_paper():
+@pytest.mark.realdata
+def test_lwr4_import_is_table_one_of_the_paper(lwr_urdf):
     """alpha 0, pi/2, -pi/2, -pi/2, pi/2, pi/2, -pi/2; r3 = 0.40, r5 = 0.39; theta_j = q_j (no offset, no sign flip)."""
-    imported = parse_robot_text(import_urdf(LWR_URDF, name="lwr4"))
+    imported = parse_robot_text(import_urdf(lwr_urdf, name="lwr4"))
     shipped = load_robot("lwr4")
     assert imported.n_joints == 7
     subs_i, subs_s = imported.geometry_subs(), shipped.geometry_subs()
@@ -314,13 +319,13 @@ def test_lwr4_import_is_table_one_of_the_paper():
     assert dict(imported.values) == {"RL3": 0.4, "RL5": 0.39}
 
 
-@needs_lwr
-def test_lwr4_nominal_values_fit_the_shipped_lwr4_file():
+@pytest.mark.realdata
+def test_lwr4_nominal_values_fit_the_shipped_lwr4_file(lwr_urdf):
     """robots/lwr4.toml (frames of Table I) with the imported nominal values == Pinocchio on the URDF."""
-    imported = parse_robot_text(import_urdf(LWR_URDF, name="lwr4"))
+    imported = parse_robot_text(import_urdf(lwr_urdf, name="lwr4"))
     shipped = load_robot("lwr4")
     chi = np.array([imported.nominal.get(n, 0.0) for n in shipped.standard_names])
-    model = pin.buildModelFromUrdf(str(LWR_URDF))
+    model = pin.buildModelFromUrdf(str(lwr_urdf))
     rng = np.random.default_rng(9)
     q, dq, ddq = _states(rng, 7)
     err = joint_relative_errors(inverse_dynamics(shipped, q, dq, ddq, chi), pinocchio_urdf_torque(model, q, dq, ddq))

@@ -3,10 +3,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from symoro_gen.cli import main
 from symoro_gen.description import load_robot, parse_robot_text
+from symoro_gen.description.inertia import standard_from_com
 from symoro_gen.description.urdf_export import export_urdf, physical_inertial
 from symoro_gen.dynamics.numeric import inverse_dynamics
+from symoro_gen.params import INERTIAL_KINDS
 from symoro_gen.simulate.parameters import random_payload, random_physical_parameters
 
 
@@ -71,10 +72,9 @@ def test_physical_parameters_are_kept():
     chi, _ = random_parameters(robot, np.random.default_rng(2))
     vals = dict(zip(robot.standard_names, chi))
     for j in range(1, 7):
-        p = [vals[f"{k}{j}"] for k in ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M")]
+        p = [vals[f"{k}{j}"] for k in INERTIAL_KINDS]
         m, c, Ic = physical_inertial(p)
-        J = Ic + m * (c @ c * np.eye(3) - np.outer(c, c))
-        assert np.allclose(J, [[p[0], p[1], p[2]], [p[1], p[3], p[4]], [p[2], p[4], p[5]]], atol=1e-12)
+        assert np.allclose(standard_from_com(m, c, Ic), p, atol=1e-12)
 
 
 def test_physical_projection():
@@ -84,15 +84,15 @@ def test_physical_projection():
     assert w.max() <= w.sum() - w.max() + 1e-12
 
 
-def test_cli_export_urdf_with_identified_params(tmp_path):
+def test_cli_export_urdf_with_identified_params(tmp_path, cli):
     import json
 
     res = tmp_path / "res.json"
     res.write_text(json.dumps({"parameters": {"names": ["MX2R", "FV1", "ZZ1R"], "values": [1.0, 2.5, 0.3]}}))
     out = tmp_path / "rx90.urdf"
     with pytest.warns(UserWarning, match="MX2R"):
-        assert main(["export-urdf", "rx90", "--params", str(res), "-o", str(out)]) == 0
+        cli("export-urdf", "rx90", "--params", res, "-o", out, rc=0)
     text = out.read_text()
     assert 'damping="2.5"' in text
     pin.buildModelFromXML(text)
-    assert main(["export-urdf", "rx90", "--params", str(tmp_path / "missing.json")]) == 2
+    cli("export-urdf", "rx90", "--params", tmp_path / "missing.json", rc=2)

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 
 from symoro_gen.diagnostics import ResidualReport, diagnose
+from symoro_gen.simulate import write_recording_csv
 
 from .simdata import recording
 
@@ -49,64 +49,43 @@ def test_write_plots(stribeck_report, tmp_path):
     assert all(f.stat().st_size > 1000 for f in files)
 
 
-def _write_csv(path, tr):
-    n = tr.n_joints
-    head = ["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)]
-    np.savetxt(path, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=",".join(head), comments="")
-
-
-def test_cli_diagnose(tmp_path, capsys):
-    from symoro_gen.cli import main
-
+def test_cli_diagnose(tmp_path, cli):
     _, tr = recording("scara", 12, "offset", 3, offset=0.3)
     # the declared scara has OFF4: an offset is not missing, so inject a drift instead
     _, tr = recording("scara", 12, "drift", 3, rate=0.01)
     csv = tmp_path / "rec.csv"
-    _write_csv(csv, tr)
+    write_recording_csv(csv, tr)
     out = tmp_path / "out.json"
-    rc = main(["diagnose", "scara", str(csv), "--json", str(out), "--max-effects", "2", "--quiet"])
-    assert rc == 0
+    cli("diagnose", "scara", csv, "--json", out, "--max-effects", "2", "--quiet", rc=0)
     d = json.loads(out.read_text())
     assert d["effects"][0]["kind"] == "drift" and d["effects"][0]["joint"] == 4
     assert d["data"] == [str(csv)] and "validation_rel_err" in d["after"]
 
 
-def test_cli_validate_and_candidates(tmp_path):
-    from symoro_gen.cli import main
-
+def test_cli_validate_and_candidates(tmp_path, cli):
     _, tr = recording("scara", 13, "spring", 0, stiffness=-5.0)
     _, tv = recording("scara", 13, "spring", 0, stiffness=-5.0, duration=20.0)
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    _write_csv(a, tr)
-    _write_csv(b, tv)
+    write_recording_csv(a, tr)
+    write_recording_csv(b, tv)
     out = tmp_path / "o.json"
-    rc = main(["diagnose", "scara", str(a), "--validate", str(b), "--candidates", "spring", "offset",
-               "--json", str(out), "--quiet"])
-    assert rc == 0
+    cli("diagnose", "scara", a, "--validate", b, "--candidates", "spring", "offset", "--json", out, "--quiet", rc=0)
     d = json.loads(out.read_text())
     assert {c["kind"] for c in d["tried"]} == {"spring", "offset"}
     assert d["effects"][0]["kind"] == "spring" and d["effects"][0]["joint"] == 1
     assert d["settings"]["validation_sources"] == [str(b)]
 
 
-def test_cli_rejects_bad_report_suffix(tmp_path, capsys):
-    from symoro_gen.cli import main
-
+def test_cli_rejects_bad_report_suffix(tmp_path, cli):
     _, tr = recording("scara", 14, duration=10.0)
     csv = tmp_path / "r.csv"
-    _write_csv(csv, tr)
-    rc = main(["diagnose", "scara", str(csv), "--report", str(tmp_path / "r.pdf")])
-    assert rc == 2
-    assert "suffix" in capsys.readouterr().err
+    write_recording_csv(csv, tr)
+    assert "suffix" in cli("diagnose", "scara", csv, "--report", tmp_path / "r.pdf", rc=2).err
 
 
 @pytest.mark.parametrize("opt", [["--significance", "1.5"], ["--holdout", "0"], ["--max-effects", "-1"]])
-def test_cli_rejects_bad_options_before_loading(opt, capsys):
-    from symoro_gen.cli import main
-
-    rc = main(["diagnose", "scara", "no-such-file.csv"] + opt)
-    assert rc == 2
-    err = capsys.readouterr().err
+def test_cli_rejects_bad_options_before_loading(opt, cli):
+    err = cli("diagnose", "scara", "no-such-file.csv", *opt, rc=2).err
     assert opt[0] in err and "no-such-file" not in err
 
 

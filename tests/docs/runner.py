@@ -49,9 +49,11 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tests.conftest import find_shared_data
+
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
-SHARED_DATA = ROOT.parent / "shared" / "data"
+SHARED_DATA = find_shared_data()  # the real recordings (tests/conftest.py: one place that locates them)
 RUNNABLE = ("console", "python")
 SHELL_LANGS = ("sh", "bash", "shell", "zsh")
 _MARK_RE = re.compile(r"^\s*<!--\s*test:\s*(.*?)\s*-->\s*$")

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from symoro_gen.cli import main
+from symoro_gen.simulate import write_recording_csv
 
 from .jsonschema_lite import ANNOTATIONS, KEYWORDS, validate
 from .runner import DOCS, strict_json
@@ -56,12 +56,6 @@ def check(instance, name):
     jsonschema.validate(instance, SCHEMAS[name])
 
 
-def _csv(path, tr):
-    n = tr.q.shape[1]
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
-    np.savetxt(path, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=head, comments="")
-
-
 @pytest.fixture(scope="module")
 def scara_files(tmp_path_factory):
     from symoro_gen.loader import model_for
@@ -75,16 +69,15 @@ def scara_files(tmp_path_factory):
     for k in range(2):
         t, q, dq, ddq = fourier_trajectory(robot.n_joints, 8.0, 0.002, rng)
         tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
-        _csv(d / f"rec{k}.csv", tr)
+        write_recording_csv(d / f"rec{k}.csv", tr)
         files.append(str(d / f"rec{k}.csv"))
     return d, files
 
 
-def test_identify_output_matches_schema(scara_files):
+def test_identify_output_matches_schema(scara_files, cli):
     d, files = scara_files
     out = d / "r.json"
-    assert main(["--quiet", "identify", "scara", files[0], "--validate", files[1], "--method", "ols",
-                 "--json", str(out)]) == 0
+    cli("--quiet", "identify", "scara", files[0], "--validate", files[1], "--method", "ols", "--json", out, rc=0)
     res = strict_json(out)
     check(res, "identify")
     p = res["parameters"]
@@ -94,7 +87,7 @@ def test_identify_output_matches_schema(scara_files):
     assert res["rel_err_basis"]["n_d"] and res["validation"]["rel_err_basis"]["samples"] > 0
 
 
-def test_identify_with_gains_matches_schema(tmp_path):
+def test_identify_with_gains_matches_schema(tmp_path, cli):
     """LWR4 torque-sensor gains with a known payload mass (the demo's job through the command)."""
     from symoro_gen.demo import TRUE_GAINS, demo_payload
     from symoro_gen.loader import model_for
@@ -111,8 +104,8 @@ def test_identify_with_gains_matches_schema(tmp_path):
         files[kind] = tmp_path / f"{kind}.npz"
         np.savez(files[kind], t=tr.t, q=tr.q, tau=tr.tau)
     out = tmp_path / "g.json"
-    assert main(["--quiet", "identify", "lwr4", str(files["unloaded"]), "--loaded", str(files["loaded"]),
-                 "--payload", "M8=4.6136", "--gains", "sensor", "--json", str(out)]) == 0
+    cli("--quiet", "identify", "lwr4", files["unloaded"], "--loaded", files["loaded"], "--payload", "M8=4.6136",
+        "--gains", "sensor", "--json", out, rc=0)
     res = strict_json(out)
     check(res, "identify")
     g = res["gains"]
@@ -149,14 +142,14 @@ def test_diagnose_output_matches_schema(diagnose_report):
     assert len(d["before"]["validation_rel_err_raw"]) == len(d["after"]["validation_rel_err_raw"]) == 4
 
 
-def test_diagnose_cli_output_matches_schema(scara_files):
+def test_diagnose_cli_output_matches_schema(scara_files, cli):
     from .runner import available_commands
 
     if "diagnose" not in available_commands():
         pytest.skip("the diagnose command is not there yet (issue 4)")
     d, files = scara_files
     out = d / "diag.json"
-    assert main(["--quiet", "diagnose", "scara", files[0], "--validate", files[1], "--json", str(out)]) == 0
+    cli("--quiet", "diagnose", "scara", files[0], "--validate", files[1], "--json", out, rc=0)
     check(strict_json(out), "diagnose")
 
 

@@ -14,6 +14,7 @@ from symoro_gen import load_model
 from symoro_gen.baseparams.regroup import numeric_rank
 from symoro_gen.description import load_robot
 from symoro_gen.dynamics.numeric import inverse_dynamics, numeric_regressor
+from symoro_gen.simulate import random_states
 
 ROOT = Path(__file__).resolve().parents[2]
 ROBOTS = sorted(p.stem for p in (ROOT / "robots").glob("*.toml"))
@@ -21,7 +22,7 @@ REL = 1e-9
 
 
 def _states(rng, N, n):
-    return rng.uniform(-np.pi, np.pi, (N, n)), rng.normal(0, 2, (N, n)), rng.normal(0, 5, (N, n))
+    return random_states(rng, N, n)
 
 
 @pytest.fixture(params=ROBOTS)

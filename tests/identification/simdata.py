@@ -14,19 +14,13 @@ import numpy as np
 import scipy.linalg
 
 from symoro_gen.description import load_robot
+from symoro_gen.description.inertia import standard_from_com
 from symoro_gen.dynamics.numeric import numeric_regressor
 from symoro_gen.identification import ObservationSystem
+from symoro_gen.params import INERTIAL_KINDS
+from symoro_gen.simulate import random_states
 
 RANK_TOL = 1e-9
-
-
-def random_states(rng: np.random.Generator, N: int, n: int, q_range: float = np.pi,
-                  dq_scale: float = 1.5, ddq_scale: float = 4.0):
-    """Random joint states (N, n): positions uniform, velocities and accelerations normal."""
-    q = rng.uniform(-q_range, q_range, (N, n))
-    dq = rng.normal(0.0, dq_scale, (N, n))
-    ddq = rng.normal(0.0, ddq_scale, (N, n))
-    return q, dq, ddq
 
 
 def _rot(rng):
@@ -43,9 +37,7 @@ def link_inertial(rng: np.random.Generator, m_range=(1.0, 8.0), com_scale=0.15, 
     a, b, cc = rng.uniform(*gyr, 3)
     Ip = m * np.array([b * b + cc * cc, a * a + cc * cc, a * a + b * b])  # box-like: triangle inequalities hold
     R = _rot(rng)
-    Jc = R @ np.diag(Ip) @ R.T
-    Jo = Jc + m * (c @ c * np.eye(3) - np.outer(c, c))
-    return np.array([Jo[0, 0], Jo[0, 1], Jo[0, 2], Jo[1, 1], Jo[1, 2], Jo[2, 2], *(m * c), m])
+    return standard_from_com(m, c, R @ np.diag(Ip) @ R.T)
 
 
 def standard_parameters(robot, rng: np.random.Generator) -> np.ndarray:
@@ -54,7 +46,7 @@ def standard_parameters(robot, rng: np.random.Generator) -> np.ndarray:
     for row in robot.joints:
         j = row.j
         p = link_inertial(rng)
-        for k, v in zip(("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"), p):
+        for k, v in zip(INERTIAL_KINDS, p):
             vals[f"{k}{j}"] = v
         vals[f"IA{j}"] = rng.uniform(0.2, 1.5)
         vals[f"FV{j}"] = rng.uniform(1.0, 6.0)
@@ -67,9 +59,7 @@ def payload_parameters(mass: float, com=(0.08, -0.07, 0.12), gyr=(0.05, 0.06, 0.
     """Payload 10-vector with sizeable first moments (box inertia about its COM, axes aligned)."""
     c = np.array(com, float)
     a, b, cc = gyr
-    Jc = mass * np.diag([b * b + cc * cc, a * a + cc * cc, a * a + b * b])
-    Jo = Jc + mass * (c @ c * np.eye(3) - np.outer(c, c))
-    return np.array([Jo[0, 0], Jo[0, 1], Jo[0, 2], Jo[1, 1], Jo[1, 2], Jo[2, 2], *(mass * c), mass])
+    return standard_from_com(mass, c, mass * np.diag([b * b + cc * cc, a * a + cc * cc, a * a + b * b]))
 
 
 def base_columns(W_std: np.ndarray, tol: float = RANK_TOL) -> np.ndarray:
@@ -130,7 +120,7 @@ def make_robot_sim(name: str, N_a: int, N_b: int, seed: int, payload_mass: float
     rng = np.random.default_rng(seed)
     n = robot.n_joints
     # one call for both experiments: numeric_regressor's cost is mostly per call, not per sample
-    Ws, Wp = numeric_regressor(robot, *random_states(rng, N_a + N_b, n))
+    Ws, Wp = numeric_regressor(robot, *random_states(rng, N_a + N_b, n, dq_scale=1.5, ddq_scale=4.0))
     Ws_a, Ws_b, Wp_b = Ws[:N_a], Ws[N_a:], Wp[N_a:]
     Wa_std, Wb_std, WL = stack_rows(Ws_a), stack_rows(Ws_b), stack_rows(Wp_b)
     base = base_columns(np.vstack([Wa_std, Wb_std]))

@@ -3,17 +3,14 @@ import json
 
 import pytest
 
-from symoro_gen.cli import main
-
 
 @pytest.mark.realdata
-def test_tx40_base_parameters_beside_reference(shared_data, tmp_path):
+def test_tx40_base_parameters_beside_reference(shared_data, tmp_path, cli):
     d = shared_data / "staubli_tx40_figaroh"
     spec = f"q={d}/data/pos_read_data.csv,tau={d}/data/curr_data.csv,dt=0.0002"
     out = tmp_path / "tx40.json"
-    rc = main(["--quiet", "identify", "tx40", spec, "--method", "wls", "--json", str(out),
-               "--reference", str(d / "reference_results" / "TX40_bp_5.csv")])
-    assert rc == 0
+    cli("--quiet", "identify", "tx40", spec, "--method", "wls", "--json", out,
+        "--reference", d / "reference_results" / "TX40_bp_5.csv", rc=0)
     res = json.loads(out.read_text())
     ref = res["reference"]
     comparable = [r for r in ref if r["agree_2sigma"] is not None]

@@ -1,8 +1,8 @@
 """An independent oracle: a Pinocchio model built from an MDH table.
 
 Nothing here uses symoro_gen's transforms or Newton-Euler code: the joint placements are
-composed from plain numpy rotations, the link inertias are handed to Pinocchio as
-(mass, centre of mass, inertia about the centre of mass), and the torques come from
+composed from plain numpy rotations, the link inertias are converted by Pinocchio itself
+(``pin.Inertia.FromDynamicParameters``), and the torques come from
 Pinocchio's RNEA. Only the parsed :class:`RobotDescription` (the MDH table itself) is shared.
 
 Conventions mirrored from the robot file:
@@ -80,30 +80,34 @@ def constant_placement(robot: RobotDescription, j: int) -> tuple[pin.SE3, int]:
     return _se3(T[:3, :3], T[:3, 3]), sign
 
 
-def standard_to_inertia(p10) -> pin.Inertia | None:
-    """``XX XY XZ YY YZ ZZ MX MY MZ M`` (frame origin) -> ``pin.Inertia(m, c, I_c)``.
+#: Pinocchio's dynamic parameters ``[m, mc_x, mc_y, mc_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz]`` (inertia
+#: about the frame origin) are the standard ``XX XY XZ YY YZ ZZ MX MY MZ M`` taken in this order
+PIN_ORDER = np.array([9, 6, 7, 8, 0, 1, 3, 2, 4, 5])
 
-    ``I_c = J_O - m (|c|^2 E - c c^T)`` (parallel-axis theorem back to the centre of mass).
-    Returns None for a massless link whose parameters are all zero; raises for a massless
-    link with non-zero first moments or inertia (not representable with a centre of mass).
+
+def standard_to_inertia(p10) -> pin.Inertia | None:
+    """``XX XY XZ YY YZ ZZ MX MY MZ M`` (frame origin) -> ``pin.Inertia`` (Pinocchio's own conversion).
+
+    The oracle does not use symoro_gen's inertia conversions: the parameters are reordered into
+    Pinocchio's dynamic parameters and converted by ``pin.Inertia.FromDynamicParameters`` (which,
+    unlike Pinocchio's constructor, accepts non-physical values: the identities tested with this
+    oracle are linear in the parameters). Returns None for a massless link whose parameters are
+    all zero; raises for a massless link with non-zero first moments or inertia (not
+    representable with a centre of mass).
     """
-    XX, XY, XZ, YY, YZ, ZZ, MX, MY, MZ, M = (float(x) for x in p10)
-    J_O = np.array([[XX, XY, XZ], [XY, YY, YZ], [XZ, YZ, ZZ]])
-    MS = np.array([MX, MY, MZ])
-    if abs(M) < MIN_MASS:
-        if np.any(J_O != 0) or np.any(MS != 0):
+    p = np.asarray([float(x) for x in p10])
+    if abs(p[9]) < MIN_MASS:
+        if np.any(p != 0):
             raise ValueError("a massless link with non-zero inertia or first moments cannot be given to Pinocchio")
         return None
-    c = MS / M
-    I_c = J_O - M * (np.dot(c, c) * np.eye(3) - np.outer(c, c))
-    # Pinocchio's constructor rejects non-positive inertias; the identities tested with this
-    # oracle are linear in the parameters, so arbitrary (even non-physical) values are allowed
-    # and set field by field.
-    inertia = pin.Inertia.Zero()
-    inertia.mass = M
-    inertia.lever = c
-    inertia.inertia = I_c
-    return inertia
+    return pin.Inertia.FromDynamicParameters(p[PIN_ORDER])
+
+
+def inertia_to_standard(inertia: pin.Inertia) -> np.ndarray:
+    """Inverse of :func:`standard_to_inertia` (Pinocchio's ``toDynamicParameters`` reordered)."""
+    out = np.empty(10)
+    out[PIN_ORDER] = inertia.toDynamicParameters()
+    return out
 
 
 def build_pinocchio_model(robot: RobotDescription, chi_std, chi_payload=None) -> tuple[pin.Model, pin.Data]:
@@ -208,8 +212,7 @@ def random_inertial(rng: np.random.Generator, *, mass=(0.5, 3.0), com_scale=0.2,
     c = rng.normal(scale=com_scale, size=3)
     A = rng.normal(scale=inertia_scale, size=(3, 3))
     I_c = A @ A.T + 0.01 * inertia_scale**2 * np.eye(3)
-    J = I_c + m * (np.dot(c, c) * np.eye(3) - np.outer(c, c))
-    return np.array([J[0, 0], J[0, 1], J[0, 2], J[1, 1], J[1, 2], J[2, 2], *(m * c), m])
+    return inertia_to_standard(pin.Inertia(m, c, I_c))
 
 
 def random_parameters(robot: RobotDescription, rng: np.random.Generator):

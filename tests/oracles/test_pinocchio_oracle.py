@@ -10,10 +10,12 @@ import pytest
 from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.dynamics.newton_euler import build_regressor
 from symoro_gen.dynamics.numeric import inverse_dynamics
+from symoro_gen.simulate import random_states
 
 from .graph_eval import graph_function
 from .pinocchio_model import (
     build_pinocchio_model,
+    inertia_to_standard,
     max_relative_error,
     pin_torque,
     random_inertial,
@@ -27,10 +29,7 @@ N_SAMPLES = 8
 
 
 def _states(rng: np.random.Generator, n: int, N: int = N_SAMPLES):
-    q = rng.uniform(-np.pi, np.pi, size=(N, n))
-    dq = rng.normal(scale=2.0, size=(N, n))
-    ddq = rng.normal(scale=5.0, size=(N, n))
-    return q, dq, ddq
+    return random_states(rng, N, n)
 
 
 @functools.lru_cache(maxsize=None)
@@ -39,15 +38,25 @@ def _graph(name: str):
 
 
 # ---- the oracle itself ----------------------------------------------------------------
-def test_inertia_conversion_matches_pinocchio_dynamic_parameters():
-    """standard (frame origin) -> pin.Inertia agrees with Pinocchio's own FromDynamicParameters."""
+def test_inertia_conversion_matches_point_masses():
+    """standard (frame origin) -> pin.Inertia: a cloud of point masses, summed directly, gives the
+    mass, centre of mass and inertia about it that Pinocchio reports (and back)."""
     rng = np.random.default_rng(1)
     for _ in range(5):
-        p = random_inertial(rng)
-        XX, XY, XZ, YY, YZ, ZZ, MX, MY, MZ, M = p
+        m = rng.uniform(0.1, 2.0, 7)
+        r = rng.normal(scale=0.3, size=(7, 3)) + rng.normal(scale=0.2, size=3)
+        J_O = sum(mi * (ri @ ri * np.eye(3) - np.outer(ri, ri)) for mi, ri in zip(m, r))
+        MS = (m[:, None] * r).sum(0)
+        p = [J_O[0, 0], J_O[0, 1], J_O[0, 2], J_O[1, 1], J_O[1, 2], J_O[2, 2], *MS, m.sum()]
         ours = standard_to_inertia(p)
-        theirs = pin.Inertia.FromDynamicParameters(np.array([M, MX, MY, MZ, XX, XY, YY, XZ, YZ, ZZ]))
-        np.testing.assert_allclose(ours.toDynamicParameters(), theirs.toDynamicParameters(), rtol=1e-12, atol=1e-14)
+        c = MS / m.sum()
+        I_c = sum(mi * ((ri - c) @ (ri - c) * np.eye(3) - np.outer(ri - c, ri - c)) for mi, ri in zip(m, r))
+        np.testing.assert_allclose(ours.mass, m.sum(), rtol=1e-14)
+        np.testing.assert_allclose(ours.lever, c, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(ours.inertia, I_c, rtol=1e-10, atol=1e-13)
+        np.testing.assert_allclose(inertia_to_standard(ours), p, rtol=1e-12, atol=1e-14)
+    p = random_inertial(rng)
+    np.testing.assert_allclose(inertia_to_standard(standard_to_inertia(p)), p, rtol=1e-12, atol=1e-14)
 
 
 def test_oracle_pendulum_closed_form():

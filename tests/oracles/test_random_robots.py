@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from symoro_gen.description import parse_robot_text
 from symoro_gen.dynamics.newton_euler import build_regressor
 from symoro_gen.dynamics.numeric import inverse_dynamics
+from symoro_gen.simulate import random_states
 from tests.strategies import mdh_robots
 
 from .graph_eval import graph_function
@@ -21,7 +22,7 @@ SEEDS = st.integers(0, 2**32 - 1)
 
 
 def _states(rng, n, N=6):
-    return rng.uniform(-np.pi, np.pi, (N, n)), rng.normal(0, 2, (N, n)), rng.normal(0, 5, (N, n))
+    return random_states(rng, N, n)
 
 
 @settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])

@@ -12,9 +12,8 @@ from symoro_gen.description import parse_robot_text
 from symoro_gen.dynamics.numeric import inverse_dynamics
 from symoro_gen.preprocessing import DataWarning, choose_filter_settings, filter_and_differentiate, load_trajectory
 
-DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
-TX40 = DATA / "staubli_tx40_figaroh"
-LWR4 = DATA / "kuka_lwr4_flobaroid" / "data" / "KUKA" / "HW"
+TX40 = Path("staubli_tx40_figaroh")
+LWR4 = Path("kuka_lwr4_flobaroid") / "data" / "KUKA" / "HW"
 
 pytestmark = pytest.mark.realdata
 
@@ -35,17 +34,24 @@ def _tx40_robot():
     return parse_robot_text(txt)
 
 
-@pytest.mark.skipif(not TX40.exists(), reason=f"real data folder {TX40} absent")
-def test_tx40_split_recording_to_joint_side():
+def _folder(shared_data, sub) -> Path:
+    d = shared_data / sub
+    if not d.exists():
+        pytest.skip(f"real data folder {d} absent")
+    return d
+
+
+def test_tx40_split_recording_to_joint_side(shared_data):
+    tx40 = _folder(shared_data, TX40)
     robot = _tx40_robot()
     spec = "q=pos_read_data.csv,tau=curr_data.csv,dt=0.0002"
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataWarning)  # joint-side values look sane
-        tr = load_trajectory(spec, robot=robot, drive_chain=robot.drive_chain, base_dir=TX40 / "data")
+        tr = load_trajectory(spec, robot=robot, drive_chain=robot.drive_chain, base_dir=tx40 / "data")
     # forgetting the drive chain: motor angles (up to 201 rad) are flagged, column by column
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        load_trajectory(spec, robot=robot, base_dir=TX40 / "data")
+        load_trajectory(spec, robot=robot, base_dir=tx40 / "data")
     msgs = [str(w.message) for w in rec if issubclass(w.category, DataWarning)]
     assert len(msgs) == 6 and any("pos_read_data.csv, column q4: max |q| = 201.1" in m and "motor-side" in m
                                   for m in msgs)
@@ -74,12 +80,11 @@ def test_tx40_split_recording_to_joint_side():
     assert abs(rest[0]) < 2.0 and abs(rest[2] - g[2]) < 2.0
 
 
-@pytest.mark.skipif(not LWR4.exists(), reason=f"real data folder {LWR4} absent")
 @pytest.mark.parametrize("k", [1, 3])
-def test_lwr4_npz(k):
+def test_lwr4_npz(k, shared_data):
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataWarning)
-        tr = load_trajectory(LWR4 / f"measurements_{k}.npz", n_joints=7)
+        tr = load_trajectory(_folder(shared_data, LWR4) / f"measurements_{k}.npz", n_joints=7)
     assert (tr.n_samples, tr.n_joints) == (5027, 7)
     assert tr.dt == pytest.approx(0.005, rel=1e-3)  # 200 Hz, time-stamp jitter accepted
     assert 0 < tr.meta["dt_max_rel_jitter"] < 0.5

@@ -9,16 +9,12 @@ import json
 import numpy as np
 import pytest
 
+from symoro_gen.simulate import write_recording_csv
+
 DURATION_S = 8.0
 DT_S = 0.002
 NOISE_TAU = 0.5   # N m: visible in the torque plots
 NOISE_Q = 1e-5    # rad
-
-
-def _write_csv(path, t, q, tau):
-    n = q.shape[1]
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
-    np.savetxt(path, np.column_stack([t, q, tau]), delimiter=",", header=head, comments="")
 
 
 @pytest.fixture(scope="session")
@@ -39,31 +35,28 @@ def rx90_recordings(tmp_path_factory):
         t, q, dq, ddq = fourier_trajectory(robot.n_joints, DURATION_S, DT_S, rng)
         tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=NOISE_Q, noise_tau=NOISE_TAU, rng=rng)
         f = folder / f"rec{k}.csv"
-        _write_csv(f, tr.t, tr.q, tr.tau)
+        write_recording_csv(f, tr)
         files.append(f)
     return files
 
 
-def _identify_report(rec, out_dir, name):
-    from symoro_gen.cli import main
-
+def _identify_report(cli, rec, out_dir, name):
     report = out_dir / name
     js = out_dir / (report.stem + ".json")
-    rc = main(["--quiet", "identify", "rx90", str(rec[0]), "--validate", str(rec[1]), "--method", "wls",
-               "--json", str(js), "--report", str(report)])
-    assert rc == 0
+    cli("--quiet", "identify", "rx90", rec[0], "--validate", rec[1], "--method", "wls", "--json", js,
+        "--report", report, rc=0)
     return report, json.loads(js.read_text())
 
 
 @pytest.fixture(scope="session")
-def rx90_html_report(rx90_recordings, tmp_path_factory):
+def rx90_html_report(rx90_recordings, tmp_path_factory, cli):
     """``(path of report.html, JSON of the same run)``."""
     pytest.importorskip("matplotlib", reason="report plots need matplotlib (the 'plots' extra)")
-    return _identify_report(rx90_recordings, tmp_path_factory.mktemp("html_report"), "report.html")
+    return _identify_report(cli, rx90_recordings, tmp_path_factory.mktemp("html_report"), "report.html")
 
 
 @pytest.fixture(scope="session")
-def rx90_md_report(rx90_recordings, tmp_path_factory):
+def rx90_md_report(rx90_recordings, tmp_path_factory, cli):
     """``(path of report.md, JSON of the same run)``."""
     pytest.importorskip("matplotlib", reason="report plots need matplotlib (the 'plots' extra)")
-    return _identify_report(rx90_recordings, tmp_path_factory.mktemp("md_report"), "report.md")
+    return _identify_report(cli, rx90_recordings, tmp_path_factory.mktemp("md_report"), "report.md")

@@ -6,6 +6,8 @@ import re
 import numpy as np
 import pytest
 
+from symoro_gen.simulate import write_recording_csv
+
 from .pngcheck import IMG_RE, decode_png, embedded_images, ink_stats
 from .test_markdown import LINK_RE, _md_table
 
@@ -14,16 +16,9 @@ pytest.importorskip("matplotlib", reason="report plots need matplotlib (the 'plo
 LWR4_DURATION_S = 5.0
 
 
-def _write_csv(path, tr):
-    n = tr.q.shape[1]
-    head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
-    np.savetxt(path, np.column_stack([tr.t, tr.q, tr.tau]), delimiter=",", header=head, comments="")
-
-
-def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path):
+def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path, cli):
     """identify --gains sensor with a known payload mass and loaded validation data: the gains table,
     the known mass and the mass re-identified on the validation data (Table IV), four plots."""
-    from symoro_gen.cli import main
     from symoro_gen.demo import PAYLOAD_MASS, TRUE_GAINS, demo_payload
     from symoro_gen.loader import model_for
     from symoro_gen.simulate.recording import simulate_recording
@@ -38,11 +33,11 @@ def test_sensor_gain_report_shows_gains_and_payload_mass(tmp_path):
         tr = simulate_recording(model, t, q, dq, ddq, chi, chi_payload=demo_payload() if loaded else None,
                                 gains=TRUE_GAINS, noise_q=2e-5, noise_tau=0.02, rng=rng, loaded=loaded)
         files.append(tmp_path / f"rec{k}.csv")
-        _write_csv(files[-1], tr)
+        write_recording_csv(files[-1], tr)
     out = tmp_path / "gains.md"
-    assert main(["--quiet", "identify", "lwr4", str(files[0]), "--loaded", str(files[1]), "--payload",
-                 f"M8={PAYLOAD_MASS}", "--gains", "sensor", "--validate", str(files[2]), "--validate-loaded",
-                 "--json", str(tmp_path / "gains.json"), "--report", str(out)]) == 0
+    cli("--quiet", "identify", "lwr4", files[0], "--loaded", files[1], "--payload", f"M8={PAYLOAD_MASS}",
+        "--gains", "sensor", "--validate", files[2], "--validate-loaded", "--json", tmp_path / "gains.json",
+        "--report", out, rc=0)
     res = json.loads((tmp_path / "gains.json").read_text())
     md = out.read_text(encoding="utf-8")
     gains = _md_table(md, "Gain")

@@ -107,7 +107,7 @@ def test_failed_write_leaves_the_previous_report_and_no_temporary(tmp_path, monk
     def boom(src, dst):
         raise OSError("disk full")
 
-    monkeypatch.setattr(document.os, "replace", boom)
+    monkeypatch.setattr(os, "replace", boom)  # the rename of symoro_gen.atomic
     with pytest.raises(OSError, match="disk full"):
         document.write_report_files(_tiny_report("new"), out)
     monkeypatch.undo()
@@ -132,8 +132,7 @@ def _hide_matplotlib(monkeypatch):
         monkeypatch.setitem(sys.modules, name, None)  # import raises ImportError
 
 
-def test_missing_matplotlib_names_the_extra(monkeypatch, tmp_path, capsys):
-    from symoro_gen.cli import main
+def test_missing_matplotlib_names_the_extra(monkeypatch, tmp_path, cli):
     from symoro_gen.report import build_report
 
     _hide_matplotlib(monkeypatch)
@@ -141,8 +140,7 @@ def test_missing_matplotlib_names_the_extra(monkeypatch, tmp_path, capsys):
         require_matplotlib()
     assert "symoro_gen[plots]" in exc.value.hint
     # the command fails at once (before loading any data), one line and the hint, status 2
-    assert main(["identify", "rx90", str(tmp_path / "absent.csv"), "--report", str(tmp_path / "r.html")]) == 2
-    err = capsys.readouterr().err
+    err = cli("identify", "rx90", tmp_path / "absent.csv", "--report", tmp_path / "r.html", rc=2).err
     assert "'plots' extra" in err and "hint: pip install 'symoro_gen[plots]'" in err
     assert not list(tmp_path.iterdir())
     # tables alone need no matplotlib
@@ -150,8 +148,6 @@ def test_missing_matplotlib_names_the_extra(monkeypatch, tmp_path, capsys):
     assert rep.figures == () and "<li>n</li>" in rep.to_html()
 
 
-def test_identify_refuses_an_unknown_report_suffix(tmp_path, capsys):
-    from symoro_gen.cli import main
-
-    assert main(["identify", "rx90", str(tmp_path / "absent.csv"), "--report", str(tmp_path / "r.pdf")]) == 2
-    assert "unknown suffix '.pdf'" in capsys.readouterr().err
+def test_identify_refuses_an_unknown_report_suffix(tmp_path, cli):
+    err = cli("identify", "rx90", tmp_path / "absent.csv", "--report", tmp_path / "r.pdf", rc=2).err
+    assert "unknown suffix '.pdf'" in err

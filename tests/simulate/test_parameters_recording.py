@@ -17,6 +17,7 @@ from symoro_gen.simulate import (
     random_physical_parameters,
     simulate_recording,
     true_torques,
+    write_recording_csv,
 )
 
 
@@ -126,3 +127,19 @@ def test_motor_side_recording_loads_back(tmp_path):
                            base_dir=tmp_path)
     np.testing.assert_allclose(back.q, q, atol=1e-12)
     np.testing.assert_allclose(back.tau, inverse_dynamics(robot, q, dq, ddq, np.asarray(chi)), atol=1e-10)
+
+
+def test_recording_csv_loads_back(tmp_path):
+    """write_recording_csv writes what load_trajectory (and so ``symoro-gen identify``) reads, exactly."""
+    robot = load_robot("scara")
+    rng = np.random.default_rng(4)
+    chi = random_physical_parameters(robot, rng)
+    t, q, dq, ddq = fourier_trajectory(robot.n_joints, 1.0, 0.002, rng)
+    rec = simulate_recording(robot, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
+    f = tmp_path / "sub" / "rec.csv"
+    write_recording_csv(f, rec)
+    assert f.read_text().splitlines()[0] == "t,q1,q2,q3,q4,tau1,tau2,tau3,tau4"
+    back = load_trajectory(f, n_joints=robot.n_joints)
+    np.testing.assert_array_equal(back.t, rec.t)
+    np.testing.assert_array_equal(back.q, rec.q)
+    np.testing.assert_array_equal(back.tau, rec.tau)
