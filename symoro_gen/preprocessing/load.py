@@ -635,20 +635,20 @@ def step_regime_changes(t, irregular=None, *, window: int = REGIME_WINDOW, tol: 
     med = float(np.median(d))
     c = np.r_[0.0, np.cumsum(d)]
     local = (c[w:] - c[:-w]) / w  # window k: steps k..k+w-1
-    bad = np.abs(local - med) > tol * med
+    ok = np.ones(local.size, bool)
     if irregular is not None:
         ci = np.r_[0, np.cumsum(np.asarray(irregular, bool))]
-        bad &= (ci[w:] - ci[:-w]) == 0
-    if not bad.any():
-        return []
-    steps = np.zeros(d.size, bool)
-    for k in np.flatnonzero(bad):
-        steps[k:k + w] = True
+        ok = (ci[w:] - ci[:-w]) == 0
     out = []
-    for a, b in _runs(steps):  # 1-based step indices; step i ends at row i + 1
-        seg = d[a - 1:b]
-        out.append((a + 1, b + 1, float(np.mean(seg))))
-    return out
+    for bad in ((local > (1 + tol) * med) & ok, (local < (1 - tol) * med) & ok):  # slower, faster regimes
+        if not bad.any():
+            continue
+        steps = np.zeros(d.size, bool)
+        for k in np.flatnonzero(bad):
+            steps[k:k + w] = True
+        for a, b in _runs(steps):  # 1-based step indices; step i ends at row i + 1
+            out.append((a + 1, b + 1, float(np.median(d[a - 1:b]))))
+    return sorted(out)
 
 
 def _warn(msg: str) -> None:

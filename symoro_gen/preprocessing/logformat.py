@@ -396,6 +396,9 @@ def _select(table: _Table, sel: str, role: str) -> list[int]:
     if _INDEX_RX.match(sel):
         if ":" in sel:
             a, b = sel.split(":", 1)
+            if (a and not -k <= int(a) < k) or (b and int(b) > k):
+                raise DataFileError([Problem(table.file, where, role, f"columns {sel}: the file has {k} columns "
+                                             f"(0-based indices 0..{k - 1})")])
             idx = list(range(k))[slice(int(a) if a else None, int(b) if b else None)]
         else:
             i = int(sel)
@@ -617,6 +620,7 @@ def _resample(t: np.ndarray, arrays: dict[str, np.ndarray], h: float, max_gap: f
             continue
         m = int(math.floor((ts[-1] - ts[0]) / h + 1e-9)) + 1
         grid = ts[0] + h * np.arange(m)
+        grid = grid[grid <= ts[-1]]
         seg = {}
         for role, v in arrays.items():
             x = v[a:b]
