@@ -72,7 +72,7 @@ def run_diagnose(args) -> dict:
                               "validation data": [str(p) for p in args.validate or ()]},
                      text=rep.summary(), notes=data_notes(reports))
     if not args.quiet:
-        print(data_text(reports) + "\n\n" + rep.summary())
+        print(rep.summary() + "\n\n" + data_text(reports))
     return out
 
 

@@ -82,11 +82,12 @@ def run_identify(args) -> dict:
         from ..atomic import write_text_atomic
 
         write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
-    text = data_text(reports) + "\n\n" + res.summary()
+    text = res.summary()
     if val is not None:
         text += "\n\nValidation (relative error norm per joint): " + "  ".join(f"{x:.4f}" for x in val)
     if ref_text:
         text += "\n\nBeside the reference table " + str(args.reference) + ":\n" + ref_text
+    text += "\n\n" + data_text(reports)
     if args.report:
         _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, rows if args.reference else None,
                       data_notes(reports))
