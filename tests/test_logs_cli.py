@@ -149,3 +149,36 @@ def test_inspect_not_usable_exit_2(tmp_path, capsys):
     assert main(["inspect", "scara", str(f)]) == 2
     out = capsys.readouterr().out
     assert "not usable" in out and "never moves" in out
+
+
+def test_identify_currents_in_degrees_same_as_clean(tmp_path):
+    """From the command line: a log with positions in degrees and currents (tau / k) identifies to the
+    clean file's parameters, within their standard deviations; the JSON says what was done."""
+    from symoro_gen.modelcache import model_for
+    from symoro_gen.simulate.parameters import random_physical_parameters
+    from symoro_gen.simulate.recording import simulate_recording
+    from symoro_gen.simulate.trajectories import fourier_trajectory
+
+    rng = np.random.default_rng(11)
+    robot, model = model_for("scara")
+    chi = np.asarray(random_physical_parameters(robot, rng))
+    t, q, dq, ddq = fourier_trajectory(robot.n_joints, 12.0, 0.002, rng)
+    rec = simulate_recording(model, t, q, dq, ddq, chi, noise_tau=0.05, rng=rng)
+    n = robot.n_joints
+    clean = tmp_path / "clean.csv"
+    hdr = ",".join(["t"] + [f"q{j}" for j in range(1, n + 1)] + [f"tau{j}" for j in range(1, n + 1)])
+    np.savetxt(clean, np.column_stack([rec.t, rec.q, rec.tau]), delimiter=",", header=hdr, comments="")
+    k = np.array([2.0, 0.5, 10.0, 0.25])
+    raw = tmp_path / "raw.txt"  # headerless, degrees, currents, a status column first
+    np.savetxt(raw, np.column_stack([np.ones_like(rec.t), rec.t, np.degrees(rec.q), rec.tau / k]), fmt="%.12g")
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    assert main(["--quiet", "identify", "scara", str(clean), "--method", "ols", "--json", str(a)]) == 0
+    assert main(["--quiet", "identify", "scara", str(raw), "--method", "ols", "--json", str(b),
+                 "--columns", "t=1,q=2:6,tau=6:10", "--deg", "--tau-scale", ",".join(map(str, k))]) == 0
+    ra, rb = _json(a), _json(b)
+    va, vb = np.array(ra["parameters"]["values"]), np.array(rb["parameters"]["values"])
+    sa = np.array(ra["parameters"]["std"])
+    assert ra["parameters"]["names"] == rb["parameters"]["names"]
+    assert np.all(np.abs(va - vb) < sa), np.abs(va - vb) / sa
+    assert rb["data"][0]["options"] == ["--columns t=1,q=2:6,tau=6:10", "--tau-scale 2,0.5,10,0.25", "--deg"]
+    assert ra["data"][0]["options"] == [] and ra["data"][0]["rows_read"] == t.size

@@ -421,7 +421,7 @@ def _load_arrays(path: str, fmt: str) -> dict[str, np.ndarray]:
                 return {k: np.asarray(z[k]) for k in z.files}
         except FileNotFoundError:
             raise DataFileError([Problem(path, "", "", "file not found")]) from None
-        except (ValueError, OSError) as exc:
+        except (ValueError, OSError):
             # never relay numpy's advice to allow pickles: say what the file is instead
             raise DataFileError([Problem(path, "", "", f"not a NumPy .npz archive ({_what_file(path)})")],
                                 hint="save arrays with numpy.savez(path, t=..., q=..., tau=...); a text table "

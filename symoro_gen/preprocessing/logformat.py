@@ -25,17 +25,20 @@ drive chain (motor -> joint side), then ``q_link`` replaces ``q``.
 from __future__ import annotations
 
 import math
-import os
 import re
-import tomllib
 import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 import scipy.interpolate
 import scipy.io
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore
 
 from ..errors import DataFileError, Problem
 from .drive_chain import motor_to_joint
