@@ -673,18 +673,19 @@ def _unit_checks(src_files: dict[str, str], t, q, tau, joint_types, *, max_abs_p
             continue
         if qa.max() > max_abs_position:
             msgs.append(f"{src_files['q']}, column q{j + 1}: max |q| = {qa.max():.4g} > {max_abs_position:.4g} rad: "
-                        "positions in degrees (or motor-side without a drive chain)? (expected rad, joint side)")
+                        "positions in degrees (or motor-side without a drive chain)? (expected rad, joint side; "
+                        "--deg reads degrees)")
         elif t.size > 2 and dt > 0:
             v = np.abs(np.diff(q[:, j])) / dt
             v99 = float(np.percentile(v, 99))
             if v99 > max_abs_velocity:
                 msgs.append(f"{src_files['q']}, column q{j + 1}: velocity {v99:.4g} rad/s (99th percentile) > "
-                            f"{max_abs_velocity:g} rad/s: positions in degrees or t not in seconds?")
+                            f"{max_abs_velocity:g} rad/s: positions in degrees (--deg) or t not in seconds?")
     ta = np.abs(tau).max(axis=0) if tau.size else np.zeros(n)
     for j in range(n):
         if ta[j] > max_abs_torque:
             msgs.append(f"{src_files['tau']}, column tau{j + 1}: max |tau| = {ta[j]:.4g} > {max_abs_torque:g} N m: "
-                        "torques in N mm or mN m? (expected N m or N)")
+                        "torques in N mm or mN m? (expected N m or N; --tau-scale rescales)")
     return msgs
 
 

@@ -41,6 +41,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore
 
 from ..errors import DataFileError, Problem
+from ..progress import progress_updates
 from .drive_chain import motor_to_joint
 from .load import (
     DataSpec,
@@ -737,9 +738,13 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
                                              f"time is not strictly increasing ({r.size} step(s) <= 0): "
                                              "resampling cannot order it")])
         else:
-            col = _Column(tcol.file, tcol.names, t[:, None], tcol.line_offset)
+            shifted = bool(drop.any())  # rows then count the kept rows: say so, give no file lines
+            col = _Column(tcol.file, tcol.names, t[:, None], None if shifted else tcol.line_offset)
             _check_time(t, col, 0.5, tprobs)
             if tprobs:
+                if shifted:
+                    tprobs = [Problem(p.file, f"{p.where} of the {rows.size} rows kept", p.field, p.message)
+                              for p in tprobs]
                 raise DataFileError(tprobs, hint=RESAMPLE_HINT)
     else:
         t = np.arange(rows.size) * float(dt)
@@ -795,22 +800,29 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
     return tuple(trajs), rep
 
 
-def load_logs(paths: Iterable, fmt: LogFormat | None = None, **kwargs
+def load_logs(paths: Iterable, fmt: LogFormat | None = None, *, progress=None, **kwargs
               ) -> tuple[tuple[Trajectory, ...], tuple[LoadReport, ...]]:
-    """:func:`load_log` on several files; the problems of all files are raised together."""
+    """:func:`load_log` on several files; the problems of all files are raised together.
+
+    ``progress``: as for :func:`~symoro_gen.preprocessing.load.load_trajectories` (a per-file bar
+    on the command line)."""
+    paths = list(paths)
     trajs: list[Trajectory] = []
     reps: list[LoadReport] = []
     probs: list[Problem] = []
     hint = None
-    for p in paths:
-        try:
-            tr, rep = load_log(p, fmt, **kwargs)
-        except DataFileError as exc:
-            probs.extend(exc.problems)
-            hint = hint or exc.hint
-            continue
-        trajs.extend(tr)
-        reps.append(rep)
+    with progress_updates(progress, total=len(paths), desc="loading data", unit="file") as step:
+        for p in paths:
+            try:
+                tr, rep = load_log(p, fmt, **kwargs)
+            except DataFileError as exc:
+                probs.extend(exc.problems)
+                hint = hint or exc.hint
+                step(1)
+                continue
+            trajs.extend(tr)
+            reps.append(rep)
+            step(1)
     if probs:
         raise DataFileError(probs, hint=hint)
     return tuple(trajs), tuple(reps)
