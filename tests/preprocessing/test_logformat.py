@@ -264,3 +264,28 @@ def test_error_paths_name_file_rows_column(truth, tmp_path):
         load_logs([str(tmp_path / "none.csv"), path], make_format(columns="t=t,q=q1:q3,tau=tau1:tau4"),
                   robot=truth["robot"])
     assert len(e.value.problems) == 2
+
+
+def test_two_encoders_through_a_coupled_drive_chain(tmp_path):
+    """TX40 drive chain (ratios, coupled wrist, offsets): motor encoders read q + delta on the joint side,
+    link encoders q; the deflection is delta, the model's q the link side."""
+    from symoro_gen.description import load_robot
+    from symoro_gen.preprocessing.drive_chain import joint_to_motor
+
+    robot = load_robot("tx40")
+    rng = np.random.default_rng(3)
+    N, n = 200, robot.n_joints
+    t = np.arange(N) * 0.001
+    q = 0.5 * np.sin(np.outer(t, rng.uniform(1, 3, n)) * 2 * np.pi)
+    delta = 1e-3 * rng.normal(size=(N, n))
+    tau_j = rng.normal(size=(N, n))
+    qm, taum, _, _ = joint_to_motor(robot.drive_chain, q=q + delta, tau=tau_j)
+    cols = np.column_stack([t, qm, taum, q])
+    names = ["t"] + [f"m{j}" for j in range(n)] + [f"c{j}" for j in range(n)] + [f"l{j}" for j in range(n)]
+    path = tmp_path / "enc.csv"
+    np.savetxt(path, cols, delimiter=",", header=",".join(names), comments="", fmt="%.15g")
+    fmt = make_format(columns=f"t=t,q=m0:m{n - 1},tau=c0:c{n - 1},q_link=l0:l{n - 1}")
+    (tr,), rep = load_log(str(path), fmt, robot=robot, drive_chain=robot.drive_chain)
+    np.testing.assert_allclose(tr.q, q, atol=1e-12)
+    np.testing.assert_allclose(tr.deflection, delta, atol=1e-9)
+    np.testing.assert_allclose(tr.tau, tau_j, atol=1e-9)
