@@ -221,8 +221,15 @@ def _diagnose_parser(sub):
     add_diagnose_parser(sub)
 
 
-_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser]
-_EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _demo_parser: "demo"}
+def _inspect_parser(sub):
+    from .preprocessing.inspect import add_inspect_parser
+
+    add_inspect_parser(sub)
+
+
+_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _inspect_parser, _demo_parser]
+_EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _inspect_parser: "inspect",
+                _demo_parser: "demo"}
 _LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf")
 
 
