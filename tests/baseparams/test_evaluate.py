@@ -17,7 +17,13 @@ import sympy as sp
 
 from symoro_gen.description import load_robot
 from symoro_gen.description.parse import robots_dir
-from symoro_gen.dynamics.evaluate import EXACT, NUMPY, evaluate_expr, evaluate_graph, regressor_function
+from symoro_gen.dynamics.evaluate import (
+    EXACT,
+    NUMPY,
+    evaluate_expr,
+    evaluate_graph,
+    regressor_function,
+)
 from symoro_gen.dynamics.graph import ExprGraph
 from symoro_gen.dynamics.newton_euler import build_regressor
 from symoro_gen.dynamics.numeric import inverse_dynamics

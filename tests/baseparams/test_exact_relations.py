@@ -22,7 +22,12 @@ import sympy as sp
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from symoro_gen.baseparams.regroup import BaseParameterMap, group_base_parameters, numeric_rank
+from symoro_gen.baseparams import regroup
+from symoro_gen.baseparams.regroup import (
+    BaseParameterMap,
+    group_base_parameters,
+    numeric_rank,
+)
 from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.description.model import RobotDescription
 from symoro_gen.description.parse import robots_dir
@@ -35,7 +40,7 @@ ROBOTS = sorted(p.stem for p in robots_dir().glob("*.toml"))
 REL = 1e-9
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _bp(name: str) -> tuple[RobotDescription, BaseParameterMap]:
     robot = load_robot(name)
     return robot, group_base_parameters(build_regressor(robot))
@@ -96,7 +101,7 @@ def test_relations_of_robot_files_are_exact_and_symbolic(name):
 def test_scara_offset_regroups_with_gravity_symbol_onto_inertial_parameters():
     """The vertical prismatic joint 3: OFF3 (constant) is collinear with the gravity load of M3;
     the offset is eliminated, the mass kept, and the coefficient is written with G3."""
-    robot, bp = _bp("scara")
+    _robot, bp = _bp("scara")
     assert "OFF3" in bp.eliminated and "M3" in bp.kept
     G3 = sp.Symbol("G3", real=True)
     m3 = next(n for n, k in zip(bp.base_names, bp.kept) if k == "M3")
@@ -122,3 +127,14 @@ def test_random_robot_relations_are_exact_symbolic_and_keep_inertial_parameters(
     rng = np.random.default_rng(seed)
     _assert_regrouping_exact(robot, bp, rng, perturb=False)
     _assert_regrouping_exact(robot, bp, rng, perturb=True)
+
+
+def test_dependency_without_exact_form_keeps_numeric_coefficients_and_is_marked(monkeypatch):
+    """When the exact solve fails, the sweep's numeric coefficients are kept, listed in ``numeric``,
+    and the regrouping is still exact at the robot's own geometry."""
+    monkeypatch.setattr(regroup._ExactSolver, "solve", lambda self, p, support: None)
+    robot = load_robot("scara")
+    bp = group_base_parameters(build_regressor(robot))
+    assert set(bp.numeric) == set(bp.swept) and bp.numeric
+    _assert_drive_rule(bp)
+    _assert_regrouping_exact(robot, bp, np.random.default_rng(4), perturb=False)
