@@ -131,7 +131,9 @@ class BaseParameterMap:
             for s, c in e.as_coefficients_dict().items():
                 if s == 1:
                     raise ValueError(f"relation of {name} has a constant term")
-                K[b, idx[s.name]] = float(c)
+                # exact numeric factors such as cos(1/10) stay in the "symbol" part: split them off
+                num, syms = s.as_independent(*e.free_symbols, as_Add=False)
+                K[b, idx[syms.name]] += float(c * num)
         return K
 
 
