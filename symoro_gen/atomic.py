@@ -11,8 +11,8 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from pathlib import Path
 from collections.abc import Mapping
+from pathlib import Path
 
 __all__ = ["ordinary_mode", "replace_folder_atomic", "write_bytes_atomic", "write_text_atomic"]
 

@@ -22,6 +22,13 @@ from .errors import (
     ShapeError,
     SymoroError,
 )
+from .atomic import write_text_atomic
+from .loader import generated_dir, load_model
+from .progress import close_all, progress_bar, progress_mode, stage_callback
+
+# The commands import the description/generation stack (sympy, ~1 s) and the sub-commands' modules
+# (identification, diagnostics, preprocessing: scipy) inside the functions on purpose: `symoro-gen --help`
+# and the light commands start without them (see build_parser and _LIGHT_COMMANDS).
 
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1
@@ -45,8 +52,6 @@ def cmd_generate(args) -> int:
     from .description import load_robot
     from .dynamics.newton_euler import build_regressor
     from .emit.package import check_name, check_replaceable, emit_from
-    from .loader import generated_dir
-    from .progress import progress_bar, stage_callback
 
     robot = load_robot(args.robot)
     out = Path(args.out) if args.out else generated_dir()
@@ -71,8 +76,6 @@ def cmd_generate(args) -> int:
 
 def cmd_build(args) -> int:
     """Compile the C kernels of a generated package (``symoro-gen build ROBOT``)."""
-    from .loader import load_model
-
     m = load_model(args.robot)
     model = getattr(m, "_MODEL", None)
     if model is None:
@@ -94,8 +97,6 @@ def _output(text: str, args, *, robot_file: bool = False) -> int:
 
         write_robot_toml(text, args.output, overwrite=args.force)
     else:
-        from .atomic import write_text_atomic
-
         write_text_atomic(Path(args.output), text)
     if not args.quiet:
         print(f"wrote {args.output}")
@@ -324,8 +325,6 @@ def _format_warning(message, category, filename, lineno, line=None) -> str:
 
 
 def _report_error(exc: BaseException, args, internal: bool) -> None:
-    from .progress import close_all
-
     close_all()
     if getattr(args, "debug", False):
         traceback.print_exception(exc, file=sys.stderr)
@@ -338,8 +337,6 @@ def _report_error(exc: BaseException, args, internal: bool) -> None:
 
 
 def main(argv=None) -> int:
-    from .progress import progress_mode
-
     cmd = _command_of(sys.argv[1:] if argv is None else argv)
     light = cmd in _LIGHT_COMMANDS or cmd in _EXTRA_NAMES.values()
     parser = build_parser(cmd if light else None)
@@ -364,8 +361,6 @@ def main(argv=None) -> int:
         _report_error(exc, args, internal=False)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
-        from .progress import close_all
-
         close_all()
         print("symoro-gen: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

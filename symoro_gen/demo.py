@@ -14,6 +14,11 @@ from __future__ import annotations
 import numpy as np
 
 from .description.inertia import standard_from_com
+from .identification import sensor_gains
+from .identification.assemble import build_observation
+from .loader import model_for
+from .simulate.recording import simulate_recording
+from .simulate.trajectories import fourier_trajectory
 
 TRUE_GAINS = np.array([1.02, 1.01, 1.02, 1.02, 1.02, 1.05, 0.99])  # Table II of the LWR4 paper
 PAYLOAD_MASS = 4.6136
@@ -28,12 +33,6 @@ def demo_payload() -> np.ndarray:
 
 
 def run_demo(args=None) -> int:
-    from .identification import sensor_gains
-    from .identification.assemble import build_observation
-    from .loader import model_for
-    from .simulate.recording import simulate_recording
-    from .simulate.trajectories import fourier_trajectory
-
     seed = getattr(args, "seed", 0)
     duration = getattr(args, "duration", 20.0)
     quiet = getattr(args, "quiet", False)

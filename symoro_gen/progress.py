@@ -35,7 +35,7 @@ import os
 import sys
 import time
 import weakref
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 __all__ = [
     "ENV_VAR",
@@ -182,7 +182,7 @@ class _TextBar(_NullBar):
             self.stream = None
 
 
-_OPEN: "weakref.WeakSet" = weakref.WeakSet()
+_OPEN: weakref.WeakSet = weakref.WeakSet()
 
 
 def close_all() -> None:

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from ..description.mdh import constant_rotation, joint_sign, position, rot_z
-from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
+from ..description.model import PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
 from ..params import INERTIAL_KINDS, param_name
 from .graph import ExprGraph, GraphBuilder
 
@@ -78,7 +78,6 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
     """
     g = GraphBuilder()
     rows = robot.rows
-    nframes = len(rows)
     joint_frames = tuple(r.j for r in robot.joints)
     row_of = {f: i for i, f in enumerate(joint_frames)}
 
@@ -198,14 +197,13 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
             na = g.vec([x + y for x, y in zip(_matvec(Rm, n), cr)], f"N{name}_{a}")
             f, n, j = fa, na, a
 
-    names_std: list[str] = []
     for row in rows:
         is_payload = robot.payload is not None and row.j == robot.payload
         if not row.is_moving and not is_payload:
             continue
         k = row.j
         Uk = u_matrix(k)
-        W, Wd, V = w[k], wd[k], vd[k]
+        Wd, V = wd[k], vd[k]
         for kind in INERTIAL_KINDS:
             name = param_name(kind, k)
             if kind in INERTIAL_KINDS[:6]:

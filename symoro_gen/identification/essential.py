@@ -7,15 +7,24 @@ deviation %sigma is cancelled and the simplified model re-estimated, until
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
 from ..errors import IdentificationError
 from .accumulate import Accumulator
-from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, Options, RawFit,
-                         _as_accumulator, fit_raw, make_result)
+from .estimators import (
+    COND_WARN,
+    RANK_TOL,
+    REL_STD_WARN_PCT,
+    ZERO_COL_TOL,
+    Options,
+    RawFit,
+    _as_accumulator,
+    fit_raw,
+    make_result,
+)
 from .observation import ObservationSystem
 from .result import EliminationStep, IdentificationResult
 

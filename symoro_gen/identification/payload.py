@@ -9,13 +9,13 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import scipy.linalg
 
 from ..errors import IdentificationError
-from .estimators import COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL
+from .estimators import COND_WARN, RANK_TOL, REL_STD_WARN_PCT, ZERO_COL_TOL
 from .method import identify
 from .observation import ObservationSystem
 from .result import IdentificationResult, per_joint_rel_err

@@ -406,7 +406,7 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
     nd = st.n_d
     Nseg = N - 2 * e
     need = max(min_filter_samples(st.order, nd, st.ftype), nd)
-    if N < min_filter_samples(st.order) or Nseg < need:
+    if min_filter_samples(st.order) > N or Nseg < need:
         raise DataFileError([Problem(src, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
                                      f"{2 * e} dropped at the edges, at least {need} must remain "
                                      f"(cut-off {st.cutoff_hz:.4g} Hz, n_d = {nd})")])
@@ -670,13 +670,13 @@ def assemble(
     system = ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names, joint=J)
     reports = []
     for ex, traj in enumerate(trajs):
-        rows = tuple(int(np.sum((E == ex) & (J == j))) for j in range(n))
+        rows = tuple(int(np.sum((ex == E) & (j == J))) for j in range(n))
         reports.append(ExperimentReport(index=ex, source=traj.source, loaded=traj.loaded, n_samples=traj.n_samples,
                                         settings=settings[ex], rows_per_joint=rows,
                                         removed_low_velocity=tuple(int(x) for x in removed[ex])))
     row_time = np.empty(S.size)
     for ex, traj in enumerate(trajs):
-        m = E == ex
+        m = ex == E
         row_time[m] = np.asarray(traj.t, float)[S[m]]
     return Assembly(system=system, experiments=tuple(reports), row_experiment=E, row_time=row_time,
                     row_sample=S, row_index=np.concatenate(Ks).astype(int), options=opts, signals=tuple(signals))

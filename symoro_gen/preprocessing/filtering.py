@@ -126,7 +126,7 @@ class FilterSettings:
             + (" (estimated from the positions)" if self.bandwidth_estimated else " (given)"),
             f"Butterworth on q (x2)     order {self.order}, f_c = {self.cutoff_hz:.4g} Hz"
             f" ({self.cutoff_hz / self.dynamics_bandwidth_hz:.3g} f_dyn)",
-            f"derivatives               central differences of the filtered q",
+            "derivatives               central differences of the filtered q",
             f"parallel decimation       n_d = {self.n_d}, {self.ftype.upper()} low-pass at "
             f"{self.decimation_cutoff_hz:.4g} Hz, new rate {self.fs / self.n_d:.4g} Hz",
             f"edge samples dropped      {self.edge_samples} at each end",
@@ -541,7 +541,7 @@ def decimate(x, n_d: int, *, axis: int = 0, ftype: str = "fir", cutoff_ratio: fl
     if ftype == "iir":
         sos = decimation_filter(n_d, ftype="iir", cutoff_ratio=cutoff_ratio)
         padlen = 3 * (2 * sos.shape[0] + 1)
-        if N <= padlen:
+        if padlen >= N:
             raise _too_short(source, N, padlen + 1, f"decimate by {n_d} (IIR)")
         y = signal.sosfiltfilt(sos, flat, axis=0)[::n_d]
     elif ftype == "fir":

@@ -14,19 +14,20 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
+from ..atomic import write_text_atomic
 from ..errors import IdentificationError
 from ..identification.assemble import build_observation
 from ..identification.estimators import REL_STD_WARN_PCT
 from ..identification.method import identify
+from ..loader import model_for
 from ..model import IdentificationModel
-from ..report import (Figure, Heading, ItemList, Preformatted, Report, Table, check_report_path,
-                      require_matplotlib)
+from ..report import Figure, Heading, ItemList, Preformatted, Report, Table, check_report_path, require_matplotlib
 from ..report.document import write_report_files
 from .cli import add_data_options, data_block, data_text, load_data
 from .filtering import choose_filter_settings, filter_and_differentiate
@@ -262,8 +263,6 @@ def _report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str):
 
 def run_inspect(args) -> int:
     """The command; returns the exit status (0 usable, 2 not usable)."""
-    from ..loader import model_for
-
     if args.report:
         check_report_path(args.report)
         require_matplotlib()
@@ -271,8 +270,6 @@ def run_inspect(args) -> int:
     trajs, reports = load_data(args, args.data, robot)
     insp = inspect_recordings(model, trajs, reports, cutoff_hz=args.cutoff, n_d=args.decimate)
     if args.json:
-        from ..atomic import write_text_atomic
-
         write_text_atomic(Path(args.json), json.dumps({"robot": robot.name, **insp.to_dict()}, indent=2) + "\n")
     if args.report:
         write_report_files(_report(insp, trajs, robot.name), args.report)

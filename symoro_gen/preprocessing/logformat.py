@@ -24,12 +24,13 @@ drive chain (motor -> joint side), then ``q_link`` replaces ``q``.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import re
 import warnings
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 import scipy.interpolate
@@ -341,7 +342,7 @@ def read_table(path: str) -> _Table:
     when it fails, line by line so that every bad row can be named.
     """
     try:
-        with open(path, "r", encoding="utf-8-sig") as f:
+        with open(path, encoding="utf-8-sig") as f:
             text = f.read()
     except FileNotFoundError:
         raise DataFileError([Problem(path, "", "", "file not found")]) from None
@@ -618,7 +619,7 @@ def _resample(t: np.ndarray, arrays: dict[str, np.ndarray], h: float, max_gap: f
     cuts = np.flatnonzero(d > max_gap)
     bounds = np.r_[0, cuts + 1, t.size]
     out = []
-    for a, b in zip(bounds[:-1], bounds[1:]):
+    for a, b in itertools.pairwise(bounds):
         ts = t[a:b]
         if ts.size < 2:
             continue

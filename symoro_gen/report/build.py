@@ -7,20 +7,50 @@ atomically. Inputs are read, never modified.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 
 from .. import __version__
-from .document import (REPORT_SUFFIXES, Heading, ItemList, Paragraph, Preformatted, Report, ReportError, Table,
-                       report_kind, write_report_files)
-from .plots import (DPI, MAX_POINTS, N_BINS, error_bars_figure, require_matplotlib, residual_figure,
-                    singular_values_figure, torque_figure)
 from ..observations.assembly import basis_text
-from .tables import (unique_in_order, drive_gains_table, fmt_pct, fmt_value, gains_table, parameter_table,
-                     payload_mass_text, payload_table, reference_table, rel_err_table, result_overview,
-                     warnings_block)
+from .document import (
+    REPORT_SUFFIXES,
+    Heading,
+    ItemList,
+    Paragraph,
+    Preformatted,
+    Report,
+    ReportError,
+    Table,
+    report_kind,
+    render_html_fragment,
+    write_report_files,
+)
+from .plots import (
+    DPI,
+    MAX_POINTS,
+    N_BINS,
+    error_bars_figure,
+    require_matplotlib,
+    residual_figure,
+    singular_values_figure,
+    torque_figure,
+)
+from .tables import (
+    drive_gains_table,
+    fmt_pct,
+    fmt_value,
+    gains_table,
+    parameter_table,
+    payload_mass_text,
+    payload_table,
+    reference_table,
+    rel_err_table,
+    result_overview,
+    unique_in_order,
+    warnings_block,
+)
 
 __all__ = ["build_report", "write_report", "check_report_path", "diagnosis_html", "scaled_singular_values", "diagnosis_plot_series"]
 
@@ -143,7 +173,7 @@ def _signal(sig, key: str, rows: np.ndarray, joint: int) -> np.ndarray | None:
 
 
 def _signal_label(key: str) -> str:
-    try:
+    try:  # lazy: diagnostics imports this package (diagnostics -> report), a top-level import would be a circle
         from ..diagnostics.structure import SIGNAL_LABELS
     except ImportError:  # diagnostics not available: the key itself
         SIGNAL_LABELS = {}
@@ -274,8 +304,6 @@ def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int,
 def diagnosis_html(diagnosis) -> str:
     """HTML tables of a :class:`~symoro_gen.diagnostics.ResidualReport` (errors before/after, effects
     added, best candidates per round, structure left, warnings), without plots: for ``_repr_html_``."""
-    from .document import render_html_fragment
-
     blocks = _diagnosis_blocks(diagnosis, False, MAX_POINTS, N_BINS, DPI, [])
     blocks += warnings_block(getattr(diagnosis, "warnings", ()))
     return '<div class="symoro-gen-diagnosis">' + render_html_fragment(blocks) + "</div>"
@@ -403,7 +431,7 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
 
     if plots and result is not None and (ident or valid):
         B.append(Heading("Measured and reconstructed torques"))
-        for kind, group in (("identification", ident), ("validation", valid)):
+        for group in (ident, valid):
             for lab, s in group:
                 if not _can_predict(result, s):
                     notes.append(f"{lab}: columns {[c for c in s.names if c not in result.parameter_map()]} are "
