@@ -28,7 +28,7 @@ class ObservationSystem:
 
     W: np.ndarray
     Y: np.ndarray
-    names: tuple
+    names: tuple[str, ...]
     joint: np.ndarray
     weights: np.ndarray | None = None
 
