@@ -14,6 +14,8 @@ import traceback
 import warnings
 from pathlib import Path
 
+from . import progress
+from .atomic import write_text_atomic
 from .errors import (
     DataFileError,
     IdentificationError,
@@ -22,9 +24,8 @@ from .errors import (
     ShapeError,
     SymoroError,
 )
-from .atomic import write_text_atomic
 from .loader import generated_dir, load_model
-from .progress import close_all, progress_bar, progress_mode, stage_callback
+from .progress import close_all, progress_mode, stage_callback
 
 # The commands import the description/generation stack (sympy, ~1 s) and the sub-commands' modules
 # (identification, diagnostics, preprocessing: scipy) inside the functions on purpose: `symoro-gen --help`
@@ -58,7 +59,8 @@ def cmd_generate(args) -> int:
     check_name(robot)
     check_replaceable(out / robot.name, robot.name, args.force)  # before the (long) generation
     # the steps of emit_robot, one bar over them
-    with progress_bar(generation_steps(robot), f"{robot.name}", unit="step") as bar:
+    # through the module: tests replace progress.progress_bar
+    with progress.progress_bar(generation_steps(robot), f"{robot.name}", unit="step") as bar:
         reg = build_regressor(robot, progress=stage_callback(bar, prefix=f"{robot.name}: newton-euler "))
         bar.set_description(f"{robot.name}: base parameters")
         bp = group_base_parameters(reg)

@@ -23,8 +23,8 @@ from .document import (
     Report,
     ReportError,
     Table,
-    report_kind,
     render_html_fragment,
+    report_kind,
     write_report_files,
 )
 from .plots import (
