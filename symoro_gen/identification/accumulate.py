@@ -42,7 +42,7 @@ def _absorb(R: np.ndarray, M: np.ndarray, block_rows: int = QR_BLOCK_ROWS) -> np
     Mz = M[:, nz]
     Rz = np.zeros((0, nz.size))
     for i in range(0, Mz.shape[0], block_rows):
-        Rz = np.linalg.qr(np.vstack([Rz, Mz[i:i + block_rows]]), mode="r")
+        Rz = np.asarray(np.linalg.qr(np.vstack([Rz, Mz[i:i + block_rows]]), mode="r"))
     S = np.zeros((Rz.shape[0], k))
     S[:, nz] = Rz
     return _triangular_factor(np.vstack([R, S]), k)
@@ -52,7 +52,7 @@ def _triangular_factor(M: np.ndarray, ncols: int) -> np.ndarray:
     """Upper-triangular R (ncols, ncols) with R'R = M'M (zero-padded when M has fewer rows)."""
     if M.shape[0] == 0:
         return np.zeros((ncols, ncols))
-    R = np.linalg.qr(M, mode="r")
+    R = np.asarray(np.linalg.qr(M, mode="r"))
     if R.shape[0] < ncols:
         R = np.vstack([R, np.zeros((ncols - R.shape[0], ncols))])
     return R

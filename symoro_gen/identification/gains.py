@@ -206,7 +206,8 @@ def drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None, p
         warnings += [f"joint {j + 1}: {w}" for w in fit.warnings]
     if not gj:
         raise IdentificationError("no drive gain could be identified: " + "; ".join(warnings))
-    return DriveGainsResult(Gains(tuple(gj), gv, gs, gp), tuple(results), tuple(warnings))
+    return DriveGainsResult(Gains(tuple(gj), np.asarray(gv), np.asarray(gs), np.asarray(gp)), tuple(results),
+                            tuple(warnings))
 
 
 def identify_with_drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None,

@@ -431,8 +431,9 @@ def blas_threads(n: int | None = 1):
     """
     controls = _openblas_thread_controls() if n is not None else []
     before = [get() for get, _ in controls]
-    for _, set_ in controls:
-        set_(int(n))
+    if n is not None:
+        for _, set_ in controls:
+            set_(int(n))
     try:
         yield
     finally:

@@ -110,6 +110,7 @@ class Inspection:
     def summary(self) -> str:
         lines = [data_text(self.files), ""]
         for r in self.files:
+            assert r.step_from is not None  # every file read has a time step
             lines.append(f"{r.file}: step {r.step_from:.6g} s ({1 / r.step_from:.5g} Hz), jitter "
                          f"{100 * r.step_jitter:.3g} % of the step, {r.gaps} gap(s) split, {r.rows_dropped} row(s) dropped")
         for e in self.experiments:
@@ -225,12 +226,12 @@ def _report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str):
     MplFigure, Canvas = require_matplotlib()
     blocks: list = [Heading("Files", 2),
                     Table(("file", "rows read", "dropped", "resampled", "step [s]", "jitter [%]", "gaps", "experiments"),
-                          tuple((r.file, r.rows_read, r.rows_dropped, "yes" if r.resampled else "no",
-                                 f"{r.step_from:.6g}", f"{100 * r.step_jitter:.3g}", r.gaps, r.experiments)
+                          tuple((r.file, str(r.rows_read), str(r.rows_dropped), "yes" if r.resampled else "no",
+                                 f"{r.step_from:.6g}", f"{100 * r.step_jitter:.3g}", str(r.gaps), str(r.experiments))
                                 for r in insp.files), caption="How each file was read")]
     for e in insp.experiments:
         blocks.append(Table(("joint", "standstill [%]", "q at bound [%]", "tau at bound [%]", "q range", "|tau| max"),
-                            tuple((j.joint, f"{100 * j.standstill:.1f}", f"{100 * j.q_saturated:.1f}",
+                            tuple((str(j.joint), f"{100 * j.standstill:.1f}", f"{100 * j.q_saturated:.1f}",
                                    f"{100 * j.tau_saturated:.1f}", f"{j.q_range:.4g}", f"{j.tau_peak:.4g}")
                                   for j in e.joints),
                             caption=f"{e.source}: {e.fs:.5g} Hz, cut-off {e.cutoff_hz:.3g} Hz, n_d = {e.n_d}"))

@@ -58,6 +58,7 @@ import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 import scipy.io
@@ -294,7 +295,7 @@ def _read_text_table(path: str, *, header_required: bool) -> tuple[list[str] | N
     return names, data, skip
 
 
-def _raise_parse_problems(path, delim, skip, ncol, names):
+def _raise_parse_problems(path, delim, skip, ncol, names) -> NoReturn:
     probs: list[Problem] = []
     bad_count: list[int] = []
     bad_value: dict[str, list[tuple[int, str]]] = {}
@@ -409,6 +410,7 @@ def _resolve_csv_columns(path, names, n, columns, dt, probs) -> tuple[dict[str, 
 
 def _read_csv(path: str, n: int, columns, dt, probs) -> _Raw:
     names, data, skip = _read_text_table(path, header_required=True)
+    assert names is not None  # header_required
     idx, unused = _resolve_csv_columns(path, names, n, columns, dt, probs)
     raw = _Raw(fmt="csv", unused=unused)
     for role, ii in idx.items():
