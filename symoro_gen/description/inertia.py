@@ -85,7 +85,7 @@ def parallel_axis(I_c: ArrayLike, m: float, c: ArrayLike) -> np.ndarray:
     """Inertia about a point from the inertia about the centre of mass (parallel-axis theorem).
 
     ``J_O = I_c + m (|c|^2 E - c c^T)``, with ``c`` the centre of mass seen from ``O``
-    (Khalil & Dombre 2002, eq. 9.18). ``parallel_axis(J_O, -m, c)`` is the inverse.
+    ([KD2002] eq. 9.18; [FO2008]). ``parallel_axis(J_O, -m, c)`` is the inverse.
 
     Examples
     --------
@@ -138,7 +138,7 @@ def com_from_standard(p10: ArrayLike) -> tuple[float, np.ndarray, np.ndarray]:
 
 
 def pseudo_inertia(p10: ArrayLike) -> np.ndarray:
-    """The 4x4 pseudo-inertia matrix ``[[tr(J)/2 E - J, MS], [MS^T, M]]`` (Wensing et al. 2017, eq. 5).
+    """The 4x4 pseudo-inertia matrix ``[[tr(J)/2 E - J, MS], [MS^T, M]]`` ([WKS2017] eq. 5).
 
     It is the second-moment matrix ``int [x; 1][x; 1]^T dm`` of the mass distribution, linear in
     the ten parameters; positive definite iff they are physically consistent.
@@ -161,7 +161,7 @@ def check_physical_consistency(p10: ArrayLike, *, tol: float = 1e-12) -> list[st
     """Reasons why 10 inertial parameters are not those of a rigid body (empty list if they are).
 
     Checks ``M > 0``, ``I_c`` positive definite, the triangle inequalities of its principal
-    moments, and the pseudo-inertia positive definite (Wensing, Kim & Slotine 2017, Thm. 1; the
+    moments, and the pseudo-inertia positive definite ([WKS2017] Thm. 1; the
     three first conditions imply the last, which is checked for numerical agreement).
 
     Parameters

@@ -1,7 +1,7 @@
 """The one home of the Khalil-Kleinfinger modified Denavit-Hartenberg (MDH) convention.
 
 Frame j is placed on its antecedent ``a = ant(j)`` by (Khalil & Kleinfinger, "A new geometric
-notation for open and closed-loop robots", ICRA 1986, eq. 1; Khalil & Dombre 2002, eq. 3.6)::
+notation for open and closed-loop robots", ICRA 1986, eq. 1 [KK1986]; Khalil & Dombre 2002, eq. 3.6 [KD2002])::
 
     T(a, j) = Rot(z, gamma) Trans(z, b) Rot(x, alpha) Trans(x, d) Rot(z, theta) Trans(z, r)
 

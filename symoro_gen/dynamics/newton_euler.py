@@ -5,6 +5,11 @@ every frame origin, gravity included as an acceleration of the base); then, for 
 standard parameter, its elementary wrench on its own link is carried back towards the
 base and projected on every joint axis it meets (backward contributions per parameter).
 Intermediate variables are kept as named symbols (see :mod:`.graph`).
+
+References: the customised recursive Newton-Euler algorithm of [KK1987] (intermediate variables, zero
+terms dropped) and [KD2002] ch. 9 (inverse dynamic model linear in the standard parameters, the MDH
+frames of [KK1986]); the drive-chain columns ``IA ddq``, ``FV dq``, ``FS sign(dq)``, ``OFF`` are the
+rotor inertia, friction and offset terms of the IDM of [GB-gains] eq. 1-8.
 """
 from __future__ import annotations
 
@@ -64,7 +69,8 @@ def _inertia_moment(kind: str, wd, p) -> list:
 
 
 def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegressor:
-    """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler.
+    """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler ([KK1987];
+    [KD2002] ch. 9: ``Gamma = IDM_st(q, dq, ddq) chi_st``, IDM of [GB-gains] eq. 1-8).
 
     Parameters
     ----------

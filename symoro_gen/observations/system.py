@@ -1,4 +1,4 @@
-"""The over-determined system Y = W chi + rho, rows grouped per joint (eq. 16 of the RX-90 paper)."""
+"""The over-determined system Y = W chi + rho, rows grouped per joint ([GB-gains] eq. 16; IDIM eq. 12)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

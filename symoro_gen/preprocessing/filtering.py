@@ -1,7 +1,7 @@
 """Gautier's pre-processing: band-pass derivatives of q and parallel decimation.
 
-The identification model ``Y = W(q, dq, ddq) chi`` (eq. 14-16 of the RX-90 paper) needs
-velocities and accelerations that are not measured. Following Gautier (1997, "Dynamic
+The identification model ``Y = W(q, dq, ddq) chi`` ([GB-gains] eq. 14-16) needs
+velocities and accelerations that are not measured. Following Gautier ([G1997], "Dynamic
 identification of robots with power model", ICRA) and the two papers of the project:
 
 1. **Band-pass derivative filter** of the measured positions: a zero-phase Butterworth low-pass
@@ -324,7 +324,7 @@ def _too_short(source: str, n: int, need: int, what: str) -> DataFileError:
 
 
 def lowpass_positions(q, fs: float, cutoff_hz: float, order: int = 4, *, source: str = "<memory>"):
-    """Zero-phase Butterworth low-pass of the positions along axis 0 (``sosfiltfilt``).
+    """Zero-phase Butterworth low-pass of the positions along axis 0 (``sosfiltfilt``; [G1997], [GB-gains] eq. 14).
 
     Parameters
     ----------
@@ -377,7 +377,7 @@ def differentiate(x, dt: float, *, second: bool = False):
 
 
 def filter_and_differentiate(q, fs: float, cutoff_hz: float, order: int = 4, *, source: str = "<memory>"):
-    """Band-pass estimates of ``q``, ``dq``, ``ddq`` from measured positions.
+    """Band-pass estimates of ``q``, ``dq``, ``ddq`` from measured positions ([G1997]; [GB-gains] eq. 14).
 
     Returns
     -------
@@ -556,7 +556,7 @@ def decimate(x, n_d: int, *, axis: int = 0, ftype: str = "fir", cutoff_ratio: fl
 
 def parallel_decimate(Y, W, n_d: int, *, ftype: str = "fir", cutoff_ratio: float = DECIMATION_CUTOFF_RATIO,
                       source: str = "<memory>"):
-    """Decimate ``Y`` and every column of ``W`` with the same filter (eq. 15 of the RX-90 paper).
+    """Decimate ``Y`` and every column of ``W`` with the same filter ([GB-gains] eq. 15-16).
 
     Parameters
     ----------

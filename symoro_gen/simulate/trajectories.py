@@ -1,6 +1,6 @@
 """Exciting trajectories with analytic derivatives.
 
-* :func:`fourier_trajectory` - finite Fourier series per joint (Swevers et al. 1997), periodic,
+* :func:`fourier_trajectory` - finite Fourier series per joint ([S1997], Swevers et al.), periodic,
   scaled to respect amplitude, velocity and acceleration bounds.
 * :func:`ptp_trajectory` - point-to-point motion through via-points with a *trapezoidal-acceleration*
   (double-S, bounded-jerk) profile as industrial controllers generate them (the LWR4 and RX-90
