@@ -13,10 +13,10 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 endif
 
-.PHONY: help install robot robots check-generated test bench demo clean
+.PHONY: help install robot robots check-generated test lint bench demo clean
 
 help:
-	@echo "make demo | make test | make robot ROBOT=<name> (generate + build) | make robots | make check-generated | make bench"
+	@echo "make demo | make test | make lint | make robot ROBOT=<name> (generate + build) | make robots | make check-generated | make bench"
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +43,11 @@ check-generated: $(STAMP)
 
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q
+
+# ruff (style and likely bugs) and mypy (strict on the core packages), configured in pyproject.toml
+lint: $(STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m mypy
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py

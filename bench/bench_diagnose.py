@@ -18,11 +18,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import symoro_gen  # noqa: E402
-from symoro_gen.description import load_robot  # noqa: E402
-from symoro_gen.diagnostics import KINDS, diagnose, inject_effect  # noqa: E402
-from symoro_gen.preprocessing.trajectory import Trajectory  # noqa: E402
-from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques  # noqa: E402
+import symoro_gen
+from symoro_gen.description import load_robot
+from symoro_gen.diagnostics import KINDS, diagnose, inject_effect
+from symoro_gen.preprocessing.trajectory import Trajectory
+from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
 
 TARGET_S = 60.0
 

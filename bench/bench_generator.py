@@ -23,9 +23,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 T0 = time.perf_counter()
-from symoro_gen.description import parse_robot_text  # noqa: E402
-from symoro_gen.emit.package import emit_robot  # noqa: E402
-from symoro_gen import load_model  # noqa: E402
+from symoro_gen import load_model
+from symoro_gen.description import parse_robot_text
+from symoro_gen.emit.package import emit_robot
 
 IMPORT_S = time.perf_counter() - T0
 N_SAMPLES = 100_000

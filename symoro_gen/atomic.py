@@ -11,8 +11,8 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from pathlib import Path
 from collections.abc import Mapping
+from pathlib import Path
 
 __all__ = ["ordinary_mode", "replace_folder_atomic", "write_bytes_atomic", "write_text_atomic"]
 
@@ -28,7 +28,7 @@ def ordinary_mode(is_dir: bool = False) -> int:
     return (0o777 if is_dir else 0o666) & ~_umask()
 
 
-def write_bytes_atomic(path, data: bytes, *, overwrite: bool = True) -> None:
+def write_bytes_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: bool = True) -> None:
     """Write ``data`` to ``path`` through a temporary sibling and a rename.
 
     Parameters
@@ -65,12 +65,12 @@ def write_bytes_atomic(path, data: bytes, *, overwrite: bool = True) -> None:
             os.unlink(tmp)
 
 
-def write_text_atomic(path, text: str, *, overwrite: bool = True) -> None:
+def write_text_atomic(path: str | os.PathLike[str], text: str, *, overwrite: bool = True) -> None:
     """UTF-8 text, ``\\n`` line ends, written atomically (see :func:`write_bytes_atomic`)."""
     write_bytes_atomic(path, text.encode("utf-8"), overwrite=overwrite)
 
 
-def replace_folder_atomic(folder, files: Mapping[str, bytes | str]) -> None:
+def replace_folder_atomic(folder: str | os.PathLike[str], files: Mapping[str, bytes | str]) -> None:
     """Make ``folder`` hold exactly ``files`` (name -> content), swapped in with one rename.
 
     The files are written into a temporary sibling folder, the old folder (if any) is moved

@@ -14,6 +14,8 @@ import traceback
 import warnings
 from pathlib import Path
 
+from . import progress
+from .atomic import write_text_atomic
 from .errors import (
     DataFileError,
     IdentificationError,
@@ -22,6 +24,12 @@ from .errors import (
     ShapeError,
     SymoroError,
 )
+from .loader import generated_dir, load_model
+from .progress import close_all, progress_mode, stage_callback
+
+# The commands import the description/generation stack (sympy, ~1 s) and the sub-commands' modules
+# (identification, diagnostics, preprocessing: scipy) inside the functions on purpose: `symoro-gen --help`
+# and the light commands start without them (see build_parser and _LIGHT_COMMANDS).
 
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1
@@ -45,15 +53,14 @@ def cmd_generate(args) -> int:
     from .description import load_robot
     from .dynamics.newton_euler import build_regressor
     from .emit.package import check_name, check_replaceable, emit_from
-    from .loader import generated_dir
-    from .progress import progress_bar, stage_callback
 
     robot = load_robot(args.robot)
     out = Path(args.out) if args.out else generated_dir()
     check_name(robot)
     check_replaceable(out / robot.name, robot.name, args.force)  # before the (long) generation
     # the steps of emit_robot, one bar over them
-    with progress_bar(generation_steps(robot), f"{robot.name}", unit="step") as bar:
+    # through the module: tests replace progress.progress_bar
+    with progress.progress_bar(generation_steps(robot), f"{robot.name}", unit="step") as bar:
         reg = build_regressor(robot, progress=stage_callback(bar, prefix=f"{robot.name}: newton-euler "))
         bar.set_description(f"{robot.name}: base parameters")
         bp = group_base_parameters(reg)
@@ -71,8 +78,6 @@ def cmd_generate(args) -> int:
 
 def cmd_build(args) -> int:
     """Compile the C kernels of a generated package (``symoro-gen build ROBOT``)."""
-    from .loader import load_model
-
     m = load_model(args.robot)
     model = getattr(m, "_MODEL", None)
     if model is None:
@@ -94,8 +99,6 @@ def _output(text: str, args, *, robot_file: bool = False) -> int:
 
         write_robot_toml(text, args.output, overwrite=args.force)
     else:
-        from .atomic import write_text_atomic
-
         write_text_atomic(Path(args.output), text)
     if not args.quiet:
         print(f"wrote {args.output}")
@@ -324,8 +327,6 @@ def _format_warning(message, category, filename, lineno, line=None) -> str:
 
 
 def _report_error(exc: BaseException, args, internal: bool) -> None:
-    from .progress import close_all
-
     close_all()
     if getattr(args, "debug", False):
         traceback.print_exception(exc, file=sys.stderr)
@@ -338,8 +339,6 @@ def _report_error(exc: BaseException, args, internal: bool) -> None:
 
 
 def main(argv=None) -> int:
-    from .progress import progress_mode
-
     cmd = _command_of(sys.argv[1:] if argv is None else argv)
     light = cmd in _LIGHT_COMMANDS or cmd in _EXTRA_NAMES.values()
     parser = build_parser(cmd if light else None)
@@ -364,8 +363,6 @@ def main(argv=None) -> int:
         _report_error(exc, args, internal=False)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
-        from .progress import close_all
-
         close_all()
         print("symoro-gen: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

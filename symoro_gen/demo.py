@@ -14,6 +14,12 @@ from __future__ import annotations
 import numpy as np
 
 from .description.inertia import standard_from_com
+from .errors import ModelError
+from .identification import sensor_gains
+from .identification.assemble import build_observation
+from .loader import model_for
+from .simulate.recording import simulate_recording
+from .simulate.trajectories import fourier_trajectory
 
 TRUE_GAINS = np.array([1.02, 1.01, 1.02, 1.02, 1.02, 1.05, 0.99])  # Table II of the LWR4 paper
 PAYLOAD_MASS = 4.6136
@@ -28,18 +34,15 @@ def demo_payload() -> np.ndarray:
 
 
 def run_demo(args=None) -> int:
-    from .identification import sensor_gains
-    from .identification.assemble import build_observation
-    from .loader import model_for
-    from .simulate.recording import simulate_recording
-    from .simulate.trajectories import fourier_trajectory
-
     seed = getattr(args, "seed", 0)
     duration = getattr(args, "duration", 20.0)
     quiet = getattr(args, "quiet", False)
     rng = np.random.default_rng(seed)
     robot, model = model_for("lwr4")
-    chi = model.nominal_parameters()
+    nominal = getattr(model, "nominal_parameters", None)  # generated packages have it (not in the contract)
+    chi = nominal() if nominal is not None else None
+    if chi is None:
+        raise ModelError("lwr4: the demo needs the nominal parameters of the robot file")
     names = model.STANDARD_NAMES
     for k, n in enumerate(names):  # torque-sensor offsets, not in the URDF
         if n.startswith("OFF"):
@@ -48,7 +51,7 @@ def run_demo(args=None) -> int:
     dt = 0.005  # 200 Hz, as the LWR4 recorder
     say = (lambda *a: None) if quiet else print
     say(f"symoro_gen demo: {robot.name}, {len(model.BASE_NAMES)} base parameters + payload {model.PAYLOAD_NAMES[-1]}; "
-        f"backend {model.BACKEND}")
+        f"backend {getattr(model, 'BACKEND', '?')}")
 
     def record(kind, loaded):
         t, q, dq, ddq = fourier_trajectory(robot.n_joints, duration, dt, rng, vmax=1.5, amax=6.0)
@@ -63,10 +66,12 @@ def run_demo(args=None) -> int:
     sys_v = build_observation(model, [validation], payload_columns=True)
     val = res.rel_err_on(sys_v)
     say(res.summary())
-    g = np.asarray(res.gains.values)
+    gains = res.gains
+    assert gains is not None  # sensor_gains identifies them
+    g = np.asarray(gains.values)
     say("\nSensor gains: true vs identified (IDIM-TLS, payload mass known)")
     for j in range(robot.n_joints):
-        say(f"  g{j + 1}: true {TRUE_GAINS[j]:.4f}  identified {g[j]:.4f}  %sigma {res.gains.rel_std_pct[j]:.2f}  "
+        say(f"  g{j + 1}: true {TRUE_GAINS[j]:.4f}  identified {g[j]:.4f}  %sigma {gains.rel_std_pct[j]:.2f}  "
             f"error {100 * (g[j] / TRUE_GAINS[j] - 1):+.2f} %")
     say("Validation, relative error norm per joint: " + "  ".join(f"{x:.4f}" for x in val))
     worst = float(np.max(np.abs(g / TRUE_GAINS - 1)))

@@ -51,12 +51,13 @@ def _is_package(p: Path) -> bool:
 
 def _manifest_sha(p: Path) -> str | None:
     try:
-        return json.loads((p / "manifest.json").read_text(encoding="utf-8")).get("robot_file_sha256")
+        sha = json.loads((p / "manifest.json").read_text(encoding="utf-8")).get("robot_file_sha256")
+        return None if sha is None else str(sha)
     except (OSError, ValueError, AttributeError):
         return None
 
 
-def import_package(path: str | os.PathLike) -> IdentificationModel:
+def import_package(path: str | os.PathLike[str]) -> IdentificationModel:
     """Import the generated package in folder ``path`` (once per process, folder and package content).
 
     The module is named ``_symoro_generated_<name>_<sha256 of the path>_<sha256 of __init__.py>``:
@@ -126,7 +127,7 @@ def _model_of_robot(robot: RobotDescription) -> IdentificationModel:
     return import_package(cached / robot.name)
 
 
-def load_model(source: str | os.PathLike | RobotDescription) -> IdentificationModel:
+def load_model(source: str | os.PathLike[str] | RobotDescription) -> IdentificationModel:
     """The identification model of a robot, generating it when needed.
 
     Parameters
@@ -174,7 +175,7 @@ def load_model(source: str | os.PathLike | RobotDescription) -> IdentificationMo
     )
 
 
-def model_for(robot_or_name: str | os.PathLike | RobotDescription) -> tuple[RobotDescription, IdentificationModel]:
+def model_for(robot_or_name: str | os.PathLike[str] | RobotDescription) -> tuple[RobotDescription, IdentificationModel]:
     """``(robot description, model)`` for a robot name, robot file or description (see :func:`load_model`)."""
     from .description import load_robot
     from .description.model import RobotDescription

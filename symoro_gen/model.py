@@ -21,6 +21,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .errors import ModelError
+
 __all__ = ["IdentificationModel", "check_model"]
 
 
@@ -84,8 +86,6 @@ class IdentificationModel(Protocol):
 def check_model(model: object) -> IdentificationModel:
     """Return ``model`` if it satisfies :class:`IdentificationModel`, else raise a :class:`~symoro_gen.errors.ModelError`
     naming the missing attributes."""
-    from .errors import ModelError
-
     need = ("ROBOT", "N_JOINTS", "STANDARD_NAMES", "BASE_NAMES", "PAYLOAD_NAMES", "regressor",
             "standard_regressor", "payload_regressor", "base_parameters", "torque")
     missing = [a for a in need if not hasattr(model, a)]

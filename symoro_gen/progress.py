@@ -35,7 +35,8 @@ import os
 import sys
 import time
 import weakref
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
+from typing import TypeAlias
 
 __all__ = [
     "ENV_VAR",
@@ -45,6 +46,7 @@ __all__ = [
     "progress_enabled",
     "progress_bar",
     "progress_updates",
+    "ProgressArg",
     "ProgressCounter",
     "close_all",
     "stage_callback",
@@ -55,6 +57,9 @@ MODES = ("off", "auto", "on")
 _MODE: contextvars.ContextVar[str] = contextvars.ContextVar("symoro_progress_mode", default="off")
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
+
+#: the ``progress=`` argument of library functions (see :func:`progress_updates`)
+ProgressArg: TypeAlias = "bool | Callable[[int], object] | None"
 
 
 @contextlib.contextmanager
@@ -182,7 +187,7 @@ class _TextBar(_NullBar):
             self.stream = None
 
 
-_OPEN: "weakref.WeakSet" = weakref.WeakSet()
+_OPEN: weakref.WeakSet = weakref.WeakSet()
 
 
 def close_all() -> None:
@@ -235,17 +240,22 @@ def progress_bar(total: int | float | None = None, desc: str = "", *, enabled: b
     return bar
 
 
+def _no_step(n: int = 1) -> None:
+    return None
+
+
 class ProgressCounter:
     """``step(n)`` / ``close()`` over the ``progress=`` argument of a library function, for loops that
     cannot sit in a ``with`` block (generators); see :func:`progress_updates` for the meaning of
     ``progress``. Bars left open by an exception are closed by :func:`close_all`."""
 
-    def __init__(self, progress, *, total=None, desc: str = "", unit: str = "it", unit_scale: bool = False):
+    def __init__(self, progress: ProgressArg, *, total: int | None = None, desc: str = "", unit: str = "it", unit_scale: bool = False):
         self._bar = None
+        self.step: Callable[[int], object]
         if callable(progress) and not isinstance(progress, bool):
             self.step = progress
         elif progress is False:
-            self.step = lambda n=1: None
+            self.step = _no_step
         else:
             self._bar = progress_bar(total, desc, enabled=True if progress is True else None, unit=unit,
                                      unit_scale=unit_scale)
@@ -258,8 +268,8 @@ class ProgressCounter:
 
 
 @contextlib.contextmanager
-def progress_updates(progress, *, total=None, desc: str = "", unit: str = "it",
-                     unit_scale: bool = False) -> Iterator[Callable[[int], None]]:
+def progress_updates(progress: ProgressArg, *, total: int | None = None, desc: str = "", unit: str = "it",
+                     unit_scale: bool = False) -> Iterator[Callable[[int], object]]:
     """Resolve the ``progress=`` argument of a library function into an ``update(n)`` function.
 
     Parameters

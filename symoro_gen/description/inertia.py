@@ -33,6 +33,7 @@ A 2 kg point-like body 0.5 m along x (no inertia about its centre of mass):
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..params import INERTIAL_KINDS
 
@@ -48,7 +49,7 @@ __all__ = [
 ]
 
 
-def matrix_from_six(v6) -> np.ndarray:
+def matrix_from_six(v6: ArrayLike) -> np.ndarray:
     """Symmetric 3x3 inertia matrix from its six entries ``XX XY XZ YY YZ ZZ``.
 
     Parameters
@@ -64,11 +65,11 @@ def matrix_from_six(v6) -> np.ndarray:
     >>> matrix_from_six([1, 2, 3, 4, 5, 6]).tolist()
     [[1.0, 2.0, 3.0], [2.0, 4.0, 5.0], [3.0, 5.0, 6.0]]
     """
-    XX, XY, XZ, YY, YZ, ZZ = (float(x) for x in list(v6)[:6])
+    XX, XY, XZ, YY, YZ, ZZ = (float(x) for x in np.asarray(v6, dtype=float)[:6])
     return np.array([[XX, XY, XZ], [XY, YY, YZ], [XZ, YZ, ZZ]])
 
 
-def six_from_matrix(J) -> np.ndarray:
+def six_from_matrix(J: ArrayLike) -> np.ndarray:
     """The six entries ``XX XY XZ YY YZ ZZ`` of a 3x3 inertia matrix (upper triangle, row by row).
 
     Examples
@@ -80,11 +81,11 @@ def six_from_matrix(J) -> np.ndarray:
     return np.array([J[0, 0], J[0, 1], J[0, 2], J[1, 1], J[1, 2], J[2, 2]])
 
 
-def parallel_axis(I_c, m: float, c) -> np.ndarray:
+def parallel_axis(I_c: ArrayLike, m: float, c: ArrayLike) -> np.ndarray:
     """Inertia about a point from the inertia about the centre of mass (parallel-axis theorem).
 
     ``J_O = I_c + m (|c|^2 E - c c^T)``, with ``c`` the centre of mass seen from ``O``
-    (Khalil & Dombre 2002, eq. 9.18). ``parallel_axis(J_O, -m, c)`` is the inverse.
+    ([KD2002] eq. 9.18; [FO2008]). ``parallel_axis(J_O, -m, c)`` is the inverse.
 
     Examples
     --------
@@ -95,7 +96,7 @@ def parallel_axis(I_c, m: float, c) -> np.ndarray:
     return np.asarray(I_c, float) + float(m) * (float(c @ c) * np.eye(3) - np.outer(c, c))
 
 
-def standard_from_com(m: float, c, I_c) -> np.ndarray:
+def standard_from_com(m: float, c: ArrayLike, I_c: ArrayLike) -> np.ndarray:
     """The 10 standard parameters at the frame origin from mass, centre of mass, inertia about it.
 
     Parameters
@@ -116,7 +117,7 @@ def standard_from_com(m: float, c, I_c) -> np.ndarray:
     return np.concatenate([six_from_matrix(parallel_axis(I_c, m, c)), float(m) * c, [float(m)]])
 
 
-def com_from_standard(p10) -> tuple[float, np.ndarray, np.ndarray]:
+def com_from_standard(p10: ArrayLike) -> tuple[float, np.ndarray, np.ndarray]:
     """``(M, c, I_c)`` from ``XX XY XZ YY YZ ZZ MX MY MZ M`` (inverse parallel-axis theorem).
 
     A zero mass gives ``c = 0`` and ``I_c = J_O``.
@@ -127,7 +128,7 @@ def com_from_standard(p10) -> tuple[float, np.ndarray, np.ndarray]:
     >>> float(m), c.tolist(), I_c.diagonal().tolist()
     (2.0, [0.0, 0.0, 0.5], [0.0, 0.0, 0.0])
     """
-    p = [float(x) for x in p10]
+    p = [float(x) for x in np.asarray(p10, dtype=float)]
     if len(p) != 10:
         raise ValueError(f"expected the 10 inertial parameters {' '.join(INERTIAL_KINDS)}, got {len(p)} values")
     J = matrix_from_six(p[:6])
@@ -136,8 +137,8 @@ def com_from_standard(p10) -> tuple[float, np.ndarray, np.ndarray]:
     return M, c, parallel_axis(J, -M, c)
 
 
-def pseudo_inertia(p10) -> np.ndarray:
-    """The 4x4 pseudo-inertia matrix ``[[tr(J)/2 E - J, MS], [MS^T, M]]`` (Wensing et al. 2017, eq. 5).
+def pseudo_inertia(p10: ArrayLike) -> np.ndarray:
+    """The 4x4 pseudo-inertia matrix ``[[tr(J)/2 E - J, MS], [MS^T, M]]`` ([WKS2017] eq. 5).
 
     It is the second-moment matrix ``int [x; 1][x; 1]^T dm`` of the mass distribution, linear in
     the ten parameters; positive definite iff they are physically consistent.
@@ -147,7 +148,7 @@ def pseudo_inertia(p10) -> np.ndarray:
     >>> pseudo_inertia(standard_from_com(2.0, [0.5, 0, 0], np.zeros((3, 3)))).tolist()
     [[0.5, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 2.0]]
     """
-    p = [float(x) for x in p10]
+    p = [float(x) for x in np.asarray(p10, dtype=float)]
     J = matrix_from_six(p[:6])
     P = np.empty((4, 4))
     P[:3, :3] = 0.5 * np.trace(J) * np.eye(3) - J
@@ -156,11 +157,11 @@ def pseudo_inertia(p10) -> np.ndarray:
     return P
 
 
-def check_physical_consistency(p10, *, tol: float = 1e-12) -> list[str]:
+def check_physical_consistency(p10: ArrayLike, *, tol: float = 1e-12) -> list[str]:
     """Reasons why 10 inertial parameters are not those of a rigid body (empty list if they are).
 
     Checks ``M > 0``, ``I_c`` positive definite, the triangle inequalities of its principal
-    moments, and the pseudo-inertia positive definite (Wensing, Kim & Slotine 2017, Thm. 1; the
+    moments, and the pseudo-inertia positive definite ([WKS2017] Thm. 1; the
     three first conditions imply the last, which is checked for numerical agreement).
 
     Parameters

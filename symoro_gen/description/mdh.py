@@ -1,7 +1,7 @@
 """The one home of the Khalil-Kleinfinger modified Denavit-Hartenberg (MDH) convention.
 
 Frame j is placed on its antecedent ``a = ant(j)`` by (Khalil & Kleinfinger, "A new geometric
-notation for open and closed-loop robots", ICRA 1986, eq. 1; Khalil & Dombre 2002, eq. 3.6)::
+notation for open and closed-loop robots", ICRA 1986, eq. 1 [KK1986]; Khalil & Dombre 2002, eq. 3.6 [KD2002])::
 
     T(a, j) = Rot(z, gamma) Trans(z, b) Rot(x, alpha) Trans(x, d) Rot(z, theta) Trans(z, r)
 
@@ -28,9 +28,11 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import sympy as sp
+from numpy.typing import ArrayLike, NDArray
 
 from .model import FIXED, PRISMATIC, REVOLUTE, MdhRow, q_symbol
 
@@ -48,13 +50,13 @@ __all__ = [
 
 
 # ---- symbolic -------------------------------------------------------------------------------
-def rot_x(a) -> sp.Matrix:
+def rot_x(a: sp.Expr | float) -> sp.Matrix:
     """Symbolic 3x3 ``Rot(x, a)``."""
     c, s = sp.cos(a), sp.sin(a)
     return sp.Matrix([[1, 0, 0], [0, c, -s], [0, s, c]])
 
 
-def rot_z(a) -> sp.Matrix:
+def rot_z(a: sp.Expr | float) -> sp.Matrix:
     """Symbolic 3x3 ``Rot(z, a)``."""
     c, s = sp.cos(a), sp.sin(a)
     return sp.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
@@ -65,7 +67,7 @@ def constant_rotation(row: MdhRow) -> sp.Matrix:
     return rot_z(row.gamma) * rot_x(row.alpha)
 
 
-def position(row: MdhRow, r=None) -> sp.Matrix:
+def position(row: MdhRow, r: sp.Expr | float | None = None) -> sp.Matrix:
     """``P(ant, j) = Rot(z, gamma) [d, -r sin(alpha), b + r cos(alpha)]^T``, origin of frame j in frame ant.
 
     ``r`` replaces ``row.r`` when given.
@@ -104,7 +106,8 @@ def joint_sign(row: MdhRow) -> int:
 
 
 # ---- numeric --------------------------------------------------------------------------------
-def transform(gamma, b, alpha, d, theta, r) -> np.ndarray:
+def transform(gamma: ArrayLike, b: ArrayLike, alpha: ArrayLike, d: ArrayLike, theta: ArrayLike,
+              r: ArrayLike) -> NDArray[np.float64]:
     """Numeric ``T(ant, j)`` for MDH values; arguments broadcast (e.g. ``theta`` of N samples).
 
     Returns
@@ -132,11 +135,11 @@ def transform(gamma, b, alpha, d, theta, r) -> np.ndarray:
     return T
 
 
-def _num(e, subs: Mapping) -> float:
+def _num(e: sp.Expr | float, subs: Mapping[Any, Any]) -> float:
     return float(e.subs(subs)) if hasattr(e, "subs") else float(e)
 
 
-def row_values(row: MdhRow, subs: Mapping, q=0.0) -> tuple:
+def row_values(row: MdhRow, subs: Mapping[Any, Any], q: ArrayLike = 0.0) -> tuple[Any, ...]:
     """Numeric ``(gamma, b, alpha, d, theta, r)`` of a row with geometry ``subs`` and joint value ``q``.
 
     The joint variable is substituted in ``theta`` (revolute) or ``r`` (prismatic) as
@@ -145,6 +148,8 @@ def row_values(row: MdhRow, subs: Mapping, q=0.0) -> tuple:
     """
     gam, b, al, d = (_num(x, subs) for x in (row.gamma, row.b, row.alpha, row.d))
     q = np.asarray(q, float)
+    th: float | NDArray[np.float64]
+    r: float | NDArray[np.float64]
     if row.sigma in (REVOLUTE, PRISMATIC):
         zero = dict(subs)
         zero[q_symbol(row.j)] = 0
@@ -165,6 +170,6 @@ def row_values(row: MdhRow, subs: Mapping, q=0.0) -> tuple:
     return gam, b, al, d, th, r
 
 
-def row_transform(row: MdhRow, subs: Mapping, q=0.0) -> np.ndarray:
+def row_transform(row: MdhRow, subs: Mapping[Any, Any], q: ArrayLike = 0.0) -> NDArray[np.float64]:
     """Numeric ``T(ant, j)`` of a row at joint value(s) ``q`` (see :func:`row_values`)."""
     return transform(*row_values(row, subs, q))

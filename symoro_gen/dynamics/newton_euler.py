@@ -5,6 +5,11 @@ every frame origin, gravity included as an acceleration of the base); then, for 
 standard parameter, its elementary wrench on its own link is carried back towards the
 base and projected on every joint axis it meets (backward contributions per parameter).
 Intermediate variables are kept as named symbols (see :mod:`.graph`).
+
+References: the customised recursive Newton-Euler algorithm of [KK1987] (intermediate variables, zero
+terms dropped) and [KD2002] ch. 9 (inverse dynamic model linear in the standard parameters, the MDH
+frames of [KK1986]); the drive-chain columns ``IA ddq``, ``FV dq``, ``FS sign(dq)``, ``OFF`` are the
+rotor inertia, friction and offset terms of the IDM of [GB-gains] eq. 1-8.
 """
 from __future__ import annotations
 
@@ -13,7 +18,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from ..description.mdh import constant_rotation, joint_sign, position, rot_z
-from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
+from ..description.model import PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
 from ..params import INERTIAL_KINDS, param_name
 from .graph import ExprGraph, GraphBuilder
 
@@ -75,7 +80,8 @@ def gravity_symbols(robot: RobotDescription) -> dict[sp.Symbol, float]:
 
 
 def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity: bool = False) -> SymbolicRegressor:
-    """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler.
+    """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler ([KK1987];
+    [KD2002] ch. 9: ``Gamma = IDM_st(q, dq, ddq) chi_st``, IDM of [GB-gains] eq. 1-8).
 
     Parameters
     ----------
@@ -92,7 +98,6 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
     """
     g = GraphBuilder()
     rows = robot.rows
-    nframes = len(rows)
     joint_frames = tuple(r.j for r in robot.joints)
     row_of = {f: i for i, f in enumerate(joint_frames)}
 
@@ -216,14 +221,13 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             na = g.vec([x + y for x, y in zip(_matvec(Rm, n), cr)], f"N{name}_{a}")
             f, n, j = fa, na, a
 
-    names_std: list[str] = []
     for row in rows:
         is_payload = robot.payload is not None and row.j == robot.payload
         if not row.is_moving and not is_payload:
             continue
         k = row.j
         Uk = u_matrix(k)
-        W, Wd, V = w[k], wd[k], vd[k]
+        Wd, V = wd[k], vd[k]
         for kind in INERTIAL_KINDS:
             name = param_name(kind, k)
             if kind in INERTIAL_KINDS[:6]:

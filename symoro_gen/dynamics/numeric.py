@@ -1,6 +1,8 @@
 """Plain numeric recursive Newton-Euler (an independent reference for the symbolic model).
 
 Works directly from the MDH table with numpy, vectorised over samples; no sympy graph.
+The recursion is the textbook one ([KD2002] ch. 9: forward velocities and accelerations, backward
+wrenches, projection on the joint axes), with the link inertia at the frame origin ([FO2008]).
 """
 from __future__ import annotations
 

@@ -7,12 +7,14 @@
 """
 from __future__ import annotations
 
+from typing import Any
+
 import sympy as sp
 
 from ..dynamics.graph import ExprGraph
 
 
-def _term(t):
+def _term(t: sp.Expr) -> tuple[int, tuple[sp.Expr, ...]] | None:
     """Split a product ``sign * X * Y`` into (sign, frozenset{X, Y}) when it has that shape."""
     coeff, rest = t.as_coeff_Mul()
     if coeff not in (1, -1):
@@ -23,15 +25,16 @@ def _term(t):
     return int(coeff), f
 
 
-def _match(e, trig):
+def _match(e: sp.Expr, trig: dict[sp.Symbol, tuple[str, str]]) -> tuple[Any, ...] | None:
     """e == s1 * C * a + s2 * S * b with C, S the cos/sin of the same joint -> (j, s1, a, s2, b)."""
     if not e.is_Add or len(e.args) != 2:
         return None
     parts = [_term(t) for t in e.args]
-    if None in parts:
-        return None
     info = []
-    for s, f in parts:
+    for part in parts:
+        if part is None:
+            return None
+        s, f = part
         k = [x for x in f if x in trig]
         if len(k) != 1:
             return None
@@ -47,7 +50,7 @@ def _match(e, trig):
 
 def rotation_pairs(graph: ExprGraph) -> ExprGraph:
     """Rewrite paired rotations with 3 multiplications (see module docstring)."""
-    trig: dict = {}
+    trig: dict[sp.Symbol, tuple[str, str]] = {}
     for s, e in graph.defs:
         if isinstance(e, sp.cos):
             trig[s] = (s.name[1:], "C")
@@ -56,7 +59,7 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
     csym = {v: k for k, v in trig.items()}
     # candidate "C-led" (u = s1 C a + s2 S b) and "S-led" (v = s3 S a + s4 C b) expressions
     items = list(graph.defs) + [(("out",) + k, e) for k, e in sorted(graph.outputs.items(), key=lambda kv: str(kv[0]))]
-    by_pair: dict = {}
+    by_pair: dict[Any, list[Any]] = {}
     for key, e in items:
         m = _match(e, trig)
         if m is None:
@@ -64,9 +67,9 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
         j, _, sc, xc, ss, xs = m
         # C multiplies xc, S multiplies xs: u-type if we call a = xc, b = xs; v-type if a = xs, b = xc.
         by_pair.setdefault((j, frozenset((xc, xs))), []).append((key, sc, xc, ss, xs))
-    replace: dict = {}
-    new_defs_for: dict = {}
-    used_joints = set()
+    replace: dict[Any, sp.Expr] = {}
+    new_defs_for: dict[Any, Any] = {}
+    used_joints: set[str] = set()
     for (j, pair), lst in by_pair.items():
         if len(pair) != 2 or len(lst) < 2:
             continue
@@ -91,13 +94,13 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
     if not new_defs_for:
         return graph
     # build new defs
-    extra_at: dict = {}
+    extra_at: dict[Any, list[tuple[sp.Symbol, sp.Expr]]] = {}
     jdefs = {}
     for j in sorted(used_joints):
         C, S = csym[(j, "C")], csym[(j, "S")]
         jdefs[j] = (sp.Symbol(f"CpS{j}", real=True), C + S, sp.Symbol(f"SmC{j}", real=True), S - C)
     order = {k: i for i, (k, _) in enumerate(items)}
-    joint_at: dict = {}
+    joint_at: dict[Any, str] = {}
     for n, ((k1, k2), (j, C, a, bp, s1, s3)) in enumerate(new_defs_for.items()):
         K = sp.Symbol(f"rot{n}", real=True)
         CpS, _, SmC, _ = jdefs[j]
@@ -106,9 +109,9 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
         first = k1 if order[k1] < order[k2] else k2
         extra_at[first] = [(K, C * (a + bp))]
         joint_at[first] = j
-    placed_joint: set = set()
+    placed_joint: set[str] = set()
 
-    def emit_extra(key, sink):
+    def emit_extra(key: Any, sink: list[tuple[sp.Symbol, sp.Expr]]) -> None:
         j = joint_at[key]
         if j not in placed_joint:  # the joint's C+S and S-C before their first use
             CpS, ce, SmC, se = jdefs[j]
@@ -116,13 +119,13 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
             placed_joint.add(j)
         sink += extra_at[key]
 
-    defs: list = []
+    defs: list[tuple[sp.Symbol, sp.Expr]] = []
     for s, e in graph.defs:
         if s in extra_at:
             emit_extra(s, defs)
         defs.append((s, replace.get(s, e)))
     outs = {}
-    tail: list = []
+    tail: list[tuple[sp.Symbol, sp.Expr]] = []
     for k, e in graph.outputs.items():
         key = ("out",) + k
         if key in extra_at:
@@ -131,9 +134,9 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
     return ExprGraph(graph.inputs, tuple(defs) + tuple(tail), outs)
 
 
-def _products_in(e):
+def _products_in(e: sp.Expr) -> list[frozenset[sp.Symbol] | tuple[sp.Symbol]]:
     """Two-symbol products (up to sign) appearing as terms or factors of e."""
-    out = []
+    out: list[frozenset[sp.Symbol] | tuple[sp.Symbol]] = []
     for m in e.atoms(sp.Mul):
         _coeff, rest = m.as_coeff_Mul()
         f = sp.Mul.make_args(rest)
@@ -148,7 +151,7 @@ def _products_in(e):
 
 def share_products(graph: ExprGraph) -> ExprGraph:
     """Name every product of two symbols (or square) used more than once, and reuse it."""
-    count: dict = {}
+    count: dict[frozenset[sp.Symbol] | tuple[sp.Symbol], int] = {}
     for _, e in graph.defs:
         for p in _products_in(e):
             count[p] = count.get(p, 0) + 1
@@ -162,18 +165,19 @@ def share_products(graph: ExprGraph) -> ExprGraph:
     for i, p in enumerate(shared):
         sym_of[p] = sp.Symbol(f"pr{i}", real=True)
 
-    def expr_of(p):
+    def expr_of(p: frozenset[sp.Symbol] | tuple[sp.Symbol]) -> sp.Expr:
         return p[0] * p[0] if isinstance(p, tuple) else sp.Mul(*sorted(p, key=lambda s: s.name))
 
     subs = {expr_of(p): sym_of[p] for p in shared}
     # place each product right after the last of its operands is defined
     pos = {s: i for i, (s, _) in enumerate(graph.defs)}
-    place: dict = {}
+    place: dict[int, list[frozenset[sp.Symbol] | tuple[sp.Symbol]]] = {}
     for p in shared:
         ops = p if isinstance(p, tuple) else tuple(p)
         k = max((pos.get(s, -1) for s in ops), default=-1)
         place.setdefault(k, []).append(p)
-    def rewrite(e):
+
+    def rewrite(e: sp.Expr) -> sp.Expr:
         rep = {}
         for m in e.atoms(sp.Mul):
             coeff, rest = m.as_coeff_Mul()

@@ -23,7 +23,7 @@ import os
 import platform
 import shutil
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,13 +56,13 @@ class EmittedModule:
 
     robot: str
     path: Path
-    files: tuple
+    files: tuple[str, ...]
     n_standard: int
     n_base: int
     base_ops: OpCount
 
 
-def tool_versions() -> dict:
+def tool_versions() -> dict[str, str | None]:
     """Versions of the tools that produced a package (recorded in ``manifest.json`` only)."""
     try:
         import casadi
@@ -82,13 +82,13 @@ def _header(robot: RobotDescription) -> str:
     )
 
 
-def _relations(bp: BaseParameterMap, subs: dict) -> tuple:
+def _relations(bp: BaseParameterMap, subs: dict[Any, Any]) -> tuple[Any, ...]:
     """``((standard index, coefficient), ...)`` per base parameter (geometry substituted)."""
     K = bp.matrix(subs)
     return tuple(tuple((int(k), float(K[b, k])) for k in np.nonzero(K[b])[0]) for b in range(len(bp.base_names)))
 
 
-def _relations_code(rel: tuple, names: tuple) -> str:
+def _relations_code(rel: tuple[Any, ...], names: tuple[str, ...]) -> str:
     lines = ["_RELATIONS = ("]
     for terms, name in zip(rel, names):
         body = ", ".join(f"({k}, {c!r})" for k, c in terms)
@@ -229,7 +229,8 @@ package's ``casadi_regressor()`` wraps it in a ``casadi.Function`` (symoro_gen.r
 {kernel}'''
 
 
-def emit_robot(robot: RobotDescription, out_dir: str | os.PathLike, *, progress: Callable | None = None,
+def emit_robot(robot: RobotDescription, out_dir: str | os.PathLike[str], *,
+               progress: Callable[[str, int], object] | None = None,
                force: bool = False) -> EmittedModule:
     """Generate ``out_dir/<robot>/`` for ``robot`` (Newton-Euler, base parameters, emission).
 
@@ -252,11 +253,11 @@ def base_graph(reg: SymbolicRegressor, bp: BaseParameterMap) -> ExprGraph:
     return ExprGraph(g.inputs, g.defs, {(i, ren[n]): e for (i, n), e in g.outputs.items()})
 
 
-def model_graphs(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict, dict]:
+def model_graphs(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[str, ExprGraph], dict[str, tuple[str, ...]]]:
     """Optimised graphs and column names of the three regressors, keyed ``base/standard/payload``."""
     subs = reg.robot.geometry_subs()
 
-    def cols(names):
+    def cols(names: Sequence[str]) -> ExprGraph:
         return optimize(reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(names)}))
 
     graphs = {"base": optimize(base_graph(reg, bp)), "standard": cols(reg.standard_names),
@@ -323,7 +324,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
     return files, ops
 
 
-def emit_from(reg: SymbolicRegressor, bp: BaseParameterMap, out_dir: str | os.PathLike, *,
+def emit_from(reg: SymbolicRegressor, bp: BaseParameterMap, out_dir: str | os.PathLike[str], *,
               force: bool = False) -> EmittedModule:
     """Write the package of ``reg.robot`` to ``out_dir/<robot>/`` (see :func:`write_package_atomic`)."""
     files, ops = package_files(reg, bp)
@@ -399,13 +400,13 @@ class InMemoryModel:
 
     ROBOT: str
     N_JOINTS: int
-    STANDARD_NAMES: tuple
-    BASE_NAMES: tuple
-    PAYLOAD_NAMES: tuple
+    STANDARD_NAMES: tuple[str, ...]
+    BASE_NAMES: tuple[str, ...]
+    PAYLOAD_NAMES: tuple[str, ...]
     _K: np.ndarray
-    _kernels: tuple
+    _kernels: tuple[Callable[..., Any], ...]
     _base_graph: Any = None
-    _symbols: tuple = ()
+    _symbols: tuple[Any, ...] = ()
 
     def _eval(self, k: int, ncols: int, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
         return evaluate(self._kernels[k], self.N_JOINTS, ncols, q, dq, ddq)
@@ -424,7 +425,8 @@ class InMemoryModel:
 
     def base_parameters(self, chi_std: ArrayLike) -> NDArray[np.float64]:
         """Base parameters from standard ones (closed-form relations)."""
-        return np.asarray(chi_std, float) @ self._K.T
+        out: NDArray[np.float64] = np.asarray(chi_std, float) @ self._K.T
+        return out
 
     def torque(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike, chi_std: ArrayLike,
                chi_payload: ArrayLike | None = None) -> NDArray[np.float64]:

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
+from ..dynamics.graph import ExprGraph
+
 
 @dataclass(frozen=True)
 class Dialect:
@@ -27,7 +29,7 @@ class Dialect:
         Literal of pi.
     """
 
-    funcs: tuple
+    funcs: tuple[tuple[str, str], ...]
     power: str
     pi: str
 
@@ -41,25 +43,25 @@ C_VECTOR = Dialect((("sin", "sym_vsin"), ("cos", "sym_vcos"), ("sign", "sym_vsig
 CASADI = Dialect((("sin", "ca.sin"), ("cos", "ca.cos"), ("tan", "ca.tan"), ("sign", "ca.sign")), "ca.power", "3.141592653589793")
 
 
-class _Printer(PythonCodePrinter):
+class _Printer(PythonCodePrinter):  # type: ignore[misc]  # sympy is untyped
     """Fallback printer for forms outside the fast path: x**2 as x*x, functions by dialect."""
 
     def __init__(self, dialect: Dialect):
         super().__init__({"fully_qualified_modules": False, "standard": "python3"})
         self.dialect = dialect
 
-    def _print_Pow(self, expr, rational=False):
+    def _print_Pow(self, expr: sp.Expr, rational: bool = False) -> str:
         b, e = expr.as_base_exp()
         if e.is_Integer and 1 < int(e) <= 4:
-            s = self.parenthesize(b, 100)
+            s = str(self.parenthesize(b, 100))
             return "*".join([s] * int(e))
         if e == -1:
-            return "1.0/" + self.parenthesize(b, 100)
+            return "1.0/" + str(self.parenthesize(b, 100))
         if not self.dialect.power:
             raise ValueError(f"expression not printable in this backend: {expr}")
         return f"{self.dialect.power}({self._print(b)}, {self._print(e)})"
 
-    def _print_Function(self, e):
+    def _print_Function(self, e: sp.Expr) -> str:
         name = self.dialect.func(type(e).__name__)
         if name is None or len(e.args) != 1:
             raise ValueError(f"expression not printable in this backend: {e}")
@@ -67,20 +69,20 @@ class _Printer(PythonCodePrinter):
 
     _print_sin = _print_cos = _print_tan = _print_sign = _print_Function
 
-    def _print_Pi(self, e):
+    def _print_Pi(self, e: sp.Expr) -> str:
         return self.dialect.pi
 
-    def _print_Float(self, e):
+    def _print_Float(self, e: sp.Expr) -> str:
         return repr(float(e))
 
-    def _print_Rational(self, e):
+    def _print_Rational(self, e: sp.Expr) -> str:
         return f"{float(e.p)}/{float(e.q)}"
 
-    def _print_Integer(self, e):
+    def _print_Integer(self, e: sp.Expr) -> str:
         return f"{int(e)}.0" if abs(int(e)) < 2**53 else str(int(e))
 
 
-_PRINTERS: dict = {}
+_PRINTERS: dict[Dialect, _Printer] = {}
 
 
 def _printer(d: Dialect) -> _Printer:
@@ -90,13 +92,13 @@ def _printer(d: Dialect) -> _Printer:
     return p
 
 
-def _fast(e, d: Dialect) -> str | None:
+def _fast(e: sp.Expr, d: Dialect) -> str | None:
     """Direct printing of the forms the model produces (sums of signed products of symbols,
     numbers, small powers and sin/cos/sign calls); None for anything else."""
     if e.is_Symbol:
-        return e.name
+        return str(e.name)
     if e.is_Number:
-        return _printer(d).doprint(e)
+        return str(_printer(d).doprint(e))
     if e.is_Mul:
         coeff, rest = e.as_coeff_Mul()
         parts = []
@@ -164,7 +166,7 @@ class OpCount:
         """Multiplications + divisions (powers counted as their multiplications)."""
         return self.mul + self.div
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, int]:
         return {"mul": self.mul, "div": self.div, "add": self.add, "func": self.func}
 
 
@@ -199,7 +201,7 @@ def count_ops(e: sp.Expr) -> OpCount:
     return c
 
 
-def graph_ops(graph) -> OpCount:
+def graph_ops(graph: ExprGraph) -> OpCount:
     """Operation count of a whole graph (definitions and outputs)."""
     c = OpCount()
     for _, e in graph.defs:

@@ -24,8 +24,8 @@ trajectories, AssemblyOptions(...))``); :mod:`.assemble` keeps the former keywor
 from .accumulate import Accumulator, accumulate
 from .essential import EssentialResult, essential_parameters
 from .estimators import fit_ols, fit_tls, fit_wls
-from .method import identify
 from .gains import DriveGainsResult, drive_gains, identify_with_drive_gains, sensor_gains
+from .method import identify
 from .observation import ObservationSystem
 from .payload import fit_with_known_payload, identify_payload
 from .result import EliminationStep, Gains, IdentificationResult

@@ -20,14 +20,13 @@ Column subsets (essential parameters) are handled by taking the matching columns
 """
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
 from ..errors import IdentificationError
 from .observation import ObservationSystem
-
 
 #: rows per Householder QR when absorbing a chunk (small blocks stay in cache: ~1.6x faster than one QR)
 QR_BLOCK_ROWS = 512
@@ -43,7 +42,7 @@ def _absorb(R: np.ndarray, M: np.ndarray, block_rows: int = QR_BLOCK_ROWS) -> np
     Mz = M[:, nz]
     Rz = np.zeros((0, nz.size))
     for i in range(0, Mz.shape[0], block_rows):
-        Rz = np.linalg.qr(np.vstack([Rz, Mz[i:i + block_rows]]), mode="r")
+        Rz = np.asarray(np.linalg.qr(np.vstack([Rz, Mz[i:i + block_rows]]), mode="r"))
     S = np.zeros((Rz.shape[0], k))
     S[:, nz] = Rz
     return _triangular_factor(np.vstack([R, S]), k)
@@ -53,7 +52,7 @@ def _triangular_factor(M: np.ndarray, ncols: int) -> np.ndarray:
     """Upper-triangular R (ncols, ncols) with R'R = M'M (zero-padded when M has fewer rows)."""
     if M.shape[0] == 0:
         return np.zeros((ncols, ncols))
-    R = np.linalg.qr(M, mode="r")
+    R = np.asarray(np.linalg.qr(M, mode="r"))
     if R.shape[0] < ncols:
         R = np.vstack([R, np.zeros((ncols - R.shape[0], ncols))])
     return R
@@ -119,7 +118,7 @@ class Accumulator:
             raise IdentificationError("Accumulator: R, rows and yy must have one entry per joint")
 
     @classmethod
-    def empty(cls, names: Sequence[str], n_joints: int = 0, weighted: bool = False) -> "Accumulator":
+    def empty(cls, names: Sequence[str], n_joints: int = 0, weighted: bool = False) -> Accumulator:
         """An accumulator with no rows for columns ``names`` (and ``n_joints`` joints)."""
         c1 = len(names) + 1
         return cls(tuple(names), tuple(np.zeros((c1, c1)) for _ in range(n_joints)),
@@ -137,7 +136,7 @@ class Accumulator:
     def n_params(self) -> int:
         return len(self.names)
 
-    def add(self, chunk: ObservationSystem) -> "Accumulator":
+    def add(self, chunk: ObservationSystem) -> Accumulator:
         """Absorb the rows of ``chunk`` (an :class:`ObservationSystem` with the same column names).
 
         Returns

@@ -6,7 +6,8 @@ and calls :func:`symoro_gen.observations.assemble` / :func:`~symoro_gen.observat
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
 
 from ..model import IdentificationModel
 from ..observations.assembly import (
@@ -15,6 +16,8 @@ from ..observations.assembly import (
     ExperimentSignals,
     assemble,
     iter_chunks,
+)
+from ..observations.assembly import (
     observation_settings as _observation_settings,
 )
 from ..observations.options import AssemblyOptions

@@ -7,15 +7,24 @@ deviation %sigma is cancelled and the simplified model re-estimated, until
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
 from ..errors import IdentificationError
 from .accumulate import Accumulator
-from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, Options, RawFit,
-                         _as_accumulator, fit_raw, make_result)
+from .estimators import (
+    COND_WARN,
+    RANK_TOL,
+    REL_STD_WARN_PCT,
+    ZERO_COL_TOL,
+    Options,
+    RawFit,
+    _as_accumulator,
+    fit_raw,
+    make_result,
+)
 from .observation import ObservationSystem
 from .result import EliminationStep, IdentificationResult
 
@@ -81,14 +90,14 @@ def essential_raw(acc: Accumulator, method: str, r_sigma: float, keep: Sequence[
     unknown = [k for k in keep if k not in acc.names]
     if unknown:
         raise IdentificationError(f"{what}: keep names {unknown} are not columns of W {acc.names}")
-    keep = set(keep)
+    kept = set(keep)
     active = list(range(acc.n_params))
     raw = fit_raw(acc, method, active, opts, weighting=weighting, what=what)
     initial = raw
     history = []
     while True:
         pct = raw.rel_std_pct
-        cand = [i for i, a in enumerate(active) if acc.names[a] not in keep]
+        cand = [i for i, a in enumerate(active) if acc.names[a] not in kept]
         if len(cand) <= 1:
             break
         p = pct[cand]

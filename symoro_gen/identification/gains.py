@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 import numpy as np
 import scipy.linalg
@@ -28,8 +28,17 @@ from ..errors import IdentificationError
 from ..report.tables import drive_gains_html
 from .accumulate import check_finite, factor_system
 from .essential import essential_raw
-from .estimators import (COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL, Options, _poor_warning,
-                         fit_ols, fit_raw, fit_wls)
+from .estimators import (
+    COND_WARN,
+    RANK_TOL,
+    REL_STD_WARN_PCT,
+    ZERO_COL_TOL,
+    Options,
+    _poor_warning,
+    fit_ols,
+    fit_raw,
+    fit_wls,
+)
 from .observation import ObservationSystem
 from .payload import fit_with_known_payload, split_experiments
 from .result import Gains, IdentificationResult, _fmt, per_joint_rel_err, relative_std_pct
@@ -197,7 +206,8 @@ def drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None, p
         warnings += [f"joint {j + 1}: {w}" for w in fit.warnings]
     if not gj:
         raise IdentificationError("no drive gain could be identified: " + "; ".join(warnings))
-    return DriveGainsResult(Gains(tuple(gj), gv, gs, gp), tuple(results), tuple(warnings))
+    return DriveGainsResult(Gains(tuple(gj), np.asarray(gv), np.asarray(gs), np.asarray(gp)), tuple(results),
+                            tuple(warnings))
 
 
 def identify_with_drive_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None,

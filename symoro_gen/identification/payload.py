@@ -9,13 +9,13 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import scipy.linalg
 
 from ..errors import IdentificationError
-from .estimators import COND_WARN, REL_STD_WARN_PCT, RANK_TOL, ZERO_COL_TOL
+from .estimators import COND_WARN, RANK_TOL, REL_STD_WARN_PCT, ZERO_COL_TOL
 from .method import identify
 from .observation import ObservationSystem
 from .result import IdentificationResult, per_joint_rel_err
@@ -127,6 +127,7 @@ def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSyste
                    rank_tol=rank_tol, cond_warn=cond_warn, rel_std_warn_pct=rel_std_warn_pct,
                    zero_col_tol=zero_col_tol)
     # same residual; error norms relative to the measured torques, not to Y - W_kl chi_kl
+    assert res.residual is not None  # identify() on a system keeps its residual
     rel_err = per_joint_rel_err(res.residual, full.Y, full.joint, res.rel_err.size)
     return dataclasses.replace(res, fixed=tuple((k, float(v)) for k, v in known.items()), rel_err=rel_err)
 
@@ -215,6 +216,7 @@ def identify_payload(loaded: ObservationSystem, robot: Mapping[str, float] | Ide
                             system.weights)
     res = identify(sub, method=method, weighting=weighting, rank_tol=rank_tol, cond_warn=cond_warn,
                    rel_std_warn_pct=rel_std_warn_pct, zero_col_tol=zero_col_tol)
+    assert res.residual is not None  # identify() on a system keeps its residual
     rel_err = per_joint_rel_err(res.residual, loaded.Y, loaded.joint, res.rel_err.size)
     return dataclasses.replace(res, fixed=tuple(fixed.items()), warnings=tuple(warnings) + res.warnings,
                                rel_err=rel_err)

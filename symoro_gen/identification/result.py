@@ -17,16 +17,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-
 import numpy as np
 
 from ..errors import IdentificationError
-from ..report.tables import gains_html, result_html
 from ..model import IdentificationModel
 from ..observations.assembly import Assembly, basis_text, merge_metric_basis
 from ..observations.raw import raw_error_sums
 from ..observations.system import ObservationSystem
-
+from ..report.tables import gains_html, result_html
 
 #: summary() lists the known (fixed) parameters one per line up to this many
 MAX_FIXED_LISTED = 12
@@ -327,7 +325,7 @@ class IdentificationResult:
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.sqrt(rho2 / y2)
 
-    def with_raw_error(self, model: IdentificationModel, *assemblies: Assembly) -> "IdentificationResult":
+    def with_raw_error(self, model: IdentificationModel, *assemblies: Assembly) -> IdentificationResult:
         """A copy with ``rel_err_raw`` on the identification ``assemblies`` and ``rel_err_basis`` (what
         each norm is computed on)."""
         basis = merge_metric_basis(assemblies)

@@ -2,7 +2,7 @@
 left-hand side, scaling measurements by gains. Pure functions; inputs are never modified."""
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 

@@ -53,8 +53,9 @@ filtered; the FIR decimation runs as dense matrix products with one OpenBLAS thr
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import signal
@@ -75,7 +76,7 @@ from ..preprocessing.filtering import (
     min_filter_samples,
 )
 from ..preprocessing.trajectory import Trajectory
-from ..progress import ProgressCounter
+from ..progress import ProgressArg, ProgressCounter
 from .options import AssemblyOptions
 from .system import ObservationSystem
 
@@ -214,7 +215,7 @@ class Assembly:
     def n_joints(self) -> int:
         return self.system.n_joints
 
-    def metric_basis(self) -> dict:
+    def metric_basis(self) -> dict[str, Any]:
         """What ``rel_err`` on this system is computed on: filter cut-off(s), decimation factor(s),
         rows, and the full-rate samples the raw error uses (the JSON ``rel_err_basis``)."""
         st = [e.settings for e in self.experiments]
@@ -249,7 +250,7 @@ def _as_trajectories(trajectories: Trajectory | Iterable[Trajectory]) -> Iterabl
     return trajectories
 
 
-def _sample_progress(progress, trajectories) -> ProgressCounter:
+def _sample_progress(progress: ProgressArg, trajectories: Trajectory | Iterable[Trajectory]) -> ProgressCounter:
     """Progress over the full-rate samples of the experiments (total known unless a lazy iterable)."""
     if isinstance(trajectories, Trajectory):
         total = trajectories.n_samples
@@ -260,7 +261,8 @@ def _sample_progress(progress, trajectories) -> ProgressCounter:
     return ProgressCounter(progress, total=total, desc="assembling W", unit="sample", unit_scale=True)
 
 
-def _blocks_with_progress(blocks, n_samples: int, n_d: int, step) -> Iterator:
+def _blocks_with_progress(blocks: Iterable[_Block], n_samples: int, n_d: int,
+                          step: Callable[[int], object]) -> Iterator[_Block]:
     """Pass the blocks of one experiment through, reporting its samples to ``step`` (they add up to
     ``n_samples`` once the experiment is done)."""
     done = 0
@@ -302,7 +304,7 @@ class _SignalSink:
         self.dq = np.empty((m, n))
         self.ddq = np.empty((m, n))
 
-    def write(self, a: int, b: int, q, dq, ddq) -> None:
+    def write(self, a: int, b: int, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> None:
         self.q[a:b], self.dq[a:b], self.ddq[a:b] = q, dq, ddq
 
 
@@ -343,7 +345,8 @@ class _Evaluator:
             self.nz_pay = np.zeros(0, int)
         self._tmp: dict[str, np.ndarray] = {}
 
-    def _call(self, what, q, dq, ddq, ncol, out=None):
+    def _call(self, what: str, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, ncol: int,
+              out: np.ndarray | None = None) -> np.ndarray:
         fn = getattr(self.model, what)
         if out is not None and self.out_ok.get(what, True):
             try:
@@ -369,7 +372,8 @@ class _Evaluator:
             cols.append(j * c + self.nb + i)
         return np.concatenate(cols)
 
-    def write(self, dst_base: np.ndarray, dst_pay: np.ndarray | None, q, dq, ddq) -> None:
+    def write(self, dst_base: np.ndarray, dst_pay: np.ndarray | None, q: np.ndarray, dq: np.ndarray,
+              ddq: np.ndarray) -> None:
         """Kept columns of W on samples (q, dq, ddq): base ones into ``dst_base`` (m, nz_base.size),
         payload ones into ``dst_pay`` (m, nz_pay.size) when given (C-contiguous row blocks)."""
         m = q.shape[0]
@@ -406,7 +410,7 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
     nd = st.n_d
     Nseg = N - 2 * e
     need = max(min_filter_samples(st.order, nd, st.ftype), nd)
-    if N < min_filter_samples(st.order) or Nseg < need:
+    if min_filter_samples(st.order) > N or Nseg < need:
         raise DataFileError([Problem(src, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
                                      f"{2 * e} dropped at the edges, at least {need} must remain "
                                      f"(cut-off {st.cutoff_hz:.4g} Hz, n_d = {nd})")])
@@ -446,10 +450,11 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
         if habs is not None:
             habs /= habs.sum()
 
-    def kinematics(a, b):
+    def kinematics(a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, dq, ddq on segment samples [a, b)."""
         lo_full, hi_full = e + a, e + b
         if use_rec:
+            assert traj.dq is not None and traj.ddq is not None  # checked above
             return traj.q[lo_full:hi_full], traj.dq[lo_full:hi_full], traj.ddq[lo_full:hi_full]
         lo = max(0, lo_full - margin)
         hi = min(N, hi_full + margin)
@@ -457,7 +462,7 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
         s = slice(lo_full - lo, hi_full - lo)
         return qf[s], dq[s], ddq[s]
 
-    def fill(bufs, dqbuf, r0, a, b):
+    def fill(bufs: list[np.ndarray], dqbuf: np.ndarray | None, r0: int, a: int, b: int) -> None:
         """W (kept columns), Y and dq of segment samples [a, b) into rows [r0, r0 + b - a)."""
         q, dq, ddq = kinematics(a, b)
         r1 = r0 + b - a
@@ -468,7 +473,7 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
         if sink is not None:
             sink.write(a, b, q, dq, ddq)
 
-    def unpack(decs, k: int):
+    def unpack(decs: list[np.ndarray], k: int) -> tuple[np.ndarray, np.ndarray]:
         Wd = np.zeros((k, n * c))
         Wd[:, keep] = np.concatenate(decs[:-1], axis=1)
         return Wd.reshape(k, n, c), decs[-1]
@@ -517,7 +522,8 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
         yield _Block(Wd=Wd, Yd=Yd, slow=slow, idx=idx)
 
 
-def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, tol: float, removed: np.ndarray):
+def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, tol: float, removed: np.ndarray
+                     ) -> tuple[list[np.ndarray], ...]:
     """Stack blocks (each tagged with its experiment) per joint, removing low-velocity rows.
 
     Returns lists (per joint and block) of W rows, Y, joint, experiment, full-rate sample index and
@@ -551,7 +557,7 @@ def iter_chunks(
     options: AssemblyOptions | None = None,
     *,
     on_experiment: Callable[[ExperimentReport], None] | None = None,
-    progress=None,
+    progress: ProgressArg = None,
 ) -> Iterator[ObservationSystem]:
     """Stream the observation system in chunks of bounded memory (RX-90 paper eq. 14-16).
 
@@ -610,7 +616,7 @@ def assemble(
     trajectories: Trajectory | Sequence[Trajectory],
     options: AssemblyOptions | None = None,
     *,
-    progress=None,
+    progress: ProgressArg = None,
 ) -> Assembly:
     """The whole observation system with its provenance and, with ``options.keep_signals``, the
     filtered signals of every experiment (same parameters as :func:`iter_chunks`).
@@ -670,19 +676,19 @@ def assemble(
     system = ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names, joint=J)
     reports = []
     for ex, traj in enumerate(trajs):
-        rows = tuple(int(np.sum((E == ex) & (J == j))) for j in range(n))
+        rows = tuple(int(np.sum((ex == E) & (j == J))) for j in range(n))
         reports.append(ExperimentReport(index=ex, source=traj.source, loaded=traj.loaded, n_samples=traj.n_samples,
                                         settings=settings[ex], rows_per_joint=rows,
                                         removed_low_velocity=tuple(int(x) for x in removed[ex])))
     row_time = np.empty(S.size)
     for ex, traj in enumerate(trajs):
-        m = E == ex
+        m = ex == E
         row_time[m] = np.asarray(traj.t, float)[S[m]]
     return Assembly(system=system, experiments=tuple(reports), row_experiment=E, row_time=row_time,
                     row_sample=S, row_index=np.concatenate(Ks).astype(int), options=opts, signals=tuple(signals))
 
 
-def merge_metric_basis(assemblies) -> dict:
+def merge_metric_basis(assemblies: Iterable[Assembly]) -> dict[str, Any]:
     """One ``rel_err_basis`` for several assemblies (cut-offs and decimation factors of every experiment,
     rows and samples summed)."""
     parts = [a.metric_basis() for a in assemblies]
@@ -697,7 +703,7 @@ def merge_metric_basis(assemblies) -> dict:
     return out
 
 
-def basis_text(basis: dict | None) -> str:
+def basis_text(basis: Mapping[str, Any] | None) -> str:
     """``"filtered, decimated system (cut-off 21.5 Hz, n_d = 10)"`` from a ``rel_err_basis``."""
     if not basis:
         return "filtered, decimated system"

@@ -27,7 +27,7 @@ RULE_FIELDS = ("dynamics_bandwidth_hz", "cutoff_hz", "n_d", "order", "ftype", "e
                "decimation_margin", "cutoff_ratio", "energy_fraction", "min_bandwidth_hz", "max_cutoff_fraction")
 
 
-def _positive(name: str, x, *, allow_none: bool = True, integer: bool = False, zero: bool = False) -> None:
+def _positive(name: str, x: object, *, allow_none: bool = True, integer: bool = False, zero: bool = False) -> None:
     if x is None:
         if allow_none:
             return
@@ -146,7 +146,7 @@ class AssemblyOptions:
             raise TypeError(f"unknown assembly option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
         return cls(**kw)
 
-    def rule_keywords(self) -> dict:
+    def rule_keywords(self) -> dict[str, Any]:
         """The keywords of :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`."""
         return {k: getattr(self, k) for k in RULE_FIELDS}
 
@@ -157,7 +157,8 @@ class AssemblyOptions:
         v = np.asarray(self.min_velocity, float)
         if v.ndim and v.size != n_joints:
             raise ValueError(f"AssemblyOptions.min_velocity has {v.size} values for {n_joints} joints")
-        return np.broadcast_to(v, (n_joints,)).copy()
+        out: np.ndarray = np.broadcast_to(v, (n_joints,)).copy()
+        return out
 
     def summary(self) -> str:
         """The options that differ from the defaults, one per line (``"defaults (the papers' rules)"``

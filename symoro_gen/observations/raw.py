@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..model import IdentificationModel
 from .assembly import Assembly, ExperimentSignals
@@ -24,8 +25,9 @@ __all__ = ["REGRESSOR_BATCH", "full_rate_torque", "raw_error_sums", "rel_err_raw
 REGRESSOR_BATCH = 8192
 
 
-def full_rate_torque(model: IdentificationModel, theta: Mapping[str, float], q, dq, ddq, loaded: bool = False, *,
-                     batch: int = REGRESSOR_BATCH, skip_prefix: tuple = ()) -> np.ndarray:
+def full_rate_torque(model: IdentificationModel, theta: Mapping[str, float], q: np.ndarray, dq: np.ndarray,
+                     ddq: np.ndarray, loaded: bool = False, *, batch: int = REGRESSOR_BATCH,
+                     skip_prefix: tuple[str, ...] = ()) -> np.ndarray:
     """``IDM(q, dq, ddq) chi`` of the declared model (base + payload columns) at every sample (IDIM eq. 2).
 
     Parameters
@@ -59,7 +61,7 @@ def full_rate_torque(model: IdentificationModel, theta: Mapping[str, float], q, 
 
 
 def raw_error_sums(model: IdentificationModel, theta: Mapping[str, float], assembly: Assembly, *,
-                   gains=None, extra: Callable[[ExperimentSignals], np.ndarray] | None = None
+                   gains: ArrayLike | None = None, extra: Callable[[ExperimentSignals], np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Per joint, ``sum (g_j tau_j - tau_hat_j)^2`` and ``sum (g_j tau_j)^2`` over every full-rate
     sample of the assembly's experiments (edge samples dropped, no row selection).
@@ -99,7 +101,7 @@ def raw_error_sums(model: IdentificationModel, theta: Mapping[str, float], assem
 
 
 def rel_err_raw(model: IdentificationModel, theta: Mapping[str, float], assemblies: Iterable[Assembly], *,
-                gains=None) -> np.ndarray:
+                gains: ArrayLike | None = None) -> np.ndarray:
     """``||g_j tau_j - IDM_j chi|| / ||g_j tau_j||`` per joint over the full-rate samples of all the
     assemblies (raw measured torque, model on the filtered states), shape (n,)."""
     total = None
@@ -109,4 +111,5 @@ def rel_err_raw(model: IdentificationModel, theta: Mapping[str, float], assembli
     if total is None:
         raise ValueError("no assembly given")
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.sqrt(total[0] / total[1])
+        out: np.ndarray = np.sqrt(total[0] / total[1])
+    return out

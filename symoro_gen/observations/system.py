@@ -1,4 +1,4 @@
-"""The over-determined system Y = W chi + rho, rows grouped per joint (eq. 16 of the RX-90 paper)."""
+"""The over-determined system Y = W chi + rho, rows grouped per joint ([GB-gains] eq. 16; IDIM eq. 12)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -28,7 +28,7 @@ class ObservationSystem:
 
     W: np.ndarray
     Y: np.ndarray
-    names: tuple
+    names: tuple[str, ...]
     joint: np.ndarray
     weights: np.ndarray | None = None
 

@@ -7,7 +7,7 @@ arguments into trajectories and :class:`~symoro_gen.preprocessing.logformat.Load
 from __future__ import annotations
 
 import argparse
-from typing import Sequence
+from collections.abc import Sequence
 
 from ..cli import OptionError
 from .logformat import ABSURD_VALUE, LoadReport, LogFormat, hold_back, load_logs, make_format

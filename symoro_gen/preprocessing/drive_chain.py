@@ -7,6 +7,8 @@ Convention (``R = diag(ratios) @ coupling``, ``D = diag(directions)``)::
     tau_joint = D @ R.T @ tau_motor          (power balance)
 
 Velocities and accelerations map as positions without the offsets.
+(Drive-chain calibration: [RG1995]; the measured joint torque as a gain times the control signal,
+``tau = g v``: [GB-gains] eq. 4.)
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Gautier's pre-processing: band-pass derivatives of q and parallel decimation.
 
-The identification model ``Y = W(q, dq, ddq) chi`` (eq. 14-16 of the RX-90 paper) needs
-velocities and accelerations that are not measured. Following Gautier (1997, "Dynamic
+The identification model ``Y = W(q, dq, ddq) chi`` ([GB-gains] eq. 14-16) needs
+velocities and accelerations that are not measured. Following Gautier ([G1997], "Dynamic
 identification of robots with power model", ICRA) and the two papers of the project:
 
 1. **Band-pass derivative filter** of the measured positions: a zero-phase Butterworth low-pass
@@ -126,7 +126,7 @@ class FilterSettings:
             + (" (estimated from the positions)" if self.bandwidth_estimated else " (given)"),
             f"Butterworth on q (x2)     order {self.order}, f_c = {self.cutoff_hz:.4g} Hz"
             f" ({self.cutoff_hz / self.dynamics_bandwidth_hz:.3g} f_dyn)",
-            f"derivatives               central differences of the filtered q",
+            "derivatives               central differences of the filtered q",
             f"parallel decimation       n_d = {self.n_d}, {self.ftype.upper()} low-pass at "
             f"{self.decimation_cutoff_hz:.4g} Hz, new rate {self.fs / self.n_d:.4g} Hz",
             f"edge samples dropped      {self.edge_samples} at each end",
@@ -324,7 +324,7 @@ def _too_short(source: str, n: int, need: int, what: str) -> DataFileError:
 
 
 def lowpass_positions(q, fs: float, cutoff_hz: float, order: int = 4, *, source: str = "<memory>"):
-    """Zero-phase Butterworth low-pass of the positions along axis 0 (``sosfiltfilt``).
+    """Zero-phase Butterworth low-pass of the positions along axis 0 (``sosfiltfilt``; [G1997], [GB-gains] eq. 14).
 
     Parameters
     ----------
@@ -377,7 +377,7 @@ def differentiate(x, dt: float, *, second: bool = False):
 
 
 def filter_and_differentiate(q, fs: float, cutoff_hz: float, order: int = 4, *, source: str = "<memory>"):
-    """Band-pass estimates of ``q``, ``dq``, ``ddq`` from measured positions.
+    """Band-pass estimates of ``q``, ``dq``, ``ddq`` from measured positions ([G1997]; [GB-gains] eq. 14).
 
     Returns
     -------
@@ -431,8 +431,9 @@ def blas_threads(n: int | None = 1):
     """
     controls = _openblas_thread_controls() if n is not None else []
     before = [get() for get, _ in controls]
-    for _, set_ in controls:
-        set_(int(n))
+    if n is not None:
+        for _, set_ in controls:
+            set_(int(n))
     try:
         yield
     finally:
@@ -541,7 +542,7 @@ def decimate(x, n_d: int, *, axis: int = 0, ftype: str = "fir", cutoff_ratio: fl
     if ftype == "iir":
         sos = decimation_filter(n_d, ftype="iir", cutoff_ratio=cutoff_ratio)
         padlen = 3 * (2 * sos.shape[0] + 1)
-        if N <= padlen:
+        if padlen >= N:
             raise _too_short(source, N, padlen + 1, f"decimate by {n_d} (IIR)")
         y = signal.sosfiltfilt(sos, flat, axis=0)[::n_d]
     elif ftype == "fir":
@@ -555,7 +556,7 @@ def decimate(x, n_d: int, *, axis: int = 0, ftype: str = "fir", cutoff_ratio: fl
 
 def parallel_decimate(Y, W, n_d: int, *, ftype: str = "fir", cutoff_ratio: float = DECIMATION_CUTOFF_RATIO,
                       source: str = "<memory>"):
-    """Decimate ``Y`` and every column of ``W`` with the same filter (eq. 15 of the RX-90 paper).
+    """Decimate ``Y`` and every column of ``W`` with the same filter ([GB-gains] eq. 15-16).
 
     Parameters
     ----------

@@ -14,19 +14,20 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
+from ..atomic import write_text_atomic
 from ..errors import IdentificationError
 from ..identification.assemble import build_observation
 from ..identification.estimators import REL_STD_WARN_PCT
 from ..identification.method import identify
+from ..loader import model_for
 from ..model import IdentificationModel
-from ..report import (Figure, Heading, ItemList, Preformatted, Report, Table, check_report_path,
-                      require_matplotlib)
+from ..report import Figure, Heading, ItemList, Preformatted, Report, Table, check_report_path, require_matplotlib
 from ..report.document import write_report_files
 from .cli import add_data_options, data_block, data_text, load_data
 from .filtering import choose_filter_settings, filter_and_differentiate
@@ -109,6 +110,7 @@ class Inspection:
     def summary(self) -> str:
         lines = [data_text(self.files), ""]
         for r in self.files:
+            assert r.step_from is not None  # every file read has a time step
             lines.append(f"{r.file}: step {r.step_from:.6g} s ({1 / r.step_from:.5g} Hz), jitter "
                          f"{100 * r.step_jitter:.3g} % of the step, {r.gaps} gap(s) split, {r.rows_dropped} row(s) dropped")
         for e in self.experiments:
@@ -224,12 +226,12 @@ def _report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str):
     MplFigure, Canvas = require_matplotlib()
     blocks: list = [Heading("Files", 2),
                     Table(("file", "rows read", "dropped", "resampled", "step [s]", "jitter [%]", "gaps", "experiments"),
-                          tuple((r.file, r.rows_read, r.rows_dropped, "yes" if r.resampled else "no",
-                                 f"{r.step_from:.6g}", f"{100 * r.step_jitter:.3g}", r.gaps, r.experiments)
+                          tuple((r.file, str(r.rows_read), str(r.rows_dropped), "yes" if r.resampled else "no",
+                                 f"{r.step_from:.6g}", f"{100 * r.step_jitter:.3g}", str(r.gaps), str(r.experiments))
                                 for r in insp.files), caption="How each file was read")]
     for e in insp.experiments:
         blocks.append(Table(("joint", "standstill [%]", "q at bound [%]", "tau at bound [%]", "q range", "|tau| max"),
-                            tuple((j.joint, f"{100 * j.standstill:.1f}", f"{100 * j.q_saturated:.1f}",
+                            tuple((str(j.joint), f"{100 * j.standstill:.1f}", f"{100 * j.q_saturated:.1f}",
                                    f"{100 * j.tau_saturated:.1f}", f"{j.q_range:.4g}", f"{j.tau_peak:.4g}")
                                   for j in e.joints),
                             caption=f"{e.source}: {e.fs:.5g} Hz, cut-off {e.cutoff_hz:.3g} Hz, n_d = {e.n_d}"))
@@ -262,8 +264,6 @@ def _report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str):
 
 def run_inspect(args) -> int:
     """The command; returns the exit status (0 usable, 2 not usable)."""
-    from ..loader import model_for
-
     if args.report:
         check_report_path(args.report)
         require_matplotlib()
@@ -271,8 +271,6 @@ def run_inspect(args) -> int:
     trajs, reports = load_data(args, args.data, robot)
     insp = inspect_recordings(model, trajs, reports, cutoff_hz=args.cutoff, n_d=args.decimate)
     if args.json:
-        from ..atomic import write_text_atomic
-
         write_text_atomic(Path(args.json), json.dumps({"robot": robot.name, **insp.to_dict()}, indent=2) + "\n")
     if args.report:
         write_report_files(_report(insp, trajs, robot.name), args.report)

@@ -55,13 +55,16 @@ import math
 import os
 import re
 import warnings
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
+from typing import NoReturn
 
 import numpy as np
+import scipy.io
 
 from ..errors import DataFileError, Problem
+from ..progress import progress_updates
 from .drive_chain import motor_to_joint
 from .trajectory import Trajectory
 
@@ -262,7 +265,7 @@ def _is_number(s: str) -> bool:
 def _read_text_table(path: str, *, header_required: bool) -> tuple[list[str] | None, np.ndarray, int]:
     """Read a delimited numeric table. Returns (header names or None, values (N, k), header lines)."""
     try:
-        with open(path, "r", encoding="utf-8-sig") as f:
+        with open(path, encoding="utf-8-sig") as f:
             first = f.readline()
     except FileNotFoundError:
         raise DataFileError([Problem(path, "", "", "file not found")]) from None
@@ -292,11 +295,11 @@ def _read_text_table(path: str, *, header_required: bool) -> tuple[list[str] | N
     return names, data, skip
 
 
-def _raise_parse_problems(path, delim, skip, ncol, names):
+def _raise_parse_problems(path, delim, skip, ncol, names) -> NoReturn:
     probs: list[Problem] = []
     bad_count: list[int] = []
     bad_value: dict[str, list[tuple[int, str]]] = {}
-    with open(path, "r", encoding="utf-8-sig") as f:
+    with open(path, encoding="utf-8-sig") as f:
         for lineno, line in enumerate(f, start=1):
             if lineno <= skip or not line.strip():
                 continue
@@ -407,6 +410,7 @@ def _resolve_csv_columns(path, names, n, columns, dt, probs) -> tuple[dict[str, 
 
 def _read_csv(path: str, n: int, columns, dt, probs) -> _Raw:
     names, data, skip = _read_text_table(path, header_required=True)
+    assert names is not None  # header_required
     idx, unused = _resolve_csv_columns(path, names, n, columns, dt, probs)
     raw = _Raw(fmt="csv", unused=unused)
     for role, ii in idx.items():
@@ -426,8 +430,6 @@ def _load_arrays(path: str, fmt: str) -> dict[str, np.ndarray]:
             raise DataFileError([Problem(path, "", "", f"not a NumPy .npz archive ({_what_file(path)})")],
                                 hint="save arrays with numpy.savez(path, t=..., q=..., tau=...); a text table "
                                      "must end in .csv or .txt") from None
-    import scipy.io
-
     try:
         d = scipy.io.loadmat(path, squeeze_me=False)
     except FileNotFoundError:
@@ -558,7 +560,7 @@ def _read_split(spec: DataSpec, n: int, probs) -> _Raw:
 # checks
 # ---------------------------------------------------------------------------------------------
 def _check_finite(raw: _Raw, probs: list[Problem]) -> None:
-    for role, c in raw.cols.items():
+    for c in raw.cols.values():
         bad = ~np.isfinite(c.values)
         if not bad.any():
             continue
@@ -804,7 +806,7 @@ def load_trajectory(
         t = np.arange(N) * float(dt)
         t_from_dt = True
         tinfo = {"dt_median": float(dt), "dt_max_rel_jitter": 0.0}
-    if N < min_samples:
+    if min_samples > N:
         probs.append(Problem(source, f"rows 1-{N}", "", f"too short to filter: {N} samples, at least "
                              f"{min_samples} needed"))
     if probs:
@@ -843,8 +845,6 @@ def load_trajectories(paths: Iterable, *, progress=None, **kwargs) -> tuple[Traj
     ``progress``: None shows a per-file bar when the ambient mode allows it (the command line, see
     :mod:`symoro_gen.progress`), False none, a callable is called with 1 after each file.
     """
-    from ..progress import progress_updates
-
     paths = list(paths)
     out: list[Trajectory] = []
     probs: list[Problem] = []

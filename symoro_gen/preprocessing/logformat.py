@@ -24,21 +24,23 @@ drive chain (motor -> joint side), then ``q_link`` replaces ``q``.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import re
+import sys
 import warnings
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 import scipy.interpolate
 import scipy.io
 
-try:
+if sys.version_info >= (3, 11):
     import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore
+else:  # Python 3.10
+    import tomli as tomllib
 
 from ..errors import DataFileError, Problem
 from ..progress import progress_updates
@@ -341,7 +343,7 @@ def read_table(path: str) -> _Table:
     when it fails, line by line so that every bad row can be named.
     """
     try:
-        with open(path, "r", encoding="utf-8-sig") as f:
+        with open(path, encoding="utf-8-sig") as f:
             text = f.read()
     except FileNotFoundError:
         raise DataFileError([Problem(path, "", "", "file not found")]) from None
@@ -448,7 +450,7 @@ def _mat_lookup(path: str, fmt: str, key: str):
     except (ValueError, OSError, TypeError) as exc:
         raise DataFileError([Problem(path, "", "", f"cannot read as a MATLAB file: {exc}")]) from None
     cur = d
-    walked = []
+    walked: list[str] = []
     for part in key.split("."):
         if not isinstance(cur, dict) or part not in cur:
             have = sorted(k for k in cur if not k.startswith("__")) if isinstance(cur, dict) else []
@@ -618,7 +620,7 @@ def _resample(t: np.ndarray, arrays: dict[str, np.ndarray], h: float, max_gap: f
     cuts = np.flatnonzero(d > max_gap)
     bounds = np.r_[0, cuts + 1, t.size]
     out = []
-    for a, b in zip(bounds[:-1], bounds[1:]):
+    for a, b in itertools.pairwise(bounds):
         ts = t[a:b]
         if ts.size < 2:
             continue
@@ -662,6 +664,8 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
     fmt = fmt or LogFormat()
     if robot is not None and n_joints is None:
         n_joints = robot.n_joints
+    if n_joints is None:
+        raise TypeError("load_log: give n_joints or robot")
     n = int(n_joints)
     spec = path if isinstance(path, DataSpec) else parse_data_spec(path, base_dir=base_dir)
     if spec.dt is not None and fmt.dt is not None and not math.isclose(spec.dt, fmt.dt, rel_tol=1e-12):
@@ -732,10 +736,10 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
         tprobs: list[Problem] = []
         if fmt.resample:
             if (d <= 0).any():
-                r = np.flatnonzero(d <= 0)
-                raise DataFileError([Problem(tcol.file, _fmt_ranges(_runs(np.isin(np.arange(N), rows[r + 1])),
+                back = np.flatnonzero(d <= 0)
+                raise DataFileError([Problem(tcol.file, _fmt_ranges(_runs(np.isin(np.arange(N), rows[back + 1])),
                                                                     tcol.line_offset), tcol.names[0],
-                                             f"time is not strictly increasing ({r.size} step(s) <= 0): "
+                                             f"time is not strictly increasing ({back.size} step(s) <= 0): "
                                              "resampling cannot order it")])
         else:
             shifted = bool(drop.any())  # rows then count the kept rows: say so, give no file lines
@@ -747,6 +751,7 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
                               for p in tprobs]
                 raise DataFileError(tprobs, hint=RESAMPLE_HINT)
     else:
+        assert dt is not None  # without a time column dt is required (checked when the columns were chosen)
         t = np.arange(rows.size) * float(dt)
         d = np.diff(t)
     h = float(np.median(d)) if d.size else float("nan")

@@ -11,10 +11,28 @@ Typical use::
 Plots need matplotlib (the ``plots`` extra); without it :func:`write_report` raises
 :class:`MissingDependencyError` naming the extra, and ``plots=False`` writes the tables alone.
 """
-from .build import (build_report, check_report_path, diagnosis_html, diagnosis_plot_series, scaled_singular_values,
-                    write_report)
-from .document import (REPORT_SUFFIXES, Figure, Heading, ItemList, Paragraph, Preformatted, Report, ReportError,
-                       Table, asset_folder, png_size, report_kind)
+from .build import (
+                    build_report,
+                    check_report_path,
+                    diagnosis_html,
+                    diagnosis_plot_series,
+                    scaled_singular_values,
+                    write_report,
+)
+from .document import (
+                    REPORT_SUFFIXES,
+                    Figure,
+                    Heading,
+                    ItemList,
+                    Paragraph,
+                    Preformatted,
+                    Report,
+                    ReportError,
+                    Table,
+                    asset_folder,
+                    png_size,
+                    report_kind,
+)
 from .plots import MissingDependencyError, require_matplotlib
 from .tables import drive_gains_html, gains_html, result_html
 

@@ -7,20 +7,51 @@ atomically. Inputs are read, never modified.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 
 from .. import __version__
-from .document import (REPORT_SUFFIXES, Heading, ItemList, Paragraph, Preformatted, Report, ReportError, Table,
-                       report_kind, write_report_files)
-from .plots import (DPI, MAX_POINTS, N_BINS, error_bars_figure, require_matplotlib, residual_figure,
-                    singular_values_figure, torque_figure)
 from ..observations.assembly import basis_text
-from .tables import (unique_in_order, drive_gains_table, fmt_pct, fmt_value, gains_table, parameter_table,
-                     payload_mass_text, payload_table, reference_table, rel_err_table, result_overview,
-                     warnings_block)
+from ..observations.system import ObservationSystem
+from .document import (
+    REPORT_SUFFIXES,
+    Heading,
+    ItemList,
+    Paragraph,
+    Preformatted,
+    Report,
+    ReportError,
+    Table,
+    render_html_fragment,
+    report_kind,
+    write_report_files,
+)
+from .plots import (
+    DPI,
+    MAX_POINTS,
+    N_BINS,
+    error_bars_figure,
+    require_matplotlib,
+    residual_figure,
+    singular_values_figure,
+    torque_figure,
+)
+from .tables import (
+    drive_gains_table,
+    fmt_pct,
+    fmt_value,
+    gains_table,
+    parameter_table,
+    payload_mass_text,
+    payload_table,
+    reference_table,
+    rel_err_table,
+    result_overview,
+    unique_in_order,
+    warnings_block,
+)
 
 __all__ = ["build_report", "write_report", "check_report_path", "diagnosis_html", "scaled_singular_values", "diagnosis_plot_series"]
 
@@ -28,7 +59,7 @@ __all__ = ["build_report", "write_report", "check_report_path", "diagnosis_html"
 N_CANDIDATES = 10
 
 
-def _labelled(systems, default: str) -> list[tuple[str, object]]:
+def _labelled(systems, default: str) -> list[tuple[str, ObservationSystem]]:
     """``[(label, ObservationSystem)]`` from a mapping, a sequence of pairs or of systems, or one system."""
     if systems is None:
         return []
@@ -83,7 +114,7 @@ def scaled_singular_values(systems: Sequence, names: Sequence[str]) -> np.ndarra
     norms[norms == 0] = 1.0
     W = W / norms
     if W.shape[0] > W.shape[1]:
-        W = np.linalg.qr(W, mode="r")
+        W = np.asarray(np.linalg.qr(W, mode="r"))
     return np.linalg.svd(W, compute_uv=False)
 
 
@@ -120,6 +151,8 @@ def diagnosis_plot_series(diagnosis) -> dict | None:
     if not isinstance(pd, Mapping):
         return None
     F, V, rr = pd.get("frame"), pd.get("vframe"), pd.get("round_resid")
+    if F is None or V is None or rr is None:
+        return None
     try:
         out = {"Y": np.asarray(F.system.Y), "joint": np.asarray(F.system.joint), "sig": F.sig,
                "Yv": np.asarray(V.system.Y), "jointv": np.asarray(V.system.joint), "sigv": V.sig,
@@ -143,7 +176,7 @@ def _signal(sig, key: str, rows: np.ndarray, joint: int) -> np.ndarray | None:
 
 
 def _signal_label(key: str) -> str:
-    try:
+    try:  # lazy: diagnostics imports this package (diagnostics -> report), a top-level import would be a circle
         from ..diagnostics.structure import SIGNAL_LABELS
     except ImportError:  # diagnostics not available: the key itself
         SIGNAL_LABELS = {}
@@ -247,8 +280,8 @@ def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int,
             with np.errstate(divide="ignore", invalid="ignore"):
                 j = int(np.nanargmax(np.where(nb > 0, (nb - na) / nb, -np.inf)))
         rj = e.reveal_joint if getattr(e, "reveal_joint", None) is not None else j
-        rows, rowsv = np.flatnonzero(ser["joint"] == j), np.flatnonzero(ser["jointv"] == j)
-        x, xv = _signal(ser["sig"], e.reveal, rows, rj), _signal(ser["sigv"], e.reveal, rowsv, rj)
+        sel, selv = np.flatnonzero(ser["joint"] == j), np.flatnonzero(ser["jointv"] == j)
+        x, xv = _signal(ser["sig"], e.reveal, sel, rj), _signal(ser["sigv"], e.reveal, selv, rj)
         if x is None or xv is None:
             notes.append(f"effect {i} ({e.kind}): signal {e.reveal!r} not in the plot data")
             continue
@@ -258,7 +291,7 @@ def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int,
             f"diagnosis-effect-{i}-{_slug(e.kind)}",
             f"Effect {i}: {e.kind} on {_effect_who(e)}: residual of joint {j + 1} before and after, "
             f"against the {lab} that revealed it",
-            [("identification data", x, rb[rows], ra[rows]), ("validation data", xv, rvb[rowsv], rva[rowsv])],
+            [("identification data", x, rb[sel], ra[sel]), ("validation data", xv, rvb[selv], rva[selv])],
             xlabel, max_points=max_points, n_bins=n_bins, dpi=dpi))
     rid, rv = ser["rounds"][-1]
     tag = "final model (declared + effects)" if diag.effects else "declared model"
@@ -274,8 +307,6 @@ def _diagnosis_blocks(diag, plots: bool, max_points: int, n_bins: int, dpi: int,
 def diagnosis_html(diagnosis) -> str:
     """HTML tables of a :class:`~symoro_gen.diagnostics.ResidualReport` (errors before/after, effects
     added, best candidates per round, structure left, warnings), without plots: for ``_repr_html_``."""
-    from .document import render_html_fragment
-
     blocks = _diagnosis_blocks(diagnosis, False, MAX_POINTS, N_BINS, DPI, [])
     blocks += warnings_block(getattr(diagnosis, "warnings", ()))
     return '<div class="symoro-gen-diagnosis">' + render_html_fragment(blocks) + "</div>"
@@ -403,7 +434,7 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
 
     if plots and result is not None and (ident or valid):
         B.append(Heading("Measured and reconstructed torques"))
-        for kind, group in (("identification", ident), ("validation", valid)):
+        for group in (ident, valid):
             for lab, s in group:
                 if not _can_predict(result, s):
                     notes.append(f"{lab}: columns {[c for c in s.names if c not in result.parameter_map()]} are "
@@ -419,11 +450,11 @@ def build_report(result=None, *, title: str | None = None, robot: str | None = N
     if plots and result is not None and ident:
         est = [nm for nm in result.names if any(nm in s.names for _, s in ident)]
         if est:
-            s = scaled_singular_values([sy for _, sy in ident], est)
-            cond = s[0] / s[-1] if s[-1] > 0 else math.inf
+            sv = scaled_singular_values([sy for _, sy in ident], est)
+            cond = sv[0] / sv[-1] if sv[-1] > 0 else math.inf
             B.append(Heading("Conditioning of the observation matrix"))
             B.append(singular_values_figure(
-                "singular-values", s,
+                "singular-values", sv,
                 title=f"Singular values of W, columns scaled to unit norm: cond = {fmt_value(cond)}",
                 caption=f"Singular values of the identification observation matrix W restricted to the {len(est)} "
                         f"estimated parameters, each column scaled to unit norm, rows unweighted: condition number "

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import io
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -252,8 +252,8 @@ def error_bars_figure(name: str, title: str, series: Sequence[tuple[str, Sequenc
     n = max(len(np.asarray(v).reshape(-1)) for _, v in series)
     width = 0.8 / max(len(series), 1)
     colors = ("#bdbdbd", "#64b5f6", "#616161", "#0d47a1")  # light: identification, dark: validation
-    for k, (label, v) in enumerate(series):
-        v = np.asarray(v, float).reshape(-1)
+    for k, (label, values) in enumerate(series):
+        v = np.asarray(values, float).reshape(-1)
         ax.bar(np.arange(v.size) + (k - (len(series) - 1) / 2) * width, np.nan_to_num(v), width,
                label=label, color=colors[k % len(colors)])
     ax.set_xticks(np.arange(n), [f"joint {j + 1}" for j in range(n)], fontsize=8)

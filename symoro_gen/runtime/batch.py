@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 #: samples per kernel call: the (n, ncols, chunk) buffer stays in cache
 CHUNK = 2048
 
 
-def evaluate_kernel(kernel: Callable, n_rows: int, n_cols: int, q: NDArray[np.float64], dq: NDArray[np.float64],
+def evaluate_kernel(kernel: Callable[..., Any], n_rows: int, n_cols: int, q: NDArray[np.float64], dq: NDArray[np.float64],
                     ddq: NDArray[np.float64], res: NDArray[np.float64], chunk: int = CHUNK) -> NDArray[np.float64]:
     """Fill ``res`` (N, n_rows, n_cols) from (N, n) inputs; the kernel works on (n, M) transposes."""
     N = q.shape[0]
@@ -26,7 +27,7 @@ def evaluate_kernel(kernel: Callable, n_rows: int, n_cols: int, q: NDArray[np.fl
     return res
 
 
-def evaluate(kernel: Callable, n_rows: int, n_cols: int, q, dq, ddq, *, chunk: int = CHUNK) -> NDArray[np.float64]:
+def evaluate(kernel: Callable[..., Any], n_rows: int, n_cols: int, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike, *, chunk: int = CHUNK) -> NDArray[np.float64]:
     """Evaluate a kernel over samples; returns (N, n_rows, n_cols), (n_rows, n_cols) for 1-D inputs."""
     q, dq, ddq = (np.asarray(x, dtype=float) for x in (q, dq, ddq))
     one = q.ndim == 1

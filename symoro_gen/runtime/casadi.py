@@ -5,7 +5,7 @@ from collections.abc import Callable
 from typing import Any
 
 
-def build_function(construct: Callable, name: str, n: int, ncols: int) -> Any:
+def build_function(construct: Callable[..., Any], name: str, n: int, ncols: int) -> Any:
     """``casadi.Function name(q, dq, ddq) -> Y`` (n x ncols) from ``construct(ca, q, dq, ddq, out)``."""
     import casadi as ca  # heavy; only needed when a CasADi function is asked for
 

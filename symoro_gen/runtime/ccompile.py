@@ -23,6 +23,7 @@ import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -127,7 +128,7 @@ def _run_compiler(cmd: list[str], timeout: float) -> None:
         raise CBuildError(f"the C compiler failed (exit {proc.returncode}): {first.strip()}")
 
 
-def build_library(c_path: str | os.PathLike, *, timeout: float | None = None, force: bool = False) -> BuildResult:
+def build_library(c_path: str | os.PathLike[str], *, timeout: float | None = None, force: bool = False) -> BuildResult:
     """Find, or compile, the shared library of ``c_path``.
 
     Parameters
@@ -171,7 +172,7 @@ def build_library(c_path: str | os.PathLike, *, timeout: float | None = None, fo
     raise CBuildError(f"no writable folder for the compiled library (tried {', '.join(map(str, build_dirs(c_path)))})")
 
 
-def load_functions(lib_path: Path, names: Sequence[str]) -> dict:
+def load_functions(lib_path: Path, names: Sequence[str]) -> dict[str, Any]:
     """ctypes functions ``{name: fn(N, q, dq, ddq, out)}`` of a built library (CBuildError when not loadable)."""
     try:
         lib = ctypes.CDLL(str(lib_path))

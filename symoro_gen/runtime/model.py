@@ -25,7 +25,7 @@ from .ccompile import (
 from .inputs import joint_states, output_array
 
 #: (robot, C file) pairs already warned about in this process: one fallback warning per model
-_WARNED: set = set()
+_WARNED: set[tuple[str, str]] = set()
 
 
 class CBackendWarning(RuntimeWarning):
@@ -62,9 +62,9 @@ class GeneratedModel:
     are used; except for ``SYMORO_BACKEND=numpy`` one :class:`CBackendWarning` says why.
     """
 
-    def __init__(self, package_dir: str | os.PathLike, robot: str, n_joints: int, standard_names: Sequence[str],
-                 base_names: Sequence[str], payload_names: Sequence[str], relations: Sequence, kernels: ModuleType,
-                 construct_casadi: Callable | None = None, *, c_file: str | None = None, numpy_only: bool = False):
+    def __init__(self, package_dir: str | os.PathLike[str], robot: str, n_joints: int, standard_names: Sequence[str],
+                 base_names: Sequence[str], payload_names: Sequence[str], relations: Sequence[Any], kernels: ModuleType,
+                 construct_casadi: Callable[..., Any] | None = None, *, c_file: str | None = None, numpy_only: bool = False):
         self.package_dir = Path(package_dir)
         self.ROBOT = robot
         self.N_JOINTS = int(n_joints)
@@ -84,7 +84,7 @@ class GeneratedModel:
         self._construct_casadi = construct_casadi
         self.c_path = self.package_dir / (c_file or f"regressor_{robot}.c")
         self._numpy_only = numpy_only
-        self._c: dict | None = None
+        self._c: dict[str, Any] | None = None
         self._resolved = False
         self._reason = ""
         self._lock = threading.Lock()
@@ -119,7 +119,7 @@ class GeneratedModel:
     def _c_names(self) -> list[str]:
         return [f"{self.ROBOT}_{kind}_regressor" for kind in ("base", "standard", "payload")]
 
-    def _c_functions(self) -> dict | None:
+    def _c_functions(self) -> dict[str, Any] | None:
         if self._resolved:
             return self._c
         with self._lock:

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..description import load_robot
 from ..description.model import RobotDescription
 from ..dynamics.numeric import inverse_dynamics, numeric_regressor
 
@@ -92,7 +93,5 @@ class NumericModel:
 def numeric_model(robot: RobotDescription | str) -> NumericModel:
     """:class:`NumericModel` of a robot description (or of a robot name/path)."""
     if not isinstance(robot, RobotDescription):
-        from ..description import load_robot
-
         robot = load_robot(robot)
     return NumericModel(robot)

@@ -63,8 +63,8 @@ def _random_rotation(rng: np.random.Generator) -> np.ndarray:
     return Q
 
 
-def random_link_inertial(rng: np.random.Generator, *, mass_range=(0.5, 10.0), com_radius: float = 0.15,
-                         size_range=(0.03, 0.25)) -> np.ndarray:
+def random_link_inertial(rng: np.random.Generator, *, mass_range: tuple[float, float] = (0.5, 10.0),
+                         com_radius: float = 0.15, size_range: tuple[float, float] = (0.03, 0.25)) -> np.ndarray:
     """The 10 inertial parameters ``XX XY XZ YY YZ ZZ MX MY MZ M`` of a random solid ellipsoid.
 
     Parameters
@@ -123,7 +123,7 @@ def random_physical_parameters(robot: RobotDescription, rng: np.random.Generator
         for k in DRIVE_KINDS:
             vals[f"{k}{row.j}"] = float(rng.uniform(*ranges[k]))
     names = robot.standard_names
-    return ParameterSet(names, [vals[nm] for nm in names])
+    return ParameterSet(names, np.array([vals[nm] for nm in names]))
 
 
 def random_payload(rng: np.random.Generator, *, robot: RobotDescription | None = None, mass_range=(0.5, 5.0),

@@ -107,8 +107,10 @@ def simulate_recording(model_or_robot, t, q, dq, ddq, chi_std, *, chi_payload=No
         raise ValueError("noise requested: pass rng=np.random.default_rng(seed)")
     q_meas = q
     if np.any(nq != 0):
+        assert rng is not None  # checked above
         q_meas = q + rng.standard_normal(q.shape) * nq
     if np.any(nt != 0):
+        assert rng is not None
         tau_meas = tau_meas + rng.standard_normal(tau_meas.shape) * nt
     dq_out = np.asarray(dq, float) if keep_derivatives else None
     ddq_out = np.asarray(ddq, float) if keep_derivatives else None

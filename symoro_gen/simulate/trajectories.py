@@ -1,6 +1,6 @@
 """Exciting trajectories with analytic derivatives.
 
-* :func:`fourier_trajectory` - finite Fourier series per joint (Swevers et al. 1997), periodic,
+* :func:`fourier_trajectory` - finite Fourier series per joint ([S1997], Swevers et al.), periodic,
   scaled to respect amplitude, velocity and acceleration bounds.
 * :func:`ptp_trajectory` - point-to-point motion through via-points with a *trapezoidal-acceleration*
   (double-S, bounded-jerk) profile as industrial controllers generate them (the LWR4 and RX-90
@@ -41,7 +41,7 @@ class Motion:
     dq: np.ndarray
     ddq: np.ndarray
     via_times: np.ndarray | None = None
-    series: "FourierSeries | None" = None
+    series: FourierSeries | None = None
 
     def __iter__(self):
         return iter((self.t, self.q, self.dq, self.ddq))
@@ -216,7 +216,7 @@ def ptp_trajectory(via_points, vmax, amax, jmax, dt: float, *, dwell: float = 0.
     n = P.shape[1]
     V, A, J = (_per_joint(x, n, nm) for x, nm in ((vmax, "vmax"), (amax, "amax"), (jmax, "jmax")))
     n_dwell = int(math.ceil(dwell / dt - 1e-9)) if dwell > 0 else 0
-    ts, qs, dqs, ddqs = [np.zeros(1)], [P[:1].copy()], [np.zeros((1, n))], [np.zeros((1, n))]
+    qs, dqs, ddqs = [P[:1].copy()], [np.zeros((1, n))], [np.zeros((1, n))]
     via_idx = [0]
     k_now = 0
     for seg in range(P.shape[0] - 1):

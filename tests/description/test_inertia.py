@@ -43,7 +43,7 @@ def test_point_mass_clouds():
         np.testing.assert_allclose(matrix_from_six(p), J_O, rtol=1e-10, atol=1e-13)
         np.testing.assert_allclose(parallel_axis(I_c, M, c), J_O, rtol=1e-10, atol=1e-13)
         M2, c2, I2 = com_from_standard(p)
-        assert M2 == pytest.approx(M) and np.allclose(c2, c) and np.allclose(I2, I_c, atol=1e-12)
+        assert pytest.approx(M) == M2 and np.allclose(c2, c) and np.allclose(I2, I_c, atol=1e-12)
         # pseudo-inertia = sum m [x; 1][x; 1]^T (Wensing et al. 2017)
         xh = np.column_stack([r, np.ones(len(m))])
         np.testing.assert_allclose(pseudo_inertia(p), (m[:, None, None] * xh[:, :, None] * xh[:, None, :]).sum(0),

@@ -27,7 +27,7 @@ def _is_type(x, t: str) -> bool:
     if t == "null":
         return x is None
     if t == "integer":
-        return isinstance(x, int) and not isinstance(x, bool) or (isinstance(x, float) and x.is_integer())
+        return (isinstance(x, int) and not isinstance(x, bool)) or (isinstance(x, float) and x.is_integer())
     if t == "number":
         return isinstance(x, (int, float)) and not isinstance(x, bool)
     raise ValueError(f"unknown type {t!r} in schema")
@@ -82,9 +82,8 @@ def validate(instance, schema: dict, root: dict | None = None, path: str = "$") 
         if "items" in schema:
             for i, v in enumerate(instance):
                 errs += validate(v, schema["items"], root, f"{path}[{i}]")
-    if "anyOf" in schema:
-        if not any(not validate(instance, s, root, path) for s in schema["anyOf"]):
-            errs.append(f"{path}: matches none of anyOf")
+    if "anyOf" in schema and not any(not validate(instance, s, root, path) for s in schema["anyOf"]):
+        errs.append(f"{path}: matches none of anyOf")
     for s in schema.get("allOf", ()):
         errs += validate(instance, s, root, path)
     return errs

@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import io
+import itertools
 import json
 import os
 import re
@@ -302,7 +303,7 @@ def available_commands() -> set[str]:
 
 def json_out_of(cmd: str) -> str | None:
     toks = shlex.split(cmd)
-    for a, b in zip(toks, toks[1:]):
+    for a, b in itertools.pairwise(toks):
         if a == "--json":
             return b
     return None

@@ -8,7 +8,7 @@ import pytest
 
 from symoro_gen.simulate import write_recording_csv
 
-from .jsonschema_lite import ANNOTATIONS, KEYWORDS, validate
+from .jsonschema_lite import KEYWORDS, validate
 from .runner import DOCS, strict_json
 
 SCHEMAS = {name: json.loads((DOCS / "schemas" / f"{name}.schema.json").read_text()) for name in ("identify", "diagnose")}

@@ -37,9 +37,9 @@ def test_every_robot_file_has_a_generated_model():
 
 def test_contract_names_and_shapes(robot_and_model):
     robot, m = robot_and_model
-    assert m.ROBOT == robot.name and m.N_JOINTS == robot.n_joints
-    assert m.STANDARD_NAMES == robot.standard_names
-    assert m.PAYLOAD_NAMES == robot.payload_names
+    assert robot.name == m.ROBOT and robot.n_joints == m.N_JOINTS
+    assert robot.standard_names == m.STANDARD_NAMES
+    assert robot.payload_names == m.PAYLOAD_NAMES
     assert all(isinstance(n, str) for n in m.BASE_NAMES)
     n, nb, ns = m.N_JOINTS, len(m.BASE_NAMES), len(m.STANDARD_NAMES)
     rng = np.random.default_rng(1)

@@ -64,7 +64,7 @@ def test_robot_file_changed_is_regenerated(tmp_path):
     m1 = load_model(f)
     f.write_text(f.read_text().replace("name = \"two\"", "name = \"two\"\n# changed"))
     m2 = load_model(f)
-    assert m1 is not m2 and m2.ROBOT_FILE_SHA256 == load_robot(f).file_hash
+    assert m1 is not m2 and load_robot(f).file_hash == m2.ROBOT_FILE_SHA256
 
 
 def test_description_without_file_goes_to_the_user_cache(tmp_path):
@@ -92,7 +92,7 @@ def test_stale_repository_package_is_not_used(tmp_path):
 
 
 def test_unknown_robot_lists_the_known_ones():
-    with pytest.raises(ModelError, match="no_such_robot.*known: .*lwr4"):
+    with pytest.raises(ModelError, match=r"no_such_robot.*known: .*lwr4"):
         load_model("no_such_robot")
     with pytest.raises(ModelError, match="expected a robot name"):
         load_model(3.5)

@@ -134,7 +134,10 @@ def make_robot_sim(name: str, N_a: int, N_b: int, seed: int, payload_mass: float
     assert np.allclose(np.vstack([Wa, Wb]) @ chi_base, np.r_[tau_a, tau_b_robot], rtol=0, atol=1e-8), \
         "base columns do not span the standard regressor"
     names = tuple(robot.standard_names[i] for i in base)
-    joint = lambda N: np.repeat(np.arange(n), N)
+
+    def joint(N):
+        return np.repeat(np.arange(n), N)
+
     return RobotSim(robot, names, base, chi_std, chi_base, robot.payload_names, chi_pay, Wa, Wb, WL,
                     tau_a, tau_b, tau_b_robot, joint(N_a), joint(N_b))
 

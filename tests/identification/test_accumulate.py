@@ -1,10 +1,19 @@
 """Streaming (TSQR accumulation of per-joint R factors) gives the full-matrix results."""
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from symoro_gen.errors import IdentificationError
-from symoro_gen.identification import (Accumulator, ObservationSystem, accumulate, essential_parameters,
-                                       fit_ols, fit_tls, fit_wls)
+from symoro_gen.identification import (
+    Accumulator,
+    ObservationSystem,
+    accumulate,
+    essential_parameters,
+    fit_ols,
+    fit_tls,
+    fit_wls,
+)
 
 from .simdata import joint_noise
 from .test_estimators import tls_reference
@@ -124,9 +133,6 @@ def test_weighted_accumulator_applies_chunk_weights():
     ref = np.linalg.lstsq(W * w[:, None], s.Y * w, rcond=None)[0]
     np.testing.assert_allclose(fit_ols(acc).values, ref, rtol=1e-11)
     np.testing.assert_allclose(fit_ols(acc).values, fit_ols(s).values, rtol=1e-11)
-
-
-from hypothesis import given, settings, strategies as st
 
 
 @settings(max_examples=25, deadline=None)

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from symoro_gen.errors import IdentificationError
-from symoro_gen.identification import (ObservationSystem, drive_gains, fit_wls, identify_with_drive_gains,
-                                       sensor_gains)
+from symoro_gen.identification import ObservationSystem, drive_gains, fit_wls, identify_with_drive_gains, sensor_gains
 
 from .simdata import joint_noise
 

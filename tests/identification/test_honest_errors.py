@@ -35,7 +35,7 @@ def scara():
     rng = np.random.default_rng(7)
     chi = np.asarray(random_physical_parameters(robot, rng))
     recs, clean = [], []
-    for k in range(2):
+    for _ in range(2):
         t, q, dq, ddq = fourier_trajectory(robot.n_joints, 12.0, 0.002, rng)
         recs.append(simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-6, noise_tau=NOISE_TAU, rng=rng))
         clean.append(simulate_recording(model, t, q, dq, ddq, chi))

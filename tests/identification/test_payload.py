@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from symoro_gen.errors import IdentificationError
-from symoro_gen.identification import (ObservationSystem, apply_gains, fit_with_known_payload, fix_parameters,
-                                       identify_payload, stack_systems)
+from symoro_gen.identification import (
+    ObservationSystem,
+    apply_gains,
+    fit_with_known_payload,
+    fix_parameters,
+    identify_payload,
+    stack_systems,
+)
 
 from .simdata import joint_noise, payload_parameters
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from symoro_gen.description import load_robot, parse_robot_text
@@ -32,7 +31,7 @@ def _states(rng: np.random.Generator, n: int, N: int = N_SAMPLES):
     return random_states(rng, N, n)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _graph(name: str):
     return graph_function(build_regressor(load_robot(name)))
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -164,14 +165,14 @@ def test_nan_and_inf_named_with_rows_and_lines(tmp_path):
 
 def test_non_numeric_and_missing_values(tmp_path):
     path, *_ = _std_csv(tmp_path)
-    lines = open(path).read().splitlines()
+    lines = Path(path).read_text().splitlines()
     f = lines[10].split(",")
     f[2] = "abc"
     lines[10] = ",".join(f)
     f = lines[20].split(",")
     f[2] = ""
     lines[20] = ",".join(f)
-    open(path, "w").write("\n".join(lines) + "\n")
+    Path(path).write_text("\n".join(lines) + "\n")
     with pytest.raises(DataFileError) as e:
         load_trajectory(path, n_joints=3)
     msg = str(e.value)
@@ -181,9 +182,9 @@ def test_non_numeric_and_missing_values(tmp_path):
 
 def test_ragged_line(tmp_path):
     path, *_ = _std_csv(tmp_path)
-    lines = open(path).read().splitlines()
+    lines = Path(path).read_text().splitlines()
     lines[30] = lines[30] + ",1.0"
-    open(path, "w").write("\n".join(lines) + "\n")
+    Path(path).write_text("\n".join(lines) + "\n")
     with pytest.raises(DataFileError) as e:
         load_trajectory(path, n_joints=3)
     assert "lines 31" in str(e.value) and "wrong number of fields" in str(e.value)
@@ -280,7 +281,7 @@ def test_missing_file_and_unknown_format(tmp_path):
         load_trajectory(tmp_path / "nope.csv", n_joints=3)
     p = tmp_path / "x.xlsx"
     p.write_text("hello")
-    with pytest.raises(DataFileError, match="unknown data format '.xlsx'"):
+    with pytest.raises(DataFileError, match=r"unknown data format '\.xlsx'"):
         load_trajectory(p, n_joints=3)
 
 

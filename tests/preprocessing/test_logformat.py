@@ -13,8 +13,15 @@ from symoro_gen.identification import identify
 from symoro_gen.identification.assemble import build_observation
 from symoro_gen.loader import model_for
 from symoro_gen.preprocessing.load import load_trajectory, parse_data_spec, step_regime_changes
-from symoro_gen.preprocessing.logformat import (LogFormat, hold_back, load_log, load_logs, make_format,
-                                                parse_columns, read_format_file)
+from symoro_gen.preprocessing.logformat import (
+    LogFormat,
+    hold_back,
+    load_log,
+    load_logs,
+    make_format,
+    parse_columns,
+    read_format_file,
+)
 from symoro_gen.simulate.parameters import random_physical_parameters
 from symoro_gen.simulate.recording import true_torques
 from symoro_gen.simulate.trajectories import fourier_trajectory

@@ -4,6 +4,7 @@ embedded plot, 1:1, non-blank, where the page puts it; the page needs nothing fr
 Chromium is Debian's ``chromium`` package (``apt-get install -y chromium``); the rendering test skips
 when it is not installed.
 """
+import itertools
 import os
 import re
 import shutil
@@ -94,7 +95,7 @@ def test_chromium_screenshot_shows_every_plot(rx90_html_report, tmp_path):
     # in page order, one below the other, none overlapping, left-aligned in the content column
     ys = [p[0] for p in placed]
     assert ys == sorted(ys)
-    assert all(a[0] + a[2] <= b[0] for a, b in zip(placed, placed[1:]))
+    assert all(a[0] + a[2] <= b[0] for a, b in itertools.pairwise(placed))
     assert len({p[1] for p in placed}) == 1
     # text and tables above the first plot (title, error norms): ink outside the images too
     top = shot[:placed[0][0]]

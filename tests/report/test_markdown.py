@@ -6,9 +6,18 @@ import sys
 
 import pytest
 
-from symoro_gen.report import (Figure, Heading, MissingDependencyError, Paragraph, Report, ReportError, Table,
-                               asset_folder, require_matplotlib)
-from symoro_gen.report import document
+from symoro_gen.report import (
+    Figure,
+    Heading,
+    MissingDependencyError,
+    Paragraph,
+    Report,
+    ReportError,
+    Table,
+    asset_folder,
+    document,
+    require_matplotlib,
+)
 
 from .pngcheck import decode_png, embedded_images, ink_stats
 

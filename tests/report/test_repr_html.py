@@ -83,7 +83,7 @@ def test_identification_result_html_lists_every_parameter_with_its_statistics(re
     p = parse(html)
     rows = _param_rows(p.tables)
     assert [r[1][0] for r in rows] == list(NAMES)
-    for (cls, (name, v, s2, pct, note)), val, std in zip(rows, result.values, result.std):
+    for (cls, (_name, v, s2, pct, note)), val, std in zip(rows, result.values, result.std):
         assert float(v) == pytest.approx(val, rel=6e-4)
         assert float(s2) == pytest.approx(2 * std, rel=6e-4)
         expect_pct = 100 * std / abs(val)

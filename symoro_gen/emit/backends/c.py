@@ -8,7 +8,7 @@ scalar loop does the remainder, and is the whole function for other compilers.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import sympy as sp
 
@@ -67,7 +67,7 @@ def function_name(robot: str, kind: str) -> str:
     return f"{robot}_{kind}_regressor"
 
 
-def _inputs(graph: ExprGraph, q, dq, ddq, ctype: str, load: Callable[[str, int], str]) -> list[str]:
+def _inputs(graph: ExprGraph, q: Sequence[sp.Symbol], dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol], ctype: str, load: Callable[[str, int], str]) -> list[str]:
     used = graph.used_names()
     out = []
     for arr, syms in (("q", q), ("dq", dq), ("ddq", ddq)):
@@ -96,7 +96,8 @@ def _vector_defs(graph: ExprGraph) -> list[str]:
     return lines
 
 
-def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str, q, dq, ddq) -> str:
+def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str, q: Sequence[sp.Symbol],
+               dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol]) -> str:
     """C source of the batch function ``func_name`` (SIMD loop + scalar remainder)."""
     col = {n: k for k, n in enumerate(col_names)}
     nc = len(col_names)
@@ -161,7 +162,8 @@ def api_comment(robot: str, n: int, ncols: dict[str, int], header: str) -> str:
     return "\n".join(lines)
 
 
-def c_source(robot: str, n: int, graphs: dict[str, ExprGraph], names: dict[str, Sequence[str]], q, dq, ddq,
+def c_source(robot: str, n: int, graphs: dict[str, ExprGraph], names: Mapping[str, Sequence[str]], q: Sequence[sp.Symbol],
+             dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol],
              header: str) -> str:
     """The whole ``regressor_<robot>.c``: API comment, prelude, one batch function per kind."""
     parts = [api_comment(robot, n, {k: len(v) for k, v in names.items()}, header), PRELUDE]

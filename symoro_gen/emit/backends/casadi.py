@@ -21,7 +21,8 @@ from ...dynamics.graph import ExprGraph
 from ..printing import CASADI, print_expr
 
 
-def casadi_source(graph: ExprGraph, col_names: Sequence[str], func_name: str, q, dq, ddq) -> str:
+def casadi_source(graph: ExprGraph, col_names: Sequence[str], func_name: str, q: Sequence[sp.Symbol],
+                  dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol]) -> str:
     """Python source of ``func_name(ca, q, dq, ddq, out)``: ``out[i, k] = ...`` on ``casadi.SX``."""
     col = {n: k for k, n in enumerate(col_names)}
     lines = [f"def {func_name}(ca, q, dq, ddq, out):"]
@@ -39,7 +40,7 @@ def casadi_source(graph: ExprGraph, col_names: Sequence[str], func_name: str, q,
     return "\n".join(lines) + "\n"
 
 
-def _to_sx(e: sp.Expr, env: dict, ca: Any) -> Any:
+def _to_sx(e: sp.Expr, env: dict[sp.Symbol, Any], ca: Any) -> Any:
     """sympy expression -> casadi SX, with ``env`` mapping symbols to SX values."""
     if e.is_Symbol:
         return env[e]
@@ -69,13 +70,14 @@ def _to_sx(e: sp.Expr, env: dict, ca: Any) -> Any:
     return fn(*args)
 
 
-def casadi_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], name: str, q, dq, ddq) -> Any:
+def casadi_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], name: str, q: Sequence[sp.Symbol],
+                    dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol]) -> Any:
     """``casadi.Function name(q, dq, ddq) -> Y`` (n_rows x len(col_names)) built from the graph."""
     import casadi as ca  # optional at run time: only needed for CasADi functions
 
     n = len(q)
     Q, DQ, DDQ = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
-    env: dict = {}
+    env: dict[sp.Symbol, Any] = {}
     for arr, syms in ((Q, q), (DQ, dq), (DDQ, ddq)):
         for i, s in enumerate(syms):
             env[s] = arr[i]

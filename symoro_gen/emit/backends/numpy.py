@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import types
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 import sympy as sp
@@ -35,10 +36,11 @@ def kernel_source(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_
     return "\n".join(lines) + "\n"
 
 
-def load_kernel(source: str, func_name: str) -> Callable:
+def load_kernel(source: str, func_name: str) -> Callable[..., Any]:
     """Compile kernel source in a private module namespace and return the function."""
     mod = types.ModuleType(f"_symoro_kernel_{func_name}")
     mod.__dict__["np"] = np
     code = compile(source, f"<symoro kernel {func_name}>", "exec")
     exec(code, mod.__dict__)  # noqa: S102 - our own generated code, private namespace
-    return mod.__dict__[func_name]
+    fn: Callable[..., Any] = mod.__dict__[func_name]
+    return fn
