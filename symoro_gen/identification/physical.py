@@ -55,6 +55,7 @@ __all__ = [
     "base_matrix",
     "identify_physical",
     "standard_from_base",
+    "standard_set_from_result",
 ]
 
 #: weight of the pull toward the nominal values (relative to the normalised LS cost)
@@ -667,3 +668,54 @@ def standard_from_base(model: IdentificationModel, chi_b, nominal=None, *,
                      "bodies): " + ", ".join(bad))
     return StandardFromBase(names=lay.standard, values=_ro(xv), exact=err <= tol, base_error=err, bodies=bodies,
                             active_constraints=_active(labels, cons, xv, s, 2.0 / p), notes=tuple(notes))
+
+
+def standard_set_from_result(model: IdentificationModel, result: Mapping, nominal=None, *, source: str = "result",
+                             solver: str | None = None) -> tuple[StandardFromBase, dict[str, float]]:
+    """The standard set (and payload values) an exporter writes for a ``symoro-gen identify`` JSON result.
+
+    With a ``physical`` block (``identify --physical``) its standard values are used as they are
+    (consistent, and their regrouping is the result's ``parameters``); otherwise the base
+    parameters of ``parameters`` (eliminated ones 0, known ``fixed`` ones included) go through
+    :func:`standard_from_base`. Payload values: those of the result when it has all ten and they are
+    consistent, else none (the exporter keeps the robot file's).
+
+    Returns
+    -------
+    (StandardFromBase, dict)
+        The standard set with its report, and ``payload name -> value``.
+    """
+    try:
+        par = result["parameters"]
+        pm = {n: v for n, v in zip(par["names"], par["values"])}
+    except (KeyError, TypeError):
+        raise IdentificationError(f"{source}: not a result of `symoro-gen identify` (no 'parameters' names/values)") from None
+    pm.update({n: 0.0 for n in result.get("eliminated", ())})
+    pm.update(dict(result.get("fixed", {})))
+    null = [n for n, v in pm.items() if v is None]
+    if null:
+        raise IdentificationError(f"{source}: parameters without a finite value: {', '.join(null)}")
+    payload = {n: float(pm[n]) for n in model.PAYLOAD_NAMES if n in pm}
+    phys = result.get("physical")
+    if phys:
+        st = dict(zip(phys["names"], phys["values"]))
+        missing = [n for n in model.STANDARD_NAMES if st.get(n) is None]
+        if missing:
+            raise IdentificationError(f"{source}: physical block lacks {', '.join(missing)}")
+        x = np.array([float(st[n]) for n in model.STANDARD_NAMES])
+        lay = _layout(model, (), ())
+        nominal_v = _nominal_vector(lay, nominal)
+        sb = StandardFromBase(names=lay.standard, values=_ro(x), exact=True, base_error=0.0,
+                              bodies=_body_reports(lay, x, nominal_v), active_constraints=(),
+                              notes=(f"standard parameters of the physically consistent estimate in {source}",))
+        pl = phys.get("payload", {})
+        payload.update({n: float(v) for n, v in zip(pl.get("names", ()), pl.get("values", ())) if v is not None})
+    else:
+        missing = [n for n in model.BASE_NAMES if n not in pm]
+        if missing:
+            raise IdentificationError(f"{source}: base parameters missing: {', '.join(missing)}")
+        sb = standard_from_base(model, {n: float(pm[n]) for n in model.BASE_NAMES}, nominal, solver=solver)
+    if len(payload) != len(model.PAYLOAD_NAMES) or (
+            payload and check_physical_consistency([payload[n] for n in model.PAYLOAD_NAMES])):
+        payload = {}
+    return sb, payload
