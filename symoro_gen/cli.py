@@ -146,9 +146,16 @@ def _export_values(args):
     sb, payload = standard_set_from_result(model, result, nominal, source=src)
     vals = sb.as_dict()
     chi = [vals.get(n, 0.0) for n in robot.standard_names]
-    pay = [payload[n] for n in robot.payload_names] if payload and robot.payload is not None else None
+    pay = None
     notes = [f"inertial and drive parameters from {Path(src).name}: physically consistent standard set whose "
              f"regrouping {'is exactly' if sb.exact else 'is the closest (least squares) to'} the identified base parameters"]
+    if robot.payload is not None:
+        if payload:
+            pay = [payload[n] for n in robot.payload_names]
+            notes.append(f"payload (frame {robot.payload}) as identified in {Path(src).name}")
+        else:  # the identified model is the robot without the payload: do not mount the nominal one
+            pay = [0.0] * len(robot.payload_names)
+            notes.append(f"payload (frame {robot.payload}) not identified in {Path(src).name}: written without mass")
     notes += list(sb.notes)
     moved = [b for b in sb.bodies if "mass_change" in b]
     for b in moved:
