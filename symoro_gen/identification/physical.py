@@ -397,7 +397,7 @@ class PhysicalResult:
         inc = [b["body"] for b in self.bodies if b.get("nominal_consistent") is False]
         if inc:
             lines.append("Nominal values physically inconsistent for: " + ", ".join(inc))
-        lines.append("Active constraints: " + ("none" if not self.active_constraints else ""))
+        lines.append(f"Active constraints ({len(self.active_constraints) or 'none'}):")
         lines += [f"  {a}" for a in self.active_constraints]
         return "\n".join(lines)
 
