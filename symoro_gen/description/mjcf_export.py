@@ -22,12 +22,20 @@ Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
 """
 from __future__ import annotations
 
-import numpy as np
 from xml.sax.saxutils import quoteattr
+
+import numpy as np
 
 from .mdh import joint_sign
 from .model import FIXED, REVOLUTE, RobotDescription
-from .urdf_export import _comment, _fmt, constant_transform, inertial_of, joint_limits, link_values
+from .urdf_export import (
+    _comment,
+    _fmt,
+    constant_transform,
+    inertial_of,
+    joint_limits,
+    link_values,
+)
 
 __all__ = ["export_mjcf", "quat_from_matrix"]
 
@@ -88,8 +96,8 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
     g = robot.gravity
     out = ["<?xml version=\"1.0\"?>", f"<mujoco model={quoteattr(robot.name)}>",
            f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({_comment(robot.source[:120])}) -->",
-           "  <!-- MDH frame j = body link<j> (pos/quat: T(ant, j) at q = 0), joint j about/along its z axis; "
-           "armature = IA, damping = FV, frictionloss = FS -->"]
+           ("  <!-- MDH frame j = body link<j> (pos/quat: T(ant, j) at q = 0), joint j about/along its z axis; "
+            "armature = IA, damping = FV, frictionloss = FS -->")]
     out += [f"  <!-- {_comment(n)} -->" for n in notes]
     out += ['  <compiler angle="radian" inertiafromgeom="false" autolimits="true"/>',
             f'  <option gravity="{_v(g)}" timestep="{_fmt(timestep)}" integrator="{integrator}"/>',

@@ -40,11 +40,15 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..description.inertia import check_physical_consistency, com_from_standard, pseudo_inertia
+from ..description.inertia import (
+    check_physical_consistency,
+    com_from_standard,
+    pseudo_inertia,
+)
 from ..errors import IdentificationError
 from ..model import IdentificationModel
-from ..params import DRIVE_KINDS, INERTIAL_KINDS, split_name
 from ..observations.system import ObservationSystem
+from ..params import DRIVE_KINDS, INERTIAL_KINDS, split_name
 from .result import IdentificationResult, _json_float, per_joint_rel_err
 
 __all__ = [
@@ -233,14 +237,12 @@ def _active(labels, cons, x: np.ndarray, s: np.ndarray, pull: float) -> tuple[st
                 force = float(np.linalg.norm(s[list(where)] * (G.T @ np.asarray(dual).reshape(-1, order="F")))) \
                     if dual is not None else 0.0
                 out.append(f"{name}: pseudo-inertia singular (lambda_min {ev[0]:.3g}; {who(force)})")
-        elif kind == "nonneg":
-            if x[where] <= 1e-6 * ref:
-                force = abs(float(dual)) * s[where] if dual is not None else 0.0
-                out.append(f"{name} >= 0 ({who(force)})")
-        elif kind in ("lower", "upper"):
-            if abs(x[where] - ref) <= 1e-6 * max(abs(ref), s[where]):
-                force = abs(float(dual)) * s[where] if dual is not None else 0.0
-                out.append(f"{name} {'>=' if kind == 'lower' else '<='} {ref:.6g} (nominal bound; {who(force)})")
+        elif kind == "nonneg" and x[where] <= 1e-6 * ref:
+            force = abs(float(dual)) * s[where] if dual is not None else 0.0
+            out.append(f"{name} >= 0 ({who(force)})")
+        elif kind in ("lower", "upper") and abs(x[where] - ref) <= 1e-6 * max(abs(ref), s[where]):
+            force = abs(float(dual)) * s[where] if dual is not None else 0.0
+            out.append(f"{name} {'>=' if kind == 'lower' else '<='} {ref:.6g} (nominal bound; {who(force)})")
     return tuple(out)
 
 
@@ -257,7 +259,7 @@ def _solve(cp, problem, solver: str | None) -> str:
             with warnings.catch_warnings():  # "optimal_inaccurate" is reported in the result's status
                 warnings.simplefilter("ignore", UserWarning)
                 problem.solve(solver=name, **kw)
-        except Exception as exc:  # solver-specific failures: try the next one
+        except (cp.error.SolverError, ValueError, ArithmeticError) as exc:  # this solver failed: try the next one
             last = f"{name}: {exc}"
             continue
         if problem.status in ("optimal", "optimal_inaccurate"):
@@ -378,8 +380,8 @@ class PhysicalResult:
     def summary(self) -> str:
         """Consistent base parameters beside the unconstrained ones, the cost of consistency and the
         active constraints."""
-        lines = [f"Physically consistent estimate ({self.solver}, {self.status}; regularisation toward nominal "
-                 f"{self.regularization:g})",
+        lines = [(f"Physically consistent estimate ({self.solver}, {self.status}; regularisation toward nominal "
+                  f"{self.regularization:g})"),
                  f"{'Param.':<10}{'consistent':>13}{'unconstrained':>15}"]
         for n, v in zip(self.base_names + self.payload_names + self.other_names,
                         np.concatenate([self.base_values, self.payload_values, self.other_values])):
@@ -496,7 +498,7 @@ def identify_physical(model: IdentificationModel, system: ObservationSystem, *,
 
     # unconstrained reference (known parameters moved to the left-hand side), same weights
     free = [i for i, n in enumerate(names) if n not in known]
-    kn = np.array([known[n] if n in known else 0.0 for n in names])
+    kn = np.array([known.get(n, 0.0) for n in names])
     Wc = system.W * w[:, None]
     chi_u = np.linalg.lstsq(Wc[:, free], y - Wc @ kn, rcond=None)[0]
     theta_u = kn.copy()
@@ -508,7 +510,7 @@ def identify_physical(model: IdentificationModel, system: ObservationSystem, *,
     # u_ls any unconstrained minimiser); the fit term is normalised by that minimum, so it reads as the
     # relative increase of the weighted residual (solver tolerances then apply to what matters).
     As = A * s[None, :]
-    Q, R = np.linalg.qr(As, mode="reduced")
+    _, R = np.linalg.qr(As, mode="reduced")
     u_ls = np.linalg.lstsq(As, y, rcond=None)[0]
     c_min = float(np.sum((y - As @ u_ls) ** 2))
     c_ref = max(c_min, 1e-12 * y2)
@@ -646,7 +648,7 @@ def standard_from_base(model: IdentificationModel, chi_b, nominal=None, *,
     prob = cp.Problem(cp.Minimize(dev), cons + [Ks @ x == bs])
     notes = []
     try:
-        used = _solve(cp, prob, solver)
+        _solve(cp, prob, solver)
         ok = prob.status in ("optimal", "optimal_inaccurate")
     except IdentificationError:
         ok = False
@@ -654,7 +656,7 @@ def standard_from_base(model: IdentificationModel, chi_b, nominal=None, *,
     err = float(np.max(np.abs(Ks @ xv - bs))) if xv is not None else math.inf
     if xv is None or err > tol:
         prob2 = cp.Problem(cp.Minimize(cp.sum_squares(Ks @ x - bs) + 1e-8 * dev), cons)
-        used = _solve(cp, prob2, solver)
+        _solve(cp, prob2, solver)
         if prob2.status not in ("optimal", "optimal_inaccurate"):
             raise IdentificationError(f"standard_from_base: solver status {prob2.status}")
         xv = np.asarray(s * u.value, float)

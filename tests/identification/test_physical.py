@@ -6,19 +6,19 @@ import pytest
 
 pytest.importorskip("cvxpy", reason="the 'physical' extra (cvxpy, clarabel) is not installed")
 
-from symoro_gen.description.inertia import check_physical_consistency  # noqa: E402
-from symoro_gen.identification import identify, stack_systems  # noqa: E402
-from symoro_gen.identification.physical import (  # noqa: E402
+from symoro_gen.description.inertia import check_physical_consistency
+from symoro_gen.identification import identify, stack_systems
+from symoro_gen.identification.physical import (
     base_matrix,
     identify_physical,
     standard_from_base,
 )
-from symoro_gen.identification.result import per_joint_rel_err  # noqa: E402
-from symoro_gen.loader import model_for  # noqa: E402
-from symoro_gen.observations.assembly import assemble  # noqa: E402
-from symoro_gen.observations.options import AssemblyOptions  # noqa: E402
-from symoro_gen.params import INERTIAL_KINDS  # noqa: E402
-from symoro_gen.simulate import (  # noqa: E402
+from symoro_gen.identification.result import per_joint_rel_err
+from symoro_gen.loader import model_for
+from symoro_gen.observations.assembly import assemble
+from symoro_gen.observations.options import AssemblyOptions
+from symoro_gen.params import INERTIAL_KINDS
+from symoro_gen.simulate import (
     fourier_trajectory,
     random_payload,
     random_physical_parameters,
