@@ -367,15 +367,23 @@ class PhysicalResult:
         missing = [n for n in unconstrained.names if n not in pm]
         if missing:
             raise IdentificationError(f"physical estimate lacks parameters {missing}")
-        vals = np.array([pm[n] for n in unconstrained.names])
+        # parameters the essential procedure cancelled are estimated here: listed after the others
+        extra = [n for n in unconstrained.eliminated if n in pm]
+        names = tuple(unconstrained.names) + tuple(extra)
+        vals = np.array([pm[n] for n in names])
+        c, k = unconstrained.n_params, len(extra)
+        std = np.concatenate([unconstrained.std, np.full(k, np.inf)])
+        cov = np.full((c + k, c + k), np.nan)
+        cov[:c, :c] = unconstrained.cov
         with np.errstate(divide="ignore", invalid="ignore"):
-            rel = np.where(vals != 0, 100.0 * unconstrained.std / np.abs(vals), np.inf)
+            rel = np.where(vals != 0, 100.0 * std / np.abs(vals), np.inf)
         note = ("physically consistent estimate (identify --physical): std and %sigma are those of the "
-                "unconstrained estimate")
-        return replace(unconstrained, method=unconstrained.method + "-phys", values=vals, rel_std_pct=rel,
-                       rel_err=self.rel_err, residual=None, rel_err_raw=None,
+                "unconstrained estimate" + (f"; {', '.join(extra)} (cancelled by the essential procedure) "
+                                            "are estimated here without statistics" if extra else ""))
+        return replace(unconstrained, method=unconstrained.method + "-phys", names=names, values=vals, std=std,
+                       rel_std_pct=rel, cov=cov, rel_err=self.rel_err, residual=None, rel_err_raw=None,
                        eliminated=tuple(n for n in unconstrained.eliminated if n not in pm),
-                       warnings=(note,) + tuple(unconstrained.warnings))
+                       warnings=(note, *unconstrained.warnings))
 
     def summary(self) -> str:
         """Consistent base parameters beside the unconstrained ones, the cost of consistency and the
