@@ -124,23 +124,104 @@ def cmd_import_urdf(args) -> int:
     return _output(import_urdf(args.file, base=args.base, tip=args.tip, name=args.name), args, robot_file=True)
 
 
-def cmd_export_urdf(args) -> int:
+def _export_values(args):
+    """Robot, standard and payload values, header notes and sidecar content for export-urdf/export-mjcf."""
     import json
 
     from .description import load_robot
-    from .description.urdf_export import export_urdf
     from .errors import ModelError
 
     robot = load_robot(args.robot)
+    src = getattr(args, "from_result", None)
+    if not src:
+        return robot, None, None, [], None
+    from .identification.physical import standard_set_from_result
+    from .loader import model_for
+
+    try:
+        result = json.loads(Path(src).read_text())
+    except (OSError, ValueError) as exc:
+        raise ModelError(f"{src}: not a result of `symoro-gen identify` ({exc})") from None
+    if not isinstance(result, dict):
+        raise ModelError(f"{src}: not a result of `symoro-gen identify` (a JSON object is expected)")
+    _, model = model_for(robot)
+    nominal = dict(zip(robot.standard_names, robot.nominal_vector() or ()))
+    sb, payload = standard_set_from_result(model, result, nominal, source=src)
+    vals = sb.as_dict()
+    chi = [vals.get(n, 0.0) for n in robot.standard_names]
+    pay = None
+    notes = [f"inertial and drive parameters from {Path(src).name}: physically consistent standard set whose "
+             f"regrouping {'is exactly' if sb.exact else 'is the closest (least squares) to'} the identified base parameters"]
+    if robot.payload is not None:
+        if payload:
+            pay = [payload[n] for n in robot.payload_names]
+            notes.append(f"payload (frame {robot.payload}) as identified in {Path(src).name}")
+        else:  # the identified model is the robot without the payload: do not mount the nominal one
+            pay = [0.0] * len(robot.payload_names)
+            notes.append(f"payload (frame {robot.payload}) not identified in {Path(src).name}: written without mass")
+    notes += list(sb.notes)
+    moved = [b for b in sb.bodies if "mass_change" in b]
+    for b in moved:
+        notes.append(f"{b['body']}: mass {b['mass']:.6g} kg ({b['mass_change']:+.3g} from nominal), centre of mass "
+                     f"moved {b['com_shift']:.3g} m" + (f", inertia changed {100 * b['inertia_change_rel']:.3g} %"
+                                                        if b.get("inertia_change_rel") is not None else ""))
+    sidecar = {"robot": robot.name, "from": str(src), "exact": sb.exact, "base_error": sb.base_error,
+               "notes": list(sb.notes), "bodies": list(sb.bodies), "active_constraints": list(sb.active_constraints)}
+    return robot, chi, pay, notes, sidecar
+
+
+def _write_export(args, text: str, report: list, sidecar: dict | None, what: str, robot, chi, pay) -> int:
+    """Print the notes about changed links, write the text and, with ``--from`` and ``-o``, the sidecar JSON."""
+    import json
+
+    from .description.urdf_export import drive_terms, link_values
+
+    for msg in report:
+        print(f"note: {msg}", file=sys.stderr)
+    rc = _output(text, args)
+    if args.output and sidecar is not None:
+        from .atomic import write_text_atomic
+
+        side = Path(str(args.output) + ".json")
+        sidecar["drive"] = drive_terms(robot, link_values(robot, chi, pay))
+        sidecar["drive_note"] = ("IA (rotor inertia) and OFF (torque offset) have no URDF field: MuJoCo's armature "
+                                 "holds IA; FV, FS are URDF <dynamics damping friction>")
+        sidecar["changed_links"] = report
+        write_text_atomic(side, json.dumps(sidecar, indent=2) + "\n")
+        if not args.quiet:
+            print(f"wrote {side}")
+    return rc
+
+
+def cmd_export_urdf(args) -> int:
+    import json
+
+    from .description.urdf_export import export_urdf
+    from .errors import ModelError
+
+    robot, chi, pay, notes, sidecar = _export_values(args)
     params = None
     if args.params:
+        if chi is not None:
+            raise ModelError("export-urdf: give --from RESULT.json or --params RESULT.json, not both")
         try:
             d = json.loads(Path(args.params).read_text())
             p = d["parameters"]
             params = {n: v for n, v in zip(p["names"], p["values"]) if v is not None}
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise ModelError(f"{args.params}: not a result of `symoro-gen identify` ({exc})") from None
-    return _output(export_urdf(robot, params=params), args)
+    report: list[str] = []
+    text = export_urdf(robot, chi, pay, params=params, notes=notes, report=report)
+    return _write_export(args, text, report, sidecar, "export-urdf", robot, chi, pay)
+
+
+def cmd_export_mjcf(args) -> int:
+    from .description.mjcf_export import export_mjcf
+
+    robot, chi, pay, notes, sidecar = _export_values(args)
+    report: list[str] = []
+    text = export_mjcf(robot, chi, pay, notes=notes, report=report, timestep=args.timestep)
+    return _write_export(args, text, report, sidecar, "export-mjcf", robot, chi, pay)
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
@@ -183,8 +264,20 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     eu = sub.add_parser("export-urdf", help="robot .toml (optionally with identified parameters) -> URDF")
     eu.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
     eu.add_argument("--params", help="JSON result of `symoro-gen identify` (standard parameters it names are used)")
-    eu.add_argument("-o", "--output", help="write the URDF here (default: stdout)")
+    eu.add_argument("--from", dest="from_result", metavar="RESULT.json",
+                    help="JSON result of `symoro-gen identify`: every body from a physically consistent standard set "
+                         "whose regrouping gives its base parameters (needs the 'physical' extra)")
+    eu.add_argument("-o", "--output", help="write the URDF here (default: stdout); with --from also OUTPUT.json "
+                    "(drive terms, how far each body moved from nominal)")
     eu.set_defaults(func=cmd_export_urdf)
+
+    em = sub.add_parser("export-mjcf", help="robot .toml (optionally with an identification) -> MuJoCo MJCF")
+    em.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
+    em.add_argument("--from", dest="from_result", metavar="RESULT.json",
+                    help="JSON result of `symoro-gen identify` (as for export-urdf --from)")
+    em.add_argument("--timestep", type=float, default=0.001, help="MuJoCo timestep [s] (default 0.001)")
+    em.add_argument("-o", "--output", help="write the MJCF here (default: stdout); with --from also OUTPUT.json")
+    em.set_defaults(func=cmd_export_mjcf)
 
     ep = sub.add_parser("export-par", help="robot .toml -> SYMORO+/OpenSYMORO .par file")
     ep.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
@@ -233,7 +326,7 @@ def _inspect_parser(sub):
 _EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _inspect_parser, _demo_parser]
 _EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _inspect_parser: "inspect",
                 _demo_parser: "demo"}
-_LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf")
+_LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf", "export-mjcf")
 
 
 def _command_of(argv) -> str | None:

@@ -5,11 +5,19 @@ Frame j of the MDH table becomes link ``link<j>`` (frame 0 is ``base_link``); th
 ``-q`` joint) as axis. Standard parameters at the frame origin become URDF inertials at the centre
 of mass; FV and FS become ``<dynamics damping friction>``.
 
-Identified parameters (``--params result.json`` of ``symoro-gen identify``) replace the nominal
-values of the parameters they name when those are standard ones (base parameters without ``R``);
-regrouped ones cannot be split back and are ignored (listed in the warnings). Each link is then made
-physically meaningful: mass >= ``min_mass``, inertia at the centre of mass symmetric positive
-definite and satisfying the triangle inequalities (eigenvalues raised as needed).
+An identification (``--from result.json`` of ``symoro-gen identify``) gives every standard parameter
+through :func:`symoro_gen.identification.physical.standard_set_from_result`: a physically consistent
+set whose regrouping is the identified base parameters (issue 14). The older ``--params`` replaces only
+the standard parameters the result names (regrouped ones are ignored, with a warning).
+
+Drive terms: ``FV`` and ``FS`` go to ``<dynamics damping friction>``; URDF has no field for the rotor
+inertia ``IA`` nor the torque offset ``OFF``: they are written as ``<!-- armature ... -->`` comments in
+the joint and listed by :func:`drive_terms` (the command line writes them to a sidecar JSON). Joint
+``<limit>`` from the robot file's ``[limits]`` when it has one (else +-pi / +-10 m, effort 1000).
+
+Each link is written physically meaningful: mass >= ``min_mass``, inertia at the centre of mass
+symmetric positive definite and satisfying the triangle inequalities (eigenvalues raised as needed);
+a link whose given values were changed so is reported (``report`` list or a warning), never silently.
 """
 from __future__ import annotations
 
@@ -20,7 +28,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ..params import INERTIAL_KINDS
-from .inertia import com_from_standard
+from .inertia import check_physical_consistency, com_from_standard
 from .mdh import joint_sign, row_transform
 from .model import FIXED, PRISMATIC, REVOLUTE, RobotDescription
 
@@ -62,18 +70,32 @@ def _fmt(x: float) -> str:
     return repr(float(x))
 
 
-def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, params: dict | None = None) -> str:
-    """URDF text of ``robot``.
+def drive_terms(robot: RobotDescription, vals: dict) -> dict[str, dict[str, float]]:
+    """``joint<j> -> {IA, FV, FS, OFF}`` (the values present) for every moving joint."""
+    out = {}
+    for row in robot.joints:
+        d = {k: float(vals[f"{k}{row.j}"]) for k in ("IA", "FV", "FS", "OFF") if f"{k}{row.j}" in vals}
+        if d:
+            out[f"joint{row.j}"] = d
+    return out
 
-    Parameters
-    ----------
-    robot : RobotDescription
-    chi_std, chi_payload : array_like, optional
-        Standard / payload parameters (default: the robot file's nominal values, zeros when absent).
-    params : dict, optional
-        ``name -> value`` overriding standard parameters (e.g. identified ones); regrouped
-        names (``...R``) are ignored with a warning.
-    """
+
+def joint_limits(robot: RobotDescription, j: int) -> dict[str, float]:
+    """``q_min, q_max, dq_max, tau_max`` of moving joint ``j`` from the robot file's ``[limits]`` (present ones)."""
+    lim = getattr(robot, "limits", None)
+    if lim is None:
+        return {}
+    k = [r.j for r in robot.joints].index(j)
+    out = {}
+    for f in ("q_min", "q_max", "dq_max", "tau_max"):
+        v = getattr(lim, f, None)
+        if v is not None and v[k] is not None and math.isfinite(float(v[k])):
+            out[f] = float(v[k])
+    return out
+
+
+def link_values(robot: RobotDescription, chi_std=None, chi_payload=None, *, params: dict | None = None) -> dict:
+    """``name -> value`` of every standard (and payload) parameter written (defaults: nominal, else 0)."""
     names = list(robot.standard_names)
     chi = np.zeros(len(names)) if chi_std is None and robot.nominal_vector() is None else np.array(
         chi_std if chi_std is not None else robot.nominal_vector(), float)
@@ -88,16 +110,56 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
         else:
             ignored.append(k)
     if ignored:
-        warnings.warn(f"export-urdf: parameters not applied (regrouped or unknown): {', '.join(ignored)}", stacklevel=2)
+        warnings.warn(f"export: parameters not applied (regrouped or unknown): {', '.join(ignored)}", stacklevel=3)
+    return vals
+
+
+def inertial_of(vals: dict, j: int, report: list | None, what: str = "export"):
+    """(mass, com, I_c) of link ``j`` made physical; a change is reported (issue 15: never silent)."""
+    p10 = [vals.get(f"{k}{j}", 0.0) for k in INERTIAL_KINDS]
+    if not any(p10):
+        return None
+    reasons = check_physical_consistency(p10)
+    m, c, Ic = physical_inertial(p10)
+    if reasons:
+        msg = (f"{what}: link {j}: inertial parameters not physically consistent ({'; '.join(reasons)}); "
+               f"written as mass {m:.6g}, inertia at the centre of mass with principal moments "
+               f"{', '.join(f'{x:.3g}' for x in np.linalg.eigvalsh(Ic))}")
+        if report is not None:
+            report.append(msg)
+        else:
+            warnings.warn(msg, stacklevel=3)
+    return m, c, Ic
+
+
+def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, params: dict | None = None,
+                notes=(), report: list | None = None) -> str:
+    """URDF text of ``robot``.
+
+    Parameters
+    ----------
+    robot : RobotDescription
+    chi_std, chi_payload : array_like, optional
+        Standard / payload parameters (default: the robot file's nominal values, zeros when absent).
+    params : dict, optional
+        ``name -> value`` overriding standard parameters (e.g. identified ones); regrouped
+        names (``...R``) are ignored with a warning.
+    notes : sequence of str
+        Lines written as a comment at the top (e.g. where the parameters come from).
+    report : list, optional
+        Receives the messages about links whose values had to be changed (else: warnings).
+    """
+    vals = link_values(robot, chi_std, chi_payload, params=params)
     out = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>",
-           f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({robot.source[:120]}) -->",
-           '  <link name="base_link"/>']
+           f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({_comment(robot.source[:120])}) -->"]
+    out += [f"  <!-- {_comment(n)} -->" for n in notes]
+    out.append('  <link name="base_link"/>')
     for row in robot.rows:
         j = row.j
-        p10 = [vals.get(f"{k}{j}", 0.0) for k in INERTIAL_KINDS]
         out.append(f'  <link name="link{j}">')
-        if any(p10):
-            m, c, Ic = physical_inertial(p10)
+        inert = inertial_of(vals, j, report, "export-urdf")
+        if inert is not None:
+            m, c, Ic = inert
             out += [
                 "    <inertial>",
                 f'      <origin xyz="{_fmt(c[0])} {_fmt(c[1])} {_fmt(c[2])}" rpy="0 0 0"/>',
@@ -119,11 +181,22 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
         if row.sigma != FIXED:
             s = joint_sign(row)
             out.append(f'    <axis xyz="0 0 {s}"/>')
-            lim = "3.141592653589793" if row.sigma == REVOLUTE else "10.0"
-            out.append(f'    <limit lower="-{lim}" upper="{lim}" effort="1000.0" velocity="100.0"/>')
+            lim = joint_limits(robot, j)
+            dflt = math.pi if row.sigma == REVOLUTE else 10.0
+            out.append(f'    <limit lower="{_fmt(lim.get("q_min", -dflt))}" upper="{_fmt(lim.get("q_max", dflt))}" '
+                       f'effort="{_fmt(lim.get("tau_max", 1000.0))}" velocity="{_fmt(lim.get("dq_max", 100.0))}"/>')
             fv, fs = vals.get(f"FV{j}", 0.0), vals.get(f"FS{j}", 0.0)
             if fv or fs:
                 out.append(f'    <dynamics damping="{_fmt(max(fv, 0.0))}" friction="{_fmt(max(fs, 0.0))}"/>')
+            ia, off = vals.get(f"IA{j}", 0.0), vals.get(f"OFF{j}", 0.0)
+            if ia or off:
+                out.append(f"    <!-- armature (rotor inertia IA{j}, no URDF field): {_fmt(ia)} "
+                           f"{'kg m^2' if row.sigma == REVOLUTE else 'kg'}; torque offset OFF{j}: {_fmt(off)} -->")
         out.append("  </joint>")
     out.append("</robot>")
     return "\n".join(out) + "\n"
+
+
+def _comment(text: str) -> str:
+    """Text safe inside an XML comment (no ``--``)."""
+    return str(text).replace("--", "- -")

@@ -5,12 +5,17 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import IdentificationError
 from ..model import IdentificationModel
 from ..observations.assembly import assemble
 from ..observations.options import AssemblyOptions
+from ..observations.system import ObservationSystem
+from .physical import identify_physical
 from .result import _json_float, basis_text
 from ..preprocessing.cli import add_data_options, data_block, data_notes, data_text, load_data, split_held_back
+from .systems import stack_systems
 
 
 def _payload_values(items, names) -> dict:
@@ -38,6 +43,8 @@ def run_identify(args) -> dict:
 
         check_report_path(args.report)
         require_matplotlib()
+    if getattr(args, "nominal_tolerance", None) is not None and not getattr(args, "physical", False):
+        raise IdentificationError("--nominal-tolerance bounds the --physical estimate: add --physical")
     robot, model = model_for(args.robot)
     unloaded, reports = load_data(args, args.data, robot, loaded=False)
     unloaded, held_back = split_held_back(args, unloaded)
@@ -64,6 +71,11 @@ def run_identify(args) -> dict:
         res = identify(sys_u, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
     res = res.with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
     out = {"robot": robot.name, "data": [], "loaded": [str(p) for p in args.loaded or ()]}
+    phys = res_u = None
+    if getattr(args, "physical", False):
+        phys, res_u, res = _physical(args, robot, model, res, sys_u, sys_l, known, asm_u, asm_l)
+        out["unconstrained"] = res_u.to_dict()
+        out["physical"] = phys.to_dict()
     out.update(res.to_dict())
     val = val_raw = sys_v = asm_v = None
     if args.validate or held_back:
@@ -79,6 +91,10 @@ def run_identify(args) -> dict:
         out["validation"] = {"data": vnames, "rel_err": [_json_float(x) for x in val],
                              "rel_err_raw": [_json_float(x) for x in val_raw],
                              "rel_err_basis": asm_v.metric_basis()}
+        if res_u is not None:
+            val_u, val_u_raw = res_u.rel_err_on(sys_v), res_u.rel_err_raw_on(model, asm_v)
+            out["unconstrained"]["validation"] = {"rel_err": [_json_float(x) for x in val_u],
+                                                  "rel_err_raw": [_json_float(x) for x in val_u_raw]}
     out["data"] = data_block(reports)
     if args.reference:
         from .reference import compare_with_reference, format_comparison
@@ -102,19 +118,47 @@ def run_identify(args) -> dict:
                  f"  on the {basis_text(vb)}:\n    " + "  ".join(f"{x:.4f}" for x in val)
                  + f"\n  on the raw measured torque (model at full rate on the filtered states, {vb['samples']} samples per joint):"
                  "\n    " + "  ".join(f"{x:.4f}" for x in val_raw))
+        if res_u is not None:
+            text += ("\n  unconstrained estimate, same data:\n    " + "  ".join(f"{x:.4f}" for x in val_u)
+                     + "\n    raw: " + "  ".join(f"{x:.4f}" for x in val_u_raw))
+    if phys is not None:
+        text += "\n\n" + phys.summary()
     if ref_text:
         text += "\n\nBeside the reference table " + str(args.reference) + ":\n" + ref_text
     text += "\n\n" + data_text(reports)
     if args.report:
         _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, rows if args.reference else None, val_raw,
-                      data_notes(reports))
+                      data_notes(reports), text=phys.summary() if phys is not None else None)
     if not args.quiet:
         print(text)
     return out
 
 
+def _physical(args, robot, model: IdentificationModel, res, sys_u, sys_l, known, asm_u, asm_l):
+    """``--physical``: the consistent estimate on the same (gain-scaled, WLS-weighted) rows.
+
+    Returns ``(PhysicalResult, unconstrained result, consistent result)``; the consistent result has the
+    implied base parameters in the unconstrained result's names, its raw-torque errors attached.
+    """
+    system = stack_systems(sys_u, sys_l) if sys_l is not None else sys_u
+    system = ObservationSystem(system.W, res.scaled_measurements(system), system.names, system.joint)
+    joint_sigma = None
+    if res.joint_sigma is not None:  # WLS: weights 1/sigma_j from the unconstrained residual per joint
+        rho = system.Y - res.predict(system)
+        n_j = np.bincount(system.joint, minlength=system.n_joints)
+        joint_sigma = np.sqrt(np.bincount(system.joint, weights=rho ** 2, minlength=system.n_joints) / np.maximum(n_j, 1))
+        joint_sigma = np.where(joint_sigma > 0, joint_sigma, 1.0)
+    nominal = dict(zip(robot.standard_names, robot.nominal_vector() or ()))
+    if robot.payload is not None and robot.nominal_payload() is not None:
+        nominal.update(zip(robot.payload_names, robot.nominal_payload()))
+    phys = identify_physical(model, system, joint_sigma=joint_sigma, known=known, nominal=nominal,
+                             nominal_tolerance=args.nominal_tolerance)
+    res_p = phys.as_identification_result(res).with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
+    return phys, res, res_p
+
+
 def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l, sys_v, reference, val_raw=None,
-                  data_lines=()) -> None:
+                  data_lines=(), text: str | None = None) -> None:
     """``--report OUT.html|OUT.md``: tables, measured vs reconstructed torques, singular values of W;
     with loaded validation data, the payload re-identified with the robot known (Table IV)."""
     from ..report import write_report
@@ -138,7 +182,7 @@ def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l
                "validation data": list(args.validate or ())}
     write_report(args.report, res, robot=robot.name, sources=sources, identification=ident, validation=valid,
                  payload_names=model.PAYLOAD_NAMES, payload=payload, drive=dg, reference=reference, notes=notes,
-                 raw_errors=raw)
+                 raw_errors=raw, text=text)
 
 
 def add_identify_parser(sub) -> None:
@@ -158,6 +202,13 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--min-velocity", type=float, help="drop identification rows that depend on samples slower than "
                    "this [rad/s] (Coulomb friction is ill-defined near zero velocity); validation errors use every sample")
     p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
+    p.add_argument("--physical", action="store_true",
+                   help="physically consistent estimate: LS in the standard parameters with every body's pseudo-inertia "
+                        "positive definite and IA, FV, FS >= 0 (needs the 'physical' extra: cvxpy, clarabel); "
+                        "'parameters' then holds the base parameters it implies, 'unconstrained' the plain fit")
+    p.add_argument("--nominal-tolerance", type=float, metavar="TOL",
+                   help="with --physical: also bound every standard parameter with a non-zero nominal value to "
+                        "|chi - nominal| <= TOL |nominal|")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "

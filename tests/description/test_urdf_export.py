@@ -96,3 +96,85 @@ def test_cli_export_urdf_with_identified_params(tmp_path, cli):
     assert 'damping="2.5"' in text
     pin.buildModelFromXML(text)
     cli("export-urdf", "rx90", "--params", tmp_path / "missing.json", rc=2)
+
+
+# ---- export-urdf --from RESULT.json (issue 14) -----------------------------------------------------
+def _drive(robot, vals, q, dq, ddq):
+    """IA ddq + FV dq + FS sign(dq) + OFF per joint (the drive terms URDF has no RNEA for)."""
+    out = np.zeros(robot.n_joints)
+    for k, row in enumerate(robot.joints):
+        j = row.j
+        out[k] = (vals.get(f"IA{j}", 0.0) * ddq[k] + vals.get(f"FV{j}", 0.0) * dq[k]
+                  + vals.get(f"FS{j}", 0.0) * np.sign(dq[k]) + vals.get(f"OFF{j}", 0.0))
+    return out
+
+
+def _check_urdf_reproduces_base(robot_name, result_path, tmp_path, cli, rng, rtol=1e-6):
+    """Pinocchio RNEA on the exported URDF + the sidecar's drive terms == W_b chi_b of the result."""
+    import json
+
+    from symoro_gen.loader import model_for
+
+    robot, model = model_for(robot_name)
+    out = tmp_path / f"{robot_name}.urdf"
+    cli("export-urdf", robot_name, "--from", result_path, "-o", out, "-q")
+    side = json.loads((tmp_path / f"{robot_name}.urdf.json").read_text())
+    assert side["exact"] is True
+    vals = {f"{k}{j[5:]}": v for j, d in side["drive"].items() for k, v in d.items()}
+    res = json.loads(result_path.read_text())
+    pm = dict(zip(res["parameters"]["names"], res["parameters"]["values"]))
+    chi_b = np.array([pm[n] for n in model.BASE_NAMES])
+    pmodel = pin.buildModelFromXML(out.read_text())
+    pmodel.gravity.linear = np.asarray(robot.gravity, float)
+    data = pmodel.createData()
+    for _ in range(10):
+        q, dq, ddq = rng.normal(size=(3, robot.n_joints))
+        ref = model.regressor(q, dq, ddq) @ chi_b
+        tau = pin.rnea(pmodel, data, q, dq, ddq) + _drive(robot, vals, q, dq, ddq)
+        assert np.allclose(tau, ref, rtol=0, atol=rtol * np.abs(ref).max()), (tau, ref)
+    return out.read_text()
+
+
+def test_export_from_identified_base_parameters(tmp_path, cli):
+    """Base parameters only (no physical block): standard_from_base finds a consistent set whose
+    regrouping is exact, and the URDF reproduces the identified model."""
+    import json
+
+    pytest.importorskip("cvxpy", reason="the 'physical' extra is not installed")
+    from symoro_gen.loader import model_for
+
+    robot, model = model_for("rx90")
+    rng = np.random.default_rng(7)
+    truth = np.asarray(random_physical_parameters(robot, rng))
+    chi_b = model.base_parameters(truth)
+    res = tmp_path / "res.json"
+    res.write_text(json.dumps({"parameters": {"names": list(model.BASE_NAMES), "values": chi_b.tolist()}}))
+    text = _check_urdf_reproduces_base("rx90", res, tmp_path, cli, rng)
+    assert "armature (rotor inertia IA1" in text and "regrouping is exactly" in text
+
+
+def test_nominal_inconsistency_is_reported(tmp_path, cli):
+    """Issue 15: a payload with a mass and no inertia is changed, and the user is told."""
+    r = cli("export-urdf", "lwr4", "-o", tmp_path / "l.urdf")
+    assert "link 8" in r.err and "not physically consistent" in r.err
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+def test_export_lwr4_identified_on_real_recordings(shared_data, tmp_path, cli):
+    """The unconstrained WLS estimate of the real LWR4 is not that of any physical robot (no exact
+    standard set exists); the --physical one is, and the URDF reproduces it."""
+    import json
+
+    pytest.importorskip("cvxpy", reason="the 'physical' extra is not installed")
+    D = shared_data / "kuka_lwr4_flobaroid" / "data" / "KUKA" / "HW"
+    res = tmp_path / "lwr4.json"
+    cli("identify", "lwr4", D / "measurements_1.npz", D / "measurements_3.npz", "--method", "wls", "--physical",
+        "--json", res, "-q")
+    d = json.loads(res.read_text())
+    unc = tmp_path / "unc.json"
+    unc.write_text(json.dumps(d["unconstrained"]))
+    cli("export-urdf", "lwr4", "--from", unc, "-o", tmp_path / "unc.urdf", "-q")
+    side = json.loads((tmp_path / "unc.urdf.json").read_text())
+    assert side["exact"] is False and "closest one in the least-squares sense" in side["notes"][0]
+    _check_urdf_reproduces_base("lwr4", res, tmp_path, cli, np.random.default_rng(8))

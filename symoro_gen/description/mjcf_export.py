@@ -1,0 +1,154 @@
+"""MDH robot -> MuJoCo MJCF (``symoro-gen export-mjcf``), with the identified drive terms.
+
+Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
+
+* frame j of the MDH table is MuJoCo body ``link<j>``, nested in body ``link<ant(j)>`` (the world body
+  for ``ant = 0``), so trees are kept; its ``pos``/``quat`` are the constant part of ``T(ant, j)``
+  (the transform at ``q = 0``, ``quat`` as MuJoCo's ``w x y z``);
+* ``T(ant, j)(q) = T(ant, j)(0) Rot(z, s q)`` for a revolute joint (``Trans(z, s q)`` for a prismatic
+  one, ``s = -1`` for a ``-q`` row), so joint j is a ``hinge`` (``slide``) at the body origin with
+  axis ``0 0 s``: MuJoCo's ``qpos[j]`` is the model's ``q_j`` and its generalised force the model's
+  ``tau_j``; a fixed frame (``sigma = 2``, e.g. the payload) is a body without joint;
+* each body's ``<inertial>`` is its mass, centre of mass and full inertia at the centre of mass in the
+  body frame, from the ten standard parameters at the frame origin (inverse parallel-axis theorem,
+  :func:`symoro_gen.description.inertia.com_from_standard`); ``inertiafromgeom="false"``, no geoms;
+* drive terms: ``armature`` = rotor inertia ``IA`` (MuJoCo adds it to the diagonal of the joint-space
+  inertia matrix, exactly the ``IA ddq`` of the model), ``damping`` = viscous ``FV`` (passive force
+  ``-FV dq``), ``frictionloss`` = Coulomb ``FS`` (a soft friction constraint of MuJoCo: equal to
+  ``FS sign(dq)`` only away from zero velocity); the torque offset ``OFF`` has no MuJoCo field and is
+  written as a comment; one ``<motor>`` per joint (``gear 1``, unlimited) drives ``tau`` directly;
+* joint ``range`` from the robot file's ``[limits]`` (``q_min``, ``q_max``) when present, ``gravity``
+  from the robot file; ``integrator="RK4"``, ``timestep`` 1 ms (options).
+"""
+from __future__ import annotations
+
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from .mdh import joint_sign
+from .model import FIXED, REVOLUTE, RobotDescription
+from .urdf_export import (
+    _comment,
+    _fmt,
+    constant_transform,
+    inertial_of,
+    joint_limits,
+    link_values,
+)
+
+__all__ = ["export_mjcf", "quat_from_matrix"]
+
+
+def quat_from_matrix(R) -> tuple[float, float, float, float]:
+    """Unit quaternion ``(w, x, y, z)`` of a rotation matrix (Shepperd's method).
+
+    Examples
+    --------
+    >>> [round(v, 12) for v in quat_from_matrix(np.eye(3))]
+    [1.0, 0.0, 0.0, 0.0]
+    """
+    R = np.asarray(R, float)
+    tr = np.trace(R)
+    if tr > 0:
+        S = 2.0 * np.sqrt(tr + 1.0)
+        q = (0.25 * S, (R[2, 1] - R[1, 2]) / S, (R[0, 2] - R[2, 0]) / S, (R[1, 0] - R[0, 1]) / S)
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        S = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = ((R[2, 1] - R[1, 2]) / S, 0.25 * S, (R[0, 1] + R[1, 0]) / S, (R[0, 2] + R[2, 0]) / S)
+    elif R[1, 1] > R[2, 2]:
+        S = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = ((R[0, 2] - R[2, 0]) / S, (R[0, 1] + R[1, 0]) / S, 0.25 * S, (R[1, 2] + R[2, 1]) / S)
+    else:
+        S = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = ((R[1, 0] - R[0, 1]) / S, (R[0, 2] + R[2, 0]) / S, (R[1, 2] + R[2, 1]) / S, 0.25 * S)
+    q = np.array(q, float)
+    q /= np.linalg.norm(q)
+    return tuple(float(v) for v in q)
+
+
+def _v(xs) -> str:
+    return " ".join(_fmt(x) for x in xs)
+
+
+def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, notes=(), report: list | None = None,
+                timestep: float = 0.001, integrator: str = "RK4", motors: bool = True) -> str:
+    """MJCF text of ``robot`` (conventions in the module docstring).
+
+    Parameters
+    ----------
+    robot : RobotDescription
+    chi_std, chi_payload : array_like, optional
+        Standard / payload parameters (default: the robot file's nominal values).
+    notes : sequence of str
+        Lines written as a comment at the top.
+    report : list, optional
+        Receives the messages about links whose inertial values had to be made physical.
+    timestep, integrator : MuJoCo ``<option>`` values.
+    motors : bool
+        One ``<motor>`` actuator per joint.
+
+    Returns
+    -------
+    str
+    """
+    vals = link_values(robot, chi_std, chi_payload)
+    g = robot.gravity
+    out = ["<?xml version=\"1.0\"?>", f"<mujoco model={quoteattr(robot.name)}>",
+           f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({_comment(robot.source[:120])}) -->",
+           ("  <!-- MDH frame j = body link<j> (pos/quat: T(ant, j) at q = 0), joint j about/along its z axis; "
+            "armature = IA, damping = FV, frictionloss = FS -->")]
+    out += [f"  <!-- {_comment(n)} -->" for n in notes]
+    out += ['  <compiler angle="radian" inertiafromgeom="false" autolimits="true"/>',
+            f'  <option gravity="{_v(g)}" timestep="{_fmt(timestep)}" integrator="{integrator}"/>',
+            "  <worldbody>"]
+    children: dict[int, list] = {}
+    for row in robot.rows:
+        children.setdefault(row.ant, []).append(row)
+    joints = []
+
+    def body(row, depth):
+        j = row.j
+        ind = "  " * depth
+        T = constant_transform(robot, j)
+        out.append(f'{ind}<body name="link{j}" pos="{_v(T[:3, 3])}" quat="{_v(quat_from_matrix(T[:3, :3]))}">')
+        inert = inertial_of(vals, j, report, "export-mjcf")
+        if inert is None and row.sigma != FIXED:
+            # MuJoCo needs mass and inertia on a moving body: a negligible one, said in the file
+            inert = (1e-9, np.zeros(3), 1e-12 * np.eye(3))
+            out.append(f"{ind}  <!-- link {j} has no inertial parameters: negligible mass written -->")
+        if inert is not None:
+            m, c, Ic = inert
+            full = (Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2])
+            out.append(f'{ind}  <inertial pos="{_v(c)}" mass="{_fmt(m)}" fullinertia="{_v(full)}"/>')
+        if row.sigma != FIXED:
+            s = joint_sign(row)
+            attrs = [f'name="joint{j}"', f'type="{"hinge" if row.sigma == REVOLUTE else "slide"}"', 'pos="0 0 0"',
+                     f'axis="0 0 {s}"']
+            for key, attr in (("IA", "armature"), ("FV", "damping"), ("FS", "frictionloss")):
+                v = vals.get(f"{key}{j}", 0.0)
+                if v:
+                    attrs.append(f'{attr}="{_fmt(max(v, 0.0))}"')
+            lim = joint_limits(robot, j)
+            if "q_min" in lim and "q_max" in lim:
+                attrs.append(f'range="{_fmt(lim["q_min"])} {_fmt(lim["q_max"])}"')
+            out.append(f"{ind}  <joint {' '.join(attrs)}/>")
+            off = vals.get(f"OFF{j}", 0.0)
+            if off:
+                out.append(f"{ind}  <!-- torque offset OFF{j} = {_fmt(off)} (no MuJoCo field) -->")
+            joints.append((j, lim))
+        for ch in children.get(j, ()):
+            body(ch, depth + 1)
+        out.append(f"{ind}</body>")
+
+    for row in children.get(0, ()):
+        body(row, 2)
+    out.append("  </worldbody>")
+    if motors and joints:
+        out.append("  <actuator>")
+        for j, lim in joints:
+            rng = f' ctrlrange="{_fmt(-lim["tau_max"])} {_fmt(lim["tau_max"])}"' if "tau_max" in lim else ""
+            out.append(f'    <motor name="motor{j}" joint="joint{j}" gear="1"{rng}/>')
+        out.append("  </actuator>")
+    out.append("</mujoco>")
+    return "\n".join(out) + "\n"
