@@ -73,3 +73,7 @@ class IdentificationError(SymoroError, ValueError):
 
 class ShapeError(SymoroError, TypeError):
     """An array argument has the wrong shape or type."""
+
+
+class RobotFileWarning(UserWarning):
+    """A robot file is valid but something in it is probably not what was meant (names file and field)."""

@@ -271,6 +271,8 @@ def random_robot(draw):
     if payload:
         names += [f"MZ{payload}", f"M{payload}"]
     nominal = draw(st.dictionaries(st.sampled_from(names), st.sampled_from([0.0, 1.5, -0.25]), max_size=4))
+    # masses and friction coefficients are non-negative (a robot file rejects negative ones)
+    nominal = {k: (abs(v) if k[:1] in "MF" and not k.startswith("MZ") else v) for k, v in nominal.items()}
     robot = parse_robot_text(head)
     allowed = set(robot.standard_names) | set(robot.payload_names)
     nominal = {k: v for k, v in nominal.items() if k in allowed}
