@@ -122,8 +122,10 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     values_raw = doc.get("values", {})
     values: dict[str, float] = {}
     reported_values: set[str] = set()  # symbols whose [values] entry is already reported
+    values_reported = False
     if not isinstance(values_raw, dict):
-        bad("[values]", "", "must be a table of NAME = number")
+        bad("top level", "values", "must be a table of NAME = number")
+        values_raw, values_reported = {}, True  # its symbols are not reported again one by one
     else:
         for k, v in values_raw.items():
             if k in _RESERVED or not _NAME_RE.match(k):
@@ -218,7 +220,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         rows.append(MdhRow(j=j, ant=ant, sigma=sigma, mu=mu, drive=tuple(drive), **ex))
 
     for s, where in sorted(used_symbols.items()):
-        if s not in values and s not in reported_values:
+        if s not in values and s not in reported_values and not values_reported:
             bad(where, "values", f"symbol {s!r} has no numeric value (add it under [values])")
 
     # moving frames first, fixed ones after
@@ -263,8 +265,12 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             if payload is not None:
                 allowed |= {f"{k}{payload}" for k in INERTIAL_KINDS}
             rejected_payload = set()
-            if payload is None and isinstance(payload_given, int) and not isinstance(payload_given, bool):
-                rejected_payload = {f"{k}{payload_given}" for k in INERTIAL_KINDS}
+            if payload is None and payload_given is not None:
+                # the payload is already reported: its nominal values (on the frame it names, or on any
+                # fixed frame when it names none) are not reported again
+                frames_ = {payload_given} if isinstance(payload_given, int) and not isinstance(payload_given, bool) \
+                    else {r.j for r in rows if r.sigma == FIXED or r.j in bad_sigma}
+                rejected_payload = {f"{k}{f_}" for k in INERTIAL_KINDS for f_ in frames_}
             for k, v in raw.items():
                 if k in rejected_payload:
                     continue  # the payload entry is already reported
