@@ -19,8 +19,10 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, settings
 
-#: bounded example counts keep the whole folder under a minute
-FUZZ = settings(max_examples=25, deadline=None, derandomize=True, database=None,
+#: bounded example counts keep the whole folder under a minute; ``SYMORO_FUZZ_EXAMPLES=500`` runs a
+#: deeper, random (not derandomized) search locally
+_DEEP = int(os.environ.get("SYMORO_FUZZ_EXAMPLES", "0"))
+FUZZ = settings(max_examples=_DEEP or 25, deadline=None, derandomize=not _DEEP, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture,
                                        HealthCheck.data_too_large])
 
