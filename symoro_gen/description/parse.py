@@ -116,7 +116,9 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         gravity = [0.0, 0.0, -9.81]
 
     default_drive = doc.get("drive", list(DRIVE_KINDS))
-    default_drive = _check_drive(default_drive, "top level", bad) or ()
+    default_drive = _check_drive(default_drive, "top level", bad)
+    if default_drive is None:  # reported; all four kinds, so that [nominal] drive terms are not reported again
+        default_drive = DRIVE_KINDS
 
     # geometric constants
     values_raw = doc.get("values", {})
@@ -185,8 +187,9 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         if drive is None:
             drive = tuple(default_drive) if (sigma != FIXED and mu == 1) else ()
         else:
-            drive = _check_drive(drive, where, bad) or ()
-            if sigma == FIXED and drive:
+            checked = _check_drive(drive, where, bad)
+            drive = checked if checked is not None else (tuple(default_drive) if sigma != FIXED else ())
+            if sigma == FIXED and checked:
                 bad(where, "drive", "a fixed frame has no drive chain")
         q = q_symbol(j)
         syms = {k: sp.Symbol(k, real=True) for k in values_raw if isinstance(k, str)} if isinstance(values_raw, dict) else {}
@@ -197,7 +200,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             try:
                 e = parse_expression(raw, syms)
             except ExprError as exc:
-                bad(where, k, str(exc))
+                if not (values_reported and str(exc).startswith("unknown name")):  # [values] already reported
+                    bad(where, k, str(exc))
                 e = sp.Integer(0)
             for s in e.free_symbols:
                 if s != q:
@@ -326,7 +330,11 @@ def _warn_inconsistent_inertia(nominal: dict, rows, payload, file: str) -> None:
         p10 = np.array([nominal.get(f"{k}{j}", 0.0) for k in INERTIAL_KINDS])
         if not (p10[9] > 0 and np.any(p10[:6] != 0)):
             continue
-        reasons = check_physical_consistency(p10, tol=1e-9)
+        try:
+            with np.errstate(all="ignore"):
+                reasons = check_physical_consistency(p10, tol=1e-9)
+        except np.linalg.LinAlgError:  # overflow of values near the float range
+            reasons = ["values too large to check"]
         if reasons:
             warnings.warn(f"{file}, [nominal], fields 'XX{j}'..'M{j}': the nominal values of link {j} are not "
                           f"those of a rigid body: {'; '.join(reasons)}", RobotFileWarning, stacklevel=3)

@@ -273,12 +273,13 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
             parent_of[child] = name
         axis = np.array(rd.snapped(rd.floats(el.find("axis"), "xyz", 3, where, "axis", default=(1.0, 0.0, 0.0)), 1.0))
         if typ in MOVING_TYPES:
-            nrm = float(np.linalg.norm(axis))
+            big = float(np.abs(axis).max())  # scaled first: the norm of (0, 0, 1e308) overflows
+            nrm = big * float(np.linalg.norm(axis / big)) if big > 0 else 0.0
             if nrm < 1e-12:
                 rd.bad(where, "axis", "zero axis")
                 axis = np.array([1.0, 0.0, 0.0])
             else:
-                axis = axis / nrm
+                axis = (axis / big) / np.linalg.norm(axis / big)
         damping = friction = None
         de = el.find("dynamics")
         if de is not None:

@@ -525,3 +525,17 @@ def test_binary_robot_file_names_file(tmp_path):
         assert p.file == str(path) and "not UTF-8" in p.message and "byte 128" in p.where
     with pytest.raises(RobotFileError, match="cannot read"):
         parse_robot(tmp_path / "robots")
+
+
+@pytest.mark.parametrize("text_edit", [
+    lambda t: t.replace('drive = ["IA", "FV", "FS", "OFF"]', "drive = true"),
+    lambda t: edit_frame(t, 2, "r = 0", "r = 0\ndrive = 3"),
+    lambda t: t.replace("payload = 4", "payload = true"),
+    lambda t: t.replace("[values]\nL2 = 0.3", "values = 3"),
+])
+def test_bad_field_does_not_cascade(tmp_path, text_edit):
+    # found by tests/fuzz: a bad drive list rejected every [nominal] drive term, a bad payload its
+    # nominal values, a [values] that is not a table every symbol
+    text = text_edit(GOOD.replace("M4 = 1.5", "M4 = 1.5\nFV2 = 0.3\nIA1 = 0.01"))
+    err, file = errors_of(text, tmp_path)
+    assert len(err.problems) == 1, str(err)

@@ -437,3 +437,12 @@ def test_ground_links_without_inertial_are_silent(recwarn):
                         '    <child link="base"/>\n  </joint>\n</robot>')
     import_urdf_text(urdf)
     assert not [w for w in recwarn if "inertial" in str(w.message)]
+
+
+def test_huge_axis_components_are_normalised():
+    # found by tests/fuzz: the norm of (0, 0, 1e308) overflowed to inf, and the axis became NaN
+    urdf = random_urdf(np.random.default_rng(3), 2, style="aligned")
+    urdf = re.sub(r'<axis xyz="[^"]*"/>', '<axis xyz="0 0 1e308"/>', urdf, count=1)
+    robot = parse_robot_text(import_urdf_text(urdf))
+    ref = parse_robot_text(import_urdf_text(urdf.replace('"0 0 1e308"', '"0 0 1"')))
+    assert robot.rows == ref.rows
