@@ -88,6 +88,7 @@ def demo_payload() -> np.ndarray:
 
 
 def run_demo(args=None) -> int:
+    check_duration(getattr(args, "duration", 20.0))  # before the heavy imports
     from .identification import sensor_gains
     from .identification.assemble import build_observation
     from .loader import model_for
@@ -97,7 +98,6 @@ def run_demo(args=None) -> int:
     seed = getattr(args, "seed", 0)
     duration = getattr(args, "duration", 20.0)
     quiet = getattr(args, "quiet", False)
-    check_duration(duration)
     rng = np.random.default_rng(seed)
     robot, model = model_for("lwr4")
     chi = model.nominal_parameters()
