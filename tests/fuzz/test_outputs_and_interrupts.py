@@ -132,3 +132,19 @@ def test_huge_demo_duration_is_one_line(cli, tmp_path):
     case = run_case(cli, tmp_path, ["demo", "--duration", "1e9"], allow_ok=False)
     assert case.first_error.startswith("symoro-gen: error: --duration 1e+09: ") and "memory" in case.first_error
     assert len(case.err.strip().splitlines()) == 2  # the error and its hint
+
+
+def test_demo_duration_cap_is_consistent():
+    from symoro_gen.demo import check_duration, demo_memory
+    from symoro_gen.errors import OptionError
+
+    avail = int(demo_memory(100.0))  # room for exactly 100 s
+    check_duration(100.0, available=avail)
+    with pytest.raises(OptionError, match=r"^--duration 200: .* use --duration (\d+) or less$") as info:
+        check_duration(200.0, available=avail)
+    longest = int(str(info.value).rsplit("--duration ", 1)[1].split()[0])
+    check_duration(float(longest), available=avail)  # the advice fits
+    assert 99 <= longest <= 100
+    for bad in (0.0, -1.0, float("inf"), float("nan")):
+        with pytest.raises(OptionError, match="--duration"):
+            check_duration(bad, available=avail)
