@@ -20,6 +20,7 @@ from .errors import (
     DataFileError,
     IdentificationError,
     ModelError,
+    OptionError,
     RobotFileError,
     ShapeError,
     SymoroError,
@@ -35,10 +36,6 @@ EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141  # as a shell reports a process killed by SIGPIPE
-
-
-class OptionError(SymoroError, ValueError):
-    """A command-line option has a value the command cannot use."""
 
 
 def generation_steps(robot) -> int:

@@ -11,10 +11,12 @@ on simulated recordings whose truth is known (LWR4 paper, Sec. III-IV).
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from .description.inertia import standard_from_com
-from .errors import ModelError
+from .errors import ModelError, OptionError
 from .identification import sensor_gains
 from .identification.assemble import build_observation
 from .loader import model_for
@@ -23,6 +25,63 @@ from .simulate.trajectories import fourier_trajectory
 
 TRUE_GAINS = np.array([1.02, 1.01, 1.02, 1.02, 1.02, 1.05, 0.99])  # Table II of the LWR4 paper
 PAYLOAD_MASS = 4.6136
+DT = 0.005  # 200 Hz, as the LWR4 recorder
+N_RECORDINGS = 3
+#: working memory of the demo per sample and joint of one recording [bytes]: measured 590 B for the
+#: three recordings together (peak RSS of ``demo --duration 10`` and ``--duration 60``), i.e. about
+#: 25 float64 per sample-joint-recording; 32 float64 leave a margin.
+BYTES_PER_SAMPLE_JOINT = 32 * 8
+
+
+def available_memory() -> int | None:
+    """Memory the demo may use [bytes]: ``MemAvailable`` of ``/proc/meminfo`` (Linux), else the
+    physical memory (``os.sysconf``), else None (unknown: no check)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def demo_memory(duration: float, n_joints: int = 7) -> float:
+    """Estimated working memory [bytes] of the demo for ``duration`` seconds per recording:
+    samples x joints x recordings x :data:`BYTES_PER_SAMPLE_JOINT`."""
+    return (duration / DT + 1) * n_joints * N_RECORDINGS * BYTES_PER_SAMPLE_JOINT
+
+
+def check_duration(duration: float, n_joints: int = 7, available: int | None = None) -> None:
+    """Refuse, before any work, a ``--duration`` whose recordings would not fit in memory.
+
+    Raises
+    ------
+    OptionError
+        ``--duration D: ...`` with the estimated need, the memory available and the longest
+        duration that fits (one line).
+    """
+    if not (np.isfinite(duration) and duration > 0):
+        raise OptionError(f"--duration {duration:g}: must be a positive number of seconds")
+    available = available_memory() if available is None else available
+    if available is None:
+        return
+    need = demo_memory(duration, n_joints)
+    if need > available:
+        longest = max(int(available / demo_memory(1.0, n_joints)), 0)
+        raise OptionError(f"--duration {duration:g}: the demo's {N_RECORDINGS} recordings at {1 / DT:.0f} Hz would need "
+                          f"about {_size(need)} of memory, {_size(available)} is available; use --duration {longest} "
+                          "or less")
+
+
+def _size(b: float) -> str:
+    for unit, k in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
+        if b >= k:
+            return f"{b / k:.3g} {unit}"
+    return f"{b / 2**10:.3g} KiB"
 
 
 def demo_payload() -> np.ndarray:
@@ -34,6 +93,7 @@ def demo_payload() -> np.ndarray:
 
 
 def run_demo(args=None) -> int:
+    check_duration(getattr(args, "duration", 20.0))  # before any work
     seed = getattr(args, "seed", 0)
     duration = getattr(args, "duration", 20.0)
     quiet = getattr(args, "quiet", False)
@@ -48,7 +108,7 @@ def run_demo(args=None) -> int:
         if n.startswith("OFF"):
             chi[k] = rng.uniform(-0.5, 0.5)
     pay = demo_payload()
-    dt = 0.005  # 200 Hz, as the LWR4 recorder
+    dt = DT
     say = (lambda *a: None) if quiet else print
     say(f"symoro_gen demo: {robot.name}, {len(model.BASE_NAMES)} base parameters + payload {model.PAYLOAD_NAMES[-1]}; "
         f"backend {getattr(model, 'BACKEND', '?')}")

@@ -71,5 +71,13 @@ class IdentificationError(SymoroError, ValueError):
     """An identification problem cannot be solved as posed."""
 
 
+class OptionError(SymoroError, ValueError):
+    """A command-line option has a value the command cannot use (the message starts with the option)."""
+
+
 class ShapeError(SymoroError, TypeError):
     """An array argument has the wrong shape or type."""
+
+
+class RobotFileWarning(UserWarning):
+    """A robot file is valid but something in it is probably not what was meant (names file and field)."""

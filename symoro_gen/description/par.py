@@ -655,6 +655,8 @@ def _snap_angle(e: sp.Expr, tol: float, q: sp.Symbol | None) -> sp.Expr:
     if not (rest.is_number and rest.has(sp.Float)):
         return e
     v = float(rest)
+    if not math.isfinite(v / (math.pi / 12)):
+        return e  # far outside any multiple of pi/12 that could be meant (and round() would overflow)
     k = round(v / (math.pi / 12))
     if abs(v - k * math.pi / 12) <= tol:
         return head + sp.pi * sp.Rational(k, 12)

@@ -9,8 +9,10 @@ import hashlib
 import math
 import os
 import re
+import warnings
 from pathlib import Path
 
+import numpy as np
 import sympy as sp
 
 try:
@@ -18,9 +20,10 @@ try:
 except ModuleNotFoundError:  # pragma: no cover - python < 3.11
     import tomli as tomllib  # type: ignore
 
-from ..errors import Problem, RobotFileError
+from ..errors import Problem, RobotFileError, RobotFileWarning
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, PARAM_KINDS
 from .expr import ExprError, parse_expression
+from .inertia import check_physical_consistency
 from .model import FIXED, PRISMATIC, REVOLUTE, DriveChain, MdhRow, RobotDescription, q_symbol
 
 TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain"}
@@ -55,8 +58,7 @@ def resolve_robot_path(name_or_path: str | os.PathLike) -> Path:
 
 def load_robot(name_or_path: str | os.PathLike) -> RobotDescription:
     """Parse a robot given by name (``robots/<name>.toml``) or path."""
-    path = resolve_robot_path(name_or_path)
-    return parse_robot_text(path.read_bytes().decode("utf-8"), file=str(path))
+    return parse_robot(resolve_robot_path(name_or_path))
 
 
 def parse_robot(path: str | os.PathLike) -> RobotDescription:
@@ -67,7 +69,10 @@ def parse_robot(path: str | os.PathLike) -> RobotDescription:
     except FileNotFoundError:
         raise RobotFileError([Problem(str(p), "", "", "file not found")]) from None
     except UnicodeDecodeError as exc:
-        raise RobotFileError([Problem(str(p), "", "", f"not UTF-8 text ({exc.reason})")]) from None
+        raise RobotFileError([Problem(str(p), f"byte {exc.start}", "", f"not UTF-8 text ({exc.reason}); "
+                                      "a robot file is TOML text")]) from None
+    except OSError as exc:  # a folder, no permission...
+        raise RobotFileError([Problem(str(p), "", "", f"cannot read: {exc.strerror or exc}")]) from None
     return parse_robot_text(text, file=str(p))
 
 
@@ -82,6 +87,9 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
 
     def bad(where: str, fld: str, msg: str) -> None:
         probs.append(Problem(file, where, fld, msg))
+
+    def probs_at(where: str, fld: str) -> bool:
+        return any(p.where == where and p.field == fld for p in probs)
 
     try:
         doc = tomllib.loads(text)
@@ -108,25 +116,35 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         gravity = [0.0, 0.0, -9.81]
 
     default_drive = doc.get("drive", list(DRIVE_KINDS))
-    default_drive = _check_drive(default_drive, "top level", bad) or ()
+    default_drive = _check_drive(default_drive, "top level", bad)
+    if default_drive is None:  # reported; all four kinds, so that [nominal] drive terms are not reported again
+        default_drive = DRIVE_KINDS
 
     # geometric constants
     values_raw = doc.get("values", {})
     values: dict[str, float] = {}
+    reported_values: set[str] = set()  # symbols whose [values] entry is already reported
+    values_reported = False
     if not isinstance(values_raw, dict):
-        bad("[values]", "", "must be a table of NAME = number")
+        bad("top level", "values", "must be a table of NAME = number")
+        values_raw, values_reported = {}, True  # its symbols are not reported again one by one
     else:
         for k, v in values_raw.items():
             if k in _RESERVED or not _NAME_RE.match(k):
                 bad("[values]", k, "reserved or invalid symbol name")
+                reported_values.add(k)
             elif not _is_number(v):
                 bad("[values]", k, f"value must be a finite number, got {v!r}")
+                reported_values.add(k)
             else:
                 values[k] = float(v)
 
     frames = doc.get("frames")
     rows: list[MdhRow] = []
     used_symbols: dict[str, str] = {}
+    # Fields are checked in dependency order (sigma before mu, drive and the joint variable); a
+    # field already reported stops the checks that depend on it, so one bad field gives one line.
+    bad_sigma: set[int] = set()
     if not isinstance(frames, list) or not frames:
         bad("top level", "frames", "missing: the MDH table must be given as [[frames]] entries")
         frames = []
@@ -145,9 +163,12 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             bad(where, "j", f"frames must be numbered 1, 2, ... in order; entry {idx} has j = {j!r}")
             j = idx
         sigma = fr.get("sigma", 0)
-        if sigma not in (0, 1, 2) or isinstance(sigma, bool):
+        sigma_ok = "sigma" in fr and sigma in (0, 1, 2) and not isinstance(sigma, bool)
+        if "sigma" in fr and not sigma_ok:
             bad(where, "sigma", f"must be 0 (revolute), 1 (prismatic) or 2 (fixed), got {sigma!r}")
+        if not sigma_ok:
             sigma = 0
+            bad_sigma.add(j)
         ant = fr.get("ant", j - 1)
         if not (isinstance(ant, int) and not isinstance(ant, bool)):
             bad(where, "ant", f"must be an integer frame number, got {ant!r}")
@@ -160,14 +181,15 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         if mu not in (0, 1) or isinstance(mu, bool):
             bad(where, "mu", f"must be 0 (passive) or 1 (actuated), got {mu!r}")
             mu = 1
-        if sigma == FIXED and mu == 1:
+        if sigma == FIXED and mu == 1 and "mu" in fr:
             bad(where, "mu", "a fixed frame (sigma = 2) cannot be actuated")
         drive = fr.get("drive", None)
         if drive is None:
             drive = tuple(default_drive) if (sigma != FIXED and mu == 1) else ()
         else:
-            drive = _check_drive(drive, where, bad) or ()
-            if sigma == FIXED and drive:
+            checked = _check_drive(drive, where, bad)
+            drive = checked if checked is not None else (tuple(default_drive) if sigma != FIXED else ())
+            if sigma == FIXED and checked:
                 bad(where, "drive", "a fixed frame has no drive chain")
         q = q_symbol(j)
         syms = {k: sp.Symbol(k, real=True) for k in values_raw if isinstance(k, str)} if isinstance(values_raw, dict) else {}
@@ -178,21 +200,22 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             try:
                 e = parse_expression(raw, syms)
             except ExprError as exc:
-                bad(where, k, str(exc))
+                if not (values_reported and str(exc).startswith("unknown name")):  # [values] already reported
+                    bad(where, k, str(exc))
                 e = sp.Integer(0)
             for s in e.free_symbols:
                 if s != q:
                     used_symbols.setdefault(s.name, where)
             ex[k] = e
-        # joint variable placement
-        var_field = {REVOLUTE: "theta", PRISMATIC: "r"}.get(sigma)
-        for k, e in ex.items():
+        # joint variable placement (depends on sigma: not checked when sigma is missing or bad)
+        var_field = {REVOLUTE: "theta", PRISMATIC: "r"}.get(sigma) if sigma_ok else None
+        for k, e in ex.items() if sigma_ok else ():
             if q in e.free_symbols and k != var_field:
                 if sigma == FIXED:
                     bad(where, k, "a fixed frame (sigma = 2) has no joint variable q")
                 else:
                     bad(where, k, f"joint variable q may only appear in {var_field} for sigma = {sigma}")
-        if var_field and var_field not in missing:
+        if var_field and var_field not in missing and not probs_at(where, var_field):
             e = ex[var_field]
             if q not in e.free_symbols:
                 bad(where, var_field, f"must contain the joint variable q (e.g. \"q\" or \"q - pi/2\"), got {fr.get(var_field)!r}")
@@ -201,7 +224,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         rows.append(MdhRow(j=j, ant=ant, sigma=sigma, mu=mu, drive=tuple(drive), **ex))
 
     for s, where in sorted(used_symbols.items()):
-        if s not in values:
+        if s not in values and s not in reported_values and not values_reported:
             bad(where, "values", f"symbol {s!r} has no numeric value (add it under [values])")
 
     # every geometric field must be finite with the [values] given (d = "1/L3" with L3 = 0 is not)
@@ -217,11 +240,13 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     # moving frames first, fixed ones after
     seen_fixed = None
     for r in rows:
+        if r.j in bad_sigma:
+            continue
         if r.sigma == FIXED:
             seen_fixed = seen_fixed or r.j
         elif seen_fixed is not None:
             bad(f"frame {r.j}", "sigma", f"moving frames must come before fixed ones (frame {seen_fixed} is fixed)")
-    if rows and not any(r.is_moving for r in rows):
+    if rows and not bad_sigma and not any(r.is_moving for r in rows):
         bad("top level", "frames", "the robot has no moving joint")
 
     payload = doc.get("payload")
@@ -233,6 +258,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         elif not (1 <= payload <= len(rows)):
             bad("top level", "payload", f"payload frame {payload} does not exist (frames 1..{len(rows)})")
             payload = None
+        elif payload in bad_sigma:
+            payload = None  # its sigma is already reported
         elif rows[payload - 1].sigma != FIXED:
             bad(f"frame {payload}", "sigma", "the payload frame must be fixed (sigma = 2)")
             payload = None
@@ -252,8 +279,12 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             if payload is not None:
                 allowed |= {f"{k}{payload}" for k in INERTIAL_KINDS}
             rejected_payload = set()
-            if payload is None and isinstance(payload_given, int) and not isinstance(payload_given, bool):
-                rejected_payload = {f"{k}{payload_given}" for k in INERTIAL_KINDS}
+            if payload is None and payload_given is not None:
+                # the payload is already reported: its nominal values (on the frame it names, or on any
+                # fixed frame when it names none) are not reported again
+                frames_ = {payload_given} if isinstance(payload_given, int) and not isinstance(payload_given, bool) \
+                    else {r.j for r in rows if r.sigma == FIXED or r.j in bad_sigma}
+                rejected_payload = {f"{k}{f_}" for k in INERTIAL_KINDS for f_ in frames_}
             for k, v in raw.items():
                 if k in rejected_payload:
                     continue  # the payload entry is already reported
@@ -261,8 +292,11 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
                     bad("[nominal]", k, "not a standard parameter of this robot")
                 elif not _is_number(v):
                     bad("[nominal]", k, f"value must be a number, got {v!r}")
+                elif v < 0 and k.rstrip("0123456789") in _NON_NEGATIVE:
+                    bad("[nominal]", k, f"{_NON_NEGATIVE[k.rstrip('0123456789')]} cannot be negative, got {v!r}")
                 else:
                     nominal[k] = float(v)
+            _warn_inconsistent_inertia(nominal, rows, payload, file)
 
     chain = None
     if "drive_chain" in doc:
@@ -284,6 +318,38 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     )
 
 
+_NON_NEGATIVE = {"M": "a mass", "IA": "a rotor inertia", "FV": "a viscous friction coefficient",
+                 "FS": "a Coulomb friction coefficient"}
+
+
+def _warn_inconsistent_inertia(nominal: dict, rows, payload, file: str) -> None:
+    """Warn (:class:`RobotFileWarning`) about nominal links that are not a rigid body.
+
+    Checked for every link whose nominal values give its mass and the three moments ``XX``,
+    ``YY``, ``ZZ`` (a partial prior, e.g. ``ZZ1`` alone, cannot be judged; missing products and
+    first moments are 0), with a positive mass and some inertia (a point mass is accepted): the
+    pseudo-inertia must be positive
+    definite (Wensing, Kim & Slotine, IEEE RA-L 2017; :func:`~.inertia.check_physical_consistency`).
+    A warning rather than an error: nominal values are priors and start values, and the
+    identification itself does not need them to be consistent.
+    """
+    links = [r.j for r in rows if r.is_moving] + ([payload] if payload is not None else [])
+    for j in links:
+        if not all(f"{k}{j}" in nominal for k in ("M", "XX", "YY", "ZZ")):
+            continue
+        p10 = np.array([nominal.get(f"{k}{j}", 0.0) for k in INERTIAL_KINDS])
+        if not (p10[9] > 0 and np.any(p10[:6] != 0)):
+            continue
+        try:
+            with np.errstate(all="ignore"):
+                reasons = check_physical_consistency(p10, tol=1e-9)
+        except np.linalg.LinAlgError:  # overflow of values near the float range
+            reasons = ["values too large to check"]
+        if reasons:
+            warnings.warn(f"{file}, [nominal], fields 'XX{j}'..'M{j}': the nominal values of link {j} are not "
+                          f"those of a rigid body: {'; '.join(reasons)}", RobotFileWarning, stacklevel=3)
+
+
 def _check_drive(drive, where, bad):
     if not isinstance(drive, list) or not all(isinstance(x, str) for x in drive):
         bad(where, "drive", f"must be a list among {list(DRIVE_KINDS)}, got {drive!r}")
@@ -292,7 +358,11 @@ def _check_drive(drive, where, bad):
     if unknown:
         bad(where, "drive", f"unknown drive-chain parameter(s) {unknown}; allowed {list(DRIVE_KINDS)}")
         return None
-    up = {x.upper() for x in drive}
+    up = [x.upper() for x in drive]
+    dup = sorted({x for x in up if up.count(x) > 1})
+    if dup:
+        bad(where, "drive", f"drive-chain parameter(s) listed twice: {dup}")
+        return None
     return tuple(k for k in DRIVE_KINDS if k in up)
 
 

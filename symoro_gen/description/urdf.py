@@ -25,7 +25,20 @@ side branches included) are summed and converted to standard parameters in frame
 origin (``XXj .. ZZj`` inertia about the origin, ``MXj MYj MZj = m c``, ``Mj``) and written
 under ``[nominal]``, with ``FVj`` / ``FSj`` from the joint's ``<dynamics damping friction>``.
 Links fixed to the base are ground and carry nothing. Moving joints off the chain (and
-beyond the tip) are left out with a warning; ``<mimic>`` tags are ignored.
+beyond the tip) are left out with a warning.
+
+Two decisions (issue 15), stated to the user:
+
+* a ``<mimic>`` joint on the chain is an error naming it. It is a kinematic constraint
+  (``q_b = multiplier q_a + offset``: one degree of freedom less), which the open-chain model
+  cannot express, and the ``[drive_chain]`` coupling cannot either (it maps n motors to n joints
+  through an invertible matrix). Choose a chain that stops before it (``--tip``), or delete the
+  ``<mimic>`` tag to identify the joint as an independent one. Mimic joints off the chain are
+  left out like any other moving joint there.
+* a link carried by a moving joint without ``<inertial>`` gets a warning naming it: its mass
+  and inertia are unknown, not zero. When no link rigidly attached to MDH link j has an
+  ``<inertial>``, link j gets no inertial ``[nominal]`` entries at all (unknown), rather than
+  a zero-mass body.
 
 Public functions: :func:`import_urdf`, :func:`import_urdf_text`, :func:`parse_urdf`.
 """
@@ -85,6 +98,7 @@ class UrdfJoint:
     axis: np.ndarray
     damping: float | None = None
     friction: float | None = None
+    mimic: str | None = None  # the joint this one mimics (<mimic joint=...>)
 
     @property
     def is_moving(self) -> bool:
@@ -259,12 +273,13 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
             parent_of[child] = name
         axis = np.array(rd.snapped(rd.floats(el.find("axis"), "xyz", 3, where, "axis", default=(1.0, 0.0, 0.0)), 1.0))
         if typ in MOVING_TYPES:
-            nrm = float(np.linalg.norm(axis))
+            big = float(np.abs(axis).max())  # scaled first: the norm of (0, 0, 1e308) overflows
+            nrm = big * float(np.linalg.norm(axis / big)) if big > 0 else 0.0
             if nrm < 1e-12:
                 rd.bad(where, "axis", "zero axis")
                 axis = np.array([1.0, 0.0, 0.0])
             else:
-                axis = axis / nrm
+                axis = (axis / big) / np.linalg.norm(axis / big)
         damping = friction = None
         de = el.find("dynamics")
         if de is not None:
@@ -272,7 +287,14 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
                 damping = rd.floats(de, "damping", 1, where, "dynamics/damping")[0]
             if de.get("friction") is not None:
                 friction = rd.floats(de, "friction", 1, where, "dynamics/friction")[0]
-        joints[name] = UrdfJoint(name, typ, parent or "", child or "", rd.origin(el, where), axis, damping, friction)
+        mimic = None
+        mi = el.find("mimic")
+        if mi is not None:
+            mimic = mi.get("joint") or ""
+            if not mimic:
+                rd.bad(where, "mimic", "missing <mimic joint=...>")
+        joints[name] = UrdfJoint(name, typ, parent or "", child or "", rd.origin(el, where), axis, damping, friction,
+                                 mimic=mimic)
     if not links:
         rd.bad("<robot>", "link", "no link defined")
     if rd.problems:
@@ -345,6 +367,13 @@ def _select_chain(model: UrdfModel, base: str | None, tip: str | None) -> tuple[
     bad = [jt for jt in chain if jt.type in ("floating", "planar")]
     if bad:
         raise RobotFileError([Problem(f, f"joint {jt.name}", "type", f"{jt.type} joints cannot be part of an MDH chain") for jt in bad])
+    mimics = [jt for jt in chain if jt.is_moving and jt.mimic is not None]
+    if mimics:
+        raise RobotFileError([Problem(
+            f, f"joint {jt.name}", "mimic",
+            f"mimics joint {jt.mimic!r}: a mimic joint is a constraint between joints, which an open-chain model "
+            "(and its drive chain) cannot express; end the chain before it with --tip, or delete the <mimic> tag "
+            "to identify it as an independent joint") for jt in mimics])
     if not any(jt.is_moving for jt in chain):
         raise RobotFileError([Problem(f, f"chain {base} -> {tip}", "", "no moving joint between base and tip")])
     return base, chain
@@ -632,6 +661,14 @@ def import_urdf_text(
     # standard parameters of each moving link, in its MDH frame at the origin
     inertial = {i: np.zeros(10) for i in range(1, n + 1)}
     J = {i: np.zeros((3, 3)) for i in range(1, n + 1)}
+    no_inertial = sorted(lk for lk, i in owner.items() if i is not None and model.links[lk].inertial is None)
+    known = {i for lk, i in owner.items() if i is not None and model.links[lk].inertial is not None}
+    unknown_links = [i for i in range(1, n + 1) if i not in known]
+    if no_inertial:
+        what = (f"MDH link(s) {', '.join(map(str, unknown_links))} get no inertial [nominal] values (unknown)"
+                if unknown_links else "they count as massless in the [nominal] values of their MDH link")
+        warnings.warn(f"{f}: link(s) {', '.join(no_inertial)} carried by a moving joint have no <inertial>: "
+                      f"their mass and inertia are unknown; {what}", UserWarning, stacklevel=2)
     for lk, i in owner.items():
         ine = model.links[lk].inertial
         if i is None or ine is None:
@@ -699,7 +736,7 @@ def import_urdf_text(
         else:
             lines += [f'theta = "{_angle_str(theta, tol)}"', f"r = {length(r, f'RL{j}')}"]
         out_frames.append("\n".join(lines))
-        if jt is not None:
+        if jt is not None and j not in unknown_links:
             nominal += [(f"{kind}{j}", v) for kind, v in zip(INERTIAL_KINDS, inertial[j])]
             if jt.damping is not None:
                 nominal.append((f"FV{j}", jt.damping))
@@ -712,6 +749,10 @@ def import_urdf_text(
     ]
     if ignored:
         head.append("# Left out (moving joints off the chain, and what they carry): " + ", ".join(sorted(ignored)) + ".")
+    if no_inertial:
+        head.append("# Links without <inertial> (mass and inertia unknown): " + ", ".join(no_inertial) + "."
+                    + (f" No nominal inertial values for MDH link(s) {', '.join(map(str, unknown_links))}."
+                       if unknown_links else ""))
     if tip_fixed:
         head.append(f"# Frame {n + 1} is the tip link {tip} (fixed); its inertia is included in link {n}. "
                     f"Set payload = {n + 1} to identify a payload there.")

@@ -271,6 +271,8 @@ def random_robot(draw):
     if payload:
         names += [f"MZ{payload}", f"M{payload}"]
     nominal = draw(st.dictionaries(st.sampled_from(names), st.sampled_from([0.0, 1.5, -0.25]), max_size=4))
+    # masses and friction coefficients are non-negative (a robot file rejects negative ones)
+    nominal = {k: (abs(v) if k[:1] in "MF" and not k.startswith("MZ") else v) for k, v in nominal.items()}
     robot = parse_robot_text(head)
     allowed = set(robot.standard_names) | set(robot.payload_names)
     nominal = {k: v for k, v in nominal.items() if k in allowed}
@@ -462,3 +464,13 @@ def test_cli_import_par(tmp_path, cli):
     bad.write_text(BASE.replace("Type = 1", "Type = 2"))
     err = cli("import-par", bad, "-o", tmp_path / "bad.toml", rc=2).err
     assert "bad.par" in err and "line 7" in err and "Type" in err and not (tmp_path / "bad.toml").exists()
+
+
+def test_huge_float_angle_is_kept():
+    # found by tests/fuzz: snapping gamma = 1e308 to a multiple of pi/12 overflowed round()
+    from symoro_gen.description import load_robot as _load
+    from symoro_gen.description.par import export_par, import_par_text
+
+    text = export_par(_load("scara")).replace("gamma = {0,0,0,0}", "gamma = {1e308,0,0,0}")
+    robot = parse_robot_text(import_par_text(text))
+    assert float(robot.row(1).gamma) == 1e308

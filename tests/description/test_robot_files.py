@@ -226,7 +226,8 @@ def test_symbol_without_value(tmp_path):
 def test_value_not_a_number(tmp_path):
     err, file = errors_of(GOOD.replace("L2 = 0.3", 'L2 = "short"'), tmp_path)
     assert_problem(err, file, "[values]", "L2", "number")
-    assert_problem(err, file, "frame 2", "values", "'L2' has no numeric value")
+    # the symbol's uses are not reported a second time as "no numeric value" (one bad field, one line)
+    assert [(p.where, p.field) for p in err.problems] == [("[values]", "L2")]
 
 
 def test_reserved_value_name(tmp_path):
@@ -434,3 +435,107 @@ def test_defaults():
     assert all(row.drive == ("IA", "FV", "FS", "OFF") for row in r.joints)
     assert r.row(4).drive == () and r.row(4).mu == 0
     assert r.row(1).gamma == 0 and r.row(1).b == 0 and r.row(1).mu == 1
+
+
+# ---------------------------------------------------------------- one bad field, one line (issue 15)
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", '"short"', "true", "[1, 2]"])
+def test_bad_value_reported_once(tmp_path, value):
+    err, file = errors_of(GOOD.replace("L2 = 0.3", f"L2 = {value}"), tmp_path)
+    assert [(p.where, p.field) for p in err.problems] == [("[values]", "L2")], str(err)
+    assert len(str(err).splitlines()) == 2
+
+
+@pytest.mark.parametrize("j, sigma", [(1, "3"), (2, "-1"), (3, "3"), (3, "true"), (4, "7"), (2, '"1"')])
+def test_bad_sigma_reported_once(tmp_path, j, sigma):
+    # frame 3 is prismatic (q in r) and frame 4 fixed: a default sigma would add theta/r/order complaints
+    old = "sigma = 1" if j == 3 else ("sigma = 2" if j == 4 else "sigma = 0")
+    err, file = errors_of(edit_frame(GOOD, j, old, f"sigma = {sigma}"), tmp_path)
+    assert [(p.where, p.field) for p in err.problems] == [(f"frame {j}", "sigma")], str(err)
+
+
+def test_missing_sigma_reported_once(tmp_path):
+    s, e = frame_block(GOOD, 3)
+    block = GOOD[s:e].replace("sigma = 1\n", "")
+    err, file = errors_of(GOOD[:s] + block + GOOD[e:], tmp_path)
+    assert [(p.where, p.field) for p in err.problems] == [("frame 3", "sigma")], str(err)
+
+
+def test_bad_theta_reported_once(tmp_path):
+    err, file = errors_of(edit_frame(GOOD, 2, 'theta = "q - pi/2"', 'theta = "q - pi/"'), tmp_path)
+    assert [(p.where, p.field) for p in err.problems] == [("frame 2", "theta")], str(err)
+
+
+@pytest.mark.parametrize("drive", ['["FV", "FV"]', '["IA", "fv", "FV"]'])
+def test_duplicate_drive_terms(tmp_path, drive):
+    err, file = errors_of(GOOD.replace('drive = ["IA", "FV", "FS", "OFF"]', f"drive = {drive}"), tmp_path)
+    assert_problem(err, file, "top level", "drive", "listed twice", "FV")
+    err, file = errors_of(edit_frame(GOOD, 2, "r = 0", f"r = 0\ndrive = {drive}"), tmp_path)
+    assert_problem(err, file, "frame 2", "drive", "listed twice")
+    assert len(err.problems) == 1
+
+
+@pytest.mark.parametrize("key, words", [("M4", ["mass", "negative"]), ("M2", ["mass", "negative"]),
+                                        ("IA1", ["rotor inertia"]), ("FV3", ["viscous"]), ("FS2", ["coulomb"])])
+def test_negative_nominal(tmp_path, key, words):
+    err, file = errors_of(GOOD.replace("M4 = 1.5", f"M4 = 1.5\n{key} = -0.5" if key != "M4" else "M4 = -0.5"), tmp_path)
+    assert_problem(err, file, "[nominal]", key, *words)
+    assert len(err.problems) == 1
+
+
+def test_negative_offset_is_fine():
+    robot = parse_robot_text(GOOD.replace("M4 = 1.5", "M4 = 1.5\nOFF2 = -0.5"))
+    assert robot.nominal["OFF2"] == -0.5
+
+
+def test_inconsistent_nominal_inertia_warns(tmp_path):
+    from symoro_gen.errors import RobotFileWarning
+
+    # triangle inequality violated: ZZ > XX + YY about the centre of mass
+    text = GOOD.replace("M4 = 1.5", "M4 = 1.5\nM2 = 2.0\nXX2 = 0.01\nYY2 = 0.01\nZZ2 = 0.05")
+    path = tmp_path / "warn.toml"
+    path.write_text(text)
+    with pytest.warns(RobotFileWarning) as rec:
+        robot = parse_robot(path)
+    assert robot.nominal["ZZ2"] == 0.05  # kept: a warning, not an error
+    msgs = [str(w.message) for w in rec]
+    assert len(msgs) == 1 and str(path) in msgs[0] and "'M2'" in msgs[0] and "triangle" in msgs[0]
+
+
+def test_consistent_nominal_does_not_warn(recwarn):
+    from symoro_gen.errors import RobotFileWarning
+
+    # a rigid body, a point mass and a mass alone are all accepted silently
+    text = GOOD.replace("M4 = 1.5", "M4 = 1.5\nM2 = 2.0\nXX2 = 0.02\nYY2 = 0.03\nZZ2 = 0.04\nMX2 = 0.1\n"
+                                    "M3 = 1.0\nMX3 = 0.2\nXX3 = 0.0\n")
+    parse_robot_text(text)
+    for name in ("lwr4", "rx90", "scara", "tx40"):
+        load_robot(name)
+    assert not [w for w in recwarn if issubclass(w.category, RobotFileWarning)]
+
+
+def test_binary_robot_file_names_file(tmp_path):
+    path = tmp_path / "robots" / "blob.toml"
+    path.parent.mkdir()
+    path.write_bytes(bytes(range(256)) * 4)
+    for load in (parse_robot, load_robot):
+        with pytest.raises(RobotFileError) as info:
+            load(path)
+        assert len(info.value.problems) == 1
+        p = info.value.problems[0]
+        assert p.file == str(path) and "not UTF-8" in p.message and "byte 128" in p.where
+    with pytest.raises(RobotFileError, match="cannot read"):
+        parse_robot(tmp_path / "robots")
+
+
+@pytest.mark.parametrize("text_edit", [
+    lambda t: t.replace('drive = ["IA", "FV", "FS", "OFF"]', "drive = true"),
+    lambda t: edit_frame(t, 2, "r = 0", "r = 0\ndrive = 3"),
+    lambda t: t.replace("payload = 4", "payload = true"),
+    lambda t: t.replace("[values]\nL2 = 0.3", "values = 3"),
+])
+def test_bad_field_does_not_cascade(tmp_path, text_edit):
+    # found by tests/fuzz: a bad drive list rejected every [nominal] drive term, a bad payload its
+    # nominal values, a [values] that is not a table every symbol
+    text = text_edit(GOOD.replace("M4 = 1.5", "M4 = 1.5\nFV2 = 0.3\nIA1 = 0.01"))
+    err, file = errors_of(text, tmp_path)
+    assert len(err.problems) == 1, str(err)

@@ -350,3 +350,99 @@ def test_link_with_two_parents_is_not_a_tree():
     )
     with pytest.raises(RobotFileError, match="joint j2, field 'child': link 'c' already has parent joint 'j1'"):
         parse_urdf_text(text, file="two.urdf")
+
+
+# ---- decisions of issue 15: <mimic> joints and links without <inertial> ---------------------
+def _two_joint_urdf(rng, *, mimic: str | None = None, inertial2: bool = True, tool_inertial: bool = True,
+                    finger_mimic: bool = False) -> str:
+    """base -> joint1 -> link1 -> joint2 -> link2 -> (fixed) tool, optionally a mimic on joint2 and a
+    mimicking finger off the chain on link1."""
+    parts = ['<?xml version="1.0"?>\n<robot name="gripper-arm">\n', _link("base", rng), _link("link1", rng),
+             _link("link2", rng, inertial=inertial2), _link("tool", rng, inertial=tool_inertial)]
+    for k, (parent, child) in enumerate((("base", "link1"), ("link1", "link2")), start=1):
+        body = f'  <joint name="joint{k}" type="revolute">\n' + _origin(rng, False) + _axis(rng, False)
+        body += f'    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
+        body += '    <limit effort="1" lower="-1" upper="1" velocity="1"/>\n'
+        if k == 2 and mimic:
+            body += f'    <mimic joint="{mimic}" multiplier="-1" offset="0"/>\n'
+        parts.append(body + "  </joint>\n")
+    parts.append('  <joint name="tool_joint" type="fixed">\n' + _origin(rng, False)
+                 + '    <parent link="link2"/>\n    <child link="tool"/>\n  </joint>\n')
+    if finger_mimic:
+        parts.append(_link("finger", rng))
+        parts.append('  <joint name="finger_joint" type="revolute">\n' + _origin(rng, False) + _axis(rng, False)
+                     + '    <parent link="link1"/>\n    <child link="finger"/>\n'
+                     + '    <limit effort="1" lower="-1" upper="1" velocity="1"/>\n'
+                     + '    <mimic joint="joint1"/>\n  </joint>\n')
+    return "".join(parts) + "</robot>\n"
+
+
+def test_mimic_joint_on_the_chain_is_an_error_naming_it():
+    urdf = _two_joint_urdf(np.random.default_rng(11), mimic="joint1")
+    with pytest.raises(RobotFileError) as info:
+        import_urdf_text(urdf, file="arm.urdf", tip="tool")
+    (p,) = info.value.problems
+    assert (p.file, p.where, p.field) == ("arm.urdf", "joint joint2", "mimic")
+    assert "'joint1'" in p.message and "--tip" in p.message and "delete the <mimic> tag" in p.message
+    # the suggestions work: a chain that stops before it, or the tag removed
+    assert parse_robot_text(import_urdf_text(urdf, tip="link1")).n_joints == 1
+    no_tag = re.sub(r"\s*<mimic[^>]*/>", "", urdf)
+    _check_against_pinocchio(import_urdf_text(no_tag), no_tag, np.random.default_rng(1))
+
+
+def test_mimic_tag_without_joint_is_reported():
+    urdf = _two_joint_urdf(np.random.default_rng(11), mimic="X")
+    with pytest.raises(RobotFileError) as info:
+        parse_urdf_text(urdf.replace('joint="X"', ""), file="arm.urdf")
+    assert [(p.where, p.field) for p in info.value.problems] == [("joint joint2", "mimic")]
+
+
+def test_mimic_joint_off_the_chain_is_left_out_with_a_warning():
+    urdf = _two_joint_urdf(np.random.default_rng(12), finger_mimic=True)
+    with pytest.warns(UserWarning, match="finger_joint"):
+        toml = import_urdf_text(urdf, tip="tool")
+    assert parse_robot_text(toml).n_joints == 2
+
+
+def test_link_without_inertial_warns_and_counts_as_massless():
+    rng = np.random.default_rng(13)
+    urdf = _two_joint_urdf(rng, tool_inertial=False)
+    with pytest.warns(UserWarning, match=r"arm\.urdf: link\(s\) tool carried by a moving joint have no <inertial>"):
+        toml = import_urdf_text(urdf, file="arm.urdf")
+    assert "# Links without <inertial> (mass and inertia unknown): tool." in toml
+    robot = _check_against_pinocchio(toml, urdf, rng)  # link 2's own inertial is still there
+    assert robot.nominal["M2"] > 0
+
+
+def test_moving_link_without_any_inertial_gets_no_nominal_values():
+    rng = np.random.default_rng(14)
+    urdf = _two_joint_urdf(rng, inertial2=False, tool_inertial=False)
+    with pytest.warns(UserWarning, match=r"link\(s\) link2, tool .* MDH link\(s\) 2 get no inertial \[nominal\]"):
+        toml = import_urdf_text(urdf, file="arm.urdf")
+    robot = parse_robot_text(toml)
+    assert not any(k.endswith("2") and k.rstrip("0123456789") in ("XX", "M", "MX", "ZZ") for k in robot.nominal)
+    assert robot.nominal["M1"] > 0
+    # unknown = absent: zero in nominal_vector, as Pinocchio's massless link (joint 2 then carries no torque)
+    q, dq, ddq = _states(rng, 2)
+    ref = pinocchio_urdf_torque(pin.buildModelFromXML(urdf), q, dq, ddq)
+    np.testing.assert_allclose(inverse_dynamics(robot, q, dq, ddq, np.array(robot.nominal_vector())), ref,
+                               rtol=1e-9, atol=1e-12)
+
+
+def test_ground_links_without_inertial_are_silent(recwarn):
+    rng = np.random.default_rng(15)
+    # a world link without <inertial> carrying the base through a fixed joint: ground, nothing to say
+    urdf = _two_joint_urdf(rng).replace('<link name="base">', '<link name="world"/>\n  <link name="base">', 1)
+    urdf = urdf.replace("</robot>", '  <joint name="mount" type="fixed">\n    <parent link="world"/>\n'
+                        '    <child link="base"/>\n  </joint>\n</robot>')
+    import_urdf_text(urdf)
+    assert not [w for w in recwarn if "inertial" in str(w.message)]
+
+
+def test_huge_axis_components_are_normalised():
+    # found by tests/fuzz: the norm of (0, 0, 1e308) overflowed to inf, and the axis became NaN
+    urdf = random_urdf(np.random.default_rng(3), 2, style="aligned")
+    urdf = re.sub(r'<axis xyz="[^"]*"/>', '<axis xyz="0 0 1e308"/>', urdf, count=1)
+    robot = parse_robot_text(import_urdf_text(urdf))
+    ref = parse_robot_text(import_urdf_text(urdf.replace('"0 0 1e308"', '"0 0 1"')))
+    assert robot.rows == ref.rows

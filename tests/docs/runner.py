@@ -169,17 +169,50 @@ def match_output(expected: list[str], actual: str) -> str | None:
     return None
 
 
+_ROBOT_OUT_RE = re.compile(r"(?:^|\s)(?:-o|--output|--out|>)\s*robots/([A-Za-z_][A-Za-z0-9_]*)\.toml(?=\s|$)")
+
+
+def robots_the_docs_create() -> set[str]:
+    """Names of the robot files the docs (``docs/*.md``, README.md) write into ``robots/``:
+    ``<!-- test: file=robots/NAME.toml -->`` blocks and commands writing ``-o robots/NAME.toml``.
+
+    A user who followed the tutorials has them in the checkout already; the docs' workspace starts
+    without them (and their generated packages), as the pages assume.
+    """
+    names: set[str] = set()
+    for page in sorted(DOCS.glob("*.md")) + [ROOT / "README.md"]:
+        if not page.is_file():
+            continue
+        for b in parse_blocks(page):
+            f = str(b.marks.get("file", ""))
+            if f.startswith("robots/") and f.endswith(".toml"):
+                names.add(Path(f).stem)
+            if b.lang == "console":
+                for c in parse_console(b):
+                    names |= set(_ROBOT_OUT_RE.findall(c.cmd))
+    return names
+
+
 class Workspace:
-    """A scratch checkout layout with ``symoro-gen`` and ``python`` on PATH."""
+    """A scratch checkout layout with ``symoro-gen`` and ``python`` on PATH.
+
+    ``robots/`` and ``generated/`` are those of the checkout (robots a user added included: the
+    pages must hold for them), minus the robots the docs themselves create
+    (:func:`robots_the_docs_create`), which a user who followed the tutorials already has.
+    """
 
     def __init__(self, base: Path):
         self.base = base
         self.cwd = base / "repo"
         self.cwd.mkdir(parents=True)
-        shutil.copytree(ROOT / "robots", self.cwd / "robots")
+        created = robots_the_docs_create()
+        shutil.copytree(ROOT / "robots", self.cwd / "robots",
+                        ignore=lambda d, names: [n for n in names if n.endswith(".toml") and n[:-5] in created])
         (self.cwd / "docs").symlink_to(DOCS)  # read only: the schemas
+        top = str(ROOT / "generated")
         shutil.copytree(ROOT / "generated", self.cwd / "generated",
-                        ignore=shutil.ignore_patterns("__pycache__", ".*"))
+                        ignore=lambda d, names: [n for n in names if n == "__pycache__" or n.startswith(".")
+                                                 or (d == top and n in created)])
         if SHARED_DATA.is_dir():
             (base / "shared").mkdir()
             (base / "shared" / "data").symlink_to(SHARED_DATA)
