@@ -221,8 +221,15 @@ def _diagnose_parser(sub):
     add_diagnose_parser(sub)
 
 
-_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser]
-_EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _demo_parser: "demo"}
+def _excite_parser(sub):
+    from .excite import add_excite_parser
+
+    add_excite_parser(sub)
+
+
+_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser, _excite_parser]
+_EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _demo_parser: "demo",
+                _excite_parser: "excite"}
 _LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf")
 
 

@@ -33,6 +33,7 @@ the base regressor stacked over the output samples, as the field reports it.
 """
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -42,6 +43,7 @@ import numpy as np
 
 from .atomic import write_text_atomic
 from .errors import IdentificationError
+from .loader import model_for
 from .model import IdentificationModel
 from .simulate.trajectories import _piecewise_jerk
 
@@ -526,3 +528,110 @@ def write_trajectory_csv(path, t, q, dq, ddq) -> None:
     data = np.column_stack([t, q, dq, ddq])
     lines = [",".join(head)] + [",".join(f"{v:.17g}" for v in row) for row in data]
     write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+# ---------------------------------------------------------------------------------------------
+def plot_trajectory(result: ExcitationResult, path) -> None:
+    """PNG of every joint's ``q, dq, ddq`` against its limits (dashed)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:  # pragma: no cover - optional
+        raise ExcitationError("--plot needs matplotlib: pip install 'symoro-gen[plots]'") from None
+    lim, n = result.limits, result.limits.n
+    fig, axes = plt.subplots(n, 3, figsize=(11, 1.6 * n + 0.8), sharex=True, squeeze=False)
+    for j in range(n):
+        for c, (y, lo, hi, lab) in enumerate(((result.q[:, j], lim.q_min[j], lim.q_max[j], f"q{j + 1}"),
+                                              (result.dq[:, j], -lim.dq_max[j], lim.dq_max[j], f"dq{j + 1}"),
+                                              (result.ddq[:, j], -lim.ddq_max[j], lim.ddq_max[j], f"ddq{j + 1}"))):
+            ax = axes[j, c]
+            ax.plot(result.t, y, lw=1)
+            for v in (lo, hi):
+                ax.axhline(v, color="r", ls="--", lw=0.8)
+            ax.set_ylabel(lab)
+    for c in range(3):
+        axes[-1, c].set_xlabel("t [s]")
+    fig.suptitle(f"{result.basis.kind} excitation, cond = {result.cond:.4g}, limits "
+                 f"{'respected' if result.limits_ok else 'VIOLATED'}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def add_excite_parser(sub) -> None:
+    """Register ``symoro-gen excite``."""
+    e = sub.add_parser("excite", help="optimal excitation trajectory (Fourier or point-to-point) -> CSV t,q,dq,ddq")
+    e.add_argument("robot", help="robot name, robot .toml file (its [limits] are used) or generated package")
+    e.add_argument("-o", "--output", required=True, help="CSV to write (header t,q1..qn,dq1..dqn,ddq1..ddqn)")
+    e.add_argument("--kind", choices=("fourier", "p2p"), default="fourier")
+    e.add_argument("--duration", type=float, default=10.0, help="seconds (Fourier: whole periods of the base frequency)")
+    e.add_argument("--harmonics", type=int, default=5, help="Fourier harmonics per joint (>= 2)")
+    e.add_argument("--base-frequency", type=float, default=None, help="Fourier base frequency [Hz] (default 1/duration)")
+    e.add_argument("--via-points", type=int, default=8, help="p2p: via-points including start and end")
+    e.add_argument("--dwell", type=float, default=0.0, help="p2p: rest at each intermediate via-point [s]")
+    e.add_argument("--rate", type=float, default=100.0, help="output sampling rate [Hz]")
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--starts", type=int, default=4, help="random starts of IPOPT")
+    e.add_argument("--max-iter", type=int, default=200, help="IPOPT iterations per start")
+    e.add_argument("--samples", type=int, default=None, help="samples of the criterion (default from the size of the problem)")
+    e.add_argument("--criterion", choices=("cond", "logdet"), default="cond")
+    e.add_argument("--noise", type=float, default=1.0, help="torque-noise standard deviation for the predicted %%sigma [N m]")
+    e.add_argument("--no-torque-limits", action="store_true", help="ignore tau_max even with nominal parameters")
+    e.add_argument("--json", help="write the figures (cond, limits_ok, predicted sigma...) as JSON here")
+    e.add_argument("--plot", help="PNG of the joint trajectories against the limits")
+    e.set_defaults(func=cmd_excite)
+
+
+def cmd_excite(args) -> int:
+    """``symoro-gen excite``: design, write CSV (and JSON, plot), print a summary."""
+
+    robot, model = model_for(args.robot)
+    n = model.N_JOINTS
+    lim = limits_of(robot, n)
+    if args.duration <= 0 or args.rate <= 0:
+        raise ExcitationError("--duration and --rate must be positive")
+    if args.kind == "fourier":
+        f = args.base_frequency or 1.0 / args.duration
+        periods = args.duration * f
+        if abs(periods - round(periods)) > 1e-6 or round(periods) < 1:
+            raise ExcitationError(f"--duration {args.duration:g} is not a whole number of periods of "
+                                  f"--base-frequency {f:g} Hz (the trajectory would not end at rest)")
+        basis: Any = FourierBasis(args.harmonics, f)
+    else:
+        seg = (args.duration + args.dwell) / (args.via_points - 1) - args.dwell if args.via_points >= 2 else 1.0
+        if seg <= 0:
+            raise ExcitationError(f"--duration {args.duration:g} too short for {args.via_points} via-points with --dwell {args.dwell:g}")
+        basis = PointToPointBasis(args.via_points, seg, args.dwell)
+    chi_b = None
+    nominal = robot.nominal_vector()
+    if nominal is not None:
+        chi_b = np.asarray(model.base_parameters(np.asarray(nominal)), float)
+    res = optimise_excitation(model, basis, lim, args.duration, rate=args.rate, criterion=args.criterion,
+                              starts=args.starts, seed=args.seed, max_iter=args.max_iter, samples=args.samples,
+                              chi_b=None if args.no_torque_limits else chi_b)
+    write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
+    sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)
+    out = {
+        "robot": model.ROBOT, "kind": basis.kind, "criterion": res.criterion, "cond": res.cond,
+        "limits_ok": res.limits_ok, "duration": args.duration, "rate": args.rate, "samples": len(res.t),
+        "seed": args.seed, "limits": lim.as_dict(), "usage": res.usage,
+        "torque_limits": bool(chi_b is not None and lim.tau_max is not None and not args.no_torque_limits),
+        "noise": args.noise, "base_names": list(model.BASE_NAMES), "sigma": sig.tolist(),
+        "sigma_pct": None if pct is None else [None if not np.isfinite(v) else float(v) for v in pct],
+        "starts": res.starts, "wall_time": res.wall_time, "design": basis.coefficients(res.X),
+    }
+    if args.json:
+        write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
+    if args.plot:
+        plot_trajectory(res, args.plot)
+    if not args.quiet:
+        worst = max(max(v) for v in res.usage.values())
+        print(f"{model.ROBOT}: {basis.kind} excitation, {len(res.t)} samples at {args.rate:g} Hz -> {args.output}")
+        print(f"cond = {res.cond:.6g} (base regressor, unscaled; random starts: "
+              f"{', '.join(format(s['cond_start'], '.4g') for s in res.starts)}); limits_ok = {res.limits_ok} "
+              f"(peak usage {worst:.3f}); {res.wall_time:.1f} s")
+        if lim.defaulted:
+            print(f"note: the robot file has no {', '.join(lim.defaulted)} in [limits]; defaults used")
+    return 0 if res.limits_ok else 3
