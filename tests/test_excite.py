@@ -208,3 +208,27 @@ def test_cli_contract_and_identification_on_the_trajectory(cli, tmp_path, scara)
 def test_cli_rejects_duration_not_whole_periods(cli, tmp_path):
     r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--duration", "3", "--base-frequency", "0.5", rc=2)
     assert "--duration 3" in r.err and "whole number of periods" in r.err
+
+
+# -- URDF <limit> import ------------------------------------------------------------------------------
+URDF = """<robot name="two">
+  <link name="base"/>
+  <link name="l1"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <link name="l2"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="-2.5" upper="2.0" velocity="1.5" effort="40"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.3 0 0"/><axis xyz="0 0 -1"/>
+    <limit lower="-1.0" upper="1.2" velocity="2.5" effort="0"/></joint>
+</robot>"""
+
+
+def test_urdf_limits_are_imported():
+    from symoro_gen.description.urdf import import_urdf_text
+
+    text = import_urdf_text(URDF, file="two.urdf")
+    assert "[limits]" in text
+    robot = parse_robot_text(text, file="two.toml")
+    # the robot file's q is the URDF joint value (joint 2's axis is reversed in theta = -q, not in q)
+    assert robot.limits.q_min == (-2.5, -1.0) and robot.limits.q_max == (2.0, 1.2)
+    assert robot.limits.dq_max == (1.5, 2.5)
+    assert robot.limits.tau_max is None  # effort="0" (unknown) on joint 2: not written
