@@ -232,3 +232,28 @@ def test_urdf_limits_are_imported():
     assert robot.limits.q_min == (-2.5, -1.0) and robot.limits.q_max == (2.0, 1.2)
     assert robot.limits.dq_max == (1.5, 2.5)
     assert robot.limits.tau_max is None  # effort="0" (unknown) on joint 2: not written
+
+
+def test_plot_of_the_trajectory_against_limits(optimised, tmp_path):
+    pytest.importorskip("matplotlib", reason="plots need matplotlib (the 'plots' extra)")
+    from symoro_gen.excite import plot_trajectory
+
+    f = tmp_path / "traj.png"
+    plot_trajectory(optimised, f)
+    assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_cli_point_to_point(cli, tmp_path, scara):
+    _, model = scara
+    csv, js = tmp_path / "p2p.csv", tmp_path / "p2p.json"
+    cli("--quiet", "excite", "scara", "--kind", "p2p", "-o", csv, "--duration", "3", "--via-points", "4",
+        "--rate", "50", "--starts", "1", "--max-iter", "20", "--json", js, rc=0)
+    out = json.loads(js.read_text())
+    assert out["kind"] == "p2p" and out["limits_ok"] is True
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    n = model.N_JOINTS
+    vias = np.asarray(out["design"]["via_points"])
+    # at rest on every via-point (t = 0, 1, 2, 3 s), which are the design's positions
+    idx = [0, 50, 100, 150]
+    np.testing.assert_allclose(data[idx, 1:n + 1], vias, atol=1e-9)
+    np.testing.assert_allclose(data[idx, n + 1:2 * n + 1], 0, atol=1e-9)
