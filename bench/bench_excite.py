@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from symoro_gen.excite import (  # noqa: E402
+from symoro_gen.excite import (
     FourierBasis,
     basis_eval,
     limits_of,
@@ -30,7 +30,7 @@ from symoro_gen.excite import (  # noqa: E402
     random_trajectory,
     stacked_cond,
 )
-from symoro_gen.loader import model_for  # noqa: E402
+from symoro_gen.loader import model_for
 
 TARGET_RATIO = 5.0
 
@@ -68,7 +68,7 @@ def main(argv=None) -> int:
                 max_iter=a.max_iter, seed=a.seed)
         ok &= r["limits_ok"]
         print(f"{r['robot']:6} {r['n']:>2} {r['nb']:>3} {r['cond']:>10.4g} {r['random_best']:>11.4g} "
-              f"{r['random_median']:>9.4g} {r['ratio']:>6.2f} {str(r['limits_ok']):>6} {r['wall']:>8.1f}")
+              f"{r['random_median']:>9.4g} {r['ratio']:>6.2f} {r['limits_ok']!s:>6} {r['wall']:>8.1f}")
         print("        starts: " + "; ".join(f"{s['cond_start']:.4g} -> {s['cond']:.4g} ({s['status']}, "
                                               f"{s['iterations']} it)" for s in r["starts"]))
     print(f"target: ratio >= {TARGET_RATIO:g} (best random cond / optimised cond)")

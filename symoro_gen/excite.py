@@ -47,9 +47,22 @@ from .loader import model_for
 from .model import IdentificationModel
 from .simulate.trajectories import _piecewise_jerk
 
-__all__ = ["output_times", "basis_eval", "Limits", "FourierBasis", "PointToPointBasis", "ExcitationResult", "limits_of", "stacked_cond",
-           "random_trajectory", "optimise_excitation", "predicted_sigma", "check_limits", "write_trajectory_csv",
-           "DEFAULT_LIMITS"]
+__all__ = [
+    "DEFAULT_LIMITS",
+    "ExcitationResult",
+    "FourierBasis",
+    "Limits",
+    "PointToPointBasis",
+    "basis_eval",
+    "check_limits",
+    "limits_of",
+    "optimise_excitation",
+    "output_times",
+    "predicted_sigma",
+    "random_trajectory",
+    "stacked_cond",
+    "write_trajectory_csv",
+]
 
 #: limits used for a robot file without ``[limits]`` (revolute joints [rad], prismatic ones [m]; the
 #: output lists the defaulted fields)
@@ -369,7 +382,7 @@ def _casadi():
 def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndarray, t_con: np.ndarray,
                criterion: str, chi_b: np.ndarray | None, margin: float) -> tuple[Any, dict]:
     ca = _casadi()
-    n, nb, m = limits.n, len(model.BASE_NAMES), basis.m
+    n, m = limits.n, basis.m
     F = model.casadi_regressor()  # (q, dq, ddq) -> Y (n x nb)
     qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
     Y = F(qs, dqs, ddqs)
@@ -411,7 +424,7 @@ def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndar
 
 def output_times(duration: float, rate: float) -> np.ndarray:
     """``0, 1/rate, ..., duration`` (the last sample at ``duration``)."""
-    N = int(round(duration * rate))
+    N = round(duration * rate)
     return np.arange(N + 1) / rate
 
 

@@ -3,6 +3,7 @@ against random trajectories, limits at every sample of a dense resampling, and t
 (CSV readable, and identifying simulated data on it recovers the truth)."""
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,8 +23,12 @@ from symoro_gen.excite import (
     stacked_cond,
 )
 from symoro_gen.loader import model_for
-from symoro_gen.simulate import random_physical_parameters, simulate_recording, write_recording_csv
 from symoro_gen.preprocessing.trajectory import Trajectory
+from symoro_gen.simulate import (
+    random_physical_parameters,
+    simulate_recording,
+    write_recording_csv,
+)
 
 SCARA_LIMITS = """
 [limits]
@@ -79,7 +84,8 @@ def test_shipped_robots_have_cited_limits():
     assert lim.defaulted == ()
     np.testing.assert_allclose(np.degrees(lim.q_max), [170, 120, 170, 120, 170, 120, 170])
     np.testing.assert_allclose(np.degrees(lim.dq_max), [110, 110, 128, 128, 204, 184, 184])
-    assert "datasheet" in open(robot.file).read().lower() or "specification" in open(robot.file).read().lower()
+    text = Path(robot.file).read_text().lower()
+    assert "kuka" in text and "specification" in text
 
 
 # -- bases ------------------------------------------------------------------------------------------
@@ -88,7 +94,7 @@ def test_bases_rest_at_ends_and_consistent_derivatives(basis):
     rng = np.random.default_rng(0)
     X = rng.standard_normal((basis.m, 3))
     T = 4.0 if basis.kind == "fourier" else basis.duration
-    q, dq, ddq = basis_eval(basis, X, np.array([0.0, T]))
+    _, dq, ddq = basis_eval(basis, X, np.array([0.0, T]))
     np.testing.assert_allclose(dq, 0, atol=1e-9)
     np.testing.assert_allclose(ddq, 0, atol=1e-9)
     # derivatives against central finite differences of the positions / velocities

@@ -750,9 +750,8 @@ def _limits_table(moving: list[UrdfJoint]) -> str:
     for i, key in enumerate(("q_min", "q_max", "dq_max", "tau_max")):
         vals = [jt.limit[i] if jt.limit is not None else None for jt in moving]
         if vals and all(v is not None for v in vals):
-            if key in ("dq_max", "tau_max"):
-                if not all(v > 0 for v in vals):  # type: ignore[operator]
-                    continue  # URDF writes 0 for "unknown"
+            if key in ("dq_max", "tau_max") and not all(v > 0 for v in vals):  # type: ignore[operator]
+                continue  # URDF writes 0 for "unknown"
             cols[key] = vals
     if ("q_min" in cols) != ("q_max" in cols) or ("q_min" in cols and not all(
             lo < hi for lo, hi in zip(cols["q_min"], cols["q_max"]))):
