@@ -45,7 +45,12 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
     t0 = time.perf_counter()
     res = optimise_excitation(model, basis, lim, duration, rate=rate, starts=starts, seed=seed, max_iter=max_iter)
     wall = time.perf_counter() - t0
-    return {"robot": name, "n": model.N_JOINTS, "nb": len(model.BASE_NAMES), "cond": res.cond,
+    # cond(W) >= max column norm / min column norm (sigma_max >= |w_i| >= sigma_min): how far the
+    # limits let the columns' magnitudes be balanced bounds what any trajectory can reach
+    W = np.asarray(model.regressor(res.q, res.dq, res.ddq)).reshape(-1, len(model.BASE_NAMES))
+    norms = np.linalg.norm(W, axis=0)
+    return {"column_bound": float(norms.max() / norms.min()), "smallest": model.BASE_NAMES[int(norms.argmin())],
+            "largest": model.BASE_NAMES[int(norms.argmax())],"robot": name, "n": model.N_JOINTS, "nb": len(model.BASE_NAMES), "cond": res.cond,
             "random_best": min(rand), "random_median": float(np.median(rand)), "ratio": min(rand) / res.cond,
             "limits_ok": res.limits_ok, "wall": wall, "starts": res.starts}
 
@@ -69,6 +74,7 @@ def main(argv=None) -> int:
         ok &= r["limits_ok"]
         print(f"{r['robot']:6} {r['n']:>2} {r['nb']:>3} {r['cond']:>10.4g} {r['random_best']:>11.4g} "
               f"{r['random_median']:>9.4g} {r['ratio']:>6.2f} {r['limits_ok']!s:>6} {r['wall']:>8.1f}")
+        print(f"        cond >= column-norm ratio {r['column_bound']:.4g} ({r['largest']} / {r['smallest']})")
         print("        starts: " + "; ".join(f"{s['cond_start']:.4g} -> {s['cond']:.4g} ({s['status']}, "
                                               f"{s['iterations']} it)" for s in r["starts"]))
     print(f"target: ratio >= {TARGET_RATIO:g} (best random cond / optimised cond)")
