@@ -383,6 +383,9 @@ def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndar
                criterion: str, chi_b: np.ndarray | None, margin: float) -> tuple[Any, dict]:
     ca = _casadi()
     n, m = limits.n, basis.m
+    if not hasattr(model, "casadi_regressor"):
+        raise ExcitationError(f"{model.ROBOT}: the model has no casadi_regressor() (use a generated package: "
+                              "symoro_gen.load_model)")
     F = model.casadi_regressor()  # (q, dq, ddq) -> Y (n x nb)
     qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
     Y = F(qs, dqs, ddqs)
