@@ -320,9 +320,15 @@ def _inspect_parser(sub):
     add_inspect_parser(sub)
 
 
-_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _inspect_parser, _demo_parser]
+def _excite_parser(sub):
+    from .excite import add_excite_parser
+
+    add_excite_parser(sub)
+
+
+_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _inspect_parser, _demo_parser, _excite_parser]
 _EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _inspect_parser: "inspect",
-                _demo_parser: "demo"}
+                _demo_parser: "demo", _excite_parser: "excite"}
 _LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf", "export-mjcf")
 
 

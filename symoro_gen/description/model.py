@@ -87,6 +87,24 @@ class DriveChain:
 
 
 @dataclass(frozen=True)
+class JointLimits:
+    """Per-joint motion and torque limits of the robot file's ``[limits]`` table (SI units).
+
+    Each field is a tuple with one entry per moving joint (joint order), or None when the file
+    does not give it. Positions in rad (revolute) or m (prismatic), velocities rad/s or m/s,
+    accelerations rad/s^2 or m/s^2, torques N m or N. See ``docs/robot-file.md``.
+    """
+
+    q_min: tuple[float, ...] | None = None
+    q_max: tuple[float, ...] | None = None
+    dq_max: tuple[float, ...] | None = None
+    ddq_max: tuple[float, ...] | None = None
+    tau_max: tuple[float, ...] | None = None
+
+    FIELDS = ("q_min", "q_max", "dq_max", "ddq_max", "tau_max")
+
+
+@dataclass(frozen=True)
 class RobotDescription:
     """A parsed, validated robot file."""
 
@@ -100,6 +118,7 @@ class RobotDescription:
     file: str = "<string>"
     file_hash: str = ""
     drive_chain: DriveChain | None = None
+    limits: JointLimits | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "values", MappingProxyType(dict(self.values)))

@@ -24,9 +24,9 @@ from ..errors import Problem, RobotFileError, RobotFileWarning
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, PARAM_KINDS
 from .expr import ExprError, parse_expression
 from .inertia import check_physical_consistency
-from .model import FIXED, PRISMATIC, REVOLUTE, DriveChain, MdhRow, RobotDescription, q_symbol
+from .model import FIXED, PRISMATIC, REVOLUTE, DriveChain, JointLimits, MdhRow, RobotDescription, q_symbol
 
-TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain"}
+TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits"}
 FRAME_REQUIRED = ("j", "ant", "sigma", "alpha", "d", "theta", "r")
 FRAME_OPTIONAL = ("mu", "gamma", "b", "drive")
 CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
@@ -302,6 +302,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     if "drive_chain" in doc:
         chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in rows), bad)
 
+    limits = _parse_limits(doc["limits"], rows, bad) if "limits" in doc else None
+
     if probs:
         raise RobotFileError(probs)
     return RobotDescription(
@@ -315,6 +317,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         file=file,
         file_hash=hashlib.sha256(text.encode("utf-8")).hexdigest(),
         drive_chain=chain,
+        limits=limits,
     )
 
 
@@ -415,3 +418,57 @@ def _parse_chain(raw, n, bad) -> DriveChain | None:
         offsets=tuple(offsets),
         directions=tuple(directions),
     )
+
+
+LIMIT_KEYS = {"angles"} | set(JointLimits.FIELDS)
+
+
+def _parse_limits(raw, rows, bad) -> JointLimits | None:
+    """The ``[limits]`` table: per-joint lists ``q_min, q_max, dq_max, ddq_max, tau_max`` (each
+    optional, one number per moving joint) and ``angles = "rad" | "deg"`` (unit of the revolute
+    joints' position, velocity and acceleration entries; default rad). Returned in SI units."""
+    where = "[limits]"
+    if not isinstance(raw, dict):
+        bad(where, "", "must be a table of per-joint lists (q_min, q_max, dq_max, ddq_max, tau_max)")
+        return None
+    for k in sorted(set(raw) - LIMIT_KEYS):
+        bad(where, k, f"unknown field (allowed: {', '.join(sorted(LIMIT_KEYS))})")
+    unit = raw.get("angles", "rad")
+    if unit not in ("rad", "deg"):
+        bad(where, "angles", f'must be "rad" or "deg", got {unit!r}')
+        unit = "rad"
+    moving = [r for r in rows if r.is_moving]
+    n = len(moving)
+    out: dict[str, tuple[float, ...] | None] = {}
+    ok = True
+    for key in JointLimits.FIELDS:
+        v = raw.get(key)
+        if v is None:
+            out[key] = None
+            continue
+        if not (isinstance(v, list) and len(v) == n):
+            bad(where, key, f"must be a list of {n} numbers (one per moving joint), got {v!r}")
+            ok = False
+            continue
+        vals = []
+        for i, (x, r) in enumerate(zip(v, moving), start=1):
+            if not _is_number(x):
+                bad(f"{where} joint {i}", key, f"must be a finite number, got {x!r}")
+                ok = False
+                x = 0.0
+            elif key != "q_min" and key != "q_max" and x <= 0:
+                bad(f"{where} joint {i}", key, f"must be positive, got {x!r}")
+                ok = False
+            scale = math.pi / 180.0 if (unit == "deg" and r.sigma == REVOLUTE and key != "tau_max") else 1.0
+            vals.append(float(x) * scale)
+        out[key] = tuple(vals)
+    lo, hi = out.get("q_min"), out.get("q_max")
+    if lo is not None and hi is not None:
+        for i, (a, b) in enumerate(zip(lo, hi), start=1):
+            if a >= b:
+                bad(f"{where} joint {i}", "q_min", f"q_min {raw['q_min'][i - 1]!r} must be below q_max {raw['q_max'][i - 1]!r}")
+                ok = False
+    if ("q_min" in raw) != ("q_max" in raw):
+        bad(where, "q_max" if "q_min" in raw else "q_min", "missing: q_min and q_max must be given together")
+        ok = False
+    return JointLimits(**out) if ok else None

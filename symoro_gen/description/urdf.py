@@ -99,6 +99,8 @@ class UrdfJoint:
     damping: float | None = None
     friction: float | None = None
     mimic: str | None = None  # the joint this one mimics (<mimic joint=...>)
+    #: ``<limit lower upper velocity effort>`` (each None when absent)
+    limit: tuple[float | None, float | None, float | None, float | None] | None = None
 
     @property
     def is_moving(self) -> bool:
@@ -293,8 +295,13 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
             mimic = mi.get("joint") or ""
             if not mimic:
                 rd.bad(where, "mimic", "missing <mimic joint=...>")
+        limit = None
+        le = el.find("limit")
+        if le is not None:
+            limit = tuple(rd.floats(le, k, 1, where, f"limit/{k}")[0] if le.get(k) is not None else None
+                          for k in ("lower", "upper", "velocity", "effort"))
         joints[name] = UrdfJoint(name, typ, parent or "", child or "", rd.origin(el, where), axis, damping, friction,
-                                 mimic=mimic)
+                                 mimic=mimic, limit=limit)
     if not links:
         rd.bad("<robot>", "link", "no link defined")
     if rd.problems:
@@ -768,6 +775,30 @@ def import_urdf_text(
     nominal_lines = ["[nominal]", "# standard parameters in frame j at its origin [kg, kg m, kg m^2]; FV [N m s/rad], FS [N m]"]
     nominal_lines += [f"{k} = {_num(_snap(v, 1e-15))}" for k, v in nominal]
     parts.append("\n".join(nominal_lines))
+    limits_text = _limits_table(moving)
+    if limits_text:
+        parts.append(limits_text)
     out = "\n\n".join(parts) + "\n"
     parse_robot_text(out, file=f"{file} (imported)")  # the output is a valid robot file, or say why
     return out
+
+
+def _limits_table(moving: list[UrdfJoint]) -> str:
+    """``[limits]`` from the moving joints' ``<limit lower upper velocity effort>`` (a field is written
+    when every joint gives it; the robot file's q is the URDF joint value, so no sign change)."""
+    cols = {}
+    for i, key in enumerate(("q_min", "q_max", "dq_max", "tau_max")):
+        vals = [jt.limit[i] if jt.limit is not None else None for jt in moving]
+        if vals and all(v is not None for v in vals):
+            if key in ("dq_max", "tau_max") and not all(v > 0 for v in vals):  # type: ignore[operator]
+                continue  # URDF writes 0 for "unknown"
+            cols[key] = vals
+    if ("q_min" in cols) != ("q_max" in cols) or ("q_min" in cols and not all(
+            lo < hi for lo, hi in zip(cols["q_min"], cols["q_max"]))):
+        cols.pop("q_min", None)
+        cols.pop("q_max", None)
+    if not cols:
+        return ""
+    lines = ["[limits]", "# from the URDF <limit lower upper velocity effort> of each joint [rad or m, /s, N m or N]"]
+    lines += [f"{k} = [" + ", ".join(_num(float(v)) for v in vals) + "]" for k, vals in cols.items()]
+    return "\n".join(lines)

@@ -1,0 +1,653 @@
+"""Optimal excitation trajectories (issue 11, section 1).
+
+The trajectory of an identification experiment is chosen so that the base regressor ``W`` stacked
+over it is well conditioned: the least-squares estimate of the base parameters is then insensitive
+to torque noise and modelling errors (Gautier & Khalil 1992, "Exciting trajectories for the
+identification of base inertial parameters of robots", IJRR 11(4); Swevers, Ganseman, Tukel,
+De Schutter & Van Brussel 1997, "Optimal robot excitation and identification", IEEE T-RA 13(5)).
+
+Two kinds of motion, both *linear in their design variables* ``X`` (one column per joint)::
+
+    q(t) = Phi(t) X,   dq(t) = Phi'(t) X,   ddq(t) = Phi''(t) X
+
+* :class:`FourierBasis` - Swevers' finite Fourier series
+  ``q_j(t) = q0_j + sum_k a_jk/(w k) sin(w k t) - b_jk/(w k) cos(w k t)``; the last harmonic's
+  coefficients are eliminated so that every joint starts and ends at rest
+  (``dq(0) = sum_k a_jk = 0``, ``ddq(0) = w sum_k k b_jk = 0``; the motion is periodic).
+* :class:`PointToPointBasis` - via-points joined by synchronised trapezoidal-acceleration
+  (double-S) profiles of one fixed shape, as industrial controllers run them (the RX-90 paper's kind
+  of motion): the robot stops at every via-point.
+
+Position, velocity and acceleration limits are then *linear* constraints on ``X`` (imposed on a
+grid denser than the output one, with a small margin, and verified again on the output samples);
+torque limits, when nominal parameters are known, are nonlinear constraints ``|W(q, dq, ddq) chi_b|
+<= tau_max`` at the optimisation samples.
+
+The criterion is evaluated with the generated CasADi model of the robot (``casadi_regressor()``)
+and minimised by IPOPT through ``casadi.nlpsol`` from several seeded random feasible starts. The
+condition number is not smooth (largest over smallest singular value); the default criterion is
+the smooth bound ``log tr(M) + log tr(M^-1)`` of ``M = W^T W``, which satisfies
+``cond(W)^2 <= tr(M) tr(M^-1) <= nb^2 cond(W)^2``; ``"logdet"`` minimises ``-log det M``
+(D-optimality). The value reported, ``cond``, is always the true, unscaled 2-norm condition number of
+the base regressor stacked over the output samples, as the field reports it.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .atomic import write_text_atomic
+from .errors import IdentificationError
+from .loader import model_for
+from .model import IdentificationModel
+from .simulate.trajectories import _piecewise_jerk
+
+__all__ = [
+    "DEFAULT_LIMITS",
+    "ExcitationResult",
+    "FourierBasis",
+    "Limits",
+    "PointToPointBasis",
+    "basis_eval",
+    "check_limits",
+    "limits_of",
+    "optimise_excitation",
+    "output_times",
+    "predicted_sigma",
+    "random_trajectory",
+    "stacked_cond",
+    "write_trajectory_csv",
+]
+
+#: limits used for a robot file without ``[limits]`` (revolute joints [rad], prismatic ones [m]; the
+#: output lists the defaulted fields)
+DEFAULT_LIMITS = {"q": math.pi, "dq": 2.0, "ddq": 10.0}
+DEFAULT_PRISMATIC_LIMITS = {"q": 0.5, "dq": 0.5, "ddq": 2.0}
+
+
+#: power p of the smooth cond criterion (a power of 2): exp(criterion) is within nb^(2/p) of cond^2
+COND_POWER = 8
+
+
+class ExcitationError(IdentificationError):
+    """An excitation design cannot be made with the given options (names the option at fault)."""
+
+
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Limits:
+    """Per-joint limits used by the design (SI units, arrays of length n).
+
+    Attributes
+    ----------
+    q_min, q_max, dq_max, ddq_max : ndarray (n,)
+    tau_max : ndarray (n,) or None
+    defaulted : tuple of str
+        The fields that were not in the robot file (taken from :data:`DEFAULT_LIMITS`).
+    """
+
+    q_min: np.ndarray
+    q_max: np.ndarray
+    dq_max: np.ndarray
+    ddq_max: np.ndarray
+    tau_max: np.ndarray | None = None
+    defaulted: tuple[str, ...] = ()
+
+    @property
+    def n(self) -> int:
+        return len(self.q_min)
+
+    def shrunk(self, margin: float) -> Limits:
+        """The limits tightened by the fraction ``margin`` (positions about the range centre)."""
+        c, h = (self.q_max + self.q_min) / 2, (self.q_max - self.q_min) / 2 * (1 - margin)
+        tau = None if self.tau_max is None else self.tau_max * (1 - margin)
+        return Limits(c - h, c + h, self.dq_max * (1 - margin), self.ddq_max * (1 - margin), tau, self.defaulted)
+
+    def as_dict(self) -> dict:
+        d = {k: getattr(self, k).tolist() for k in ("q_min", "q_max", "dq_max", "ddq_max")}
+        d["tau_max"] = None if self.tau_max is None else self.tau_max.tolist()
+        d["defaulted"] = list(self.defaulted)
+        return d
+
+
+def limits_of(robot: Any, n: int | None = None) -> Limits:
+    """:class:`Limits` from a :class:`~symoro_gen.description.model.RobotDescription`'s ``[limits]``.
+
+    Fields the file does not give are taken from :data:`DEFAULT_LIMITS` (revolute joints: positions
+    ``+-pi``, velocities 2 rad/s, accelerations 10 rad/s^2) or :data:`DEFAULT_PRISMATIC_LIMITS`
+    (0.5 m, 0.5 m/s, 2 m/s^2) and listed in ``defaulted``; torque limits stay None.
+    """
+    n = robot.n_joints if n is None else n
+    prismatic = np.array([getattr(r, "sigma", 0) == 1 for r in robot.joints][:n] + [False] * max(0, n - robot.n_joints))
+    lim = getattr(robot, "limits", None)
+    got = {k: (None if lim is None else getattr(lim, k)) for k in ("q_min", "q_max", "dq_max", "ddq_max", "tau_max")}
+    defaulted = []
+    out = {}
+    for k, key, sign in (("q_min", "q", -1.0), ("q_max", "q", 1.0), ("dq_max", "dq", 1.0), ("ddq_max", "ddq", 1.0)):
+        if got[k] is None:
+            defaulted.append(k)
+            out[k] = sign * np.where(prismatic, DEFAULT_PRISMATIC_LIMITS[key], DEFAULT_LIMITS[key])
+        else:
+            out[k] = np.asarray(got[k], float)
+    tau = None if got["tau_max"] is None else np.asarray(got["tau_max"], float)
+    return Limits(out["q_min"], out["q_max"], out["dq_max"], out["ddq_max"], tau, tuple(defaulted))
+
+
+# ---------------------------------------------------------------------------------------------
+class FourierBasis:
+    """Swevers' finite Fourier series with rest at ``t = 0`` (and at every period) built in.
+
+    Per joint ``q_j(t) = q0_j + sum_{k=1..K} a_jk/(w k) sin(w k t) - b_jk/(w k) cos(w k t)``
+    (Swevers et al. 1997, eq. 7), ``w = 2 pi f`` the base frequency. The design variables of a joint
+    are ``x = (q0, a_1..a_{K-1}, b_1..b_{K-1})``; ``a_K = -sum_{k<K} a_k`` and
+    ``b_K = -sum_{k<K} k b_k / K`` make ``dq(0) = ddq(0) = 0`` (hence at ``t = m / f`` too).
+
+    Parameters
+    ----------
+    harmonics : int
+        ``K >= 2``.
+    base_frequency : float
+        ``f`` [Hz].
+    """
+
+    kind = "fourier"
+
+    def __init__(self, harmonics: int, base_frequency: float):
+        if harmonics < 2:
+            raise ExcitationError(f"--harmonics {harmonics}: at least 2 harmonics are needed to start and end at rest")
+        if not base_frequency > 0:
+            raise ExcitationError(f"--base-frequency {base_frequency:g}: must be a positive frequency in Hz")
+        self.K = int(harmonics)
+        self.w = 2 * math.pi * float(base_frequency)
+        self.m = 2 * self.K - 1
+
+    def matrices(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``Phi, Phi', Phi''`` at times ``t``, each (N, m)."""
+        t = np.asarray(t, float)
+        K, w = self.K, self.w
+        k = np.arange(1, K + 1)
+        S, C = np.sin(np.outer(t, w * k)), np.cos(np.outer(t, w * k))
+        N = len(t)
+        P, D, A = (np.zeros((N, self.m)) for _ in range(3))
+        P[:, 0] = 1.0
+        wk, wK = w * k[:-1], w * K
+        # a_k (k < K), with a_K = -sum a_k
+        P[:, 1:K] = S[:, :-1] / wk - S[:, -1:] / wK
+        D[:, 1:K] = C[:, :-1] - C[:, -1:]
+        A[:, 1:K] = -S[:, :-1] * wk + S[:, -1:] * wK
+        # b_k (k < K), with b_K = -sum k b_k / K
+        r = k[:-1] / K
+        P[:, K:] = -C[:, :-1] / wk + r * C[:, -1:] / wK
+        D[:, K:] = S[:, :-1] - r * S[:, -1:]
+        A[:, K:] = C[:, :-1] * wk - r * C[:, -1:] * wK
+        return P, D, A
+
+    def coefficients(self, X: np.ndarray) -> dict:
+        """``q0`` (n,), ``a``, ``b`` (n, K) of a design ``X`` (m, n) (eliminated harmonic included)."""
+        K = self.K
+        a = X[1:K].T
+        b = X[K:].T
+        ks = np.arange(1, K)
+        aK = -a.sum(1)
+        bK = -(b * ks).sum(1) / K
+        return {"q0": X[0].tolist(), "a": np.column_stack([a, aK]).tolist(), "b": np.column_stack([b, bK]).tolist(),
+                "base_frequency": self.w / (2 * math.pi)}
+
+
+class PointToPointBasis:
+    """Via-points joined by synchronised trapezoidal-acceleration (double-S) segments.
+
+    Segment ``i`` (duration ``T``) moves every joint from via-point ``P_i`` to ``P_{i+1}`` along
+    ``q = P_i + s(u) (P_{i+1} - P_i)``, ``u = (t - i T) / T``, with ``s`` the unit double-S profile of
+    seven phases (jerk, constant acceleration, jerk, cruise, jerk, constant deceleration, jerk) of
+    durations ``phases`` (fractions of ``T``); velocity and acceleration are zero at every via-point.
+    The design variables of a joint are its via-points ``x = (P_0, ..., P_{m-1})``.
+
+    Parameters
+    ----------
+    via_points : int
+        ``m >= 2`` (the first is the start, the last the end).
+    segment_time : float
+        ``T`` [s].
+    dwell : float
+        Rest at each intermediate via-point [s].
+    """
+
+    kind = "p2p"
+    PHASES = (0.1, 0.1, 0.1, 0.4, 0.1, 0.1, 0.1)
+
+    def __init__(self, via_points: int, segment_time: float, dwell: float = 0.0):
+        if via_points < 2:
+            raise ExcitationError(f"--via-points {via_points}: at least 2 via-points are needed")
+        self.m = int(via_points)
+        self.T = float(segment_time)
+        self.dwell = float(dwell)
+        jerks = (1.0, 0.0, -1.0, 0.0, -1.0, 0.0, 1.0)
+        self._phases = list(zip(self.PHASES, jerks))
+
+    @property
+    def duration(self) -> float:
+        return (self.m - 1) * (self.T + self.dwell) - self.dwell
+
+    def _unit(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        P, V, A, p_end = _piecewise_jerk(self._phases, np.clip(u, 0.0, 1.0))
+        return P / p_end, V / p_end, A / p_end
+
+    def matrices(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(t, float)
+        N = len(t)
+        P, D, A = (np.zeros((N, self.m)) for _ in range(3))
+        period = self.T + self.dwell
+        seg = np.clip(np.floor(t / period + 1e-12).astype(int), 0, self.m - 2)
+        u = np.clip((t - seg * period) / self.T, 0.0, 1.0)
+        s, ds, dds = self._unit(u)
+        rows = np.arange(N)
+        P[rows, seg] = 1 - s
+        P[rows, seg + 1] = s
+        D[rows, seg] = -ds / self.T
+        D[rows, seg + 1] = ds / self.T
+        A[rows, seg] = -dds / self.T ** 2
+        A[rows, seg + 1] = dds / self.T ** 2
+        return P, D, A
+
+    def coefficients(self, X: np.ndarray) -> dict:
+        return {"via_points": X.tolist(), "segment_time": self.T, "dwell": self.dwell,
+                "phases": list(self.PHASES)}
+
+
+# ---------------------------------------------------------------------------------------------
+def stacked_cond(model: IdentificationModel, q, dq, ddq) -> float:
+    """Unscaled 2-norm condition number of the base regressor stacked over the samples."""
+    W = np.asarray(model.regressor(q, dq, ddq)).reshape(-1, len(model.BASE_NAMES))
+    s = np.linalg.svd(W, compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+
+
+def predicted_sigma(model: IdentificationModel, q, dq, ddq, noise: float, chi_b=None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Predicted standard deviations of the base parameters for i.i.d. torque noise ``noise``.
+
+    ``cov = noise^2 (W^T W)^-1`` (Gautier 1997, eq. 9, with the noise variance given instead of
+    estimated from the residual). Returns ``sigma`` (nb,) and, when ``chi_b`` is given, the relative
+    ``%sigma = 100 sigma / |chi_b|`` (NaN where ``chi_b`` is 0).
+    """
+    W = np.asarray(model.regressor(q, dq, ddq)).reshape(-1, len(model.BASE_NAMES))
+    cov = noise ** 2 * np.linalg.pinv(W.T @ W)
+    sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    if chi_b is None:
+        return sig, None
+    cb = np.abs(np.asarray(chi_b, float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pct = np.where(cb > 0, 100.0 * sig / np.where(cb > 0, cb, 1.0), np.nan)
+    return sig, pct
+
+
+def check_limits(limits: Limits, q, dq, ddq, tau=None, *, rtol: float = 1e-9) -> dict:
+    """Per-joint peak usage of each limit (1 = at the limit) and whether every sample is inside."""
+    q, dq, ddq = (np.asarray(x, float) for x in (q, dq, ddq))
+    c, h = (limits.q_max + limits.q_min) / 2, (limits.q_max - limits.q_min) / 2
+    use = {"q": (np.abs(q - c) / h).max(0), "dq": (np.abs(dq) / limits.dq_max).max(0),
+           "ddq": (np.abs(ddq) / limits.ddq_max).max(0)}
+    if tau is not None and limits.tau_max is not None:
+        use["tau"] = (np.abs(tau) / limits.tau_max).max(0)
+    ok = all(bool(np.all(u <= 1 + rtol)) for u in use.values())
+    return {"ok": ok, "usage": {k: v.tolist() for k, v in use.items()}}
+
+
+def _constant_design(basis, n: int, centre: np.ndarray) -> np.ndarray:
+    """Design ``X`` of the motion that stays at ``centre``."""
+    t = np.linspace(0.0, 1.0, 5)
+    P, _, _ = basis.matrices(t)
+    c, *_ = np.linalg.lstsq(P, np.ones(len(t)), rcond=None)
+    return np.outer(c, centre)
+
+
+def _scale_into(basis, limits: Limits, X: np.ndarray, X0: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``X0 + k_j (X - X0)`` per joint, with the largest ``k_j`` that keeps joint j inside
+    its position, velocity and acceleration limits at the times ``t`` (``X0``: rest at the centre)."""
+    P, D, A = basis.matrices(t)
+    h = (limits.q_max - limits.q_min) / 2
+    dX = X - X0
+    with np.errstate(divide="ignore"):
+        k = np.minimum.reduce([h / np.abs(P @ dX).max(0), limits.dq_max / np.abs(D @ dX).max(0),
+                               limits.ddq_max / np.abs(A @ dX).max(0)])
+    k = np.where(np.isfinite(k), k, 1.0)
+    return X0 + dX * k
+
+
+def random_trajectory(basis, limits: Limits, rng: np.random.Generator, t: np.ndarray, *, decay: float = 1.0) -> np.ndarray:
+    """A random feasible design ``X`` (m, n): random coefficients (harmonic ``k`` with standard
+    deviation ``k**-decay``; uniform via-points), scaled per joint so that the tightest of its
+    position, velocity and acceleration limits is reached on the samples ``t`` (the usual random
+    baseline of excitation design)."""
+    n = limits.n
+    centre = (limits.q_max + limits.q_min) / 2
+    X0 = _constant_design(basis, n, centre)
+    if isinstance(basis, FourierBasis):
+        ks = np.concatenate([np.arange(1, basis.K), np.arange(1, basis.K)]).astype(float)
+        R = np.zeros((basis.m, n))
+        R[1:] = rng.standard_normal((basis.m - 1, n)) * (ks ** -decay)[:, None]
+        R[0] = rng.uniform(-0.3, 0.3, n) * (limits.q_max - limits.q_min) / 2
+        X = X0 + R
+    else:
+        X = rng.uniform(limits.q_min, limits.q_max, (basis.m, n))
+    return _scale_into(basis, limits, X, X0, t)
+
+
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class ExcitationResult:
+    """An optimised excitation trajectory and its figures.
+
+    Attributes
+    ----------
+    t, q, dq, ddq : ndarray
+        Output samples (``t`` (N,), the others (N, n)).
+    X : ndarray (m, n)
+        The design (see the basis).
+    cond : float
+        Unscaled condition number of the base regressor stacked over the output samples.
+    limits_ok : bool
+        Every output sample (and a 10x denser resampling) inside every limit.
+    starts : list of dict
+        Per random start: ``cond`` before and after IPOPT, IPOPT's return status.
+    """
+
+    basis: Any
+    limits: Limits
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    X: np.ndarray
+    cond: float
+    limits_ok: bool
+    usage: dict
+    criterion: str
+    starts: list = field(default_factory=list)
+    wall_time: float = 0.0
+    tau: np.ndarray | None = None
+
+
+def _casadi():
+    import casadi as ca  # heavy; only for the optimisation
+
+    return ca
+
+
+def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndarray, t_con: np.ndarray,
+               criterion: str, chi_b: np.ndarray | None, margin: float) -> tuple[Any, dict]:
+    ca = _casadi()
+    n, m = limits.n, basis.m
+    if not hasattr(model, "casadi_regressor"):
+        raise ExcitationError(f"{model.ROBOT}: the model has no casadi_regressor() (use a generated package: "
+                              "symoro_gen.load_model)")
+    F = model.casadi_regressor()  # (q, dq, ddq) -> Y (n x nb)
+    qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
+    Y = F(qs, dqs, ddqs)
+    G = ca.Function("Yt", [qs, dqs, ddqs], [Y.T])
+    x = ca.MX.sym("x", m * n)
+    X = ca.reshape(x, m, n)  # column-major: column j = design of joint j
+    Po, Do, Ao = (ca.DM(M) for M in basis.matrices(t_obj))
+    No = len(t_obj)
+    Z = G.map(No)((Po @ X).T, (Do @ X).T, (Ao @ X).T)  # (nb, n No): [Y_1^T, Y_2^T, ...]
+    M = (Z @ Z.T) / (n * No)
+    if criterion == "cond":
+        # cond(W)^2 = lambda_max / lambda_min of M, with the power means
+        # lambda_max <= tr(M^p)^(1/p) <= nb^(1/p) lambda_max (and alike for M^-1): smooth, tight for large p
+        Mn = M / ca.trace(M)
+        Mi = ca.inv(Mn)
+        Mp, Mip = Mn, Mi
+        for _ in range(int(math.log2(COND_POWER))):
+            Mp, Mip = Mp @ Mp, Mip @ Mip
+        f = (ca.log(ca.trace(Mp)) + ca.log(ca.trace(Mip))) / COND_POWER
+    elif criterion == "logdet":
+        f = -ca.log(ca.det(M))
+    else:
+        raise ExcitationError(f"--criterion {criterion!r}: expected cond or logdet")
+    lim = limits.shrunk(margin)
+    Pc, Dc, Ac = basis.matrices(t_con)
+    Nc = len(t_con)
+    g = [ca.vec(ca.DM(Pc) @ X), ca.vec(ca.DM(Dc) @ X), ca.vec(ca.DM(Ac) @ X)]
+    lbg = [np.repeat(lim.q_min, Nc), np.repeat(-lim.dq_max, Nc), np.repeat(-lim.ddq_max, Nc)]
+    ubg = [np.repeat(lim.q_max, Nc), np.repeat(lim.dq_max, Nc), np.repeat(lim.ddq_max, Nc)]
+    if chi_b is not None and lim.tau_max is not None:
+        Hq = ca.Function("tau", [qs, dqs, ddqs], [Y @ ca.DM(chi_b)])
+        T = Hq.map(No)((Po @ X).T, (Do @ X).T, (Ao @ X).T)  # (n, No)
+        g.append(ca.vec(T.T))
+        lbg.append(np.repeat(-lim.tau_max, No))
+        ubg.append(np.repeat(lim.tau_max, No))
+    nlp = {"x": x, "f": f, "g": ca.vertcat(*g)}
+    return nlp, {"lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg)}
+
+
+def output_times(duration: float, rate: float) -> np.ndarray:
+    """``0, 1/rate, ..., duration`` (the last sample at ``duration``)."""
+    N = round(duration * rate)
+    return np.arange(N + 1) / rate
+
+
+def optimise_excitation(model: IdentificationModel, basis, limits: Limits, duration: float, *, rate: float = 100.0,
+                        criterion: str = "cond", starts: int = 4, seed: int = 0, chi_b=None,
+                        samples: int | None = None, max_iter: int = 200, margin: float = 0.01,
+                        progress=None) -> ExcitationResult:
+    """Optimise an excitation trajectory (IPOPT from ``starts`` seeded random feasible designs).
+
+    Parameters
+    ----------
+    model : IdentificationModel
+        With ``casadi_regressor()`` (a generated package).
+    basis : FourierBasis or PointToPointBasis
+    limits : Limits
+    duration : float
+        Length of the output trajectory [s] (for a Fourier design, a whole number of periods).
+    rate : float
+        Output sampling rate [Hz].
+    criterion : {"cond", "logdet"}
+        ``log tr(M) + log tr(M^-1)`` (bounds ``cond(W)^2`` within ``nb^2``) or ``-log det M``.
+    starts, seed : int
+        Random starts and the seed of their generator.
+    chi_b : array_like (nb,), optional
+        Nominal base parameters: with ``limits.tau_max``, torque limits are imposed.
+    samples : int, optional
+        Samples of the criterion (default ``max(8 nb / n, 20 m)`` up to 200).
+    max_iter : int
+        IPOPT iterations per start.
+    margin : float
+        Fraction by which the limits are tightened in the optimisation (the output is checked
+        against the full limits).
+
+    Returns
+    -------
+    ExcitationResult
+        The best start by the true unscaled ``cond`` over the output samples.
+    """
+    ca = _casadi()
+    t0 = time.perf_counter()
+    n, nb = limits.n, len(model.BASE_NAMES)
+    if n != model.N_JOINTS:
+        raise ExcitationError(f"{model.ROBOT}: limits for {n} joints, the model has {model.N_JOINTS}")
+    if not (duration > 0 and rate > 0):
+        raise ExcitationError("--duration and --rate must be positive")
+    t_out = output_times(duration, rate)
+    if len(t_out) * n < nb:
+        raise ExcitationError(f"{model.ROBOT}: {len(t_out)} samples x {n} joints < {nb} base parameters; "
+                              "increase --duration or --rate")
+    if samples is None:
+        samples = int(min(200, max(8 * nb // n + 1, 20 * basis.m, 40)))
+    period = duration if isinstance(basis, PointToPointBasis) else 2 * math.pi / basis.w
+    t_obj = np.arange(samples) * period / samples if isinstance(basis, FourierBasis) else np.linspace(0, duration, samples)
+    nharm = basis.K if isinstance(basis, FourierBasis) else 8
+    n_con = int(min(400, max(2 * samples, 40 * nharm)))
+    t_con = np.linspace(0.0, period, n_con)
+    cb = None if chi_b is None else np.asarray(chi_b, float)
+    nlp, bounds = _build_nlp(model, basis, limits, t_obj, t_con, criterion, cb, margin)
+    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": int(max_iter),
+            "ipopt.hessian_approximation": "limited-memory", "ipopt.tol": 1e-6, "ipopt.acceptable_tol": 1e-4,
+            "ipopt.sb": "yes"}
+    solver = ca.nlpsol("excite", "ipopt", nlp, opts)
+    rng = np.random.default_rng(seed)
+    lim_start = limits.shrunk(margin)
+    best = None
+    records = []
+    for s in range(int(starts)):
+        X_init = random_trajectory(basis, lim_start, rng, t_con)
+        cond0 = stacked_cond(model, *basis_eval(basis, X_init, t_out))
+        sol = solver(x0=X_init.T.reshape(-1), lbg=bounds["lbg"], ubg=bounds["ubg"])
+        stats = solver.stats()
+        status, iters = stats.get("return_status", ""), stats.get("iter_count", 0)
+        X = np.asarray(sol["x"]).reshape(n, basis.m).T
+        X = _scale_into(basis, limits, X, _constant_design(basis, n, (limits.q_max + limits.q_min) / 2),
+                        dense_times(t_out, duration)) if not _inside(basis, limits, X, dense_times(t_out, duration)) else X
+        q, dq, ddq = basis_eval(basis, X, t_out)
+        c = stacked_cond(model, q, dq, ddq)
+        records.append({"start": s, "cond_start": cond0, "cond": c, "status": status, "iterations": iters})
+        if progress is not None:
+            progress(s + 1, int(starts), c)
+        if best is None or c < best[0]:
+            best = (c, X)
+    assert best is not None
+    cond, X = best
+    q, dq, ddq = basis_eval(basis, X, t_out)
+    tau = None if (cb is None or limits.tau_max is None) else np.asarray(model.regressor(q, dq, ddq)) @ cb
+    chk = check_limits(limits, q, dq, ddq, tau)
+    dq_d = basis_eval(basis, X, dense_times(t_out, duration))
+    chk_dense = check_limits(limits, *dq_d)
+    return ExcitationResult(basis=basis, limits=limits, t=t_out, q=q, dq=dq, ddq=ddq, X=X, cond=cond,
+                            limits_ok=bool(chk["ok"] and chk_dense["ok"]), usage=chk["usage"], criterion=criterion,
+                            starts=records, wall_time=time.perf_counter() - t0, tau=tau)
+
+
+def dense_times(t_out: np.ndarray, duration: float) -> np.ndarray:
+    """Ten times denser than the output samples (for the limit checks)."""
+    return np.linspace(0.0, duration, 10 * (len(t_out) - 1) + 1)
+
+
+def _inside(basis, limits: Limits, X: np.ndarray, t: np.ndarray) -> bool:
+    return bool(check_limits(limits, *basis_eval(basis, X, t))["ok"])
+
+
+def basis_eval(basis, X: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``q, dq, ddq`` (N, n) of the design ``X`` at times ``t``."""
+    P, D, A = basis.matrices(t)
+    return P @ X, D @ X, A @ X
+
+
+def write_trajectory_csv(path, t, q, dq, ddq) -> None:
+    """CSV with header ``t,q1..qn,dq1..dqn,ddq1..ddqn`` (SI units, full precision)."""
+    n = q.shape[1]
+    head = ["t"] + [f"q{j}" for j in range(1, n + 1)] + [f"dq{j}" for j in range(1, n + 1)] + [f"ddq{j}" for j in range(1, n + 1)]
+    data = np.column_stack([t, q, dq, ddq])
+    lines = [",".join(head)] + [",".join(f"{v:.17g}" for v in row) for row in data]
+    write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+# ---------------------------------------------------------------------------------------------
+def plot_trajectory(result: ExcitationResult, path) -> None:
+    """PNG of every joint's ``q, dq, ddq`` against its limits (dashed)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:  # pragma: no cover - optional
+        raise ExcitationError("--plot needs matplotlib: pip install 'symoro-gen[plots]'") from None
+    lim, n = result.limits, result.limits.n
+    fig, axes = plt.subplots(n, 3, figsize=(11, 1.6 * n + 0.8), sharex=True, squeeze=False)
+    for j in range(n):
+        for c, (y, lo, hi, lab) in enumerate(((result.q[:, j], lim.q_min[j], lim.q_max[j], f"q{j + 1}"),
+                                              (result.dq[:, j], -lim.dq_max[j], lim.dq_max[j], f"dq{j + 1}"),
+                                              (result.ddq[:, j], -lim.ddq_max[j], lim.ddq_max[j], f"ddq{j + 1}"))):
+            ax = axes[j, c]
+            ax.plot(result.t, y, lw=1)
+            for v in (lo, hi):
+                ax.axhline(v, color="r", ls="--", lw=0.8)
+            ax.set_ylabel(lab)
+    for c in range(3):
+        axes[-1, c].set_xlabel("t [s]")
+    fig.suptitle(f"{result.basis.kind} excitation, cond = {result.cond:.4g}, limits "
+                 f"{'respected' if result.limits_ok else 'VIOLATED'}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def add_excite_parser(sub) -> None:
+    """Register ``symoro-gen excite``."""
+    e = sub.add_parser("excite", help="optimal excitation trajectory (Fourier or point-to-point) -> CSV t,q,dq,ddq")
+    e.add_argument("robot", help="robot name, robot .toml file (its [limits] are used) or generated package")
+    e.add_argument("-o", "--output", required=True, help="CSV to write (header t,q1..qn,dq1..dqn,ddq1..ddqn)")
+    e.add_argument("--kind", choices=("fourier", "p2p"), default="fourier")
+    e.add_argument("--duration", type=float, default=10.0, help="seconds (Fourier: whole periods of the base frequency)")
+    e.add_argument("--harmonics", type=int, default=5, help="Fourier harmonics per joint (>= 2)")
+    e.add_argument("--base-frequency", type=float, default=None, help="Fourier base frequency [Hz] (default 1/duration)")
+    e.add_argument("--via-points", type=int, default=8, help="p2p: via-points including start and end")
+    e.add_argument("--dwell", type=float, default=0.0, help="p2p: rest at each intermediate via-point [s]")
+    e.add_argument("--rate", type=float, default=100.0, help="output sampling rate [Hz]")
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--starts", type=int, default=4, help="random starts of IPOPT")
+    e.add_argument("--max-iter", type=int, default=200, help="IPOPT iterations per start")
+    e.add_argument("--samples", type=int, default=None, help="samples of the criterion (default from the size of the problem)")
+    e.add_argument("--criterion", choices=("cond", "logdet"), default="cond")
+    e.add_argument("--noise", type=float, default=1.0, help="torque-noise standard deviation for the predicted %%sigma [N m]")
+    e.add_argument("--no-torque-limits", action="store_true", help="ignore tau_max even with nominal parameters")
+    e.add_argument("--json", help="write the figures (cond, limits_ok, predicted sigma...) as JSON here")
+    e.add_argument("--plot", help="PNG of the joint trajectories against the limits")
+    e.set_defaults(func=cmd_excite)
+
+
+def cmd_excite(args) -> int:
+    """``symoro-gen excite``: design, write CSV (and JSON, plot), print a summary."""
+
+    robot, model = model_for(args.robot)
+    n = model.N_JOINTS
+    lim = limits_of(robot, n)
+    if args.duration <= 0 or args.rate <= 0:
+        raise ExcitationError("--duration and --rate must be positive")
+    if args.kind == "fourier":
+        f = args.base_frequency or 1.0 / args.duration
+        periods = args.duration * f
+        if abs(periods - round(periods)) > 1e-6 or round(periods) < 1:
+            raise ExcitationError(f"--duration {args.duration:g} is not a whole number of periods of "
+                                  f"--base-frequency {f:g} Hz (the trajectory would not end at rest)")
+        basis: Any = FourierBasis(args.harmonics, f)
+    else:
+        seg = (args.duration + args.dwell) / (args.via_points - 1) - args.dwell if args.via_points >= 2 else 1.0
+        if seg <= 0:
+            raise ExcitationError(f"--duration {args.duration:g} too short for {args.via_points} via-points with --dwell {args.dwell:g}")
+        basis = PointToPointBasis(args.via_points, seg, args.dwell)
+    chi_b = None
+    nominal = robot.nominal_vector()
+    if nominal is not None:
+        chi_b = np.asarray(model.base_parameters(np.asarray(nominal)), float)
+    res = optimise_excitation(model, basis, lim, args.duration, rate=args.rate, criterion=args.criterion,
+                              starts=args.starts, seed=args.seed, max_iter=args.max_iter, samples=args.samples,
+                              chi_b=None if args.no_torque_limits else chi_b)
+    write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
+    sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)
+    out = {
+        "robot": model.ROBOT, "kind": basis.kind, "criterion": res.criterion, "cond": res.cond,
+        "limits_ok": res.limits_ok, "duration": args.duration, "rate": args.rate, "samples": len(res.t),
+        "seed": args.seed, "limits": lim.as_dict(), "usage": res.usage,
+        "torque_limits": bool(chi_b is not None and lim.tau_max is not None and not args.no_torque_limits),
+        "noise": args.noise, "base_names": list(model.BASE_NAMES), "sigma": sig.tolist(),
+        "sigma_pct": None if pct is None else [None if not np.isfinite(v) else float(v) for v in pct],
+        "starts": res.starts, "wall_time": res.wall_time, "design": basis.coefficients(res.X),
+    }
+    if args.json:
+        write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
+    if args.plot:
+        plot_trajectory(res, args.plot)
+    if not args.quiet:
+        worst = max(max(v) for v in res.usage.values())
+        print(f"{model.ROBOT}: {basis.kind} excitation, {len(res.t)} samples at {args.rate:g} Hz -> {args.output}")
+        print(f"cond = {res.cond:.6g} (base regressor, unscaled; random starts: "
+              f"{', '.join(format(s['cond_start'], '.4g') for s in res.starts)}); limits_ok = {res.limits_ok} "
+              f"(peak usage {worst:.3f}); {res.wall_time:.1f} s")
+        if lim.defaulted:
+            print(f"note: the robot file has no {', '.join(lim.defaulted)} in [limits]; defaults used")
+    return 0 if res.limits_ok else 3

@@ -1,0 +1,265 @@
+"""Excitation design (issue 11 section 1): robot-file limits, the trajectory bases, the optimiser
+against random trajectories, limits at every sample of a dense resampling, and the CLI contract
+(CSV readable, and identifying simulated data on it recovers the truth)."""
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from symoro_gen.description.parse import parse_robot_text
+from symoro_gen.errors import RobotFileError
+from symoro_gen.excite import (
+    FourierBasis,
+    Limits,
+    PointToPointBasis,
+    basis_eval,
+    check_limits,
+    limits_of,
+    optimise_excitation,
+    output_times,
+    random_trajectory,
+    stacked_cond,
+)
+from symoro_gen.loader import model_for
+from symoro_gen.preprocessing.trajectory import Trajectory
+from symoro_gen.simulate import (
+    random_physical_parameters,
+    simulate_recording,
+    write_recording_csv,
+)
+
+SCARA_LIMITS = """
+[limits]
+angles = "deg"
+q_min = [-150, -140, 0, -360]
+q_max = [150, 140, 0.2, 360]
+dq_max = [180, 180, 0.3, 360]
+ddq_max = [600, 600, 1.5, 900]
+"""
+
+
+@pytest.fixture(scope="module")
+def scara():
+    return model_for("scara")
+
+
+@pytest.fixture(scope="module")
+def scara_limits(scara):
+    from symoro_gen.description import robots_dir
+
+    robot = parse_robot_text((robots_dir() / "scara.toml").read_text() + SCARA_LIMITS, file="scara+limits.toml")
+    return limits_of(robot)
+
+
+# -- robot-file [limits] --------------------------------------------------------------------------
+def test_limits_table_in_si_units(scara_limits):
+    lim = scara_limits
+    assert lim.defaulted == ()
+    np.testing.assert_allclose(lim.q_max, [150 * math.pi / 180, 140 * math.pi / 180, 0.2, 2 * math.pi])
+    # the prismatic joint 3 is not converted from degrees
+    assert lim.dq_max[2] == 0.3 and lim.ddq_max[2] == 1.5
+    assert lim.tau_max is None
+
+
+def test_limits_errors_name_file_joint_and_field():
+    from symoro_gen.description import robots_dir
+
+    text = (robots_dir() / "scara.toml").read_text()
+    bad = text + "\n[limits]\nq_min = [-1, 2, 0, -1]\nq_max = [1, 1, 1, 1]\ndq_max = [1, 1, -2, 1]\nspeed = 3\n"
+    with pytest.raises(RobotFileError) as ei:
+        parse_robot_text(bad, file="arm.toml")
+    msgs = [str(p) for p in ei.value.problems]
+    assert any("arm.toml" in m and "joint 2" in m and "q_min" in m for m in msgs), msgs
+    assert any("joint 3" in m and "dq_max" in m and "positive" in m for m in msgs), msgs
+    assert any("speed" in m and "unknown field" in m for m in msgs), msgs
+    with pytest.raises(RobotFileError, match="list of 4 numbers"):
+        parse_robot_text(text + "\n[limits]\ndq_max = [1, 1]\n", file="arm.toml")
+
+
+def test_shipped_robots_have_cited_limits():
+    robot, _ = model_for("lwr4")
+    lim = limits_of(robot)
+    assert lim.defaulted == ()
+    np.testing.assert_allclose(np.degrees(lim.q_max), [170, 120, 170, 120, 170, 120, 170])
+    np.testing.assert_allclose(np.degrees(lim.dq_max), [110, 110, 128, 128, 204, 184, 184])
+    text = Path(robot.file).read_text().lower()
+    assert "kuka" in text and "specification" in text
+
+
+# -- bases ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("basis", [FourierBasis(4, 0.25), PointToPointBasis(5, 1.0, dwell=0.2)])
+def test_bases_rest_at_ends_and_consistent_derivatives(basis):
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((basis.m, 3))
+    T = 4.0 if basis.kind == "fourier" else basis.duration
+    _, dq, ddq = basis_eval(basis, X, np.array([0.0, T]))
+    np.testing.assert_allclose(dq, 0, atol=1e-9)
+    np.testing.assert_allclose(ddq, 0, atol=1e-9)
+    # derivatives against central finite differences of the positions / velocities
+    t = np.linspace(0.05, T - 0.05, 37)
+    h = 1e-5
+    qp, dqp, _ = basis_eval(basis, X, t + h)
+    qm, dqm, _ = basis_eval(basis, X, t - h)
+    _, dq_t, ddq_t = basis_eval(basis, X, t)
+    np.testing.assert_allclose((qp - qm) / (2 * h), dq_t, atol=1e-5)
+    np.testing.assert_allclose((dqp - dqm) / (2 * h), ddq_t, atol=1e-3)
+
+
+def test_p2p_passes_through_via_points():
+    b = PointToPointBasis(4, 0.8)
+    X = np.arange(8.0).reshape(4, 2)
+    q, dq, _ = basis_eval(b, X, np.arange(4) * 0.8)
+    np.testing.assert_allclose(q, X, atol=1e-12)
+    np.testing.assert_allclose(dq, 0, atol=1e-9)
+
+
+# -- optimisation -------------------------------------------------------------------------------------
+DURATION, RATE = 4.0, 50.0
+
+
+@pytest.fixture(scope="module")
+def optimised(scara, scara_limits):
+    _, model = scara
+    basis = FourierBasis(3, 1 / DURATION)
+    return optimise_excitation(model, basis, scara_limits, DURATION, rate=RATE, starts=2, seed=0, max_iter=60)
+
+
+def test_optimised_cond_far_below_random(scara, scara_limits, optimised):
+    _, model = scara
+    basis = optimised.basis
+    rng = np.random.default_rng(1)
+    t = output_times(DURATION, RATE)
+    rand = [stacked_cond(model, *basis_eval(basis, random_trajectory(basis, scara_limits, rng, t), t)) for _ in range(20)]
+    # the reported cond is the unscaled one of the output samples
+    assert optimised.cond == pytest.approx(stacked_cond(model, optimised.q, optimised.dq, optimised.ddq), rel=1e-12)
+    assert optimised.cond < min(rand), (optimised.cond, min(rand))
+    assert optimised.cond < 0.5 * float(np.median(rand)), (optimised.cond, np.median(rand))
+
+
+def test_limits_hold_on_a_dense_resampling(scara_limits, optimised):
+    assert optimised.limits_ok
+    t = np.linspace(0, DURATION, 40001)
+    q, dq, ddq = basis_eval(optimised.basis, optimised.X, t)
+    lim = scara_limits
+    assert np.all(q >= lim.q_min - 1e-12) and np.all(q <= lim.q_max + 1e-12)
+    assert np.all(np.abs(dq) <= lim.dq_max * (1 + 1e-9))
+    assert np.all(np.abs(ddq) <= lim.ddq_max * (1 + 1e-9))
+    # the limits are used: some joint is driven to within 5% of a velocity or acceleration limit
+    assert max(max(optimised.usage["dq"]), max(optimised.usage["ddq"])) > 0.95
+
+
+def test_torque_limits_are_imposed(scara):
+    robot, model = scara
+    rng = np.random.default_rng(4)
+    chi_b = model.base_parameters(np.asarray(random_physical_parameters(robot, rng)))
+    basis = FourierBasis(3, 1 / DURATION)
+    free = optimise_excitation(model, basis, limits_of(robot), DURATION, rate=RATE, starts=1, seed=0, max_iter=30)
+    tau_free = np.abs(model.regressor(free.q, free.dq, free.ddq) @ chi_b).max(0)
+    base = limits_of(robot)
+    # the horizontal joints 1, 2, 4 to 60% of their free peak; joint 3 carries the weight (kept feasible)
+    lim = Limits(base.q_min, base.q_max, base.dq_max, base.ddq_max, tau_max=tau_free * [0.6, 0.6, 1.5, 0.6])
+    res = optimise_excitation(model, basis, lim, DURATION, rate=RATE, starts=1, seed=0, max_iter=60, chi_b=chi_b)
+    tau = model.regressor(res.q, res.dq, res.ddq) @ chi_b
+    assert np.all(np.abs(tau) <= lim.tau_max * 1.02), (np.abs(tau).max(0), lim.tau_max)
+    assert check_limits(lim, res.q, res.dq, res.ddq)["ok"]
+    assert res.limits_ok == check_limits(lim, res.q, res.dq, res.ddq, tau)["ok"]
+
+
+def test_p2p_design_respects_limits(scara, scara_limits):
+    _, model = scara
+    basis = PointToPointBasis(5, 1.0)
+    res = optimise_excitation(model, basis, scara_limits, basis.duration, rate=RATE, starts=1, seed=0, max_iter=40)
+    assert res.limits_ok
+    t = np.linspace(0, basis.duration, 20001)
+    assert check_limits(scara_limits, *basis_eval(basis, res.X, t))["ok"]
+    assert res.cond <= min(s["cond_start"] for s in res.starts)
+
+
+# -- CLI ------------------------------------------------------------------------------------------------
+def test_cli_contract_and_identification_on_the_trajectory(cli, tmp_path, scara):
+    robot, model = scara
+    csv, js = tmp_path / "traj.csv", tmp_path / "traj.json"
+    cli("--quiet", "excite", "scara", "-o", csv, "--duration", "4", "--harmonics", "3", "--rate", "100",
+        "--seed", "2", "--starts", "1", "--max-iter", "40", "--json", js, rc=0)
+    head = csv.read_text().splitlines()[0].split(",")
+    n = model.N_JOINTS
+    assert head == ["t"] + [f"q{j}" for j in range(1, n + 1)] + [f"dq{j}" for j in range(1, n + 1)] + [
+        f"ddq{j}" for j in range(1, n + 1)]
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    t, q, dq, ddq = data[:, 0], data[:, 1:n + 1], data[:, n + 1:2 * n + 1], data[:, 2 * n + 1:]
+    out = json.loads(js.read_text())
+    assert out["limits_ok"] is True
+    assert out["cond"] == pytest.approx(stacked_cond(model, q, dq, ddq), rel=1e-9)
+    assert len(out["sigma"]) == len(model.BASE_NAMES)
+    assert np.all(np.diff(t) > 0) and t[-1] == pytest.approx(4.0)
+    # a recording simulated on this trajectory identifies the truth
+    rng = np.random.default_rng(5)
+    chi = np.asarray(random_physical_parameters(robot, rng))
+    rec = simulate_recording(model, t, q, dq, ddq, chi, noise_tau=1e-3, rng=rng, keep_derivatives=True)
+    assert isinstance(rec, Trajectory)
+    f = tmp_path / "rec.csv"
+    write_recording_csv(f, rec)
+    res_js = tmp_path / "id.json"
+    cli("--quiet", "identify", "scara", f, "--json", res_js, rc=0)
+    got = json.loads(res_js.read_text())["parameters"]
+    truth = dict(zip(model.BASE_NAMES, model.base_parameters(chi)))
+    est = dict(zip(got["names"], got["values"]))
+    scale = max(abs(v) for v in truth.values())
+    for name, v in truth.items():
+        assert est[name] == pytest.approx(v, abs=2e-2 * scale), name
+
+
+def test_cli_rejects_duration_not_whole_periods(cli, tmp_path):
+    r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--duration", "3", "--base-frequency", "0.5", rc=2)
+    assert "--duration 3" in r.err and "whole number of periods" in r.err
+
+
+# -- URDF <limit> import ------------------------------------------------------------------------------
+URDF = """<robot name="two">
+  <link name="base"/>
+  <link name="l1"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <link name="l2"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="-2.5" upper="2.0" velocity="1.5" effort="40"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.3 0 0"/><axis xyz="0 0 -1"/>
+    <limit lower="-1.0" upper="1.2" velocity="2.5" effort="0"/></joint>
+</robot>"""
+
+
+def test_urdf_limits_are_imported():
+    from symoro_gen.description.urdf import import_urdf_text
+
+    text = import_urdf_text(URDF, file="two.urdf")
+    assert "[limits]" in text
+    robot = parse_robot_text(text, file="two.toml")
+    # the robot file's q is the URDF joint value (joint 2's axis is reversed in theta = -q, not in q)
+    assert robot.limits.q_min == (-2.5, -1.0) and robot.limits.q_max == (2.0, 1.2)
+    assert robot.limits.dq_max == (1.5, 2.5)
+    assert robot.limits.tau_max is None  # effort="0" (unknown) on joint 2: not written
+
+
+def test_plot_of_the_trajectory_against_limits(optimised, tmp_path):
+    pytest.importorskip("matplotlib", reason="plots need matplotlib (the 'plots' extra)")
+    from symoro_gen.excite import plot_trajectory
+
+    f = tmp_path / "traj.png"
+    plot_trajectory(optimised, f)
+    assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_cli_point_to_point(cli, tmp_path, scara):
+    _, model = scara
+    csv, js = tmp_path / "p2p.csv", tmp_path / "p2p.json"
+    cli("--quiet", "excite", "scara", "--kind", "p2p", "-o", csv, "--duration", "3", "--via-points", "4",
+        "--rate", "50", "--starts", "1", "--max-iter", "20", "--json", js, rc=0)
+    out = json.loads(js.read_text())
+    assert out["kind"] == "p2p" and out["limits_ok"] is True
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    n = model.N_JOINTS
+    vias = np.asarray(out["design"]["via_points"])
+    # at rest on every via-point (t = 0, 1, 2, 3 s), which are the design's positions
+    idx = [0, 50, 100, 150]
+    np.testing.assert_allclose(data[idx, 1:n + 1], vias, atol=1e-9)
+    np.testing.assert_allclose(data[idx, n + 1:2 * n + 1], 0, atol=1e-9)
