@@ -221,8 +221,16 @@ def _diagnose_parser(sub):
     add_diagnose_parser(sub)
 
 
+def _fleet_parser(sub):
+    from .fleet.cli import add_fleet_parser  # Dask and pyarrow load only for this command
+
+    add_fleet_parser(sub)
+
+
 _EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser]
 _EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _demo_parser: "demo"}
+_EXTRA_COMMANDS.append(_fleet_parser)
+_EXTRA_NAMES[_fleet_parser] = "fleet"
 _LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf")
 
 

@@ -41,8 +41,9 @@ class LogFile:
 def compile_pattern(pattern: str) -> re.Pattern:
     """The regular expression of a ``--by`` pattern, matched against the *end* of a path.
 
-    ``{robot}`` and ``{day}`` match one or more characters other than ``/``; every other character is
-    literal; ``/`` also matches the separator of the platform.
+    ``{robot}`` and ``{day}`` match one or more characters other than ``/``; ``*`` matches any part of
+    one path element (``{robot}/{day}_*.csv``: several logs per day); every other character is literal;
+    ``/`` also matches the separator of the platform.
 
     >>> compile_pattern("{robot}/{day}.parquet").search("logs/arm07/2026-03-01.parquet").groupdict()
     {'robot': 'arm07', 'day': '2026-03-01'}
@@ -50,12 +51,16 @@ def compile_pattern(pattern: str) -> re.Pattern:
     if "{robot}" not in pattern or "{day}" not in pattern:
         raise FleetError(f"--by {pattern!r}: the pattern must contain {{robot}} and {{day}}, "
                           "e.g. '{robot}/{day}.parquet'")
+
+    def literal(text: str) -> str:
+        return re.escape(text).replace("/", r"[/\\]").replace(r"\*", r"[^/\\]*")
+
     out, i = [], 0
     for m in re.finditer(r"\{(robot|day)\}", pattern):
-        out.append(re.escape(pattern[i:m.start()]).replace("/", r"[/\\]"))
+        out.append(literal(pattern[i:m.start()]))
         out.append(f"(?P<{m.group(1)}>[^/\\\\]+?)")
         i = m.end()
-    out.append(re.escape(pattern[i:]).replace("/", r"[/\\]"))
+    out.append(literal(pattern[i:]))
     return re.compile("(?:^|[/\\\\])" + "".join(out) + "$")
 
 
