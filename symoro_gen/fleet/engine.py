@@ -95,8 +95,8 @@ class Estimate:
     files: tuple[str, ...] = ()
 
     def to_json(self) -> dict:
-        return {"names": list(self.names), "values": [float(x) for x in self.values],
-                "std": [float(x) for x in self.std], "rows": int(self.rows), "samples": int(self.samples),
+        return {"names": list(self.names), "values": _floats(self.values),
+                "std": _floats(self.std), "rows": int(self.rows), "samples": int(self.samples),
                 "files": list(self.files)}
 
 
@@ -171,14 +171,17 @@ def _floats(a) -> list:
     return [None if not math.isfinite(float(x)) else float(x) for x in np.asarray(a, float).reshape(-1)]
 
 
-def _fit(p: Partial, names: Sequence[str]) -> Estimate | None:
+def _fit(p: Partial, names: Sequence[str], problems: list | None = None, what: str = "") -> Estimate | None:
+    """IDIM-WLS on merged factors; None (and a line in ``problems``) when they do not identify the model."""
     if p.acc is None:
         return None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
             res = fit_wls(p.acc)
-        except Exception:  # noqa: BLE001 - a day too short to identify is reported as missing
+        except Exception as exc:  # noqa: BLE001 - a day too short to identify is reported, not fatal
+            if problems is not None:
+                problems.append({"file": ", ".join(p.files), "error": f"{what}: not identifiable ({exc})"})
             return None
     return Estimate(tuple(res.names), np.asarray(res.values, float), np.asarray(res.std, float),
                     rows=p.acc.n_rows, samples=p.samples, files=p.files)
@@ -285,13 +288,13 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     days: dict[str, dict[str, Estimate]] = {}
     robots: dict[str, Estimate] = {}
     for r in groups:
-        e = _fit(robot_p[r], names)
+        e = _fit(robot_p[r], names, skipped, f"robot {r}")
         if e is None:
             continue
         robots[r] = e
         days[r] = {}
         for d in groups[r]:
-            ed = _fit(day_p[r, d], names)
+            ed = _fit(day_p[r, d], names, skipped, f"robot {r}, day {d}")
             if ed is not None:
                 days[r][d] = ed
     result = _judge(mdl, names, days, robots, fleet, skipped, alpha, correction)
