@@ -128,7 +128,13 @@ def throughput(tmp: Path) -> float:
     """samples/s with 1 and 2 workers, and the plain single-process accumulator on the same logs (wall and
     per CPU-second: the machine is shared, the CPU figure is the one that does not depend on the load)."""
     from symoro_gen import load_model
-    from symoro_gen.fleet import discover, identify_fleet, open_client, read_log, simulate_fleet
+    from symoro_gen.fleet import (
+        discover,
+        identify_fleet,
+        open_client,
+        read_log,
+        simulate_fleet,
+    )
     from symoro_gen.identification.accumulate import accumulate
     from symoro_gen.observations import AssemblyOptions, iter_chunks
 

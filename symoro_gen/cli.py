@@ -222,7 +222,8 @@ def _diagnose_parser(sub):
 
 
 def _fleet_parser(sub):
-    from .fleet.cli import add_fleet_parser  # Dask and pyarrow load only for this command
+    """``fleet`` (Dask and pyarrow are imported only when this command runs)."""
+    from .fleet.cli import add_fleet_parser
 
     add_fleet_parser(sub)
 

@@ -5,7 +5,14 @@ drift away from the fleet flagged (random-effects distance and trend over days, 
 Needs the ``fleet`` extra (``dask[distributed]``, ``pyarrow``). See docs/fleet.md.
 """
 from .engine import DEFAULT_ALPHA, Estimate, FleetResult, identify_fleet, open_client
-from .files import FleetError, LogFile, compile_pattern, discover, read_log, write_parquet
+from .files import (
+           FleetError,
+           LogFile,
+           compile_pattern,
+           discover,
+           read_log,
+           write_parquet,
+)
 from .kernel import Partial, merge_accumulators, merge_partials, process_file
 from .simulate import Drift, FleetTruth, simulate_fleet
 

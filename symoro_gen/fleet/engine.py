@@ -20,14 +20,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..atomic import write_text_atomic
 from ..identification.estimators import fit_wls
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
-from .files import FleetError, LogFile, discover, group_by
+from ..report.plots import MissingDependencyError
+from .files import FleetError, discover, group_by
 from .kernel import Partial, merge_partials, process_file, resolve_model
 from .stats import adjust, dersimonian_laird, level_z, trend_test
 
-__all__ = ["FleetResult", "Estimate", "identify_fleet", "open_client", "DEFAULT_ALPHA", "Z_DAY"]
+__all__ = ["DEFAULT_ALPHA", "Z_DAY", "Estimate", "FleetResult", "identify_fleet", "open_client"]
 
 #: family-wise error rate of the flags (Holm) or false-discovery rate (BH)
 DEFAULT_ALPHA = 0.01
@@ -39,7 +41,6 @@ def _require_distributed():
     try:
         import distributed
     except ImportError:  # pragma: no cover - depends on the installation
-        from ..report.plots import MissingDependencyError
         raise MissingDependencyError("fleet identification needs Dask: pip install 'symoro-gen[fleet]'") from None
     return distributed
 
@@ -148,15 +149,13 @@ class FleetResult:
                 "skipped": self.skipped, "settings": self.settings, "timing": self.timing}
 
     def write_json(self, path) -> None:
-        from ..atomic import write_text_atomic
-
         write_text_atomic(path, json.dumps(self.to_json(), indent=1, allow_nan=True) + "\n")
 
     def summary(self) -> str:
         """A few lines for the terminal."""
         nd = sum(len(v) for v in self.days.values())
-        lines = [f"fleet of {len(self.robots)} robot(s) of {self.model}, {nd} robot-day(s), "
-                 f"{self.fleet.samples} samples, {len(self.skipped)} log(s) skipped"]
+        lines = [(f"fleet of {len(self.robots)} robot(s) of {self.model}, {nd} robot-day(s), "
+                  f"{self.fleet.samples} samples, {len(self.skipped)} log(s) skipped")]
         for s in self.skipped:
             lines.append(f"  skipped {s['file']}: {s['error']}")
         if not self.flagged:

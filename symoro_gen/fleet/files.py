@@ -19,8 +19,9 @@ import numpy as np
 from ..errors import DataFileError, Problem, SymoroError
 from ..preprocessing.load import load_trajectory
 from ..preprocessing.trajectory import Trajectory
+from ..report.plots import MissingDependencyError
 
-__all__ = ["FleetError", "LogFile", "compile_pattern", "discover", "read_log", "write_parquet", "require_pyarrow"]
+__all__ = ["FleetError", "LogFile", "compile_pattern", "discover", "read_log", "require_pyarrow", "write_parquet"]
 
 PARQUET_SUFFIXES = (".parquet", ".pq")
 
@@ -113,7 +114,7 @@ def discover(logs: Iterable, pattern: str) -> list[LogFile]:
     for f in _expand(named):
         m = rx.search(f.replace(os.sep, "/"))
         if m is None:
-            if not any(f.startswith(d.rstrip("/\\") + os.sep) or f.startswith(d.rstrip("/") + "/") for d in folders):
+            if not any(f.startswith((d.rstrip("/\\") + os.sep, d.rstrip("/") + "/")) for d in folders):
                 probs.append(Problem(f, "", "--by", f"path does not end like the pattern {pattern!r}"))
             continue
         out.append(LogFile(m.group("robot"), m.group("day"), f))
@@ -129,7 +130,6 @@ def require_pyarrow():
     try:
         import pyarrow.parquet as pq
     except ImportError:  # pragma: no cover - depends on the installation
-        from ..report.plots import MissingDependencyError
         raise MissingDependencyError("Parquet logs need pyarrow: pip install 'symoro-gen[fleet]'") from None
     return pq
 
@@ -138,7 +138,7 @@ def _read_parquet(path: str, n_joints: int, loaded: bool) -> Trajectory:
     pq = require_pyarrow()
     try:
         table = pq.read_table(path)
-    except Exception as exc:  # pyarrow raises ArrowInvalid, OSError... on a damaged file
+    except Exception as exc:  # noqa: BLE001 - pyarrow raises ArrowInvalid, OSError... on a damaged file
         raise DataFileError([Problem(path, "", "", f"cannot read as Parquet ({type(exc).__name__}: {exc})")]) from None
     cols = set(table.column_names)
     need = ["t"] + [f"q{j}" for j in range(1, n_joints + 1)] + [f"tau{j}" for j in range(1, n_joints + 1)]

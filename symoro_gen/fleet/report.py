@@ -7,7 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..report.document import Figure, Heading, Paragraph, Report, Table, write_report_files
+from ..report.document import (
+    Figure,
+    Heading,
+    Paragraph,
+    Report,
+    Table,
+    write_report_files,
+)
 from ..report.plots import _figure_and_axes, _png
 from .engine import FleetResult
 

@@ -11,7 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from ..loader import model_for
-from ..simulate import fourier_trajectory, random_physical_parameters, simulate_recording
+from ..simulate import (
+    fourier_trajectory,
+    random_physical_parameters,
+    simulate_recording,
+)
 from .files import write_parquet
 
 __all__ = ["Drift", "FleetTruth", "simulate_fleet"]

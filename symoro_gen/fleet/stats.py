@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-__all__ = ["dersimonian_laird", "level_z", "trend_test", "holm", "benjamini_hochberg", "adjust"]
+__all__ = ["adjust", "benjamini_hochberg", "dersimonian_laird", "holm", "level_z", "trend_test"]
 
 
 def dersimonian_laird(theta: np.ndarray, var: np.ndarray) -> tuple[float, float, float]:

@@ -12,9 +12,22 @@ import pytest
 
 from symoro_gen import load_model
 from symoro_gen.errors import DataFileError
-from symoro_gen.fleet import (Drift, FleetError, compile_pattern, discover, identify_fleet, open_client, read_log,
-                              simulate_fleet)
-from symoro_gen.fleet.stats import benjamini_hochberg, dersimonian_laird, holm, trend_test
+from symoro_gen.fleet import (
+    Drift,
+    FleetError,
+    compile_pattern,
+    discover,
+    identify_fleet,
+    open_client,
+    read_log,
+    simulate_fleet,
+)
+from symoro_gen.fleet.stats import (
+    benjamini_hochberg,
+    dersimonian_laird,
+    holm,
+    trend_test,
+)
 from symoro_gen.identification import fit_wls
 from symoro_gen.identification.accumulate import accumulate
 from symoro_gen.observations import AssemblyOptions, iter_chunks
@@ -211,7 +224,7 @@ def test_pattern_and_discovery(tmp_path):
 def test_statistics_against_direct_definitions():
     rng = np.random.default_rng(0)
     theta, var = rng.normal(1.0, 0.2, 7), rng.uniform(0.01, 0.05, 7)
-    m, vm, t2 = dersimonian_laird(theta, var)
+    m, _vm, t2 = dersimonian_laird(theta, var)
     w = 1 / var
     mfe = w @ theta / w.sum()
     Q = w @ (theta - mfe) ** 2
@@ -230,5 +243,5 @@ def test_statistics_against_direct_definitions():
     x = np.arange(6.0)
     y = 2.0 + 0.3 * x + rng.normal(0, 0.01, 6)
     s = np.full(6, 0.01)
-    slope, se, z, pv = trend_test(x, y, s)
+    slope, _se, z, pv = trend_test(x, y, s)
     assert np.isclose(slope, np.polyfit(x, y, 1)[0]) and z > 10 and pv < 1e-10
