@@ -221,6 +221,12 @@ def _diagnose_parser(sub):
     add_diagnose_parser(sub)
 
 
+def _inspect_parser(sub):
+    from .preprocessing.inspect import add_inspect_parser
+
+    add_inspect_parser(sub)
+
+
 def _fleet_parser(sub):
     """``fleet`` (Dask and pyarrow are imported only when this command runs)."""
     from .fleet.cli import add_fleet_parser
@@ -228,8 +234,9 @@ def _fleet_parser(sub):
     add_fleet_parser(sub)
 
 
-_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _demo_parser]
-_EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _demo_parser: "demo"}
+_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _inspect_parser, _demo_parser]
+_EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _inspect_parser: "inspect",
+                _demo_parser: "demo"}
 _EXTRA_COMMANDS.append(_fleet_parser)
 _EXTRA_NAMES[_fleet_parser] = "fleet"
 _LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf")

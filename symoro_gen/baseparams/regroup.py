@@ -1,6 +1,8 @@
-"""Base parameters by the closed-form rules of Gautier & Khalil, with a numeric QR check.
+"""Base parameters by the closed-form rules of Gautier & Khalil, completed by an exact dependency sweep.
 
-Rules, applied from the terminal links towards the base (geometry kept symbolic):
+Rules, applied from the terminal links towards the base (geometry kept symbolic), after
+Gautier & Khalil (1990), "Direct calculation of minimum set of inertial parameters of serial
+robots", IEEE Trans. Robotics and Automation 6(3), and Khalil & Dombre (2002), ch. 12:
 
 * revolute joint j (ant a): YYj, MZj, Mj are regrouped. Link j keeps XXjR = XXj - YYj;
   the rotationally symmetric remainder (inertia diag(YYj, YYj, 0), first moment
@@ -12,22 +14,54 @@ Rules, applied from the terminal links towards the base (geometry kept symbolic)
 * parameters whose regressor column is identically zero (links near the base whose
   motion is restricted) have no effect and are eliminated.
 
-Whatever dependency remains after these rules (other special cases near the base)
-is found by a seeded numerical QR-like sweep on random samples: a column in the span of
-the columns kept before it is regrouped into them with numerical coefficients (exact
-rationals when they are), and the relation is marked ``numeric``.
+Whatever dependency remains after these rules (special cases near the base, drive-chain
+terms) is found by a seeded numerical sweep over the columns, then written exactly:
+
+1. **Which** columns depend on which: the columns of the remaining parameters are evaluated
+   on random states (:mod:`symoro_gen.dynamics.evaluate`, geometry and gravity by value) and
+   swept in a fixed *keep order*; a column in the span of the columns kept before it is
+   eliminated and regrouped into them.
+2. **Keep order** (what is eliminated when a dependency involves several kinds): the
+   inertial parameters first, in the standard order (so, as in the closed-form rules, the
+   parameter of the link nearer the terminal is the one regrouped onto the link nearer the
+   base: MX2R = MX2 + MX3), then the drive terms IA, then FV and FS, then OFF. Hence a
+   dependency that involves a drive term eliminates the drive term, in the order OFF first,
+   then FS/FV, then IA:
+
+   * OFF (a constant torque) is the least physical column: it is collinear with anything
+     constant, e.g. the gravity load of a link on a vertical prismatic joint, and the
+     papers model it as a bias, not as a dynamic parameter;
+   * FS/FV are friction laws of the drive chain, identified as such, but not properties of
+     the rigid body;
+   * IA (rotor inertia) is an inertia about the joint axis; when it is collinear with a link
+     inertia the papers write it into the link's parameter (ZZ1R = ZZ1 + IA1, Khalil &
+     Dombre 2002, sec. 12.5) rather than the converse.
+
+   No drive term is therefore kept while an inertial parameter of the same dependency is
+   eliminated.
+3. **Exact coefficients**: for each dependency found, the columns involved are evaluated
+   exactly (:data:`~symoro_gen.dynamics.evaluate.EXACT`) with the geometric constants and
+   the gravity components (``G1, G2, G3``, SYMORO's names) kept as symbols, at random
+   rational states (sin and cos of each joint angle rational), and the small linear system
+   is solved with sympy. The solution is verified exactly on every equation of every state
+   and numerically on the random samples. Relations therefore keep geometry and gravity
+   symbolic (``M3R = M3 + M4 - OFF3/G3``). A dependency whose exact solution does not verify
+   (e.g. one that holds only for the particular numeric values of the geometry) keeps
+   numeric coefficients and is listed in :attr:`BaseParameterMap.numeric`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import sympy as sp
 
-from ..description.model import PRISMATIC, REVOLUTE
-from ..dynamics.newton_euler import SymbolicRegressor
 from ..description.mdh import constant_rotation, position, rot_z
-from ..params import INERTIAL_KINDS, param_name
+from ..description.model import PRISMATIC, REVOLUTE, RobotDescription
+from ..dynamics.evaluate import EXACT, Arithmetic, evaluate_columns, evaluate_graph
+from ..dynamics.graph import ExprGraph
+from ..dynamics.newton_euler import SymbolicRegressor, build_regressor, gravity_symbols
+from ..params import INERTIAL_KINDS, param_name, split_name
 
 _J_KINDS = INERTIAL_KINDS[:6]
 _J_INDEX = {"XX": (0, 0), "XY": (0, 1), "XZ": (0, 2), "YY": (1, 1), "YZ": (1, 2), "ZZ": (2, 2)}
@@ -45,13 +79,21 @@ class BaseParameterMap:
     kept : tuple of str
         The standard parameter whose regressor column each base parameter uses.
     relations : dict
-        ``base name -> sympy expression`` in the standard-parameter symbols (geometry symbolic).
+        ``base name -> sympy expression`` in the standard-parameter symbols, linear in them, with
+        coefficients in the geometric constants and the gravity symbols (``G3``) kept symbolic.
     eliminated : tuple of str
         Standard parameters with no column of their own (regrouped or without effect).
     no_effect : tuple of str
         Standard parameters (or groups) without any effect on the model.
     numeric : tuple of str
-        Base parameters whose relation came from the numerical sweep.
+        Base parameters whose relation has numeric coefficients (a dependency found by the sweep
+        without an exact symbolic form); empty for the usual robots.
+    geometry : dict
+        Geometric constant symbol -> value.
+    gravity : dict
+        Gravity component symbol (``G1, G2, G3``) -> value, for the non-zero components.
+    swept : tuple of str
+        Base parameters whose relation got terms from the dependency sweep (not the closed-form rules).
     """
 
     standard_names: tuple
@@ -62,10 +104,26 @@ class BaseParameterMap:
     no_effect: tuple
     numeric: tuple = ()
     geometry: dict = field(default_factory=dict)
+    gravity: dict = field(default_factory=dict)
+    swept: tuple = ()
+
+    def matrix_symbolic(self) -> sp.Matrix:
+        """K (n_base x n_std) with chi_base = K chi_std, entries in the geometry and gravity symbols."""
+        idx = {n: i for i, n in enumerate(self.standard_names)}
+        K = sp.zeros(len(self.base_names), len(self.standard_names))
+        for b, name in enumerate(self.base_names):
+            e = sp.expand(self.relations[name])
+            for s in e.free_symbols:
+                if s.name in idx:
+                    K[b, idx[s.name]] = e.coeff(s)
+        return K
 
     def matrix(self, subs: dict | None = None) -> np.ndarray:
-        """K (n_base x n_std) with chi_base = K chi_std, geometry substituted by ``subs``."""
-        subs = self.geometry if subs is None else subs
+        """K (n_base x n_std) with chi_base = K chi_std, geometry substituted by ``subs``.
+
+        The gravity symbols are always substituted by their values (``self.gravity``).
+        """
+        subs = {**self.gravity, **(self.geometry if subs is None else subs)}
         idx = {n: i for i, n in enumerate(self.standard_names)}
         K = np.zeros((len(self.base_names), len(self.standard_names)))
         for b, name in enumerate(self.base_names):
@@ -73,7 +131,9 @@ class BaseParameterMap:
             for s, c in e.as_coefficients_dict().items():
                 if s == 1:
                     raise ValueError(f"relation of {name} has a constant term")
-                K[b, idx[s.name]] = float(c)
+                # exact numeric factors such as cos(1/10) stay in the "symbol" part: split them off
+                num, syms = s.as_independent(*e.free_symbols, as_Add=False)
+                K[b, idx[syms.name]] += float(c * num)
         return K
 
 
@@ -92,6 +152,7 @@ def _regroup_closed_form(reg: SymbolicRegressor):
             cur[param_name(k, a)] = cur[param_name(k, a)] + dJ[r, c]
 
     for row in reversed(robot.joints):
+        row = _exact_row(row)
         j, a = row.j, row.ant
         R0 = constant_rotation(row)
         if row.sigma == REVOLUTE:
@@ -126,6 +187,17 @@ def _regroup_closed_form(reg: SymbolicRegressor):
     return cur, eliminated, no_effect
 
 
+def _exact_row(row):
+    """The MDH row with its float literals written as the rationals they print as (``0.05 -> 1/20``),
+    so that relations from literal geometry have exact coefficients."""
+    fields = {}
+    for k in ("gamma", "b", "alpha", "d", "theta", "r"):
+        e = getattr(row, k)
+        if e.has(sp.Float):
+            fields[k] = e.xreplace({f: sp.nsimplify(f, rational=True) for f in e.atoms(sp.Float)})
+    return replace(row, **fields) if fields else row
+
+
 def _kind_at(r, c):
     for k, (a, b) in _J_INDEX.items():
         if (a, b) == (r, c) or (b, a) == (r, c):
@@ -133,19 +205,39 @@ def _kind_at(r, c):
     raise KeyError((r, c))
 
 
-def _sample_columns(reg: SymbolicRegressor, names, n_samples: int, rng: np.random.Generator) -> np.ndarray:
-    """Numeric columns (n_samples*n, len(names)) of the standard regressor at random states."""
-    from ..emit.numpy_backend import evaluate, kernel_source, load_kernel
+def _kind(name: str) -> str:
+    return split_name(name)[0]
 
-    robot = reg.robot
-    graph = reg.graph.substituted(robot.geometry_subs()).pruned({k for k in reg.graph.outputs if k[1] in set(names)})
-    src = kernel_source(graph, robot.n_joints, names, "k", robot.q, robot.dq, robot.ddq)
-    kern = load_kernel(src, "k")
+
+def keep_rank(name: str) -> int:
+    """Keep priority class of a standard parameter: 0 inertial, 1 IA, 2 FV/FS, 3 OFF.
+
+    A dependency eliminates the parameter of the highest class (see the module docstring).
+    """
+    return _KEEP_RANK.get(_kind(name), 0)
+
+
+_KEEP_RANK = {"IA": 1, "FV": 2, "FS": 2, "OFF": 3}
+
+
+def _random_states(robot: RobotDescription, n_samples: int, rng: np.random.Generator) -> dict:
     n = robot.n_joints
     q = rng.uniform(-np.pi, np.pi, (n_samples, n))
     dq = rng.normal(0, 2.0, (n_samples, n))
     ddq = rng.normal(0, 4.0, (n_samples, n))
-    W = evaluate(kern, n, len(names), q, dq, ddq)
+    values: dict = {}
+    for k in range(n):
+        values[robot.q[k]] = q[:, k]
+        values[robot.dq[k]] = dq[:, k]
+        values[robot.ddq[k]] = ddq[:, k]
+    return values
+
+
+def _sample_columns(reg: SymbolicRegressor, names, n_samples: int, rng: np.random.Generator) -> np.ndarray:
+    """Numeric columns (n_samples*n, len(names)) of the standard regressor at random states."""
+    robot = reg.robot
+    values = {**_random_states(robot, n_samples, rng), **robot.geometry_subs()}
+    W = evaluate_columns(reg.graph, robot.n_joints, names, values, n_samples)
     return W.reshape(-1, len(names))
 
 
@@ -154,6 +246,99 @@ def _nice(c: float, tol: float) -> sp.Expr:
     if abs(float(r) - c) <= tol * max(1.0, abs(c)) and (r.q <= 1000):
         return r
     return sp.Float(float(f"{c:.12g}"))
+
+
+def _rational_state(robot: RobotDescription, rng: np.random.Generator) -> tuple[dict, dict]:
+    """Exact random state: values of q (angle symbols), dq, ddq, and exact sin/cos of the angles.
+
+    sin and cos of each revolute joint angle are rational (t = tan(q/2) rational); a
+    prismatic joint variable is rational.
+    """
+    env: dict = {}
+    trig: dict = {}
+    for k, row in enumerate(robot.joints):
+        t = sp.Rational(int(rng.integers(-9, 10)), int(rng.integers(1, 10)))
+        if row.sigma == PRISMATIC:
+            env[robot.q[k]] = t
+        else:
+            A = sp.Dummy(f"A{k}", real=True)
+            trig[sp.sin(A)] = 2 * t / (1 + t**2)
+            trig[sp.cos(A)] = (1 - t**2) / (1 + t**2)
+            env[robot.q[k]] = A
+        for sym in (robot.dq[k], robot.ddq[k]):
+            v = 0
+            while v == 0:
+                v = int(rng.integers(-9, 10))
+            env[sym] = sp.Rational(v, int(rng.integers(1, 5)))
+    return env, trig
+
+
+def _state_arithmetic(trig: dict) -> Arithmetic:
+    def fn(f):
+        def apply(x):
+            return sp.expand(sp.expand_trig(f(x)).xreplace(trig))
+
+        return apply
+
+    return replace(EXACT, functions={**EXACT.functions, sp.sin: fn(sp.sin), sp.cos: fn(sp.cos)})
+
+
+class _ExactSolver:
+    """Solves ``column(p) = sum_k c_k column(k)`` with symbolic geometry and gravity."""
+
+    def __init__(self, robot: RobotDescription, seed: int = 1) -> None:
+        self.robot = robot
+        self._reg: SymbolicRegressor | None = None
+        self.gravity = gravity_symbols(robot)
+        self.constants = {**robot.geometry_subs(), **self.gravity}
+        self.seed = seed
+
+    @property
+    def graph(self) -> ExprGraph:
+        if self._reg is None:
+            self._reg = build_regressor(self.robot, symbolic_gravity=True)
+        return self._reg.graph
+
+    def _rows(self, names: list[str], n_states: int, rng: np.random.Generator) -> sp.Matrix:
+        """Exact regressor rows (n_states * n_joints, len(names))."""
+        col = {nm: i for i, nm in enumerate(names)}
+        keys = [k for k in self.graph.outputs if k[1] in col]
+        base = {s: s for s in self.constants}
+        rows = []
+        for _ in range(n_states):
+            env, trig = _rational_state(self.robot, rng)
+            out = evaluate_graph(self.graph, {**base, **env}, keys, _state_arithmetic(trig))
+            M = [[sp.Integer(0)] * len(names) for _ in range(self.robot.n_joints)]
+            for (i, nm), v in out.items():
+                M[i][col[nm]] = v
+            rows.extend(M)
+        return sp.Matrix(rows)
+
+    def solve(self, p: str, support: list[str]) -> list[sp.Expr] | None:
+        """Exact coefficients of the columns ``support`` giving the column ``p``, or None."""
+        rng = np.random.default_rng(self.seed)
+        m = len(support)
+        R = self._rows(support + [p], m + 2, rng)
+        A, b = R[:, :m], R[:, m]
+        An = np.array(A.xreplace(self.constants).evalf(), dtype=float)
+        # m independent equations, chosen greedily (Gram-Schmidt on the numeric rows)
+        chosen: list[int] = []
+        basis = np.zeros((0, m))
+        for r in range(An.shape[0]):
+            v = An[r] - basis.T @ (basis @ An[r]) if basis.size else An[r]
+            if np.linalg.norm(v) > 1e-9 * max(1.0, np.linalg.norm(An[r])):
+                chosen.append(r)
+                basis = np.vstack([basis, v / np.linalg.norm(v)])
+                if len(chosen) == m:
+                    break
+        if len(chosen) < m:
+            return None
+        x = A.extract(chosen, list(range(m))).LUsolve(b.extract(chosen, [0]))
+        coefs = [sp.factor_terms(sp.cancel(c)) for c in x]
+        for r in range(A.rows):
+            if sp.cancel(sum((A[r, k] * coefs[k] for k in range(m)), sp.Integer(0)) - b[r]) != 0:
+                return None
+        return coefs
 
 
 def group_base_parameters(
@@ -165,7 +350,7 @@ def group_base_parameters(
     dependency_tol: float = 1e-7,
     coefficient_tol: float = 1e-8,
 ) -> BaseParameterMap:
-    """Base parameters of the robot of ``reg`` (closed-form rules + numeric sweep).
+    """Base parameters of the robot of ``reg`` (closed-form rules + exact dependency sweep).
 
     Parameters
     ----------
@@ -180,8 +365,13 @@ def group_base_parameters(
         A column whose distance to the span of the previously kept columns is below
         ``dependency_tol`` times its norm is dependent (regrouped into them).
     coefficient_tol : float
-        Regrouping coefficients smaller than this are dropped; within it of a simple
-        rational they are written exactly.
+        Numeric regrouping coefficients smaller than this are not part of the dependency;
+        when no exact form is found, coefficients within it of a simple rational are
+        written exactly.
+
+    Returns
+    -------
+    BaseParameterMap
     """
     rng = np.random.default_rng(0) if rng is None else rng
     robot = reg.robot
@@ -195,14 +385,18 @@ def group_base_parameters(
             eliminated.append(name)
             del cur[name]
 
-    kept_order = [n for n in reg.standard_names if n in cur]
-    # numeric sweep: columns in standard order, a dependent one regroups into earlier ones
-    W = _sample_columns(reg, kept_order, n_samples, rng)
+    std_index = {n: i for i, n in enumerate(reg.standard_names)}
+    sweep_order = sorted((n for n in reg.standard_names if n in cur), key=lambda n: (keep_rank(n), std_index[n]))
+    W = _sample_columns(reg, sweep_order, n_samples, rng)
     norms = np.linalg.norm(W, axis=0)
     accepted: list[int] = []
+    swept: list[str] = []
     numeric: list[str] = []
+    solver = _ExactSolver(robot)
+    gravity = gravity_symbols(robot)
+    values = {**robot.geometry_subs(), **gravity}
     Q = np.zeros((W.shape[0], 0))
-    for k, name in enumerate(kept_order):
+    for k, name in enumerate(sweep_order):
         c = W[:, k]
         if norms[k] <= rank_tol * max(norms.max(), 1.0):
             no_effect.append(name)
@@ -215,15 +409,27 @@ def group_base_parameters(
             qv = resid - Q @ (Q.T @ resid) if Q.shape[1] else resid
             Q = np.column_stack([Q, qv / np.linalg.norm(qv)])
             continue
-        # dependent: c = W_acc beta
-        Wa = W[:, accepted]
-        beta, *_ = np.linalg.lstsq(Wa, c, rcond=None)
-        for kk, b in zip(accepted, beta):
-            if abs(b) > coefficient_tol:
-                tgt = kept_order[kk]
-                cur[tgt] = cur[tgt] + _nice(float(b), coefficient_tol) * cur[name]
-                if tgt not in numeric:
-                    numeric.append(tgt)
+        # dependent: c = W_acc beta; which columns (numeric), then the coefficients (exact)
+        beta, *_ = np.linalg.lstsq(W[:, accepted], c, rcond=None)
+        support = [(sweep_order[kk], float(b)) for kk, b in zip(accepted, beta) if abs(b) > coefficient_tol]
+        targets = [t for t, _ in support]
+        coefs = solver.solve(name, targets)
+        if coefs is not None:
+            approx = np.array([float(e.xreplace(values)) for e in coefs])
+            cols = [sweep_order.index(t) for t in targets]
+            if np.linalg.norm(c - W[:, cols] @ approx) > 10 * dependency_tol * norms[k]:
+                coefs = None
+        exact = coefs is not None
+        if coefs is None:
+            coefs = [_nice(b, coefficient_tol) for _, b in support]
+        for tgt, coef in zip(targets, coefs):
+            if coef == 0:
+                continue
+            cur[tgt] = cur[tgt] + coef * cur[name]
+            if tgt not in swept:
+                swept.append(tgt)
+            if not exact and tgt not in numeric:
+                numeric.append(tgt)
         eliminated.append(name)
         del cur[name]
 
@@ -234,7 +440,10 @@ def group_base_parameters(
         bn = n if e == _sym(n) else n + "R"
         base_names.append(bn)
         relations[bn] = e
-    num_names = tuple(n + ("R" if (n + "R") in relations else "") for n in numeric if n in cur)
+
+    def base_of(ns: list[str]) -> tuple[str, ...]:
+        return tuple(n + ("R" if (n + "R") in relations else "") for n in reg.standard_names if n in ns and n in cur)
+
     return BaseParameterMap(
         standard_names=reg.standard_names,
         base_names=tuple(base_names),
@@ -242,8 +451,10 @@ def group_base_parameters(
         relations=relations,
         eliminated=tuple(eliminated),
         no_effect=tuple(no_effect),
-        numeric=num_names,
+        numeric=base_of(numeric),
         geometry=robot.geometry_subs(),
+        gravity=gravity,
+        swept=base_of(swept),
     )
 
 

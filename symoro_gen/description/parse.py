@@ -204,6 +204,16 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         if s not in values:
             bad(where, "values", f"symbol {s!r} has no numeric value (add it under [values])")
 
+    # every geometric field must be finite with the [values] given (d = "1/L3" with L3 = 0 is not)
+    if not probs:
+        vsubs = {sp.Symbol(k, real=True): sp.Rational(v) for k, v in values.items()}
+        for fr, r in zip(frames, rows):
+            for k in ("gamma", "b", "alpha", "d", "theta", "r"):
+                val = getattr(r, k).xreplace({**vsubs, q_symbol(r.j): sp.Integer(0)})
+                if val.is_finite is not True:
+                    what = "infinite (division by zero)" if val.has(sp.zoo, sp.oo) else "undefined"
+                    bad(f"frame {r.j}", k, f"{fr.get(k)!r} is {what} with the [values] given")
+
     # moving frames first, fixed ones after
     seen_fixed = None
     for r in rows:

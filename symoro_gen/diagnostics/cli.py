@@ -14,6 +14,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ..preprocessing.cli import add_data_options, data_block, data_notes, data_text, load_data
+
 __all__ = ["add_diagnose_parser", "run_diagnose"]
 
 
@@ -34,7 +36,6 @@ def run_diagnose(args) -> dict:
     import numpy as np
 
     from ..loader import model_for
-    from ..preprocessing.load import load_trajectories
     from .candidates import KINDS
     from .core import diagnose
 
@@ -45,15 +46,15 @@ def run_diagnose(args) -> dict:
         check_report_path(args.report)
     kinds = KINDS if not args.candidates else tuple(args.candidates)
     robot, model = model_for(args.robot)
-    kw = dict(n_joints=robot.n_joints, drive_chain=robot.drive_chain)
-    data = load_trajectories(args.data, **kw)
-    valid = load_trajectories(args.validate, **kw) if args.validate else None
+    data, reports = load_data(args, args.data, robot)
+    valid, rep_v = load_data(args, args.validate, robot) if args.validate else (None, ())
+    reports += rep_v
     filt = {k: v for k, v in (("cutoff_hz", args.cutoff), ("n_d", args.decimate)) if v is not None}
     rep = diagnose(model, data, validation=valid, method=args.method, candidates=kinds,
                    significance=args.significance, max_effects=args.max_effects, holdout=args.holdout,
                    rng=np.random.default_rng(args.seed), **filt)
     out = rep.to_dict()
-    out["data"] = [str(p) for p in args.data]
+    out["data"] = data_block(reports)  # per file: path, rows read, dropped, resampled, experiments
     out["validate"] = [str(p) for p in args.validate or ()]
     if args.json:
         from ..atomic import write_text_atomic
@@ -69,9 +70,9 @@ def run_diagnose(args) -> dict:
         write_report(args.report, diagnosis=rep, robot=robot.name,
                      sources={"identification data": [str(p) for p in args.data],
                               "validation data": [str(p) for p in args.validate or ()]},
-                     text=rep.summary())
+                     text=rep.summary(), notes=data_notes(reports))
     if not args.quiet:
-        print(rep.summary())
+        print(rep.summary() + "\n\n" + data_text(reports))
     return out
 
 
@@ -99,4 +100,5 @@ def add_diagnose_parser(subparsers) -> None:
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.md|OUT.html", help="write a report (tables and plots) here")
     p.add_argument("--plots", metavar="DIR", help="write the plots as PNG files in this folder")
+    add_data_options(p)
     p.set_defaults(func=lambda a: (run_diagnose(a), 0)[1])

@@ -63,12 +63,26 @@ def _inertia_moment(kind: str, wd, p) -> list:
 
 
 
-def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegressor:
+def gravity_symbols(robot: RobotDescription) -> dict[sp.Symbol, float]:
+    """Symbols ``G1, G2, G3`` (SYMORO's names) for the non-zero components of ``robot.gravity``.
+
+    Returns
+    -------
+    dict
+        ``symbol -> value`` for each non-zero gravity component (x, y, z of frame 0).
+    """
+    return {sp.Symbol(f"G{i + 1}", real=True): float(x) for i, x in enumerate(robot.gravity) if x != 0}
+
+
+def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity: bool = False) -> SymbolicRegressor:
     """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler.
 
     Parameters
     ----------
     robot : RobotDescription
+    symbolic_gravity : bool
+        Keep the non-zero gravity components as the symbols of :func:`gravity_symbols`
+        (graph inputs) instead of numbers; used to write regrouping relations exactly.
     progress : callable, optional
         Called as ``progress(stage, j)`` per link (for progress bars).
 
@@ -103,7 +117,11 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
     w = {0: zero}
     wd = {0: zero}
     # gravity enters as an upward acceleration of the base
-    vd = {0: [sp.Integer(int(-x)) if float(x).is_integer() else sp.Float(-x) for x in robot.gravity]}
+    if symbolic_gravity:
+        gsym = {int(s.name[1:]) - 1: s for s in gravity_symbols(robot)}
+        vd = {0: [-gsym[i] if i in gsym else sp.Integer(0) for i in range(3)]}
+    else:
+        vd = {0: [sp.Integer(int(-x)) if float(x).is_integer() else sp.Float(-x) for x in robot.gravity]}
     U: dict[int, sp.Matrix] = {}
 
     WW: dict[int, dict[str, sp.Expr]] = {}
@@ -230,5 +248,7 @@ def build_regressor(robot: RobotDescription, *, progress=None) -> SymbolicRegres
 
     inputs = tuple(q_symbol(f) for f in joint_frames) + tuple(dq_symbol(f) for f in joint_frames)
     inputs += tuple(ddq_symbol(f) for f in joint_frames) + robot.geometry_symbols
+    if symbolic_gravity:
+        inputs += tuple(gravity_symbols(robot))
     graph = ExprGraph(inputs, tuple(g.defs), outputs)
     return SymbolicRegressor(robot, graph, robot.standard_names, robot.payload_names, joint_frames)

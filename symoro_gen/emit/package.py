@@ -122,6 +122,8 @@ def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCou
         "Geometric constants (kept symbolic below): "
         + (", ".join(f"{k} = {v}" for k, v in sorted(robot.values.items())) or "none"),
         "",
+        "Gravity components (kept symbolic below): " + (", ".join(f"{k} = {v}" for k, v in bp.gravity.items()) or "none"),
+        "",
         "## Regrouping relations",
         "",
         "```",
@@ -133,12 +135,17 @@ def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCou
     lines += ["```", "", "## Base parameters kept unchanged", "", ", ".join(n for n in bp.base_names if not n.endswith("R")) or "none", ""]
     lines += ["## Without effect on the model (eliminated)", ""]
     lines += [f"- {x}" for x in bp.no_effect] or ["- none"]
-    lines += ["", "## Relations completed by the numeric sweep", ""]
-    if bp.numeric:
+    lines += ["", "## Relations completed by the dependency sweep", ""]
+    if bp.swept:
         lines.append(
-            "These relations got terms from the seeded numerical dependency sweep (special cases near the base "
-            "not covered by the general rules); their coefficients were recognised as exact rationals when they are: "
-            + ", ".join(bp.numeric)
+            "These relations got terms from the seeded dependency sweep (special cases near the base and drive "
+            "terms, not covered by the closed-form rules; drive terms are eliminated before inertial ones): "
+            + ", ".join(bp.swept)
+            + "."
+        )
+        lines.append("")
+        lines.append(
+            "Numeric coefficients (no exact symbolic form found): " + (", ".join(bp.numeric) or "none; all coefficients are exact and symbolic.")
         )
     else:
         lines.append("none: every relation comes from the closed-form rules.")

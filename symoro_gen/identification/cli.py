@@ -10,6 +10,7 @@ from ..model import IdentificationModel
 from ..observations.assembly import assemble
 from ..observations.options import AssemblyOptions
 from .result import _json_float, basis_text
+from ..preprocessing.cli import add_data_options, data_block, data_notes, data_text, load_data, split_held_back
 
 
 def _payload_values(items, names) -> dict:
@@ -30,7 +31,6 @@ def _payload_values(items, names) -> dict:
 
 def run_identify(args) -> dict:
     from ..loader import model_for
-    from ..preprocessing.load import load_trajectories
     from . import fit_with_known_payload, identify, identify_with_drive_gains, sensor_gains
 
     if args.report:  # before the long computation: a bad suffix or a missing matplotlib fails at once
@@ -39,9 +39,10 @@ def run_identify(args) -> dict:
         check_report_path(args.report)
         require_matplotlib()
     robot, model = model_for(args.robot)
-    kw = dict(n_joints=robot.n_joints, drive_chain=robot.drive_chain)
-    unloaded = load_trajectories(args.data, loaded=False, **kw)
-    loaded = load_trajectories(args.loaded, loaded=True, **kw) if args.loaded else ()
+    unloaded, reports = load_data(args, args.data, robot, loaded=False)
+    unloaded, held_back = split_held_back(args, unloaded)
+    loaded, rep_l = load_data(args, args.loaded, robot, loaded=True) if args.loaded else ((), ())
+    reports += rep_l
     known = _payload_values(args.payload, model.PAYLOAD_NAMES)
     if (args.gains or known) and not loaded:
         raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
@@ -62,19 +63,23 @@ def run_identify(args) -> dict:
     else:
         res = identify(sys_u, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
     res = res.with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
-    out = {"robot": robot.name, "data": [str(p) for p in args.data], "loaded": [str(p) for p in args.loaded or ()]}
+    out = {"robot": robot.name, "data": [], "loaded": [str(p) for p in args.loaded or ()]}
     out.update(res.to_dict())
-    val = val_raw = sys_v = None
-    if args.validate:
-        vtr = load_trajectories(args.validate, loaded=args.validate_loaded, **kw)
+    val = val_raw = sys_v = asm_v = None
+    if args.validate or held_back:
+        vtr, rep_v = load_data(args, args.validate, robot, loaded=args.validate_loaded) if args.validate else ((), ())
+        reports += rep_v
+        vtr = tuple(held_back) + tuple(vtr)
         asm_v = assemble(model, vtr, replace(opts, min_velocity=None,
                                              payload_columns=bool(args.validate_loaded) or has_payload))
         sys_v = asm_v.system
         val = res.rel_err_on(sys_v)
         val_raw = res.rel_err_raw_on(model, asm_v)
-        out["validation"] = {"data": [str(p) for p in args.validate], "rel_err": [_json_float(x) for x in val],
+        vnames = [tr.source for tr in held_back] + [str(p) for p in args.validate or ()]
+        out["validation"] = {"data": vnames, "rel_err": [_json_float(x) for x in val],
                              "rel_err_raw": [_json_float(x) for x in val_raw],
                              "rel_err_basis": asm_v.metric_basis()}
+    out["data"] = data_block(reports)
     if args.reference:
         from .reference import compare_with_reference, format_comparison
 
@@ -99,14 +104,17 @@ def run_identify(args) -> dict:
                  "\n    " + "  ".join(f"{x:.4f}" for x in val_raw))
     if ref_text:
         text += "\n\nBeside the reference table " + str(args.reference) + ":\n" + ref_text
+    text += "\n\n" + data_text(reports)
     if args.report:
-        _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, rows if args.reference else None, val_raw)
+        _write_report(args, robot, model, res, dg, sys_u, sys_l, sys_v, rows if args.reference else None, val_raw,
+                      data_notes(reports))
     if not args.quiet:
         print(text)
     return out
 
 
-def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l, sys_v, reference, val_raw=None) -> None:
+def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l, sys_v, reference, val_raw=None,
+                  data_lines=()) -> None:
     """``--report OUT.html|OUT.md``: tables, measured vs reconstructed torques, singular values of W;
     with loaded validation data, the payload re-identified with the robot known (Table IV)."""
     from ..report import write_report
@@ -118,7 +126,7 @@ def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l
         ident.append(("identification data (loaded)", sys_l))
     valid = [("validation data" + (" (loaded)" if args.validate_loaded else ""), sys_v)] if sys_v is not None else []
     raw = [(valid[0][0], val_raw)] if valid and val_raw is not None else []
-    payload, notes = None, []
+    payload, notes = None, list(data_lines)
     pay_in_val = sys_v is not None and args.validate_loaded and any(n in sys_v.names for n in model.PAYLOAD_NAMES)
     if pay_in_val:
         try:
@@ -154,4 +162,5 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "
                         "images in OUT_files/ (plots need the 'plots' extra: matplotlib)")
+    add_data_options(p, validate_fraction=True)
     p.set_defaults(func=lambda a: (run_identify(a), 0)[1])

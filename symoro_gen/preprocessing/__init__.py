@@ -11,10 +11,12 @@ from .filtering import (
     parallel_decimate,
 )
 from .load import DataSpec, DataWarning, load_trajectories, load_trajectory, parse_data_spec
+from .logformat import LoadReport, LogFormat, hold_back, load_log, load_logs, make_format
 from .trajectory import Trajectory
 
 __all__ = [
     "Trajectory", "load_trajectory", "load_trajectories", "parse_data_spec", "DataSpec", "DataWarning",
     "motor_to_joint", "joint_to_motor", "FilterSettings", "choose_filter_settings", "estimate_dynamics_bandwidth",
     "lowpass_positions", "differentiate", "filter_and_differentiate", "decimate", "parallel_decimate",
+    "LogFormat", "LoadReport", "make_format", "load_log", "load_logs", "hold_back",
 ]

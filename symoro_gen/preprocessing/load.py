@@ -152,6 +152,7 @@ def parse_data_spec(spec: str | os.PathLike, *, base_dir: str | os.PathLike | No
     dt = None
     loaded = None
     probs: list[Problem] = []
+    seen_time: set[str] = set()
     for item in text.split(","):
         if not item.strip():
             continue
@@ -162,6 +163,13 @@ def parse_data_spec(spec: str | os.PathLike, *, base_dir: str | os.PathLike | No
         if k not in _SPEC_KEYS:
             probs.append(Problem(text, f"item {item!r}", k, f"unknown key (allowed: {', '.join(sorted(_SPEC_KEYS))})"))
         elif k in ("dt", "fs"):
+            if k in seen_time:
+                probs.append(Problem(text, f"item {item!r}", k, f"{k}= given twice; give the time base once"))
+            elif seen_time:
+                other = next(iter(seen_time))
+                probs.append(Problem(text, f"item {item!r}", k, f"conflicts with {other}=: give either dt= "
+                                     "(sampling period [s]) or fs= (sampling frequency [Hz]), not both"))
+            seen_time.add(k)
             try:
                 x = float(v)
             except ValueError:
@@ -413,8 +421,11 @@ def _load_arrays(path: str, fmt: str) -> dict[str, np.ndarray]:
                 return {k: np.asarray(z[k]) for k in z.files}
         except FileNotFoundError:
             raise DataFileError([Problem(path, "", "", "file not found")]) from None
-        except (ValueError, OSError) as exc:
-            raise DataFileError([Problem(path, "", "", f"cannot read as .npz: {exc}")]) from None
+        except (ValueError, OSError):
+            # never relay numpy's advice to allow pickles: say what the file is instead
+            raise DataFileError([Problem(path, "", "", f"not a NumPy .npz archive ({_what_file(path)})")],
+                                hint="save arrays with numpy.savez(path, t=..., q=..., tau=...); a text table "
+                                     "must end in .csv or .txt") from None
     import scipy.io
 
     try:
@@ -427,6 +438,26 @@ def _load_arrays(path: str, fmt: str) -> dict[str, np.ndarray]:
     except (ValueError, OSError, TypeError) as exc:
         raise DataFileError([Problem(path, "", "", f"cannot read as a MATLAB file: {exc}")]) from None
     return {k: np.asarray(v) for k, v in d.items() if not k.startswith("__")}
+
+
+def _what_file(path: str) -> str:
+    """A few words on what a file that failed to load really is (for error messages)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(512)
+    except OSError as exc:
+        return exc.strerror or "unreadable"
+    if not head:
+        return "the file is empty"
+    if head.startswith(b"\x93NUMPY"):
+        return "a single .npy array, not an .npz archive"
+    if head.startswith(b"PK"):
+        return "a zip archive without readable .npy members"
+    try:
+        head.decode("utf-8")
+        return "the file is text, e.g. a CSV table"
+    except UnicodeDecodeError:
+        return "unknown binary content"
 
 
 def _read_arrays(path: str, fmt: str, n: int, columns, dt, probs) -> _Raw:
@@ -562,8 +593,62 @@ def _check_time(t: np.ndarray, col: _Column, jitter_tol: float, probs: list[Prob
         probs.append(Problem(col.file, _fmt_ranges(runs, col.line_offset), name,
                              f"irregular sampling: {int(irr.sum())} time step(s) deviate more than "
                              f"{100 * jitter_tol:g} % from the median step {med:.6g} s (e.g. {worst:.6g} s); "
-                             "gaps or resets must be split into separate files"))
+                             "gaps or resets must be split into separate files, or resampled (--resample)"))
+    for a, b, local in step_regime_changes(t, irr):
+        probs.append(Problem(col.file, _fmt_ranges([(a, b)], col.line_offset), name,
+                             f"the sampling period changes: about {local:.6g} s per step here against "
+                             f"{med:.6g} s (median); a recording must keep one period: resample it (--resample) "
+                             "or split it into separate files"))
     return info
+
+
+REGIME_WINDOW = 20  #: steps averaged to find the local sampling period
+REGIME_TOL = 0.2    #: largest accepted relative change of the local sampling period
+
+
+def step_regime_changes(t, irregular=None, *, window: int = REGIME_WINDOW, tol: float = REGIME_TOL
+                        ) -> list[tuple[int, int, float]]:
+    """Stretches whose local sampling period differs from the median step (a change of step regime).
+
+    The local period is the mean of ``window`` consecutive steps: time-stamp jitter averages out (a
+    short step followed by a long one), a change of regime (2 ms -> 4 ms) does not, even when both
+    steps lie within the tolerance of the median. Windows holding an individually irregular step (a
+    gap, already reported) are not counted.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Strictly increasing time [s].
+    irregular : ndarray of bool, shape (N - 1,), optional
+        Steps already reported as irregular.
+
+    Returns
+    -------
+    list of (first_row, last_row, local_step)
+        1-based rows (the later sample of each step) and the mean step there [s].
+    """
+    t = np.asarray(t, float)
+    d = np.diff(t)
+    if d.size < 4:
+        return []
+    w = int(min(window, max(2, d.size // 4)))
+    med = float(np.median(d))
+    c = np.r_[0.0, np.cumsum(d)]
+    local = (c[w:] - c[:-w]) / w  # window k: steps k..k+w-1
+    ok = np.ones(local.size, bool)
+    if irregular is not None:
+        ci = np.r_[0, np.cumsum(np.asarray(irregular, bool))]
+        ok = (ci[w:] - ci[:-w]) == 0
+    out = []
+    for bad in ((local > (1 + tol) * med) & ok, (local < (1 - tol) * med) & ok):  # slower, faster regimes
+        if not bad.any():
+            continue
+        steps = np.zeros(d.size, bool)
+        for k in np.flatnonzero(bad):
+            steps[k:k + w] = True
+        for a, b in _runs(steps):  # 1-based step indices; step i ends at row i + 1
+            out.append((a + 1, b + 1, float(np.median(d[a - 1:b]))))
+    return sorted(out)
 
 
 def _warn(msg: str) -> None:
@@ -588,18 +673,19 @@ def _unit_checks(src_files: dict[str, str], t, q, tau, joint_types, *, max_abs_p
             continue
         if qa.max() > max_abs_position:
             msgs.append(f"{src_files['q']}, column q{j + 1}: max |q| = {qa.max():.4g} > {max_abs_position:.4g} rad: "
-                        "positions in degrees (or motor-side without a drive chain)? (expected rad, joint side)")
+                        "positions in degrees (or motor-side without a drive chain)? (expected rad, joint side; "
+                        "--deg reads degrees)")
         elif t.size > 2 and dt > 0:
             v = np.abs(np.diff(q[:, j])) / dt
             v99 = float(np.percentile(v, 99))
             if v99 > max_abs_velocity:
                 msgs.append(f"{src_files['q']}, column q{j + 1}: velocity {v99:.4g} rad/s (99th percentile) > "
-                            f"{max_abs_velocity:g} rad/s: positions in degrees or t not in seconds?")
+                            f"{max_abs_velocity:g} rad/s: positions in degrees (--deg) or t not in seconds?")
     ta = np.abs(tau).max(axis=0) if tau.size else np.zeros(n)
     for j in range(n):
         if ta[j] > max_abs_torque:
             msgs.append(f"{src_files['tau']}, column tau{j + 1}: max |tau| = {ta[j]:.4g} > {max_abs_torque:g} N m: "
-                        "torques in N mm or mN m? (expected N m or N)")
+                        "torques in N mm or mN m? (expected N m or N; --tau-scale rescales)")
     return msgs
 
 

@@ -41,6 +41,10 @@ class Trajectory:
         True when the payload is mounted during this experiment.
     meta : dict
         Free-form provenance.
+    deflection : ndarray, shape (N, n), optional
+        Measured joint deflection [rad or m] of a recording with two position sources (motor- and
+        link-side encoders): motor position mapped to the joint side (motor / ratio) minus the
+        link-side position ``q``. A signal for the diagnosis (elasticity seen directly).
     """
 
     t: np.ndarray
@@ -51,13 +55,14 @@ class Trajectory:
     source: str = "<memory>"
     loaded: bool = False
     meta: dict = field(default_factory=dict)
+    deflection: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "t", _frozen_array(self.t, "t", 1))
-        for k in ("q", "tau", "dq", "ddq"):
+        for k in ("q", "tau", "dq", "ddq", "deflection"):
             object.__setattr__(self, k, _frozen_array(getattr(self, k), k, 2))
         N = self.t.shape[0]
-        for k in ("q", "tau", "dq", "ddq"):
+        for k in ("q", "tau", "dq", "ddq", "deflection"):
             a = getattr(self, k)
             if a is not None and a.shape[0] != N:
                 raise ValueError(f"{self.source}: {k} has {a.shape[0]} samples, t has {N}")

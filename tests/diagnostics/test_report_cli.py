@@ -59,7 +59,7 @@ def test_cli_diagnose(tmp_path, cli):
     cli("diagnose", "scara", csv, "--json", out, "--max-effects", "2", "--quiet", rc=0)
     d = json.loads(out.read_text())
     assert d["effects"][0]["kind"] == "drift" and d["effects"][0]["joint"] == 4
-    assert d["data"] == [str(csv)] and "validation_rel_err" in d["after"]
+    assert [e["file"] for e in d["data"]] == [str(csv)] and "validation_rel_err" in d["after"]
 
 
 def test_cli_validate_and_candidates(tmp_path, cli):

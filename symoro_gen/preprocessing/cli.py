@@ -1,0 +1,88 @@
+"""The data options every command that reads DATA shares (identify, diagnose, inspect).
+
+:func:`add_data_options` registers them on an argparse parser, :func:`load_data` turns the parsed
+arguments into trajectories and :class:`~symoro_gen.preprocessing.logformat.LoadReport` s,
+:func:`data_block` / :func:`data_text` echo the reports (JSON ``data`` block, text output).
+"""
+from __future__ import annotations
+
+import argparse
+from typing import Sequence
+
+from ..cli import OptionError
+from .logformat import ABSURD_VALUE, LoadReport, LogFormat, hold_back, load_logs, make_format
+from .trajectory import Trajectory
+
+__all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "data_text", "data_notes",
+           "split_held_back"]
+
+
+def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = False) -> None:
+    """Add ``--format --columns --dt --tau-scale --deg --resample --max-gap --drop-bad-rows`` (and,
+    with ``validate_fraction``, ``--validate-fraction``) to a command's parser."""
+    g = p.add_argument_group("reading the DATA files (docs/data-files.md)")
+    g.add_argument("--format", metavar="FILE.toml", help="a log format file with the keys below (options given "
+                   "on the command line override it)")
+    g.add_argument("--columns", metavar="SPEC", help="which columns are what: t=0,q=1:7,tau=13:19 (0-based, "
+                   "Python slices) or q=q_0:q_6,tau=tau_0:tau_6 (header names, inclusive); optional dq=, ddq=, "
+                   "q_link= (link-side position); in .npz/.mat array names, nested structs dotted (q=rec.pos)")
+    g.add_argument("--dt", type=float, metavar="SECONDS", help="sampling period when the file has no time column")
+    g.add_argument("--tau-scale", metavar="V[,V...]", help="factor(s) turning the logged torque signal into N m "
+                   "(one per joint or one for all), e.g. current x torque constant x ratio")
+    g.add_argument("--deg", action="store_true", default=None, help="positions are logged in degrees")
+    g.add_argument("--resample", action="store_true", default=None,
+                   help="resample irregular time stamps on a uniform grid at the median step (cubic for q, linear "
+                        "for the rest); steps longer than --max-gap split the file into experiments")
+    g.add_argument("--max-gap", type=float, metavar="SECONDS", help="longest step bridged by --resample "
+                   "(default 5 median steps)")
+    g.add_argument("--drop-bad-rows", action="store_true", default=None,
+                   help=f"drop rows with a wrong field count, unparsable/non-finite numbers or |value| > "
+                        f"{ABSURD_VALUE:g} (counted in the output) instead of stopping")
+    if validate_fraction:
+        g.add_argument("--validate-fraction", type=float, metavar="F",
+                       help="hold back the last F (0 < F < 1) of each DATA file for validation")
+
+
+def format_from_args(args) -> LogFormat:
+    """The :class:`LogFormat` of parsed arguments (over ``--format FILE``)."""
+    return make_format(columns=getattr(args, "columns", None), dt=getattr(args, "dt", None),
+                       tau_scale=getattr(args, "tau_scale", None), deg=getattr(args, "deg", None),
+                       resample=getattr(args, "resample", None), max_gap=getattr(args, "max_gap", None),
+                       drop_bad_rows=getattr(args, "drop_bad_rows", None), format_file=getattr(args, "format", None))
+
+
+def load_data(args, paths: Sequence, robot, *, loaded: bool = False
+              ) -> tuple[tuple[Trajectory, ...], tuple[LoadReport, ...]]:
+    """Read ``paths`` with the data options of ``args`` for ``robot`` (its drive chain applied)."""
+    fmt = format_from_args(args)
+    return load_logs(paths, fmt, n_joints=robot.n_joints, robot=robot, drive_chain=robot.drive_chain,
+                     loaded=loaded)
+
+
+def split_held_back(args, trajectories):
+    """``--validate-fraction F``: (identification part, held-back part); without it (all, ())."""
+    f = getattr(args, "validate_fraction", None)
+    if f is None:
+        return tuple(trajectories), ()
+    if not 0 < f < 1:
+        raise OptionError(f"--validate-fraction {f:g}: must lie between 0 and 1 (a share of each recording)")
+    return hold_back(trajectories, f)
+
+
+def data_block(reports: Sequence[LoadReport]) -> list[dict]:
+    """The JSON ``data`` block: one entry per file."""
+    return [r.to_dict() for r in reports]
+
+
+def data_text(reports: Sequence[LoadReport]) -> str:
+    """The text echo: one line per file, plus the dropped rows and notes."""
+    lines = ["Data:"]
+    for r in reports:
+        lines.append("  " + r.summary())
+        lines += [f"    dropped {d}" for d in r.dropped] + [f"    note: {x}" for x in r.notes]
+    return "\n".join(lines)
+
+
+def data_notes(reports: Sequence[LoadReport]) -> list[str]:
+    """Report notes (one per file)."""
+    return ["data " + r.summary() for r in reports]

@@ -1,0 +1,294 @@
+"""``symoro-gen inspect ROBOT DATA...``: what a recording can and cannot give, before identifying.
+
+Per file: sampling rate and jitter, gaps, dropped rows (from :class:`LoadReport`); per experiment and
+joint: standstill fraction, saturation (samples stuck at the column's bound), the low-pass cut-off and
+decimation factor the papers' rules choose (:func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`);
+for all experiments: the condition number of ``W`` assembled by the identification code
+(:func:`~symoro_gen.identification.assemble.build_observation`) and the base parameters whose
+predicted relative standard deviation ``%sigma`` (Gautier 1990; LWR4 paper eq. 11) exceeds
+``REL_STD_WARN_PCT``: the parameters this recording cannot identify.
+
+Exit 0 (with warnings) when the recording is usable, 2 with the reason when it is not.
+"""
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import IdentificationError
+from ..identification.assemble import build_observation
+from ..identification.estimators import REL_STD_WARN_PCT
+from ..identification.method import identify
+from ..model import IdentificationModel
+from ..report import (Figure, Heading, ItemList, Preformatted, Report, Table, check_report_path,
+                      require_matplotlib)
+from ..report.document import write_report_files
+from .cli import add_data_options, data_block, data_text, load_data
+from .filtering import choose_filter_settings, filter_and_differentiate
+from .logformat import LoadReport
+from .trajectory import Trajectory
+
+__all__ = ["JointStats", "ExperimentStats", "Inspection", "inspect_recordings", "add_inspect_parser", "run_inspect"]
+
+#: |dq| below which a joint is at a standstill [rad/s or m/s]
+STANDSTILL_VELOCITY = 0.01
+#: share of the samples at a column's extreme value above which it is reported saturated
+SATURATION_FRACTION = 0.02
+#: standstill share above which a joint is reported (the recording hardly excites it)
+STANDSTILL_WARN = 0.5
+#: cond(W) (columns scaled) above which the recording is reported ill-conditioned
+COND_WARN = 1e3
+
+
+@dataclass(frozen=True)
+class JointStats:
+    """One joint of one experiment."""
+
+    joint: int
+    standstill: float        # share of samples with |dq| < STANDSTILL_VELOCITY
+    q_saturated: float       # share of samples at min or max of q
+    tau_saturated: float     # share of samples at min or max of tau
+    q_range: float
+    tau_peak: float
+
+
+@dataclass(frozen=True)
+class ExperimentStats:
+    source: str
+    n_samples: int
+    fs: float
+    duration: float
+    cutoff_hz: float
+    n_d: int
+    joints: tuple[JointStats, ...]
+
+
+@dataclass(frozen=True)
+class Inspection:
+    """What :func:`inspect_recordings` found."""
+
+    files: tuple[LoadReport, ...]
+    experiments: tuple[ExperimentStats, ...]
+    cond: float | None
+    cond_scaled: float | None
+    names: tuple[str, ...] = ()
+    rel_std_pct: tuple[float, ...] = ()
+    warnings: tuple[str, ...] = ()
+    errors: tuple[str, ...] = ()
+
+    @property
+    def usable(self) -> bool:
+        return not self.errors
+
+    @property
+    def unidentifiable(self) -> tuple[tuple[str, float], ...]:
+        return tuple((n, p) for n, p in zip(self.names, self.rel_std_pct) if not (p <= REL_STD_WARN_PCT))
+
+    def to_dict(self) -> dict:
+        def f(x):
+            return None if x is None or not np.isfinite(x) else float(x)
+
+        return {
+            "usable": self.usable, "errors": list(self.errors), "warnings": list(self.warnings),
+            "data": data_block(self.files),
+            "experiments": [{"source": e.source, "n_samples": e.n_samples, "fs": e.fs, "duration": e.duration,
+                             "cutoff_hz": e.cutoff_hz, "n_d": e.n_d,
+                             "joints": [{"joint": j.joint, "standstill": j.standstill, "q_saturated": j.q_saturated,
+                                         "tau_saturated": j.tau_saturated, "q_range": j.q_range,
+                                         "tau_peak": j.tau_peak} for j in e.joints]} for e in self.experiments],
+            "cond": f(self.cond), "cond_scaled": f(self.cond_scaled),
+            "parameters": {"names": list(self.names), "rel_std_pct": [f(p) for p in self.rel_std_pct]},
+            "unidentifiable": [{"name": n, "rel_std_pct": f(p)} for n, p in self.unidentifiable],
+        }
+
+    def summary(self) -> str:
+        lines = [data_text(self.files), ""]
+        for r in self.files:
+            lines.append(f"{r.file}: step {r.step_from:.6g} s ({1 / r.step_from:.5g} Hz), jitter "
+                         f"{100 * r.step_jitter:.3g} % of the step, {r.gaps} gap(s) split, {r.rows_dropped} row(s) dropped")
+        for e in self.experiments:
+            lines.append(f"{e.source}: {e.n_samples} samples, {e.duration:.4g} s at {e.fs:.5g} Hz; the papers' rule "
+                         f"chooses a cut-off of {e.cutoff_hz:.3g} Hz and decimation n_d = {e.n_d}")
+            lines.append("  joint  standstill  q at bound  tau at bound   q range   |tau| max")
+            for j in e.joints:
+                lines.append(f"  {j.joint:5d}  {100 * j.standstill:9.1f}%  {100 * j.q_saturated:9.1f}%  "
+                             f"{100 * j.tau_saturated:11.1f}%  {j.q_range:8.4g}  {j.tau_peak:10.4g}")
+        if self.cond is not None:
+            lines.append(f"cond(W) = {self.cond:.4g} (columns scaled: {self.cond_scaled:.4g}); "
+                         f"{len(self.names)} base parameters")
+            un = self.unidentifiable
+            if un:
+                lines.append(f"{len(un)} base parameter(s) this recording cannot identify (predicted %sigma > "
+                             f"{REL_STD_WARN_PCT:g}): " + ", ".join(f"{n} ({p:.3g} %)" for n, p in un))
+            else:
+                lines.append(f"every base parameter has a predicted %sigma <= {REL_STD_WARN_PCT:g}")
+        lines += [f"warning: {w}" for w in self.warnings]
+        lines += [f"not usable: {e}" for e in self.errors]
+        return "\n".join(lines)
+
+
+def _at_bound(x: np.ndarray) -> float:
+    """Share of the samples equal to the column's minimum or maximum (values stuck at a bound)."""
+    lo, hi = x.min(), x.max()
+    if hi - lo <= 0:
+        return 1.0
+    tol = 1e-9 * (hi - lo)
+    return float(np.mean((x <= lo + tol) | (x >= hi - tol)))
+
+
+def _experiment_stats(tr: Trajectory, cutoff_hz, n_d) -> ExperimentStats:
+    fs = 1.0 / tr.dt
+    st = choose_filter_settings(fs, tr.q, cutoff_hz=cutoff_hz, n_d=n_d)
+    _, dq, _ = filter_and_differentiate(tr.q, fs, st.cutoff_hz, source=tr.source)
+    joints = []
+    for j in range(tr.n_joints):
+        joints.append(JointStats(
+            joint=j + 1, standstill=float(np.mean(np.abs(dq[:, j]) < STANDSTILL_VELOCITY)),
+            q_saturated=_at_bound(tr.q[:, j]), tau_saturated=_at_bound(tr.tau[:, j]),
+            q_range=float(np.ptp(tr.q[:, j])), tau_peak=float(np.abs(tr.tau[:, j]).max())))
+    return ExperimentStats(tr.source, tr.n_samples, fs, float(tr.t[-1] - tr.t[0]), st.cutoff_hz, st.n_d, tuple(joints))
+
+
+def inspect_recordings(model: IdentificationModel, trajectories: Sequence[Trajectory],
+                       reports: Sequence[LoadReport] = (), *, cutoff_hz: float | None = None,
+                       n_d: int | None = None) -> Inspection:
+    """Inspect recordings for ``model`` (see the module docstring).
+
+    Parameters
+    ----------
+    model : IdentificationModel
+    trajectories : sequence of Trajectory
+    reports : sequence of LoadReport
+        How the files were read (sampling, gaps, dropped rows).
+    cutoff_hz, n_d : optional
+        As for identification (default: the papers' rules).
+    """
+    warn: list[str] = []
+    errs: list[str] = []
+    exps = []
+    for tr in trajectories:
+        try:
+            exps.append(_experiment_stats(tr, cutoff_hz, n_d))
+        except ValueError as exc:  # too short to filter...
+            errs.append(f"{tr.source}: {str(exc).splitlines()[0]}")
+    for r in reports:
+        if r.rows_dropped:
+            warn.append(f"{r.file}: {r.rows_dropped} bad row(s) dropped")
+        if r.step_jitter > 0.5 and not r.resampled:
+            warn.append(f"{r.file}: irregular time steps (up to {100 * r.step_jitter:.3g} % of the median step)")
+        for note in r.notes:
+            warn.append(f"{r.file}: {note}")
+    n = model.N_JOINTS if hasattr(model, "N_JOINTS") else (trajectories[0].n_joints if trajectories else 0)
+    for j in range(n):
+        still = [e.joints[j].standstill for e in exps if j < len(e.joints)]
+        if still and min(still) > STANDSTILL_WARN:
+            warn.append(f"joint {j + 1} is at a standstill {100 * min(still):.0f} % of the time or more: "
+                        "its friction and inertia are barely excited")
+        sat = [(e.source, e.joints[j].tau_saturated) for e in exps if j < len(e.joints)]
+        for src, s in sat:
+            if SATURATION_FRACTION < s < 1.0:
+                warn.append(f"{src}: tau of joint {j + 1} sits at its extreme value {100 * s:.1f} % of the time "
+                            "(saturated torque or current limit?)")
+            elif s >= 1.0:
+                warn.append(f"{src}: tau of joint {j + 1} is constant")
+        for e in exps:
+            if j < len(e.joints) and e.joints[j].q_range == 0:
+                warn.append(f"{e.source}: joint {j + 1} never moves")
+    cond = cond_s = None
+    names: tuple[str, ...] = ()
+    pct: tuple[float, ...] = ()
+    if not errs and trajectories:
+        try:
+            sys_ = build_observation(model, trajectories, cutoff_hz=cutoff_hz, n_d=n_d)
+            res = identify(sys_, method="ols")
+            cond, cond_s = float(res.cond), float(res.cond_scaled)
+            names, pct = tuple(res.names), tuple(float(p) for p in res.rel_std_pct)
+            warn.extend(w for w in res.warnings if "poorly identified" not in w)
+            if cond_s > COND_WARN:
+                warn.append(f"cond(W) = {cond_s:.3g} with scaled columns: the recording excites the parameters "
+                            "poorly (essential parameters or a richer trajectory help)")
+        except (IdentificationError, ValueError) as exc:
+            errs.append(f"identification not possible on this recording: {str(exc).splitlines()[0]}")
+    if not trajectories:
+        errs.append("no data")
+    return Inspection(tuple(reports), tuple(exps), cond, cond_s, names, pct, tuple(dict.fromkeys(warn)), tuple(errs))
+
+
+def _report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str):
+    """An HTML/Markdown report: the summary tables and one plot per joint (q and tau against t)."""
+    MplFigure, Canvas = require_matplotlib()
+    blocks: list = [Heading("Files", 2),
+                    Table(("file", "rows read", "dropped", "resampled", "step [s]", "jitter [%]", "gaps", "experiments"),
+                          tuple((r.file, r.rows_read, r.rows_dropped, "yes" if r.resampled else "no",
+                                 f"{r.step_from:.6g}", f"{100 * r.step_jitter:.3g}", r.gaps, r.experiments)
+                                for r in insp.files), caption="How each file was read")]
+    for e in insp.experiments:
+        blocks.append(Table(("joint", "standstill [%]", "q at bound [%]", "tau at bound [%]", "q range", "|tau| max"),
+                            tuple((j.joint, f"{100 * j.standstill:.1f}", f"{100 * j.q_saturated:.1f}",
+                                   f"{100 * j.tau_saturated:.1f}", f"{j.q_range:.4g}", f"{j.tau_peak:.4g}")
+                                  for j in e.joints),
+                            caption=f"{e.source}: {e.fs:.5g} Hz, cut-off {e.cutoff_hz:.3g} Hz, n_d = {e.n_d}"))
+    if insp.names:
+        blocks.append(Heading("Predicted identifiability", 2))
+        blocks.append(Table(("parameter", "predicted %sigma"),
+                            tuple((n, f"{p:.3g}") for n, p in zip(insp.names, insp.rel_std_pct)),
+                            caption=f"cond(W) = {insp.cond:.4g} (scaled {insp.cond_scaled:.4g})",
+                            row_classes=tuple("poor" if not p <= REL_STD_WARN_PCT else "" for p in insp.rel_std_pct)))
+    if insp.warnings or insp.errors:
+        blocks.append(ItemList(tuple(insp.errors) + tuple(insp.warnings)))
+    blocks.append(Heading("Signals per joint", 2))
+    for k, tr in enumerate(trajectories):
+        for j in range(tr.n_joints):
+            fig = MplFigure(figsize=(8, 3.2), dpi=80)
+            Canvas(fig)
+            ax1, ax2 = fig.subplots(2, 1, sharex=True)
+            step = max(1, tr.n_samples // 4000)
+            ax1.plot(tr.t[::step], tr.q[::step, j], lw=0.8)
+            ax1.set_ylabel(f"q{j + 1}")
+            ax2.plot(tr.t[::step], tr.tau[::step, j], lw=0.8, color="C1")
+            ax2.set_ylabel(f"tau{j + 1}")
+            ax2.set_xlabel("t [s]")
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", metadata={"Software": None})
+            blocks.append(Figure(f"exp{k + 1}_joint{j + 1}", buf.getvalue(), caption=f"{tr.source}, joint {j + 1}"))
+    blocks.append(Preformatted(insp.summary()))
+    return Report(f"Inspection of recordings for {robot}", tuple(blocks))
+
+
+def run_inspect(args) -> int:
+    """The command; returns the exit status (0 usable, 2 not usable)."""
+    from ..loader import model_for
+
+    if args.report:
+        check_report_path(args.report)
+        require_matplotlib()
+    robot, model = model_for(args.robot)
+    trajs, reports = load_data(args, args.data, robot)
+    insp = inspect_recordings(model, trajs, reports, cutoff_hz=args.cutoff, n_d=args.decimate)
+    if args.json:
+        from ..atomic import write_text_atomic
+
+        write_text_atomic(Path(args.json), json.dumps({"robot": robot.name, **insp.to_dict()}, indent=2) + "\n")
+    if args.report:
+        write_report_files(_report(insp, trajs, robot.name), args.report)
+    if not args.quiet or not insp.usable:
+        print(insp.summary())
+    return 0 if insp.usable else 2
+
+
+def add_inspect_parser(sub) -> None:
+    p = sub.add_parser("inspect", help="what a recording can give: sampling, gaps, bad rows, standstill, "
+                                       "saturation, filter cut-off, cond(W), parameters it cannot identify")
+    p.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
+    p.add_argument("data", nargs="+", help="recordings (CSV/NPZ/MAT, or q=..,tau=..,dt=.. spec)")
+    p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
+    p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
+    p.add_argument("--json", help="write the findings as JSON here")
+    p.add_argument("--report", metavar="OUT.html|OUT.md", help="write a report with a plot per joint here")
+    add_data_options(p)
+    p.set_defaults(func=run_inspect)
