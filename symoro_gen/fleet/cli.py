@@ -5,6 +5,7 @@ import argparse
 import sys
 
 from ..observations import AssemblyOptions
+from ..preprocessing.cli import add_data_options, format_from_args
 from .engine import DEFAULT_ALPHA, identify_fleet
 from .report import write_fleet_report
 
@@ -37,7 +38,7 @@ def add_fleet_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--decimate", type=int, help="decimation factor n_d (default: Gautier's rule per log)")
     p.add_argument("--chunk-samples", type=int, metavar="N",
                    help="full-rate samples per block inside a task (bounds the memory of a worker)")
-    p.add_argument("--dt", type=float, metavar="SECONDS", help="sampling period of CSV/NPZ/MAT logs without time")
+    add_data_options(p)
     p.set_defaults(func=run_fleet)
     return p
 
@@ -46,7 +47,7 @@ def run_fleet(args) -> int:
     """Run the command; 0 whether or not robots are flagged (the flags are in the output)."""
     opts = AssemblyOptions(keep_signals=False, cutoff_hz=args.cutoff, n_d=args.decimate,
                            chunk_samples=args.chunk_samples)
-    load_kw = {"dt": args.dt} if args.dt is not None else None
+    load_kw = {"fmt": format_from_args(args)}
     res = identify_fleet(args.robot, args.logs, args.by, scheduler=args.scheduler, options=opts, load_kw=load_kw,
                          alpha=args.alpha, correction=args.correction, retries=args.retries)
     if args.json:

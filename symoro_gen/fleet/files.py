@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import DataFileError, Problem, SymoroError
 from ..preprocessing.load import load_trajectory
+from ..preprocessing.logformat import LogFormat, load_log
 from ..preprocessing.trajectory import Trajectory
 from ..report.plots import MissingDependencyError
 
@@ -178,6 +179,17 @@ def read_log(path: str, n_joints: int, *, loaded: bool = False, **load_kw) -> Tr
     if str(path).lower().endswith(PARQUET_SUFFIXES):
         return _read_parquet(str(path), n_joints, loaded)
     return load_trajectory(path, n_joints=n_joints, loaded=loaded, **load_kw)
+
+
+def read_experiments(path: str, n_joints: int, *, fmt: LogFormat | None = None, loaded: bool = False,
+                     **load_kw) -> tuple[Trajectory, ...]:
+    """The experiments of one log: a Parquet file is one; a CSV/NPZ/MAT log read with a
+    :class:`~symoro_gen.preprocessing.logformat.LogFormat` (the ``--columns --tau-scale --deg --resample``...
+    options of the command line, docs/data-files.md) may split at gaps; without ``fmt`` it is read by
+    ``load_trajectory`` with ``load_kw``."""
+    if str(path).lower().endswith(PARQUET_SUFFIXES) or fmt is None:
+        return (read_log(path, n_joints, loaded=loaded, **load_kw),)
+    return tuple(load_log(path, fmt, n_joints=n_joints, loaded=loaded)[0])
 
 
 def write_parquet(path, recording: Trajectory, *, row_group_size: int = 100_000) -> None:

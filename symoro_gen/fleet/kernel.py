@@ -20,7 +20,7 @@ from ..identification.accumulate import Accumulator, accumulate
 from ..loader import load_model
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions, iter_chunks
-from .files import LogFile, read_log
+from .files import LogFile, read_experiments
 
 __all__ = ["Partial", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
 
@@ -109,16 +109,18 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
     options : AssemblyOptions, optional
         Filters and block size (``keep_signals`` is ignored).
     load_kw : dict, optional
-        Keywords of :func:`~symoro_gen.preprocessing.load.load_trajectory` for CSV/NPZ/MAT logs.
+        Keywords of :func:`~symoro_gen.fleet.files.read_experiments` for CSV/NPZ/MAT logs: ``fmt`` (a
+        :class:`~symoro_gen.preprocessing.logformat.LogFormat`, the command line's data options) or the
+        keywords of :func:`~symoro_gen.preprocessing.load.load_trajectory`.
     """
     model = resolve_model(model_ref)
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     try:
-        traj = read_log(log.path, int(model.N_JOINTS), **(load_kw or {}))
-        acc = accumulate(iter_chunks(model, traj, opts, progress=False))
+        trajs = read_experiments(log.path, int(model.N_JOINTS), **(load_kw or {}))
+        acc = accumulate(iter_chunks(model, trajs, opts, progress=False))
     except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         if log.path not in msg:
             msg = f"{log.path}: {msg}"
         return Partial(files=(), acc=None, samples=0, skipped=((log.path, msg),))
-    return Partial(files=(log.path,), acc=acc, samples=int(traj.n_samples))
+    return Partial(files=(log.path,), acc=acc, samples=int(sum(t.n_samples for t in trajs)))
