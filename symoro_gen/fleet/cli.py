@@ -36,6 +36,9 @@ def add_fleet_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--retries", type=int, default=2, help="times a failed or lost task is re-run")
     p.add_argument("--cutoff", type=float, help="Butterworth cut-off of q [Hz] (default: Gautier's rule per log)")
     p.add_argument("--decimate", type=int, help="decimation factor n_d (default: Gautier's rule per log)")
+    p.add_argument("--segment-samples", type=int, metavar="N",
+                   help="cut Parquet logs longer than N samples into segments, one task each (a worker's memory "
+                        "is bounded by the segment, not by the log; each segment loses its filter edges)")
     p.add_argument("--chunk-samples", type=int, metavar="N",
                    help="full-rate samples per block inside a task (bounds the memory of a worker)")
     add_data_options(p)
@@ -49,7 +52,8 @@ def run_fleet(args) -> int:
                            chunk_samples=args.chunk_samples)
     load_kw = {"fmt": format_from_args(args)}
     res = identify_fleet(args.robot, args.logs, args.by, scheduler=args.scheduler, options=opts, load_kw=load_kw,
-                         alpha=args.alpha, correction=args.correction, retries=args.retries)
+                         alpha=args.alpha, correction=args.correction, retries=args.retries,
+                         segment_samples=args.segment_samples)
     if args.json:
         res.write_json(args.json)
     if args.report:

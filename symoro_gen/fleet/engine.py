@@ -25,7 +25,7 @@ from ..identification.estimators import fit_wls
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
 from ..report.plots import MissingDependencyError
-from .files import FleetError, discover, group_by
+from .files import FleetError, discover, group_by, segments
 from .kernel import Partial, merge_partials, process_file, resolve_model
 from .stats import adjust, dersimonian_laird, level_z, trend_test
 
@@ -213,7 +213,7 @@ def _model_ref(model) -> tuple[object, IdentificationModel]:
 def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *, scheduler: str | None = None,
                    client=None, options: AssemblyOptions | None = None, load_kw: dict | None = None,
                    alpha: float = DEFAULT_ALPHA, correction: str = "holm", retries: int = 2,
-                   kernel: Callable[..., Partial] = process_file) -> FleetResult:
+                   segment_samples: int | None = None, kernel: Callable[..., Partial] = process_file) -> FleetResult:
     """Identify every robot of a fleet per day, pool the fleet and flag the robots that drift.
 
     Parameters
@@ -238,6 +238,10 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
         Holm (family-wise error rate) or Benjamini-Hochberg (false-discovery rate).
     retries : int
         Times Dask re-runs a task that failed (worker lost, exception).
+    segment_samples : int, optional
+        Cut Parquet logs longer than this into segments, one task and one experiment each (its own filter
+        edges), read row group by row group: a worker's memory is then bounded by the segment whatever
+        the log length. Default: one task per log.
     kernel : callable
         The per-file task, ``kernel(model_ref, log, options, load_kw) -> Partial`` (default
         :func:`~symoro_gen.fleet.kernel.process_file`).
@@ -255,7 +259,9 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
         raise FleetError(f"alpha must be in (0, 1), got {alpha!r}")
     adjust(np.array([0.5]), alpha, correction)  # validates the name
     opts = AssemblyOptions(keep_signals=False) if options is None else options
-    files = discover(logs, by)
+    if segment_samples is not None and segment_samples < 1000:
+        raise FleetError(f"segment_samples must be >= 1000, got {segment_samples!r}")
+    files = segments(discover(logs, by), segment_samples)
     ref, mdl = _model_ref(model)
     t0 = time.perf_counter()
     ctx = contextlib.nullcontext(client) if client is not None else open_client(scheduler)
@@ -265,7 +271,7 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
         day_f, robot_f = {}, {}
         for r, days in groups.items():
             for d, logs_rd in days.items():
-                parts = [cl.submit(kernel, ref, lf, opts, load_kw, key=f"file-{r}-{d}-{i}-{os.path.basename(lf.path)}",
+                parts = [cl.submit(kernel, ref, lf, opts, load_kw, key=f"file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
                                    retries=retries, pure=False) for i, lf in enumerate(logs_rd)]
                 day_f[r, d] = _tree(cl, parts, f"day-{r}-{d}", retries)
             robot_f[r] = _tree(cl, [day_f[r, d] for d in days], f"robot-{r}", retries)
@@ -298,7 +304,8 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
                 days[r][d] = ed
     result = _judge(mdl, names, days, robots, fleet, skipped, alpha, correction)
     settings = {"by": by, "scheduler": scheduler or ("client" if client is not None else "local"),
-                "alpha": alpha, "correction": correction, "z_day": Z_DAY, "workers": n_workers,
+                "alpha": alpha, "correction": correction, "segment_samples": segment_samples, "tasks": len(files),
+                "z_day": Z_DAY, "workers": n_workers,
                 "estimator": "IDIM-WLS", "assembly": opts.summary()}
     timing = {"startup_s": round(t_start, 3), "run_s": round(t_run, 3),
               "samples": int(fleet_p.samples), "samples_per_s": fleet_p.samples / t_run if t_run > 0 else None}

@@ -33,11 +33,18 @@ class FleetError(SymoroError, ValueError):
 
 @dataclass(frozen=True, order=True)
 class LogFile:
-    """One log of the fleet: ``robot``, ``day`` (as named by the path) and ``path``."""
+    """One log of the fleet: ``robot``, ``day`` (as named by the path) and ``path``; with ``stop`` set, only
+    the samples ``[start, stop)`` of a Parquet log (a segment: one task, its own experiment)."""
 
     robot: str
     day: str
     path: str
+    start: int = 0
+    stop: int = -1
+
+    @property
+    def label(self) -> str:
+        return self.path if self.stop < 0 else f"{self.path}[{self.start}:{self.stop}]"
 
 
 def compile_pattern(pattern: str) -> re.Pattern:
@@ -135,10 +142,59 @@ def require_pyarrow():
     return pq
 
 
-def _read_parquet(path: str, n_joints: int, loaded: bool) -> Trajectory:
+def parquet_rows(path: str) -> int:
+    """Number of samples of a Parquet log (from its footer, nothing else is read)."""
     pq = require_pyarrow()
     try:
-        table = pq.read_table(path)
+        return int(pq.ParquetFile(path).metadata.num_rows)
+    except Exception as exc:  # noqa: BLE001 - pyarrow raises ArrowInvalid, OSError... on a damaged file
+        raise DataFileError([Problem(path, "", "", f"cannot read as Parquet ({type(exc).__name__}: {exc})")]) from None
+
+
+def segments(logs: Sequence[LogFile], samples: int | None) -> list[LogFile]:
+    """Parquet logs longer than ``samples`` cut into segments of ``samples`` (one task each, read row group
+    by row group: a worker's memory is bounded by the segment, not by the log); other logs unchanged.
+    A log whose footer cannot be read is kept whole (its task reports it)."""
+    if not samples:
+        return list(logs)
+    out = []
+    for lf in logs:
+        if not lf.path.lower().endswith(PARQUET_SUFFIXES):
+            out.append(lf)
+            continue
+        try:
+            n = parquet_rows(lf.path)
+        except DataFileError:
+            out.append(lf)
+            continue
+        if n <= samples:
+            out.append(lf)
+            continue
+        k = -(-n // samples)
+        bounds = np.linspace(0, n, k + 1).round().astype(int)
+        out += [LogFile(lf.robot, lf.day, lf.path, int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
+    return out
+
+
+def _read_table(path: str, start: int, stop: int):
+    """The Parquet table, or only the row groups holding samples ``[start, stop)`` sliced to them."""
+    pq = require_pyarrow()
+    if stop < 0:
+        return pq.read_table(path)
+    f = pq.ParquetFile(path)
+    groups, first, row = [], None, 0
+    for g in range(f.metadata.num_row_groups):
+        n = f.metadata.row_group(g).num_rows
+        if row + n > start and row < stop:
+            groups.append(g)
+            first = row if first is None else first
+        row += n
+    return f.read_row_groups(groups).slice(start - first, stop - start)
+
+
+def _read_parquet(path: str, n_joints: int, loaded: bool, start: int = 0, stop: int = -1) -> Trajectory:
+    try:
+        table = _read_table(path, start, stop)
     except Exception as exc:  # noqa: BLE001 - pyarrow raises ArrowInvalid, OSError... on a damaged file
         raise DataFileError([Problem(path, "", "", f"cannot read as Parquet ({type(exc).__name__}: {exc})")]) from None
     cols = set(table.column_names)
@@ -164,12 +220,15 @@ def _read_parquet(path: str, n_joints: int, loaded: bool) -> Trajectory:
                                          f"{rows.size} row(s) with NaN/inf or missing values")])
     if t.size < 2 or np.any(np.diff(t) <= 0):
         raise DataFileError([Problem(path, "", "t", "time must be strictly increasing with >= 2 samples")])
-    return Trajectory(t=t, q=q, tau=tau, dq=block("dq"), ddq=block("ddq"), source=path, loaded=loaded,
-                      meta={"format": "parquet"})
+    src = path if stop < 0 else f"{path}[{start}:{stop}]"
+    return Trajectory(t=t, q=q, tau=tau, dq=block("dq"), ddq=block("ddq"), source=src, loaded=loaded,
+                      meta={"format": "parquet", "rows": (start, stop)})
 
 
-def read_log(path: str, n_joints: int, *, loaded: bool = False, **load_kw) -> Trajectory:
-    """One log file as a :class:`Trajectory` (Parquet here, other formats by ``load_trajectory``).
+def read_log(path: str, n_joints: int, *, loaded: bool = False, start: int = 0, stop: int = -1,
+             **load_kw) -> Trajectory:
+    """One log file as a :class:`Trajectory` (Parquet here, other formats by ``load_trajectory``);
+    ``start``, ``stop``: only those samples of a Parquet log.
 
     Raises
     ------
@@ -177,18 +236,18 @@ def read_log(path: str, n_joints: int, *, loaded: bool = False, **load_kw) -> Tr
         Naming the file (and the column and rows) when it cannot be read.
     """
     if str(path).lower().endswith(PARQUET_SUFFIXES):
-        return _read_parquet(str(path), n_joints, loaded)
+        return _read_parquet(str(path), n_joints, loaded, start, stop)
     return load_trajectory(path, n_joints=n_joints, loaded=loaded, **load_kw)
 
 
 def read_experiments(path: str, n_joints: int, *, fmt: LogFormat | None = None, loaded: bool = False,
-                     **load_kw) -> tuple[Trajectory, ...]:
+                     start: int = 0, stop: int = -1, **load_kw) -> tuple[Trajectory, ...]:
     """The experiments of one log: a Parquet file is one; a CSV/NPZ/MAT log read with a
     :class:`~symoro_gen.preprocessing.logformat.LogFormat` (the ``--columns --tau-scale --deg --resample``...
     options of the command line, docs/data-files.md) may split at gaps; without ``fmt`` it is read by
     ``load_trajectory`` with ``load_kw``."""
     if str(path).lower().endswith(PARQUET_SUFFIXES) or fmt is None:
-        return (read_log(path, n_joints, loaded=loaded, **load_kw),)
+        return (read_log(path, n_joints, loaded=loaded, start=start, stop=stop, **load_kw),)
     return tuple(load_log(path, fmt, n_joints=n_joints, loaded=loaded)[0])
 
 

@@ -116,11 +116,11 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
     model = resolve_model(model_ref)
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     try:
-        trajs = read_experiments(log.path, int(model.N_JOINTS), **(load_kw or {}))
+        trajs = read_experiments(log.path, int(model.N_JOINTS), start=log.start, stop=log.stop, **(load_kw or {}))
         acc = accumulate(iter_chunks(model, trajs, opts, progress=False))
     except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         if log.path not in msg:
-            msg = f"{log.path}: {msg}"
-        return Partial(files=(), acc=None, samples=0, skipped=((log.path, msg),))
-    return Partial(files=(log.path,), acc=acc, samples=int(sum(t.n_samples for t in trajs)))
+            msg = f"{log.label}: {msg}"
+        return Partial(files=(), acc=None, samples=0, skipped=((log.label, msg),))
+    return Partial(files=(log.label,), acc=acc, samples=int(sum(t.n_samples for t in trajs)))

@@ -21,6 +21,7 @@ from symoro_gen.fleet import (
     open_client,
     read_log,
     simulate_fleet,
+    write_parquet,
 )
 from symoro_gen.fleet.stats import (
     benjamini_hochberg,
@@ -32,6 +33,7 @@ from symoro_gen.identification import fit_wls
 from symoro_gen.identification.accumulate import accumulate
 from symoro_gen.observations import AssemblyOptions, iter_chunks
 from symoro_gen.preprocessing.load import load_trajectory
+from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import write_recording_csv
 
 from .killer import kill_once
@@ -96,6 +98,26 @@ def test_distributed_equals_single_process(small_fleet, threads_client, chunk_sa
         G, G1 = acc.R[j].T @ acc.R[j], one.R[j].T @ one.R[j]
         assert np.max(np.abs(G - G1)) <= 1e-10 * np.max(np.abs(G1))
     assert acc.rows == one.rows
+
+
+def test_segments_are_tasks_of_bounded_memory_and_exact(small_fleet, threads_client, tmp_path):
+    """Logs cut into segments (read row group by row group) give the single-process accumulator over the
+    same segments taken as experiments, sliced from the whole log."""
+    root0, _ = small_fleet
+    root = tmp_path / "f"
+    shutil.copytree(root0, root)
+    whole = read_log(str(root / "r00" / "d00.parquet"), 4)
+    write_parquet(root / "r00" / "d00.parquet", whole, row_group_size=700)     # several row groups
+    res = identify_fleet("scara", [root], BY, client=threads_client, segment_samples=1500)
+    assert res.settings["tasks"] == 3 * 8 + 1 and not res.skipped            # 8 Parquet logs of 4001 samples, 1 CSV
+    model = load_model("scara")
+    opts = AssemblyOptions(keep_signals=False)
+    bounds = [0, 1334, 2667, 4001]
+    parts = [Trajectory(t=whole.t[a:b], q=whole.q[a:b], tau=whole.tau[a:b], source=f"[{a}:{b}]")
+             for a, b in zip(bounds[:-1], bounds[1:])]
+    ref = fit_wls(accumulate(iter_chunks(model, parts, opts, progress=False)))
+    assert _close(res.days["r00"]["d00"].values, ref.values)
+    assert res.days["r00"]["d00"].samples == 4001
 
 
 def test_lost_worker_is_retried_and_result_unchanged(small_fleet, threads_client, tmp_path):
