@@ -8,6 +8,7 @@ tau1..taun`` (``dq1..``, ``ddq1..`` optional), as :func:`write_parquet` writes t
 from __future__ import annotations
 
 import glob
+import itertools
 import os
 import re
 from collections.abc import Iterable, Sequence
@@ -172,7 +173,7 @@ def segments(logs: Sequence[LogFile], samples: int | None) -> list[LogFile]:
             continue
         k = -(-n // samples)
         bounds = np.linspace(0, n, k + 1).round().astype(int)
-        out += [LogFile(lf.robot, lf.day, lf.path, int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
+        out += [LogFile(lf.robot, lf.day, lf.path, int(a), int(b)) for a, b in itertools.pairwise(bounds)]
     return out
 
 

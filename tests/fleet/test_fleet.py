@@ -3,6 +3,7 @@ accumulator, a lost worker, a damaged log, drift detection on simulated fleets, 
 from __future__ import annotations
 
 import functools
+import itertools
 import json
 import re
 import shutil
@@ -114,7 +115,7 @@ def test_segments_are_tasks_of_bounded_memory_and_exact(small_fleet, threads_cli
     opts = AssemblyOptions(keep_signals=False)
     bounds = [0, 1334, 2667, 4001]
     parts = [Trajectory(t=whole.t[a:b], q=whole.q[a:b], tau=whole.tau[a:b], source=f"[{a}:{b}]")
-             for a, b in zip(bounds[:-1], bounds[1:])]
+             for a, b in itertools.pairwise(bounds)]
     ref = fit_wls(accumulate(iter_chunks(model, parts, opts, progress=False)))
     assert _close(res.days["r00"]["d00"].values, ref.values)
     assert res.days["r00"]["d00"].samples == 4001
