@@ -268,3 +268,12 @@ def test_statistics_against_direct_definitions():
     s = np.full(6, 0.01)
     slope, _se, z, pv = trend_test(x, y, s)
     assert np.isclose(slope, np.polyfit(x, y, 1)[0]) and z > 10 and pv < 1e-10
+
+
+def test_cli_errors_name_the_file_and_the_pattern(cli, tmp_path):
+    r = cli("fleet", "scara", tmp_path / "missing.parquet", "--by", "{robot}/{day}.parquet", rc=2)
+    assert "missing.parquet: no such file" in r.err_lines[0]
+    r = cli("fleet", "scara", tmp_path, "--by", "{day}.parquet", rc=2)
+    assert "must contain {robot} and {day}" in r.err_lines[0]
+    r = cli("fleet", "scara", tmp_path, "--by", "{robot}/{day}.parquet", "--alpha", "2", rc=2)
+    assert "alpha" in r.err_lines[0]
