@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import math
 import os
 import re
@@ -66,10 +67,10 @@ def open_client(scheduler: str | None = None):
                 raise FleetError(f"--scheduler {s}: the number of workers must be >= 1")
             if m.group(1) == "local":
                 cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                   dashboard_address=None)
+                                                   dashboard_address=None, silence_logs=logging.ERROR)
             else:
                 cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=n, processes=False,
-                                                   dashboard_address=None)
+                                                   dashboard_address=None, silence_logs=logging.ERROR)
             client = distributed.Client(cluster)
         else:
             try:
