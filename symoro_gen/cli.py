@@ -326,9 +326,17 @@ def _excite_parser(sub):
     add_excite_parser(sub)
 
 
-_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _inspect_parser, _demo_parser, _excite_parser]
+def _fleet_parser(sub):
+    """``fleet`` (Dask and pyarrow are imported only when this command runs)."""
+    from .fleet.cli import add_fleet_parser
+
+    add_fleet_parser(sub)
+
+
+_EXTRA_COMMANDS: list = [_identify_parser, _diagnose_parser, _inspect_parser, _demo_parser, _excite_parser,
+                         _fleet_parser]
 _EXTRA_NAMES = {_identify_parser: "identify", _diagnose_parser: "diagnose", _inspect_parser: "inspect",
-                _demo_parser: "demo", _excite_parser: "excite"}
+                _demo_parser: "demo", _excite_parser: "excite", _fleet_parser: "fleet"}
 _LIGHT_COMMANDS = ("generate", "build", "import-par", "import-urdf", "export-par", "export-urdf", "export-mjcf")
 
 

@@ -1,0 +1,367 @@
+"""Fleet identification on Dask distributed: one task per log, TSQR tree reductions per robot-day, per
+robot and for the fleet, then the per-day, per-robot and fleet estimates (IDIM-WLS, RX-90 paper eq. 22)
+and the drift flags (:mod:`symoro_gen.fleet.stats`).
+
+The same code runs on a laptop (``scheduler=None``: a ``LocalCluster``), a workstation
+(``"local:N"``: N worker processes) or a cluster (the address of any running scheduler, e.g. one
+started by dask-jobqueue or on Kubernetes; the workers need symoro_gen and the generated model).
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import os
+import re
+import time
+import warnings
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..atomic import write_text_atomic
+from ..identification.estimators import fit_wls
+from ..model import IdentificationModel
+from ..observations import AssemblyOptions
+from ..report.plots import MissingDependencyError
+from .files import FleetError, discover, group_by, segments
+from .kernel import Partial, merge_partials, process_file, resolve_model
+from .stats import adjust, dersimonian_laird, level_z, trend_test
+
+__all__ = ["DEFAULT_ALPHA", "Z_DAY", "Estimate", "FleetResult", "identify_fleet", "open_client"]
+
+#: family-wise error rate of the flags (Holm) or false-discovery rate (BH)
+DEFAULT_ALPHA = 0.01
+#: a day is listed in a flag when its own distance to the fleet exceeds this
+Z_DAY = 3.0
+
+
+def _require_distributed():
+    try:
+        import distributed
+    except ImportError:  # pragma: no cover - depends on the installation
+        raise MissingDependencyError("fleet identification needs Dask: pip install 'symoro-gen[fleet]'") from None
+    return distributed
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None = None):
+    """A ``distributed.Client`` for ``scheduler``, closed (with its cluster) on exit.
+
+    ``None`` or ``"local"``: a ``LocalCluster`` of ``min(2, cpus)`` single-threaded worker processes;
+    ``"local:N"``: N worker processes; ``"threads:N"``: one in-process worker with N threads (no
+    pickling, quick to start: tests, notebooks); anything else: the address of a running scheduler
+    (``tcp://host:8786``).
+    """
+    distributed = _require_distributed()
+    cluster = None
+    s = (scheduler or "local").strip()
+    m = re.fullmatch(r"(local|threads)(?::(\d+))?", s)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Dask's port/dashboard notices
+        if m:
+            n = int(m.group(2)) if m.group(2) else min(2, os.cpu_count() or 1)
+            if n < 1:
+                raise FleetError(f"--scheduler {s}: the number of workers must be >= 1")
+            if m.group(1) == "local":
+                cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                   dashboard_address=None, silence_logs=logging.ERROR)
+            else:
+                cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=n, processes=False,
+                                                   dashboard_address=None, silence_logs=logging.ERROR)
+            client = distributed.Client(cluster)
+        else:
+            try:
+                client = distributed.Client(s, timeout="20s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise FleetError(f"--scheduler {s}: cannot connect ({exc})") from None
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Parameters with standard deviations (IDIM-WLS on the merged factors)."""
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    std: np.ndarray
+    rows: int = 0
+    samples: int = 0
+    files: tuple[str, ...] = ()
+
+    def to_json(self) -> dict:
+        return {"names": list(self.names), "values": _floats(self.values),
+                "std": _floats(self.std), "rows": int(self.rows), "samples": int(self.samples),
+                "files": list(self.files)}
+
+
+@dataclass(frozen=True, eq=False)
+class FleetResult:
+    """What a fleet run found (see :meth:`to_json` for the contract)."""
+
+    model: str
+    names: tuple[str, ...]
+    days: dict[str, dict[str, Estimate]]          # robot -> day -> estimate
+    robots: dict[str, Estimate]                    # robot -> all its days
+    fleet: Estimate
+    level: dict                                    # z, p, mean, mean_std, tau: (R, P) arrays
+    trend: dict                                    # slope, se, z, p: (R, P) arrays
+    flagged: list[dict]
+    skipped: list[dict]
+    settings: dict = field(default_factory=dict)
+    timing: dict = field(default_factory=dict)
+    partials: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def robot_names(self) -> list[str]:
+        return list(self.robots)
+
+    def series(self, robot: str, parameter: str) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """``(days, values, std)`` of one parameter of one robot over its days."""
+        k = self.names.index(parameter)
+        days = list(self.days[robot])
+        return (days, np.array([self.days[robot][d].values[k] for d in days]),
+                np.array([self.days[robot][d].std[k] for d in days]))
+
+    def to_json(self) -> dict:
+        """The JSON document: ``robots`` {robot: {``days``: {day: {names, values, std}}, ``estimate``,
+        ``z``, ``z_trend``, ``slope``}}, ``fleet`` {names, values, std, between_robot_std}, ``flagged``
+        [{robot, parameter, z, days, ...}], ``skipped`` [{file, error}], ``settings``, ``timing``."""
+        rob = {}
+        for i, r in enumerate(self.robots):
+            rob[r] = {
+                "days": {d: e.to_json() for d, e in self.days[r].items()},
+                "estimate": self.robots[r].to_json(),
+                "z": _floats(self.level["z"][i]),
+                "z_trend": _floats(self.trend["z"][i]),
+                "slope_per_day": _floats(self.trend["slope"][i]),
+            }
+        fleet = self.fleet.to_json()
+        tau = self.level.get("tau_all")
+        fleet["between_robot_std"] = _floats(tau) if tau is not None else None
+        return {"model": self.model, "robots": rob, "fleet": fleet, "flagged": self.flagged,
+                "skipped": self.skipped, "settings": self.settings, "timing": self.timing}
+
+    def write_json(self, path) -> None:
+        write_text_atomic(path, json.dumps(self.to_json(), indent=1, allow_nan=True) + "\n")
+
+    def summary(self) -> str:
+        """A few lines for the terminal."""
+        nd = sum(len(v) for v in self.days.values())
+        lines = [(f"fleet of {len(self.robots)} robot(s) of {self.model}, {nd} robot-day(s), "
+                  f"{self.fleet.samples} samples, {len(self.skipped)} log(s) skipped")]
+        for s in self.skipped:
+            lines.append(f"  skipped {s['file']}: {s['error']}")
+        if not self.flagged:
+            lines.append("no robot drifts away from the fleet")
+        for f in self.flagged:
+            lines.append(f"  FLAG {f['robot']} {f['parameter']}: {f['test']} z = {f['z']:.1f} "
+                         f"(p_adj = {f['p_adjusted']:.2g}), days {', '.join(f['days'])}")
+        return "\n".join(lines)
+
+
+def _floats(a) -> list:
+    return [None if not math.isfinite(float(x)) else float(x) for x in np.asarray(a, float).reshape(-1)]
+
+
+def _fit(p: Partial, names: Sequence[str], problems: list | None = None, what: str = "") -> Estimate | None:
+    """IDIM-WLS on merged factors; None (and a line in ``problems``) when they do not identify the model."""
+    if p.acc is None:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            res = fit_wls(p.acc)
+        except Exception as exc:  # noqa: BLE001 - a day too short to identify is reported, not fatal
+            if problems is not None:
+                problems.append({"file": ", ".join(p.files), "error": f"{what}: not identifiable ({exc})"})
+            return None
+    return Estimate(tuple(res.names), np.asarray(res.values, float), np.asarray(res.std, float),
+                    rows=p.acc.n_rows, samples=p.samples, files=p.files)
+
+
+def _tree(client, parts: list, key: str, retries: int):
+    """Pairwise tree reduction of futures on the cluster (TSQR)."""
+    level = 0
+    while len(parts) > 1:
+        nxt = []
+        for i in range(0, len(parts) - 1, 2):
+            nxt.append(client.submit(merge_partials, parts[i], parts[i + 1], key=f"{key}-merge{level}-{i}",
+                                     retries=retries, pure=False))
+        if len(parts) % 2:
+            nxt.append(parts[-1])
+        parts, level = nxt, level + 1
+    return parts[0]
+
+
+def _model_ref(model) -> tuple[object, IdentificationModel]:
+    """What the tasks receive (a name or package path when possible: workers load it once) and the model."""
+    if isinstance(model, (str, os.PathLike)):
+        return os.fspath(model), resolve_model(os.fspath(model))
+    f = getattr(model, "__file__", None)
+    if f and os.path.basename(f) == "__init__.py":
+        return os.path.dirname(f), model
+    return model, model
+
+
+def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *, scheduler: str | None = None,
+                   client=None, options: AssemblyOptions | None = None, load_kw: dict | None = None,
+                   alpha: float = DEFAULT_ALPHA, correction: str = "holm", retries: int = 2,
+                   segment_samples: int | None = None, kernel: Callable[..., Partial] = process_file) -> FleetResult:
+    """Identify every robot of a fleet per day, pool the fleet and flag the robots that drift.
+
+    Parameters
+    ----------
+    model : str or IdentificationModel
+        Robot name, generated package folder or robot file (workers load it), or a model object.
+    logs : iterable of str
+        Files, globs or folders (CSV, NPZ, MAT, Parquet).
+    by : str
+        Pattern naming the robot and the day in the end of each path, e.g. ``"{robot}/{day}.parquet"``.
+    scheduler : str, optional
+        See :func:`open_client` (ignored when ``client`` is given).
+    client : distributed.Client, optional
+        An open client to use (not closed here).
+    options : AssemblyOptions, optional
+        Filters and block size (default: the papers' rules, ``keep_signals=False``).
+    load_kw : dict, optional
+        Keywords of ``load_trajectory`` (CSV columns, ``dt``...).
+    alpha : float
+        Level of the flags after correction (0.01).
+    correction : {"holm", "bh"}
+        Holm (family-wise error rate) or Benjamini-Hochberg (false-discovery rate).
+    retries : int
+        Times Dask re-runs a task that failed (worker lost, exception).
+    segment_samples : int, optional
+        Cut Parquet logs longer than this into segments, one task and one experiment each (its own filter
+        edges), read row group by row group: a worker's memory is then bounded by the segment whatever
+        the log length. Default: one task per log.
+    kernel : callable
+        The per-file task, ``kernel(model_ref, log, options, load_kw) -> Partial`` (default
+        :func:`~symoro_gen.fleet.kernel.process_file`).
+
+    Returns
+    -------
+    FleetResult
+
+    Raises
+    ------
+    FleetError
+        No log could be used.
+    """
+    if not (0 < alpha < 1):
+        raise FleetError(f"alpha must be in (0, 1), got {alpha!r}")
+    adjust(np.array([0.5]), alpha, correction)  # validates the name
+    opts = AssemblyOptions(keep_signals=False) if options is None else options
+    if segment_samples is not None and segment_samples < 1000:
+        raise FleetError(f"segment_samples must be >= 1000, got {segment_samples!r}")
+    files = segments(discover(logs, by), segment_samples)
+    ref, mdl = _model_ref(model)
+    t0 = time.perf_counter()
+    ctx = contextlib.nullcontext(client) if client is not None else open_client(scheduler)
+    with ctx as cl:
+        t_start = time.perf_counter() - t0
+        groups = group_by(files)
+        day_f, robot_f = {}, {}
+        for r, days in groups.items():
+            for d, logs_rd in days.items():
+                parts = [cl.submit(kernel, ref, lf, opts, load_kw, key=f"file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
+                                   retries=retries, pure=False) for i, lf in enumerate(logs_rd)]
+                day_f[r, d] = _tree(cl, parts, f"day-{r}-{d}", retries)
+            robot_f[r] = _tree(cl, [day_f[r, d] for d in days], f"robot-{r}", retries)
+        fleet_f = _tree(cl, list(robot_f.values()), "fleet", retries)
+        keys = list(day_f)
+        got = cl.gather([day_f[k] for k in keys] + [robot_f[r] for r in groups] + [fleet_f])
+        n_workers = len(cl.scheduler_info().get("workers", {}))
+    t_run = time.perf_counter() - t0 - t_start
+    day_p = dict(zip(keys, got[:len(keys)]))
+    robot_p = dict(zip(groups, got[len(keys):-1]))
+    fleet_p: Partial = got[-1]
+    skipped = [{"file": f, "error": e} for f, e in fleet_p.skipped]
+    if fleet_p.acc is None:
+        raise FleetError("fleet: no log could be used; " + "; ".join(s["error"] for s in skipped[:3]))
+    names = tuple(fleet_p.acc.names)
+    fleet = _fit(fleet_p, names)
+    if fleet is None:
+        raise FleetError("fleet: the pooled logs do not identify the base parameters")
+    days: dict[str, dict[str, Estimate]] = {}
+    robots: dict[str, Estimate] = {}
+    for r in groups:
+        e = _fit(robot_p[r], names, skipped, f"robot {r}")
+        if e is None:
+            continue
+        robots[r] = e
+        days[r] = {}
+        for d in groups[r]:
+            ed = _fit(day_p[r, d], names, skipped, f"robot {r}, day {d}")
+            if ed is not None:
+                days[r][d] = ed
+    result = _judge(mdl, names, days, robots, fleet, skipped, alpha, correction)
+    settings = {"by": by, "scheduler": scheduler or ("client" if client is not None else "local"),
+                "alpha": alpha, "correction": correction, "segment_samples": segment_samples, "tasks": len(files),
+                "z_day": Z_DAY, "workers": n_workers,
+                "estimator": "IDIM-WLS", "assembly": opts.summary()}
+    timing = {"startup_s": round(t_start, 3), "run_s": round(t_run, 3),
+              "samples": int(fleet_p.samples), "samples_per_s": fleet_p.samples / t_run if t_run > 0 else None}
+    return FleetResult(model=str(getattr(mdl, "ROBOT", ref)), names=names, days=days, robots=robots, fleet=fleet,
+                       level=result["level"], trend=result["trend"], flagged=result["flagged"], skipped=skipped,
+                       settings=settings, timing=timing,
+                       partials={"days": day_p, "robots": robot_p, "fleet": fleet_p})
+
+
+def _judge(model, names, days, robots, fleet, skipped, alpha, correction) -> dict:
+    """Level and trend tests of every robot and parameter, corrected together, and the flags."""
+    rnames = list(robots)
+    R, P = len(rnames), len(names)
+    theta = np.array([robots[r].values for r in rnames]).reshape(R, P)
+    std = np.array([robots[r].std for r in rnames]).reshape(R, P)
+    z, p, mean, mstd, tau = level_z(theta, std)
+    slope, se, zt, pt = (np.full((R, P), np.nan) for _ in range(4))
+    for i, r in enumerate(rnames):
+        dl = list(days[r])
+        if len(dl) < 3:
+            continue
+        x = np.arange(len(dl), dtype=float)
+        for k in range(P):
+            y = np.array([days[r][d].values[k] for d in dl])
+            s = np.array([days[r][d].std[k] for d in dl])
+            slope[i, k], se[i, k], zt[i, k], pt[i, k] = trend_test(x, y, s)
+    rej, padj = adjust(np.stack([p, pt]), alpha, correction)
+    tau_all = np.array([np.nan] * P)
+    if R >= 2:
+        tau_all = np.array([np.sqrt(dersimonian_laird(theta[:, k], std[:, k] ** 2)[2])
+                            if np.all(np.isfinite(std[:, k])) else np.nan for k in range(P)])
+    flagged = []
+    for i, r in enumerate(rnames):
+        for k in range(P):
+            if not (rej[0, i, k] or rej[1, i, k]):
+                continue
+            use_trend = bool(rej[1, i, k]) and (not rej[0, i, k] or padj[1, i, k] <= padj[0, i, k])
+            dl = list(days[r])
+            ref_m = mean[i, k] if np.isfinite(mean[i, k]) else fleet.values[k]
+            ref_v = (tau[i, k] ** 2 + mstd[i, k] ** 2) if np.isfinite(tau[i, k]) else fleet.std[k] ** 2
+            zd = [(days[r][d].values[k] - ref_m) / np.sqrt(days[r][d].std[k] ** 2 + ref_v) for d in dl]
+            out_days = [d for d, zz in zip(dl, zd) if abs(zz) > Z_DAY] or dl
+            flagged.append({
+                "robot": r, "parameter": names[k],
+                "z": float(zt[i, k] if use_trend else z[i, k]),
+                "days": out_days,
+                "test": "trend" if use_trend else "level",
+                "p_adjusted": float(padj[1 if use_trend else 0, i, k]),
+                "z_level": None if not np.isfinite(z[i, k]) else float(z[i, k]),
+                "z_trend": None if not np.isfinite(zt[i, k]) else float(zt[i, k]),
+                "slope_per_day": None if not np.isfinite(slope[i, k]) else float(slope[i, k]),
+                "fleet_reference": float(ref_m),
+            })
+    flagged.sort(key=lambda f: -abs(f["z"]))
+    return {"level": {"z": z, "p": p, "mean": mean, "mean_std": mstd, "tau": tau, "tau_all": tau_all,
+                      "p_adjusted": padj[0]},
+            "trend": {"slope": slope, "se": se, "z": zt, "p": pt, "p_adjusted": padj[1]},
+            "flagged": flagged}

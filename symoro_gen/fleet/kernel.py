@@ -1,0 +1,126 @@
+"""The per-file task of a fleet run and the merge of its results (TSQR tree reduction).
+
+One task reads one log, band-pass filters and decimates it block by block and folds every block of the
+base regressor into the per-joint QR factors of :class:`~symoro_gen.identification.accumulate.Accumulator`
+(:func:`~symoro_gen.observations.iter_chunks`: the full-rate ``W`` of a whole log never exists; memory
+is the log's ``t, q, tau`` plus one block of ``AssemblyOptions.chunk_samples`` / ``max_chunk_mb``).
+Two partial results merge exactly: the factor of ``[R_a; R_b]`` is the factor of all the rows of both
+(Demmel et al., "Communication-optimal parallel and sequential QR", SIAM J. Sci. Comput. 2012: TSQR).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from ..errors import IdentificationError
+from ..identification.accumulate import Accumulator, accumulate
+from ..loader import load_model
+from ..model import IdentificationModel
+from ..observations import AssemblyOptions, iter_chunks
+from .files import LogFile, read_experiments
+
+__all__ = ["Partial", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
+
+
+@dataclass(frozen=True, eq=False)
+class Partial:
+    """The factors of the logs of one group (a file, a robot-day, a robot, the fleet).
+
+    Attributes
+    ----------
+    files : tuple of str
+        Logs folded in.
+    acc : Accumulator or None
+        None when no log of the group could be used.
+    samples : int
+        Full-rate samples read.
+    skipped : tuple of (str, str)
+        ``(file, reason)`` of the logs that could not be used.
+    """
+
+    files: tuple[str, ...]
+    acc: Accumulator | None
+    samples: int = 0
+    skipped: tuple[tuple[str, str], ...] = ()
+
+
+@lru_cache(maxsize=8)
+def _load(ref: str) -> IdentificationModel:
+    return load_model(ref)
+
+
+def resolve_model(ref) -> IdentificationModel:
+    """A model from what a task received: a name or path (loaded once per worker process) or the model."""
+    if isinstance(ref, (str, os.PathLike)):
+        return _load(os.fspath(ref))
+    return ref
+
+
+def merge_accumulators(a: Accumulator, b: Accumulator) -> Accumulator:
+    """The accumulator of the rows of ``a`` and of ``b`` (per joint, ``R`` of ``[R_a; R_b]``; exact).
+
+    Raises
+    ------
+    IdentificationError
+        The two have different columns or weighting.
+    """
+    if a.names != b.names or a.weighted != b.weighted:
+        raise IdentificationError("merge_accumulators: the two accumulators have different columns or weighting")
+    c1 = a.n_params + 1
+    nj = max(a.n_joints, b.n_joints)
+    Rs, rows, yy = [], [], []
+    for j in range(nj):
+        parts = [x.R[j] for x in (a, b) if j < x.n_joints]
+        R = np.linalg.qr(np.vstack(parts), mode="r") if len(parts) > 1 else parts[0]
+        if R.shape[0] < c1:
+            R = np.vstack([R, np.zeros((c1 - R.shape[0], c1))])
+        Rs.append(R)
+        rows.append(sum(x.rows[j] for x in (a, b) if j < x.n_joints))
+        yy.append(sum(x.yy[j] for x in (a, b) if j < x.n_joints))
+    return Accumulator(a.names, tuple(Rs), tuple(rows), tuple(yy), a.weighted)
+
+
+def merge_partials(*parts: Partial) -> Partial:
+    """Merge partial results (files, samples and skipped logs concatenated; factors merged)."""
+    acc = None
+    for p in parts:
+        if p.acc is not None:
+            acc = p.acc if acc is None else merge_accumulators(acc, p.acc)
+    return Partial(files=tuple(f for p in parts for f in p.files), acc=acc,
+                   samples=sum(p.samples for p in parts), skipped=tuple(s for p in parts for s in p.skipped))
+
+
+def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None, load_kw: dict | None = None
+                 ) -> Partial:
+    """Read one log, filter, decimate, evaluate the base regressor block by block and fold it into the
+    per-joint QR factors (the kernel of a fleet run; RX-90 paper eq. 14-16 for the filters).
+
+    A log that cannot be read or used (damaged file, wrong columns, too short...) does not raise: it
+    comes back in ``skipped`` with the reason, so that it cannot stop the rest of the fleet.
+
+    Parameters
+    ----------
+    model_ref : str or IdentificationModel
+        Robot name / package folder (loaded once per worker) or a model object.
+    log : LogFile
+    options : AssemblyOptions, optional
+        Filters and block size (``keep_signals`` is ignored).
+    load_kw : dict, optional
+        Keywords of :func:`~symoro_gen.fleet.files.read_experiments` for CSV/NPZ/MAT logs: ``fmt`` (a
+        :class:`~symoro_gen.preprocessing.logformat.LogFormat`, the command line's data options) or the
+        keywords of :func:`~symoro_gen.preprocessing.load.load_trajectory`.
+    """
+    model = resolve_model(model_ref)
+    opts = AssemblyOptions(keep_signals=False) if options is None else options
+    try:
+        trajs = read_experiments(log.path, int(model.N_JOINTS), start=log.start, stop=log.stop, **(load_kw or {}))
+        acc = accumulate(iter_chunks(model, trajs, opts, progress=False))
+    except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
+        msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        if log.path not in msg:
+            msg = f"{log.label}: {msg}"
+        return Partial(files=(), acc=None, samples=0, skipped=((log.label, msg),))
+    return Partial(files=(log.label,), acc=acc, samples=int(sum(t.n_samples for t in trajs)))

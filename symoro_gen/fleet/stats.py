@@ -1,0 +1,149 @@
+"""Statistics of a fleet: a robot against the fleet's own spread, the trend of a robot over days, and
+the multiple-testing correction of the flags.
+
+* **Level** (random effects, DerSimonian & Laird, "Meta-analysis in clinical trials", Controlled
+  Clinical Trials 7, 1986): for parameter k, robot r's estimate ``theta_rk`` (variance ``v_rk`` from its
+  covariance) is compared with the random-effects mean ``m_k`` of the *other* robots (leave-one-out, so a
+  deviating robot does not pull the reference), whose variance ``var(m_k)`` comes from their
+  covariances and the between-robot variance ``tau2_k`` estimated by DerSimonian-Laird from them::
+
+      z_rk = (theta_rk - m_k) / sqrt(v_rk + tau2_k + var(m_k))
+
+  With few robots ``tau2`` is poorly known: the p-value uses Student's t with ``R - 2`` degrees of
+  freedom (Hartung & Knapp, Stat. Med. 20, 2001, in spirit), so ordinary unit-to-unit scatter is not
+  flagged.
+* **Trend**: weighted least-squares line of ``theta_rdk`` over the day index ``d`` (days in string
+  order), weights ``1 / std_rdk^2``; the standard error of the slope is inflated by the Birge ratio
+  ``sqrt(max(1, chi2 / (D - 2)))`` when the days scatter more than their standard deviations say
+  (day-to-day variation of real logs); ``z = slope / se``, normal two-sided p-value.
+* **Correction**: Holm's step-down procedure (Holm, Scand. J. Statist. 6, 1979) over every test of
+  every robot and parameter controls the family-wise error rate at ``alpha`` (default 0.01), or
+  Benjamini-Hochberg (``correction="bh"``) controls the false-discovery rate.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+__all__ = ["adjust", "benjamini_hochberg", "dersimonian_laird", "holm", "level_z", "trend_test"]
+
+
+def dersimonian_laird(theta: np.ndarray, var: np.ndarray) -> tuple[float, float, float]:
+    """Random-effects mean, its variance and the between-unit variance ``tau2`` (DerSimonian-Laird).
+
+    Parameters
+    ----------
+    theta, var : ndarray, shape (R,)
+        Estimates and their (within-unit) variances; ``var > 0``.
+
+    Returns
+    -------
+    mean, var_mean, tau2 : float
+    """
+    theta = np.asarray(theta, float)
+    w = 1.0 / np.maximum(np.asarray(var, float), np.finfo(float).tiny)
+    R = theta.size
+    mean_fe = float(w @ theta / w.sum())
+    Q = float(w @ (theta - mean_fe) ** 2)
+    denom = w.sum() - (w @ w) / w.sum()
+    tau2 = max(0.0, (Q - (R - 1)) / denom) if R > 1 and denom > 0 else 0.0
+    ws = 1.0 / (1.0 / w + tau2)
+    return float(ws @ theta / ws.sum()), float(1.0 / ws.sum()), tau2
+
+
+def level_z(theta: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Leave-one-out random-effects distance of every robot to the rest of the fleet.
+
+    Parameters
+    ----------
+    theta, std : ndarray, shape (R, P)
+        Per robot (all its days) estimates and standard deviations.
+
+    Returns
+    -------
+    z, p : ndarray (R, P)
+        Standardised distance and two-sided p-value (t with R-2 dof; NaN when R < 3).
+    mean, mean_std, tau : ndarray (R, P)
+        The leave-one-out reference of each robot, its standard deviation and the between-robot spread.
+    """
+    theta, std = np.asarray(theta, float), np.asarray(std, float)
+    R, P = theta.shape
+    z = np.full((R, P), np.nan)
+    mean, mstd, tau = (np.full((R, P), np.nan) for _ in range(3))
+    if R < 3:
+        return z, np.full((R, P), np.nan), mean, mstd, tau
+    var = std ** 2
+    for r in range(R):
+        others = np.arange(R) != r
+        for k in range(P):
+            if not (np.all(np.isfinite(var[:, k])) and np.all(np.isfinite(theta[:, k]))):
+                continue
+            m, vm, t2 = dersimonian_laird(theta[others, k], var[others, k])
+            mean[r, k], mstd[r, k], tau[r, k] = m, np.sqrt(vm), np.sqrt(t2)
+            den = np.sqrt(var[r, k] + t2 + vm)
+            z[r, k] = (theta[r, k] - m) / den if den > 0 else 0.0
+    p = 2.0 * stats.t.sf(np.abs(z), df=R - 2)
+    return z, p, mean, mstd, tau
+
+
+def trend_test(x: np.ndarray, y: np.ndarray, s: np.ndarray) -> tuple[float, float, float, float]:
+    """Weighted slope of ``y`` over ``x`` with standard deviations ``s`` (Birge-ratio inflated).
+
+    Returns
+    -------
+    slope, se, z, p : float
+        NaN when fewer than 3 points.
+    """
+    x, y, s = (np.asarray(a, float) for a in (x, y, s))
+    ok = np.isfinite(y) & np.isfinite(s) & (s > 0)
+    x, y, s = x[ok], y[ok], s[ok]
+    D = x.size
+    if D < 3:
+        return (np.nan,) * 4
+    w = 1.0 / s ** 2
+    xm, ym = w @ x / w.sum(), w @ y / w.sum()
+    sxx = w @ (x - xm) ** 2
+    if sxx <= 0:
+        return (np.nan,) * 4
+    slope = float(w @ ((x - xm) * (y - ym)) / sxx)
+    chi2 = float(w @ (y - ym - slope * (x - xm)) ** 2)
+    se = float(np.sqrt(1.0 / sxx * max(1.0, chi2 / (D - 2))))
+    z = slope / se
+    return slope, se, z, float(2.0 * stats.norm.sf(abs(z)))
+
+
+def holm(p: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """Holm's step-down procedure: (reject mask, adjusted p-values); NaN p-values are never rejected."""
+    p = np.asarray(p, float)
+    flat = p.reshape(-1)
+    adj = np.full(flat.shape, np.nan)
+    idx = np.flatnonzero(np.isfinite(flat))
+    m = idx.size
+    if m:
+        order = idx[np.argsort(flat[idx], kind="stable")]
+        a = np.maximum.accumulate(np.minimum(1.0, (m - np.arange(m)) * flat[order]))
+        adj[order] = a
+    return (np.nan_to_num(adj, nan=2.0) <= alpha).reshape(p.shape), adj.reshape(p.shape)
+
+
+def benjamini_hochberg(p: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """Benjamini-Hochberg step-up procedure: (reject mask, adjusted p-values)."""
+    p = np.asarray(p, float)
+    flat = p.reshape(-1)
+    adj = np.full(flat.shape, np.nan)
+    idx = np.flatnonzero(np.isfinite(flat))
+    m = idx.size
+    if m:
+        order = idx[np.argsort(flat[idx], kind="stable")]
+        a = flat[order] * m / np.arange(1, m + 1)
+        adj[order] = np.minimum(1.0, np.minimum.accumulate(a[::-1])[::-1])
+    return (np.nan_to_num(adj, nan=2.0) <= alpha).reshape(p.shape), adj.reshape(p.shape)
+
+
+def adjust(p: np.ndarray, alpha: float, correction: str = "holm") -> tuple[np.ndarray, np.ndarray]:
+    """Multiple-testing correction by name: ``"holm"`` (family-wise) or ``"bh"`` (false-discovery rate)."""
+    if correction == "holm":
+        return holm(p, alpha)
+    if correction == "bh":
+        return benjamini_hochberg(p, alpha)
+    raise ValueError(f"correction must be 'holm' or 'bh', got {correction!r}")

@@ -1,0 +1,279 @@
+"""Fleet identification (issue 12): exactness of the distributed TSQR against the single-process
+accumulator, a lost worker, a damaged log, drift detection on simulated fleets, the JSON contract."""
+from __future__ import annotations
+
+import functools
+import itertools
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from symoro_gen import load_model
+from symoro_gen.errors import DataFileError
+from symoro_gen.fleet import (
+    Drift,
+    FleetError,
+    compile_pattern,
+    discover,
+    identify_fleet,
+    open_client,
+    read_log,
+    simulate_fleet,
+    write_parquet,
+)
+from symoro_gen.fleet.stats import (
+    benjamini_hochberg,
+    dersimonian_laird,
+    holm,
+    trend_test,
+)
+from symoro_gen.identification import fit_wls
+from symoro_gen.identification.accumulate import accumulate
+from symoro_gen.observations import AssemblyOptions, iter_chunks
+from symoro_gen.preprocessing.load import load_trajectory
+from symoro_gen.preprocessing.trajectory import Trajectory
+from symoro_gen.simulate import write_recording_csv
+
+from .killer import kill_once
+
+BY = "{robot}/{day}.*"
+
+
+@pytest.fixture(scope="module")
+def small_fleet(tmp_path_factory):
+    """3 robots x 3 days of 4 s, scara; one log rewritten as CSV (mixed formats)."""
+    root = tmp_path_factory.mktemp("fleet")
+    truth = simulate_fleet(root, "scara", n_robots=3, n_days=3, duration=4.0, drifts=(), seed=3)
+    pq = root / "r02" / "d01.parquet"
+    write_recording_csv(root / "r02" / "d01.csv", read_log(str(pq), 4))
+    pq.unlink()
+    return root, truth
+
+
+@pytest.fixture(scope="module")
+def threads_client():
+    with open_client("threads:2") as c:
+        yield c
+
+
+def _reference(model, files, opts):
+    """The single-process accumulator on the same files (no Dask, no merge): IDIM-WLS of each robot-day."""
+    out = {}
+    for f in files:
+        traj = load_trajectory(f.path, n_joints=4) if f.path.endswith(".csv") else read_log(f.path, 4)
+        out[f.robot, f.day] = fit_wls(accumulate(iter_chunks(model, traj, opts, progress=False)))
+    return out
+
+
+def _close(a, b, rtol=1e-10):
+    a, b = np.asarray(a), np.asarray(b)
+    return np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)) <= rtol
+
+
+@pytest.mark.parametrize("chunk_samples", [None, 1300])
+def test_distributed_equals_single_process(small_fleet, threads_client, chunk_samples):
+    """Per robot-day estimates and the fleet factor equal those of the plain single-process accumulator
+    (whatever the block size, with 2 threads here and 2 worker processes in the lost-worker test)."""
+    root, _ = small_fleet
+    model = load_model("scara")
+    opts = AssemblyOptions(keep_signals=False, chunk_samples=chunk_samples)
+    files = discover([root], BY)
+    assert {f.path[-4:] for f in files} == {".csv", "quet"}
+    ref = _reference(model, files, opts)   # same blocks: the filters' block borders are part of the method
+    res = identify_fleet("scara", [root], BY, client=threads_client, options=opts)
+    assert not res.skipped
+    for (r, d), fit in ref.items():
+        e = res.days[r][d]
+        assert e.names == tuple(fit.names)
+        assert _close(e.values, fit.values), (r, d, np.abs(e.values - fit.values).max())
+        assert _close(e.std, fit.std), (r, d)
+    # the fleet factor is the factor of every row: same Gram matrix as one accumulator fed all the chunks
+    one = accumulate(c for f in files for c in iter_chunks(
+        model, load_trajectory(f.path, n_joints=4) if f.path.endswith(".csv") else read_log(f.path, 4), opts,
+        progress=False))
+    acc = res.partials["fleet"].acc
+    for j in range(4):
+        G, G1 = acc.R[j].T @ acc.R[j], one.R[j].T @ one.R[j]
+        assert np.max(np.abs(G - G1)) <= 1e-10 * np.max(np.abs(G1))
+    assert acc.rows == one.rows
+
+
+def test_segments_are_tasks_of_bounded_memory_and_exact(small_fleet, threads_client, tmp_path):
+    """Logs cut into segments (read row group by row group) give the single-process accumulator over the
+    same segments taken as experiments, sliced from the whole log."""
+    root0, _ = small_fleet
+    root = tmp_path / "f"
+    shutil.copytree(root0, root)
+    whole = read_log(str(root / "r00" / "d00.parquet"), 4)
+    write_parquet(root / "r00" / "d00.parquet", whole, row_group_size=700)     # several row groups
+    res = identify_fleet("scara", [root], BY, client=threads_client, segment_samples=1500)
+    assert res.settings["tasks"] == 3 * 8 + 1 and not res.skipped            # 8 Parquet logs of 4001 samples, 1 CSV
+    model = load_model("scara")
+    opts = AssemblyOptions(keep_signals=False)
+    bounds = [0, 1334, 2667, 4001]
+    parts = [Trajectory(t=whole.t[a:b], q=whole.q[a:b], tau=whole.tau[a:b], source=f"[{a}:{b}]")
+             for a, b in itertools.pairwise(bounds)]
+    ref = fit_wls(accumulate(iter_chunks(model, parts, opts, progress=False)))
+    assert _close(res.days["r00"]["d00"].values, ref.values)
+    assert res.days["r00"]["d00"].samples == 4001
+
+
+def test_lost_worker_is_retried_and_result_unchanged(small_fleet, threads_client, tmp_path):
+    root, _ = small_fleet
+    base = identify_fleet("scara", [root], BY, client=threads_client)
+    marker = tmp_path / "killed"
+    res = identify_fleet("scara", [root], BY, scheduler="local:2", retries=3,
+                         kernel=functools.partial(kill_once, marker=str(marker)))
+    assert marker.exists(), "no worker was killed"
+    assert res.settings["workers"] >= 1 and not res.skipped
+    for r in base.days:
+        for d in base.days[r]:
+            assert _close(res.days[r][d].values, base.days[r][d].values)
+    assert _close(res.fleet.values, base.fleet.values)
+
+
+def test_damaged_log_is_skipped_and_named(small_fleet, threads_client, tmp_path):
+    root0, _ = small_fleet
+    root = tmp_path / "f"
+    shutil.copytree(root0, root)
+    bad = root / "r01" / "d02.parquet"
+    bad.write_bytes(b"PAR1 this is not a parquet file" * 10)
+    res = identify_fleet("scara", [root], BY, client=threads_client)
+    assert [s["file"] for s in res.skipped] == [str(bad)]
+    assert str(bad) in res.skipped[0]["error"]
+    assert "d02" not in res.days["r01"] and "d01" in res.days["r01"]
+    clean = identify_fleet("scara", [root0], BY, client=threads_client)
+    for r in ("r00", "r02"):          # the other robots are not poisoned: same numbers as without the bad file
+        for d in clean.days[r]:
+            assert _close(res.days[r][d].values, clean.days[r][d].values)
+    assert _close(res.days["r01"]["d00"].values, clean.days["r01"]["d00"].values)
+    assert str(bad) in res.summary()
+
+
+def test_nothing_usable_fails_with_the_files(tmp_path, threads_client):
+    (tmp_path / "a").mkdir()
+    f = tmp_path / "a" / "d1.parquet"
+    f.write_bytes(b"garbage")
+    with pytest.raises(FleetError, match="d1.parquet"):
+        identify_fleet("scara", [str(f)], "{robot}/{day}.parquet", client=threads_client)
+
+
+def _joint_of(name: str) -> int:
+    return int(re.search(r"(\d+)R?$", name).group(1))
+
+
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_drifting_robots_flagged_and_no_other(tmp_path, threads_client, seed):
+    drifts = (Drift("r01", "FV4", 0.06), Drift("r03", "gain", -0.04, joint=1))
+    truth = simulate_fleet(tmp_path, "scara", n_robots=6, n_days=4, duration=8.0, drifts=drifts, seed=seed,
+                           friction_scatter=0.04)
+    res = identify_fleet("scara", [tmp_path], "{robot}/{day}.parquet", client=threads_client)
+    flagged = {}
+    for f in res.flagged:
+        flagged.setdefault(f["robot"], []).append(f["parameter"])
+    assert set(flagged) == truth.drifting, res.summary()
+    assert "FV4" in flagged["r01"]
+    # a torque gain of joint 1 scales the rows of joint 1: its own parameters (friction, offset) move with it
+    # and the parameters shared with other joints' rows follow a little; the strongest flag is joint 1's
+    top = next(f for f in res.flagged if f["robot"] == "r03")
+    assert _joint_of(top["parameter"]) == 1, flagged["r03"]
+    assert {"FV1", "FS1"} <= set(flagged["r03"])
+
+
+def test_unit_scatter_alone_is_never_flagged(tmp_path, threads_client):
+    simulate_fleet(tmp_path, "scara", n_robots=8, n_days=3, duration=6.0, drifts=(), seed=5, friction_scatter=0.05)
+    res = identify_fleet("scara", [tmp_path], "{robot}/{day}.parquet", client=threads_client)
+    assert res.flagged == []
+    # the scatter is there and seen: the between-robot spread of the friction parameters is not zero
+    k = res.names.index("FV2")
+    assert res.level["tau_all"][k] > 0
+
+
+def test_json_contract_and_report_from_the_cli(small_fleet, cli, tmp_path):
+    root, _ = small_fleet
+    out, rep = tmp_path / "fleet.json", tmp_path / "fleet.html"
+    r = cli("fleet", "scara", str(root / "*" / "*"), "--by", BY, "--scheduler", "threads:2", "--json", out,
+            "--report", rep)
+    assert "no robot drifts" in r.out
+    doc = json.loads(out.read_text())
+    assert set(doc) >= {"robots", "fleet", "flagged"}
+    assert doc["flagged"] == []
+    assert sorted(doc["robots"]) == ["r00", "r01", "r02"]
+    for rob in doc["robots"].values():
+        assert sorted(rob["days"]) == ["d00", "d01", "d02"]
+        for day in rob["days"].values():
+            assert len(day["names"]) == len(day["values"]) == len(day["std"]) == 22
+            assert all(s > 0 for s in day["std"])
+    assert len(doc["fleet"]["names"]) == len(doc["fleet"]["values"]) == len(doc["fleet"]["std"]) == 22
+    assert rep.read_text().startswith("<!DOCTYPE html>")
+
+
+def test_flagged_json_entries_and_plots(tmp_path, threads_client):
+    pytest.importorskip("matplotlib", reason="plots extra")
+    from symoro_gen.fleet.report import write_fleet_report
+
+    simulate_fleet(tmp_path / "logs", "scara", n_robots=4, n_days=3, duration=6.0,
+                   drifts=(Drift("r02", "FS2", 0.2),), seed=2)
+    res = identify_fleet("scara", [tmp_path / "logs"], "{robot}/{day}.parquet", client=threads_client)
+    doc = json.loads(json.dumps(res.to_json()))
+    assert doc["flagged"] and all(f["robot"] == "r02" for f in doc["flagged"])
+    f = doc["flagged"][0]
+    assert set(f) >= {"robot", "parameter", "z", "days"} and isinstance(f["z"], float)
+    assert set(f["days"]) <= {"d00", "d01", "d02"} and f["days"]
+    html = write_fleet_report(tmp_path / "r.html", res).read_text()
+    assert html.count("<img") == len(res.flagged)
+
+
+def test_pattern_and_discovery(tmp_path):
+    rx = compile_pattern("{robot}/{day}.parquet")
+    assert rx.search("/data/plant/arm07/2026-03-01.parquet").groupdict() == {"robot": "arm07", "day": "2026-03-01"}
+    assert rx.search("/data/arm07/2026-03-01.csv") is None
+    with pytest.raises(FleetError, match="robot"):
+        compile_pattern("{day}.csv")
+    for r, d in (("b", "2"), ("a", "10"), ("a", "9")):
+        (tmp_path / r).mkdir(exist_ok=True)
+        (tmp_path / r / f"{d}.csv").write_text("x")
+    got = [(f.robot, f.day) for f in discover([tmp_path / "*" / "*.csv"], "{robot}/{day}.csv")]
+    assert got == [("a", "10"), ("a", "9"), ("b", "2")]       # days sort as strings
+    with pytest.raises(DataFileError, match="no file matches"):
+        discover([tmp_path / "*.nothing"], "{robot}/{day}.csv")
+    with pytest.raises(DataFileError, match="does not end like"):
+        discover([tmp_path / "a" / "9.csv"], "{robot}/{day}.parquet")
+
+
+def test_statistics_against_direct_definitions():
+    rng = np.random.default_rng(0)
+    theta, var = rng.normal(1.0, 0.2, 7), rng.uniform(0.01, 0.05, 7)
+    m, _vm, t2 = dersimonian_laird(theta, var)
+    w = 1 / var
+    mfe = w @ theta / w.sum()
+    Q = w @ (theta - mfe) ** 2
+    t2_ref = max(0.0, (Q - 6) / (w.sum() - (w ** 2).sum() / w.sum()))
+    assert np.isclose(t2, t2_ref) and np.isclose(m, (theta / (var + t2)).sum() / (1 / (var + t2)).sum())
+    # Holm and BH against their textbook step procedures
+    p = rng.uniform(0, 0.02, 12)
+    rej, _ = holm(p, 0.05)
+    srt = np.sort(p)
+    k = next((i for i in range(12) if srt[i] > 0.05 / (12 - i)), 12)
+    assert rej.sum() == k
+    rej, _ = benjamini_hochberg(p, 0.05)
+    kk = max([i + 1 for i in range(12) if srt[i] <= 0.05 * (i + 1) / 12], default=0)
+    assert rej.sum() == kk
+    # the trend slope is the weighted least-squares slope
+    x = np.arange(6.0)
+    y = 2.0 + 0.3 * x + rng.normal(0, 0.01, 6)
+    s = np.full(6, 0.01)
+    slope, _se, z, pv = trend_test(x, y, s)
+    assert np.isclose(slope, np.polyfit(x, y, 1)[0]) and z > 10 and pv < 1e-10
+
+
+def test_cli_errors_name_the_file_and_the_pattern(cli, tmp_path):
+    r = cli("fleet", "scara", tmp_path / "missing.parquet", "--by", "{robot}/{day}.parquet", rc=2)
+    assert "missing.parquet: no such file" in r.err_lines[0]
+    r = cli("fleet", "scara", tmp_path, "--by", "{day}.parquet", rc=2)
+    assert "must contain {robot} and {day}" in r.err_lines[0]
+    r = cli("fleet", "scara", tmp_path, "--by", "{robot}/{day}.parquet", "--alpha", "2", rc=2)
+    assert "alpha" in r.err_lines[0]
