@@ -175,7 +175,7 @@ def _regroup_closed_form(reg: SymbolicRegressor):
                 cur[f"{k}{a}"] = cur[f"{k}{a}"] + dMS[i]
             cur[f"M{a}"] = cur[f"M{a}"] + M
         elif row.sigma == PRISMATIC:
-            Jj = sp.Matrix(3, 3, lambda r, c: cur[param_name(_kind_at(r, c), j)])
+            Jj = sp.Matrix(3, 3, lambda r, c, j=j: cur[param_name(_kind_at(r, c), j)])
             for k in _J_KINDS:
                 eliminated.append(f"{k}{j}")
                 del cur[f"{k}{j}"]

@@ -1,9 +1,9 @@
 """Value types describing a robot: MDH rows, drive chain, the whole robot."""
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Mapping
 
 import sympy as sp
 
@@ -184,13 +184,13 @@ class RobotDescription:
             a = self.row(a).ant
         return tuple(out)
 
-    def nominal_vector(self) -> "tuple[float, ...] | None":
+    def nominal_vector(self) -> tuple[float, ...] | None:
         """Nominal standard parameters in ``standard_names`` order (missing ones 0), or None."""
         if self.nominal is None:
             return None
         return tuple(float(self.nominal.get(n, 0.0)) for n in self.standard_names)
 
-    def nominal_payload(self) -> "tuple[float, ...] | None":
+    def nominal_payload(self) -> tuple[float, ...] | None:
         if self.nominal is None or self.payload is None:
             return None
         if not any(n in self.nominal for n in self.payload_names):

@@ -52,8 +52,8 @@ import math
 import os
 import re
 from collections import Counter
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 import sympy as sp
 from sympy.printing.str import StrPrinter
@@ -361,7 +361,7 @@ def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, f
             bad(None, _PAR_SPELLING[k], "missing list (the geometric table needs Ant, Sigma, d, R, Alpha, Theta)")
     lengths = {k: len(st.items) for k, st in geom.items()}
     nf = header["NF"][1] if "NF" in header else (Counter(lengths.values()).most_common(1)[0][0] if lengths else 0)
-    for k, st in geom.items():
+    for st in geom.values():
         if len(st.items) != nf:
             bad(st.line, st.key, f"has {len(st.items)} entries, expected {nf} (one per frame, NF = {nf})")
     if probs and not geom:

@@ -21,7 +21,7 @@ except ModuleNotFoundError:  # pragma: no cover - python < 3.11
     import tomli as tomllib  # type: ignore
 
 from ..errors import Problem, RobotFileError, RobotFileWarning
-from ..params import DRIVE_KINDS, INERTIAL_KINDS, PARAM_KINDS
+from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from .expr import ExprError, parse_expression
 from .inertia import check_physical_consistency
 from .model import FIXED, PRISMATIC, REVOLUTE, DriveChain, JointLimits, MdhRow, RobotDescription, q_symbol

@@ -474,7 +474,7 @@ def _merge_aliases(res: list[ComposedResult], sig: RowSignals) -> list[ComposedR
         c = r.candidate
         rows = np.flatnonzero(sig.joint == c.joint)
         m = c._signal(sig, rows)
-        for k, (r0, m0, al) in enumerate(kept):
+        for _k, (r0, m0, al) in enumerate(kept):
             c0 = r0.candidate
             if (c0.effect, c0.joint, c0.order) != (c.effect, c.joint, c.order):
                 continue

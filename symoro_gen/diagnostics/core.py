@@ -50,8 +50,8 @@ Known limits
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Sequence
 
 import numpy as np
 from scipy import stats as sst
@@ -62,10 +62,19 @@ from ..identification.method import identify
 from ..identification.result import IdentificationResult
 from ..model import IdentificationModel
 from ..observations.system import ObservationSystem
-from ..progress import progress_bar
 from ..preprocessing.trajectory import Trajectory
-from .candidates import (_UNSHIFTED, ALL, REVEAL, Family, FitContext, describe_params, make_families,
-                         nuisance_columns, placebo_families)
+from ..progress import progress_bar
+from .candidates import (
+    _UNSHIFTED,
+    ALL,
+    REVEAL,
+    Family,
+    FitContext,
+    describe_params,
+    make_families,
+    nuisance_columns,
+    placebo_families,
+)
 from .frame import Frame, attach_model_torque, build_frame, common_bandwidth, model_torque, split_holdout
 from .report import CandidateScore, Effect, ResidualReport
 from .stats import bonferroni, hac_covariance, hac_lag, segments_of, wald_test
@@ -315,7 +324,7 @@ def _build_one(fam: Family, frame: Frame, ctx: FitContext, value) -> np.ndarray:
     return fam.build(frame, ctx)[0]
 
 
-def _refine(fam: Family, member: int, F: Frame, ctx: FitContext, scorer: "_Scorer",
+def _refine(fam: Family, member: int, F: Frame, ctx: FitContext, scorer: _Scorer,
             xatol: float = REFINE_XATOL) -> float:
     """Continuous 1-D search (log scale, bounded by the grid neighbours) of the searched parameter,
     minimising the weighted identification residual."""
@@ -593,9 +602,9 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
             if cs.eligible:
                 eligible.append((ev.score, fam, ev, Xs[ev.member], Xvs[ev.member], cs))
         (placebos if fam.placebo else tried).append(cs)
-        if fam.placebo and ev is not None and ev.p_value < thr and ev.z > zcrit:
-            if gain_of(ev, _own(fam, n)) >= cfg.min_rel_improvement:
-                hits.append((fam.joint, rnd, fam.variant, ev.score))
+        if (fam.placebo and ev is not None and ev.p_value < thr and ev.z > zcrit
+                and gain_of(ev, _own(fam, n)) >= cfg.min_rel_improvement):
+            hits.append((fam.joint, rnd, fam.variant, ev.score))
     eligible.sort(key=lambda t: -t[0])
     return _Round(tried=tuple(tried), placebos=tuple(placebos), placebo_hits=tuple(hits), eligible=tuple(eligible),
                   ctx=ctx, scorer=scorer)

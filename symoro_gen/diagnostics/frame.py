@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 from scipy import signal
@@ -250,7 +250,7 @@ def _row_signals(exps, keys, row_exp, row_idx, n) -> dict:
 model_torque = full_rate_torque
 
 
-def attach_model_torque(frame: "Frame", model: IdentificationModel, theta: Mapping[str, float]) -> "Frame":
+def attach_model_torque(frame: Frame, model: IdentificationModel, theta: Mapping[str, float]) -> Frame:
     """A copy of ``frame`` with the model torque ``tau_hat`` (and derivatives) of parameters ``theta``.
 
     ``tau_hat`` is computed at full rate from the band-pass kinematics, then low-passed by a zero-phase

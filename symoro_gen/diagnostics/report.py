@@ -12,7 +12,6 @@ import numpy as np
 from ..identification.result import IdentificationResult
 from ..report import diagnosis_html
 from .plots import write_plots
-from .structure import SIGNAL_LABELS, StructureItem
 
 __all__ = ["CandidateScore", "Effect", "ResidualReport"]
 
@@ -294,7 +293,7 @@ class ResidualReport:
                     who += f" ({e.variant}, with joint {e.partner + 1})"
                 L.append(f" {i}. {e.kind} on {who}: score {e.score:.3f}, p = {e.p_value:.2e}, "
                          f"z_val = {e.z_validation:.1f}")
-                for n, v, s, p in zip(e.names, e.values, e.std, e.rel_std_pct):
+                for n, v, p in zip(e.names, e.values, e.rel_std_pct):
                     L.append(f"      {n:<28}{v:>12.4g}  %sigma {p:8.2f}")
                 if e.physical:
                     L.append("      " + ", ".join(f"{k} = {v:.4g}" for k, v in e.physical.items()))

@@ -239,7 +239,7 @@ def binned_anova(resid, signal, *, n_bins: int = 16, groups=None, inflation: flo
     s = np.asarray(signal, float)
     N = r.size
     empty = AnovaResult(0.0, 0.0, 1.0, np.zeros(0), np.zeros(0))
-    if N < 3 * n_bins or not np.isfinite(s).all() or np.ptp(s) == 0:
+    if 3 * n_bins > N or not np.isfinite(s).all() or np.ptp(s) == 0:
         return empty
     edges = np.unique(np.quantile(s, np.linspace(0, 1, n_bins + 1)))
     if edges.size < 3:

@@ -119,7 +119,7 @@ def residual_structure(frame: Frame, residual: np.ndarray, *, significance: floa
             fmax = FREQUENCY_BAND * frame.experiments[int(e)].settings.decimation_cutoff_hz
             f, g, p = fisher_g_test(r[m], dt, f_max=fmax if np.isfinite(fmax) else None)
             p = min(1.0, p * exps.size)
-            if p < best[2] or best[2] == 1.0 and g > best[1]:
+            if p < best[2] or (best[2] == 1.0 and g > best[1]):
                 best = (f, g, p)
         raw.append((j, "frequency", None, best[1], best[2], best[0]))
     m = len(raw)

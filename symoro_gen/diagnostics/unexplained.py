@@ -241,7 +241,7 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
             imp = np.zeros(X.shape[1])
             for c in range(X.shape[1]):
                 p2 = np.empty_like(e)
-                for (tr, te), m in zip(folds, models):
+                for (_tr, te), m in zip(folds, models):
                     Xt = X[te].copy()
                     Xt[:, c] = rng.permutation(Xt[:, c])
                     p2[te] = m.predict(Xt)

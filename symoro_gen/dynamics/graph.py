@@ -14,9 +14,7 @@ def is_trivial(e: sp.Expr) -> bool:
     """Atoms and negated atoms are inlined rather than given a name."""
     if e.is_Atom:
         return True
-    if e.is_Mul and len(e.args) == 2 and e.args[0] == -1 and e.args[1].is_Atom:
-        return True
-    return False
+    return bool(e.is_Mul and len(e.args) == 2 and e.args[0] == -1 and e.args[1].is_Atom)
 
 
 class GraphBuilder:
@@ -70,7 +68,7 @@ class ExprGraph:
     defs: tuple
     outputs: dict
 
-    def pruned(self, keys=None) -> "ExprGraph":
+    def pruned(self, keys=None) -> ExprGraph:
         """Keep only the outputs in ``keys`` and the intermediates they need (dead code removed)."""
         outs = self.outputs if keys is None else {k: v for k, v in self.outputs.items() if k in keys}
         need: set = set()
@@ -83,7 +81,7 @@ class ExprGraph:
                 need |= e.free_symbols
         return ExprGraph(self.inputs, tuple(reversed(keep)), outs)
 
-    def substituted(self, subs: dict) -> "ExprGraph":
+    def substituted(self, subs: dict) -> ExprGraph:
         """Substitute inputs (e.g. geometric constants by their values)."""
         defs = tuple((s, e.xreplace(subs)) for s, e in self.defs)
         outs = {k: v.xreplace(subs) for k, v in self.outputs.items()}

@@ -12,9 +12,9 @@ from ..model import IdentificationModel
 from ..observations.assembly import assemble
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
+from ..preprocessing.cli import add_data_options, data_block, data_notes, data_text, load_data, split_held_back
 from .physical import identify_physical
 from .result import _json_float, basis_text
-from ..preprocessing.cli import add_data_options, data_block, data_notes, data_text, load_data, split_held_back
 from .systems import stack_systems
 
 

@@ -17,8 +17,8 @@ and gives the same numbers for both: all computations run on per-joint QR factor
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

@@ -5,7 +5,7 @@ Kept apart from :mod:`.estimators` (the OLS/WLS/TLS solvers) because the essenti
 """
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 from ..errors import IdentificationError
 from ..observations.system import ObservationSystem

@@ -6,9 +6,9 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco", reason="the 'mjcf' extra (mujoco wheel) is not installed")
 
-from symoro_gen.description.mjcf_export import export_mjcf, quat_from_matrix
-from symoro_gen.loader import model_for
-from symoro_gen.simulate import (
+from symoro_gen.description.mjcf_export import export_mjcf, quat_from_matrix  # noqa: E402 - after the skip
+from symoro_gen.loader import model_for  # noqa: E402
+from symoro_gen.simulate import (  # noqa: E402
     fourier_trajectory,
     random_payload,
     random_physical_parameters,

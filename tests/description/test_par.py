@@ -117,7 +117,8 @@ def test_round_trip_shipped(name):
     back, par, toml = round_trip(robot)
     same_robot(robot, back)
     # the export of the imported robot is the same file (idempotent), comments aside
-    strip = lambda t: [l for l in t.splitlines() if not l.startswith("(*")]
+    def strip(t):
+        return [l for l in t.splitlines() if not l.startswith("(*")]
     assert strip(export_par(back)) == strip(par)
 
 

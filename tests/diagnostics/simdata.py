@@ -20,7 +20,7 @@ DURATION = 40.0
 DT = 0.002
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def robot_and_model(name: str):
     """``scara``, ``lwr4`` (generated) or ``scara_bare`` (SCARA declared without rotor inertias and
     offsets, built in memory: the model that misses ``rotor_inertia`` and ``offset``)."""

@@ -7,7 +7,6 @@ identified parameter is compared with the injected one where the candidate's col
 """
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from symoro_gen.diagnostics import KINDS, diagnose

@@ -4,8 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from symoro_gen.diagnostics.frame import (T_ORIGIN_KEY, attach_model_torque, build_frame, common_bandwidth,
-                                          split_holdout)
+from symoro_gen.diagnostics.frame import T_ORIGIN_KEY, attach_model_torque, build_frame, common_bandwidth, split_holdout
 
 from .simdata import recording
 

@@ -42,7 +42,7 @@ def case(seed, j, coulomb=("sign", None), viscous=("linear", None), **kw):
     d = scara_rows(seed)
     W, J, S, th = d["W"], d["J"], d["S"], d["theta"]
     fs, fv = friction_column_indices(d["model"].BASE_NAMES, j)
-    rows = J == j
+    rows = j == J
     Wt = W.copy()
     dqj = d["dq"][S[rows], j]
     C = coulomb_columns(coulomb[0], dqj, coulomb[1])

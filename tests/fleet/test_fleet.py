@@ -157,7 +157,7 @@ def test_nothing_usable_fails_with_the_files(tmp_path, threads_client):
     (tmp_path / "a").mkdir()
     f = tmp_path / "a" / "d1.parquet"
     f.write_bytes(b"garbage")
-    with pytest.raises(FleetError, match="d1.parquet"):
+    with pytest.raises(FleetError, match=r"d1\.parquet"):
         identify_fleet("scara", [str(f)], "{robot}/{day}.parquet", client=threads_client)
 
 

@@ -8,8 +8,8 @@ import re
 from hypothesis import given
 from hypothesis import strategies as st
 
-from symoro_gen.description.par import export_par
 from symoro_gen.description import load_robot
+from symoro_gen.description.par import export_par
 
 from .helpers import FUZZ, run_case
 

@@ -12,8 +12,6 @@ import time
 
 import pytest
 
-from tests.conftest import ROOT
-
 from .helpers import run_case, snapshot
 
 

@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from tests.description.test_robot_files import GOOD
 from tests.conftest import ROOT
+from tests.description.test_robot_files import GOOD
 
 from .helpers import FUZZ, run_case
 
