@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import IdentificationError
 from ..model import IdentificationModel
 
-__all__ = ["FRICTION_EPS", "DEFAULT_BANDWIDTH_HZ", "ClosedLoopResult", "ForwardDynamics", "PIDGains",
+__all__ = ["FRICTION_EPS", "DEFAULT_BANDWIDTH_HZ", "ClosedLoopResult", "ForwardDynamics", "PIDGains", "parameter_vector",
            "default_gains", "simulate_closed_loop"]
 
 #: default smoothing velocity of the Coulomb friction during integration [rad/s or m/s]
@@ -44,7 +44,7 @@ DEFAULT_BANDWIDTH_HZ = 10.0
 MAX_SUBSTEPS = 64
 
 
-def _parameter_vector(model: IdentificationModel, theta) -> np.ndarray:
+def parameter_vector(model: IdentificationModel, theta) -> np.ndarray:
     """Base-parameter vector (``model.BASE_NAMES`` order) from a vector or a name -> value mapping
     (missing names count as 0, e.g. the parameters cancelled by the essential procedure)."""
     names = tuple(model.BASE_NAMES)
@@ -77,7 +77,7 @@ class ForwardDynamics:
     def __init__(self, model: IdentificationModel, theta, *, friction_eps: float = FRICTION_EPS):
         self.model = model
         self.n = int(model.N_JOINTS)
-        self.theta = _parameter_vector(model, theta)
+        self.theta = parameter_vector(model, theta)
         if not (friction_eps >= 0 and math.isfinite(friction_eps)):
             raise IdentificationError(f"friction_eps must be >= 0 and finite, got {friction_eps!r}")
         self.friction_eps = float(friction_eps)
