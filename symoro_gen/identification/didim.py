@@ -25,17 +25,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 
-import numpy as np
-
-from ..errors import IdentificationError
 from ..model import IdentificationModel
-from ..observations.assembly import assemble
 from ..observations.options import AssemblyOptions
 from ..preprocessing.trajectory import Trajectory
 from ..simulate.closed_loop import FRICTION_EPS
 from .estimators import fit_ols
-from ..simulate.closed_loop import parameter_vector
-from .iv import MAX_ITER, TOL, IterativeIdentification, _rel_change, _tracking, closed_loop_setup, simulated_system
+from .iv import MAX_ITER, TOL, IterativeIdentification, iterate
 
 __all__ = ["identify_didim"]
 
@@ -64,41 +59,14 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
     max_iter, tol
         Iterations at most; stop when ``|chi_k+1 - chi_k| / |chi_k| < tol``.
     start : array_like or mapping, optional
-        First estimate to simulate; default the IDIM-OLS estimate.
+        First estimate to simulate; default the IDIM-OLS estimate (or, when it cannot be simulated, the
+        OLS fit on the reference states; :func:`~symoro_gen.identification.iv.iterate`).
 
     Returns
     -------
     IterativeIdentification
         ``result.method == "DIDIM"``; ``result.residual`` is the output error ``Y - W_s chi``.
     """
-    opts = AssemblyOptions() if options is None else options
-    trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
-    measured = assemble(model, trajs, replace(opts, payload_columns=False))
-    if tuple(measured.system.names) != tuple(model.BASE_NAMES):
-        raise IdentificationError("DIDIM needs the base-parameter columns of the model")
-    ols = fit_ols(measured.system)
-    theta = ols.values if start is None else parameter_vector(model, start)
-    setup = closed_loop_setup(model, trajs, opts, theta, references=references, gains=gains,
-                              bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
-    history, changes = [theta], []
-    res, runs, converged = ols, [], False
-    for _ in range(int(max_iter)):
-        try:
-            ssys, runs = simulated_system(model, setup, theta)
-        except IdentificationError as exc:
-            first = "the IDIM-OLS start" if start is None and not changes else "the current estimate"
-            raise IdentificationError(
-                f"DIDIM iteration {len(changes) + 1}: cannot simulate {first}: {exc}; filter more (a lower "
-                f"cutoff_hz) or give a physical start (start=...)") from None
-        res = replace(fit_ols(ssys), method="DIDIM")
-        changes.append(_rel_change(res.values, theta))
-        theta = res.values
-        history.append(theta)
-        if changes[-1] < tol:
-            converged = True
-            break
-    if not converged:
-        res = replace(res, warnings=res.warnings + (
-            f"DIDIM did not converge in {max_iter} iterations (last relative change {changes[-1]:.3g} >= {tol:g})",))
-    return IterativeIdentification(res, ols, len(changes), converged, np.array(history), np.array(changes), setup,
-                                   _tracking(runs))
+    return iterate(model, trajectories, options, lambda measured, sim: replace(fit_ols(sim), method="DIDIM"), "DIDIM",
+                   references=references, gains=gains, bandwidth_hz=bandwidth_hz, friction_eps=friction_eps,
+                   max_iter=max_iter, tol=tol, start=start)

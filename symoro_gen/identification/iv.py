@@ -40,7 +40,8 @@ from ..simulate.closed_loop import FRICTION_EPS, PIDGains, parameter_vector, def
 from .estimators import COND_WARN, REL_STD_WARN_PCT, fit_ols
 from .result import IdentificationResult, per_joint_rel_err, relative_std_pct
 
-__all__ = ["ClosedLoopSetup", "IterativeIdentification", "closed_loop_setup", "identify_iv", "simulated_system"]
+__all__ = ["ClosedLoopSetup", "IterativeIdentification", "closed_loop_setup", "identify_iv", "iterate", "iv_fit",
+           "reference_ols", "simulated_system"]
 
 #: default convergence tolerance on ``|chi_k+1 - chi_k| / |chi_k|``
 TOL = 1e-3
@@ -224,6 +225,8 @@ class IterativeIdentification:
         References, gains, filter settings.
     tracking_error : ndarray, shape (n,)
         RMS ``q_ref - q`` of the last simulation (all experiments).
+    start_source : str
+        ``"IDIM-OLS"``, ``"OLS on the reference states"`` (fallback) or ``"given"``.
     """
 
     result: IdentificationResult
@@ -234,17 +237,19 @@ class IterativeIdentification:
     changes: np.ndarray
     setup: ClosedLoopSetup
     tracking_error: np.ndarray
+    start_source: str = "IDIM-OLS"
 
     def to_dict(self) -> dict:
         """The ``iterations`` block of the JSON output."""
         return {"method": self.result.method, "iterations": self.iterations, "converged": self.converged,
+                "start": self.start_source,
                 "changes": [float(c) for c in self.changes], "reference": list(self.setup.reference_source),
                 "controller_gains": [g.to_dict() for g in self.setup.gains],
                 "tracking_error_rms": [float(x) for x in self.tracking_error]}
 
     def summary(self) -> str:
         st = "converged" if self.converged else "NOT converged"
-        return (f"{self.result.method}: {self.iterations} iteration(s), {st} "
+        return (f"{self.result.method}: {self.iterations} iteration(s) from {self.start_source}, {st} "
                 f"(last relative change {self.changes[-1] if self.changes.size else float('nan'):.3g}); "
                 f"reference: {', '.join(sorted(set(self.setup.reference_source)))}; closed-loop tracking error "
                 f"RMS per joint: {', '.join(f'{x:.3g}' for x in self.tracking_error)}")
@@ -310,6 +315,96 @@ def _rel_change(new: np.ndarray, old: np.ndarray) -> float:
     return float(np.linalg.norm(new - old) / max(np.linalg.norm(old), 1e-300))
 
 
+def reference_ols(model: IdentificationModel, setup: ClosedLoopSetup) -> IdentificationResult:
+    """IDIM-OLS of the measured torque on the observation matrix of the *reference* states (noise-free
+    when the reference is recorded): the fallback start when the IDIM-OLS estimate cannot be simulated."""
+    systems = []
+    for i, tr in enumerate(setup.trajectories):
+        qr, dqr = setup.references[i]
+        ref = Trajectory(t=tr.t, q=qr, tau=tr.tau, source=f"{tr.source} (reference)")
+        systems.append(assemble(model, ref, setup.options[i]).system)
+    W = np.vstack([s.W for s in systems])
+    order = np.argsort(np.concatenate([s.joint for s in systems]), kind="stable")
+    Y = np.concatenate([s.Y for s in systems])
+    J = np.concatenate([s.joint for s in systems])
+    return fit_ols(ObservationSystem(W[order], Y[order], systems[0].names, J[order]))
+
+
+def _simulable(model: IdentificationModel, setup: ClosedLoopSetup, theta) -> str | None:
+    """None when ``theta`` can be simulated on the first experiment, else the reason."""
+    tr = setup.trajectories[0]
+    qr, dqr = setup.references[0]
+    try:
+        simulate_closed_loop(model, theta, tr.t, qr, dqr, gains=setup.gains[0], friction_eps=setup.friction_eps)
+    except IdentificationError as exc:
+        return str(exc)
+    return None
+
+
+def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory], options: AssemblyOptions | None,
+            step, label: str, *, references=None, gains=None, bandwidth_hz: float | None = None,
+            friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER, tol: float = TOL,
+            start=None) -> IterativeIdentification:
+    """The iteration shared by IDIM-IV and DIDIM: simulate the current estimate in closed loop, assemble
+    the simulated states, ``chi_k+1 = step(measured_system, simulated_system)``, until the relative
+    change is below ``tol``.
+
+    The start is ``start`` when given, else the IDIM-OLS estimate; when that one cannot be simulated
+    (inertia matrix not positive definite, diverging loop: noisy positions can make OLS non-physical),
+    the OLS fit on the reference states (:func:`reference_ols`) is tried, and said in the warnings.
+    """
+    opts = AssemblyOptions() if options is None else options
+    trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
+    if int(max_iter) < 1:
+        raise IdentificationError(f"max_iter must be >= 1, got {max_iter}")
+    measured = assemble(model, trajs, replace(opts, payload_columns=False))
+    if tuple(measured.system.names) != tuple(model.BASE_NAMES):
+        raise IdentificationError(f"{label} needs the base-parameter columns of the model")
+    ols = fit_ols(measured.system)
+    theta = ols.values if start is None else parameter_vector(model, start)
+    source = "IDIM-OLS" if start is None else "given"
+    setup = closed_loop_setup(model, trajs, opts, theta, references=references, gains=gains,
+                              bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
+    notes = []
+    if start is None:
+        why = _simulable(model, setup, theta)
+        if why is not None:
+            alt = reference_ols(model, setup).values
+            if gains is None:  # the default gains came from the rejected estimate
+                setup = closed_loop_setup(model, trajs, opts, alt, references=references, gains=None,
+                                          bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
+            why2 = _simulable(model, setup, alt)
+            if why2 is not None:
+                raise IdentificationError(
+                    f"{label}: cannot simulate the IDIM-OLS start ({why}) nor the OLS fit on the reference states "
+                    f"({why2}); filter more (a lower cutoff) or give a physical start (start=...)")
+            theta, source = alt, "OLS on the reference states"
+            notes.append(f"{label} started from the OLS fit on the reference states: the IDIM-OLS estimate cannot "
+                         f"be simulated ({why})")
+    history, changes = [theta], []
+    res, runs, converged = ols, [], False
+    for _ in range(int(max_iter)):
+        try:
+            ssys, runs = simulated_system(model, setup, theta)
+        except IdentificationError as exc:
+            raise IdentificationError(
+                f"{label} iteration {len(changes) + 1}: cannot simulate the current estimate: {exc}; filter more "
+                f"(a lower cutoff) or give a physical start (start=...)") from None
+        res = step(measured.system, ssys)
+        changes.append(_rel_change(res.values, theta))
+        theta = res.values
+        history.append(theta)
+        if changes[-1] < tol:
+            converged = True
+            break
+    if not converged:
+        notes.append(f"{label} did not converge in {max_iter} iterations (last relative change {changes[-1]:.3g} "
+                     f">= {tol:g})")
+    res = replace(res, warnings=tuple(notes) + res.warnings)
+    return IterativeIdentification(res, ols, len(changes), converged, np.array(history), np.array(changes), setup,
+                                   _tracking(runs), source)
+
+
 def identify_iv(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory],
                 options: AssemblyOptions | None = None, *, references=None, gains=None,
                 bandwidth_hz: float | None = None, friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER,
@@ -330,7 +425,8 @@ def identify_iv(model: IdentificationModel, trajectories: Trajectory | Sequence[
     tol : float
         Stop when ``|chi_k+1 - chi_k| / |chi_k| < tol``.
     start : array_like or mapping, optional
-        First estimate to simulate (``BASE_NAMES`` order or name -> value); default the IDIM-OLS estimate.
+        First estimate to simulate (``BASE_NAMES`` order or name -> value); default the IDIM-OLS
+        estimate (or, when it cannot be simulated, :func:`reference_ols`; see :func:`iterate`).
 
     Returns
     -------
@@ -340,36 +436,8 @@ def identify_iv(model: IdentificationModel, trajectories: Trajectory | Sequence[
     Raises
     ------
     IdentificationError
-        Non-physical start (the OLS estimate cannot be simulated), diverging simulation, singular ``Z'W``.
+        No simulable start, diverging simulation, singular ``Z'W``.
     """
-    opts = AssemblyOptions() if options is None else options
-    trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
-    measured = assemble(model, trajs, replace(opts, payload_columns=False))
-    if tuple(measured.system.names) != tuple(model.BASE_NAMES):
-        raise IdentificationError("IDIM-IV needs the base-parameter columns of the model")
-    ols = fit_ols(measured.system)
-    theta = ols.values if start is None else parameter_vector(model, start)
-    setup = closed_loop_setup(model, trajs, opts, theta, references=references, gains=gains,
-                              bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
-    history, changes = [theta], []
-    res, runs, converged = ols, [], False
-    for _ in range(int(max_iter)):
-        try:
-            zsys, runs = simulated_system(model, setup, theta)
-        except IdentificationError as exc:
-            first = "the IDIM-OLS start" if start is None and not changes else "the current estimate"
-            raise IdentificationError(
-                f"IDIM-IV iteration {len(changes) + 1}: cannot simulate {first}: {exc}; filter more (a lower "
-                f"cutoff_hz) or give a physical start (start=...)") from None
-        res = iv_fit(measured.system, zsys.W)
-        changes.append(_rel_change(res.values, theta))
-        theta = res.values
-        history.append(theta)
-        if changes[-1] < tol:
-            converged = True
-            break
-    if not converged:
-        res = replace(res, warnings=res.warnings + (
-            f"IDIM-IV did not converge in {max_iter} iterations (last relative change {changes[-1]:.3g} >= {tol:g})",))
-    return IterativeIdentification(res, ols, len(changes), converged, np.array(history), np.array(changes), setup,
-                                   _tracking(runs))
+    return iterate(model, trajectories, options, lambda measured, sim: iv_fit(measured, sim.W), "IDIM-IV",
+                   references=references, gains=gains, bandwidth_hz=bandwidth_hz, friction_eps=friction_eps,
+                   max_iter=max_iter, tol=tol, start=start)
