@@ -200,3 +200,25 @@ def test_cli_identify_didim(scara, experiment, cli, tmp_path):
     assert abs(vals["M3R"] - theta[list(model.BASE_NAMES).index("M3R")]) < 0.05 * abs(theta[list(model.BASE_NAMES).index("M3R")])
     bad = cli("identify", "scara", str(csv), "--method", "iv", "--kp", "1", rc=None)
     assert bad.rc != 0 and "--kp and --kd go together" in bad.err
+
+
+def test_non_physical_ols_start_falls_back_to_the_reference_states(scara):
+    """Heavy position noise can make IDIM-OLS non-physical (M(q) indefinite: it cannot be simulated);
+    the iterations then start from the OLS fit on the recorded reference states, and say so."""
+    robot, model, *_ = scara
+    rng = np.random.default_rng(6)
+    chi = np.asarray(random_physical_parameters(robot, rng, fs_range=(0.5, 2.0)))
+    theta = model.base_parameters(chi)
+    mot = fourier_trajectory(4, 10.0, DT, rng, amplitude=1.0, vmax=2.0, amax=10.0, base_frequency_hz=0.2)
+    gains = default_gains(model, theta, mot.q, DT)
+    run = simulate_closed_loop(model, theta, mot.t, mot.q, mot.dq, gains=gains)
+    log = Trajectory(t=mot.t, q=run.q + NOISE_Q * rng.standard_normal(run.q.shape),
+                     tau=run.tau + 0.005 * np.abs(run.tau).max(0) * rng.standard_normal(run.tau.shape),
+                     source="noisy", meta={"q_ref": mot.q})
+    fit = identify_iv(model, log, AssemblyOptions(), gains=gains, max_iter=2)
+    with pytest.raises(IdentificationError, match="not positive definite|diverged"):
+        simulate_closed_loop(model, fit.ols.values, mot.t, mot.q, mot.dq, gains=gains)
+    assert fit.start_source == "OLS on the reference states"
+    assert any("started from the OLS fit on the reference states" in w for w in fit.result.warnings)
+    scale = np.maximum(np.abs(theta), 0.1)
+    assert np.linalg.norm((fit.result.values - theta) / scale) < 0.5 * np.linalg.norm((fit.ols.values - theta) / scale)
