@@ -135,8 +135,15 @@ def _run_closed_loop(args, model: IdentificationModel, unloaded, opts, loaded, k
                 raise IdentificationError(f"{name}: give 1 value or {n} (one per joint), got {len(x)}")
             vals.append(x * n if len(x) == 1 else x)
         gains = PIDGains(*vals)
+    start = None
+    if args.start == "nominal":
+        nominal = getattr(model, "nominal_parameters", lambda: None)()
+        if nominal is None or not any(float(x) != 0 for x in nominal):
+            raise IdentificationError(f"--start nominal: the robot file of {model.ROBOT} declares no nominal "
+                                      f"inertial parameters")
+        start = model.base_parameters(nominal)
     fn = identify_iv if args.method == "iv" else identify_didim
-    return fn(model, unloaded, opts, gains=gains, bandwidth_hz=args.bandwidth, max_iter=args.max_iter)
+    return fn(model, unloaded, opts, gains=gains, bandwidth_hz=args.bandwidth, max_iter=args.max_iter, start=start)
 
 
 def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l, sys_v, reference, val_raw=None) -> None:
@@ -192,6 +199,9 @@ def add_identify_parser(sub) -> None:
     cl.add_argument("--bandwidth", type=float, help="without --kp/--kd: PD gains placing each joint at this "
                     "bandwidth [Hz] (default 10, at most rate/30)")
     cl.add_argument("--max-iter", type=int, default=20, help="iterations at most (default 20)")
+    cl.add_argument("--start", choices=("ols", "nominal"), default="ols",
+                    help="first estimate simulated: IDIM-OLS (default; the OLS fit on the reference states when it is "
+                         "not physical) or the robot file's nominal parameters")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "

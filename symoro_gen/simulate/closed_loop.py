@@ -261,7 +261,8 @@ def simulate_closed_loop(model: IdentificationModel, theta, t, q_ref, dq_ref=Non
     theta : array_like or mapping
         Base parameters of the simulated robot (``BASE_NAMES`` order or name -> value).
     t : array_like (N,)
-        Sampling instants [s], uniform step (the controller rate).
+        Sampling instants [s]; the controller runs at the median step ``dt`` (a logger's time-stamp
+        jitter is ignored, as the filters of the assembly do).
     q_ref : array_like (N, n)
         Reference positions.
     dq_ref : array_like (N, n), optional
@@ -297,10 +298,9 @@ def simulate_closed_loop(model: IdentificationModel, theta, t, q_ref, dq_ref=Non
         raise IdentificationError(f"q_ref has shape {q_ref.shape}, expected ({N}, {n}) for {N} instants of {model.ROBOT}")
     if N < 3:
         raise IdentificationError("the reference needs at least 3 samples")
-    steps = np.diff(t)
-    dt = float(np.median(steps))
-    if not dt > 0 or np.max(np.abs(steps - dt)) > 1e-6 * max(dt, 1.0) + 1e-3 * dt:
-        raise IdentificationError("the closed-loop simulation needs uniformly sampled instants t")
+    dt = float(np.median(np.diff(t)))
+    if not (dt > 0 and math.isfinite(dt)):
+        raise IdentificationError("the instants t must increase")
     dq_ref = np.gradient(q_ref, dt, axis=0) if dq_ref is None else np.atleast_2d(np.asarray(dq_ref, float))
     if dq_ref.shape != (N, n):
         raise IdentificationError(f"dq_ref has shape {dq_ref.shape}, expected ({N}, {n})")
