@@ -38,7 +38,7 @@ __all__ = ["FRICTION_EPS", "DEFAULT_BANDWIDTH_HZ", "ClosedLoopResult", "ForwardD
 
 #: default smoothing velocity of the Coulomb friction during integration [rad/s or m/s]
 FRICTION_EPS = 0.02
-#: default closed-loop bandwidth of :func:`default_gains` [Hz] (capped at rate / 30)
+#: default closed-loop bandwidth of :func:`default_gains` [Hz] (capped at rate / 30, lowered for coupled joints)
 DEFAULT_BANDWIDTH_HZ = 10.0
 #: most RK4 substeps per sampling period chosen automatically
 MAX_SUBSTEPS = 64
@@ -187,13 +187,14 @@ class PIDGains:
 
 
 def default_gains(model: IdentificationModel, theta, q_ref, dt: float, *, bandwidth_hz: float | None = None,
-                  damping: float = 1.0, friction_eps: float = FRICTION_EPS) -> PIDGains:
+                  damping: float = 1.0, friction_eps: float = FRICTION_EPS, max_rate_product: float = 1.0) -> PIDGains:
     """PD gains placing each joint, decoupled, at ``bandwidth_hz`` with damping ``damping``.
 
-    ``Kp_j = m_j w^2``, ``Kd_j = 2 zeta w m_j``, ``Ki_j = 0``, with ``w = 2 pi f``, ``m_j`` the mean of
-    the inertia seen by joint j alone, ``1 / (M(q)^-1)_jj`` (the smallest one, so that the coupled loop
-    is not faster than ``f``), over (up to 20) samples of ``q_ref`` and ``f = bandwidth_hz`` (default
-    :data:`DEFAULT_BANDWIDTH_HZ`, capped at ``1 / (30 dt)`` so that the digital loop stays stable).
+    ``Kp_j = m_j w^2``, ``Kd_j = 2 zeta w m_j``, ``Ki_j = 0``, with ``w = 2 pi f`` and ``m_j`` the smallest
+    inertia seen by joint j alone, ``1 / (M(q)^-1)_jj``, over (up to 30) samples of ``q_ref``;
+    ``f = bandwidth_hz`` (default :data:`DEFAULT_BANDWIDTH_HZ`), capped at ``1 / (30 dt)`` and lowered
+    until the fastest velocity mode of the coupled loop, ``max_q rho(M(q)^-1 Kd) dt``, is at most
+    ``max_rate_product`` (the held torque of a digital loop is unstable beyond about 2).
 
     Returns
     -------
@@ -201,10 +202,14 @@ def default_gains(model: IdentificationModel, theta, q_ref, dt: float, *, bandwi
     """
     fd = ForwardDynamics(model, theta, friction_eps=friction_eps)
     q_ref = np.atleast_2d(np.asarray(q_ref, float))
-    idx = np.unique(np.linspace(0, q_ref.shape[0] - 1, min(20, q_ref.shape[0])).astype(int))
-    m = np.mean([1.0 / np.abs(np.diag(np.linalg.pinv(fd.mass_matrix(q_ref[i])))) for i in idx], axis=0)
+    idx = np.unique(np.linspace(0, q_ref.shape[0] - 1, min(30, q_ref.shape[0])).astype(int))
+    Minv = [np.linalg.pinv(fd.mass_matrix(q_ref[i])) for i in idx]
+    m = np.min([1.0 / np.abs(np.diag(Mi)) for Mi in Minv], axis=0)
     f = min(DEFAULT_BANDWIDTH_HZ if bandwidth_hz is None else float(bandwidth_hz), 1.0 / (30.0 * dt))
     w = 2 * math.pi * f
+    rho = max(float(np.max(np.abs(np.linalg.eigvals(Mi * (2 * damping * w * m)[None, :])))) for Mi in Minv) * dt
+    if rho > max_rate_product:
+        w *= max_rate_product / rho
     return PIDGains(kp=m * w * w, kd=2 * damping * w * m, ki=np.zeros_like(m))
 
 
@@ -328,7 +333,7 @@ def simulate_closed_loop(model: IdentificationModel, theta, t, q_ref, dq_ref=Non
         e = q_ref[k] - x
         if not (np.all(np.isfinite(e)) and np.max(np.abs(e)) <= max_tracking_error):
             raise IdentificationError(
-                f"the closed-loop simulation diverged at t = {t[k]:.4g} s (tracking error "
+                f"the closed-loop simulation diverged at t = {t[k] - t[0]:.4g} s from its start (tracking error "
                 f"{np.round(e, 3).tolist()}): parameters far from physical, or gains too high for the rate")
         integ += e * dt
         u = gains.kp * e + gains.kd * (dq_ref[k] - v) + gains.ki * integ + ff[k]
