@@ -47,6 +47,8 @@ __all__ = ["ClosedLoopSetup", "IterativeIdentification", "closed_loop_setup", "i
 TOL = 1e-3
 #: default maximum number of iterations
 MAX_ITER = 20
+#: step halvings tried when a new estimate cannot be simulated
+MAX_HALVINGS = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -352,6 +354,8 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
     The start is ``start`` when given, else the IDIM-OLS estimate; when that one cannot be simulated
     (inertia matrix not positive definite, diverging loop: noisy positions can make OLS non-physical),
     the OLS fit on the reference states (:func:`reference_ols`) is tried, and said in the warnings.
+    When a new estimate cannot be simulated, the step from the last simulated one is halved (up to
+    :data:`MAX_HALVINGS` times), as a damped Gauss–Newton iteration does.
     """
     opts = AssemblyOptions() if options is None else options
     trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
@@ -383,13 +387,24 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
                          f"be simulated ({why})")
     history, changes = [theta], []
     res, runs, converged = ols, [], False
+    prev = None
     for _ in range(int(max_iter)):
-        try:
-            ssys, runs = simulated_system(model, setup, theta)
-        except IdentificationError as exc:
-            raise IdentificationError(
-                f"{label} iteration {len(changes) + 1}: cannot simulate the current estimate: {exc}; filter more "
-                f"(a lower cutoff) or give a physical start (start=...)") from None
+        for halving in range(MAX_HALVINGS + 1):
+            try:
+                ssys, runs = simulated_system(model, setup, theta)
+                break
+            except IdentificationError as exc:
+                if prev is None or halving == MAX_HALVINGS:
+                    raise IdentificationError(
+                        f"{label} iteration {len(changes) + 1}: cannot simulate the current estimate: {exc}; filter "
+                        f"more (a lower cutoff) or give a physical start (start=...)") from None
+                # damped step (Gauss-Newton with step halving): back towards the last simulable estimate
+                theta = prev + 0.5 * (theta - prev)
+                history[-1] = theta
+                if halving == 0:
+                    notes.append(f"{label} iteration {len(changes)}: the full step could not be simulated; "
+                                 f"step halved")
+        prev = theta
         res = step(measured.system, ssys)
         changes.append(_rel_change(res.values, theta))
         theta = res.values

@@ -342,13 +342,18 @@ def simulate_closed_loop(model: IdentificationModel, theta, t, q_ref, dq_ref=Non
         ddq[k] = a1
         if k == N - 1:
             break
-        for s in range(ns):
-            if s:
-                a1 = acc(x, v, u, False)
-            k1x, k1v = v, a1
-            k2x, k2v = v + 0.5 * h * k1v, acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v, u, False)
-            k3x, k3v = v + 0.5 * h * k2v, acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v, u, False)
-            k4x, k4v = v + h * k3v, acc(x + h * k3x, v + h * k3v, u, False)
-            x = x + h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
-            v = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        try:
+            for s in range(ns):
+                if s:
+                    a1 = acc(x, v, u, False)
+                k1x, k1v = v, a1
+                k2x, k2v = v + 0.5 * h * k1v, acc(x + 0.5 * h * k1x, v + 0.5 * h * k1v, u, False)
+                k3x, k3v = v + 0.5 * h * k2v, acc(x + 0.5 * h * k2x, v + 0.5 * h * k2v, u, False)
+                k4x, k4v = v + h * k3v, acc(x + h * k3x, v + h * k3v, u, False)
+                x = x + h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
+                v = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        except np.linalg.LinAlgError:
+            raise IdentificationError(
+                f"the inertia matrix of these parameters is singular near t = {t[k] - t[0]:.4g} s from the start: "
+                f"cannot simulate") from None
     return ClosedLoopResult(t=t, q=q, dq=dq, ddq=ddq, tau=tau, q_ref=q_ref, dq_ref=dq_ref, substeps=ns)
