@@ -21,6 +21,7 @@ from symoro_gen.identification.didim import identify_didim
 from symoro_gen.identification.iv import identify_iv, iv_fit
 from symoro_gen.loader import model_for
 from symoro_gen.observations import AssemblyOptions
+from symoro_gen.observations.system import ObservationSystem
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques, write_recording_csv
 from symoro_gen.simulate.closed_loop import ForwardDynamics, PIDGains, default_gains, simulate_closed_loop
@@ -150,8 +151,6 @@ def test_iv_statistics_against_monte_carlo(scara):
     """The IV covariance ``sigma^2 (Z'W)^-1 Z'Z (W'Z)^-1`` predicts the scatter of the estimate over
     noise draws (independent instruments, noisy regressors)."""
     *_, rng = scara
-    from symoro_gen.observations.system import ObservationSystem
-
     r, c = 400, 3
     X = rng.standard_normal((r, c))
     chi = np.array([1.0, -2.0, 0.5])
