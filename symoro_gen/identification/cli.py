@@ -61,7 +61,11 @@ def run_identify(args) -> dict:
     sys_u = asm_u.system
     sys_l = asm_l.system if asm_l is not None else None
     dg = None
-    if args.gains == "sensor":
+    closed = None
+    if args.method in ("iv", "didim"):
+        closed = _run_closed_loop(args, model, unloaded, opts, loaded, known)
+        res = closed.result
+    elif args.gains == "sensor":
         res = sensor_gains(sys_u, sys_l, known, essential=args.essential, r_sigma=args.r_sigma)
     elif args.gains == "drive":
         res, dg = identify_with_drive_gains(sys_u, sys_l, known, method=args.method)
@@ -77,6 +81,8 @@ def run_identify(args) -> dict:
         out["unconstrained"] = res_u.to_dict()
         out["physical"] = phys.to_dict()
     out.update(res.to_dict())
+    if closed is not None:
+        out["iterations"] = closed.to_dict()
     val = val_raw = sys_v = asm_v = None
     if args.validate or held_back:
         vtr, rep_v = load_data(args, args.validate, robot, loaded=args.validate_loaded) if args.validate else ((), ())
@@ -112,6 +118,8 @@ def run_identify(args) -> dict:
 
         write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
     text = res.summary()
+    if closed is not None:
+        text = closed.summary() + "\n\n" + text
     if val is not None:
         vb = asm_v.metric_basis()
         text += ("\n\nValidation (relative error norm per joint): every sample, no row selection\n"
@@ -132,6 +140,38 @@ def run_identify(args) -> dict:
     if not args.quiet:
         print(text)
     return out
+
+
+def _run_closed_loop(args, model: IdentificationModel, unloaded, opts, loaded, known):
+    """``--method iv|didim``: IDIM-IV / DIDIM on the unloaded recordings (closed-loop simulations)."""
+    from ..simulate.closed_loop import PIDGains
+    from .didim import identify_didim
+    from .iv import identify_iv
+
+    if loaded or known or args.gains or args.essential:
+        raise IdentificationError(f"--method {args.method} identifies the robot without payload from the DATA "
+                                  f"recordings: --loaded, --payload, --gains and --essential are not available with it")
+    gains = None
+    given = [x for x in (args.kp, args.kd, args.ki) if x]
+    if given:
+        if not args.kp or not args.kd:
+            raise IdentificationError("--kp and --kd go together (--ki is optional): the controller's gains per joint")
+        n = model.N_JOINTS
+        vals = []
+        for name, x in (("--kp", args.kp), ("--kd", args.kd), ("--ki", args.ki or [0.0])):
+            if len(x) not in (1, n):
+                raise IdentificationError(f"{name}: give 1 value or {n} (one per joint), got {len(x)}")
+            vals.append(x * n if len(x) == 1 else x)
+        gains = PIDGains(*vals)
+    start = None
+    if args.start == "nominal":
+        nominal = getattr(model, "nominal_parameters", lambda: None)()
+        if nominal is None or not any(float(x) != 0 for x in nominal):
+            raise IdentificationError(f"--start nominal: the robot file of {model.ROBOT} declares no nominal "
+                                      f"inertial parameters")
+        start = model.base_parameters(nominal)
+    fn = identify_iv if args.method == "iv" else identify_didim
+    return fn(model, unloaded, opts, gains=gains, bandwidth_hz=args.bandwidth, max_iter=args.max_iter, start=start)
 
 
 def _physical(args, robot, model: IdentificationModel, res, sys_u, sys_l, known, asm_u, asm_l):
@@ -189,7 +229,9 @@ def add_identify_parser(sub) -> None:
     p = sub.add_parser("identify", help="identify base parameters (and gains) from recorded data")
     p.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
     p.add_argument("data", nargs="+", help="recordings without payload (CSV/NPZ/MAT, or q=..,tau=..,dt=.. spec)")
-    p.add_argument("--method", choices=("ols", "wls", "tls"), default="wls")
+    p.add_argument("--method", choices=("ols", "wls", "tls", "iv", "didim"), default="wls",
+                   help="estimator: IDIM-OLS/WLS/TLS, or the closed-loop ones IDIM-IV and DIDIM (iterated simulations; "
+                        "reference = the filtered measured positions, controller = --kp/--kd/--ki or a PD at --bandwidth)")
     p.add_argument("--validate", nargs="+", help="validation recordings (relative error norms, Table III)")
     p.add_argument("--validate-loaded", action="store_true", help="the validation recordings carry the payload")
     p.add_argument("--loaded", nargs="+", help="recordings with the payload mounted")
@@ -202,6 +244,18 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--min-velocity", type=float, help="drop identification rows that depend on samples slower than "
                    "this [rad/s] (Coulomb friction is ill-defined near zero velocity); validation errors use every sample")
     p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
+    cl = p.add_argument_group("closed-loop estimators (--method iv|didim)")
+    cl.add_argument("--kp", type=float, nargs="+", help="position gain(s) of the robot's PID controller, per joint")
+    cl.add_argument("--kd", type=float, nargs="+", help="velocity gain(s) of the controller, per joint")
+    cl.add_argument("--ki", type=float, nargs="+", help="integral gain(s) of the controller, per joint (default 0)")
+    cl.add_argument("--bandwidth", type=float, help="without --kp/--kd: PD gains placing each joint at this "
+                    "bandwidth [Hz] (default 10, at most rate/30)")
+    cl.add_argument("--max-iter", type=int, default=20, help="iterations at most (default 20)")
+    cl.add_argument("--start", choices=("ols", "nominal"), default="ols",
+                    help="first estimate simulated: IDIM-OLS (default; the OLS fit on the reference states when it is "
+                         "not physical) or the robot file's nominal parameters")
+
+
     p.add_argument("--physical", action="store_true",
                    help="physically consistent estimate: LS in the standard parameters with every body's pseudo-inertia "
                         "positive definite and IA, FV, FS >= 0 (needs the 'physical' extra: cvxpy, clarabel); "

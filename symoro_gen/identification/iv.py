@@ -1,0 +1,458 @@
+"""IDIM-IV: instrumental-variable identification with instruments from a simulated model.
+
+A. Janot, P.-O. Vandanjon, M. Gautier, "A generic instrumental variable approach for industrial robot
+identification", IEEE Trans. Control Systems Technology 22(1), 2014 ([JVG2014], docs/references.md).
+
+With noisy positions, the observation matrix ``W`` built from the filtered measured ``q, dq, ddq`` is
+correlated with the error ``rho`` of ``Y = W chi + rho`` and IDIM-OLS is biased. IDIM-IV uses as
+instruments the observation matrix ``Z`` evaluated on the *simulated* (noise-free) states of the robot
+model with the current estimate, driven in closed loop by the same reference
+(:func:`symoro_gen.simulate.closed_loop.simulate_closed_loop`), filtered and decimated exactly as ``W``
+(same :class:`~symoro_gen.observations.AssemblyOptions` and filter settings):
+
+* ``chi_IV = (Z' W)^-1 Z' Y`` (JVG2014), started from IDIM-OLS and iterated (new simulation with
+  the new estimate) until ``|chi_k+1 - chi_k| / |chi_k| < tol`` (JVG2014);
+* ``sigma^2 = ||Y - W chi_IV||^2 / (r - c)``, ``C = sigma^2 (Z'W)^-1 Z'Z (W'Z)^-1``,
+  ``%sigma_i = 100 sigma_i / |chi_i|``.
+
+Computed with the QR factor of ``Z = Q R``: ``chi = (Q'W)^-1 Q'Y`` and ``C = sigma^2 (Q'W)^-1 (Q'W)^-T``.
+
+The shared machinery of IDIM-IV and DIDIM (:mod:`.didim`) lives here: :class:`ClosedLoopSetup`
+(reference, controller gains and filter settings per experiment) and :func:`simulated_system`
+(the observation system of a closed-loop simulation, rows aligned with the measured one).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..errors import IdentificationError
+from ..model import IdentificationModel
+from ..observations.assembly import Assembly, assemble
+from ..observations.options import AssemblyOptions
+from ..observations.system import ObservationSystem
+from ..preprocessing.filtering import filter_and_differentiate
+from ..preprocessing.trajectory import Trajectory
+from ..simulate.closed_loop import FRICTION_EPS, PIDGains, parameter_vector, default_gains, simulate_closed_loop
+from .estimators import COND_WARN, REL_STD_WARN_PCT, fit_ols
+from .result import IdentificationResult, per_joint_rel_err, relative_std_pct
+
+__all__ = ["ClosedLoopSetup", "IterativeIdentification", "closed_loop_setup", "identify_iv", "iterate", "iv_fit",
+           "reference_ols", "simulated_system"]
+
+#: default convergence tolerance on ``|chi_k+1 - chi_k| / |chi_k|``
+TOL = 1e-3
+#: default maximum number of iterations
+MAX_ITER = 20
+#: step halvings tried when a new estimate cannot be simulated
+MAX_HALVINGS = 4
+
+
+@dataclass(frozen=True, eq=False)
+class ClosedLoopSetup:
+    """What the closed-loop simulations of IDIM-IV and DIDIM share, per experiment.
+
+    Attributes
+    ----------
+    trajectories : tuple of Trajectory
+        The measured experiments.
+    references : tuple of (q_ref, dq_ref)
+        Reference positions and velocities at the recording's instants, shape (N, n) each.
+    reference_source : tuple of str
+        ``"recorded"`` (``Trajectory.meta['q_ref']`` or given) or ``"filtered q"``.
+    gains : tuple of PIDGains
+        Controller gains per experiment.
+    options : tuple of AssemblyOptions
+        Assembly options of each experiment with its filter settings frozen (so the simulated states
+        are filtered and decimated exactly as the measured ones), no row selection.
+    measured : Assembly
+        The assembly of the measured data (user options).
+    friction_eps : float
+        Coulomb smoothing of the simulations.
+    """
+
+    trajectories: tuple[Trajectory, ...]
+    references: tuple[tuple[np.ndarray, np.ndarray], ...]
+    reference_source: tuple[str, ...]
+    gains: tuple[PIDGains, ...]
+    options: tuple[AssemblyOptions, ...]
+    measured: Assembly
+    friction_eps: float = FRICTION_EPS
+
+
+def _frozen_options(opts: AssemblyOptions, st) -> AssemblyOptions:
+    return replace(opts, cutoff_hz=float(st.cutoff_hz), n_d=int(st.n_d), edge_samples=int(st.edge_samples),
+                   dynamics_bandwidth_hz=float(st.dynamics_bandwidth_hz), min_velocity=None, payload_columns=False,
+                   keep_signals=False)
+
+
+def closed_loop_setup(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory],
+                      options: AssemblyOptions | None, theta0, *, references=None, gains=None,
+                      bandwidth_hz: float | None = None, friction_eps: float = FRICTION_EPS,
+                      measured: Assembly | None = None) -> ClosedLoopSetup:
+    """Reference, gains and frozen filter settings per experiment.
+
+    Parameters
+    ----------
+    model : IdentificationModel
+    trajectories : Trajectory or sequence
+        Unloaded recordings.
+    options : AssemblyOptions
+    theta0 : array_like or mapping
+        Base parameters used for the default gains (the IDIM-OLS estimate).
+    references : sequence of array_like (N, n) or None, optional
+        Recorded reference positions per experiment (None entries: see below).
+        Default per experiment: ``Trajectory.meta['q_ref']`` when present, else the measured positions
+        low-passed by the experiment's Butterworth filter (its velocity by central differences).
+    gains : PIDGains or sequence of PIDGains, optional
+        Controller gains; default :func:`~symoro_gen.simulate.closed_loop.default_gains` from ``theta0``
+        (PD at ``bandwidth_hz``).
+    """
+    trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
+    if not trajs:
+        raise IdentificationError("no trajectory given")
+    loaded = [t.source for t in trajs if t.loaded]
+    if loaded:
+        raise IdentificationError(f"IDIM-IV/DIDIM simulate the robot without payload; loaded recordings {loaded} "
+                                  f"are not supported")
+    opts = AssemblyOptions() if options is None else options
+    if measured is None:
+        measured = assemble(model, trajs, replace(opts, payload_columns=False))
+    n = int(model.N_JOINTS)
+    refs, srcs, gl, ol = [], [], [], []
+    if references is not None and len(references) != len(trajs):
+        raise IdentificationError(f"{len(references)} references for {len(trajs)} recordings")
+    if isinstance(gains, PIDGains) or gains is None:
+        gains_list = [gains] * len(trajs)
+    else:
+        gains_list = list(gains)
+        if len(gains_list) != len(trajs):
+            raise IdentificationError(f"{len(gains_list)} controller gain sets for {len(trajs)} recordings")
+    for i, tr in enumerate(trajs):
+        st = measured.experiments[i].settings
+        ref = None if references is None else references[i]
+        if ref is None:
+            ref = tr.meta.get("q_ref") if isinstance(tr.meta, dict) else None
+        if ref is not None:
+            qr = np.asarray(ref, float)
+            if qr.shape != tr.q.shape:
+                raise IdentificationError(f"{tr.source}: reference positions have shape {qr.shape}, "
+                                          f"the recording {tr.q.shape}")
+            dqr = np.gradient(qr, tr.dt, axis=0)
+            srcs.append("recorded")
+        else:
+            qr, dqr, _ = filter_and_differentiate(tr.q, st.fs, st.cutoff_hz, st.order, source=tr.source)
+            srcs.append("filtered q")
+        refs.append((qr, dqr))
+        g = gains_list[i]
+        if g is None:
+            g = default_gains(model, theta0, qr, tr.dt, bandwidth_hz=bandwidth_hz, friction_eps=friction_eps)
+        if g.n_joints != n:
+            raise IdentificationError(f"{g.n_joints} controller gains for the {n} joints of {model.ROBOT}")
+        gl.append(g)
+        ol.append(_frozen_options(opts, st))
+    return ClosedLoopSetup(trajs, tuple(refs), tuple(srcs), tuple(gl), tuple(ol), measured, float(friction_eps))
+
+
+def _row_keys(asm: Assembly, experiment: int | None = None) -> np.ndarray:
+    joint = asm.system.joint.astype(np.int64)
+    sample = asm.row_sample.astype(np.int64)
+    exp = asm.row_experiment.astype(np.int64) if experiment is None else np.full(joint.size, experiment, np.int64)
+    return (exp << 40) + (joint << 32) + sample
+
+
+def simulated_system(model: IdentificationModel, setup: ClosedLoopSetup, theta) -> tuple[ObservationSystem, list]:
+    """The observation system on the closed-loop simulation with parameters ``theta``.
+
+    Each experiment's reference is tracked by the simulated robot (same controller gains); the
+    simulated positions replace the measured ones in a copy of the recording (the measured torque
+    is kept) that is assembled with the measured experiment's filter settings, and its rows are
+    matched with the measured system's rows (same experiment, joint and sample).
+
+    Returns
+    -------
+    system : ObservationSystem
+        ``W`` = the observation matrix on the simulated states (``Z``), ``Y`` = the measured torque,
+        rows in the order of ``setup.measured.system``.
+    runs : list of ClosedLoopResult
+    """
+    blocks_w, keys, runs = [], [], []
+    y_parts = []
+    for i, tr in enumerate(setup.trajectories):
+        qr, dqr = setup.references[i]
+        run = simulate_closed_loop(model, theta, tr.t, qr, dqr, gains=setup.gains[i],
+                                   friction_eps=setup.friction_eps)
+        runs.append(run)
+        sim = Trajectory(t=tr.t, q=run.q, tau=tr.tau, dq=run.dq, ddq=run.ddq, source=f"{tr.source} (simulated)")
+        asm = assemble(model, sim, setup.options[i])
+        blocks_w.append(asm.system.W)
+        y_parts.append(asm.system.Y)
+        keys.append(_row_keys(asm, experiment=i))
+    allk = np.concatenate(keys)
+    W = np.vstack(blocks_w)
+    Y = np.concatenate(y_parts)
+    want = _row_keys(setup.measured)
+    order = np.argsort(allk)
+    pos = np.searchsorted(allk, want, sorter=order)
+    pos = np.clip(pos, 0, allk.size - 1)
+    idx = order[pos]
+    if not np.array_equal(allk[idx], want):
+        raise IdentificationError("internal: the simulated observation rows do not match the measured ones")
+    ms = setup.measured.system
+    return ObservationSystem(W[idx], Y[idx], ms.names, ms.joint), runs
+
+
+@dataclass(frozen=True, eq=False)
+class IterativeIdentification:
+    """Result of an iterated estimator (IDIM-IV, DIDIM).
+
+    Attributes
+    ----------
+    result : IdentificationResult
+        The final estimate with its statistics (``method`` = ``"IV"`` or ``"DIDIM"``).
+    ols : IdentificationResult
+        The IDIM-OLS estimate (the default start of the iterations).
+    iterations : int
+        Simulations run (one per iteration).
+    converged : bool
+        ``|chi_k+1 - chi_k| / |chi_k| < tol`` was reached within ``max_iter``.
+    history : ndarray, shape (iterations + 1, c)
+        The estimates, starting with the start (IDIM-OLS by default).
+    changes : ndarray, shape (iterations,)
+        Relative change of each iteration.
+    setup : ClosedLoopSetup
+        References, gains, filter settings.
+    tracking_error : ndarray, shape (n,)
+        RMS ``q_ref - q`` of the last simulation (all experiments).
+    start_source : str
+        ``"IDIM-OLS"``, ``"OLS on the reference states"`` (fallback) or ``"given"``.
+    """
+
+    result: IdentificationResult
+    ols: IdentificationResult
+    iterations: int
+    converged: bool
+    history: np.ndarray
+    changes: np.ndarray
+    setup: ClosedLoopSetup
+    tracking_error: np.ndarray
+    start_source: str = "IDIM-OLS"
+
+    def to_dict(self) -> dict:
+        """The ``iterations`` block of the JSON output."""
+        return {"method": self.result.method, "iterations": self.iterations, "converged": self.converged,
+                "start": self.start_source,
+                "changes": [float(c) for c in self.changes], "reference": list(self.setup.reference_source),
+                "controller_gains": [g.to_dict() for g in self.setup.gains],
+                "tracking_error_rms": [float(x) for x in self.tracking_error]}
+
+    def summary(self) -> str:
+        st = "converged" if self.converged else "NOT converged"
+        return (f"{self.result.method}: {self.iterations} iteration(s) from {self.start_source}, {st} "
+                f"(last relative change {self.changes[-1] if self.changes.size else float('nan'):.3g}); "
+                f"reference: {', '.join(sorted(set(self.setup.reference_source)))}; closed-loop tracking error "
+                f"RMS per joint: {', '.join(f'{x:.3g}' for x in self.tracking_error)}")
+
+
+def _tracking(runs) -> np.ndarray:
+    num = sum(np.sum((r.q_ref - r.q) ** 2, axis=0) for r in runs)
+    den = sum(r.q.shape[0] for r in runs)
+    return np.sqrt(num / den)
+
+
+def iv_fit(system: ObservationSystem, instruments: np.ndarray, *, rel_std_warn_pct: float = REL_STD_WARN_PCT,
+           cond_warn: float = COND_WARN) -> IdentificationResult:
+    """One IV solve ``chi = (Z'W)^-1 Z'Y`` with its covariance (JVG2014).
+
+    Parameters
+    ----------
+    system : ObservationSystem
+        ``W`` (measured states) and ``Y``.
+    instruments : ndarray, shape like ``system.W``
+        ``Z``.
+    """
+    W, Y, Z = system.W, system.Y, np.asarray(instruments, float)
+    r, c = W.shape
+    if Z.shape != W.shape:
+        raise IdentificationError(f"instruments {Z.shape} and W {W.shape} differ in shape")
+    if r <= c:
+        raise IdentificationError(f"IDIM-IV: too few equations: {r} rows for {c} parameters")
+    norms = np.linalg.norm(W, axis=0)
+    zn = np.linalg.norm(Z, axis=0)
+    if np.any(norms == 0) or np.any(zn == 0):
+        zero = [system.names[i] for i in np.flatnonzero((norms == 0) | (zn == 0))]
+        raise IdentificationError(f"IDIM-IV: column(s) {zero} of W or of the instruments are all zero")
+    Q, _ = np.linalg.qr(Z / zn)
+    B = Q.T @ (W / norms)
+    s = np.linalg.svd(B, compute_uv=False)
+    if s[-1] <= 1e-12 * s[0]:
+        raise IdentificationError("IDIM-IV: Z'W is singular (the instruments are not correlated with every column of W)")
+    x = np.linalg.solve(B, Q.T @ Y)
+    values = x / norms
+    res = Y - W @ values
+    sigma = math.sqrt(float(res @ res) / (r - c))
+    Binv = np.linalg.inv(B)
+    cov = sigma ** 2 * (Binv @ Binv.T) / np.outer(norms, norms)
+    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    sv = np.linalg.svd(W, compute_uv=False)
+    svs = np.linalg.svd(W / norms, compute_uv=False)
+    cond, cond_s = float(sv[0] / sv[-1]), float(svs[0] / svs[-1])
+    warnings = []
+    if cond_s > cond_warn:
+        warnings.append(f"W is ill-conditioned: cond = {cond:.3g}, {cond_s:.3g} with unit-norm columns (> {cond_warn:g})")
+    pct = relative_std_pct(values, std)
+    bad = [f"{n} ({p:.3g}%)" for n, p in zip(system.names, pct) if p > rel_std_warn_pct]
+    if bad:
+        warnings.append(f"{len(bad)} parameter(s) poorly identified (%sigma > {rel_std_warn_pct:g}): {', '.join(bad)}")
+    return IdentificationResult(method="IV", names=system.names, values=values, std=std, rel_std_pct=pct, cov=cov,
+                                cond=cond, cond_scaled=cond_s, sigma=sigma,
+                                rel_err=per_joint_rel_err(res, Y, system.joint, system.n_joints), n_rows=r,
+                                residual=res, warnings=tuple(warnings))
+
+
+def _rel_change(new: np.ndarray, old: np.ndarray) -> float:
+    return float(np.linalg.norm(new - old) / max(np.linalg.norm(old), 1e-300))
+
+
+def reference_ols(model: IdentificationModel, setup: ClosedLoopSetup) -> IdentificationResult:
+    """IDIM-OLS of the measured torque on the observation matrix of the *reference* states (noise-free
+    when the reference is recorded): the fallback start when the IDIM-OLS estimate cannot be simulated."""
+    systems = []
+    for i, tr in enumerate(setup.trajectories):
+        qr, dqr = setup.references[i]
+        ref = Trajectory(t=tr.t, q=qr, tau=tr.tau, source=f"{tr.source} (reference)")
+        systems.append(assemble(model, ref, setup.options[i]).system)
+    W = np.vstack([s.W for s in systems])
+    order = np.argsort(np.concatenate([s.joint for s in systems]), kind="stable")
+    Y = np.concatenate([s.Y for s in systems])
+    J = np.concatenate([s.joint for s in systems])
+    return fit_ols(ObservationSystem(W[order], Y[order], systems[0].names, J[order]))
+
+
+def _simulable(model: IdentificationModel, setup: ClosedLoopSetup, theta) -> str | None:
+    """None when ``theta`` can be simulated on the first experiment, else the reason."""
+    tr = setup.trajectories[0]
+    qr, dqr = setup.references[0]
+    try:
+        simulate_closed_loop(model, theta, tr.t, qr, dqr, gains=setup.gains[0], friction_eps=setup.friction_eps)
+    except IdentificationError as exc:
+        return str(exc)
+    return None
+
+
+def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory], options: AssemblyOptions | None,
+            step, label: str, *, references=None, gains=None, bandwidth_hz: float | None = None,
+            friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER, tol: float = TOL,
+            start=None) -> IterativeIdentification:
+    """The iteration shared by IDIM-IV and DIDIM: simulate the current estimate in closed loop, assemble
+    the simulated states, ``chi_k+1 = step(measured_system, simulated_system)``, until the relative
+    change is below ``tol``.
+
+    The start is ``start`` when given, else the IDIM-OLS estimate; when that one cannot be simulated
+    (inertia matrix not positive definite, diverging loop: noisy positions can make OLS non-physical),
+    the OLS fit on the reference states (:func:`reference_ols`) is tried, and said in the warnings.
+    When a new estimate cannot be simulated, the step from the last simulated one is halved (up to
+    :data:`MAX_HALVINGS` times), as a damped Gauss–Newton iteration does.
+    """
+    opts = AssemblyOptions() if options is None else options
+    trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
+    if int(max_iter) < 1:
+        raise IdentificationError(f"max_iter must be >= 1, got {max_iter}")
+    measured = assemble(model, trajs, replace(opts, payload_columns=False))
+    if tuple(measured.system.names) != tuple(model.BASE_NAMES):
+        raise IdentificationError(f"{label} needs the base-parameter columns of the model")
+    ols = fit_ols(measured.system)
+    theta = ols.values if start is None else parameter_vector(model, start)
+    source = "IDIM-OLS" if start is None else "given"
+    setup = closed_loop_setup(model, trajs, opts, theta, references=references, gains=gains,
+                              bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
+    notes = []
+    if start is None:
+        why = _simulable(model, setup, theta)
+        if why is not None:
+            alt = reference_ols(model, setup).values
+            if gains is None:  # the default gains came from the rejected estimate
+                setup = closed_loop_setup(model, trajs, opts, alt, references=references, gains=None,
+                                          bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
+            why2 = _simulable(model, setup, alt)
+            if why2 is not None:
+                raise IdentificationError(
+                    f"{label}: cannot simulate the IDIM-OLS start ({why}) nor the OLS fit on the reference states "
+                    f"({why2}); filter more (a lower cutoff) or give a physical start (start=...)")
+            theta, source = alt, "OLS on the reference states"
+            notes.append(f"{label} started from the OLS fit on the reference states: the IDIM-OLS estimate cannot "
+                         f"be simulated ({why})")
+    history, changes = [theta], []
+    res, runs, converged = ols, [], False
+    prev = None
+    for _ in range(int(max_iter)):
+        for halving in range(MAX_HALVINGS + 1):
+            try:
+                ssys, runs = simulated_system(model, setup, theta)
+                break
+            except IdentificationError as exc:
+                if prev is None or halving == MAX_HALVINGS:
+                    raise IdentificationError(
+                        f"{label} iteration {len(changes) + 1}: cannot simulate the current estimate: {exc}; filter "
+                        f"more (a lower cutoff) or give a physical start (start=...)") from None
+                # damped step (Gauss-Newton with step halving): back towards the last simulable estimate
+                theta = prev + 0.5 * (theta - prev)
+                history[-1] = theta
+                if halving == 0:
+                    notes.append(f"{label} iteration {len(changes)}: the full step could not be simulated; "
+                                 f"step halved")
+        prev = theta
+        res = step(measured.system, ssys)
+        changes.append(_rel_change(res.values, theta))
+        theta = res.values
+        history.append(theta)
+        if changes[-1] < tol:
+            converged = True
+            break
+    if not converged:
+        notes.append(f"{label} did not converge in {max_iter} iterations (last relative change {changes[-1]:.3g} "
+                     f">= {tol:g})")
+    res = replace(res, warnings=tuple(notes) + res.warnings)
+    return IterativeIdentification(res, ols, len(changes), converged, np.array(history), np.array(changes), setup,
+                                   _tracking(runs), source)
+
+
+def identify_iv(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory],
+                options: AssemblyOptions | None = None, *, references=None, gains=None,
+                bandwidth_hz: float | None = None, friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER,
+                tol: float = TOL, start=None) -> IterativeIdentification:
+    """IDIM-IV (JVG2014): instruments from the closed-loop simulation of the current estimate, iterated.
+
+    Parameters
+    ----------
+    model : IdentificationModel
+    trajectories : Trajectory or sequence of Trajectory
+        Measured, unloaded recordings (``t, q, tau``).
+    options : AssemblyOptions
+        Filtering and decimation (as IDIM-OLS); ``min_velocity`` applies to the rows.
+    references, gains, bandwidth_hz, friction_eps
+        See :func:`closed_loop_setup`.
+    max_iter : int
+        Iterations (simulations) at most.
+    tol : float
+        Stop when ``|chi_k+1 - chi_k| / |chi_k| < tol``.
+    start : array_like or mapping, optional
+        First estimate to simulate (``BASE_NAMES`` order or name -> value); default the IDIM-OLS
+        estimate (or, when it cannot be simulated, :func:`reference_ols`; see :func:`iterate`).
+
+    Returns
+    -------
+    IterativeIdentification
+        ``result.method == "IV"``.
+
+    Raises
+    ------
+    IdentificationError
+        No simulable start, diverging simulation, singular ``Z'W``.
+    """
+    return iterate(model, trajectories, options, lambda measured, sim: iv_fit(measured, sim.W), "IDIM-IV",
+                   references=references, gains=gains, bandwidth_hz=bandwidth_hz, friction_eps=friction_eps,
+                   max_iter=max_iter, tol=tol, start=start)
