@@ -19,14 +19,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from symoro_gen.errors import IdentificationError  # noqa: E402
-from symoro_gen.identification.didim import identify_didim  # noqa: E402
-from symoro_gen.identification.iv import identify_iv  # noqa: E402
-from symoro_gen.loader import model_for  # noqa: E402
-from symoro_gen.observations import AssemblyOptions  # noqa: E402
-from symoro_gen.preprocessing.trajectory import Trajectory  # noqa: E402
-from symoro_gen.simulate import fourier_trajectory, random_physical_parameters  # noqa: E402
-from symoro_gen.simulate.closed_loop import default_gains, simulate_closed_loop  # noqa: E402
+from symoro_gen.errors import IdentificationError
+from symoro_gen.identification.didim import identify_didim
+from symoro_gen.identification.iv import identify_iv
+from symoro_gen.loader import model_for
+from symoro_gen.observations import AssemblyOptions
+from symoro_gen.preprocessing.trajectory import Trajectory
+from symoro_gen.simulate import fourier_trajectory, random_physical_parameters
+from symoro_gen.simulate.closed_loop import default_gains, simulate_closed_loop
 
 DT = 0.005
 NOISE_Q = float(os.environ.get("SYMORO_BENCH_NOISE_Q", "5e-3"))

@@ -36,7 +36,7 @@ from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
 from ..preprocessing.filtering import filter_and_differentiate
 from ..preprocessing.trajectory import Trajectory
-from ..simulate.closed_loop import FRICTION_EPS, PIDGains, parameter_vector, default_gains, simulate_closed_loop
+from ..simulate.closed_loop import FRICTION_EPS, PIDGains, default_gains, parameter_vector, simulate_closed_loop
 from .estimators import COND_WARN, REL_STD_WARN_PCT, fit_ols
 from .result import IdentificationResult, per_joint_rel_err, relative_std_pct
 

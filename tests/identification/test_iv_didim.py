@@ -106,7 +106,7 @@ def test_simulation_errors_are_clear(scara, experiment):
         simulate_closed_loop(model, theta, mot.t[:50], mot.q[:40])
     with pytest.raises(IdentificationError, match="gain kp"):
         PIDGains(kp=[-1.0, 1, 1, 1], kd=[1.0] * 4, ki=[0.0] * 4)
-    with pytest.raises(IdentificationError, match="cannot simulate the IDIM-OLS start|physical start"):
+    with pytest.raises(IdentificationError, match=r"cannot simulate the IDIM-OLS start|physical start"):
         identify_didim(model, experiment["log"], AssemblyOptions(), gains=experiment["gains"], start=bad, max_iter=1)
 
 
@@ -215,7 +215,7 @@ def test_non_physical_ols_start_falls_back_to_the_reference_states(scara):
                      tau=run.tau + 0.005 * np.abs(run.tau).max(0) * rng.standard_normal(run.tau.shape),
                      source="noisy", meta={"q_ref": mot.q})
     fit = identify_iv(model, log, AssemblyOptions(), gains=gains, max_iter=2)
-    with pytest.raises(IdentificationError, match="not positive definite|diverged"):
+    with pytest.raises(IdentificationError, match=r"not positive definite|diverged"):
         simulate_closed_loop(model, fit.ols.values, mot.t, mot.q, mot.dq, gains=gains)
     assert fit.start_source == "OLS on the reference states"
     assert any("started from the OLS fit on the reference states" in w for w in fit.result.warnings)
