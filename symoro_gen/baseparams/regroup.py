@@ -283,6 +283,14 @@ def _state_arithmetic(trig: dict) -> Arithmetic:
     return replace(EXACT, functions={**EXACT.functions, sp.sin: fn(sp.sin), sp.cos: fn(sp.cos)})
 
 
+#: Budget of the exact solve (deterministic: sizes, not time). Above it the dependency keeps the numeric
+#: coefficients of the sweep, marked ``numeric`` in the map and in base_parameters.md. The robots of
+#: robots/ need at most 5 support columns and ~200 operations; a pathological random chain (many
+#: symbolic lengths and special angles) can make the symbolic elimination swell without end.
+EXACT_MAX_SUPPORT = 12
+EXACT_MAX_OPS = 4000
+
+
 class _ExactSolver:
     """Solves ``column(p) = sum_k c_k column(k)`` with symbolic geometry and gravity."""
 
@@ -318,7 +326,11 @@ class _ExactSolver:
         """Exact coefficients of the columns ``support`` giving the column ``p``, or None."""
         rng = np.random.default_rng(self.seed)
         m = len(support)
+        if m > EXACT_MAX_SUPPORT:
+            return None
         R = self._rows(support + [p], m + 2, rng)
+        if sum(sp.count_ops(e) for e in R) > EXACT_MAX_OPS:
+            return None
         A, b = R[:, :m], R[:, m]
         An = np.array(A.xreplace(self.constants).evalf(), dtype=float)
         # m independent equations, chosen greedily (Gram-Schmidt on the numeric rows)
@@ -334,6 +346,8 @@ class _ExactSolver:
         if len(chosen) < m:
             return None
         x = A.extract(chosen, list(range(m))).LUsolve(b.extract(chosen, [0]))
+        if sum(sp.count_ops(c) for c in x) > 10 * EXACT_MAX_OPS:
+            return None
         coefs = [sp.factor_terms(sp.cancel(c)) for c in x]
         for r in range(A.rows):
             if sp.cancel(sum((A[r, k] * coefs[k] for k in range(m)), sp.Integer(0)) - b[r]) != 0:

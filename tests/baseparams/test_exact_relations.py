@@ -114,6 +114,7 @@ def test_scara_offset_regroups_with_gravity_symbol_onto_inertial_parameters():
 @settings(
     max_examples=15,
     deadline=None,
+    derandomize=True,  # CI draws the same robots every run (a swelling symbolic solve was once drawn at random)
     suppress_health_check=[HealthCheck.too_slow],
     phases=(Phase.explicit, Phase.reuse, Phase.generate),
 )
