@@ -57,6 +57,11 @@ def test_mj_inverse_matches_model_with_drive_terms(name):
     pay = np.asarray(random_payload(rng)) if robot.payload is not None else None
     m = mujoco.MjModel.from_xml_string(export_mjcf(robot, chi, pay))
     assert m.nv == robot.n_joints
+    lim = robot.limits
+    if lim is not None and lim.q_min is not None and lim.q_max is not None:  # ranges from [limits]
+        assert m.jnt_limited.all()
+        assert np.allclose(m.jnt_range, np.column_stack([lim.q_min, lim.q_max]))
+    m.jnt_limited[:] = 0  # the dynamics are compared on random states, some of them beyond the ranges
     n = robot.n_joints
     q, dq, ddq = rng.normal(size=(3, 50, n))
     dq = np.sign(dq) * (np.abs(dq) + 0.3)  # Coulomb friction compared away from zero velocity
@@ -86,6 +91,7 @@ def identified_rx90(tmp_path_factory):
     pm = dict(zip(res["parameters"]["names"], res["parameters"]["values"]))
     chi_b = np.array([pm[n] for n in model.BASE_NAMES])
     m = mujoco.MjModel.from_xml_path(str(tmp / "rx90.xml"))
+    m.jnt_limited[:] = 0  # the test trajectories are random Fourier series, not kept inside [limits]
     off = np.array([side["drive"][f"joint{r.j}"]["OFF"] for r in robot.joints])
     return robot, model, truth, chi_b, m, off, side
 
