@@ -41,6 +41,11 @@ def add_fleet_parser(sub) -> argparse.ArgumentParser:
                         "is bounded by the segment, not by the log; each segment loses its filter edges)")
     p.add_argument("--chunk-samples", type=int, metavar="N",
                    help="full-rate samples per block inside a task (bounds the memory of a worker)")
+    p.add_argument("--diagnose", action="store_true",
+                   help="close the loop: run the residual diagnosis (symoro-gen diagnose) on each flagged robot's "
+                        "logs of the last flagged day; its summary goes to the output, the JSON and the report")
+    p.add_argument("--diagnose-method", choices=("ols", "wls", "tls"), default="wls",
+                   help="estimator of those diagnoses (default %(default)s)")
     add_data_options(p)
     p.set_defaults(func=run_fleet)
     return p
@@ -53,7 +58,8 @@ def run_fleet(args) -> int:
     load_kw = {"fmt": format_from_args(args)}
     res = identify_fleet(args.robot, args.logs, args.by, scheduler=args.scheduler, options=opts, load_kw=load_kw,
                          alpha=args.alpha, correction=args.correction, retries=args.retries,
-                         segment_samples=args.segment_samples)
+                         segment_samples=args.segment_samples, diagnose=args.diagnose,
+                         diagnose_method=args.diagnose_method)
     if args.json:
         res.write_json(args.json)
     if args.report:

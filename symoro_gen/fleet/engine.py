@@ -22,11 +22,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..atomic import write_text_atomic
+from ..errors import SymoroError
 from ..identification.estimators import fit_wls
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
 from ..report.plots import MissingDependencyError
-from .files import FleetError, discover, group_by, segments
+from .files import FleetError, LogFile, discover, group_by, plain_format, read_experiments, segments
 from .kernel import Partial, merge_partials, process_file, resolve_model
 from .stats import adjust, dersimonian_laird, level_z, trend_test
 
@@ -118,6 +119,7 @@ class FleetResult:
     settings: dict = field(default_factory=dict)
     timing: dict = field(default_factory=dict)
     partials: dict = field(default_factory=dict, repr=False)
+    diagnoses: dict = field(default_factory=dict)                # robot -> closed-loop diagnosis (``diagnose=True``)
 
     @property
     def robot_names(self) -> list[str]:
@@ -133,7 +135,8 @@ class FleetResult:
     def to_json(self) -> dict:
         """The JSON document: ``robots`` {robot: {``days``: {day: {names, values, std}}, ``estimate``,
         ``z``, ``z_trend``, ``slope``}}, ``fleet`` {names, values, std, between_robot_std}, ``flagged``
-        [{robot, parameter, z, days, ...}], ``skipped`` [{file, error}], ``settings``, ``timing``."""
+        [{robot, parameter, z, days, ...}], ``skipped`` [{file, error}], ``settings``, ``timing`` and, with
+        ``diagnose=True``, ``diagnoses`` {robot: {day, files, summary, report} or {day, files, error}}."""
         rob = {}
         for i, r in enumerate(self.robots):
             rob[r] = {
@@ -146,8 +149,11 @@ class FleetResult:
         fleet = self.fleet.to_json()
         tau = self.level.get("tau_all")
         fleet["between_robot_std"] = _floats(tau) if tau is not None else None
-        return {"model": self.model, "robots": rob, "fleet": fleet, "flagged": self.flagged,
-                "skipped": self.skipped, "settings": self.settings, "timing": self.timing}
+        out = {"model": self.model, "robots": rob, "fleet": fleet, "flagged": self.flagged,
+               "skipped": self.skipped, "settings": self.settings, "timing": self.timing}
+        if self.settings.get("diagnose"):
+            out["diagnoses"] = self.diagnoses
+        return out
 
     def write_json(self, path) -> None:
         write_text_atomic(path, json.dumps(self.to_json(), indent=1, allow_nan=True) + "\n")
@@ -164,6 +170,13 @@ class FleetResult:
         for f in self.flagged:
             lines.append(f"  FLAG {f['robot']} {f['parameter']}: {f['test']} z = {f['z']:.1f} "
                          f"(p_adj = {f['p_adjusted']:.2g}), days {', '.join(f['days'])}")
+        for r, d in self.diagnoses.items():
+            head = f"diagnosis of {r} on day {d['day']}"
+            if "error" in d:
+                lines.append(f"  {head}: not run ({d['error']})")
+            else:
+                lines.append(f"  {head}:")
+                lines += ["    " + x for x in str(d["summary"]).splitlines()]
         return "\n".join(lines)
 
 
@@ -214,7 +227,8 @@ def _model_ref(model) -> tuple[object, IdentificationModel]:
 def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *, scheduler: str | None = None,
                    client=None, options: AssemblyOptions | None = None, load_kw: dict | None = None,
                    alpha: float = DEFAULT_ALPHA, correction: str = "holm", retries: int = 2,
-                   segment_samples: int | None = None, kernel: Callable[..., Partial] = process_file) -> FleetResult:
+                   segment_samples: int | None = None, kernel: Callable[..., Partial] = process_file,
+                   diagnose: bool = False, diagnose_method: str = "wls") -> FleetResult:
     """Identify every robot of a fleet per day, pool the fleet and flag the robots that drift.
 
     Parameters
@@ -232,7 +246,11 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     options : AssemblyOptions, optional
         Filters and block size (default: the papers' rules, ``keep_signals=False``).
     load_kw : dict, optional
-        Keywords of ``load_trajectory`` (CSV columns, ``dt``...).
+        How the logs are read (:func:`~symoro_gen.fleet.files.read_experiments`): ``fmt``, the
+        :class:`~symoro_gen.preprocessing.logformat.LogFormat` of the command line's data options (every
+        format, Parquet included), or keywords of ``load_trajectory``; ``drive_chain``: default the robot
+        file's ``[drive_chain]`` (motor-side logs mapped to the joint side, as ``identify`` does; found from
+        the robot name or file, or ``robots/<ROBOT>.toml`` for a model object).
     alpha : float
         Level of the flags after correction (0.01).
     correction : {"holm", "bh"}
@@ -242,10 +260,15 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     segment_samples : int, optional
         Cut Parquet logs longer than this into segments, one task and one experiment each (its own filter
         edges), read row group by row group: a worker's memory is then bounded by the segment whatever
-        the log length. Default: one task per log.
+        the log length. Default: one task per log. Only for logs read as they are (no data options).
     kernel : callable
         The per-file task, ``kernel(model_ref, log, options, load_kw) -> Partial`` (default
         :func:`~symoro_gen.fleet.kernel.process_file`).
+    diagnose : bool
+        Close the loop on every flagged robot: :func:`symoro_gen.diagnostics.diagnose` on its logs of the
+        last day listed in its flags (what the declared model misses there); summaries in ``diagnoses``.
+    diagnose_method : str
+        The estimator of those diagnoses (``"ols"``, ``"wls"``, ``"tls"``).
 
     Returns
     -------
@@ -262,8 +285,12 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     if segment_samples is not None and segment_samples < 1000:
         raise FleetError(f"segment_samples must be >= 1000, got {segment_samples!r}")
-    files = segments(discover(logs, by), segment_samples)
     ref, mdl = _model_ref(model)
+    load_kw = dict(load_kw or {})
+    if "drive_chain" not in load_kw:
+        load_kw["drive_chain"] = _drive_chain(model, mdl)
+    plain = plain_format(load_kw.get("fmt"))
+    files = segments(discover(logs, by), segment_samples if plain else None)
     t0 = time.perf_counter()
     ctx = contextlib.nullcontext(client) if client is not None else open_client(scheduler)
     with ctx as cl:
@@ -304,16 +331,71 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
             if ed is not None:
                 days[r][d] = ed
     result = _judge(mdl, names, days, robots, fleet, skipped, alpha, correction)
+    fmt = load_kw.get("fmt")
     settings = {"by": by, "scheduler": scheduler or ("client" if client is not None else "local"),
-                "alpha": alpha, "correction": correction, "segment_samples": segment_samples, "tasks": len(files),
-                "z_day": Z_DAY, "workers": n_workers,
-                "estimator": "IDIM-WLS", "assembly": opts.summary()}
+                "alpha": alpha, "correction": correction, "segment_samples": segment_samples if plain else None,
+                "tasks": len(files), "z_day": Z_DAY, "workers": n_workers,
+                "estimator": "IDIM-WLS", "assembly": opts.summary(),
+                "data_options": list(fmt.options()) if fmt is not None else [],
+                "drive_chain": load_kw.get("drive_chain") is not None, "diagnose": bool(diagnose)}
+    diagnoses = {}
+    if diagnose:
+        t_d = time.perf_counter()
+        diagnoses = _diagnose_flagged(mdl, result["flagged"], group_by(files), load_kw, diagnose_method)
+        settings["diagnose_method"] = diagnose_method
+        settings["diagnose_s"] = round(time.perf_counter() - t_d, 3)
     timing = {"startup_s": round(t_start, 3), "run_s": round(t_run, 3),
               "samples": int(fleet_p.samples), "samples_per_s": fleet_p.samples / t_run if t_run > 0 else None}
     return FleetResult(model=str(getattr(mdl, "ROBOT", ref)), names=names, days=days, robots=robots, fleet=fleet,
                        level=result["level"], trend=result["trend"], flagged=result["flagged"], skipped=skipped,
                        settings=settings, timing=timing,
-                       partials={"days": day_p, "robots": robot_p, "fleet": fleet_p})
+                       partials={"days": day_p, "robots": robot_p, "fleet": fleet_p}, diagnoses=diagnoses)
+
+
+def _drive_chain(model, mdl):
+    """The ``[drive_chain]`` of the robot file behind ``model`` (its name or file; for a package folder or a
+    model object, ``robots/<ROBOT>.toml``), None when it has none or no robot file is found."""
+    from ..description import load_robot
+
+    cands = [os.fspath(model)] if isinstance(model, (str, os.PathLike)) else []
+    if getattr(mdl, "ROBOT", None):
+        cands.append(str(mdl.ROBOT))
+    for c in cands:
+        try:
+            return load_robot(c).drive_chain
+        except (SymoroError, OSError, ValueError):
+            continue
+    return None
+
+
+def _diagnose_flagged(model, flagged: list[dict], groups: dict[str, dict[str, list[LogFile]]], load_kw: dict,
+                      method: str) -> dict:
+    """``diagnose`` (the public call) on each flagged robot's logs of the last day of its flags."""
+    from ..diagnostics import diagnose
+
+    out: dict[str, dict] = {}
+    for f in flagged:
+        r = f["robot"]
+        if r in out:
+            continue
+        day = sorted(f["days"])[-1]
+        logs = groups.get(r, {}).get(day, [])
+        entry: dict = {"day": day, "files": [lf.label for lf in logs], "parameters": [
+            g["parameter"] for g in flagged if g["robot"] == r]}
+        try:
+            trajs = [tr for lf in logs for tr in read_experiments(lf.path, int(model.N_JOINTS), start=lf.start,
+                                                                   stop=lf.stop, **load_kw)]
+            if not trajs:
+                raise FleetError("no log of that day")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                rep = diagnose(model, trajs, method=method)
+            to_json = getattr(rep, "to_json", None) or rep.to_dict
+            entry.update(summary=rep.summary(), report=to_json())
+        except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is reported, the fleet result stands
+            entry["error"] = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        out[r] = entry
+    return out
 
 
 def _judge(model, names, days, robots, fleet, skipped, alpha, correction) -> dict:

@@ -1,9 +1,11 @@
 """A fleet's log files: expansion of files and globs, robot and day from each path (``--by``), reading
 of one log (CSV, NPZ, MAT through :func:`~symoro_gen.preprocessing.load.load_trajectory`, Parquet
-through pyarrow).
+through pyarrow; with the data options of the command line, every format through
+:func:`~symoro_gen.preprocessing.logformat.load_log`), motor-side data mapped by the robot's drive chain.
 
-Parquet logs hold one experiment per file with the columns of the CSV format: ``t, q1..qn,
-tau1..taun`` (``dq1..``, ``ddq1..`` optional), as :func:`write_parquet` writes them.
+Parquet logs hold one experiment per file; read as they are, with the columns of the CSV format: ``t,
+q1..qn, tau1..taun`` (``dq1..``, ``ddq1..`` optional), as :func:`write_parquet` writes them; any other
+layout is read with ``--columns`` (names of the Parquet columns, as a CSV header's), ``--tau-scale``...
 """
 from __future__ import annotations
 
@@ -12,12 +14,13 @@ import itertools
 import os
 import re
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import DataFileError, Problem, SymoroError
+from ..preprocessing.drive_chain import motor_to_joint
 from ..preprocessing.load import load_trajectory
 from ..preprocessing.logformat import LogFormat, load_log
 from ..preprocessing.trajectory import Trajectory
@@ -227,9 +230,11 @@ def _read_parquet(path: str, n_joints: int, loaded: bool, start: int = 0, stop: 
 
 
 def read_log(path: str, n_joints: int, *, loaded: bool = False, start: int = 0, stop: int = -1,
-             **load_kw) -> Trajectory:
+             drive_chain=None, **load_kw) -> Trajectory:
     """One log file as a :class:`Trajectory` (Parquet here, other formats by ``load_trajectory``);
-    ``start``, ``stop``: only those samples of a Parquet log.
+    ``start``, ``stop``: only those samples of a Parquet log; ``drive_chain``: the data are motor-side
+    (mapped to the joint side by :func:`~symoro_gen.preprocessing.drive_chain.motor_to_joint`, as
+    ``load_trajectory`` does).
 
     Raises
     ------
@@ -237,19 +242,36 @@ def read_log(path: str, n_joints: int, *, loaded: bool = False, start: int = 0, 
         Naming the file (and the column and rows) when it cannot be read.
     """
     if str(path).lower().endswith(PARQUET_SUFFIXES):
-        return _read_parquet(str(path), n_joints, loaded, start, stop)
-    return load_trajectory(path, n_joints=n_joints, loaded=loaded, **load_kw)
+        tr = _read_parquet(str(path), n_joints, loaded, start, stop)
+        if drive_chain is None:
+            return tr
+        q, tau, dq, ddq = motor_to_joint(drive_chain, tr.q, tr.tau, tr.dq, tr.ddq)
+        return replace(tr, q=q, tau=tau, dq=dq, ddq=ddq, meta={**tr.meta, "drive_chain": True})
+    return load_trajectory(path, n_joints=n_joints, loaded=loaded, drive_chain=drive_chain, **load_kw)
 
 
-def read_experiments(path: str, n_joints: int, *, fmt: LogFormat | None = None, loaded: bool = False,
+def plain_format(fmt: LogFormat | None) -> bool:
+    """Whether logs read with ``fmt`` are read as they are (no column mapping, units, time base or
+    resampling): Parquet logs are then read by this module, row group by row group (segments)."""
+    return fmt is None or (fmt.is_plain and fmt.dt is None)
+
+
+def read_experiments(path: str, n_joints: int, *, fmt: LogFormat | None = None, drive_chain=None, loaded: bool = False,
                      start: int = 0, stop: int = -1, **load_kw) -> tuple[Trajectory, ...]:
-    """The experiments of one log: a Parquet file is one; a CSV/NPZ/MAT log read with a
-    :class:`~symoro_gen.preprocessing.logformat.LogFormat` (the ``--columns --tau-scale --deg --resample``...
-    options of the command line, docs/data-files.md) may split at gaps; without ``fmt`` it is read by
-    ``load_trajectory`` with ``load_kw``."""
-    if str(path).lower().endswith(PARQUET_SUFFIXES) or fmt is None:
-        return (read_log(path, n_joints, loaded=loaded, start=start, stop=stop, **load_kw),)
-    return tuple(load_log(path, fmt, n_joints=n_joints, loaded=loaded)[0])
+    """The experiments of one log, read as ``identify`` reads its DATA files.
+
+    With a :class:`~symoro_gen.preprocessing.logformat.LogFormat` that changes anything (the ``--columns
+    --tau-scale --deg --dt --resample --drop-bad-rows`` options, docs/data-files.md) every format, Parquet
+    included, is read by :func:`~symoro_gen.preprocessing.logformat.load_log` (a log may then split at
+    gaps); otherwise a Parquet log is read here (``start``, ``stop``: a segment) and the others by
+    ``load_trajectory`` with ``load_kw``. ``drive_chain`` (the robot file's ``[drive_chain]``): motor-side
+    data mapped to the joint side, the same function as ``identify``.
+    """
+    if plain_format(fmt):
+        return (read_log(path, n_joints, loaded=loaded, start=start, stop=stop, drive_chain=drive_chain, **load_kw),)
+    if stop >= 0:
+        raise FleetError(f"{path}: segments of a log need the plain format (no --columns, units or resampling)")
+    return tuple(load_log(path, fmt, n_joints=n_joints, drive_chain=drive_chain, loaded=loaded)[0])
 
 
 def write_parquet(path, recording: Trajectory, *, row_group_size: int = 100_000) -> None:

@@ -2,8 +2,9 @@
 
 One task reads one log, band-pass filters and decimates it block by block and folds every block of the
 base regressor into the per-joint QR factors of :class:`~symoro_gen.identification.accumulate.Accumulator`
-(:func:`~symoro_gen.observations.iter_chunks`: the full-rate ``W`` of a whole log never exists; memory
-is the log's ``t, q, tau`` plus one block of ``AssemblyOptions.chunk_samples`` / ``max_chunk_mb``).
+(:mod:`symoro_gen.fleet.fused`, the rows of :func:`~symoro_gen.observations.iter_chunks`: the full-rate
+``W`` of a whole log never exists; memory is the log's ``t, q, tau`` plus one Butterworth block of
+``AssemblyOptions.chunk_samples`` or 64k samples, and ~2 MB of regressor buffers).
 Two partial results merge exactly: the factor of ``[R_a; R_b]`` is the factor of all the rows of both
 (Demmel et al., "Communication-optimal parallel and sequential QR", SIAM J. Sci. Comput. 2012: TSQR).
 """
@@ -16,11 +17,12 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import IdentificationError
-from ..identification.accumulate import Accumulator, accumulate
+from ..identification.accumulate import Accumulator
 from ..loader import load_model
 from ..model import IdentificationModel
-from ..observations import AssemblyOptions, iter_chunks
+from ..observations import AssemblyOptions
 from .files import LogFile, read_experiments
+from .fused import ColumnMap, column_map, fold_trajectories
 
 __all__ = ["Partial", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
 
@@ -50,6 +52,17 @@ class Partial:
 @lru_cache(maxsize=8)
 def _load(ref: str) -> IdentificationModel:
     return load_model(ref)
+
+
+_CMAPS: dict[int, tuple[IdentificationModel, ColumnMap]] = {}
+
+
+def _column_map(model: IdentificationModel) -> ColumnMap:
+    """The model's :func:`~symoro_gen.fleet.fused.column_map`, once per model object and process."""
+    hit = _CMAPS.get(id(model))
+    if hit is None or hit[0] is not model:
+        hit = _CMAPS[id(model)] = (model, column_map(model, int(model.N_JOINTS), len(model.BASE_NAMES)))
+    return hit[1]
 
 
 def resolve_model(ref) -> IdentificationModel:
@@ -96,7 +109,8 @@ def merge_partials(*parts: Partial) -> Partial:
 def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None, load_kw: dict | None = None
                  ) -> Partial:
     """Read one log, filter, decimate, evaluate the base regressor block by block and fold it into the
-    per-joint QR factors (the kernel of a fleet run; RX-90 paper eq. 14-16 for the filters).
+    per-joint QR factors (the kernel of a fleet run, :func:`~symoro_gen.fleet.fused.fold_trajectory`;
+    RX-90 paper eq. 14-16 for the filters).
 
     A log that cannot be read or used (damaged file, wrong columns, too short...) does not raise: it
     comes back in ``skipped`` with the reason, so that it cannot stop the rest of the fleet.
@@ -109,15 +123,16 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
     options : AssemblyOptions, optional
         Filters and block size (``keep_signals`` is ignored).
     load_kw : dict, optional
-        Keywords of :func:`~symoro_gen.fleet.files.read_experiments` for CSV/NPZ/MAT logs: ``fmt`` (a
-        :class:`~symoro_gen.preprocessing.logformat.LogFormat`, the command line's data options) or the
-        keywords of :func:`~symoro_gen.preprocessing.load.load_trajectory`.
+        Keywords of :func:`~symoro_gen.fleet.files.read_experiments`: ``fmt`` (a
+        :class:`~symoro_gen.preprocessing.logformat.LogFormat`, the command line's data options, for every
+        format), ``drive_chain`` (motor-side logs) or the keywords of
+        :func:`~symoro_gen.preprocessing.load.load_trajectory`.
     """
     model = resolve_model(model_ref)
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     try:
         trajs = read_experiments(log.path, int(model.N_JOINTS), start=log.start, stop=log.stop, **(load_kw or {}))
-        acc = accumulate(iter_chunks(model, trajs, opts, progress=False))
+        acc = fold_trajectories(model, trajs, opts, cmap=_column_map(model))
     except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         if log.path not in msg:

@@ -11,6 +11,7 @@ from ..report.document import (
     Figure,
     Heading,
     Paragraph,
+    Preformatted,
     Report,
     Table,
     write_report_files,
@@ -66,6 +67,14 @@ def fleet_report(res: FleetResult, *, plots: bool = True) -> Report:
                             caption="Flagged robots and parameters", numeric=(False, False, False, True, True, False)))
         if plots:
             blocks += [_flag_figure(res, f, i) for i, f in enumerate(res.flagged)]
+    if res.diagnoses:
+        blocks.append(Heading("Closed loop: diagnosis of the flagged robots"))
+        for r, d in res.diagnoses.items():
+            what = f"{r}, day {d['day']} ({', '.join(d['files'])}; flagged on {', '.join(d['parameters'])})"
+            if "error" in d:
+                blocks.append(Paragraph(f"{what}: not run ({d['error']})."))
+            else:
+                blocks += [Paragraph(what + ":"), Preformatted(str(d["summary"]))]
     if res.skipped:
         blocks.append(Heading("Skipped logs"))
         blocks.append(Table(("file", "reason"), tuple((s["file"], s["error"]) for s in res.skipped),

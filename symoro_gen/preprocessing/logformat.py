@@ -322,6 +322,39 @@ class _Table:
     unparsable: np.ndarray      # (N, k) bool
 
 
+#: Parquet tables (columns by name, as a CSV header): read by pyarrow, the ``fleet`` extra
+PARQUET_SUFFIXES = (".parquet", ".pq")
+
+
+def _read_parquet_table(path: str) -> _Table:
+    """A Parquet file as a table: its column names as the header, row r (1-based) as "line" r; null or
+    non-numeric values marked unparsable (then named by row and column like a CSV's)."""
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:  # pragma: no cover - depends on the installation
+        raise DataFileError([Problem(path, "", "", "Parquet files need pyarrow: pip install 'symoro-gen[fleet]'")]
+                            ) from None
+    if not Path(path).exists():
+        raise DataFileError([Problem(path, "", "", "file not found")])
+    try:
+        table = pq.read_table(path)
+    except Exception as exc:  # noqa: BLE001 - pyarrow raises ArrowInvalid, OSError... on a damaged file
+        raise DataFileError([Problem(path, "", "", f"cannot read as Parquet ({type(exc).__name__}: {exc})")]) from None
+    N, names = table.num_rows, list(table.column_names)
+    data = np.full((N, len(names)), np.nan)
+    unparsable = np.zeros((N, len(names)), bool)
+    for k, nm in enumerate(names):
+        col = table.column(nm)
+        try:
+            data[:, k] = col.to_numpy(zero_copy_only=False).astype(float)
+        except (TypeError, ValueError):
+            unparsable[:, k] = True
+            continue
+        if col.null_count:
+            unparsable[:, k] = np.asarray(col.is_null().to_numpy(zero_copy_only=False), bool)
+    return _Table(path, names, data, np.arange(1, N + 1), np.zeros(N, bool), unparsable)
+
+
 def _delimiter(line: str) -> str | None:
     for d in (",", ";", "\t"):
         if d in line:
@@ -342,6 +375,8 @@ def read_table(path: str) -> _Table:
     The header (first line with a non-numeric field) is optional. Fast path: :func:`numpy.loadtxt`;
     when it fails, line by line so that every bad row can be named.
     """
+    if str(path).lower().endswith(PARQUET_SUFFIXES):
+        return _read_parquet_table(path)
     try:
         with open(path, encoding="utf-8-sig") as f:
             text = f.read()
@@ -672,7 +707,7 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
         raise DataFileError([Problem(spec.text, "", "dt", f"the spec says dt = {spec.dt:g} s, --dt {fmt.dt:g}: "
                                      "give the sampling period once")])
     dt = fmt.dt if fmt.dt is not None else spec.dt
-    if fmt.is_plain:
+    if fmt.is_plain and not (not spec.is_split and spec.files["file"].lower().endswith(PARQUET_SUFFIXES)):
         tr = load_trajectory(spec, n_joints=n, robot=robot, drive_chain=drive_chain, loaded=loaded, dt=dt)
         rep = LoadReport(file=tr.source, rows_read=tr.n_samples, step_from=tr.meta.get("dt_median"),
                          step_jitter=float(tr.meta.get("dt_max_rel_jitter", 0.0)), samples=(tr.n_samples,),
@@ -691,13 +726,13 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
         if not Path(file).exists():
             raise DataFileError([Problem(file, "", "", "file not found")])
         suffix = Path(file).suffix.lower()
-        if suffix in (".csv", ".txt", ".tsv", ".dat"):
+        if suffix in (".csv", ".txt", ".tsv", ".dat", *PARQUET_SUFFIXES):
             c = _read_single_text(file, n, fmt, dt, probs)
         elif suffix in (".npz", ".mat"):
             c = _read_single_arrays(file, suffix[1:], n, fmt, dt, probs)
         else:
             raise DataFileError([Problem(file, "", "", f"unknown data format {suffix!r} "
-                                         "(expected .csv, .txt, .npz, .mat or a q=...,tau=... spec)")])
+                                         "(expected .csv, .txt, .npz, .mat, .parquet or a q=...,tau=... spec)")])
     if probs:
         raise DataFileError(probs)
     source = c.source

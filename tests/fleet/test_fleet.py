@@ -37,6 +37,8 @@ from symoro_gen.preprocessing.load import load_trajectory
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import write_recording_csv
 
+from symoro_gen.fleet.fused import fold_trajectories, fold_trajectory
+
 from .killer import kill_once
 
 BY = "{robot}/{day}.*"
@@ -59,13 +61,13 @@ def threads_client():
         yield c
 
 
+def _read(f):
+    return load_trajectory(f.path, n_joints=4) if f.path.endswith(".csv") else read_log(f.path, 4)
+
+
 def _reference(model, files, opts):
     """The single-process accumulator on the same files (no Dask, no merge): IDIM-WLS of each robot-day."""
-    out = {}
-    for f in files:
-        traj = load_trajectory(f.path, n_joints=4) if f.path.endswith(".csv") else read_log(f.path, 4)
-        out[f.robot, f.day] = fit_wls(accumulate(iter_chunks(model, traj, opts, progress=False)))
-    return out
+    return {(f.robot, f.day): fit_wls(fold_trajectory(model, _read(f), opts)) for f in files}
 
 
 def _close(a, b, rtol=1e-10):
@@ -94,10 +96,8 @@ def test_distributed_equals_single_process(small_fleet, threads_client, chunk_sa
         # std carries sigma^2 = (|y|^2 - |Q'y|^2) / (r - p): a difference of two close sums, whose last
         # bits depend on the summation order (C vs NumPy kernel, block tree): 1e-8 relative
         assert _close(e.std, fit.std, rtol=1e-8), (r, d)
-    # the fleet factor is the factor of every row: same Gram matrix as one accumulator fed all the chunks
-    one = accumulate(c for f in files for c in iter_chunks(
-        model, load_trajectory(f.path, n_joints=4) if f.path.endswith(".csv") else read_log(f.path, 4), opts,
-        progress=False))
+    # the fleet factor is the factor of every row: same Gram matrix as one accumulator fed every log
+    one = fold_trajectories(model, [_read(f) for f in files], opts)
     acc = res.partials["fleet"].acc
     for j in range(4):
         G, G1 = acc.R[j].T @ acc.R[j], one.R[j].T @ one.R[j]
@@ -120,7 +120,7 @@ def test_segments_are_tasks_of_bounded_memory_and_exact(small_fleet, threads_cli
     bounds = [0, 1334, 2667, 4001]
     parts = [Trajectory(t=whole.t[a:b], q=whole.q[a:b], tau=whole.tau[a:b], source=f"[{a}:{b}]")
              for a, b in itertools.pairwise(bounds)]
-    ref = fit_wls(accumulate(iter_chunks(model, parts, opts, progress=False)))
+    ref = fit_wls(fold_trajectories(model, parts, opts))
     assert _close(res.days["r00"]["d00"].values, ref.values)
     assert res.days["r00"]["d00"].samples == 4001
 

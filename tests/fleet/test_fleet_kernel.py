@@ -1,0 +1,168 @@
+"""The fused per-chunk kernel against the assembly's rows, and how a fleet reads its logs: data options
+on Parquet (as on every format), the robot's drive chain applied in the workers, and the closed loop
+(``diagnose``) on a flagged robot."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from symoro_gen import load_model
+from symoro_gen.description import load_robot
+from symoro_gen.fleet import Drift, identify_fleet, open_client, read_log, simulate_fleet, write_parquet
+from symoro_gen.fleet.fused import column_map, fold_trajectory, fused_applies
+from symoro_gen.identification import fit_wls
+from symoro_gen.identification.accumulate import accumulate
+from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
+from symoro_gen.preprocessing.drive_chain import joint_to_motor
+from symoro_gen.preprocessing.logformat import make_format
+from symoro_gen.preprocessing.trajectory import Trajectory
+from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
+
+BY = "{robot}/{day}.parquet"
+
+
+@pytest.fixture(scope="module")
+def threads_client():
+    with open_client("threads:2") as c:
+        yield c
+
+
+def _recording(robot: str, seconds: float, seed: int = 0) -> Trajectory:
+    model = load_model(robot)
+    rng = np.random.default_rng(seed)
+    chi = random_physical_parameters(load_robot(robot), rng)
+    mo = fourier_trajectory(model.N_JOINTS, seconds, 1e-3, rng, vmax=1.5, amax=8.0)
+    return simulate_recording(model, mo.t, mo.q, mo.dq, mo.ddq, np.asarray(chi, float), noise_q=1e-5,
+                              noise_tau=0.02, rng=rng, source=f"{robot}-sim")
+
+
+def _gram_close(a, b, rtol):
+    for Ra, Rb in zip(a.R, b.R):
+        G, G1 = Ra.T @ Ra, Rb.T @ Rb
+        assert np.max(np.abs(G - G1)) <= rtol * np.max(np.abs(G1))
+
+
+@pytest.mark.parametrize("kw", [{}, {"batch_super_rows": 3, "outer_samples": 1000, "fold_rows": 50}])
+def test_fused_kernel_gives_the_rows_of_the_assembly(kw):
+    """Polyphase FIR with state across batches, distinct columns only, folds every few rows: the same factors
+    as the assembly's blocked FIR (Gram matrices to 1e-12; estimates to 1e-9; sigma, a difference of close
+    sums, to 1e-6), whatever the batch and block sizes (partial super-rows, batch borders, block borders)."""
+    model = load_model("lwr4")
+    tr = _recording("lwr4", 7.3)
+    opts = AssemblyOptions(keep_signals=False)
+    st = observation_settings(tr, opts)
+    assert fused_applies(tr, st, opts) and st.n_d > 1
+    ref = accumulate(iter_chunks(model, tr, opts, progress=False))
+    got = fold_trajectory(model, tr, opts, **kw)
+    assert got.rows == ref.rows and got.names == ref.names
+    _gram_close(got, ref, 1e-12)
+    fr, fg = fit_wls(ref), fit_wls(got)
+    assert np.linalg.norm(fg.values - fr.values) <= 1e-9 * np.linalg.norm(fr.values)
+    assert np.linalg.norm(fg.std - fr.std) <= 1e-6 * np.linalg.norm(fr.std)
+
+
+def test_fused_kernel_falls_back_to_the_assembly_for_other_options():
+    """Options the fused kernel does not cover (IIR decimation, no decimation, low-velocity rows) give the
+    assembly's own factors."""
+    model = load_model("scara")
+    tr = _recording("scara", 3.0, seed=1)
+    for opts in (AssemblyOptions(keep_signals=False, ftype="iir"), AssemblyOptions(keep_signals=False, n_d=1),
+                 AssemblyOptions(keep_signals=False, min_velocity=0.05)):
+        assert not fused_applies(tr, observation_settings(tr, opts), opts)
+        ref = accumulate(iter_chunks(model, tr, opts, progress=False))
+        got = fold_trajectory(model, tr, opts)
+        assert got.rows == ref.rows
+        _gram_close(got, ref, 1e-14)
+
+
+def test_column_map_reproduces_every_entry():
+    """Distinct columns times their factor rebuild every non-zero entry of the regressor on new states."""
+    model = load_model("lwr4")
+    n, nb = 7, len(model.BASE_NAMES)
+    cm = column_map(model, n, nb)
+    rng = np.random.default_rng(99)
+    q, dq, ddq = (rng.uniform(-3, 3, (40, n)) for _ in range(3))
+    W = model.regressor(q, dq, ddq).reshape(40, n * nb)
+    rebuilt = np.zeros_like(W)
+    rebuilt[:, cm.entry] = W[:, cm.source][:, cm.column] * cm.scale
+    assert np.allclose(rebuilt, W, rtol=1e-12, atol=1e-12 * np.abs(W).max())
+    assert cm.source.size < cm.entry.size < n * nb
+
+
+def test_parquet_logs_honour_the_data_options(tmp_path, threads_client, cli):
+    """A Parquet log with its own column names, positions in degrees and torques as a scaled signal, read
+    with --columns --deg --tau-scale (the options of every command that reads data), gives the numbers of
+    the plain log."""
+    simulate_fleet(tmp_path / "plain", "scara", n_robots=2, n_days=1, duration=4.0, drifts=(), seed=4)
+    pa = pytest.importorskip("pyarrow")
+    import pyarrow.parquet as pq
+
+    for r in ("r00", "r01"):
+        tr = read_log(str(tmp_path / "plain" / r / "d00.parquet"), 4)
+        cols = {"time": tr.t}
+        cols.update({f"pos_{j}": np.rad2deg(tr.q[:, j]) for j in range(4)})
+        cols.update({f"cur_{j}": tr.tau[:, j] / 2.5 for j in range(4)})
+        cols["temperature"] = np.full(tr.n_samples, 40.0)
+        (tmp_path / "raw" / r).mkdir(parents=True)
+        pq.write_table(pa.table(cols), tmp_path / "raw" / r / "d00.parquet")
+    fmt = make_format(columns="t=time,q=pos_0:pos_3,tau=cur_0:cur_3", tau_scale="2.5", deg=True)
+    plain = identify_fleet("scara", [tmp_path / "plain"], BY, client=threads_client)
+    got = identify_fleet("scara", [tmp_path / "raw"], BY, client=threads_client, load_kw={"fmt": fmt})
+    assert not got.skipped
+    for r in ("r00", "r01"):
+        a, b = got.days[r]["d00"].values, plain.days[r]["d00"].values
+        assert np.linalg.norm(a - b) <= 1e-8 * np.linalg.norm(b)
+    assert got.settings["data_options"] and got.settings["segment_samples"] is None
+    # the same from the command line; without the options the file's columns are not found: named, skipped
+    out = tmp_path / "f.json"
+    cli("fleet", "scara", tmp_path / "raw", "--by", BY, "--scheduler", "threads:1", "--json", out,
+        "--columns", "t=time,q=pos_0:pos_3,tau=cur_0:cur_3", "--tau-scale", "2.5", "--deg")
+    doc = json.loads(out.read_text())
+    assert np.allclose(doc["robots"]["r01"]["days"]["d00"]["values"], plain.days["r01"]["d00"].values, rtol=1e-8,
+                       atol=1e-10)
+    with pytest.raises(Exception, match="no log could be used"):
+        identify_fleet("scara", [tmp_path / "raw"], BY, client=threads_client)
+
+
+def test_motor_side_logs_go_through_the_robots_drive_chain(tmp_path, threads_client):
+    """TX40 logs recorded on the motor side (its robot file's [drive_chain]): the workers map them to the
+    joint side with the function identify uses, giving the numbers of the joint-side logs."""
+    chain = load_robot("tx40").drive_chain
+    assert chain is not None
+    for r in ("r00", "r01"):
+        tr = _recording("tx40", 4.0, seed=int(r[-1]) + 10)
+        write_parquet(tmp_path / "joint" / r / "d00.parquet", tr)
+        qm, taum = joint_to_motor(chain, tr.q, tr.tau)[:2]
+        write_parquet(tmp_path / "motor" / r / "d00.parquet", Trajectory(t=tr.t, q=qm, tau=taum, source="motor"))
+    joint = identify_fleet("tx40", [tmp_path / "joint"], BY, client=threads_client,
+                           load_kw={"drive_chain": None})
+    motor = identify_fleet("tx40", [tmp_path / "motor"], BY, client=threads_client)
+    assert motor.settings["drive_chain"] and not joint.settings["drive_chain"]
+    for r in ("r00", "r01"):
+        a, b = motor.days[r]["d00"].values, joint.days[r]["d00"].values
+        assert np.linalg.norm(a - b) <= 1e-8 * np.linalg.norm(b)
+    # read without the chain, the same motor-side logs give other (wrong) numbers
+    raw = identify_fleet("tx40", [tmp_path / "motor"], BY, client=threads_client, load_kw={"drive_chain": None})
+    assert np.linalg.norm(raw.days["r00"]["d00"].values - joint.days["r00"]["d00"].values) > 0.1 * np.linalg.norm(
+        joint.days["r00"]["d00"].values)
+
+
+def test_diagnose_closes_the_loop_on_the_flagged_robot(tmp_path, threads_client):
+    """--diagnose runs the public diagnose() on the flagged robot's last flagged day only; its summary and
+    JSON report are in the result, the JSON and the text."""
+    simulate_fleet(tmp_path, "scara", n_robots=4, n_days=3, duration=5.0, drifts=(Drift("r02", "FS2", 0.25),),
+                   seed=2)
+    res = identify_fleet("scara", [tmp_path], BY, client=threads_client, diagnose=True)
+    assert {f["robot"] for f in res.flagged} == {"r02"}
+    assert set(res.diagnoses) == {"r02"}
+    d = res.diagnoses["r02"]
+    assert "error" not in d, d.get("error")
+    assert d["day"] == sorted(next(f for f in res.flagged if f["robot"] == "r02")["days"])[-1]
+    assert d["files"] == [str(tmp_path / "r02" / f"{d['day']}.parquet")]
+    assert isinstance(d["summary"], str) and d["summary"]
+    assert {"before", "after", "effects"} <= set(d["report"])
+    doc = json.loads(json.dumps(res.to_json()))
+    assert doc["diagnoses"]["r02"]["day"] == d["day"]
+    assert "diagnosis of r02" in res.summary()
