@@ -15,6 +15,7 @@ import math
 import os
 import re
 import time
+import uuid
 import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -296,14 +297,18 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     with ctx as cl:
         t_start = time.perf_counter() - t0
         groups = group_by(files)
+        # task keys unique to this run: a scheduler keeps results by key, and another run on the same
+        # client (other files, other options, same robot and day names) must never reuse them
+        run = f"fleet-{uuid.uuid4().hex[:12]}"
         day_f, robot_f = {}, {}
         for r, days in groups.items():
             for d, logs_rd in days.items():
-                parts = [cl.submit(kernel, ref, lf, opts, load_kw, key=f"file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
+                parts = [cl.submit(kernel, ref, lf, opts, load_kw,
+                                   key=f"{run}-file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
                                    retries=retries, pure=False) for i, lf in enumerate(logs_rd)]
-                day_f[r, d] = _tree(cl, parts, f"day-{r}-{d}", retries)
-            robot_f[r] = _tree(cl, [day_f[r, d] for d in days], f"robot-{r}", retries)
-        fleet_f = _tree(cl, list(robot_f.values()), "fleet", retries)
+                day_f[r, d] = _tree(cl, parts, f"{run}-day-{r}-{d}", retries)
+            robot_f[r] = _tree(cl, [day_f[r, d] for d in days], f"{run}-robot-{r}", retries)
+        fleet_f = _tree(cl, list(robot_f.values()), f"{run}-fleet", retries)
         keys = list(day_f)
         got = cl.gather([day_f[k] for k in keys] + [robot_f[r] for r in groups] + [fleet_f])
         n_workers = len(cl.scheduler_info().get("workers", {}))
