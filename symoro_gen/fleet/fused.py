@@ -17,8 +17,9 @@ one sample in ``n_d`` kept, zero padding beyond the ends as ``resample_poly``), 
 * **only the distinct columns**: the structurally non-zero entries of ``W`` (per joint row) that are
   equal up to a constant factor for random states are equal for all states (analytic functions);
   only one of each is filtered, then scaled back after decimation (80x fewer rows);
-* **in cache**: the regressor is evaluated a batch of ``n_d * BATCH_SUPER_ROWS`` samples at a time
-  into a reused buffer and its kept columns copied straight into the polyphase layout;
+* **in cache**: the regressor is evaluated ``REGRESSOR_ROWS`` samples at a time into a reused buffer
+  that stays in L2, and its distinct columns copied straight into the layout of the matrix product
+  (``BATCH_SUPER_ROWS`` super-rows per product);
 * **fewer Householder passes**: decimated rows are collected and folded into ``R_j`` by one stacked QR
   of ``[R_j; rows]`` every ``fold_rows`` rows
   (:class:`~symoro_gen.identification.accumulate.Accumulator`).
@@ -35,6 +36,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.lib.stride_tricks import as_strided
 
 from ..errors import ShapeError
 from ..identification.accumulate import Accumulator, accumulate
@@ -53,7 +55,9 @@ from ..preprocessing.trajectory import Trajectory
 __all__ = ["BATCH_SUPER_ROWS", "ColumnMap", "column_map", "fold_trajectories", "fold_trajectory", "fused_applies"]
 
 #: super-rows (``n_d`` samples each) per regressor call and matrix product: ~1-2 MB of buffers, in L2
-BATCH_SUPER_ROWS = 16
+BATCH_SUPER_ROWS = 64
+#: samples per regressor call: its output (~1.8 MB for 7 joints x 64 columns) stays in L2 for the copy
+REGRESSOR_ROWS = 512
 #: full-rate samples per Butterworth block (the zero-phase filter's margins are paid once per block)
 OUTER_SAMPLES = 65536
 #: decimated rows per joint collected before one stacked QR folds them into R_j
@@ -173,7 +177,8 @@ def _regressor(model: IdentificationModel, q: np.ndarray, dq: np.ndarray, ddq: n
 
 
 def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings, opts: AssemblyOptions,
-                cmap: ColumnMap, folder: _Folder, batch_super_rows: int, outer_samples: int) -> None:
+                cmap: ColumnMap, folder: _Folder, batch_super_rows: int, outer_samples: int,
+                regressor_rows: int) -> None:
     n, nb = cmap.n, cmap.nb
     nd, e, fs = st.n_d, st.edge_samples, st.fs
     N = traj.n_samples
@@ -194,11 +199,25 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
     outer = max(B, outer // B * B)
     Xw = np.zeros((B, nd, U))             # super-row b, sample r of the batch: Xw[b, r] (distinct W columns)
     Xy = np.zeros((B, nd, n))             # and the torques
-    Zw, Zy = np.empty((B, P, U)), np.empty((B, P, n))
-    Wbuf = np.empty((B * nd, n, nb))
-    pending = np.zeros((B + P - 1, C))     # partial outputs k = s0 - half ... of the current batch
+    # Z of super-rows s0 - (P - 1) ... s1 - 1: the last P - 1 of the previous batch carried over (the state
+    # across batches), then this batch's, written in place by the matrix product
+    Zw, Zy = np.zeros((P - 1 + B, P, U)), np.zeros((P - 1 + B, P, n))
+    R = max(1, min(int(regressor_rows), B * nd))
+    Wbuf = np.empty((R, n, nb))
+    Xw2 = Xw.reshape(B * nd, U)
     src = cmap.source
     k_next = 0                             # next output index to emit
+
+    def outputs(i0: int, i1: int, Zs: tuple[np.ndarray, ...] = (Zw, Zy)) -> np.ndarray:
+        """Outputs i0..i1-1 of the window: ``y_i = sum_p Z[i + p, p]`` (output k = s0 - half + i)."""
+        out = []
+        for Z in Zs:
+            s_0, s_1, s_2 = Z.strides
+            V = as_strided(Z, shape=(Z.shape[0] - P + 1, P, Z.shape[2]), strides=(s_0, s_0 + s_1, s_2),
+                           writeable=False)
+            out.append(V[i0:i1].sum(axis=1))
+        return np.concatenate(out, axis=1)
+
     with blas_threads(opts.blas_threads):
         for o0 in range(0, n_data, outer):
             o1 = min(n_data, o0 + outer)
@@ -212,37 +231,37 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
                 nbt = s1 - s0
                 m0, m1 = (s0 - o0) * nd, min(b - a, (s1 - o0) * nd)  # rows of this batch in the outer block
                 m = m1 - m0
-                Wb = _regressor(model, qf[off + m0:off + m1], dq[off + m0:off + m1], ddq[off + m0:off + m1],
-                                Wbuf[:m])
                 if m < B * nd:                                      # the last batch: zeros beyond the segment
                     Xw[...] = 0.0
                     Xy[...] = 0.0
-                np.take(Wb.reshape(m, n * nb), src, axis=1, out=Xw.reshape(B * nd, U)[:m], mode="clip")
+                for r0 in range(0, m, R):                           # regressor in cache-sized calls
+                    r1 = min(m, r0 + R)
+                    i0, i1 = off + m0 + r0, off + m0 + r1
+                    Wb = _regressor(model, qf[i0:i1], dq[i0:i1], ddq[i0:i1], Wbuf[:r1 - r0])
+                    np.take(Wb.reshape(r1 - r0, n * nb), src, axis=1, out=Xw2[r0:r1], mode="clip")
                 Xy.reshape(B * nd, n)[:m] = tau[m0:m1]
-                np.matmul(H, Xw, out=Zw)
-                np.matmul(H, Xy, out=Zy)
-                for p in range(P):
-                    i0 = P - 1 - p
-                    pending[i0:i0 + nbt, :U] += Zw[:nbt, p]
-                    pending[i0:i0 + nbt, U:] += Zy[:nbt, p]
-                # pending[i] is output k = s0 - half + i; those with i < nbt are complete (last super-row s1 - 1)
+                np.matmul(H, Xw, out=Zw[P - 1:])
+                np.matmul(H, Xy, out=Zy[P - 1:])
+                # outputs i < nbt are complete (their last super-row, s0 - half + i + half, is in this batch)
                 k0 = s0 - half
                 i_first = max(0, k_next - k0)
                 if i_first < nbt:
-                    folder.add(pending[i_first:nbt].copy())
+                    folder.add(outputs(i_first, nbt))
                     k_next = k0 + nbt
-                pending[:P - 1] = pending[nbt:nbt + P - 1]
-                pending[P - 1:] = 0.0
-        # the outputs left only lack zero-padding super-rows: they are complete (pending[0] is output
-        # n_data - half)
+                Zw[:P - 1] = Zw[nbt:nbt + P - 1]
+                Zy[:P - 1] = Zy[nbt:nbt + P - 1]
+        # the outputs left only lack zero-padding super-rows: with Z = 0 there, they are complete
+        # (window index i is now output n_data - half + i)
         kp = n_data - half
         if n_out > k_next:
-            folder.add(pending[k_next - kp:n_out - kp].copy())
+            tail = tuple(np.concatenate([Z[:P - 1], np.zeros((half + 1,) + Z.shape[1:])]) for Z in (Zw, Zy))
+            folder.add(outputs(k_next - kp, n_out - kp, tail))
 
 
 def fold_trajectory(model: IdentificationModel, traj: Trajectory, options: AssemblyOptions | None = None,
                     acc: Accumulator | None = None, *, cmap: ColumnMap | None = None,
                     batch_super_rows: int = BATCH_SUPER_ROWS, outer_samples: int = OUTER_SAMPLES,
+                    regressor_rows: int = REGRESSOR_ROWS,
                     fold_rows: int = FOLD_ROWS) -> Accumulator:
     """Fold one experiment into per-joint QR factors (the rows of ``iter_chunks``, see the module notes).
 
@@ -280,7 +299,7 @@ def fold_trajectory(model: IdentificationModel, traj: Trajectory, options: Assem
         raise ShapeError(f"{traj.source}: the accumulator's columns are not the model's base parameters")
     cm = cmap if cmap is not None else column_map(model, n, len(names))
     folder = _Folder(names, cm, fold_rows, acc)
-    _fold_fused(model, traj, st, opts, cm, folder, batch_super_rows, outer_samples)
+    _fold_fused(model, traj, st, opts, cm, folder, batch_super_rows, outer_samples, regressor_rows)
     folder.flush()
     return folder.acc
 
