@@ -189,7 +189,6 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
     n_out = -(-nseg // nd)
     n_data = n_out                         # super-rows holding samples: s = half .. half + n_out - 1
     U = cmap.source.size
-    C = U + n
     B = max(1, int(batch_super_rows))
     margin = butterworth_settle_samples(fs, st.cutoff_hz, st.order) + 2
     if opts.chunk_samples is not None:

@@ -24,6 +24,7 @@ from symoro_gen.fleet import (
     simulate_fleet,
     write_parquet,
 )
+from symoro_gen.fleet.fused import fold_trajectories, fold_trajectory
 from symoro_gen.fleet.stats import (
     benjamini_hochberg,
     dersimonian_laird,
@@ -31,13 +32,10 @@ from symoro_gen.fleet.stats import (
     trend_test,
 )
 from symoro_gen.identification import fit_wls
-from symoro_gen.identification.accumulate import accumulate
-from symoro_gen.observations import AssemblyOptions, iter_chunks
+from symoro_gen.observations import AssemblyOptions
 from symoro_gen.preprocessing.load import load_trajectory
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import write_recording_csv
-
-from symoro_gen.fleet.fused import fold_trajectories, fold_trajectory
 
 from .killer import kill_once
 
