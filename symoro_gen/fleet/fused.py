@@ -166,7 +166,7 @@ def _regressor(model: IdentificationModel, q: np.ndarray, dq: np.ndarray, ddq: n
                out: np.ndarray) -> np.ndarray:
     """The base regressor into ``out`` (models whose ``regressor`` takes no ``out``: copied there)."""
     try:
-        W = model.regressor(q, dq, ddq, out=out)
+        W = model.regressor(q, dq, ddq, out=out)  # type: ignore[call-arg]  # generated models take out=
     except TypeError:
         W = np.asarray(model.regressor(q, dq, ddq), float)
     if W is not out:

@@ -330,7 +330,7 @@ def _read_parquet_table(path: str) -> _Table:
     """A Parquet file as a table: its column names as the header, row r (1-based) as "line" r; null or
     non-numeric values marked unparsable (then named by row and column like a CSV's)."""
     try:
-        import pyarrow.parquet as pq
+        import pyarrow.parquet as pq  # type: ignore[import-untyped]
     except ImportError:  # pragma: no cover - depends on the installation
         raise DataFileError([Problem(path, "", "", "Parquet files need pyarrow: pip install 'symoro-gen[fleet]'")]
                             ) from None
