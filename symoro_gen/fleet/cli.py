@@ -41,9 +41,6 @@ def add_fleet_parser(sub) -> argparse.ArgumentParser:
                         "is bounded by the segment, not by the log; each segment loses its filter edges)")
     p.add_argument("--chunk-samples", type=int, metavar="N",
                    help="full-rate samples per block inside a task (bounds the memory of a worker)")
-    p.add_argument("--decimation", choices=("exact", "two-stage"), default="exact",
-                   help="exact: the decimation FIR of identify (same rows); two-stage: the same pass band in two FIR "
-                        "stages, ~2.6x fewer flops at n_d = 80 (estimates within a fraction of their std of identify's)")
     p.add_argument("--diagnose", action="store_true",
                    help="close the loop: run the residual diagnosis (symoro-gen diagnose) on each flagged robot's "
                         "logs of the last flagged day; its summary goes to the output, the JSON and the report")
@@ -62,7 +59,7 @@ def run_fleet(args) -> int:
     res = identify_fleet(args.robot, args.logs, args.by, scheduler=args.scheduler, options=opts, load_kw=load_kw,
                          alpha=args.alpha, correction=args.correction, retries=args.retries,
                          segment_samples=args.segment_samples, diagnose=args.diagnose,
-                         diagnose_method=args.diagnose_method, decimation=args.decimation)
+                         diagnose_method=args.diagnose_method)
     if args.json:
         res.write_json(args.json)
     if args.report:

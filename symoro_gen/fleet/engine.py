@@ -229,7 +229,7 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
                    client=None, options: AssemblyOptions | None = None, load_kw: dict | None = None,
                    alpha: float = DEFAULT_ALPHA, correction: str = "holm", retries: int = 2,
                    segment_samples: int | None = None, kernel: Callable[..., Partial] = process_file,
-                   diagnose: bool = False, diagnose_method: str = "wls", decimation: str = "exact") -> FleetResult:
+                   diagnose: bool = False, diagnose_method: str = "wls") -> FleetResult:
     """Identify every robot of a fleet per day, pool the fleet and flag the robots that drift.
 
     Parameters
@@ -270,9 +270,6 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
         last day listed in its flags (what the declared model misses there); summaries in ``diagnoses``.
     diagnose_method : str
         The estimator of those diagnoses (``"ols"``, ``"wls"``, ``"tls"``).
-    decimation : {"exact", "two-stage"}
-        ``"exact"``: the decimation FIR of ``identify`` (same rows); ``"two-stage"``: the same pass band in
-        two FIR stages, ~2.6x fewer flops at n_d = 80 (:func:`~symoro_gen.fleet.fused.fold_trajectory`).
 
     Returns
     -------
@@ -285,9 +282,6 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     """
     if not (0 < alpha < 1):
         raise FleetError(f"alpha must be in (0, 1), got {alpha!r}")
-    if decimation not in ("exact", "two-stage"):
-        raise FleetError(f"decimation must be 'exact' or 'two-stage', got {decimation!r}")
-    kernel_kw = {} if decimation == "exact" else {"decimation": decimation}
     adjust(np.array([0.5]), alpha, correction)  # validates the name
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     if segment_samples is not None and segment_samples < 1000:
@@ -309,7 +303,7 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
         day_f, robot_f = {}, {}
         for r, days in groups.items():
             for d, logs_rd in days.items():
-                parts = [cl.submit(kernel, ref, lf, opts, load_kw, **kernel_kw,
+                parts = [cl.submit(kernel, ref, lf, opts, load_kw,
                                    key=f"{run}-file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
                                    retries=retries, pure=False) for i, lf in enumerate(logs_rd)]
                 day_f[r, d] = _tree(cl, parts, f"{run}-day-{r}-{d}", retries)
@@ -348,8 +342,7 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
                 "tasks": len(files), "z_day": Z_DAY, "workers": n_workers,
                 "estimator": "IDIM-WLS", "assembly": opts.summary(),
                 "data_options": list(fmt.options()) if fmt is not None else [],
-                "drive_chain": load_kw.get("drive_chain") is not None, "diagnose": bool(diagnose),
-                "decimation": decimation}
+                "drive_chain": load_kw.get("drive_chain") is not None, "diagnose": bool(diagnose)}
     diagnoses = {}
     if diagnose:
         t_d = time.perf_counter()

@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
-from scipy import signal
 
 from ..errors import ShapeError
 from ..identification.accumulate import Accumulator, accumulate
@@ -258,167 +257,11 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
             folder.add(outputs(k_next - kp, n_out - kp, tail))
 
 
-class _Decimator:
-    """Streaming polyphase FIR decimation in "valid" mode: output i is ``sum_m h[m] x[i M + m]`` over the
-    rows ``x`` fed so far (rows written into :meth:`space` then :meth:`commit`-ted, or :meth:`push`-ed),
-    one matrix product per batch of ``B`` super-rows of ``M`` rows, the products of the last ``P - 1``
-    super-rows carried to the next batch."""
-
-    def __init__(self, h: np.ndarray, M: int, C: int, B: int):
-        L = h.size
-        self.M, self.B, self.C = int(M), int(B), int(C)
-        self.P = P = -(-L // self.M)
-        H = np.zeros(P * self.M)
-        H[:L] = h
-        self.H = H.reshape(P, self.M)
-        self.X = np.zeros((self.B * self.M, C))
-        self.Z = np.zeros((P - 1 + self.B, P, C))
-        self.fill = 0
-        self.rows_done = 0        # super-rows multiplied
-        self.out_done = 0         # outputs emitted
-
-    def space(self) -> np.ndarray:
-        return self.X[self.fill:]
-
-    def commit(self, m: int) -> list[np.ndarray]:
-        self.fill += m
-        return [self._run()] if self.fill == self.X.shape[0] else []
-
-    def push(self, x: np.ndarray) -> list[np.ndarray]:
-        out, i = [], 0
-        while i < x.shape[0]:
-            k = min(x.shape[0] - i, self.X.shape[0] - self.fill)
-            self.X[self.fill:self.fill + k] = x[i:i + k]
-            out += self.commit(k)
-            i += k
-        return out
-
-    def _run(self) -> np.ndarray:
-        P, B = self.P, self.B
-        self.X[self.fill:] = 0.0
-        np.matmul(self.H, self.X.reshape(B, self.M, self.C), out=self.Z[P - 1:])
-        # window row w is super-row rows_done - (P - 1) + w; output i needs super-rows i .. i + P - 1
-        hi = self.rows_done + B - P + 1
-        w0 = self.out_done - self.rows_done + P - 1
-        s0, s1, s2 = self.Z.strides
-        V = as_strided(self.Z, shape=(B, P, self.C), strides=(s0, s0 + s1, s2), writeable=False)
-        y = V[max(0, w0):max(0, hi - self.rows_done + P - 1)].sum(axis=1)
-        self.Z[:P - 1] = self.Z[B:B + P - 1]
-        self.rows_done += B
-        self.out_done = max(self.out_done, hi)
-        self.fill = 0
-        return y
-
-    def finish(self, n_out: int) -> list[np.ndarray]:
-        """The outputs up to ``n_out`` (the stream continues with zeros)."""
-        out = []
-        while self.out_done < n_out:
-            before = self.out_done
-            y = self._run()
-            out.append(y[:max(0, n_out - before)])
-        return out
-
-
-def two_stage_filters(st: FilterSettings) -> tuple[int, np.ndarray, int, np.ndarray] | None:
-    """``(M1, h1, M2, h2)`` of the two-stage decimation by ``n_d = M1 M2``, or None when ``n_d`` has no
-    factorisation that saves work. Stage 2 is the assembly's FIR for ``M2`` (``20 M2 + 1`` Hamming taps,
-    cut-off at ``cutoff_ratio`` of the final Nyquist frequency: the same pass band); stage 1 is a short
-    Blackman FIR keeping that pass band and rejecting what stage 1's decimation would alias into the
-    final band (``f_s / M1 - f_s / (2 n_d)`` and above), ``5.5 f_s / transition`` taps: the cascade has the
-    one-stage response within 1 % in the pass band and its stop band within 1.4x (-60 dB)."""
-    nd, fs = st.n_d, st.fs
-    fp = st.cutoff_ratio * fs / (2.0 * nd)
-    best = None
-    for M1 in range(2, nd // 2 + 1):
-        if nd % M1:
-            continue
-        M2 = nd // M1
-        fstop = fs / M1 - fs / (2.0 * nd)
-        if fstop <= fp:
-            continue
-        L1 = int(np.ceil(5.5 * fs / (fstop - fp))) | 1
-        cost = 2.0 * L1 / M1 + 2.0 * (20 * M2 + 1) / nd
-        if best is None or cost < best[0]:
-            best = (cost, M1, L1, M2, fp, fstop)
-    if best is None or best[0] >= 40.0:
-        return None
-    _, M1, L1, M2, fp, fstop = best
-    h1 = signal.firwin(L1, 0.5 * (fp + fstop), fs=fs, window="blackman")
-    h2 = decimation_filter(M2, ftype="fir", cutoff_ratio=st.cutoff_ratio)
-    return M1, h1, M2, h2
-
-
-def _fold_two_stage(model: IdentificationModel, traj: Trajectory, st: FilterSettings, opts: AssemblyOptions,
-                    cmap: ColumnMap, folder: _Folder, filters: tuple[int, np.ndarray, int, np.ndarray],
-                    outer_samples: int, regressor_rows: int) -> None:
-    """As :func:`_fold_fused` with the decimation in two stages (:func:`two_stage_filters`): output k is
-    centred on sample ``k n_d`` of the segment, zero beyond its ends, like the one-stage FIR."""
-    M1, h1, M2, h2 = filters
-    n, nb = cmap.n, cmap.nb
-    nd, e, fs = st.n_d, st.edge_samples, st.fs
-    N = traj.n_samples
-    nseg = N - 2 * e
-    n_out = -(-nseg // nd)
-    half1, half2 = (h1.size - 1) // 2, (h2.size - 1) // 2
-    lead = half1 + half2 * M1                       # zeros before sample 0 in the stage-1 stream
-    n1 = (n_out - 1) * M2 + h2.size                 # stage-1 outputs stage 2 needs
-    U = cmap.source.size
-    B1 = max(1, 5120 // M1)
-    B2 = max(1, 640 // M2)
-    d1w, d1y = _Decimator(h1, M1, U, B1), _Decimator(h1, M1, n, B1)
-    d2w, d2y = _Decimator(h2, M2, U, B2), _Decimator(h2, M2, n, B2)
-    margin = butterworth_settle_samples(fs, st.cutoff_hz, st.order) + 2
-    block = int(opts.chunk_samples) if opts.chunk_samples is not None else max(int(outer_samples), 1)
-    R = max(1, int(regressor_rows))
-    Wbuf = np.empty((R, n, nb))
-    src = cmap.source
-    pend_w: list[np.ndarray] = []
-    pend_y: list[np.ndarray] = []
-
-    def emit(ow: list[np.ndarray], oy: list[np.ndarray]) -> None:
-        """Stage-2 outputs of W and Y (same count once both are in) to the folder."""
-        pend_w.extend(ow)
-        pend_y.extend(oy)
-        k = min(sum(x.shape[0] for x in pend_w), sum(x.shape[0] for x in pend_y))
-        if k:
-            w_, y_ = np.concatenate(pend_w), np.concatenate(pend_y)
-            folder.add(np.concatenate([w_[:k], y_[:k]], axis=1))
-            pend_w[:] = [w_[k:]] if w_.shape[0] > k else []
-            pend_y[:] = [y_[k:]] if y_.shape[0] > k else []
-
-    def stage2(yw: list[np.ndarray], yy: list[np.ndarray]) -> None:
-        emit([o for a_ in yw for o in d2w.push(a_)], [o for a_ in yy for o in d2y.push(a_)])
-
-    zeros_w, zeros_y = np.zeros((lead, U)), np.zeros((lead, n))
-    stage2(d1w.push(zeros_w), d1y.push(zeros_y))
-    with blas_threads(opts.blas_threads):
-        for a in range(0, nseg, block):
-            b = min(nseg, a + block)
-            lo, hi = max(0, e + a - margin), min(N, e + b + margin)
-            qf, dq, ddq = filter_and_differentiate(traj.q[lo:hi], fs, st.cutoff_hz, st.order, source=traj.source)
-            off = e + a - lo
-            yw: list[np.ndarray] = []
-            yy: list[np.ndarray] = []
-            r0 = 0
-            while r0 < b - a:
-                sp = d1w.space()
-                r1 = min(b - a, r0 + R, r0 + sp.shape[0])
-                i0, i1 = off + r0, off + r1
-                Wb = _regressor(model, qf[i0:i1], dq[i0:i1], ddq[i0:i1], Wbuf[:r1 - r0])
-                np.take(Wb.reshape(r1 - r0, n * nb), src, axis=1, out=sp[:r1 - r0], mode="clip")
-                yw += d1w.commit(r1 - r0)
-                r0 = r1
-            yy += d1y.push(np.asarray(traj.tau[e + a:e + b], float))
-            stage2(yw, yy)
-        stage2(d1w.finish(n1), d1y.finish(n1))
-        emit(d2w.finish(n_out), d2y.finish(n_out))
-
-
 def fold_trajectory(model: IdentificationModel, traj: Trajectory, options: AssemblyOptions | None = None,
                     acc: Accumulator | None = None, *, cmap: ColumnMap | None = None,
                     batch_super_rows: int = BATCH_SUPER_ROWS, outer_samples: int = OUTER_SAMPLES,
                     regressor_rows: int = REGRESSOR_ROWS,
-                    fold_rows: int = FOLD_ROWS, decimation: str = "exact") -> Accumulator:
+                    fold_rows: int = FOLD_ROWS) -> Accumulator:
     """Fold one experiment into per-joint QR factors (the rows of ``iter_chunks``, see the module notes).
 
     Parameters
@@ -432,12 +275,6 @@ def fold_trajectory(model: IdentificationModel, traj: Trajectory, options: Assem
         Factors to fold into (default: a new one).
     cmap : ColumnMap, optional
         :func:`column_map` of the model (computed when not given).
-    decimation : {"exact", "two-stage"}
-        ``"exact"``: the assembly's ``20 n_d + 1``-tap FIR (the rows of ``identify``); ``"two-stage"``: the
-        same pass band by two FIR stages (:func:`two_stage_filters`, ~2.6x fewer flops at n_d = 80: another linear
-        filter applied to ``W`` and ``Y`` alike, so ``Y = W chi`` holds; estimates differ from
-        ``identify``'s by a fraction of their standard deviations). Falls back to ``"exact"`` when
-        ``n_d`` has no useful factorisation.
 
     Returns
     -------
@@ -460,27 +297,20 @@ def fold_trajectory(model: IdentificationModel, traj: Trajectory, options: Assem
     if acc is not None and acc.names != names:
         raise ShapeError(f"{traj.source}: the accumulator's columns are not the model's base parameters")
     cm = cmap if cmap is not None else column_map(model, n, len(names))
-    if decimation not in ("exact", "two-stage"):
-        raise ValueError(f"decimation must be 'exact' or 'two-stage', got {decimation!r}")
     folder = _Folder(names, cm, fold_rows, acc)
-    filters = two_stage_filters(st) if decimation == "two-stage" else None
-    if filters is not None:
-        _fold_two_stage(model, traj, st, opts, cm, folder, filters, outer_samples, regressor_rows)
-    else:
-        _fold_fused(model, traj, st, opts, cm, folder, batch_super_rows, outer_samples, regressor_rows)
+    _fold_fused(model, traj, st, opts, cm, folder, batch_super_rows, outer_samples, regressor_rows)
     folder.flush()
     return folder.acc
 
 
 def fold_trajectories(model: IdentificationModel, trajectories: Iterable[Trajectory],
-                      options: AssemblyOptions | None = None, *, cmap: ColumnMap | None = None,
-                      decimation: str = "exact") -> Accumulator:
+                      options: AssemblyOptions | None = None, *, cmap: ColumnMap | None = None) -> Accumulator:
     """:func:`fold_trajectory` over several experiments into one accumulator."""
     acc: Accumulator | None = None
     for tr in trajectories:
         if cmap is None:
             cmap = column_map(model, tr.n_joints, len(model.BASE_NAMES))
-        acc = fold_trajectory(model, tr, options, acc, cmap=cmap, decimation=decimation)
+        acc = fold_trajectory(model, tr, options, acc, cmap=cmap)
     if acc is None:
         raise ShapeError("fold_trajectories: no experiment given")
     return acc

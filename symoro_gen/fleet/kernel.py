@@ -106,8 +106,8 @@ def merge_partials(*parts: Partial) -> Partial:
                    samples=sum(p.samples for p in parts), skipped=tuple(s for p in parts for s in p.skipped))
 
 
-def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None, load_kw: dict | None = None,
-                 decimation: str = "exact") -> Partial:
+def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None, load_kw: dict | None = None
+                 ) -> Partial:
     """Read one log, filter, decimate, evaluate the base regressor block by block and fold it into the
     per-joint QR factors (the kernel of a fleet run, :func:`~symoro_gen.fleet.fused.fold_trajectory`;
     RX-90 paper eq. 14-16 for the filters).
@@ -127,14 +127,12 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
         :class:`~symoro_gen.preprocessing.logformat.LogFormat`, the command line's data options, for every
         format), ``drive_chain`` (motor-side logs) or the keywords of
         :func:`~symoro_gen.preprocessing.load.load_trajectory`.
-    decimation : {"exact", "two-stage"}
-        The decimation filter (:func:`~symoro_gen.fleet.fused.fold_trajectory`).
     """
     model = resolve_model(model_ref)
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     try:
         trajs = read_experiments(log.path, int(model.N_JOINTS), start=log.start, stop=log.stop, **(load_kw or {}))
-        acc = fold_trajectories(model, trajs, opts, cmap=_column_map(model), decimation=decimation)
+        acc = fold_trajectories(model, trajs, opts, cmap=_column_map(model))
     except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         if log.path not in msg:

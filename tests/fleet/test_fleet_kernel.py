@@ -166,39 +166,3 @@ def test_diagnose_closes_the_loop_on_the_flagged_robot(tmp_path, threads_client)
     doc = json.loads(json.dumps(res.to_json()))
     assert doc["diagnoses"]["r02"]["day"] == d["day"]
     assert "diagnosis of r02" in res.summary()
-
-
-def test_two_stage_decimation_keeps_the_response_and_the_estimates(threads_client, tmp_path):
-    """decimation="two-stage": the cascade's response is the one-stage FIR's (pass band within 1 %, stop band
-    within 1.5x); the same rows count, estimates within a fraction of their std of the exact filter's; and
-    the distributed run equals the in-process fold with the same filter to 1e-10."""
-    from symoro_gen.fleet.fused import fold_trajectories, two_stage_filters
-    from symoro_gen.preprocessing.filtering import choose_filter_settings, decimation_filter
-
-    for nd in (80, 12, 6):
-        st = choose_filter_settings(1000.0, cutoff_hz=10.0, n_d=nd)
-        M1, h1, M2, h2 = two_stage_filters(st)
-        assert nd == M1 * M2
-        up = np.zeros((h2.size - 1) * M1 + 1)
-        up[::M1] = h2
-        F = np.fft.rfftfreq(1 << 17, 1e-3)
-        Ht = np.abs(np.fft.rfft(np.convolve(h1, up), 1 << 17))
-        Hs = np.abs(np.fft.rfft(decimation_filter(nd), 1 << 17))
-        pb, sb = 0.4 * 1000 / (2 * nd) >= F, 0.6 * 1000 / nd <= F
-        assert np.abs(Ht[pb] - 1).max() <= 0.01 and np.abs(Ht[pb] - 1).max() <= 1.1 * np.abs(Hs[pb] - 1).max()
-        assert Ht[sb].max() <= 1.5 * Hs[sb].max()
-    model = load_model("lwr4")
-    tr = _recording("lwr4", 7.3, seed=5)
-    opts = AssemblyOptions(keep_signals=False)
-    exact, two = (fold_trajectory(model, tr, opts, decimation=d) for d in ("exact", "two-stage"))
-    assert two.rows == exact.rows
-    fe, ft = fit_wls(exact), fit_wls(two)
-    assert np.max(np.abs(ft.values - fe.values) / fe.std) < 0.3
-    simulate_fleet(tmp_path, "scara", n_robots=2, n_days=2, duration=4.0, drifts=(), seed=8)
-    res = identify_fleet("scara", [tmp_path], BY, client=threads_client, decimation="two-stage")
-    assert res.settings["decimation"] == "two-stage"
-    m = load_model("scara")
-    for r in ("r00", "r01"):
-        ref = fit_wls(fold_trajectories(m, [read_log(str(tmp_path / r / "d01.parquet"), 4)], opts,
-                                        decimation="two-stage"))
-        assert np.linalg.norm(res.days[r]["d01"].values - ref.values) <= 1e-10 * np.linalg.norm(ref.values)
