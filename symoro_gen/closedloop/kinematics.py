@@ -13,13 +13,14 @@ two frames, ``A xdot = [v_k - v_{k+B}; w_k - w_{k+B}] = 0``), and its time deriv
 constraint ``A xddot + b(x, xdot) = 0`` with ``b`` the relative acceleration at ``xddot = 0``
 ([KD2002] sec. 7.3 and 10.x: kinematic constraint equations of closed loops). Hence
 
-    q_p    : Newton's method on Phi(q_a, q_p) = 0 (Gauss-Newton steps  dq_p = -pinv(A_p) Phi)
-    qd_p   = -pinv(A_p) A_a qd_a                  (= G_p qd_a)
-    qdd_p  = -pinv(A_p) (A_a qdd_a + b)
+    q_p    : Newton's method on Phi(q_a, q_p) = 0 (Gauss-Newton steps  dq_p = -A_p^+ Phi)
+    qd_p   = -A_p^+ A_a qd_a                  (= G_p qd_a)
+    qdd_p  = -A_p^+ (A_a qdd_a + b)
 
-``pinv`` because a planar loop gives only 3 independent equations of the 6 (the others vanish
-identically); the velocity solution is exact whenever the passive joints are determined (``A_p`` of
-full column rank), which :func:`solve` checks.
+with ``A_p^+`` the least-squares inverse (a planar loop gives only 3 independent equations of the 6;
+the others vanish identically): the solution is exact whenever the passive joints are determined
+(``A_p`` of full column rank, checked at the reference configuration; the residual is checked at
+every sample).
 
 The assembly mode (for a parallelogram: parallel or crossed) is the one of the reference
 configuration (``[loop_reference]`` of the robot file, zeros by default): the actuated joints are
@@ -100,6 +101,14 @@ class LoopKinematics:
         self._sign = {r.j: joint_sign(r) for r in self.frames if r.sigma != FIXED}
         self._subs = subs
         self._fixed = {r.j: transform(*row_values(r, subs)) for r in self.frames if r.sigma == FIXED}
+        # per frame, once (no sympy below): T(ant, j) = [C Rot(z, theta) | p0 + r C e_z] with
+        # C = Rot(z, gamma) Rot(x, alpha) and p0 = Rot(z, gamma) [d, 0, b] (the MDH transform of mdh.py)
+        self._local: dict[int, tuple[NDArray[np.float64], NDArray[np.float64], float, float]] = {}
+        for r in self.frames:
+            if r.sigma != FIXED:
+                g, b, al, d, th, rr = row_values(r, subs, 0.0)
+                T0 = transform(g, b, al, d, 0.0, 0.0)
+                self._local[r.j] = (T0[:3, :3], T0[:3, 3], float(th), float(rr))
         self.pairs = [(lp.cut.j, lp.close.j) for lp in robot.loops]
         # frames on the path of each frame down to the base (for the Jacobian)
         ant = {r.j: r.ant for r in self.frames}
@@ -112,16 +121,34 @@ class LoopKinematics:
         return len(self.actuated)
 
     def _poses(self, x: NDArray[np.float64]) -> dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Rotation (N,3,3) and origin (N,3) in frame 0 of every frame, for variables x (N, nx)."""
+        """Rotation (N,3,3) and origin (N,3) in frame 0 of every frame, for variables x (N, nx).
+
+        ``R(0, j) = R(0, a) C Rot(z, theta)`` and ``p(0, j) = p(0, a) + R(0, a) (p0 + r C e_z)``, written with
+        products by the constant ``C`` (matrix products of (3N, 3) blocks) and elementwise terms."""
         N = x.shape[0]
         out = {0: (np.broadcast_to(np.eye(3), (N, 3, 3)), np.zeros((N, 3)))}
         for r in self.frames:
-            if r.sigma == FIXED:
-                T = np.broadcast_to(self._fixed[r.j], (N, 4, 4))
-            else:
-                T = transform(*row_values(r, self._subs, x[:, self._col[r.j]]))
             Ra, pa = out[r.ant]
-            out[r.j] = (Ra @ T[:, :3, :3], pa + np.einsum("nij,nj->ni", Ra, T[:, :3, 3]))
+            if r.sigma == FIXED:
+                T = self._fixed[r.j]
+                out[r.j] = ((Ra.reshape(-1, 3) @ T[:3, :3]).reshape(N, 3, 3), pa + (Ra.reshape(-1, 3) @ T[:3, 3]).reshape(N, 3))
+                continue
+            C, p0, th, rr = self._local[r.j]
+            v = self._sign[r.j] * x[:, self._col[r.j]]
+            M = (Ra.reshape(-1, 3) @ C).reshape(N, 3, 3)  # R(0, a) C
+            if r.sigma == PRISMATIC:
+                R = (Ra.reshape(-1, 3) @ (C @ np.array([[np.cos(th), -np.sin(th), 0.0],
+                                                        [np.sin(th), np.cos(th), 0.0], [0.0, 0.0, 1.0]]))
+                     ).reshape(N, 3, 3)
+                p = pa + (Ra.reshape(-1, 3) @ p0).reshape(N, 3) + M[:, :, 2] * (rr + v)[:, None]
+            else:
+                ct, st = np.cos(th + v)[:, None], np.sin(th + v)[:, None]
+                R = np.empty((N, 3, 3))
+                R[:, :, 0] = M[:, :, 0] * ct + M[:, :, 1] * st
+                R[:, :, 1] = M[:, :, 1] * ct - M[:, :, 0] * st
+                R[:, :, 2] = M[:, :, 2]
+                p = pa + (Ra.reshape(-1, 3) @ p0).reshape(N, 3) + M[:, :, 2] * rr
+            out[r.j] = (R, p)
         return out
 
     def _path(self, f: int) -> list[int]:
@@ -193,6 +220,21 @@ class LoopKinematics:
             parts += [a[k] - a[c], wd[k] - wd[c]]
         return np.concatenate(parts, axis=1)
 
+    @staticmethod
+    def _lsq(Ap: NDArray[np.float64], rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Least-squares solution of ``Ap y = rhs`` per sample (``Ap`` (N, m, p) of full column rank; ``rhs``
+        (N, m) or (N, m, k)), by the normal equations (a batched p x p solve, much faster than a batched
+        SVD) with one step of iterative refinement; a singular sample is caught by the residual check."""
+        vec = rhs.ndim == 2
+        b = rhs[..., None] if vec else rhs
+        AtA = np.einsum("nmi,nmj->nij", Ap, Ap)
+        try:
+            y = np.linalg.solve(AtA, np.einsum("nmi,nmk->nik", Ap, b))
+            y += np.linalg.solve(AtA, np.einsum("nmi,nmk->nik", Ap, b - Ap @ y))  # one refinement step
+        except np.linalg.LinAlgError:  # an exactly singular sample: minimum-norm solution
+            y = np.linalg.pinv(Ap, rcond=1e-12) @ b
+        return y[..., 0] if vec else y
+
     # ---------------------------------------------------------------------------------------------
     def _newton(self, x: NDArray[np.float64], iters: int = 30) -> NDArray[np.float64]:
         for _ in range(iters):
@@ -200,8 +242,7 @@ class LoopKinematics:
             e = self._residual(P)
             if np.max(np.abs(e), initial=0.0) < self.tol:
                 break
-            Ap = self._jacobian(P)[:, :, self._ip]
-            dx = np.einsum("nij,nj->ni", np.linalg.pinv(Ap, rcond=1e-10), e)
+            dx = self._lsq(self._jacobian(P)[:, :, self._ip], e)
             x = x.copy()
             x[:, self._ip] -= dx
         return x
@@ -229,6 +270,9 @@ class LoopKinematics:
         d = q_a - ref[self._ia]
         nsteps = max(1, int(np.ceil(np.max(np.abs(d), initial=0.0) / self.step)))
         for s in range(1, nsteps + 1):
+            # first-order predictor along the path (x_p += G_p dq_a), then Newton's corrector
+            A = self._jacobian(self._poses(x))
+            x[:, self._ip] -= self._lsq(A[:, :, self._ip], A[:, :, self._ia] @ (d / nsteps)[..., None])[..., 0]
             x[:, self._ia] = ref[self._ia] + d * (s / nsteps)
             x = self._newton(x, iters=30 if s == nsteps else 8)
         res = np.max(np.abs(self.residual(x)), axis=1) if N else np.zeros(0)
@@ -240,8 +284,8 @@ class LoopKinematics:
         x, res = self.solve_positions(q_a)
         P = self._poses(x)
         A = self._jacobian(P)
-        Ap_pinv = np.linalg.pinv(A[:, :, self._ip], rcond=1e-10)
-        Gp = -Ap_pinv @ A[:, :, self._ia]  # (N, np, na)
+        Ap = A[:, :, self._ip]
+        Gp = -self._lsq(Ap, A[:, :, self._ia])  # (N, np, na)
         N, nx = x.shape
         xd = np.zeros((N, nx))
         xd[:, self._ia] = dq_a
@@ -249,7 +293,7 @@ class LoopKinematics:
         b = self._bias(x, xd, P)
         xdd = np.zeros((N, nx))
         xdd[:, self._ia] = ddq_a
-        xdd[:, self._ip] = -np.einsum("npk,nk->np", Ap_pinv, np.einsum("nka,na->nk", A[:, :, self._ia], ddq_a) + b)
+        xdd[:, self._ip] = -self._lsq(Ap, np.einsum("nka,na->nk", A[:, :, self._ia], ddq_a) + b)
         if check:
             bad = np.flatnonzero(~(res < 1e-8))
             if bad.size:
