@@ -135,7 +135,7 @@ class ClosedLoopModel:
     """
 
     def __init__(self, robot: RobotDescription, tree: IdentificationModel):
-        if tree.N_JOINTS != robot.n_joints:
+        if robot.n_joints != tree.N_JOINTS:
             raise ModelError(f"{robot.name}: the tree model has {tree.N_JOINTS} joints, the robot file "
                              f"{robot.n_joints}: regenerate it")
         self.robot = robot

@@ -39,10 +39,6 @@ _GEOM = ("gamma", "b", "alpha", "d", "theta", "r")
 LOOP_KEYS = {"cut", "close"}
 
 
-def _int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
 def parse_loops(raw: Any, raw_ref: Any, rows: tuple[MdhRow, ...] | list[MdhRow], values: Mapping[str, float],
                 bad: Callable[[str, str, str], None]) -> tuple[tuple[LoopClosure, ...], dict[str, float]]:
     """Validate ``[[loops]]`` (``raw``) and ``[loop_reference]`` (``raw_ref``) against the tree ``rows``.
@@ -78,9 +74,10 @@ def parse_loops(raw: Any, raw_ref: Any, rows: tuple[MdhRow, ...] | list[MdhRow],
                 bad(where, "j", f"the {part} frame of loop {idx} is frame {j} (after the {nr} frames"
                                 f"{' and the cut frames' if part == 'close' else ''}), got {fr['j']!r}")
                 ok = False
-            ant = fr.get("ant")
-            if not _int(ant) or not (0 <= ant <= nr) or (ant and ant not in link_frames):
-                bad(where, "ant", f"must be a link (a moving frame 1..{nr}) or 0 (the base), got {ant!r}")
+            raw_ant = fr.get("ant")
+            ant = raw_ant if isinstance(raw_ant, int) and not isinstance(raw_ant, bool) else -1
+            if not (0 <= ant <= nr) or (ant and ant not in link_frames):
+                bad(where, "ant", f"must be a link (a moving frame 1..{nr}) or 0 (the base), got {raw_ant!r}")
                 ok = False
                 ant = 0
             sigma = fr.get("sigma", REVOLUTE if part == "cut" else FIXED)
@@ -123,14 +120,15 @@ def parse_loops(raw: Any, raw_ref: Any, rows: tuple[MdhRow, ...] | list[MdhRow],
 
     # every passive tree joint must lie on a loop (else it is a free, unactuated joint)
     if loops:
-        ant = {r.j: r.ant for r in rows}
+        antecedent = {r.j: r.ant for r in rows}
 
         def chain(f: int) -> set[int]:
             out = set()
             while f:
                 out.add(f)
-                f = ant[f]
+                f = antecedent[f]
             return out
+
         on_loop: set[int] = set()
         for lp in loops:
             a, b = chain(lp.cut.ant), chain(lp.close.ant)

@@ -90,9 +90,8 @@ def lagrangian_torque():
     positions and angles of the closed-form position analysis (sympy differentiates them twice; ``M'``
     and ``U'`` are then written out by the product rule, with ``d(R MS)/dq = w k x R MS``).
     """
-    x, xd, xdd = sp.symbols("x xd xdd")
+    x = sp.Symbol("x")
     names = [f"{k}{j}" for j in (1, 2, 3) for k in ("ZZ", "MX", "MY", "M")] + ["IA1", "FV1", "FS1", "OFF1"]
-    P = {n: sp.Symbol(n) for n in names}
     bx, by = A * sp.cos(x), A * sp.sin(x)
     ex, ey = D - bx, -by
     e = sp.sqrt(ex**2 + ey**2)
