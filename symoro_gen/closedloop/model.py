@@ -22,11 +22,14 @@ pivoting of the projected base columns on random closed states around the refere
 dependent parameter regroups onto earlier links as in the tree rules); its coefficients come from a
 least-squares solve. Base parameter ``b`` is ``chi_b = P K_t chi`` with ``P = [I beta]``; a parameter that
 absorbed others is suffixed ``R`` (``[KC1997]``). :func:`closed_loop_base` returns the relations with
-their numeric coefficients (geometry substituted): the closed-form rules of Khalil & Bennis for
-parallelograms are not implemented, so the printed coefficients are numbers.
+their numeric coefficients (geometry substituted), each followed by a closed form in the geometric
+constants when a simple one matches (:func:`recognise`, e.g. ``0.318181818182 [= L5/D3]``): the
+closed-form rules of Khalil & Bennis for loops are not implemented, the forms are recognised from the
+numbers.
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,6 +76,39 @@ def _fmt(c: float) -> str:
     return f"{c:.12g}"
 
 
+def recognise(c: float, values: dict[str, float], tol: float = 1e-9) -> str | None:
+    """A closed form of a numeric coefficient in the robot's geometric constants, when one is simple:
+    ``k * a^i * b^j`` with ``a, b`` among ``[values]``, ``i, j`` in ``{-2, -1, 1, 2}`` and ``k`` in
+    ``{1, 2, 1/2}`` (signed), or ``k`` alone; matched to ``tol`` (relative). The simplest match wins (fewest
+    constants, then the order of ``[values]``). A heuristic (a coincidence of the numbers can match), so
+    the printed relations give it next to the number."""
+    if c == 0.0:
+        return "0"
+    ks = (1.0, 2.0, 0.5)
+    names = sorted(values)
+    exps = (1, -1, 2, -2)
+
+    def close(x: float) -> bool:
+        return abs(x - abs(c)) <= tol * max(1.0, abs(c))
+    sign = "-" if c < 0 else ""
+    for k in ks:
+        if close(k):
+            return f"{sign}{k:g}"
+    for n_sym in (1, 2):
+        for combo in itertools.combinations(names, n_sym):
+            for es in itertools.product(exps, repeat=n_sym):
+                v = 1.0
+                for nm, e in zip(combo, es):
+                    v *= float(values[nm]) ** e
+                for k in ks:
+                    if close(k * v):
+                        num = [f"{nm}" + (f"^{e}" if e > 1 else "") for nm, e in zip(combo, es) if e > 0]
+                        den = [f"{nm}" + (f"^{-e}" if e < -1 else "") for nm, e in zip(combo, es) if e < 0]
+                        head = (f"{k:g}*" if k != 1.0 else "") + ("*".join(num) or "1")
+                        return sign + head + (f"/{'/'.join(den)}" if den else "")
+    return None
+
+
 def sample_states(kin: LoopKinematics, n: int, seed: int = 0) -> tuple[NDArray[np.float64], ...]:
     """``n`` random actuated states around the reference assembly: positions within 0.5 rad (0.05 m
     for prismatic joints) of it, velocities and accelerations standard normal. Deterministic."""
@@ -104,6 +140,13 @@ def closed_loop_base(kin: LoopKinematics, tree: IdentificationModel, *, n_sample
     if dep:
         P[:, dep] = beta
     tree_names = tuple(tree.BASE_NAMES)
+    geometry = {k: float(v) for k, v in kin.robot.values.items()}
+
+    def coef(c: float) -> str:
+        form = recognise(c, geometry)
+        if form is None or form.lstrip("-") == _fmt(abs(c)):
+            return _fmt(abs(c))
+        return f"{_fmt(abs(c))} [= {form.lstrip('-')}]"
     names, groupings = [], []
     for b, i in enumerate(indep):
         absorbed = [(tree_names[d], beta[b, k]) for k, d in enumerate(dep) if beta[b, k] != 0.0]
@@ -113,7 +156,7 @@ def closed_loop_base(kin: LoopKinematics, tree: IdentificationModel, *, n_sample
         names.append(name)
         if absorbed:
             groupings.append(f"{name} = {tree_names[i]} " + " ".join(
-                f"{'+' if c >= 0 else '-'} {_fmt(abs(c))} {n}" for n, c in absorbed))
+                f"{'+' if c >= 0 else '-'} {coef(c)} {n}" for n, c in absorbed))
     n_std = len(tree.STANDARD_NAMES)
     Kt = np.asarray(tree.base_parameters(np.eye(n_std)), float).T  # (nb_tree, n_std)
     if len(set(names)) != len(names):  # two kept columns with the same name: keep them apart

@@ -90,9 +90,12 @@ def test_base_count_equals_numeric_rank_and_the_loop_groupings(pal):
     # the parallelogram: the rod (link 6) turns with the upper arm (link 2), the crank (link 5) with the
     # forearm (link 3), so their inertias regroup there (Khalil & Bennis 1995)
     text = model.base_parameters_text()
+    K = dict(zip(model.BASE_NAMES, model.base.K))
     for g in ("ZZ2R = ZZ2R + 1 ZZ6", "ZZ3R = ZZ3R + 1 ZZ5R", "XX2R = XX2R + 1 XX6R"):
         assert g in text
-    K = dict(zip(model.BASE_NAMES, model.base.K))
+    # the rod's first moment: the parallelogram's side ratio, recognised as a closed form
+    assert "MX5R = MX5R - 0.318181818182 [= L5/D3] MX6" in text
+    assert K["MX5R"][model.STANDARD_NAMES.index("MX6")] == pytest.approx(-0.35 / 1.1, abs=1e-12)
     assert K["ZZ3R"][model.STANDARD_NAMES.index("IA5")] == pytest.approx(1.0)  # motor 5 turns with the forearm
 
 
