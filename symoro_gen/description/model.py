@@ -154,6 +154,12 @@ class RobotDescription:
         return len(self.joints)
 
     @property
+    def model_joints(self) -> tuple[MdhRow, ...]:
+        """The joints of the identification model and of the recordings: every moving joint, or the
+        actuated ones of a closed-loop robot (``[[loops]]``; its passive joints are solved, not logged)."""
+        return self.actuated if self.loops else self.joints
+
+    @property
     def actuated(self) -> tuple[MdhRow, ...]:
         """The actuated moving frames (``mu = 1``), in joint order (all joints of an open structure)."""
         return tuple(r for r in self.joints if r.mu == 1)

@@ -300,11 +300,13 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
                     nominal[k] = float(v)
             _warn_inconsistent_inertia(nominal, rows, payload, file)
 
+    # per-joint tables of a closed-loop robot are per actuated joint (the passive ones are not logged)
+    model_rows = [r for r in rows if not (r.is_moving and r.mu == 0)] if "loops" in doc else rows
     chain = None
     if "drive_chain" in doc:
-        chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in rows), bad)
+        chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in model_rows), bad)
 
-    limits = _parse_limits(doc["limits"], rows, bad) if "limits" in doc else None
+    limits = _parse_limits(doc["limits"], model_rows, bad) if "limits" in doc else None
 
     loops, loop_reference = (), {}
     if ("loops" in doc or "loop_reference" in doc) and not bad_sigma:

@@ -751,11 +751,11 @@ def load_trajectory(
         Listing every problem found (file, column, rows).
     """
     if robot is not None and n_joints is None:
-        n_joints = robot.n_joints
+        n_joints = len(robot.model_joints)
     if n_joints is None or int(n_joints) < 1:
         raise ValueError("n_joints (or robot) is required")
     n = int(n_joints)
-    joint_types = [r.sigma for r in robot.joints] if robot is not None else None
+    joint_types = [r.sigma for r in robot.model_joints] if robot is not None else None
     spec = path if isinstance(path, DataSpec) else parse_data_spec(path, base_dir=base_dir)
     if dt is None:
         dt = spec.dt

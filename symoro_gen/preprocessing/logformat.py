@@ -663,7 +663,7 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
     """
     fmt = fmt or LogFormat()
     if robot is not None and n_joints is None:
-        n_joints = robot.n_joints
+        n_joints = len(robot.model_joints)
     if n_joints is None:
         raise TypeError("load_log: give n_joints or robot")
     n = int(n_joints)
@@ -774,7 +774,7 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
         raise DataFileError([Problem(source, f"rows 1-{N}", "", f"too short to filter: no piece of at least "
                                      f"{MIN_SAMPLES} samples")])
     trajs = []
-    joint_types = [r.sigma for r in robot.joints] if robot is not None else None
+    joint_types = [r.sigma for r in robot.model_joints] if robot is not None else None
     for k, (tt, vv) in enumerate(kept):
         q, tau, dq, ddq = vv["q"], vv["tau"], vv.get("dq"), vv.get("ddq")
         if drive_chain is not None:
