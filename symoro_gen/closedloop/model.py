@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..description.model import PRISMATIC, RobotDescription
 from ..errors import ModelError
 from ..model import IdentificationModel
-from .kinematics import ClosedState, LoopKinematics
+from .kinematics import ClosedState, ClosureError, LoopKinematics
 
 __all__ = ["ClosedLoopBase", "ClosedLoopModel", "closed_loop_base"]
 
@@ -109,12 +109,13 @@ def recognise(c: float, values: dict[str, float], tol: float = 1e-9) -> str | No
     return None
 
 
-def sample_states(kin: LoopKinematics, n: int, seed: int = 0) -> tuple[NDArray[np.float64], ...]:
-    """``n`` random actuated states around the reference assembly: positions within 0.5 rad (0.05 m
-    for prismatic joints) of it, velocities and accelerations standard normal. Deterministic."""
+def sample_states(kin: LoopKinematics, n: int, seed: int = 0, scale: float = 1.0) -> tuple[NDArray[np.float64], ...]:
+    """``n`` random actuated states around the reference assembly: positions within ``0.5 scale`` rad
+    (``0.05 scale`` m for prismatic joints) of it, velocities and accelerations standard normal.
+    Deterministic."""
     rng = np.random.default_rng(seed)
     ref = kin._reference[kin._ia]
-    span = np.array([0.05 if r.sigma == PRISMATIC else 0.5 for r in kin.robot.actuated])
+    span = scale * np.array([0.05 if r.sigma == PRISMATIC else 0.5 for r in kin.robot.actuated])
     q = ref + rng.uniform(-1, 1, (n, kin.n_a)) * span
     return q, rng.standard_normal((n, kin.n_a)), rng.standard_normal((n, kin.n_a))
 
@@ -122,9 +123,19 @@ def sample_states(kin: LoopKinematics, n: int, seed: int = 0) -> tuple[NDArray[n
 def closed_loop_base(kin: LoopKinematics, tree: IdentificationModel, *, n_samples: int = 120,
                      tol: float = 1e-8, seed: int = 0) -> ClosedLoopBase:
     """Base parameters of the closed-loop robot (numeric rank of the projected tree base regressor)."""
-    q, dq, ddq = sample_states(kin, n_samples, seed)
-    st = kin.solve(q, dq, ddq)
-    W = np.einsum("nta,ntp->nap", st.G, tree.regressor(st.q, st.dq, st.ddq)).reshape(-1, len(tree.BASE_NAMES))
+    span = 1.0
+    for _ in range(6):  # samples that cannot be closed (out of reach, past a singularity) are left out
+        q, dq, ddq = sample_states(kin, n_samples, seed, scale=span)
+        st = kin.solve(q, dq, ddq, check=False)
+        ok = st.residual < 1e-10
+        if ok.sum() >= n_samples // 2:
+            break
+        span /= 2
+    else:
+        raise ClosureError(f"{kin.robot.name}: the loops cannot be closed around the reference configuration "
+                           "(base-parameter sweep); check [[loops]] and [loop_reference]")
+    Wt = tree.regressor(st.q[ok], st.dq[ok], st.ddq[ok])
+    W = np.einsum("nta,ntp->nap", st.G[ok], Wt).reshape(-1, len(tree.BASE_NAMES))
     norms = np.linalg.norm(W, axis=0)
     live = norms > tol * max(1.0, float(norms.max(initial=0.0)))
     Ws = np.where(live, W / np.where(live, norms, 1.0), 0.0)

@@ -177,3 +177,22 @@ def test_unusable_reference_is_one_error_naming_the_table():
     robot = parse_robot_text(fourbar_text(reference=False).replace("D = 0.5", "D = 2.0"), file="fourbar.toml")
     with pytest.raises(ClosureError, match=r"fourbar.toml, \[loop_reference\]"):
         ClosedLoopModel(robot, build_in_memory(robot))
+
+
+def test_payload_on_a_passive_link_is_projected_like_the_link():
+    """A payload frame fixed on the rocker (a passive link) at the rocker's own frame: its parameters
+    act exactly as the same values added to the rocker's."""
+    text = fourbar_text().replace("[[loops]]", "[[frames]]\nj = 4\nant = 3\nsigma = 2\nalpha = 0\nd = 0\ntheta = 0\n"
+                                                "r = 0\n[[loops]]").replace('drive = ["IA"', 'payload = 4\ndrive = ["IA"')
+    text = text.replace("q4 = ", "q5 = ")  # the cut joint is now frame 5 (after the 4 frames)
+    robot = parse_robot_text(text, file="fourbar_payload.toml")
+    model = ClosedLoopModel(robot, build_in_memory(robot))
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-math.pi, math.pi, (20, 1))
+    dq, ddq = rng.normal(0, 2, (20, 1)), rng.normal(0, 5, (20, 1))
+    chi = rng.uniform(-1, 1, len(model.STANDARD_NAMES))
+    pay = rng.uniform(-1, 1, 10)
+    merged = chi.copy()
+    for k, name in enumerate(model.PAYLOAD_NAMES):
+        merged[model.STANDARD_NAMES.index(name.replace("4", "3"))] += pay[k]
+    np.testing.assert_allclose(model.torque(q, dq, ddq, chi, pay), model.torque(q, dq, ddq, merged), atol=1e-9)
