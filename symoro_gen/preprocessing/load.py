@@ -55,6 +55,8 @@ import math
 import os
 import re
 import warnings
+import zipfile
+import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -87,6 +89,14 @@ DEFAULT_KEYS: dict[str, tuple[str, ...]] = {
 }
 CSV_TEMPLATES = {"q": "q{j}", "tau": "tau{j}", "dq": "dq{j}", "ddq": "ddq{j}"}
 MAX_RANGES_SHOWN = 5
+#: |value| above which a (non-time) sample is absurd: a sensor fault or a logging glitch, not a measurement.
+#: Every loader (this module's, :mod:`~symoro_gen.preprocessing.logformat`'s) rejects such values.
+ABSURD_VALUE = 1e6
+#: hint of the errors about bad values (non-finite, absurd)
+BAD_VALUE_HINT = ("fix or remove these rows; the command line's --drop-bad-rows drops them (counted in the "
+                  "output)")
+#: what reading a damaged .npz/.npy can raise (zip directory, CRC, truncated or garbled members)
+_ARCHIVE_ERRORS = (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
 
 
 class DataWarning(UserWarning):
@@ -425,25 +435,80 @@ def _load_arrays(path: str, fmt: str) -> dict[str, np.ndarray]:
                 return {k: np.asarray(z[k]) for k in z.files}
         except FileNotFoundError:
             raise DataFileError([Problem(path, "", "", "file not found")]) from None
-        except (ValueError, OSError):
+        except _ARCHIVE_ERRORS as exc:
             # never relay numpy's advice to allow pickles: say what the file is instead
-            raise DataFileError([Problem(path, "", "", f"not a NumPy .npz archive ({_what_file(path)})")],
+            raise DataFileError([Problem(path, "", "", f"not a readable NumPy .npz archive ({_what_file(path)}"
+                                         f"{_archive_detail(exc)})")],
                                 hint="save arrays with numpy.savez(path, t=..., q=..., tau=...); a text table "
                                      "must end in .csv or .txt") from None
+    d = load_mat(path, squeeze_me=False)
+    return {k: np.asarray(v) for k, v in d.items() if not k.startswith("__")}
+
+
+def load_mat(path: str, **kwargs) -> dict:
+    """:func:`scipy.io.loadmat` with every failure as a one-line :class:`DataFileError` naming the file.
+
+    scipy's MATLAB reader meets damaged files with whatever its parser hits first (``IndexError``,
+    ``struct.error``, ``MatReadError``, ``zlib.error``...), so any exception from it is a bad file.
+    """
     try:
-        d = scipy.io.loadmat(path, squeeze_me=False)
+        return scipy.io.loadmat(path, **kwargs)
     except FileNotFoundError:
         raise DataFileError([Problem(path, "", "", "file not found")]) from None
     except NotImplementedError:
         raise DataFileError([Problem(path, "", "", "MATLAB v7.3 (HDF5) files are not supported")],
                             hint="save with save(..., '-v7') or export to CSV/NPZ") from None
-    except (ValueError, OSError, TypeError) as exc:
-        raise DataFileError([Problem(path, "", "", f"cannot read as a MATLAB file: {exc}")]) from None
-    return {k: np.asarray(v) for k, v in d.items() if not k.startswith("__")}
+    except (MemoryError, RecursionError):
+        raise DataFileError([Problem(path, "", "", "cannot read as a MATLAB file: its headers declare "
+                                     "impossible sizes (damaged?)")]) from None
+    except Exception as exc:  # noqa: BLE001 - a damaged file reaches any line of scipy's parser
+        raise DataFileError([Problem(path, "", "", f"cannot read as a MATLAB file ({_what_file(path, 'mat')}; "
+                                     f"{type(exc).__name__}: {_one_line(exc)})")],
+                            hint="save with MATLAB's save(..., '-v7') or scipy.io.savemat, or export to "
+                                 "CSV/NPZ") from None
 
 
-def _what_file(path: str) -> str:
-    """A few words on what a file that failed to load really is (for error messages)."""
+def _one_line(exc: BaseException) -> str:
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+
+
+def _archive_detail(exc: BaseException) -> str:
+    """``; damaged: ...`` for archive errors worth naming (CRC, truncation), never numpy's pickle advice."""
+    if isinstance(exc, (zipfile.BadZipFile, zlib.error, EOFError)):
+        return f"; damaged: {_one_line(exc)}"
+    return ""
+
+
+def load_npy(path: str) -> np.ndarray:
+    """One ``.npy`` array as floats; a missing, damaged or non-numeric file is a :class:`DataFileError`
+    naming it (never numpy's advice to allow pickles)."""
+    try:
+        a = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise DataFileError([Problem(path, "", "", "file not found")]) from None
+    except IsADirectoryError:
+        raise DataFileError([Problem(path, "", "", "is a folder, not a .npy file")]) from None
+    except _ARCHIVE_ERRORS as exc:
+        what = _what_file(path)
+        if what.startswith("a single .npy"):
+            what = "its header is .npy but the data are damaged or cut short"
+        detail = "" if "pickle" in str(exc) else f": {_one_line(exc)}"
+        raise DataFileError([Problem(path, "", "", f"not a readable NumPy .npy array ({what}{detail})")],
+                            hint="save one array with numpy.save(path, array) (samples x joints)") from None
+    if isinstance(a, np.lib.npyio.NpzFile):
+        a.close()
+        raise DataFileError([Problem(path, "", "", "an .npz archive, not a single .npy array")])
+    if not np.issubdtype(a.dtype, np.number) and a.dtype != bool:
+        raise DataFileError([Problem(path, "", "", f"not numeric (dtype {a.dtype})")])
+    a = a.astype(float)
+    if a.ndim not in (1, 2):
+        raise DataFileError([Problem(path, "", "", f"must be a 1-D or 2-D (samples x joints) array, got shape "
+                                     f"{a.shape}")])
+    return a
+
+
+def _what_file(path: str, expected: str = "npz") -> str:
+    """A few words on what a file that failed to load (as an ``expected`` kind) really is."""
     try:
         with open(path, "rb") as f:
             head = f.read(512)
@@ -454,7 +519,7 @@ def _what_file(path: str) -> str:
     if head.startswith(b"\x93NUMPY"):
         return "a single .npy array, not an .npz archive"
     if head.startswith(b"PK"):
-        return "a zip archive without readable .npy members"
+        return "a zip archive without readable .npy members" if expected == "npz" else "a zip archive, e.g. an .npz"
     try:
         head.decode("utf-8")
         return "the file is text, e.g. a CSV table"
@@ -527,10 +592,7 @@ def _read_split(spec: DataSpec, n: int, probs) -> _Raw:
     raw = _Raw(fmt="split")
     for role, path in spec.files.items():
         if path.endswith(".npy"):
-            try:
-                a = np.load(path, allow_pickle=False).astype(float)
-            except FileNotFoundError:
-                raise DataFileError([Problem(path, "", "", "file not found")]) from None
+            a = load_npy(path)
             if a.ndim == 1:
                 a = a[:, None]
             names = [f"column {c + 1}" for c in range(a.shape[1])]
@@ -559,17 +621,27 @@ def _read_split(spec: DataSpec, n: int, probs) -> _Raw:
 # ---------------------------------------------------------------------------------------------
 # checks
 # ---------------------------------------------------------------------------------------------
-def _check_finite(raw: _Raw, probs: list[Problem]) -> None:
-    for c in raw.cols.values():
+def _check_values(raw: _Raw, probs: list[Problem]) -> None:
+    """Non-finite values anywhere, absurd ones (``|value| > ABSURD_VALUE``) outside the time column:
+    one problem per column, naming its rows (the same rule as ``logformat``'s loader)."""
+    for role, c in raw.cols.items():
         bad = ~np.isfinite(c.values)
-        if not bad.any():
-            continue
         for k in np.flatnonzero(bad.any(axis=0)):
             col = bad[:, k]
             v = c.values[col, k]
             kinds = [s for s, m in (("NaN", np.isnan(v)), ("+inf", v == np.inf), ("-inf", v == -np.inf)) if m.any()]
             probs.append(Problem(c.file, _fmt_ranges(_runs(col), c.line_offset), c.names[k],
                                  f"{int(col.sum())} non-finite value(s) ({', '.join(kinds)})"))
+        if role == "t":
+            continue
+        with np.errstate(invalid="ignore"):
+            absurd = np.isfinite(c.values) & (np.abs(c.values) > ABSURD_VALUE)
+        for k in np.flatnonzero(absurd.any(axis=0)):
+            col = absurd[:, k]
+            worst = float(np.max(np.abs(c.values[col, k])))
+            probs.append(Problem(c.file, _fmt_ranges(_runs(col), c.line_offset), c.names[k],
+                                 f"{int(col.sum())} absurd value(s) (|value| > {ABSURD_VALUE:g}, up to {worst:.3g}): "
+                                 "a sensor fault or a logging glitch, not a measurement"))
 
 
 def _check_time(t: np.ndarray, col: _Column, jitter_tol: float, probs: list[Problem]) -> dict:
@@ -787,10 +859,11 @@ def load_trajectory(
     if raw.fmt in ("npz", "mat") and len(set(lens.values())) > 1:
         desc = ", ".join(f"{raw.cols[r].names[0].split('[')[0]}: {m}" for r, m in lens.items())
         probs.append(Problem(source, "", "", f"arrays have different numbers of samples ({desc})"))
-    _check_finite(raw, probs)
+    _check_values(raw, probs)
     N = max(lens.values()) if lens else 0
     if probs:
-        raise DataFileError(probs)
+        bad_values = any("non-finite" in p.message or "absurd" in p.message for p in probs)
+        raise DataFileError(probs, hint=BAD_VALUE_HINT if bad_values else None)
     # time base
     tinfo: dict = {}
     t_from_dt = False
