@@ -95,6 +95,9 @@ ABSURD_VALUE = 1e6
 #: hint of the errors about bad values (non-finite, absurd)
 BAD_VALUE_HINT = ("fix or remove these rows; the command line's --drop-bad-rows drops them (counted in the "
                   "output)")
+#: hint of the errors about the time column
+TIME_HINT = ("the command line's --resample puts irregular time stamps on a uniform grid (gaps longer than "
+             "--max-gap split the file); --dt SECONDS ignores the time column")
 #: what reading a damaged .npz/.npy can raise (zip directory, CRC, truncated or garbled members)
 _ARCHIVE_ERRORS = (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
 
@@ -669,9 +672,12 @@ def _check_time(t: np.ndarray, col: _Column, jitter_tol: float, probs: list[Prob
                              f"{100 * jitter_tol:g} % from the median step {med:.6g} s (e.g. {worst:.6g} s); "
                              "gaps or resets must be split into separate files, or resampled (--resample)"))
     for a, b, local in step_regime_changes(t, irr):
+        inside = np.zeros(d.size, bool)
+        inside[max(a - 2, 0):b - 1] = True  # steps ending at rows a..b (1-based)
+        other = float(np.median(d[~inside])) if (~inside).any() else med
         probs.append(Problem(col.file, _fmt_ranges([(a, b)], col.line_offset), name,
-                             f"the sampling period changes: about {local:.6g} s per step here against "
-                             f"{med:.6g} s (median); a recording must keep one period: resample it (--resample) "
+                             f"the sampling period changes: about {local:.6g} s per step in these rows, "
+                             f"{other:.6g} s elsewhere; a recording must keep one period: resample it (--resample) "
                              "or split it into separate files"))
     return info
 
@@ -879,11 +885,12 @@ def load_trajectory(
         t = np.arange(N) * float(dt)
         t_from_dt = True
         tinfo = {"dt_median": float(dt), "dt_max_rel_jitter": 0.0}
+    time_probs = bool(probs)
     if min_samples > N:
         probs.append(Problem(source, f"rows 1-{N}", "", f"too short to filter: {N} samples, at least "
                              f"{min_samples} needed"))
     if probs:
-        raise DataFileError(probs)
+        raise DataFileError(probs, hint=TIME_HINT if time_probs else None)
     q = raw.cols["q"].values
     tau = raw.cols["tau"].values
     dq = raw.cols["dq"].values if "dq" in raw.cols else None
