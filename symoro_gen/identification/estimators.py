@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import cast
 
 import numpy as np
 
@@ -93,13 +94,18 @@ def _check_problem(acc: Accumulator, active: Sequence[int], extra_cols: int, wha
             f"(need more than {need} to estimate the parameters and the noise level)")
 
 
+def _qr_r(M: np.ndarray) -> np.ndarray:
+    """The R factor of ``M`` (``numpy.linalg.qr(mode="r")`` returns the bare array)."""
+    return cast(np.ndarray, np.linalg.qr(M, mode="r"))
+
+
 def _column_norms(M: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->j", M, M))
 
 
 def _check_zero_columns(norms: np.ndarray, names: Sequence[str], opts: Options, what: str) -> None:
     top = norms.max() if norms.size else 0.0
-    zero = [names[i] for i in np.flatnonzero(norms <= opts.zero_col_tol * top)] if top > 0 else list(names)
+    zero = [names[int(i)] for i in np.flatnonzero(norms <= opts.zero_col_tol * top)] if top > 0 else list(names)
     if zero:
         raise IdentificationError(
             f"{what}: column(s) {zero} of W are all zero: these parameters have no effect on the "
@@ -192,7 +198,7 @@ def drop_unexcited(systems: Sequence[ObservationSystem | None], trajectories=(),
         still = still_joints(trs)
         why = ""
         if still:
-            per = {}
+            per: dict[int, list[float]] = {}
             for _src, j, span in still:
                 per.setdefault(j, []).append(span)
             why = " (" + ", ".join(f"joint {j} does not move: q{j} spans at most {max(v):.3g}"
@@ -220,7 +226,7 @@ def _involved(v: np.ndarray, names: Sequence[str], opts: Options) -> list[str]:
     a = np.abs(v)
     idx = np.flatnonzero(a >= opts.involved_tol * a.max())
     idx = idx[np.argsort(-a[idx])]
-    return [f"{names[i]} ({v[i]:+.2f})" for i in idx]
+    return [f"{names[int(i)]} ({v[i]:+.2f})" for i in idx]
 
 
 def _conditioning(Wsqrt: np.ndarray, names: Sequence[str], opts: Options, what: str):
@@ -275,7 +281,7 @@ def _ols_core(M: np.ndarray, r: int, names: Sequence[str], opts: Options, what: 
     Returns values, cov, std, sigma, cond, cond_scaled, warnings.
     """
     k = M.shape[1] - 1
-    R = np.linalg.qr(M, mode="r")
+    R = _qr_r(M)
     if R.shape[0] < k + 1:
         R = np.vstack([R, np.zeros((k + 1 - R.shape[0], k + 1))])
     R11, z, e = R[:k, :k], R[:k, k], R[k, k]
@@ -300,7 +306,7 @@ def _tls_core(M: np.ndarray, r: int, names: Sequence[str], opts: Options, what: 
     Returns values, cov, std, sigma_W, cond, cond_scaled, warnings.
     """
     k = M.shape[1] - 1
-    R = np.linalg.qr(M, mode="r")
+    R = _qr_r(M)
     if R.shape[0] < k + 1:
         R = np.vstack([R, np.zeros((k + 1 - R.shape[0], k + 1))])
     cond, cond_scaled, rank, _, _, _, Vts, warnings = _conditioning(R[:, :k], names, opts, what)

@@ -12,9 +12,9 @@ from symoro_gen import load_model
 from symoro_gen.description import load_robot
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
 
-from .helpers import FUZZ, run_case
+from .helpers import _DEEP, FUZZ, run_case
 
-DATA = FUZZ.__class__(FUZZ, max_examples=min(FUZZ.max_examples, 15))  # each valid case identifies: fewer
+DATA = FUZZ if _DEEP else FUZZ.__class__(FUZZ, max_examples=15)  # each valid case identifies: fewer
 
 
 def _recording():
