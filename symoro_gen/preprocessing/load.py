@@ -169,6 +169,7 @@ def parse_data_spec(spec: str | os.PathLike, *, base_dir: str | os.PathLike | No
     loaded = None
     probs: list[Problem] = []
     seen_time: set[str] = set()
+    empty: set[str] = set()  # keys given without a file (reported once, not again as missing)
     for item in text.split(","):
         if not item.strip():
             continue
@@ -199,13 +200,16 @@ def parse_data_spec(spec: str | os.PathLike, *, base_dir: str | os.PathLike | No
             if b is None:
                 probs.append(Problem(text, f"item {item!r}", k, "must be true or false"))
             loaded = b
+        elif not v:
+            probs.append(Problem(text, f"item {item!r}", k, "no file given"))
+            empty.add(k)
         else:
             files[k] = resolve(v)
     if "file" in files and len(files) > 1:
         probs.append(Problem(text, "", "file", "'file=' cannot be combined with q=/tau=/... files"))
     if "file" not in files:
         for k in ("q", "tau"):
-            if k not in files:
+            if k not in files and k not in empty:
                 probs.append(Problem(text, "", k, f"missing: a split recording needs {k}=FILE"))
     if probs:
         raise DataFileError(probs)
@@ -275,15 +279,39 @@ def _is_number(s: str) -> bool:
         return False
 
 
+def not_text_problem(path: str, exc: UnicodeDecodeError) -> Problem:
+    """The problem of a text file that is not UTF-8: the line of the first bad byte, how much is bad."""
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except OSError:
+        raw = b""
+    line = raw[:exc.start].count(b"\n") + 1
+    where = f"line {line}" if raw else ""
+    bad = raw.decode("utf-8", errors="replace").count("\ufffd") if raw else 0
+    what = "not a text file" if bad > max(8, len(raw) // 100) else "not UTF-8 text here"
+    return Problem(path, where, "", f"{what} (byte 0x{raw[exc.start]:02x}: {exc.reason})" if raw else
+                   f"{what} ({exc.reason})")
+
+
+def open_problem(path: str, exc: OSError) -> Problem:
+    """A data file that cannot be opened: missing, a folder, unreadable."""
+    if isinstance(exc, FileNotFoundError):
+        return Problem(path, "", "", "file not found")
+    if isinstance(exc, IsADirectoryError):
+        return Problem(path, "", "", "is a folder, not a data file")
+    return Problem(path, "", "", f"cannot read: {exc.strerror or exc}")
+
+
 def _read_text_table(path: str, *, header_required: bool) -> tuple[list[str] | None, np.ndarray, int]:
     """Read a delimited numeric table. Returns (header names or None, values (N, k), header lines)."""
     try:
         with open(path, encoding="utf-8-sig") as f:
             first = f.readline()
-    except FileNotFoundError:
-        raise DataFileError([Problem(path, "", "", "file not found")]) from None
+    except OSError as exc:
+        raise DataFileError([open_problem(path, exc)]) from None
     except UnicodeDecodeError as exc:
-        raise DataFileError([Problem(path, "", "", f"not a text file ({exc.reason})")]) from None
+        raise DataFileError([not_text_problem(path, exc)]) from None
     if not first.strip():
         raise DataFileError([Problem(path, "line 1", "", "empty file (no header, no data)")])
     delim = _detect_delimiter(first)
@@ -299,6 +327,8 @@ def _read_text_table(path: str, *, header_required: bool) -> tuple[list[str] | N
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             data = np.loadtxt(path, delimiter=delim, skiprows=skip, ndmin=2, dtype=float, encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:  # a stray byte further down (a ValueError: before the clause below)
+        raise DataFileError([not_text_problem(path, exc)]) from None
     except ValueError:
         data = None
     if data is None or (data.size and data.shape[1] != ncol):
@@ -312,18 +342,22 @@ def _raise_parse_problems(path, delim, skip, ncol, names) -> NoReturn:
     probs: list[Problem] = []
     bad_count: list[int] = []
     bad_value: dict[str, list[tuple[int, str]]] = {}
-    with open(path, encoding="utf-8-sig") as f:
-        for lineno, line in enumerate(f, start=1):
-            if lineno <= skip or not line.strip():
-                continue
-            parts = _split(line.rstrip("\r\n"), delim)
-            if len(parts) != ncol:
-                bad_count.append(lineno)
-                continue
-            for c, s in enumerate(parts):
-                if not _is_number(s):
-                    col = names[c] if names else f"column {c + 1}"
-                    bad_value.setdefault(col, []).append((lineno, s))
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            lines = list(f)
+    except UnicodeDecodeError as exc:
+        raise DataFileError([not_text_problem(path, exc)]) from None
+    for lineno, line in enumerate(lines, start=1):
+        if lineno <= skip or not line.strip():
+            continue
+        parts = _split(line.rstrip("\r\n"), delim)
+        if len(parts) != ncol:
+            bad_count.append(lineno)
+            continue
+        for c, s in enumerate(parts):
+            if not _is_number(s):
+                col = names[c] if names else f"column {c + 1}"
+                bad_value.setdefault(col, []).append((lineno, s))
     if bad_count:
         runs = _runs(np.isin(np.arange(max(bad_count) + 1), bad_count))
         probs.append(Problem(path, _fmt_ranges([(a - 1, b - 1) for a, b in runs]).replace("rows", "lines"), "",

@@ -59,6 +59,8 @@ from .load import (
     load_mat,
     load_npy,
     load_trajectory,
+    not_text_problem,
+    open_problem,
     parse_data_spec,
 )
 from .trajectory import Trajectory
@@ -345,10 +347,10 @@ def read_table(path: str) -> _Table:
     try:
         with open(path, encoding="utf-8-sig") as f:
             text = f.read()
-    except FileNotFoundError:
-        raise DataFileError([Problem(path, "", "", "file not found")]) from None
+    except OSError as exc:
+        raise DataFileError([open_problem(path, exc)]) from None
     except UnicodeDecodeError as exc:
-        raise DataFileError([Problem(path, "", "", f"not a text file ({exc.reason})")]) from None
+        raise DataFileError([not_text_problem(path, exc)]) from None
     lines = text.splitlines()
     first_i = next((i for i, ln in enumerate(lines) if ln.strip()), None)
     if first_i is None:

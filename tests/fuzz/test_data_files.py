@@ -150,3 +150,22 @@ def test_damaged_npz_and_npy_name_the_file(cli, tmp_path):
                       (f"q={tmp_path / 'short.npy'},tau={tmp_path / 'tau.npy'},dt=0.004", "short.npy")]:
         case = _identify(cli, tmp_path, arg, name)
         assert case.rc == 2 and name in case.first_error and "pickle" not in case.err, case.err
+
+
+def test_stray_byte_and_empty_spec_value(cli, tmp_path):
+    """Found by the deep search (SYMORO_FUZZ_EXAMPLES=150): one non-UTF-8 byte in a data row gave
+    "'utf-8' codec can't decode byte 0x80" without the file; ``q=`` (no file) read the current folder
+    ("Is a directory") and added a second, wrong complaint that q= was missing."""
+    raw = CSV.encode()
+    i = raw.index(b"\n", 3000) + 20
+    (tmp_path / "byte.csv").write_bytes(raw[:i] + b"\x80" + raw[i + 1:])
+    line = raw[:i].count(b"\n") + 1
+    for extra in ([], ["--tau-scale", "1"]):  # plain loader, and logformat's
+        out = tmp_path / "out.json"
+        case = run_case(cli, tmp_path, ["-q", "identify", "scara", tmp_path / "byte.csv", *extra, "--json", out],
+                        output=out, file="byte.csv", allow_ok=False)
+        assert f"byte.csv, line {line}: not UTF-8 text" in case.first_error, case.err
+    np.savetxt(tmp_path / "cur.csv", REC.tau, delimiter=",")
+    case = _identify(cli, tmp_path, f"tau={tmp_path / 'cur.csv'},q=", None)
+    assert case.rc == 2 and "field 'q': no file given" in case.first_error, case.err
+    assert "missing" not in case.err and "directory" not in case.err.lower(), case.err
