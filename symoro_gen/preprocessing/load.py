@@ -344,10 +344,10 @@ def _raise_parse_problems(path, delim, skip, ncol, names) -> NoReturn:
     bad_value: dict[str, list[tuple[int, str]]] = {}
     try:
         with open(path, encoding="utf-8-sig") as f:
-            lines = list(f)
+            text_lines = list(f)
     except UnicodeDecodeError as exc:
         raise DataFileError([not_text_problem(path, exc)]) from None
-    for lineno, line in enumerate(lines, start=1):
+    for lineno, line in enumerate(text_lines, start=1):
         if lineno <= skip or not line.strip():
             continue
         parts = _split(line.rstrip("\r\n"), delim)
