@@ -1,4 +1,4 @@
-"""Import a serial chain of a URDF as a Khalil-Kleinfinger MDH robot file (TOML text).
+"""Import a serial chain or a tree of a URDF as a Khalil-Kleinfinger MDH robot file (TOML text).
 
 Only the standard library's XML parser is used (no urdfdom). The chain from ``base`` to
 ``tip`` (revolute, continuous, prismatic and fixed joints, any axis and origin) becomes an
@@ -18,6 +18,14 @@ MDH table built by the Khalil-Kleinfinger construction at the URDF zero configur
 * fixed joints are folded into the neighbours' constants; when the tip link is reached
   through fixed joints after the last moving one, it gets a fixed frame (sigma = 2), a
   place where a payload can be attached (its inertia stays in the last link).
+
+Trees ([KK1986]): when no ``tip`` is given and several moving chains leave a link below the base,
+the whole tree is imported. The moving joints are numbered depth first (children in the file's order),
+so that every frame comes after its antecedent, ``ant`` being the frame of the nearest moving joint
+above it. Along each chain (a frame and its first moving child) the frames are built as above; every
+further child k of frame i (a branch) has its origin on the common normal of ``z_i`` and ``z_k`` (or
+on the perpendicular from ``O_i`` when they are parallel), and its row carries the gamma and b that
+place that normal on ``z_i``. Fixed tip frames are not added to a tree.
 
 Constant theta / r values at ``q = 0`` are written as offsets (``q - pi/2``, ``q + RL3``).
 The URDF inertials of every link rigidly attached to moving link j (through fixed joints,
@@ -595,7 +603,7 @@ def _identifier(name: str) -> str:
 # import
 # ---------------------------------------------------------------------------------------------
 def import_urdf(path, base: str | None = None, tip: str | None = None, name: str | None = None, **options) -> str:
-    """A URDF serial chain as robot-file text (TOML) in Khalil-Kleinfinger MDH notation.
+    """A URDF serial chain or tree as robot-file text (TOML) in Khalil-Kleinfinger MDH notation.
 
     Parameters
     ----------
@@ -603,7 +611,8 @@ def import_urdf(path, base: str | None = None, tip: str | None = None, name: str
         The URDF file.
     base, tip : str, optional
         Link names bounding the chain. Default: the root link, and the end of the single
-        moving chain below it (followed by a single fixed link if there is one).
+        moving chain below it (followed by a single fixed link if there is one); when the URDF
+        branches into several moving chains below the base and no tip is given, the whole tree.
     name : str, optional
         Robot name (default: the URDF robot name made an identifier).
     **options
@@ -619,7 +628,7 @@ def import_urdf(path, base: str | None = None, tip: str | None = None, name: str
     ------
     RobotFileError
         Unreadable or malformed URDF, unknown base/tip link, no moving joint in the chain,
-        floating/planar joint in the chain, a branching tree without ``tip``.
+        floating/planar joint in the chain or tree, a mimic joint in it.
     """
     p = Path(path)
     try:
