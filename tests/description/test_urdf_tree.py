@@ -154,16 +154,35 @@ def test_dual_arm_torso_urdf_imports_as_the_shipped_tree():
     torques (Pinocchio on the URDF == numeric Newton-Euler on both robot files)."""
     from symoro_gen.description import load_robot
     from symoro_gen.description.urdf_export import export_urdf
-    from tests.oracles.pinocchio_model import random_parameters
+    from symoro_gen.simulate import random_physical_parameters
 
     torso = load_robot("sda10f")
     rng = np.random.default_rng(9)
-    chi, _ = random_parameters(torso, rng)
+    chi = np.asarray(random_physical_parameters(torso, rng))  # rigid bodies: exported unchanged
     urdf = export_urdf(torso, chi)
     robot, names, _ = check_tree(urdf, rng)
     assert [r.ant for r in robot.rows] == [r.ant for r in torso.joints]
     q, dq, ddq = random_states(rng, 5, torso.n_joints)
     a = inverse_dynamics(robot, q, dq, ddq, np.array(robot.nominal_vector()))
-    inertial = np.array([0.0 if n[:2] in ("IA", "FV", "FS", "OF") else x for n, x in zip(torso.standard_names, chi)])
-    b = inverse_dynamics(torso, q, dq, ddq, inertial)
+    # URDF carries the rigid bodies, FV (damping) and FS (friction); not IA and OFF
+    urdf_part = np.array([0.0 if n.startswith(("IA", "OFF")) else x for n, x in zip(torso.standard_names, chi)])
+    b = inverse_dynamics(torso, q, dq, ddq, urdf_part)
     np.testing.assert_allclose(a, b, rtol=1e-8, atol=1e-8 * np.abs(b).max())
+
+
+def test_import_urdf_command_writes_the_tree(tmp_path):
+    """``symoro-gen import-urdf tree.urdf -o tree.toml`` (no --tip): the robot file of the whole tree,
+    which ``generate`` accepts."""
+    import warnings
+
+    from symoro_gen.cli import main
+
+    urdf, _ = random_tree_urdf(np.random.default_rng(21), 5, style="aligned")
+    (tmp_path / "tree.urdf").write_text(urdf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["--quiet", "import-urdf", str(tmp_path / "tree.urdf"), "-o", str(tmp_path / "tree.toml")]) == 0
+        robot = parse_robot_text((tmp_path / "tree.toml").read_text())
+        assert robot.n_joints == 5 and any(r.ant != r.j - 1 for r in robot.rows)
+        assert main(["--quiet", "generate", str(tmp_path / "tree.toml"), "--out", str(tmp_path / "gen")]) == 0
+    assert (tmp_path / "gen" / robot.name / "base_parameters.md").is_file()
