@@ -70,6 +70,10 @@ def cmd_generate(args) -> int:
             f"{m.robot}: {m.n_standard} standard -> {m.n_base} base parameters; base regressor "
             f"{m.base_ops.mul} mul, {m.base_ops.div} div, {m.base_ops.add} add -> {m.path}"
         )
+        if robot.loops:
+            print(f"{m.robot}: {len(robot.loops)} closed loop(s): this package is the tree model; load_model() "
+                  f"projects it on the {len(robot.actuated)} actuated joints (its base parameters: "
+                  "model.base_parameters_text())")
     return 0
 
 
@@ -249,10 +253,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     ip.add_argument("--force", action="store_true", help="overwrite an existing output file")
     ip.set_defaults(func=cmd_import_par)
 
-    iu = sub.add_parser("import-urdf", help="serial chain of a URDF -> robot .toml (MDH + nominal parameters)")
+    iu = sub.add_parser("import-urdf", help="URDF chain or tree -> robot .toml (MDH + nominal parameters)")
     iu.add_argument("file")
     iu.add_argument("--base", help="base link (default: the URDF root)")
-    iu.add_argument("--tip", help="tip link (default: the end of the only chain)")
+    iu.add_argument("--tip", help="tip link (default: the end of the only chain; a URDF that branches is imported whole, as a tree)")
     iu.add_argument("--name", help="robot name (default: the URDF's)")
     iu.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
     iu.add_argument("--force", action="store_true", help="overwrite an existing output file")

@@ -11,6 +11,10 @@ or ``load_model(robot_description)`` all return an :class:`~symoro_gen.model.Ide
 * otherwise into the user cache, ``$XDG_CACHE_HOME/symoro_gen/models/<file sha256[:16]>/<name>/``.
 
 :func:`model_for` returns the robot description too.
+
+A closed-loop robot (``[[loops]]`` in its robot file) is generated as its tree (the package's
+``manifest.json`` says ``closed_loops``) and returned wrapped in
+:class:`symoro_gen.closedloop.ClosedLoopModel` (the tree model projected on the actuated joints).
 """
 from __future__ import annotations
 
@@ -104,27 +108,67 @@ def _generate(robot: RobotDescription, out_dir: Path) -> Path:
     return target
 
 
+#: closed-loop models already built in this process: (package folder, robot-file sha256) -> model
+_CLOSED: dict[tuple[str, str], IdentificationModel] = {}
+
+
+def _closed(robot: RobotDescription, tree: IdentificationModel, folder: Path) -> IdentificationModel:
+    """The closed-loop model of ``robot`` around its generated tree model (``symoro_gen.closedloop``)."""
+    key = (str(folder.resolve()), robot.file_hash)
+    if key not in _CLOSED:
+        from .closedloop import ClosedLoopModel  # sympy: only for closed-loop robots
+
+        _CLOSED[key] = check_model(ClosedLoopModel(robot, tree))
+    return _CLOSED[key]
+
+
+def _import_checked(folder: Path, robot: RobotDescription | None = None) -> IdentificationModel:
+    """:func:`import_package`, wrapped in the closed-loop model when the package is the tree of a
+    closed-loop robot (its ``manifest.json`` has ``closed_loops``); the robot file is then the one the
+    package was generated from, looked for in ``robots/`` and beside the ``generated/`` folder."""
+    model = import_package(folder)
+    try:
+        man = json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return model
+    if not (isinstance(man, dict) and man.get("closed_loops")):
+        return model
+    if robot is None:
+        from .description import load_robot, robots_dir  # sympy: only for closed-loop robots
+
+        name, sha = str(man.get("robot_file", "")), man.get("robot_file_sha256")
+        for cand in (robots_dir() / name, folder.resolve().parent.parent / name):
+            if name and cand.is_file() and hashlib.sha256(cand.read_bytes()).hexdigest() == sha:
+                robot = load_robot(cand)
+                break
+        else:
+            raise ModelError(f"{folder} is the tree model of the closed-loop robot {man.get('robot')!r}; its robot "
+                             f"file {name!r} (sha256 {str(sha)[:12]}...) was not found in {robots_dir()} or beside "
+                             f"the generated/ folder: load the model from the robot file")
+    return _closed(robot, model, folder)
+
+
 def _model_of_robot(robot: RobotDescription) -> IdentificationModel:
     repo = generated_dir() / robot.name
     if _is_package(repo) and _manifest_sha(repo) == robot.file_hash:
-        return import_package(repo)
+        return _import_checked(repo, robot)
     f = Path(robot.file)
     if robot.file and f.is_file() and not _inside_repo(f):
         beside = f.resolve().parent / "generated"
         target = beside / robot.name
         if _is_package(target) and _manifest_sha(target) == robot.file_hash:
-            return import_package(target)
+            return _import_checked(target, robot)
         try:
             writable = (beside.is_dir() or os.access(beside.parent, os.W_OK)) and (
                 not beside.exists() or os.access(beside, os.W_OK))
         except OSError:
             writable = False
         if writable and (not target.exists() or (target / "manifest.json").is_file()):
-            return import_package(_generate(robot, beside))
+            return _import_checked(_generate(robot, beside), robot)
     cached = cache_dir() / robot.file_hash[:16]
     if not (_is_package(cached / robot.name) and _manifest_sha(cached / robot.name) == robot.file_hash):
         _generate(robot, cached)
-    return import_package(cached / robot.name)
+    return _import_checked(cached / robot.name, robot)
 
 
 def load_model(source: str | os.PathLike[str] | RobotDescription) -> IdentificationModel:
@@ -154,14 +198,14 @@ def load_model(source: str | os.PathLike[str] | RobotDescription) -> Identificat
         return _model_of_robot(source)
     p = Path(source)
     if _is_package(p):
-        return import_package(p)
+        return _import_checked(p)
     if p.suffix == ".toml" or p.is_file():
         from .description import load_robot  # sympy: only for robot files
 
         return _model_of_robot(load_robot(p))
     cand = generated_dir() / str(source)
     if _is_package(cand):
-        return import_package(cand)
+        return _import_checked(cand)
     from .description import robots_dir  # sympy: only for robot files
 
     if (robots_dir() / f"{source}.toml").is_file() and p.name == str(source):

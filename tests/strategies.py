@@ -1,8 +1,8 @@
 """Hypothesis strategies of random MDH robots, as robot-file text (parse with ``parse_robot_text``).
 
-``from tests.strategies import mdh_robots``
+``from tests.strategies import mdh_robots, mdh_trees``
 
-The drawn robots are serial chains of revolute and prismatic joints in Khalil-Kleinfinger
+The drawn robots of ``mdh_robots`` are serial chains of revolute and prismatic joints in Khalil-Kleinfinger
 notation, exercising what the robot-file format allows: alpha in {0, +-pi/2} or arbitrary,
 d and r zero / numeric / symbolic (with ``[values]``), theta (or r) offsets, ``-q`` joint
 directions, gamma and b on some rows, per-joint drive-parameter subsets and sometimes a
@@ -142,6 +142,67 @@ def mdh_robots(draw, min_joints: int = 2, max_joints: int = 7, *, random_gravity
             f'theta = "{draw(_angle())}"',
             f"r = {_fmt(draw(_length()))}",
         ]
+        frames.append("\n".join(lines))
+        head.append(f"payload = {k}")
+    if random_gravity and draw(st.booleans()):
+        g = [draw(st.integers(-981, 981)) / 100.0 for _ in range(3)]
+        head.append("gravity = [" + ", ".join(_fmt(x) for x in g) + "]")
+    else:
+        head.append("gravity = [0, 0, -9.81]")
+    parts = ["\n".join(head)]
+    if values:
+        parts.append("[values]\n" + "\n".join(f"{k} = {_fmt(v)}" for k, v in sorted(values.items())))
+    parts += ["[[frames]]\n" + f for f in frames]
+    return "\n\n".join(parts) + "\n"
+
+
+@st.composite
+def mdh_trees(draw, min_frames: int = 2, max_frames: int = 14, *, random_gravity: bool = False,
+              payload: bool | None = None) -> str:
+    """Robot-file text of a random tree-structured MDH robot (Khalil-Kleinfinger notation for trees).
+
+    Every moving frame ``j`` hangs off any earlier frame (``0 <= ant < j``; about half the frames
+    continue the previous one, the others branch anywhere, the base included). A frame that starts
+    a branch (``ant != j - 1``) gets gamma and b on about two rows in three (the common normal of
+    its axis and its antecedent's is not the antecedent's x axis); the others on one in six. The
+    row values are drawn as in :func:`mdh_robots`, and so are the drive subsets, the payload frame
+    (fixed, on any moving frame) and the gravity.
+
+    Parameters
+    ----------
+    min_frames, max_frames : int
+        Number of moving frames (inclusive bounds).
+    random_gravity, payload : see :func:`mdh_robots`.
+    """
+    n = draw(st.integers(min_frames, max_frames))
+    values: dict[str, float] = {}
+    frames: list[str] = []
+    for j in range(1, n + 1):
+        ant = j - 1 if draw(st.booleans()) else draw(st.integers(0, j - 1))
+        sigma = draw(st.sampled_from((0, 0, 0, 1)))
+        alpha = draw(_angle(arbitrary_weight=1))
+        d = draw(_const_length(values, f"D{j}"))
+        if sigma == 0:
+            theta = draw(_joint_expr(values, f"TH{j}", kind="angle"))
+            r = draw(_const_length(values, f"RL{j}"))
+        else:
+            theta = f'"{draw(_angle(arbitrary_weight=1))}"'
+            r = draw(_joint_expr(values, f"RL{j}", kind="length"))
+        lines = [f"j = {j}", f"ant = {ant}", f"sigma = {sigma}"]
+        if draw(st.integers(0, 5)) < (4 if ant != j - 1 else 1):
+            lines.append(f'gamma = "{draw(_angle(arbitrary_weight=2))}"')
+            lines.append(f"b = {draw(_const_length(values, f'B{j}', zero_weight=1))}")
+        lines += [f'alpha = "{alpha}"', f"d = {d}", f"theta = {theta}", f"r = {r}"]
+        if draw(st.integers(0, 3)) == 0:
+            subset = [k for k in DRIVE_KINDS if draw(st.booleans())]
+            lines.append("drive = [" + ", ".join(f'"{k}"' for k in subset) + "]")
+        frames.append("\n".join(lines))
+    head = ['name = "random_tree"', 'source = "hypothesis strategy tests.strategies.mdh_trees"']
+    if draw(st.booleans()) if payload is None else payload:
+        k = n + 1
+        lines = [f"j = {k}", f"ant = {draw(st.integers(1, n))}", "sigma = 2",
+                 f'alpha = "{draw(_angle())}"', f"d = {_fmt(draw(_length()))}",
+                 f'theta = "{draw(_angle())}"', f"r = {_fmt(draw(_length()))}"]
         frames.append("\n".join(lines))
         head.append(f"payload = {k}")
     if random_gravity and draw(st.booleans()):

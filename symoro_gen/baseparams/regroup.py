@@ -13,6 +13,10 @@ robots", IEEE Trans. Robotics and Automation 6(3), and Khalil & Dombre (2002), c
 * contributions that reach the base (a = 0) have no effect and vanish.
 * parameters whose regressor column is identically zero (links near the base whose
   motion is restricted) have no effect and are eliminated.
+* trees ([KK1987]; Khalil & Bennis 1995, [KB1995]): the same rules with ``a = ant(j)`` in place of
+  ``j - 1``; a branch's parameters regroup onto its own antecedent (never onto a sibling branch).
+  Frames are numbered so that ``ant(j) < j``, so going from the highest frame down visits every
+  frame before its antecedent (tests/oracles/test_trees.py).
 
 Whatever dependency remains after these rules (special cases near the base, drive-chain
 terms) is found by a seeded numerical sweep over the columns, then written exactly:

@@ -105,6 +105,21 @@ class JointLimits:
 
 
 @dataclass(frozen=True)
+class LoopClosure:
+    """One closed loop in Khalil & Kleinfinger's notation ([KK1986]; [KD2002] sec. 7.3; SYMORO+ ``.par``
+    frames ``NL+1..NJ`` and ``NJ+1..NF``).
+
+    The loop is cut at a passive joint: ``cut`` is the frame of the cut joint, placed on its
+    antecedent link ``cut.ant`` with its joint variable ``q<cut.j>``; ``close`` is a fixed frame
+    (``sigma = 2``) on the link ``close.ant`` on the other side of the cut. The loop is closed when
+    both frames coincide, ``T(0, cut) = T(0, close)``. Neither frame carries a body.
+    """
+
+    cut: MdhRow
+    close: MdhRow
+
+
+@dataclass(frozen=True)
 class RobotDescription:
     """A parsed, validated robot file."""
 
@@ -119,9 +134,12 @@ class RobotDescription:
     file_hash: str = ""
     drive_chain: DriveChain | None = None
     limits: JointLimits | None = None
+    loops: tuple[LoopClosure, ...] = ()
+    loop_reference: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "values", MappingProxyType(dict(self.values)))
+        object.__setattr__(self, "loop_reference", MappingProxyType(dict(self.loop_reference)))
         if self.nominal is not None:
             object.__setattr__(self, "nominal", MappingProxyType(dict(self.nominal)))
 
@@ -134,6 +152,17 @@ class RobotDescription:
     @property
     def n_joints(self) -> int:
         return len(self.joints)
+
+    @property
+    def model_joints(self) -> tuple[MdhRow, ...]:
+        """The joints of the identification model and of the recordings: every moving joint, or the
+        actuated ones of a closed-loop robot (``[[loops]]``; its passive joints are solved, not logged)."""
+        return self.actuated if self.loops else self.joints
+
+    @property
+    def actuated(self) -> tuple[MdhRow, ...]:
+        """The actuated moving frames (``mu = 1``), in joint order (all joints of an open structure)."""
+        return tuple(r for r in self.joints if r.mu == 1)
 
     def row(self, j: int) -> MdhRow:
         return self.rows[j - 1]

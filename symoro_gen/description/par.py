@@ -344,17 +344,14 @@ def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, f
             numeric[k] = float(v)
 
     # ---- structure
-    if header.get("Type", (0, 0))[1] == 2:
-        bad(header["Type"][0], "Type", "closed-loop structures (Type = 2) are not supported: "
-                                       "symoro_gen models simple and tree structures only")
-    elif "Type" in header and header["Type"][1] not in (0, 1):
+    if "Type" in header and header["Type"][1] not in (0, 1, 2):
         bad(header["Type"][0], "Type", f"must be 0 (simple), 1 (tree) or 2 (closed), got {header['Type'][1]}")
     for k in _HEADER_BOOLS:
         if header.get(k, (0, False))[1]:
             bad(header[k][0], k, f"{k} = 1 is not supported: symoro_gen models fixed-base robots")
     if "NJ" in header and "NL" in header and header["NJ"][1] != header["NL"][1] and header.get("Type", (0, 0))[1] != 2:
-        bad(header["NJ"][0], "NJ", f"NJ = {header['NJ'][1]} differs from NL = {header['NL'][1]}: "
-                                   "closed loops are not supported")
+        bad(header["NJ"][0], "NJ", f"NJ = {header['NJ'][1]} differs from NL = {header['NL'][1]}: a structure with "
+                                   "closed loops must say Type = 2")
 
     for k in _REQUIRED_GEOM:
         if k not in geom:
@@ -501,6 +498,26 @@ def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, f
     if nl != nf and not closed:
         bad(header["NL"][0], "NL", f"NL = {nl} differs from the number of frames {nf}: every frame of a simple or "
                                    f"tree structure is a link")
+    nj = header["NJ"][1] if "NJ" in header else nl
+    nb = nj - nl  # closed loops: links 1..NL, cut joints NL+1..NJ, closing frames NJ+1..NF (KK1986)
+    if closed:
+        if "NL" not in header or "NJ" not in header:
+            bad(header.get("Type", (None, 0))[0], "Type", "a closed-loop structure needs NL and NJ")
+        elif nb <= 0:
+            bad(header["Type"][0] if "Type" in header else header["NJ"][0], "Type" if "Type" in header else "NJ",
+                f"Type = 2 is a closed-loop structure: it needs more joints than links (NJ > NL), got NJ = {nj}, "
+                f"NL = {nl}")
+        elif nf != nj + nb:
+            bad(header["NF"][0] if "NF" in header else None, "NF",
+                f"a closed-loop structure has NF = NJ + (NJ - NL) = {nj + nb} frames (one closing frame per cut "
+                f"joint), got {nf}")
+        else:
+            for j in range(nl + 1, nf + 1):
+                if (sigmas[j] == FIXED) != (j > nj):
+                    what = "a cut joint (revolute or prismatic)" if j <= nj else "a closing frame (Sigma = 2)"
+                    bad(cells[("sigma", j)][1].line if ("sigma", j) in cells else None, _spelled(geom, "sigma"),
+                        f"frame {j} must be {what}", j)
+    nlinks = nl if closed else nf  # frames carrying a body
     for k, st in dyn.items():
         if len(st.items) != nl:
             bad(st.line, k, f"has {len(st.items)} entries, expected {nl} (one per link, NL = {nl})")
@@ -508,7 +525,7 @@ def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, f
     drive: dict[int, list[str]] = {j: [] for j in range(1, nf + 1)}
     inertia_given: dict[int, bool] = {}
     dyn_symbol_at: dict[str, str] = {}  # a symbol names one parameter only
-    for j in range(1, nf + 1):
+    for j in range(1, nlinks + 1):
         moving = sigmas[j] in (REVOLUTE, PRISMATIC)
         any_inertia = False
         for k in _DYN_KEYS:
@@ -546,7 +563,7 @@ def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, f
                     nominal[f"{k}{j}"] = value
         inertia_given[j] = any_inertia
 
-    fixed_with_inertia = [j for j in range(1, nf + 1) if sigmas[j] == FIXED and inertia_given[j]]
+    fixed_with_inertia = [j for j in range(1, nlinks + 1) if sigmas[j] == FIXED and inertia_given[j]]
     if payload is None:
         if len(fixed_with_inertia) > 1:
             bad(dyn["XX"].line if "XX" in dyn else None, "XX",
@@ -558,7 +575,7 @@ def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, f
         if others:
             bad(dyn["XX"].line if "XX" in dyn else None, "XX",
                 f"fixed frames {others} carry inertial parameters but the payload is frame {payload}")
-    for j in range(1, nf + 1):  # keep nominal values of moving links and of the payload only
+    for j in range(1, nlinks + 1):  # keep nominal values of moving links and of the payload only
         if sigmas[j] == FIXED and j != payload:
             for k in INERTIAL_KINDS:
                 nominal.pop(f"{k}{j}", None)
@@ -581,13 +598,16 @@ def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, f
               f"gravity = [{', '.join(_toml_float(g) for g in gravity)}]"]
     if payload is not None:
         lines.append(f"payload = {payload}")
-    actuated = [j for j in range(1, nf + 1) if sigmas[j] != FIXED and int(cell("mu", j, 1)) == 1]
+    actuated = [j for j in range(1, nlinks + 1) if sigmas[j] != FIXED and int(cell("mu", j, 1)) == 1]
     top_drive = Counter(tuple(drive[j]) for j in actuated).most_common(1)[0][0] if actuated else None
     if top_drive is not None:
         lines.append(f"drive = [{', '.join(_toml_str(d) for d in top_drive)}]")
     if used:
         lines += ["", "[values]"] + [f"{n} = {_toml_float(numeric[n])}" for n in used]
-    for j in range(1, nf + 1):
+    if closed:
+        lines.append("# Note: closed loops; the loop is assembled from the zero configuration unless a [loop_reference] "
+                     "table gives a closed, non-singular one")
+    for j in range(1, nlinks + 1):
         s = sigmas[j]
         mu = int(cell("mu", j, 0 if s == FIXED else 1))
         subs = {joint_var[j]: q_symbol(j)} if j in joint_var else {}
@@ -603,6 +623,19 @@ def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, f
             lines.append(f"{k} = {_toml_expr(e, q_symbol(j))}")
         if s != FIXED and (tuple(drive[j]) != top_drive if mu == 1 else bool(drive[j])):
             lines.append(f"drive = [{', '.join(_toml_str(d) for d in drive[j])}]")
+    for ell in range(1, nb + 1 if closed else 1):
+        lines += ["", "[[loops]]"]
+        for part, j in (("cut", nl + ell), ("close", nj + ell)):
+            subs = {joint_var[j]: q_symbol(j)} if j in joint_var else {}
+            fields = [f"ant = {int(cell('ant', j))}", f"sigma = {sigmas[j]}"]
+            for k in ("gamma", "b", "alpha", "d", "theta", "r"):
+                e = cell(k, j).subs(subs)
+                if k in ("gamma", "alpha", "theta"):
+                    e = _snap_angle(e, angle_tol, q_symbol(j) if sigmas[j] == REVOLUTE else None)
+                if k in ("gamma", "b") and e == 0:
+                    continue
+                fields.append(f"{k} = {_toml_expr(e, q_symbol(j))}")
+            lines.append(f"{part} = {{ {', '.join(fields)} }}")
     if nominal:
         order = {f"{k}{j}": (j, i) for j in range(1, nf + 1) for i, k in enumerate(_DYN_KEYS)}
         lines += ["", "[nominal]"] + [f"{k} = {_toml_float(nominal[k])}" for k in sorted(nominal, key=order.get)]
@@ -714,8 +747,9 @@ def export_par(robot: RobotDescription | str | os.PathLike) -> str:
     """
     if not isinstance(robot, RobotDescription):
         robot = load_robot(robot)
-    rows = robot.rows
-    nf = len(rows)
+    links = robot.rows
+    rows = links + tuple(lp.cut for lp in robot.loops) + tuple(lp.close for lp in robot.loops)
+    nf, nl, nj = len(rows), len(links), len(links) + len(robot.loops)
     taken = set(robot.values)
     prefix = {}
     for sigma, cands in ((REVOLUTE, ("t", "th", "qj")), (PRISMATIC, ("r", "rj", "qr"))):
@@ -733,6 +767,7 @@ def export_par(robot: RobotDescription | str | os.PathLike) -> str:
         return _par_expr(e)
 
     simple = all(r.ant == r.j - 1 for r in rows)
+    kind = 2 if robot.loops else (0 if simple else 1)
     out = [
         "(* SYMORO+ : parameters of a robot, written by symoro_gen *)",
         f"(* Robotname = '{robot.name}' *)",
@@ -740,7 +775,7 @@ def export_par(robot: RobotDescription | str | os.PathLike) -> str:
     if robot.source:
         src = re.sub(r"\s+", " ", robot.source).replace("*)", "* )")
         out.append(f"(* Source: {src} *)")
-    out += [f"NF = {nf}", f"NL = {nf}", f"NJ = {nf}", f"Type = {0 if simple else 1} (* {_TYPE_NAMES[0 if simple else 1]} *)",
+    out += [f"NF = {nf}", f"NL = {nl}", f"NJ = {nj}", f"Type = {kind} (* {_TYPE_NAMES[kind]} *)",
             "is_floating = 0", "is_mobile = 0", "", "(* Geometric parameters *)"]
     for k in ("ant", "sigma", "b", "d", "r", "gamma", "alpha", "mu", "theta"):
         if k in _INT_FIELDS:
@@ -769,14 +804,14 @@ def export_par(robot: RobotDescription | str | os.PathLike) -> str:
 
     out += ["", "(* Dynamic parameters and external forces *)"]
     for k in INERTIAL_KINDS + ("IA", "FV", "FS"):
-        out.append(f"{k} = {{{','.join(dyn(k, r) for r in rows)}}}")
+        out.append(f"{k} = {{{','.join(dyn(k, r) for r in links)}}}")
     for k in ("FX", "FY", "FZ", "CX", "CY", "CZ"):
-        out.append(f"{k} = {{{','.join('0' for _ in rows)}}}")
+        out.append(f"{k} = {{{','.join('0' for _ in links)}}}")
     out += ["(* Joint offsets kept in the model: symoro_gen extension, ignored by SYMORO *)",
-            f"OFF = {{{','.join(dyn('OFF', r) for r in rows)}}}"]
+            f"OFF = {{{','.join(dyn('OFF', r) for r in links)}}}"]
     out += ["", "(* Joint parameters *)"]
     for k in ("QP", "QDP", "GAM"):
-        out.append(f"{k} = {{{','.join(f'{k}{r.j}' for r in rows)}}}")
+        out.append(f"{k} = {{{','.join(f'{k}{r.j}' for r in rows[:nj])}}}")
     out += ["", "(* Speed and acceleration of the base *)"]
     out += [f"{k} = {{0,0,0}}" for k in _BASE_MOTION]
     out += ["", "(* Acceleration of gravity *)", f"G = {{{','.join(_par_number(g) for g in robot.gravity)}}}",

@@ -24,9 +24,11 @@ from ..errors import Problem, RobotFileError, RobotFileWarning
 from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from .expr import ExprError, parse_expression
 from .inertia import check_physical_consistency
+from .loops import parse_loops
 from .model import FIXED, PRISMATIC, REVOLUTE, DriveChain, JointLimits, MdhRow, RobotDescription, q_symbol
 
-TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits"}
+TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits",
+            "loops", "loop_reference"}
 FRAME_REQUIRED = ("j", "ant", "sigma", "alpha", "d", "theta", "r")
 FRAME_OPTIONAL = ("mu", "gamma", "b", "drive")
 CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
@@ -298,11 +300,17 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
                     nominal[k] = float(v)
             _warn_inconsistent_inertia(nominal, rows, payload, file)
 
+    # per-joint tables of a closed-loop robot are per actuated joint (the passive ones are not logged)
+    model_rows = [r for r in rows if not (r.is_moving and r.mu == 0)] if "loops" in doc else rows
     chain = None
     if "drive_chain" in doc:
-        chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in rows), bad)
+        chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in model_rows), bad)
 
-    limits = _parse_limits(doc["limits"], rows, bad) if "limits" in doc else None
+    limits = _parse_limits(doc["limits"], model_rows, bad) if "limits" in doc else None
+
+    loops, loop_reference = (), {}
+    if ("loops" in doc or "loop_reference" in doc) and not bad_sigma:
+        loops, loop_reference = parse_loops(doc.get("loops"), doc.get("loop_reference"), rows, values, bad)
 
     if probs:
         raise RobotFileError(probs)
@@ -318,6 +326,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         file_hash=hashlib.sha256(text.encode("utf-8")).hexdigest(),
         drive_chain=chain,
         limits=limits,
+        loops=loops,
+        loop_reference=loop_reference,
     )
 
 

@@ -1,4 +1,4 @@
-"""Import a serial chain of a URDF as a Khalil-Kleinfinger MDH robot file (TOML text).
+"""Import a serial chain or a tree of a URDF as a Khalil-Kleinfinger MDH robot file (TOML text).
 
 Only the standard library's XML parser is used (no urdfdom). The chain from ``base`` to
 ``tip`` (revolute, continuous, prismatic and fixed joints, any axis and origin) becomes an
@@ -18,6 +18,14 @@ MDH table built by the Khalil-Kleinfinger construction at the URDF zero configur
 * fixed joints are folded into the neighbours' constants; when the tip link is reached
   through fixed joints after the last moving one, it gets a fixed frame (sigma = 2), a
   place where a payload can be attached (its inertia stays in the last link).
+
+Trees ([KK1986]): when no ``tip`` is given and several moving chains leave a link below the base,
+the whole tree is imported. The moving joints are numbered depth first (children in the file's order),
+so that every frame comes after its antecedent, ``ant`` being the frame of the nearest moving joint
+above it. Along each chain (a frame and its first moving child) the frames are built as above; every
+further child k of frame i (a branch) has its origin on the common normal of ``z_i`` and ``z_k`` (or
+on the perpendicular from ``O_i`` when they are parallel), and its row carries the gamma and b that
+place that normal on ``z_i``. Fixed tip frames are not added to a tree.
 
 Constant theta / r values at ``q = 0`` are written as offsets (``q - pi/2``, ``q + RL3``).
 The URDF inertials of every link rigidly attached to moving link j (through fixed joints,
@@ -328,8 +336,10 @@ def _subtree_has_moving(model: UrdfModel, link: str) -> bool:
     return any(jt.is_moving or _subtree_has_moving(model, jt.child) for jt in model.child_joints(link))
 
 
-def _select_chain(model: UrdfModel, base: str | None, tip: str | None) -> tuple[str, list[UrdfJoint]]:
-    """Base link and the joints from base to tip (in order)."""
+def _select_chain(model: UrdfModel, base: str | None, tip: str | None, *,
+                  allow_tree: bool = False) -> tuple[str, list[UrdfJoint] | None]:
+    """Base link and the joints from base to tip (in order); ``None`` instead of the joints when no tip
+    is given, the subtree branches into several moving chains and ``allow_tree`` (a tree to import whole)."""
     f = model.file
     roots = model.roots
     if len(roots) != 1:
@@ -352,6 +362,8 @@ def _select_chain(model: UrdfModel, base: str | None, tip: str | None) -> tuple[
         while True:
             kids = model.child_joints(lk)
             moving = [jt for jt in kids if jt.is_moving or _subtree_has_moving(model, jt.child)]
+            if len(moving) > 1 and allow_tree:
+                return base, None
             if len(moving) > 1:
                 raise RobotFileError([Problem(f, f"link {lk}", "tip", "the tree branches here into several moving chains ("
                                               + ", ".join(jt.name for jt in moving) + "); choose the chain with tip=LINK")])
@@ -384,6 +396,31 @@ def _select_chain(model: UrdfModel, base: str | None, tip: str | None) -> tuple[
     if not any(jt.is_moving for jt in chain):
         raise RobotFileError([Problem(f, f"chain {base} -> {tip}", "", "no moving joint between base and tip")])
     return base, chain
+
+
+def _select_tree(model: UrdfModel, base: str) -> list[UrdfJoint]:
+    """Every joint below ``base``, depth first (children in file order): the order of the MDH frames
+    of a tree, each joint after its antecedent and a joint's first moving child right after it."""
+    f = model.file
+    out: list[UrdfJoint] = []
+
+    def visit(lk: str) -> None:
+        for jt in model.child_joints(lk):
+            out.append(jt)
+            visit(jt.child)
+
+    visit(base)
+    bad = [jt for jt in out if jt.type in ("floating", "planar")]
+    if bad:
+        raise RobotFileError([Problem(f, f"joint {jt.name}", "type", f"{jt.type} joints cannot be part of an MDH tree") for jt in bad])
+    mimics = [jt for jt in out if jt.is_moving and jt.mimic is not None]
+    if mimics:
+        raise RobotFileError([Problem(
+            f, f"joint {jt.name}", "mimic",
+            f"mimics joint {jt.mimic!r}: a mimic joint is a constraint between joints, which a tree model "
+            "(and its drive chain) cannot express; import one chain that avoids it with --tip, or delete the "
+            "<mimic> tag to identify it as an independent joint") for jt in mimics])
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -420,32 +457,68 @@ def _pick_sign(x, ref, z):
     return x if np.cross(ref, x) @ z > 0 else -x
 
 
-def _kk_frames(points, axes, base_frame: str, tol: float):
-    """Frames 0..n (4x4 poses in the base-link frame at q = 0) and the joint signs."""
+def _kk_frames(points, axes, base_frame: str, tol: float, parents=None):
+    """Frames 0..n (4x4 poses in the base-link frame at q = 0) and the joint signs.
+
+    ``parents[i]`` is the index of the moving joint that carries joint i (-1: the base), in an order
+    where a joint comes after its parent and a joint's first child comes right after it (depth-first
+    preorder); ``None`` is the serial chain ``[-1, 0, 1, ...]``. Along a chain (a joint and its first
+    child) the frames are those of the Khalil-Kleinfinger construction described in the module
+    docstring. A further child k of joint i (a branch, [KK1986]) starts on the common normal of
+    ``z_i`` and ``z_k`` (its foot on ``z_k``, or the foot of the perpendicular from ``O_i`` when the
+    axes are parallel), which the row of k then describes with gamma and b.
+    """
     n = len(points)
+    parents = list(range(-1, n - 1)) if parents is None else list(parents)
     X, Z = np.array([1.0, 0, 0]), np.array([0, 0, 1.0])
     zs, signs = [], []
-    prev_z = Z if base_frame == "link" else None
-    for a in axes:
+    first_root = parents.index(-1)
+    for i, a in enumerate(axes):
+        p = parents[i]
+        if p >= 0:
+            prev_z = zs[p]
+        elif base_frame == "link":
+            prev_z = Z
+        else:
+            prev_z = zs[first_root] if i != first_root else None
         s = -1 if (prev_z is not None and a @ prev_z < -1 + tol) else 1
         zs.append(s * a)
         signs.append(s)
-        prev_z = s * a
-    frames = []
+    frames: list = [None] * n
+    start: dict = {}  # joint -> (anchor on its axis, reference direction for its x axis)
+
+    def branch_start(k, O, z, x):
+        """Anchor on axis k and reference x for a joint hung off the frame (O, z, x)."""
+        pk, zk = points[k], zs[k]
+        if np.linalg.norm(np.cross(z, zk)) > tol:
+            _, anchor = _closest(O, z, pk, zk)
+        else:
+            anchor = pk + ((O - pk) @ zk) * zk
+        ref = _perp(x, zk)
+        ref = _unit(ref) if np.linalg.norm(ref) > tol else _unit(_perp(np.cross(zk, x), zk))
+        return anchor, ref
+
     # anchor A_1 and reference direction for x_1
-    p1, z1 = points[0], zs[0]
+    p1, z1 = points[first_root], zs[first_root]
     if base_frame == "link" and np.linalg.norm(np.cross(Z, z1)) > tol:
         _, anchor = _closest(np.zeros(3), Z, p1, z1)
     else:
         anchor = p1 + ((-p1) @ z1) * z1  # closest point of axis 1 to the base origin
     ref = _perp(X, z1)
     ref = _unit(ref) if np.linalg.norm(ref) > tol else _unit(_perp(np.array([0, 1.0, 0]), z1))
+    start[first_root] = (anchor, ref)
     for i in range(n):
+        if i not in start:  # a branch: on its parent frame (frame 0 for a further root)
+            p = parents[i]
+            F = frames[p] if p >= 0 else (np.eye(4) if base_frame == "link" else frames[first_root])
+            start[i] = branch_start(i, F[:3, 3], F[:3, 2], F[:3, 0])
+        anchor, ref = start.pop(i)
         zi = zs[i]
-        if i == n - 1:
+        main = i + 1 if i + 1 < n and parents[i + 1] == i else None
+        if main is None:
             O, x, next_anchor = anchor, _unit(_perp(ref, zi)), None
         else:
-            pn, zn = points[i + 1], zs[i + 1]
+            pn, zn = points[main], zs[main]
             if np.linalg.norm(np.cross(zi, zn)) > tol:
                 F, G = _closest(anchor, zi, pn, zn)
                 x = _unit(G - F) if np.linalg.norm(G - F) > tol else _unit(np.cross(zi, zn))
@@ -458,9 +531,10 @@ def _kk_frames(points, axes, base_frame: str, tol: float):
                     x, next_anchor = _unit(_perp(ref, zi)), anchor
                 O = anchor
             x = _pick_sign(x, ref, zi)
-        frames.append(_frame(O, x, zi))
-        ref, anchor = x, next_anchor
-    frame0 = np.eye(4) if base_frame == "link" else frames[0].copy()
+        frames[i] = _frame(O, x, zi)
+        if main is not None:
+            start[main] = (next_anchor, x)
+    frame0 = np.eye(4) if base_frame == "link" else frames[first_root].copy()
     return [frame0] + frames, signs
 
 
@@ -529,7 +603,7 @@ def _identifier(name: str) -> str:
 # import
 # ---------------------------------------------------------------------------------------------
 def import_urdf(path, base: str | None = None, tip: str | None = None, name: str | None = None, **options) -> str:
-    """A URDF serial chain as robot-file text (TOML) in Khalil-Kleinfinger MDH notation.
+    """A URDF serial chain or tree as robot-file text (TOML) in Khalil-Kleinfinger MDH notation.
 
     Parameters
     ----------
@@ -537,7 +611,8 @@ def import_urdf(path, base: str | None = None, tip: str | None = None, name: str
         The URDF file.
     base, tip : str, optional
         Link names bounding the chain. Default: the root link, and the end of the single
-        moving chain below it (followed by a single fixed link if there is one).
+        moving chain below it (followed by a single fixed link if there is one); when the URDF
+        branches into several moving chains below the base and no tip is given, the whole tree.
     name : str, optional
         Robot name (default: the URDF robot name made an identifier).
     **options
@@ -553,7 +628,7 @@ def import_urdf(path, base: str | None = None, tip: str | None = None, name: str
     ------
     RobotFileError
         Unreadable or malformed URDF, unknown base/tip link, no moving joint in the chain,
-        floating/planar joint in the chain, a branching tree without ``tip``.
+        floating/planar joint in the chain or tree, a mimic joint in it.
     """
     p = Path(path)
     try:
@@ -611,8 +686,10 @@ def import_urdf_text(
     if base_frame not in ("joint", "link"):
         raise ValueError(f"base_frame must be 'joint' or 'link', got {base_frame!r}")
     model = parse_urdf_text(text, file=file, snap_angles=snap_angles)
-    base, chain = _select_chain(model, base, tip)
-    tip = chain[-1].child
+    base, selected = _select_chain(model, base, tip, allow_tree=True)
+    tree = selected is None  # no tip and several moving chains below the base: the whole tree
+    chain = _select_tree(model, base) if selected is None else selected
+    tip = base if tree else chain[-1].child
     f = model.file
 
     # link poses (base-link frame, q = 0) of the whole subtree below the base
@@ -635,19 +712,23 @@ def import_urdf_text(
 
     moving = [jt for jt in chain if jt.is_moving]
     n = len(moving)
+    index = {jt.name: i for i, jt in enumerate(moving)}
+    parents = []  # index of the moving joint carrying each moving joint (-1: the base); ant = parent + 1
+    for jt in moving:
+        up = model.parent_joint(jt.parent) if jt.parent != base else None
+        while up is not None and up.name not in index:
+            up = model.parent_joint(up.parent) if up.parent != base else None
+        parents.append(-1 if up is None else index[up.name])
     points = [pose[jt.child][:3, 3] for jt in moving]
     axes = [_unit(pose[jt.child][:3, :3] @ jt.axis) for jt in moving]
-    frames, signs = _kk_frames(points, axes, base_frame, tol)
+    frames, signs = _kk_frames(points, axes, base_frame, tol, parents)
 
     # which moving link carries each link (None: ground); ignored moving side joints
     owner: dict[str, int | None] = {base: None}
     ignored: list[str] = []
     on_chain = {jt.name for jt in chain}
-    k = None
-    for jt in chain:
-        if jt.is_moving:
-            k = moving.index(jt) + 1
-        owner[jt.child] = k
+    for jt in chain:  # parents before children (a chain, or a tree depth first)
+        owner[jt.child] = index[jt.name] + 1 if jt.is_moving else owner[jt.parent]
     for lk in [base] + [jt.child for jt in chain]:
         stack = [jt for jt in model.child_joints(lk) if jt.name not in on_chain]
         while stack:
@@ -692,13 +773,14 @@ def import_urdf_text(
     # rows
     rows = []
     for i in range(1, n + 1):
-        T = _inv(frames[i - 1]) @ frames[i]
+        ant = parents[i - 1] + 1
+        T = _inv(frames[ant]) @ frames[i]
         params = _mdh_from_transform(T, tol)
         err = np.abs(mdh_transform(*params) - T).max()
         if err > 1e3 * tol:  # pragma: no cover - internal consistency check
             raise ModelError(f"{f}: MDH decomposition of joint {moving[i - 1].name} is off by {err:.2e}")
-        rows.append((i, i - 1, 0 if moving[i - 1].type != "prismatic" else 1, params, moving[i - 1]))
-    tip_fixed = chain[-1].type == "fixed"
+        rows.append((i, ant, 0 if moving[i - 1].type != "prismatic" else 1, params, moving[i - 1]))
+    tip_fixed = not tree and chain[-1].type == "fixed"
     if tip_fixed:
         T = _inv(frames[n]) @ pose[tip]
         rows.append((n + 1, n, 2, _mdh_from_transform(T, tol), None))
@@ -718,8 +800,9 @@ def import_urdf_text(
     robot_name = name if name is not None else _identifier(model.name or Path(file).stem or "robot")
     g0 = frames[0][:3, :3].T @ g_base
     frame_note = "frame 0 = frame 1 at q = 0" if base_frame == "joint" else f"frame 0 = link {base}"
+    what = f"tree below {base}" if tree else f"chain {base} -> {tip}"
     source = (
-        f"URDF {Path(file).name} (robot '{model.name}'), chain {base} -> {tip}, {frame_note}; "
+        f"URDF {Path(file).name} (robot '{model.name}'), {what}, {frame_note}; "
         "imported by symoro_gen.description.urdf.import_urdf; nominal values from the URDF inertials "
         "(FV, FS from <dynamics damping friction>)"
     )
@@ -752,7 +835,9 @@ def import_urdf_text(
 
     head = [
         f"# Imported from {file} by symoro_gen.description.urdf.import_urdf.",
-        f"# Chain {base} -> {tip}: " + ", ".join(f"{jt.name} ({jt.type})" for jt in chain) + ".",
+        f"# Chain {base} -> {tip}: " + ", ".join(f"{jt.name} ({jt.type})" for jt in chain) + "." if not tree else
+        f"# Tree below {base} (frames depth first, branches by ant): "
+        + ", ".join(f"{jt.name} ({jt.type})" for jt in chain) + ".",
     ]
     if ignored:
         head.append("# Left out (moving joints off the chain, and what they carry): " + ", ".join(sorted(ignored)) + ".")

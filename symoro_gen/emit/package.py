@@ -320,6 +320,8 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         "c_functions": {k: f"{robot.name}_{k}_regressor" for k in ("base", "standard", "payload")},
         "files": sorted(list(files) + ["manifest.json"]),
     }
+    if robot.loops:  # closed loops: this package is the tree model; symoro_gen.closedloop projects it
+        manifest["closed_loops"] = len(robot.loops)
     files["manifest.json"] = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
     return files, ops
 

@@ -23,7 +23,7 @@ trajectories, AssemblyOptions(...))``); :mod:`.assemble` keeps the former keywor
 """
 from .accumulate import Accumulator, accumulate
 from .essential import EssentialResult, essential_parameters
-from .estimators import fit_ols, fit_tls, fit_wls
+from .estimators import drop_columns, drop_unexcited, fit_ols, fit_tls, fit_wls, unexcited_columns
 from .gains import DriveGainsResult, drive_gains, identify_with_drive_gains, sensor_gains
 from .method import identify
 from .observation import ObservationSystem
@@ -36,5 +36,5 @@ __all__ = [
     "fit_wls", "identify", "DriveGainsResult", "drive_gains", "identify_with_drive_gains",
     "sensor_gains", "ObservationSystem", "fit_with_known_payload", "identify_payload",
     "EliminationStep", "Gains", "IdentificationResult", "apply_gains", "fix_parameters",
-    "select_rows", "stack_systems",
+    "select_rows", "stack_systems", "drop_columns", "drop_unexcited", "unexcited_columns",
 ]

@@ -7,12 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import IdentificationError
+from ..errors import IdentificationError, OptionError
 from ..model import IdentificationModel
 from ..observations.assembly import assemble
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
 from ..preprocessing.cli import add_data_options, data_block, data_notes, data_text, load_data, split_held_back
+from .estimators import drop_unexcited, with_unexcited
 from .physical import identify_physical
 from .result import _json_float, basis_text
 from .systems import stack_systems
@@ -60,6 +61,10 @@ def run_identify(args) -> dict:
     asm_l = assemble(model, loaded, replace(opts, payload_columns=True)) if loaded else None
     sys_u = asm_u.system
     sys_l = asm_l.system if asm_l is not None else None
+    # a joint that stands still leaves columns of W zero: an error naming the files, or --drop-unexcited
+    (sys_u, sys_l), unexcited = drop_unexcited([sys_u, sys_l], (*unloaded, *loaded), drop=args.drop_unexcited)
+    if unexcited and args.method in ("iv", "didim"):
+        raise OptionError(f"--drop-unexcited is not available with --method {args.method} (it simulates every joint)")
     dg = None
     closed = None
     if args.method in ("iv", "didim"):
@@ -73,7 +78,7 @@ def run_identify(args) -> dict:
         res = fit_with_known_payload(sys_u, sys_l, known, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
     else:
         res = identify(sys_u, method=args.method, essential=args.essential, r_sigma=args.r_sigma)
-    res = res.with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
+    res = with_unexcited(res, unexcited).with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
     out = {"robot": robot.name, "data": [], "loaded": [str(p) for p in args.loaded or ()]}
     phys = res_u = None
     if getattr(args, "physical", False):
@@ -243,6 +248,9 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
     p.add_argument("--min-velocity", type=float, help="drop identification rows that depend on samples slower than "
                    "this [rad/s] (Coulomb friction is ill-defined near zero velocity); validation errors use every sample")
+    p.add_argument("--drop-unexcited", action="store_true",
+                   help="leave out the parameters the data do not excite (their columns of W are zero, e.g. a joint "
+                        "that stands still) and report them as not identified, instead of stopping")
     p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
     cl = p.add_argument_group("closed-loop estimators (--method iv|didim)")
     cl.add_argument("--kp", type=float, nargs="+", help="position gain(s) of the robot's PID controller, per joint")

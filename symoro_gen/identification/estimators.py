@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import cast
 
 import numpy as np
 
@@ -93,24 +94,139 @@ def _check_problem(acc: Accumulator, active: Sequence[int], extra_cols: int, wha
             f"(need more than {need} to estimate the parameters and the noise level)")
 
 
+def _qr_r(M: np.ndarray) -> np.ndarray:
+    """The R factor of ``M`` (``numpy.linalg.qr(mode="r")`` returns the bare array)."""
+    return cast(np.ndarray, np.linalg.qr(M, mode="r"))
+
+
 def _column_norms(M: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->j", M, M))
 
 
 def _check_zero_columns(norms: np.ndarray, names: Sequence[str], opts: Options, what: str) -> None:
     top = norms.max() if norms.size else 0.0
-    zero = [names[i] for i in np.flatnonzero(norms <= opts.zero_col_tol * top)] if top > 0 else list(names)
+    zero = [names[int(i)] for i in np.flatnonzero(norms <= opts.zero_col_tol * top)] if top > 0 else list(names)
     if zero:
         raise IdentificationError(
             f"{what}: column(s) {zero} of W are all zero: these parameters have no effect on the "
-            f"data (not excited, or not base parameters); remove them before identification")
+            f"data (not excited, or not base parameters); leave them out with drop_unexcited() "
+            f"(`symoro-gen identify --drop-unexcited`) to identify the others")
+
+
+# ---------------------------------------------------------------------------- unexcited parameters
+#: a joint whose position spans less than this [rad or m] in a file "does not move" there (named in messages)
+STILL_SPAN = 1e-3
+
+
+def unexcited_columns(systems: Sequence[ObservationSystem], *, zero_col_tol: float = ZERO_COL_TOL
+                      ) -> tuple[str, ...]:
+    """Columns that are zero in every system (norm <= ``zero_col_tol`` x the largest column norm), in order.
+
+    The estimators refuse such columns (no data constrain them: ``W'W`` is singular, RX-90 eq. 17);
+    a column present in several systems counts with its norm over all of them, as in the stacked system
+    the estimators solve (e.g. unloaded and loaded recordings, [GB-gains] eq. 16).
+    """
+    norm2: dict[str, float] = {}
+    for sys_ in systems:
+        for name, v in zip(sys_.names, np.einsum("ij,ij->j", sys_.W, sys_.W)):
+            norm2[name] = norm2.get(name, 0.0) + float(v)
+    if not norm2:
+        return ()
+    top = math.sqrt(max(norm2.values()))
+    return tuple(n for n, v in norm2.items() if math.sqrt(v) <= zero_col_tol * top)
+
+
+def drop_columns(system: ObservationSystem, names: Sequence[str]) -> ObservationSystem:
+    """``system`` without the columns ``names`` (those it lacks are ignored)."""
+    gone = set(names)
+    keep = [i for i, n in enumerate(system.names) if n not in gone]
+    return ObservationSystem(system.W[:, keep], system.Y, tuple(system.names[i] for i in keep), system.joint,
+                             system.weights)
+
+
+def still_joints(trajectories, span: float = STILL_SPAN) -> list[tuple[str, int, float]]:
+    """``(source, joint (1-based), span of q)`` for every joint whose position spans less than ``span``."""
+    out = []
+    for tr in trajectories:
+        q = np.asarray(tr.q, float)
+        if q.size == 0:
+            continue
+        ptp = np.ptp(q, axis=0)
+        out += [(str(tr.source), int(j) + 1, float(ptp[j])) for j in np.flatnonzero(ptp < span)]
+    return out
+
+
+def drop_unexcited(systems: Sequence[ObservationSystem | None], trajectories=(), *, drop: bool = True,
+                   zero_col_tol: float = ZERO_COL_TOL, option: str = "--drop-unexcited"
+                   ) -> tuple[list[ObservationSystem | None], tuple[str, ...]]:
+    """Leave out the parameters no recording excites (a joint that stands still), or say which and why.
+
+    Parameters
+    ----------
+    systems : sequence of ObservationSystem or None
+        The systems identified together (None entries are passed through).
+    trajectories : sequence of Trajectory
+        The recordings behind them: named in the error, with the joints that do not move in each.
+    drop : bool
+        True: return the systems without those columns. False: raise if there are any.
+    option : str
+        How the caller turns ``drop`` on (named in the error's hint).
+
+    Returns
+    -------
+    (systems, unexcited)
+        The systems (columns left out when ``drop``) and the names left out, to be reported as not
+        identified (:attr:`IdentificationResult.unexcited`).
+
+    Raises
+    ------
+    IdentificationError
+        ``drop`` is False and some columns are zero: names the parameters, the files and the joints
+        that do not move in them.
+    """
+    present = [s for s in systems if s is not None]
+    zero = unexcited_columns(present, zero_col_tol=zero_col_tol)
+    if not zero:
+        return list(systems), ()
+    all_names = list(dict.fromkeys(n for s in present for n in s.names))
+    if len(zero) == len(all_names):
+        drop = False  # nothing would be left to identify
+    if not drop:
+        trs = list(trajectories)
+        files = list(dict.fromkeys(str(tr.source) for tr in trs))
+        shown = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
+        still = still_joints(trs)
+        why = ""
+        if still:
+            per: dict[int, list[float]] = {}
+            for _src, j, span in still:
+                per.setdefault(j, []).append(span)
+            why = " (" + ", ".join(f"joint {j} does not move: q{j} spans at most {max(v):.3g}"
+                                   for j, v in sorted(per.items())) + ")"
+        err = IdentificationError(
+            f"{shown or 'the data'}: parameter(s) {', '.join(zero)} ({len(zero)} of {len(all_names)}) are not "
+            f"excited: their columns of W are all zero{why}, so these data cannot identify them")
+        err.hint = (f"give {option} to identify the other parameters and report these as not identified, or "
+                    "record a trajectory that moves every joint (symoro-gen excite)"
+                    if len(zero) < len(all_names) else "record a trajectory that moves the joints (symoro-gen excite)")
+        raise err
+    return [drop_columns(s, zero) if s is not None else None for s in systems], zero
+
+
+def with_unexcited(result: IdentificationResult, unexcited: Sequence[str]) -> IdentificationResult:
+    """``result`` reporting ``unexcited`` as not identified (a warning says why and what it means)."""
+    if not unexcited:
+        return result
+    note = (f"{', '.join(unexcited)} not identified: their columns of W are zero in the identification data "
+            "(not excited); predictions use 0 for them, so validation data that excite them show the gap")
+    return replace(result, unexcited=tuple(unexcited), warnings=(note, *result.warnings))
 
 
 def _involved(v: np.ndarray, names: Sequence[str], opts: Options) -> list[str]:
     a = np.abs(v)
     idx = np.flatnonzero(a >= opts.involved_tol * a.max())
     idx = idx[np.argsort(-a[idx])]
-    return [f"{names[i]} ({v[i]:+.2f})" for i in idx]
+    return [f"{names[int(i)]} ({v[i]:+.2f})" for i in idx]
 
 
 def _conditioning(Wsqrt: np.ndarray, names: Sequence[str], opts: Options, what: str):
@@ -165,7 +281,7 @@ def _ols_core(M: np.ndarray, r: int, names: Sequence[str], opts: Options, what: 
     Returns values, cov, std, sigma, cond, cond_scaled, warnings.
     """
     k = M.shape[1] - 1
-    R = np.linalg.qr(M, mode="r")
+    R = _qr_r(M)
     if R.shape[0] < k + 1:
         R = np.vstack([R, np.zeros((k + 1 - R.shape[0], k + 1))])
     R11, z, e = R[:k, :k], R[:k, k], R[k, k]
@@ -190,7 +306,7 @@ def _tls_core(M: np.ndarray, r: int, names: Sequence[str], opts: Options, what: 
     Returns values, cov, std, sigma_W, cond, cond_scaled, warnings.
     """
     k = M.shape[1] - 1
-    R = np.linalg.qr(M, mode="r")
+    R = _qr_r(M)
     if R.shape[0] < k + 1:
         R = np.vstack([R, np.zeros((k + 1 - R.shape[0], k + 1))])
     cond, cond_scaled, rank, _, _, _, Vts, warnings = _conditioning(R[:, :k], names, opts, what)

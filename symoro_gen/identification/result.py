@@ -176,6 +176,10 @@ class IdentificationResult:
         Known parameters moved to the left-hand side (e.g. known payload parameters).
     eliminated : tuple of str
         Parameters cancelled by the essential-parameter procedure (their value is 0).
+    unexcited : tuple of str
+        Parameters left out because their columns of W are zero in the identification data (a joint
+        that does not move: ``identify --drop-unexcited``): not identified, no value; predictions use 0
+        for them (they contribute nothing on the identification data).
     warnings : tuple of str
         Numbered in :meth:`summary`; ill-conditioning, rank deficiency, poorly identified parameters.
     rel_err_raw : ndarray, shape (n_joints,) or None
@@ -204,6 +208,7 @@ class IdentificationResult:
     fixed: tuple[tuple[str, float], ...] = ()
     eliminated: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
+    unexcited: tuple[str, ...] = ()
     rel_err_raw: np.ndarray | None = None
     rel_err_basis: dict | None = None
 
@@ -228,6 +233,7 @@ class IdentificationResult:
             object.__setattr__(self, "joint_sigma", _frozen(self.joint_sigma).reshape(-1))
         object.__setattr__(self, "fixed", tuple((str(k), float(v)) for k, v in self.fixed))
         object.__setattr__(self, "eliminated", tuple(self.eliminated))
+        object.__setattr__(self, "unexcited", tuple(self.unexcited))
         object.__setattr__(self, "warnings", tuple(self.warnings))
         for f in ("cond", "cond_scaled", "sigma"):
             object.__setattr__(self, f, float(getattr(self, f)))
@@ -255,11 +261,15 @@ class IdentificationResult:
             return fixed[name]
         if name in self.eliminated:
             return 0.0
+        if name in self.unexcited and name not in self.names:
+            raise IdentificationError(f"{name} was not identified: its column of W is zero in the identification "
+                                      "data (not excited)")
         return float(self.values[self.index(name)])
 
     def parameter_map(self) -> dict[str, float]:
-        """All parameters by name: estimated, eliminated (0) and fixed (known) ones."""
-        out = {n: float(v) for n, v in zip(self.names, self.values)}
+        """All parameters by name: estimated, eliminated (0), unexcited (0) and fixed (known) ones."""
+        out = {n: 0.0 for n in self.unexcited}
+        out.update({n: float(v) for n, v in zip(self.names, self.values)})
         out.update({n: 0.0 for n in self.eliminated})
         out.update(dict(self.fixed))
         return out
@@ -357,6 +367,8 @@ class IdentificationResult:
                          f"{', '.join(n for n, _ in self.fixed[:5])}, ...)")
         if self.eliminated:
             lines.append(f"cancelled (essential parameters): {', '.join(self.eliminated)}")
+        if self.unexcited:
+            lines.append(f"not identified (columns of W zero: not excited by the data): {', '.join(self.unexcited)}")
         lines.append("")
         lines.append("Rel. err. norm ||rho_j||/||Y_j|| on the " + basis_text(self.rel_err_basis))
         lines.append("  ".join(f"joint {j + 1}: {e:.4f}" for j, e in enumerate(self.rel_err)))
@@ -394,6 +406,8 @@ class IdentificationResult:
             "eliminated": list(self.eliminated),
             "warnings": list(self.warnings),
         }
+        if self.unexcited:
+            out["unexcited"] = list(self.unexcited)
         if self.rel_err_raw is not None:
             out["rel_err_raw"] = [_json_float(v) for v in self.rel_err_raw]
         if self.rel_err_basis is not None:

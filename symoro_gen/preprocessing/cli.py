@@ -55,7 +55,7 @@ def load_data(args, paths: Sequence, robot, *, loaded: bool = False
               ) -> tuple[tuple[Trajectory, ...], tuple[LoadReport, ...]]:
     """Read ``paths`` with the data options of ``args`` for ``robot`` (its drive chain applied)."""
     fmt = format_from_args(args)
-    return load_logs(paths, fmt, n_joints=robot.n_joints, robot=robot, drive_chain=robot.drive_chain,
+    return load_logs(paths, fmt, n_joints=len(robot.model_joints), robot=robot, drive_chain=robot.drive_chain,
                      loaded=loaded)
 
 

@@ -55,6 +55,8 @@ import math
 import os
 import re
 import warnings
+import zipfile
+import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -87,6 +89,17 @@ DEFAULT_KEYS: dict[str, tuple[str, ...]] = {
 }
 CSV_TEMPLATES = {"q": "q{j}", "tau": "tau{j}", "dq": "dq{j}", "ddq": "ddq{j}"}
 MAX_RANGES_SHOWN = 5
+#: |value| above which a (non-time) sample is absurd: a sensor fault or a logging glitch, not a measurement.
+#: Every loader (this module's, :mod:`~symoro_gen.preprocessing.logformat`'s) rejects such values.
+ABSURD_VALUE = 1e6
+#: hint of the errors about bad values (non-finite, absurd)
+BAD_VALUE_HINT = ("fix or remove these rows; the command line's --drop-bad-rows drops them (counted in the "
+                  "output)")
+#: hint of the errors about the time column
+TIME_HINT = ("the command line's --resample puts irregular time stamps on a uniform grid (gaps longer than "
+             "--max-gap split the file); --dt SECONDS ignores the time column")
+#: what reading a damaged .npz/.npy can raise (zip directory, CRC, truncated or garbled members)
+_ARCHIVE_ERRORS = (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
 
 
 class DataWarning(UserWarning):
@@ -156,6 +169,7 @@ def parse_data_spec(spec: str | os.PathLike, *, base_dir: str | os.PathLike | No
     loaded = None
     probs: list[Problem] = []
     seen_time: set[str] = set()
+    empty: set[str] = set()  # keys given without a file (reported once, not again as missing)
     for item in text.split(","):
         if not item.strip():
             continue
@@ -186,13 +200,16 @@ def parse_data_spec(spec: str | os.PathLike, *, base_dir: str | os.PathLike | No
             if b is None:
                 probs.append(Problem(text, f"item {item!r}", k, "must be true or false"))
             loaded = b
+        elif not v:
+            probs.append(Problem(text, f"item {item!r}", k, "no file given"))
+            empty.add(k)
         else:
             files[k] = resolve(v)
     if "file" in files and len(files) > 1:
         probs.append(Problem(text, "", "file", "'file=' cannot be combined with q=/tau=/... files"))
     if "file" not in files:
         for k in ("q", "tau"):
-            if k not in files:
+            if k not in files and k not in empty:
                 probs.append(Problem(text, "", k, f"missing: a split recording needs {k}=FILE"))
     if probs:
         raise DataFileError(probs)
@@ -262,15 +279,39 @@ def _is_number(s: str) -> bool:
         return False
 
 
+def not_text_problem(path: str, exc: UnicodeDecodeError) -> Problem:
+    """The problem of a text file that is not UTF-8: the line of the first bad byte, how much is bad."""
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except OSError:
+        raw = b""
+    line = raw[:exc.start].count(b"\n") + 1
+    where = f"line {line}" if raw else ""
+    bad = raw.decode("utf-8", errors="replace").count("\ufffd") if raw else 0
+    what = "not a text file" if bad > max(8, len(raw) // 100) else "not UTF-8 text here"
+    return Problem(path, where, "", f"{what} (byte 0x{raw[exc.start]:02x}: {exc.reason})" if raw else
+                   f"{what} ({exc.reason})")
+
+
+def open_problem(path: str, exc: OSError) -> Problem:
+    """A data file that cannot be opened: missing, a folder, unreadable."""
+    if isinstance(exc, FileNotFoundError):
+        return Problem(path, "", "", "file not found")
+    if isinstance(exc, IsADirectoryError):
+        return Problem(path, "", "", "is a folder, not a data file")
+    return Problem(path, "", "", f"cannot read: {exc.strerror or exc}")
+
+
 def _read_text_table(path: str, *, header_required: bool) -> tuple[list[str] | None, np.ndarray, int]:
     """Read a delimited numeric table. Returns (header names or None, values (N, k), header lines)."""
     try:
         with open(path, encoding="utf-8-sig") as f:
             first = f.readline()
-    except FileNotFoundError:
-        raise DataFileError([Problem(path, "", "", "file not found")]) from None
+    except OSError as exc:
+        raise DataFileError([open_problem(path, exc)]) from None
     except UnicodeDecodeError as exc:
-        raise DataFileError([Problem(path, "", "", f"not a text file ({exc.reason})")]) from None
+        raise DataFileError([not_text_problem(path, exc)]) from None
     if not first.strip():
         raise DataFileError([Problem(path, "line 1", "", "empty file (no header, no data)")])
     delim = _detect_delimiter(first)
@@ -286,6 +327,8 @@ def _read_text_table(path: str, *, header_required: bool) -> tuple[list[str] | N
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             data = np.loadtxt(path, delimiter=delim, skiprows=skip, ndmin=2, dtype=float, encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:  # a stray byte further down (a ValueError: before the clause below)
+        raise DataFileError([not_text_problem(path, exc)]) from None
     except ValueError:
         data = None
     if data is None or (data.size and data.shape[1] != ncol):
@@ -299,18 +342,22 @@ def _raise_parse_problems(path, delim, skip, ncol, names) -> NoReturn:
     probs: list[Problem] = []
     bad_count: list[int] = []
     bad_value: dict[str, list[tuple[int, str]]] = {}
-    with open(path, encoding="utf-8-sig") as f:
-        for lineno, line in enumerate(f, start=1):
-            if lineno <= skip or not line.strip():
-                continue
-            parts = _split(line.rstrip("\r\n"), delim)
-            if len(parts) != ncol:
-                bad_count.append(lineno)
-                continue
-            for c, s in enumerate(parts):
-                if not _is_number(s):
-                    col = names[c] if names else f"column {c + 1}"
-                    bad_value.setdefault(col, []).append((lineno, s))
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            text_lines = list(f)
+    except UnicodeDecodeError as exc:
+        raise DataFileError([not_text_problem(path, exc)]) from None
+    for lineno, line in enumerate(text_lines, start=1):
+        if lineno <= skip or not line.strip():
+            continue
+        parts = _split(line.rstrip("\r\n"), delim)
+        if len(parts) != ncol:
+            bad_count.append(lineno)
+            continue
+        for c, s in enumerate(parts):
+            if not _is_number(s):
+                col = names[c] if names else f"column {c + 1}"
+                bad_value.setdefault(col, []).append((lineno, s))
     if bad_count:
         runs = _runs(np.isin(np.arange(max(bad_count) + 1), bad_count))
         probs.append(Problem(path, _fmt_ranges([(a - 1, b - 1) for a, b in runs]).replace("rows", "lines"), "",
@@ -425,25 +472,80 @@ def _load_arrays(path: str, fmt: str) -> dict[str, np.ndarray]:
                 return {k: np.asarray(z[k]) for k in z.files}
         except FileNotFoundError:
             raise DataFileError([Problem(path, "", "", "file not found")]) from None
-        except (ValueError, OSError):
+        except _ARCHIVE_ERRORS as exc:
             # never relay numpy's advice to allow pickles: say what the file is instead
-            raise DataFileError([Problem(path, "", "", f"not a NumPy .npz archive ({_what_file(path)})")],
+            raise DataFileError([Problem(path, "", "", f"not a readable NumPy .npz archive ({_what_file(path)}"
+                                         f"{_archive_detail(exc)})")],
                                 hint="save arrays with numpy.savez(path, t=..., q=..., tau=...); a text table "
                                      "must end in .csv or .txt") from None
+    d = load_mat(path, squeeze_me=False)
+    return {k: np.asarray(v) for k, v in d.items() if not k.startswith("__")}
+
+
+def load_mat(path: str, **kwargs) -> dict:
+    """:func:`scipy.io.loadmat` with every failure as a one-line :class:`DataFileError` naming the file.
+
+    scipy's MATLAB reader meets damaged files with whatever its parser hits first (``IndexError``,
+    ``struct.error``, ``MatReadError``, ``zlib.error``...), so any exception from it is a bad file.
+    """
     try:
-        d = scipy.io.loadmat(path, squeeze_me=False)
+        return scipy.io.loadmat(path, **kwargs)
     except FileNotFoundError:
         raise DataFileError([Problem(path, "", "", "file not found")]) from None
     except NotImplementedError:
         raise DataFileError([Problem(path, "", "", "MATLAB v7.3 (HDF5) files are not supported")],
                             hint="save with save(..., '-v7') or export to CSV/NPZ") from None
-    except (ValueError, OSError, TypeError) as exc:
-        raise DataFileError([Problem(path, "", "", f"cannot read as a MATLAB file: {exc}")]) from None
-    return {k: np.asarray(v) for k, v in d.items() if not k.startswith("__")}
+    except (MemoryError, RecursionError):
+        raise DataFileError([Problem(path, "", "", "cannot read as a MATLAB file: its headers declare "
+                                     "impossible sizes (damaged?)")]) from None
+    except Exception as exc:  # noqa: BLE001 - a damaged file reaches any line of scipy's parser
+        raise DataFileError([Problem(path, "", "", f"cannot read as a MATLAB file ({_what_file(path, 'mat')}; "
+                                     f"{type(exc).__name__}: {_one_line(exc)})")],
+                            hint="save with MATLAB's save(..., '-v7') or scipy.io.savemat, or export to "
+                                 "CSV/NPZ") from None
 
 
-def _what_file(path: str) -> str:
-    """A few words on what a file that failed to load really is (for error messages)."""
+def _one_line(exc: BaseException) -> str:
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+
+
+def _archive_detail(exc: BaseException) -> str:
+    """``; damaged: ...`` for archive errors worth naming (CRC, truncation), never numpy's pickle advice."""
+    if isinstance(exc, (zipfile.BadZipFile, zlib.error, EOFError)):
+        return f"; damaged: {_one_line(exc)}"
+    return ""
+
+
+def load_npy(path: str) -> np.ndarray:
+    """One ``.npy`` array as floats; a missing, damaged or non-numeric file is a :class:`DataFileError`
+    naming it (never numpy's advice to allow pickles)."""
+    try:
+        a = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise DataFileError([Problem(path, "", "", "file not found")]) from None
+    except IsADirectoryError:
+        raise DataFileError([Problem(path, "", "", "is a folder, not a .npy file")]) from None
+    except _ARCHIVE_ERRORS as exc:
+        what = _what_file(path)
+        if what.startswith("a single .npy"):
+            what = "its header is .npy but the data are damaged or cut short"
+        detail = "" if "pickle" in str(exc) else f": {_one_line(exc)}"
+        raise DataFileError([Problem(path, "", "", f"not a readable NumPy .npy array ({what}{detail})")],
+                            hint="save one array with numpy.save(path, array) (samples x joints)") from None
+    if isinstance(a, np.lib.npyio.NpzFile):
+        a.close()
+        raise DataFileError([Problem(path, "", "", "an .npz archive, not a single .npy array")])
+    if not np.issubdtype(a.dtype, np.number) and a.dtype != bool:
+        raise DataFileError([Problem(path, "", "", f"not numeric (dtype {a.dtype})")])
+    a = a.astype(float)
+    if a.ndim not in (1, 2):
+        raise DataFileError([Problem(path, "", "", f"must be a 1-D or 2-D (samples x joints) array, got shape "
+                                     f"{a.shape}")])
+    return a
+
+
+def _what_file(path: str, expected: str = "npz") -> str:
+    """A few words on what a file that failed to load (as an ``expected`` kind) really is."""
     try:
         with open(path, "rb") as f:
             head = f.read(512)
@@ -454,7 +556,7 @@ def _what_file(path: str) -> str:
     if head.startswith(b"\x93NUMPY"):
         return "a single .npy array, not an .npz archive"
     if head.startswith(b"PK"):
-        return "a zip archive without readable .npy members"
+        return "a zip archive without readable .npy members" if expected == "npz" else "a zip archive, e.g. an .npz"
     try:
         head.decode("utf-8")
         return "the file is text, e.g. a CSV table"
@@ -527,10 +629,7 @@ def _read_split(spec: DataSpec, n: int, probs) -> _Raw:
     raw = _Raw(fmt="split")
     for role, path in spec.files.items():
         if path.endswith(".npy"):
-            try:
-                a = np.load(path, allow_pickle=False).astype(float)
-            except FileNotFoundError:
-                raise DataFileError([Problem(path, "", "", "file not found")]) from None
+            a = load_npy(path)
             if a.ndim == 1:
                 a = a[:, None]
             names = [f"column {c + 1}" for c in range(a.shape[1])]
@@ -559,17 +658,27 @@ def _read_split(spec: DataSpec, n: int, probs) -> _Raw:
 # ---------------------------------------------------------------------------------------------
 # checks
 # ---------------------------------------------------------------------------------------------
-def _check_finite(raw: _Raw, probs: list[Problem]) -> None:
-    for c in raw.cols.values():
+def _check_values(raw: _Raw, probs: list[Problem]) -> None:
+    """Non-finite values anywhere, absurd ones (``|value| > ABSURD_VALUE``) outside the time column:
+    one problem per column, naming its rows (the same rule as ``logformat``'s loader)."""
+    for role, c in raw.cols.items():
         bad = ~np.isfinite(c.values)
-        if not bad.any():
-            continue
         for k in np.flatnonzero(bad.any(axis=0)):
             col = bad[:, k]
             v = c.values[col, k]
             kinds = [s for s, m in (("NaN", np.isnan(v)), ("+inf", v == np.inf), ("-inf", v == -np.inf)) if m.any()]
             probs.append(Problem(c.file, _fmt_ranges(_runs(col), c.line_offset), c.names[k],
                                  f"{int(col.sum())} non-finite value(s) ({', '.join(kinds)})"))
+        if role == "t":
+            continue
+        with np.errstate(invalid="ignore"):
+            absurd = np.isfinite(c.values) & (np.abs(c.values) > ABSURD_VALUE)
+        for k in np.flatnonzero(absurd.any(axis=0)):
+            col = absurd[:, k]
+            worst = float(np.max(np.abs(c.values[col, k])))
+            probs.append(Problem(c.file, _fmt_ranges(_runs(col), c.line_offset), c.names[k],
+                                 f"{int(col.sum())} absurd value(s) (|value| > {ABSURD_VALUE:g}, up to {worst:.3g}): "
+                                 "a sensor fault or a logging glitch, not a measurement"))
 
 
 def _check_time(t: np.ndarray, col: _Column, jitter_tol: float, probs: list[Problem]) -> dict:
@@ -597,9 +706,12 @@ def _check_time(t: np.ndarray, col: _Column, jitter_tol: float, probs: list[Prob
                              f"{100 * jitter_tol:g} % from the median step {med:.6g} s (e.g. {worst:.6g} s); "
                              "gaps or resets must be split into separate files, or resampled (--resample)"))
     for a, b, local in step_regime_changes(t, irr):
+        inside = np.zeros(d.size, bool)
+        inside[max(a - 2, 0):b - 1] = True  # steps ending at rows a..b (1-based)
+        other = float(np.median(d[~inside])) if (~inside).any() else med
         probs.append(Problem(col.file, _fmt_ranges([(a, b)], col.line_offset), name,
-                             f"the sampling period changes: about {local:.6g} s per step here against "
-                             f"{med:.6g} s (median); a recording must keep one period: resample it (--resample) "
+                             f"the sampling period changes: about {local:.6g} s per step in these rows, "
+                             f"{other:.6g} s elsewhere; a recording must keep one period: resample it (--resample) "
                              "or split it into separate files"))
     return info
 
@@ -751,11 +863,11 @@ def load_trajectory(
         Listing every problem found (file, column, rows).
     """
     if robot is not None and n_joints is None:
-        n_joints = robot.n_joints
+        n_joints = len(robot.model_joints)
     if n_joints is None or int(n_joints) < 1:
         raise ValueError("n_joints (or robot) is required")
     n = int(n_joints)
-    joint_types = [r.sigma for r in robot.joints] if robot is not None else None
+    joint_types = [r.sigma for r in robot.model_joints] if robot is not None else None
     spec = path if isinstance(path, DataSpec) else parse_data_spec(path, base_dir=base_dir)
     if dt is None:
         dt = spec.dt
@@ -787,10 +899,11 @@ def load_trajectory(
     if raw.fmt in ("npz", "mat") and len(set(lens.values())) > 1:
         desc = ", ".join(f"{raw.cols[r].names[0].split('[')[0]}: {m}" for r, m in lens.items())
         probs.append(Problem(source, "", "", f"arrays have different numbers of samples ({desc})"))
-    _check_finite(raw, probs)
+    _check_values(raw, probs)
     N = max(lens.values()) if lens else 0
     if probs:
-        raise DataFileError(probs)
+        bad_values = any("non-finite" in p.message or "absurd" in p.message for p in probs)
+        raise DataFileError(probs, hint=BAD_VALUE_HINT if bad_values else None)
     # time base
     tinfo: dict = {}
     t_from_dt = False
@@ -806,11 +919,12 @@ def load_trajectory(
         t = np.arange(N) * float(dt)
         t_from_dt = True
         tinfo = {"dt_median": float(dt), "dt_max_rel_jitter": 0.0}
+    time_probs = bool(probs)
     if min_samples > N:
         probs.append(Problem(source, f"rows 1-{N}", "", f"too short to filter: {N} samples, at least "
                              f"{min_samples} needed"))
     if probs:
-        raise DataFileError(probs)
+        raise DataFileError(probs, hint=TIME_HINT if time_probs else None)
     q = raw.cols["q"].values
     tau = raw.cols["tau"].values
     dq = raw.cols["dq"].values if "dq" in raw.cols else None

@@ -35,7 +35,6 @@ from pathlib import Path
 
 import numpy as np
 import scipy.interpolate
-import scipy.io
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -46,6 +45,7 @@ from ..errors import DataFileError, Problem
 from ..progress import progress_updates
 from .drive_chain import motor_to_joint
 from .load import (
+    ABSURD_VALUE,
     DataSpec,
     _check_time,
     _Column,
@@ -56,7 +56,11 @@ from .load import (
     _runs,
     _unit_checks,
     _warn,
+    load_mat,
+    load_npy,
     load_trajectory,
+    not_text_problem,
+    open_problem,
     parse_data_spec,
 )
 from .trajectory import Trajectory
@@ -66,8 +70,6 @@ __all__ = ["LogFormat", "LoadReport", "parse_columns", "read_format_file", "make
 
 LOG_ROLES = ("t", "q", "tau", "dq", "ddq", "q_link")
 POSITION_ROLES = ("q", "q_link", "dq", "ddq")
-#: |value| above which a (non-time) sample is absurd: a sensor fault or a logging glitch, not a measurement
-ABSURD_VALUE = 1e6
 #: default ``max_gap`` in median steps
 MAX_GAP_STEPS = 5
 MIN_SAMPLES = 32
@@ -380,10 +382,10 @@ def read_table(path: str) -> _Table:
     try:
         with open(path, encoding="utf-8-sig") as f:
             text = f.read()
-    except FileNotFoundError:
-        raise DataFileError([Problem(path, "", "", "file not found")]) from None
+    except OSError as exc:
+        raise DataFileError([open_problem(path, exc)]) from None
     except UnicodeDecodeError as exc:
-        raise DataFileError([Problem(path, "", "", f"not a text file ({exc.reason})")]) from None
+        raise DataFileError([not_text_problem(path, exc)]) from None
     lines = text.splitlines()
     first_i = next((i for i, ln in enumerate(lines) if ln.strip()), None)
     if first_i is None:
@@ -477,13 +479,7 @@ def _mat_lookup(path: str, fmt: str, key: str):
         if key in arrays:
             return np.asarray(arrays[key])
         raise DataFileError([Problem(path, "", key, f"no such array; the file has {', '.join(sorted(arrays))}")])
-    try:
-        d = scipy.io.loadmat(path, simplify_cells=True)
-    except NotImplementedError:
-        raise DataFileError([Problem(path, "", "", "MATLAB v7.3 (HDF5) files are not supported")],
-                            hint="save with save(..., '-v7') or export to CSV/NPZ") from None
-    except (ValueError, OSError, TypeError) as exc:
-        raise DataFileError([Problem(path, "", "", f"cannot read as a MATLAB file: {exc}")]) from None
+    d = load_mat(path, simplify_cells=True)
     cur = d
     walked: list[str] = []
     for part in key.split("."):
@@ -589,12 +585,7 @@ def _read_split_files(spec: DataSpec, n: int, probs) -> _Cols:
     bad = None
     for role, path in spec.files.items():
         if path.endswith(".npy"):
-            try:
-                a = np.load(path, allow_pickle=False).astype(float)
-            except FileNotFoundError:
-                raise DataFileError([Problem(path, "", "", "file not found")]) from None
-            except (ValueError, OSError) as exc:
-                raise DataFileError([Problem(path, "", "", f"not a NumPy .npy array ({type(exc).__name__})")]) from None
+            a = load_npy(path)
             a = a[:, None] if a.ndim == 1 else a
             names, off, unp, bf = [f"column {c}" for c in range(a.shape[1])], None, np.zeros(a.shape, bool), None
         else:
@@ -698,7 +689,7 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
     """
     fmt = fmt or LogFormat()
     if robot is not None and n_joints is None:
-        n_joints = robot.n_joints
+        n_joints = len(robot.model_joints)
     if n_joints is None:
         raise TypeError("load_log: give n_joints or robot")
     n = int(n_joints)
@@ -809,7 +800,7 @@ def load_log(path, fmt: LogFormat | None = None, *, n_joints: int | None = None,
         raise DataFileError([Problem(source, f"rows 1-{N}", "", f"too short to filter: no piece of at least "
                                      f"{MIN_SAMPLES} samples")])
     trajs = []
-    joint_types = [r.sigma for r in robot.joints] if robot is not None else None
+    joint_types = [r.sigma for r in robot.model_joints] if robot is not None else None
     for k, (tt, vv) in enumerate(kept):
         q, tau, dq, ddq = vv["q"], vv["tau"], vv.get("dq"), vv.get("ddq")
         if drive_chain is not None:

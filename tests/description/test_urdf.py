@@ -218,8 +218,8 @@ def test_base_below_the_root_rotates_gravity():
 def test_moving_side_branch_is_left_out_with_a_warning():
     rng = np.random.default_rng(4)
     urdf = random_urdf(rng, 3, style="general", moving_branch=True)
-    with pytest.raises(RobotFileError, match="branches"):
-        import_urdf_text(urdf)  # two moving chains below link1: tip must be given
+    tree = parse_robot_text(import_urdf_text(urdf))  # no tip: the whole tree (tests/description/test_urdf_tree.py)
+    assert tree.n_joints == 4 and [r.ant for r in tree.rows] == [0, 1, 1, 3]
     with pytest.warns(UserWarning, match="finger_joint"):
         toml = import_urdf_text(urdf, tip="link3")
     assert "finger_joint" in toml.splitlines()[2]

@@ -126,6 +126,24 @@ def test_sigint_during_demo(cli, tmp_path):
     assert snapshot(tmp_path) == before
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_sigint_during_identify(cli, tmp_path):
+    """SIGINT while ``identify --json --report`` computes (DIDIM: iterated simulations): exit 130 (or
+    death by SIGINT, see test_sigint_during_demo), one line, neither the JSON nor the report written."""
+    from tests.fuzz.test_data_files import CSV
+
+    (tmp_path / "rec.csv").write_text(CSV)
+    before = snapshot(tmp_path)
+    rc, err, finished = _interrupt_when_started(
+        cli, ["identify", "scara", "rec.csv", "--method", "didim", "--json", "out.json", "--report", "out.md"],
+        tmp_path, 0.5)
+    if finished or (rc == -signal.SIGINT and "interrupted" not in err):
+        pytest.skip("identify finished before the interrupt (the signal hit the interpreter's shutdown)")
+    assert rc in (130, -signal.SIGINT) and "Traceback" not in err, f"exit {rc}\n{err}"
+    assert rc != 130 or err.rstrip().endswith("symoro-gen: interrupted"), err
+    assert snapshot(tmp_path) == before
+
+
 def test_huge_demo_duration_is_one_line(cli, tmp_path):
     case = run_case(cli, tmp_path, ["demo", "--duration", "1e9"], allow_ok=False)
     assert case.first_error.startswith("symoro-gen: error: --duration 1e+09: ") and "memory" in case.first_error
@@ -146,3 +164,41 @@ def test_demo_duration_cap_is_consistent():
     for bad in (0.0, -1.0, float("inf"), float("nan")):
         with pytest.raises(OptionError, match="--duration"):
             check_duration(bad, available=avail)
+
+
+# ---- outputs of the commands that read data --------------------------------------------------
+ID_OUTPUTS = [
+    ("a_dir", (2,)),                   # a folder
+    ("a_file/x", (2,)),                # below a regular file
+    ("missing/deeper/x", (0, 2)),      # missing folders: created, or an error
+    ("x" * 300, (2,)),                 # name too long for the file system
+    ("existing", (0,)),                # a previous result is replaced
+]
+
+
+@pytest.mark.parametrize("option, suffix", [("--json", ".json"), ("--report", ".md")])
+@pytest.mark.parametrize("out, allowed", ID_OUTPUTS)
+def test_identify_output_paths(cli, tmp_path, option, suffix, out, allowed):
+    """``identify --json/--report OUT``: an unusable path fails before any work with one line naming it;
+    otherwise only OUT (and a report's OUT_files/ folder) appear."""
+    from tests.fuzz.test_data_files import CSV
+
+    _prepare(tmp_path)
+    (tmp_path / "rec.csv").write_text(CSV)
+    name = out if out == "a_dir" else out + suffix
+    (tmp_path / ("existing" + suffix)).write_text("old result\n")
+    before = snapshot(tmp_path)
+    res = cli("-q", "identify", "scara", tmp_path / "rec.csv", option, tmp_path / name, rc=None)
+    after = snapshot(tmp_path)
+    assert res.rc in allowed, f"{option} {name!r}: exit {res.rc}\n{res.err}"
+    assert "Traceback" not in res.err and "internal error" not in res.err, res.err
+    changed = {k for k in before.keys() | after.keys() if before.get(k) != after.get(k)}
+    if res.rc == 2:
+        assert not changed, f"{option} {name!r} failed but touched {sorted(changed)}"
+        first = res.err.splitlines()[0]
+        assert first.startswith("symoro-gen: error:") and name[:40] in first, res.err
+    else:
+        stem = name[: -len(suffix)]
+        mine = {k for k in changed if k == name or k.startswith(stem + "_files") or name.startswith(k + os.sep)
+                or k in ("missing", "missing/deeper")}
+        assert changed == mine and name in changed, sorted(changed - mine)

@@ -389,3 +389,70 @@ def test_npz_arrays_of_different_lengths(tmp_path):
     np.savez(tmp_path / "d.npz", t=t, q=q, tau=tau[:150])
     with pytest.raises(DataFileError, match=r"d\.npz: arrays have different numbers of samples \(t: 200, q: 200, tau: 150\)"):
         load_trajectory(tmp_path / "d.npz", n_joints=3)
+
+
+# ---------------------------------------------------------------------------------------------
+# damaged binary files and absurd values: the same one-problem errors from both loaders (issue 15)
+# ---------------------------------------------------------------------------------------------
+def _damaged_archives(tmp_path):
+    """name -> bytes: an .npz cut in half, one with a zeroed stretch (CRC), a zip header with nothing behind,
+    a .npy cut short, a .mat cut short and one of random bytes."""
+    t, q, tau = _signals()
+    np.savez(tmp_path / "ok.npz", t=t, q=q, tau=tau)
+    npz = (tmp_path / "ok.npz").read_bytes()
+    crc = bytearray(npz)
+    crc[200:260] = bytes(60)
+    np.save(tmp_path / "ok.npy", q)
+    scipy.io.savemat(tmp_path / "ok.mat", {"t": t, "q": q, "tau": tau})
+    mat = (tmp_path / "ok.mat").read_bytes()
+    return {"half.npz": npz[: len(npz) // 2], "crc.npz": bytes(crc), "header.npz": b"PK\x03\x04" + bytes(100),
+            "short.npy": (tmp_path / "ok.npy").read_bytes()[:150], "half.mat": mat[: len(mat) // 2],
+            "zip.mat": b"PK\x03\x04" + bytes(100), "noise.mat": np.random.default_rng(1).bytes(300)}
+
+
+@pytest.mark.parametrize("plain", [True, False], ids=["load_trajectory", "load_log"])
+def test_damaged_binary_files_name_the_file(tmp_path, plain):
+    from symoro_gen.preprocessing.logformat import load_log, make_format
+
+    for name, data in _damaged_archives(tmp_path).items():
+        (tmp_path / name).write_bytes(data)
+        path = f"q={tmp_path / name},tau={tmp_path / 'ok.npy'},dt=0.01" if name.endswith(".npy") else tmp_path / name
+        with pytest.raises(DataFileError) as e:
+            if plain:
+                load_trajectory(path, n_joints=3)
+            else:  # through logformat's reader (options given: not the plain path)
+                load_log(path, make_format(tau_scale="1"), n_joints=3)
+        msgs = _messages(e)
+        assert len(msgs) == 1 and name in msgs[0], (name, msgs)
+        assert "pickle" not in str(e.value) and "\n" not in msgs[0]
+
+
+@pytest.mark.parametrize("plain", [True, False], ids=["load_trajectory", "load_log"])
+def test_absurd_value_is_an_error_in_every_loader(tmp_path, plain):
+    """A 1e308 position used to pass the plain loader (a degrees warning) and fail later as 'W has
+    non-finite values' without the file; both loaders now name file, row and column."""
+    from symoro_gen.preprocessing.logformat import ABSURD_VALUE, load_log, make_format
+
+    t, q, tau = _signals()
+    q[20, 1] = 1e308
+    tau[30, 2] = -2 * ABSURD_VALUE
+    t[50] += 1e-9  # the time column is not held to the bound (absolute times are large)
+    header = ["t", "q1", "q2", "q3", "tau1", "tau2", "tau3"]
+    path = _write_csv(tmp_path / "huge.csv", header, np.column_stack([t + 1.7e9, q, tau]))
+    with pytest.raises(DataFileError) as e:
+        if plain:
+            load_trajectory(path, n_joints=3)
+        else:
+            load_log(path, make_format(tau_scale="1"), n_joints=3)
+    msgs = _messages(e)
+    assert len(msgs) == 2, msgs
+    assert any("huge.csv" in m and "rows 21" in m and "'q2'" in m and "absurd" in m for m in msgs)
+    assert any("rows 31" in m and "'tau3'" in m and "absurd" in m for m in msgs)
+    if not plain:
+        return
+    # just below the bound: loaded (a unit warning for the position, no error)
+    q[20, 1], tau[30, 2] = 0.5, ABSURD_VALUE
+    path = _write_csv(tmp_path / "big.csv", header, np.column_stack([t, q, tau]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        assert load_trajectory(path, n_joints=3).tau[30, 2] == ABSURD_VALUE

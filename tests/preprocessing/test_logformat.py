@@ -221,6 +221,9 @@ def test_sampling_period_change_detected(tmp_path):
         load_trajectory(path, n_joints=n)
     m = str(e.value)
     assert "regime.csv" in m and "sampling period changes" in m and "--resample" in m and "rows " in m
+    # each stretch is set against the other (not against the 3 ms median, which no step has)
+    assert "0.002 s per step in these rows, 0.004 s elsewhere" in m and "0.004 s per step in these rows, 0.002 s" in m
+    assert "--resample" in e.value.hint
     found = step_regime_changes(t)
     assert [round(x, 4) for _, _, x in found] == [0.002, 0.004]
     assert found[0][0] <= 20 and found[1][1] == t.size  # from the start, to the last row

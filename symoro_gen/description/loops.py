@@ -1,0 +1,155 @@
+"""The ``[[loops]]`` and ``[loop_reference]`` tables of a robot file (closed-loop robots).
+
+Khalil & Kleinfinger's notation for closed loops ([KK1986]; [KD2002] sec. 7.3, the SR400 example; the
+SYMORO+ ``.par`` layout ``NL < NJ < NF``): the loops are cut at passive joints, which leaves a tree of
+``NL`` links (the ``[[frames]]`` table, passive joints with ``mu = 0``). Each cut joint ``k`` gets two
+frames:
+
+* the **cut frame** ``k = NR + l`` (``NR`` = number of ``[[frames]]`` rows, ``l`` = 1, 2, ... the loop),
+  placed on its antecedent link like any MDH frame, with the cut joint's variable ``q<k>``;
+* the **closing frame** ``k + B`` (``B`` loops), fixed (``sigma = 2``) on the link at the other side
+  of the cut, which coincides with frame ``k`` when the loop is closed: ``T(0, k) = T(0, k + B)``.
+
+Syntax (every field of ``cut``/``close`` as in ``[[frames]]``; ``j`` may be omitted)::
+
+    [[loops]]
+    cut   = { ant = 6, sigma = 0, alpha = 0, d = "D3", theta = "q + pi/2", r = 0 }
+    close = { ant = 3, gamma = "pi/2", alpha = 0, d = "-L5", theta = 0, r = 0 }
+
+    [loop_reference]          # optional: a closed, non-singular assembly (rad or m; missing = 0)
+    q3 = 0.0
+
+The assembly mode (a parallelogram or its crossed twin) is the one of the reference configuration,
+followed continuously (:mod:`symoro_gen.closedloop.kinematics`).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import sympy as sp
+
+from .expr import ExprError, parse_expression
+from .model import FIXED, PRISMATIC, REVOLUTE, LoopClosure, MdhRow, q_symbol
+
+__all__ = ["parse_loops"]
+
+_CUT_KEYS = ("j", "ant", "sigma", "mu", "gamma", "b", "alpha", "d", "theta", "r")
+_GEOM = ("gamma", "b", "alpha", "d", "theta", "r")
+LOOP_KEYS = {"cut", "close"}
+
+
+def parse_loops(raw: Any, raw_ref: Any, rows: tuple[MdhRow, ...] | list[MdhRow], values: Mapping[str, float],
+                bad: Callable[[str, str, str], None]) -> tuple[tuple[LoopClosure, ...], dict[str, float]]:
+    """Validate ``[[loops]]`` (``raw``) and ``[loop_reference]`` (``raw_ref``) against the tree ``rows``.
+
+    Every problem is reported through ``bad(where, field, message)`` (``where`` is ``"loop 1, cut"``,
+    ``"[loop_reference]"``...). Returns the loops and the reference values.
+    """
+    loops: list[LoopClosure] = []
+    if raw is None:
+        raw = []
+    if not isinstance(raw, list) or not all(isinstance(x, dict) for x in raw):
+        bad("top level", "loops", "must be [[loops]] entries, each with a `cut` and a `close` table")
+        return (), {}
+    nr, nb = len(rows), len(raw)
+    syms = {k: sp.Symbol(k, real=True) for k in values}
+    link_frames = {r.j for r in rows if r.is_moving}
+    for idx, entry in enumerate(raw, start=1):
+        where0 = f"loop {idx}"
+        for k in sorted(set(entry) - LOOP_KEYS):
+            bad(where0, k, "unknown field (allowed: cut, close)")
+        made: dict[str, MdhRow] = {}
+        for part, j in (("cut", nr + idx), ("close", nr + nb + idx)):
+            fr = entry.get(part)
+            where = f"{where0}, {part}"
+            if not isinstance(fr, dict):
+                bad(where0, part, "missing: a table of MDH fields (ant, sigma, alpha, d, theta, r, ...)")
+                continue
+            ok = True
+            for k in sorted(set(fr) - set(_CUT_KEYS)):
+                bad(where, k, f"unknown field (allowed: {', '.join(_CUT_KEYS)})")
+                ok = False
+            if "j" in fr and fr["j"] != j:
+                bad(where, "j", f"the {part} frame of loop {idx} is frame {j} (after the {nr} frames"
+                                f"{' and the cut frames' if part == 'close' else ''}), got {fr['j']!r}")
+                ok = False
+            raw_ant = fr.get("ant")
+            ant = raw_ant if isinstance(raw_ant, int) and not isinstance(raw_ant, bool) else -1
+            if not (0 <= ant <= nr) or (ant and ant not in link_frames):
+                bad(where, "ant", f"must be a link (a moving frame 1..{nr}) or 0 (the base), got {raw_ant!r}")
+                ok = False
+                ant = 0
+            sigma = fr.get("sigma", REVOLUTE if part == "cut" else FIXED)
+            if part == "cut" and sigma not in (REVOLUTE, PRISMATIC):
+                bad(where, "sigma", f"a cut joint is 0 (revolute) or 1 (prismatic), got {sigma!r}")
+                ok, sigma = False, REVOLUTE
+            if part == "close" and sigma != FIXED:
+                bad(where, "sigma", f"the closing frame is fixed on its link (sigma = 2), got {sigma!r}")
+                ok, sigma = False, FIXED
+            if fr.get("mu", 0) != 0:
+                bad(where, "mu", "cut joints are passive (mu = 0)")
+                ok = False
+            q = q_symbol(j)
+            ex: dict[str, sp.Expr] = {}
+            for k in _GEOM:
+                try:
+                    e = parse_expression(fr.get(k, 0), {**syms, "q": q})
+                except ExprError as exc:
+                    bad(where, k, str(exc))
+                    ok, e = False, sp.Integer(0)
+                ex[k] = e
+            var = {REVOLUTE: "theta", PRISMATIC: "r"}.get(sigma)
+            for k, e in ex.items():
+                if q in e.free_symbols and k != var:
+                    bad(where, k, "the joint variable q may only appear in theta (cut revolute joint) or r "
+                                  "(cut prismatic joint)")
+                    ok = False
+            if var is not None and ok:
+                e = ex[var]
+                if q not in e.free_symbols or sp.diff(e, q) not in (1, -1) or sp.diff(e, q, 2) != 0:
+                    bad(where, var, f"must be q + constant (or -q + constant), got {fr.get(var)!r}")
+                    ok = False
+            if ok:
+                made[part] = MdhRow(j=j, ant=ant, sigma=sigma, mu=0, drive=(), **ex)
+        if len(made) == 2:
+            if made["cut"].ant == made["close"].ant:
+                bad(f"{where0}, close", "ant", "the cut and closing frames are on the same link: no loop")
+            else:
+                loops.append(LoopClosure(cut=made["cut"], close=made["close"]))
+
+    # every passive tree joint must lie on a loop (else it is a free, unactuated joint)
+    if loops:
+        antecedent = {r.j: r.ant for r in rows}
+
+        def chain(f: int) -> set[int]:
+            out = set()
+            while f:
+                out.add(f)
+                f = antecedent[f]
+            return out
+
+        on_loop: set[int] = set()
+        for lp in loops:
+            a, b = chain(lp.cut.ant), chain(lp.close.ant)
+            on_loop |= a ^ b
+        for r in rows:
+            if r.is_moving and r.mu == 0 and r.j not in on_loop:
+                bad(f"frame {r.j}", "mu", "a passive joint (mu = 0) must lie on a closed loop ([[loops]])")
+
+    ref: dict[str, float] = {}
+    if raw_ref is not None:
+        if not isinstance(raw_ref, dict):
+            bad("top level", "loop_reference", "must be a table of q<j> = number")
+        else:
+            names = {f"q{r.j}" for r in rows if r.is_moving} | {f"q{lp.cut.j}" for lp in loops}
+            for k, v in raw_ref.items():
+                if k not in names:
+                    bad("[loop_reference]", k, f"not a joint variable of this robot (known: {', '.join(sorted(names))})")
+                elif not (isinstance(v, (int, float)) and not isinstance(v, bool) and v == v and abs(v) != float("inf")):
+                    bad("[loop_reference]", k, f"must be a finite number, got {v!r}")
+                else:
+                    ref[k] = float(v)
+        if not raw:
+            bad("top level", "loop_reference", "given without [[loops]]")
+    return tuple(loops), ref
