@@ -35,13 +35,38 @@ under ``[nominal]``, with ``FVj`` / ``FSj`` from the joint's ``<dynamics damping
 Links fixed to the base are ground and carry nothing. Moving joints off the chain (and
 beyond the tip) are left out with a warning.
 
-Two decisions (issue 15), stated to the user:
+Closed loops (issue 13) follow the ``<loop_joint>`` extension element read by Drake's former
+RigidBodyTree parser, RigidBodyDynamics.jl and Isaac Sim's URDF importer (the most common spelling;
+URDF itself has no loops, and Pinocchio, urdfdom and ROS tools ignore the element)::
+
+    <loop_joint name="pin_C" type="continuous">          <!-- revolute | continuous | prismatic -->
+      <link1 link="coupler" xyz="0.45 0 0" rpy="0 0 0"/>  <!-- the joint frame on link1 -->
+      <link2 link="rocker" xyz="0.40 0 0" rpy="0 0 0"/>   <!-- the joint frame on link2 -->
+      <axis xyz="0 0 1"/>                                  <!-- in the joint frame -->
+    </loop_joint>
+
+The two joint frames coincide up to a motion along ``axis``. The joint frame on ``link1`` (z along
+the axis) becomes the cut frame of a ``[[loops]]`` entry, on the MDH link that carries ``link1``,
+with the loop joint's variable (0 at the URDF zero configuration); the joint frame on ``link2``
+becomes the closing frame (``sigma = 2``) on the MDH link that carries ``link2`` ([KK1986]; the
+``[[loops]]`` table of :mod:`symoro_gen.description.loops`). A ``fixed`` loop joint (a weld) is an
+error: a cut joint is revolute or prismatic. The actuated joints are those named by the URDF's
+``<transmission>`` elements (ROS ``transmission_interface`` spelling, ``<joint name=...>``), or the
+``actuated`` argument; every other moving joint is passive (``mu = 0``). A URDF with loops is imported
+whole (no ``tip``); the loop solver starts from the URDF zero configuration, which should be an
+assembled one (a loop open there is warned about).
+
+Two decisions (issue 15, issue 13), stated to the user:
 
 * a ``<mimic>`` joint on the chain is an error naming it. It is a kinematic constraint
   (``q_b = multiplier q_a + offset``: one degree of freedom less), which the open-chain model
   cannot express, and the ``[drive_chain]`` coupling cannot either (it maps n motors to n joints
-  through an invertible matrix). Choose a chain that stops before it (``--tip``), or delete the
-  ``<mimic>`` tag to identify the joint as an independent one. Mimic joints off the chain are
+  through an invertible matrix). Seen as a closed-loop constraint it has a constant
+  ``G`` and ``tau_a = G^T tau_tree`` would hold, but the closed-loop layer takes geometric loops
+  only (a cut joint and its closing frame, as SYMORO's notation and ``.par`` files have them): a
+  linear coupling would need a table of its own in the robot file, its ``.par``/URDF export and rows
+  in the loop solver, which is not done. Choose a chain that stops before it (``--tip``), or delete
+  the ``<mimic>`` tag to identify the joint as an independent one. Mimic joints off the chain are
   left out like any other moving joint there.
 * a link carried by a moving joint without ``<inertial>`` gets a warning naming it: its mass
   and inertia are unknown, not zero. When no link rigidly attached to MDH link j has an
@@ -703,7 +728,7 @@ def import_urdf(path, base: str | None = None, tip: str | None = None, name: str
         Robot name (default: the URDF robot name made an identifier).
     **options
         See :func:`import_urdf_text` (``base_frame``, ``symbols``, ``gravity``, ``tol``,
-        ``snap_angles``).
+        ``snap_angles``, ``actuated``).
 
     Returns
     -------
