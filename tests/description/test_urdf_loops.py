@@ -211,3 +211,17 @@ def test_an_open_loop_at_zero_is_warned_about():
     with pytest.warns(UserWarning, match="loop_joint pin_C is not closed at the URDF zero configuration"):
         import_urdf_text(fourbar_urdf().replace(f'<link2 link="rocker" xyz="{C} 0 0"', '<link2 link="rocker" xyz="0.3 0 0"'),
                          file="open.urdf")
+
+
+def test_cli_import_urdf_with_actuated_option_and_a_one_line_error(tmp_path, cli):
+    src = tmp_path / "fourbar.urdf"
+    src.write_text(fourbar_urdf(transmission=False))
+    out = tmp_path / "fourbar.toml"
+    cli("--quiet", "import-urdf", src, "--actuated", "crank_joint", "-o", out)
+    robot = load_robot(out)
+    assert [r.mu for r in robot.joints] == [1, 0, 0] and len(robot.loops) == 1
+    bad = tmp_path / "bad.urdf"
+    bad.write_text(fourbar_urdf(transmission=False))
+    res = cli("import-urdf", bad, "-o", tmp_path / "bad.toml", rc=2)
+    assert f"{bad}, <loop_joint>, field 'transmission'" in res.err and "Traceback" not in res.err
+    assert not (tmp_path / "bad.toml").exists()
