@@ -225,3 +225,70 @@ def test_cli_import_urdf_with_actuated_option_and_a_one_line_error(tmp_path, cli
     res = cli("import-urdf", bad, "-o", tmp_path / "bad.toml", rc=2)
     assert f"{bad}, <loop_joint>, field 'transmission'" in res.err and "Traceback" not in res.err
     assert not (tmp_path / "bad.toml").exists()
+
+
+# ---------------------------------------------------------------------------------------------------
+# slider-crank closed by a prismatic loop joint on the ground
+# ---------------------------------------------------------------------------------------------------
+SA, SL, SE = 0.15, 0.5, 0.05  # crank, rod, height of the slider's line
+
+
+@functools.lru_cache(maxsize=1)
+def slider_crank_sym():
+    """Tree joint values (crank, rod, slider; revolute) and their first and second derivatives in the crank angle."""
+    q = sp.Symbol("q", real=True)
+    phi = sp.asin((SE - SA * sp.sin(q)) / SL)  # absolute angle of the rod
+    phi0 = phi.subs(q, 0)
+    exprs = [q, phi - phi0 - q, phi0 - phi]
+    return sp.lambdify(q, [[e, sp.diff(e, q), sp.diff(e, q, 2)] for e in exprs], "math"), float(phi0)
+
+
+def slider_crank_urdf() -> str:
+    _, phi0 = slider_crank_sym()
+    x0 = SA + SL * math.cos(phi0)
+    return f"""<robot name="slider_crank">
+  <link name="ground"/>
+  <link name="crank">{inertial(1.0, (0.07, 0.01, 0.0), (0.01, 0.0, 0.0, 0.02, 0.0, 0.025))}</link>
+  <link name="rod">{inertial(0.7, (0.25, -0.01, 0.01), (0.005, 0.001, 0.0, 0.03, 0.0, 0.032))}</link>
+  <link name="slider">{inertial(2.0, (0.01, 0.02, 0.0), (0.004, 0.0, 0.0, 0.005, 0.0, 0.006))}</link>
+  <joint name="crank_joint" type="revolute"><parent link="ground"/><child link="crank"/>
+    <axis xyz="0 0 1"/><limit lower="-4" upper="4" effort="10" velocity="10"/></joint>
+  <joint name="rod_joint" type="revolute"><parent link="crank"/><child link="rod"/>
+    <origin xyz="{SA} 0 0" rpy="0 0 {phi0!r}"/><axis xyz="0 0 1"/><limit lower="-4" upper="4" effort="10" velocity="10"/></joint>
+  <joint name="slider_joint" type="revolute"><parent link="rod"/><child link="slider"/>
+    <origin xyz="{SL} 0 0" rpy="0 0 {-phi0!r}"/><axis xyz="0 0 1"/><limit lower="-4" upper="4" effort="10" velocity="10"/></joint>
+  <loop_joint name="track" type="prismatic">
+    <link1 link="slider" xyz="0 0 0" rpy="0 0 0"/>
+    <link2 link="ground" xyz="{x0!r} {SE} 0" rpy="0 0 0"/>
+    <axis xyz="1 0 0"/>
+  </loop_joint>
+  <transmission name="t"><joint name="crank_joint"/></transmission>
+</robot>
+"""
+
+
+def test_slider_crank_with_a_prismatic_loop_joint_equals_pinocchio_projected():
+    urdf = slider_crank_urdf()
+    text = import_urdf_text(urdf, file="slider_crank.urdf", gravity=GRAV)
+    robot = parse_robot_text(text, file="slider_crank.toml")
+    assert robot.loops[0].cut.sigma == 1 and robot.loops[0].close.ant == 0  # prismatic cut, closing on the ground
+    model = ClosedLoopModel(robot, build_in_memory(robot))
+    rng = np.random.default_rng(11)
+    q = rng.uniform(-math.pi, math.pi, (20, 1))
+    dq, ddq = rng.normal(0, 2, (20, 1)), rng.normal(0, 5, (20, 1))
+    pm = pin.buildModelFromXML(urdf)
+    data = pm.createData()
+    pm.gravity.linear = np.array(GRAV)
+    f, _ = slider_crank_sym()
+    idx = [pm.joints[pm.getJointId(n)].idx_v for n in ("crank_joint", "rod_joint", "slider_joint")]
+    ref = []
+    for a, da, dda in zip(q[:, 0], dq[:, 0], ddq[:, 0]):
+        vals = np.array(f(a))  # (3 joints, [value, d/dq, d2/dq2])
+        qt, v, acc, g = (np.zeros(pm.nv) for _ in range(4))
+        qt[idx], g[idx] = vals[:, 0], vals[:, 1]
+        v[idx], acc[idx] = vals[:, 1] * da, vals[:, 1] * dda + vals[:, 2] * da**2
+        ref.append(g @ pin.rnea(pm, data, qt, v, acc))
+    ref_a = np.array(ref)
+    tau = model.torque(q, dq, ddq, model.nominal_parameters())[:, 0]
+    assert np.abs(ref_a).max() > 0.5
+    np.testing.assert_allclose(tau, ref_a, rtol=0, atol=1e-9 * np.abs(ref_a).max())
