@@ -122,7 +122,9 @@ def cmd_export_par(args) -> int:
 def cmd_import_urdf(args) -> int:
     from .description.urdf import import_urdf
 
-    return _output(import_urdf(args.file, base=args.base, tip=args.tip, name=args.name), args, robot_file=True)
+    actuated = [a.strip() for a in args.actuated.split(",") if a.strip()] if args.actuated else None
+    return _output(import_urdf(args.file, base=args.base, tip=args.tip, name=args.name, actuated=actuated), args,
+                   robot_file=True)
 
 
 def _export_values(args):
@@ -258,6 +260,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     iu.add_argument("--base", help="base link (default: the URDF root)")
     iu.add_argument("--tip", help="tip link (default: the end of the only chain; a URDF that branches is imported whole, as a tree)")
     iu.add_argument("--name", help="robot name (default: the URDF's)")
+    iu.add_argument("--actuated", metavar="J1,J2,...",
+                    help="a URDF with <loop_joint> elements: the actuated joints (default: those named by its "
+                         "<transmission> elements); the other moving joints are passive")
     iu.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
     iu.add_argument("--force", action="store_true", help="overwrite an existing output file")
     iu.set_defaults(func=cmd_import_urdf)
@@ -397,7 +402,8 @@ def _default_hint(exc: BaseException, args) -> str:
         if cmd == "import-par":
             return f"the input must be a SYMORO+/OpenSYMORO .par file (geometric table Ant, Sigma, d, R, Alpha, Theta); see {_DOCS}tutorial-model.md"
         if cmd == "import-urdf":
-            return f"the URDF must hold a serial chain of revolute, prismatic or fixed joints; --base/--tip pick it (see {_DOCS}tutorial-model.md)"
+            return (f"the URDF must hold a chain or tree of revolute, prismatic or fixed joints (--base/--tip pick it), "
+                    f"closed loops as <loop_joint> with <transmission> or --actuated (see {_DOCS}robot-file.md)")
         if "no such robot" in text or "file not found" in text:
             return "give a robot name from robots/ (e.g. lwr4) or the path of a robot .toml file"
         return f"every problem is listed above; the robot-file format is described in {_DOCS}robot-file.md"

@@ -35,13 +35,38 @@ under ``[nominal]``, with ``FVj`` / ``FSj`` from the joint's ``<dynamics damping
 Links fixed to the base are ground and carry nothing. Moving joints off the chain (and
 beyond the tip) are left out with a warning.
 
-Two decisions (issue 15), stated to the user:
+Closed loops (issue 13) follow the ``<loop_joint>`` extension element read by Drake's former
+RigidBodyTree parser, RigidBodyDynamics.jl and Isaac Sim's URDF importer (the most common spelling;
+URDF itself has no loops, and Pinocchio, urdfdom and ROS tools ignore the element)::
+
+    <loop_joint name="pin_C" type="continuous">          <!-- revolute | continuous | prismatic -->
+      <link1 link="coupler" xyz="0.45 0 0" rpy="0 0 0"/>  <!-- the joint frame on link1 -->
+      <link2 link="rocker" xyz="0.40 0 0" rpy="0 0 0"/>   <!-- the joint frame on link2 -->
+      <axis xyz="0 0 1"/>                                  <!-- in the joint frame -->
+    </loop_joint>
+
+The two joint frames coincide up to a motion along ``axis``. The joint frame on ``link1`` (z along
+the axis) becomes the cut frame of a ``[[loops]]`` entry, on the MDH link that carries ``link1``,
+with the loop joint's variable (0 at the URDF zero configuration); the joint frame on ``link2``
+becomes the closing frame (``sigma = 2``) on the MDH link that carries ``link2`` ([KK1986]; the
+``[[loops]]`` table of :mod:`symoro_gen.description.loops`). A ``fixed`` loop joint (a weld) is an
+error: a cut joint is revolute or prismatic. The actuated joints are those named by the URDF's
+``<transmission>`` elements (ROS ``transmission_interface`` spelling, ``<joint name=...>``), or the
+``actuated`` argument; every other moving joint is passive (``mu = 0``). A URDF with loops is imported
+whole (no ``tip``); the loop solver starts from the URDF zero configuration, which should be an
+assembled one (a loop open there is warned about).
+
+Two decisions (issue 15, issue 13), stated to the user:
 
 * a ``<mimic>`` joint on the chain is an error naming it. It is a kinematic constraint
   (``q_b = multiplier q_a + offset``: one degree of freedom less), which the open-chain model
   cannot express, and the ``[drive_chain]`` coupling cannot either (it maps n motors to n joints
-  through an invertible matrix). Choose a chain that stops before it (``--tip``), or delete the
-  ``<mimic>`` tag to identify the joint as an independent one. Mimic joints off the chain are
+  through an invertible matrix). Seen as a closed-loop constraint it has a constant
+  ``G`` and ``tau_a = G^T tau_tree`` would hold, but the closed-loop layer takes geometric loops
+  only (a cut joint and its closing frame, as SYMORO's notation and ``.par`` files have them): a
+  linear coupling would need a table of its own in the robot file, its ``.par``/URDF export and rows
+  in the loop solver, which is not done. Choose a chain that stops before it (``--tip``), or delete
+  the ``<mimic>`` tag to identify the joint as an independent one. Mimic joints off the chain are
   left out like any other moving joint there.
 * a link carried by a moving joint without ``<inertial>`` gets a warning naming it: its mass
   and inertia are unknown, not zero. When no link rigidly attached to MDH link j has an
@@ -68,7 +93,8 @@ from .inertia import matrix_from_six, parallel_axis, six_from_matrix
 from .mdh import transform as mdh_transform
 from .parse import parse_robot_text
 
-__all__ = ["import_urdf", "import_urdf_text", "parse_urdf", "UrdfModel", "UrdfJoint", "UrdfLink", "UrdfInertial"]
+__all__ = ["import_urdf", "import_urdf_text", "parse_urdf", "UrdfModel", "UrdfJoint", "UrdfLink", "UrdfInertial",
+           "UrdfLoopJoint"]
 
 #: gravitational acceleration in the URDF root frame (ROS convention: z up)
 URDF_GRAVITY = (0.0, 0.0, -9.81)
@@ -116,13 +142,31 @@ class UrdfJoint:
 
 
 @dataclass(frozen=True)
+class UrdfLoopJoint:
+    """A ``<loop_joint>`` (the closing joint of a kinematic loop; Drake / RigidBodyDynamics.jl / Isaac Sim
+    spelling): the joint frame is ``origin1`` in ``link1`` and ``origin2`` in ``link2`` (4x4); the two
+    frames coincide up to a motion of ``type`` along ``axis`` (a unit vector in the joint frame)."""
+
+    name: str
+    type: str
+    link1: str
+    origin1: np.ndarray
+    link2: str
+    origin2: np.ndarray
+    axis: np.ndarray
+
+
+@dataclass(frozen=True)
 class UrdfModel:
-    """The kinematic tree of a URDF file (links and joints by name)."""
+    """The kinematic tree of a URDF file (links and joints by name), its loop joints and the joints
+    named by its ``<transmission>`` elements (``None``: the file has no transmission)."""
 
     name: str
     links: dict
     joints: dict
     file: str = "<string>"
+    loops: tuple = ()
+    transmitted: frozenset | None = None
 
     def parent_joint(self, link: str) -> UrdfJoint | None:
         for jt in self.joints.values():
@@ -198,12 +242,22 @@ class _Reader:
             return [0.0] * n if default is None else list(default)
         return vals
 
-    def origin(self, elem, where: str) -> np.ndarray:
-        o = elem.find("origin")
+    def axis(self, elem, where: str) -> np.ndarray:
+        """The unit ``<axis xyz>`` (default x) of a moving joint; a zero axis is reported."""
+        axis = np.array(self.snapped(self.floats(elem.find("axis"), "xyz", 3, where, "axis", default=(1.0, 0.0, 0.0)), 1.0))
+        big = float(np.abs(axis).max())  # scaled first: the norm of (0, 0, 1e308) overflows
+        nrm = big * float(np.linalg.norm(axis / big)) if big > 0 else 0.0
+        if nrm < 1e-12:
+            self.bad(where, "axis", "zero axis")
+            return np.array([1.0, 0.0, 0.0])
+        return (axis / big) / np.linalg.norm(axis / big)
+
+    def origin(self, elem, where: str, tag: str = "origin") -> np.ndarray:
+        o = elem.find("origin") if tag == "origin" else elem
         if o is None:
             return np.eye(4)
-        xyz = self.floats(o, "xyz", 3, where, "origin", default=(0.0, 0.0, 0.0))
-        rpy = self.snapped(self.floats(o, "rpy", 3, where, "origin", default=(0.0, 0.0, 0.0)), math.pi / 2)
+        xyz = self.floats(o, "xyz", 3, where, tag, default=(0.0, 0.0, 0.0))
+        rpy = self.snapped(self.floats(o, "rpy", 3, where, tag, default=(0.0, 0.0, 0.0)), math.pi / 2)
         return _hom(_rpy_matrix(*rpy), xyz)
 
 
@@ -281,15 +335,10 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
             if child in parent_of:
                 rd.bad(where, "child", f"link {child!r} already has parent joint {parent_of[child]!r} (not a tree)")
             parent_of[child] = name
-        axis = np.array(rd.snapped(rd.floats(el.find("axis"), "xyz", 3, where, "axis", default=(1.0, 0.0, 0.0)), 1.0))
         if typ in MOVING_TYPES:
-            big = float(np.abs(axis).max())  # scaled first: the norm of (0, 0, 1e308) overflows
-            nrm = big * float(np.linalg.norm(axis / big)) if big > 0 else 0.0
-            if nrm < 1e-12:
-                rd.bad(where, "axis", "zero axis")
-                axis = np.array([1.0, 0.0, 0.0])
-            else:
-                axis = (axis / big) / np.linalg.norm(axis / big)
+            axis = rd.axis(el, where)
+        else:
+            axis = np.array(rd.snapped(rd.floats(el.find("axis"), "xyz", 3, where, "axis", default=(1.0, 0.0, 0.0)), 1.0))
         damping = friction = None
         de = el.find("dynamics")
         if de is not None:
@@ -310,11 +359,73 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
                           for k in ("lower", "upper", "velocity", "effort"))
         joints[name] = UrdfJoint(name, typ, parent or "", child or "", rd.origin(el, where), axis, damping, friction,
                                  mimic=mimic, limit=limit)
+    loops = _parse_loop_joints(root, rd, links, joints)
+    transmitted = _parse_transmissions(root, rd, joints)
     if not links:
         rd.bad("<robot>", "link", "no link defined")
     if rd.problems:
         raise RobotFileError(rd.problems)
-    return UrdfModel(root.get("name", ""), links, joints, file)
+    return UrdfModel(root.get("name", ""), links, joints, file, loops=tuple(loops), transmitted=transmitted)
+
+
+#: ``<loop_joint type>`` values and their MDH joint type (continuous = revolute without limits)
+LOOP_TYPES = {"revolute": 0, "continuous": 0, "prismatic": 1}
+
+
+def _parse_loop_joints(root, rd: _Reader, links: dict, joints: dict) -> list[UrdfLoopJoint]:
+    """The ``<loop_joint>`` elements (see the module docstring), every problem reported."""
+    out: list[UrdfLoopJoint] = []
+    names: set[str] = set()
+    for el in root.findall("loop_joint"):
+        name = el.get("name")
+        if not name:
+            rd.bad("<loop_joint>", "name", "loop joint without a name")
+            continue
+        where = f"loop_joint {name}"
+        if name in names or name in joints:
+            rd.bad(where, "name", "defined twice (joint and loop joint names share one namespace)")
+        names.add(name)
+        typ = el.get("type", "")
+        if typ == "fixed":
+            rd.bad(where, "type", "a fixed loop joint (a weld, 6 constraints) is not supported: the cut joint of a "
+                                  "[[loops]] entry is revolute or prismatic; merge the two links instead")
+        elif typ not in LOOP_TYPES:
+            rd.bad(where, "type", f"unknown loop joint type {typ!r} (expected one of {', '.join(LOOP_TYPES)})")
+        ends = []
+        for tag in ("link1", "link2"):
+            le = el.find(tag)
+            lk = le.get("link") if le is not None else None
+            if le is None:
+                rd.bad(where, tag, f"missing <{tag} link=... xyz=... rpy=...>")
+            elif not lk:
+                rd.bad(where, tag, f"missing attribute 'link' in <{tag}>")
+            elif lk not in links:
+                rd.bad(where, tag, f"link {lk!r} is not defined")
+            ends.append((lk or "", rd.origin(le, where, tag) if le is not None else np.eye(4)))
+        if ends[0][0] and ends[0][0] == ends[1][0]:
+            rd.bad(where, "link2", f"link1 and link2 are the same link {ends[0][0]!r}: no loop")
+        out.append(UrdfLoopJoint(name, typ, ends[0][0], ends[0][1], ends[1][0], ends[1][1], rd.axis(el, where)))
+    return out
+
+
+def _parse_transmissions(root, rd: _Reader, joints: dict) -> frozenset | None:
+    """Names of the joints driven by a ``<transmission>`` (ROS ``transmission_interface`` spelling:
+    ``<transmission><joint name=.../>...</transmission>``); None when the file has none."""
+    els = root.findall("transmission")
+    if not els:
+        return None
+    out = set()
+    for k, el in enumerate(els, start=1):
+        where = f"transmission {el.get('name') or k}"
+        for je in el.findall("joint"):
+            jn = je.get("name")
+            if not jn:
+                rd.bad(where, "joint", "missing attribute 'name' in <joint>")
+            elif jn not in joints:
+                rd.bad(where, "joint", f"joint {jn!r} is not defined")
+            else:
+                out.add(jn)
+    return frozenset(out)
 
 
 def parse_urdf(path, *, snap_angles: float = 0.0) -> UrdfModel:
@@ -617,7 +728,7 @@ def import_urdf(path, base: str | None = None, tip: str | None = None, name: str
         Robot name (default: the URDF robot name made an identifier).
     **options
         See :func:`import_urdf_text` (``base_frame``, ``symbols``, ``gravity``, ``tol``,
-        ``snap_angles``).
+        ``snap_angles``, ``actuated``).
 
     Returns
     -------
@@ -652,6 +763,7 @@ def import_urdf_text(
     gravity=URDF_GRAVITY,
     tol: float = 1e-9,
     snap_angles: float = 0.0,
+    actuated=None,
 ) -> str:
     """URDF text -> robot-file text (see :func:`import_urdf`).
 
@@ -677,6 +789,10 @@ def import_urdf_text(
         Make URDF rpy angles and axis components that are within this [rad] of a right
         angle (of 0, +-1) exact before building the frames (see :func:`parse_urdf_text`);
         0 (default) keeps the file's numbers, so the model is exactly the URDF's.
+    actuated : sequence of str, optional
+        A URDF with ``<loop_joint>`` elements: names of the actuated joints (default: the joints named
+        by its ``<transmission>`` elements); every other moving joint is passive (``mu = 0``).
+        Ignored without loop joints.
 
     Returns
     -------
@@ -686,11 +802,14 @@ def import_urdf_text(
     if base_frame not in ("joint", "link"):
         raise ValueError(f"base_frame must be 'joint' or 'link', got {base_frame!r}")
     model = parse_urdf_text(text, file=file, snap_angles=snap_angles)
-    base, selected = _select_chain(model, base, tip, allow_tree=True)
-    tree = selected is None  # no tip and several moving chains below the base: the whole tree
-    chain = _select_tree(model, base) if selected is None else selected
-    tip = base if tree else chain[-1].child
     f = model.file
+    if model.loops and tip is not None:
+        raise RobotFileError([Problem(f, "tip link", tip, "a URDF with <loop_joint> elements is imported whole "
+                                      "(the tree below the base and its loops): give no tip")])
+    base, selected = _select_chain(model, base, tip, allow_tree=True)
+    tree = selected is None or bool(model.loops)  # several moving chains below the base, or loops: the whole tree
+    chain = _select_tree(model, base) if tree else selected
+    tip = base if tree else chain[-1].child
 
     # link poses (base-link frame, q = 0) of the whole subtree below the base
     pose = {base: np.eye(4)}
@@ -713,6 +832,7 @@ def import_urdf_text(
     moving = [jt for jt in chain if jt.is_moving]
     n = len(moving)
     index = {jt.name: i for i, jt in enumerate(moving)}
+    passive = _passive_joints(model, moving, actuated)
     parents = []  # index of the moving joint carrying each moving joint (-1: the base); ant = parent + 1
     for jt in moving:
         up = model.parent_joint(jt.parent) if jt.parent != base else None
@@ -769,6 +889,7 @@ def import_urdf_text(
     for i in range(1, n + 1):
         Ji = J[i]
         inertial[i][:6] = six_from_matrix(Ji)
+    loop_frames = _loop_frames(model, owner, pose, frames, tol)
 
     # rows
     rows = []
@@ -811,6 +932,8 @@ def import_urdf_text(
     for j, ant, sigma, (gamma, b, alpha, d, theta, r), jt in rows:
         lines = ["[[frames]]  # " + (f"URDF joint {jt.name} ({jt.type}), link {jt.child}" if jt else f"fixed frame of the tip link {tip}"),
                  f"j = {j}", f"ant = {ant}", f"sigma = {sigma}"]
+        if jt is not None and jt.name in passive:
+            lines.append("mu = 0")
         g_s, b_s = _angle_str(gamma, tol), length(b, f"B{j}")
         if g_s != "0" or b_s != "0":
             lines += [f'gamma = "{g_s}"', f"b = {b_s}"]
@@ -828,10 +951,32 @@ def import_urdf_text(
         out_frames.append("\n".join(lines))
         if jt is not None and j not in unknown_links:
             nominal += [(f"{kind}{j}", v) for kind, v in zip(INERTIAL_KINDS, inertial[j])]
+        if jt is not None and jt.name not in passive:  # passive joints carry no drive terms
             if jt.damping is not None:
                 nominal.append((f"FV{j}", jt.damping))
             if jt.friction is not None:
                 nominal.append((f"FS{j}", jt.friction))
+
+    loop_parts = []
+    for l, (lj, (ant1, sig, p1), (ant2, p2)) in enumerate(loop_frames, start=1):
+        k = len(rows) + l  # the cut frame; its closing frame is k + (number of loops)
+        cut, close = [f"ant = {ant1}", f"sigma = {sig}"], [f"ant = {ant2}", "sigma = 2"]
+        for out_l, prm, kk, var in ((cut, p1, k, sig), (close, p2, k + len(loop_frames), None)):
+            gamma, b, alpha, d, theta, r = prm
+            g_s, b_s = _angle_str(gamma, tol), length(b, f"B{kk}")
+            if g_s != "0" or b_s != "0":
+                out_l += [f'gamma = "{g_s}"', f"b = {b_s}"]
+            out_l += [f'alpha = "{_angle_str(alpha, tol)}"', f"d = {length(d, f'D{kk}')}"]
+            r_s = length(r, f"RL{kk}")
+            if var == 0:
+                out_l += [f'theta = "{_offset_expr("q", _angle_str(theta, tol))}"', f"r = {r_s}"]
+            elif var == 1:
+                out_l += [f'theta = "{_angle_str(theta, tol)}"', f'r = "{_offset_expr("q", r_s.strip(chr(34)) if r_s != "0" else "0")}"']
+            else:
+                out_l += [f'theta = "{_angle_str(theta, tol)}"', f"r = {r_s}"]
+        loop_parts.append(f"[[loops]]  # URDF loop_joint {lj.name} ({lj.type}): cut frame {k} on link {lj.link1}, "
+                          f"closing frame {k + len(loop_frames)} on link {lj.link2}\ncut = {{ " + ", ".join(cut)
+                          + " }\nclose = { " + ", ".join(close) + " }")
 
     head = [
         f"# Imported from {file} by symoro_gen.description.urdf.import_urdf.",
@@ -845,6 +990,10 @@ def import_urdf_text(
         head.append("# Links without <inertial> (mass and inertia unknown): " + ", ".join(no_inertial) + "."
                     + (f" No nominal inertial values for MDH link(s) {', '.join(map(str, unknown_links))}."
                        if unknown_links else ""))
+    if loop_frames:
+        head.append(f"# Closed loops ([[loops]]) from the <loop_joint> elements; passive joints (mu = 0): "
+                    f"{', '.join(jt.name for jt in moving if jt.name in passive)}; the loop solver starts from the "
+                    "URDF zero configuration (no [loop_reference]: all zero).")
     if tip_fixed:
         head.append(f"# Frame {n + 1} is the tip link {tip} (fixed); its inertia is included in link {n}. "
                     f"Set payload = {n + 1} to identify a payload there.")
@@ -857,16 +1006,93 @@ def import_urdf_text(
     if values:
         parts.append("[values]\n" + "\n".join(f"{k} = {_num(v)}" for k, v in values.items()))
     parts += out_frames
+    parts += loop_parts
     nominal_lines = ["[nominal]", "# standard parameters in frame j at its origin [kg, kg m, kg m^2]; FV [N m s/rad], FS [N m]"]
     nominal_lines += [f"{k} = {_num(_snap(v, 1e-15))}" for k, v in nominal]
     parts.append("\n".join(nominal_lines))
-    limits_text = _limits_table(moving)
+    limits_text = _limits_table([jt for jt in moving if jt.name not in passive])
     if limits_text:
         parts.append(limits_text)
     out = "\n\n".join(parts) + "\n"
     parse_robot_text(out, file=f"{file} (imported)")  # the output is a valid robot file, or say why
     return out
 
+
+
+def _passive_joints(model: UrdfModel, moving: list[UrdfJoint], actuated) -> set[str]:
+    """Names of the passive moving joints of a URDF with loop joints (empty without loops): those not
+    in ``actuated`` (default: the joints named by the ``<transmission>`` elements)."""
+    if not model.loops:
+        return set()
+    f = model.file
+    names = {jt.name for jt in moving}
+    if actuated is None:
+        if model.transmitted is None:
+            raise RobotFileError([Problem(f, "<loop_joint>", "transmission", (
+                "a URDF with loop joints must say which joints are actuated: name them in <transmission> "
+                "elements (<transmission><joint name=.../></transmission>) or pass --actuated J1,J2,..."))])
+        act = set(model.transmitted)
+        where = "<transmission>"
+    else:
+        act = {str(a) for a in actuated}
+        where = "actuated"
+    unknown = sorted(act - names)
+    if unknown:
+        raise RobotFileError([Problem(f, where, "joint", f"not a moving joint of the imported tree: {', '.join(unknown)} "
+                                      f"(moving joints: {', '.join(jt.name for jt in moving)})")])
+    if not act:
+        raise RobotFileError([Problem(f, where, "joint", "no actuated joint")])
+    return names - act
+
+
+def _align_z(axis: np.ndarray) -> np.ndarray:
+    """A rotation whose z column is the unit vector ``axis`` (x: the part of a base vector orthogonal to it)."""
+    ref = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
+    return _frame(np.zeros(3), _perp(ref, axis), axis)[:3, :3]
+
+
+def _loop_frames(model: UrdfModel, owner: dict, pose: dict, frames: list, tol: float) -> list:
+    """The cut and closing frames of every ``<loop_joint>`` as MDH parameters on their links.
+
+    The joint frame on ``link1`` (``origin1``, z along the axis) becomes the cut frame, on the MDH link
+    carrying ``link1``, with the loop joint's variable (its value at the URDF zero configuration is 0);
+    the joint frame on ``link2`` becomes the closing frame (fixed, ``sigma = 2``) on the MDH link carrying
+    ``link2``. The loop is closed when they coincide ([KK1986], [[loops]] of the robot file). A loop that
+    is not closed at the URDF zero configuration is warned about (the solver starts from there)."""
+    f = model.file
+    out = []
+    problems = []
+    for lj in model.loops:
+        where = f"loop_joint {lj.name}"
+        ants = []
+        for tag, lk in (("link1", lj.link1), ("link2", lj.link2)):
+            if lk not in owner:
+                problems.append(Problem(f, where, tag, f"link {lk!r} is not in the tree imported below the base"))
+            ants.append(owner.get(lk) or 0)
+        if problems:
+            continue
+        if ants[0] == ants[1]:
+            problems.append(Problem(f, where, "link2", f"links {lj.link1!r} and {lj.link2!r} are rigidly attached "
+                                    "to the same body: no loop"))
+            continue
+        R = _hom(_align_z(lj.axis), np.zeros(3))
+        J1 = pose[lj.link1] @ lj.origin1 @ R
+        J2 = pose[lj.link2] @ lj.origin2 @ R
+        gap = float(np.linalg.norm(J1[:3, 3] - J2[:3, 3]))
+        tilt = float(np.linalg.norm(np.cross(J1[:3, 2], J2[:3, 2])))
+        if lj.type == "prismatic":
+            gap = float(np.linalg.norm(_perp(J1[:3, 3] - J2[:3, 3], J1[:3, 2])))
+        if gap > 1e3 * tol or tilt > 1e3 * tol:
+            warnings.warn(f"{f}: loop_joint {lj.name} is not closed at the URDF zero configuration (gap {gap:.3g} m, "
+                          f"axes {math.degrees(math.asin(min(tilt, 1.0))):.3g} deg apart): the loop solver starts "
+                          "from there; add a [loop_reference] of an assembled configuration to the robot file",
+                          UserWarning, stacklevel=3)
+        p1 = _mdh_from_transform(_inv(frames[ants[0]]) @ J1, tol)
+        p2 = _mdh_from_transform(_inv(frames[ants[1]]) @ J2, tol)
+        out.append((lj, (ants[0], LOOP_TYPES[lj.type], p1), (ants[1], p2)))
+    if problems:
+        raise RobotFileError(problems)
+    return out
 
 def _limits_table(moving: list[UrdfJoint]) -> str:
     """``[limits]`` from the moving joints' ``<limit lower upper velocity effort>`` (a field is written

@@ -85,7 +85,10 @@ def joint_limits(robot: RobotDescription, j: int) -> dict[str, float]:
     lim = getattr(robot, "limits", None)
     if lim is None:
         return {}
-    k = [r.j for r in robot.joints].index(j)
+    logged = [r.j for r in robot.model_joints]
+    if j not in logged:  # a passive joint of a closed-loop robot: [limits] lists the actuated ones
+        return {}
+    k = logged.index(j)
     out = {}
     for f in ("q_min", "q_max", "dq_max", "tau_max"):
         v = getattr(lim, f, None)
@@ -193,8 +196,41 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
                 out.append(f"    <!-- armature (rotor inertia IA{j}, no URDF field): {_fmt(ia)} "
                            f"{'kg m^2' if row.sigma == REVOLUTE else 'kg'}; torque offset OFF{j}: {_fmt(off)} -->")
         out.append("  </joint>")
+    out += _loop_elements(robot)
     out.append("</robot>")
     return "\n".join(out) + "\n"
+
+
+def _loop_elements(robot: RobotDescription) -> list[str]:
+    """``<loop_joint>`` per ``[[loops]]`` entry and a ``<transmission>`` per actuated joint (closed-loop robots).
+
+    The cut frame's constant pose on its antecedent link is ``<link1>``, the closing frame's pose on its link
+    is ``<link2>``; the loop joint turns (or slides) along z of the cut frame (``-z`` for a ``-q`` joint), so
+    the two frames coincide at the loop joint's value ``q<cut>`` (the convention read by
+    :func:`symoro_gen.description.urdf.import_urdf`)."""
+    if not robot.loops:
+        return []
+    subs = robot.geometry_subs()
+    out = []
+    for lp in robot.loops:
+        kind = "prismatic" if lp.cut.sigma == PRISMATIC else "revolute"
+        out.append(f'  <loop_joint name="loop{lp.cut.j}" type="{kind}">')
+        for tag, row in (("link1", lp.cut), ("link2", lp.close)):
+            T = row_transform(row, subs, q=0.0)
+            rpy = rpy_from_matrix(T[:3, :3])
+            link = "base_link" if row.ant == 0 else f"link{row.ant}"
+            out.append(f'    <{tag} link="{link}" xyz="{_fmt(T[0, 3])} {_fmt(T[1, 3])} {_fmt(T[2, 3])}" '
+                       f'rpy="{_fmt(rpy[0])} {_fmt(rpy[1])} {_fmt(rpy[2])}"/>')
+        out.append(f'    <axis xyz="0 0 {joint_sign(lp.cut)}"/>')
+        out.append("  </loop_joint>")
+    for row in robot.actuated:
+        out += [f'  <transmission name="transmission{row.j}">',
+                "    <type>transmission_interface/SimpleTransmission</type>",
+                f'    <joint name="joint{row.j}"><hardwareInterface>hardware_interface/EffortJointInterface'
+                "</hardwareInterface></joint>",
+                f'    <actuator name="motor{row.j}"><mechanicalReduction>1</mechanicalReduction></actuator>',
+                "  </transmission>"]
+    return out
 
 
 def _comment(text: str) -> str:
