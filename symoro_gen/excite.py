@@ -434,7 +434,7 @@ def output_times(duration: float, rate: float) -> np.ndarray:
 def optimise_excitation(model: IdentificationModel, basis, limits: Limits, duration: float, *, rate: float = 100.0,
                         criterion: str = "cond", starts: int = 4, seed: int = 0, chi_b=None,
                         samples: int | None = None, max_iter: int = 200, margin: float = 0.01,
-                        progress=None) -> ExcitationResult:
+                        pool: int | None = None, progress=None) -> ExcitationResult:
     """Optimise an excitation trajectory (IPOPT from ``starts`` seeded random feasible designs).
 
     Parameters
@@ -451,6 +451,9 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
         ``log tr(M) + log tr(M^-1)`` (bounds ``cond(W)^2`` within ``nb^2``) or ``-log det M``.
     starts, seed : int
         Random starts and the seed of their generator.
+    pool : int, optional
+        Random feasible designs drawn (default ``10 * starts``); the ``starts`` of lowest ``cond`` are
+        the IPOPT starts (a multistart from the best of a random population, as FloBaRoID does).
     chi_b : array_like (nb,), optional
         Nominal base parameters: with ``limits.tau_max``, torque limits are imposed.
     samples : int, optional
@@ -494,9 +497,13 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     lim_start = limits.shrunk(margin)
     best = None
     records = []
-    for s in range(int(starts)):
+    n_pool = max(int(starts), 10 * int(starts) if pool is None else int(pool))
+    candidates = []
+    for _ in range(n_pool):
         X_init = random_trajectory(basis, lim_start, rng, t_con)
-        cond0 = stacked_cond(model, *basis_eval(basis, X_init, t_out))
+        candidates.append((stacked_cond(model, *basis_eval(basis, X_init, t_out)), len(candidates), X_init))
+    candidates.sort(key=lambda c: (c[0], c[1]))
+    for s, (cond0, _, X_init) in enumerate(candidates[:int(starts)]):
         sol = solver(x0=X_init.T.reshape(-1), lbg=bounds["lbg"], ubg=bounds["ubg"])
         stats = solver.stats()
         status, iters = stats.get("return_status", ""), stats.get("iter_count", 0)
@@ -590,6 +597,8 @@ def add_excite_parser(sub) -> None:
     e.add_argument("--rate", type=float, default=100.0, help="output sampling rate [Hz]")
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--starts", type=int, default=4, help="random starts of IPOPT")
+    e.add_argument("--pool", type=int, default=None,
+                   help="random feasible designs drawn; the --starts best by cond start IPOPT (default 10 x --starts)")
     e.add_argument("--max-iter", type=int, default=200, help="IPOPT iterations per start")
     e.add_argument("--samples", type=int, default=None, help="samples of the criterion (default from the size of the problem)")
     e.add_argument("--criterion", choices=("cond", "logdet"), default="cond")
@@ -626,6 +635,7 @@ def cmd_excite(args) -> int:
         chi_b = np.asarray(model.base_parameters(np.asarray(nominal)), float)
     res = optimise_excitation(model, basis, lim, args.duration, rate=args.rate, criterion=args.criterion,
                               starts=args.starts, seed=args.seed, max_iter=args.max_iter, samples=args.samples,
+                              pool=args.pool,
                               chi_b=None if args.no_torque_limits else chi_b)
     write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
     sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)
