@@ -583,6 +583,87 @@ def plot_trajectory(result: ExcitationResult, path) -> None:
     plt.close(fig)
 
 
+def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000) -> bytes:
+    """PNG (report style) of every joint's ``q, dq, ddq`` against its limits (dashed red)."""
+    from .report.plots import WIDTH_IN, _png, require_matplotlib
+
+    MplFigure, FigureCanvasAgg = require_matplotlib()
+    lim, n = result.limits, result.limits.n
+    fig = MplFigure(figsize=(WIDTH_IN, 1.5 * n + 0.9), dpi=dpi, facecolor="white")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(n, 3, squeeze=False, sharex=True)
+    k = max(1, len(result.t) // max(max_points, 1))
+    t = result.t[::k]
+    deg = np.degrees
+    for j in range(n):
+        panels = ((deg(result.q[::k, j]), deg(lim.q_min[j]), deg(lim.q_max[j]), f"q{j + 1} [deg]"),
+                  (deg(result.dq[::k, j]), -deg(lim.dq_max[j]), deg(lim.dq_max[j]), f"dq{j + 1} [deg/s]"),
+                  (deg(result.ddq[::k, j]), -deg(lim.ddq_max[j]), deg(lim.ddq_max[j]), f"ddq{j + 1} [deg/s2]"))
+        for c, (y, lo, hi, lab) in enumerate(panels):
+            ax = axes[j, c]
+            ax.plot(t, y, lw=1)
+            for v in (lo, hi):
+                ax.axhline(v, color="r", ls="--", lw=0.8)
+            ax.set_ylabel(lab, fontsize=8)
+            ax.tick_params(labelsize=7)
+    for c in range(3):
+        axes[-1, c].set_xlabel("t [s]", fontsize=8)
+    fig.subplots_adjust(left=0.07, right=0.99, top=0.97, bottom=0.5 / (1.5 * n + 0.9), wspace=0.3, hspace=0.25)
+    return _png(fig, dpi)
+
+
+def excitation_report(result: ExcitationResult, model: IdentificationModel, *, noise: float, chi_b=None,
+                      title: str | None = None, plots: bool = True):
+    """:class:`~symoro_gen.report.Report` of an excitation design: the figures, the joint
+    trajectories against the limits, the peak use of every limit, and the predicted standard
+    deviation (and %sigma with nominal base parameters) of every base parameter for i.i.d. torque
+    noise ``noise`` (:func:`predicted_sigma`, Gautier 1997 eq. 9)."""
+    from . import __version__
+    from .report import Figure, Heading, Paragraph, Report, Table
+
+    lim, n = result.limits, result.limits.n
+    sig, pct = predicted_sigma(model, result.q, result.dq, result.ddq, noise, chi_b)
+    worst = max(max(v) for v in result.usage.values())
+    blocks: list = [Paragraph(
+        f"{model.ROBOT}: {result.basis.kind} excitation, {len(result.t)} samples over {result.t[-1]:g} s; "
+        f"criterion {result.criterion}; cond = {result.cond:.6g} (2-norm condition number of the base regressor "
+        f"stacked over the output samples, unscaled); limits {'respected' if result.limits_ok else 'VIOLATED'} "
+        f"at every output sample and on a 10x denser resampling (peak usage {worst:.3f}); "
+        f"{len(result.starts)} IPOPT start(s), {result.wall_time:.1f} s.")]
+    if lim.defaulted:
+        blocks.append(Paragraph(f"The robot file gives no {', '.join(lim.defaulted)}: defaults were used."))
+    blocks.append(Heading("Joint trajectories against the limits"))
+    if plots:
+        blocks.append(Figure("trajectory", trajectory_figure_png(result),
+                             caption="q, dq, ddq per joint (rows) against the limits (dashed red)"))
+    deg = np.degrees
+    rows = []
+    for j in range(n):
+        rows.append((f"{j + 1}", f"{deg(result.q[:, j].min()):.1f} .. {deg(result.q[:, j].max()):.1f}",
+                     f"{deg(lim.q_min[j]):.1f} .. {deg(lim.q_max[j]):.1f}",
+                     *(f"{result.usage[k][j]:.3f}" for k in ("q", "dq", "ddq")),
+                     f"{result.usage['tau'][j]:.3f}" if "tau" in result.usage else "-"))
+    blocks.append(Table(("joint", "q range [deg]", "limits [deg]", "use q", "use dq", "use ddq", "use tau"),
+                        tuple(rows), caption="Peak use of each limit (1 = at the limit; q about the range centre)"))
+    blocks.append(Heading("Predicted precision of the base parameters"))
+    cb = None if chi_b is None else np.asarray(chi_b, float)
+    prow = []
+    for i, name in enumerate(model.BASE_NAMES):
+        nominal = "-" if cb is None else f"{cb[i]:.4g}"
+        p = "-" if pct is None or not np.isfinite(pct[i]) else f"{pct[i]:.3g}"
+        prow.append((name, nominal, f"{sig[i]:.4g}", p))
+    blocks.append(Table(("parameter", "nominal", "sigma", "%sigma"), tuple(prow),
+                        caption=f"sigma = noise sqrt(diag((W'W)^-1)) for torque noise {noise:g} N m "
+                                f"(Gautier 1997 eq. 9); %sigma = 100 sigma / |nominal|"))
+    if result.starts:
+        blocks.append(Heading("Starts"))
+        blocks.append(Table(("start", "cond at start", "cond optimised", "IPOPT status", "iterations"),
+                            tuple((str(st["start"]), f"{st['cond_start']:.4g}", f"{st['cond']:.4g}", str(st["status"]),
+                                   str(st["iterations"])) for st in result.starts),
+                            caption="Random feasible starts (best of the pool) and IPOPT's result from each"))
+    return Report(title or f"Excitation trajectory: {model.ROBOT}", tuple(blocks), footer=f"symoro_gen {__version__}")
+
+
 def add_excite_parser(sub) -> None:
     """Register ``symoro-gen excite``."""
     e = sub.add_parser("excite", help="optimal excitation trajectory (Fourier or point-to-point) -> CSV t,q,dq,ddq")
@@ -606,12 +687,18 @@ def add_excite_parser(sub) -> None:
     e.add_argument("--no-torque-limits", action="store_true", help="ignore tau_max even with nominal parameters")
     e.add_argument("--json", help="write the figures (cond, limits_ok, predicted sigma...) as JSON here")
     e.add_argument("--plot", help="PNG of the joint trajectories against the limits")
+    e.add_argument("--report", help="report (.html self-contained, or .md with its images beside it): trajectories "
+                                    "against the limits, cond, limit usage, predicted %%sigma at --noise")
     e.set_defaults(func=cmd_excite)
 
 
 def cmd_excite(args) -> int:
     """``symoro-gen excite``: design, write CSV (and JSON, plot), print a summary."""
 
+    if args.report:
+        from .report import check_report_path
+
+        check_report_path(args.report)  # before the long optimisation
     robot, model = model_for(args.robot)
     n = model.N_JOINTS
     lim = limits_of(robot, n)
@@ -652,6 +739,10 @@ def cmd_excite(args) -> int:
         write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
     if args.plot:
         plot_trajectory(res, args.plot)
+    if args.report:
+        from .report.document import write_report_files
+
+        write_report_files(excitation_report(res, model, noise=args.noise, chi_b=chi_b), args.report)
     if not args.quiet:
         worst = max(max(v) for v in res.usage.values())
         print(f"{model.ROBOT}: {basis.kind} excitation, {len(res.t)} samples at {args.rate:g} Hz -> {args.output}")

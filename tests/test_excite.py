@@ -263,3 +263,30 @@ def test_cli_point_to_point(cli, tmp_path, scara):
     idx = [0, 50, 100, 150]
     np.testing.assert_allclose(data[idx, 1:n + 1], vias, atol=1e-9)
     np.testing.assert_allclose(data[idx, n + 1:2 * n + 1], 0, atol=1e-9)
+
+
+def test_cli_report_html(cli, tmp_path, scara):
+    """``excite --report``: one self-contained page with the trajectory plot, the cond of the CSV and the
+    predicted sigma of every base parameter (those of the JSON, i.e. noise * sqrt(diag((W'W)^-1)))."""
+    pytest.importorskip("matplotlib", reason="the report's plot needs matplotlib (the 'plots' extra)")
+    import re
+
+    _, model = scara
+    csv, js, rep = tmp_path / "t.csv", tmp_path / "t.json", tmp_path / "t.html"
+    cli("--quiet", "excite", "scara", "-o", csv, "--duration", "4", "--harmonics", "3", "--rate", "50",
+        "--starts", "1", "--pool", "3", "--max-iter", "20", "--noise", "0.5", "--json", js, "--report", rep, rc=0)
+    html = rep.read_text()
+    out = json.loads(js.read_text())
+    assert "data:image/png;base64," in html and "http" not in html.replace("http-equiv", "")
+    assert f"cond = {out['cond']:.6g}" in html
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    n = model.N_JOINTS
+    W = model.regressor(data[:, 1:n + 1], data[:, n + 1:2 * n + 1], data[:, 2 * n + 1:]).reshape(-1, len(model.BASE_NAMES))
+    sig = 0.5 * np.sqrt(np.diag(np.linalg.inv(W.T @ W)))
+    for name, s in zip(model.BASE_NAMES, sig):
+        m = re.search(rf"<td>{name}</td><td[^>]*>[^<]*</td><td[^>]*>([^<]+)</td>", html)
+        assert m is not None, name
+        assert float(m.group(1)) == pytest.approx(s, rel=1e-3), name
+    # a bad suffix is refused before the optimisation, and nothing is written
+    r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--report", tmp_path / "r.pdf", rc=None)
+    assert r.rc != 0 and "unknown suffix" in r.err and not (tmp_path / "x.csv").exists()
