@@ -97,6 +97,11 @@ class Limits:
     ddq_max: np.ndarray
     tau_max: np.ndarray | None = None
     defaulted: tuple[str, ...] = ()
+    prismatic: tuple[bool, ...] = ()
+
+    def is_prismatic(self, j: int) -> bool:
+        """Joint ``j`` (0-based) is prismatic (its limits are in m, m/s, m/s^2)."""
+        return bool(self.prismatic[j]) if j < len(self.prismatic) else False
 
     @property
     def n(self) -> int:
@@ -106,7 +111,8 @@ class Limits:
         """The limits tightened by the fraction ``margin`` (positions about the range centre)."""
         c, h = (self.q_max + self.q_min) / 2, (self.q_max - self.q_min) / 2 * (1 - margin)
         tau = None if self.tau_max is None else self.tau_max * (1 - margin)
-        return Limits(c - h, c + h, self.dq_max * (1 - margin), self.ddq_max * (1 - margin), tau, self.defaulted)
+        return Limits(c - h, c + h, self.dq_max * (1 - margin), self.ddq_max * (1 - margin), tau, self.defaulted,
+                      self.prismatic)
 
     def as_dict(self) -> dict:
         d = {k: getattr(self, k).tolist() for k in ("q_min", "q_max", "dq_max", "ddq_max")}
@@ -135,7 +141,8 @@ def limits_of(robot: Any, n: int | None = None) -> Limits:
         else:
             out[k] = np.asarray(got[k], float)
     tau = None if got["tau_max"] is None else np.asarray(got["tau_max"], float)
-    return Limits(out["q_min"], out["q_max"], out["dq_max"], out["ddq_max"], tau, tuple(defaulted))
+    return Limits(out["q_min"], out["q_max"], out["dq_max"], out["ddq_max"], tau, tuple(defaulted),
+                  tuple(bool(p) for p in prismatic))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -594,11 +601,11 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
     axes = fig.subplots(n, 3, squeeze=False, sharex=True)
     k = max(1, len(result.t) // max(max_points, 1))
     t = result.t[::k]
-    deg = np.degrees
     for j in range(n):
-        panels = ((deg(result.q[::k, j]), deg(lim.q_min[j]), deg(lim.q_max[j]), f"q{j + 1} [deg]"),
-                  (deg(result.dq[::k, j]), -deg(lim.dq_max[j]), deg(lim.dq_max[j]), f"dq{j + 1} [deg/s]"),
-                  (deg(result.ddq[::k, j]), -deg(lim.ddq_max[j]), deg(lim.ddq_max[j]), f"ddq{j + 1} [deg/s2]"))
+        f, u = (1.0, "m") if lim.is_prismatic(j) else (180.0 / math.pi, "deg")
+        panels = ((f * result.q[::k, j], f * lim.q_min[j], f * lim.q_max[j], f"q{j + 1} [{u}]"),
+                  (f * result.dq[::k, j], -f * lim.dq_max[j], f * lim.dq_max[j], f"dq{j + 1} [{u}/s]"),
+                  (f * result.ddq[::k, j], -f * lim.ddq_max[j], f * lim.ddq_max[j], f"ddq{j + 1} [{u}/s2]"))
         for c, (y, lo, hi, lab) in enumerate(panels):
             ax = axes[j, c]
             ax.plot(t, y, lw=1)
@@ -636,14 +643,14 @@ def excitation_report(result: ExcitationResult, model: IdentificationModel, *, n
     if plots:
         blocks.append(Figure("trajectory", trajectory_figure_png(result),
                              caption="q, dq, ddq per joint (rows) against the limits (dashed red)"))
-    deg = np.degrees
     rows = []
     for j in range(n):
-        rows.append((f"{j + 1}", f"{deg(result.q[:, j].min()):.1f} .. {deg(result.q[:, j].max()):.1f}",
-                     f"{deg(lim.q_min[j]):.1f} .. {deg(lim.q_max[j]):.1f}",
+        f, u, d = (1.0, "m", 4) if lim.is_prismatic(j) else (180.0 / math.pi, "deg", 1)
+        rows.append((f"{j + 1}", f"{f * result.q[:, j].min():.{d}f} .. {f * result.q[:, j].max():.{d}f} {u}",
+                     f"{f * lim.q_min[j]:.{d}f} .. {f * lim.q_max[j]:.{d}f} {u}",
                      *(f"{result.usage[k][j]:.3f}" for k in ("q", "dq", "ddq")),
                      f"{result.usage['tau'][j]:.3f}" if "tau" in result.usage else "-"))
-    blocks.append(Table(("joint", "q range [deg]", "limits [deg]", "use q", "use dq", "use ddq", "use tau"),
+    blocks.append(Table(("joint", "q range", "limits", "use q", "use dq", "use ddq", "use tau"),
                         tuple(rows), caption="Peak use of each limit (1 = at the limit; q about the range centre)"))
     blocks.append(Heading("Predicted precision of the base parameters"))
     cb = None if chi_b is None else np.asarray(chi_b, float)

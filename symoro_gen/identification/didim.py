@@ -25,16 +25,16 @@ Only the measured torque and the reference enter: the noise on the measured posi
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 
+from ..errors import IdentificationError
 from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
 from ..preprocessing.trajectory import Trajectory
-from ..errors import IdentificationError
 from ..simulate.closed_loop import FRICTION_EPS
 from .estimators import fit_ols
 from .iv import MAX_ITER, TOL, IterativeIdentification, _tracking, iterate, simulated_system
