@@ -505,7 +505,7 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     best = None
     records = []
     n_pool = max(int(starts), 10 * int(starts) if pool is None else int(pool))
-    candidates = []
+    candidates: list[tuple[float, int, np.ndarray]] = []
     for _ in range(n_pool):
         X_init = random_trajectory(basis, lim_start, rng, t_con)
         candidates.append((stacked_cond(model, *basis_eval(basis, X_init, t_out)), len(candidates), X_init))
