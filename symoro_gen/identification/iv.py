@@ -431,12 +431,14 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
             if proj is not None:
                 try:
                     ssys, runs = simulated_system(model, setup, proj)
-                    theta = proj
-                    history[-1] = theta
                     notes.append(f"{label} iteration {len(changes)}: the estimate could not be simulated "
                                  f"({failure}); replaced by its physically consistent projection")
                 except IdentificationError:
                     ssys = None
+                # the damped steps below go toward the projection: with a physical last estimate every
+                # point between is physical (the constraints are convex, the regrouping linear)
+                theta = proj
+                history[-1] = theta
         if ssys is None:
             assert prev is not None
             for halving in range(1, MAX_HALVINGS + 1):
