@@ -414,7 +414,7 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
     res, runs, converged = ols, [], False
     prev = None
     for _ in range(int(max_iter)):
-        ssys, failure = None, ""
+        ssys, failure, proj = None, "", None
         try:
             ssys, runs = simulated_system(model, setup, theta)
         except IdentificationError as exc:
@@ -441,6 +441,7 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
                 history[-1] = theta
         if ssys is None:
             assert prev is not None
+            toward = "" if proj is None else " toward its physically consistent projection"
             for halving in range(1, MAX_HALVINGS + 1):
                 theta = prev + 0.5 * (theta - prev)
                 history[-1] = theta
@@ -452,7 +453,7 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
                         raise IdentificationError(
                             f"{label} iteration {len(changes) + 1}: cannot simulate the current estimate: {exc}; "
                             f"filter more (a lower cutoff) or give a physical start (start=...)") from None
-            notes.append(f"{label} iteration {len(changes)}: the full step could not be simulated; step halved")
+            notes.append(f"{label} iteration {len(changes)}: the full step could not be simulated; step halved{toward}")
         prev = theta
         res = step(measured.system, ssys)
         changes.append(_rel_change(res.values, theta))
