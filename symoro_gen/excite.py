@@ -505,12 +505,21 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     best = None
     records = []
     n_pool = max(int(starts), 10 * int(starts) if pool is None else int(pool))
-    candidates: list[tuple[float, int, np.ndarray]] = []
+    candidates: list[tuple[float, float, int, np.ndarray]] = []
+    torque = cb is not None and limits.tau_max is not None
     for _ in range(n_pool):
         X_init = random_trajectory(basis, lim_start, rng, t_con)
-        candidates.append((stacked_cond(model, *basis_eval(basis, X_init, t_out)), len(candidates), X_init))
-    candidates.sort(key=lambda c: (c[0], c[1]))
-    for s, (cond0, _, X_init) in enumerate(candidates[:int(starts)]):
+        qdq = basis_eval(basis, X_init, t_out)
+        Wc = np.asarray(model.regressor(*qdq)).reshape(-1, nb)
+        sv = np.linalg.svd(Wc, compute_uv=False)
+        # with torque limits, designs within them (the random ones are not held to them) rank first
+        excess = 0.0
+        if torque:
+            tau0 = (Wc @ cb).reshape(-1, n)
+            excess = max(0.0, float((np.abs(tau0) / lim_start.tau_max).max()) - 1.0)
+        candidates.append((excess, float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf, len(candidates), X_init))
+    candidates.sort(key=lambda c: (c[0], c[1], c[2]))
+    for s, (_, cond0, _, X_init) in enumerate(candidates[:int(starts)]):
         sol = solver(x0=X_init.T.reshape(-1), lbg=bounds["lbg"], ubg=bounds["ubg"])
         stats = solver.stats()
         status, iters = stats.get("return_status", ""), stats.get("iter_count", 0)
