@@ -506,7 +506,6 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     records = []
     n_pool = max(int(starts), 10 * int(starts) if pool is None else int(pool))
     candidates: list[tuple[float, float, int, np.ndarray]] = []
-    torque = cb is not None and limits.tau_max is not None
     for _ in range(n_pool):
         X_init = random_trajectory(basis, lim_start, rng, t_con)
         qdq = basis_eval(basis, X_init, t_out)
@@ -514,7 +513,7 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
         sv = np.linalg.svd(Wc, compute_uv=False)
         # with torque limits, designs within them (the random ones are not held to them) rank first
         excess = 0.0
-        if torque:
+        if cb is not None and lim_start.tau_max is not None:
             tau0 = (Wc @ cb).reshape(-1, n)
             excess = max(0.0, float((np.abs(tau0) / lim_start.tau_max).max()) - 1.0)
         candidates.append((excess, float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf, len(candidates), X_init))
