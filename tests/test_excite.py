@@ -293,3 +293,25 @@ def test_cli_report_html(cli, tmp_path, scara):
     # a bad suffix is refused before the optimisation, and nothing is written
     r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--report", tmp_path / "r.pdf", rc=None)
     assert r.rc != 0 and "unknown suffix" in r.err and not (tmp_path / "x.csv").exists()
+
+
+def test_ipopt_starts_are_the_best_of_the_random_pool(scara, scara_limits, monkeypatch):
+    """``pool`` random feasible designs are drawn; the ``starts`` of lowest cond start IPOPT."""
+    import symoro_gen.excite as ex
+
+    _, model = scara
+    drawn = []
+    real = ex.random_trajectory
+
+    def recording(*a, **kw):
+        X = real(*a, **kw)
+        drawn.append(X)
+        return X
+
+    monkeypatch.setattr(ex, "random_trajectory", recording)
+    basis = FourierBasis(3, 1 / DURATION)
+    res = optimise_excitation(model, basis, scara_limits, DURATION, rate=RATE, starts=2, pool=7, seed=3, max_iter=1)
+    assert len(drawn) == 7
+    t = output_times(DURATION, RATE)
+    conds = sorted(stacked_cond(model, *basis_eval(basis, X, t)) for X in drawn)
+    np.testing.assert_allclose([s["cond_start"] for s in res.starts], conds[:2], rtol=1e-10)
