@@ -97,6 +97,11 @@ class Limits:
     ddq_max: np.ndarray
     tau_max: np.ndarray | None = None
     defaulted: tuple[str, ...] = ()
+    prismatic: tuple[bool, ...] = ()
+
+    def is_prismatic(self, j: int) -> bool:
+        """Joint ``j`` (0-based) is prismatic (its limits are in m, m/s, m/s^2)."""
+        return bool(self.prismatic[j]) if j < len(self.prismatic) else False
 
     @property
     def n(self) -> int:
@@ -106,7 +111,8 @@ class Limits:
         """The limits tightened by the fraction ``margin`` (positions about the range centre)."""
         c, h = (self.q_max + self.q_min) / 2, (self.q_max - self.q_min) / 2 * (1 - margin)
         tau = None if self.tau_max is None else self.tau_max * (1 - margin)
-        return Limits(c - h, c + h, self.dq_max * (1 - margin), self.ddq_max * (1 - margin), tau, self.defaulted)
+        return Limits(c - h, c + h, self.dq_max * (1 - margin), self.ddq_max * (1 - margin), tau, self.defaulted,
+                      self.prismatic)
 
     def as_dict(self) -> dict:
         d = {k: getattr(self, k).tolist() for k in ("q_min", "q_max", "dq_max", "ddq_max")}
@@ -135,7 +141,8 @@ def limits_of(robot: Any, n: int | None = None) -> Limits:
         else:
             out[k] = np.asarray(got[k], float)
     tau = None if got["tau_max"] is None else np.asarray(got["tau_max"], float)
-    return Limits(out["q_min"], out["q_max"], out["dq_max"], out["ddq_max"], tau, tuple(defaulted))
+    return Limits(out["q_min"], out["q_max"], out["dq_max"], out["ddq_max"], tau, tuple(defaulted),
+                  tuple(bool(p) for p in prismatic))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -434,7 +441,7 @@ def output_times(duration: float, rate: float) -> np.ndarray:
 def optimise_excitation(model: IdentificationModel, basis, limits: Limits, duration: float, *, rate: float = 100.0,
                         criterion: str = "cond", starts: int = 4, seed: int = 0, chi_b=None,
                         samples: int | None = None, max_iter: int = 200, margin: float = 0.01,
-                        progress=None) -> ExcitationResult:
+                        pool: int | None = None, progress=None) -> ExcitationResult:
     """Optimise an excitation trajectory (IPOPT from ``starts`` seeded random feasible designs).
 
     Parameters
@@ -451,6 +458,9 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
         ``log tr(M) + log tr(M^-1)`` (bounds ``cond(W)^2`` within ``nb^2``) or ``-log det M``.
     starts, seed : int
         Random starts and the seed of their generator.
+    pool : int, optional
+        Random feasible designs drawn (default ``10 * starts``); the ``starts`` of lowest ``cond`` are
+        the IPOPT starts (a multistart from the best of a random population, as FloBaRoID does).
     chi_b : array_like (nb,), optional
         Nominal base parameters: with ``limits.tau_max``, torque limits are imposed.
     samples : int, optional
@@ -494,9 +504,21 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     lim_start = limits.shrunk(margin)
     best = None
     records = []
-    for s in range(int(starts)):
+    n_pool = max(int(starts), 10 * int(starts) if pool is None else int(pool))
+    candidates: list[tuple[float, float, int, np.ndarray]] = []
+    for _ in range(n_pool):
         X_init = random_trajectory(basis, lim_start, rng, t_con)
-        cond0 = stacked_cond(model, *basis_eval(basis, X_init, t_out))
+        qdq = basis_eval(basis, X_init, t_out)
+        Wc = np.asarray(model.regressor(*qdq)).reshape(-1, nb)
+        sv = np.linalg.svd(Wc, compute_uv=False)
+        # with torque limits, designs within them (the random ones are not held to them) rank first
+        excess = 0.0
+        if cb is not None and lim_start.tau_max is not None:
+            tau0 = (Wc @ cb).reshape(-1, n)
+            excess = max(0.0, float((np.abs(tau0) / lim_start.tau_max).max()) - 1.0)
+        candidates.append((excess, float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf, len(candidates), X_init))
+    candidates.sort(key=lambda c: (c[0], c[1], c[2]))
+    for s, (_, cond0, _, X_init) in enumerate(candidates[:int(starts)]):
         sol = solver(x0=X_init.T.reshape(-1), lbg=bounds["lbg"], ubg=bounds["ubg"])
         stats = solver.stats()
         status, iters = stats.get("return_status", ""), stats.get("iter_count", 0)
@@ -576,6 +598,87 @@ def plot_trajectory(result: ExcitationResult, path) -> None:
     plt.close(fig)
 
 
+def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000) -> bytes:
+    """PNG (report style) of every joint's ``q, dq, ddq`` against its limits (dashed red)."""
+    from .report.plots import WIDTH_IN, _png, require_matplotlib
+
+    MplFigure, FigureCanvasAgg = require_matplotlib()
+    lim, n = result.limits, result.limits.n
+    fig = MplFigure(figsize=(WIDTH_IN, 1.5 * n + 0.9), dpi=dpi, facecolor="white")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(n, 3, squeeze=False, sharex=True)
+    k = max(1, len(result.t) // max(max_points, 1))
+    t = result.t[::k]
+    for j in range(n):
+        f, u = (1.0, "m") if lim.is_prismatic(j) else (180.0 / math.pi, "deg")
+        panels = ((f * result.q[::k, j], f * lim.q_min[j], f * lim.q_max[j], f"q{j + 1} [{u}]"),
+                  (f * result.dq[::k, j], -f * lim.dq_max[j], f * lim.dq_max[j], f"dq{j + 1} [{u}/s]"),
+                  (f * result.ddq[::k, j], -f * lim.ddq_max[j], f * lim.ddq_max[j], f"ddq{j + 1} [{u}/s2]"))
+        for c, (y, lo, hi, lab) in enumerate(panels):
+            ax = axes[j, c]
+            ax.plot(t, y, lw=1)
+            for v in (lo, hi):
+                ax.axhline(v, color="r", ls="--", lw=0.8)
+            ax.set_ylabel(lab, fontsize=8)
+            ax.tick_params(labelsize=7)
+    for c in range(3):
+        axes[-1, c].set_xlabel("t [s]", fontsize=8)
+    fig.subplots_adjust(left=0.07, right=0.99, top=0.97, bottom=0.5 / (1.5 * n + 0.9), wspace=0.3, hspace=0.25)
+    return _png(fig, dpi)
+
+
+def excitation_report(result: ExcitationResult, model: IdentificationModel, *, noise: float, chi_b=None,
+                      title: str | None = None, plots: bool = True):
+    """:class:`~symoro_gen.report.Report` of an excitation design: the figures, the joint
+    trajectories against the limits, the peak use of every limit, and the predicted standard
+    deviation (and %sigma with nominal base parameters) of every base parameter for i.i.d. torque
+    noise ``noise`` (:func:`predicted_sigma`, Gautier 1997 eq. 9)."""
+    from . import __version__
+    from .report import Figure, Heading, Paragraph, Report, Table
+
+    lim, n = result.limits, result.limits.n
+    sig, pct = predicted_sigma(model, result.q, result.dq, result.ddq, noise, chi_b)
+    worst = max(max(v) for v in result.usage.values())
+    blocks: list = [Paragraph(
+        f"{model.ROBOT}: {result.basis.kind} excitation, {len(result.t)} samples over {result.t[-1]:g} s; "
+        f"criterion {result.criterion}; cond = {result.cond:.6g} (2-norm condition number of the base regressor "
+        f"stacked over the output samples, unscaled); limits {'respected' if result.limits_ok else 'VIOLATED'} "
+        f"at every output sample and on a 10x denser resampling (peak usage {worst:.3f}); "
+        f"{len(result.starts)} IPOPT start(s), {result.wall_time:.1f} s.")]
+    if lim.defaulted:
+        blocks.append(Paragraph(f"The robot file gives no {', '.join(lim.defaulted)}: defaults were used."))
+    blocks.append(Heading("Joint trajectories against the limits"))
+    if plots:
+        blocks.append(Figure("trajectory", trajectory_figure_png(result),
+                             caption="q, dq, ddq per joint (rows) against the limits (dashed red)"))
+    rows = []
+    for j in range(n):
+        f, u, d = (1.0, "m", 4) if lim.is_prismatic(j) else (180.0 / math.pi, "deg", 1)
+        rows.append((f"{j + 1}", f"{f * result.q[:, j].min():.{d}f} .. {f * result.q[:, j].max():.{d}f} {u}",
+                     f"{f * lim.q_min[j]:.{d}f} .. {f * lim.q_max[j]:.{d}f} {u}",
+                     *(f"{result.usage[k][j]:.3f}" for k in ("q", "dq", "ddq")),
+                     f"{result.usage['tau'][j]:.3f}" if "tau" in result.usage else "-"))
+    blocks.append(Table(("joint", "q range", "limits", "use q", "use dq", "use ddq", "use tau"),
+                        tuple(rows), caption="Peak use of each limit (1 = at the limit; q about the range centre)"))
+    blocks.append(Heading("Predicted precision of the base parameters"))
+    cb = None if chi_b is None else np.asarray(chi_b, float)
+    prow = []
+    for i, name in enumerate(model.BASE_NAMES):
+        nominal = "-" if cb is None else f"{cb[i]:.4g}"
+        p = "-" if pct is None or not np.isfinite(pct[i]) else f"{pct[i]:.3g}"
+        prow.append((name, nominal, f"{sig[i]:.4g}", p))
+    blocks.append(Table(("parameter", "nominal", "sigma", "%sigma"), tuple(prow),
+                        caption=f"sigma = noise sqrt(diag((W'W)^-1)) for torque noise {noise:g} N m "
+                                f"(Gautier 1997 eq. 9); %sigma = 100 sigma / |nominal|"))
+    if result.starts:
+        blocks.append(Heading("Starts"))
+        blocks.append(Table(("start", "cond at start", "cond optimised", "IPOPT status", "iterations"),
+                            tuple((str(st["start"]), f"{st['cond_start']:.4g}", f"{st['cond']:.4g}", str(st["status"]),
+                                   str(st["iterations"])) for st in result.starts),
+                            caption="Random feasible starts (best of the pool) and IPOPT's result from each"))
+    return Report(title or f"Excitation trajectory: {model.ROBOT}", tuple(blocks), footer=f"symoro_gen {__version__}")
+
+
 def add_excite_parser(sub) -> None:
     """Register ``symoro-gen excite``."""
     e = sub.add_parser("excite", help="optimal excitation trajectory (Fourier or point-to-point) -> CSV t,q,dq,ddq")
@@ -590,6 +693,8 @@ def add_excite_parser(sub) -> None:
     e.add_argument("--rate", type=float, default=100.0, help="output sampling rate [Hz]")
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--starts", type=int, default=4, help="random starts of IPOPT")
+    e.add_argument("--pool", type=int, default=None,
+                   help="random feasible designs drawn; the --starts best by cond start IPOPT (default 10 x --starts)")
     e.add_argument("--max-iter", type=int, default=200, help="IPOPT iterations per start")
     e.add_argument("--samples", type=int, default=None, help="samples of the criterion (default from the size of the problem)")
     e.add_argument("--criterion", choices=("cond", "logdet"), default="cond")
@@ -597,12 +702,18 @@ def add_excite_parser(sub) -> None:
     e.add_argument("--no-torque-limits", action="store_true", help="ignore tau_max even with nominal parameters")
     e.add_argument("--json", help="write the figures (cond, limits_ok, predicted sigma...) as JSON here")
     e.add_argument("--plot", help="PNG of the joint trajectories against the limits")
+    e.add_argument("--report", help="report (.html self-contained, or .md with its images beside it): trajectories "
+                                    "against the limits, cond, limit usage, predicted %%sigma at --noise")
     e.set_defaults(func=cmd_excite)
 
 
 def cmd_excite(args) -> int:
     """``symoro-gen excite``: design, write CSV (and JSON, plot), print a summary."""
 
+    if args.report:
+        from .report import check_report_path
+
+        check_report_path(args.report)  # before the long optimisation
     robot, model = model_for(args.robot)
     n = model.N_JOINTS
     lim = limits_of(robot, n)
@@ -626,6 +737,7 @@ def cmd_excite(args) -> int:
         chi_b = np.asarray(model.base_parameters(np.asarray(nominal)), float)
     res = optimise_excitation(model, basis, lim, args.duration, rate=args.rate, criterion=args.criterion,
                               starts=args.starts, seed=args.seed, max_iter=args.max_iter, samples=args.samples,
+                              pool=args.pool,
                               chi_b=None if args.no_torque_limits else chi_b)
     write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
     sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)
@@ -642,6 +754,10 @@ def cmd_excite(args) -> int:
         write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
     if args.plot:
         plot_trajectory(res, args.plot)
+    if args.report:
+        from .report.document import write_report_files
+
+        write_report_files(excitation_report(res, model, noise=args.noise, chi_b=chi_b), args.report)
     if not args.quiet:
         worst = max(max(v) for v in res.usage.values())
         print(f"{model.ROBOT}: {basis.kind} excitation, {len(res.t)} samples at {args.rate:g} Hz -> {args.output}")

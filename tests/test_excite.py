@@ -155,12 +155,15 @@ def test_torque_limits_are_imposed(scara):
     rng = np.random.default_rng(4)
     chi_b = model.base_parameters(np.asarray(random_physical_parameters(robot, rng)))
     basis = FourierBasis(3, 1 / DURATION)
-    free = optimise_excitation(model, basis, limits_of(robot), DURATION, rate=RATE, starts=1, seed=0, max_iter=30)
+    # pool=1: one plain random start, so that the torque-limited problem below stays the same small one
+    free = optimise_excitation(model, basis, limits_of(robot), DURATION, rate=RATE, starts=1, seed=0, max_iter=30,
+                               pool=1)
     tau_free = np.abs(model.regressor(free.q, free.dq, free.ddq) @ chi_b).max(0)
     base = limits_of(robot)
     # the horizontal joints 1, 2, 4 to 60% of their free peak; joint 3 carries the weight (kept feasible)
     lim = Limits(base.q_min, base.q_max, base.dq_max, base.ddq_max, tau_max=tau_free * [0.6, 0.6, 1.5, 0.6])
-    res = optimise_excitation(model, basis, lim, DURATION, rate=RATE, starts=1, seed=0, max_iter=60, chi_b=chi_b)
+    res = optimise_excitation(model, basis, lim, DURATION, rate=RATE, starts=1, seed=0, max_iter=60, chi_b=chi_b,
+                              pool=1)
     tau = model.regressor(res.q, res.dq, res.ddq) @ chi_b
     assert np.all(np.abs(tau) <= lim.tau_max * 1.02), (np.abs(tau).max(0), lim.tau_max)
     assert check_limits(lim, res.q, res.dq, res.ddq)["ok"]
@@ -263,3 +266,52 @@ def test_cli_point_to_point(cli, tmp_path, scara):
     idx = [0, 50, 100, 150]
     np.testing.assert_allclose(data[idx, 1:n + 1], vias, atol=1e-9)
     np.testing.assert_allclose(data[idx, n + 1:2 * n + 1], 0, atol=1e-9)
+
+
+def test_cli_report_html(cli, tmp_path, scara):
+    """``excite --report``: one self-contained page with the trajectory plot, the cond of the CSV and the
+    predicted sigma of every base parameter (those of the JSON, i.e. noise * sqrt(diag((W'W)^-1)))."""
+    pytest.importorskip("matplotlib", reason="the report's plot needs matplotlib (the 'plots' extra)")
+    import re
+
+    _, model = scara
+    csv, js, rep = tmp_path / "t.csv", tmp_path / "t.json", tmp_path / "t.html"
+    cli("--quiet", "excite", "scara", "-o", csv, "--duration", "4", "--harmonics", "3", "--rate", "50",
+        "--starts", "1", "--pool", "3", "--max-iter", "20", "--noise", "0.5", "--json", js, "--report", rep, rc=0)
+    html = rep.read_text()
+    out = json.loads(js.read_text())
+    assert "data:image/png;base64," in html and "http" not in html.replace("http-equiv", "")
+    assert f"cond = {out['cond']:.6g}" in html
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    n = model.N_JOINTS
+    W = model.regressor(data[:, 1:n + 1], data[:, n + 1:2 * n + 1], data[:, 2 * n + 1:]).reshape(-1, len(model.BASE_NAMES))
+    sig = 0.5 * np.sqrt(np.diag(np.linalg.inv(W.T @ W)))
+    for name, s in zip(model.BASE_NAMES, sig):
+        m = re.search(rf"<td>{name}</td><td[^>]*>[^<]*</td><td[^>]*>([^<]+)</td>", html)
+        assert m is not None, name
+        assert float(m.group(1)) == pytest.approx(s, rel=1e-3), name
+    # a bad suffix is refused before the optimisation, and nothing is written
+    r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--report", tmp_path / "r.pdf", rc=None)
+    assert r.rc != 0 and "unknown suffix" in r.err and not (tmp_path / "x.csv").exists()
+
+
+def test_ipopt_starts_are_the_best_of_the_random_pool(scara, scara_limits, monkeypatch):
+    """``pool`` random feasible designs are drawn; the ``starts`` of lowest cond start IPOPT."""
+    import symoro_gen.excite as ex
+
+    _, model = scara
+    drawn = []
+    real = ex.random_trajectory
+
+    def recording(*a, **kw):
+        X = real(*a, **kw)
+        drawn.append(X)
+        return X
+
+    monkeypatch.setattr(ex, "random_trajectory", recording)
+    basis = FourierBasis(3, 1 / DURATION)
+    res = optimise_excitation(model, basis, scara_limits, DURATION, rate=RATE, starts=2, pool=7, seed=3, max_iter=1)
+    assert len(drawn) == 7
+    t = output_times(DURATION, RATE)
+    conds = sorted(stacked_cond(model, *basis_eval(basis, X, t)) for X in drawn)
+    np.testing.assert_allclose([s["cond_start"] for s in res.starts], conds[:2], rtol=1e-10)

@@ -15,22 +15,30 @@ iteration an ordinary least-squares fit of the *measured* torque on the observat
 
 * ``chi_k+1 = argmin ||Y - W_s(chi_k) chi||^2`` (GJV2013), started from IDIM-OLS and
   iterated until ``|chi_k+1 - chi_k| / |chi_k| < tol``;
-* statistics of the last LS fit: ``sigma^2 = ||Y - W_s chi||^2 / (r - c)``,
-  ``C = sigma^2 (W_s' W_s)^-1`` (GJV2013), ``%sigma``.
+* statistics of the output-error estimate at convergence (GJV2013, Gauss-Newton covariance): the
+  robot is simulated once more with the final ``chi``; the output error ``e = Y - W_s(chi) chi`` of
+  that simulation gives ``sigma^2 = ||e||^2 / (r - c)`` and the Gauss-Newton Jacobian ``W_s(chi)``
+  gives ``C = sigma^2 (W_s' W_s)^-1``, ``%sigma`` (the residual of the last LS fit, on the states of
+  the previous simulation, would understate sigma).
 
 Only the measured torque and the reference enter: the noise on the measured positions does not bias it.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 
+import numpy as np
+
+from ..errors import IdentificationError
 from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
 from ..preprocessing.trajectory import Trajectory
 from ..simulate.closed_loop import FRICTION_EPS
 from .estimators import fit_ols
-from .iv import MAX_ITER, TOL, IterativeIdentification, iterate
+from .iv import MAX_ITER, TOL, IterativeIdentification, _tracking, iterate, simulated_system
+from .result import per_joint_rel_err, relative_std_pct
 
 __all__ = ["identify_didim"]
 
@@ -67,6 +75,31 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
     IterativeIdentification
         ``result.method == "DIDIM"``; ``result.residual`` is the output error ``Y - W_s chi``.
     """
-    return iterate(model, trajectories, options, lambda measured, sim: replace(fit_ols(sim), method="DIDIM"), "DIDIM",
-                   references=references, gains=gains, bandwidth_hz=bandwidth_hz, friction_eps=friction_eps,
-                   max_iter=max_iter, tol=tol, start=start)
+    it = iterate(model, trajectories, options, lambda measured, sim: replace(fit_ols(sim), method="DIDIM"), "DIDIM",
+                 references=references, gains=gains, bandwidth_hz=bandwidth_hz, friction_eps=friction_eps,
+                 max_iter=max_iter, tol=tol, start=start)
+    return output_error_statistics(model, it)
+
+
+def output_error_statistics(model: IdentificationModel, it: IterativeIdentification) -> IterativeIdentification:
+    """DIDIM statistics at the final estimate (GJV2013): simulate ``chi``, output error
+    ``e = Y - W_s(chi) chi``, ``sigma^2 = ||e||^2 / (r - c)``, ``C = sigma^2 (W_s' W_s)^-1``.
+
+    When the final estimate cannot be simulated the statistics of the last LS fit are kept and a
+    warning says so."""
+    res = it.result
+    chi = np.asarray(res.values, float)
+    try:
+        ssys, runs = simulated_system(model, it.setup, chi)
+    except IdentificationError as exc:
+        return replace(it, result=replace(res, warnings=res.warnings + (
+            f"DIDIM statistics are those of the last least-squares fit: the final estimate cannot be simulated ({exc})",)))
+    W, Y = ssys.W, ssys.Y
+    r, c = W.shape
+    e = Y - W @ chi
+    sigma = math.sqrt(float(e @ e) / (r - c))
+    cov = sigma ** 2 * np.linalg.pinv(W.T @ W)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    new = replace(res, std=std, cov=cov, sigma=sigma, rel_std_pct=relative_std_pct(chi, std), residual=e,
+                  rel_err=per_joint_rel_err(e, Y, ssys.joint, ssys.n_joints))
+    return replace(it, result=new, tracking_error=_tracking(runs))

@@ -40,7 +40,7 @@ from ..simulate.closed_loop import FRICTION_EPS, PIDGains, default_gains, parame
 from .estimators import COND_WARN, REL_STD_WARN_PCT, fit_ols
 from .result import IdentificationResult, per_joint_rel_err, relative_std_pct
 
-__all__ = ["ClosedLoopSetup", "IterativeIdentification", "closed_loop_setup", "identify_iv", "iterate", "iv_fit",
+__all__ = ["ClosedLoopSetup", "IterativeIdentification", "closed_loop_setup", "identify_iv", "iterate", "iv_fit", "physical_projection",
            "reference_ols", "simulated_system"]
 
 #: default convergence tolerance on ``|chi_k+1 - chi_k| / |chi_k|``
@@ -228,7 +228,8 @@ class IterativeIdentification:
     tracking_error : ndarray, shape (n,)
         RMS ``q_ref - q`` of the last simulation (all experiments).
     start_source : str
-        ``"IDIM-OLS"``, ``"OLS on the reference states"`` (fallback) or ``"given"``.
+        ``"IDIM-OLS"``, ``"OLS on the reference states"``, ``"physical projection of IDIM-OLS"``
+        (fallbacks) or ``"given"``.
     """
 
     result: IdentificationResult
@@ -332,6 +333,20 @@ def reference_ols(model: IdentificationModel, setup: ClosedLoopSetup) -> Identif
     return fit_ols(ObservationSystem(W[order], Y[order], systems[0].names, J[order]))
 
 
+def physical_projection(model: IdentificationModel, theta) -> np.ndarray | None:
+    """The base parameters of the physically consistent standard set closest to giving ``theta``
+    (:func:`~symoro_gen.identification.physical.standard_from_base`: pseudo-inertias positive
+    semidefinite, Wensing, Kim & Slotine 2018; ``IA, FV, FS >= 0``), i.e. ``theta`` itself when it is
+    physical, else its least-squares projection on the physical set. None without cvxpy."""
+    from .physical import base_matrix, standard_from_base
+
+    try:
+        sfb = standard_from_base(model, np.asarray(theta, float))
+    except IdentificationError:
+        return None
+    return base_matrix(model) @ np.asarray(sfb.values, float)
+
+
 def _simulable(model: IdentificationModel, setup: ClosedLoopSetup, theta) -> str | None:
     """None when ``theta`` can be simulated on the first experiment, else the reason."""
     tr = setup.trajectories[0]
@@ -354,7 +369,9 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
     The start is ``start`` when given, else the IDIM-OLS estimate; when that one cannot be simulated
     (inertia matrix not positive definite, diverging loop: noisy positions can make OLS non-physical),
     the OLS fit on the reference states (:func:`reference_ols`) is tried, and said in the warnings.
-    When a new estimate cannot be simulated, the step from the last simulated one is halved (up to
+    When neither can, the physically consistent projection of IDIM-OLS (:func:`physical_projection`)
+    starts. When a new estimate cannot be simulated, its physically consistent projection is simulated
+    instead; when that fails too, the step from the last simulated estimate is halved (up to
     :data:`MAX_HALVINGS` times), as a damped Gauss–Newton iteration does.
     """
     opts = AssemblyOptions() if options is None else options
@@ -378,32 +395,65 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
                 setup = closed_loop_setup(model, trajs, opts, alt, references=references, gains=None,
                                           bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
             why2 = _simulable(model, setup, alt)
-            if why2 is not None:
-                raise IdentificationError(
-                    f"{label}: cannot simulate the IDIM-OLS start ({why}) nor the OLS fit on the reference states "
-                    f"({why2}); filter more (a lower cutoff) or give a physical start (start=...)")
-            theta, source = alt, "OLS on the reference states"
-            notes.append(f"{label} started from the OLS fit on the reference states: the IDIM-OLS estimate cannot "
-                         f"be simulated ({why})")
+            if why2 is None:
+                theta, source = alt, "OLS on the reference states"
+                notes.append(f"{label} started from the OLS fit on the reference states: the IDIM-OLS estimate cannot "
+                             f"be simulated ({why})")
+            else:
+                proj = physical_projection(model, ols.values)
+                why3 = "cvxpy is not installed" if proj is None else _simulable(model, setup, proj)
+                if proj is None or why3 is not None:
+                    raise IdentificationError(
+                        f"{label}: cannot simulate the IDIM-OLS start ({why}), the OLS fit on the reference states "
+                        f"({why2}) nor the physically consistent projection of IDIM-OLS ({why3}); filter more "
+                        f"(a lower cutoff) or give a physical start (start=...)")
+                theta, source = proj, "physical projection of IDIM-OLS"
+                notes.append(f"{label} started from the physically consistent projection of the IDIM-OLS estimate "
+                             f"(neither it ({why}) nor the OLS fit on the reference states ({why2}) can be simulated)")
     history, changes = [theta], []
     res, runs, converged = ols, [], False
     prev = None
     for _ in range(int(max_iter)):
-        for halving in range(MAX_HALVINGS + 1):
-            try:
-                ssys, runs = simulated_system(model, setup, theta)
-                break
-            except IdentificationError as exc:
-                if prev is None or halving == MAX_HALVINGS:
-                    raise IdentificationError(
-                        f"{label} iteration {len(changes) + 1}: cannot simulate the current estimate: {exc}; filter "
-                        f"more (a lower cutoff) or give a physical start (start=...)") from None
-                # damped step (Gauss-Newton with step halving): back towards the last simulable estimate
+        ssys, failure, proj = None, "", None
+        try:
+            ssys, runs = simulated_system(model, setup, theta)
+        except IdentificationError as exc:
+            if prev is None:
+                raise IdentificationError(
+                    f"{label} iteration 1: cannot simulate the start: {exc}; filter more (a lower cutoff) or give "
+                    f"a physical start (start=...)") from None
+            failure = str(exc)
+        if ssys is None:
+            # the new estimate is not physical (M(q) indefinite) or its closed loop diverges: first its
+            # physically consistent projection (Wensing, Kim & Slotine 2018 constraints, physical.py),
+            # keeping the information of the step; else the damped step (Gauss-Newton with step halving)
+            proj = physical_projection(model, theta)
+            if proj is not None:
+                try:
+                    ssys, runs = simulated_system(model, setup, proj)
+                    notes.append(f"{label} iteration {len(changes)}: the estimate could not be simulated "
+                                 f"({failure}); replaced by its physically consistent projection")
+                except IdentificationError:
+                    ssys = None
+                # the damped steps below go toward the projection: with a physical last estimate every
+                # point between is physical (the constraints are convex, the regrouping linear)
+                theta = proj
+                history[-1] = theta
+        if ssys is None:
+            assert prev is not None
+            toward = "" if proj is None else " toward its physically consistent projection"
+            for halving in range(1, MAX_HALVINGS + 1):
                 theta = prev + 0.5 * (theta - prev)
                 history[-1] = theta
-                if halving == 0:
-                    notes.append(f"{label} iteration {len(changes)}: the full step could not be simulated; "
-                                 f"step halved")
+                try:
+                    ssys, runs = simulated_system(model, setup, theta)
+                    break
+                except IdentificationError as exc:
+                    if halving == MAX_HALVINGS:
+                        raise IdentificationError(
+                            f"{label} iteration {len(changes) + 1}: cannot simulate the current estimate: {exc}; "
+                            f"filter more (a lower cutoff) or give a physical start (start=...)") from None
+            notes.append(f"{label} iteration {len(changes)}: the full step could not be simulated; step halved{toward}")
         prev = theta
         res = step(measured.system, ssys)
         changes.append(_rel_change(res.values, theta))

@@ -36,6 +36,12 @@ def _frozen(a, dtype=float) -> np.ndarray:
     return out
 
 
+def method_label(method: str) -> str:
+    """The estimator's name in headers: ``IDIM-OLS``, ``IDIM-IV``...; DIDIM is not an IDIM method
+    (output error in closed loop, Gautier, Janot & Vandanjon 2013) and keeps its own name."""
+    return "DIDIM" if str(method).upper() == "DIDIM" else f"IDIM-{method}"
+
+
 def relative_std_pct(values, std) -> np.ndarray:
     """Relative standard deviation in percent (eq. 21); ``inf`` where the value is 0.
 
@@ -346,7 +352,7 @@ class IdentificationResult:
         """Tables like the papers': parameters (value, 2 sigma, %sigma), gains, relative error
         norms per joint, then numbered warnings."""
         lines = [
-            f"IDIM-{self.method} identification: {self.n_rows} equations, {self.n_params} parameters",
+            f"{method_label(self.method)} identification: {self.n_rows} equations, {self.n_params} parameters",
             f"cond(W) = {self.cond:.4g}  (columns scaled: {self.cond_scaled:.4g})   "
             f"sigma = {self.sigma:.4g}",
             "",

@@ -185,7 +185,9 @@ def unique_in_order(items) -> tuple[str, ...]:
 
 
 def result_overview(result) -> str:
-    return (f"IDIM-{result.method}: {result.n_rows} equations, {result.n_params} parameters; "
+    from ..identification.result import method_label
+
+    return (f"{method_label(result.method)}: {result.n_rows} equations, {result.n_params} parameters; "
             f"cond(W) = {fmt_value(result.cond)} (columns scaled: {fmt_value(result.cond_scaled)}); "
             f"σ = {fmt_value(result.sigma)}")
 

@@ -221,3 +221,99 @@ def test_non_physical_ols_start_falls_back_to_the_reference_states(scara):
     assert any("started from the OLS fit on the reference states" in w for w in fit.result.warnings)
     scale = np.maximum(np.abs(theta), 0.1)
     assert np.linalg.norm((fit.result.values - theta) / scale) < 0.5 * np.linalg.norm((fit.ols.values - theta) / scale)
+
+
+# ----------------------------------------------------------------------------- robustness, DIDIM statistics
+def test_didim_statistics_from_the_output_error_of_the_final_simulation(scara, fits):
+    """GJV2013: sigma^2 = ||Y - W_s(chi) chi||^2 / (r - c) on a simulation WITH the final estimate,
+    C = sigma^2 (W_s' W_s)^-1; the header names the method DIDIM (not IDIM-DIDIM)."""
+    from symoro_gen.identification.iv import simulated_system
+
+    _, model, *_ = scara
+    didim = fits[1]
+    res = didim.result
+    ssys, _ = simulated_system(model, didim.setup, res.values)
+    e = ssys.Y - ssys.W @ res.values
+    r, c = ssys.W.shape
+    sigma = np.sqrt(e @ e / (r - c))
+    assert res.sigma == pytest.approx(sigma, rel=1e-9)
+    np.testing.assert_allclose(res.std, sigma * np.sqrt(np.diag(np.linalg.inv(ssys.W.T @ ssys.W))), rtol=1e-6)
+    np.testing.assert_allclose(res.residual, e, rtol=1e-9, atol=1e-12)
+    head = res.summary().splitlines()[0]
+    assert head.startswith("DIDIM identification") and "IDIM-DIDIM" not in res.summary()
+    assert fits[0].result.summary().startswith("IDIM-IV identification")
+
+
+def test_physical_projection_of_base_parameters(scara, experiment):
+    pytest.importorskip("cvxpy", reason="the physical projection needs cvxpy")
+    from symoro_gen.identification.iv import physical_projection
+
+    _, model, _, theta, _ = scara
+    # a physical estimate is its own projection
+    np.testing.assert_allclose(physical_projection(model, theta), theta, atol=1e-5 * np.abs(theta).max())
+    bad = theta.copy()
+    bad[list(model.BASE_NAMES).index("ZZ1R")] = -5.0
+    proj = physical_projection(model, bad)
+    mot = experiment["mot"]
+    simulate_closed_loop(model, proj, mot.t[:50], mot.q[:50])  # simulable: no exception
+    from symoro_gen.identification.physical import standard_from_base
+
+    assert not standard_from_base(model, bad).exact  # the given one is not physical
+    assert standard_from_base(model, proj).exact  # its projection is
+    assert np.abs(proj - bad).max() > 0.1
+
+
+def test_non_simulable_iterate_is_replaced_by_its_physical_projection(scara, experiment):
+    """An iterate that cannot be simulated (here a step forced to a negative ZZ1R) is replaced by its
+    physically consistent projection; the iterations then converge to the same estimate."""
+    pytest.importorskip("cvxpy", reason="the physical projection needs cvxpy")
+    from dataclasses import replace
+
+    from symoro_gen.identification.iv import iterate
+
+    _, model, _, theta, _ = scara
+    calls = []
+
+    def step(measured, sim):
+        fit = iv_fit(measured, sim.W)
+        calls.append(1)
+        if len(calls) == 1:
+            v = fit.values.copy()
+            v[list(model.BASE_NAMES).index("ZZ1R")] = -1.0  # M(q) not positive definite
+            return replace(fit, values=v)
+        return fit
+
+    it = iterate(model, experiment["log"], AssemblyOptions(), step, "IDIM-IV", gains=experiment["gains"])
+    assert any("physically consistent projection" in w for w in it.result.warnings), it.result.warnings
+    assert it.converged
+    ref = identify_iv(model, experiment["log"], AssemblyOptions(), gains=experiment["gains"])
+    scale = np.maximum(np.abs(theta), 0.1)
+    assert np.linalg.norm((it.result.values - ref.result.values) / scale) < 1e-2
+
+
+def test_start_falls_back_to_the_physical_projection(scara, experiment, fits, monkeypatch):
+    """When neither IDIM-OLS nor the OLS fit on the reference states can be simulated, the
+    iterations start from the physically consistent projection of IDIM-OLS, and say so."""
+    pytest.importorskip("cvxpy", reason="the physical projection needs cvxpy")
+    import symoro_gen.identification.iv as ivmod
+
+    _, model, _, theta, _ = scara
+    bad = theta.copy()
+    bad[list(model.BASE_NAMES).index("ZZ1R")] = -1.0  # M(q) not positive definite
+    real_fit_ols = ivmod.fit_ols
+
+    def non_physical_ols(system, **kw):  # IDIM-OLS and the reference OLS both made non-physical
+        return replace_values(real_fit_ols(system, **kw), bad)
+
+    def replace_values(res, v):
+        from dataclasses import replace
+
+        return replace(res, values=v.copy())
+
+    monkeypatch.setattr(ivmod, "fit_ols", non_physical_ols)
+    fit = identify_didim(model, experiment["log"], AssemblyOptions(), gains=experiment["gains"])
+    assert fit.start_source == "physical projection of IDIM-OLS"
+    assert any("physically consistent projection of the IDIM-OLS" in w for w in fit.result.warnings)
+    scale = np.maximum(np.abs(theta), 0.1)
+    # the same fixed point as the iterations from a physical start
+    assert np.linalg.norm((fit.result.values - fits[1].result.values) / scale) < 1e-2
