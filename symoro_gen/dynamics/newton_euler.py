@@ -41,16 +41,38 @@ class SymbolicRegressor:
         return {i: e for (i, n), e in self.graph.outputs.items() if n == name}
 
 
+_ZERO = sp.S.Zero
+
+
+def _diff(x, y):
+    """``x - y`` without building the products that are exactly zero (same result as sympy's)."""
+    if y is _ZERO:
+        return x
+    return -y if x is _ZERO else x - y
+
+
+def _prod(a, b):
+    return _ZERO if a is _ZERO or b is _ZERO else a * b
+
+
+def _dot(pairs) -> sp.Expr:
+    """``sum(a * b)`` as one ``Add`` of the non-zero products (one flatten instead of one per term)."""
+    terms = [a * b for a, b in pairs if a is not _ZERO and b is not _ZERO]
+    return sp.Add(*terms) if len(terms) != 1 else terms[0]
+
+
 def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    a = [sp.sympify(x) for x in a]
+    return [_diff(_prod(a[1], b[2]), _prod(a[2], b[1])), _diff(_prod(a[2], b[0]), _prod(a[0], b[2])),
+            _diff(_prod(a[0], b[1]), _prod(a[1], b[0]))]
 
 
 def _matvec(M, v):
-    return [sum((M[i, k] * v[k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+    return [_dot((M[i, k], v[k]) for k in range(3)) for i in range(3)]
 
 
 def _matTvec(M, v):
-    return [sum((M[k, i] * v[k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+    return [_dot((M[k, i], v[k]) for k in range(3)) for i in range(3)]
 
 
 def _inertia_moment(kind: str, wd, p) -> list:
@@ -173,7 +195,7 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             acc_a = list(vd[0])
         else:
             Ua = u_matrix(a)
-            acc_a = [vd[a][i] + sum((Ua[i, k] * P[j][k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+            acc_a = [vd[a][i] + _dot((Ua[i, k], P[j][k]) for k in range(3)) for i in range(3)]
             acc_a = g.vec(acc_a, f"va{j}")
         vj = g.vec(_matTvec(Rm, acc_a), f"vd{j}")
         if row.sigma == REVOLUTE:

@@ -244,23 +244,26 @@ def emit_robot(robot: RobotDescription, out_dir: str | os.PathLike[str], *,
     return emit_from(reg, bp, out_dir, force=force)
 
 
-def base_graph(reg: SymbolicRegressor, bp: BaseParameterMap) -> ExprGraph:
-    """The base regressor's graph: geometry substituted, kept columns renamed to base names."""
-    subs = reg.robot.geometry_subs()
+def base_graph(reg: SymbolicRegressor, bp: BaseParameterMap, substituted: ExprGraph | None = None) -> ExprGraph:
+    """The base regressor's graph: geometry substituted, kept columns renamed to base names.
+
+    ``substituted``: ``reg.graph`` with the geometry already substituted (computed here when None).
+    """
     kept = set(bp.kept)
-    g = reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in kept})
+    full = reg.graph.substituted(reg.robot.geometry_subs()) if substituted is None else substituted
+    g = full.pruned({k for k in reg.graph.outputs if k[1] in kept})
     ren = dict(zip(bp.kept, bp.base_names))
     return ExprGraph(g.inputs, g.defs, {(i, ren[n]): e for (i, n), e in g.outputs.items()})
 
 
 def model_graphs(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[str, ExprGraph], dict[str, tuple[str, ...]]]:
     """Optimised graphs and column names of the three regressors, keyed ``base/standard/payload``."""
-    subs = reg.robot.geometry_subs()
+    full = reg.graph.substituted(reg.robot.geometry_subs())  # once, shared by the three graphs
 
     def cols(names: Sequence[str]) -> ExprGraph:
-        return optimize(reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(names)}))
+        return optimize(full.pruned({k for k in reg.graph.outputs if k[1] in set(names)}))
 
-    graphs = {"base": optimize(base_graph(reg, bp)), "standard": cols(reg.standard_names),
+    graphs = {"base": optimize(base_graph(reg, bp, full)), "standard": cols(reg.standard_names),
               "payload": cols(reg.payload_names)}
     names = {"base": tuple(bp.base_names), "standard": tuple(reg.standard_names), "payload": tuple(reg.payload_names)}
     return graphs, names
