@@ -101,7 +101,8 @@ def gravity_symbols(robot: RobotDescription) -> dict[sp.Symbol, float]:
     return {sp.Symbol(f"G{i + 1}", real=True): float(x) for i, x in enumerate(robot.gravity) if x != 0}
 
 
-def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity: bool = False) -> SymbolicRegressor:
+def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity: bool = False,
+                    columns=None) -> SymbolicRegressor:
     """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler ([KK1987];
     [KD2002] ch. 9: ``Gamma = IDM_st(q, dq, ddq) chi_st``, IDM of [GB-gains] eq. 1-8).
 
@@ -113,6 +114,9 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
         (graph inputs) instead of numbers; used to write regrouping relations exactly.
     progress : callable, optional
         Called as ``progress(stage, j)`` per link (for progress bars).
+    columns : collection of str, optional
+        Only these parameter columns (standard or payload names) are built; the others are left out of
+        ``graph.outputs`` (the exact base-parameter solve needs a few columns, not the whole model).
 
     Returns
     -------
@@ -252,6 +256,8 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
         Wd, V = wd[k], vd[k]
         for kind in INERTIAL_KINDS:
             name = param_name(kind, k)
+            if columns is not None and name not in columns:
+                continue
             if kind in INERTIAL_KINDS[:6]:
                 # N = E wd + w x (E w), written with the named products of w
                 n_ = _inertia_moment(kind, Wd, products(k))
@@ -268,7 +274,8 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             i = row_of[k]
             extra = {"IA": ddq_symbol(k), "FV": dq_symbol(k), "FS": sp.sign(dq_symbol(k)), "OFF": sp.Integer(1)}
             for kind in row.drive:
-                add(i, param_name(kind, k), extra[kind])
+                if columns is None or param_name(kind, k) in columns:
+                    add(i, param_name(kind, k), extra[kind])
         if progress:
             progress("backward", k)
 

@@ -109,7 +109,9 @@ def _pretty_relation(name: str, e: sp.Expr) -> str:
     return f"{name} = {sp.sstr(e, order='none')}"
 
 
-def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCount) -> str:
+def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCount,
+                       texts: dict[str, str] | None = None) -> str:
+    """``base_parameters.md``; ``texts``: the relations already printed (``sp.sstr(e, order="none")``)."""
     lines = [
         f"# Base parameters of `{robot.name}`",
         "",
@@ -131,7 +133,7 @@ def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCou
     for n in bp.base_names:
         e = bp.relations[n]
         if n.endswith("R"):
-            lines.append(_pretty_relation(n, e))
+            lines.append(_pretty_relation(n, e) if texts is None else f"{n} = {texts[n]}")
     lines += ["```", "", "## Base parameters kept unchanged", "", ", ".join(n for n in bp.base_names if not n.endswith("R")) or "none", ""]
     lines += ["## Without effect on the model (eliminated)", ""]
     lines += [f"- {x}" for x in bp.no_effect] or ["- none"]
@@ -304,7 +306,8 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         relations=_relations_code(rel, tuple(bp.base_names)),
     )
     ops = graph_ops(graphs["base"])
-    files["base_parameters.md"] = relations_markdown(robot, bp, ops)
+    texts = {k: sp.sstr(bp.relations[k], order="none") for k in bp.base_names}  # printed once, used twice
+    files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
     manifest = {
         "generator": "symoro_gen",
         "robot": robot.name,
@@ -317,7 +320,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         "payload_names": list(reg.payload_names),
         "counts": {"standard": len(reg.standard_names), "base": len(bp.base_names), "payload": len(reg.payload_names)},
         "operations": {f"{k}_regressor": graph_ops(graphs[k]).as_dict() for k in ("base", "standard", "payload")},
-        "relations": {k: sp.sstr(bp.relations[k], order="none") for k in bp.base_names},
+        "relations": texts,
         "numeric_relations": list(bp.numeric),
         "c_file": f"regressor_{robot.name}.c",
         "c_functions": {k: f"{robot.name}_{k}_regressor" for k in ("base", "standard", "payload")},
