@@ -148,17 +148,17 @@ def _monomial(f: sp.Expr) -> bool:
     return True
 
 
+def _plain_factor(f: sp.Expr) -> bool:
+    """An atom, a function of monomials (``cos(pi/5)``), or an integer power of one of these."""
+    if f.is_Pow and f.exp.is_Integer:
+        f = f.base
+    return bool(f.is_Atom or (isinstance(f, sp.Function) and all(_monomial(a) for a in f.args)))
+
+
 def _is_expanded(e: sp.Expr) -> bool:
-    """True when ``sp.expand(e)`` is ``e``: a sum of products of atoms, integer powers of atoms and
-    functions of such products (``cos(pi/5)``); a cheap test that saves expanding long relations again."""
-    for t in sp.Add.make_args(e):
-        for f in sp.Mul.make_args(t):
-            if f.is_Atom or _monomial(f):
-                continue
-            if isinstance(f, sp.Function) and all(_monomial(a) for a in f.args):
-                continue
-            return False
-    return True
+    """True when ``sp.expand(e)`` is ``e``: a sum of products of atoms, functions of monomials
+    (``cos(pi/5)``) and integer powers of these; a cheap test that saves expanding long relations again."""
+    return all(_plain_factor(f) for t in sp.Add.make_args(e) for f in sp.Mul.make_args(t))
 
 
 def _sym(name: str) -> sp.Symbol:
