@@ -142,10 +142,7 @@ class BaseParameterMap:
 
 def _monomial(f: sp.Expr) -> bool:
     """A product of atoms and integer powers of atoms (``sp.expand`` leaves it unchanged)."""
-    for x in sp.Mul.make_args(f):
-        if not (x.is_Atom or (x.is_Pow and x.exp.is_Integer and x.base.is_Atom)):
-            return False
-    return True
+    return all(x.is_Atom or (x.is_Pow and x.exp.is_Integer and x.base.is_Atom) for x in sp.Mul.make_args(f))
 
 
 def _plain_factor(f: sp.Expr) -> bool:
@@ -479,7 +476,9 @@ def group_base_parameters(
             Q = np.column_stack([Q, qv / np.linalg.norm(qv)])
             continue
         # dependent: c = W_acc beta; which columns (numeric), then the coefficients (exact)
-        beta, *_ = np.linalg.lstsq(W[:, accepted], c, rcond=None)
+        # least squares through the orthonormal basis Q of the accepted columns (W_acc = Q R, R = Q^T W_acc
+        # triangular): a k x k solve instead of an SVD of the (samples*n) x k block for every dependency
+        beta = np.linalg.solve(Q.T @ W[:, accepted], Q.T @ c)
         support = [(sweep_order[kk], float(b)) for kk, b in zip(accepted, beta) if abs(b) > coefficient_tol]
         targets = [t for t, _ in support]
         coefs = solver.solve(name, targets)

@@ -96,12 +96,15 @@ class ExprGraph:
 
     def used_names(self) -> set:
         """Names of all symbols the definitions and outputs use (to load only needed inputs)."""
-        used: set = set()
-        for _, e in self.defs:
-            used |= {x.name for x in e.free_symbols}
-        for e in self.outputs.values():
-            used |= {x.name for x in e.free_symbols}
-        return used
+        cached = self.__dict__.get("_used_names")  # each backend asks; the graph is immutable
+        if cached is None:
+            used: set = set()
+            for _, e in self.defs:
+                used |= {x.name for x in e.free_symbols}
+            for e in self.outputs.values():
+                used |= {x.name for x in e.free_symbols}
+            cached = self.__dict__["_used_names"] = frozenset(used)
+        return set(cached)
 
     def inline_all(self) -> dict:
         """Outputs as closed expressions of the inputs (for small checks only)."""

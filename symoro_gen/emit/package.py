@@ -22,8 +22,8 @@ import importlib.metadata
 import json
 import os
 import platform
-import sys
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -265,11 +265,12 @@ def base_graph(reg: SymbolicRegressor, bp: BaseParameterMap, substituted: ExprGr
 def model_graphs(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[str, ExprGraph], dict[str, tuple[str, ...]]]:
     """Optimised graphs and column names of the three regressors, keyed ``base/standard/payload``."""
     full = reg.graph.substituted(reg.robot.geometry_subs())  # once, shared by the three graphs
+    memo: dict[Any, Any] = {}  # per-expression work of the optimiser, shared by the three graphs
 
     def cols(names: Sequence[str]) -> ExprGraph:
-        return optimize(full.pruned({k for k in reg.graph.outputs if k[1] in set(names)}))
+        return optimize(full.pruned({k for k in reg.graph.outputs if k[1] in set(names)}), memo)
 
-    graphs = {"base": optimize(base_graph(reg, bp, full)), "standard": cols(reg.standard_names),
+    graphs = {"base": optimize(base_graph(reg, bp, full), memo), "standard": cols(reg.standard_names),
               "payload": cols(reg.payload_names)}
     names = {"base": tuple(bp.base_names), "standard": tuple(reg.standard_names), "payload": tuple(reg.payload_names)}
     return graphs, names
@@ -309,7 +310,8 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         nominal_payload=robot.nominal_payload(),
         relations=_relations_code(rel, tuple(bp.base_names)),
     )
-    ops = graph_ops(graphs["base"])
+    all_ops = {k: graph_ops(graphs[k]) for k in ("base", "standard", "payload")}
+    ops = all_ops["base"]
     texts = {k: sp.sstr(bp.relations[k], order="none") for k in bp.base_names}  # printed once, used twice
     files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
     manifest = {
@@ -323,7 +325,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         "base_names": list(bp.base_names),
         "payload_names": list(reg.payload_names),
         "counts": {"standard": len(reg.standard_names), "base": len(bp.base_names), "payload": len(reg.payload_names)},
-        "operations": {f"{k}_regressor": graph_ops(graphs[k]).as_dict() for k in ("base", "standard", "payload")},
+        "operations": {f"{k}_regressor": all_ops[k].as_dict() for k in ("base", "standard", "payload")},
         "relations": texts,
         "numeric_relations": list(bp.numeric),
         "c_file": f"regressor_{robot.name}.c",
