@@ -51,13 +51,16 @@ def _diff(x, y):
     return -y if x is _ZERO else x - y
 
 
+_MUL = sp.Mul  # what ``a * b`` calls for sympy expressions, without the operator's sympify wrappers
+
+
 def _prod(a, b):
-    return _ZERO if a is _ZERO or b is _ZERO else a * b
+    return _ZERO if a is _ZERO or b is _ZERO else _MUL(a, b)
 
 
 def _dot(pairs) -> sp.Expr:
     """``sum(a * b)`` as one ``Add`` of the non-zero products (one flatten instead of one per term)."""
-    terms = [a * b for a, b in pairs if a is not _ZERO and b is not _ZERO]
+    terms = [_MUL(a, b) for a, b in pairs if a is not _ZERO and b is not _ZERO]
     return sp.Add(*terms) if len(terms) != 1 else terms[0]
 
 
