@@ -48,8 +48,20 @@ def _match(e: sp.Expr, trig: dict[sp.Symbol, tuple[str, str]]) -> tuple[Any, ...
     return ja, "C", sb, xb, sa, xa
 
 
-def rotation_pairs(graph: ExprGraph) -> ExprGraph:
-    """Rewrite paired rotations with 3 multiplications (see module docstring)."""
+def rotation_pairs(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> ExprGraph:
+    """Rewrite paired rotations with 3 multiplications (see module docstring).
+
+    ``memo``: a dict kept by the caller across the graphs of one model; the products that do not depend
+    on the numbering of the new variables are built once (results do not depend on it).
+    """
+    memo = {} if memo is None else memo
+
+    def once(key: tuple[Any, ...], build: Any) -> Any:
+        got = memo.get(key)
+        if got is None:
+            got = memo[key] = build()
+        return got
+
     trig: dict[sp.Symbol, tuple[str, str]] = {}
     for s, e in graph.defs:
         if isinstance(e, sp.cos):
@@ -104,10 +116,10 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
     for n, ((k1, k2), (j, C, a, bp, s1, s3)) in enumerate(new_defs_for.items()):
         K = sp.Symbol(f"rot{n}", real=True)
         CpS, _, SmC, _ = jdefs[j]
-        replace[k1] = s1 * (K - bp * CpS)
-        replace[k2] = s3 * (K + a * SmC)
+        replace[k1] = s1 * (K - once(("rot*", bp, CpS), lambda bp=bp, CpS=CpS: bp * CpS))
+        replace[k2] = s3 * (K + once(("rot*", a, SmC), lambda a=a, SmC=SmC: a * SmC))
         first = k1 if order[k1] < order[k2] else k2
-        extra_at[first] = [(K, C * (a + bp))]
+        extra_at[first] = [(K, once(("rotK", C, a, bp), lambda C=C, a=a, bp=bp: C * (a + bp)))]
         joint_at[first] = j
     placed_joint: set[str] = set()
 
@@ -227,4 +239,5 @@ def share_products(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> Expr
 
 def optimize(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> ExprGraph:
     """All passes, in order (``memo``: see :func:`share_products`)."""
-    return share_products(rotation_pairs(graph), memo)
+    memo = {} if memo is None else memo
+    return share_products(rotation_pairs(graph, memo), memo)
