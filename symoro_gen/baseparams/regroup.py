@@ -135,7 +135,7 @@ class BaseParameterMap:
                 if s == 1:
                     raise ValueError(f"relation of {name} has a constant term")
                 # exact numeric factors such as cos(1/10) stay in the "symbol" part: split them off
-                num, syms = s.as_independent(*fs, as_Add=False)
+                num, syms = _split_constant(s, fs)
                 K[b, idx[syms.name]] += float(c * num)
         return K
 
@@ -156,6 +156,16 @@ def _is_expanded(e: sp.Expr) -> bool:
     """True when ``sp.expand(e)`` is ``e``: a sum of products of atoms, functions of monomials
     (``cos(pi/5)``) and integer powers of these; a cheap test that saves expanding long relations again."""
     return all(_plain_factor(f) for t in sp.Add.make_args(e) for f in sp.Mul.make_args(t))
+
+
+def _split_constant(term: sp.Expr, fs: set) -> tuple[sp.Expr, sp.Expr]:
+    """``term.as_independent(*fs, as_Add=False)`` for a term with one symbolic factor, without building
+    the set of the relation's free symbols once per term (what ``as_independent`` does with them)."""
+    if term.is_Mul:
+        dep = [f for f in term.args if f.free_symbols]
+        if len(dep) == 1:
+            return sp.Mul(*[f for f in term.args if not f.free_symbols]), dep[0]
+    return term.as_independent(*fs, as_Add=False)
 
 
 def _sym(name: str) -> sp.Symbol:

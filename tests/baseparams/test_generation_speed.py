@@ -113,3 +113,17 @@ def test_graph_size_grows_no_faster_than_the_regressor():
     sizes = {n: len(build_regressor(parse_robot_text(chain_text(n, False), file="c.toml")).graph.defs)
              for n in (3, 6)}
     assert sizes[6] <= 4.4 * sizes[3], sizes
+
+
+def test_constant_split_equals_as_independent():
+    """The K matrix splits each relation term into its constant factor and its parameter symbol: the
+    shortcut gives what ``as_independent`` gives, term by term, on a general chain's relations."""
+    bp = regroup.group_base_parameters(build_regressor(parse_robot_text(chain_text(3, True), file="g.toml")))
+    n = 0
+    for rel in bp.relations.values():
+        e = rel.xreplace({**bp.gravity, **bp.geometry})
+        fs = e.free_symbols
+        for term in e.as_coefficients_dict():
+            assert regroup._split_constant(term, fs) == term.as_independent(*fs, as_Add=False)
+            n += 1
+    assert n > 50
