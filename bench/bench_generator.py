@@ -93,7 +93,9 @@ def generate_text(text: str, file: str, out: Path):
 
 
 def fit_exponent(ns, ts) -> float:
-    """p of t ~ c n^p, least squares on log t against log n."""
+    """p of t ~ c n^p, least squares on log t against log n (nan with fewer than two points)."""
+    if len(ns) < 2:
+        return float("nan")
     return float(np.polyfit(np.log(np.asarray(ns, float)), np.log(np.asarray(ts, float)), 1)[0])
 
 
@@ -125,7 +127,7 @@ def scaling(out: Path, frames: list[int], families: list[str]) -> None:
             print(f"  {'':{len(fam)}}  {n:3d} {w:7.2f} {c:7.2f} {em.n_base:4d} {o.mul + o.div:6d} {o.add:6d}", flush=True)
         p_all = fit_exponent(ns, cpu)
         tail = [k for k, n in enumerate(ns) if n >= 6]
-        p_tail = fit_exponent([ns[k] for k in tail], [cpu[k] for k in tail]) if len(tail) >= 2 else float("nan")
+        p_tail = fit_exponent([ns[k] for k in tail], [cpu[k] for k in tail])
         largest = cpu[-1]
         print(f"  {fam}: fitted exponent (CPU s, log-log least squares) {p_all:.2f} over n = {ns[0]}..{ns[-1]}, "
               f"{p_tail:.2f} over n >= 6 (target <= 1.5: {'met' if p_all <= 1.5 else 'NOT met'}); "
