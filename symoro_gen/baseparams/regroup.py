@@ -131,14 +131,45 @@ class BaseParameterMap:
         idx = {n: i for i, n in enumerate(self.standard_names)}
         K = np.zeros((len(self.base_names), len(self.standard_names)))
         for b, name in enumerate(self.base_names):
-            e = sp.expand(self.relations[name].xreplace(subs))
+            e = self.relations[name].xreplace(subs)
+            if not _is_expanded(e):  # expand is the cost for long relations: only when it changes something
+                e = sp.expand(e)
+            fs = e.free_symbols
             for s, c in e.as_coefficients_dict().items():
                 if s == 1:
                     raise ValueError(f"relation of {name} has a constant term")
                 # exact numeric factors such as cos(1/10) stay in the "symbol" part: split them off
-                num, syms = s.as_independent(*e.free_symbols, as_Add=False)
+                num, syms = _split_constant(s, fs)
                 K[b, idx[syms.name]] += float(c * num)
         return K
+
+
+def _monomial(f: sp.Expr) -> bool:
+    """A product of atoms and integer powers of atoms (``sp.expand`` leaves it unchanged)."""
+    return all(x.is_Atom or (x.is_Pow and x.exp.is_Integer and x.base.is_Atom) for x in sp.Mul.make_args(f))
+
+
+def _plain_factor(f: sp.Expr) -> bool:
+    """An atom, a function of monomials (``cos(pi/5)``), or an integer power of one of these."""
+    if f.is_Pow and f.exp.is_Integer:
+        f = f.base
+    return bool(f.is_Atom or (isinstance(f, sp.Function) and all(_monomial(a) for a in f.args)))
+
+
+def _is_expanded(e: sp.Expr) -> bool:
+    """True when ``sp.expand(e)`` is ``e``: a sum of products of atoms, functions of monomials
+    (``cos(pi/5)``) and integer powers of these; a cheap test that saves expanding long relations again."""
+    return all(_plain_factor(f) for t in sp.Add.make_args(e) for f in sp.Mul.make_args(t))
+
+
+def _split_constant(term: sp.Expr, fs: set) -> tuple[sp.Expr, sp.Expr]:
+    """``term.as_independent(*fs, as_Add=False)`` for a term with one symbolic factor, without building
+    the set of the relation's free symbols once per term (what ``as_independent`` does with them)."""
+    if term.is_Mul:
+        dep = [f for f in term.args if f.free_symbols]
+        if len(dep) == 1:
+            return sp.Mul(*[f for f in term.args if not f.free_symbols]), dep[0]
+    return term.as_independent(*fs, as_Add=False)
 
 
 def _sym(name: str) -> sp.Symbol:
@@ -169,12 +200,17 @@ def _regroup_closed_form(reg: SymbolicRegressor):
                 no_effect.append(f"YY{j}, MZ{j}, M{j} (regrouped onto the base)")
                 continue
             P = position(row)
-            Js = sp.diag(YY, YY, 0)
-            s = R0 * sp.Matrix([0, 0, MZ])
-            dJ = R0 * Js * R0.T + M * ((P.T * P)[0] * sp.eye(3) - P * P.T)
-            dJ += 2 * (P.T * s)[0] * sp.eye(3) - P * s.T - s * P.T
-            add_J(a, dJ.applyfunc(sp.expand))
-            dMS = (s + M * P).applyfunc(sp.expand)
+
+            def moved(YY, MZ, M, R0=R0, P=P):
+                Js = sp.diag(YY, YY, 0)
+                s = R0 * sp.Matrix([0, 0, MZ])
+                dJ = R0 * Js * R0.T + M * ((P.T * P)[0] * sp.eye(3) - P * P.T)
+                dJ += 2 * (P.T * s)[0] * sp.eye(3) - P * s.T - s * P.T
+                return dJ.row_join(s + M * P)
+
+            dJMS = _expand_linear(moved, (YY, MZ, M))
+            add_J(a, dJMS[:, :3])
+            dMS = dJMS[:, 3]
             for i, k in enumerate(("MX", "MY", "MZ")):
                 cur[f"{k}{a}"] = cur[f"{k}{a}"] + dMS[i]
             cur[f"M{a}"] = cur[f"M{a}"] + M
@@ -187,8 +223,31 @@ def _regroup_closed_form(reg: SymbolicRegressor):
                 no_effect.append(f"XX{j}..ZZ{j} (rotation inertia of a link moving in translation from the base)")
                 continue
             Rj = constant_rotation(row) * rot_z(row.theta)
-            add_J(a, (Rj * Jj * Rj.T).applyfunc(sp.expand))
+            add_J(a, _expand_linear(lambda *J, Rj=Rj: Rj * _sym_matrix(J) * Rj.T,
+                                    tuple(Jj[r, c] for r, c in _J_INDEX.values())))
     return cur, eliminated, no_effect
+
+
+def _expand_linear(build, values: tuple) -> sp.Matrix:
+    """``build(*values)`` for a ``build`` linear in its arguments, with its coefficients expanded.
+
+    The matrix is built and expanded on placeholder symbols (small expressions in the constants of one
+    row), then the placeholders are replaced by ``values`` (the long accumulated parameter sums). The
+    result is not expanded in the values: the relations are expanded once at the end
+    (:func:`group_base_parameters`), which gives the same canonical sums as expanding at every step,
+    without re-expanding the growing sums once per link.
+    """
+    ph = sp.symbols(f"_ph0:{len(values)}", cls=sp.Dummy)
+    coef = build(*ph).applyfunc(sp.expand)
+    return coef.xreplace(dict(zip(ph, values)))
+
+
+def _sym_matrix(J) -> sp.Matrix:
+    """The symmetric 3x3 matrix of the six entries ``J`` in :data:`_J_INDEX` order."""
+    m = sp.zeros(3, 3)
+    for x, (r, c) in zip(J, _J_INDEX.values()):
+        m[r, c] = m[c, r] = x
+    return m
 
 
 def _exact_row(row):
@@ -300,26 +359,29 @@ class _ExactSolver:
 
     def __init__(self, robot: RobotDescription, seed: int = 1) -> None:
         self.robot = robot
-        self._reg: SymbolicRegressor | None = None
+        self._graphs: dict[frozenset, ExprGraph] = {}
         self.gravity = gravity_symbols(robot)
         self.constants = {**robot.geometry_subs(), **self.gravity}
         self.seed = seed
 
-    @property
-    def graph(self) -> ExprGraph:
-        if self._reg is None:
-            self._reg = build_regressor(self.robot, symbolic_gravity=True)
-        return self._reg.graph
+    def graph(self, names) -> ExprGraph:
+        """The graph of the columns ``names`` only, with symbolic gravity (its exact values are those of
+        the full model's columns: only the intermediate naming differs, and the exact evaluation expands)."""
+        key = frozenset(names)
+        if key not in self._graphs:
+            self._graphs[key] = build_regressor(self.robot, symbolic_gravity=True, columns=key).graph
+        return self._graphs[key]
 
     def _rows(self, names: list[str], n_states: int, rng: np.random.Generator) -> sp.Matrix:
         """Exact regressor rows (n_states * n_joints, len(names))."""
         col = {nm: i for i, nm in enumerate(names)}
-        keys = [k for k in self.graph.outputs if k[1] in col]
+        graph = self.graph(names)
+        keys = [k for k in graph.outputs if k[1] in col]
         base = {s: s for s in self.constants}
         rows = []
         for _ in range(n_states):
             env, trig = _rational_state(self.robot, rng)
-            out = evaluate_graph(self.graph, {**base, **env}, keys, _state_arithmetic(trig))
+            out = evaluate_graph(graph, {**base, **env}, keys, _state_arithmetic(trig))
             M = [[sp.Integer(0)] * len(names) for _ in range(self.robot.n_joints)]
             for (i, nm), v in out.items():
                 M[i][col[nm]] = v
@@ -399,7 +461,7 @@ def group_base_parameters(
     cols_present = {name for (_, name) in reg.graph.outputs}
     for name in list(cur):
         if name not in cols_present:
-            no_effect.append(f"{name}R" if cur[name] != _sym(name) else name)
+            no_effect.append(f"{name}R" if sp.expand(cur[name]) != _sym(name) else name)
             eliminated.append(name)
             del cur[name]
 
@@ -428,7 +490,9 @@ def group_base_parameters(
             Q = np.column_stack([Q, qv / np.linalg.norm(qv)])
             continue
         # dependent: c = W_acc beta; which columns (numeric), then the coefficients (exact)
-        beta, *_ = np.linalg.lstsq(W[:, accepted], c, rcond=None)
+        # least squares through the orthonormal basis Q of the accepted columns (W_acc = Q R, R = Q^T W_acc
+        # triangular): a k x k solve instead of an SVD of the (samples*n) x k block for every dependency
+        beta = np.linalg.solve(Q.T @ W[:, accepted], Q.T @ c)
         support = [(sweep_order[kk], float(b)) for kk, b in zip(accepted, beta) if abs(b) > coefficient_tol]
         targets = [t for t, _ in support]
         coefs = solver.solve(name, targets)

@@ -23,17 +23,22 @@ class GraphBuilder:
     def __init__(self) -> None:
         self.defs: list[tuple[sp.Symbol, sp.Expr]] = []
         self._by_expr: dict[sp.Expr, sp.Symbol] = {}
+        # the same expressions keyed by their terms {(rest, coefficient)}: the key of -expr is found
+        # by negating the coefficients, without building -expr (sympy's Add.__neg__ is the cost)
+        self._by_terms: dict[frozenset, sp.Symbol] = {}
         self._names: set[str] = set()
 
     def name(self, expr, prefix: str) -> sp.Expr:
         expr = sp.sympify(expr)
         if is_trivial(expr):
             return expr
-        neg = -expr
-        if expr in self._by_expr:
-            return self._by_expr[expr]
-        if neg in self._by_expr:
-            return -self._by_expr[neg]
+        hit = self._by_expr.get(expr)
+        if hit is not None:
+            return hit
+        terms = [t.as_coeff_Mul() for t in sp.Add.make_args(expr)]
+        hit = self._by_terms.get(frozenset((r, -c) for c, r in terms))
+        if hit is not None:  # expr == -(an expression already named)
+            return -hit
         base = prefix
         k = 1
         nm = base
@@ -44,6 +49,7 @@ class GraphBuilder:
         s = sp.Symbol(nm, real=True)
         self.defs.append((s, expr))
         self._by_expr[expr] = s
+        self._by_terms[frozenset((r, c) for c, r in terms)] = s
         return s
 
     def vec(self, exprs, prefix: str, comps: str = "xyz") -> list[sp.Expr]:
@@ -90,12 +96,15 @@ class ExprGraph:
 
     def used_names(self) -> set:
         """Names of all symbols the definitions and outputs use (to load only needed inputs)."""
-        used: set = set()
-        for _, e in self.defs:
-            used |= {x.name for x in e.free_symbols}
-        for e in self.outputs.values():
-            used |= {x.name for x in e.free_symbols}
-        return used
+        cached = self.__dict__.get("_used_names")  # each backend asks; the graph is immutable
+        if cached is None:
+            used: set = set()
+            for _, e in self.defs:
+                used |= {x.name for x in e.free_symbols}
+            for e in self.outputs.values():
+                used |= {x.name for x in e.free_symbols}
+            cached = self.__dict__["_used_names"] = frozenset(used)
+        return set(cached)
 
     def inline_all(self) -> dict:
         """Outputs as closed expressions of the inputs (for small checks only)."""

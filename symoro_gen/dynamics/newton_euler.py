@@ -41,16 +41,41 @@ class SymbolicRegressor:
         return {i: e for (i, n), e in self.graph.outputs.items() if n == name}
 
 
+_ZERO = sp.S.Zero
+
+
+def _diff(x, y):
+    """``x - y`` without building the products that are exactly zero (same result as sympy's)."""
+    if y is _ZERO:
+        return x
+    return -y if x is _ZERO else x - y
+
+
+_MUL = sp.Mul  # what ``a * b`` calls for sympy expressions, without the operator's sympify wrappers
+
+
+def _prod(a, b):
+    return _ZERO if a is _ZERO or b is _ZERO else _MUL(a, b)
+
+
+def _dot(pairs) -> sp.Expr:
+    """``sum(a * b)`` as one ``Add`` of the non-zero products (one flatten instead of one per term)."""
+    terms = [_MUL(a, b) for a, b in pairs if a is not _ZERO and b is not _ZERO]
+    return sp.Add(*terms) if len(terms) != 1 else terms[0]
+
+
 def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    a = [sp.sympify(x) for x in a]
+    return [_diff(_prod(a[1], b[2]), _prod(a[2], b[1])), _diff(_prod(a[2], b[0]), _prod(a[0], b[2])),
+            _diff(_prod(a[0], b[1]), _prod(a[1], b[0]))]
 
 
 def _matvec(M, v):
-    return [sum((M[i, k] * v[k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+    return [_dot((M[i, k], v[k]) for k in range(3)) for i in range(3)]
 
 
 def _matTvec(M, v):
-    return [sum((M[k, i] * v[k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+    return [_dot((M[k, i], v[k]) for k in range(3)) for i in range(3)]
 
 
 def _inertia_moment(kind: str, wd, p) -> list:
@@ -79,7 +104,8 @@ def gravity_symbols(robot: RobotDescription) -> dict[sp.Symbol, float]:
     return {sp.Symbol(f"G{i + 1}", real=True): float(x) for i, x in enumerate(robot.gravity) if x != 0}
 
 
-def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity: bool = False) -> SymbolicRegressor:
+def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity: bool = False,
+                    columns=None) -> SymbolicRegressor:
     """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler ([KK1987];
     [KD2002] ch. 9: ``Gamma = IDM_st(q, dq, ddq) chi_st``, IDM of [GB-gains] eq. 1-8).
 
@@ -91,6 +117,9 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
         (graph inputs) instead of numbers; used to write regrouping relations exactly.
     progress : callable, optional
         Called as ``progress(stage, j)`` per link (for progress bars).
+    columns : collection of str, optional
+        Only these parameter columns (standard or payload names) are built; the others are left out of
+        ``graph.outputs`` (the exact base-parameter solve needs a few columns, not the whole model).
 
     Returns
     -------
@@ -173,7 +202,7 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             acc_a = list(vd[0])
         else:
             Ua = u_matrix(a)
-            acc_a = [vd[a][i] + sum((Ua[i, k] * P[j][k] for k in range(3)), sp.Integer(0)) for i in range(3)]
+            acc_a = [vd[a][i] + _dot((Ua[i, k], P[j][k]) for k in range(3)) for i in range(3)]
             acc_a = g.vec(acc_a, f"va{j}")
         vj = g.vec(_matTvec(Rm, acc_a), f"vd{j}")
         if row.sigma == REVOLUTE:
@@ -230,6 +259,8 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
         Wd, V = wd[k], vd[k]
         for kind in INERTIAL_KINDS:
             name = param_name(kind, k)
+            if columns is not None and name not in columns:
+                continue
             if kind in INERTIAL_KINDS[:6]:
                 # N = E wd + w x (E w), written with the named products of w
                 n_ = _inertia_moment(kind, Wd, products(k))
@@ -246,7 +277,8 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             i = row_of[k]
             extra = {"IA": ddq_symbol(k), "FV": dq_symbol(k), "FS": sp.sign(dq_symbol(k)), "OFF": sp.Integer(1)}
             for kind in row.drive:
-                add(i, param_name(kind, k), extra[kind])
+                if columns is None or param_name(kind, k) in columns:
+                    add(i, param_name(kind, k), extra[kind])
         if progress:
             progress("backward", k)
 

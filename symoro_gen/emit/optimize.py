@@ -48,8 +48,20 @@ def _match(e: sp.Expr, trig: dict[sp.Symbol, tuple[str, str]]) -> tuple[Any, ...
     return ja, "C", sb, xb, sa, xa
 
 
-def rotation_pairs(graph: ExprGraph) -> ExprGraph:
-    """Rewrite paired rotations with 3 multiplications (see module docstring)."""
+def rotation_pairs(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> ExprGraph:
+    """Rewrite paired rotations with 3 multiplications (see module docstring).
+
+    ``memo``: a dict kept by the caller across the graphs of one model; the products that do not depend
+    on the numbering of the new variables are built once (results do not depend on it).
+    """
+    memo = {} if memo is None else memo
+
+    def once(key: tuple[Any, ...], build: Any) -> Any:
+        got = memo.get(key)
+        if got is None:
+            got = memo[key] = build()
+        return got
+
     trig: dict[sp.Symbol, tuple[str, str]] = {}
     for s, e in graph.defs:
         if isinstance(e, sp.cos):
@@ -104,10 +116,10 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
     for n, ((k1, k2), (j, C, a, bp, s1, s3)) in enumerate(new_defs_for.items()):
         K = sp.Symbol(f"rot{n}", real=True)
         CpS, _, SmC, _ = jdefs[j]
-        replace[k1] = s1 * (K - bp * CpS)
-        replace[k2] = s3 * (K + a * SmC)
+        replace[k1] = s1 * (K - once(("rot*", bp, CpS), lambda bp=bp, CpS=CpS: bp * CpS))
+        replace[k2] = s3 * (K + once(("rot*", a, SmC), lambda a=a, SmC=SmC: a * SmC))
         first = k1 if order[k1] < order[k2] else k2
-        extra_at[first] = [(K, C * (a + bp))]
+        extra_at[first] = [(K, once(("rotK", C, a, bp), lambda C=C, a=a, bp=bp: C * (a + bp)))]
         joint_at[first] = j
     placed_joint: set[str] = set()
 
@@ -134,7 +146,7 @@ def rotation_pairs(graph: ExprGraph) -> ExprGraph:
     return ExprGraph(graph.inputs, tuple(defs) + tuple(tail), outs)
 
 
-def _products_in(e: sp.Expr) -> list[frozenset[sp.Symbol] | tuple[sp.Symbol]]:
+def _products_in(e: sp.Expr) -> tuple[frozenset[sp.Symbol] | tuple[sp.Symbol], ...]:
     """Two-symbol products (up to sign) appearing as terms or factors of e."""
     out: list[frozenset[sp.Symbol] | tuple[sp.Symbol]] = []
     for m in e.atoms(sp.Mul):
@@ -146,17 +158,29 @@ def _products_in(e: sp.Expr) -> list[frozenset[sp.Symbol] | tuple[sp.Symbol]]:
         for x in f:
             if x.is_Pow and x.exp == 2 and x.base.is_Symbol:
                 out.append((x.base,))
-    return out
+    return tuple(out)
 
 
-def share_products(graph: ExprGraph) -> ExprGraph:
-    """Name every product of two symbols (or square) used more than once, and reuse it."""
+def share_products(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> ExprGraph:
+    """Name every product of two symbols (or square) used more than once, and reuse it.
+
+    ``memo``: a dict kept by the caller across the graphs of one model (they share most definitions),
+    expression -> its products; results do not depend on it.
+    """
+    memo = {} if memo is None else memo
+
+    def products(e: sp.Expr) -> tuple[frozenset[sp.Symbol] | tuple[sp.Symbol], ...]:
+        got = memo.get(e)
+        if got is None:
+            got = memo[e] = _products_in(e)
+        return got
+
     count: dict[frozenset[sp.Symbol] | tuple[sp.Symbol], int] = {}
     for _, e in graph.defs:
-        for p in _products_in(e):
+        for p in products(e):
             count[p] = count.get(p, 0) + 1
     for e in graph.outputs.values():
-        for p in _products_in(e):
+        for p in products(e):
             count[p] = count.get(p, 0) + 1
     shared = sorted((p for p, c in count.items() if c > 1), key=lambda p: sorted(s.name for s in p))
     if not shared:
@@ -188,10 +212,14 @@ def share_products(graph: ExprGraph) -> ExprGraph:
                 # a longer product containing a shared pair: factor it out
                 for a in range(len(f)):
                     for b in range(a + 1, len(f)):
-                        pair = f[a] * f[b]
-                        if pair in subs:
+                        # f[a] * f[b] is a shared product only when both are symbols (the factors of a
+                        # canonical Mul have distinct bases): look the pair up without building it
+                        if not (f[a].is_Symbol and f[b].is_Symbol):
+                            continue
+                        pair = frozenset((f[a], f[b]))
+                        if pair in sym_of:
                             others = [x for k, x in enumerate(f) if k not in (a, b)]
-                            rep[m] = coeff * subs[pair] * sp.Mul(*others)
+                            rep[m] = coeff * sym_of[pair] * sp.Mul(*others)
                             break
                     if m in rep:
                         break
@@ -209,6 +237,7 @@ def share_products(graph: ExprGraph) -> ExprGraph:
     return ExprGraph(graph.inputs, tuple(defs), outs)
 
 
-def optimize(graph: ExprGraph) -> ExprGraph:
-    """All passes, in order."""
-    return share_products(rotation_pairs(graph))
+def optimize(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> ExprGraph:
+    """All passes, in order (``memo``: see :func:`share_products`)."""
+    memo = {} if memo is None else memo
+    return share_products(rotation_pairs(graph, memo), memo)

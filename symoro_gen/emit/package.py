@@ -18,10 +18,12 @@ half-written package. An existing target is replaced only when a previous ``gene
 """
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import os
 import platform
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -64,12 +66,14 @@ class EmittedModule:
 
 def tool_versions() -> dict[str, str | None]:
     """Versions of the tools that produced a package (recorded in ``manifest.json`` only)."""
-    try:
-        import casadi
-
-        cv = getattr(casadi, "__version__", None)
-    except ImportError:  # pragma: no cover - casadi is a core dependency
-        cv = None
+    # the installed distribution's version: importing casadi only to read it costs ~0.1 s per generation
+    mod = sys.modules.get("casadi")
+    cv = getattr(mod, "__version__", None) if mod is not None else None
+    if cv is None:
+        try:
+            cv = importlib.metadata.version("casadi")
+        except importlib.metadata.PackageNotFoundError:  # pragma: no cover - casadi is a core dependency
+            cv = None
     return {"symoro_gen": __version__, "sympy": sp.__version__, "numpy": np.__version__, "casadi": cv,
             "python": platform.python_version()}
 
@@ -109,7 +113,9 @@ def _pretty_relation(name: str, e: sp.Expr) -> str:
     return f"{name} = {sp.sstr(e, order='none')}"
 
 
-def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCount) -> str:
+def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCount,
+                       texts: dict[str, str] | None = None) -> str:
+    """``base_parameters.md``; ``texts``: the relations already printed (``sp.sstr(e, order="none")``)."""
     lines = [
         f"# Base parameters of `{robot.name}`",
         "",
@@ -131,7 +137,7 @@ def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCou
     for n in bp.base_names:
         e = bp.relations[n]
         if n.endswith("R"):
-            lines.append(_pretty_relation(n, e))
+            lines.append(_pretty_relation(n, e) if texts is None else f"{n} = {texts[n]}")
     lines += ["```", "", "## Base parameters kept unchanged", "", ", ".join(n for n in bp.base_names if not n.endswith("R")) or "none", ""]
     lines += ["## Without effect on the model (eliminated)", ""]
     lines += [f"- {x}" for x in bp.no_effect] or ["- none"]
@@ -244,23 +250,27 @@ def emit_robot(robot: RobotDescription, out_dir: str | os.PathLike[str], *,
     return emit_from(reg, bp, out_dir, force=force)
 
 
-def base_graph(reg: SymbolicRegressor, bp: BaseParameterMap) -> ExprGraph:
-    """The base regressor's graph: geometry substituted, kept columns renamed to base names."""
-    subs = reg.robot.geometry_subs()
+def base_graph(reg: SymbolicRegressor, bp: BaseParameterMap, substituted: ExprGraph | None = None) -> ExprGraph:
+    """The base regressor's graph: geometry substituted, kept columns renamed to base names.
+
+    ``substituted``: ``reg.graph`` with the geometry already substituted (computed here when None).
+    """
     kept = set(bp.kept)
-    g = reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in kept})
+    full = reg.graph.substituted(reg.robot.geometry_subs()) if substituted is None else substituted
+    g = full.pruned({k for k in reg.graph.outputs if k[1] in kept})
     ren = dict(zip(bp.kept, bp.base_names))
     return ExprGraph(g.inputs, g.defs, {(i, ren[n]): e for (i, n), e in g.outputs.items()})
 
 
 def model_graphs(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[str, ExprGraph], dict[str, tuple[str, ...]]]:
     """Optimised graphs and column names of the three regressors, keyed ``base/standard/payload``."""
-    subs = reg.robot.geometry_subs()
+    full = reg.graph.substituted(reg.robot.geometry_subs())  # once, shared by the three graphs
+    memo: dict[Any, Any] = {}  # per-expression work of the optimiser, shared by the three graphs
 
     def cols(names: Sequence[str]) -> ExprGraph:
-        return optimize(reg.graph.substituted(subs).pruned({k for k in reg.graph.outputs if k[1] in set(names)}))
+        return optimize(full.pruned({k for k in reg.graph.outputs if k[1] in set(names)}), memo)
 
-    graphs = {"base": optimize(base_graph(reg, bp)), "standard": cols(reg.standard_names),
+    graphs = {"base": optimize(base_graph(reg, bp, full), memo), "standard": cols(reg.standard_names),
               "payload": cols(reg.payload_names)}
     names = {"base": tuple(bp.base_names), "standard": tuple(reg.standard_names), "payload": tuple(reg.payload_names)}
     return graphs, names
@@ -300,8 +310,10 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         nominal_payload=robot.nominal_payload(),
         relations=_relations_code(rel, tuple(bp.base_names)),
     )
-    ops = graph_ops(graphs["base"])
-    files["base_parameters.md"] = relations_markdown(robot, bp, ops)
+    all_ops = {k: graph_ops(graphs[k]) for k in ("base", "standard", "payload")}
+    ops = all_ops["base"]
+    texts = {k: sp.sstr(bp.relations[k], order="none") for k in bp.base_names}  # printed once, used twice
+    files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
     manifest = {
         "generator": "symoro_gen",
         "robot": robot.name,
@@ -313,8 +325,8 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         "base_names": list(bp.base_names),
         "payload_names": list(reg.payload_names),
         "counts": {"standard": len(reg.standard_names), "base": len(bp.base_names), "payload": len(reg.payload_names)},
-        "operations": {f"{k}_regressor": graph_ops(graphs[k]).as_dict() for k in ("base", "standard", "payload")},
-        "relations": {k: sp.sstr(bp.relations[k], order="none") for k in bp.base_names},
+        "operations": {f"{k}_regressor": all_ops[k].as_dict() for k in ("base", "standard", "payload")},
+        "relations": texts,
         "numeric_relations": list(bp.numeric),
         "c_file": f"regressor_{robot.name}.c",
         "c_functions": {k: f"{robot.name}_{k}_regressor" for k in ("base", "standard", "payload")},
