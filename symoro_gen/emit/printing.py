@@ -51,6 +51,10 @@ class _Printer(PythonCodePrinter):  # type: ignore[misc]  # sympy is untyped
         self.dialect = dialect
 
     def _print_Pow(self, expr: sp.Expr, rational: bool = False) -> str:
+        if expr.is_number:
+            # a constant such as sqrt(3)/2 from alpha = pi/3: one literal in every backend
+            # (C vector code has no power function); 17 significant digits round-trip a double
+            return repr(float(expr))
         b, e = expr.as_base_exp()
         if e.is_Integer and 1 < int(e) <= 4:
             s = str(self.parenthesize(b, 100))

@@ -112,3 +112,30 @@ def test_written_files_have_ordinary_permissions(tmp_path):
     assert (tmp_path / "scara").stat().st_mode & 0o777 == 0o755
     assert (tmp_path / "scara" / "__init__.py").stat().st_mode & 0o777 == 0o644
     assert (tmp_path / "x.json").stat().st_mode & 0o777 == 0o644
+
+
+@pytest.mark.parametrize("alpha", ["pi/3", "pi/4", "-pi/6"])
+def test_irrational_constant_angles_generate_in_every_backend(tmp_path, alpha):
+    """alpha = pi/3 puts sqrt(3)/2 in the model: each backend prints it as a literal (the C vector
+    code has no power function; generation used to fail with "not printable: sqrt(3)")."""
+    from symoro_gen.dynamics.numeric import inverse_dynamics
+
+    text = (ROOT / "robots" / "scara.toml").read_text()
+    lines = text.splitlines()
+    idx = [i for i, ln in enumerate(lines) if ln.strip() == "alpha = 0"]
+    lines[idx[1]] = f'alpha = "{alpha}"'  # second frame tilted
+    robot = parse_robot_text("\n".join(lines) + "\n", file="scara_tilted.toml")
+    emit_robot(robot, tmp_path)
+    m = load_model(tmp_path / robot.name)
+    rng = np.random.default_rng(3)
+    q, dq, ddq = rng.normal(size=(3, 25, robot.n_joints))
+    chi = rng.normal(size=len(m.STANDARD_NAMES))
+    ref = inverse_dynamics(robot, q, dq, ddq, chi)
+    tau = m.torque(q, dq, ddq, chi)
+    assert np.max(np.abs(tau - ref)) <= 1e-10 * max(1.0, np.abs(ref).max())
+    mn = m._MODEL.numpy_only()
+    assert np.max(np.abs(mn.regressor(q, dq, ddq) - m.regressor(q, dq, ddq))) <= 1e-12 * max(
+        1.0, np.abs(mn.regressor(q, dq, ddq)).max())
+    f = m.casadi_regressor()
+    Yc = np.array(f(q[0], dq[0], ddq[0]))
+    assert np.allclose(Yc, mn.regressor(q[:1], dq[:1], ddq[:1])[0], atol=1e-12)
