@@ -452,10 +452,22 @@ def _report_error(exc: BaseException, args, internal: bool) -> None:
     print(f"hint: {getattr(exc, 'hint', None) or _default_hint(exc, args)}", file=sys.stderr)
 
 
+def _interrupted_by_ctypes(exc: BaseException) -> bool:
+    """A Ctrl-C that lands while ctypes converts the arguments of a C call arrives wrapped in a
+    ``ctypes.ArgumentError`` ("argument 3: KeyboardInterrupt: "): it is an interrupt, not a bug."""
+    import ctypes
+
+    return isinstance(exc, ctypes.ArgumentError) and "KeyboardInterrupt" in str(exc)
+
+
 def main(argv=None) -> int:
-    cmd = _command_of(sys.argv[1:] if argv is None else argv)
-    light = cmd in _LIGHT_COMMANDS or cmd in _EXTRA_NAMES.values()
-    parser = build_parser(cmd if light else None)
+    try:  # building the parser imports the command modules (scipy, sympy): a Ctrl-C there is clean too
+        cmd = _command_of(sys.argv[1:] if argv is None else argv)
+        light = cmd in _LIGHT_COMMANDS or cmd in _EXTRA_NAMES.values()
+        parser = build_parser(cmd if light else None)
+    except KeyboardInterrupt:
+        print("symoro-gen: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     args = parser.parse_args(argv)
     try:
         with warnings.catch_warnings():
@@ -481,6 +493,10 @@ def main(argv=None) -> int:
         print("symoro-gen: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as exc:  # noqa: BLE001 - last resort: one line and a hint instead of a raw traceback
+        if _interrupted_by_ctypes(exc):
+            close_all()
+            print("symoro-gen: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
         _report_error(exc, args, internal=True)
         return EXIT_INTERNAL_ERROR
 

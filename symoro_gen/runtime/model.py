@@ -1,6 +1,7 @@
 """The object behind a generated package's functions (:class:`GeneratedModel`)."""
 from __future__ import annotations
 
+import ctypes
 import os
 import threading
 import warnings
@@ -153,8 +154,13 @@ class GeneratedModel:
         res = output_array(self.ROBOT, (N, self.N_JOINTS, nc), out)
         c = self._c_functions()
         if c is not None:
-            c[f"{self.ROBOT}_{kind}_regressor"](N, np.ascontiguousarray(Q), np.ascontiguousarray(DQ),
-                                                np.ascontiguousarray(DDQ), res)
+            try:
+                c[f"{self.ROBOT}_{kind}_regressor"](N, np.ascontiguousarray(Q), np.ascontiguousarray(DQ),
+                                                    np.ascontiguousarray(DDQ), res)
+            except ctypes.ArgumentError as exc:  # Ctrl-C during ctypes' argument conversion
+                if "KeyboardInterrupt" in str(exc):
+                    raise KeyboardInterrupt from None
+                raise
         else:
             evaluate_kernel(self._kernels[kind], self.N_JOINTS, nc, Q, DQ, DDQ, res)
         return res[0] if one else res

@@ -202,3 +202,32 @@ def test_identify_output_paths(cli, tmp_path, option, suffix, out, allowed):
         mine = {k for k in changed if k == name or k.startswith(stem + "_files") or name.startswith(k + os.sep)
                 or k in ("missing", "missing/deeper")}
         assert changed == mine and name in changed, sorted(changed - mine)
+
+
+def test_ctrl_c_inside_a_ctypes_call_is_an_interrupt_not_a_bug(monkeypatch, capsys, tmp_path):
+    """Ctrl-C while ctypes converts a C kernel's arguments arrives as ``ctypes.ArgumentError``
+    ("argument 3: KeyboardInterrupt: "): exit 130 and "interrupted", not "internal error"."""
+    import ctypes
+
+    from symoro_gen import cli as cli_module
+
+    def boom(args):
+        raise ctypes.ArgumentError("argument 3: KeyboardInterrupt: ")
+
+    monkeypatch.setattr(cli_module, "_check_options", boom)
+    assert cli_module.main(["generate", "scara", "--out", str(tmp_path)]) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "internal error" not in err
+
+
+def test_a_real_ctypes_argument_error_is_still_reported_as_internal(monkeypatch, capsys, tmp_path):
+    import ctypes
+
+    from symoro_gen import cli as cli_module
+
+    def boom(args):
+        raise ctypes.ArgumentError("argument 2: TypeError: wrong type")
+
+    monkeypatch.setattr(cli_module, "_check_options", boom)
+    assert cli_module.main(["generate", "scara", "--out", str(tmp_path)]) not in (0, 130)
+    assert "internal error" in capsys.readouterr().err
