@@ -5,7 +5,8 @@ A composed candidate on joint ``j`` is ``effect_j(row) * m(row)``: extra columns
 
 Effects (columns on joint ``j``'s rows)
     ``viscous``  ``dq_j``; ``coulomb`` ``sign(dq_j)`` (or ``tanh(dq_j/v)`` with ``coulomb_v``);
-    ``ripple``   ``sin(k q_j), cos(k q_j)`` with the order ``k`` searched over :data:`RIPPLE_ORDERS`;
+    ``ripple``   ``sin(k q_j), cos(k q_j)`` with the order ``k`` searched over :data:`RIPPLE_ORDERS` (the
+                 orders with ``k range(q_j) >= pi``: over a smaller range it is a constant or a spring);
     ``constant`` ``1`` (a gravity-like constant torque or an offset); ``inertia`` ``ddq_j``.
 Modulating signals (the documented set)
     ``time``     time since the start of each experiment;
@@ -47,6 +48,7 @@ columns through :meth:`Composed.columns`.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -310,8 +312,13 @@ def library(sig: RowSignals, *, joints: Sequence[int] | None = None, effects: Se
     fams: list[list[Composed]] = []
     for j in js:
         rows = sig.joint == j
+        span = float(np.ptp(sig.q[rows, j])) if rows.any() else 0.0
         for eff in effects:
-            orders = tuple(ripple_orders) if eff == "ripple" else (None,)
+            # a ripple of order k is a ripple (not a constant or a smooth spring) only when the joint moves
+            # over at least half its period: k * range(q_j) >= pi
+            orders = tuple(k for k in ripple_orders if k * span >= math.pi) if eff == "ripple" else (None,)
+            if not orders:
+                continue
             for s in signals:
                 if s == "temperature" and sig.temperature is None:
                     continue

@@ -782,14 +782,21 @@ def _composed_variant(c: Composed) -> str:
 
 
 def _composed_family(c: Composed, plain: bool) -> Family:
-    """A composed candidate as a family of the loop: its modulated columns (standardisation fixed on the
-    identification rows), and the plain effect's columns when the model lacks them."""
+    """A composed candidate as a family of the loop: its modulated columns (``c`` with its standardisation
+    fixed on the identification rows), and the plain effect's columns when the model lacks them."""
     names = c.names() + (tuple(f"{nm.split('*')[0]}_plain" for nm in c.names()) if plain else ())
 
-    def build(fr, ctx, c=c, plain=plain):
-        sig = _row_sig(fr)
+    p = len(c.names()) * (2 if plain else 1)
+
+    def full(ex, c=c, plain=plain):
+        M = ex.n_samples
+        sig = RowSignals(np.full(M, c.joint), ex.t, ex.q, ex.dq, ex.ddq, ex.tau_hat)
         X = c.columns(sig)
-        return [np.hstack([X, c.plain_columns(sig)]) if plain else X]
+        return {c.joint: np.hstack([X, c.plain_columns(sig)]) if plain else X}
+
+    def build(fr, ctx):
+        # evaluated at full rate and decimated in parallel with W (exact, like the plain candidates)
+        return [fr.full_rate_columns(full, p)]
     reveal = {"time": "t", "step": "t", "q_own": "q", "q_other": "q", "abs_tau": "tau_hat", "tau": "tau_hat",
               "abs_dq": "dq", "temperature": "t"}.get(c.signal, "t")
     return Family(c.effect, c.joint, names, build, variant=_composed_variant(c), reveal=reveal,
@@ -816,7 +823,8 @@ def _plain_missing(D: _Design, P: np.ndarray, tol: float) -> bool:
     nrm = np.sqrt(np.einsum("ij,ij->j", Pw, Pw))
     if not np.all(nrm > 0):
         return False
-    Pp = Pw - D.U @ (D.U.T @ Pw)
+    Aw = D.A * D.w[:, None]
+    Pp = Pw - Aw @ np.linalg.lstsq(Aw, Pw, rcond=None)[0]   # least squares, not D.U: exact for ill-conditioned A
     return bool(np.min(np.sqrt(np.einsum("ij,ij->j", Pp, Pp)) / nrm) > tol)
 
 
@@ -860,8 +868,11 @@ def _score_composed_round(data: _Data, base: _Baseline, state: _State, D: _Desig
                                             f"Holm-adjusted p {r.p_adjusted:.1e} >= {cfg.significance:g} "
                                             f"({len(lib)} composed families)", search))
             continue
-        fam = _composed_family(c, _plain_missing(D, c.plain_columns(sigF), cfg.identifiability_tol))
+        fam = _composed_family(c, True)
         X, Xv = fam.build(F, ctx)[0], fam.build(V, ctx)[0]
+        m = len(c.names())
+        if not _plain_missing(D, X[:, m:], cfg.identifiability_tol):
+            fam, X, Xv = _composed_family(c, False), X[:, :m], Xv[:, :m]
         ev = scorer.evaluate(X, Xv)
         if isinstance(ev, str):
             tried.append(CandidateScore(rnd, c.effect, r.description, c.joint, None, fam.variant, None, r.p_adjusted,

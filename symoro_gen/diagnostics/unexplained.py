@@ -235,8 +235,9 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         e = E[:, j]
         pred, models = _oof(X, e, folds, seed)
         share = float(np.clip(_r2(e, pred), 0.0, 1.0))
+        # a share at or below min_share is never flagged whatever the null gives: skip the null fits
         null = [float(np.clip(_r2(es, _oof(X, es, folds, seed)[0]), 0.0, 1.0))
-                for es in (_block_permute(e, experiment, rng) for _ in range(n_null))]
+                for es in (_block_permute(e, experiment, rng) for _ in range(n_null))] if share > min_share else []
         thr = max(min_share, (max(null) if null else 0.0) + null_margin)
         flagged = share > thr
         sigs: tuple = ()
