@@ -974,8 +974,8 @@ def _full_rate_frame(V: Frame) -> Frame:
     return Frame(system=system, experiments=exps, row_experiment=row_exp, row_index=row_idx, sig=sig)
 
 
-def _validation_rel_err_raw(data: _Data, V: Frame, res: IdentificationResult, added: Sequence[_Added]
-                            ) -> np.ndarray:
+def _validation_rel_err_raw(data: _Data, V: Frame, res: IdentificationResult, added: Sequence[_Added],
+                            keep: dict | None = None) -> np.ndarray:
     """Validation ``rel_err_raw`` of ``res`` (declared model + ``added`` effects): the model at full rate
     on the filtered states (the assembly's) against the raw measured torque, per joint, every sample."""
     theta = data.theta_of(res)
@@ -993,6 +993,9 @@ def _validation_rel_err_raw(data: _Data, V: Frame, res: IdentificationResult, ad
             X = _build_one(ad.family, R, ctx, ad.value)
             pred += X @ np.array([res.value(nm) for nm in ad.family.names()])
         _UNSHIFTED.clear()
+    if keep is not None:   # per-sample residuals for block-wise comparisons (plot_data["valid_raw"])
+        keep.update(e=R.system.Y - pred, y=R.system.Y, joint=R.system.joint, experiment=R.row_experiment,
+                    index=R.row_index)
     return _rel_err(R.system.Y - pred, R.system.Y, R.system.joint, data.n)
 
 
@@ -1138,7 +1141,8 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
         res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
     val1 = res.rel_err_on(ObservationSystem(Av, data.Vs.Y, names, data.Vs.joint))
     val0_raw = _validation_rel_err_raw(data0, state.V, base.res0, ())
-    val1_raw = _validation_rel_err_raw(data, state.V, res, state.added)
+    raw_keep: dict = {}
+    val1_raw = _validation_rel_err_raw(data, state.V, res, state.added, keep=raw_keep)
     warnings: list[str] = list(stab_msgs)
     if state.stopped_at_max:
         warnings.append(f"stopped at max_effects = {cfg.max_effects}: more effects may be significant")
@@ -1217,7 +1221,11 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
         "unexplained_threshold": "max(0.05, largest out-of-fold R^2 of 3 block-permuted residuals + 0.05)",
         "friction_law_choices": [r.choice.describe() for r in base.laws],
     }
-    plot_data = {"frame": F, "vframe": state.V, "round_resid": list(state.round_resid)}
+    Vs = data.Vs
+    plot_data = {"frame": F, "vframe": state.V, "round_resid": list(state.round_resid),
+                 "valid_filtered": dict(e=Vs.Y - Av @ np.array([res.value(nm) for nm in names]), y=Vs.Y, joint=Vs.joint,
+                                        experiment=state.V.row_experiment, index=state.V.row_index),
+                 "valid_raw": raw_keep}
     return ResidualReport(robot=str(getattr(data.model, "ROBOT", "?")), method=cfg.method, n_joints=n,
                           before_rel_err=np.asarray(base.res0.rel_err), before_validation_rel_err=base.val0,
                           after_rel_err=np.asarray(res.rel_err), after_validation_rel_err=np.asarray(val1),
