@@ -1,4 +1,6 @@
-"""Benchmark: ``diagnose`` on 60 s of 7-joint data at 1 kHz with all candidate kinds (target <= 60 s).
+"""Benchmark: ``diagnose`` on 60 s of 7-joint data at 1 kHz with every candidate (target <= 60 s): all
+eleven plain kinds, the composed library (effect x modulating signal), the friction-law stage, the
+stability stage (OLS and WLS weights, time-blocked folds) and the unexplained-structure stage.
 
 Simulated KUKA LWR4 recording (generated model ``lwr4``, random physical parameters with LWR-like
 friction, Fourier excitation) with three effects the model lacks (Stribeck friction on joint 2, a
@@ -57,6 +59,9 @@ def main(argv=None) -> int:
           f"(target <= {TARGET_S:g} s) {'OK' if t2 - t1 <= TARGET_S else 'SLOW'}")
     print("validation rel. err. before: " + " ".join(f"{x:.4f}" for x in rep.before_validation_rel_err))
     print("validation rel. err. after:  " + " ".join(f"{x:.4f}" for x in rep.after_validation_rel_err))
+    print("friction laws: " + ("; ".join(rep.settings["friction_law_choices"]) or "declared laws kept"))
+    print("unexplained: " + (", ".join(f"joint {u['joint']} {u['share']:.2f}" for u in rep.to_dict()["unexplained"])
+                             or "none"))
     return 0
 
 

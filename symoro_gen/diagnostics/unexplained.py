@@ -139,7 +139,7 @@ def rows_to_samples(values: np.ndarray, joint: np.ndarray, experiment: np.ndarra
 
 def _oof(X, e, folds, seed):
     from sklearn.ensemble import HistGradientBoostingRegressor
-    from threadpoolctl import threadpool_limits
+    from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
     pred = np.empty_like(e)
     models = []
