@@ -106,8 +106,9 @@ def add_diagnose_parser(subparsers) -> None:
     p.add_argument("--payload", nargs="+", metavar="NAME=VALUE",
                    help="known payload parameters (as in identify), e.g. M8=4.6136; needs --loaded")
     p.add_argument("--method", choices=("ols", "wls", "tls"), default="ols")
-    p.add_argument("--candidates", nargs="+", choices=KINDS, metavar="KIND",
-                   help=f"effect kinds to try (default all: {', '.join(KINDS)})")
+    p.add_argument("--candidates", nargs="+", choices=KINDS + ("friction_law", "composed"), metavar="KIND",
+                   help=f"effect kinds to try (default all: {', '.join(KINDS)}, 'friction_law': the friction law "
+                        "of each joint chosen by cross-validation, and 'composed': effect x modulating signal)")
     p.add_argument("--significance", type=float, default=SIGNIFICANCE,
                    help=f"family-wise level of each round (default {SIGNIFICANCE})")
     p.add_argument("--max-effects", type=int, default=MAX_EFFECTS, help=f"most effects added (default {MAX_EFFECTS})")

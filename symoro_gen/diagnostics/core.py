@@ -1241,8 +1241,8 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
              holdout: float = HOLDOUT, min_rel_improvement: float = MIN_REL_IMPROVEMENT, n_placebo: int = N_PLACEBO,
              identifiability_tol: float = IDENTIFIABILITY_TOL, rng: np.random.Generator | None = None,
              dynamics_bandwidth_hz: float | None = None, structure: bool = True, loaded=None, payload=None,
-             friction_laws: bool = True, composed: bool = True, unexplained: bool = True, stability: bool = True,
-             **filter_kw) -> ResidualReport:
+             friction_laws: bool | None = None, composed: bool | None = None, unexplained: bool = True,
+             stability: bool = True, **filter_kw) -> ResidualReport:
     """Find what the declared model misses, add it, and measure the gain on validation data.
 
     The stages (each a function over frozen values): :func:`_stage_assemble` (observations stage:
@@ -1263,7 +1263,9 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
     method : {"ols", "wls", "tls"}
         Estimator of the reported identifications (candidate scoring always uses per-joint weighted LS).
     candidates : sequence of str
-        Kinds to try (default all, :data:`~.candidates.KINDS`).
+        Kinds to try (default all, :data:`~.candidates.KINDS`, plus ``"friction_law"`` - the friction-law
+        stage - and ``"composed"`` - the composed library); an explicit list runs those two only when it
+        names them (unless ``friction_laws``/``composed`` say otherwise).
     significance : float
         Family-wise level of each round.
     max_effects : int
@@ -1289,10 +1291,12 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
     payload : mapping name -> value, optional
         Known payload parameters (``identify --payload M8=4.6``): moved to ``Y`` (identification paper on
         payloads, eq. 7), the others identified.
-    friction_laws : bool
-        Stage "friction law" (:func:`_stage_friction`).
-    composed : bool
-        Composed candidates (effect x modulating signal, :mod:`.compose`) in each round.
+    friction_laws : bool, optional
+        Stage "friction law" (:func:`_stage_friction`); default: with the default ``candidates`` or when
+        they name ``"friction_law"``.
+    composed : bool, optional
+        Composed candidates (effect x modulating signal, :mod:`.compose`) in each round; default: with the
+        default ``candidates`` or when they name ``"composed"``.
     unexplained : bool
         Stage "unexplained" (:mod:`.unexplained`, needs scikit-learn).
     stability : bool
@@ -1307,6 +1311,12 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
         Errors before/after on the filtered, decimated system (``*_rel_err``, the papers' metric) and,
         on validation data, on the raw measured torque (``*_validation_rel_err_raw``).
     """
+    everything = tuple(candidates) == tuple(ALL)
+    if friction_laws is None:
+        friction_laws = everything or "friction_law" in candidates
+    if composed is None:
+        composed = everything or "composed" in candidates
+    candidates = tuple(k for k in candidates if k not in ("friction_law", "composed"))
     cfg = DiagnoseSettings(method=method, candidates=tuple(candidates), significance=significance,
                            max_effects=max_effects, holdout=holdout, min_rel_improvement=min_rel_improvement,
                            n_placebo=n_placebo, identifiability_tol=identifiability_tol, structure=structure,
