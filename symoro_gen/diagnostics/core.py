@@ -121,8 +121,8 @@ REFINE_XATOL = 0.02
 #: the ``sign(dq)`` of the friction laws is smoothed at this many standard deviations of the velocity
 #: noise (:func:`.friction.select_friction` ``v_floor``)
 V_FLOOR_NOISE = 3.0
-#: a Coulomb law's velocity scale (tanh v, Stribeck vs) below this share of the 95th percentile of |dq_j|
-#: is a rounding of sign(dq) at reversals, not a change of law (the declared law is kept)
+#: a tanh velocity scale below this share of the 95th percentile of |dq_j| is a rounding of sign(dq) at
+#: reversals and standstill (applied, reported in ``settings["sign_smoothing"]``, not as an effect)
 MIN_LAW_SCALE = 0.01
 #: contiguous sub-blocks (per experiment) of the paired test of a friction-law replacement
 N_LAW_SUBBLOCKS = 20
@@ -453,6 +453,7 @@ class _LawRecord:
     offset: bool
     frequency: float
     p_value: float
+    smoothing: bool = False   # a tanh at a scale below MIN_LAW_SCALE: sign(dq) smoothed, not reported as an effect
 
 
 @dataclass(frozen=True, eq=False)
@@ -627,12 +628,12 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
             continue   # the joint does not move: nothing to choose
         if not (ch.replaced or missing):
             continue
-        # a tanh/Stribeck scale below MIN_LAW_SCALE of the joint's speeds only rounds sign(dq) off where
-        # the band-pass velocity misses the true reversal (seen on clean simulated data): not a change of law
+        # a tanh scale below MIN_LAW_SCALE of the joint's speeds only rounds sign(dq) off where the band-pass
+        # velocity misses the true reversal or chatters at standstill (seen on clean simulated data too):
+        # applied when it passes the tests below, but as a smoothing of the declared sign, not as an effect
         p95 = float(np.quantile(np.abs(dq_all), 0.95))
-        if (not missing and ch.viscous.law == "linear" and ch.coulomb.law in ("tanh", "stribeck")
-                and float(ch.coulomb.param) < MIN_LAW_SCALE * p95):
-            continue
+        smoothing = bool(not missing and ch.viscous.law == "linear" and ch.coulomb.law == "tanh"
+                         and float(ch.coulomb.param) < MIN_LAW_SCALE * p95)
         X = cols(ch.columns, len(ch.names()))
         cv = BlockedLS(A, Y, blocks)
         e_new = cv.oof_residual(X)
@@ -655,7 +656,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
         p_law = float(sst.t.sf(float(np.mean(d)) / (sd / math.sqrt(d.size)), d.size - 1)) if sd > 0 else 1.0
         if not (float(np.mean(wins)) > MIN_SELECTION_FREQUENCY and p_law < cfg.significance / n):
             continue
-        recs.append(_LawRecord(ch, missing, off, float(np.mean(wins)), p_law))
+        recs.append(_LawRecord(ch, missing, off, float(np.mean(wins)), p_law, smoothing))
         W = np.hstack([A, X])
         names = an + list(ch.names())
     if not recs:
@@ -1168,7 +1169,7 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     warnings: list[str] = list(stab_msgs)
     if state.stopped_at_max:
         warnings.append(f"stopped at max_effects = {cfg.max_effects}: more effects may be significant")
-    effects = [_law_effect(r, res) for r in base.laws]
+    effects = [_law_effect(r, res) for r in base.laws if not r.smoothing]
     final_value = {ad.family.key: ad.value for ad in state.added}
     wkey = "WLS" if cfg.method == "wls" else "OLS"
     for meta in state.effects_meta:
@@ -1241,7 +1242,10 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
         "stopped_joints": [j + 1 for j in sorted(state.stopped_joints)],
         "known_payload": dict(data.fixed),
         "unexplained_threshold": "max(0.05, largest out-of-fold R^2 of 3 block-permuted residuals + 0.05)",
-        "friction_law_choices": [r.choice.describe() for r in base.laws],
+        "friction_law_choices": [r.choice.describe() for r in base.laws if not r.smoothing],
+        "sign_smoothing": [f"joint {r.choice.joint + 1}: sign(dq) smoothed as tanh(dq/v), v = {r.choice.coulomb.param:.3g} "
+                           f"(below {100 * MIN_LAW_SCALE:g} % of the joint's speeds: a processing matter, not a "
+                           f"friction law)" for r in base.laws if r.smoothing],
     }
     Vs = data.Vs
     plot_data = {"frame": F, "vframe": state.V, "round_resid": list(state.round_resid),

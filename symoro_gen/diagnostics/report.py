@@ -334,6 +334,8 @@ class ResidualReport:
         else:
             L.append("No effect added: no candidate was significant on the identification data and "
                      "better than noise on the validation data.")
+        for line in (self.settings.get("sign_smoothing") or []) if isinstance(self.settings, dict) else []:
+            L.append(f"Note: {line}")
         rounds = sorted({c.round for c in self.tried})
         for r in rounds:
             best = self.best_tried(r, n_tried)
