@@ -50,11 +50,12 @@ def test_clean_report_keeps_errors_and_tries_every_kind():
     rep = diagnose(model, tr)
     assf = rep.to_dict()
     assert assf["effects"] == []
-    # nothing added; the only change is sign(dq) smoothed at the velocity-noise floor (settings.sign_smoothing)
+    # nothing added; the only change allowed is sign(dq) smoothed at the velocity-noise floor where CV prefers
+    # it (settings.sign_smoothing): it may not make any joint worse on validation data
     import numpy as np
 
-    for k in ("rel_err", "validation_rel_err"):
-        assert np.allclose(assf["after"][k], assf["before"][k], rtol=0.05), (assf["before"][k], assf["after"][k])
+    b, a = np.array(assf["before"]["validation_rel_err"]), np.array(assf["after"]["validation_rel_err"])
+    assert np.all(a <= 1.02 * b), (b, a)
     assert all("sign(dq) smoothed" in x for x in assf["settings"]["sign_smoothing"])
     assert {c["kind"] for c in assf["tried"]} == set(KINDS)
     # declared-model terms already present are recognised as such
