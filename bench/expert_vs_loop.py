@@ -6,19 +6,19 @@ split CSVs through the drive chain of ``robots/tx40.toml``, last 30 % held out; 
 in memory, last 30 % held out) it prints, per joint, the validation relative error norms
 ``||rho_j|| / ||Y_j||`` of
 
-* the declared model fitted by LS ("declared", diagnose's "before"),
+* the declared model fitted by LS (diagnose's "before"),
 * the expert model: declared base parameters + Fc tanh(dq/v) (v by time-blocked CV) + Fv dq + offset,
-* the declared model with the friction law of each joint chosen by time-blocked CV
-  (:func:`symoro_gen.diagnostics.friction.select_friction`; "declared+laws"),
-* the loop's final model ("loop after"),
+* the loop's final model (friction laws chosen, effects accepted and kept by the stability stage),
 
-on the filtered, decimated system (``filt``) and, where available, at full rate against the raw measured
-torque (``raw``; the loop's report has no raw metric yet: ``-``), then the share of the loop's final
-identification residual that boosted trees predict out of fold (:mod:`symoro_gen.diagnostics.unexplained`).
+on the filtered, decimated system (``filt``) and at full rate against the raw measured torque (``raw``),
+under OLS and WLS. "Worse" is decided per joint with :func:`symoro_gen.diagnostics.expert.no_worse`: the
+loop is worse only when ``rel_loop^2 - rel_expert^2`` exceeds twice its standard error over 10 contiguous
+time blocks of the validation data. It also prints the effects named under each method (they must be the
+same) and the structure left that no candidate explains.
 
 Usage (from the project root)::
 
-    PYTHONPATH=$PWD python bench/expert_vs_loop.py [--data ../shared/data] [--method ols|wls] [--only lwr4,tx40,med7]
+    PYTHONPATH=$PWD python bench/expert_vs_loop.py [--data ../shared/data] [--method ols,wls] [--only lwr4,tx40,med7]
 """
 from __future__ import annotations
 
@@ -36,30 +36,12 @@ import symoro_gen
 from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.description.urdf import import_urdf
 from symoro_gen.diagnostics import diagnose
-from symoro_gen.diagnostics.expert import (
-    filtered_data,
-    fit_declared,
-    fit_expert,
-    fit_linear,
-)
-from symoro_gen.diagnostics.friction import (
-    friction_column_indices,
-    replaced_friction_columns,
-    select_friction,
-    velocity_grid,
-)
-from symoro_gen.diagnostics.unexplained import (
-    rows_to_samples,
-    signal_matrix,
-    unexplained_structure,
-)
+from symoro_gen.diagnostics.expert import expert_residuals, filtered_data, fit_expert, no_worse
 from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
 from symoro_gen.preprocessing.load import load_trajectories, load_trajectory
 from symoro_gen.preprocessing.trajectory import Trajectory
 
 HOLDOUT = 0.3
-#: sign(dq) is smoothed at this many standard deviations of the velocity noise
-V_FLOOR_NOISE = 3.0
 
 
 def split(tr: Trajectory, fraction: float = HOLDOUT) -> tuple[Trajectory, Trajectory]:
@@ -104,93 +86,66 @@ def fmt(x) -> str:
     return "      -" if x is None else f"{x:7.3f}"
 
 
-def run(name, model, ident, valid, method: str) -> None:
+def run(name, model, ident, valid, methods) -> dict:
+    """Expert model and the loop (each method of ``methods``) on one arm; prints the per-joint table and
+    returns it (for the README)."""
     print(f"\n== {name}: {model.N_JOINTS} joints, {len(model.BASE_NAMES)} base parameters "
           f"({', '.join(n for n in model.BASE_NAMES if n[:2] in ('FS', 'FV', 'OF')) or 'no friction/offset columns'})")
     fdyn = max(estimate_dynamics_bandwidth(tr.q, 1.0 / tr.dt) for tr in ident)
-    t0 = time.perf_counter()
-    data = filtered_data(ident, dynamics_bandwidth_hz=fdyn)
-    vdata = filtered_data(valid, dynamics_bandwidth_hz=fdyn)
-    dec = fit_declared(model, data, method=method)
-    ex = fit_expert(model, data, method=method)
-    d_f, d_r = dec.errors(model, vdata)
-    e_f, e_r = ex.errors(model, vdata)
-    t_ex = time.perf_counter() - t0
-    # friction-law selection per joint (item 1), on the declared model's decimated columns
-    t0 = time.perf_counter()
-    W = data.columns(lambda ex: np.asarray(model.regressor(ex.q, ex.dq, ex.ddq), float))
-    blocks = data.blocks()
-    choices = []
-    for j in range(model.N_JOINTS):
-        fs, fv = friction_column_indices(model.BASE_NAMES, j)
-        if not fs or not fv:
-            continue
-        ch = select_friction(np.delete(W, fs + fv, axis=1), data.Y, data.joint, j, np.zeros(data.Y.size), blocks,
-                             columns=lambda f, p, j=j: data.joint_columns(j, f, p),
-                             v_grid=velocity_grid(np.concatenate([e.dq[:, j] for e in data.experiments])),
-                             v_floor=V_FLOOR_NOISE * max(float(data.dq_noise[j]), 1e-9))
-        choices.append(ch)
-    _, cols = replaced_friction_columns(model, choices)
-    fl = fit_linear(cols, data, method=method)
-    l_f, l_r = fl.errors(vdata)
-    t_fr = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    rep = diagnose(model, ident, validation=valid, method=method, dynamics_bandwidth_hz=fdyn)
-    t_loop = time.perf_counter() - t0
-    st = data.experiments[0].settings
-    print(f"filter: f_dyn {fdyn:.3g} Hz, cut-off {st.cutoff_hz:.3g} Hz, n_d {st.n_d}; "
-          f"expert {t_ex:.1f} s, diagnose {t_loop:.1f} s ({len(rep.effects)} effect(s): "
-          + ", ".join(f"{e.kind}{'' if e.joint is None else e.joint + 1}" for e in rep.effects) + ")")
-    print("expert v [rad/s]: " + " ".join(f"{v:.3g}" for v in ex.v))
-    print(f"friction laws by time-blocked CV ({t_fr:.1f} s):")
-    for ch in choices:
-        print("  " + ch.describe())
-    raw_after = getattr(rep, "after_validation_rel_err_raw", None)
-    rows = [
-        ("declared (ours)      filt", d_f),
-        ("diagnose before      filt", rep.before_validation_rel_err),
-        ("expert               filt", e_f),
-        ("declared+laws        filt", l_f),
-        ("loop after           filt", rep.after_validation_rel_err),
-        ("declared (ours)      raw ", d_r),
-        ("expert               raw ", e_r),
-        ("declared+laws        raw ", l_r),
-        ("loop after           raw ", raw_after),
-    ]
+    out = {}
     n = model.N_JOINTS
-    print(f"{'validation ||rho_j||/||Y_j||':28s}" + "".join(f"    j{j + 1:<3d}" for j in range(n)))
-    for label, vals in rows:
-        print(f"{label:28s}" + "".join(f" {fmt(None if vals is None else float(vals[j]))}" for j in range(n)))
-    worse = [j + 1 for j in range(n) if rep.after_validation_rel_err[j] > e_f[j]]
-    print(f"loop worse than the expert (filtered) on joints: {worse or 'none'}")
-    unexplained(rep)
-
-
-def unexplained(rep) -> None:
-    """Structure left in the loop's final identification residual (issue 10 item 4), from the report's
-    plot data (frame and residual of the last round)."""
-    try:
-        F = rep.plot_data["frame"]
-        resid = rep.plot_data["round_resid"][-1][0]
-    except (AttributeError, KeyError, IndexError, TypeError):
-        print("unexplained: the report has no frame/residual to analyse")
-        return
-    t0 = time.perf_counter()
-    E, e_exp, e_idx = rows_to_samples(resid, F.system.joint, F.row_experiment, F.row_index)
-    S = F.samples()
-    X, names = signal_matrix(S["q"], S["dq"], S["ddq"], S.get("tau_hat"), S["t"])
-    out = unexplained_structure(E, X, names, experiment=e_exp, order=e_idx)
-    print(f"structure left that no candidate explains ({time.perf_counter() - t0:.1f} s; out-of-fold R^2 of "
-          "boosted trees on q, dq, ddq, tau_hat, t; threshold from block-permuted residuals):")
-    for u in out:
-        print(f"  joint {u.joint}: share {u.share:.2f} (threshold {u.threshold:.2f})"
-              + (f"  FLAGGED, depends on {', '.join(u.signals)}" if u.flagged else ""))
+    for method in methods:
+        t0 = time.perf_counter()
+        data = filtered_data(ident, dynamics_bandwidth_hz=fdyn)
+        vdata = filtered_data(valid, dynamics_bandwidth_hz=fdyn)
+        ex = fit_expert(model, data, method=method)
+        e_f, e_r = ex.errors(model, vdata)
+        ex_filt, ex_raw = expert_residuals(model, ex, vdata)
+        t_ex = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rep = diagnose(model, ident, validation=valid, method=method, dynamics_bandwidth_hz=fdyn)
+        t_loop = time.perf_counter() - t0
+        ok_f, d_f, se_f = no_worse(rep.plot_data["valid_filtered"], ex_filt, n)
+        ok_r, d_r, se_r = no_worse(rep.plot_data["valid_raw"], ex_raw, n)
+        effects = [(e.kind, None if e.joint is None else e.joint + 1, e.modulation) for e in rep.effects]
+        print(f"\n-- method {method.upper()}: expert {t_ex:.1f} s (v = " + " ".join(f"{v:.3g}" for v in ex.v)
+              + f" rad/s), diagnose {t_loop:.1f} s")
+        for e in rep.effects:
+            print(f"   {e.kind} j{'-' if e.joint is None else e.joint + 1}"
+                  + (f" [{e.modulation}]" if e.modulation else "")
+                  + (f" sel.freq {e.selection_frequency:.2f}" if e.selection_frequency is not None else "")
+                  + f": {e.description or e.label}")
+        rows = [("declared (before)  filt", rep.before_validation_rel_err),
+                ("expert             filt", e_f),
+                ("loop (after)       filt", rep.after_validation_rel_err),
+                ("declared (before)  raw ", rep.before_validation_rel_err_raw),
+                ("expert             raw ", e_r),
+                ("loop (after)       raw ", rep.after_validation_rel_err_raw)]
+        print(f"{'validation ||rho_j||/||Y_j||':28s}" + "".join(f"    j{j + 1:<3d}" for j in range(n)))
+        for label, vals in rows:
+            print(f"{label:28s}" + "".join(f" {fmt(float(vals[j]))}" for j in range(n)))
+        print("loop - expert (rel^2) filt / 2 SE: " + " ".join(f"{d:+.2e}/{2 * s:.1e}" for d, s in zip(d_f, se_f)))
+        print("loop - expert (rel^2) raw  / 2 SE: " + " ".join(f"{d:+.2e}/{2 * s:.1e}" for d, s in zip(d_r, se_r)))
+        worse_f = [j + 1 for j in range(n) if not ok_f[j]]
+        worse_r = [j + 1 for j in range(n) if not ok_r[j]]
+        print(f"loop worse than the expert beyond 2 SE: filtered {worse_f or 'none'}, raw {worse_r or 'none'}")
+        un = rep.to_dict()["unexplained"]
+        print("structure left that no candidate explains: "
+              + ("; ".join(f"joint {u['joint']} share {u['share']:.2f} ({', '.join(u['signals'])})" for u in un)
+                 or "none"))
+        for w in rep.warnings:
+            print("   warning: " + w[:300])
+        out[method] = dict(rep=rep, expert=(e_f, e_r), ok=(ok_f, ok_r), effects=effects)
+    if len(out) == 2:
+        a, b = (out[m]["effects"] for m in methods)
+        print(f"effects OLS: {a}\neffects WLS: {b}\nsame effects under OLS and WLS: {a == b}")
+    return out
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "data"))
-    ap.add_argument("--method", default="ols", choices=("ols", "wls"))
+    ap.add_argument("--method", default="ols,wls", help="ols, wls or ols,wls (both: the effect sets compared)")
     ap.add_argument("--only", default="lwr4,tx40,med7")
     args = ap.parse_args(argv)
     data = Path(args.data)
@@ -198,7 +153,7 @@ def main(argv=None) -> int:
         print(f"no data folder {data}: nothing to compare", file=sys.stderr)
         return 2
     for key in args.only.split(","):
-        run(*{"lwr4": lwr4, "tx40": tx40, "med7": med7}[key.strip()](data), method=args.method)
+        run(*{"lwr4": lwr4, "tx40": tx40, "med7": med7}[key.strip()](data), methods=args.method.split(","))
     return 0
 
 

@@ -1,13 +1,16 @@
 """``symoro-gen diagnose``: identify, find what the residual says the model misses, add it, re-identify.
 
-    symoro-gen diagnose ROBOT DATA... [--validate DATA...] [--method ols|wls|tls] [--json OUT]
+    symoro-gen diagnose ROBOT DATA... [--loaded DATA... [--payload NAME=VALUE...]] [--validate DATA...]
+                        [--method ols|wls|tls] [--json OUT]
                         [--report OUT.md|OUT.html] [--plots DIR]
 
 ROBOT is a robot name (robots/, generated/) or a robot .toml file; DATA are recordings the loaders of
 :mod:`symoro_gen.preprocessing.load` read (CSV/NPZ/MAT or a ``q=..,tau=..,dt=..`` spec), mapped to the
 joint side by the robot file's drive chain. Without ``--validate`` the last ``--holdout`` share of each
 recording is held out for validation. The JSON keys ``before``, ``after`` (``rel_err``,
-``validation_rel_err``), ``effects`` (``kind``, ``joint``, ``params``, ``score``) and ``tried`` are a contract.
+``validation_rel_err``, ``validation_rel_err_raw``), ``effects`` (``kind``, ``joint``, ``modulation``,
+``selection_frequency``, ``params``, ``ci``), ``unexplained`` (``joint``, ``share``, ``signals``) and ``tried``
+are a contract. ``--loaded DATA... [--payload NAME=VALUE...]`` as in ``identify``.
 """
 from __future__ import annotations
 
@@ -45,17 +48,27 @@ def run_diagnose(args) -> dict:
 
         check_report_path(args.report)
     kinds = KINDS if not args.candidates else tuple(args.candidates)
+    from ..identification.cli import _payload_values
+
     robot, model = model_for(args.robot)
-    data, reports = load_data(args, args.data, robot)
+    data, reports = load_data(args, args.data, robot, loaded=False)
+    loaded, rep_l = load_data(args, args.loaded, robot, loaded=True) if args.loaded else (None, ())
+    reports += rep_l
+    known = _payload_values(args.payload, tuple(getattr(model, "PAYLOAD_NAMES", ())))
+    if known and not loaded:
+        from ..errors import IdentificationError
+
+        raise IdentificationError("--payload needs recordings with the payload: give them with --loaded")
     valid, rep_v = load_data(args, args.validate, robot) if args.validate else (None, ())
     reports += rep_v
     filt = {k: v for k, v in (("cutoff_hz", args.cutoff), ("n_d", args.decimate)) if v is not None}
     rep = diagnose(model, data, validation=valid, method=args.method, candidates=kinds,
                    significance=args.significance, max_effects=args.max_effects, holdout=args.holdout,
-                   rng=np.random.default_rng(args.seed), **filt)
+                   rng=np.random.default_rng(args.seed), loaded=loaded, payload=known, **filt)
     out = rep.to_dict()
     out["data"] = data_block(reports)  # per file: path, rows read, dropped, resampled, experiments
     out["validate"] = [str(p) for p in args.validate or ()]
+    out["loaded"] = [str(p) for p in args.loaded or ()]
     if args.json:
         from ..atomic import write_text_atomic
 
@@ -69,6 +82,7 @@ def run_diagnose(args) -> dict:
 
         write_report(args.report, diagnosis=rep, robot=robot.name,
                      sources={"identification data": [str(p) for p in args.data],
+                              "loaded": [str(p) for p in args.loaded or ()],
                               "validation data": [str(p) for p in args.validate or ()]},
                      text=rep.summary(), notes=data_notes(reports))
     if not args.quiet:
@@ -86,9 +100,15 @@ def add_diagnose_parser(subparsers) -> None:
     p.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
     p.add_argument("data", nargs="+", help="identification recordings (CSV/NPZ/MAT, or q=..,tau=..,dt=.. spec)")
     p.add_argument("--validate", nargs="+", help="validation recordings (default: hold out the end of each recording)")
+    p.add_argument("--loaded", nargs="+", metavar="DATA",
+                   help="identification recordings with the payload attached (as in identify --loaded): the "
+                        "payload's columns are added to their rows")
+    p.add_argument("--payload", nargs="+", metavar="NAME=VALUE",
+                   help="known payload parameters (as in identify), e.g. M8=4.6136; needs --loaded")
     p.add_argument("--method", choices=("ols", "wls", "tls"), default="ols")
-    p.add_argument("--candidates", nargs="+", choices=KINDS, metavar="KIND",
-                   help=f"effect kinds to try (default all: {', '.join(KINDS)})")
+    p.add_argument("--candidates", nargs="+", choices=KINDS + ("friction_law", "composed"), metavar="KIND",
+                   help=f"effect kinds to try (default all: {', '.join(KINDS)}, 'friction_law': the friction law "
+                        "of each joint chosen by cross-validation, and 'composed': effect x modulating signal)")
     p.add_argument("--significance", type=float, default=SIGNIFICANCE,
                    help=f"family-wise level of each round (default {SIGNIFICANCE})")
     p.add_argument("--max-effects", type=int, default=MAX_EFFECTS, help=f"most effects added (default {MAX_EFFECTS})")

@@ -5,7 +5,8 @@ A composed candidate on joint ``j`` is ``effect_j(row) * m(row)``: extra columns
 
 Effects (columns on joint ``j``'s rows)
     ``viscous``  ``dq_j``; ``coulomb`` ``sign(dq_j)`` (or ``tanh(dq_j/v)`` with ``coulomb_v``);
-    ``ripple``   ``sin(k q_j), cos(k q_j)`` with the order ``k`` searched over :data:`RIPPLE_ORDERS`;
+    ``ripple``   ``sin(k q_j), cos(k q_j)`` with the order ``k`` searched over :data:`RIPPLE_ORDERS` (the
+                 orders with ``k range(q_j) >= pi``: over a smaller range it is a constant or a spring);
     ``constant`` ``1`` (a gravity-like constant torque or an offset); ``inertia`` ``ddq_j``.
 Modulating signals (the documented set)
     ``time``     time since the start of each experiment;
@@ -47,6 +48,7 @@ columns through :meth:`Composed.columns`.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -153,6 +155,10 @@ class Composed:
         ``t_s`` of a ``step`` [s].
     coulomb_v : float or None
         Velocity scale of a smooth Coulomb effect (None: ``sign``).
+    center, scale : float or None
+        Fixed standardisation of the modulating signal (:meth:`standardised_on`); None: the mean and
+        standard deviation of the rows the columns are built on. A model fitted on identification rows
+        and evaluated on validation rows needs the identification values on both.
     """
 
     effect: str
@@ -162,6 +168,8 @@ class Composed:
     order: int | None = None
     step_time: float | None = None
     coulomb_v: float | None = None
+    center: float | None = None
+    scale: float | None = None
 
     @property
     def family(self) -> tuple:
@@ -209,8 +217,29 @@ class Composed:
             x = T[rows] if T.ndim == 1 else T[rows, j]
         else:
             raise ValueError(f"unknown modulating signal {s!r}; use one of {SIGNALS}")
+        if self.center is not None:
+            sd = float(self.scale or 0.0)
+            return (x - self.center) / sd if sd > 0 else np.zeros_like(x)
         sd = float(np.std(x))
         return (x - x.mean()) / sd if sd > 0 else np.zeros_like(x)
+
+    def standardised_on(self, sig: RowSignals) -> Composed:
+        """This candidate with the standardisation of its signal fixed to the mean and standard deviation on
+        the joint's rows of ``sig`` (the identification rows), so its columns mean the same on other rows."""
+        if self.signal == "step":
+            return self
+        rows = np.flatnonzero(sig.joint == self.joint)
+        x = replace(self, center=0.0, scale=1.0)._signal(sig, rows)
+        return replace(self, center=float(x.mean()), scale=float(np.std(x)))
+
+    @property
+    def modulation(self) -> str:
+        """The modulating signal as a short token: ``abs_tau``, ``q_other:q3``, ``step:t=12.1``..."""
+        if self.signal == "q_other":
+            return f"q_other:q{(self.source or 0) + 1}"
+        if self.signal == "step":
+            return f"step:t={self.step_time:.4g}"
+        return self.signal
 
     def columns(self, sig: RowSignals) -> np.ndarray:
         """Columns (r, p) on the rows of the joint (zeros elsewhere)."""
@@ -283,8 +312,13 @@ def library(sig: RowSignals, *, joints: Sequence[int] | None = None, effects: Se
     fams: list[list[Composed]] = []
     for j in js:
         rows = sig.joint == j
+        span = float(np.ptp(sig.q[rows, j])) if rows.any() else 0.0
         for eff in effects:
-            orders = tuple(ripple_orders) if eff == "ripple" else (None,)
+            # a ripple of order k is a ripple (not a constant or a smooth spring) only when the joint moves
+            # over at least half its period: k * range(q_j) >= pi
+            orders = tuple(k for k in ripple_orders if k * span >= math.pi) if eff == "ripple" else (None,)
+            if not orders:
+                continue
             for s in signals:
                 if s == "temperature" and sig.temperature is None:
                     continue

@@ -37,6 +37,7 @@ from .stability import N_FOLDS, _wls_basis, time_blocks
 __all__ = [
     "DeclaredFit",
     "ExpertModel",
+    "expert_residuals",
     "FilteredData",
     "LinearFit",
     "expert_columns",
@@ -45,6 +46,7 @@ __all__ = [
     "fit_expert",
     "fit_linear",
     "joint_rel_err",
+    "no_worse",
     "stacked_regressor",
 ]
 
@@ -378,3 +380,70 @@ def fit_expert(model: IdentificationModel, data: FilteredData, *, method: str = 
     rel = joint_rel_err(data.Y - base @ theta, data.Y, data.joint, n)
     return ExpertModel(names, theta, v, method, cv, rel)
 
+
+
+#: contiguous time blocks of the paired comparison of two models (:func:`no_worse`)
+N_COMPARE_BLOCKS = 10
+
+
+def _block_shares(e, y, joint, experiment, index, j, n_blocks):
+    m = np.asarray(joint) == j
+    b = time_blocks(np.asarray(experiment)[m], np.asarray(index)[m], n_blocks)
+    den = float(np.sum(np.asarray(y)[m] ** 2))
+    return np.bincount(b, weights=np.asarray(e)[m] ** 2, minlength=n_blocks) / den
+
+
+def no_worse(a: dict, b: dict, n_joints: int, *, n_blocks: int = N_COMPARE_BLOCKS, z: float = 2.0
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Is model ``a`` no worse than model ``b`` on each joint, beyond the noise of the comparison?
+
+    ``a`` and ``b`` hold validation residuals ``e``, measured torques ``y`` and, per row, ``joint``,
+    ``experiment`` and time ``index`` (each on its own rows: the two models may drop different edge
+    samples). The difference of the squared relative errors, ``rel_a^2 - rel_b^2``, is a sum over
+    ``n_blocks`` contiguous time blocks of each experiment, ``d_k = ||e_a,k||^2/||y_a||^2 -
+    ||e_b,k||^2/||y_b||^2``; its standard error is ``sqrt(K) std(d_k)`` (blocks long against the residual's
+    correlation time are nearly independent; the block-to-block spread measures how much the difference
+    would change on another recording of the same kind). ``a`` is *worse* on a joint only when
+    ``rel_a^2 - rel_b^2 > z * SE`` (one-sided, ``z = 2``: about 2.5 %).
+
+    Returns
+    -------
+    ok : ndarray of bool, shape (n,)
+    diff : ndarray, shape (n,)
+        ``rel_a^2 - rel_b^2``.
+    se : ndarray, shape (n,)
+        Its standard error.
+    """
+    ok, diff, se = np.zeros(n_joints, bool), np.zeros(n_joints), np.zeros(n_joints)
+    for j in range(n_joints):
+        sa = _block_shares(a["e"], a["y"], a["joint"], a["experiment"], a["index"], j, n_blocks)
+        sb = _block_shares(b["e"], b["y"], b["joint"], b["experiment"], b["index"], j, n_blocks)
+        d = sa - sb
+        diff[j] = float(d.sum())
+        se[j] = float(np.sqrt(d.size) * np.std(d, ddof=1))
+        ok[j] = diff[j] <= z * se[j]
+    return ok, diff, se
+
+
+def expert_residuals(model: IdentificationModel, ex_model: ExpertModel, data: FilteredData) -> tuple[dict, dict]:
+    """Validation residuals of a fitted expert model for :func:`no_worse`: on the filtered, decimated rows,
+    and at full rate against the raw measured torque."""
+    def cols(q, dq, ddq):
+        return expert_columns(model, q, dq, ddq, ex_model.v)
+    pred = data.columns(lambda ex: cols(ex.q, ex.dq, ex.ddq)) @ ex_model.theta
+    filt = dict(e=data.Y - pred, y=data.Y, joint=data.joint, experiment=data.row_experiment, index=data.row_index)
+    E, Yr, Jr, Xr, Ir = [], [], [], [], []
+    n = data.n_joints
+    for k, ex in enumerate(data.experiments):
+        M = ex.q.shape[0]
+        err = ex.tau - np.concatenate([cols(ex.q[s:s + BATCH], ex.dq[s:s + BATCH], ex.ddq[s:s + BATCH])
+                                       for s in range(0, M, BATCH)]) @ ex_model.theta
+        for j in range(n):
+            E.append(err[:, j])
+            Yr.append(ex.tau[:, j])
+            Jr.append(np.full(M, j))
+            Xr.append(np.full(M, k))
+            Ir.append(np.arange(M))
+    raw = dict(e=np.concatenate(E), y=np.concatenate(Yr), joint=np.concatenate(Jr), experiment=np.concatenate(Xr),
+               index=np.concatenate(Ir))
+    return filt, raw

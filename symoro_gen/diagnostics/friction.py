@@ -402,3 +402,46 @@ def replaced_friction_columns(model: IdentificationModel, choices: Sequence[Fric
             parts.append(C)
         return np.concatenate(parts, axis=2)
     return out_names, columns
+
+
+class LawModel:
+    """The declared model with the friction laws of ``choices`` in place of its ``FS``/``FV`` columns, and
+    an offset column ``OFF<j>`` for each joint of ``offsets`` (joints declared without friction or offset
+    get the expert's terms: Coulomb law, viscous law, offset).
+
+    It satisfies :class:`symoro_gen.model.IdentificationModel` (``BASE_NAMES`` are the new columns;
+    every other attribute, the payload regressor included, is the declared model's), so the model torque
+    of a fit (:func:`symoro_gen.observations.full_rate_torque`) is that of the chosen laws.
+    """
+
+    def __init__(self, model: IdentificationModel, choices: Sequence[FrictionChoice], offsets: Sequence[int] = ()):
+        self._model = model
+        self.choices = tuple(choices)
+        self.offsets = tuple(int(j) for j in offsets)
+        names = tuple(model.BASE_NAMES)
+        drop = {i for ch in self.choices for part in friction_column_indices(names, ch.joint) for i in part}
+        self._keep = [i for i in range(len(names)) if i not in drop]
+        self.BASE_NAMES = (tuple(names[i] for i in self._keep) + tuple(nm for ch in self.choices for nm in ch.names())
+                           + tuple(f"OFF{j + 1}" for j in self.offsets))
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    def regressor(self, q, dq, ddq) -> np.ndarray:
+        q, dq, ddq = (np.asarray(x, float) for x in (q, dq, ddq))
+        single = q.ndim == 1
+        if single:
+            q, dq, ddq = q[None], dq[None], ddq[None]
+        R = np.asarray(self._model.regressor(q, dq, ddq), float)
+        parts = [R[:, :, self._keep]]
+        for ch in self.choices:
+            C = np.zeros((R.shape[0], R.shape[1], len(ch.names())))
+            C[:, ch.joint, :] = ch.columns(dq[:, ch.joint])
+            parts.append(C)
+        if self.offsets:
+            C = np.zeros((R.shape[0], R.shape[1], len(self.offsets)))
+            for i, j in enumerate(self.offsets):
+                C[:, j, i] = 1.0
+            parts.append(C)
+        out = np.concatenate(parts, axis=2)
+        return out[0] if single else out

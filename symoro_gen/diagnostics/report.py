@@ -113,8 +113,19 @@ class Effect:
     score, p_value, z_validation : float
         Evidence when it was added (see :class:`CandidateScore`).
     round : int
+        Round of the loop it was added in (0: the friction-law stage).
     reveal : str
         Row signal it shows against; ``reveal_joint`` its joint.
+    modulation : str or None
+        Modulating signal of a composed effect (:mod:`.compose`: ``abs_tau``, ``abs_dq``, ``step:t=12``,
+        ``q_other:q3``...); None for a plain effect.
+    selection_frequency : float or None
+        Share of the time-blocked folds that select it (the smaller under OLS and WLS weights; for a
+        friction law, the share of folds whose held-out block it predicts better than the declared law).
+    ci : dict
+        Confidence interval ``[low, high]`` of each coefficient (HAC, level ``ci_level``).
+    description : str
+        The effect in words.
     """
 
     kind: str
@@ -133,10 +144,17 @@ class Effect:
     round: int
     reveal: str
     reveal_joint: int | None
+    modulation: str | None = None
+    selection_frequency: float | None = None
+    ci: dict = field(default_factory=dict)
+    description: str = ""
+    ci_level: float | None = None
 
     def to_dict(self) -> dict:
         return {"kind": self.kind, "joint": _j(self.joint), "partner": _j(self.partner), "variant": self.variant,
-                "label": self.label,
+                "label": self.label, "description": self.description or self.label,
+                "modulation": self.modulation, "selection_frequency": _f(self.selection_frequency),
+                "ci": {n: [_f(a), _f(b)] for n, (a, b) in self.ci.items()}, "ci_level": _f(self.ci_level),
                 "params": {n: _f(v) for n, v in zip(self.names, self.values)},
                 "std": {n: _f(v) for n, v in zip(self.names, self.std)},
                 "rel_std_pct": {n: _f(v) for n, v in zip(self.names, self.rel_std_pct)},
@@ -197,6 +215,12 @@ class ResidualReport:
     plot_data: dict = field(default_factory=dict, repr=False)
     before_validation_rel_err_raw: np.ndarray | None = None
     after_validation_rel_err_raw: np.ndarray | None = None
+    unexplained: tuple = ()
+
+    @property
+    def unexplained_flagged(self) -> tuple:
+        """The joints whose residual holds structure no candidate explains (:mod:`.unexplained`)."""
+        return tuple(u for u in self.unexplained if u.flagged)
 
     def error_basis(self) -> dict:
         """What each error norm is computed on (the JSON ``error_basis``)."""
@@ -226,6 +250,9 @@ class ResidualReport:
             "after": self._errors(self.after_rel_err, self.after_validation_rel_err, self.after_validation_rel_err_raw),
             "error_basis": self.error_basis(),
             "effects": [e.to_dict() for e in self.effects],
+            "unexplained": [u.to_dict() for u in self.unexplained_flagged],
+            "unexplained_all": [{**u.to_dict(), "threshold": _f(u.threshold), "flagged": u.flagged}
+                                for u in self.unexplained],
             "tried": [c.to_dict() for c in self.tried],
             "placebos": [c.to_dict() for c in self.placebos],
             "structure": {"before": [s.to_dict() for s in self.structure_before if s.significant],
@@ -291,8 +318,15 @@ class ResidualReport:
                 who = "all joints" if e.joint is None else f"joint {e.joint + 1}"
                 if e.partner is not None:
                     who += f" ({e.variant}, with joint {e.partner + 1})"
-                L.append(f" {i}. {e.kind} on {who}: score {e.score:.3f}, p = {e.p_value:.2e}, "
-                         f"z_val = {e.z_validation:.1f}")
+                ev = ", ".join(x for x in (
+                    f"score {e.score:.3f}" if _f(e.score) is not None else "",
+                    f"p = {e.p_value:.2e}" if _f(e.p_value) is not None else "",
+                    f"z_val = {e.z_validation:.1f}" if _f(e.z_validation) is not None else "",
+                    f"selected in {100 * e.selection_frequency:.0f} % of the folds"
+                    if e.selection_frequency is not None else "") if x)
+                L.append(f" {i}. {e.kind} on {who}" + (f" ({e.modulation})" if e.modulation else "") + f": {ev}")
+                if e.description:
+                    L.append(f"      {e.description}")
                 for n, v, p in zip(e.names, e.values, e.rel_std_pct):
                     L.append(f"      {n:<28}{v:>12.4g}  %sigma {p:8.2f}")
                 if e.physical:
@@ -300,6 +334,8 @@ class ResidualReport:
         else:
             L.append("No effect added: no candidate was significant on the identification data and "
                      "better than noise on the validation data.")
+        for line in (self.settings.get("sign_smoothing") or []) if isinstance(self.settings, dict) else []:
+            L.append(f"Note: {line}")
         rounds = sorted({c.round for c in self.tried})
         for r in rounds:
             best = self.best_tried(r, n_tried)
@@ -312,6 +348,7 @@ class ResidualReport:
                 L.append(f"  {c.label + (' ' + c.variant if c.variant and c.kind != 'coupling' else ''):<22}"
                          f"{c.score:>8.3f}{c.p_value:>11.2e}{c.threshold:>10.1e}{c.z_validation:>8.1f}  "
                          f"{'eligible' if c.eligible else c.reason}")
+        L += self._unexplained_lines()
         left = [s for s in self.structure_after if s.significant]
         if left:
             L.append("")
@@ -323,6 +360,20 @@ class ResidualReport:
             L.append("Warnings:")
             L += [f"[{i}] {w}" for i, w in enumerate(self.warnings, 1)]
         return "\n".join(L)
+
+    def _unexplained_lines(self) -> list[str]:
+        if not self.unexplained:
+            return []
+        L = ["", "Structure left that no candidate explains (out-of-fold R^2 of boosted trees on the final "
+                 "residual; flagged above a threshold calibrated on block-permuted residuals):"]
+        flagged = self.unexplained_flagged
+        for u in flagged:
+            L.append(f"  joint {u.joint}: share {u.share:.2f} of the residual variance (threshold "
+                     f"{u.threshold:.2f}), depends on {', '.join(u.signals) or '?'}")
+        if not flagged:
+            L.append("  none: every joint's residual is below its threshold ("
+                     + ", ".join(f"j{u.joint} {u.share:.2f}/{u.threshold:.2f}" for u in self.unexplained) + ")")
+        return L
 
     def to_markdown(self, plots: list | None = None) -> str:
         """A Markdown report (tables of errors, effects, candidates; links to plots)."""
@@ -345,8 +396,9 @@ class ResidualReport:
             who = "all joints" if e.joint is None else f"joint {e.joint + 1}"
             if e.partner is not None:
                 who += f" ({e.variant} with joint {e.partner + 1})"
-            L.append(f"{i}. **{e.kind}** on {who} - score {e.score:.3f}, p = {e.p_value:.2e}, "
-                     f"z_val = {e.z_validation:.1f}")
+            L.append(f"{i}. **{e.kind}** on {who}" + (f" (modulated by {e.modulation})" if e.modulation else "")
+                     + f" - {e.description or e.label}; score {_num(_f(e.score))}, p = {_num(_f(e.p_value))}, "
+                     f"z_val = {_num(_f(e.z_validation))}, selection frequency {_num(e.selection_frequency)}")
             for nme, v, p in zip(e.names, e.values, e.rel_std_pct):
                 L.append(f"   - `{nme}` = {v:.4g} (%sigma {p:.2f})")
             for k, v in e.physical.items():
@@ -360,6 +412,10 @@ class ResidualReport:
             for c in self.best_tried(r, 10):
                 L.append(f"| {c.label} {c.variant} | {c.score:.3f} | {c.p_value:.2e} | {c.threshold:.1e} | "
                          f"{c.z_validation:.1f} | {'eligible' if c.eligible else c.reason} |")
+        if self.unexplained:
+            L.append("")
+            L.append("## Structure left that no candidate explains")
+            L += [x.strip() for x in self._unexplained_lines()[2:]]
         if plots:
             L.append("")
             L.append("## Plots")

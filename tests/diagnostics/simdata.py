@@ -39,9 +39,10 @@ def robot_and_model(name: str):
 
 def recording(name: str, seed: int, kind: str | None = None, joint: int | None = None, *,
               noise_q: float = NOISE_Q, noise_tau: float = NOISE_TAU, duration: float = DURATION, dt: float = DT,
-              lwr_friction: bool = True, **params):
+              lwr_friction: bool = True, extra=None, **params):
     """(model, Trajectory) of robot ``name`` along a random Fourier excitation, with ``kind`` injected.
 
+    ``extra(t, q, dq, ddq, tau) -> (N, n)``: a torque added to the true one (effects built in the test).
     LWR4 simulations use LWR-like friction (FS 0.1-0.5 N m, Table II of the LWR4 paper) unless
     ``lwr_friction`` is False.
     """
@@ -56,6 +57,8 @@ def recording(name: str, seed: int, kind: str | None = None, joint: int | None =
     chi = np.asarray(random_physical_parameters(robot, rng, **kw))
     tau = true_torques(model, q, dq, ddq, chi)
     qm, taum = (q, tau) if kind is None else inject_effect(kind, t, q, dq, ddq, tau, joint=joint, **params)
+    if extra is not None:   # extra(t, q, dq, ddq, tau) -> (N, n) torque the declared model lacks
+        taum = taum + np.asarray(extra(t, q, dq, ddq, tau), float)
     qm = qm + noise_q * rng.standard_normal(q.shape)
     taum = taum + noise_tau * rng.standard_normal(q.shape)
     src = f"{name} seed {seed}" + (f" + {kind}" if kind else "")

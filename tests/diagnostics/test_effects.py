@@ -57,7 +57,21 @@ def test_injected_effect_found_first(case):
     model, tr = recording(name, seed, kind, joint, **params)
     rep = diagnose(model, tr)
     assert rep.effects, f"nothing found; best candidates: {[(c.label, c.score, c.reason) for c in rep.best_tried(1, 4)]}"
-    first = rep.effects[0]
+    # the friction-law stage (round 0) comes first; a Stribeck law chosen there on the joint *is* the
+    # injected Stribeck friction (its Fs - Fc is the FSS column, its vs the searched scale)
+    law = [e for e in rep.effects if e.kind == "friction_law" and e.joint == joint and e.variant.startswith("stribeck")]
+    if kind == "stribeck" and law:
+        first = law[0]
+        if params["Fst"] == 1.0:   # case 1 checks the Stribeck excess Fs - Fc, case 2 the velocity scale
+            got, want, rel = first.values[1], params["Fst"], 0.1
+        else:
+            got, want, rel = first.physical["vs"], params["vs"], 0.2
+        assert got == pytest.approx(want, rel=rel), (got, want)
+        assert rep.after_validation_rel_err[joint] < 0.98 * rep.before_validation_rel_err[joint]
+        return
+    loop = [e for e in rep.effects if e.kind != "friction_law"]
+    assert loop, [e.label for e in rep.effects]
+    first = loop[0]
     assert (first.kind, first.joint) == (kind, joint), [e.label for e in rep.effects]
     if kind == "coupling":
         assert first.partner == params["partner"]
@@ -68,7 +82,7 @@ def test_injected_effect_found_first(case):
         assert rep.after_validation_rel_err[j] < 0.98 * rep.before_validation_rel_err[j], (
             j, rep.before_validation_rel_err, rep.after_validation_rel_err)
     # the JSON contract names it the same way
-    d = rep.to_dict()["effects"][0]
+    d = rep.to_dict()["effects"][rep.effects.index(first)]
     assert d["kind"] == kind and d["joint"] == (None if joint is None else joint + 1)
     assert set(d["params"]) == set(first.names)
     if check is not None:
