@@ -717,6 +717,11 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     val0 = res0.rel_err_on(data0.Vs)
     res_start = _fit(data.F.system, cfg.method) if laws else res0
     families = make_families(data.F, cfg.candidates)
+    # a joint whose friction-law stage chose a Stribeck law already has the Stribeck column: the loop's
+    # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
+    # coefficients then split the effect between them with opposite signs)
+    stribeck_law = {r.choice.joint for r in laws if not r.smoothing and r.choice.coulomb.law == "stribeck"}
+    families = [f for f in families if not (f.kind == "stribeck" and f.joint in stribeck_law)]
     dq_noise = np.max([ex.dq_noise for ex in data.F.experiments], axis=0)
     N_id = nuisance_columns(data.F, data.decl, dq_noise)
     N_v = nuisance_columns(data.V, data.decl, dq_noise)
