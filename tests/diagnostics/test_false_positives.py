@@ -57,7 +57,10 @@ def test_clean_report_keeps_errors_and_tries_every_kind():
     b, a = np.array(assf["before"]["validation_rel_err"]), np.array(assf["after"]["validation_rel_err"])
     assert np.all(a <= 1.1 * b), (b, a)   # seed 300: joint 3 0.000595 -> 0.000635 (a tenth of the noise level)
     assert all("sign(dq) smoothed" in x for x in assf["settings"]["sign_smoothing"])
-    assert {c["kind"] for c in assf["tried"]} == set(KINDS)
+    # every plain kind was tried, and the composed families (effect x modulating signal) besides them
+    from symoro_gen.diagnostics.compose import EFFECTS
+
+    assert {c["kind"] for c in assf["tried"]} == set(KINDS) | set(EFFECTS)
     # declared-model terms already present are recognised as such
     reasons = {c.kind: c.reason for c in rep.tried if c.kind in ("offset", "rotor_inertia") and c.joint == 1}
     assert all("already in the model" in r for r in reasons.values()), reasons
