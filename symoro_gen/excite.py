@@ -41,10 +41,14 @@ from typing import Any
 
 import numpy as np
 
+from . import __version__
 from .atomic import write_text_atomic
 from .errors import IdentificationError
 from .loader import model_for
 from .model import IdentificationModel
+from .report import Figure, Heading, Paragraph, Report, Table, check_report_path
+from .report.document import write_report_files
+from .report.plots import WIDTH_IN, _png, require_matplotlib
 from .simulate.trajectories import _piecewise_jerk
 
 __all__ = [
@@ -600,7 +604,6 @@ def plot_trajectory(result: ExcitationResult, path) -> None:
 
 def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000) -> bytes:
     """PNG (report style) of every joint's ``q, dq, ddq`` against its limits (dashed red)."""
-    from .report.plots import WIDTH_IN, _png, require_matplotlib
 
     MplFigure, FigureCanvasAgg = require_matplotlib()
     lim, n = result.limits, result.limits.n
@@ -633,8 +636,6 @@ def excitation_report(result: ExcitationResult, model: IdentificationModel, *, n
     trajectories against the limits, the peak use of every limit, and the predicted standard
     deviation (and %sigma with nominal base parameters) of every base parameter for i.i.d. torque
     noise ``noise`` (:func:`predicted_sigma`, Gautier 1997 eq. 9)."""
-    from . import __version__
-    from .report import Figure, Heading, Paragraph, Report, Table
 
     lim, n = result.limits, result.limits.n
     sig, pct = predicted_sigma(model, result.q, result.dq, result.ddq, noise, chi_b)
@@ -711,7 +712,6 @@ def cmd_excite(args) -> int:
     """``symoro-gen excite``: design, write CSV (and JSON, plot), print a summary."""
 
     if args.report:
-        from .report import check_report_path
 
         check_report_path(args.report)  # before the long optimisation
     robot, model = model_for(args.robot)
@@ -755,7 +755,6 @@ def cmd_excite(args) -> int:
     if args.plot:
         plot_trajectory(res, args.plot)
     if args.report:
-        from .report.document import write_report_files
 
         write_report_files(excitation_report(res, model, noise=args.noise, chi_b=chi_b), args.report)
     if not args.quiet:

@@ -92,6 +92,7 @@ from .report import CandidateScore, Effect, ResidualReport
 from .stability import N_FOLDS, BlockedLS, coefficient_ci, ols_wls_agreement, time_blocks
 from .stats import bonferroni, hac_covariance, hac_lag, segments_of, wald_test
 from .structure import residual_structure
+from .unexplained import rows_to_samples, signal_matrix, unexplained_structure
 
 __all__ = ["diagnose", "DiagnoseSettings", "SIGNIFICANCE", "MAX_EFFECTS", "HOLDOUT", "MIN_REL_IMPROVEMENT", "IDENTIFIABILITY_TOL"]
 
@@ -1152,7 +1153,6 @@ def _unexplained(F: Frame, resid: np.ndarray, seed: int = 0) -> tuple:
     """Stage "unexplained" (issue 10 item 4): out-of-fold boosted trees on the final identification residual
     of each joint from every joint's q, dq, ddq, tau_hat and t (:func:`.unexplained.unexplained_structure`;
     threshold ``max(MIN_SHARE, max null share + NULL_MARGIN)``, null = block-permuted residual)."""
-    from .unexplained import rows_to_samples, signal_matrix, unexplained_structure
 
     E, e_exp, e_idx = rows_to_samples(resid, F.system.joint, F.row_experiment, F.row_index)
     S = F.samples()

@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..atomic import write_text_atomic
+from ..description import load_robot
+from ..diagnostics import diagnose
 from ..errors import SymoroError
 from ..identification.estimators import fit_wls
 from ..model import IdentificationModel
@@ -360,7 +362,6 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
 def _drive_chain(model, mdl):
     """The ``[drive_chain]`` of the robot file behind ``model`` (its name or file; for a package folder or a
     model object, ``robots/<ROBOT>.toml``), None when it has none or no robot file is found."""
-    from ..description import load_robot
 
     cands = [os.fspath(model)] if isinstance(model, (str, os.PathLike)) else []
     if getattr(mdl, "ROBOT", None):
@@ -376,7 +377,6 @@ def _drive_chain(model, mdl):
 def _diagnose_flagged(model, flagged: list[dict], groups: dict[str, dict[str, list[LogFile]]], load_kw: dict,
                       method: str) -> dict:
     """``diagnose`` (the public call) on each flagged robot's logs of the last day of its flags."""
-    from ..diagnostics import diagnose
 
     out: dict[str, dict] = {}
     for f in flagged:

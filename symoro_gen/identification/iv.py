@@ -38,6 +38,7 @@ from ..preprocessing.filtering import filter_and_differentiate
 from ..preprocessing.trajectory import Trajectory
 from ..simulate.closed_loop import FRICTION_EPS, PIDGains, default_gains, parameter_vector, simulate_closed_loop
 from .estimators import COND_WARN, REL_STD_WARN_PCT, fit_ols
+from .physical import base_matrix, standard_from_base
 from .result import IdentificationResult, per_joint_rel_err, relative_std_pct
 
 __all__ = ["ClosedLoopSetup", "IterativeIdentification", "closed_loop_setup", "identify_iv", "iterate", "iv_fit", "physical_projection",
@@ -338,7 +339,6 @@ def physical_projection(model: IdentificationModel, theta) -> np.ndarray | None:
     (:func:`~symoro_gen.identification.physical.standard_from_base`: pseudo-inertias positive
     semidefinite, Wensing, Kim & Slotine 2018; ``IA, FV, FS >= 0``), i.e. ``theta`` itself when it is
     physical, else its least-squares projection on the physical set. None without cvxpy."""
-    from .physical import base_matrix, standard_from_base
 
     try:
         sfb = standard_from_base(model, np.asarray(theta, float))
