@@ -34,6 +34,31 @@ def _check_options(args) -> None:
             raise OptionError(f"{flag} {v:g}: {what}")
 
 
+def _refuse_still_joints(trajectories) -> None:
+    """A joint that stands still in every identification file leaves its drive-chain columns of W zero:
+    the loop cannot fit the declared model, so say which files and joints, before the long computation
+    (issue 15; ``identify --drop-unexcited`` identifies the other parameters)."""
+    from ..errors import IdentificationError
+    from ..identification.estimators import still_joints
+
+    trs = list(trajectories)
+    per: dict[int, list[tuple[str, float]]] = {}
+    for src, j, span in still_joints(trs):
+        per.setdefault(j, []).append((src, span))
+    still = {j: v for j, v in per.items() if len(v) == len(trs)}  # still in every file
+    if not still:
+        return
+    files = list(dict.fromkeys(src for v in still.values() for src, _ in v))
+    shown = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
+    why = ", ".join(f"joint {j} does not move (q{j} spans at most {max(s for _, s in v):.3g})"
+                    for j, v in sorted(still.items()))
+    err = IdentificationError(f"{shown}: {why}: the parameters of its motion (rotor inertia, friction) have no "
+                              "effect on these data, and diagnose needs the declared model identifiable")
+    err.hint = ("record a trajectory that moves every joint (symoro-gen excite), or identify the other "
+                "parameters with `symoro-gen identify ... --drop-unexcited`")
+    raise err
+
+
 def run_diagnose(args) -> dict:
     """Run the command; returns the JSON dictionary."""
     import numpy as np
@@ -59,6 +84,7 @@ def run_diagnose(args) -> dict:
         from ..errors import IdentificationError
 
         raise IdentificationError("--payload needs recordings with the payload: give them with --loaded")
+    _refuse_still_joints(data)
     valid, rep_v = load_data(args, args.validate, robot) if args.validate else (None, ())
     reports += rep_v
     filt = {k: v for k, v in (("cutoff_hz", args.cutoff), ("n_d", args.decimate)) if v is not None}

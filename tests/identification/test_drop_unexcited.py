@@ -110,3 +110,20 @@ def test_unexcited_columns_count_every_system():
     np.testing.assert_allclose(fit_wls(ObservationSystem(W1[:, :2], a.Y, ("A", "B"), a.joint)).values,
                                fit_wls(a2).values)
     assert np.isfinite(ref).all()
+
+
+def test_diagnose_on_a_still_joint_names_file_and_joint_before_computing(cli, recordings):
+    """diagnose refuses a joint that stands still in every identification file with one line naming the
+    file and the joint (not the estimator's message about columns), and points at identify's option."""
+    d, _, _, _ = recordings
+    out = d / "diag.json"
+    res = cli("-q", "diagnose", "scara", d / "still.csv", "--json", out, rc=2)
+    first = res.err.splitlines()[0]
+    assert first.startswith("symoro-gen: error: ") and "still.csv" in first and "joint 2 does not move" in first
+    assert "--drop-unexcited" in res.err and "Traceback" not in res.err
+    assert not out.exists()
+    # a joint still in one file but moving in another is excited: no refusal from this check
+    from symoro_gen.diagnostics.cli import _refuse_still_joints
+    from symoro_gen.preprocessing.load import load_trajectory
+
+    _refuse_still_joints([load_trajectory(d / f, n_joints=4) for f in ("still.csv", "moving.csv")])
