@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -276,6 +277,15 @@ class ClosedLoopModel:
         v = self.robot.nominal_payload()
         return None if v is None else np.asarray(v, float)
 
+    def closed_form_text(self) -> str | None:
+        """The generated ``closed_loop_base_parameters.md`` beside the tree package (the closed-form
+        groupings of a linear closure, [KB1995]), or None (an in-memory tree, or an older package)."""
+        f = getattr(self.tree, "__file__", None)
+        if not f:
+            return None
+        p = Path(f).parent / "closed_loop_base_parameters.md"
+        return p.read_text(encoding="utf-8") if p.is_file() else None
+
     def base_parameters_text(self) -> str:
         """The base parameters and the extra groupings of the loops, as Markdown lines."""
         lines = [f"# Base parameters of the closed-loop robot `{self.ROBOT}`", "",
@@ -283,6 +293,10 @@ class ClosedLoopModel:
                  f"{len(self.base.tree_names) - len(self.BASE_NAMES)}), actuated joints {list(self.ACTUATED_JOINTS)}.",
                  "", "Extra groupings brought by the loops (tree base parameters, numeric coefficients):", ""]
         lines += [f"* `{g}`" for g in self.base.groupings] or ["* none"]
+        cf = self.closed_form_text()
+        if cf is not None:
+            lines += ["", "Closed form (the generated `closed_loop_base_parameters.md`, symoro_gen.closedloop.grouping):",
+                      "", *cf.rstrip("\n").splitlines()[4:]]
         lines += ["", "Base parameters in standard ones:", ""]
         for name, row in zip(self.BASE_NAMES, self.base.K):
             terms = [(self.STANDARD_NAMES[k], c) for k, c in enumerate(row) if abs(c) > 1e-12]

@@ -45,6 +45,7 @@ from ..runtime.batch import evaluate
 from .backends.c import c_source
 from .backends.casadi import casadi_function, casadi_source
 from .backends.numpy import kernel_source, load_kernel
+from .closedloop import closed_loop_files
 from .optimize import optimize
 from .printing import OpCount, graph_ops
 
@@ -314,6 +315,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
     ops = all_ops["base"]
     texts = {k: sp.sstr(bp.relations[k], order="none") for k in bp.base_names}  # printed once, used twice
     files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
+    files.update(closed_loop_files(robot, bp))  # closed loops: their groupings, beside the tree's
     manifest = {
         "generator": "symoro_gen",
         "robot": robot.name,

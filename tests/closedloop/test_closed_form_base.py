@@ -1,0 +1,139 @@
+"""Closed-form base parameters of loops with a linear closure (symoro_gen.closedloop.grouping, Khalil &
+Bennis 1995): the relations derived symbolically must give a base regressor that spans exactly the space
+of the numeric reduction (numeric rank of the projected regressor on random closed states) and
+reproduces the actuated torques of the independent numeric Newton-Euler of the tree, projected by G."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from symoro_gen import load_model
+from symoro_gen.baseparams.regroup import group_base_parameters
+from symoro_gen.closedloop import ClosedLoopModel
+from symoro_gen.closedloop.grouping import closed_form_base, closed_form_markdown, detect_linear_closure
+from symoro_gen.description import load_robot, parse_robot_text
+from symoro_gen.dynamics.newton_euler import build_regressor
+from symoro_gen.dynamics.numeric import inverse_dynamics
+from symoro_gen.emit.closedloop import closed_loop_files
+from symoro_gen.emit.package import build_in_memory
+from symoro_gen.loader import generated_dir
+
+from .test_fourbar_lagrangian import fourbar_text
+
+
+def tree_base(robot):
+    bp = group_base_parameters(build_regressor(robot))
+    return bp, closed_form_base(robot, bp.base_names, bp.kept, bp.relations, bp.gravity)
+
+
+def numeric_rank(model, q, dq, ddq):
+    Ws = model.standard_regressor(q, dq, ddq).reshape(-1, len(model.STANDARD_NAMES))
+    norms = np.linalg.norm(Ws, axis=0)
+    live = norms > 1e-10 * norms.max()
+    s = np.linalg.svd(Ws[:, live] / norms[live], compute_uv=False)
+    return int(np.sum(s > 1e-9 * s[0]))
+
+
+def check_against_numeric(robot, model, cf, q, dq, ddq, seed):
+    """The closed-form base regressor (the kept standard columns, projected) and relations K against the
+    numeric reduction and the numeric Newton-Euler of the tree."""
+    rng = np.random.default_rng(seed)
+    nb = len(cf.names)
+    assert nb == numeric_rank(model, q, dq, ddq) == len(model.BASE_NAMES)
+    Ws = model.standard_regressor(q, dq, ddq)  # G^T W_tree, (N, n_a, n_std)
+    cols = [model.STANDARD_NAMES.index(k) for k in cf.kept_standard]
+    Wb = Ws[:, :, cols].reshape(-1, nb)
+    assert np.linalg.matrix_rank(Wb) == nb
+    K = cf.matrix()
+    # the same space as the numeric base regressor: each spans the other
+    Wn = model.regressor(q, dq, ddq).reshape(-1, nb)
+    assert np.linalg.matrix_rank(np.hstack([Wb, Wn]), tol=1e-9 * np.abs(Wb).max() * Wb.shape[0]) == nb
+    st = model.closure(q, dq, ddq)
+    for _ in range(3):
+        chi = rng.normal(size=len(model.STANDARD_NAMES))
+        ref = np.einsum("nta,nt->na", st.G, inverse_dynamics(robot, st.q, st.dq, st.ddq, chi))
+        tau = (Wb @ (K @ chi)).reshape(ref.shape)
+        np.testing.assert_allclose(tau, ref, atol=1e-9 * max(1.0, np.abs(ref).max()))
+    return K
+
+
+@pytest.fixture(scope="module")
+def pal():
+    robot = load_robot("palletizer")
+    model = load_model("palletizer")
+    assert isinstance(model, ClosedLoopModel)
+    bp, cf = tree_base(robot)
+    return robot, model, bp, cf
+
+
+def test_palletizer_closure_is_detected_linear_and_exact(pal):
+    robot, model, _, cf = pal
+    assert cf is not None
+    cl = cf.closure
+    assert cl.actuated == (1, 2, 4, 5) and cl.joints == (1, 2, 3, 4, 5, 6)
+    # q3 = q5 - q2, q6 = q2 - q5 (the file's offsets make b zero)
+    assert cl.A.tolist() == [[1, 0, 0, 0], [0, 1, 0, 0], [0, -1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1], [0, 1, 0, -1]]
+    assert all(b == 0 for b in cl.b)
+    assert cl.lines() == ["q3 = -q2 + q5", "q6 = q2 - q5"]
+
+
+def test_palletizer_closed_form_spans_the_numeric_base_and_reproduces_the_torques(pal):
+    robot, model, _, cf = pal
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-0.6, 0.6, (150, 4))
+    K = check_against_numeric(robot, model, cf, q, rng.normal(0, 1.5, q.shape), rng.normal(0, 4, q.shape), 6)
+    # same kept parameters as the numeric reduction, and the numeric coefficients are the closed forms'
+    assert cf.names == model.BASE_NAMES
+    np.testing.assert_allclose(K, model.base.K, atol=1e-9)
+
+
+def test_palletizer_relations_are_symbolic(pal):
+    """The parallelogram's groupings (Khalil & Bennis 1995): the rod (6) turns with the upper arm (2), the
+    crank (5) with the forearm (3); the rod's first moment splits with the side ratio L5/D3."""
+    robot, _, bp, cf = pal
+    g = set(cf.groupings)
+    for line in ("ZZ2R = ZZ2R + ZZ6", "MX2R = MX2R + MX6", "ZZ3R = ZZ3R + ZZ5R", "XX3R = XX3R - XX5R",
+                 "MY3R = MY3R - L5/D3*MX6", "MX5R = MX5R - L5/D3*MX6"):
+        assert line in g, line
+    D3, L5, M6, MX5, MX6 = sp.symbols("D3 L5 M6 MX5 MX6", real=True)
+    assert sp.expand(cf.relations["MX5R"] - (MX5 + L5 * M6 - L5 / D3 * MX6)) == 0
+    # every coefficient is in the geometric constants (no float)
+    for e in cf.relations.values():
+        assert not e.atoms(sp.Float), e
+    # the generated file is this closed form (regenerated by `symoro-gen generate palletizer`)
+    text = (generated_dir() / "palletizer" / "closed_loop_base_parameters.md").read_text(encoding="utf-8")
+    assert text == closed_form_markdown(robot, cf, len(bp.base_names))
+    assert "MY3R = MY3 + MZ4 - L5*MX6/D3" in text
+
+
+def parallelogram_text() -> str:
+    """The four-bar of test_fourbar_lagrangian made a planar parallelogram (rocker = crank, coupler =
+    ground), assembled at q1 = 1 (the flat configuration q1 = 0 is singular)."""
+    text = fourbar_text(reference=False).replace("BC = 0.45", "BC = 0.5").replace("C = 0.4", "C = 0.2")
+    return text + "\n[loop_reference]\nq1 = 1.0\nq2 = -1.0\nq3 = 1.0\nq4 = 0.0\n"
+
+
+def test_planar_parallelogram_closed_form():
+    """A second linear closure: the coupler translates (q2 = -q1) and the rocker turns with the crank
+    (q3 = q1), so the rocker's inertia adds to the crank's and the coupler's rotation terms vanish."""
+    robot = parse_robot_text(parallelogram_text(), file="parallelogram.toml")
+    model = ClosedLoopModel(robot, build_in_memory(robot))
+    bp, cf = tree_base(robot)
+    assert cf is not None and cf.closure.lines() == ["q2 = -q1", "q3 = q1"]
+    rng = np.random.default_rng(8)
+    q = 1.0 + rng.uniform(-0.8, 0.8, (80, 1))
+    K = check_against_numeric(robot, model, cf, q, rng.normal(size=q.shape), rng.normal(size=q.shape), 9)
+    assert cf.names == model.BASE_NAMES
+    np.testing.assert_allclose(K, model.base.K, atol=1e-9)
+    assert any(g.startswith("ZZ1R = ZZ1R + ZZ3") for g in cf.groupings), cf.groupings
+
+
+def test_general_fourbar_is_not_linear_and_keeps_the_numeric_relations():
+    robot = parse_robot_text(fourbar_text(), file="fourbar.toml")
+    model = ClosedLoopModel(robot, build_in_memory(robot))
+    assert detect_linear_closure(model.kinematics) is None
+    bp = group_base_parameters(build_regressor(robot))
+    assert closed_form_base(robot, bp.base_names, bp.kept, bp.relations, bp.gravity) is None
+    text = closed_loop_files(robot, bp)["closed_loop_base_parameters.md"]
+    assert "not linear" in text and "numeric" in text
