@@ -5,6 +5,8 @@ Prints:
 * generation of the tree package (parse, Newton-Euler, tree base parameters, emission) and its
   operation count;
 * building the closed-loop model (the numeric base-parameter sweep on 120 closed states);
+* the closed-form groupings of the parallelogram (symoro_gen.closedloop.grouping: linear closure
+  detected, energy functions, exact solves), given the tree's base parameters;
 * the loop closure (positions by Newton's method, velocities, accelerations, G) for 10,000 samples,
   with the largest constraint residual;
 * the closed-loop base regressor for 10,000 samples (closure + tree regressor + projection).
@@ -24,8 +26,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from symoro_gen.baseparams.regroup import group_base_parameters
 from symoro_gen.closedloop import ClosedLoopModel
+from symoro_gen.closedloop.grouping import closed_form_base
 from symoro_gen.description import load_robot
+from symoro_gen.dynamics.newton_euler import build_regressor
 from symoro_gen.emit.package import emit_robot
 from symoro_gen.loader import import_package
 
@@ -46,6 +51,13 @@ def main() -> None:
         t = time.perf_counter()
         model = ClosedLoopModel(robot, tree)
         build = time.perf_counter() - t
+        t = time.perf_counter()
+        bp = group_base_parameters(build_regressor(robot))
+        t_tree = time.perf_counter() - t
+        t = time.perf_counter()
+        cf = closed_form_base(robot, bp.base_names, bp.kept, bp.relations, bp.gravity, kinematics=model.kinematics)
+        closed_form = time.perf_counter() - t
+        assert cf is not None
     rng = np.random.default_rng(0)
     q, dq, ddq = rng.uniform(-0.6, 0.6, (N, 4)), rng.normal(size=(N, 4)), rng.normal(size=(N, 4))
     t = time.perf_counter()
@@ -59,6 +71,8 @@ def main() -> None:
     print(f"| tree package generated (6 joints, {man['counts']['base']} tree base parameters) | {gen:.2f} s |")
     print(f"| tree base regressor operations | {ops['mul']} mul, {ops['add']} add |")
     print(f"| closed-loop model built ({len(model.BASE_NAMES)} base parameters) | {build:.2f} s |")
+    print(f"| closed-form loop groupings ({len(cf.groupings)} relations, energy method; after the tree's "
+          f"symbolic model and base parameters, {t_tree:.2f} s) | {closed_form:.2f} s |")
     print(f"| loop closure, {N} samples | {closure:.2f} s ({closure / N * 1e6:.0f} us/sample), "
           f"max residual {st.residual.max():.1e} |")
     print(f"| closed-loop base regressor, {N} samples | {reg:.2f} s ({reg / N * 1e6:.0f} us/sample) |")

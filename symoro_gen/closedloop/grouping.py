@@ -319,10 +319,10 @@ def closed_form_base(robot: RobotDescription, tree_names: Sequence[str], kept: S
     values: dict[sp.Symbol, float] = {**robot.geometry_subs(), **gravity}
     # the kept standard parameter of each tree base parameter has that base parameter's column
     expanded = {n: sp.expand(tree_relations[n]) for n in tree_names}
-    for name, k in zip(tree_names, kept):
+    for name, kstd in zip(tree_names, kept):
         for other in tree_names:
-            if expanded[other].coeff(_sym(k)) != (1 if other == name else 0):
-                raise ModelError(f"{robot.name}: tree base parameter {other}: the kept standard parameter {k} of "
+            if expanded[other].coeff(_sym(kstd)) != (1 if other == name else 0):
+                raise ModelError(f"{robot.name}: tree base parameter {other}: the kept standard parameter {kstd} of "
                                  f"{name} appears in its relation; the closed-form loop grouping needs the tree's "
                                  "base parameters to keep distinct standard columns")
     en = _Energies(robot, closure)
@@ -355,9 +355,9 @@ def closed_form_base(robot: RobotDescription, tree_names: Sequence[str], kept: S
         sub = Es[:, live]
         if sub.shape[0] < sub.shape[1]:  # fewer energy terms than parameters: pad, so R is square
             sub = np.vstack([sub, np.zeros((sub.shape[1] - sub.shape[0], sub.shape[1]))])
-        Rm = np.linalg.qr(sub, mode="r")
+        diag = np.abs(np.diag(np.asarray(np.linalg.qr(sub, mode="r"))))
         for k, i in enumerate(live):
-            (indep if abs(Rm[k, k]) > tol else dep).append(i)
+            (indep if diag[k] > tol else dep).append(i)
     beta = np.linalg.lstsq(Es[:, indep], Es[:, dep], rcond=None)[0] if dep else np.zeros((len(indep), 0))
     # exact coefficients: E[:, S] beta = E[:, d] on |S| independent rows, checked on every row
     exact: dict[int, dict[int, sp.Expr]] = {}

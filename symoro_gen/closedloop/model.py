@@ -23,9 +23,10 @@ dependent parameter regroups onto earlier links as in the tree rules); its coeff
 least-squares solve. Base parameter ``b`` is ``chi_b = P K_t chi`` with ``P = [I beta]``; a parameter that
 absorbed others is suffixed ``R`` (``[KC1997]``). :func:`closed_loop_base` returns the relations with
 their numeric coefficients (geometry substituted), each followed by a closed form in the geometric
-constants when a simple one matches (:func:`recognise`, e.g. ``0.318181818182 [= L5/D3]``): the
-closed-form rules of Khalil & Bennis for loops are not implemented, the forms are recognised from the
-numbers.
+constants when a simple one matches (:func:`recognise`, e.g. ``0.318181818182 [= L5/D3]``), recognised
+from the numbers. For a closure linear in the joint variables (parallelograms) the groupings are derived
+in closed form by :mod:`symoro_gen.closedloop.grouping` ([KB1995], energy method) and written by the
+generator to ``closed_loop_base_parameters.md``, which :meth:`ClosedLoopModel.base_parameters_text` shows.
 """
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
 """symoro_gen.runtime: generated packages compile nothing at import; C is built by `symoro-gen build`
 or on first use, and every failure (no compiler, compile error, timeout) falls back to NumPy with one
 warning, kills the compiler and leaves no partial library (issues 8 and 15)."""
+import json
 import os
 import shutil
 import stat
@@ -207,8 +208,9 @@ def test_generated_package_source_has_no_runtime_copies():
         if not (pkg / "__init__.py").exists():
             continue
         names = sorted(p.name for p in pkg.iterdir() if p.name not in ("_build", "__pycache__"))
+        loops = ["closed_loop_base_parameters.md"] if "closed_loops" in json.loads((pkg / "manifest.json").read_text()) else []
         assert names == sorted(["__init__.py", "_casadi.py", "_kernels.py", "base_parameters.md", "manifest.json",
-                                f"regressor_{pkg.name}.c"])
+                                f"regressor_{pkg.name}.c", *loops])
         init = (pkg / "__init__.py").read_text()
         assert "from symoro_gen.runtime import GeneratedModel" in init
         assert "def _evaluate" not in init and "ctypes" not in init and "subprocess" not in init
