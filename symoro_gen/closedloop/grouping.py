@@ -38,13 +38,15 @@ numeric ones of :func:`symoro_gen.closedloop.model.closed_loop_base`.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import sympy as sp
 from numpy.typing import NDArray
 from scipy.linalg import qr as _qr
+from sympy.printing.pycode import PythonCodePrinter
 
 from ..description.mdh import constant_rotation, position, rot_z
 from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, q_symbol
@@ -52,7 +54,8 @@ from ..errors import ModelError
 from .kinematics import LoopKinematics
 from .model import sample_states
 
-__all__ = ["LinearClosure", "ClosedFormBase", "detect_linear_closure", "closed_form_base", "closed_form_markdown"]
+__all__ = ["LinearClosure", "ClosedFormBase", "detect_linear_closure", "closed_form_base", "closed_form_markdown",
+           "closed_loop_regressor", "closed_loop_kernel_source"]
 
 
 @dataclass(frozen=True)
@@ -278,6 +281,7 @@ class ClosedFormBase:
     tree_names: tuple[str, ...]
     standard_names: tuple[str, ...]
     values: Mapping[sp.Symbol, float]
+    energies: _Energies | None = field(default=None, repr=False)
 
     def matrix(self) -> NDArray[np.float64]:
         """``K`` (nb, n_std) with ``chi_b = K chi_std``, constants substituted."""
@@ -400,7 +404,7 @@ def closed_form_base(robot: RobotDescription, tree_names: Sequence[str], kept: S
     return ClosedFormBase(closure=closure, names=tuple(names), keep=tuple(keep),
                           kept_standard=tuple(kept[i] for i in keep), relations=rel, groupings=tuple(groupings),
                           no_effect=no_effect, tree_names=tuple(tree_names), standard_names=std_names,
-                          values=values)
+                          values=values, energies=en)
 
 
 def closed_form_markdown(robot: RobotDescription, cf: ClosedFormBase | None, n_tree: int) -> str:
@@ -425,3 +429,110 @@ def closed_form_markdown(robot: RobotDescription, cf: ClosedFormBase | None, n_t
     lines += [f"{n} = {sp.sstr(cf.relations[n], order='none')}" for n in cf.names]
     lines += ["```", ""]
     return "\n".join(lines)
+
+
+# ---- the closed-loop model in closed form (a linear closure) ----------------------------------
+def closed_loop_regressor(cf: ClosedFormBase) -> tuple[sp.Matrix, _Energies]:
+    """Base regressor ``Y_a`` (n_a x nb) of the closed robot, ``tau_a = Y_a chi_b``, as sympy expressions in the
+    actuated state only: Lagrange's equations of the energy functions in the actuated variables,
+    ``Y[:, b] = d/dt dT_b/dqd - dT_b/dq + dU_b/dq`` ([KD2002] ch. 9 and 10; valid because the closure is
+    holonomic and ``q_a`` are independent coordinates), plus ``qd_j`` and ``sign(qd_j)`` for the friction
+    columns. Symbols: ``_s<j>, _c<j>`` (sine and cosine of revolute actuated joints), ``_x<j>`` (the
+    position), ``_v<j>`` (velocity), ``_a<j>`` (acceleration); constants substituted by their values."""
+    en = cf.energies
+    if en is None:
+        raise ModelError("closed_loop_regressor: a ClosedFormBase built by closed_form_base is needed")
+    act = cf.closure.actuated
+    acc = {j: sp.Symbol(f"_a{j}") for j in act}
+    # the constants as exact rationals of their decimal values (0.35 -> 7/20): polynomial arithmetic over QQ
+    vals = {k: sp.Rational(repr(float(v))) for k, v in cf.values.items()}
+    gens = [*en.gens, *acc.values()]
+    ring, *rg = sp.ring(gens, sp.QQ)  # sparse polynomials: fast products and derivatives
+    g = dict(zip(gens, rg))
+
+    def P(e: sp.Expr):
+        return ring.from_expr(sp.sympify(e).xreplace(vals))
+
+    si, ci = [gens.index(en.s[i]) for i in en.rev], [gens.index(en.c[i]) for i in en.rev]
+
+    def dq_(f, j: int):
+        out = f.diff(g[en.x[j]])
+        if j in en.rev:
+            out = out + g[en.c[j]] * f.diff(g[en.s[j]]) - g[en.s[j]] * f.diff(g[en.c[j]])
+        return out
+
+    Y = sp.zeros(len(act), len(cf.names))
+    for b, k in enumerate(cf.kept_standard):
+        if k.startswith("FV") or k.startswith("FS"):
+            r = act.index(int(k[2:]))
+            Y[r, b] = en.v[act[r]] if k.startswith("FV") else sp.sign(en.v[act[r]])
+            continue
+        T, U = P(en.T[k]), P(en.U[k])
+        for r, j in enumerate(act):
+            p = T.diff(g[en.v[j]])
+            e = dq_(U, j) - dq_(T, j)
+            for i in act:
+                e = e + dq_(p, i) * g[en.v[i]] + p.diff(g[en.v[i]]) * g[acc[i]]
+            Y[r, b] = _reduce(ring, e, si, ci).as_expr()
+    return Y, en
+
+
+def _reduce(ring, p, si: list[int], ci: list[int]):
+    """Normal form of a polynomial in ``sin, cos``: every ``c^k`` (k >= 2) rewritten with ``c^2 = 1 - s^2``."""
+    out: dict[tuple[int, ...], object] = {}
+    todo = list(p.terms())
+    while todo:
+        m, coef = todo.pop()
+        hi = next((k for k in range(len(ci)) if m[ci[k]] >= 2), None)
+        if hi is None:
+            out[m] = out.get(m, 0) + coef
+            continue
+        m1 = list(m)
+        m1[ci[hi]] -= 2
+        todo.append((tuple(m1), coef))
+        m1[si[hi]] += 2
+        todo.append((tuple(m1), -coef))
+    return ring.from_dict({k: v for k, v in out.items() if v != 0})
+
+
+def closed_loop_kernel_source(robot: RobotDescription, cf: ClosedFormBase) -> tuple[str, int]:
+    """Python/NumPy source of the closed-loop base regressor in the actuated state (``_closed_loop.py`` of
+    the generated package) and its operation count (after common subexpressions)."""
+    Y, en = closed_loop_regressor(cf)
+    act = cf.closure.actuated
+    entries = [(r, b, Y[r, b]) for r in range(Y.rows) for b in range(Y.cols)
+               if Y[r, b] != 0 and not isinstance(Y[r, b], sp.sign)]
+    signs = [(r, b, Y[r, b].args[0]) for r in range(Y.rows) for b in range(Y.cols) if isinstance(Y[r, b], sp.sign)]
+    subs, red = sp.cse([e for _, _, e in entries], symbols=sp.numbered_symbols("t"), order="none")
+    ops = sum(sp.count_ops(e) for _, e in subs) + sum(sp.count_ops(e) for e in red)
+    printer = PythonCodePrinter({"fully_qualified_modules": False})
+
+    def pr(e: sp.Expr) -> str:
+        return printer.doprint(e).replace("_", "")
+
+    body = [f"    {i} = q[:, {k}]" for k, i in ((k, f"x{j}") for k, j in enumerate(act))]
+    body += [f"    s{j}, c{j} = np.sin(q[:, {k}]), np.cos(q[:, {k}])" for k, j in enumerate(act) if j in en.rev]
+    body += [f"    v{j}, a{j} = dq[:, {k}], ddq[:, {k}]" for k, j in enumerate(act)]
+    body += [f"    {t!s} = {pr(e)}" for t, e in subs]
+    body += [f"    out[:, {r}, {b}] = {pr(e)}" for (r, b, _), e in zip(entries, red)]
+    body += [f"    out[:, {r}, {b}] = np.sign({pr(v)})" for r, b, v in signs]
+    src = f'''# Generated by symoro_gen (symoro_gen.closedloop.grouping); do not edit.
+# Robot file: {Path(robot.file).name} sha256={robot.file_hash}
+"""Closed-loop base regressor of `{robot.name}` in the actuated joints only (linear loop closure
+{"; ".join(cf.closure.lines())}): Lagrange's equations of the energy functions in the actuated variables,
+constants substituted. tau_a = regressor(q, dq, ddq) @ chi_b with chi_b the closed-loop base parameters of
+closed_loop_base_parameters.md ({len(cf.names)}); {ops} operations after common subexpressions."""
+import numpy as np
+
+ROBOT = {robot.name!r}
+ACTUATED_JOINTS = {tuple(act)!r}
+BASE_NAMES = {tuple(cf.names)!r}
+OPERATIONS = {ops}
+
+
+def regressor(q, dq, ddq):
+    """(N, {len(act)}, {len(cf.names)}) base regressor for actuated q, dq, ddq of shape (N, {len(act)})."""
+    q, dq, ddq = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, dq, ddq))
+    out = np.zeros((q.shape[0], {len(act)}, {len(cf.names)}))
+''' + "\n".join(body) + "\n    return out\n"
+    return src, ops

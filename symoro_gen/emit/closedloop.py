@@ -3,13 +3,15 @@
 The package of a robot with ``[[loops]]`` is its tree's model (``symoro_gen.closedloop`` projects it
 on the actuated joints). When the loop closure is linear in the joint variables (parallelograms),
 ``closed_loop_base_parameters.md`` gives the closed-loop base parameters in closed form
-(:func:`symoro_gen.closedloop.grouping.closed_form_base`, [KB1995]); otherwise it says that the
-groupings stay numeric.
+(:func:`symoro_gen.closedloop.grouping.closed_form_base`, [KB1995]) and ``_closed_loop.py`` the
+closed-loop base regressor as NumPy code in the actuated ``q, dq, ddq`` only (Lagrange's equations of
+the energy functions, :func:`symoro_gen.closedloop.grouping.closed_loop_regressor`); otherwise the
+Markdown file says that the groupings stay numeric and the model stays the numeric projection.
 """
 from __future__ import annotations
 
 from ..baseparams.regroup import BaseParameterMap
-from ..closedloop.grouping import closed_form_base, closed_form_markdown
+from ..closedloop.grouping import closed_form_base, closed_form_markdown, closed_loop_kernel_source
 from ..description.model import RobotDescription
 
 __all__ = ["closed_loop_files"]
@@ -20,4 +22,7 @@ def closed_loop_files(robot: RobotDescription, bp: BaseParameterMap) -> dict[str
     if not robot.loops:
         return {}
     cf = closed_form_base(robot, bp.base_names, bp.kept, bp.relations, bp.gravity)
-    return {"closed_loop_base_parameters.md": closed_form_markdown(robot, cf, len(bp.base_names))}
+    files = {"closed_loop_base_parameters.md": closed_form_markdown(robot, cf, len(bp.base_names))}
+    if cf is not None:
+        files["_closed_loop.py"] = closed_loop_kernel_source(robot, cf)[0]
+    return files

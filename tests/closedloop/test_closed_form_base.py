@@ -4,6 +4,8 @@ of the numeric reduction (numeric rank of the projected regressor on random clos
 reproduces the actuated torques of the independent numeric Newton-Euler of the tree, projected by G."""
 from __future__ import annotations
 
+import importlib.util
+
 import numpy as np
 import pytest
 import sympy as sp
@@ -11,7 +13,12 @@ import sympy as sp
 from symoro_gen import load_model
 from symoro_gen.baseparams.regroup import group_base_parameters
 from symoro_gen.closedloop import ClosedLoopModel
-from symoro_gen.closedloop.grouping import closed_form_base, closed_form_markdown, detect_linear_closure
+from symoro_gen.closedloop.grouping import (
+    closed_form_base,
+    closed_form_markdown,
+    closed_loop_kernel_source,
+    detect_linear_closure,
+)
 from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.dynamics.newton_euler import build_regressor
 from symoro_gen.dynamics.numeric import inverse_dynamics
@@ -107,6 +114,40 @@ def test_palletizer_relations_are_symbolic(pal):
     assert "MY3R = MY3 + MZ4 - L5*MX6/D3" in text
 
 
+def kernel_from_source(src: str) -> dict:
+    ns: dict = {}
+    exec(compile(src, "<closed_loop>", "exec"), ns)  # noqa: S102 (the generator's own output)
+    return ns
+
+
+def check_kernel(robot, model, cf, kernel, q, dq, ddq, seed):
+    """The emitted closed-loop regressor (actuated q, dq, ddq only) against the numeric projection G^T W_tree
+    of ClosedLoopModel, and its torques against the numeric Newton-Euler of the tree, projected."""
+    assert tuple(kernel["BASE_NAMES"]) == model.BASE_NAMES and tuple(kernel["ACTUATED_JOINTS"]) == model.ACTUATED_JOINTS
+    Y, Yn = kernel["regressor"](q, dq, ddq), model.regressor(q, dq, ddq)
+    assert Y.shape == Yn.shape
+    np.testing.assert_allclose(Y, Yn, atol=1e-9 * np.abs(Yn).max())
+    rng = np.random.default_rng(seed)
+    chi = rng.normal(size=len(model.STANDARD_NAMES))
+    st = model.closure(q, dq, ddq)
+    ref = np.einsum("nta,nt->na", st.G, inverse_dynamics(robot, st.q, st.dq, st.ddq, chi))
+    np.testing.assert_allclose(Y @ (cf.matrix() @ chi), ref, atol=1e-9 * max(1.0, np.abs(ref).max()))
+
+
+def test_palletizer_emitted_closed_loop_regressor(pal):
+    """generated/palletizer/_closed_loop.py: tau_a as code in the actuated state, no loop-closure solve."""
+    robot, model, _, cf = pal
+    path = generated_dir() / "palletizer" / "_closed_loop.py"
+    spec = importlib.util.spec_from_file_location("palletizer_closed_loop", path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rng = np.random.default_rng(12)
+    q = rng.uniform(-0.6, 0.6, (100, 4))
+    check_kernel(robot, model, cf, vars(mod), q, rng.normal(0, 1.5, q.shape), rng.normal(0, 4, q.shape), 13)
+    assert mod.OPERATIONS > 0
+
+
 def parallelogram_text() -> str:
     """The four-bar of test_fourbar_lagrangian made a planar parallelogram (rocker = crank, coupler =
     ground), assembled at q1 = 1 (the flat configuration q1 = 0 is singular)."""
@@ -127,6 +168,8 @@ def test_planar_parallelogram_closed_form():
     assert cf.names == model.BASE_NAMES
     np.testing.assert_allclose(K, model.base.K, atol=1e-9)
     assert any(g.startswith("ZZ1R = ZZ1R + ZZ3") for g in cf.groupings), cf.groupings
+    kernel = kernel_from_source(closed_loop_kernel_source(robot, cf)[0])
+    check_kernel(robot, model, cf, kernel, q, rng.normal(size=q.shape), rng.normal(size=q.shape), 10)
 
 
 def test_general_fourbar_is_not_linear_and_keeps_the_numeric_relations():

@@ -208,7 +208,8 @@ def test_generated_package_source_has_no_runtime_copies():
         if not (pkg / "__init__.py").exists():
             continue
         names = sorted(p.name for p in pkg.iterdir() if p.name not in ("_build", "__pycache__"))
-        loops = ["closed_loop_base_parameters.md"] if "closed_loops" in json.loads((pkg / "manifest.json").read_text()) else []
+        loops = (["closed_loop_base_parameters.md", "_closed_loop.py"]  # a closed-loop robot with a linear closure
+                 if "closed_loops" in json.loads((pkg / "manifest.json").read_text()) else [])
         assert names == sorted(["__init__.py", "_casadi.py", "_kernels.py", "base_parameters.md", "manifest.json",
                                 f"regressor_{pkg.name}.c", *loops])
         init = (pkg / "__init__.py").read_text()
