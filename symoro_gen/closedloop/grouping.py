@@ -71,7 +71,8 @@ class LinearClosure:
     A : sympy Matrix (n_tree, n_a)
         Exact (small fractions; the actuated rows are the identity).
     b : tuple of sympy expressions
-        Exact offsets (fractions of ``pi`` for revolute joints, 0 for the actuated ones).
+        Offsets: fractions of ``pi`` (revolute joints) or small fractions (prismatic ones) when they are,
+        else the fitted number; 0 for the actuated joints.
     error : float
         Largest difference between ``A q_a + b`` and the solved closure on the check states (rad or m).
     """
@@ -133,9 +134,9 @@ def detect_linear_closure(kin: LoopKinematics, *, n_fit: int = 40, n_check: int 
             b.append(sp.S(0))
             continue
         e = _exact(off, sp.pi, 24) if robot.row(j).sigma == REVOLUTE else _exact(off, sp.S(1), 1000)
-        if e is None:
-            return None
-        b.append(e)
+        # an offset that is no simple fraction (of pi) stays a number: the relations then carry its sine
+        # and cosine as numbers (printed), still exact to rounding
+        b.append(e if e is not None else sp.Float(round(off, 12), 15))
     An = np.array(A.tolist(), float)
     bn = np.array([float(x) for x in b])
     err = float(np.max(np.abs(qa2 @ An.T + bn - qt2)))
@@ -294,6 +295,16 @@ class ClosedFormBase:
         return K
 
 
+def _tidy(x: sp.Expr) -> sp.Expr:
+    """Numbers from a numeric closure offset: one that is a simple fraction up to rounding becomes it."""
+    rep = {}
+    for f in x.atoms(sp.Float):
+        r = sp.Rational(f).limit_denominator(1000)
+        if abs(float(f) - float(r)) < 1e-12:
+            rep[f] = r
+    return x.xreplace(rep)
+
+
 def _term(c: sp.Expr, name: str) -> str:
     """``+ name``, ``- name``, ``- L5/D3*name``."""
     neg = c.could_extract_minus_sign()
@@ -376,10 +387,12 @@ def closed_form_base(robot: RobotDescription, tree_names: Sequence[str], kept: S
         M = sp.Matrix([[Esym.get((r, i), sp.S(0)) for i in S] for r in rsel])
         rhs = sp.Matrix([Esym.get((r, d), sp.S(0)) for r in rsel])
         sol = [sp.factor(sp.cancel(x)) for x in M.LUsolve(rhs)]
+        sol = [_tidy(x) for x in sol]
         used = {r for (r, i) in Esym if i in S or i == d}
         for r in used:
             res = sum((sol[t] * Esym.get((r, i), sp.S(0)) for t, i in enumerate(S)), sp.S(0)) - Esym.get((r, d), sp.S(0))
-            if sp.cancel(sp.together(res)) != 0:
+            res = sp.cancel(sp.together(res))
+            if res != 0 and not (res.atoms(sp.Float) and abs(float(res.xreplace(values))) < 1e-9):
                 raise ModelError(f"{robot.name}: the closed-form loop grouping of {tree_names[d]} does not hold on "
                                  f"every energy term (row {rows[r]})")
         num = np.array([float(x.xreplace(values)) for x in sol])
@@ -451,7 +464,8 @@ def closed_loop_regressor(cf: ClosedFormBase) -> tuple[sp.Matrix, _Energies]:
     g = dict(zip(gens, rg))
 
     def P(e: sp.Expr):
-        return ring.from_expr(sp.sympify(e).xreplace(vals))
+        e = sp.sympify(e).xreplace(vals)
+        return ring.from_expr(e.xreplace({f: sp.Rational(f) for f in e.atoms(sp.Float)}))
 
     si, ci = [gens.index(en.s[i]) for i in en.rev], [gens.index(en.c[i]) for i in en.rev]
 
