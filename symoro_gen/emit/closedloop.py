@@ -13,6 +13,7 @@ from __future__ import annotations
 from ..baseparams.regroup import BaseParameterMap
 from ..closedloop.grouping import closed_form_base, closed_form_markdown, closed_loop_kernel_source
 from ..description.model import RobotDescription
+from ..errors import ModelError
 
 __all__ = ["closed_loop_files"]
 
@@ -21,7 +22,10 @@ def closed_loop_files(robot: RobotDescription, bp: BaseParameterMap) -> dict[str
     """``{file name: text}`` for the package of ``robot`` (empty without ``[[loops]]``)."""
     if not robot.loops:
         return {}
-    cf = closed_form_base(robot, bp.base_names, bp.kept, bp.relations, bp.gravity)
+    try:
+        cf = closed_form_base(robot, bp.base_names, bp.kept, bp.relations, bp.gravity)
+    except ModelError as e:  # the tree package is still written; the closed-loop model reports it at load
+        return {"closed_loop_base_parameters.md": closed_form_markdown(robot, None, len(bp.base_names), reason=str(e))}
     files = {"closed_loop_base_parameters.md": closed_form_markdown(robot, cf, len(bp.base_names))}
     if cf is not None:
         files["_closed_loop.py"] = closed_loop_kernel_source(robot, cf)[0]
