@@ -494,16 +494,7 @@ def _select_chain(model: UrdfModel, base: str | None, tip: str | None, *,
         chain.append(jt)
         lk = jt.parent
     chain.reverse()
-    bad = [jt for jt in chain if jt.type in ("floating", "planar")]
-    if bad:
-        raise RobotFileError([Problem(f, f"joint {jt.name}", "type", f"{jt.type} joints cannot be part of an MDH chain") for jt in bad])
-    mimics = [jt for jt in chain if jt.is_moving and jt.mimic is not None]
-    if mimics:
-        raise RobotFileError([Problem(
-            f, f"joint {jt.name}", "mimic",
-            f"mimics joint {jt.mimic!r}: a mimic joint is a constraint between joints, which an open-chain model "
-            "(and its drive chain) cannot express; end the chain before it with --tip, or delete the <mimic> tag "
-            "to identify it as an independent joint") for jt in mimics])
+    _refuse_joints(f, chain, "an MDH chain", "an open-chain model", "end the chain before it with --tip")
     if not any(jt.is_moving for jt in chain):
         raise RobotFileError([Problem(f, f"chain {base} -> {tip}", "", "no moving joint between base and tip")])
     return base, chain
@@ -521,17 +512,22 @@ def _select_tree(model: UrdfModel, base: str) -> list[UrdfJoint]:
             visit(jt.child)
 
     visit(base)
-    bad = [jt for jt in out if jt.type in ("floating", "planar")]
+    _refuse_joints(f, out, "an MDH tree", "a tree model", "import one chain that avoids it with --tip")
+    return out
+
+
+def _refuse_joints(f: str, joints: list[UrdfJoint], structure: str, model_kind: str, hint: str) -> None:
+    """One error naming every floating/planar joint, else every moving ``<mimic>`` joint, of ``joints``."""
+    bad = [jt for jt in joints if jt.type in ("floating", "planar")]
     if bad:
-        raise RobotFileError([Problem(f, f"joint {jt.name}", "type", f"{jt.type} joints cannot be part of an MDH tree") for jt in bad])
-    mimics = [jt for jt in out if jt.is_moving and jt.mimic is not None]
+        raise RobotFileError([Problem(f, f"joint {jt.name}", "type", f"{jt.type} joints cannot be part of {structure}") for jt in bad])
+    mimics = [jt for jt in joints if jt.is_moving and jt.mimic is not None]
     if mimics:
         raise RobotFileError([Problem(
             f, f"joint {jt.name}", "mimic",
-            f"mimics joint {jt.mimic!r}: a mimic joint is a constraint between joints, which a tree model "
-            "(and its drive chain) cannot express; import one chain that avoids it with --tip, or delete the "
-            "<mimic> tag to identify it as an independent joint") for jt in mimics])
-    return out
+            f"mimics joint {jt.mimic!r}: a mimic joint is a constraint between joints, which {model_kind} "
+            f"(and its drive chain) cannot express; {hint}, or delete the <mimic> tag "
+            "to identify it as an independent joint") for jt in mimics])
 
 
 # ---------------------------------------------------------------------------------------------
