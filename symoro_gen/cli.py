@@ -70,8 +70,8 @@ def cmd_generate(args) -> int:
             f"{m.robot}: {m.n_standard} standard -> {m.n_base} base parameters; base regressor "
             f"{m.base_ops.mul} mul, {m.base_ops.div} div, {m.base_ops.add} add -> {m.path}"
         )
-        if robot.loops:
-            print(f"{m.robot}: {len(robot.loops)} closed loop(s): this package is the tree model; load_model() "
+        if robot.constrained:
+            print(f"{m.robot}: {len(robot.loops)} closed loop(s), {len(robot.couplings)} coupled joint(s): this package is the tree model; load_model() "
                   f"projects it on the {len(robot.actuated)} actuated joints (its base parameters: "
                   "model.base_parameters_text())")
     return 0

@@ -124,14 +124,14 @@ def _closed(robot: RobotDescription, tree: IdentificationModel, folder: Path) ->
 
 def _import_checked(folder: Path, robot: RobotDescription | None = None) -> IdentificationModel:
     """:func:`import_package`, wrapped in the closed-loop model when the package is the tree of a
-    closed-loop robot (its ``manifest.json`` has ``closed_loops``); the robot file is then the one the
+    closed-loop robot (its ``manifest.json`` has ``closed_loops``, or ``couplings``: coupled joints); the robot file is then the one the
     package was generated from, looked for in ``robots/`` and beside the ``generated/`` folder."""
     model = import_package(folder)
     try:
         man = json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return model
-    if not (isinstance(man, dict) and man.get("closed_loops")):
+    if not (isinstance(man, dict) and (man.get("closed_loops") or man.get("couplings"))):
         return model
     if robot is None:
         from .description import load_robot, robots_dir  # sympy: only for closed-loop robots

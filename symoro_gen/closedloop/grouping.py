@@ -20,7 +20,7 @@ with the energy method of [KB1995] (after Gautier & Khalil's energy model of the
   polynomials (``cos^2 = 1 - sin^2``), these are linear equations on ``c``, one per monomial: the
   coefficient matrix ``E`` (monomials x tree base parameters) carries every dependency;
 * the dependent parameters and the support of each dependency are read from ``E`` evaluated at the robot's
-  values (QR without pivoting in the tree's base order, so a parameter regroups onto earlier ones, as in
+  values (in the tree's base order, each column against the span of the independent ones before it, so a parameter regroups onto earlier ones, as in
   the tree rules); each dependency ``E_S beta = E_d`` is then solved exactly with sympy on ``|S|``
   independent rows and checked on **every** row symbolically. The relation of closed-loop base
   parameter ``b`` in the standard parameters is ``chi_b + sum_d beta_bd chi_d`` with the tree's relations
@@ -52,9 +52,9 @@ from ..description.mdh import constant_rotation, position, rot_z
 from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, q_symbol
 from ..errors import ModelError
 from .kinematics import LoopKinematics
-from .model import sample_states
+from .model import independent_columns, sample_states
 
-__all__ = ["LinearClosure", "ClosedFormBase", "detect_linear_closure", "closed_form_base", "closed_form_markdown",
+__all__ = ["LinearClosure", "ClosedFormBase", "coupling_closure", "detect_linear_closure", "closed_form_base", "closed_form_markdown",
            "closed_loop_regressor", "closed_loop_kernel_source"]
 
 
@@ -101,11 +101,41 @@ def _exact(x: float, unit: sp.Expr, max_den: int) -> sp.Expr | None:
     return sp.Rational(f.numerator, f.denominator) * unit
 
 
+def _exact_number(e: sp.Expr, unit: sp.Expr) -> sp.Expr:
+    """A robot file's number made exact when it is a simple fraction (of ``unit``) up to rounding
+    (``0.5 -> 1/2``, ``1.5707963267948966 -> pi/2``), else kept as it is."""
+    if not e.atoms(sp.Float):
+        return e
+    x = _exact(float(e), unit, 1000 if unit == 1 else 24)
+    return x if x is not None and abs(float(x) - float(e)) < 1e-12 * max(1.0, abs(float(e))) else e
+
+
+def coupling_closure(robot: RobotDescription) -> LinearClosure:
+    """The exact closure ``q_tree = A q_a + b`` of a robot whose only constraints are coupled (mimic) joints:
+    known by construction (``q_m = multiplier q_s + offset``), no fit."""
+    tree = [r.j for r in robot.joints]
+    act = [r.j for r in robot.actuated]
+    A = sp.zeros(len(tree), len(act))
+    b: list[sp.Expr] = [sp.S(0)] * len(tree)
+    for r, j in enumerate(tree):
+        c = robot.coupling(j)
+        if c is None:
+            if j in act:
+                A[r, act.index(j)] = 1
+            continue
+        A[r, act.index(c.source)] = _exact_number(c.multiplier, sp.S(1))
+        b[r] = _exact_number(c.offset, sp.pi if robot.row(j).sigma == REVOLUTE else sp.S(1))
+    return LinearClosure(tuple(tree), tuple(act), A, tuple(b), 0.0)
+
+
 def detect_linear_closure(kin: LoopKinematics, *, n_fit: int = 40, n_check: int = 40, seed: int = 7,
                           tol: float = 1e-9) -> LinearClosure | None:
     """The exact linear closure ``q_tree = A q_a + b`` of ``kin``'s robot, or ``None`` when the closed
-    passive variables are not (exactly) linear in the actuated ones around the reference assembly."""
+    passive variables are not (exactly) linear in the actuated ones around the reference assembly. A robot
+    with coupled joints and no loop has it by construction (:func:`coupling_closure`)."""
     robot = kin.robot
+    if kin.linear:
+        return coupling_closure(robot)
     tree = list(kin.tree_joints)
     nt, na = len(tree), kin.n_a
     out = []
@@ -176,7 +206,8 @@ class _Energies:
             bad = [f for f in e.atoms(sp.sin, sp.cos) if f.free_symbols & set(qa.values())]
             if bad:
                 raise ModelError(f"{robot.name}: closed-form regrouping: a joint variable left in {bad[0]} after "
-                                 "the linear closure (a trigonometric function of a prismatic joint?)")
+                                 "the linear closure (a revolute joint turning by a non-integer multiple of an "
+                                 "actuated angle, or following a prismatic joint): the groupings stay numeric")
             return e.xreplace(lin)
 
         def rate(e: sp.Expr) -> sp.Expr:
@@ -367,10 +398,7 @@ def closed_form_base(robot: RobotDescription, tree_names: Sequence[str], kept: S
     dep: list[int] = []
     Es = E / np.where(norms > 0, norms, 1.0)
     if live:
-        sub = Es[:, live]
-        if sub.shape[0] < sub.shape[1]:  # fewer energy terms than parameters: pad, so R is square
-            sub = np.vstack([sub, np.zeros((sub.shape[1] - sub.shape[0], sub.shape[1]))])
-        diag = np.abs(np.diag(np.asarray(np.linalg.qr(sub, mode="r"))))
+        diag = independent_columns(Es[:, live], tol)
         for k, i in enumerate(live):
             (indep if diag[k] > tol else dep).append(i)
     beta = np.linalg.lstsq(Es[:, indep], Es[:, dep], rcond=None)[0] if dep else np.zeros((len(indep), 0))
@@ -436,8 +464,10 @@ def closed_form_markdown(robot: RobotDescription, cf: ClosedFormBase | None, n_t
                   "for loops do not apply. The extra groupings are the numeric ones of "
                   "`load_model(...).base_parameters_text()` (numeric rank of the projected regressor).", ""]
         return "\n".join(lines)
-    lines += ["Loop closure, linear in the joint variables (fitted on random closed states and checked to 1e-9 on "
-              f"others; actuated joints {act}):", "", "```", *cf.closure.lines(), "```", "",
+    how = ("fitted on random closed states and checked to 1e-9 on others" if robot.loops else
+           "the coupled (mimic) joints of the robot file, exact by construction")
+    lines += [f"Loop closure, linear in the joint variables ({how}; actuated joints {act}):", "", "```",
+              *cf.closure.lines(), "```", "",
               f"{len(cf.names)} base parameters (tree: {n_tree}; the loops remove {n_tree - len(cf.names)}).", "",
               "## Groupings brought by the loops (tree base parameters on the right)", "", "```",
               *(cf.groupings or ["(none)"]), "```", ""]
@@ -469,8 +499,13 @@ def closed_loop_regressor(cf: ClosedFormBase) -> tuple[sp.Matrix, _Energies]:
     g = dict(zip(gens, rg))
 
     def P(e: sp.Expr):
-        e = sp.sympify(e).xreplace(vals)
-        return ring.from_expr(e.xreplace({f: sp.Rational(f) for f in e.atoms(sp.Float)}))
+        e = sp.expand(sp.sympify(e).xreplace(vals))
+        if e == 0:
+            return ring.zero
+        # coefficients that are not rational (sqrt(3)/2 from a closure offset of pi/6, a float): their value as
+        # the exact rational of the double (the generated code is numeric anyway)
+        terms = sp.Poly(e, *gens).terms()
+        return ring.from_dict({m: sp.Rational(c) if c.is_Rational else sp.Rational(repr(float(c))) for m, c in terms})
 
     si, ci = [gens.index(en.s[i]) for i in en.rev], [gens.index(en.c[i]) for i in en.rev]
 

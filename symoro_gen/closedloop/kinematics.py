@@ -27,6 +27,11 @@ configuration (``[loop_reference]`` of the robot file, zeros by default): the ac
 moved along a straight line from the reference to each requested configuration (a homotopy, in steps
 of at most ``0.1`` rad or m) and Newton's method follows the solution. A configuration that this
 path cannot reach without crossing a singular configuration raises :class:`ClosureError`.
+
+Coupled (mimic) joints (``q_m = k q_s + c``, :class:`~symoro_gen.description.model.Coupling`) add one
+linear row per coupling to ``Phi`` (``x_m - k x_s - c``), to ``A`` (constant: ``+1`` at ``m``, ``-k`` at
+``s``) and nothing to ``b``. A robot with couplings and no loop needs no Newton solve: its closure is
+``q_tree = A q_a + b`` with constant ``A`` (``G = A``), evaluated directly.
 """
 from __future__ import annotations
 
@@ -82,8 +87,8 @@ class LoopKinematics:
     """
 
     def __init__(self, robot: RobotDescription, *, tol: float = 1e-13, step: float = 0.1):
-        if not robot.loops:
-            raise ModelError(f"{robot.name}: no [[loops]]: not a closed-loop robot")
+        if not robot.constrained:
+            raise ModelError(f"{robot.name}: no [[loops]] and no coupled (mimic) joint: not a closed-loop robot")
         self.robot = robot
         self.tol, self.step = tol, step
         subs = robot.geometry_subs()
@@ -110,6 +115,10 @@ class LoopKinematics:
                 T0 = transform(g, b, al, d, 0.0, 0.0)
                 self._local[r.j] = (T0[:3, :3], T0[:3, 3], float(th), float(rr))
         self.pairs = [(lp.cut.j, lp.close.j) for lp in robot.loops]
+        # couplings x_m = k x_s + c: (column of m, column of s, k, c)
+        self.couplings = [(self._col[c.joint], self._col[c.source], float(c.multiplier), float(c.offset))
+                          for c in robot.couplings]
+        self._nrows = 6 * len(self.pairs) + len(self.couplings)
         # frames on the path of each frame down to the base (for the Jacobian)
         ant = {r.j: r.ant for r in self.frames}
         self._ant = ant
@@ -161,20 +170,25 @@ class LoopKinematics:
     def residual(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """``Phi(x)``, shape (N, 6 B)."""
         P = self._poses(x)
-        return self._residual(P)
+        return self._residual(P, x)
 
-    def _residual(self, P) -> NDArray[np.float64]:
+    def _residual(self, P, x: NDArray[np.float64]) -> NDArray[np.float64]:
         parts = []
         for k, c in self.pairs:
             (Rk, pk), (Rc, pc) = P[k], P[c]
             parts.append(pk - pc)
             parts.append(0.5 * np.cross(Rc, Rk, axis=1).sum(axis=2))  # sum over the three axes (d/dt: w_k - w_c)
+        for im, i_s, k_, c_ in self.couplings:
+            parts.append((x[:, im] - k_ * x[:, i_s] - c_)[:, None])
         return np.concatenate(parts, axis=1)
 
     def _jacobian(self, P) -> NDArray[np.float64]:
         """Constraint Jacobian ``A`` (N, 6B, nx): the relative twist of the two frames per unit xdot."""
         N = next(iter(P.values()))[1].shape[0]
-        A = np.zeros((N, 6 * len(self.pairs), len(self.variables)))
+        A = np.zeros((N, self._nrows, len(self.variables)))
+        for r, (im, i_s, k_, _) in enumerate(self.couplings, start=6 * len(self.pairs)):
+            A[:, r, im] = 1.0
+            A[:, r, i_s] -= k_
         for li, (k, c) in enumerate(self.pairs):
             for f, s in ((k, 1.0), (c, -1.0)):
                 pf = P[f][1]
@@ -218,6 +232,7 @@ class LoopKinematics:
         parts = []
         for k, c in self.pairs:
             parts += [a[k] - a[c], wd[k] - wd[c]]
+        parts.append(np.zeros((N, len(self.couplings))))  # linear couplings: no velocity-product term
         return np.concatenate(parts, axis=1)
 
     @staticmethod
@@ -239,7 +254,7 @@ class LoopKinematics:
     def _newton(self, x: NDArray[np.float64], iters: int = 30) -> NDArray[np.float64]:
         for _ in range(iters):
             P = self._poses(x)
-            e = self._residual(P)
+            e = self._residual(P, x)
             if np.max(np.abs(e), initial=0.0) < self.tol:
                 break
             dx = self._lsq(self._jacobian(P)[:, :, self._ip], e)
@@ -251,7 +266,7 @@ class LoopKinematics:
         x0 = np.array([[self.robot.loop_reference.get(f"q{j}", 0.0) for j in self.variables]])
         x = self._newton(x0, iters=60)
         P = self._poses(x)
-        e = float(np.max(np.abs(self._residual(P))))
+        e = float(np.max(np.abs(self._residual(P, x))))
         sv = np.linalg.svd(self._jacobian(P)[0][:, self._ip], compute_uv=False)
         if e > 1e-9 or sv[len(self._ip) - 1] < 1e-6 * max(1.0, sv[0]):
             what = (f"the loops do not close from it (residual {e:.2g})" if e > 1e-9 else
@@ -261,10 +276,28 @@ class LoopKinematics:
                                f"passive and cut joints included)")
         return x[0]
 
+    @property
+    def linear(self) -> bool:
+        """True when the closure is linear by construction (couplings only, no loop): ``x = A q_a + b``."""
+        return not self.pairs
+
+    def _linear_map(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(A, b)`` of ``x = A q_a + b`` for a robot with couplings and no loop (x order, actuated columns)."""
+        A = np.zeros((len(self.variables), self.n_a))
+        b = np.zeros(len(self.variables))
+        A[self._ia, np.arange(self.n_a)] = 1.0
+        for im, i_s, k_, c_ in self.couplings:
+            A[im], b[im] = k_ * A[i_s], k_ * b[i_s] + c_
+        return A, b
+
     def solve_positions(self, q_a) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """All variables ``x`` (N, nx) and the residual (N,) for actuated positions ``q_a`` (N, n_a)."""
         q_a = np.atleast_2d(np.asarray(q_a, float))
         N = q_a.shape[0]
+        if self.linear:
+            A, b = self._linear_map()
+            x = q_a @ A.T + b
+            return x, np.max(np.abs(self._residual({}, x)), axis=1, initial=0.0) if N else np.zeros(0)
         ref = self._reference
         x = np.tile(ref, (N, 1))
         d = q_a - ref[self._ia]
@@ -281,6 +314,12 @@ class LoopKinematics:
     def solve(self, q_a, dq_a, ddq_a, *, check: bool = True) -> ClosedState:
         """Positions, velocities, accelerations of every tree joint for actuated ``q_a, dq_a, ddq_a`` (N, n_a)."""
         q_a, dq_a, ddq_a = (np.atleast_2d(np.asarray(v, float)) for v in (q_a, dq_a, ddq_a))
+        if self.linear:  # couplings only: G constant, no bias term
+            A, _ = self._linear_map()
+            x, res = self.solve_positions(q_a)
+            nt, N = len(self.tree_joints), q_a.shape[0]
+            return ClosedState(q=x[:, :nt], dq=dq_a @ A[:nt].T, ddq=ddq_a @ A[:nt].T, q_cut=x[:, nt:],
+                               G=np.broadcast_to(A[:nt], (N, nt, self.n_a)).copy(), residual=res)
         x, res = self.solve_positions(q_a)
         P = self._poses(x)
         A = self._jacobian(P)

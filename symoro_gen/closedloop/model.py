@@ -18,7 +18,8 @@ Base parameters ([KB1995]; [G1991] for the numeric method): starting from the tr
 parameters (closed-form regrouping of the tree, ``W_t = W_tb K_t``), the loop brings extra
 dependencies among the projected columns ``G^T W_tb``. They are found by a QR factorisation without
 pivoting of the projected base columns on random closed states around the reference assembly
-(columns scaled to unit norm; a column whose ``|R_ii| < 1e-8`` depends on the previous ones, so a
+(columns scaled to unit norm; a column within ``1e-8`` of the span of the previous independent ones
+depends on them, :func:`independent_columns`, so a
 dependent parameter regroups onto earlier links as in the tree rules); its coefficients come from a
 least-squares solve. Base parameter ``b`` is ``chi_b = P K_t chi`` with ``P = [I beta]``; a parameter that
 absorbed others is suffixed ``R`` (``[KC1997]``). :func:`closed_loop_base` returns the relations with
@@ -111,6 +112,29 @@ def recognise(c: float, values: dict[str, float], tol: float = 1e-9) -> str | No
     return None
 
 
+def independent_columns(M: NDArray[np.float64], tol: float) -> NDArray[np.float64]:
+    """Distance of each column of ``M`` (columns scaled to unit norm, zero columns excluded by the caller)
+    from the span of the **independent** columns before it, in order: a column at distance ``<= tol``
+    depends on earlier ones (the regrouping order of [G1991]).
+
+    Gram-Schmidt with re-orthogonalisation against the independent columns only: a QR factorisation
+    without pivoting would let a dependent column consume a row direction (its Householder reflector is
+    built from rounding noise), after which a later independent column can look dependent when the
+    matrix has few rows (a coupled joint's energy matrix)."""
+    basis: list[NDArray[np.float64]] = []
+    out = np.zeros(M.shape[1])
+    for i in range(M.shape[1]):
+        v = np.array(M[:, i], float)
+        for _ in range(2):
+            for b in basis:
+                v -= (b @ v) * b
+        d = float(np.linalg.norm(v))
+        out[i] = d
+        if d > tol:
+            basis.append(v / d)
+    return out
+
+
 def sample_states(kin: LoopKinematics, n: int, seed: int = 0, scale: float = 1.0) -> tuple[NDArray[np.float64], ...]:
     """``n`` random actuated states around the reference assembly: positions within ``0.5 scale`` rad
     (``0.05 scale`` m for prismatic joints) of it, velocities and accelerations standard normal.
@@ -141,8 +165,7 @@ def closed_loop_base(kin: LoopKinematics, tree: IdentificationModel, *, n_sample
     norms = np.linalg.norm(W, axis=0)
     live = norms > tol * max(1.0, float(norms.max(initial=0.0)))
     Ws = np.where(live, W / np.where(live, norms, 1.0), 0.0)
-    R = np.linalg.qr(Ws, mode="r")
-    diag = np.abs(np.diag(R))
+    diag = independent_columns(Ws, tol)
     indep = [i for i in range(W.shape[1]) if live[i] and diag[i] > tol]
     dep = [i for i in range(W.shape[1]) if live[i] and diag[i] <= tol]
     beta = np.linalg.lstsq(W[:, indep], W[:, dep], rcond=None)[0] if dep else np.zeros((len(indep), 0))

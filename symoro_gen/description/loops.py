@@ -21,6 +21,22 @@ Syntax (every field of ``cut``/``close`` as in ``[[frames]]``; ``j`` may be omit
 
 The assembly mode (a parallelogram or its crossed twin) is the one of the reference configuration,
 followed continuously (:mod:`symoro_gen.closedloop.kinematics`).
+
+Coupled (mimic) joints: a passive frame whose variable follows an actuated joint linearly,
+``q<j> = multiplier * q<joint> + offset`` (URDF's ``<mimic>`` semantics; a gear pair, the second finger
+of a gripper), written on its own ``[[frames]]`` row::
+
+    [[frames]]
+    j = 6
+    ant = 4
+    sigma = 1
+    mimic = { joint = 5, multiplier = 1, offset = 0 }   # q6 = q5; mu = 0 is implied
+    ...
+
+``joint`` is an earlier, actuated moving frame; ``multiplier`` (non-zero) and ``offset`` (rad or m, default
+0) are constant numbers or expressions (``"pi/2"``, ``"-1/3"``; no ``[values]`` symbols: the closure must be
+a known constant). The model projects the tree on the actuated joints exactly as for a loop
+(:mod:`symoro_gen.closedloop`, ``G`` constant); loops and couplings may be combined.
 """
 from __future__ import annotations
 
@@ -30,9 +46,9 @@ from typing import Any
 import sympy as sp
 
 from .expr import ExprError, parse_expression
-from .model import FIXED, PRISMATIC, REVOLUTE, LoopClosure, MdhRow, q_symbol
+from .model import FIXED, PRISMATIC, REVOLUTE, Coupling, LoopClosure, MdhRow, q_symbol
 
-__all__ = ["parse_loops"]
+__all__ = ["parse_loops", "parse_couplings", "check_passive"]
 
 _CUT_KEYS = ("j", "ant", "sigma", "mu", "gamma", "b", "alpha", "d", "theta", "r")
 _GEOM = ("gamma", "b", "alpha", "d", "theta", "r")
@@ -118,25 +134,6 @@ def parse_loops(raw: Any, raw_ref: Any, rows: tuple[MdhRow, ...] | list[MdhRow],
             else:
                 loops.append(LoopClosure(cut=made["cut"], close=made["close"]))
 
-    # every passive tree joint must lie on a loop (else it is a free, unactuated joint)
-    if loops:
-        antecedent = {r.j: r.ant for r in rows}
-
-        def chain(f: int) -> set[int]:
-            out = set()
-            while f:
-                out.add(f)
-                f = antecedent[f]
-            return out
-
-        on_loop: set[int] = set()
-        for lp in loops:
-            a, b = chain(lp.cut.ant), chain(lp.close.ant)
-            on_loop |= a ^ b
-        for r in rows:
-            if r.is_moving and r.mu == 0 and r.j not in on_loop:
-                bad(f"frame {r.j}", "mu", "a passive joint (mu = 0) must lie on a closed loop ([[loops]])")
-
     ref: dict[str, float] = {}
     if raw_ref is not None:
         if not isinstance(raw_ref, dict):
@@ -153,3 +150,111 @@ def parse_loops(raw: Any, raw_ref: Any, rows: tuple[MdhRow, ...] | list[MdhRow],
         if not raw:
             bad("top level", "loop_reference", "given without [[loops]]")
     return tuple(loops), ref
+
+
+MIMIC_KEYS = ("joint", "multiplier", "offset")
+
+
+def _constant(value: Any, what: str) -> tuple[sp.Expr | None, str]:
+    """A finite real constant (number or expression without symbols), or None and the reason."""
+    try:
+        e = parse_expression(value, {})
+    except ExprError as exc:
+        return None, str(exc)
+    v = complex(sp.N(e))
+    if not (v.imag == 0 and abs(v.real) != float("inf") and v.real == v.real):
+        return None, f"{what} must be a finite real number, got {value!r}"
+    return e, ""
+
+
+def parse_couplings(frames: list[Any], rows: tuple[MdhRow, ...] | list[MdhRow],
+                    bad: Callable[[str, str, str], None]) -> tuple[Coupling, ...]:
+    """The ``mimic`` tables of the ``[[frames]]`` entries (``frames``, as read from TOML) against the parsed
+    ``rows``; every problem through ``bad(where, field, message)``, ``where`` = ``"frame j"``, field
+    ``mimic.joint``, ``mimic.multiplier``..."""
+    out: list[Coupling] = []
+    by_j = {r.j: r for r in rows}
+    mimic_of = {}
+    for idx, fr in enumerate(frames, start=1):
+        if isinstance(fr, dict) and "mimic" in fr:
+            mimic_of[idx] = fr["mimic"]
+    for j, raw in mimic_of.items():
+        where = f"frame {j}"
+        row = by_j.get(j)
+        if row is None:
+            continue
+        if not isinstance(raw, dict):
+            bad(where, "mimic", "must be a table { joint = J, multiplier = 1.0, offset = 0.0 }")
+            continue
+        ok = True
+        for k in sorted(set(raw) - set(MIMIC_KEYS)):
+            bad(where, f"mimic.{k}", f"unknown field (allowed: {', '.join(MIMIC_KEYS)})")
+            ok = False
+        if not row.is_moving:
+            bad(where, "mimic", "a fixed frame (sigma = 2) has no joint variable to couple")
+            continue
+        if row.mu != 0:
+            bad(where, "mu", "a coupled joint (mimic) is passive: mu = 0 (the default with mimic)")
+            ok = False
+        src = raw.get("joint")
+        if "joint" not in raw:
+            bad(where, "mimic.joint", "missing: the frame of the joint it follows")
+            ok = False
+        elif not (isinstance(src, int) and not isinstance(src, bool)) or src not in by_j:
+            bad(where, "mimic.joint", f"not a frame of this robot (1..{len(rows)}), got {src!r}")
+            ok = False
+        elif src == j:
+            bad(where, "mimic.joint", "a joint cannot follow itself")
+            ok = False
+        elif src > j:
+            bad(where, "mimic.joint", f"joint {src} comes after frame {j}: a coupled joint follows an earlier "
+                                      "joint (renumber the frames)")
+            ok = False
+        elif not by_j[src].is_moving:
+            bad(where, "mimic.joint", f"frame {src} is fixed (sigma = 2): no joint variable to follow")
+            ok = False
+        elif src in mimic_of:
+            bad(where, "mimic.joint", f"joint {src} is itself coupled (mimic): follow the joint it follows "
+                                      "(compose the multipliers and offsets); chains and cycles are not allowed")
+            ok = False
+        elif by_j[src].mu != 1:
+            bad(where, "mimic.joint", f"joint {src} is passive (mu = 0): a coupled joint follows an actuated one")
+            ok = False
+        mult, why = _constant(raw.get("multiplier", 1), "the multiplier")
+        if mult is None:
+            bad(where, "mimic.multiplier", why)
+            ok = False
+        elif mult == 0 or abs(float(sp.N(mult))) < 1e-12:
+            bad(where, "mimic.multiplier", "must be non-zero (a joint that does not move is a fixed frame, sigma = 2)")
+            ok = False
+        off, why = _constant(raw.get("offset", 0), "the offset")
+        if off is None:
+            bad(where, "mimic.offset", why)
+            ok = False
+        if ok and mult is not None and off is not None:
+            out.append(Coupling(joint=j, source=int(src), multiplier=mult, offset=off))
+    return tuple(out)
+
+
+def check_passive(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopClosure, ...],
+                  couplings: tuple[Coupling, ...], bad: Callable[[str, str, str], None]) -> None:
+    """Every passive tree joint (``mu = 0``) of a robot with loops or couplings must lie on a loop or be
+    coupled (else it is a free, unactuated joint: the closure would not determine it)."""
+    if not (loops or couplings):
+        return
+    antecedent = {r.j: r.ant for r in rows}
+
+    def chain(f: int) -> set[int]:
+        out = set()
+        while f:
+            out.add(f)
+            f = antecedent[f]
+        return out
+
+    on_loop: set[int] = {c.joint for c in couplings}
+    for lp in loops:
+        on_loop |= chain(lp.cut.ant) ^ chain(lp.close.ant)
+    for r in rows:
+        if r.is_moving and r.mu == 0 and r.j not in on_loop:
+            bad(f"frame {r.j}", "mu", "a passive joint (mu = 0) must lie on a closed loop ([[loops]]) or follow "
+                                      "another joint (mimic)")

@@ -120,6 +120,24 @@ class LoopClosure:
 
 
 @dataclass(frozen=True)
+class Coupling:
+    """A coupled (mimic) joint: ``q<joint> = multiplier * q<source> + offset``.
+
+    The semantics of URDF's ``<mimic joint multiplier offset>``: frame ``joint`` is a passive joint
+    (``mu = 0``) whose variable is a linear function of the actuated joint ``source`` (a gear pair, the
+    two fingers of a gripper). It is a holonomic constraint with a constant Jacobian: the model is the
+    tree's projected by ``G = d q_tree / d q_a`` (:mod:`symoro_gen.closedloop`, as for closed loops), so
+    ``tau_source = tau_tree,source + multiplier * tau_tree,joint``. ``multiplier`` and ``offset`` are
+    exact sympy numbers (``offset`` in rad or m, the unit of ``joint``).
+    """
+
+    joint: int
+    source: int
+    multiplier: sp.Expr
+    offset: sp.Expr
+
+
+@dataclass(frozen=True)
 class RobotDescription:
     """A parsed, validated robot file."""
 
@@ -136,6 +154,7 @@ class RobotDescription:
     limits: JointLimits | None = None
     loops: tuple[LoopClosure, ...] = ()
     loop_reference: Mapping[str, float] = field(default_factory=dict)
+    couplings: tuple[Coupling, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "values", MappingProxyType(dict(self.values)))
@@ -156,8 +175,19 @@ class RobotDescription:
     @property
     def model_joints(self) -> tuple[MdhRow, ...]:
         """The joints of the identification model and of the recordings: every moving joint, or the
-        actuated ones of a closed-loop robot (``[[loops]]``; its passive joints are solved, not logged)."""
-        return self.actuated if self.loops else self.joints
+        actuated ones of a closed-loop robot (``[[loops]]``) or of one with coupled joints (``mimic``):
+        its passive joints are solved, not logged."""
+        return self.actuated if self.constrained else self.joints
+
+    @property
+    def constrained(self) -> bool:
+        """True for a robot whose model is its tree's projected on the actuated joints: closed loops
+        (``[[loops]]``) or coupled joints (``mimic``), see :mod:`symoro_gen.closedloop`."""
+        return bool(self.loops or self.couplings)
+
+    def coupling(self, j: int) -> Coupling | None:
+        """The coupling of frame ``j`` (a mimic joint), or None."""
+        return next((c for c in self.couplings if c.joint == j), None)
 
     @property
     def actuated(self) -> tuple[MdhRow, ...]:

@@ -24,13 +24,13 @@ from ..errors import Problem, RobotFileError, RobotFileWarning
 from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from .expr import ExprError, parse_expression
 from .inertia import check_physical_consistency
-from .loops import parse_loops
-from .model import FIXED, PRISMATIC, REVOLUTE, DriveChain, JointLimits, MdhRow, RobotDescription, q_symbol
+from .loops import check_passive, parse_couplings, parse_loops
+from .model import FIXED, PRISMATIC, REVOLUTE, Coupling, DriveChain, JointLimits, MdhRow, RobotDescription, q_symbol
 
 TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits",
             "loops", "loop_reference"}
 FRAME_REQUIRED = ("j", "ant", "sigma", "alpha", "d", "theta", "r")
-FRAME_OPTIONAL = ("mu", "gamma", "b", "drive")
+FRAME_OPTIONAL = ("mu", "gamma", "b", "drive", "mimic")
 CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _RESERVED = {"q", "pi", "sin", "cos", "tan", "sqrt", "atan2"}
@@ -179,7 +179,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             what = "points forward (ant must be < j)" if ant >= j else "is out of range (ant >= 0)"
             bad(where, "ant", f"antecedent {ant} {what}")
             ant = j - 1
-        mu = fr.get("mu", 0 if sigma == FIXED else 1)
+        mu = fr.get("mu", 0 if sigma == FIXED or "mimic" in fr else 1)  # a coupled joint is passive
         if mu not in (0, 1) or isinstance(mu, bool):
             bad(where, "mu", f"must be 0 (passive) or 1 (actuated), got {mu!r}")
             mu = 1
@@ -301,7 +301,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             _warn_inconsistent_inertia(nominal, rows, payload, file)
 
     # per-joint tables of a closed-loop robot are per actuated joint (the passive ones are not logged)
-    model_rows = [r for r in rows if not (r.is_moving and r.mu == 0)] if "loops" in doc else rows
+    coupled = any(isinstance(fr, dict) and "mimic" in fr for fr in frames)
+    model_rows = [r for r in rows if not (r.is_moving and r.mu == 0)] if ("loops" in doc or coupled) else rows
     chain = None
     if "drive_chain" in doc:
         chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in model_rows), bad)
@@ -311,6 +312,11 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     loops, loop_reference = (), {}
     if ("loops" in doc or "loop_reference" in doc) and not bad_sigma:
         loops, loop_reference = parse_loops(doc.get("loops"), doc.get("loop_reference"), rows, values, bad)
+    couplings: tuple[Coupling, ...] = ()
+    if coupled and not bad_sigma:
+        couplings = parse_couplings(frames, rows, bad)
+    if not bad_sigma:
+        check_passive(rows, loops, couplings, bad)
 
     if probs:
         raise RobotFileError(probs)
@@ -328,6 +334,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         limits=limits,
         loops=loops,
         loop_reference=loop_reference,
+        couplings=couplings,
     )
 
 

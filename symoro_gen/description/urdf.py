@@ -58,16 +58,13 @@ assembled one (a loop open there is warned about).
 
 Two decisions (issue 15, issue 13), stated to the user:
 
-* a ``<mimic>`` joint on the chain is an error naming it. It is a kinematic constraint
-  (``q_b = multiplier q_a + offset``: one degree of freedom less), which the open-chain model
-  cannot express, and the ``[drive_chain]`` coupling cannot either (it maps n motors to n joints
-  through an invertible matrix). Seen as a closed-loop constraint it has a constant
-  ``G`` and ``tau_a = G^T tau_tree`` would hold, but the closed-loop layer takes geometric loops
-  only (a cut joint and its closing frame, as SYMORO's notation and ``.par`` files have them): a
-  linear coupling would need a table of its own in the robot file, its ``.par``/URDF export and rows
-  in the loop solver, which is not done. Choose a chain that stops before it (``--tip``), or delete
-  the ``<mimic>`` tag to identify the joint as an independent one. Mimic joints off the chain are
-  left out like any other moving joint there.
+* a ``<mimic joint multiplier offset>`` joint is a **coupled joint** of the robot file (issue 13): a
+  passive frame (``mu = 0``, no drive terms) with ``mimic = { joint = J, multiplier = k, offset = c }``,
+  ``q = k q_J + c`` exactly as URDF's mimic (the robot file's ``q`` is the URDF joint value); the model
+  projects the tree on the actuated joints (:mod:`symoro_gen.closedloop`). A mimic of a mimic is composed
+  down to the joint that is not one; a cycle, a mimic of a joint outside the imported chain or tree (or
+  numbered after it) are errors naming the joint. Mimic joints off the chain are left out like any other
+  moving joint there.
 * a link carried by a moving joint without ``<inertial>`` gets a warning naming it: its mass
   and inertia are unknown, not zero. When no link rigidly attached to MDH link j has an
   ``<inertial>``, link j gets no inertial ``[nominal]`` entries at all (unknown), rather than
@@ -133,6 +130,9 @@ class UrdfJoint:
     damping: float | None = None
     friction: float | None = None
     mimic: str | None = None  # the joint this one mimics (<mimic joint=...>)
+    #: ``<mimic multiplier offset>`` (URDF defaults 1 and 0): this joint's value is ``multiplier * q + offset``
+    mimic_multiplier: float = 1.0
+    mimic_offset: float = 0.0
     #: ``<limit lower upper velocity effort>`` (each None when absent)
     limit: tuple[float | None, float | None, float | None, float | None] | None = None
 
@@ -346,19 +346,24 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
                 damping = rd.floats(de, "damping", 1, where, "dynamics/damping")[0]
             if de.get("friction") is not None:
                 friction = rd.floats(de, "friction", 1, where, "dynamics/friction")[0]
-        mimic = None
+        mimic, mult, moff = None, 1.0, 0.0
         mi = el.find("mimic")
         if mi is not None:
             mimic = mi.get("joint") or ""
             if not mimic:
                 rd.bad(where, "mimic", "missing <mimic joint=...>")
+            mult = rd.floats(mi, "multiplier", 1, where, "mimic/multiplier", default=(1.0,))[0]
+            moff = rd.floats(mi, "offset", 1, where, "mimic/offset", default=(0.0,))[0]
+            if mult is not None and mult == 0.0 and typ in MOVING_TYPES:
+                rd.bad(where, "mimic/multiplier", "must be non-zero (a joint that does not move is a fixed joint)")
         limit = None
         le = el.find("limit")
         if le is not None:
             limit = tuple(rd.floats(le, k, 1, where, f"limit/{k}")[0] if le.get(k) is not None else None
                           for k in ("lower", "upper", "velocity", "effort"))
         joints[name] = UrdfJoint(name, typ, parent or "", child or "", rd.origin(el, where), axis, damping, friction,
-                                 mimic=mimic, limit=limit)
+                                 mimic=mimic, limit=limit, mimic_multiplier=float(mult if mult is not None else 1.0),
+                                 mimic_offset=float(moff if moff is not None else 0.0))
     loops = _parse_loop_joints(root, rd, links, joints)
     transmitted = _parse_transmissions(root, rd, joints)
     if not links:
@@ -517,17 +522,54 @@ def _select_tree(model: UrdfModel, base: str) -> list[UrdfJoint]:
 
 
 def _refuse_joints(f: str, joints: list[UrdfJoint], structure: str, model_kind: str, hint: str) -> None:
-    """One error naming every floating/planar joint, else every moving ``<mimic>`` joint, of ``joints``."""
+    """One error naming every floating/planar joint of ``joints`` (``<mimic>`` joints are couplings,
+    :func:`_couplings`)."""
     bad = [jt for jt in joints if jt.type in ("floating", "planar")]
     if bad:
         raise RobotFileError([Problem(f, f"joint {jt.name}", "type", f"{jt.type} joints cannot be part of {structure}") for jt in bad])
-    mimics = [jt for jt in joints if jt.is_moving and jt.mimic is not None]
-    if mimics:
-        raise RobotFileError([Problem(
-            f, f"joint {jt.name}", "mimic",
-            f"mimics joint {jt.mimic!r}: a mimic joint is a constraint between joints, which {model_kind} "
-            f"(and its drive chain) cannot express; {hint}, or delete the <mimic> tag "
-            "to identify it as an independent joint") for jt in mimics])
+
+
+def _couplings(model: UrdfModel, moving: list[UrdfJoint]) -> dict[str, tuple[str, float, float]]:
+    """``{mimic joint: (followed joint, multiplier, offset)}`` of the imported moving joints (URDF
+    ``<mimic>``: ``q = multiplier * q_followed + offset``). A mimic of a mimic is composed down to the
+    joint that is not one (``k1 (k2 q + c2) + c1``); a cycle, a mimic of an undefined or fixed joint, of a
+    joint outside the imported chain or tree, or of a joint numbered after it are errors naming the joint."""
+    f = model.file
+    index = {jt.name: i for i, jt in enumerate(moving)}
+    out: dict[str, tuple[str, float, float]] = {}
+    problems = []
+    for jt in moving:
+        if jt.mimic is None:
+            continue
+        where = f"joint {jt.name}"
+        k, c, seen, cur = 1.0, 0.0, [jt.name], jt
+        err = None
+        while cur.mimic is not None:
+            tgt = model.joints.get(cur.mimic)
+            k, c = k * cur.mimic_multiplier, c + k * cur.mimic_offset
+            if tgt is None:
+                err = f"mimics joint {cur.mimic!r}, which is not defined"
+            elif tgt.name in seen:
+                err = "mimic joints form a cycle: " + " -> ".join(seen + [tgt.name])
+            elif not tgt.is_moving:
+                err = f"mimics joint {tgt.name!r}, a {tgt.type} joint (no joint variable)"
+            if err:
+                break
+            seen.append(tgt.name)
+            cur = tgt
+        if err is None and cur.name not in index:
+            err = (f"mimics joint {cur.name!r}, which is outside the imported chain/tree: import a chain or tree "
+                   "that contains it (--tip), or delete the <mimic> tag to identify the joint as an independent one")
+        elif err is None and index[cur.name] > index[jt.name]:
+            err = (f"mimics joint {cur.name!r}, which comes after it in the frame numbering (depth first, children "
+                   "in the file's order): a coupled joint follows an earlier one; list the followed joint first")
+        if err:
+            problems.append(Problem(f, where, "mimic", err))
+            continue
+        out[jt.name] = (cur.name, k, c)
+    if problems:
+        raise RobotFileError(problems)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -735,7 +777,7 @@ def import_urdf(path, base: str | None = None, tip: str | None = None, name: str
     ------
     RobotFileError
         Unreadable or malformed URDF, unknown base/tip link, no moving joint in the chain,
-        floating/planar joint in the chain or tree, a mimic joint in it.
+        floating/planar joint in the chain or tree, a mimic joint whose followed joint is not in it.
     """
     p = Path(path)
     try:
@@ -828,7 +870,8 @@ def import_urdf_text(
     moving = [jt for jt in chain if jt.is_moving]
     n = len(moving)
     index = {jt.name: i for i, jt in enumerate(moving)}
-    passive = _passive_joints(model, moving, actuated)
+    coupled = _couplings(model, moving)
+    passive = _passive_joints(model, moving, actuated, coupled)
     parents = []  # index of the moving joint carrying each moving joint (-1: the base); ant = parent + 1
     for jt in moving:
         up = model.parent_joint(jt.parent) if jt.parent != base else None
@@ -928,7 +971,13 @@ def import_urdf_text(
     for j, ant, sigma, (gamma, b, alpha, d, theta, r), jt in rows:
         lines = ["[[frames]]  # " + (f"URDF joint {jt.name} ({jt.type}), link {jt.child}" if jt else f"fixed frame of the tip link {tip}"),
                  f"j = {j}", f"ant = {ant}", f"sigma = {sigma}"]
-        if jt is not None and jt.name in passive:
+        if jt is not None and jt.name in coupled:
+            src, k_, c_ = coupled[jt.name]
+            off = _angle_str(c_, tol) if sigma == 0 else repr(_snap(c_, tol))
+            off = off if re.fullmatch(r"-?[0-9.eE+-]+", off) else f'"{off}"'  # a number, or "pi/2"
+            lines.append(f"mimic = {{ joint = {index[src] + 1}, multiplier = {_num(_snap(k_, tol))}, offset = {off} }}"
+                         f'  # URDF <mimic joint="{jt.mimic}">')
+        elif jt is not None and jt.name in passive:
             lines.append("mu = 0")
         g_s, b_s = _angle_str(gamma, tol), length(b, f"B{j}")
         if g_s != "0" or b_s != "0":
@@ -990,6 +1039,9 @@ def import_urdf_text(
         head.append(f"# Closed loops ([[loops]]) from the <loop_joint> elements; passive joints (mu = 0): "
                     f"{', '.join(jt.name for jt in moving if jt.name in passive)}; the loop solver starts from the "
                     "URDF zero configuration (no [loop_reference]: all zero).")
+    if coupled:
+        head.append("# Coupled joints (URDF <mimic>, q = multiplier * q_followed + offset; passive, no drive terms): "
+                    + ", ".join(f"{jn} follows {src}" for jn, (src, _, _) in coupled.items()) + ".")
     if tip_fixed:
         head.append(f"# Frame {n + 1} is the tip link {tip} (fixed); its inertia is included in link {n}. "
                     f"Set payload = {n + 1} to identify a payload there.")
@@ -1015,11 +1067,30 @@ def import_urdf_text(
 
 
 
-def _passive_joints(model: UrdfModel, moving: list[UrdfJoint], actuated) -> set[str]:
-    """Names of the passive moving joints of a URDF with loop joints (empty without loops): those not
-    in ``actuated`` (default: the joints named by the ``<transmission>`` elements)."""
+def _passive_joints(model: UrdfModel, moving: list[UrdfJoint], actuated, coupled=None) -> set[str]:
+    """Names of the passive moving joints: the mimic joints (``coupled``), and for a URDF with loop joints
+    those not in ``actuated`` (default: the joints named by the ``<transmission>`` elements). A followed
+    joint must be actuated."""
+    coupled = coupled or {}
+    f = model.file
+    if actuated is not None and model.loops:
+        named = sorted(set(map(str, actuated)) & set(coupled))
+        if named:
+            raise RobotFileError([Problem(f, "actuated", "joint", f"{', '.join(named)}: a mimic joint is passive (it "
+                                          "follows another joint); do not name it as actuated")])
     if not model.loops:
-        return set()
+        return set(coupled)
+    passive = _loop_passive(model, moving, actuated) | set(coupled)
+    for jn, (src, _, _) in coupled.items():
+        if src in passive:
+            raise RobotFileError([Problem(f, f"joint {jn}", "mimic", f"follows joint {src!r}, which is passive (not "
+                                          "actuated): a coupled joint follows an actuated one")])
+    return passive
+
+
+def _loop_passive(model: UrdfModel, moving: list[UrdfJoint], actuated) -> set[str]:
+    """The passive joints of a URDF with loop joints: the moving joints not in ``actuated`` (default: those
+    named by the ``<transmission>`` elements)."""
     f = model.file
     names = {jt.name for jt in moving}
     if actuated is None:

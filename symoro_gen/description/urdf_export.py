@@ -10,6 +10,11 @@ through :func:`symoro_gen.identification.physical.standard_set_from_result`: a p
 set whose regrouping is the identified base parameters (issue 14). The older ``--params`` replaces only
 the standard parameters the result names (regrouped ones are ignored, with a warning).
 
+A coupled joint (``mimic`` in the robot file, ``q_j = multiplier q_s + offset``) gets URDF's
+``<mimic joint="joint<s>" multiplier offset>`` (the URDF joint value is the model's ``q``), which
+:func:`symoro_gen.description.urdf.import_urdf` reads back and Pinocchio (``mimic=True``) builds as a
+``JointModelMimic``.
+
 Drive terms: ``FV`` and ``FS`` go to ``<dynamics damping friction>``; URDF has no field for the rotor
 inertia ``IA`` nor the torque offset ``OFF``: they are written as ``<!-- armature ... -->`` comments in
 the joint and listed by :func:`drive_terms` (the command line writes them to a sidecar JSON). Joint
@@ -188,6 +193,10 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
             dflt = math.pi if row.sigma == REVOLUTE else 10.0
             out.append(f'    <limit lower="{_fmt(lim.get("q_min", -dflt))}" upper="{_fmt(lim.get("q_max", dflt))}" '
                        f'effort="{_fmt(lim.get("tau_max", 1000.0))}" velocity="{_fmt(lim.get("dq_max", 100.0))}"/>')
+            cp = robot.coupling(j)
+            if cp is not None:  # a coupled joint: URDF's mimic, q_j = multiplier q_source + offset
+                out.append(f'    <mimic joint="joint{cp.source}" multiplier="{_fmt(float(cp.multiplier))}" '
+                           f'offset="{_fmt(float(cp.offset))}"/>')
             fv, fs = vals.get(f"FV{j}", 0.0), vals.get(f"FS{j}", 0.0)
             if fv or fs:
                 out.append(f'    <dynamics damping="{_fmt(max(fv, 0.0))}" friction="{_fmt(max(fs, 0.0))}"/>')

@@ -336,6 +336,8 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
     }
     if robot.loops:  # closed loops: this package is the tree model; symoro_gen.closedloop projects it
         manifest["closed_loops"] = len(robot.loops)
+    if robot.couplings:  # coupled (mimic) joints: likewise
+        manifest["couplings"] = len(robot.couplings)
     files["manifest.json"] = json.dumps(manifest, indent=2, sort_keys=True) + "\n"
     return files, ops
 

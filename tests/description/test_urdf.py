@@ -377,17 +377,70 @@ def _two_joint_urdf(rng, *, mimic: str | None = None, inertial2: bool = True, to
     return "".join(parts) + "</robot>\n"
 
 
-def test_mimic_joint_on_the_chain_is_an_error_naming_it():
+def test_mimic_joint_on_the_chain_is_a_coupling_equal_to_pinocchio_mimic():
+    """joint2 mimics joint1 (multiplier -1, random axes and origins): imported as a coupled joint, whose
+    actuated torque equals Pinocchio's RNEA on the same URDF built with its mimic joints (``mimic=True``:
+    Pinocchio's own JointModelMimic, one configuration variable)."""
+    from symoro_gen.closedloop import ClosedLoopModel
+    from symoro_gen.emit.package import build_in_memory
+
     urdf = _two_joint_urdf(np.random.default_rng(11), mimic="joint1")
+    robot = parse_robot_text(import_urdf_text(urdf, file="arm.urdf", tip="tool"))
+    (c,) = robot.couplings
+    assert (c.joint, c.source, float(c.multiplier), float(c.offset)) == (2, 1, -1.0, 0.0)
+    assert robot.row(2).mu == 0 and [r.j for r in robot.model_joints] == [1]
+    model = ClosedLoopModel(robot, build_in_memory(robot))
+    pm = pin.buildModelFromXML(urdf, mimic=True)
+    assert pm.nq == 1
+    rng = np.random.default_rng(1)
+    q, dq, ddq = rng.uniform(-1, 1, (3, N_SAMPLES, 1))
+    ours = model.torque(q, dq, ddq, robot.nominal_vector())
+    ref = pinocchio_urdf_torque(pm, q, dq, ddq)
+    np.testing.assert_allclose(ours, ref, atol=1e-9 * np.abs(ref).max())
+    # a chain that stops before it leaves the mimic joint out (warned), like any joint off the chain
+    with pytest.warns(UserWarning, match="joint2"):
+        assert parse_robot_text(import_urdf_text(urdf, tip="link1")).n_joints == 1
+
+
+def test_mimic_of_a_joint_outside_the_imported_chain_is_an_error_naming_it():
+    """joint2 mimics the finger joint, a side branch that the chain base -> tool leaves out."""
+    both = _two_joint_urdf(np.random.default_rng(11), mimic="finger_joint", finger_mimic=True)
+    urdf = both.replace('    <mimic joint="joint1"/>\n', "")  # the finger itself is an independent joint
     with pytest.raises(RobotFileError) as info:
         import_urdf_text(urdf, file="arm.urdf", tip="tool")
     (p,) = info.value.problems
     assert (p.file, p.where, p.field) == ("arm.urdf", "joint joint2", "mimic")
-    assert "'joint1'" in p.message and "--tip" in p.message and "delete the <mimic> tag" in p.message
-    # the suggestions work: a chain that stops before it, or the tag removed
-    assert parse_robot_text(import_urdf_text(urdf, tip="link1")).n_joints == 1
+    assert "'finger_joint'" in p.message and "outside the imported chain" in p.message and "--tip" in p.message
+    # the suggestion works: without the tag joint 2 is an independent joint
     no_tag = re.sub(r"\s*<mimic[^>]*/>", "", urdf)
-    _check_against_pinocchio(import_urdf_text(no_tag), no_tag, np.random.default_rng(1))
+    with pytest.warns(UserWarning, match="finger_joint"):
+        assert parse_robot_text(import_urdf_text(no_tag, tip="tool")).n_joints == 2
+    # a mimic of a mimic is composed down to the joint that is not one: finger = joint1, joint2 = -1 finger
+    with pytest.warns(UserWarning, match="finger_joint"):
+        robot = parse_robot_text(import_urdf_text(both, tip="tool"))
+    assert [(c.joint, c.source, float(c.multiplier)) for c in robot.couplings] == [(2, 1, -1.0)]
+
+
+def test_mimic_cycles_and_mimics_of_fixed_or_undefined_joints_are_errors_naming_the_joint():
+    urdf = _two_joint_urdf(np.random.default_rng(11), mimic="joint1")
+    cases = [
+        (urdf.replace('<child link="link1"/>\n', '<child link="link1"/>\n    <mimic joint="joint2"/>\n'),
+         "joint joint1", "cycle: joint1 -> joint2 -> joint1"),
+        (urdf.replace('mimic joint="joint1"', 'mimic joint="tool_joint"'), "joint joint2", "a fixed joint"),
+        (urdf.replace('mimic joint="joint1"', 'mimic joint="nope"'), "joint joint2", "'nope', which is not defined"),
+    ]
+    for text, where, words in cases:
+        with pytest.raises(RobotFileError) as info:
+            import_urdf_text(text, file="arm.urdf", tip="tool")
+        p = info.value.problems[0]
+        assert (p.file, p.where, p.field) == ("arm.urdf", where, "mimic") and words in p.message, p
+    for bad, fld in (('multiplier="-1"', "mimic/multiplier"), ('offset="0"', "mimic/offset")):
+        text = urdf.replace(bad, bad.split("=")[0] + '="inf"')
+        with pytest.raises(RobotFileError) as info:
+            parse_urdf_text(text, file="arm.urdf")
+        assert [(p.where, p.field) for p in info.value.problems] == [("joint joint2", fld)]
+    with pytest.raises(RobotFileError, match=r"joint joint2, field 'mimic/multiplier'.*non-zero"):
+        parse_urdf_text(urdf.replace('multiplier="-1"', 'multiplier="0"'), file="arm.urdf")
 
 
 def test_mimic_tag_without_joint_is_reported():

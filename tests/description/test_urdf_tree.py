@@ -138,15 +138,21 @@ def test_aligned_tree_rows_are_textbook():
     assert seen_branch_gamma
 
 
-def test_mimic_joint_in_a_tree_is_an_error_naming_it():
+def test_mimic_joint_in_a_tree_is_a_coupling_and_a_later_one_an_error_naming_it():
     link = '<link name="{}"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>'
     joint = '<joint name="{}" type="revolute"><parent link="{}"/><child link="{}"/><axis xyz="0 0 1"/>{}</joint>'
     urdf = ("<robot name='t'>" + "".join(link.format(n) for n in ("b", "l1", "l2", "l3"))
             + joint.format("j1", "b", "l1", "") + joint.format("j2", "l1", "l2", "")
-            + joint.format("j3", "l1", "l3", '<mimic joint="j2"/>') + "</robot>")
-    with pytest.raises(RobotFileError, match=r"t.urdf, joint j3, field 'mimic'.*mimics joint 'j2'"):
-        import_urdf_text(urdf, file="t.urdf")
-    assert parse_robot_text(import_urdf_text(urdf.replace('<mimic joint="j2"/>', ""))).n_joints == 3
+            + joint.format("j3", "l1", "l3", '<mimic joint="j2" multiplier="0.5" offset="0.1"/>') + "</robot>")
+    robot = parse_robot_text(import_urdf_text(urdf, file="t.urdf"))
+    assert [(c.joint, c.source, float(c.multiplier), float(c.offset)) for c in robot.couplings] == [(3, 2, 0.5, 0.1)]
+    assert [r.ant for r in robot.rows] == [0, 1, 1] and [r.j for r in robot.model_joints] == [1, 2]
+    # j2 mimicking j3, which is numbered after it (depth first, file order): an error naming it
+    later = urdf.replace('<mimic joint="j2" multiplier="0.5" offset="0.1"/>', "").replace(
+        '<child link="l2"/><axis xyz="0 0 1"/>', '<child link="l2"/><axis xyz="0 0 1"/><mimic joint="j3"/>')
+    with pytest.raises(RobotFileError, match=r"t.urdf, joint j2, field 'mimic'.*'j3', which comes after it"):
+        import_urdf_text(later, file="t.urdf")
+    assert parse_robot_text(import_urdf_text(urdf.replace('<mimic joint="j2" multiplier="0.5" offset="0.1"/>', ""))).n_joints == 3
 
 
 def test_dual_arm_torso_urdf_imports_as_the_shipped_tree():
