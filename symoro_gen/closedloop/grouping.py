@@ -321,8 +321,8 @@ class ClosedFormBase:
         K = np.zeros((len(self.names), len(self.standard_names)))
         for b, name in enumerate(self.names):
             e = sp.expand(self.relations[name].xreplace(dict(self.values)))
-            for s, c in e.as_coefficients_dict().items():
-                K[b, idx[str(s)]] += float(c)
+            for s in e.free_symbols:  # linear in the standard parameters; coefficients may be sqrt(3)/2...
+                K[b, idx[str(s)]] += float(e.coeff(s))
         return K
 
 

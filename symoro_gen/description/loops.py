@@ -237,10 +237,12 @@ def parse_couplings(frames: list[Any], rows: tuple[MdhRow, ...] | list[MdhRow],
 
 
 def check_passive(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopClosure, ...],
-                  couplings: tuple[Coupling, ...], bad: Callable[[str, str, str], None]) -> None:
+                  couplings: tuple[Coupling, ...], bad: Callable[[str, str, str], None],
+                  mimic_frames: frozenset[int] = frozenset()) -> None:
     """Every passive tree joint (``mu = 0``) of a robot with loops or couplings must lie on a loop or be
-    coupled (else it is a free, unactuated joint: the closure would not determine it)."""
-    if not (loops or couplings):
+    coupled (else it is a free, unactuated joint: the closure would not determine it). ``mimic_frames``: the
+    frames with a ``mimic`` table (a bad one is reported already, not again here)."""
+    if not (loops or couplings or mimic_frames):
         return
     antecedent = {r.j: r.ant for r in rows}
 
@@ -251,7 +253,7 @@ def check_passive(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopClos
             f = antecedent[f]
         return out
 
-    on_loop: set[int] = {c.joint for c in couplings}
+    on_loop: set[int] = {c.joint for c in couplings} | set(mimic_frames)
     for lp in loops:
         on_loop |= chain(lp.cut.ant) ^ chain(lp.close.ant)
     for r in rows:

@@ -301,7 +301,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
             _warn_inconsistent_inertia(nominal, rows, payload, file)
 
     # per-joint tables of a closed-loop robot are per actuated joint (the passive ones are not logged)
-    coupled = any(isinstance(fr, dict) and "mimic" in fr for fr in frames)
+    mimic_frames = frozenset(i for i, fr in enumerate(frames, start=1) if isinstance(fr, dict) and "mimic" in fr)
+    coupled = bool(mimic_frames)
     model_rows = [r for r in rows if not (r.is_moving and r.mu == 0)] if ("loops" in doc or coupled) else rows
     chain = None
     if "drive_chain" in doc:
@@ -316,7 +317,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     if coupled and not bad_sigma:
         couplings = parse_couplings(frames, rows, bad)
     if not bad_sigma:
-        check_passive(rows, loops, couplings, bad)
+        check_passive(rows, loops, couplings, bad, mimic_frames)
 
     if probs:
         raise RobotFileError(probs)
