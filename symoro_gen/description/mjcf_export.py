@@ -17,6 +17,9 @@ Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
   ``-FV dq``), ``frictionloss`` = Coulomb ``FS`` (a soft friction constraint of MuJoCo: equal to
   ``FS sign(dq)`` only away from zero velocity); the torque offset ``OFF`` has no MuJoCo field and is
   written as a comment; one ``<motor>`` per joint (``gear 1``, unlimited) drives ``tau`` directly;
+* a coupled joint (``mimic``, ``q_m = multiplier q_s + offset``) has no motor and a joint equality
+  ``<joint joint1="joint<m>" joint2="joint<s>" polycoef="offset multiplier 0 0 0"/>`` (MuJoCo enforces it
+  as a soft constraint, as it does every equality);
 * joint ``range`` from the robot file's ``[limits]`` (``q_min``, ``q_max``) when present, ``gravity``
   from the robot file; ``integrator="RK4"``, ``timestep`` 1 ms (options).
 """
@@ -136,7 +139,8 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
             off = vals.get(f"OFF{j}", 0.0)
             if off:
                 out.append(f"{ind}  <!-- torque offset OFF{j} = {_fmt(off)} (no MuJoCo field) -->")
-            joints.append((j, lim))
+            if robot.coupling(j) is None:  # a coupled joint is passive: no motor
+                joints.append((j, lim))
         for ch in children.get(j, ()):
             body(ch, depth + 1)
         out.append(f"{ind}</body>")
@@ -144,6 +148,11 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
     for row in children.get(0, ()):
         body(row, 2)
     out.append("  </worldbody>")
+    if robot.couplings:  # coupled (mimic) joints: q_m = offset + multiplier q_s, MuJoCo's joint equality
+        out.append("  <equality>")
+        out += [f'    <joint joint1="joint{c.joint}" joint2="joint{c.source}" '
+                f'polycoef="{_fmt(float(c.offset))} {_fmt(float(c.multiplier))} 0 0 0"/>' for c in robot.couplings]
+        out.append("  </equality>")
     if motors and joints:
         out.append("  <actuator>")
         for j, lim in joints:

@@ -743,10 +743,15 @@ def export_par(robot: RobotDescription | str | os.PathLike) -> str:
         (prismatic) unless those names are taken by geometric constants; numeric values of the
         geometric constants and nominal values equal to zero are written as ``NAME = number``
         lines; other nominal values are written in the dynamic lists. The drive chain (gear
-        ratios, coupling) has no SYMORO equivalent and is not written.
+        ratios, coupling) has no SYMORO equivalent and is not written. A robot with coupled (mimic)
+        joints is an error naming them (``.par`` has no coupled joints).
     """
     if not isinstance(robot, RobotDescription):
         robot = load_robot(robot)
+    if robot.couplings:  # SYMORO+ has no coupled joints: writing them as independent ones would be wrong
+        raise RobotFileError([Problem(robot.file, f"frame {c.joint}", "mimic", (
+            f"a coupled joint (q{c.joint} = {c.multiplier} q{c.source} + {c.offset}) has no SYMORO .par spelling; "
+            "export it with export-urdf (<mimic>) or export-mjcf (joint equality)")) for c in robot.couplings])
     links = robot.rows
     rows = links + tuple(lp.cut for lp in robot.loops) + tuple(lp.close for lp in robot.loops)
     nf, nl, nj = len(rows), len(links), len(links) + len(robot.loops)

@@ -348,3 +348,27 @@ def test_load_model_of_a_coupled_robot_file_is_the_projected_model(tmp_path):
     q, dq, ddq = rng.uniform(-1, 1, (3, 10, 3))
     assert mod.BASE_NAMES == model.BASE_NAMES
     np.testing.assert_allclose(mod.regressor(q, dq, ddq), model.regressor(q, dq, ddq), atol=1e-9)
+
+
+# ---- exports --------------------------------------------------------------------------------------------------
+def test_export_mjcf_writes_couplings_as_joint_equalities_and_export_par_refuses_them(toy):
+    """MuJoCo's joint equality ``q1 = polycoef(q2)`` holds the coupling in a simulation of the exported model;
+    SYMORO's .par has no coupled joint: an error naming the frame."""
+    from symoro_gen.description.mjcf_export import export_mjcf
+    from symoro_gen.description.par import export_par
+
+    mujoco = pytest.importorskip("mujoco")
+    robot, _ = toy
+    rng = np.random.default_rng(1)
+    xml = export_mjcf(robot, np.asarray(random_physical_parameters(robot, rng)))
+    assert '<joint joint1="joint3" joint2="joint2" polycoef="0.523598775598298' in xml  # pi/6, -2
+    m = mujoco.MjModel.from_xml_string(xml)
+    assert m.neq == 2 and m.nu == 3  # two equalities, motors on the actuated joints only
+    d = mujoco.MjData(m)
+    d.qpos[:] = [0.3, 0.2, 0.3 * -2 + np.pi / 6 + 0.05, 0.01, 0.005]  # slightly off the coupling
+    for _ in range(2000):
+        mujoco.mj_step(m, d)
+    assert abs(d.qpos[2] - (-2 * d.qpos[1] + np.pi / 6)) < 1e-2  # pulled back onto it (soft constraint)
+    assert abs(d.qpos[4] - 0.5 * d.qpos[3]) < 1e-3
+    with pytest.raises(RobotFileError, match=r"coupled_toy.toml, frame 3, field 'mimic'.*no SYMORO .par"):
+        export_par(robot)
