@@ -231,8 +231,8 @@ def parse_couplings(frames: list[Any], rows: tuple[MdhRow, ...] | list[MdhRow],
         if off is None:
             bad(where, "mimic.offset", why)
             ok = False
-        if ok and mult is not None and off is not None:
-            out.append(Coupling(joint=j, source=int(src), multiplier=mult, offset=off))
+        if ok and isinstance(src, int) and mult is not None and off is not None:
+            out.append(Coupling(joint=j, source=src, multiplier=mult, offset=off))
     return tuple(out)
 
 
