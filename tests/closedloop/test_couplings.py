@@ -373,3 +373,29 @@ def test_export_mjcf_writes_couplings_as_joint_equalities_and_export_par_refuses
     assert abs(d.qpos[4] - 0.5 * d.qpos[3]) < 1e-3
     with pytest.raises(RobotFileError, match=r"coupled_toy.toml, frame 3, field 'mimic'.*no SYMORO .par"):
         export_par(robot)
+
+
+def test_identify_cli_on_a_coupled_robot_file(tmp_path, cli):
+    """`symoro-gen identify coupled_toy.toml rec.csv`: the recordings log the actuated joints 1, 2, 4 only."""
+    from symoro_gen.simulate.recording import simulate_recording, write_recording_csv
+
+    from .test_cli_identify import fourier
+
+    f = tmp_path / "coupled_toy.toml"
+    f.write_text(toy_text(), encoding="utf-8")
+    robot, model = load_robot(f), load_model(f)
+    rng = np.random.default_rng(5)
+    chi = np.asarray(random_physical_parameters(robot, rng))
+    files = []
+    for k in range(2):
+        t = np.arange(0, 20, 0.002)
+        tr = simulate_recording(model, t, *fourier(rng, t, 3, amp=0.25), chi, noise_q=1e-6, noise_tau=0.05, rng=rng)
+        write_recording_csv(tmp_path / f"rec{k}.csv", tr)
+        files.append(tmp_path / f"rec{k}.csv")
+    out = tmp_path / "res.json"
+    cli("--quiet", "identify", f, files[0], "--validate", files[1], "--method", "ols", "--json", out)
+    d = json.loads(out.read_text())
+    assert d["parameters"]["names"] == list(model.BASE_NAMES)
+    assert len(d["validation"]["rel_err"]) == 3 and max(d["validation"]["rel_err"]) < 0.05
+    v, s = np.array(d["parameters"]["values"]), np.array(d["parameters"]["std"], float)
+    assert np.mean(np.abs(v - model.base_parameters(chi)) <= 3 * s) > 0.9
