@@ -61,6 +61,12 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
+from mpmath.libmp import bitcount as _bitcount
+from mpmath.libmp import normalize as _normalize
+from mpmath.libmp import round_nearest as _round_nearest
+from mpmath.libmp.backend import MPZ as _MPZ
+from sympy.core.evalf import LG10 as _LG10
+from sympy.core.evalf import evalf as _sympy_evalf
 
 from ..description.mdh import constant_rotation, position, rot_z
 from ..description.model import PRISMATIC, REVOLUTE, RobotDescription
@@ -132,6 +138,7 @@ class BaseParameterMap:
         subs = {**self.gravity, **(self.geometry if subs is None else subs)}
         idx = {n: i for i, n in enumerate(self.standard_names)}
         K = np.zeros((len(self.base_names), len(self.standard_names)))
+        to_float = _ProductFloat()
         for b, name in enumerate(self.base_names):
             e = self.relations[name].xreplace(subs)
             if not _is_expanded(e):  # expand is the cost for long relations: only when it changes something
@@ -142,8 +149,67 @@ class BaseParameterMap:
                     raise ValueError(f"relation of {name} has a constant term")
                 # exact numeric factors such as cos(1/10) stay in the "symbol" part: split them off
                 num, syms = _split_constant(s, fs)
-                K[b, idx[syms.name]] += float(c * num)
+                K[b, idx[syms.name]] += to_float(c, num)
         return K
+
+
+class _ProductFloat:
+    """``float(c * num)`` for a rational ``c`` and a product ``num`` of sin/cos (powers) of numbers, bit for
+    bit, without building ``c * num``: the steps of sympy's ``Expr.__float__`` -> ``evalf`` -> ``evalf_mul``
+    (each factor evaluated at the working precision ``53 + 4 + len(args) + 5``, mantissas multiplied, rounded
+    to 57 then to 53 bits) with each factor's evaluation kept across the terms of a K matrix (the same
+    ``sin(457/500)**2`` recurs in hundreds of terms). Any other shape takes sympy's own path."""
+
+    _OPTIONS = {"maxprec": max(53, int(100 * _LG10)), "chop": False, "strict": False, "verbose": False}
+
+    def __init__(self) -> None:
+        self._memo: dict[tuple[sp.Expr, int], Any] = {}
+
+    def _ev(self, x: sp.Expr, prec: int):
+        key = (x, prec)
+        got = self._memo.get(key)
+        if got is None:
+            got = self._memo[key] = _sympy_evalf(x, prec, dict(self._OPTIONS))
+        return got
+
+    @staticmethod
+    def _trig(f: sp.Expr) -> bool:
+        if f.is_Pow:
+            if not (f.exp.is_Integer and f.exp > 0):
+                return False
+            f = f.base
+        return isinstance(f, (sp.sin, sp.cos)) and f.args[0].is_Rational
+
+    def __call__(self, c: sp.Expr, num: sp.Expr) -> float:
+        factors = sp.Mul.make_args(num)
+        if not (c.is_Rational and c != 0 and num is not sp.S.One and all(self._trig(f) for f in factors)):
+            return float(c * num)
+        args = factors if c == 1 else (c,) + factors  # the args of the Mul c * num (number first)
+        prec = 53 + 4  # Expr.evalf(15 digits): evalf at prec + 4, then a Float of 53 bits
+        if len(args) == 1:
+            re, im, acc, _ = self._ev(args[0], prec)
+        else:  # evalf_mul, real factors
+            wp = prec + len(args) + 5
+            man, exp, bc = _MPZ(1), 0, 1
+            direction, acc = 0, prec
+            for x in args:
+                re, im, re_acc, _ = self._ev(x, wp)
+                if im or not re:
+                    return float(c * num)
+                s_, m_, e_, b_ = re
+                direction += 2 * s_
+                man *= m_
+                exp += e_
+                bc += b_
+                while bc > 3 * wp:
+                    man >>= wp
+                    exp += wp
+                    bc -= wp
+                acc = min(acc, re_acc)
+            re, im = _normalize((direction & 2) >> 1, man, exp, _bitcount(man), prec, _round_nearest), None
+        if im or not re:
+            return float(c * num)
+        return float(sp.Float._new(re, max(min(53, acc), 1)))
 
 
 def _monomial(f: sp.Expr) -> bool:
