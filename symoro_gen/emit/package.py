@@ -46,7 +46,7 @@ from .backends.c import c_source
 from .backends.casadi import casadi_function, casadi_source
 from .backends.numpy import kernel_source, load_kernel
 from .optimize import optimize
-from .printing import OpCount, graph_ops
+from .printing import OpCount, graph_ops, relation_text
 
 #: longest robot name: it becomes file, module and C symbol names
 MAX_NAME = 64
@@ -110,7 +110,7 @@ def check_name(robot: RobotDescription) -> None:
 
 
 def _pretty_relation(name: str, e: sp.Expr) -> str:
-    return f"{name} = {sp.sstr(e, order='none')}"
+    return f"{name} = {relation_text(e)}"
 
 
 def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCount,
@@ -312,7 +312,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
     )
     all_ops = {k: graph_ops(graphs[k]) for k in ("base", "standard", "payload")}
     ops = all_ops["base"]
-    texts = {k: sp.sstr(bp.relations[k], order="none") for k in bp.base_names}  # printed once, used twice
+    texts = {k: relation_text(bp.relations[k]) for k in bp.base_names}  # printed once, used twice
     files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
     manifest = {
         "generator": "symoro_gen",
