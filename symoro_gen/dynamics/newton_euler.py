@@ -147,6 +147,9 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
         pos = position(row)
         P[row.j] = [g.name(sp.expand(pos[i]), f"P{row.j}{'xyz'[i]}") for i in range(3)]
 
+    # the sign of each joint variable (sympy.diff of theta or r), once per row: carry() asks it at every step
+    sign = {row.j: joint_sign(row) for row in rows if row.sigma in (REVOLUTE, PRISMATIC)}
+
     zero = [sp.Integer(0)] * 3
     w = {0: zero}
     wd = {0: zero}
@@ -206,13 +209,13 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             acc_a = g.vec(acc_a, f"va{j}")
         vj = g.vec(_matTvec(Rm, acc_a), f"vd{j}")
         if row.sigma == REVOLUTE:
-            sg = joint_sign(row)
+            sg = sign[j]
             qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
             w[j] = [wa[0], wa[1], g.name(wa[2] + qd, f"w{j}z")]
             wd[j] = g.vec([wda[0] + qd * wa[1], wda[1] - qd * wa[0], wda[2] + qdd], f"wd{j}")
             vd[j] = vj
         elif row.sigma == PRISMATIC:
-            sg = joint_sign(row)
+            sg = sign[j]
             qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
             w[j], wd[j] = wa, wda
             # + 2 w x (qd z) + qdd z
@@ -235,9 +238,9 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
         while j != 0:
             row = rows[j - 1]
             if row.sigma == REVOLUTE:
-                add(row_of[j], name, joint_sign(row) * n[2])
+                add(row_of[j], name, sign[j] * n[2])
             elif row.sigma == PRISMATIC:
-                add(row_of[j], name, joint_sign(row) * f[2])
+                add(row_of[j], name, sign[j] * f[2])
             a = row.ant
             if a == 0:
                 break
