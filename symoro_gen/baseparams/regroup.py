@@ -57,7 +57,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import sympy as sp
@@ -160,7 +160,7 @@ class _ProductFloat:
     to 57 then to 53 bits) with each factor's evaluation kept across the terms of a K matrix (the same
     ``sin(457/500)**2`` recurs in hundreds of terms). Any other shape takes sympy's own path."""
 
-    _OPTIONS = {"maxprec": max(53, int(100 * _LG10)), "chop": False, "strict": False, "verbose": False}
+    _OPTIONS: ClassVar[dict[str, Any]] = {"maxprec": max(53, int(100 * _LG10)), "chop": False, "strict": False, "verbose": False}
 
     def __init__(self) -> None:
         self._memo: dict[tuple[sp.Expr, int], Any] = {}

@@ -271,7 +271,7 @@ def relation_text(e: sp.Expr) -> str:
     relations are (rational coefficient, parameter symbol, sin/cos of constants, symbols, ``1/G3``) and by
     sympy's printer for any other form; the same text (tests/baseparams/test_generation_speed.py)."""
     parts: list[str] = []
-    for i, t in enumerate(sp.Add.make_args(e)):
+    for t in sp.Add.make_args(e):
         s = _sstr_term(t)
         if s is None:
             return str(sp.sstr(e, order="none"))
