@@ -271,3 +271,21 @@ def test_shared_products_equal_the_xreplace_rewrite(monkeypatch):
         assert [(s, e.args) for s, e in fast[k].defs] == [(s, e.args) for s, e in slow[k].defs]
         assert {o: e.args for o, e in fast[k].outputs.items()} == {o: e.args for o, e in slow[k].outputs.items()}
     assert any(s.name.startswith("pr") for s, _ in fast["base"].defs)
+
+
+@pytest.mark.parametrize("which", ["general", "rx90"])
+def test_newton_euler_direct_products_equal_sympy_flatten(monkeypatch, which):
+    """Newton-Euler's float-times-symbol products and sums built without flatten: the same graph, argument
+    order included, as with sympy's ``Mul``/``Add`` (float constants of a general chain; rx90's lengths)."""
+    from symoro_gen.dynamics import newton_euler as ne
+
+    robot = parse_robot_text(chain_text(4, True), file="g.toml") if which == "general" else load_robot("rx90")
+    fast = build_regressor(robot).graph
+    monkeypatch.setattr(ne, "_mul", lambda a, b: sp.Mul(a, b))
+    monkeypatch.setattr(ne, "_add", lambda terms: sp.Add(*terms))
+    slow = build_regressor(robot).graph
+    assert [(s, e.func, e.args) for s, e in fast.defs] == [(s, e.func, e.args) for s, e in slow.defs]
+    assert {k: (e.func, e.args) for k, e in fast.outputs.items()} == {k: (e.func, e.args) for k, e in slow.outputs.items()}
+    n_direct = sum(1 for _, e in fast.defs for t in sp.Add.make_args(e)
+                   if t.is_Mul and len(t.args) == 2 and t.args[0].is_Float and t.args[1].is_Symbol)
+    assert n_direct >= (20 if which == "general" else 1)
