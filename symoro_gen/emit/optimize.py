@@ -50,6 +50,12 @@ def _match(e: sp.Expr, trig: dict[sp.Symbol, tuple[str, str]]) -> tuple[Any, ...
     return ja, "C", sb, xb, sa, xa
 
 
+def _signed(s: int, e: sp.Expr) -> sp.Expr:
+    """``s * e`` for ``s = +-1``: ``e`` or ``-e`` (the same expressions as sympy's ``s * e``, without the
+    multiplication by 1 and its sympify)."""
+    return e if s == 1 else -e
+
+
 def rotation_pairs(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> ExprGraph:
     """Rewrite paired rotations with 3 multiplications (see module docstring).
 
@@ -100,7 +106,7 @@ def rotation_pairs(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> Expr
                     continue
                 C = csym[(j, "C")]
                 S = csym[(j, "S")]
-                bp = -s1 * s2 * b  # b' = -s1 s2 b
+                bp = _signed(-s1 * s2, b)  # b' = -s1 s2 b
                 new_defs_for[(k1, k2)] = (j, C, a, bp, s1, s3)
                 used_joints.add(j)
                 done = True
@@ -118,8 +124,8 @@ def rotation_pairs(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> Expr
     for n, ((k1, k2), (j, C, a, bp, s1, s3)) in enumerate(new_defs_for.items()):
         K = sp.Symbol(f"rot{n}", real=True)
         CpS, _, SmC, _ = jdefs[j]
-        replace[k1] = s1 * (K - once(("rot*", bp, CpS), lambda bp=bp, CpS=CpS: bp * CpS))
-        replace[k2] = s3 * (K + once(("rot*", a, SmC), lambda a=a, SmC=SmC: a * SmC))
+        replace[k1] = _signed(s1, K - once(("rot*", bp, CpS), lambda bp=bp, CpS=CpS: bp * CpS))
+        replace[k2] = _signed(s3, K + once(("rot*", a, SmC), lambda a=a, SmC=SmC: a * SmC))
         first = k1 if order[k1] < order[k2] else k2
         extra_at[first] = [(K, once(("rotK", C, a, bp), lambda C=C, a=a, bp=bp: C * (a + bp)))]
         joint_at[first] = j
