@@ -96,13 +96,25 @@ def _printer(d: Dialect) -> _Printer:
     return p
 
 
+def _number(e: sp.Expr, d: Dialect) -> str:
+    """``_Printer.doprint`` of a number: what its ``_print_Float`` / ``_print_Integer`` / ``_print_Rational``
+    write, without the code printer's per-call set-up (a walk of the expression); others by ``doprint``."""
+    if e.is_Float:
+        return repr(float(e))
+    if e.is_Integer:
+        return f"{int(e)}.0" if abs(int(e)) < 2**53 else str(int(e))
+    if e.is_Rational:
+        return f"{float(e.p)}/{float(e.q)}"
+    return str(_printer(d).doprint(e))
+
+
 def _fast(e: sp.Expr, d: Dialect) -> str | None:
     """Direct printing of the forms the model produces (sums of signed products of symbols,
     numbers, small powers and sin/cos/sign calls); None for anything else."""
     if e.is_Symbol:
         return str(e.name)
     if e.is_Number:
-        return str(_printer(d).doprint(e))
+        return _number(e, d)
     if e.is_Mul:
         coeff, rest = e.as_coeff_Mul()
         parts = []
@@ -118,8 +130,9 @@ def _fast(e: sp.Expr, d: Dialect) -> str | None:
             return body
         if coeff == -1:
             return "-" + body
-        c = _printer(d).doprint(coeff)
-        return f"({c})*{body}" if coeff < 0 else f"{c}*{body}"
+        c = _number(coeff, d)
+        negative = coeff.p < 0 if coeff.is_Rational else float(coeff) < 0
+        return f"({c})*{body}" if negative else f"{c}*{body}"
     if e.is_Add:
         out = ""
         for i, t in enumerate(e.args):

@@ -289,3 +289,21 @@ def test_newton_euler_direct_products_equal_sympy_flatten(monkeypatch, which):
     n_direct = sum(1 for _, e in fast.defs for t in sp.Add.make_args(e)
                    if t.is_Mul and len(t.args) == 2 and t.args[0].is_Float and t.args[1].is_Symbol)
     assert n_direct >= (20 if which == "general" else 1)
+
+
+def test_number_printing_equals_the_code_printer():
+    """Numbers and signed coefficients printed without the code printer's set-up: the same text in every
+    dialect as ``doprint`` (and the same sign test as sympy's ``coeff < 0``)."""
+    from symoro_gen.emit import printing
+
+    x, y = sp.symbols("x y", real=True)
+    numbers = [sp.Float(0.7919524001197934), sp.Float(-5.026835757662715), sp.Float(1e-300), sp.Integer(3),
+               sp.Integer(-1), sp.Integer(2**60), sp.Rational(-3, 7), sp.Rational(1, 2), sp.Float(-0.0)]
+    for d in (printing.NUMPY, printing.C_SCALAR, printing.C_VECTOR, printing.CASADI):
+        for c in numbers:
+            assert printing._number(c, d) == printing._printer(d).doprint(c), (c, d)
+            e = sp.Mul(c, x, y)
+            if e.is_Mul and e.as_coeff_Mul()[0] not in (1, -1):
+                coeff = e.as_coeff_Mul()[0]
+                s = printing.print_expr(e, d)
+                assert s.startswith("(") == bool(coeff < 0), s
