@@ -56,9 +56,17 @@ terms) is found by a seeded numerical sweep over the columns, then written exact
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from fractions import Fraction
+from typing import Any, ClassVar
 
 import numpy as np
 import sympy as sp
+from mpmath.libmp import bitcount as _bitcount
+from mpmath.libmp import normalize as _normalize
+from mpmath.libmp import round_nearest as _round_nearest
+from mpmath.libmp.backend import MPZ as _MPZ
+from sympy.core.evalf import LG10 as _LG10
+from sympy.core.evalf import evalf as _sympy_evalf
 
 from ..description.mdh import constant_rotation, position, rot_z
 from ..description.model import PRISMATIC, REVOLUTE, RobotDescription
@@ -130,6 +138,7 @@ class BaseParameterMap:
         subs = {**self.gravity, **(self.geometry if subs is None else subs)}
         idx = {n: i for i, n in enumerate(self.standard_names)}
         K = np.zeros((len(self.base_names), len(self.standard_names)))
+        to_float = _ProductFloat()
         for b, name in enumerate(self.base_names):
             e = self.relations[name].xreplace(subs)
             if not _is_expanded(e):  # expand is the cost for long relations: only when it changes something
@@ -140,8 +149,67 @@ class BaseParameterMap:
                     raise ValueError(f"relation of {name} has a constant term")
                 # exact numeric factors such as cos(1/10) stay in the "symbol" part: split them off
                 num, syms = _split_constant(s, fs)
-                K[b, idx[syms.name]] += float(c * num)
+                K[b, idx[syms.name]] += to_float(c, num)
         return K
+
+
+class _ProductFloat:
+    """``float(c * num)`` for a rational ``c`` and a product ``num`` of sin/cos (powers) of numbers, bit for
+    bit, without building ``c * num``: the steps of sympy's ``Expr.__float__`` -> ``evalf`` -> ``evalf_mul``
+    (each factor evaluated at the working precision ``53 + 4 + len(args) + 5``, mantissas multiplied, rounded
+    to 57 then to 53 bits) with each factor's evaluation kept across the terms of a K matrix (the same
+    ``sin(457/500)**2`` recurs in hundreds of terms). Any other shape takes sympy's own path."""
+
+    _OPTIONS: ClassVar[dict[str, Any]] = {"maxprec": max(53, int(100 * _LG10)), "chop": False, "strict": False, "verbose": False}
+
+    def __init__(self) -> None:
+        self._memo: dict[tuple[sp.Expr, int], Any] = {}
+
+    def _ev(self, x: sp.Expr, prec: int):
+        key = (x, prec)
+        got = self._memo.get(key)
+        if got is None:
+            got = self._memo[key] = _sympy_evalf(x, prec, dict(self._OPTIONS))
+        return got
+
+    @staticmethod
+    def _trig(f: sp.Expr) -> bool:
+        if f.is_Pow:
+            if not (f.exp.is_Integer and f.exp > 0):
+                return False
+            f = f.base
+        return isinstance(f, (sp.sin, sp.cos)) and f.args[0].is_Rational
+
+    def __call__(self, c: sp.Expr, num: sp.Expr) -> float:
+        factors = sp.Mul.make_args(num)
+        if not (c.is_Rational and c != 0 and num is not sp.S.One and all(self._trig(f) for f in factors)):
+            return float(c * num)
+        args = factors if c == 1 else (c,) + factors  # the args of the Mul c * num (number first)
+        prec = 53 + 4  # Expr.evalf(15 digits): evalf at prec + 4, then a Float of 53 bits
+        if len(args) == 1:
+            re, im, acc, _ = self._ev(args[0], prec)
+        else:  # evalf_mul, real factors
+            wp = prec + len(args) + 5
+            man, exp, bc = _MPZ(1), 0, 1
+            direction, acc = 0, prec
+            for x in args:
+                re, im, re_acc, _ = self._ev(x, wp)
+                if im or not re:
+                    return float(c * num)
+                s_, m_, e_, b_ = re
+                direction += 2 * s_
+                man *= m_
+                exp += e_
+                bc += b_
+                while bc > 3 * wp:
+                    man >>= wp
+                    exp += wp
+                    bc -= wp
+                acc = min(acc, re_acc)
+            re, im = _normalize((direction & 2) >> 1, man, exp, _bitcount(man), prec, _round_nearest), None
+        if im or not re:
+            return float(c * num)
+        return float(sp.Float._new(re, max(min(53, acc), 1)))
 
 
 def _monomial(f: sp.Expr) -> bool:
@@ -176,15 +244,22 @@ def _sym(name: str) -> sp.Symbol:
     return sp.Symbol(name, real=True)
 
 
-def _regroup_closed_form(reg: SymbolicRegressor):
+def _regroup_closed_form(reg: SymbolicRegressor, alg: _Algebra | None = None):
+    """The closed-form rules (module docstring) on the standard parameters of ``reg``.
+
+    ``alg``: the arithmetic of the relations (:class:`_ExprAlgebra`, sympy expressions, or
+    :class:`_PolyAlgebra`, exact sparse polynomials; the same relations). Returns ``(cur, eliminated,
+    no_effect)`` with ``cur``: kept standard name -> its relation in ``alg``'s representation.
+    """
+    alg = _ExprAlgebra() if alg is None else alg
     robot = reg.robot
-    cur: dict[str, sp.Expr] = {n: _sym(n) for n in reg.standard_names}
+    cur: dict[str, Any] = {n: alg.symbol(n) for n in reg.standard_names}
     eliminated: list[str] = []
     no_effect: list[str] = []
 
     def add_J(a, dJ):
         for k, (r, c) in _J_INDEX.items():
-            cur[param_name(k, a)] = cur[param_name(k, a)] + dJ[r, c]
+            cur[param_name(k, a)] = alg.add(cur[param_name(k, a)], dJ[r][c])
 
     for row in reversed(robot.joints):
         row = _exact_row(row)
@@ -192,7 +267,7 @@ def _regroup_closed_form(reg: SymbolicRegressor):
         R0 = constant_rotation(row)
         if row.sigma == REVOLUTE:
             YY, MZ, M = cur[f"YY{j}"], cur[f"MZ{j}"], cur[f"M{j}"]
-            cur[f"XX{j}"] = cur[f"XX{j}"] - YY
+            cur[f"XX{j}"] = alg.sub(cur[f"XX{j}"], YY)
             for k in ("YY", "MZ", "M"):
                 eliminated.append(f"{k}{j}")
                 del cur[f"{k}{j}"]
@@ -208,14 +283,13 @@ def _regroup_closed_form(reg: SymbolicRegressor):
                 dJ += 2 * (P.T * s)[0] * sp.eye(3) - P * s.T - s * P.T
                 return dJ.row_join(s + M * P)
 
-            dJMS = _expand_linear(moved, (YY, MZ, M))
-            add_J(a, dJMS[:, :3])
-            dMS = dJMS[:, 3]
+            dJMS = alg.linear(moved, (YY, MZ, M))
+            add_J(a, dJMS)
             for i, k in enumerate(("MX", "MY", "MZ")):
-                cur[f"{k}{a}"] = cur[f"{k}{a}"] + dMS[i]
-            cur[f"M{a}"] = cur[f"M{a}"] + M
+                cur[f"{k}{a}"] = alg.add(cur[f"{k}{a}"], dJMS[i][3])
+            cur[f"M{a}"] = alg.add(cur[f"M{a}"], M)
         elif row.sigma == PRISMATIC:
-            Jj = sp.Matrix(3, 3, lambda r, c, j=j: cur[param_name(_kind_at(r, c), j)])
+            Jj = [[cur[param_name(_kind_at(r, c), j)] for c in range(3)] for r in range(3)]
             for k in _J_KINDS:
                 eliminated.append(f"{k}{j}")
                 del cur[f"{k}{j}"]
@@ -223,9 +297,191 @@ def _regroup_closed_form(reg: SymbolicRegressor):
                 no_effect.append(f"XX{j}..ZZ{j} (rotation inertia of a link moving in translation from the base)")
                 continue
             Rj = constant_rotation(row) * rot_z(row.theta)
-            add_J(a, _expand_linear(lambda *J, Rj=Rj: Rj * _sym_matrix(J) * Rj.T,
-                                    tuple(Jj[r, c] for r, c in _J_INDEX.values())))
+            add_J(a, alg.linear(lambda *J, Rj=Rj: Rj * _sym_matrix(J) * Rj.T,
+                                tuple(Jj[r][c] for r, c in _J_INDEX.values())))
     return cur, eliminated, no_effect
+
+
+class _NotPolynomial(Exception):
+    """A coefficient outside what :class:`_PolyAlgebra` represents (the sympy path is used instead)."""
+
+
+class _ExprAlgebra:
+    """Relations as sympy expressions, expanded once at the end (the reference arithmetic)."""
+
+    def symbol(self, name: str) -> sp.Expr:
+        return _sym(name)
+
+    def add(self, x, y):
+        return x + y
+
+    def sub(self, x, y):
+        return x - y
+
+    def add_scaled(self, x, coef: sp.Expr, y):
+        """``x + coef * y``."""
+        return x + coef * y
+
+    def linear(self, build, values: tuple) -> list[list[Any]]:
+        m = _expand_linear(build, values)
+        return [[m[r, c] for c in range(m.cols)] for r in range(m.rows)]
+
+    def is_symbol(self, x, name: str) -> bool:
+        return bool(sp.expand(x) == _sym(name))
+
+    def to_expr(self, x) -> sp.Expr:
+        return sp.expand(x)
+
+
+_Mono = tuple  # ((atom index, exponent), ...) sorted by index, exponents non-zero
+
+
+class _PolyAlgebra:
+    """Relations as exact sparse polynomials: ``{(standard name, monomial): Fraction}``.
+
+    A relation is linear in the standard parameters with coefficients that are polynomials (Laurent, for
+    ``1/G3``) with rational coefficients in *atoms*: the geometric and gravity symbols and ``sin``/``cos`` of
+    rational or symbolic angles ([GK1990] rules applied to the MDH constants of each row). Products are
+    computed on these dictionaries, and the sympy expression of each relation is built once, term by term:
+    the same expanded sum as ``sympy.expand`` of the nested sums (sympy's canonical form of the same terms),
+    without expanding products of long sums symbol by symbol. A coefficient outside this form (a float, an
+    irrational number such as ``sqrt(3)``, a sum in a denominator) raises :class:`_NotPolynomial`.
+    """
+
+    def __init__(self) -> None:
+        self.atoms: list[sp.Expr] = []
+        self.index: dict[sp.Expr, int] = {}
+        self._mono: dict[tuple[_Mono, _Mono], _Mono] = {}
+        self._pow: dict[tuple[int, int], sp.Expr] = {}
+
+    def symbol(self, name: str) -> dict:
+        return {(name, ()): Fraction(1)}
+
+    @staticmethod
+    def add(x: dict, y: dict) -> dict:
+        out = dict(x)
+        for k, c in y.items():
+            v = out.get(k, 0) + c
+            if v:
+                out[k] = v
+            else:
+                out.pop(k, None)
+        return out
+
+    def sub(self, x: dict, y: dict) -> dict:
+        return self.add(x, {k: -c for k, c in y.items()})
+
+    def _mono_mul(self, a: _Mono, b: _Mono) -> _Mono:
+        if not a:
+            return b
+        if not b:
+            return a
+        key = (a, b)
+        got = self._mono.get(key)
+        if got is None:
+            d = dict(a)
+            for i, e in b:
+                d[i] = d.get(i, 0) + e
+            got = self._mono[key] = tuple(sorted((i, e) for i, e in d.items() if e))
+        return got
+
+    def _atom(self, b: sp.Expr) -> int:
+        i = self.index.get(b)
+        if i is None:
+            ok = b.is_Symbol or (isinstance(b, (sp.sin, sp.cos)) and all(x.is_Rational or x.is_Symbol for x in b.args))
+            if not ok:
+                raise _NotPolynomial(str(b))
+            i = self.index[b] = len(self.atoms)
+            self.atoms.append(b)
+        return i
+
+    def poly(self, e: sp.Expr, placeholders: dict | None = None) -> dict:
+        """``{(placeholder index or None, monomial): Fraction}`` of the expanded constant expression ``e``."""
+        out: dict = {}
+        for t in sp.Add.make_args(sp.expand(e)):
+            c, rest = t.as_coeff_Mul()
+            if not c.is_Rational:
+                raise _NotPolynomial(str(t))
+            if c == 0:
+                continue
+            ph = None
+            mono: dict[int, int] = {}
+            for f in sp.Mul.make_args(rest):
+                if f is sp.S.One:
+                    continue
+                if placeholders is not None and f in placeholders:
+                    if ph is not None:
+                        raise _NotPolynomial(str(t))
+                    ph = placeholders[f]
+                    continue
+                b, x = f.as_base_exp()
+                if not x.is_Integer:
+                    raise _NotPolynomial(str(t))
+                i = self._atom(b)
+                mono[i] = mono.get(i, 0) + int(x)
+            key = (ph, tuple(sorted((i, x) for i, x in mono.items() if x)))
+            v = out.get(key, 0) + Fraction(c.p, c.q)
+            if v:
+                out[key] = v
+            else:
+                out.pop(key, None)
+        return out
+
+    def _scaled(self, coef: dict, y: dict, out: dict) -> None:
+        """``out += coef * y`` (``coef``: ``{monomial: Fraction}``)."""
+        mul = self._mono_mul
+        for m1, c1 in coef.items():
+            for (p, m2), c2 in y.items():
+                k = (p, mul(m1, m2))
+                v = out.get(k, 0) + c1 * c2
+                if v:
+                    out[k] = v
+                else:
+                    out.pop(k, None)
+
+    def add_scaled(self, x: dict, coef: sp.Expr, y: dict) -> dict:
+        out = dict(x)
+        self._scaled({m: c for (_, m), c in self.poly(coef).items()}, y, out)
+        return out
+
+    def linear(self, build, values: tuple) -> list[list[dict]]:
+        ph = sp.symbols(f"_ph0:{len(values)}", cls=sp.Dummy)
+        where = {s: i for i, s in enumerate(ph)}
+        m = build(*ph)
+        rows = []
+        for r in range(m.rows):
+            row = []
+            for c in range(m.cols):
+                out: dict = {}
+                per: dict[int, dict] = {}
+                for (i, mono), q in self.poly(m[r, c], where).items():
+                    if i is None:
+                        raise _NotPolynomial(str(m[r, c]))  # a constant term: not linear in the values
+                    per.setdefault(i, {})[mono] = q
+                for i, coef in per.items():
+                    self._scaled(coef, values[i], out)
+                row.append(out)
+            rows.append(row)
+        return rows
+
+    def is_symbol(self, x: dict, name: str) -> bool:
+        return x == {(name, ()): 1}
+
+    def _power(self, i: int, e: int) -> sp.Expr:
+        got = self._pow.get((i, e))
+        if got is None:
+            got = self._pow[(i, e)] = self.atoms[i] ** e
+        return got
+
+    def to_expr(self, x: dict) -> sp.Expr:
+        terms = []
+        for (p, mono), c in x.items():
+            f = [self._power(i, e) for i, e in mono]
+            terms.append(sp.Mul(sp.Rational(c.numerator, c.denominator), _sym(p), *f))
+        return sp.Add(*terms)
+
+
+_Algebra = _ExprAlgebra | _PolyAlgebra
 
 
 def _expand_linear(build, values: tuple) -> sp.Matrix:
@@ -454,14 +710,24 @@ def group_base_parameters(
     BaseParameterMap
     """
     rng = np.random.default_rng(0) if rng is None else rng
+    state = rng.bit_generator.state
+    try:
+        return _group(reg, _PolyAlgebra(), rng, n_samples, rank_tol, dependency_tol, coefficient_tol)
+    except _NotPolynomial:  # e.g. sqrt(3)/2 from alpha = pi/3, or a numeric coefficient: sympy's arithmetic
+        rng.bit_generator.state = state
+        return _group(reg, _ExprAlgebra(), rng, n_samples, rank_tol, dependency_tol, coefficient_tol)
+
+
+def _group(reg: SymbolicRegressor, alg: _Algebra, rng: np.random.Generator, n_samples: int, rank_tol: float,
+           dependency_tol: float, coefficient_tol: float) -> BaseParameterMap:
     robot = reg.robot
-    cur, eliminated, no_effect = _regroup_closed_form(reg)
+    cur, eliminated, no_effect = _regroup_closed_form(reg, alg)
 
     # zero columns: no effect
     cols_present = {name for (_, name) in reg.graph.outputs}
     for name in list(cur):
         if name not in cols_present:
-            no_effect.append(f"{name}R" if sp.expand(cur[name]) != _sym(name) else name)
+            no_effect.append(f"{name}R" if not alg.is_symbol(cur[name], name) else name)
             eliminated.append(name)
             del cur[name]
 
@@ -507,7 +773,7 @@ def group_base_parameters(
         for tgt, coef in zip(targets, coefs):
             if coef == 0:
                 continue
-            cur[tgt] = cur[tgt] + coef * cur[name]
+            cur[tgt] = alg.add_scaled(cur[tgt], coef, cur[name])
             if tgt not in swept:
                 swept.append(tgt)
             if not exact and tgt not in numeric:
@@ -518,7 +784,7 @@ def group_base_parameters(
     kept = tuple(n for n in reg.standard_names if n in cur)
     base_names, relations = [], {}
     for n in kept:
-        e = sp.expand(cur[n])
+        e = alg.to_expr(cur[n])
         bn = n if e == _sym(n) else n + "R"
         base_names.append(bn)
         relations[bn] = e

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import sympy as sp
+from sympy.core.add import _addsort
 
 from ..description.mdh import constant_rotation, joint_sign, position, rot_z
 from ..description.model import PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
@@ -48,20 +49,55 @@ def _diff(x, y):
     """``x - y`` without building the products that are exactly zero (same result as sympy's)."""
     if y is _ZERO:
         return x
-    return -y if x is _ZERO else x - y
+    return -y if x is _ZERO else _add([x, -y])
 
 
 _MUL = sp.Mul  # what ``a * b`` calls for sympy expressions, without the operator's sympify wrappers
 
 
+def _mul(a, b):
+    """``Mul(a, b)``; a non-zero float times a symbol is built as ``Mul.flatten`` orders it (the float first)
+    without flatten, which multiplies the float by 1 and asks the new Float whether it is zero: sympy deduces
+    all the facts of each new Float (~0.2 ms), most of the cost of general chains (floats from sin/cos of
+    arbitrary alpha). The same expression either way (tests/baseparams/test_generation_speed.py)."""
+    if b.is_Symbol and a.is_Float and a:
+        return _MUL._from_args((a, b))
+    if a.is_Symbol and b.is_Float and b:
+        return _MUL._from_args((b, a))
+    return _MUL(a, b)
+
+
+def _add(terms: list) -> sp.Expr:
+    """``Add(*terms)``; built directly, as ``Add.flatten`` orders it (``_addsort``), when no two terms have the
+    same non-numeric part and none is a number or a sum: flatten would rebuild every ``float * symbol``
+    term with a new Float (see :func:`_mul`). Any other case: ``sympy.Add``."""
+    if len(terms) == 1:
+        return terms[0]
+    seen = set()
+    for t in terms:
+        if t.is_Mul:
+            args = t.args
+            key = args[1:] if (args[0].is_Float or args[0].is_Rational) else args
+        elif t.is_Symbol or isinstance(t, sp.Function) or (t.is_Pow and not t.base.is_number):
+            key = (t,)
+        else:
+            return sp.Add(*terms)
+        if key in seen:
+            return sp.Add(*terms)
+        seen.add(key)
+    out = list(terms)
+    _addsort(out)
+    return sp.Add._from_args(out)
+
+
 def _prod(a, b):
-    return _ZERO if a is _ZERO or b is _ZERO else _MUL(a, b)
+    return _ZERO if a is _ZERO or b is _ZERO else _mul(a, b)
 
 
 def _dot(pairs) -> sp.Expr:
     """``sum(a * b)`` as one ``Add`` of the non-zero products (one flatten instead of one per term)."""
-    terms = [_MUL(a, b) for a, b in pairs if a is not _ZERO and b is not _ZERO]
-    return sp.Add(*terms) if len(terms) != 1 else terms[0]
+    terms = [_mul(a, b) for a, b in pairs if a is not _ZERO and b is not _ZERO]
+    return _add(terms) if len(terms) > 1 else (terms[0] if terms else sp.Add())
 
 
 def _cross(a, b):
@@ -147,6 +183,9 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
         pos = position(row)
         P[row.j] = [g.name(sp.expand(pos[i]), f"P{row.j}{'xyz'[i]}") for i in range(3)]
 
+    # the sign of each joint variable (sympy.diff of theta or r), once per row: carry() asks it at every step
+    sign = {row.j: joint_sign(row) for row in rows if row.sigma in (REVOLUTE, PRISMATIC)}
+
     zero = [sp.Integer(0)] * 3
     w = {0: zero}
     wd = {0: zero}
@@ -206,13 +245,13 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             acc_a = g.vec(acc_a, f"va{j}")
         vj = g.vec(_matTvec(Rm, acc_a), f"vd{j}")
         if row.sigma == REVOLUTE:
-            sg = joint_sign(row)
+            sg = sign[j]
             qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
             w[j] = [wa[0], wa[1], g.name(wa[2] + qd, f"w{j}z")]
             wd[j] = g.vec([wda[0] + qd * wa[1], wda[1] - qd * wa[0], wda[2] + qdd], f"wd{j}")
             vd[j] = vj
         elif row.sigma == PRISMATIC:
-            sg = joint_sign(row)
+            sg = sign[j]
             qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
             w[j], wd[j] = wa, wda
             # + 2 w x (qd z) + qdd z
@@ -235,9 +274,9 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
         while j != 0:
             row = rows[j - 1]
             if row.sigma == REVOLUTE:
-                add(row_of[j], name, joint_sign(row) * n[2])
+                add(row_of[j], name, sign[j] * n[2])
             elif row.sigma == PRISMATIC:
-                add(row_of[j], name, joint_sign(row) * f[2])
+                add(row_of[j], name, sign[j] * f[2])
             a = row.ant
             if a == 0:
                 break

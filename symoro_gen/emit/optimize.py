@@ -10,6 +10,8 @@ from __future__ import annotations
 from typing import Any
 
 import sympy as sp
+from sympy.core.add import _addsort
+from sympy.core.mul import _mulsort
 
 from ..dynamics.graph import ExprGraph
 
@@ -46,6 +48,12 @@ def _match(e: sp.Expr, trig: dict[sp.Symbol, tuple[str, str]]) -> tuple[Any, ...
     if kind_a == "C":
         return ja, "C", sa, xa, sb, xb  # sa*C*xa + sb*S*xb
     return ja, "C", sb, xb, sa, xa
+
+
+def _signed(s: int, e: sp.Expr) -> sp.Expr:
+    """``s * e`` for ``s = +-1``: ``e`` or ``-e`` (the same expressions as sympy's ``s * e``, without the
+    multiplication by 1 and its sympify)."""
+    return e if s == 1 else -e
 
 
 def rotation_pairs(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> ExprGraph:
@@ -98,7 +106,7 @@ def rotation_pairs(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> Expr
                     continue
                 C = csym[(j, "C")]
                 S = csym[(j, "S")]
-                bp = -s1 * s2 * b  # b' = -s1 s2 b
+                bp = _signed(-s1 * s2, b)  # b' = -s1 s2 b
                 new_defs_for[(k1, k2)] = (j, C, a, bp, s1, s3)
                 used_joints.add(j)
                 done = True
@@ -116,8 +124,8 @@ def rotation_pairs(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> Expr
     for n, ((k1, k2), (j, C, a, bp, s1, s3)) in enumerate(new_defs_for.items()):
         K = sp.Symbol(f"rot{n}", real=True)
         CpS, _, SmC, _ = jdefs[j]
-        replace[k1] = s1 * (K - once(("rot*", bp, CpS), lambda bp=bp, CpS=CpS: bp * CpS))
-        replace[k2] = s3 * (K + once(("rot*", a, SmC), lambda a=a, SmC=SmC: a * SmC))
+        replace[k1] = _signed(s1, K - once(("rot*", bp, CpS), lambda bp=bp, CpS=CpS: bp * CpS))
+        replace[k2] = _signed(s3, K + once(("rot*", a, SmC), lambda a=a, SmC=SmC: a * SmC))
         first = k1 if order[k1] < order[k2] else k2
         extra_at[first] = [(K, once(("rotK", C, a, bp), lambda C=C, a=a, bp=bp: C * (a + bp)))]
         joint_at[first] = j
@@ -159,6 +167,46 @@ def _products_in(e: sp.Expr) -> tuple[frozenset[sp.Symbol] | tuple[sp.Symbol], .
             if x.is_Pow and x.exp == 2 and x.base.is_Symbol:
                 out.append((x.base,))
     return tuple(out)
+
+
+def _times(coeff: sp.Expr, factors: list[sp.Expr]) -> sp.Expr:
+    """``coeff * Mul(*factors)``: for factors that are not numbers nor sums and have distinct bases, the Mul that
+    sympy's ``Mul.flatten`` builds (the number first, then the factors in ``_mulsort`` order), built directly.
+
+    Flatten multiplies the number by 1 and asks the new Float whether it is zero: sympy's assumption system
+    deduces all the facts of each new Float (~0.2 ms), which was most of this pass on general chains
+    (float constants from sin/cos of arbitrary alpha).
+    """
+    if (len(factors) < 1 or not coeff.is_Number
+            or any(f.is_Number or f.is_Add or f.is_Mul or not f.is_commutative for f in factors)
+            or len({f.as_base_exp()[0] for f in factors}) != len(factors)):
+        return coeff * sp.Mul(*factors)
+    fs = list(factors)
+    _mulsort(fs)
+    if coeff is sp.S.One:
+        return fs[0] if len(fs) == 1 else sp.Mul._from_args(fs)
+    return sp.Mul._from_args([coeff] + fs)
+
+
+def _replace_terms(e: sp.Expr, rep: dict[sp.Expr, sp.Expr]) -> sp.Expr:
+    """``e.xreplace(rep)`` when ``rep`` replaces terms of the sum ``e`` by products with a new symbol: the sum is
+    rebuilt as sympy's ``Add.flatten`` would (the number first, the other terms in ``_addsort`` order; no two
+    terms become alike, the new symbol standing for one product), without flatten re-multiplying every
+    ``float * symbol`` term (a new Float whose facts sympy deduces each time). Other shapes: ``xreplace``."""
+    if e in rep:
+        return rep[e]
+    if not e.is_Add:
+        return e.xreplace(rep)
+    args = e.args
+    if not all(m in args for m in rep):  # a product nested deeper than a term
+        return e.xreplace(rep)
+    new = [rep.get(t, t) for t in args]
+    if any(t.is_Add or t.is_Number for t in rep.values()):
+        return e.xreplace(rep)
+    num = [t for t in new if t.is_Number]
+    terms = [t for t in new if not t.is_Number]
+    _addsort(terms)
+    return sp.Add._from_args(num + terms)
 
 
 def share_products(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> ExprGraph:
@@ -207,7 +255,7 @@ def share_products(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> Expr
             coeff, rest = m.as_coeff_Mul()
             f = sp.Mul.make_args(rest)
             if rest in subs:
-                rep[m] = coeff * subs[rest]
+                rep[m] = _times(coeff, [subs[rest]])
             elif len(f) > 2:
                 # a longer product containing a shared pair: factor it out
                 for a in range(len(f)):
@@ -219,15 +267,15 @@ def share_products(graph: ExprGraph, memo: dict[Any, Any] | None = None) -> Expr
                         pair = frozenset((f[a], f[b]))
                         if pair in sym_of:
                             others = [x for k, x in enumerate(f) if k not in (a, b)]
-                            rep[m] = coeff * sym_of[pair] * sp.Mul(*others)
+                            rep[m] = _times(coeff, [sym_of[pair], *others])
                             break
                     if m in rep:
                         break
             else:
                 for x in f:
                     if x.is_Pow and x in subs:
-                        rep[m] = coeff * subs[x] * sp.Mul(*[y for y in f if y is not x])
-        return e.xreplace(rep) if rep else e
+                        rep[m] = _times(coeff, [subs[x], *[y for y in f if y is not x]])
+        return _replace_terms(e, rep) if rep else e
 
     defs = [(sym_of[p], expr_of(p)) for p in place.get(-1, [])]
     for i, (s, e) in enumerate(graph.defs):

@@ -47,7 +47,7 @@ from .backends.casadi import casadi_function, casadi_source
 from .backends.numpy import kernel_source, load_kernel
 from .closedloop import closed_loop_files
 from .optimize import optimize
-from .printing import OpCount, graph_ops
+from .printing import OpCount, graph_ops, relation_text
 
 #: longest robot name: it becomes file, module and C symbol names
 MAX_NAME = 64
@@ -111,7 +111,7 @@ def check_name(robot: RobotDescription) -> None:
 
 
 def _pretty_relation(name: str, e: sp.Expr) -> str:
-    return f"{name} = {sp.sstr(e, order='none')}"
+    return f"{name} = {relation_text(e)}"
 
 
 def relations_markdown(robot: RobotDescription, bp: BaseParameterMap, ops: OpCount,
@@ -313,7 +313,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
     )
     all_ops = {k: graph_ops(graphs[k]) for k in ("base", "standard", "payload")}
     ops = all_ops["base"]
-    texts = {k: sp.sstr(bp.relations[k], order="none") for k in bp.base_names}  # printed once, used twice
+    texts = {k: relation_text(bp.relations[k]) for k in bp.base_names}  # printed once, used twice
     files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
     files.update(closed_loop_files(robot, bp))  # closed loops: their groupings, beside the tree's
     manifest = {

@@ -96,13 +96,25 @@ def _printer(d: Dialect) -> _Printer:
     return p
 
 
+def _number(e: sp.Expr, d: Dialect) -> str:
+    """``_Printer.doprint`` of a number: what its ``_print_Float`` / ``_print_Integer`` / ``_print_Rational``
+    write, without the code printer's per-call set-up (a walk of the expression); others by ``doprint``."""
+    if e.is_Float:
+        return repr(float(e))
+    if e.is_Integer:
+        return f"{int(e)}.0" if abs(int(e)) < 2**53 else str(int(e))
+    if e.is_Rational:
+        return f"{float(e.p)}/{float(e.q)}"
+    return str(_printer(d).doprint(e))
+
+
 def _fast(e: sp.Expr, d: Dialect) -> str | None:
     """Direct printing of the forms the model produces (sums of signed products of symbols,
     numbers, small powers and sin/cos/sign calls); None for anything else."""
     if e.is_Symbol:
         return str(e.name)
     if e.is_Number:
-        return str(_printer(d).doprint(e))
+        return _number(e, d)
     if e.is_Mul:
         coeff, rest = e.as_coeff_Mul()
         parts = []
@@ -118,8 +130,9 @@ def _fast(e: sp.Expr, d: Dialect) -> str | None:
             return body
         if coeff == -1:
             return "-" + body
-        c = _printer(d).doprint(coeff)
-        return f"({c})*{body}" if coeff < 0 else f"{c}*{body}"
+        c = _number(coeff, d)
+        negative = coeff.p < 0 if coeff.is_Rational else float(coeff) < 0
+        return f"({c})*{body}" if negative else f"{c}*{body}"
     if e.is_Add:
         out = ""
         for i, t in enumerate(e.args):
@@ -213,3 +226,74 @@ def graph_ops(graph: ExprGraph) -> OpCount:
     for e in graph.outputs.values():
         c = c + count_ops(e)
     return c
+
+
+def _sstr_factor(f: sp.Expr) -> str | None:
+    """``sp.sstr`` of one factor of a relation term (symbol, sin/cos of a rational or a symbol, a positive
+    integer power of these), or None for anything else."""
+    if f.is_Symbol:
+        return str(f.name)
+    if isinstance(f, (sp.sin, sp.cos)):
+        (x,) = f.args
+        if x.is_Symbol:
+            return f"{type(f).__name__}({x.name})"
+        if x.is_Rational and x > 0:
+            return f"{type(f).__name__}({x.p}/{x.q})" if x.q != 1 else f"{type(f).__name__}({x.p})"
+        return None
+    if f.is_Pow and f.exp.is_Integer and f.exp > 1 and not f.base.is_Pow:
+        b = _sstr_factor(f.base)
+        return None if b is None else f"{b}**{int(f.exp)}"
+    return None
+
+
+def _sstr_term(t: sp.Expr) -> str | None:
+    """``sp.sstr(t, order="none")`` of a product ``c * symbols * functions`` (StrPrinter._print_Mul's
+    numerator/denominator split for a rational ``c`` and ``1/G`` factors), or None for other shapes."""
+    if t.is_Symbol:
+        return str(t.name)
+    if not t.is_Mul:
+        return None
+    args = t.args
+    num: list[str] = []
+    den: list[str] = []
+    sign = ""
+    if args[0].is_Rational:
+        c, args = args[0], args[1:]
+        if c < 0:
+            sign, c = "-", -c
+        if c.p != 1:
+            num.append(str(c.p))
+        if c.q != 1:
+            den.append(str(c.q))
+    for f in args:
+        if f.is_Pow and f.exp == -1 and f.base.is_Symbol:
+            den.append(str(f.base.name))
+            continue
+        s = _sstr_factor(f)
+        if s is None:
+            return None
+        num.append(s)
+    body = "*".join(num or ["1"])
+    if not den:
+        return sign + body
+    return sign + body + ("/" + den[0] if len(den) == 1 else "/(" + "*".join(den) + ")")
+
+
+def relation_text(e: sp.Expr) -> str:
+    """``sp.sstr(e, order="none")`` of a base-parameter relation, written directly for the sums of products the
+    relations are (rational coefficient, parameter symbol, sin/cos of constants, symbols, ``1/G3``) and by
+    sympy's printer for any other form; the same text (tests/baseparams/test_generation_speed.py)."""
+    parts: list[str] = []
+    for t in sp.Add.make_args(e):
+        s = _sstr_term(t)
+        if s is None:
+            return str(sp.sstr(e, order="none"))
+        if s.startswith("-"):
+            parts += ["-", s[1:]]
+        else:
+            parts += ["+", s]
+    if parts and parts[0] == "+":
+        parts.pop(0)
+    elif parts:
+        parts[0:2] = ["-" + parts[1]]
+    return " ".join(parts)

@@ -10,6 +10,14 @@ plain computation it replaces:
   accumulated sums afterwards: once expanded, the same relation as expanding the block directly;
 * the K matrix skips ``sympy.expand`` on relations that it would leave unchanged: whenever the
   test says "already expanded", ``expand`` is indeed the identity;
+* the relations are computed as exact sparse polynomials (:class:`regroup._PolyAlgebra`) and built once
+  as sympy sums: the same expressions as sympy's arithmetic and ``expand`` (:class:`regroup._ExprAlgebra`),
+  and the sympy path is taken for coefficients outside that form (``sqrt(3)`` from alpha = pi/3);
+* the K matrix evaluates ``float(c * num)`` by sympy's evalf steps with cached factors: bit for bit the
+  same floats;
+* the relations are printed without sympy's printer: the same text as ``sympy.sstr(e, order="none")``;
+* the shared-product pass builds its rewritten terms and sums as sympy's flatten orders them: the same
+  expressions (and so the same printed code) as ``xreplace``;
 * structure, not time: the Newton-Euler graph of a serial chain grows no faster than the n^2
   entries of the regressor ([KK1987]: one named variable per non-zero term, no expansion).
 """
@@ -127,3 +135,175 @@ def test_constant_split_equals_as_independent():
             assert regroup._split_constant(term, fs) == term.as_independent(*fs, as_Add=False)
             n += 1
     assert n > 50
+
+
+_SPECIAL = """name = "special"
+gravity = [0, 0, -9.81]
+drive = ["IA", "FV", "FS", "OFF"]
+
+[[frames]]
+j = 1
+ant = 0
+sigma = 0
+alpha = 0
+d = 0
+theta = "q"
+r = 0.3
+
+[[frames]]
+j = 2
+ant = 1
+sigma = 0
+alpha = "pi/3"
+d = 0.2
+theta = "q"
+r = 0.05
+
+[[frames]]
+j = 3
+ant = 2
+sigma = 1
+alpha = 0.7
+d = 0.1
+theta = 0.4
+r = "q"
+"""
+
+
+@pytest.mark.parametrize("case", ["general", "industrial", "rx90", "scara", "sda10f"])
+def test_polynomial_relations_equal_sympy_arithmetic(case):
+    robot = {"general": lambda: parse_robot_text(chain_text(5, True), file="g.toml"),
+             "industrial": lambda: parse_robot_text(chain_text(5, False), file="i.toml"),
+             }.get(case, lambda: load_robot(case))()
+    reg = build_regressor(robot)
+    args = (np.random.default_rng(0), 60, 1e-9, 1e-7, 1e-8)
+    fast = regroup._group(reg, regroup._PolyAlgebra(), *args)
+    slow = regroup._group(reg, regroup._ExprAlgebra(), *args)
+    assert fast == slow  # same names, kept, eliminated, and relations (sympy's structural equality)
+    assert [sp.srepr(fast.relations[k]) for k in fast.base_names] == [sp.srepr(slow.relations[k]) for k in slow.base_names]
+    assert any(len(sp.Add.make_args(e)) > 3 for e in fast.relations.values())
+
+
+def test_polynomial_relations_fall_back_to_sympy_for_irrational_constants():
+    robot = parse_robot_text(_SPECIAL, file="special.toml")
+    reg = build_regressor(robot)
+    with pytest.raises(regroup._NotPolynomial):
+        regroup._group(reg, regroup._PolyAlgebra(), np.random.default_rng(0), 60, 1e-9, 1e-7, 1e-8)
+    bp = regroup.group_base_parameters(reg)  # the public entry takes the sympy path
+    slow = regroup._group(reg, regroup._ExprAlgebra(), np.random.default_rng(0), 60, 1e-9, 1e-7, 1e-8)
+    assert bp == slow
+    assert bp.relations["ZZ1R"].has(sp.Rational(3, 4) * sp.Symbol("YY2", real=True))  # sin(pi/3)**2, exact
+
+
+def test_polynomial_algebra_products_and_laurent_terms():
+    """Products of sums of atoms, exponents cancelling (``G3 * (1/G3)``), terms cancelling to zero."""
+    alg = regroup._PolyAlgebra()
+    G3, L = sp.Symbol("G3", real=True), sp.Symbol("L", real=True)
+    c, s = sp.cos(sp.Rational(7, 10)), sp.sin(sp.Rational(7, 10))
+    x = alg.add_scaled(alg.symbol("M2"), c * L + s**2 / 3, alg.symbol("MZ2"))
+    y = alg.add_scaled(alg.symbol("M3"), G3 - c, x)
+    z = alg.add_scaled(y, 1 / G3, alg.add_scaled(alg.symbol("OFF3"), -L * c, x))
+    M2, MZ2, M3, OFF3 = (sp.Symbol(n, real=True) for n in ("M2", "MZ2", "M3", "OFF3"))
+    xe = M2 + (c * L + s**2 / 3) * MZ2
+    ze = sp.expand(M3 + (G3 - c) * xe + (OFF3 - L * c * xe) / G3)
+    assert alg.to_expr(z) == ze
+    assert alg.is_symbol(alg.sub(alg.add(alg.symbol("M2"), alg.symbol("M3")), alg.symbol("M3")), "M2")
+    assert alg.sub(x, x) == {}
+    with pytest.raises(regroup._NotPolynomial):
+        alg.add_scaled(x, sp.Float(0.5), x)
+    with pytest.raises(regroup._NotPolynomial):
+        alg.add_scaled(x, 1 / (G3 + L), x)
+
+
+@pytest.mark.parametrize("n_frames", [3, 6])
+def test_product_float_equals_sympy_float_bit_for_bit(n_frames):
+    bp = regroup.group_base_parameters(build_regressor(parse_robot_text(chain_text(n_frames, True, seed=n_frames),
+                                                                        file="g.toml")))
+    to_float = regroup._ProductFloat()
+    n_fast = 0
+    for rel in bp.relations.values():
+        e = rel.xreplace({**bp.gravity, **bp.geometry})
+        fs = e.free_symbols
+        for term, c in e.as_coefficients_dict().items():
+            num, _ = regroup._split_constant(term, fs)
+            assert to_float(c, num).hex() == float(c * num).hex(), (c, num)
+            n_fast += num is not sp.S.One
+    assert n_fast >= 20
+    for c, num in ((sp.Rational(-3, 7), sp.cos(sp.Rational(1, 3))), (sp.Integer(1), sp.sin(sp.Rational(2, 7)) ** 3),
+                   (sp.Rational(5, 2), sp.sqrt(3) * sp.cos(sp.Rational(1, 9))), (sp.Float(0.3), sp.sin(sp.Rational(1, 2)))):
+        assert to_float(c, num).hex() == float(c * num).hex()
+    K = bp.matrix()
+    assert K.shape == (len(bp.base_names), len(bp.standard_names)) and np.abs(K).max() > 0
+
+
+def test_relation_text_equals_sympy_sstr():
+    from symoro_gen.emit.printing import relation_text
+
+    texts = 0
+    for robot in (parse_robot_text(chain_text(4, True), file="g.toml"), load_robot("scara"), load_robot("sda10f"),
+                  parse_robot_text(_SPECIAL, file="special.toml")):
+        bp = regroup.group_base_parameters(build_regressor(robot))
+        for e in bp.relations.values():
+            assert relation_text(e) == sp.sstr(e, order="none")
+            texts += 1
+    G3, x, y = sp.symbols("G3 x y", real=True)
+    c = sp.cos(sp.Rational(3, 4))
+    for e in (-x, -x / 3 + 2 * y * c**2, x / G3 - y / (3 * G3), x + sp.Float(0.25) * y, -2 * x * c / 7 - y,
+              x * sp.sin(y) ** 2 - sp.sqrt(2) * y, sp.Integer(3) * x):
+        assert relation_text(e) == sp.sstr(e, order="none"), e
+    assert texts > 50
+
+
+def test_shared_products_equal_the_xreplace_rewrite(monkeypatch):
+    """The optimiser's direct construction of rewritten terms and sums against plain ``xreplace``: the same
+    expressions, argument order included (which the printers follow), on a general chain (float constants)."""
+    from symoro_gen.emit import optimize
+    from symoro_gen.emit.package import model_graphs
+
+    robot = parse_robot_text(chain_text(4, True), file="g.toml")
+    reg = build_regressor(robot)
+    bp = regroup.group_base_parameters(reg)
+    fast, _ = model_graphs(reg, bp)
+    monkeypatch.setattr(optimize, "_times", lambda coeff, factors: coeff * sp.Mul(*factors))
+    monkeypatch.setattr(optimize, "_replace_terms", lambda e, rep: e.xreplace(rep))
+    slow, _ = model_graphs(reg, bp)
+    for k in fast:
+        assert [(s, e.args) for s, e in fast[k].defs] == [(s, e.args) for s, e in slow[k].defs]
+        assert {o: e.args for o, e in fast[k].outputs.items()} == {o: e.args for o, e in slow[k].outputs.items()}
+    assert any(s.name.startswith("pr") for s, _ in fast["base"].defs)
+
+
+@pytest.mark.parametrize("which", ["general", "rx90"])
+def test_newton_euler_direct_products_equal_sympy_flatten(monkeypatch, which):
+    """Newton-Euler's float-times-symbol products and sums built without flatten: the same graph, argument
+    order included, as with sympy's ``Mul``/``Add`` (float constants of a general chain; rx90's lengths)."""
+    from symoro_gen.dynamics import newton_euler as ne
+
+    robot = parse_robot_text(chain_text(4, True), file="g.toml") if which == "general" else load_robot("rx90")
+    fast = build_regressor(robot).graph
+    monkeypatch.setattr(ne, "_mul", lambda a, b: sp.Mul(a, b))
+    monkeypatch.setattr(ne, "_add", lambda terms: sp.Add(*terms))
+    slow = build_regressor(robot).graph
+    assert [(s, e.func, e.args) for s, e in fast.defs] == [(s, e.func, e.args) for s, e in slow.defs]
+    assert {k: (e.func, e.args) for k, e in fast.outputs.items()} == {k: (e.func, e.args) for k, e in slow.outputs.items()}
+    n_direct = sum(1 for _, e in fast.defs for t in sp.Add.make_args(e)
+                   if t.is_Mul and len(t.args) == 2 and t.args[0].is_Float and t.args[1].is_Symbol)
+    assert n_direct >= (20 if which == "general" else 1)
+
+
+def test_number_printing_equals_the_code_printer():
+    """Numbers and signed coefficients printed without the code printer's set-up: the same text in every
+    dialect as ``doprint`` (and the same sign test as sympy's ``coeff < 0``)."""
+    from symoro_gen.emit import printing
+
+    x, y = sp.symbols("x y", real=True)
+    numbers = [sp.Float(0.7919524001197934), sp.Float(-5.026835757662715), sp.Float(1e-300), sp.Integer(3),
+               sp.Integer(-1), sp.Integer(2**60), sp.Rational(-3, 7), sp.Rational(1, 2), sp.Float(-0.0)]
+    for d in (printing.NUMPY, printing.C_SCALAR, printing.C_VECTOR, printing.CASADI):
+        for c in numbers:
+            assert printing._number(c, d) == printing._printer(d).doprint(c), (c, d)
+            e = sp.Mul(c, x, y)
+            if e.is_Mul and e.as_coeff_Mul()[0] not in (1, -1):
+                coeff = e.as_coeff_Mul()[0]
+                s = printing.print_expr(e, d)
+                assert s.startswith("(") == bool(coeff < 0), s
