@@ -17,12 +17,16 @@ one sample in ``n_d`` kept, zero padding beyond the ends as ``resample_poly``), 
 * **only the distinct columns**: the structurally non-zero entries of ``W`` (per joint row) that are
   equal up to a constant factor for random states are equal for all states (analytic functions);
   only one of each is filtered, then scaled back after decimation (80x fewer rows);
-* **in cache**: the regressor is evaluated ``REGRESSOR_ROWS`` samples at a time into a reused buffer
-  that stays in L2, and its distinct columns copied straight into the layout of the matrix product
-  (``BATCH_SUPER_ROWS`` super-rows per product);
-* **fewer Householder passes**: decimated rows are collected and folded into ``R_j`` by one stacked QR
-  of ``[R_j; rows]`` every ``fold_rows`` rows
-  (:class:`~symoro_gen.identification.accumulate.Accumulator`).
+* **in cache**: the regressor is evaluated ``REGRESSOR_ROWS`` samples at a time into a reused buffer, and
+  its distinct columns copied straight into the layout of the matrix product (``BATCH_SUPER_ROWS``
+  super-rows per product) by a compiled row gather (:data:`_GATHER_SOURCE`; ``np.take`` without a C
+  compiler, same numbers); the products fill a window of ``RING_SUPER_ROWS`` super-rows whose outputs
+  are summed by 21 vector adds, its last 20 products carried to the front when it is full;
+* **per-joint columns, in-place QR**: joint j's rows are non-zero only in the columns of its own entries
+  (links j..n and its drive), so its factor is kept on those columns (exact) and the decimated rows are
+  written scaled into a Fortran-ordered ``[R_j; rows]`` buffer that LAPACK ``dgeqrf`` factors in place
+  every ``fold_rows`` rows (Golub & Van Loan, Matrix Computations, 4th ed., sec. 5.2, Householder QR;
+  the stacking is the TSQR update of Demmel et al. 2012).
 
 The Butterworth filter of ``q`` is zero-phase (forward-backward), so it is applied per outer block of
 samples with a settling margin at both ends, as :func:`~symoro_gen.observations.iter_chunks` does: its
@@ -254,7 +258,7 @@ class _Folder:
         Rm, rows, yy = [], [], []
         for j in range(nj):
             parts = [x.R[j] for x in (a, new) if j < x.n_joints]
-            Rj = np.linalg.qr(np.vstack(parts), mode="r") if len(parts) > 1 else parts[0]
+            Rj = np.asarray(np.linalg.qr(np.vstack(parts), mode="r")) if len(parts) > 1 else parts[0]
             Rm.append(Rj)
             rows.append(sum(x.rows[j] for x in (a, new) if j < x.n_joints))
             yy.append(sum(x.yy[j] for x in (a, new) if j < x.n_joints))

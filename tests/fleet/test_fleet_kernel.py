@@ -63,6 +63,30 @@ def test_fused_kernel_gives_the_rows_of_the_assembly(kw):
     assert np.linalg.norm(fg.std - fr.std) <= 1e-6 * np.linalg.norm(fr.std)
 
 
+def test_compiled_gather_and_numpy_copy_give_identical_factors(monkeypatch):
+    """The compiled row gather of the distinct columns and its NumPy fallback (``np.take``, used without a
+    C compiler) copy the same numbers: bit-identical factors; and an accumulator given to fold into gets
+    the merge of its rows and the new ones (same Gram matrix as both experiments folded at once)."""
+    from symoro_gen.fleet import fused
+
+    if fused._c_gather() is None:
+        pytest.skip("no C compiler here: only the NumPy copy can run")
+    model = load_model("lwr4")
+    tr = _recording("lwr4", 4.1, seed=3)
+    opts = AssemblyOptions(keep_signals=False)
+    compiled = fold_trajectory(model, tr, opts)
+    monkeypatch.setattr(fused, "_GATHER", [None])
+    numpy_copy = fold_trajectory(model, tr, opts)
+    for a, b in zip(compiled.R, numpy_copy.R):
+        assert np.array_equal(a, b)
+    assert compiled.yy == numpy_copy.yy and compiled.rows == numpy_copy.rows
+    tr2 = _recording("lwr4", 3.2, seed=4)
+    both = fold_trajectory(model, tr2, opts, acc=compiled)
+    ref = accumulate(list(iter_chunks(model, tr, opts, progress=False)) + list(iter_chunks(model, tr2, opts, progress=False)))
+    assert both.rows == ref.rows
+    _gram_close(both, ref, 1e-12)
+
+
 def test_fused_kernel_falls_back_to_the_assembly_for_other_options():
     """Options the fused kernel does not cover (IIR decimation, no decimation, low-velocity rows) give the
     assembly's own factors."""
