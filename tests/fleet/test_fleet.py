@@ -290,6 +290,9 @@ def test_trend_reference_distributions():
     own = (ref.stderr / (0.001 / np.sqrt(10.0))) ** 2
     slope, se, z, p = trend_test(x, y, s, dispersion=4 * own, dof=12)
     assert np.isclose(se, 2 * ref.stderr) and np.isclose(p, 2 * st.t.sf(abs(z), 12))
+    # the robot's own ratio above the fleet's: it sets the scale (a guard), the pooled dof the reference
+    slope, se, z, p = trend_test(x, y, s, dispersion=own / 4, dof=12)
+    assert np.isclose(se, ref.stderr) and np.isclose(p, 2 * st.t.sf(abs(z), 12))
     # sigmas that hold (scatter below them): the slope's own standard error, normal reference
     s = np.full(5, 0.05)
     slope, se, z, p = trend_test(x, y, s, dispersion=0.5, dof=12)
