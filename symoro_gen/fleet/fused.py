@@ -19,7 +19,7 @@ one sample in ``n_d`` kept, zero padding beyond the ends as ``resample_poly``), 
   only one of each is filtered, then scaled back after decimation (80x fewer rows);
 * **in cache**: the regressor is evaluated ``REGRESSOR_ROWS`` samples at a time into a reused buffer, and
   its distinct columns copied straight into the layout of the matrix product (``BATCH_SUPER_ROWS``
-  super-rows per product) by a compiled row gather (:data:`_GATHER_SOURCE`; ``np.take`` without a C
+  super-rows per product) by a compiled row gather (:data:`_KERNELS_SOURCE`; ``np.take`` without a C
   compiler, same numbers); the products fill a window of ``RING_SUPER_ROWS`` super-rows whose outputs
   are summed by 21 vector adds, its last 20 products carried to the front when it is full;
 * **per-joint columns, in-place QR**: joint j's rows are non-zero only in the columns of its own entries
@@ -38,11 +38,13 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import math
 import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import signal
 from scipy.linalg import lapack
 
 from ..atomic import write_text_atomic
@@ -51,6 +53,7 @@ from ..identification.accumulate import Accumulator, accumulate
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions, iter_chunks, observation_settings
 from ..preprocessing.filtering import (
+    PAD_PERIODS,
     FilterSettings,
     blas_threads,
     butterworth_settle_samples,
@@ -75,7 +78,7 @@ OUTER_SAMPLES = 65536
 #: decimated rows per joint collected before one LAPACK QR folds them into R_j
 FOLD_ROWS = 2048
 
-_GATHER_SOURCE = r"""
+_KERNELS_SOURCE = r"""
 /* symoro_gen.fleet.fused: copy the distinct columns of regressor rows (row i of W, stride ldw) to
    row i of X (stride ldx): X[i, u] = W[i, src[u]]. */
 void symoro_gather_rows(long m, const double *W, long ldw, const long *src, long U, double *X, long ldx)
@@ -87,34 +90,82 @@ void symoro_gather_rows(long m, const double *W, long ldw, const long *src, long
             x[u] = w[src[u]];
     }
 }
+
+/* Second-order sections along axis 0 of x (n rows, nch channels, C order), in place, forward or
+   (reverse != 0) backward, state zi (nch x nsec x 2) updated: the recursion of scipy.signal.sosfilt
+   (direct form II transposed) with the channels advanced together, without contracted multiply-adds so
+   that the numbers are SciPy's. */
+__attribute__((optimize("fp-contract=off")))
+void symoro_sosfilt_rows(long n, long nch, long nsec, const double *sos, double *x, double *zi, int reverse)
+{
+    for (long k = 0; k < n; k++) {
+        double *row = x + (reverse ? n - 1 - k : k) * nch;
+        for (long c = 0; c < nch; c++) {
+            double xc = row[c];
+            double *z = zi + c * nsec * 2;
+            for (long s = 0; s < nsec; s++) {
+                const double *f = sos + 6 * s;
+                double xn = f[0] * xc + z[2 * s];
+                z[2 * s] = f[1] * xc - f[4] * xn + z[2 * s + 1];
+                z[2 * s + 1] = f[2] * xc - f[5] * xn;
+                xc = xn;
+            }
+            row[c] = xc;
+        }
+    }
+}
 """
-_GATHER: list = []
-_GATHER_LOCK = threading.Lock()
+_KERNELS: list = []
+_KERNELS_LOCK = threading.Lock()
 
 
-def _c_gather() -> Callable | None:
-    """The compiled row gather (:data:`_GATHER_SOURCE`, built once per machine with the generated
-    models' compiler settings, :mod:`symoro_gen.runtime.ccompile`), or None without a C compiler
-    (then ``np.take``: the same numbers, ~4x slower copy)."""
-    with _GATHER_LOCK:
-        if not _GATHER:
-            fn = None
+def _c_kernels() -> dict[str, Callable] | None:
+    """The compiled helpers (:data:`_KERNELS_SOURCE`: the row gather and the multi-channel sections
+    filter), built once per machine with the generated models' compiler settings
+    (:mod:`symoro_gen.runtime.ccompile`), or None without a C compiler (then ``np.take`` and SciPy's
+    ``sosfiltfilt``: the same numbers, slower)."""
+    with _KERNELS_LOCK:
+        if not _KERNELS:
+            fns: dict[str, Callable] | None = None
             try:
                 from ..runtime.ccompile import build_library, user_cache
-                tag = hashlib.sha256(_GATHER_SOURCE.encode()).hexdigest()[:12]
-                c_path = user_cache() / f"fleet_gather_{tag}.c"
+                if ctypes.sizeof(ctypes.c_long) != 8:
+                    raise OSError("the helpers take 64-bit longs")
+                tag = hashlib.sha256(_KERNELS_SOURCE.encode()).hexdigest()[:12]
+                c_path = user_cache() / f"fleet_kernels_{tag}.c"
                 if not c_path.is_file():
                     c_path.parent.mkdir(parents=True, exist_ok=True)
-                    write_text_atomic(c_path, _GATHER_SOURCE)
+                    write_text_atomic(c_path, _KERNELS_SOURCE)
                 lib = ctypes.CDLL(str(build_library(c_path, timeout=60.0).path))
-                fn = lib.symoro_gather_rows
-                fn.restype = None
-                fn.argtypes = [ctypes.c_long, ctypes.c_void_p, ctypes.c_long, ctypes.c_void_p, ctypes.c_long,
-                               ctypes.c_void_p, ctypes.c_long]
-            except Exception:  # noqa: BLE001 - no compiler, read-only cache...: the NumPy copy does the same
-                fn = None
-            _GATHER.append(fn)
-        return _GATHER[0]
+                g, f = lib.symoro_gather_rows, lib.symoro_sosfilt_rows
+                L, P = ctypes.c_long, ctypes.c_void_p
+                g.restype, g.argtypes = None, [L, P, L, P, L, P, L]
+                f.restype, f.argtypes = None, [L, L, L, P, P, P, ctypes.c_int]
+                fns = {"gather": g, "sosfilt": f}
+            except Exception:  # noqa: BLE001 - no compiler, read-only cache...: NumPy/SciPy do the same
+                fns = None
+            _KERNELS.append(fns)
+        return _KERNELS[0]
+
+
+def _zero_phase_rows(q: np.ndarray, fs: float, cutoff_hz: float, order: int, source: str) -> np.ndarray:
+    """:func:`~symoro_gen.preprocessing.filtering.lowpass_positions` (zero-phase Butterworth, SciPy's
+    ``sosfiltfilt`` with its odd extension and steady-state initial conditions), C-ordered: with the
+    compiled sections filter the channels run together and in place (SciPy filters one channel at a
+    time, each a chain of dependent multiply-adds)."""
+    k = _c_kernels()
+    q = np.asarray(q, float)
+    padlen = min(q.shape[0] - 1, int(math.ceil(PAD_PERIODS * fs / cutoff_hz)))
+    if k is None or q.ndim != 2 or q.shape[0] < min_filter_samples(order) or padlen < 1:
+        return np.ascontiguousarray(lowpass_positions(q, fs, cutoff_hz, order, source=source))
+    sos = np.ascontiguousarray(signal.butter(order, cutoff_hz, fs=fs, output="sos"))
+    zi = signal.sosfilt_zi(sos)                                   # (nsec, 2)
+    ext = np.concatenate([2.0 * q[:1] - q[padlen:0:-1], q, 2.0 * q[-1:] - q[-2:-padlen - 2:-1]])
+    n, nch = ext.shape
+    for reverse in (0, 1):                                        # forward, then backward on its output
+        z = np.ascontiguousarray(zi[None, :, :] * (ext[-1] if reverse else ext[0])[:, None, None])
+        k["sosfilt"](n, nch, sos.shape[0], sos.ctypes.data, ext.ctypes.data, z.ctypes.data, reverse)
+    return ext[padlen:n - padlen]
 
 
 @dataclass(frozen=True, eq=False)
@@ -311,7 +362,8 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
     Wbuf = np.empty((R, n, nb))
     Wflat = Wbuf.reshape(R, n * nb)
     src = np.ascontiguousarray(cmap.source, dtype=np.int64)
-    gather = _c_gather() if ctypes.sizeof(ctypes.c_long) == 8 else None
+    kernels = _c_kernels()
+    gather = None if kernels is None else kernels["gather"]
     state = {"k_next": 0, "s_base": -(P - 1), "zpos": P - 1}   # next output; super-row of Z[0]; rows filled
 
     def outputs(i0: int, i1: int) -> np.ndarray:
@@ -347,8 +399,7 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
             lo, hi = max(0, e + a - margin), min(N, e + b + margin)
             # filter_and_differentiate, with the filtered positions made C-ordered once (sosfiltfilt along
             # axis 0 returns them column-major: every regressor call would copy its slices)
-            qf = np.ascontiguousarray(lowpass_positions(traj.q[lo:hi], fs, st.cutoff_hz, st.order,
-                                                        source=traj.source))
+            qf = _zero_phase_rows(traj.q[lo:hi], fs, st.cutoff_hz, st.order, traj.source)
             dq, ddq = differentiate(qf, 1.0 / fs), differentiate(qf, 1.0 / fs, second=True)
             off = e + a - lo
             tau = np.asarray(traj.tau[e + a:e + b], float)
