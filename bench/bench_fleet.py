@@ -10,9 +10,13 @@
 3. A simulated fleet (default 20 robots x 5 days x 1 min of 7-joint 1 kHz data, Parquet): wall time,
    peak memory per worker, the drifting robots flagged and no other; the throughput a 100-robot fleet
    logging 8 h a day would need to be processed in one night.
+4. Few robots, short logs (``python bench/bench_fleet.py few`` alone): SEEDS fleets of 4 robots x 5 days
+   x 5 s with one drifting robot; the fleets where a clean robot is flagged (none expected) and where the
+   drifting one is.
 
 Sizes: SYMORO_BENCH_KERNEL_HOURS (1.0), SYMORO_BENCH_FLEET_ROBOTS (20), SYMORO_BENCH_FLEET_DAYS (5),
-SYMORO_BENCH_FLEET_SECONDS (60). Run: ``python bench/bench_fleet.py`` (or ``make bench``).
+SYMORO_BENCH_FLEET_SECONDS (60), SYMORO_BENCH_FLEET_SEEDS (20), SYMORO_BENCH_KERNEL_RUNS (3, the kernel's
+figure is the best run). Run: ``python bench/bench_fleet.py`` (or ``make bench``).
 """
 from __future__ import annotations
 
@@ -33,6 +37,8 @@ HOURS = float(os.environ.get("SYMORO_BENCH_KERNEL_HOURS", "1.0"))
 N_ROBOTS = int(os.environ.get("SYMORO_BENCH_FLEET_ROBOTS", "20"))
 N_DAYS = int(os.environ.get("SYMORO_BENCH_FLEET_DAYS", "5"))
 SECONDS = float(os.environ.get("SYMORO_BENCH_FLEET_SECONDS", "60"))
+SEEDS = int(os.environ.get("SYMORO_BENCH_FLEET_SEEDS", "20"))
+RUNS = int(os.environ.get("SYMORO_BENCH_KERNEL_RUNS", "3"))
 
 
 def simulate_hour(path: Path) -> None:
@@ -113,9 +119,12 @@ def kernel(path: Path) -> None:
         st = observation_settings(tr, AssemblyOptions())
         cpu_rule = time.process_time() - c0
         given = AssemblyOptions(keep_signals=False, cutoff_hz=st.cutoff_hz, n_d=st.n_d)
-        t0, c0 = time.perf_counter(), time.process_time()
-        acc = fold_trajectory(m, tr, given, cmap=cm)
-        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
+        runs = []                                  # best of RUNS: the machine is shared, the best run is the
+        for _ in range(RUNS):                      # one the other processes disturbed least
+            t0, c0 = time.perf_counter(), time.process_time()
+            acc = fold_trajectory(m, tr, given, cmap=cm)
+            runs.append((time.process_time() - c0, time.perf_counter() - t0))
+        cpu, dt = min(runs)
         rss = peak_rss_mb()
         # the floors: the regressor alone (generated C, cache-sized calls), the FIR's flops, reading the log
         rng = np.random.default_rng(0)
@@ -139,8 +148,9 @@ def kernel(path: Path) -> None:
     # what the regressor's full-rate W would move through memory were it not consumed in cache (write + read)
     w_bytes = 2 * N * 7 * len(m.BASE_NAMES) * 8
     print(f"  kernel (fused: polyphase FIR with state, {cm.source.size} distinct columns of {cm.entry.size} "
-          f"gathered by a compiled copy, per-joint in-place LAPACK QR): {N:,} samples x 7 joints -> {acc.n_rows:,} rows (n_d = {st.n_d}, cut-off "
-          f"{st.cutoff_hz:.3g} Hz): {dt:.1f} s wall, {cpu:.1f} s CPU ({N / cpu:,.0f} samples per CPU-second), "
+          f"gathered by a compiled copy, q filtered by compiled Butterworth sections, per-joint in-place LAPACK QR): {N:,} samples x 7 joints -> {acc.n_rows:,} rows (n_d = {st.n_d}, cut-off "
+          f"{st.cutoff_hz:.3g} Hz): best of {RUNS} runs {cpu:.1f} s CPU, {dt:.1f} s wall ({N / cpu:,.0f} samples per "
+          f"CPU-second; all runs {', '.join(f'{c:.1f}' for c, _ in runs)} s CPU), "
           f"peak RSS {rss:.0f} MB ({rss - rss0:.0f} MB above the start, the memory-mapped log's pages included)")
     print(f"  + the filters' rule (f_dyn estimated from the log's positions, Welch): {cpu_rule:.1f} s CPU "
           f"(none when --cutoff and --decimate are given)")
@@ -232,9 +242,34 @@ def fleet(tmp: Path) -> None:
           f"8 h night: {int(np.ceil(need / per_core))} cores at the {per_core:,.0f} samples per CPU-second measured here")
 
 
+def few_robots(tmp: Path) -> None:
+    """False flags with few robots and short logs: SEEDS simulated fleets of 4 SCARA robots x 5 days x 5 s,
+    robot r01's viscous friction of joint 4 drifting +6 %/day: in how many a clean robot is flagged, in how
+    many the drifting one is."""
+    from symoro_gen.fleet import Drift, identify_fleet, open_client, simulate_fleet
+
+    false, found = [], 0
+    with open_client("threads:1") as client:
+        for seed in range(SEEDS):
+            root = tmp / f"few{seed}"
+            simulate_fleet(root, "scara", n_robots=4, n_days=5, duration=5.0, drifts=(Drift("r01", "FV4", 0.06),),
+                           seed=seed)
+            res = identify_fleet("scara", [root], "{robot}/{day}.parquet", client=client)
+            robots = {f["robot"] for f in res.flagged}
+            found += "r01" in robots
+            if robots - {"r01"}:
+                false.append(seed)
+    print(f"[fleet few robots] 4 robots x 5 days x 5 s, {SEEDS} seeds: a clean robot flagged in {len(false)} "
+          f"fleets {false}; the drifting robot flagged in {found} of {SEEDS}")
+
+
 def main() -> int:
     if len(sys.argv) == 3 and sys.argv[1] == "kernel":
         kernel(Path(sys.argv[2]))
+        return 0
+    if len(sys.argv) == 2 and sys.argv[1] == "few":
+        with tempfile.TemporaryDirectory(prefix="symoro_fleet_") as td:
+            few_robots(Path(td))
         return 0
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1",
                PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
@@ -249,6 +284,7 @@ def main() -> int:
         path.unlink()
         throughput(tmp)
         fleet(tmp)
+        few_robots(tmp)
     return 0
 
 
