@@ -63,6 +63,7 @@ from ..preprocessing.filtering import (
     min_filter_samples,
 )
 from ..preprocessing.trajectory import Trajectory
+from ..runtime.ccompile import build_library, user_cache
 
 __all__ = ["BATCH_SUPER_ROWS", "ColumnMap", "column_map", "fold_trajectories", "fold_trajectory", "fused_applies"]
 
@@ -128,7 +129,6 @@ def _c_kernels() -> dict[str, Callable] | None:
         if not _KERNELS:
             fns: dict[str, Callable] | None = None
             try:
-                from ..runtime.ccompile import build_library, user_cache
                 if ctypes.sizeof(ctypes.c_long) != 8:
                     raise OSError("the helpers take 64-bit longs")
                 tag = hashlib.sha256(_KERNELS_SOURCE.encode()).hexdigest()[:12]
