@@ -32,7 +32,7 @@ from ..observations import AssemblyOptions
 from ..report.plots import MissingDependencyError
 from .files import FleetError, LogFile, discover, group_by, plain_format, read_experiments, segments
 from .kernel import Partial, merge_partials, process_file, resolve_model
-from .stats import adjust, dersimonian_laird, level_z, trend_test
+from .stats import adjust, dersimonian_laird, level_z, line_fit, pooled_dispersion, trend_test
 
 __all__ = ["DEFAULT_ALPHA", "Z_DAY", "Estimate", "FleetResult", "identify_fleet", "open_client"]
 
@@ -411,6 +411,8 @@ def _judge(model, names, days, robots, fleet, skipped, alpha, correction) -> dic
     std = np.array([robots[r].std for r in rnames]).reshape(R, P)
     z, p, mean, mstd, tau = level_z(theta, std)
     slope, se, zt, pt = (np.full((R, P), np.nan) for _ in range(4))
+    series = {}
+    chi2, nu = np.full((R, P), np.nan), np.zeros((R, P), int)
     for i, r in enumerate(rnames):
         dl = list(days[r])
         if len(dl) < 3:
@@ -419,7 +421,12 @@ def _judge(model, names, days, robots, fleet, skipped, alpha, correction) -> dic
         for k in range(P):
             y = np.array([days[r][d].values[k] for d in dl])
             s = np.array([days[r][d].std[k] for d in dl])
-            slope[i, k], se[i, k], zt[i, k], pt[i, k] = trend_test(x, y, s)
+            series[i, k] = (x, y, s)
+            _, _, chi2[i, k], nu[i, k] = line_fit(x, y, s)
+    # the fleet's excess day-to-day scatter per parameter (pooled over robots) and its degrees of freedom
+    pooled = [pooled_dispersion(chi2[:, k], nu[:, k]) for k in range(P)]
+    for (i, k), (x, y, s) in series.items():
+        slope[i, k], se[i, k], zt[i, k], pt[i, k] = trend_test(x, y, s, dispersion=pooled[k][0], dof=pooled[k][1])
     rej, padj = adjust(np.stack([p, pt]), alpha, correction)
     tau_all = np.array([np.nan] * P)
     if R >= 2:
@@ -450,5 +457,6 @@ def _judge(model, names, days, robots, fleet, skipped, alpha, correction) -> dic
     flagged.sort(key=lambda f: -abs(f["z"]))
     return {"level": {"z": z, "p": p, "mean": mean, "mean_std": mstd, "tau": tau, "tau_all": tau_all,
                       "p_adjusted": padj[0]},
-            "trend": {"slope": slope, "se": se, "z": zt, "p": pt, "p_adjusted": padj[1]},
+            "trend": {"slope": slope, "se": se, "z": zt, "p": pt, "p_adjusted": padj[1],
+                      "dispersion": np.array([d for d, _ in pooled]), "dof": np.array([n for _, n in pooled])},
             "flagged": flagged}

@@ -17,12 +17,16 @@ one sample in ``n_d`` kept, zero padding beyond the ends as ``resample_poly``), 
 * **only the distinct columns**: the structurally non-zero entries of ``W`` (per joint row) that are
   equal up to a constant factor for random states are equal for all states (analytic functions);
   only one of each is filtered, then scaled back after decimation (80x fewer rows);
-* **in cache**: the regressor is evaluated ``REGRESSOR_ROWS`` samples at a time into a reused buffer
-  that stays in L2, and its distinct columns copied straight into the layout of the matrix product
-  (``BATCH_SUPER_ROWS`` super-rows per product);
-* **fewer Householder passes**: decimated rows are collected and folded into ``R_j`` by one stacked QR
-  of ``[R_j; rows]`` every ``fold_rows`` rows
-  (:class:`~symoro_gen.identification.accumulate.Accumulator`).
+* **in cache**: the regressor is evaluated ``REGRESSOR_ROWS`` samples at a time into a reused buffer, and
+  its distinct columns copied straight into the layout of the matrix product (``BATCH_SUPER_ROWS``
+  super-rows per product) by a compiled row gather (:data:`_KERNELS_SOURCE`; ``np.take`` without a C
+  compiler, same numbers); the products fill a window of ``RING_SUPER_ROWS`` super-rows whose outputs
+  are summed by 21 vector adds, its last 20 products carried to the front when it is full;
+* **per-joint columns, in-place QR**: joint j's rows are non-zero only in the columns of its own entries
+  (links j..n and its drive), so its factor is kept on those columns (exact) and the decimated rows are
+  written scaled into a Fortran-ordered ``[R_j; rows]`` buffer that LAPACK ``dgeqrf`` factors in place
+  every ``fold_rows`` rows (Golub & Van Loan, Matrix Computations, 4th ed., sec. 5.2, Householder QR;
+  the stacking is the TSQR update of Demmel et al. 2012).
 
 The Butterworth filter of ``q`` is zero-phase (forward-backward), so it is applied per outer block of
 samples with a settling margin at both ends, as :func:`~symoro_gen.observations.iter_chunks` does: its
@@ -32,36 +36,136 @@ payload columns, recorded derivatives) run through :func:`~symoro_gen.observatio
 """
 from __future__ import annotations
 
-from collections.abc import Iterable
+import ctypes
+import hashlib
+import math
+import threading
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.lib.stride_tricks import as_strided
+from scipy import signal
+from scipy.linalg import lapack
 
+from ..atomic import write_text_atomic
 from ..errors import ShapeError
 from ..identification.accumulate import Accumulator, accumulate
 from ..model import IdentificationModel
-from ..observations import AssemblyOptions, ObservationSystem, iter_chunks, observation_settings
+from ..observations import AssemblyOptions, iter_chunks, observation_settings
 from ..preprocessing.filtering import (
+    PAD_PERIODS,
     FilterSettings,
     blas_threads,
     butterworth_settle_samples,
     decimation_filter,
-    filter_and_differentiate,
+    differentiate,
+    lowpass_positions,
     min_filter_samples,
 )
 from ..preprocessing.trajectory import Trajectory
+from ..runtime.ccompile import build_library, user_cache
 
 __all__ = ["BATCH_SUPER_ROWS", "ColumnMap", "column_map", "fold_trajectories", "fold_trajectory", "fused_applies"]
 
-#: super-rows (``n_d`` samples each) per regressor call and matrix product: ~1-2 MB of buffers, in L2
-BATCH_SUPER_ROWS = 64
-#: samples per regressor call: its output (~1.8 MB for 7 joints x 64 columns) stays in L2 for the copy
-REGRESSOR_ROWS = 512
+#: super-rows (``n_d`` samples each) per matrix product: the batch's inputs (16 x 80 x 208 doubles at
+#: n_d = 80, 2 MB) and products stay in the L2/L3 caches
+BATCH_SUPER_ROWS = 16
+#: samples per regressor call: its output (640 x 7 x 64 doubles, 2.3 MB) is gathered while still cached
+REGRESSOR_ROWS = 640
+#: super-rows of products kept before the outputs are summed and the window shifted
+RING_SUPER_ROWS = 128
 #: full-rate samples per Butterworth block (the zero-phase filter's margins are paid once per block)
 OUTER_SAMPLES = 65536
-#: decimated rows per joint collected before one stacked QR folds them into R_j
-FOLD_ROWS = 4096
+#: decimated rows per joint collected before one LAPACK QR folds them into R_j
+FOLD_ROWS = 2048
+
+_KERNELS_SOURCE = r"""
+/* symoro_gen.fleet.fused: copy the distinct columns of regressor rows (row i of W, stride ldw) to
+   row i of X (stride ldx): X[i, u] = W[i, src[u]]. */
+void symoro_gather_rows(long m, const double *W, long ldw, const long *src, long U, double *X, long ldx)
+{
+    for (long i = 0; i < m; i++) {
+        const double *w = W + i * ldw;
+        double *x = X + i * ldx;
+        for (long u = 0; u < U; u++)
+            x[u] = w[src[u]];
+    }
+}
+
+/* Second-order sections along axis 0 of x (n rows, nch channels, C order), in place, forward or
+   (reverse != 0) backward, state zi (nch x nsec x 2) updated: the recursion of scipy.signal.sosfilt
+   (direct form II transposed) with the channels advanced together, without contracted multiply-adds so
+   that the numbers are SciPy's. */
+__attribute__((optimize("fp-contract=off")))
+void symoro_sosfilt_rows(long n, long nch, long nsec, const double *sos, double *x, double *zi, int reverse)
+{
+    for (long k = 0; k < n; k++) {
+        double *row = x + (reverse ? n - 1 - k : k) * nch;
+        for (long c = 0; c < nch; c++) {
+            double xc = row[c];
+            double *z = zi + c * nsec * 2;
+            for (long s = 0; s < nsec; s++) {
+                const double *f = sos + 6 * s;
+                double xn = f[0] * xc + z[2 * s];
+                z[2 * s] = f[1] * xc - f[4] * xn + z[2 * s + 1];
+                z[2 * s + 1] = f[2] * xc - f[5] * xn;
+                xc = xn;
+            }
+            row[c] = xc;
+        }
+    }
+}
+"""
+_KERNELS: list = []
+_KERNELS_LOCK = threading.Lock()
+
+
+def _c_kernels() -> dict[str, Callable] | None:
+    """The compiled helpers (:data:`_KERNELS_SOURCE`: the row gather and the multi-channel sections
+    filter), built once per machine with the generated models' compiler settings
+    (:mod:`symoro_gen.runtime.ccompile`), or None without a C compiler (then ``np.take`` and SciPy's
+    ``sosfiltfilt``: the same numbers, slower)."""
+    with _KERNELS_LOCK:
+        if not _KERNELS:
+            fns: dict[str, Callable] | None = None
+            try:
+                if ctypes.sizeof(ctypes.c_long) != 8:
+                    raise OSError("the helpers take 64-bit longs")
+                tag = hashlib.sha256(_KERNELS_SOURCE.encode()).hexdigest()[:12]
+                c_path = user_cache() / f"fleet_kernels_{tag}.c"
+                if not c_path.is_file():
+                    c_path.parent.mkdir(parents=True, exist_ok=True)
+                    write_text_atomic(c_path, _KERNELS_SOURCE)
+                lib = ctypes.CDLL(str(build_library(c_path, timeout=60.0).path))
+                g, f = lib.symoro_gather_rows, lib.symoro_sosfilt_rows
+                L, P = ctypes.c_long, ctypes.c_void_p
+                g.restype, g.argtypes = None, [L, P, L, P, L, P, L]
+                f.restype, f.argtypes = None, [L, L, L, P, P, P, ctypes.c_int]
+                fns = {"gather": g, "sosfilt": f}
+            except Exception:  # noqa: BLE001 - no compiler, read-only cache...: NumPy/SciPy do the same
+                fns = None
+            _KERNELS.append(fns)
+        return _KERNELS[0]
+
+
+def _zero_phase_rows(q: np.ndarray, fs: float, cutoff_hz: float, order: int, source: str) -> np.ndarray:
+    """:func:`~symoro_gen.preprocessing.filtering.lowpass_positions` (zero-phase Butterworth, SciPy's
+    ``sosfiltfilt`` with its odd extension and steady-state initial conditions), C-ordered: with the
+    compiled sections filter the channels run together and in place (SciPy filters one channel at a
+    time, each a chain of dependent multiply-adds)."""
+    k = _c_kernels()
+    q = np.asarray(q, float)
+    padlen = min(q.shape[0] - 1, int(math.ceil(PAD_PERIODS * fs / cutoff_hz)))
+    if k is None or q.ndim != 2 or q.shape[0] < min_filter_samples(order) or padlen < 1:
+        return np.ascontiguousarray(lowpass_positions(q, fs, cutoff_hz, order, source=source))
+    sos = np.ascontiguousarray(signal.butter(order, cutoff_hz, fs=fs, output="sos"))
+    zi = signal.sosfilt_zi(sos)                                   # (nsec, 2)
+    ext = np.concatenate([2.0 * q[:1] - q[padlen:0:-1], q, 2.0 * q[-1:] - q[-2:-padlen - 2:-1]])
+    n, nch = ext.shape
+    for reverse in (0, 1):                                        # forward, then backward on its output
+        z = np.ascontiguousarray(zi[None, :, :] * (ext[-1] if reverse else ext[0])[:, None, None])
+        k["sosfilt"](n, nch, sos.shape[0], sos.ctypes.data, ext.ctypes.data, z.ctypes.data, reverse)
+    return ext[padlen:n - padlen]
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,36 +234,86 @@ def _polyphase(st: FilterSettings) -> np.ndarray:
 
 
 class _Folder:
-    """Collects decimated outputs ``(k, C)`` (distinct columns, then Y of every joint) and folds them
-    into per-joint factors every ``fold_rows`` rows."""
+    """Folds decimated outputs ``(k, C)`` (distinct columns, then Y of every joint) into per-joint QR
+    factors. Joint j's rows are non-zero only in the columns of its own entries of ``W`` (the parameters
+    of links j..n and its drive), so its factor is kept on those columns only (``L_j + 1`` with Y) and
+    embedded in the full ``(c+1, c+1)`` factor at the end (exact: the others are zero columns). Rows are
+    written scaled straight into a Fortran-ordered ``[R_j; rows]`` buffer that LAPACK ``dgeqrf``
+    factors in place every ``fold_rows`` rows."""
 
     def __init__(self, names: tuple[str, ...], cmap: ColumnMap, fold_rows: int, acc: Accumulator | None):
-        self.names, self.cmap, self.fold_rows = names, cmap, fold_rows
-        self.acc = acc if acc is not None else Accumulator.empty(names, cmap.n)
-        self.parts: list[np.ndarray] = []
-        self.rows = 0
+        self.names, self.cmap, self.fold_rows = names, cmap, max(1, int(fold_rows))
+        self.acc = acc
+        n, nb, U = cmap.n, cmap.nb, cmap.source.size
+        joint, col = np.divmod(cmap.entry, nb)
+        self.cols, self.src, self.scale, self.buf, self.lwork = [], [], [], [], []
+        for j in range(n):
+            sel = np.flatnonzero(joint == j)                     # entries sorted: columns ascending
+            self.cols.append(col[sel])
+            self.src.append(np.append(cmap.column[sel], U + j))  # Y of joint j last
+            self.scale.append(np.append(cmap.scale[sel], 1.0))
+            L1 = sel.size + 1
+            self.buf.append(np.zeros((L1 + self.fold_rows, L1), order="F"))
+            self.lwork.append(max(1, int(lapack.dgeqrf_lwork(L1 + self.fold_rows, L1)[0])))
+        self.rows = 0                                            # rows in the buffers (same for every joint)
+        self.total = [0] * n
+        self.yy = [0.0] * n
 
     def add(self, y: np.ndarray) -> None:
-        if y.shape[0]:
-            self.parts.append(y)
-            self.rows += y.shape[0]
-            if self.rows >= self.fold_rows:
-                self.flush()
+        i = 0
+        while i < y.shape[0]:
+            take = min(y.shape[0] - i, self.fold_rows - self.rows)
+            part = y[i:i + take]
+            for j, buf in enumerate(self.buf):
+                L1 = buf.shape[1]
+                block = buf[L1 + self.rows:L1 + self.rows + take]
+                np.multiply(part[:, self.src[j]], self.scale[j], out=block)
+                self.yy[j] += float(block[:, -1] @ block[:, -1])
+                self.total[j] += take
+            self.rows += take
+            i += take
+            if self.rows == self.fold_rows:
+                self._fold()
+
+    def _fold(self) -> None:
+        for j, buf in enumerate(self.buf):
+            L1 = buf.shape[1]
+            qr, _, _, info = lapack.dgeqrf(buf, lwork=self.lwork[j], overwrite_a=1)
+            if info != 0:
+                raise ShapeError(f"LAPACK dgeqrf failed (info {info}) folding the rows of joint {j + 1}")
+            buf[:L1] = np.triu(qr[:L1])                          # in place (F-ordered): qr is buf
+        self.rows = 0
 
     def flush(self) -> None:
-        if not self.rows:
-            return
-        y = np.concatenate(self.parts, axis=0) if len(self.parts) > 1 else self.parts[0]
-        self.parts, self.rows = [], 0
+        if self.rows:
+            for buf in self.buf:                                 # the unused rows are zero rows
+                buf[buf.shape[1] + self.rows:] = 0.0
+            self._fold()
+
+    def result(self) -> Accumulator:
+        """The factors so far (pending rows folded), merged with the accumulator given, if any."""
+        self.flush()
         cm = self.cmap
-        k, n, nb = y.shape[0], cm.n, cm.nb
-        U = cm.source.size
-        Wd = np.zeros((k, n * nb))
-        Wd[:, cm.entry] = y[:, cm.column] * cm.scale
-        # rows grouped per joint (the ObservationSystem layout of iter_chunks)
-        W = Wd.reshape(k, n, nb).transpose(1, 0, 2).reshape(n * k, nb)
-        Y = y[:, U:U + n].T.reshape(n * k)
-        self.acc = self.acc.add(ObservationSystem(W=W, Y=Y, names=self.names, joint=np.repeat(np.arange(n), k)))
+        c1 = cm.nb + 1
+        Rs = []
+        for j, buf in enumerate(self.buf):
+            idx = np.append(self.cols[j], cm.nb)
+            R = np.zeros((c1, c1))
+            R[np.ix_(np.arange(idx.size), idx)] = buf[:idx.size]
+            Rs.append(R)
+        new = Accumulator(self.names, tuple(Rs), tuple(self.total), tuple(self.yy))
+        a = self.acc
+        if a is None:
+            return new
+        nj = max(a.n_joints, new.n_joints)
+        Rm, rows, yy = [], [], []
+        for j in range(nj):
+            parts = [x.R[j] for x in (a, new) if j < x.n_joints]
+            Rj = np.asarray(np.linalg.qr(np.vstack(parts), mode="r")) if len(parts) > 1 else parts[0]
+            Rm.append(Rj)
+            rows.append(sum(x.rows[j] for x in (a, new) if j < x.n_joints))
+            yy.append(sum(x.yy[j] for x in (a, new) if j < x.n_joints))
+        return Accumulator(self.names, tuple(Rm), tuple(rows), tuple(yy), a.weighted)
 
 
 def _regressor(model: IdentificationModel, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray,
@@ -189,6 +343,7 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
     n_out = -(-nseg // nd)
     n_data = n_out                         # super-rows holding samples: s = half .. half + n_out - 1
     U = cmap.source.size
+    C = U + n                              # filtered columns: the distinct ones of W, then the torques
     B = max(1, int(batch_super_rows))
     margin = butterworth_settle_samples(fs, st.cutoff_hz, st.order) + 2
     if opts.chunk_samples is not None:
@@ -196,33 +351,56 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
     else:
         outer = max(1, max(int(outer_samples), int(opts.max_chunk_mb * 1e6 / (8.0 * 4 * n))) // nd)
     outer = max(B, outer // B * B)
-    Xw = np.zeros((B, nd, U))             # super-row b, sample r of the batch: Xw[b, r] (distinct W columns)
-    Xy = np.zeros((B, nd, n))             # and the torques
-    # Z of super-rows s0 - (P - 1) ... s1 - 1: the last P - 1 of the previous batch carried over (the state
-    # across batches), then this batch's, written in place by the matrix product
-    Zw, Zy = np.zeros((P - 1 + B, P, U)), np.zeros((P - 1 + B, P, n))
+    X = np.zeros((B, nd, C))               # super-row b, sample r of the batch: X[b, r] (W columns, then tau)
+    X2 = X.reshape(B * nd, C)
+    # Z[t] = H X of super-row s_base + t (zero before the segment): a window of G batches, the last P - 1
+    # rows carried to the front when it is full (the state across batches: no sample filtered twice)
+    G = max(1, -(-RING_SUPER_ROWS // B))
+    Z = np.zeros((P - 1 + G * B, P, C))
+    Y = np.empty((G * B + P, C))           # outputs of one window
     R = max(1, min(int(regressor_rows), B * nd))
     Wbuf = np.empty((R, n, nb))
-    Xw2 = Xw.reshape(B * nd, U)
-    src = cmap.source
-    k_next = 0                             # next output index to emit
+    Wflat = Wbuf.reshape(R, n * nb)
+    src = np.ascontiguousarray(cmap.source, dtype=np.int64)
+    kernels = _c_kernels()
+    gather = None if kernels is None else kernels["gather"]
+    state = {"k_next": 0, "s_base": -(P - 1), "zpos": P - 1}   # next output; super-row of Z[0]; rows filled
 
-    def outputs(i0: int, i1: int, Zs: tuple[np.ndarray, ...] = (Zw, Zy)) -> np.ndarray:
-        """Outputs i0..i1-1 of the window: ``y_i = sum_p Z[i + p, p]`` (output k = s0 - half + i)."""
-        out = []
-        for Z in Zs:
-            s_0, s_1, s_2 = Z.strides
-            V = as_strided(Z, shape=(Z.shape[0] - P + 1, P, Z.shape[2]), strides=(s_0, s_0 + s_1, s_2),
-                           writeable=False)
-            out.append(V[i0:i1].sum(axis=1))
-        return np.concatenate(out, axis=1)
+    def outputs(i0: int, i1: int) -> np.ndarray:
+        """Window outputs i0..i1-1: ``y_i = sum_p Z[i + p, p]`` (21 strided vector adds), output
+        ``k = s_base + half + i``."""
+        y = Y[:i1 - i0] if i1 - i0 <= Y.shape[0] else np.empty((i1 - i0, C))
+        np.copyto(y, Z[i0:i1, 0])
+        for p in range(1, P):
+            y += Z[i0 + p:i1 + p, p]
+        return y
+
+    def emit() -> None:
+        """Fold every output whose P super-rows are in the window (and that exists)."""
+        sb, zp = state["s_base"], state["zpos"]
+        i0 = state["k_next"] - sb - half
+        i1 = min(zp - P, n_out - 1 - sb - half) + 1
+        if i1 > i0:
+            folder.add(outputs(i0, i1))
+            state["k_next"] = sb + half + i1
+
+    def shift() -> None:
+        """Emit, then carry the last P - 1 rows of the window to its front."""
+        emit()
+        zp = state["zpos"]
+        Z[:P - 1] = Z[zp - (P - 1):zp]
+        state["s_base"] += zp - (P - 1)
+        state["zpos"] = P - 1
 
     with blas_threads(opts.blas_threads):
         for o0 in range(0, n_data, outer):
             o1 = min(n_data, o0 + outer)
             a, b = o0 * nd, min(nseg, o1 * nd)                     # segment samples of this outer block
             lo, hi = max(0, e + a - margin), min(N, e + b + margin)
-            qf, dq, ddq = filter_and_differentiate(traj.q[lo:hi], fs, st.cutoff_hz, st.order, source=traj.source)
+            # filter_and_differentiate, with the filtered positions made C-ordered once (sosfiltfilt along
+            # axis 0 returns them column-major: every regressor call would copy its slices)
+            qf = _zero_phase_rows(traj.q[lo:hi], fs, st.cutoff_hz, st.order, traj.source)
+            dq, ddq = differentiate(qf, 1.0 / fs), differentiate(qf, 1.0 / fs, second=True)
             off = e + a - lo
             tau = np.asarray(traj.tau[e + a:e + b], float)
             for s0 in range(o0, o1, B):
@@ -231,30 +409,28 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
                 m0, m1 = (s0 - o0) * nd, min(b - a, (s1 - o0) * nd)  # rows of this batch in the outer block
                 m = m1 - m0
                 if m < B * nd:                                      # the last batch: zeros beyond the segment
-                    Xw[...] = 0.0
-                    Xy[...] = 0.0
+                    X[...] = 0.0
                 for r0 in range(0, m, R):                           # regressor in cache-sized calls
                     r1 = min(m, r0 + R)
                     i0, i1 = off + m0 + r0, off + m0 + r1
                     Wb = _regressor(model, qf[i0:i1], dq[i0:i1], ddq[i0:i1], Wbuf[:r1 - r0])
-                    np.take(Wb.reshape(r1 - r0, n * nb), src, axis=1, out=Xw2[r0:r1], mode="clip")
-                Xy.reshape(B * nd, n)[:m] = tau[m0:m1]
-                np.matmul(H, Xw, out=Zw[P - 1:])
-                np.matmul(H, Xy, out=Zy[P - 1:])
-                # outputs i < nbt are complete (their last super-row, s0 - half + i + half, is in this batch)
-                k0 = s0 - half
-                i_first = max(0, k_next - k0)
-                if i_first < nbt:
-                    folder.add(outputs(i_first, nbt))
-                    k_next = k0 + nbt
-                Zw[:P - 1] = Zw[nbt:nbt + P - 1]
-                Zy[:P - 1] = Zy[nbt:nbt + P - 1]
-        # the outputs left only lack zero-padding super-rows: with Z = 0 there, they are complete
-        # (window index i is now output n_data - half + i)
-        kp = n_data - half
-        if n_out > k_next:
-            tail = tuple(np.concatenate([Z[:P - 1], np.zeros((half + 1,) + Z.shape[1:])]) for Z in (Zw, Zy))
-            folder.add(outputs(k_next - kp, n_out - kp, tail))
+                    if gather is not None:                          # Wb is Wbuf[:r1 - r0] (filled in place)
+                        gather(r1 - r0, Wflat.ctypes.data, n * nb, src.ctypes.data, U, X2[r0:].ctypes.data, C)
+                    else:
+                        X2[r0:r1, :U] = np.take(Wb.reshape(r1 - r0, n * nb), src, axis=1)
+                X2[:m, U:] = tau[m0:m1]
+                if state["zpos"] + B > Z.shape[0]:
+                    shift()
+                zp = state["zpos"]
+                np.matmul(H, X, out=Z[zp:zp + B])
+                state["zpos"] = zp + nbt
+        # the last outputs also use the zero padding after the segment: half zero super-rows
+        if state["zpos"] + half > Z.shape[0]:
+            shift()
+        zp = state["zpos"]
+        Z[zp:zp + half] = 0.0
+        state["zpos"] = zp + half
+        emit()
 
 
 def fold_trajectory(model: IdentificationModel, traj: Trajectory, options: AssemblyOptions | None = None,
@@ -299,8 +475,7 @@ def fold_trajectory(model: IdentificationModel, traj: Trajectory, options: Assem
     cm = cmap if cmap is not None else column_map(model, n, len(names))
     folder = _Folder(names, cm, fold_rows, acc)
     _fold_fused(model, traj, st, opts, cm, folder, batch_super_rows, outer_samples, regressor_rows)
-    folder.flush()
-    return folder.acc
+    return folder.result()
 
 
 def fold_trajectories(model: IdentificationModel, trajectories: Iterable[Trajectory],

@@ -29,6 +29,7 @@ from symoro_gen.fleet.stats import (
     benjamini_hochberg,
     dersimonian_laird,
     holm,
+    pooled_dispersion,
     trend_test,
 )
 from symoro_gen.identification import fit_wls
@@ -269,7 +270,50 @@ def test_statistics_against_direct_definitions():
     y = 2.0 + 0.3 * x + rng.normal(0, 0.01, 6)
     s = np.full(6, 0.01)
     slope, _se, z, pv = trend_test(x, y, s)
-    assert np.isclose(slope, np.polyfit(x, y, 1)[0]) and z > 10 and pv < 1e-10
+    assert np.isclose(slope, np.polyfit(x, y, 1)[0]) and z > 10 and pv < 1e-6
+
+
+def test_trend_reference_distributions():
+    """The trend's standard error and p-value against ordinary least squares (scipy's linregress: the
+    scale estimated from the residuals, Student's t with D - 2 dof) when the days scatter more than their
+    sigmas; the pooled fleet dispersion with its dof; the plain normal test when the sigmas hold."""
+    from scipy import stats as st
+
+    rng = np.random.default_rng(1)
+    x = np.arange(5.0)
+    y = 1.0 + 0.02 * x + rng.normal(0, 0.01, 5)
+    s = np.full(5, 0.001)                          # sigmas 10x too small: the own Birge ratio sets the scale
+    slope, se, z, p = trend_test(x, y, s)
+    ref = st.linregress(x, y)
+    assert np.isclose(slope, ref.slope) and np.isclose(se, ref.stderr) and np.isclose(p, ref.pvalue)
+    # a fleet dispersion larger than the robot's own: it sets the scale, with its degrees of freedom
+    own = (ref.stderr / (0.001 / np.sqrt(10.0))) ** 2
+    slope, se, z, p = trend_test(x, y, s, dispersion=4 * own, dof=12)
+    assert np.isclose(se, 2 * ref.stderr) and np.isclose(p, 2 * st.t.sf(abs(z), 12))
+    # the robot's own ratio above the fleet's: it sets the scale (a guard), the pooled dof the reference
+    slope, se, z, p = trend_test(x, y, s, dispersion=own / 4, dof=12)
+    assert np.isclose(se, ref.stderr) and np.isclose(p, 2 * st.t.sf(abs(z), 12))
+    # sigmas that hold (scatter below them): the slope's own standard error, normal reference
+    s = np.full(5, 0.05)
+    slope, se, z, p = trend_test(x, y, s, dispersion=0.5, dof=12)
+    assert np.isclose(se, 0.05 / np.sqrt(10.0)) and np.isclose(p, 2 * st.norm.sf(abs(z)))
+    # pooling: sum of chi2 over sum of dof, robots without a line (NaN, dof 0) left out
+    assert pooled_dispersion(np.array([3.0, np.nan, 1.0]), np.array([3, 0, 1])) == (1.0, 4)
+    assert np.isnan(pooled_dispersion(np.array([np.nan]), np.array([0]))[0])
+
+
+@pytest.mark.parametrize("seed", [12, 16, 27])
+def test_few_robots_short_logs_no_false_flag(tmp_path, threads_client, seed):
+    """4 robots x 5 days x 5 s: one robot's daily sigmas say less than its days scatter, and 3 others
+    estimate the fleet's spread poorly. Seed 12 flagged a clean robot's ZZ4/MX4 trend (z = 4.4 against a
+    normal reference with its own 3-dof Birge ratio); with the pooled dispersion and the t reference no
+    clean robot is flagged and the drifting one still is."""
+    simulate_fleet(tmp_path, "scara", n_robots=4, n_days=5, duration=5.0, drifts=(Drift("r01", "FV4", 0.06),),
+                   seed=seed)
+    res = identify_fleet("scara", [tmp_path], "{robot}/{day}.parquet", client=threads_client)
+    assert {f["robot"] for f in res.flagged} == {"r01"}, res.summary()
+    assert "FV4" in [f["parameter"] for f in res.flagged]
+    assert np.all(res.trend["dof"] == 4 * 3)
 
 
 def test_cli_errors_name_the_file_and_the_pattern(cli, tmp_path):

@@ -63,6 +63,34 @@ def test_fused_kernel_gives_the_rows_of_the_assembly(kw):
     assert np.linalg.norm(fg.std - fr.std) <= 1e-6 * np.linalg.norm(fr.std)
 
 
+def test_compiled_helpers_and_numpy_scipy_give_identical_factors(monkeypatch):
+    """The compiled helpers (row gather of the distinct columns, Butterworth sections with the channels
+    together) and their fallbacks without a C compiler (``np.take``, SciPy's ``sosfiltfilt``) give the
+    same numbers: bit-identical filtered positions and factors; and an accumulator given to fold into gets
+    the merge of its rows and the new ones (same Gram matrix as both experiments folded at once)."""
+    from symoro_gen.fleet import fused
+    from symoro_gen.preprocessing.filtering import lowpass_positions
+
+    if fused._c_kernels() is None:
+        pytest.skip("no C compiler here: only the NumPy/SciPy fallbacks can run")
+    model = load_model("lwr4")
+    tr = _recording("lwr4", 4.1, seed=3)
+    opts = AssemblyOptions(keep_signals=False)
+    for q in (tr.q, tr.q[:900, :3]):
+        assert np.array_equal(fused._zero_phase_rows(q, 1000.0, 12.5, 4, "x"), lowpass_positions(q, 1000.0, 12.5, 4))
+    compiled = fold_trajectory(model, tr, opts)
+    monkeypatch.setattr(fused, "_KERNELS", [None])
+    numpy_copy = fold_trajectory(model, tr, opts)
+    for a, b in zip(compiled.R, numpy_copy.R):
+        assert np.array_equal(a, b)
+    assert compiled.yy == numpy_copy.yy and compiled.rows == numpy_copy.rows
+    tr2 = _recording("lwr4", 3.2, seed=4)
+    both = fold_trajectory(model, tr2, opts, acc=compiled)
+    ref = accumulate(list(iter_chunks(model, tr, opts, progress=False)) + list(iter_chunks(model, tr2, opts, progress=False)))
+    assert both.rows == ref.rows
+    _gram_close(both, ref, 1e-12)
+
+
 def test_fused_kernel_falls_back_to_the_assembly_for_other_options():
     """Options the fused kernel does not cover (IIR decimation, no decimation, low-velocity rows) give the
     assembly's own factors."""
