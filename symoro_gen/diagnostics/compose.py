@@ -398,7 +398,7 @@ class _Tester:
         self.lag = hac_lag(self.e0, groups)
         self.rss_joint = np.bincount(joint, weights=self.e0 ** 2, minlength=int(joint.max()) + 1)
 
-    def _with_plain(self, P):
+    def with_plain(self, P):
         """Basis, residual, leverage, rank and joint RSS with the plain effect's columns ``P`` added to the
         model (the part of them outside its span; none when they are already in it)."""
         base = (self.U, self.e0, self.lev0, self.rank, self.rss_joint)
@@ -416,8 +416,8 @@ class _Tester:
         rss = np.bincount(self.joint, weights=e0 ** 2, minlength=self.rss_joint.size)
         return (np.hstack([self.U, Q]), e0, self.lev0 + np.einsum("ij,ij->i", Q, Q), self.rank + Q.shape[1], rss)
 
-    def __call__(self, X, j, P=None):
-        U, e0, lev0, rank, rss_joint = self._with_plain(P)
+    def __call__(self, X, j, P=None, base=None):
+        U, e0, lev0, rank, rss_joint = self.with_plain(P) if base is None else base
         Xw = X * self.w[:, None]
         Xp = Xw - U @ (U.T @ Xw)
         G = Xp.T @ Xp
@@ -480,11 +480,14 @@ def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np
     fams = library(sig, **library_kw) if families is None else families
     tester = _Tester(A, y, w, np.asarray(sig.joint), groups)
     rows = []
+    plains: dict = {}   # the plain effect's design depends on (effect, joint, ripple order, Coulomb scale) only
     for fam in fams:
         best = None
-        plain = fam[0].plain_columns(sig) if fam else None
         for c in fam:
-            out = tester(c.columns(sig), c.joint, plain if c.effect != "ripple" else c.plain_columns(sig))
+            key = (c.effect, c.joint, c.order if c.effect == "ripple" else None, c.coulomb_v)
+            if key not in plains:
+                plains[key] = tester.with_plain(c.plain_columns(sig))
+            out = tester(c.columns(sig), c.joint, base=plains[key])
             if out is None:
                 continue
             if best is None or out[0] < best[1][0] or (out[0] == best[1][0] and out[2] > best[1][2]):
