@@ -171,17 +171,20 @@ def hac_covariance(Z, groups=None, max_lag: int = 4, *, segments: list | None = 
     S = np.zeros((p, p))
     segs = segments if segments is not None else _segments(groups, Z.shape[0])
     for idx in segs:
-        z = Z[idx]
+        n_i = idx.size
+        # a contiguous run of rows (the usual case: rows grouped per joint and experiment) is sliced, not copied
+        z = Z[idx[0]:idx[0] + n_i] if n_i and idx[-1] - idx[0] + 1 == n_i else Z[idx]
         if L == 0:
             S += z.T @ z
             continue
-        c = np.zeros((z.shape[0] + L + 1, p))
-        np.cumsum(z, axis=0, out=c[1:z.shape[0] + 1])
-        c[z.shape[0] + 1:] = c[z.shape[0]]
+        c = np.empty((n_i + L + 1, p))
+        c[0] = 0.0
+        np.cumsum(z, axis=0, out=c[1:n_i + 1])
+        c[n_i + 1:] = c[n_i]
         # M_t = c[t + L + 1] - c[t] for t = -L .. N-1 (c extended by 0 before the start)
-        top = c                                   # c[k], k = 0 .. N+L
-        low = np.vstack([np.zeros((L + 1, p)), c[:-(L + 1)]])
-        M = top - low
+        M = np.empty_like(c)
+        M[:L + 1] = c[:L + 1]
+        np.subtract(c[L + 1:], c[:-(L + 1)], out=M[L + 1:])
         S += (M.T @ M) / (L + 1.0)
     return S
 
