@@ -162,11 +162,11 @@ class BlockedLS:
         self.A, self.y, self.w = A, y, w
         key = (A.shape, _fingerprint(A), _fingerprint(y), _fingerprint(w), _fingerprint(np.asarray(blocks, float)))
         hit = _FOLD_CACHE.get(key)
+        self.folds: list[_Fold] = []
         if hit is not None and np.array_equal(hit[0], A) and np.array_equal(hit[1], y) and np.array_equal(hit[2], w) \
                 and np.array_equal(hit[3], blocks):
             self.folds = hit[4]
             return
-        self.folds: list[_Fold] = []
         for tr, te in blocked_folds(blocks):
             wt = w[tr]
             U, pinv, rank = _wls_basis(A[tr] * wt[:, None])
