@@ -432,7 +432,7 @@ class _Tester:
         e = e0 - Xp @ b
         r, p = e.size, X.shape[1]
         dof = max(r - rank - p, 1)
-        lev = np.einsum("ij,jk,ik->i", Xp, Ginv, Xp) + lev0
+        lev = np.einsum("ij,ij->i", Xp @ Ginv, Xp) + lev0   # diag(Xp Ginv Xp^T)
         e3 = e / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0)
         S = hac_covariance(Xp * e3[:, None], max_lag=self.lag, segments=self.segs)
         Ch = Ginv @ S @ Ginv * (r / dof)

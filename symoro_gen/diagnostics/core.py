@@ -280,7 +280,7 @@ class _Scorer:
         e1 = D.e_w - Xp @ b
         # residuals scaled by 1/(1 - leverage) (HC3): a column concentrated on a few rows would otherwise
         # fit them away and shrink its own variance
-        lev = np.einsum("ij,jk,ik->i", Xp, Ginv, Xp) + self.lev0
+        lev = np.einsum("ij,ij->i", Xp @ Ginv, Xp) + self.lev0   # diag(Xp Ginv Xp^T)
         e3 = e1 / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0)
         S = hac_covariance(Xp * e3[:, None], max_lag=self.lag, segments=self.gid)
         dof = max(self.r - D.rank - p, 1)
