@@ -56,7 +56,7 @@ import numpy as np
 
 from ..errors import IdentificationError
 from .stability import _wls_basis
-from .stats import hac_covariance, hac_lag, segments_of, wald_test
+from .stats import hac_covariance, hac_lag, segments_of, single_threaded_blas, wald_test
 
 __all__ = [
     "EFFECTS",
@@ -443,6 +443,7 @@ class _Tester:
         return pv, b, drop
 
 
+@single_threaded_blas
 def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np.ndarray | None = None,
                   groups: np.ndarray | None = None, alpha: float = ALPHA,
                   families: list[list[Composed]] | None = None, **library_kw) -> list[ComposedResult]:
