@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import erf
@@ -313,7 +313,41 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
 
                     out.append(Family("coupling", j, ("IAm", "FVm", "FSm"), b_sh, partner=k, variant="shared",
                                       reveal="ddq", reveal_joint=k))
-    return out
+    # columns that do not depend on the fit are the same in every round (the frames keep their q, dq,
+    # ddq, t arrays when the model torque is re-attached): build them once per frame
+    return [f if f.depends_on_fit else replace(f, build=_memo_build(f.build)) for f in out]
+
+
+#: frames whose columns a memoised family keeps (identification, validation, and one more)
+_MEMO_FRAMES = 3
+
+
+def _frame_key(frame: Frame) -> tuple:
+    """The arrays a fit-independent candidate column is built from (their identities)."""
+    arrs = [frame.row_experiment, frame.row_index, frame.system.joint]
+    for ex in frame.experiments:
+        arrs += [ex.t, ex.q, ex.dq, ex.ddq]
+    return tuple(arrs)
+
+
+def _memo_build(build: Callable) -> Callable:
+    """``build(frame, ctx)`` remembered per frame (keyed on the identity of its signal arrays, held so that
+    an identity is not reused) for a family whose columns do not depend on the fit: the decimation of
+    the full-rate columns is the bulk of a round otherwise. The columns are returned read-only."""
+    cache: list = []   # [(arrays, columns)], most recent last
+
+    def run(frame: Frame, ctx: FitContext):
+        key = _frame_key(frame)
+        for arrs, cols in cache:
+            if len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
+                return list(cols)
+        cols = build(frame, ctx)
+        for X in cols:
+            X.setflags(write=False)
+        cache.append((key, cols))
+        del cache[:-_MEMO_FRAMES]
+        return list(cols)
+    return run
 
 
 def nuisance_columns(frame: Frame, names: Sequence[str], dq_noise: np.ndarray) -> np.ndarray:

@@ -56,7 +56,7 @@ import numpy as np
 
 from ..errors import IdentificationError
 from .stability import _wls_basis
-from .stats import hac_covariance, hac_lag, segments_of, wald_test
+from .stats import hac_covariance, hac_lag, segments_of, single_threaded_blas, wald_test
 
 __all__ = [
     "EFFECTS",
@@ -398,7 +398,7 @@ class _Tester:
         self.lag = hac_lag(self.e0, groups)
         self.rss_joint = np.bincount(joint, weights=self.e0 ** 2, minlength=int(joint.max()) + 1)
 
-    def _with_plain(self, P):
+    def with_plain(self, P):
         """Basis, residual, leverage, rank and joint RSS with the plain effect's columns ``P`` added to the
         model (the part of them outside its span; none when they are already in it)."""
         base = (self.U, self.e0, self.lev0, self.rank, self.rss_joint)
@@ -416,8 +416,8 @@ class _Tester:
         rss = np.bincount(self.joint, weights=e0 ** 2, minlength=self.rss_joint.size)
         return (np.hstack([self.U, Q]), e0, self.lev0 + np.einsum("ij,ij->i", Q, Q), self.rank + Q.shape[1], rss)
 
-    def __call__(self, X, j, P=None):
-        U, e0, lev0, rank, rss_joint = self._with_plain(P)
+    def __call__(self, X, j, P=None, base=None):
+        U, e0, lev0, rank, rss_joint = self.with_plain(P) if base is None else base
         Xw = X * self.w[:, None]
         Xp = Xw - U @ (U.T @ Xw)
         G = Xp.T @ Xp
@@ -432,7 +432,7 @@ class _Tester:
         e = e0 - Xp @ b
         r, p = e.size, X.shape[1]
         dof = max(r - rank - p, 1)
-        lev = np.einsum("ij,jk,ik->i", Xp, Ginv, Xp) + lev0
+        lev = np.einsum("ij,ij->i", Xp @ Ginv, Xp) + lev0   # diag(Xp Ginv Xp^T)
         e3 = e / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0)
         S = hac_covariance(Xp * e3[:, None], max_lag=self.lag, segments=self.segs)
         Ch = Ginv @ S @ Ginv * (r / dof)
@@ -443,6 +443,7 @@ class _Tester:
         return pv, b, drop
 
 
+@single_threaded_blas
 def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np.ndarray | None = None,
                   groups: np.ndarray | None = None, alpha: float = ALPHA,
                   families: list[list[Composed]] | None = None, **library_kw) -> list[ComposedResult]:
@@ -480,11 +481,14 @@ def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np
     fams = library(sig, **library_kw) if families is None else families
     tester = _Tester(A, y, w, np.asarray(sig.joint), groups)
     rows = []
+    plains: dict = {}   # the plain effect's design depends on (effect, joint, ripple order, Coulomb scale) only
     for fam in fams:
         best = None
-        plain = fam[0].plain_columns(sig) if fam else None
         for c in fam:
-            out = tester(c.columns(sig), c.joint, plain if c.effect != "ripple" else c.plain_columns(sig))
+            key = (c.effect, c.joint, c.order if c.effect == "ripple" else None, c.coulomb_v)
+            if key not in plains:
+                plains[key] = tester.with_plain(c.plain_columns(sig))
+            out = tester(c.columns(sig), c.joint, base=plains[key])
             if out is None:
                 continue
             if best is None or out[0] < best[1][0] or (out[0] == best[1][0] and out[2] > best[1][2]):

@@ -90,7 +90,7 @@ from .friction import (
 )
 from .report import CandidateScore, Effect, ResidualReport
 from .stability import N_FOLDS, BlockedLS, coefficient_ci, ols_wls_agreement, time_blocks
-from .stats import bonferroni, hac_covariance, hac_lag, segments_of, wald_test
+from .stats import bonferroni, hac_covariance, hac_lag, segments_of, single_threaded_blas, wald_test
 from .structure import residual_structure
 from .unexplained import rows_to_samples, signal_matrix, unexplained_structure
 
@@ -280,7 +280,7 @@ class _Scorer:
         e1 = D.e_w - Xp @ b
         # residuals scaled by 1/(1 - leverage) (HC3): a column concentrated on a few rows would otherwise
         # fit them away and shrink its own variance
-        lev = np.einsum("ij,jk,ik->i", Xp, Ginv, Xp) + self.lev0
+        lev = np.einsum("ij,ij->i", Xp @ Ginv, Xp) + self.lev0   # diag(Xp Ginv Xp^T)
         e3 = e1 / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0)
         S = hac_covariance(Xp * e3[:, None], max_lag=self.lag, segments=self.gid)
         dof = max(self.r - D.rank - p, 1)
@@ -1092,10 +1092,10 @@ def _effect_stability(data: _Data, F: Frame, added: Sequence[_Added], k: int, we
     e1, e0 = cv.oof_residual(X), cv.oof_residual(None)
     w = np.ones(Y.size) if weights is None else weights
     sel = []
-    for b in np.unique(blocks):
-        tr = blocks != b
-        cb = coefficient_ci(A[tr], X[tr], Y[tr], weights=w[tr], groups=groups[tr], level=level)
-        te = own & (blocks == b)
+    for f in cv.folds:   # one per block; the fold's basis of A on its training rows is the one the CI needs
+        tr = f.train
+        cb = coefficient_ci(A[tr], X[tr], Y[tr], weights=w[tr], groups=groups[tr], level=level, basis=(f.U, f.rank))
+        te = own & f.test
         sel.append(cb.excludes_zero and float(np.sum(e1[te] ** 2)) < float(np.sum(e0[te] ** 2)))
     return _Stability(float(np.mean(sel)), ci.low, ci.high, ci.excludes_zero)
 
@@ -1298,6 +1298,7 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                           after_validation_rel_err_raw=np.asarray(val1_raw), unexplained=unexpl)
 
 
+@single_threaded_blas
 def diagnose(model: IdentificationModel, trajectories, *, validation=None, method: str = "ols",
              candidates: Sequence[str] = ALL, significance: float = SIGNIFICANCE, max_effects: int = MAX_EFFECTS,
              holdout: float = HOLDOUT, min_rel_improvement: float = MIN_REL_IMPROVEMENT, n_placebo: int = N_PLACEBO,

@@ -37,9 +37,9 @@ from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats as sst
+from scipy import special as ssp
 
-from .stats import hac_covariance, hac_lag, segments_of
+from .stats import f_sf, hac_covariance, hac_lag, segments_of
 
 __all__ = [
     "MIN_SELECTION_FREQUENCY",
@@ -124,6 +124,16 @@ class _Fold:
     pinv: np.ndarray       # (k, r_train)
     e0: np.ndarray         # weighted training residual of y on A
     pred0: np.ndarray      # test prediction of A alone
+    rank: int = 0          # rank of A_train * w
+
+
+#: the folds of the last BlockedLS (see BlockedLS.__init__)
+_FOLD_CACHE: dict = {}
+
+
+def _fingerprint(x: np.ndarray) -> tuple:
+    x = np.asarray(x)
+    return (x.shape, float(np.sum(x)), float(np.sum(x[::97] ** 2)) if x.size else 0.0)
 
 
 class BlockedLS:
@@ -150,13 +160,23 @@ class BlockedLS:
         if w.shape != y.shape or not np.all(np.isfinite(w)) or np.any(w < 0):
             raise ValueError("BlockedLS: weights must be finite, non-negative and one per row")
         self.A, self.y, self.w = A, y, w
+        key = (A.shape, _fingerprint(A), _fingerprint(y), _fingerprint(w), _fingerprint(np.asarray(blocks, float)))
+        hit = _FOLD_CACHE.get(key)
         self.folds: list[_Fold] = []
+        if hit is not None and np.array_equal(hit[0], A) and np.array_equal(hit[1], y) and np.array_equal(hit[2], w) \
+                and np.array_equal(hit[3], blocks):
+            self.folds = hit[4]
+            return
         for tr, te in blocked_folds(blocks):
             wt = w[tr]
-            U, pinv, _ = _wls_basis(A[tr] * wt[:, None])
+            U, pinv, rank = _wls_basis(A[tr] * wt[:, None])
             yw = y[tr] * wt
             th = pinv @ yw
-            self.folds.append(_Fold(tr, te, wt, U, pinv, yw - U @ (U.T @ yw), A[te] @ th))
+            self.folds.append(_Fold(tr, te, wt, U, pinv, yw - U @ (U.T @ yw), A[te] @ th, rank))
+        # the friction-law stage builds the same folds up to three times per joint (selection, kept law,
+        # acceptance test): keep the last ones (reused for equal A, y, weights and blocks)
+        _FOLD_CACHE.clear()
+        _FOLD_CACHE[key] = (A.copy(), y.copy(), w.copy(), np.array(blocks, copy=True), self.folds)
 
     def oof_residual(self, X: np.ndarray | None = None) -> np.ndarray:
         """Out-of-fold residual ``y - prediction`` of every row (each row predicted by the fold that
@@ -235,7 +255,8 @@ class CoefficientCI:
 
 
 def coefficient_ci(A: np.ndarray, X: np.ndarray, y: np.ndarray, *, weights: np.ndarray | None = None,
-                   groups: np.ndarray | None = None, level: float = 0.99) -> CoefficientCI:
+                   groups: np.ndarray | None = None, level: float = 0.99,
+                   basis: tuple[np.ndarray, int] | None = None) -> CoefficientCI:
     """Confidence intervals of the coefficients of ``X`` in the weighted LS fit ``y ~ [A X]``.
 
     The covariance is Newey-West (Bartlett weights, lag by :func:`.stats.hac_lag` on the residual,
@@ -253,12 +274,15 @@ def coefficient_ci(A: np.ndarray, X: np.ndarray, y: np.ndarray, *, weights: np.n
         Contiguous-time segments (e.g. ``joint * 100000 + experiment``).
     level : float
         Confidence level in (0, 1).
+    basis : (U, rank), optional
+        Orthonormal basis of ``A * weights`` and its rank when already computed (e.g. a
+        :class:`BlockedLS` fold's ``U``, ``rank`` on the same rows and weights): skips the SVD.
     """
     if not 0.0 < level < 1.0:
         raise ValueError(f"coefficient_ci: level must lie in (0, 1), got {level!r}")
     X = np.asarray(X, float).reshape(len(y), -1)
     w = np.ones(len(y)) if weights is None else np.asarray(weights, float)
-    U, _, rank = _wls_basis(np.asarray(A, float) * w[:, None])
+    U, rank = basis if basis is not None else _wls_basis(np.asarray(A, float) * w[:, None])[::2]
     Xw = X * w[:, None]
     Xp = Xw - U @ (U.T @ Xw)
     yw = np.asarray(y, float) * w
@@ -276,12 +300,12 @@ def coefficient_ci(A: np.ndarray, X: np.ndarray, y: np.ndarray, *, weights: np.n
     C_iid = Ginv * float(e @ e) / dof
     C = C_hac if np.trace(C_hac @ np.linalg.pinv(C_iid)) >= p else C_iid
     std = np.sqrt(np.maximum(np.diag(C), 0.0))
-    tq = float(sst.t.ppf(0.5 + level / 2.0, dof))
+    tq = float(ssp.stdtrit(dof, 0.5 + level / 2.0))    # = scipy.stats.t.ppf(0.5 + level / 2, dof)
     try:
         W = float(b @ np.linalg.solve(C, b))
     except np.linalg.LinAlgError:
         W = float(b @ np.linalg.pinv(C) @ b)
-    pv = float(sst.f.sf(max(W, 0.0) / p, p, dof))
+    pv = f_sf(max(W, 0.0) / p, p, dof)
     return CoefficientCI(b, std, b - tq * std, b + tq * std, pv, bool(pv < 1.0 - level), level)
 
 
