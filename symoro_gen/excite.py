@@ -26,9 +26,15 @@ torque limits, when nominal parameters are known, are nonlinear constraints ``|W
 The criterion is evaluated with the generated CasADi model of the robot (``casadi_regressor()``)
 and minimised by IPOPT through ``casadi.nlpsol`` from several seeded random feasible starts. The
 condition number is not smooth (largest over smallest singular value); the default criterion is
-the smooth bound ``log tr(M) + log tr(M^-1)`` of ``M = W^T W``, which satisfies
-``cond(W)^2 <= tr(M) tr(M^-1) <= nb^2 cond(W)^2``; ``"logdet"`` minimises ``-log det M``
-(D-optimality). The value reported, ``cond``, is always the true, unscaled 2-norm condition number of
+the power-mean bound ``(log tr(Mn^p) + log tr(Mn^-p)) / p`` of ``Mn = M / tr M``, ``M = W^T W``, which
+satisfies ``cond(W)^2 <= exp(criterion) <= nb^(2/p) cond(W)^2``; ``p`` is raised by continuation
+(:data:`COND_POWERS`: 8, then 64 warm-started from the first optimum); ``"logdet"`` minimises
+``-log det M`` (D-optimality).
+
+:func:`cond_lower_bound` bounds from below the cond of ANY trajectory within the velocity limits
+(whatever its duration and samples): the friction columns ``dq_j, sign dq_j, 1`` cap ``sigma_min``
+(:func:`friction_ceiling`), a set of columns with a constant squared norm per sample (the first
+moments of a link turning about a fixed horizontal axis: ``g^2``) floors ``sigma_max``. The value reported, ``cond``, is always the true, unscaled 2-norm condition number of
 the base regressor stacked over the output samples, as the field reports it.
 """
 from __future__ import annotations

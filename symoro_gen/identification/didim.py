@@ -56,7 +56,7 @@ __all__ = ["didim_system", "hac_score_covariance", "identify_didim", "output_err
 
 #: finite-difference sensitivities are computed when ``nb`` simulations would take at most this [s]
 #: (measured on the final simulation), else ``J = W_s``
-FD_BUDGET_S = 600.0
+FD_BUDGET_S = 30.0
 #: relative step of the finite-difference sensitivities
 FD_STEP = 1e-4
 
@@ -74,7 +74,8 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
                    options: AssemblyOptions | None = None, *, references=None, gains=None,
                    bandwidth_hz: float | None = None, friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER,
                    tol: float = TOL, start=None, jacobian: str = "auto",
-                   fd_budget_s: float = FD_BUDGET_S) -> IterativeIdentification:
+                   fd_budget_s: float = FD_BUDGET_S, physical: str = "auto",
+                   nominal_tolerance: float | None = None) -> IterativeIdentification:
     """DIDIM (GJV2013): Gauss–Newton on the output error ``Y - T(chi)`` of the closed-loop
     simulation with the current estimate, iterated from IDIM-OLS.
 
@@ -100,6 +101,18 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
     jacobian : {"auto", "fd", "simulated"}
         The sensitivity ``J = dT/dchi`` of the covariance: finite differences of the simulation
         (``"fd"``), ``W_s`` (``"simulated"``), or finite differences when they fit in ``fd_budget_s``.
+    physical : {"auto", "always", "never"}
+        Constrain the Gauss–Newton step to physically consistent parameters (the least squares of the
+        step solved by :func:`~symoro_gen.identification.physical.identify_physical` on the simulated
+        system: pseudo-inertias positive semidefinite, ``IA, FV, FS >= 0``, pulled toward the robot
+        file's nominal values where the data say nothing; Wensing, Kim & Slotine 2018): ``"auto"`` only
+        when the unconstrained step gives an inertia matrix that is not positive definite on the
+        recorded positions (it could not be simulated: on the real LWR4 every unconstrained step is
+        such, and the iterations wandered without converging). Needs cvxpy.
+    nominal_tolerance : float, optional
+        With the constrained step: bound every standard parameter with a non-zero nominal value to
+        ``|chi - nominal| <= tol |nominal|`` (keeps e.g. the inertia about the last axis away from 0, where
+        the simulation of a joint with Coulomb friction becomes infinitely stiff).
 
     Returns
     -------
@@ -108,10 +121,42 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
     """
     if jacobian not in ("auto", "fd", "simulated"):
         raise IdentificationError(f"DIDIM jacobian {jacobian!r}: expected auto, fd or simulated")
-    it = iterate(model, trajectories, options, lambda measured, sim: replace(fit_ols(sim), method="DIDIM"), "DIDIM",
-                 references=references, gains=gains, bandwidth_hz=bandwidth_hz, friction_eps=friction_eps,
-                 max_iter=max_iter, tol=tol, start=start, simulate=didim_system)
+    if physical not in ("auto", "always", "never"):
+        raise IdentificationError(f"DIDIM physical {physical!r}: expected auto, always or never")
+    trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
+    q_check = np.vstack([tr.q[::max(1, tr.q.shape[0] // 40)] for tr in trajs])
+    constrained: list[int] = []
+
+    def step(measured, sim):
+        res = replace(fit_ols(sim), method="DIDIM")
+        if physical == "never" or (physical == "auto" and _inertia_positive(model, res.values, q_check)):
+            return res
+        from .physical import identify_physical
+
+        nominal = getattr(model, "nominal_parameters", lambda: None)()
+        phys = identify_physical(model, sim, nominal=nominal, nominal_tolerance=nominal_tolerance)
+        constrained.append(len(constrained) + 1)
+        return replace(res, values=np.asarray(phys.base_values, float))
+
+    it = iterate(model, trajs, options, step, "DIDIM", references=references, gains=gains, bandwidth_hz=bandwidth_hz,
+                 friction_eps=friction_eps, max_iter=max_iter, tol=tol, start=start, simulate=didim_system)
+    if constrained:
+        it = replace(it, result=replace(it.result, warnings=it.result.warnings + (
+            f"DIDIM: {len(constrained)} of {it.iterations} Gauss-Newton step(s) constrained to physically consistent "
+            f"parameters (the unconstrained step's inertia matrix was not positive definite); the covariance "
+            f"ignores the active constraints",)))
     return output_error_statistics(model, it, jacobian=jacobian, fd_budget_s=fd_budget_s)
+
+
+def _inertia_positive(model: IdentificationModel, theta, q_check: np.ndarray) -> bool:
+    """``M(q)`` positive definite at every position of ``q_check`` (what a simulation needs)."""
+    from ..simulate.closed_loop import ForwardDynamics
+
+    fd = ForwardDynamics(model, theta)
+    try:
+        return all(float(np.linalg.eigvalsh(fd.mass_matrix(q))[0]) > 0 for q in q_check)
+    except (IdentificationError, np.linalg.LinAlgError):
+        return False
 
 
 def _bartlett_lags(e: np.ndarray, groups: list[np.ndarray]) -> int:

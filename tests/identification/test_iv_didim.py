@@ -265,7 +265,10 @@ def test_didim_fixed_point_is_the_truth_on_noise_free_torque(scara, experiment):
     moved it by several sigma)."""
     _, model, _, theta, _ = scara
     log = experiment["log"]
-    clean = Trajectory(t=log.t, q=log.q, tau=experiment["run"].tau, source="clean", meta=log.meta)
+    q_ref = log.meta["q_ref"]
+    # the "real" robot driven by the reference exactly as DIDIM's simulation is (velocity by differences)
+    run = simulate_closed_loop(model, theta, log.t, q_ref, np.gradient(q_ref, DT, axis=0), gains=experiment["gains"])
+    clean = Trajectory(t=log.t, q=log.q, tau=run.tau, source="clean", meta=log.meta)
     fit = identify_didim(model, clean, AssemblyOptions(), gains=experiment["gains"], start=theta, max_iter=1,
                          jacobian="simulated")
     scale = np.maximum(np.abs(theta), 0.1)
