@@ -648,13 +648,20 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     for s, (_, cond0, _, X_init) in enumerate(candidates[:int(starts)]):
         x = X_init.T.reshape(-1)
         stage_conds, iters = [], 0
+        x_best, c_best = x, math.inf
         for solver in solvers:
             sol = solver(x0=x, lbg=bounds["lbg"], ubg=bounds["ubg"])
             stats = solver.stats()
             status, iters = stats.get("return_status", ""), iters + stats.get("iter_count", 0)
             x = np.asarray(sol["x"]).reshape(-1)
             stage_conds.append(stacked_cond(model, *basis_eval(basis, x.reshape(n, basis.m).T, t_out)))
-        X = x.reshape(n, basis.m).T
+            # a failed stage (e.g. IPOPT's Error_In_Step_Computation at a large p) can end worse than it
+            # started: the start's result is its best feasible stage
+            if stage_conds[-1] < c_best and _inside(basis, limits, x.reshape(n, basis.m).T, t_con):
+                x_best, c_best = x, stage_conds[-1]
+            elif stage_conds[-1] >= c_best:
+                x = x_best
+        X = (x_best if math.isfinite(c_best) else x).reshape(n, basis.m).T
         X = _scale_into(basis, limits, X, _constant_design(basis, n, (limits.q_max + limits.q_min) / 2),
                         dense_times(t_out, duration)) if not _inside(basis, limits, X, dense_times(t_out, duration)) else X
         q, dq, ddq = basis_eval(basis, X, t_out)

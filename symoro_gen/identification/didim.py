@@ -19,7 +19,10 @@ sensitivity of the simulated states to ``chi`` is neglected in the step, GJV2013
   smoothing of the simulation, and the band-pass derivatives of the filtered simulated positions if
   they were used): the output error is therefore taken on the simulated torque itself, and ``W_s``
   on the simulation's own velocities and accelerations. (With ``Y - W_s chi`` in its place the
-  fixed point is biased: 3–9 sigma on the simulated SCARA of ``bench/bench_iv_didim.py``.)
+  fixed point is biased: 3–9 sigma on the simulated SCARA of ``bench/bench_iv_didim.py``.) From the
+  default start (IDIM-OLS or a fallback, possibly far) the first iterations are GJV2013's re-fit
+  ``argmin ||Y - W_s chi||``, robust while the simulated robot tracks badly; the output-error step
+  takes over once they move by less than :data:`REFIT_SWITCH` (2 %).
 * statistics at the fixed point ``W_s'(Y - T(chi)) = 0``: with ``J = dT/dchi`` (the sensitivity of
   the closed-loop simulated torque, by finite differences of the simulation: GJV2013 Sec. IV uses
   the output-error Jacobian for the covariance) the estimate moves by ``(W_s' J)^-1 W_s' dY`` for a
@@ -59,6 +62,8 @@ __all__ = ["didim_system", "hac_score_covariance", "identify_didim", "output_err
 FD_BUDGET_S = 30.0
 #: relative step of the finite-difference sensitivities
 FD_STEP = 1e-4
+#: relative change of the re-fit iterates below which the output-error step takes over
+REFIT_SWITCH = 0.02
 
 
 def didim_system(model: IdentificationModel, setup, theta) -> tuple[ObservationSystem, list]:
@@ -127,8 +132,29 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
     q_check = np.vstack([tr.q[::max(1, tr.q.shape[0] // 40)] for tr in trajs])
     constrained: list[int] = []
 
+    # far from the solution (start not given), GJV2013's re-fit of Y on W_s is the robust step (it does not
+    # rest on T(chi + d) ~ T(chi) + W_s d, poor while the simulated robot tracks badly); once its iterates
+    # move by less than REFIT_SWITCH, the output-error step takes over (unbiased fixed point)
+    state: dict = {"refit": start is None, "prev": None, "W_filtered": None}
+
+    def simulate(model_, setup, theta):
+        theta = np.asarray(theta, float)
+        so = simulated_output(model_, setup, theta, filtered=state["refit"])
+        state["W_filtered"] = so.W_filtered
+        ms = setup.measured.system
+        return ObservationSystem(so.W, so.Y - so.T + so.W @ theta, ms.names, ms.joint), so.runs
+
     def step(measured, sim):
         res = replace(fit_ols(sim), method="DIDIM")
+        if state["refit"] and state["W_filtered"] is not None:
+            # GJV2013's re-fit, on the simulated positions differentiated as the measured ones
+            refit = replace(fit_ols(ObservationSystem(state["W_filtered"], measured.Y, sim.names, sim.joint)),
+                            method="DIDIM")
+            prev, state["prev"] = state["prev"], refit.values
+            if prev is None or np.linalg.norm(refit.values - prev) > REFIT_SWITCH * np.linalg.norm(prev):
+                res = refit
+            else:
+                state["refit"] = False
         if physical == "never" or (physical == "auto" and _inertia_positive(model, res.values, q_check)):
             return res
         from .physical import identify_physical
@@ -139,13 +165,24 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
         return replace(res, values=np.asarray(phys.base_values, float))
 
     it = iterate(model, trajs, options, step, "DIDIM", references=references, gains=gains, bandwidth_hz=bandwidth_hz,
-                 friction_eps=friction_eps, max_iter=max_iter, tol=tol, start=start, simulate=didim_system)
+                 friction_eps=friction_eps, max_iter=max_iter, tol=tol, start=start, simulate=simulate)
     if constrained:
         it = replace(it, result=replace(it.result, warnings=it.result.warnings + (
             f"DIDIM: {len(constrained)} of {it.iterations} Gauss-Newton step(s) constrained to physically consistent "
             f"parameters (the unconstrained step's inertia matrix was not positive definite); the covariance "
             f"ignores the active constraints",)))
-    return output_error_statistics(model, it, jacobian=jacobian, fd_budget_s=fd_budget_s)
+    it = output_error_statistics(model, it, jacobian=jacobian, fd_budget_s=fd_budget_s)
+    if not it.converged:
+        worst = int(np.argmax(it.tracking_error))
+        src = ", ".join(sorted(set(it.setup.reference_source)))
+        it = replace(it, result=replace(it.result, warnings=it.result.warnings + (
+            f"DIDIM did not converge: the simulated closed loop does not reproduce the recording (output error "
+            f"||Y - T|| / ||Y|| per joint {', '.join(f'{x:.2g}' for x in it.result.rel_err)}; simulated tracking error "
+            f"RMS up to {it.tracking_error[worst]:.3g} rad on joint {worst + 1}; reference: {src}; controller: "
+            f"{'given' if gains is not None else 'default PD from the start estimate'}). DIDIM needs the real "
+            f"controller (--kp/--kd/--ki) and its recorded reference; without them use IDIM (--method ols/wls) or "
+            f"IDIM-IV",)))
+    return it
 
 
 def _inertia_positive(model: IdentificationModel, theta, q_check: np.ndarray) -> bool:

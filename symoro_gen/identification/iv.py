@@ -230,6 +230,7 @@ class SimulatedOutput:
     T: np.ndarray
     Y: np.ndarray
     runs: list
+    W_filtered: np.ndarray | None = None
 
     @property
     def substeps(self) -> tuple[int, ...]:
@@ -237,13 +238,15 @@ class SimulatedOutput:
 
 
 def simulated_output(model: IdentificationModel, setup: ClosedLoopSetup, theta, *, substeps=None,
-                     with_w: bool = True) -> SimulatedOutput:
+                     with_w: bool = True, filtered: bool = False) -> SimulatedOutput:
     """Simulate ``theta`` in closed loop on every experiment; the simulated torque ``T`` (and the
     observation matrix ``W`` on the simulated states) decimated as the measured system, in its rows.
+    ``filtered``: also ``W_filtered``, the observation matrix of the simulated positions band-pass
+    differentiated as the measured ones (:func:`simulated_system`'s).
 
     ``substeps`` (one per experiment) fixes the RK4 substeps (the finite-difference sensitivities
     of DIDIM need the same integrator for every perturbed estimate)."""
-    blocks_w, blocks_t, keys, runs = [], [], [], []
+    blocks_w, blocks_t, blocks_f, keys, keys_f, runs = [], [], [], [], [], []
     for i, tr in enumerate(setup.trajectories):
         qr, dqr = setup.references[i]
         run = simulate_closed_loop(model, theta, tr.t, qr, dqr, gains=setup.gains[i], friction_eps=setup.friction_eps,
@@ -254,8 +257,13 @@ def simulated_output(model: IdentificationModel, setup: ClosedLoopSetup, theta, 
         blocks_w.append(asm.system.W if with_w else np.zeros((asm.system.Y.size, 0)))
         blocks_t.append(asm.system.Y)
         keys.append(_row_keys(asm, experiment=i))
+        if filtered:
+            asm_f = assemble(model, sim, setup.options[i])
+            blocks_f.append(asm_f.system.W)
+            keys_f.append(_row_keys(asm_f, experiment=i))
     W, T = _match_rows(setup, keys, blocks_w, blocks_t)
-    return SimulatedOutput(W, T, np.asarray(setup.measured.system.Y, float), runs)
+    W_f = _match_rows(setup, keys_f, blocks_f)[0] if filtered else None
+    return SimulatedOutput(W, T, np.asarray(setup.measured.system.Y, float), runs, W_f)
 
 
 @dataclass(frozen=True, eq=False)
