@@ -79,7 +79,7 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
                    options: AssemblyOptions | None = None, *, references=None, gains=None,
                    bandwidth_hz: float | None = None, friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER,
                    tol: float = TOL, start=None, jacobian: str = "auto",
-                   fd_budget_s: float = FD_BUDGET_S, physical: str = "auto",
+                   fd_budget_s: float = FD_BUDGET_S, physical: str = "never",
                    nominal_tolerance: float | None = None) -> IterativeIdentification:
     """DIDIM (GJV2013): Gauss–Newton on the output error ``Y - T(chi)`` of the closed-loop
     simulation with the current estimate, iterated from IDIM-OLS.
@@ -113,7 +113,9 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
         file's nominal values where the data say nothing; Wensing, Kim & Slotine 2018): ``"auto"`` only
         when the unconstrained step gives an inertia matrix that is not positive definite on the
         recorded positions (it could not be simulated: on the real LWR4 every unconstrained step is
-        such, and the iterations wandered without converging). Needs cvxpy.
+        such). Default ``"never"``: the constrained step did not make the real LWR4 converge and, on
+        the simulated SCARA from a far start, it led to estimates whose closed loop diverges, where the
+        default path (projection of a non-simulable iterate, then step halving) converges. Needs cvxpy.
     nominal_tolerance : float, optional
         With the constrained step: bound every standard parameter with a non-zero nominal value to
         ``|chi - nominal| <= tol |nominal|`` (keeps e.g. the inertia about the last axis away from 0, where

@@ -399,3 +399,15 @@ def test_start_falls_back_to_the_physical_projection(scara, experiment, fits, mo
     scale = np.maximum(np.abs(theta), 0.1)
     # the same fixed point as the iterations from a physical start
     assert np.linalg.norm((fit.result.values - fits[1].result.values) / scale) < 1e-2
+
+
+def test_didim_not_converged_says_why(scara, experiment):
+    """A DIDIM that stops before converging ends with one warning naming the output error per joint, the
+    worst simulated tracking error, the reference and the controller it used."""
+    _, model, *_ = scara
+    fit = identify_didim(model, experiment["log"], AssemblyOptions(), gains=experiment["gains"], max_iter=1,
+                         jacobian="simulated")
+    assert not fit.converged
+    last = fit.result.warnings[-1]
+    assert last.startswith("DIDIM did not converge: the simulated closed loop does not reproduce the recording")
+    assert "reference: recorded" in last and "controller: given" in last and "--kp/--kd/--ki" in last
