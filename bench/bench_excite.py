@@ -6,9 +6,12 @@ files: a Fourier design (5 harmonics, 10 s = one period, 100 Hz) optimised by ``
 duration, each scaled so that its tightest position, velocity or acceleration limit is reached. Prints
 the unscaled condition number of the stacked base regressor of each, their ratio (target >= 5) and
 the wall time of the optimisation. Torque limits are not imposed (the random ones would not be held
-to them either).
+to them either). It also prints ``symoro_gen.excite.cond_lower_bound``: a lower bound on the cond of ANY
+trajectory within the velocity limits (sigma_max floored by a column set of constant squared norm per
+sample, sigma_min capped by the friction columns), and where the target (best random / 5) and the
+optimised cond lie relative to it.
 
-    PYTHONPATH=. python bench/bench_excite.py [--robots lwr4 rx90] [--starts 3] [--max-iter 150]
+    PYTHONPATH=. python bench/bench_excite.py [--robots lwr4 rx90] [--starts 3] [--max-iter 150] [--powers 8 64]
 """
 from __future__ import annotations
 
