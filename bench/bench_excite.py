@@ -6,9 +6,12 @@ files: a Fourier design (5 harmonics, 10 s = one period, 100 Hz) optimised by ``
 duration, each scaled so that its tightest position, velocity or acceleration limit is reached. Prints
 the unscaled condition number of the stacked base regressor of each, their ratio (target >= 5) and
 the wall time of the optimisation. Torque limits are not imposed (the random ones would not be held
-to them either).
+to them either). It also prints ``symoro_gen.excite.cond_lower_bound``: a lower bound on the cond of ANY
+trajectory within the velocity limits (sigma_max floored by a column set of constant squared norm per
+sample, sigma_min capped by the friction columns), and where the target (best random / 5) and the
+optimised cond lie relative to it.
 
-    PYTHONPATH=. python bench/bench_excite.py [--robots lwr4 rx90] [--starts 3] [--max-iter 150]
+    PYTHONPATH=. python bench/bench_excite.py [--robots lwr4 rx90] [--starts 3] [--max-iter 150] [--powers 8 64]
 """
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from symoro_gen.excite import (
     FourierBasis,
     basis_eval,
+    cond_lower_bound,
     limits_of,
     optimise_excitation,
     output_times,
@@ -34,27 +38,8 @@ from symoro_gen.loader import model_for
 TARGET_RATIO = 5.0
 
 
-def friction_ceiling(v_max: float) -> float:
-    """Largest ``lambda_min`` of ``E[z z^T]``, ``z = (dq, sign dq, 1)``, over every distribution of a
-    joint velocity on ``[-v_max, v_max]``.
-
-    The columns FV_j, FS_j, OFF_j of the base regressor are ``dq_j, sign(dq_j), 1`` in row j only, so
-    for ANY trajectory of N samples ``sigma_min(W)^2 <= N * friction_ceiling(dq_max_j)`` (restricting
-    the minimising vector to those three columns). By symmetry and concavity of lambda_min the optimum
-    is symmetric, so the moment matrix is ``[[a, b], [b, c]] (+) [1]`` with ``a = E dq^2 <= v b``,
-    ``b = E|dq|``, ``c = P(dq != 0) <= 1``; lambda_min grows with ``a`` and ``c``: a one-dimensional
-    maximisation over ``b``.
-    """
-    from scipy.optimize import minimize_scalar
-
-    def neg(b: float) -> float:
-        return -min(1.0, float(np.linalg.eigvalsh(np.array([[v_max * b, b], [b, 1.0]]))[0]))
-
-    return -float(minimize_scalar(neg, bounds=(0.0, v_max), method="bounded").fun)
-
-
 def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int, max_iter: int, seed: int,
-        pool: int | None) -> dict:
+        pool: int | None, powers=None) -> dict:
     robot, model = model_for(name)
     lim = limits_of(robot)
     basis = FourierBasis(harmonics, 1.0 / duration)
@@ -69,22 +54,16 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
         rand_smax.append(float(sr[0] / np.sqrt(len(t))))
     t0 = time.perf_counter()
     res = optimise_excitation(model, basis, lim, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,
-                              pool=pool)
+                              pool=pool, powers=powers)
     wall = time.perf_counter() - t0
-    # cond(W) >= max column norm / min column norm (sigma_max >= |w_i| >= sigma_min): how far the
-    # limits let the columns' magnitudes be balanced bounds what any trajectory can reach
     W = np.asarray(model.regressor(res.q, res.dq, res.ddq)).reshape(-1, len(model.BASE_NAMES))
-    norms = np.linalg.norm(W, axis=0)
     sv = np.linalg.svd(W, compute_uv=False)
-    names = model.BASE_NAMES
-    has_friction = [j for j in range(model.N_JOINTS) if all(f"{k}{j + 1}" in names for k in ("FV", "FS", "OFF"))]
-    ceiling = min((friction_ceiling(float(lim.dq_max[j])) for j in has_friction), default=float("nan"))
-    return {"column_bound": float(norms.max() / norms.min()), "smallest": model.BASE_NAMES[int(norms.argmin())],
-            "largest": model.BASE_NAMES[int(norms.argmax())],"robot": name, "n": model.N_JOINTS, "nb": len(model.BASE_NAMES), "cond": res.cond,
+    N = W.shape[0] / model.N_JOINTS
+    bound = cond_lower_bound(model, lim)
+    return {"robot": name, "n": model.N_JOINTS, "nb": len(model.BASE_NAMES), "cond": res.cond,
             "random_best": min(rand), "random_median": float(np.median(rand)), "ratio": min(rand) / res.cond,
-            "limits_ok": res.limits_ok, "wall": wall, "starts": res.starts,
-            "smax": float(sv[0] / np.sqrt(W.shape[0] / model.N_JOINTS)), "smin": float(sv[-1] / np.sqrt(W.shape[0] / model.N_JOINTS)),
-            "smin_ceiling": float(np.sqrt(ceiling)), "random_smax_min": min(rand_smax)}
+            "limits_ok": res.limits_ok, "wall": wall, "starts": res.starts, "bound": bound,
+            "smax": float(sv[0] / np.sqrt(N)), "smin": float(sv[-1] / np.sqrt(N)), "random_smax_min": min(rand_smax)}
 
 
 def main(argv=None) -> int:
@@ -97,24 +76,30 @@ def main(argv=None) -> int:
     ap.add_argument("--max-iter", type=int, default=150)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--pool", type=int, default=None, help="random designs the IPOPT starts are chosen from")
+    ap.add_argument("--powers", type=int, nargs="+", default=None,
+                    help="continuation powers of the cond criterion (default symoro_gen.excite.COND_POWERS)")
     a = ap.parse_args(argv)
     print(f"{'robot':6} {'n':>2} {'nb':>3} {'cond opt':>10} {'best of 50':>11} {'median':>9} {'ratio':>6} "
           f"{'limits':>6} {'wall [s]':>8}")
     ok = True
     for name in a.robots:
         r = run(name, harmonics=a.harmonics, duration=a.duration, rate=a.rate, starts=a.starts,
-                max_iter=a.max_iter, seed=a.seed, pool=a.pool)
+                max_iter=a.max_iter, seed=a.seed, pool=a.pool, powers=a.powers)
         ok &= r["limits_ok"]
         print(f"{r['robot']:6} {r['n']:>2} {r['nb']:>3} {r['cond']:>10.4g} {r['random_best']:>11.4g} "
               f"{r['random_median']:>9.4g} {r['ratio']:>6.2f} {r['limits_ok']!s:>6} {r['wall']:>8.1f}")
-        print(f"        cond >= column-norm ratio {r['column_bound']:.4g} ({r['largest']} / {r['smallest']})")
+        bd = r["bound"]
         need = r["random_best"] / TARGET_RATIO
-        print(f"        per sqrt(N samples): sigma_max {r['smax']:.3g}, sigma_min {r['smin']:.3g}; any trajectory has "
-              f"sigma_min <= {r['smin_ceiling']:.3g} (friction columns), so cond {need:.3g} (the target) needs "
-              f"sigma_max <= {need * r['smin_ceiling']:.3g}; the smallest sigma_max of the 50 random ones is "
-              f"{r['random_smax_min']:.3g}")
-        print("        starts: " + "; ".join(f"{s['cond_start']:.4g} -> {s['cond']:.4g} ({s['status']}, "
-                                              f"{s['iterations']} it)" for s in r["starts"]))
+        print(f"        {bd.describe()}")
+        print(f"        target cond <= {need:.4g} (best random / {TARGET_RATIO:g}) = {need / bd.bound:.3g} x the bound: "
+              f"{'not excluded by' if need >= bd.bound else 'UNREACHABLE by'} the bound; optimised = "
+              f"{r['cond'] / bd.bound:.3g} x the bound (sigma_max/sqrt(N) {r['smax']:.3g} >= {np.sqrt(bd.smax2):.3g}, "
+              f"sigma_min/sqrt(N) {r['smin']:.3g} <= {np.sqrt(bd.smin2):.3g}; smallest sigma_max/sqrt(N) of the 50 "
+              f"random: {r['random_smax_min']:.3g})")
+        print("        starts: " + "; ".join(f"{s['cond_start']:.4g} -> "
+                                              + " -> ".join(f"{c:.4g}" for c in s.get("cond_stages", [s["cond"]]))
+                                              + f" (p = {s.get('powers')}, {s['status']}, {s['iterations']} it)"
+                                              for s in r["starts"]))
     print(f"target: ratio >= {TARGET_RATIO:g} (best random cond / optimised cond)")
     return 0 if ok else 1
 

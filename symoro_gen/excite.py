@@ -26,9 +26,15 @@ torque limits, when nominal parameters are known, are nonlinear constraints ``|W
 The criterion is evaluated with the generated CasADi model of the robot (``casadi_regressor()``)
 and minimised by IPOPT through ``casadi.nlpsol`` from several seeded random feasible starts. The
 condition number is not smooth (largest over smallest singular value); the default criterion is
-the smooth bound ``log tr(M) + log tr(M^-1)`` of ``M = W^T W``, which satisfies
-``cond(W)^2 <= tr(M) tr(M^-1) <= nb^2 cond(W)^2``; ``"logdet"`` minimises ``-log det M``
-(D-optimality). The value reported, ``cond``, is always the true, unscaled 2-norm condition number of
+the power-mean bound ``(log tr(Mn^p) + log tr(Mn^-p)) / p`` of ``Mn = M / tr M``, ``M = W^T W``, which
+satisfies ``cond(W)^2 <= exp(criterion) <= nb^(2/p) cond(W)^2``; ``p`` is raised by continuation
+(:data:`COND_POWERS`: 8, then 64 warm-started from the first optimum); ``"logdet"`` minimises
+``-log det M`` (D-optimality).
+
+:func:`cond_lower_bound` bounds from below the cond of ANY trajectory within the velocity limits
+(whatever its duration and samples): the friction columns ``dq_j, sign dq_j, 1`` cap ``sigma_min``
+(:func:`friction_ceiling`), a set of columns with a constant squared norm per sample (the first
+moments of a link turning about a fixed horizontal axis: ``g^2``) floors ``sigma_max``. The value reported, ``cond``, is always the true, unscaled 2-norm condition number of
 the base regressor stacked over the output samples, as the field reports it.
 """
 from __future__ import annotations
@@ -52,6 +58,7 @@ from .report.plots import WIDTH_IN, _png, require_matplotlib
 from .simulate.trajectories import _piecewise_jerk
 
 __all__ = [
+    "CondBound",
     "DEFAULT_LIMITS",
     "ExcitationResult",
     "FourierBasis",
@@ -59,6 +66,8 @@ __all__ = [
     "PointToPointBasis",
     "basis_eval",
     "check_limits",
+    "cond_lower_bound",
+    "friction_ceiling",
     "limits_of",
     "optimise_excitation",
     "output_times",
@@ -76,6 +85,10 @@ DEFAULT_PRISMATIC_LIMITS = {"q": 0.5, "dq": 0.5, "ddq": 2.0}
 
 #: power p of the smooth cond criterion (a power of 2): exp(criterion) is within nb^(2/p) of cond^2
 COND_POWER = 8
+#: continuation of the cond criterion: IPOPT runs with each power in turn, each stage warm-started
+#: from the previous one (a small p is smooth and well scaled far from the optimum, a large p is
+#: within nb^(2/p) of cond^2 near it: 64^(1/64) = 1.07 for p = 64)
+COND_POWERS = (8, 64)
 
 
 class ExcitationError(IdentificationError):
@@ -279,6 +292,98 @@ def stacked_cond(model: IdentificationModel, q, dq, ddq) -> float:
     return float(s[0] / s[-1]) if s[-1] > 0 else math.inf
 
 
+def friction_ceiling(v_max: float) -> float:
+    """Largest ``lambda_min`` of ``E[z z^T]``, ``z = (dq, sign dq, 1)``, over every distribution of a
+    joint velocity on ``[-v_max, v_max]`` (time samples of any trajectory within the limit).
+
+    By symmetry (``dq -> -dq`` leaves ``lambda_min`` unchanged) and concavity of ``lambda_min`` in the
+    moment matrix, a symmetric distribution is optimal, so the moment matrix is
+    ``[[a, b], [b, c]] (+) [1]`` with ``b = E|dq|``, ``a = E dq^2 <= v_max b``, ``c = P(dq != 0) <= 1``;
+    ``lambda_min`` grows with ``a`` and ``c``: a one-dimensional maximisation over ``b``.
+    """
+    from scipy.optimize import minimize_scalar
+
+    def neg(b: float) -> float:
+        return -min(1.0, float(np.linalg.eigvalsh(np.array([[v_max * b, b], [b, 1.0]]))[0]))
+
+    return -float(minimize_scalar(neg, bounds=(0.0, v_max), method="bounded").fun)
+
+
+@dataclass(frozen=True)
+class CondBound:
+    """A lower bound on the condition number of the stacked base regressor over EVERY trajectory
+    within the velocity limits (any duration, any number of samples N).
+
+    ``cond(W) = sigma_max / sigma_min`` with
+    ``sigma_max^2 >= N smax2`` (a column set whose squared norm per sample is a constant ``k s``:
+    ``lambda_max`` of its Gram matrix ``>= N s``) and ``sigma_min^2 <= N smin2`` (the friction columns
+    ``dq_j, sign dq_j, 1`` of joint ``j``, restricting the minimising vector to them:
+    :func:`friction_ceiling` of ``dq_max_j``). Attributes: ``bound = sqrt(smax2 / smin2)``, and which
+    columns give each.
+    """
+
+    bound: float
+    smax2: float
+    smax_columns: tuple[str, ...]
+    smin2: float
+    smin_joint: int
+
+    def describe(self) -> str:
+        return (f"cond >= {self.bound:.4g} for any trajectory within the velocity limits: sigma_max^2/N >= "
+                f"{self.smax2:.4g} ({' + '.join(self.smax_columns)}: constant squared norm per sample), "
+                f"sigma_min^2/N <= {self.smin2:.4g} (FV{self.smin_joint}, FS{self.smin_joint}, "
+                f"OFF{self.smin_joint} at the velocity limit of joint {self.smin_joint})")
+
+
+def cond_lower_bound(model: IdentificationModel, limits: Limits, *, checks: int = 64, seed: int = 0) -> CondBound | None:
+    """:class:`CondBound` of a model under ``limits`` (None when the model has no friction columns).
+
+    The structure the bound rests on is checked on ``checks`` random states (positions across the
+    whole circle, velocities and accelerations of both signs): the friction columns of joint ``j``
+    are ``dq_j, sign(dq_j), 1`` in row ``j`` only; for ``sigma_max``, single columns and pairs of
+    columns that depend on ``q`` only and whose squared norm per sample is the same at every state (the
+    offsets: 1; the first moments of a link whose frame origin stays on the fixed base axes: ``g^2``
+    for the pair, their torque being ``g (c, s)`` of one angle) are used.
+    """
+    names = list(model.BASE_NAMES)
+    n, nb = int(model.N_JOINTS), len(names)
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-math.pi, math.pi, (checks, n))
+    dq = rng.uniform(-3, 3, (checks, n))
+    ddq = rng.uniform(-10, 10, (checks, n))
+    W = np.asarray(model.regressor(q, dq, ddq)).reshape(checks, n, nb)
+    W2 = np.asarray(model.regressor(q, 2 * dq + 1, -ddq + 3)).reshape(checks, n, nb)
+    tol = 1e-9 * max(1.0, float(np.abs(W).max()))
+    smin2, smin_joint = math.inf, 0
+    for j in range(n):
+        cols = [f"{k}{j + 1}" for k in ("FV", "FS", "OFF")]
+        if not all(c in names for c in cols):
+            continue
+        want = np.zeros((3, checks, n))
+        want[0, :, j], want[1, :, j], want[2, :, j] = dq[:, j], np.sign(dq[:, j]), 1.0
+        got = np.stack([W[:, :, names.index(c)] for c in cols])
+        if np.abs(got - want).max() > tol:
+            continue
+        c2 = friction_ceiling(float(limits.dq_max[j]))
+        if c2 < smin2:
+            smin2, smin_joint = c2, j + 1
+    if not math.isfinite(smin2):
+        return None
+    q_only = [i for i in range(nb) if np.abs(W[:, :, i] - W2[:, :, i]).max() <= tol]
+    per = {i: (W[:, :, i] ** 2).sum(1) for i in q_only}  # squared norm per sample
+    best: tuple[float, tuple[str, ...]] = (0.0, ())
+    for a_i, a in enumerate(q_only):
+        if np.ptp(per[a]) <= 1e-9 * max(per[a].max(), 1.0) and per[a][0] > best[0]:
+            best = (float(per[a][0]), (names[a],))
+        for b in q_only[a_i + 1:]:
+            tot = per[a] + per[b]
+            if np.ptp(tot) <= 1e-9 * max(tot.max(), 1.0) and tot[0] / 2 > best[0]:
+                best = (float(tot[0] / 2), (names[a], names[b]))
+    if best[0] <= 0:
+        return None
+    return CondBound(math.sqrt(best[0] / smin2), best[0], best[1], smin2, smin_joint)
+
+
 def predicted_sigma(model: IdentificationModel, q, dq, ddq, noise: float, chi_b=None) -> tuple[np.ndarray, np.ndarray | None]:
     """Predicted standard deviations of the base parameters for i.i.d. torque noise ``noise``.
 
@@ -391,7 +496,7 @@ def _casadi():
 
 
 def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndarray, t_con: np.ndarray,
-               criterion: str, chi_b: np.ndarray | None, margin: float) -> tuple[Any, dict]:
+               criterion: str, chi_b: np.ndarray | None, margin: float, power: int = COND_POWER) -> tuple[Any, dict]:
     ca = _casadi()
     n, m = limits.n, basis.m
     if not hasattr(model, "casadi_regressor"):
@@ -409,13 +514,24 @@ def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndar
     M = (Z @ Z.T) / (n * No)
     if criterion == "cond":
         # cond(W)^2 = lambda_max / lambda_min of M, with the power means
-        # lambda_max <= tr(M^p)^(1/p) <= nb^(1/p) lambda_max (and alike for M^-1): smooth, tight for large p
+        # lambda_max <= tr(M^p)^(1/p) <= nb^(1/p) lambda_max (and alike for M^-1): smooth, tight for large p.
+        # Each squaring is renormalised by its trace (log tr(A^2p) = 2 log tr(A^p) + log tr(B^2),
+        # B = A^p / tr(A^p)), so that large p neither overflows nor underflows.
+        if power < 2 or power & (power - 1):
+            raise ExcitationError(f"cond criterion power {power}: must be a power of 2")
+
+        def log_tr_power(A):
+            lt = ca.log(ca.trace(A))
+            B = A / ca.trace(A)
+            for _ in range(int(math.log2(power))):
+                B2 = B @ B
+                t2 = ca.trace(B2)
+                lt = 2 * lt + ca.log(t2)
+                B = B2 / t2
+            return lt
+
         Mn = M / ca.trace(M)
-        Mi = ca.inv(Mn)
-        Mp, Mip = Mn, Mi
-        for _ in range(int(math.log2(COND_POWER))):
-            Mp, Mip = Mp @ Mp, Mip @ Mip
-        f = (ca.log(ca.trace(Mp)) + ca.log(ca.trace(Mip))) / COND_POWER
+        f = (log_tr_power(Mn) + log_tr_power(ca.inv(Mn))) / power
     elif criterion == "logdet":
         f = -ca.log(ca.det(M))
     else:
@@ -445,7 +561,7 @@ def output_times(duration: float, rate: float) -> np.ndarray:
 def optimise_excitation(model: IdentificationModel, basis, limits: Limits, duration: float, *, rate: float = 100.0,
                         criterion: str = "cond", starts: int = 4, seed: int = 0, chi_b=None,
                         samples: int | None = None, max_iter: int = 200, margin: float = 0.01,
-                        pool: int | None = None, progress=None) -> ExcitationResult:
+                        pool: int | None = None, progress=None, powers=None) -> ExcitationResult:
     """Optimise an excitation trajectory (IPOPT from ``starts`` seeded random feasible designs).
 
     Parameters
@@ -474,6 +590,10 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     margin : float
         Fraction by which the limits are tightened in the optimisation (the output is checked
         against the full limits).
+    powers : sequence of int, optional
+        ``criterion="cond"``: the powers ``p`` of the smooth criterion run in turn from each start,
+        each stage warm-started from the previous one (continuation; default :data:`COND_POWERS`),
+        ``max_iter`` IPOPT iterations each.
 
     Returns
     -------
@@ -499,11 +619,14 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     n_con = int(min(400, max(2 * samples, 40 * nharm)))
     t_con = np.linspace(0.0, period, n_con)
     cb = None if chi_b is None else np.asarray(chi_b, float)
-    nlp, bounds = _build_nlp(model, basis, limits, t_obj, t_con, criterion, cb, margin)
     opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": int(max_iter),
             "ipopt.hessian_approximation": "limited-memory", "ipopt.tol": 1e-6, "ipopt.acceptable_tol": 1e-4,
             "ipopt.sb": "yes"}
-    solver = ca.nlpsol("excite", "ipopt", nlp, opts)
+    stages = tuple(COND_POWERS if powers is None else powers) if criterion == "cond" else (COND_POWER,)
+    solvers = []
+    for p in stages:
+        nlp, bounds = _build_nlp(model, basis, limits, t_obj, t_con, criterion, cb, margin, power=int(p))
+        solvers.append(ca.nlpsol(f"excite_p{p}", "ipopt", nlp, opts))
     rng = np.random.default_rng(seed)
     lim_start = limits.shrunk(margin)
     best = None
@@ -523,15 +646,28 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
         candidates.append((excess, float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf, len(candidates), X_init))
     candidates.sort(key=lambda c: (c[0], c[1], c[2]))
     for s, (_, cond0, _, X_init) in enumerate(candidates[:int(starts)]):
-        sol = solver(x0=X_init.T.reshape(-1), lbg=bounds["lbg"], ubg=bounds["ubg"])
-        stats = solver.stats()
-        status, iters = stats.get("return_status", ""), stats.get("iter_count", 0)
-        X = np.asarray(sol["x"]).reshape(n, basis.m).T
+        x = X_init.T.reshape(-1)
+        stage_conds, iters = [], 0
+        x_best, c_best = x, math.inf
+        for solver in solvers:
+            sol = solver(x0=x, lbg=bounds["lbg"], ubg=bounds["ubg"])
+            stats = solver.stats()
+            status, iters = stats.get("return_status", ""), iters + stats.get("iter_count", 0)
+            x = np.asarray(sol["x"]).reshape(-1)
+            stage_conds.append(stacked_cond(model, *basis_eval(basis, x.reshape(n, basis.m).T, t_out)))
+            # a failed stage (e.g. IPOPT's Error_In_Step_Computation at a large p) can end worse than it
+            # started: the start's result is its best feasible stage
+            if stage_conds[-1] < c_best and _inside(basis, limits, x.reshape(n, basis.m).T, t_con):
+                x_best, c_best = x, stage_conds[-1]
+            elif stage_conds[-1] >= c_best:
+                x = x_best
+        X = (x_best if math.isfinite(c_best) else x).reshape(n, basis.m).T
         X = _scale_into(basis, limits, X, _constant_design(basis, n, (limits.q_max + limits.q_min) / 2),
                         dense_times(t_out, duration)) if not _inside(basis, limits, X, dense_times(t_out, duration)) else X
         q, dq, ddq = basis_eval(basis, X, t_out)
         c = stacked_cond(model, q, dq, ddq)
-        records.append({"start": s, "cond_start": cond0, "cond": c, "status": status, "iterations": iters})
+        records.append({"start": s, "cond_start": cond0, "cond": c, "status": status, "iterations": iters,
+                        "powers": list(stages), "cond_stages": stage_conds})
         if progress is not None:
             progress(s + 1, int(starts), c)
         if best is None or c < best[0]:

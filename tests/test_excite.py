@@ -16,6 +16,8 @@ from symoro_gen.excite import (
     PointToPointBasis,
     basis_eval,
     check_limits,
+    cond_lower_bound,
+    friction_ceiling,
     limits_of,
     optimise_excitation,
     output_times,
@@ -136,6 +138,58 @@ def test_optimised_cond_far_below_random(scara, scara_limits, optimised):
     assert optimised.cond == pytest.approx(stacked_cond(model, optimised.q, optimised.dq, optimised.ddq), rel=1e-12)
     assert optimised.cond < min(rand), (optimised.cond, min(rand))
     assert optimised.cond < 0.5 * float(np.median(rand)), (optimised.cond, np.median(rand))
+
+
+def test_friction_ceiling_is_the_largest_smallest_eigenvalue():
+    """No velocity distribution on [-v, v] (random discrete ones, symmetric or not, with rests) has a
+    moment matrix of (dq, sign dq, 1) with a larger smallest eigenvalue than ``friction_ceiling(v)``,
+    and the supremum is approached (within 1 %) by slow motion at +-eps mixed with motion at +-v."""
+    rng = np.random.default_rng(0)
+    for v in (0.5, 1.92, 4.0):
+        c = friction_ceiling(v)
+        best = 0.0
+        for _ in range(4000):
+            k = rng.integers(2, 7)
+            x = rng.uniform(-v, v, k)
+            x[rng.random(k) < 0.2] = 0.0
+            if rng.random() < 0.5:
+                x = np.r_[x, -x]
+            p = rng.dirichlet(np.ones(x.size))
+            Z = np.column_stack([x, np.sign(x), np.ones_like(x)])
+            lam = float(np.linalg.eigvalsh((Z * p[:, None]).T @ Z)[0])
+            assert lam <= c + 1e-9, (v, lam, c)
+        for w in np.linspace(0.01, 0.99, 99):
+            x = np.array([1e-6, -1e-6, v, -v])
+            p = np.array([1 - w, 1 - w, w, w]) / 2
+            Z = np.column_stack([x, np.sign(x), np.ones_like(x)])
+            best = max(best, float(np.linalg.eigvalsh((Z * p[:, None]).T @ Z)[0]))
+        assert c * 0.99 < best <= c + 1e-9, (v, best, c)
+
+
+@pytest.mark.parametrize("robot_name", ["scara", "lwr4"])
+def test_cond_lower_bound_holds_for_every_trajectory(robot_name, scara_limits):
+    """``cond_lower_bound`` is below the cond of random feasible trajectories of any length and of the
+    optimised-like extremes; on the LWR4 it rests on the first moments of link 2 (squared norm g^2 at
+    every sample, whatever the trajectory) and on the friction columns of the slowest joint."""
+    robot, model = model_for(robot_name)
+    lim = scara_limits if robot_name == "scara" else limits_of(robot)
+    b = cond_lower_bound(model, lim)
+    assert b is not None and b.bound > 1
+    rng = np.random.default_rng(2)
+    for duration, harmonics in ((4.0, 2), (10.0, 5), (20.0, 8)):
+        basis = FourierBasis(harmonics, 1 / duration)
+        t = output_times(duration, 20.0)
+        for _ in range(5):
+            q, dq, ddq = basis_eval(basis, random_trajectory(basis, lim, rng, t), t)
+            assert stacked_cond(model, q, dq, ddq) >= b.bound
+    if robot_name == "lwr4":
+        assert set(b.smax_columns) == {"MX2", "MY2R"}
+        assert b.smax2 == pytest.approx(9.81 ** 2 / 2, rel=1e-3)  # g^2 / 2 (the model's g)
+        q = rng.uniform(-3, 3, (50, 7))
+        W = np.asarray(model.regressor(q, rng.normal(size=(50, 7)), rng.normal(size=(50, 7)))).reshape(50, 7, -1)
+        i, j = (list(model.BASE_NAMES).index(c) for c in ("MX2", "MY2R"))
+        np.testing.assert_allclose((W[:, :, i] ** 2 + W[:, :, j] ** 2).sum(1), 2 * b.smax2, rtol=1e-9)
+        assert b.smin2 == pytest.approx(friction_ceiling(float(lim.dq_max.min())), rel=1e-9)
 
 
 def test_limits_hold_on_a_dense_resampling(scara_limits, optimised):

@@ -41,8 +41,8 @@ from .estimators import COND_WARN, REL_STD_WARN_PCT, fit_ols
 from .physical import base_matrix, standard_from_base
 from .result import IdentificationResult, per_joint_rel_err, relative_std_pct
 
-__all__ = ["ClosedLoopSetup", "IterativeIdentification", "closed_loop_setup", "identify_iv", "iterate", "iv_fit", "physical_projection",
-           "reference_ols", "simulated_system"]
+__all__ = ["ClosedLoopSetup", "IterativeIdentification", "SimulatedOutput", "closed_loop_setup", "identify_iv", "iterate",
+           "iv_fit", "physical_projection", "reference_ols", "simulated_output", "simulated_system"]
 
 #: default convergence tolerance on ``|chi_k+1 - chi_k| / |chi_k|``
 TOL = 1e-3
@@ -165,6 +165,19 @@ def _row_keys(asm: Assembly, experiment: int | None = None) -> np.ndarray:
     return (exp << 40) + (joint << 32) + sample
 
 
+def _match_rows(setup: ClosedLoopSetup, keys: list, *blocks: list) -> list:
+    """The stacked ``blocks`` reordered to the rows of ``setup.measured.system`` (same experiment,
+    joint and decimated sample)."""
+    allk = np.concatenate(keys)
+    want = _row_keys(setup.measured)
+    order = np.argsort(allk)
+    pos = np.clip(np.searchsorted(allk, want, sorter=order), 0, allk.size - 1)
+    idx = order[pos]
+    if not np.array_equal(allk[idx], want):
+        raise IdentificationError("internal: the simulated observation rows do not match the measured ones")
+    return [(np.vstack(b) if b[0].ndim == 2 else np.concatenate(b))[idx] for b in blocks]
+
+
 def simulated_system(model: IdentificationModel, setup: ClosedLoopSetup, theta) -> tuple[ObservationSystem, list]:
     """The observation system on the closed-loop simulation with parameters ``theta``.
 
@@ -192,18 +205,65 @@ def simulated_system(model: IdentificationModel, setup: ClosedLoopSetup, theta) 
         blocks_w.append(asm.system.W)
         y_parts.append(asm.system.Y)
         keys.append(_row_keys(asm, experiment=i))
-    allk = np.concatenate(keys)
-    W = np.vstack(blocks_w)
-    Y = np.concatenate(y_parts)
-    want = _row_keys(setup.measured)
-    order = np.argsort(allk)
-    pos = np.searchsorted(allk, want, sorter=order)
-    pos = np.clip(pos, 0, allk.size - 1)
-    idx = order[pos]
-    if not np.array_equal(allk[idx], want):
-        raise IdentificationError("internal: the simulated observation rows do not match the measured ones")
+    W, Y = _match_rows(setup, keys, blocks_w, y_parts)
     ms = setup.measured.system
-    return ObservationSystem(W[idx], Y[idx], ms.names, ms.joint), runs
+    return ObservationSystem(W, Y, ms.names, ms.joint), runs
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedOutput:
+    """The closed-loop simulation of one estimate, in the rows of the measured system.
+
+    Attributes
+    ----------
+    W : ndarray (r, c)
+        The observation matrix on the simulated states, with the simulation's own velocities and
+        accelerations (``W chi`` is the simulated torque up to the Coulomb smoothing).
+    T : ndarray (r,)
+        The simulated torque (the controller's output), filtered and decimated as the measured ``Y``.
+    Y : ndarray (r,)
+        The measured torque.
+    runs : list of ClosedLoopResult
+    """
+
+    W: np.ndarray
+    T: np.ndarray
+    Y: np.ndarray
+    runs: list
+    W_filtered: np.ndarray | None = None
+
+    @property
+    def substeps(self) -> tuple[int, ...]:
+        return tuple(int(r.substeps) for r in self.runs)
+
+
+def simulated_output(model: IdentificationModel, setup: ClosedLoopSetup, theta, *, substeps=None,
+                     with_w: bool = True, filtered: bool = False) -> SimulatedOutput:
+    """Simulate ``theta`` in closed loop on every experiment; the simulated torque ``T`` (and the
+    observation matrix ``W`` on the simulated states) decimated as the measured system, in its rows.
+    ``filtered``: also ``W_filtered``, the observation matrix of the simulated positions band-pass
+    differentiated as the measured ones (:func:`simulated_system`'s).
+
+    ``substeps`` (one per experiment) fixes the RK4 substeps (the finite-difference sensitivities
+    of DIDIM need the same integrator for every perturbed estimate)."""
+    blocks_w, blocks_t, blocks_f, keys, keys_f, runs = [], [], [], [], [], []
+    for i, tr in enumerate(setup.trajectories):
+        qr, dqr = setup.references[i]
+        run = simulate_closed_loop(model, theta, tr.t, qr, dqr, gains=setup.gains[i], friction_eps=setup.friction_eps,
+                                   substeps=None if substeps is None else int(substeps[i]))
+        runs.append(run)
+        sim = Trajectory(t=tr.t, q=run.q, tau=run.tau, dq=run.dq, ddq=run.ddq, source=f"{tr.source} (simulated)")
+        asm = assemble(model, sim, replace(setup.options[i], use_recorded_derivatives=True))
+        blocks_w.append(asm.system.W if with_w else np.zeros((asm.system.Y.size, 0)))
+        blocks_t.append(asm.system.Y)
+        keys.append(_row_keys(asm, experiment=i))
+        if filtered:
+            asm_f = assemble(model, sim, setup.options[i])
+            blocks_f.append(asm_f.system.W)
+            keys_f.append(_row_keys(asm_f, experiment=i))
+    W, T = _match_rows(setup, keys, blocks_w, blocks_t)
+    W_f = _match_rows(setup, keys_f, blocks_f)[0] if filtered else None
+    return SimulatedOutput(W, T, np.asarray(setup.measured.system.Y, float), runs, W_f)
 
 
 @dataclass(frozen=True, eq=False)
@@ -242,6 +302,7 @@ class IterativeIdentification:
     setup: ClosedLoopSetup
     tracking_error: np.ndarray
     start_source: str = "IDIM-OLS"
+    statistics: dict | None = None
 
     def to_dict(self) -> dict:
         """The ``iterations`` block of the JSON output."""
@@ -249,7 +310,8 @@ class IterativeIdentification:
                 "start": self.start_source,
                 "changes": [float(c) for c in self.changes], "reference": list(self.setup.reference_source),
                 "controller_gains": [g.to_dict() for g in self.setup.gains],
-                "tracking_error_rms": [float(x) for x in self.tracking_error]}
+                "tracking_error_rms": [float(x) for x in self.tracking_error],
+                **({} if self.statistics is None else {"statistics": self.statistics})}
 
     def summary(self) -> str:
         st = "converged" if self.converged else "NOT converged"
@@ -338,10 +400,16 @@ def physical_projection(model: IdentificationModel, theta) -> np.ndarray | None:
     """The base parameters of the physically consistent standard set closest to giving ``theta``
     (:func:`~symoro_gen.identification.physical.standard_from_base`: pseudo-inertias positive
     semidefinite, Wensing, Kim & Slotine 2018; ``IA, FV, FS >= 0``), i.e. ``theta`` itself when it is
-    physical, else its least-squares projection on the physical set. None without cvxpy."""
+    physical, else its least-squares projection on the physical set. Among the consistent sets the one
+    closest to the robot file's nominal parameters is taken when the model has them (pulled toward
+    zero instead, the unidentifiable inertias of a wrist vanish and its inertia matrix is singular:
+    it cannot be simulated, seen on the real LWR4). None without cvxpy."""
 
+    nominal = getattr(model, "nominal_parameters", lambda: None)()
+    if nominal is not None and not np.any(np.asarray(nominal, float) != 0):
+        nominal = None
     try:
-        sfb = standard_from_base(model, np.asarray(theta, float))
+        sfb = standard_from_base(model, np.asarray(theta, float), nominal)
     except IdentificationError:
         return None
     return base_matrix(model) @ np.asarray(sfb.values, float)
@@ -361,10 +429,11 @@ def _simulable(model: IdentificationModel, setup: ClosedLoopSetup, theta) -> str
 def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory], options: AssemblyOptions | None,
             step, label: str, *, references=None, gains=None, bandwidth_hz: float | None = None,
             friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER, tol: float = TOL,
-            start=None) -> IterativeIdentification:
+            start=None, simulate=None) -> IterativeIdentification:
     """The iteration shared by IDIM-IV and DIDIM: simulate the current estimate in closed loop, assemble
     the simulated states, ``chi_k+1 = step(measured_system, simulated_system)``, until the relative
-    change is below ``tol``.
+    change is below ``tol``. ``simulate(model, setup, theta) -> (system, runs)`` builds the simulated
+    system (default :func:`simulated_system`).
 
     The start is ``start`` when given, else the IDIM-OLS estimate; when that one cannot be simulated
     (inertia matrix not positive definite, diverging loop: noisy positions can make OLS non-physical),
@@ -376,6 +445,7 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
     """
     opts = AssemblyOptions() if options is None else options
     trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
+    sim_fn = simulated_system if simulate is None else simulate
     if int(max_iter) < 1:
         raise IdentificationError(f"max_iter must be >= 1, got {max_iter}")
     measured = assemble(model, trajs, replace(opts, payload_columns=False))
@@ -401,6 +471,9 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
                              f"be simulated ({why})")
             else:
                 proj = physical_projection(model, ols.values)
+                if proj is not None and gains is None:  # default gains from the start actually simulated
+                    setup = closed_loop_setup(model, trajs, opts, proj, references=references, gains=None,
+                                              bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
                 why3 = "cvxpy is not installed" if proj is None else _simulable(model, setup, proj)
                 if proj is None or why3 is not None:
                     raise IdentificationError(
@@ -416,7 +489,7 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
     for _ in range(int(max_iter)):
         ssys, failure, proj = None, "", None
         try:
-            ssys, runs = simulated_system(model, setup, theta)
+            ssys, runs = sim_fn(model, setup, theta)
         except IdentificationError as exc:
             if prev is None:
                 raise IdentificationError(
@@ -430,7 +503,7 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
             proj = physical_projection(model, theta)
             if proj is not None:
                 try:
-                    ssys, runs = simulated_system(model, setup, proj)
+                    ssys, runs = sim_fn(model, setup, proj)
                     notes.append(f"{label} iteration {len(changes)}: the estimate could not be simulated "
                                  f"({failure}); replaced by its physically consistent projection")
                 except IdentificationError:
@@ -446,7 +519,7 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
                 theta = prev + 0.5 * (theta - prev)
                 history[-1] = theta
                 try:
-                    ssys, runs = simulated_system(model, setup, theta)
+                    ssys, runs = sim_fn(model, setup, theta)
                     break
                 except IdentificationError as exc:
                     if halving == MAX_HALVINGS:
