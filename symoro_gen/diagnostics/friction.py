@@ -35,8 +35,8 @@ full-rate velocity of the joint and decimates it (``Frame.full_rate_columns`` st
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
 import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
