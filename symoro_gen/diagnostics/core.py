@@ -24,7 +24,7 @@
    noise model and that also catches coincidental fits of deterministic artefacts repeated in the
    validation data);
 4. the eligible candidate with the best validation score is added (its searched parameter refined
-   continuously between grid points), the model re-identified with the chosen method, the model
+   continuously between grid points), the model re-identified (OLS, :data:`SELECT_METHOD`), the model
    torque and the columns linearised around the fit rebuilt (fixed point), and the loop goes on
    until nothing is eligible or ``max_effects``.
 
@@ -32,8 +32,11 @@ Everything the loop computed is in the :class:`~.report.ResidualReport`.
 
 Known limits
 ------------
-* Candidates are scored with per-joint weighted least squares whatever ``method``; the reported
-  identifications (errors before/after, effect parameters and %sigma) use ``method``.
+* Candidates are scored with per-joint weighted least squares and the loop re-identifies with OLS
+  (:data:`SELECT_METHOD`) whatever ``method``, and the stability stage keeps only the effects that both
+  OLS and WLS weights name (the others are reported as ``estimator_dependent``): the named effects are the
+  same under ``method="ols"`` and ``"wls"`` by construction. Only the reported identifications (errors
+  before/after, effect parameters and %sigma) use ``method``.
 * ``gain``: only the gain of one joint relative to the others is identifiable (through the dynamic
   coupling); a common scale of all joints needs a known payload. On robots whose joints are weakly
   coupled (a SCARA) a gain error of one joint looks like that of another.
@@ -133,6 +136,11 @@ MIN_SELECTION_FREQUENCY = 0.5
 #: confidence level of the intervals of the accepted effects' coefficients (the joint region must
 #: exclude "no effect" at this level)
 CI_LEVEL = 0.99
+#: estimator of the loop's own re-identifications (the fit the candidates are linearised around, the row
+#: weights of the scoring): fixed, so that *what* is named does not depend on ``method`` (issue 10 item 3);
+#: the stability stage then tests every effect under OLS *and* WLS weights and keeps the common ones, and
+#: only the reported identifications (errors before/after, parameters, %sigma) use ``method``
+SELECT_METHOD = "ols"
 
 
 # ------------------------------------------------------------------------------------------------
@@ -489,6 +497,7 @@ class _State:
     placebo_hits: tuple[tuple[int | None, int, str, float], ...] = ()   # (joint, round, variant, score)
     stopped_at_max: bool = False
     stopped_joints: frozenset = frozenset()   # joints where a placebo passed: the loop stopped there
+    estimator_dependent: tuple[dict, ...] = ()   # effects named under one weighting only (dropped)
 
 
 @dataclass(frozen=True, eq=False)
@@ -716,7 +725,8 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     families and the nuisance columns (velocity noise at Coulomb reversals)."""
     res0 = _fit(data0.F.system, cfg.method)
     val0 = res0.rel_err_on(data0.Vs)
-    res_start = _fit(data.F.system, cfg.method) if laws else res0
+    # the loop starts from the selection estimator's fit (the named effects do not depend on cfg.method)
+    res_start = (_fit(data.F.system, SELECT_METHOD) if laws or cfg.method != SELECT_METHOD else res0)
     families = make_families(data.F, cfg.candidates)
     # a joint whose friction-law stage chose a Stribeck law already has the Stribeck column: the loop's
     # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
@@ -959,8 +969,9 @@ def _score_composed_round(data: _Data, base: _Baseline, state: _State, D: _Desig
 
 def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: DiagnoseSettings) -> _State:
     """Stage 4 (accept, refine, re-identify): add the best eligible candidate (its searched parameter
-    refined continuously), re-identify with ``cfg.method`` and re-linearise the effects that depend on
-    the fit (fixed point, :data:`RELINEARISE_PASSES`)."""
+    refined continuously), re-identify with :data:`SELECT_METHOD` (whatever ``cfg.method``: the loop's path
+    must not depend on the estimator) and re-linearise the effects that depend on the fit (fixed point,
+    :data:`RELINEARISE_PASSES`)."""
     F, V = state.F, state.V
     Y, J = F.system.Y, F.system.joint
     _, fam, ev, X, Xv, _cs = scored.eligible[0]
@@ -971,12 +982,12 @@ def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: Dia
     added = state.added + (_Added(fam, value, X, Xv),)
     meta = dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd)
     names, A, Av = _augmented(data, added)
-    res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
+    res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
     passes = RELINEARISE_PASSES if any(ad.family.depends_on_fit for ad in added) else 0
     for _ in range(passes):
         F, V, added = _relinearise(data, F, V, added, res)
         names, A, Av = _augmented(data, added)
-        res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
+        res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
     if not passes:
         F, V, added = _relinearise(data, F, V, added, res)   # model torque of the new fit for the next round
     th = np.array([res.value(nm) for nm in names])
@@ -1106,7 +1117,9 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
     under a weighting when it is selected in most time-blocked folds (> :data:`MIN_SELECTION_FREQUENCY`)
     and the confidence region of its coefficients excludes "no effect" at :data:`CI_LEVEL`. Only the
     effects named under both are kept (:func:`.stability.ols_wls_agreement` says which depend on the
-    estimator); the model is re-identified without the others."""
+    estimator, listed in ``estimator_dependent``); the model is re-identified (:data:`SELECT_METHOD`) without
+    the others. Since the loop itself runs with :data:`SELECT_METHOD`, the effects kept are the same
+    whichever ``method`` the user chose."""
     if not state.added:
         return state, {}, []
     F = state.F
@@ -1139,14 +1152,25 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
         msgs.append(f"{labels[ad.family.key]} dropped: not stable (selected in {100 * st['OLS'].frequency:.0f} % / "
                     f"{100 * st['WLS'].frequency:.0f} % of the {N_FOLDS} time-blocked folds under OLS / WLS weights, "
                     f"confidence region excluding zero: {st['OLS'].excludes_zero} / {st['WLS'].excludes_zero})")
+    dep = []
+    for ad in state.added:
+        key = ad.family.key
+        if key in set(agr.only_first) | set(agr.only_second):
+            comp = dict(ad.family.info).get("composed")
+            dep.append({"kind": ad.family.kind, "joint": None if ad.family.joint is None else ad.family.joint + 1,
+                        "modulation": None if comp is None else comp.modulation, "label": labels[key],
+                        "named_under": "OLS" if key in set(agr.only_first) else "WLS",
+                        "selection_frequency": {lab: float(x.frequency) for lab, x in info[key].items()},
+                        "excludes_zero": {lab: bool(x.excludes_zero) for lab, x in info[key].items()}})
     if not gone:
         return state, info, msgs
     added = tuple(ad for ad in state.added if ad.family.key in keep)
     meta = tuple(m for m in state.effects_meta if m["family"].key in keep)
     names, A, Av = _augmented(data, added)
-    res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
+    res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
     Fn, Vn, added = _relinearise(data, state.F, state.V, added, res)
-    return replace(state, F=Fn, V=Vn, added=added, res=res, effects_meta=meta), info, msgs
+    return (replace(state, F=Fn, V=Vn, added=added, res=res, effects_meta=meta, estimator_dependent=tuple(dep)),
+            info, msgs)
 
 
 def _unexplained(F: Frame, resid: np.ndarray, seed: int = 0) -> tuple:
@@ -1195,8 +1219,16 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     stab = stab or {}
     names, A, Av = _augmented(data, state.added)
     res = state.res
-    if state.added or base.laws:
+    if state.added or base.laws or cfg.method != SELECT_METHOD:
         res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
+    if cfg.method != SELECT_METHOD and any(ad.family.depends_on_fit for ad in state.added):
+        # the effects linearised around the fit (gain, elasticity, |tau_hat|-modulated) rebuilt around the
+        # user's estimator (fixed point, as in the loop)
+        for _ in range(RELINEARISE_PASSES):
+            Fn, Vn, added = _relinearise(data, state.F, state.V, state.added, res)
+            state = replace(state, F=Fn, V=Vn, added=added)
+            names, A, Av = _augmented(data, state.added)
+            res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
     val1 = res.rel_err_on(ObservationSystem(Av, data.Vs.Y, names, data.Vs.joint))
     val0_raw = _validation_rel_err_raw(data0, state.V, base.res0, ())
     raw_keep: dict = {}
@@ -1295,7 +1327,8 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                           structure_before=s_before, structure_after=s_after, result_before=base.res0,
                           result_after=res, settings=settings, warnings=tuple(warnings), plot_data=plot_data,
                           before_validation_rel_err_raw=np.asarray(val0_raw),
-                          after_validation_rel_err_raw=np.asarray(val1_raw), unexplained=unexpl)
+                          after_validation_rel_err_raw=np.asarray(val1_raw), unexplained=unexpl,
+                          estimator_dependent=tuple(state.estimator_dependent))
 
 
 @single_threaded_blas

@@ -25,7 +25,9 @@ time-blocked K-fold cross-validation (:mod:`.stability`: ``K`` contiguous blocks
 shuffling; fold ``k`` holds out block ``k`` of every experiment and the whole model - base parameters
 of all joints and the candidate friction columns - is fitted on the other blocks). A law replaces the
 simpler one (order ``sign < tanh < stribeck``, ``linear < power``) only if it lowers the CV error by
-more than ``min_gain`` (relative): ties keep the declared law.
+more than ``min_gain`` (relative) *and* by more than one standard error of the paired per-fold
+difference of the squared errors (the one-standard-error rule over time blocks): ties, and gains inside
+the fold-to-fold scatter, keep the simpler law.
 
 Columns are evaluated on the rows by default (the decimated velocity); a caller that decimates columns
 in parallel with ``W`` (RX-90 paper eq. 15) passes ``columns(f)``, which evaluates ``f`` on the
@@ -33,6 +35,7 @@ full-rate velocity of the joint and decimates it (``Frame.full_rate_columns`` st
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -311,28 +314,51 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
     cv = BlockedLS(A, y, blocks, weights)
     n_folds = len(cv.folds)
 
-    def err(claw, cpar, vlaw="linear", vpar=None, smooth=None):
+    def oof(claw, cpar, vlaw="linear", vpar=None, smooth=None):
         pc = 2 if claw == "stribeck" else 1
         X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]),
                     pc + 1)
-        return cv.rel_err(X, rows)
+        return cv.oof_residual(X)[rows]
+
+    den = float(np.sum(y[rows] ** 2))
+    fold_of = np.asarray(blocks)[rows]
+    fold_ids = np.unique(fold_of)
+
+    def err(*a, **k):
+        e = oof(*a, **k)
+        return math.sqrt(float(e @ e) / den) if den > 0 else math.inf
+
+    def better(new: LawFit, new_args: tuple, old: LawFit, old_args: tuple) -> bool:
+        """``new`` (the more complex law) replaces ``old``: its CV error is lower by more than ``min_gain``
+        *and* by more than one standard error of the paired difference over the time-blocked folds (the
+        one-standard-error rule, Hastie, Tibshirani & Friedman 2009, sec. 7.10; Breiman et al. 1984): a
+        gain inside the fold-to-fold scatter keeps the simpler law."""
+        if not new.cv_rel_err < old.cv_rel_err * (1.0 - min_gain):
+            return False
+        e_new, e_old = oof(*new_args), oof(*old_args)
+        d = np.array([float(np.sum(e_old[fold_of == b] ** 2) - np.sum(e_new[fold_of == b] ** 2)) for b in fold_ids])
+        if d.size < 2:
+            return True
+        return bool(np.mean(d) > np.std(d, ddof=1) / math.sqrt(d.size))
 
     tried: list[LawFit] = []
 
     def choose_coulomb(vlaw, vpar):
         best = LawFit("sign", None, err("sign", None, vlaw, vpar, v_floor), v_floor)
+        best_args: tuple = ("sign", None, vlaw, vpar, v_floor)
         tried.append(best)
         smooth = v_floor
         for law in ("tanh", "stribeck"):
             if law not in laws:
                 continue
-            p, e = _search(lambda v, law=law, sm=smooth: err(law, v, vlaw, vpar, sm), grid, refine and law == "tanh")
+            p, e = _search(lambda v, law=law, sm=smooth: err(law, v, vlaw, vpar, sm), grid, refine)
             fit = LawFit(law, p, e, smooth if law == "stribeck" else None)
+            args = (law, p, vlaw, vpar, smooth if law == "stribeck" else None)
             if law == "tanh":
                 smooth = p
             tried.append(fit)
-            if e < best.cv_rel_err * (1.0 - min_gain):
-                best = fit
+            if better(fit, args, best, best_args):
+                best, best_args = fit, args
         return best
 
     def choose_viscous(c):
@@ -341,7 +367,7 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
             d, e = _search(lambda d: err(c.law, c.param, "power", d, c.smooth), np.asarray(delta_grid, float), refine)
             fit = LawFit("power", d, e)
             tried.append(fit)
-            if e < best.cv_rel_err * (1.0 - min_gain):
+            if better(fit, (c.law, c.param, "power", d, c.smooth), best, (c.law, c.param, "linear", None, c.smooth)):
                 best = fit
         return best
 

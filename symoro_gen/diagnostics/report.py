@@ -194,6 +194,11 @@ class ResidualReport:
     before_validation_rel_err_raw, after_validation_rel_err_raw : ndarray, shape (n,), or None
         Validation relative error norms on the raw measured torque: the model (declared, then with every
         effect) at full rate on the filtered states against the unfiltered torque, every sample.
+    unexplained : tuple of UnexplainedItem
+    estimator_dependent : tuple of dict
+        Effects the loop accepted that only one weighting (OLS or WLS) names in the stability stage: dropped
+        from the model (issue 10 item 3, "keep only the common ones"); ``kind``, ``joint`` (1-based),
+        ``modulation``, ``label``, ``named_under``, ``selection_frequency`` and ``excludes_zero`` per weighting.
     """
 
     robot: str
@@ -216,6 +221,7 @@ class ResidualReport:
     before_validation_rel_err_raw: np.ndarray | None = None
     after_validation_rel_err_raw: np.ndarray | None = None
     unexplained: tuple = ()
+    estimator_dependent: tuple = ()
 
     @property
     def unexplained_flagged(self) -> tuple:
@@ -253,6 +259,7 @@ class ResidualReport:
             "unexplained": [u.to_dict() for u in self.unexplained_flagged],
             "unexplained_all": [{**u.to_dict(), "threshold": _f(u.threshold), "flagged": u.flagged}
                                 for u in self.unexplained],
+            "estimator_dependent": [dict(d) for d in self.estimator_dependent],
             "tried": [c.to_dict() for c in self.tried],
             "placebos": [c.to_dict() for c in self.placebos],
             "structure": {"before": [s.to_dict() for s in self.structure_before if s.significant],
@@ -348,6 +355,7 @@ class ResidualReport:
                 L.append(f"  {c.label + (' ' + c.variant if c.variant and c.kind != 'coupling' else ''):<22}"
                          f"{c.score:>8.3f}{c.p_value:>11.2e}{c.threshold:>10.1e}{c.z_validation:>8.1f}  "
                          f"{'eligible' if c.eligible else c.reason}")
+        L += self._estimator_lines()
         L += self._unexplained_lines()
         left = [s for s in self.structure_after if s.significant]
         if left:
@@ -360,6 +368,14 @@ class ResidualReport:
             L.append("Warnings:")
             L += [f"[{i}] {w}" for i, w in enumerate(self.warnings, 1)]
         return "\n".join(L)
+
+    def _estimator_lines(self) -> list[str]:
+        if not self.estimator_dependent:
+            return []
+        return ["", "Estimator-dependent (named under one weighting only, dropped from the model):"] + [
+            f"  {d['label']}: named under {d['named_under']} weights only (selected in "
+            + " / ".join(f"{100 * f:.0f} %" for f in d["selection_frequency"].values()) + " of the folds under "
+            + " / ".join(d["selection_frequency"]) + ")" for d in self.estimator_dependent]
 
     def _unexplained_lines(self) -> list[str]:
         if not self.unexplained:
@@ -412,6 +428,10 @@ class ResidualReport:
             for c in self.best_tried(r, 10):
                 L.append(f"| {c.label} {c.variant} | {c.score:.3f} | {c.p_value:.2e} | {c.threshold:.1e} | "
                          f"{c.z_validation:.1f} | {'eligible' if c.eligible else c.reason} |")
+        if self.estimator_dependent:
+            L.append("")
+            L.append("## Estimator-dependent effects (dropped)")
+            L += [x.strip() for x in self._estimator_lines()[2:]]
         if self.unexplained:
             L.append("")
             L.append("## Structure left that no candidate explains")

@@ -51,12 +51,7 @@ def _id(c):
     return f"{c[1]}-{c[0]}-j{'all' if c[2] is None else c[2] + 1}"
 
 
-_KNOWN = {"stribeck-scara-j2": "issue 10, open: the friction-law stage pairs the Stribeck law with a "
-          "|dq|^1.17 viscous law on this seed (vs grid 0.117 vs 0.1 true), so its Fs - Fc is 0.67 for 1.0"}
-
-
-@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(reason=_KNOWN[_id(c)], strict=False))
-                                  if _id(c) in _KNOWN else c for c in CASES], ids=[_id(c) for c in CASES])
+@pytest.mark.parametrize("case", CASES, ids=[_id(c) for c in CASES])
 def test_injected_effect_found_first(case):
     name, kind, joint, params, seed, check = case
     model, tr = recording(name, seed, kind, joint, **params)

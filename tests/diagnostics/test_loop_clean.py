@@ -16,8 +16,14 @@ SEEDS = range(500, 530)
 CHUNKS = [SEEDS[i:i + 10] for i in range(0, len(SEEDS), 10)]
 
 
-#: issue 10 open: on seed 510 the friction-law stage replaces joint 2's law on clean data (1 of 30 seeds)
-_KNOWN = {510: "issue 10 open: seed 510, the friction-law stage adds a law on joint 2 of clean data"}
+#: issue 10 open (measured with the one-SE rule of the law selection): on seed 510 the friction-law stage
+#: replaces joint 1's Coulomb law by a Stribeck law on clean data (1 of 30 seeds). The Stribeck excess is
+#: tiny (Fs - Fc 0.028 N m, 1 % of Fc = 2.9 N m, vs 0.15 rad/s) but the same in all 5 time-blocked folds
+#: (0.013-0.031) and it lowers the out-of-fold error by 12 % (t = 3.8 over 20 sub-blocks): a systematic
+#: low-speed pattern at the noise level of 10 s of 100 Hz data, not explained yet (no practical-size floor
+#: on a law's torque change exists yet). Seeds 511-519 add and flag nothing.
+_KNOWN = {510: "issue 10 open: seed 510, the friction-law stage puts a Stribeck law (Fs - Fc 0.028 N m) on "
+               "joint 1 of clean data"}
 
 
 @pytest.mark.slow

@@ -37,34 +37,31 @@ def _load(shared_data, arm):
         pytest.skip(f"{arm} recording not found: {exc}")
 
 
-@pytest.mark.parametrize("arm", ["lwr4", "tx40", "med7"])
-def test_loop_no_worse_than_the_expert_under_ols(shared_data, arm):
-    """The loop's final model (OLS) against the expert model, every joint, both metrics."""
-    bench, (name, model, ident, valid) = _load(shared_data, arm)
-    r = bench.run(name, model, ident, valid, ["ols"])["ols"]
-    ok_f, ok_r = r["ok"]
-    assert ok_f.all(), ("filtered", [j + 1 for j in range(ok_f.size) if not ok_f[j]])
-    assert ok_r.all(), ("raw", [j + 1 for j in range(ok_r.size) if not ok_r[j]])
+#: measured with the final code of session 4 (`bench/expert_vs_loop.py --only tx40 --method ols,wls`): the
+#: effects are the same under OLS and WLS, but under WLS the TX40 loop is worse than the expert on joint 3,
+#: raw metric (+0.029 in rel^2 against 2 SE = 0.023; better on the filtered system). The OLS comparison and
+#: the same-effects check stay hard assertions; only that WLS shortfall is reported as a known failure.
+_OPEN_WLS = {"tx40": "issue 10 open: TX40 under WLS, loop worse than the expert on joint 3 (raw metric)"}
 
 
-#: measured at the end of session 3 (issue 10 open): under WLS the TX40 loop is worse than the expert on
-#: joint 3 (raw metric), and the effects named differ between OLS and WLS on the LWR4 (a composed ripple
-#: on joint 7) and the Med 7 (WLS adds a step on joint 7). Not run (each arm runs two real-data diagnoses);
-#: `python bench/expert_vs_loop.py --only ARM --method ols` and `--method wls` reproduce the comparison.
-_OPEN = "issue 10 open: effects differ between OLS and WLS (lwr4, med7); TX40 WLS worse on joint 3 (raw)"
-
-
-@pytest.mark.xfail(run=False, reason=_OPEN)
 @pytest.mark.parametrize("arm", ["lwr4", "tx40", "med7"])
 def test_loop_no_worse_than_the_expert_and_same_effects_under_ols_and_wls(shared_data, arm):
-    bench = _bench()
-    try:
-        name, model, ident, valid = getattr(bench, arm)(shared_data)
-    except (FileNotFoundError, OSError) as exc:
-        pytest.skip(f"{arm} recording not found: {exc}")
+    """The loop's final model against the expert model, every joint, both metrics, under OLS and under WLS
+    (each with its own expert fit); and the same effects named under both (the loop re-identifies with OLS
+    whatever the method and keeps only the effects both weightings name: equal by construction, checked here
+    on real data)."""
+    bench, (name, model, ident, valid) = _load(shared_data, arm)
     out = bench.run(name, model, ident, valid, ["ols", "wls"])
+    assert out["ols"]["effects"] == out["wls"]["effects"], (out["ols"]["effects"], out["wls"]["effects"])
+    dep = [r["rep"].to_dict()["estimator_dependent"] for r in out.values()]
+    assert dep[0] == dep[1], dep
+    worse = {}
     for method, r in out.items():
         ok_f, ok_r = r["ok"]
-        assert ok_f.all(), (method, "filtered", [j + 1 for j in range(ok_f.size) if not ok_f[j]])
-        assert ok_r.all(), (method, "raw", [j + 1 for j in range(ok_r.size) if not ok_r[j]])
-    assert out["ols"]["effects"] == out["wls"]["effects"], (out["ols"]["effects"], out["wls"]["effects"])
+        for metric, ok in (("filtered", ok_f), ("raw", ok_r)):
+            if not ok.all():
+                worse[(method, metric)] = [j + 1 for j in range(ok.size) if not ok[j]]
+    assert not {k: v for k, v in worse.items() if k[0] == "ols"}, worse
+    if worse and arm in _OPEN_WLS:
+        pytest.xfail(f"{_OPEN_WLS[arm]}; measured now: {worse}")
+    assert not worse, worse
