@@ -42,7 +42,7 @@ check-generated: $(STAMP)
 	$(PY) -m symoro_gen.emit.check
 
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto --maxprocesses 4
 
 # ruff (style and likely bugs) and mypy (strict on the core packages), configured in pyproject.toml
 lint: $(STAMP)

@@ -50,9 +50,10 @@ from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
 from ..preprocessing.trajectory import Trajectory
-from ..simulate.closed_loop import FRICTION_EPS
+from ..simulate.closed_loop import FRICTION_EPS, ForwardDynamics
 from .estimators import fit_ols
 from .iv import MAX_ITER, TOL, IterativeIdentification, _tracking, iterate, simulated_output
+from .physical import identify_physical
 from .result import per_joint_rel_err, relative_std_pct
 
 __all__ = ["didim_system", "hac_score_covariance", "identify_didim", "output_error_statistics"]
@@ -159,8 +160,6 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
                 state["refit"] = False
         if physical == "never" or (physical == "auto" and _inertia_positive(model, res.values, q_check)):
             return res
-        from .physical import identify_physical
-
         nominal = getattr(model, "nominal_parameters", lambda: None)()
         phys = identify_physical(model, sim, nominal=nominal, nominal_tolerance=nominal_tolerance)
         constrained.append(len(constrained) + 1)
@@ -189,8 +188,6 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
 
 def _inertia_positive(model: IdentificationModel, theta, q_check: np.ndarray) -> bool:
     """``M(q)`` positive definite at every position of ``q_check`` (what a simulation needs)."""
-    from ..simulate.closed_loop import ForwardDynamics
-
     fd = ForwardDynamics(model, theta)
     try:
         return all(float(np.linalg.eigvalsh(fd.mass_matrix(q))[0]) > 0 for q in q_check)
