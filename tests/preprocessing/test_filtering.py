@@ -86,6 +86,21 @@ def test_bandwidth_estimate_follows_the_signal():
     assert "estimated" in s.summary()
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_long_recording_bandwidth_is_welchs(seed):
+    """Long recordings: the rule's spectrum equals scipy.signal.welch (Hann segments, half overlap, linear
+    detrend), so the estimated bandwidth is the one computed from scipy's Welch estimate."""
+    rng = np.random.default_rng(seed)
+    n_seg = 2 ** 12
+    t = np.arange(int(rng.integers(3 * n_seg, 9 * n_seg))) / FS
+    q = np.column_stack([a * np.sin(2 * np.pi * fr * t + ph) + 20.0 * a * t + 1e-3 * rng.standard_normal(t.size)
+                         for a, fr, ph in zip(rng.uniform(0.2, 2, 4), rng.uniform(1.5, 40, 4), rng.uniform(0, 6, 4))])
+    f, P = signal.welch(q, fs=FS, window=np.hanning(n_seg), nperseg=n_seg, noverlap=n_seg // 2, detrend="linear", axis=0)
+    c = np.cumsum(P, axis=0) / P.sum(axis=0)
+    expected = max(f[min(int(np.searchsorted(c[:, j], 0.999)), f.size - 1)] for j in range(q.shape[1]))
+    assert estimate_dynamics_bandwidth(q, FS, max_segment=n_seg) == pytest.approx(max(expected, 1.0), abs=1e-12)
+
+
 def test_too_short_to_filter_names_the_source():
     with pytest.raises(DataFileError, match=r"run7\.csv, rows 1-10: too short to filter: 10 samples"):
         filter_and_differentiate(np.zeros((10, 2)), FS, 20.0, source="run7.csv")
