@@ -152,7 +152,10 @@ class BaseParameterMap:
                 if s == 1:
                     raise ValueError(f"relation of {name} has a constant term")
                 # exact numeric factors such as cos(1/10) stay in the "symbol" part: split them off
-                num, syms = _split_constant(s, fs, free)
+                if s.is_Symbol:  # a parameter alone (a term of e: one of its free symbols)
+                    num, syms = sp.S.One, s
+                else:
+                    num, syms = _split_constant(s, fs, free)
                 K[b, idx[syms.name]] += to_float(c, num)
         return K
 
@@ -253,6 +256,8 @@ def _split_constant(term: sp.Expr, fs: set, memo: dict | None = None) -> tuple[s
     """``term.as_independent(*fs, as_Add=False)`` for a term with one symbolic factor, without building
     the set of the relation's free symbols once per term (what ``as_independent`` does with them).
     ``memo``: whether a factor has free symbols, per distinct factor, kept across calls."""
+    if term.is_Symbol and term in fs:  # what as_independent gives for a parameter alone
+        return sp.S.One, term
     if term.is_Mul:
         if memo is None:
             memo = {}
@@ -275,10 +280,16 @@ class _LazyFreeSymbols:
         self._e = e
         self._fs: set | None = None
 
-    def __iter__(self):
+    def _get(self) -> set:
         if self._fs is None:
             self._fs = self._e.free_symbols
-        return iter(self._fs)
+        return self._fs
+
+    def __iter__(self):
+        return iter(self._get())
+
+    def __contains__(self, x) -> bool:
+        return x in self._get()
 
 
 def _sym(name: str) -> sp.Symbol:

@@ -313,7 +313,8 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
     )
     all_ops = {k: graph_ops(graphs[k]) for k in ("base", "standard", "payload")}
     ops = all_ops["base"]
-    texts = {k: relation_text(bp.relations[k]) for k in bp.base_names}  # printed once, used twice
+    memo: dict[Any, Any] = {}  # each factor's text, shared by the relations
+    texts = {k: relation_text(bp.relations[k], memo) for k in bp.base_names}  # printed once, used twice
     files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
     files.update(closed_loop_files(robot, bp))  # closed loops: their groupings, beside the tree's
     manifest = {

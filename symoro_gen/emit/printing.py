@@ -237,18 +237,19 @@ def _sstr_factor(f: sp.Expr) -> str | None:
         (x,) = f.args
         if x.is_Symbol:
             return f"{type(f).__name__}({x.name})"
-        if x.is_Rational and x > 0:
+        if x.is_Rational and x.p > 0:  # (x > 0 for a Rational, without sympy's comparison)
             return f"{type(f).__name__}({x.p}/{x.q})" if x.q != 1 else f"{type(f).__name__}({x.p})"
         return None
-    if f.is_Pow and f.exp.is_Integer and f.exp > 1 and not f.base.is_Pow:
+    if f.is_Pow and f.exp.is_Integer and f.exp.p > 1 and not f.base.is_Pow:
         b = _sstr_factor(f.base)
         return None if b is None else f"{b}**{int(f.exp)}"
     return None
 
 
-def _sstr_term(t: sp.Expr) -> str | None:
+def _sstr_term(t: sp.Expr, memo: dict | None = None) -> str | None:
     """``sp.sstr(t, order="none")`` of a product ``c * symbols * functions`` (StrPrinter._print_Mul's
-    numerator/denominator split for a rational ``c`` and ``1/G`` factors), or None for other shapes."""
+    numerator/denominator split for a rational ``c`` and ``1/G`` factors), or None for other shapes.
+    ``memo``: :func:`_sstr_factor` per distinct factor, kept across terms."""
     if t.is_Symbol:
         return str(t.name)
     if not t.is_Mul:
@@ -259,7 +260,7 @@ def _sstr_term(t: sp.Expr) -> str | None:
     sign = ""
     if args[0].is_Rational:
         c, args = args[0], args[1:]
-        if c < 0:
+        if c.p < 0:  # c < 0
             sign, c = "-", -c
         if c.p != 1:
             num.append(str(c.p))
@@ -269,7 +270,12 @@ def _sstr_term(t: sp.Expr) -> str | None:
         if f.is_Pow and f.exp == -1 and f.base.is_Symbol:
             den.append(str(f.base.name))
             continue
-        s = _sstr_factor(f)
+        if memo is None:
+            s = _sstr_factor(f)
+        else:
+            s = memo.get(f, False)
+            if s is False:
+                s = memo[f] = _sstr_factor(f)
         if s is None:
             return None
         num.append(s)
@@ -279,13 +285,16 @@ def _sstr_term(t: sp.Expr) -> str | None:
     return sign + body + ("/" + den[0] if len(den) == 1 else "/(" + "*".join(den) + ")")
 
 
-def relation_text(e: sp.Expr) -> str:
+def relation_text(e: sp.Expr, memo: dict | None = None) -> str:
     """``sp.sstr(e, order="none")`` of a base-parameter relation, written directly for the sums of products the
     relations are (rational coefficient, parameter symbol, sin/cos of constants, symbols, ``1/G3``) and by
-    sympy's printer for any other form; the same text (tests/baseparams/test_generation_speed.py)."""
+    sympy's printer for any other form; the same text (tests/baseparams/test_generation_speed.py).
+    ``memo``: a dict shared by the relations of one robot (each factor's text, printed once)."""
+    if memo is None:
+        memo = {}
     parts: list[str] = []
     for t in sp.Add.make_args(e):
-        s = _sstr_term(t)
+        s = _sstr_term(t, memo)
         if s is None:
             return str(sp.sstr(e, order="none"))
         if s.startswith("-"):

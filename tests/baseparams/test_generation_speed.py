@@ -282,14 +282,17 @@ def test_relation_text_equals_sympy_sstr():
     for robot in (parse_robot_text(chain_text(4, True), file="g.toml"), load_robot("scara"), load_robot("sda10f"),
                   parse_robot_text(_SPECIAL, file="special.toml")):
         bp = regroup.group_base_parameters(build_regressor(robot))
+        memo: dict = {}  # shared by the relations of a robot, as in package_files
         for e in bp.relations.values():
             assert relation_text(e) == sp.sstr(e, order="none")
+            assert relation_text(e, memo) == sp.sstr(e, order="none")
             texts += 1
     G3, x, y = sp.symbols("G3 x y", real=True)
     c = sp.cos(sp.Rational(3, 4))
     for e in (-x, -x / 3 + 2 * y * c**2, x / G3 - y / (3 * G3), x + sp.Float(0.25) * y, -2 * x * c / 7 - y,
               x * sp.sin(y) ** 2 - sp.sqrt(2) * y, sp.Integer(3) * x):
         assert relation_text(e) == sp.sstr(e, order="none"), e
+        assert relation_text(e, memo) == sp.sstr(e, order="none"), e  # a memo filled by other relations
     assert texts > 50
 
 
