@@ -356,6 +356,29 @@ def test_direct_monomial_products_equal_sympy_mul():
     assert n_direct > 1000  # the direct construction, not the fallback, produced most of them
 
 
+def test_printing_and_counting_memos_shared_by_the_three_graphs():
+    """The NumPy/C texts and operation counts memoised across the base, standard and payload graphs of one
+    model: the same text and counts, expression by expression and graph by graph, as without the memo;
+    the memo does save work (definitions recur across the graphs)."""
+    from symoro_gen.emit import printing
+    from symoro_gen.emit.package import model_graphs
+
+    robot = parse_robot_text(chain_text(4, True), file="g.toml")
+    reg = build_regressor(robot)
+    graphs, _ = model_graphs(reg, regroup.group_base_parameters(reg))
+    printed: dict = {}
+    counted: dict = {}
+    calls = 0
+    for g in graphs.values():
+        exprs = [e for _, e in g.defs] + list(g.outputs.values())
+        calls += len(exprs)
+        for d in (printing.NUMPY, printing.C_SCALAR, printing.C_VECTOR):
+            for e in exprs:
+                assert printing.print_expr(e, d, printed) == printing.print_expr(e, d)
+        assert printing.graph_ops(g, counted) == printing.graph_ops(g)
+    assert len(counted) < calls and len(printed) < 3 * calls
+
+
 def test_number_printing_equals_the_code_printer():
     """Numbers and signed coefficients printed without the code printer's set-up: the same text in every
     dialect as ``doprint`` (and the same sign test as sympy's ``coeff < 0``)."""
