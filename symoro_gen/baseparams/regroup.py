@@ -57,6 +57,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
+from functools import cmp_to_key
 from typing import Any, ClassVar
 
 import numpy as np
@@ -65,6 +66,7 @@ from mpmath.libmp import bitcount as _bitcount
 from mpmath.libmp import normalize as _normalize
 from mpmath.libmp import round_nearest as _round_nearest
 from mpmath.libmp.backend import MPZ as _MPZ
+from sympy.core.basic import ordering_of_classes
 from sympy.core.evalf import LG10 as _LG10
 from sympy.core.evalf import evalf as _sympy_evalf
 
@@ -139,16 +141,21 @@ class BaseParameterMap:
         idx = {n: i for i, n in enumerate(self.standard_names)}
         K = np.zeros((len(self.base_names), len(self.standard_names)))
         to_float = _ProductFloat()
+        plain: dict = {}  # per distinct factor: _plain_factor, and whether it has free symbols
+        free: dict = {}
         for b, name in enumerate(self.base_names):
             e = self.relations[name].xreplace(subs)
-            if not _is_expanded(e):  # expand is the cost for long relations: only when it changes something
+            if not _is_expanded(e, plain):  # expand is the cost for long relations: only when it changes something
                 e = sp.expand(e)
-            fs = e.free_symbols
+            fs = _LazyFreeSymbols(e)
             for s, c in e.as_coefficients_dict().items():
                 if s == 1:
                     raise ValueError(f"relation of {name} has a constant term")
                 # exact numeric factors such as cos(1/10) stay in the "symbol" part: split them off
-                num, syms = _split_constant(s, fs)
+                if s.is_Symbol:  # a parameter alone (a term of e: one of its free symbols)
+                    num, syms = sp.S.One, s
+                else:
+                    num, syms = _split_constant(s, fs, free)
                 K[b, idx[syms.name]] += to_float(c, num)
         return K
 
@@ -164,6 +171,7 @@ class _ProductFloat:
 
     def __init__(self) -> None:
         self._memo: dict[tuple[sp.Expr, int], Any] = {}
+        self._is_trig: dict[sp.Expr, bool] = {}  # _trig per distinct factor
 
     def _ev(self, x: sp.Expr, prec: int):
         key = (x, prec)
@@ -182,7 +190,11 @@ class _ProductFloat:
 
     def __call__(self, c: sp.Expr, num: sp.Expr) -> float:
         factors = sp.Mul.make_args(num)
-        if not (c.is_Rational and c != 0 and num is not sp.S.One and all(self._trig(f) for f in factors)):
+        is_trig = self._is_trig
+        for f in factors:
+            if f not in is_trig:
+                is_trig[f] = self._trig(f)
+        if not (c.is_Rational and c != 0 and num is not sp.S.One and all(is_trig[f] for f in factors)):
             return float(c * num)
         args = factors if c == 1 else (c,) + factors  # the args of the Mul c * num (number first)
         prec = 53 + 4  # Expr.evalf(15 digits): evalf at prec + 4, then a Float of 53 bits
@@ -224,20 +236,60 @@ def _plain_factor(f: sp.Expr) -> bool:
     return bool(f.is_Atom or (isinstance(f, sp.Function) and all(_monomial(a) for a in f.args)))
 
 
-def _is_expanded(e: sp.Expr) -> bool:
+def _is_expanded(e: sp.Expr, memo: dict | None = None) -> bool:
     """True when ``sp.expand(e)`` is ``e``: a sum of products of atoms, functions of monomials
-    (``cos(pi/5)``) and integer powers of these; a cheap test that saves expanding long relations again."""
-    return all(_plain_factor(f) for t in sp.Add.make_args(e) for f in sp.Mul.make_args(t))
+    (``cos(pi/5)``) and integer powers of these; a cheap test that saves expanding long relations again.
+    ``memo``: :func:`_plain_factor` per distinct factor, kept across calls (factors recur across terms)."""
+    if memo is None:
+        memo = {}
+    for t in sp.Add.make_args(e):
+        for f in sp.Mul.make_args(t):
+            ok = memo.get(f)
+            if ok is None:
+                ok = memo[f] = _plain_factor(f)
+            if not ok:
+                return False
+    return True
 
 
-def _split_constant(term: sp.Expr, fs: set) -> tuple[sp.Expr, sp.Expr]:
+def _split_constant(term: sp.Expr, fs: set, memo: dict | None = None) -> tuple[sp.Expr, sp.Expr]:
     """``term.as_independent(*fs, as_Add=False)`` for a term with one symbolic factor, without building
-    the set of the relation's free symbols once per term (what ``as_independent`` does with them)."""
+    the set of the relation's free symbols once per term (what ``as_independent`` does with them).
+    ``memo``: whether a factor has free symbols, per distinct factor, kept across calls."""
+    if term.is_Symbol and term in fs:  # what as_independent gives for a parameter alone
+        return sp.S.One, term
     if term.is_Mul:
-        dep = [f for f in term.args if f.free_symbols]
-        if len(dep) == 1:
-            return sp.Mul(*[f for f in term.args if not f.free_symbols]), dep[0]
+        if memo is None:
+            memo = {}
+        has = []
+        for f in term.args:
+            h = memo.get(f)
+            if h is None:
+                h = memo[f] = bool(f.free_symbols)
+            has.append(h)
+        if sum(has) == 1:
+            return sp.Mul(*[f for f, h in zip(term.args, has) if not h]), term.args[has.index(True)]
     return term.as_independent(*fs, as_Add=False)
+
+
+class _LazyFreeSymbols:
+    """``e.free_symbols``, computed on first use (:func:`_split_constant` rarely needs it; a walk of a
+    long relation)."""
+
+    def __init__(self, e: sp.Expr) -> None:
+        self._e = e
+        self._fs: set | None = None
+
+    def _get(self) -> set:
+        if self._fs is None:
+            self._fs = self._e.free_symbols
+        return self._fs
+
+    def __iter__(self):
+        return iter(self._get())
+
+    def __contains__(self, x) -> bool:
+        return x in self._get()
 
 
 def _sym(name: str) -> sp.Symbol:
@@ -474,11 +526,80 @@ class _PolyAlgebra:
         return got
 
     def to_expr(self, x: dict) -> sp.Expr:
+        """The sympy sum of the terms of ``x``: ``Add(*[Mul(c, p, *powers)])``, built as ``Mul.flatten`` and
+        ``Add.flatten`` build it (:func:`_canonical_sum`)."""
         terms = []
         for (p, mono), c in x.items():
             f = [self._power(i, e) for i, e in mono]
-            terms.append(sp.Mul(sp.Rational(c.numerator, c.denominator), _sym(p), *f))
-        return sp.Add(*terms)
+            terms.append((sp.Rational(c.numerator, c.denominator), [_sym(p), *f]))
+        return _canonical_sum(terms)
+
+
+def _class_key(cls: type) -> tuple:
+    """The order of ``sympy.core.basic._cmp_name`` on classes, as a key: the classes of
+    ``ordering_of_classes`` by position, then the others by name."""
+    try:
+        return (ordering_of_classes.index(cls.__name__), "")
+    except ValueError:
+        return (len(ordering_of_classes) + 1, cls.__name__)
+
+
+def _plain_base(b: sp.Expr) -> bool:
+    return b.is_Symbol or (isinstance(b, sp.Function) and all(a.is_Atom for a in b.args))
+
+
+def _canonical_sum(terms: list) -> sp.Expr:
+    """``sympy.Add(*[sympy.Mul(c, *factors) for c, factors in terms])`` without flatten, when every
+    ``c`` is a non-zero rational, every factor a symbol, a function of atoms (``sin(457/500)``) or an
+    integer power of one of these, the bases distinct within a term and the terms' factor sets distinct
+    (so that nothing combines). Each product is then the coefficient (if not 1) and the factors in
+    ``_mulsort`` order, and the sum is its terms in ``_addsort`` order; both orders are ``Basic.compare``,
+    which on two products compares their classes, then their numbers of args, then their args in turn. Here
+    each distinct coefficient and factor is ranked once by ``Basic.compare`` and the products and the sum are
+    sorted by these ranks, instead of ``compare`` on every pair of long products. Any other input:
+    sympy's ``Mul`` and ``Add``. The same expression either way (tests/baseparams/test_generation_speed.py).
+    """
+    def slow() -> sp.Expr:
+        return sp.Add(*[sp.Mul(c, *f) for c, f in terms])
+
+    if len(terms) < 2:
+        return slow()
+    distinct: dict = {}
+    sets = set()
+    for c, f in terms:
+        if not (c.is_Rational and c != 0 and f):
+            return slow()
+        bases = []
+        for b in f:
+            if b.is_Pow:
+                if not (b.exp.is_Integer and _plain_base(b.base)):
+                    return slow()
+                bases.append(b.base)
+            elif _plain_base(b):
+                bases.append(b)
+            else:
+                return slow()
+        if len(set(bases)) != len(bases):
+            return slow()
+        sets.add(frozenset(f))
+        distinct[c] = None
+        for b in f:
+            distinct[b] = None
+    if len(sets) != len(terms):
+        return slow()
+    rank = {x: k for k, x in enumerate(sorted(distinct, key=cmp_to_key(sp.Basic.compare)))}
+    mul_key = _class_key(sp.Mul)
+    built = []
+    for c, f in terms:
+        f = sorted(f, key=rank.__getitem__)
+        args = f if c == 1 else [c, *f]
+        key = tuple(rank[a] for a in args)
+        if len(args) == 1:
+            built.append(((_class_key(type(args[0])), 0, key), args[0]))
+        else:
+            built.append(((mul_key, len(args), key), sp.Mul._from_args(args)))
+    built.sort(key=lambda t: t[0])
+    return sp.Add._from_args([e for _, e in built])
 
 
 _Algebra = _ExprAlgebra | _PolyAlgebra

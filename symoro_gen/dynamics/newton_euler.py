@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 from sympy.core.add import _addsort
+from sympy.core.mul import _mulsort
 
 from ..description.mdh import constant_rotation, joint_sign, position, rot_z
 from ..description.model import PRISMATIC, REVOLUTE, RobotDescription, ddq_symbol, dq_symbol, q_symbol
@@ -55,16 +56,46 @@ def _diff(x, y):
 _MUL = sp.Mul  # what ``a * b`` calls for sympy expressions, without the operator's sympify wrappers
 
 
+def _monomial(x):
+    """``(coefficient or None, symbols)`` when ``x`` is a non-zero number, a symbol, or a product of one
+    optional number and distinct symbols (each to the power 1); ``None`` otherwise."""
+    if x.is_Symbol:
+        return None, (x,)
+    if x.is_Mul:
+        args = x.args
+        if args[0].is_Number:
+            coeff, rest = args[0], args[1:]
+        else:
+            coeff, rest = None, args
+        return (coeff, rest) if all(r.is_Symbol for r in rest) else None
+    if x.is_Number and x and x.is_finite:
+        return x, ()
+    return None
+
+
 def _mul(a, b):
-    """``Mul(a, b)``; a non-zero float times a symbol is built as ``Mul.flatten`` orders it (the float first)
-    without flatten, which multiplies the float by 1 and asks the new Float whether it is zero: sympy deduces
-    all the facts of each new Float (~0.2 ms), most of the cost of general chains (floats from sin/cos of
-    arbitrary alpha). The same expression either way (tests/baseparams/test_generation_speed.py)."""
-    if b.is_Symbol and a.is_Float and a:
-        return _MUL._from_args((a, b))
-    if a.is_Symbol and b.is_Float and b:
-        return _MUL._from_args((b, a))
-    return _MUL(a, b)
+    """``Mul(a, b)``; when both factors are monomials (:func:`_monomial`) with distinct symbols and at most
+    one numeric coefficient, the product is built as ``Mul.flatten`` orders it (the number first, then the
+    symbols in ``_mulsort`` order) without flatten, which multiplies a float by 1 and asks the new Float
+    whether it is zero: sympy deduces all the facts of each new Float (~0.2 ms), most of the cost of general
+    chains (floats from sin/cos of arbitrary alpha; ``R[i, k] f[k]`` is ``float * C_j * F``). Any other case:
+    ``sympy.Mul``. The same expression either way (tests/baseparams/test_generation_speed.py)."""
+    ma, mb = _monomial(a), _monomial(b)
+    if ma is None or mb is None:
+        return _MUL(a, b)
+    (ca, sa), (cb, sb) = ma, mb
+    if ca is not None and cb is not None:
+        return _MUL(a, b)
+    syms = list(sa + sb)
+    if len(syms) == 0 or len(set(syms)) != len(syms):
+        return _MUL(a, b)
+    coeff = ca if ca is not None else cb
+    if coeff is not None and coeff == 1:  # flatten drops an exact 1
+        return _MUL(a, b)
+    if coeff is None and len(syms) == 1:
+        return syms[0]
+    _mulsort(syms)
+    return _MUL._from_args(syms if coeff is None else [coeff, *syms])
 
 
 def _add(terms: list) -> sp.Expr:
@@ -88,6 +119,15 @@ def _add(terms: list) -> sp.Expr:
     out = list(terms)
     _addsort(out)
     return sp.Add._from_args(out)
+
+
+def _plus(x, y) -> sp.Expr:
+    """``x + y`` as one :func:`_add` of the terms of both (``Add.flatten`` flattens nested sums the same way)."""
+    if x is _ZERO:
+        return y
+    if y is _ZERO:
+        return x
+    return _add([*sp.Add.make_args(x), *sp.Add.make_args(y)])
 
 
 def _prod(a, b):
@@ -286,7 +326,7 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             Rm = R[j]
             fa = g.vec(_matvec(Rm, f), f"F{name}_{a}")
             cr = _cross(P[j], fa)
-            na = g.vec([x + y for x, y in zip(_matvec(Rm, n), cr)], f"N{name}_{a}")
+            na = g.vec([_plus(x, y) for x, y in zip(_matvec(Rm, n), cr)], f"N{name}_{a}")
             f, n, j = fa, na, a
 
     for row in rows:

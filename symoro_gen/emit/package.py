@@ -284,13 +284,14 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
     subs = robot.geometry_subs()
     header = _header(robot)
     graphs, names = model_graphs(reg, bp)
+    printed: dict[Any, str] = {}  # NumPy text of each expression, shared by the three kernels
     n = robot.n_joints
     qs = (robot.q, robot.dq, robot.ddq)
     files: dict[str, str] = {}
     files["_kernels.py"] = "".join(
         [header, '"""NumPy kernels (generated): fill out[joint, column, sample] from (n, M) inputs."""\n',
          "import numpy as np\n\n"]
-        + [kernel_source(graphs[k], n, names[k], f"{k}_kernel", *qs) + ("\n" if k != "payload" else "")
+        + [kernel_source(graphs[k], n, names[k], f"{k}_kernel", *qs, memo=printed) + ("\n" if k != "payload" else "")
            for k in ("base", "standard", "payload")]
     )
     files[f"regressor_{robot.name}.c"] = c_source(robot.name, n, graphs, names, *qs, header.replace("# ", ""))
@@ -311,9 +312,11 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         nominal_payload=robot.nominal_payload(),
         relations=_relations_code(rel, tuple(bp.base_names)),
     )
-    all_ops = {k: graph_ops(graphs[k]) for k in ("base", "standard", "payload")}
+    counted: dict[Any, OpCount] = {}  # each expression counted once across the three graphs
+    all_ops = {k: graph_ops(graphs[k], counted) for k in ("base", "standard", "payload")}
     ops = all_ops["base"]
-    texts = {k: relation_text(bp.relations[k]) for k in bp.base_names}  # printed once, used twice
+    memo: dict[Any, Any] = {}  # each factor's text, shared by the relations
+    texts = {k: relation_text(bp.relations[k], memo) for k in bp.base_names}  # printed once, used twice
     files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
     files.update(closed_loop_files(robot, bp))  # closed loops: their groupings, beside the tree's
     manifest = {

@@ -8,6 +8,7 @@ and the dialect, never on NumPy's ``repr`` (floats print as ``repr(float(x))``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
@@ -160,8 +161,17 @@ def _fast(e: sp.Expr, d: Dialect) -> str | None:
     return None
 
 
-def print_expr(e: sp.Expr, dialect: Dialect = NUMPY) -> str:
-    """Source text of ``e`` in ``dialect`` (raises ValueError for a function the dialect lacks)."""
+def print_expr(e: sp.Expr, dialect: Dialect = NUMPY, memo: dict[Any, str] | None = None) -> str:
+    """Source text of ``e`` in ``dialect`` (raises ValueError for a function the dialect lacks).
+
+    ``memo``: a dict kept by the caller across the graphs of one model (the base, standard and payload graphs
+    share most definitions): ``(e, dialect) -> text``, each text printed once; results do not depend on it."""
+    if memo is not None:
+        key = (e, dialect)
+        got = memo.get(key)
+        if got is None:
+            got = memo[key] = print_expr(e, dialect)
+        return got
     s = _fast(e, dialect)
     return s if s is not None else _printer(dialect).doprint(e)
 
@@ -218,13 +228,16 @@ def count_ops(e: sp.Expr) -> OpCount:
     return c
 
 
-def graph_ops(graph: ExprGraph) -> OpCount:
-    """Operation count of a whole graph (definitions and outputs)."""
+def graph_ops(graph: ExprGraph, memo: dict[Any, OpCount] | None = None) -> OpCount:
+    """Operation count of a whole graph (definitions and outputs). ``memo``: a dict kept by the caller
+    across the graphs of one model, expression -> its count; results do not depend on it."""
+    memo = {} if memo is None else memo
     c = OpCount()
-    for _, e in graph.defs:
-        c = c + count_ops(e)
-    for e in graph.outputs.values():
-        c = c + count_ops(e)
+    for e in [e for _, e in graph.defs] + list(graph.outputs.values()):
+        n = memo.get(e)
+        if n is None:
+            n = memo[e] = count_ops(e)
+        c = c + n
     return c
 
 
@@ -237,18 +250,19 @@ def _sstr_factor(f: sp.Expr) -> str | None:
         (x,) = f.args
         if x.is_Symbol:
             return f"{type(f).__name__}({x.name})"
-        if x.is_Rational and x > 0:
+        if x.is_Rational and x.p > 0:  # (x > 0 for a Rational, without sympy's comparison)
             return f"{type(f).__name__}({x.p}/{x.q})" if x.q != 1 else f"{type(f).__name__}({x.p})"
         return None
-    if f.is_Pow and f.exp.is_Integer and f.exp > 1 and not f.base.is_Pow:
+    if f.is_Pow and f.exp.is_Integer and f.exp.p > 1 and not f.base.is_Pow:
         b = _sstr_factor(f.base)
         return None if b is None else f"{b}**{int(f.exp)}"
     return None
 
 
-def _sstr_term(t: sp.Expr) -> str | None:
+def _sstr_term(t: sp.Expr, memo: dict[sp.Expr, str | None] | None = None) -> str | None:
     """``sp.sstr(t, order="none")`` of a product ``c * symbols * functions`` (StrPrinter._print_Mul's
-    numerator/denominator split for a rational ``c`` and ``1/G`` factors), or None for other shapes."""
+    numerator/denominator split for a rational ``c`` and ``1/G`` factors), or None for other shapes.
+    ``memo``: :func:`_sstr_factor` per distinct factor, kept across terms."""
     if t.is_Symbol:
         return str(t.name)
     if not t.is_Mul:
@@ -259,7 +273,7 @@ def _sstr_term(t: sp.Expr) -> str | None:
     sign = ""
     if args[0].is_Rational:
         c, args = args[0], args[1:]
-        if c < 0:
+        if c.p < 0:  # c < 0
             sign, c = "-", -c
         if c.p != 1:
             num.append(str(c.p))
@@ -269,7 +283,13 @@ def _sstr_term(t: sp.Expr) -> str | None:
         if f.is_Pow and f.exp == -1 and f.base.is_Symbol:
             den.append(str(f.base.name))
             continue
-        s = _sstr_factor(f)
+        if memo is None:
+            s = _sstr_factor(f)
+        else:
+            if f in memo:
+                s = memo[f]
+            else:
+                s = memo[f] = _sstr_factor(f)
         if s is None:
             return None
         num.append(s)
@@ -279,13 +299,16 @@ def _sstr_term(t: sp.Expr) -> str | None:
     return sign + body + ("/" + den[0] if len(den) == 1 else "/(" + "*".join(den) + ")")
 
 
-def relation_text(e: sp.Expr) -> str:
+def relation_text(e: sp.Expr, memo: dict[sp.Expr, str | None] | None = None) -> str:
     """``sp.sstr(e, order="none")`` of a base-parameter relation, written directly for the sums of products the
     relations are (rational coefficient, parameter symbol, sin/cos of constants, symbols, ``1/G3``) and by
-    sympy's printer for any other form; the same text (tests/baseparams/test_generation_speed.py)."""
+    sympy's printer for any other form; the same text (tests/baseparams/test_generation_speed.py).
+    ``memo``: a dict shared by the relations of one robot (each factor's text, printed once)."""
+    if memo is None:
+        memo = {}
     parts: list[str] = []
     for t in sp.Add.make_args(e):
-        s = _sstr_term(t)
+        s = _sstr_term(t, memo)
         if s is None:
             return str(sp.sstr(e, order="none"))
         if s.startswith("-"):

@@ -11,7 +11,7 @@ plain computation it replaces:
 * the K matrix skips ``sympy.expand`` on relations that it would leave unchanged: whenever the
   test says "already expanded", ``expand`` is indeed the identity;
 * the relations are computed as exact sparse polynomials (:class:`regroup._PolyAlgebra`) and built once
-  as sympy sums: the same expressions as sympy's arithmetic and ``expand`` (:class:`regroup._ExprAlgebra`),
+  as sympy sums, without flatten (:func:`regroup._canonical_sum`, sorted by ranks of their factors): the same expressions as sympy's arithmetic and ``expand`` (:class:`regroup._ExprAlgebra`),
   and the sympy path is taken for coefficients outside that form (``sqrt(3)`` from alpha = pi/3);
 * the K matrix evaluates ``float(c * num)`` by sympy's evalf steps with cached factors: bit for bit the
   same floats;
@@ -128,13 +128,19 @@ def test_constant_split_equals_as_independent():
     shortcut gives what ``as_independent`` gives, term by term, on a general chain's relations."""
     bp = regroup.group_base_parameters(build_regressor(parse_robot_text(chain_text(3, True), file="g.toml")))
     n = 0
+    memo: dict = {}  # shared by all the relations, as in BaseParameterMap.matrix
+    plain: dict = {}
     for rel in bp.relations.values():
         e = rel.xreplace({**bp.gravity, **bp.geometry})
         fs = e.free_symbols
+        assert set(regroup._LazyFreeSymbols(e)) == fs
+        assert regroup._is_expanded(e, plain) == regroup._is_expanded(e)
         for term in e.as_coefficients_dict():
-            assert regroup._split_constant(term, fs) == term.as_independent(*fs, as_Add=False)
+            want = term.as_independent(*fs, as_Add=False)
+            assert regroup._split_constant(term, fs) == want
+            assert regroup._split_constant(term, regroup._LazyFreeSymbols(e), memo) == want
             n += 1
-    assert n > 50
+    assert n > 50 and len(memo) < n  # factors recur across terms
 
 
 _SPECIAL = """name = "special"
@@ -182,6 +188,39 @@ def test_polynomial_relations_equal_sympy_arithmetic(case):
     assert fast == slow  # same names, kept, eliminated, and relations (sympy's structural equality)
     assert [sp.srepr(fast.relations[k]) for k in fast.base_names] == [sp.srepr(slow.relations[k]) for k in slow.base_names]
     assert any(len(sp.Add.make_args(e)) > 3 for e in fast.relations.values())
+
+
+def test_canonical_sum_equals_sympy_add_of_muls():
+    """The relations' sums built without flatten (ranks by ``Basic.compare``): the same class and args as
+    ``Add(*[Mul(c, *factors)])`` on random terms (coefficients 1, -1, integers, fractions; symbols of
+    several classes of names, sin/cos of rationals, integer powers incl. negative ones), and sympy's own
+    result when something would combine (a repeated base, two terms with the same factors)."""
+    rng = np.random.default_rng(5)
+    params = [sp.Symbol(n, real=True) for n in ("XX2", "XY2", "MX10", "MX9", "M3", "ZZ1", "IA4", "FV2", "OFF7")]
+    atoms = [sp.Symbol("G3", real=True), sp.Symbol("L1", real=True), sp.sin(sp.Rational(457, 500)),
+             sp.cos(sp.Rational(457, 500)), sp.cos(sp.Rational(-3, 10)), sp.sin(sp.Rational(7, 1000))]
+    coeffs = [sp.Integer(1), sp.Integer(-1), sp.Integer(2), sp.Rational(-3, 7), sp.Rational(1, 2), sp.Integer(-12)]
+    for _trial in range(60):
+        terms, seen = [], set()
+        for _ in range(int(rng.integers(2, 25))):
+            p = params[int(rng.integers(len(params)))]
+            k = int(rng.integers(0, 4))
+            chosen = rng.choice(len(atoms), size=k, replace=False)
+            f = [p] + [atoms[int(a)] ** int(rng.choice([1, 1, 2, 3, -1])) for a in chosen]
+            if frozenset(f) in seen:
+                continue
+            seen.add(frozenset(f))
+            terms.append((coeffs[int(rng.integers(len(coeffs)))], f))
+        fast, slow = regroup._canonical_sum(terms), sp.Add(*[sp.Mul(c, *f) for c, f in terms])
+        assert (fast.func, fast.args) == (slow.func, slow.args), terms
+        assert fast is not slow  # built directly (sympy's cached Add would be the same object)
+        assert [(t.func, t.args) for t in sp.Add.make_args(fast)] == [(t.func, t.args) for t in sp.Add.make_args(slow)]
+    x = params[0]
+    for terms in ([(sp.Integer(1), [x, atoms[0]]), (sp.Integer(2), [atoms[0], x])],  # the same factors twice
+                  [(sp.Integer(1), [x, atoms[2], atoms[2] ** 2]), (sp.Integer(3), [params[1]])],  # a repeated base
+                  [(sp.Float(0.5), [x]), (sp.Integer(1), [params[1]])]):  # a float coefficient
+        fast, slow = regroup._canonical_sum(terms), sp.Add(*[sp.Mul(c, *f) for c, f in terms])
+        assert fast is slow  # sympy's own (cached) result
 
 
 def test_polynomial_relations_fall_back_to_sympy_for_irrational_constants():
@@ -243,14 +282,17 @@ def test_relation_text_equals_sympy_sstr():
     for robot in (parse_robot_text(chain_text(4, True), file="g.toml"), load_robot("scara"), load_robot("sda10f"),
                   parse_robot_text(_SPECIAL, file="special.toml")):
         bp = regroup.group_base_parameters(build_regressor(robot))
+        memo: dict = {}  # shared by the relations of a robot, as in package_files
         for e in bp.relations.values():
             assert relation_text(e) == sp.sstr(e, order="none")
+            assert relation_text(e, memo) == sp.sstr(e, order="none")
             texts += 1
     G3, x, y = sp.symbols("G3 x y", real=True)
     c = sp.cos(sp.Rational(3, 4))
     for e in (-x, -x / 3 + 2 * y * c**2, x / G3 - y / (3 * G3), x + sp.Float(0.25) * y, -2 * x * c / 7 - y,
               x * sp.sin(y) ** 2 - sp.sqrt(2) * y, sp.Integer(3) * x):
         assert relation_text(e) == sp.sstr(e, order="none"), e
+        assert relation_text(e, memo) == sp.sstr(e, order="none"), e  # a memo filled by other relations
     assert texts > 50
 
 
@@ -283,12 +325,58 @@ def test_newton_euler_direct_products_equal_sympy_flatten(monkeypatch, which):
     fast = build_regressor(robot).graph
     monkeypatch.setattr(ne, "_mul", lambda a, b: sp.Mul(a, b))
     monkeypatch.setattr(ne, "_add", lambda terms: sp.Add(*terms))
+    monkeypatch.setattr(ne, "_plus", lambda x, y: x + y)
     slow = build_regressor(robot).graph
     assert [(s, e.func, e.args) for s, e in fast.defs] == [(s, e.func, e.args) for s, e in slow.defs]
     assert {k: (e.func, e.args) for k, e in fast.outputs.items()} == {k: (e.func, e.args) for k, e in slow.outputs.items()}
     n_direct = sum(1 for _, e in fast.defs for t in sp.Add.make_args(e)
                    if t.is_Mul and len(t.args) == 2 and t.args[0].is_Float and t.args[1].is_Symbol)
     assert n_direct >= (20 if which == "general" else 1)
+
+
+def test_direct_monomial_products_equal_sympy_mul():
+    """Every product of two monomials (numbers incl. 0, 1, -1, 1.0 and floats; symbols with and without
+    assumptions; products of up to three factors; non-monomials for the fallback) built by ``_mul`` is
+    ``sympy.Mul``'s, class and argument order included."""
+    import itertools
+
+    from symoro_gen.dynamics.newton_euler import _mul
+
+    x, y, c3, f = sp.symbols("x y C3 FMX2_1x", real=True)
+    atoms = [x, y, c3, f, sp.Symbol("w"), sp.Float(0.7), sp.Float(-1.0), sp.Float(1.0), sp.Integer(-1),
+             sp.Integer(2), sp.Rational(-1, 3), sp.Integer(1), sp.Integer(0), sp.Float(0.0), sp.pi, sp.sin(x)]
+    exprs = atoms + [sp.Mul(a, b) for a, b in itertools.product(atoms, repeat=2)]
+    exprs += [sp.Mul(*t) for t in itertools.product(atoms[:6], repeat=3)]
+    exprs = list(dict.fromkeys(exprs))
+    n_direct = 0
+    for a, b in itertools.product(exprs, repeat=2):
+        fast, slow = _mul(a, b), sp.Mul(a, b)
+        assert (fast.func, fast.args) == (slow.func, slow.args), (a, b)
+        n_direct += fast is not slow and not fast.is_Atom
+    assert n_direct > 1000  # the direct construction, not the fallback, produced most of them
+
+
+def test_printing_and_counting_memos_shared_by_the_three_graphs():
+    """The NumPy/C texts and operation counts memoised across the base, standard and payload graphs of one
+    model: the same text and counts, expression by expression and graph by graph, as without the memo;
+    the memo does save work (definitions recur across the graphs)."""
+    from symoro_gen.emit import printing
+    from symoro_gen.emit.package import model_graphs
+
+    robot = parse_robot_text(chain_text(4, True), file="g.toml")
+    reg = build_regressor(robot)
+    graphs, _ = model_graphs(reg, regroup.group_base_parameters(reg))
+    printed: dict = {}
+    counted: dict = {}
+    calls = 0
+    for g in graphs.values():
+        exprs = [e for _, e in g.defs] + list(g.outputs.values())
+        calls += len(exprs)
+        for d in (printing.NUMPY, printing.C_SCALAR, printing.C_VECTOR):
+            for e in exprs:
+                assert printing.print_expr(e, d, printed) == printing.print_expr(e, d)
+        assert printing.graph_ops(g, counted) == printing.graph_ops(g)
+    assert len(counted) < calls and len(printed) < 3 * calls
 
 
 def test_number_printing_equals_the_code_printer():

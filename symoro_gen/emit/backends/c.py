@@ -9,6 +9,7 @@ scalar loop does the remainder, and is the whole function for other compilers.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import sympy as sp
 
@@ -77,7 +78,7 @@ def _inputs(graph: ExprGraph, q: Sequence[sp.Symbol], dq: Sequence[sp.Symbol], d
     return out
 
 
-def _vector_defs(graph: ExprGraph) -> list[str]:
+def _vector_defs(graph: ExprGraph, memo: dict[Any, str] | None = None) -> list[str]:
     """Definitions on vectors; a sin and a cos of the same angle become one sincos per lane."""
     cos_of = {e.args[0]: s for s, e in graph.defs if isinstance(e, sp.cos)}
     sin_of = {e.args[0]: s for s, e in graph.defs if isinstance(e, sp.sin)}
@@ -89,16 +90,17 @@ def _vector_defs(graph: ExprGraph) -> list[str]:
             if a not in done:
                 sn, cs = sin_of[a].name, cos_of[a].name
                 lines.append(f"        sym_vd {sn}, {cs};")
-                lines.append(f"        sym_vsincos({print_expr(a, C_VECTOR)}, &{sn}, &{cs});")
+                lines.append(f"        sym_vsincos({print_expr(a, C_VECTOR, memo)}, &{sn}, &{cs});")
                 done.add(a)
             continue
-        lines.append(f"        const sym_vd {s.name} = {print_expr(e, C_VECTOR)};")
+        lines.append(f"        const sym_vd {s.name} = {print_expr(e, C_VECTOR, memo)};")
     return lines
 
 
 def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str, q: Sequence[sp.Symbol],
-               dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol]) -> str:
-    """C source of the batch function ``func_name`` (SIMD loop + scalar remainder)."""
+               dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol], memo: dict[Any, str] | None = None) -> str:
+    """C source of the batch function ``func_name`` (SIMD loop + scalar remainder); ``memo``: see
+    :func:`~symoro_gen.emit.printing.print_expr`."""
     col = {n: k for k, n in enumerate(col_names)}
     nc = len(col_names)
     entries = {(i, col[nm]): e for (i, nm), e in graph.outputs.items()}
@@ -107,25 +109,25 @@ def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_nam
     scalar = [f"static void {func_name}_scalar{sig}", "{", "    for (long s = 0; s < N; ++s) {",
               f"        double* o = out + s * {n_rows * nc};"]
     scalar += _inputs(graph, q, dq, ddq, "double", lambda a, i: f"{a}[s * {n_rows} + {i}]")
-    scalar += [f"        const double {s.name} = {print_expr(e, C_SCALAR)};" for s, e in graph.defs]
+    scalar += [f"        const double {s.name} = {print_expr(e, C_SCALAR, memo)};" for s, e in graph.defs]
     for i in range(n_rows):
         for k in range(nc):
             e = entries.get((i, k))
-            scalar.append(f"        o[{i * nc + k}] = {print_expr(e, C_SCALAR) if e is not None else '0.0'};")
+            scalar.append(f"        o[{i * nc + k}] = {print_expr(e, C_SCALAR, memo) if e is not None else '0.0'};")
     scalar += ["    }", "}"]
 
     simd = [f"void {func_name}{sig}", "{", "    long s = 0;", "    for (; s + SYM_LANES <= N; s += SYM_LANES) {"]
     simd += _inputs(graph, q, dq, ddq, "sym_vd", lambda a, i: f"sym_vload({a} + s * {n_rows} + {i}, {n_rows})")
-    simd += _vector_defs(graph)
+    simd += _vector_defs(graph, memo)
     for (i, k), e in sorted(entries.items()):
         if e.free_symbols:
-            simd.append(f"        const sym_vd o{i}_{k} = {print_expr(e, C_VECTOR)};")
+            simd.append(f"        const sym_vd o{i}_{k} = {print_expr(e, C_VECTOR, memo)};")
     total = n_rows * nc
     simd += ["        for (int l = 0; l < SYM_LANES; ++l) {", f"            double* o = out + (s + l) * {total};"]
     for x in range(total):
         i, k = divmod(x, nc)
         e = entries.get((i, k))
-        v = "0.0" if e is None else (f"o{i}_{k}[l]" if e.free_symbols else print_expr(e, C_SCALAR))
+        v = "0.0" if e is None else (f"o{i}_{k}[l]" if e.free_symbols else print_expr(e, C_SCALAR, memo))
         simd.append(f"            o[{x}] = {v};")
     simd += ["        }", "    }",
              f"    {func_name}_scalar(N - s, q + s * {n_rows}, dq + s * {n_rows}, ddq + s * {n_rows}, out + s * {n_rows * nc});",
@@ -167,6 +169,7 @@ def c_source(robot: str, n: int, graphs: dict[str, ExprGraph], names: Mapping[st
              header: str) -> str:
     """The whole ``regressor_<robot>.c``: API comment, prelude, one batch function per kind."""
     parts = [api_comment(robot, n, {k: len(v) for k, v in names.items()}, header), PRELUDE]
+    memo: dict[Any, str] = {}  # each expression printed once per dialect across the three functions
     for kind, _ in KINDS:
-        parts.append(c_function(graphs[kind], n, names[kind], function_name(robot, kind), q, dq, ddq))
+        parts.append(c_function(graphs[kind], n, names[kind], function_name(robot, kind), q, dq, ddq, memo))
     return "\n".join(parts)

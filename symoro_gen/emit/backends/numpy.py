@@ -14,8 +14,9 @@ from ..printing import NUMPY, print_expr
 
 def kernel_source(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str,
                   inputs_q: Sequence[sp.Symbol], inputs_dq: Sequence[sp.Symbol],
-                  inputs_ddq: Sequence[sp.Symbol]) -> str:
-    """Python source of ``func_name(q, dq, ddq, out)`` filling ``out[i, k, :]``.
+                  inputs_ddq: Sequence[sp.Symbol], memo: dict[Any, str] | None = None) -> str:
+    """Python source of ``func_name(q, dq, ddq, out)`` filling ``out[i, k, :]`` (``memo``: see
+    :func:`~symoro_gen.emit.printing.print_expr`).
 
     ``q, dq, ddq`` are (n, M) arrays (one row per joint); ``out`` is a zeroed
     (n_rows, len(col_names), M) array; only non-zero entries are written.
@@ -28,9 +29,9 @@ def kernel_source(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_
             if s.name in used:
                 lines.append(f"    {s.name} = {arr}[{i}]")
     for s, e in graph.defs:
-        lines.append(f"    {s.name} = {print_expr(e, NUMPY)}")
+        lines.append(f"    {s.name} = {print_expr(e, NUMPY, memo)}")
     for (i, name) in sorted(graph.outputs, key=lambda k: (col[k[1]], k[0])):
-        lines.append(f"    out[{i}, {col[name]}] = {print_expr(graph.outputs[(i, name)], NUMPY)}")
+        lines.append(f"    out[{i}, {col[name]}] = {print_expr(graph.outputs[(i, name)], NUMPY, memo)}")
     if len(lines) == 1:
         lines.append("    pass")
     return "\n".join(lines) + "\n"
