@@ -66,19 +66,6 @@ STRIBECK_GRID = (0.01, 0.5, 8)
 #: band-pass velocity chatters at reversals and its Coulomb column is smoothed by the noise (an
 #: artefact of the processing, not friction)
 STRIBECK_NOISE_FLOOR = 5.0
-#: the sign(dq) of a Coulomb-like column is smoothed as tanh(dq/s) with s this quantile of |dq_j| of the
-#: identification data (at least 3 velocity-noise SDs): below the slowest speeds the data show, a sharp
-#: switch is an extrapolation (issue 10, TX40 joint 3: no rest in identification, 56 % rest in validation)
-SIGN_SUPPORT_QUANTILE = 0.02
-#: the sign of the Stribeck candidate is smoothed at most at this share of its Stribeck velocity (the dip
-#: the column models stays a dip; a wider rounding would trade its amplitude against the smoothing)
-STRIBECK_SMOOTH_SHARE = 0.25
-
-
-def sign_scale(dq: np.ndarray, dq_noise: float) -> float:
-    """Smoothing scale of ``sign(dq)``: the :data:`SIGN_SUPPORT_QUANTILE` quantile of ``|dq|`` (the
-    identification data's support near 0) and at least 3 velocity-noise standard deviations."""
-    return max(float(np.quantile(np.abs(np.asarray(dq, float)), SIGN_SUPPORT_QUANTILE)), 3.0 * float(dq_noise), 1e-12)
 #: ripple orders tried (kept when ``k * |dq|_98 / (2 pi)`` lies below half the decimation cut-off)
 RIPPLE_ORDERS = (2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32)
 #: relative step of the central differences of the elasticity linearisation
@@ -196,11 +183,6 @@ def _sign(x):
     return np.sign(x)
 
 
-def _smooth_sign(dq, s, vs):
-    """``sign(dq)`` (``s`` None) or ``tanh(dq / min(s, STRIBECK_SMOOTH_SHARE vs))``."""
-    return np.sign(dq) if s is None else np.tanh(dq / min(s, STRIBECK_SMOOTH_SHARE * vs))
-
-
 def _stats(frame: Frame):
     dq = frame.samples()["dq"]
     q = frame.samples()["q"]
@@ -210,7 +192,7 @@ def _stats(frame: Frame):
 
 
 def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Sequence[int] = RIPPLE_ORDERS,
-                  stribeck_grid=STRIBECK_GRID, sign_scales: Sequence[float] | None = None) -> list[Family]:
+                  stribeck_grid=STRIBECK_GRID) -> list[Family]:
     """Candidate families for the joints of ``frame`` (the identification frame fixes the search
     grids and scalings, reused unchanged on validation data).
 
@@ -220,9 +202,6 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
         Identification data.
     kinds : sequence of str
         Subset of :data:`KINDS`.
-    sign_scales : sequence of float, optional
-        Per joint, the ``sign(dq_j)`` of the Stribeck column is ``tanh(dq_j / s_j)`` with ``s_j`` at most
-        ``STRIBECK_SMOOTH_SHARE`` times its Stribeck velocity (``core._sign_scales``); default a sharp sign.
     """
     bad = [k for k in kinds if k not in KINDS]
     if bad:
@@ -241,18 +220,16 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
             lo, hi, m = stribeck_grid
             vlo = max(lo * v98[j], STRIBECK_NOISE_FLOOR * dq_noise[j])
             grid = tuple(float(v) for v in np.geomspace(vlo, max(hi * v98[j], 2 * vlo), int(m)))
-            sj = None if sign_scales is None else float(sign_scales[j])
 
-            def b_str(fr, ctx, j=j, grid=grid, sj=sj):
+            def b_str(fr, ctx, j=j, grid=grid):
                 X = fr.full_rate_columns(
-                    lambda ex: {j: np.stack([_smooth_sign(ex.dq[:, j], sj, vs) * np.exp(-(ex.dq[:, j] / vs) ** 2)
-                                             for vs in grid], 1)},
+                    lambda ex: {j: np.stack([_sign(ex.dq[:, j]) * np.exp(-(ex.dq[:, j] / vs) ** 2) for vs in grid], 1)},
                     len(grid))
                 return [X[:, i:i + 1] for i in range(len(grid))]
 
-            def b_str_at(fr, ctx, vs, j=j, sj=sj):
+            def b_str_at(fr, ctx, vs, j=j):
                 return fr.full_rate_columns(
-                    lambda ex: {j: _col(_smooth_sign(ex.dq[:, j], sj, vs) * np.exp(-(ex.dq[:, j] / vs) ** 2))}, 1)
+                    lambda ex: {j: _col(_sign(ex.dq[:, j]) * np.exp(-(ex.dq[:, j] / vs) ** 2))}, 1)
 
             out.append(Family("stribeck", j, ("Fst",), b_str, grid_label="vs", grid=grid, reveal="dq",
                               build_at=b_str_at))

@@ -77,7 +77,6 @@ from .candidates import (
     make_families,
     nuisance_columns,
     placebo_families,
-    sign_scale,
 )
 from .compose import Composed, RowSignals, score_composed
 from .compose import library as composed_library
@@ -601,54 +600,7 @@ def _stage_assemble(model: IdentificationModel, trajectories, validation, holdou
                  fixed=tuple(sorted(fixed.items())))
 
 
-def _sign_scales(data: _Data) -> np.ndarray:
-    """Per joint, the scale ``s`` at which the ``sign(dq_j)`` of the Coulomb-like columns is smoothed as
-    ``tanh(dq_j / s)`` (issue 10, TX40 joint 3 under WLS).
-
-    Two scales are compared: ``V_FLOOR_NOISE`` velocity-noise SDs, and :func:`.candidates.sign_scale` (the
-    ``SIGN_SUPPORT_QUANTILE`` quantile of ``|dq_j|``: below the slowest speeds the identification data
-    show, a sharp switch is an extrapolation, and one that costs at rest - the TX40 identification part
-    has 0.6 % of its samples below 0.003 rad/s on joint 3, its validation part 56 %, where the near-sharp
-    sign alternated between +-Fc on velocity wander and made the loop's raw error 0.235 against the
-    expert's 0.164). The wider scale is kept unless time-blocked CV of the declared law (sign + linear
-    viscous, whole model refitted on the training blocks) says it is worse by more than one standard
-    error of the paired per-fold difference (one-standard-error rule, Hastie, Tibshirani & Friedman 2009,
-    sec. 7.10): with no evidence either way, the law that does not extrapolate a switch is chosen; a true
-    sharp law (simulated data) keeps the narrow scale."""
-    F = data.F
-    n = data.n
-    Y, J = F.system.Y, F.system.joint
-    blocks = time_blocks(F.row_experiment, F.row_index, N_FOLDS)
-    dq_noise = np.max([ex.dq_noise for ex in F.experiments], axis=0)
-    names = list(data.decl)
-    out = np.zeros(n)
-    for j in range(n):
-        dq_all = np.concatenate([e_.dq[:, j] for e_ in F.experiments])
-        narrow = V_FLOOR_NOISE * max(float(dq_noise[j]), 1e-9)
-        wide = max(sign_scale(dq_all, float(dq_noise[j])), narrow)
-        out[j] = narrow
-        if not wide > narrow or not np.any(np.abs(dq_all) > 0):
-            continue
-        fs, fv = friction_column_indices(names, j)
-        A = np.delete(F.system.W, fs + fv, axis=1)
-        cv = BlockedLS(A, Y, blocks)
-        rows = np.equal(J, j)
-
-        def oof(v, j=j, cv=cv, rows=rows):
-            X = F.full_rate_columns(lambda ex: {j: np.hstack([coulomb_columns("sign", ex.dq[:, j], None, v),
-                                                              viscous_columns("linear", ex.dq[:, j])])}, 2)
-            return cv.oof_residual(X)[rows]
-        e_n, e_w = oof(narrow), oof(wide)
-        b = blocks[rows]
-        d = np.array([float(np.sum(e_w[b == k] ** 2) - np.sum(e_n[b == k] ** 2)) for k in np.unique(b)])
-        se = float(np.std(d, ddof=1)) / math.sqrt(d.size) if d.size > 1 else 0.0
-        if float(np.mean(d)) <= se:
-            out[j] = wide
-    return out
-
-
-def _stage_friction(data: _Data, cfg: DiagnoseSettings, scales: np.ndarray | None = None
-                    ) -> tuple[_Data, tuple[_LawRecord, ...]]:
+def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_LawRecord, ...]]:
     """Stage "friction law" (issue 10 item 1): for each joint in turn, choose the Coulomb law (sign, tanh
     with searched ``v``, Stribeck) and the viscous law (linear, ``|dq|^delta``) by time-blocked
     cross-validation on the *identification* rows (:func:`.friction.select_friction`: the whole model
@@ -681,16 +633,13 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings, scales: np.ndarray | Non
             return F.full_rate_columns(lambda ex: {j: f(ex.dq[:, j])}, p)
         dq_all = np.concatenate([e_.dq[:, j] for e_ in F.experiments])
         try:
-            vf = V_FLOOR_NOISE * max(float(dq_noise[j]), 1e-9)
-            # the scale a kept or smoothed sign(dq) gets (_sign_scales); the selection's reference stays at
-            # the noise floor, so that what is *named* does not change with it
-            vk = vf if scales is None else max(float(scales[j]), vf)
             ch = select_friction(A, Y, J, j, np.zeros(Y.size), blocks, columns=cols, v_grid=velocity_grid(dq_all),
-                                 v_floor=vf)
+                                 v_floor=V_FLOOR_NOISE * max(float(dq_noise[j]), 1e-9))
         except IdentificationError:
             continue   # the joint does not move: nothing to choose
+        vf = V_FLOOR_NOISE * max(float(dq_noise[j]), 1e-9)
 
-        def kept(ch=ch, j=j, vf=vk, missing=missing, A=A, an=an, cols=cols):
+        def kept(ch=ch, j=j, vf=vf, missing=missing, A=A, an=an, cols=cols):
             """The declared law with sign(dq) smoothed at the velocity noise floor (what the CV compared
             against): the sign of a velocity that is noise (standstill, reversals) has no meaning, and a
             chattering Coulomb column costs the most where the robot rests (TX40 j4: 0.42 vs 0.17)."""
@@ -747,12 +696,6 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings, scales: np.ndarray | Non
                 recs.append(kr[0])
                 W, names = kr[1], kr[2]
             continue
-        if smoothing and vk > float(ch.coulomb.param):
-            # a rounding of sign(dq) finer than the support of the identification data near dq = 0: widened
-            # to the scale _sign_scales found no worse in CV (no sharp switch extrapolated to rest phases)
-            ch = FrictionChoice(j, LawFit("tanh", vk, ch.coulomb.cv_rel_err), ch.viscous, ch.candidates, ch.coefficients,
-                                ch.n_folds, ch.unit)
-            X = cols(ch.columns, len(ch.names()))
         recs.append(_LawRecord(ch, missing, off, float(np.mean(wins)), p_law, smoothing))
         W = np.hstack([A, X])
         names = an + list(ch.names())
@@ -776,8 +719,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings, scales: np.ndarray | Non
     return replace(data, model=law_model, F=F2, Vs=rebuild(data.V, data.Vs), decl=new_names), tuple(recs)
 
 
-def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg: DiagnoseSettings,
-                    scales: np.ndarray | None = None) -> _Baseline:
+def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg: DiagnoseSettings) -> _Baseline:
     """Stage 2: identify the declared model (``cfg.method``) and its validation error ("before", on
     ``data0``), the model with the friction laws chosen (the loop's start, on ``data``), the candidate
     families and the nuisance columns (velocity noise at Coulomb reversals)."""
@@ -785,7 +727,7 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     val0 = res0.rel_err_on(data0.Vs)
     # the loop starts from the selection estimator's fit (the named effects do not depend on cfg.method)
     res_start = (_fit(data.F.system, SELECT_METHOD) if laws or cfg.method != SELECT_METHOD else res0)
-    families = make_families(data.F, cfg.candidates, sign_scales=scales)
+    families = make_families(data.F, cfg.candidates)
     # a joint whose friction-law stage chose a Stribeck law already has the Stribeck column: the loop's
     # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
     # coefficients then split the effect between them with opposite signs)
@@ -1480,9 +1422,8 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
     if loaded is not None:
         trajs += [replace(tr, loaded=True) for tr in _as_list(loaded)]
     data0 = _stage_assemble(model, trajs, validation, holdout, dynamics_bandwidth_hz, filter_kw, payload)
-    scales = _sign_scales(data0)
-    data, laws = _stage_friction(data0, cfg, scales) if cfg.friction_laws else (data0, ())
-    base = _stage_baseline(data0, data, laws, cfg, scales)
+    data, laws = _stage_friction(data0, cfg) if cfg.friction_laws else (data0, ())
+    base = _stage_baseline(data0, data, laws, cfg)
     state = _stage_loop(data, base, cfg, rng)
     stab, msgs = {}, []
     if cfg.stability:
