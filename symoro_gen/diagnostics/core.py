@@ -1316,8 +1316,15 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                            f"friction law)" for r in base.laws if r.smoothing],
     }
     Vs = data.Vs
-    plot_data = {"frame": F, "vframe": state.V, "round_resid": list(state.round_resid),
-                 "valid_filtered": dict(e=Vs.Y - Av @ np.array([res.value(nm) for nm in names]), y=Vs.Y, joint=Vs.joint,
+    # the plotted residuals are those of the errors reported: "before" is the declared model fitted with the
+    # user's estimator (the loop's own rounds run on SELECT_METHOD's fit), "after" the final refit
+    e_valid = Vs.Y - Av @ np.array([res.value(nm) for nm in names])
+    rounds = list(state.round_resid)
+    if base.res0.residual is not None:
+        rounds[0] = (np.asarray(base.res0.residual), data0.Vs.Y - base.res0.predict(data0.Vs))
+    rounds[-1] = (final_resid, e_valid)
+    plot_data = {"frame": F, "vframe": state.V, "round_resid": rounds,
+                 "valid_filtered": dict(e=e_valid, y=Vs.Y, joint=Vs.joint,
                                         experiment=state.V.row_experiment, index=state.V.row_index),
                  "valid_raw": raw_keep}
     return ResidualReport(robot=str(getattr(data.model, "ROBOT", "?")), method=cfg.method, n_joints=n,
