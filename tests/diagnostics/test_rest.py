@@ -138,3 +138,49 @@ def test_rest_mask_of_a_simulated_recording_finds_the_rests_and_no_reversal():
             # what is flagged is a rest or the last millimetres per second of a stop
             band = friction.REST_NOISE_MULTIPLE * ex.dq_noise[j]
             assert np.all(np.abs(dq_true[idx, j])[m[:, j]] < 2 * band + 1e-9), j
+
+
+# ------------------------------------------------------------------------------------------------
+# the rule in the loop
+# ------------------------------------------------------------------------------------------------
+def _no_rest(dq, fs, noise, f_dyn, **kw):
+    """The detector switched off (the loop as before the rule)."""
+    return np.zeros(np.shape(dq), bool)
+
+
+def _run(model, ident, valid):
+    return diagnose(model, ident, validation=valid, method="ols", candidates=("friction_law", "stribeck"),
+                    max_effects=1, structure=False, unexplained=False, stability=False, n_placebo=0,
+                    dynamics_bandwidth_hz=1.0)
+
+
+def test_static_at_rest_cuts_the_validation_error_where_the_robot_rests(monkeypatch):
+    """Identification data without a rest (the moving part), validation data that stop and go: with the
+    rule the loop's Coulomb columns are 0 at rest, where the truth is an unknown static torque; without it
+    sign(dq) of the velocity noise switches between +-FS there. The rule leaves the identification - which
+    has no rest - and the declared model untouched, and lowers the raw validation error of every joint
+    with Coulomb friction; at rest the loop's friction prediction is exactly 0."""
+    model, ident, valid, off, _, fs = stop_and_go(2)
+    with_rule = _run(model, ident, valid)
+    monkeypatch.setattr(friction, "rest_segments", _no_rest)
+    without = _run(model, ident, valid)
+    assert [e.label for e in with_rule.effects] == [e.label for e in without.effects]
+    np.testing.assert_allclose(with_rule.result_after.values, without.result_after.values, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(with_rule.before_validation_rel_err_raw, without.before_validation_rel_err_raw)
+    a, b = with_rule.after_validation_rel_err_raw, without.after_validation_rel_err_raw
+    for j in range(4):
+        if fs[j] > 0.05:   # a Coulomb torque that the velocity noise can flip (N m)
+            assert a[j] < 0.9 * b[j], (j, a, b)
+    assert with_rule.settings["static_at_rest"], with_rule.settings
+    assert "validation samples" in with_rule.settings["static_at_rest"][0]
+    # the residual at rest is the static friction torque and the noise, nothing the laws added: its RMS
+    # stays below that of the truth's static torque (<= FS/2) plus the torque noise
+    raw = with_rule.plot_data["valid_raw"]
+    e, jj, idx = raw["e"], raw["joint"], raw["index"]
+    (ex,) = with_rule.plot_data["vframe"].experiments
+    rest = rest_mask(ex)
+    for j in range(4):
+        m = (jj == j) & rest[idx, j]
+        assert m.sum() > 1000
+        rms = float(np.sqrt(np.mean(e[m] ** 2)))
+        assert rms < 0.5 * fs[j] + 3 * NOISE_TAU + 0.05 * float(np.sqrt(np.mean(raw["y"][jj == j] ** 2))), (j, rms)
