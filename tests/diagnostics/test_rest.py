@@ -104,7 +104,7 @@ def test_rest_segments_of_a_noisy_stop_and_go_velocity_and_none_on_a_sinusoid():
 
 
 def test_rest_segments_bad_input_is_named():
-    with pytest.raises(IdentificationError, match="run.csv: rest segments: sampling rate"):
+    with pytest.raises(IdentificationError, match=r"run\.csv: rest segments: sampling rate"):
         rest_segments(np.zeros(10), 0.0, 1e-3, 2.0, source="run.csv")
     with pytest.raises(IdentificationError, match="velocity noise"):
         rest_segments(np.zeros((10, 2)), 100.0, [1e-3, np.nan], 2.0)
