@@ -741,8 +741,8 @@ def _static_at_rest_family(fam: Family) -> Family:
 
 
 def _static_at_rest(data: _Data, V: Frame, laws: Sequence[_LawRecord]) -> list[str]:
-    """Per joint with a friction law: share of the identification and validation samples in rest segments
-    (where the law is static, predicted 0)."""
+    """Per joint with a friction law and any rest: share of the identification and validation samples in
+    rest segments (where the law is static, predicted 0)."""
     out = []
     for r in laws:
         j = r.choice.joint
@@ -750,6 +750,8 @@ def _static_at_rest(data: _Data, V: Frame, laws: Sequence[_LawRecord]) -> list[s
         for fr in (data.F, V):
             tot = sum(ex.n_samples for ex in fr.experiments)
             shares.append(sum(int(rest_mask(ex)[:, j].sum()) for ex in fr.experiments) / max(tot, 1))
+        if not any(shares):
+            continue
         out.append(f"joint {j + 1}: sliding friction static (0) in rest segments: {100 * shares[0]:.1f} % of the "
                    f"identification samples, {100 * shares[1]:.1f} % of the validation samples")
     return out

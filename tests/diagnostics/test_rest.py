@@ -173,6 +173,11 @@ def test_static_at_rest_cuts_the_validation_error_where_the_robot_rests(monkeypa
             assert a[j] < 0.9 * b[j], (j, a, b)
     assert with_rule.settings["static_at_rest"], with_rule.settings
     assert "validation samples" in with_rule.settings["static_at_rest"][0]
+    # the user sees the rule in the text and Markdown reports; a run without rests says nothing of it
+    for text in (with_rule.summary(), with_rule.to_markdown()):
+        assert "Note: " + with_rule.settings["static_at_rest"][0] in text
+    assert not without.settings["static_at_rest"]
+    assert "rest segments" not in without.summary()
     # the residual at rest is the static friction torque and the noise, nothing the laws added: its RMS
     # stays below that of the truth's static torque (<= FS/2) plus the torque noise
     raw = with_rule.plot_data["valid_raw"]
