@@ -34,7 +34,7 @@ from ..observations import AssemblyOptions
 from ..report.plots import MissingDependencyError
 from .files import FleetError, LogFile, discover, group_by, plain_format, read_experiments, segments
 from .kernel import Partial, _column_map, merge_partials, process_file, resolve_model
-from .stats import adjust, dersimonian_laird, level_z, line_fit, pooled_dispersion, trend_test
+from .stats import adjust, dersimonian_laird, hampel_outliers, level_z, line_fit, pooled_dispersion, trend_test
 
 try:  # the fleet extra; without it identify_fleet raises MissingDependencyError before any plugin is made
     from distributed.diagnostics.plugin import WorkerPlugin as _WorkerPlugin
@@ -500,8 +500,9 @@ def _judge(model, names, days, robots, fleet, skipped, alpha, correction) -> dic
         slope[i, k], se[i, k], zt[i, k], pt[i, k] = trend_test(x, y, s, dispersion=pooled[k][0], dof=pooled[k][1])
     rej, padj = adjust(np.stack([p, pt]), alpha, correction)
     tau_all = np.array([np.nan] * P)
-    if R >= 2:
-        tau_all = np.array([np.sqrt(dersimonian_laird(theta[:, k], std[:, k] ** 2)[2])
+    if R >= 2:      # the fleet's spread: DerSimonian-Laird on the robots the Hampel screen keeps
+        keep = [~hampel_outliers(theta[:, k], std[:, k] ** 2) for k in range(P)]
+        tau_all = np.array([np.sqrt(dersimonian_laird(theta[keep[k], k], std[keep[k], k] ** 2)[2])
                             if np.all(np.isfinite(std[:, k])) else np.nan for k in range(P)])
     flagged = []
     for i, r in enumerate(rnames):

@@ -112,6 +112,20 @@ void symoro_diagonal_sum(long k, long P, long C, const double *Z, double *y)
     }
 }
 
+/* Decimated rows into a joint's Fortran-ordered QR buffer: dst[u * ld + i] = y[i * C + src[u]] * scale[u]
+   for the k rows i and the L columns u of the joint (one multiply: the numbers of NumPy's indexed copy). */
+void symoro_scatter_scaled(long k, const double *y, long C, long L, const long *src, const double *scale,
+                           double *dst, long ld)
+{
+    for (long u = 0; u < L; u++) {
+        const double *col = y + src[u];
+        const double s = scale[u];
+        double *d = dst + u * ld;
+        for (long i = 0; i < k; i++)
+            d[i] = col[i * C] * s;
+    }
+}
+
 /* Central differences along axis 0 of x (n rows, nch channels, C order), one pass for both derivatives:
    d1 as numpy.gradient (interior (x[k+1] - x[k-1]) / (2 dt), one-sided first order at the ends), d2 as
    symoro_gen.preprocessing.filtering.differentiate(second=True) (interior (x[k+1] - 2 x[k] + x[k-1]) / dt^2,
@@ -182,13 +196,14 @@ def _c_kernels() -> dict[str, Callable] | None:
                     write_text_atomic(c_path, _KERNELS_SOURCE)
                 lib = ctypes.CDLL(str(build_library(c_path, timeout=60.0).path))
                 g, f = lib.symoro_gather_rows, lib.symoro_sosfilt_rows
-                d, cd = lib.symoro_diagonal_sum, lib.symoro_central_differences
+                d, cd, sc = lib.symoro_diagonal_sum, lib.symoro_central_differences, lib.symoro_scatter_scaled
                 L, P = ctypes.c_long, ctypes.c_void_p
                 g.restype, g.argtypes = None, [L, P, L, P, L, P, L]
                 f.restype, f.argtypes = None, [L, L, L, P, P, P, ctypes.c_int]
                 d.restype, d.argtypes = None, [L, L, L, P, P]
                 cd.restype, cd.argtypes = None, [L, L, P, ctypes.c_double, P, P]
-                fns = {"gather": g, "sosfilt": f, "diagonal_sum": d, "differences": cd}
+                sc.restype, sc.argtypes = None, [L, P, L, L, P, P, P, L]
+                fns = {"gather": g, "sosfilt": f, "diagonal_sum": d, "differences": cd, "scatter": sc}
             except Exception:  # noqa: BLE001 - no compiler, read-only cache...: NumPy/SciPy do the same
                 fns = None
             _KERNELS.append(fns)
@@ -370,11 +385,13 @@ class _Folder:
         for j in range(n):
             sel = np.flatnonzero(joint == j)                     # entries sorted: columns ascending
             self.cols.append(col[sel])
-            self.src.append(np.append(cmap.column[sel], U + j))  # Y of joint j last
-            self.scale.append(np.append(cmap.scale[sel], 1.0))
+            self.src.append(np.ascontiguousarray(np.append(cmap.column[sel], U + j), dtype=np.int64))  # Y last
+            self.scale.append(np.ascontiguousarray(np.append(cmap.scale[sel], 1.0), dtype=float))
             L1 = sel.size + 1
             self.buf.append(np.zeros((L1 + self.fold_rows, L1), order="F"))
             self.lwork.append(max(1, int(lapack.dgeqrf_lwork(L1 + self.fold_rows, L1)[0])))
+        kernels = _c_kernels()
+        self.scatter = None if kernels is None else kernels["scatter"]
         self.rows = 0                                            # rows in the buffers (same for every joint)
         self.total = [0] * n
         self.yy = [0.0] * n
@@ -387,7 +404,11 @@ class _Folder:
             for j, buf in enumerate(self.buf):
                 L1 = buf.shape[1]
                 block = buf[L1 + self.rows:L1 + self.rows + take]
-                np.multiply(part[:, self.src[j]], self.scale[j], out=block)
+                if self.scatter is not None and part.flags.c_contiguous:
+                    self.scatter(take, part.ctypes.data, part.shape[1], L1, self.src[j].ctypes.data,
+                                 self.scale[j].ctypes.data, block.ctypes.data, buf.shape[0])
+                else:
+                    np.multiply(part[:, self.src[j]], self.scale[j], out=block)
                 self.yy[j] += float(block[:, -1] @ block[:, -1])
                 self.total[j] += take
             self.rows += take
