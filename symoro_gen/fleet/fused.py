@@ -65,6 +65,7 @@ from ..preprocessing.filtering import (
     min_filter_samples,
 )
 from ..preprocessing.trajectory import Trajectory
+from ..runtime import GeneratedModel
 from ..runtime.ccompile import build_library, user_cache
 
 __all__ = ["BATCH_SUPER_ROWS", "ColumnMap", "column_map", "dynamics_bandwidth", "filter_settings", "fold_trajectories",
@@ -480,8 +481,6 @@ def _raw_regressor(model: IdentificationModel) -> Callable | None:
     C-ordered float64 buffers), or None (NumPy kernels, a model object of another kind): the kernel then
     goes through ``model.regressor``. The same function as ``model.regressor`` calls, without its
     per-call argument checks and conversions (0.3 s of the 1 h log's 5,600 calls)."""
-    from ..runtime import GeneratedModel
-
     owner = getattr(getattr(model, "regressor", None), "__self__", None)   # a generated package's bound method
     if not isinstance(owner, GeneratedModel):
         owner = model if isinstance(model, GeneratedModel) else None
@@ -492,7 +491,8 @@ def _raw_regressor(model: IdentificationModel) -> Callable | None:
         fn = None if fns is None else fns.get(f"{owner.ROBOT}_base_regressor")
         if fn is None:
             return None
-        return _RAW_PROTO(ctypes.cast(fn, ctypes.c_void_p).value)
+        addr = ctypes.cast(fn, ctypes.c_void_p).value
+        return None if not addr else _RAW_PROTO(addr)
     except Exception:  # noqa: BLE001 - any surprise: the checked call
         return None
 
@@ -593,7 +593,7 @@ def _fold_fused(model: IdentificationModel, traj: Trajectory, st: FilterSettings
                 for r0 in range(0, m, R):                           # regressor in cache-sized calls
                     r1 = min(m, r0 + R)
                     i0, i1 = off + m0 + r0, off + m0 + r1
-                    if by_address:                                  # the generated C, by address
+                    if raw is not None and by_address:              # the generated C, by address
                         raw(i1 - i0, qp + i0 * n * 8, dqp + i0 * n * 8, ddqp + i0 * n * 8, Wptr)
                         Wb = Wbuf[:r1 - r0]
                     else:

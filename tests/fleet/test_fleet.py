@@ -10,6 +10,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -399,7 +400,7 @@ def test_cli_errors_name_the_file_and_the_pattern(cli, tmp_path):
 _FAULTS = """
 import resource, sys
 import numpy as np
-from symoro_gen.fleet.engine import tune_malloc
+from symoro_gen.fleet.worker import tune_malloc
 if sys.argv[1] == "tuned":
     assert tune_malloc()
 a = np.ones(1 << 19)                    # 4 MB, as a log's column or a filter block
@@ -458,3 +459,22 @@ def test_worker_model_cache_follows_a_regenerated_package(tmp_path):
     m2 = resolve_model(str(pkg))
     assert m2 is not m1 and _column_map(m2) is not _column_map(m1)
     assert resolve_model(str(pkg)) is m2
+
+
+def test_worker_path_does_not_import_the_engine():
+    """What a worker unpickles (the per-log task, the merge, the setup plugin) imports neither the engine nor
+    what only the client needs (the statistics, the closed-loop diagnosis): the package's names load on
+    first use; and they are still all there."""
+    code = ("import sys, symoro_gen.fleet.kernel, symoro_gen.fleet.worker\n"
+            "bad = [m for m in ('symoro_gen.fleet.engine', 'symoro_gen.fleet.stats', 'symoro_gen.diagnostics',"
+            " 'symoro_gen.fleet.simulate') if m in sys.modules]\n"
+            "import symoro_gen.fleet as f\n"
+            "missing = [n for n in f.__all__ if getattr(f, n, None) is None]\n"
+            "print(bad, missing)\n")
+    root = str(Path(__file__).resolve().parents[2])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    assert out.strip() == "[] []", out
+    import symoro_gen.fleet as f
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        f.nothing  # noqa: B018
