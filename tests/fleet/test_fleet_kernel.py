@@ -238,3 +238,41 @@ def test_diagnose_closes_the_loop_on_the_flagged_robot(tmp_path, threads_client)
     doc = json.loads(json.dumps(res.to_json()))
     assert doc["diagnoses"]["r02"]["day"] == d["day"]
     assert "diagnosis of r02" in res.summary()
+
+
+def test_every_qr_fold_and_merge_runs_on_one_blas_thread(monkeypatch):
+    """The kernel's LAPACK folds, the last one (``result()``) included, and the TSQR merges run with one
+    OpenBLAS thread even in a process whose OpenBLAS has more (a ``threads:N`` client, the CLI: outside
+    Dask's nanny, which sets OPENBLAS_NUM_THREADS=1); multi-threaded, each 2k-row dgeqrf cost ~0.4 s CPU on
+    this 2-core machine against 0.004 s. The process's own setting is restored afterwards."""
+    from symoro_gen.fleet import fused, kernel
+    from symoro_gen.preprocessing import filtering
+
+    controls = filtering._openblas_thread_controls()
+    if not controls:
+        pytest.skip("no OpenBLAS thread control in this process")
+    get, set_ = controls[0]
+    before = get()
+    seen: list[int] = []
+    fold, qr = fused._Folder._fold, np.linalg.qr
+
+    def spy_fold(self):
+        seen.append(get())
+        return fold(self)
+
+    def spy_qr(*a, **k):
+        seen.append(get())
+        return qr(*a, **k)
+
+    model = load_model("scara")
+    tr = _recording("scara", 3.0, seed=2)
+    monkeypatch.setattr(fused._Folder, "_fold", spy_fold)
+    monkeypatch.setattr(kernel.np.linalg, "qr", spy_qr)
+    set_(2)
+    try:
+        a = fold_trajectory(model, tr, AssemblyOptions(keep_signals=False))
+        kernel.merge_partials(kernel.Partial(("a",), a, 1), kernel.Partial(("b",), a, 1))
+        assert get() == 2
+    finally:
+        set_(before)
+    assert len(seen) >= 2 and set(seen) == {1}, seen
