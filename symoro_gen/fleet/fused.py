@@ -20,13 +20,19 @@ one sample in ``n_d`` kept, zero padding beyond the ends as ``resample_poly``), 
 * **in cache**: the regressor is evaluated ``REGRESSOR_ROWS`` samples at a time into a reused buffer, and
   its distinct columns copied straight into the layout of the matrix product (``BATCH_SUPER_ROWS``
   super-rows per product) by a compiled row gather (:data:`_KERNELS_SOURCE`; ``np.take`` without a C
-  compiler, same numbers); the products fill a window of ``RING_SUPER_ROWS`` super-rows whose outputs
-  are summed by 21 vector adds, its last 20 products carried to the front when it is full;
+  compiler, same numbers); the generated C regressor is called by address (:func:`_raw_regressor`,
+  without ``model.regressor``'s per-call checks); the products fill a window of ``RING_SUPER_ROWS``
+  super-rows whose outputs are summed by a compiled row-by-row loop (21 vector adds without a compiler,
+  same order of additions, same numbers), its last 20 products carried to the front when it is full;
 * **per-joint columns, in-place QR**: joint j's rows are non-zero only in the columns of its own entries
   (links j..n and its drive), so its factor is kept on those columns (exact) and the decimated rows are
-  written scaled into a Fortran-ordered ``[R_j; rows]`` buffer that LAPACK ``dgeqrf`` factors in place
-  every ``fold_rows`` rows (Golub & Van Loan, Matrix Computations, 4th ed., sec. 5.2, Householder QR;
-  the stacking is the TSQR update of Demmel et al. 2012).
+  written scaled (compiled copy) into a Fortran-ordered ``[R_j; rows]`` buffer that LAPACK ``dgeqrf``
+  factors in place every ``fold_rows`` rows (Golub & Van Loan, Matrix Computations, 4th ed., sec. 5.2,
+  Householder QR; the stacking is the TSQR update of Demmel et al. 2012), every BLAS/LAPACK call of a
+  log on the options' thread count (one by default);
+* **the filters' rule** (``f_dyn`` when the cut-off or ``n_d`` is not given): :func:`dynamics_bandwidth`,
+  ``estimate_dynamics_bandwidth``'s Welch periodogram with each segment's mean and line from sums per
+  half-segment (same ``f_dyn``); the central differences of ``q`` are one compiled pass (same numbers).
 
 The Butterworth filter of ``q`` is zero-phase (forward-backward), so it is applied per outer block of
 samples with a settling margin at both ends, as :func:`~symoro_gen.observations.iter_chunks` does: its
