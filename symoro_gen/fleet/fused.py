@@ -133,6 +133,31 @@ void symoro_scatter_scaled(long k, const double *y, long C, long L, const long *
     }
 }
 
+/* One Welch segment of the filters' rule: buf[c, k] = ((x[k, c] - mean[c]) - slope[c] tc[k]) w[k] for the m
+   rows k of x (nch channels, C order) into buf (nch x m): NumPy's subtract, multiply, subtract and
+   multiply in one pass (same operations, same numbers). */
+__attribute__((optimize("fp-contract=off")))
+void symoro_detrend_window(long m, long nch, const double *x, const double *mean, const double *slope,
+                           const double *tc, const double *w, double *buf)
+{
+    for (long c = 0; c < nch; c++) {
+        double *b = buf + c * m;
+        const double mu = mean[c], sl = slope[c];
+        for (long k = 0; k < m; k++)
+            b[k] = ((x[k * nch + c] - mu) - sl * tc[k]) * w[k];
+    }
+}
+
+/* Periodogram accumulation: P[i] += re_i * re_i + im_i * im_i over the n complex values X (interleaved). */
+__attribute__((optimize("fp-contract=off")))
+void symoro_add_power(long n, const double *X, double *P)
+{
+    for (long i = 0; i < n; i++) {
+        const double re = X[2 * i], im = X[2 * i + 1];
+        P[i] += re * re + im * im;
+    }
+}
+
 /* Central differences along axis 0 of x (n rows, nch channels, C order), one pass for both derivatives:
    d1 as numpy.gradient (interior (x[k+1] - x[k-1]) / (2 dt), one-sided first order at the ends), d2 as
    symoro_gen.preprocessing.filtering.differentiate(second=True) (interior (x[k+1] - 2 x[k] + x[k-1]) / dt^2,
@@ -210,7 +235,11 @@ def _c_kernels() -> dict[str, Callable] | None:
                 d.restype, d.argtypes = None, [L, L, L, P, P]
                 cd.restype, cd.argtypes = None, [L, L, P, ctypes.c_double, P, P]
                 sc.restype, sc.argtypes = None, [L, P, L, L, P, P, P, L]
-                fns = {"gather": g, "sosfilt": f, "diagonal_sum": d, "differences": cd, "scatter": sc}
+                dw, ap = lib.symoro_detrend_window, lib.symoro_add_power
+                dw.restype, dw.argtypes = None, [L, L, P, P, P, P, P, P]
+                ap.restype, ap.argtypes = None, [L, P, P]
+                fns = {"gather": g, "sosfilt": f, "diagonal_sum": d, "differences": cd, "scatter": sc,
+                       "detrend_window": dw, "add_power": ap}
             except Exception:  # noqa: BLE001 - no compiler, read-only cache...: NumPy/SciPy do the same
                 fns = None
             _KERNELS.append(fns)
@@ -272,7 +301,15 @@ def dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999, min_band
     Pj = np.zeros((n, f.size))                  # joint-major: contiguous accumulation
     buf, line = np.empty((n, m)), np.empty((n, m))
     re2, im2 = np.empty((n, f.size)), np.empty((n, f.size))
+    kernels = _c_kernels() if q.flags.c_contiguous else None
     for i in range(nseg):
+        if kernels is not None:                  # the same operations in one compiled pass each
+            mi, si = np.ascontiguousarray(mean[i]), np.ascontiguousarray(slope[i])
+            kernels["detrend_window"](m, n, q[i * h:].ctypes.data, mi.ctypes.data, si.ctypes.data,
+                                      tc.ctypes.data, w.ctypes.data, buf.ctypes.data)
+            X = np.fft.rfft(buf, axis=1)
+            kernels["add_power"](X.size, X.ctypes.data, Pj.ctypes.data)
+            continue
         np.subtract(q[i * h:i * h + m].T, mean[i][:, None], out=buf)
         np.multiply(slope[i][:, None], tc, out=line)
         buf -= line

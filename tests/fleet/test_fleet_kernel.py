@@ -111,15 +111,21 @@ def _long_log_checks(q: np.ndarray, fs: float) -> None:
     assert dynamics_bandwidth(q2, fs, min_bandwidth_hz=0.0) == estimate_dynamics_bandwidth(q2, fs, min_bandwidth_hz=0.0)
 
 
-def test_filters_rule_on_long_logs_is_the_assemblys():
-    """The fleet's f_dyn (Welch's periodogram with per-half-segment sums, :func:`dynamics_bandwidth`) is
-    ``estimate_dynamics_bandwidth``'s on a long simulated log (4 energy fractions, f_dyn well above the
-    floor), and the filter settings are ``observation_settings``' (cut-off, n_d, notes)."""
+def test_filters_rule_on_long_logs_is_the_assemblys(monkeypatch):
+    """The fleet's f_dyn (Welch's periodogram with per-half-segment sums, :func:`dynamics_bandwidth`; its
+    compiled segment passes and their NumPy fallback) is ``estimate_dynamics_bandwidth``'s on a long
+    simulated log (4 energy fractions, f_dyn above the resolution), and the filter settings are
+    ``observation_settings``' (cut-off, n_d, notes)."""
+    from symoro_gen.fleet import fused
+
     rng = np.random.default_rng(5)
     mo = fourier_trajectory(7, 20.0, 1e-3, rng, vmax=1.5, amax=30.0)
     t = np.arange(200_000) * 1e-3
     q = mo.series.evaluate(t).q + rng.normal(0, 1e-5, (t.size, 7))
     _long_log_checks(q, 1000.0)
+    with monkeypatch.context() as mp:
+        mp.setattr(fused, "_KERNELS", [None])
+        _long_log_checks(q, 1000.0)
     tr = Trajectory(t=t, q=q, tau=np.zeros_like(q), source="long")
     for opts in (AssemblyOptions(keep_signals=False), AssemblyOptions(keep_signals=False, energy_fraction=0.99),
                  AssemblyOptions(keep_signals=False, cutoff_hz=8.0)):
