@@ -9,13 +9,11 @@ started by dask-jobqueue or on Kubernetes; the workers need symoro_gen and the g
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import json
 import logging
 import math
 import os
 import re
-import sys
 import time
 import uuid
 import warnings
@@ -33,13 +31,9 @@ from ..model import IdentificationModel
 from ..observations import AssemblyOptions
 from ..report.plots import MissingDependencyError
 from .files import FleetError, LogFile, discover, group_by, plain_format, read_experiments, segments
-from .kernel import Partial, _column_map, merge_partials, process_file, resolve_model
-from .stats import adjust, dersimonian_laird, level_z, line_fit, pooled_dispersion, trend_test
-
-try:  # the fleet extra; without it identify_fleet raises MissingDependencyError before any plugin is made
-    from distributed.diagnostics.plugin import WorkerPlugin as _WorkerPlugin
-except ImportError:  # pragma: no cover - depends on the installation
-    _WorkerPlugin = object
+from .kernel import Partial, merge_partials, process_file, resolve_model
+from .stats import adjust, dersimonian_laird, hampel_outliers, level_z, line_fit, pooled_dispersion, trend_test
+from .worker import FleetWorkerSetup, tune_malloc
 
 __all__ = ["DEFAULT_ALPHA", "Z_DAY", "Estimate", "FleetResult", "FleetWorkerSetup", "identify_fleet", "open_client",
            "tune_malloc"]
@@ -48,63 +42,6 @@ __all__ = ["DEFAULT_ALPHA", "Z_DAY", "Estimate", "FleetResult", "FleetWorkerSetu
 DEFAULT_ALPHA = 0.01
 #: a day is listed in a flag when its own distance to the fleet exceeds this
 Z_DAY = 3.0
-
-
-#: glibc ``mallopt`` parameters (malloc.h)
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-#: arrays up to this size come from the heap, not from fresh ``mmap`` pages (glibc's own ceiling, 32 MiB)
-MMAP_THRESHOLD = 32 << 20
-#: free memory at the top of the heap kept up to this size (glibc's default ceiling, 2 x the above)
-TRIM_THRESHOLD = 64 << 20
-
-
-def tune_malloc() -> bool:
-    """Give a worker process glibc's large-block settings back; True when applied (glibc only).
-
-    A Dask nanny starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536`` (distributed's
-    ``nanny.pre-spawn-environ``): setting it turns off glibc's adaptive mmap threshold, so every array
-    above 128 KiB is a fresh ``mmap`` whose pages fault in one by one and every free returns them. A
-    fleet task allocates arrays of a few MB (the log's columns, the filters' blocks, Welch's segments)
-    all the time: measured on 1-minute LWR4 logs, 33k page faults and 0.21-0.23 s CPU per log against
-    0.13-0.16 s with these settings (225 faults). Memory stays bounded: freed blocks are reused, and the
-    top of the heap is still returned above :data:`TRIM_THRESHOLD`.
-    """
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):  # pragma: no cover - not glibc
-        return False
-    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
-    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
-
-
-class FleetWorkerSetup(_WorkerPlugin):  # type: ignore[misc,valid-type]
-    """Once per worker process (and again on a worker the nanny restarts): :func:`tune_malloc` and the
-    model loaded with its column map (:func:`symoro_gen.fleet.kernel.resolve_model`'s per-process cache),
-    so that no task pays for them.
-
-    Not applied to a worker living in the client's own process (``threads:N``): the client's allocator
-    is left alone there.
-    """
-
-    idempotent = True
-
-    def __init__(self, model_ref, client_pid: int):
-        self.model_ref = model_ref
-        self.client_pid = client_pid
-        self.malloc_tuned = False
-        self.preloaded = False
-
-    def setup(self, worker=None) -> None:
-        if os.getpid() != self.client_pid:
-            self.malloc_tuned = tune_malloc()
-        if isinstance(self.model_ref, (str, os.PathLike)):
-            try:
-                _column_map(resolve_model(self.model_ref))
-                self.preloaded = True
-            except Exception:  # noqa: BLE001 - a model missing on this worker is reported by each task
-                pass
 
 
 def _require_distributed():
@@ -500,8 +437,9 @@ def _judge(model, names, days, robots, fleet, skipped, alpha, correction) -> dic
         slope[i, k], se[i, k], zt[i, k], pt[i, k] = trend_test(x, y, s, dispersion=pooled[k][0], dof=pooled[k][1])
     rej, padj = adjust(np.stack([p, pt]), alpha, correction)
     tau_all = np.array([np.nan] * P)
-    if R >= 2:
-        tau_all = np.array([np.sqrt(dersimonian_laird(theta[:, k], std[:, k] ** 2)[2])
+    if R >= 2:      # the fleet's spread: DerSimonian-Laird on the robots the Hampel screen keeps
+        keep = [~hampel_outliers(theta[:, k], std[:, k] ** 2) for k in range(P)]
+        tau_all = np.array([np.sqrt(dersimonian_laird(theta[keep[k], k], std[keep[k], k] ** 2)[2])
                             if np.all(np.isfinite(std[:, k])) else np.nan for k in range(P)])
     flagged = []
     for i, r in enumerate(rnames):

@@ -20,6 +20,7 @@ from ..identification.accumulate import Accumulator
 from ..loader import load_model
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
+from ..preprocessing.filtering import blas_threads
 from .files import LogFile, read_experiments
 from .fused import ColumnMap, column_map, fold_trajectories
 
@@ -97,11 +98,14 @@ def merge_accumulators(a: Accumulator, b: Accumulator) -> Accumulator:
 
 
 def merge_partials(*parts: Partial) -> Partial:
-    """Merge partial results (files, samples and skipped logs concatenated; factors merged)."""
+    """Merge partial results (files, samples and skipped logs concatenated; factors merged; one BLAS
+    thread: the QR of a ``2(c+1) x (c+1)`` stack gains nothing from more and a multi-threaded OpenBLAS
+    spends far more in synchronisation)."""
     acc = None
-    for p in parts:
-        if p.acc is not None:
-            acc = p.acc if acc is None else merge_accumulators(acc, p.acc)
+    with blas_threads(1):
+        for p in parts:
+            if p.acc is not None:
+                acc = p.acc if acc is None else merge_accumulators(acc, p.acc)
     return Partial(files=tuple(f for p in parts for f in p.files), acc=acc,
                    samples=sum(p.samples for p in parts), skipped=tuple(s for p in parts for s in p.skipped))
 

@@ -24,12 +24,15 @@ __all__ = ["Drift", "FleetTruth", "simulate_fleet"]
 @dataclass(frozen=True)
 class Drift:
     """A robot whose standard parameter ``parameter`` (e.g. ``"FV2"``) or torque gain of joint ``joint``
-    (``parameter="gain"``) changes by ``rate`` (relative) per day: ``x_d = x_0 (1 + rate d)``."""
+    (``parameter="gain"``) changes by ``rate`` (relative) per day, from ``offset`` (relative) away from its
+    own value on the first day: ``x_d = x_0 (1 + offset + rate d)`` (``rate=0``: a unit that is off from
+    the start, e.g. a gearbox that was never like the others)."""
 
     robot: str
     parameter: str
     rate: float
     joint: int | None = None
+    offset: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,9 +105,9 @@ def simulate_fleet(root, robot: str = "scara", *, n_robots: int = 6, n_days: int
                 if dr.robot != r:
                     continue
                 if dr.parameter == "gain":
-                    gains[(dr.joint or 1) - 1] *= 1.0 + dr.rate * di
+                    gains[(dr.joint or 1) - 1] *= 1.0 + dr.offset + dr.rate * di
                 else:
-                    cd[names.index(dr.parameter)] *= 1.0 + dr.rate * di
+                    cd[names.index(dr.parameter)] *= 1.0 + dr.offset + dr.rate * di
             mo = fourier_trajectory(n, duration, 1.0 / fs, rng, vmax=1.5, amax=8.0)
             rec = simulate_recording(model, mo.t, mo.q, mo.dq, mo.ddq, cd, gains=gains, noise_q=noise_q,
                                      noise_tau=noise_tau, rng=rng, source=f"{r}/{d}")

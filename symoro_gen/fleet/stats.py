@@ -9,9 +9,22 @@ the multiple-testing correction of the flags.
 
       z_rk = (theta_rk - m_k) / sqrt(v_rk + tau2_k + var(m_k))
 
-  With few robots ``tau2`` is poorly known: the p-value uses Student's t with ``R - 2`` degrees of
-  freedom (Hartung & Knapp, Stat. Med. 20, 2001, in spirit), so ordinary unit-to-unit scatter is not
-  flagged.
+  With few robots ``tau2`` is poorly known: the p-value uses Student's t with ``n_ref - 1`` degrees of
+  freedom (``n_ref`` robots in the reference; Hartung & Knapp, Stat. Med. 20, 2001, in spirit), so ordinary
+  unit-to-unit scatter is not flagged.
+* **Robust reference** (:func:`hampel_outliers`): leaving the judged robot out protects its own z from
+  itself, not from *another* deviating robot: one strongly drifting robot inflates the DerSimonian-Laird
+  ``tau2`` of every other robot's reference and masks a second, milder one (and two drifters deflate
+  each other's z). So, from ``HAMPEL_MIN_ROBOTS`` robots on, the robots whose estimate lies more than
+  ``HAMPEL_C`` robust standard deviations from the fleet's median (the Hampel identifier: median and
+  1.4826 MAD, breakdown point 50 %; Hampel, JASA 69, 1974; Davies & Gather, JASA 88, 1993, whose
+  finite-sample thresholds for 10-50 observations at a 5 % chance of screening out a clean one are close
+  to 5) are left out of every *other* robot's reference (each is still judged against the rest). Why this
+  and not a median/MAD between-robot variance itself: the MAD has 37 % of the standard deviation's
+  efficiency, so with 5-20 robots its scatter needs a far heavier-tailed reference (drifts missed) or
+  gives false flags; the screen keeps DerSimonian-Laird's efficiency and the t calibration above, and
+  changes nothing on a fleet without outliers (same numbers). The spread reported for the fleet
+  (``tau_all``) is DerSimonian-Laird on the robots not screened out.
 * **Trend**: weighted least-squares line of ``theta_rdk`` over the day index ``d`` (days in string
   order), weights ``1 / std_rdk^2``. The daily standard deviations of short logs understate how much
   the days really scatter (each day is a different trajectory: its filter and model errors differ), and
@@ -41,8 +54,36 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-__all__ = ["adjust", "benjamini_hochberg", "dersimonian_laird", "holm", "level_z", "line_fit", "pooled_dispersion",
-           "trend_test"]
+__all__ = ["HAMPEL_C", "HAMPEL_MIN_ROBOTS", "adjust", "benjamini_hochberg", "dersimonian_laird", "hampel_outliers",
+           "holm", "level_z", "line_fit", "pooled_dispersion", "trend_test"]
+
+#: robust standard deviations (1.4826 MAD, with the robot's own variance) beyond which a robot is left out
+#: of the other robots' reference
+HAMPEL_C = 5.0
+#: fewest robots with which the screen runs (with 4, the median and MAD of the fleet are not reliable)
+HAMPEL_MIN_ROBOTS = 5
+
+
+def hampel_outliers(theta: np.ndarray, var: np.ndarray, c: float = HAMPEL_C) -> np.ndarray:
+    """Robots whose estimate is far from the fleet's median: ``|theta_r - med| > c sqrt(s^2 + var_r)``
+    with ``s = 1.4826 MAD`` (the Hampel identifier; ``var_r`` keeps a robot with a large own variance, a
+    short log, from being screened out for it). All False below :data:`HAMPEL_MIN_ROBOTS` robots.
+
+    Parameters
+    ----------
+    theta, var : ndarray, shape (R,)
+
+    Returns
+    -------
+    ndarray of bool, shape (R,)
+    """
+    theta, var = np.asarray(theta, float), np.asarray(var, float)
+    out = np.zeros(theta.shape, bool)
+    if theta.size < HAMPEL_MIN_ROBOTS or not (np.all(np.isfinite(theta)) and np.all(np.isfinite(var))):
+        return out
+    med = float(np.median(theta))
+    s = 1.4826 * float(np.median(np.abs(theta - med)))
+    return np.abs(theta - med) > c * np.sqrt(s * s + var)
 
 
 def dersimonian_laird(theta: np.ndarray, var: np.ndarray) -> tuple[float, float, float]:
@@ -68,38 +109,51 @@ def dersimonian_laird(theta: np.ndarray, var: np.ndarray) -> tuple[float, float,
     return float(ws @ theta / ws.sum()), float(1.0 / ws.sum()), tau2
 
 
-def level_z(theta: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def level_z(theta: np.ndarray, std: np.ndarray, *, robust: bool = True
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Leave-one-out random-effects distance of every robot to the rest of the fleet.
 
     Parameters
     ----------
     theta, std : ndarray, shape (R, P)
         Per robot (all its days) estimates and standard deviations.
+    robust : bool
+        Leave the robots :func:`hampel_outliers` screens out of the other robots' references (default);
+        False: every other robot is in each reference (plain leave-one-out DerSimonian-Laird).
 
     Returns
     -------
     z, p : ndarray (R, P)
-        Standardised distance and two-sided p-value (t with R-2 dof; NaN when R < 3).
+        Standardised distance and two-sided p-value (t with ``n_ref - 1`` dof, ``n_ref`` the robots in the
+        reference; NaN when R < 3).
     mean, mean_std, tau : ndarray (R, P)
         The leave-one-out reference of each robot, its standard deviation and the between-robot spread.
     """
     theta, std = np.asarray(theta, float), np.asarray(std, float)
     R, P = theta.shape
     z = np.full((R, P), np.nan)
+    p = np.full((R, P), np.nan)
     mean, mstd, tau = (np.full((R, P), np.nan) for _ in range(3))
     if R < 3:
-        return z, np.full((R, P), np.nan), mean, mstd, tau
+        return z, p, mean, mstd, tau
     var = std ** 2
-    for r in range(R):
-        others = np.arange(R) != r
-        for k in range(P):
-            if not (np.all(np.isfinite(var[:, k])) and np.all(np.isfinite(theta[:, k]))):
-                continue
-            m, vm, t2 = dersimonian_laird(theta[others, k], var[others, k])
+    df = np.full((R, P), np.nan)
+    for k in range(P):
+        if not (np.all(np.isfinite(var[:, k])) and np.all(np.isfinite(theta[:, k]))):
+            continue
+        screened = hampel_outliers(theta[:, k], var[:, k]) if robust else np.zeros(R, bool)
+        for r in range(R):
+            ref = ~screened
+            ref[r] = False
+            if ref.sum() < 2:                      # (cannot happen: the screen leaves more than half)
+                ref = np.arange(R) != r
+            m, vm, t2 = dersimonian_laird(theta[ref, k], var[ref, k])
             mean[r, k], mstd[r, k], tau[r, k] = m, np.sqrt(vm), np.sqrt(t2)
             den = np.sqrt(var[r, k] + t2 + vm)
             z[r, k] = (theta[r, k] - m) / den if den > 0 else 0.0
-    p = 2.0 * stats.t.sf(np.abs(z), df=R - 2)
+            df[r, k] = ref.sum() - 1
+    ok = np.isfinite(z)
+    p[ok] = 2.0 * stats.t.sf(np.abs(z[ok]), df=df[ok])
     return z, p, mean, mstd, tau
 
 

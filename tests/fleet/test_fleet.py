@@ -10,6 +10,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,9 +30,12 @@ from symoro_gen.fleet import (
 )
 from symoro_gen.fleet.fused import fold_trajectories, fold_trajectory
 from symoro_gen.fleet.stats import (
+    HAMPEL_C,
     benjamini_hochberg,
     dersimonian_laird,
+    hampel_outliers,
     holm,
+    level_z,
     pooled_dispersion,
     trend_test,
 )
@@ -305,6 +309,71 @@ def test_trend_reference_distributions():
     assert np.isnan(pooled_dispersion(np.array([np.nan]), np.array([0]))[0])
 
 
+@pytest.mark.parametrize("seed", [2, 3])
+def test_a_far_robot_no_longer_masks_a_milder_one(tmp_path, threads_client, seed):
+    """12 robots; r01's FV4 is 100 % off the fleet (small sigma: a unit that was never like the others), r02's
+    40 %. Plain leave-one-out DerSimonian-Laird lets r01 into r02's reference: the between-robot spread
+    becomes ~r01's distance / sqrt(11), r02's z falls below 1 (masked) and r01's own z is deflated by r02.
+    With the Hampel screen (robots beyond 5 robust sigmas out of the others' references) both are flagged
+    on FV4, the z's grow several-fold, and no clean robot is flagged."""
+    drifts = (Drift("r01", "FV4", 0.0, offset=1.0), Drift("r02", "FV4", 0.0, offset=0.4))
+    simulate_fleet(tmp_path, "scara", n_robots=12, n_days=3, duration=5.0, drifts=drifts, seed=seed)
+    res = identify_fleet("scara", [tmp_path], "{robot}/{day}.parquet", client=threads_client)
+    k = res.names.index("FV4")
+    rn = list(res.robots)
+    theta = np.array([res.robots[r].values for r in rn])
+    std = np.array([res.robots[r].std for r in rn])
+    before = level_z(theta, std, robust=False)[0][:, k]
+    after = res.level["z"][:, k]
+    i1, i2 = rn.index("r01"), rn.index("r02")
+    assert abs(before[i2]) < 2.0 and after[i2] > 3 * abs(before[i2]) + 5, (before, after)
+    assert after[i1] > 2 * before[i1], (before, after)
+    assert {(f["robot"], f["parameter"]) for f in res.flagged if f["parameter"] == "FV4"} == {("r01", "FV4"),
+                                                                                             ("r02", "FV4")}
+    assert {f["robot"] for f in res.flagged} == {"r01", "r02"}, res.summary()
+    # the fleet's reported spread is the clean robots' (r01, r02 screened out): a few % of FV4, not ~30 %
+    assert res.level["tau_all"][k] < 0.1 * abs(res.fleet.values[k])
+
+
+def test_robust_reference_statistics():
+    """The Hampel screen against its definition; on fleets without outliers it changes nothing (same numbers)
+    and flags no more clean robots than the plain reference (100 simulated fleets of 10 robots x 20
+    parameters, Holm at 1 %); with a robot 40 between-robot sigmas away, a second one 10 sigmas away is
+    found (never before: masked) and clean robots are still not flagged more often."""
+    rng = np.random.default_rng(0)
+    theta, var = rng.normal(0.0, 1.0, 9), rng.uniform(0.01, 0.04, 9)
+    theta[4] = 9.0
+    med = np.median(theta)
+    s = 1.4826 * np.median(np.abs(theta - med))
+    assert np.array_equal(hampel_outliers(theta, var), np.abs(theta - med) > HAMPEL_C * np.sqrt(s * s + var))
+    assert hampel_outliers(theta, var).tolist() == [i == 4 for i in range(9)]
+    assert not hampel_outliers(theta[:4], var[:4]).any()        # too few robots: no screen
+    R, P, tau = 10, 20, 0.1
+    counts = {"clean": [0, 0], "masked": [0, 0], "masked_clean": [0, 0]}
+    for seed in range(100):
+        g = np.random.default_rng(seed)
+        sd = g.uniform(0.02, 0.1, (R, P))
+        th = 1.0 + tau * g.standard_normal((R, P)) + sd * g.standard_normal((R, P))
+        other = g.uniform(0, 1, (R, P))                          # the trend tests' p-values: uniform when clean
+        for j, robust in enumerate((False, True)):
+            z, p, *_ = level_z(th, sd, robust=robust)
+            counts["clean"][j] += holm(np.stack([p, other]), 0.01)[0][0].any()
+        if not hampel_outliers(th[:, 0], sd[:, 0] ** 2).any():
+            z0, z1 = level_z(th, sd, robust=False)[0][:, 0], level_z(th, sd)[0][:, 0]
+            assert np.array_equal(z0, z1)
+        th[0, 3] += 40 * tau
+        th[1, 3] += 10 * tau
+        for j, robust in enumerate((False, True)):
+            z, p, *_ = level_z(th, sd, robust=robust)
+            rej = holm(np.stack([p, other]), 0.01)[0][0]
+            counts["masked"][j] += rej[1, 3]
+            rej[:2, 3] = False
+            counts["masked_clean"][j] += rej.any()
+    assert counts["masked"][0] == 0 and counts["masked"][1] >= 25, counts
+    assert counts["clean"][1] <= counts["clean"][0] + 1 and counts["clean"][1] <= 3, counts
+    assert counts["masked_clean"][1] <= counts["masked_clean"][0] + 1 and counts["masked_clean"][1] <= 3, counts
+
+
 @pytest.mark.parametrize("seed", [12, 16, 27])
 def test_few_robots_short_logs_no_false_flag(tmp_path, threads_client, seed):
     """4 robots x 5 days x 5 s: one robot's daily sigmas say less than its days scatter, and 3 others
@@ -331,7 +400,7 @@ def test_cli_errors_name_the_file_and_the_pattern(cli, tmp_path):
 _FAULTS = """
 import resource, sys
 import numpy as np
-from symoro_gen.fleet.engine import tune_malloc
+from symoro_gen.fleet.worker import tune_malloc
 if sys.argv[1] == "tuned":
     assert tune_malloc()
 a = np.ones(1 << 19)                    # 4 MB, as a log's column or a filter block
@@ -390,3 +459,22 @@ def test_worker_model_cache_follows_a_regenerated_package(tmp_path):
     m2 = resolve_model(str(pkg))
     assert m2 is not m1 and _column_map(m2) is not _column_map(m1)
     assert resolve_model(str(pkg)) is m2
+
+
+def test_worker_path_does_not_import_the_engine():
+    """What a worker unpickles (the per-log task, the merge, the setup plugin) imports neither the engine nor
+    what only the client needs (the statistics, the closed-loop diagnosis): the package's names load on
+    first use; and they are still all there."""
+    code = ("import sys, symoro_gen.fleet.kernel, symoro_gen.fleet.worker\n"
+            "bad = [m for m in ('symoro_gen.fleet.engine', 'symoro_gen.fleet.stats', 'symoro_gen.diagnostics',"
+            " 'symoro_gen.fleet.simulate') if m in sys.modules]\n"
+            "import symoro_gen.fleet as f\n"
+            "missing = [n for n in f.__all__ if getattr(f, n, None) is None]\n"
+            "print(bad, missing)\n")
+    root = str(Path(__file__).resolve().parents[2])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    assert out.strip() == "[] []", out
+    import symoro_gen.fleet as f
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        f.nothing  # noqa: B018

@@ -11,11 +11,19 @@ import pytest
 from symoro_gen import load_model
 from symoro_gen.description import load_robot
 from symoro_gen.fleet import Drift, identify_fleet, open_client, read_log, simulate_fleet, write_parquet
-from symoro_gen.fleet.fused import column_map, fold_trajectory, fused_applies
+from symoro_gen.fleet.fused import (
+    WELCH_SEGMENT,
+    column_map,
+    dynamics_bandwidth,
+    filter_settings,
+    fold_trajectory,
+    fused_applies,
+)
 from symoro_gen.identification import fit_wls
 from symoro_gen.identification.accumulate import accumulate
 from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
 from symoro_gen.preprocessing.drive_chain import joint_to_motor
+from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
 from symoro_gen.preprocessing.logformat import make_format
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
@@ -78,8 +86,10 @@ def test_compiled_helpers_and_numpy_scipy_give_identical_factors(monkeypatch):
     opts = AssemblyOptions(keep_signals=False)
     for q in (tr.q, tr.q[:900, :3]):
         assert np.array_equal(fused._zero_phase_rows(q, 1000.0, 12.5, 4, "x"), lowpass_positions(q, 1000.0, 12.5, 4))
+    assert fused._raw_regressor(model) is not None                # the generated C, called by address
     compiled = fold_trajectory(model, tr, opts)
     monkeypatch.setattr(fused, "_KERNELS", [None])
+    monkeypatch.setattr(fused, "_raw_regressor", lambda m: None)  # model.regressor, its checked call
     numpy_copy = fold_trajectory(model, tr, opts)
     for a, b in zip(compiled.R, numpy_copy.R):
         assert np.array_equal(a, b)
@@ -89,6 +99,46 @@ def test_compiled_helpers_and_numpy_scipy_give_identical_factors(monkeypatch):
     ref = accumulate(list(iter_chunks(model, tr, opts, progress=False)) + list(iter_chunks(model, tr2, opts, progress=False)))
     assert both.rows == ref.rows
     _gram_close(both, ref, 1e-12)
+
+
+def _long_log_checks(q: np.ndarray, fs: float) -> None:
+    assert q.shape[0] > 2 * WELCH_SEGMENT                         # Welch's path, several segments
+    for ef in (0.9, 0.99, 0.999, 0.9999):
+        ref = estimate_dynamics_bandwidth(q, fs, energy_fraction=ef, min_bandwidth_hz=0.0)
+        assert ref > 0 and dynamics_bandwidth(q, fs, energy_fraction=ef, min_bandwidth_hz=0.0) == ref, ef
+    # a segment count that leaves a tail (the last half-segment of the log unused, as Welch's loop does)
+    q2 = q[:q.shape[0] - WELCH_SEGMENT // 3]
+    assert dynamics_bandwidth(q2, fs, min_bandwidth_hz=0.0) == estimate_dynamics_bandwidth(q2, fs, min_bandwidth_hz=0.0)
+
+
+def test_filters_rule_on_long_logs_is_the_assemblys(monkeypatch):
+    """The fleet's f_dyn (Welch's periodogram with per-half-segment sums, :func:`dynamics_bandwidth`; its
+    compiled segment passes and their NumPy fallback) is ``estimate_dynamics_bandwidth``'s on a long
+    simulated log (4 energy fractions, f_dyn above the resolution), and the filter settings are
+    ``observation_settings``' (cut-off, n_d, notes)."""
+    from symoro_gen.fleet import fused
+
+    rng = np.random.default_rng(5)
+    mo = fourier_trajectory(7, 20.0, 1e-3, rng, vmax=1.5, amax=30.0)
+    t = np.arange(200_000) * 1e-3
+    q = mo.series.evaluate(t).q + rng.normal(0, 1e-5, (t.size, 7))
+    _long_log_checks(q, 1000.0)
+    with monkeypatch.context() as mp:
+        mp.setattr(fused, "_KERNELS", [None])
+        _long_log_checks(q, 1000.0)
+    tr = Trajectory(t=t, q=q, tau=np.zeros_like(q), source="long")
+    for opts in (AssemblyOptions(keep_signals=False), AssemblyOptions(keep_signals=False, energy_fraction=0.99),
+                 AssemblyOptions(keep_signals=False, cutoff_hz=8.0)):
+        st = filter_settings(tr, opts)
+        assert st == observation_settings(tr, opts) and st.bandwidth_estimated
+
+
+def test_filters_rule_on_a_long_real_log(shared_data):
+    """The same on real positions: the three LWR4 recordings (FloBaRoID, 200 Hz), put end to end five times
+    (a log longer than two Welch segments)."""
+    d = shared_data / "kuka_lwr4_flobaroid" / "data" / "KUKA" / "HW"
+    q = np.concatenate([np.load(d / f"measurements_{i}.npz")["positions"] for i in (1, 2, 3)] * 9)
+    _long_log_checks(q, 200.0)
 
 
 def test_fused_kernel_falls_back_to_the_assembly_for_other_options():
@@ -194,3 +244,41 @@ def test_diagnose_closes_the_loop_on_the_flagged_robot(tmp_path, threads_client)
     doc = json.loads(json.dumps(res.to_json()))
     assert doc["diagnoses"]["r02"]["day"] == d["day"]
     assert "diagnosis of r02" in res.summary()
+
+
+def test_every_qr_fold_and_merge_runs_on_one_blas_thread(monkeypatch):
+    """The kernel's LAPACK folds, the last one (``result()``) included, and the TSQR merges run with one
+    OpenBLAS thread even in a process whose OpenBLAS has more (a ``threads:N`` client, the CLI: outside
+    Dask's nanny, which sets OPENBLAS_NUM_THREADS=1); multi-threaded, each 2k-row dgeqrf cost ~0.4 s CPU on
+    this 2-core machine against 0.004 s. The process's own setting is restored afterwards."""
+    from symoro_gen.fleet import fused, kernel
+    from symoro_gen.preprocessing import filtering
+
+    controls = filtering._openblas_thread_controls()
+    if not controls:
+        pytest.skip("no OpenBLAS thread control in this process")
+    get, set_ = controls[0]
+    before = get()
+    seen: list[int] = []
+    fold, qr = fused._Folder._fold, np.linalg.qr
+
+    def spy_fold(self):
+        seen.append(get())
+        return fold(self)
+
+    def spy_qr(*a, **k):
+        seen.append(get())
+        return qr(*a, **k)
+
+    model = load_model("scara")
+    tr = _recording("scara", 3.0, seed=2)
+    monkeypatch.setattr(fused._Folder, "_fold", spy_fold)
+    monkeypatch.setattr(kernel.np.linalg, "qr", spy_qr)
+    set_(2)
+    try:
+        a = fold_trajectory(model, tr, AssemblyOptions(keep_signals=False))
+        kernel.merge_partials(kernel.Partial(("a",), a, 1), kernel.Partial(("b",), a, 1))
+        assert get() == 2
+    finally:
+        set_(before)
+    assert len(seen) >= 2 and set(seen) == {1}, seen
