@@ -92,7 +92,7 @@ from .friction import (
     viscous_columns,
 )
 from .report import CandidateScore, Effect, ResidualReport
-from .stability import N_FOLDS, BlockedLS, coefficient_ci, ols_wls_agreement, time_blocks
+from .stability import N_FOLDS, BlockedLS, coefficient_ci, ols_wls_agreement, simulated_noise_placebo, time_blocks
 from .stats import bonferroni, hac_covariance, hac_lag, segments_of, single_threaded_blas, wald_test
 from .structure import residual_structure
 from .unexplained import rows_to_samples, signal_matrix, unexplained_structure
@@ -690,7 +690,13 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
                       for b in np.unique(sub[own])])
         sd = float(np.std(d, ddof=1)) if d.size > 1 else 0.0
         p_law = float(sst.t.sf(float(np.mean(d)) / (sd / math.sqrt(d.size)), d.size - 1)) if sd > 0 else 1.0
-        if not (float(np.mean(wins)) > MIN_SELECTION_FREQUENCY and p_law < cfg.significance / n):
+        passed = float(np.mean(wins)) > MIN_SELECTION_FREQUENCY and p_law < cfg.significance / n
+        if passed and not (missing or smoothing):
+            # simulated-noise placebo (stability.simulated_noise_placebo): v, vs, delta and the law were
+            # chosen on the folds that judge them; the whole selection re-run on the declared law's fit
+            # plus its own residual shifted in time must never claim the observed gain (clean data, seed 510)
+            passed = _law_beats_noise(ch, A, Y, J, blocks, cols, dq_all, vf, F)[0]
+        if not passed:
             kr = kept()
             if kr is not None:
                 recs.append(kr[0])
@@ -717,6 +723,33 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
 
     F2 = replace(F, system=rebuild(F, F.system))
     return replace(data, model=law_model, F=F2, Vs=rebuild(data.V, data.Vs), decl=new_names), tuple(recs)
+
+
+def _law_gain(ch: FrictionChoice, dq_all: np.ndarray) -> float:
+    """Relative decrease of the out-of-fold squared error a friction-law replacement claims (0 when the
+    declared law is kept or the replacement is only a rounding of sign(dq), see ``MIN_LAW_SCALE``)."""
+    p95 = float(np.quantile(np.abs(dq_all), 0.95))
+    if not ch.replaced or (ch.viscous.law == "linear" and ch.coulomb.law == "tanh"
+                           and float(ch.coulomb.param) < MIN_LAW_SCALE * p95):
+        return 0.0
+    return 1.0 - (ch.cv_rel_err / ch.declared_cv_rel_err) ** 2
+
+
+def _law_beats_noise(ch: FrictionChoice, A, Y, J, blocks, cols, dq_all, vf, F: Frame) -> tuple[bool, list]:
+    """Simulated-noise placebo of a friction-law replacement on joint ``j`` (:func:`.stability.
+    simulated_noise_placebo`): the declared law (sign smoothed at ``vf``) fitted on all rows, its residual
+    shifted in time, the selection ``ch`` came from re-run; its gain must exceed every null one."""
+    j = ch.joint
+    Xd = cols(lambda v: np.hstack([coulomb_columns("sign", v, None, vf), viscous_columns("linear", v)]), 2)
+    M = np.hstack([A, Xd])
+    fitted = M @ np.linalg.lstsq(M, Y, rcond=None)[0]
+    v_grid = velocity_grid(dq_all)
+
+    def gain(y):
+        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols, v_grid=v_grid,
+                                         v_floor=vf), dq_all)
+    return simulated_noise_placebo(gain, fitted, Y - fitted, J * 100000 + F.row_experiment, F.row_experiment,
+                                   _law_gain(ch, dq_all), rng=np.random.default_rng(7919 + j))
 
 
 def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg: DiagnoseSettings) -> _Baseline:
