@@ -36,7 +36,8 @@ white-noise one (as :mod:`.core`). The plain effect's columns (:meth:`Composed.p
 ripple of the same order, a constant, ``dq_j``) are added to the model for that test (partialled out)
 when they are not in it already, so a plain effect the model lacks is not taken for a modulated one
 (on the LWR4 recordings a plain ripple of joint 7 otherwise passes as "modulated by" any signal that
-differs between the experiments); the reported decrease of the joint's residual is the modulation's. A *family* is one (effect, joint, signal, source joint); its grid
+differs between the experiments); a change in time of friction is tested at equal speed (the speed
+modulation of the same effect partialled out too, :meth:`Composed.confounder_columns`); the reported decrease of the joint's residual is the modulation's. A *family* is one (effect, joint, signal, source joint); its grid
 (ripple orders x step times) is searched and its smallest p-value is Bonferroni-corrected by the
 number of grid points ``G`` (``min(1, G p_min)``). The family-wise error over the whole composed
 library - every effect x signal x joint combination - is then controlled by Holm's step-down

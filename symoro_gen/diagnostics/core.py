@@ -92,7 +92,15 @@ from .friction import (
     viscous_columns,
 )
 from .report import CandidateScore, Effect, ResidualReport
-from .stability import N_FOLDS, BlockedLS, coefficient_ci, ols_wls_agreement, simulated_noise_placebo, time_blocks
+from .stability import (
+    N_FOLDS,
+    BlockedLS,
+    coefficient_ci,
+    ols_wls_agreement,
+    sided_selection,
+    simulated_noise_placebo,
+    time_blocks,
+)
 from .stats import bonferroni, hac_covariance, hac_lag, segments_of, single_threaded_blas, wald_test
 from .structure import residual_structure
 from .unexplained import rows_to_samples, signal_matrix, unexplained_structure
@@ -1123,7 +1131,9 @@ def _effect_stability(data: _Data, F: Frame, added: Sequence[_Added], k: int, we
     coefficients on all identification rows (HAC, :func:`.stability.coefficient_ci`); (2) on each of the
     ``N_FOLDS`` time-blocked folds, whether it is *selected*: significant on the fold's training rows
     (joint Wald test at ``1 - level``) and lowering the error of its own joints on the held-out block
-    (the whole model refitted on the training rows). The frequency is the share of folds selecting it."""
+    (the whole model refitted on the training rows). The frequency is the share of folds selecting it; for
+    a step at ``t_s`` (a composed ``step`` modulation) at most the smaller of the shares judged on the
+    held-out rows before ``t_s`` and after it (:func:`.stability.sided_selection`)."""
     Y, J = F.system.Y, F.system.joint
     others = tuple(ad for i, ad in enumerate(added) if i != k)
     _, A, _ = _augmented(data, others)
@@ -1135,13 +1145,21 @@ def _effect_stability(data: _Data, F: Frame, added: Sequence[_Added], k: int, we
     cv = BlockedLS(A, Y, blocks, weights)
     e1, e0 = cv.oof_residual(X), cv.oof_residual(None)
     w = np.ones(Y.size) if weights is None else weights
-    sel = []
+    sel, sig_k = [], []
     for f in cv.folds:   # one per block; the fold's basis of A on its training rows is the one the CI needs
         tr = f.train
         cb = coefficient_ci(A[tr], X[tr], Y[tr], weights=w[tr], groups=groups[tr], level=level, basis=(f.U, f.rank))
         te = own & f.test
+        sig_k.append(cb.excludes_zero)
         sel.append(cb.excludes_zero and float(np.sum(e1[te] ** 2)) < float(np.sum(e0[te] ** 2)))
-    return _Stability(float(np.mean(sel)), ci.low, ci.high, ci.excludes_zero)
+    freq = float(np.mean(sel))
+    comp = dict(added[k].family.info).get("composed")
+    if comp is not None and comp.step_time is not None:
+        # a change in time must be confirmed by held-out data on both sides of it (stability.sided_selection)
+        freq = min(freq, sided_selection(
+            lambda i, rows: sig_k[i] and float(np.sum(e1[rows] ** 2)) < float(np.sum(e0[rows] ** 2)),
+            [own & f.test for f in cv.folds], F.sig["t"] < comp.step_time))
+    return _Stability(freq, ci.low, ci.high, ci.excludes_zero)
 
 
 def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple[_State, dict, list[str]]:
@@ -1182,9 +1200,12 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
         if ad.family.key in set(agr.only_first) | set(agr.only_second):
             continue
         st = info[ad.family.key]
+        comp = dict(ad.family.info).get("composed")
+        sided = (" (a change in time: judged on the held-out rows before and after it, the smaller share)"
+                 if comp is not None and comp.step_time is not None else "")
         msgs.append(f"{labels[ad.family.key]} dropped: not stable (selected in {100 * st['OLS'].frequency:.0f} % / "
-                    f"{100 * st['WLS'].frequency:.0f} % of the {N_FOLDS} time-blocked folds under OLS / WLS weights, "
-                    f"confidence region excluding zero: {st['OLS'].excludes_zero} / {st['WLS'].excludes_zero})")
+                    f"{100 * st['WLS'].frequency:.0f} % of the {N_FOLDS} time-blocked folds under OLS / WLS weights"
+                    f"{sided}, confidence region excluding zero: {st['OLS'].excludes_zero} / {st['WLS'].excludes_zero})")
     dep = []
     for ad in state.added:
         key = ad.family.key

@@ -29,6 +29,8 @@ Acceptance rules
 * :func:`ols_wls_agreement` - the effects named under OLS and under WLS: their intersection, and a
   message when they differ (keep only the common ones, issue 10 item 3).
 * :func:`placebo_stop` - joints on which a placebo column passed the tests: the loop stops there.
+* :func:`sided_selection` - a change in time (a step) must be confirmed by held-out blocks on both sides
+  of it: its selection frequency is the smaller of the two sides'.
 * :func:`simulated_noise_placebo` - a selection whose searched shape parameters are judged on the folds
   that chose them is re-run on null data (the declared model's prediction plus its own residual shifted
   in time); the observed gain must beat every null replicate.
@@ -57,6 +59,7 @@ __all__ = [
     "placebo_stop",
     "selection_frequency",
     "shifted_residual",
+    "sided_selection",
     "simulated_noise_placebo",
     "stable",
     "time_blocks",
@@ -423,3 +426,24 @@ def simulated_noise_placebo(gain: Callable[[np.ndarray], float], fitted: np.ndar
         if not g < observed:
             return False, null
     return True, null
+
+
+def sided_selection(selected_on: Callable[[int, np.ndarray], bool], tests: Sequence[np.ndarray],
+                    before: np.ndarray) -> float:
+    """Selection frequency of a change in time (a step at ``t_s``), judged on each side of the change.
+
+    A time-invariant effect may be confirmed by any held-out block; a change at ``t_s`` is only confirmed
+    by held-out data on *both* sides of it: blocks after ``t_s`` show that the later level differs from
+    the whole fit's, which any misfit concentrated early gives too (and validation data held out at the end
+    of a recording lie wholly after the change); blocks before ``t_s`` show that the earlier level differs
+    as well. ``selected_on(k, rows)`` says whether fold ``k`` selects the effect judged on the held-out
+    ``rows`` (significant on its training rows and lowering the error on ``rows``); it is asked on the part
+    before ``t_s`` and the part after of each held-out block ``tests[k]`` (rows of the effect's joints), and
+    the frequency is the smaller of the two sides' (each over the blocks that have rows on that side). A side without any held-out rows gives 0: a change that no data precede or follow is
+    not testable."""
+    before = np.asarray(before, bool)
+    freq = []
+    for side in (before, ~before):
+        hits = [bool(selected_on(k, te & side)) for k, te in enumerate(tests) if np.any(te & side)]
+        freq.append(float(np.mean(hits)) if hits else 0.0)
+    return min(freq)

@@ -196,3 +196,20 @@ def test_blocked_ls_with_a_new_y_equals_a_fresh_fit():
     from symoro_gen.diagnostics import stability
     stability._FOLD_CACHE.clear()
     np.testing.assert_allclose(reused, BlockedLS(A, y2, blocks).oof_residual(X), rtol=1e-12, atol=1e-12)
+
+
+def test_sided_selection_needs_both_sides_of_a_change():
+    """Five held-out blocks of 20 rows, a change at row 30: blocks 0 (before), 1 (straddling), 2-4 (after)."""
+    from symoro_gen.diagnostics.stability import sided_selection
+
+    rows = np.arange(100)
+    tests = [(rows // 20) == k for k in range(5)]
+    before = rows < 30
+    # lowers the held-out error after the change only (the TX40 joint-5 viscous step): rejected
+    assert sided_selection(lambda k, r: not np.any(r & before), tests, before) == 0.0
+    # on both sides everywhere: 1
+    assert sided_selection(lambda k, r: True, tests, before) == 1.0
+    # before: blocks 0 and the first half of 1; selected in 1 of those 2 -> 0.5 (not "most")
+    assert sided_selection(lambda k, r: k != 0, tests, before) == 0.5
+    # a change no held-out rows precede is not testable
+    assert sided_selection(lambda k, r: True, tests, np.zeros(100, bool)) == 0.0
