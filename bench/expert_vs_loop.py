@@ -8,7 +8,8 @@ in memory, last 30 % held out) it prints, per joint, the validation relative err
 
 * the declared model fitted by LS (diagnose's "before"),
 * the expert model: declared base parameters + Fc tanh(dq/v) (v by time-blocked CV) + Fv dq + offset,
-* the loop's final model (friction laws chosen, effects accepted and kept by the stability stage),
+* the loop's final model (friction laws chosen, static in the rest segments of each joint - the share of
+  samples at rest is printed - effects accepted and kept by the stability stage),
 
 on the filtered, decimated system (``filt``) and at full rate against the raw measured torque (``raw``),
 under OLS and WLS. "Worse" is decided per joint with :func:`symoro_gen.diagnostics.expert.no_worse`: the
@@ -115,6 +116,8 @@ def run(name, model, ident, valid, methods) -> dict:
                   + (f" [{e.modulation}]" if e.modulation else "")
                   + (f" sel.freq {e.selection_frequency:.2f}" if e.selection_frequency is not None else "")
                   + f": {e.description or e.label}")
+        for line in rep.settings.get("static_at_rest") or []:
+            print(f"   static at rest: {line}")
         rows = [("declared (before)  filt", rep.before_validation_rel_err),
                 ("expert             filt", e_f),
                 ("loop (after)       filt", rep.after_validation_rel_err),

@@ -87,7 +87,10 @@ from .friction import (
     LawModel,
     coulomb_columns,
     friction_column_indices,
+    rest_mask,
     select_friction,
+    sliding_frame,
+    sliding_velocity,
     velocity_grid,
     viscous_columns,
 )
@@ -638,7 +641,8 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
             an.append(f"OFF{j + 1}")
 
         def cols(f, p, j=j):
-            return F.full_rate_columns(lambda ex: {j: f(ex.dq[:, j])}, p)
+            # laws of sliding friction: evaluated on the sliding velocity (0 in the joint's rest segments)
+            return F.full_rate_columns(lambda ex: {j: f(sliding_velocity(ex, j))}, p)
         dq_all = np.concatenate([e_.dq[:, j] for e_ in F.experiments])
         try:
             ch = select_friction(A, Y, J, j, np.zeros(Y.size), blocks, columns=cols, v_grid=velocity_grid(dq_all),
@@ -650,7 +654,8 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
         def kept(ch=ch, j=j, vf=vf, missing=missing, A=A, an=an, cols=cols):
             """The declared law with sign(dq) smoothed at the velocity noise floor (what the CV compared
             against): the sign of a velocity that is noise (standstill, reversals) has no meaning, and a
-            chattering Coulomb column costs the most where the robot rests (TX40 j4: 0.42 vs 0.17)."""
+            chattering Coulomb column costs the most where the robot rests (TX40 j4: 0.42 vs 0.17). Where the
+            CV prefers the true sign, the declared law itself (still static in the rest segments)."""
             if missing:
                 return None
             # only where time-blocked CV does not prefer the true sign (on clean simulated data with the
@@ -661,9 +666,8 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
                                                              viscous_columns("linear", v)]), 2))[rows]
             e_d = cvk.oof_residual(cols(lambda v: np.hstack([coulomb_columns("sign", v),
                                                              viscous_columns("linear", v)]), 2))[rows]
-            if float(e_s @ e_s) > float(e_d @ e_d):
-                return None
-            k = FrictionChoice(j, LawFit("sign", None, ch.declared_cv_rel_err, vf),
+            sm = None if float(e_s @ e_s) > float(e_d @ e_d) else vf
+            k = FrictionChoice(j, LawFit("sign", None, ch.declared_cv_rel_err, sm),
                                LawFit("linear", None, ch.declared_cv_rel_err), ch.candidates, {}, ch.n_folds, ch.unit)
             return _LawRecord(k, False, False, math.nan, math.nan, True), np.hstack([A, cols(k.columns, 2)]), an + list(k.names())
 
@@ -723,7 +727,8 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
         col = {nm: system.W[:, i] for i, nm in enumerate(system.names)}
         for r in recs:
             ch = r.choice
-            X = frame.full_rate_columns(lambda ex, ch=ch: {ch.joint: ch.columns(ex.dq[:, ch.joint])}, len(ch.names()))
+            X = frame.full_rate_columns(lambda ex, ch=ch: {ch.joint: ch.columns(sliding_velocity(ex, ch.joint))},
+                                        len(ch.names()))
             col.update(zip(ch.names(), X.T))
             if r.offset:
                 col[f"OFF{ch.joint + 1}"] = (system.joint == ch.joint).astype(float)
@@ -760,6 +765,39 @@ def _law_beats_noise(ch: FrictionChoice, A, Y, J, blocks, cols, dq_all, vf, F: F
                                    _law_gain(ch, dq_all), rng=np.random.default_rng(7919 + j))
 
 
+#: candidate kinds of sliding friction (:mod:`.candidates`): built on the sliding velocity, 0 at rest
+SLIDING_KINDS = ("stribeck", "load_friction")
+
+
+def _static_at_rest_family(fam: Family) -> Family:
+    """``fam`` with its columns built on the sliding velocity (:func:`.friction.sliding_frame`): 0 in the
+    rest segments of its joint, as the friction laws (the Stribeck dip and the load-dependent Coulomb
+    friction are laws of sliding)."""
+    build, build_at = fam.build, fam.build_at
+
+    def b(fr, ctx, build=build):
+        return build(sliding_frame(fr), ctx)
+    b_at = None if build_at is None else (lambda fr, ctx, value, build_at=build_at: build_at(sliding_frame(fr), ctx, value))
+    return replace(fam, build=b, build_at=b_at)
+
+
+def _static_at_rest(data: _Data, V: Frame, laws: Sequence[_LawRecord]) -> list[str]:
+    """Per joint with a friction law and any rest: share of the identification and validation samples in
+    rest segments (where the law is static, predicted 0)."""
+    out = []
+    for r in laws:
+        j = r.choice.joint
+        shares = []
+        for fr in (data.F, V):
+            tot = sum(ex.n_samples for ex in fr.experiments)
+            shares.append(sum(int(rest_mask(ex)[:, j].sum()) for ex in fr.experiments) / max(tot, 1))
+        if not any(shares):
+            continue
+        out.append(f"joint {j + 1}: sliding friction static (0) in rest segments: {100 * shares[0]:.1f} % of the "
+                   f"identification samples, {100 * shares[1]:.1f} % of the validation samples")
+    return out
+
+
 def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg: DiagnoseSettings) -> _Baseline:
     """Stage 2: identify the declared model (``cfg.method``) and its validation error ("before", on
     ``data0``), the model with the friction laws chosen (the loop's start, on ``data``), the candidate
@@ -774,6 +812,8 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     # coefficients then split the effect between them with opposite signs)
     stribeck_law = {r.choice.joint for r in laws if not r.smoothing and r.choice.coulomb.law == "stribeck"}
     families = [f for f in families if not (f.kind == "stribeck" and f.joint in stribeck_law)]
+    # sliding-friction candidates are static (0) in the rest segments, like the friction laws
+    families = [_static_at_rest_family(f) if f.kind in SLIDING_KINDS else f for f in families]
     dq_noise = np.max([ex.dq_noise for ex in data.F.experiments], axis=0)
     N_id = nuisance_columns(data.F, data.decl, dq_noise)
     N_v = nuisance_columns(data.V, data.decl, dq_noise)
@@ -900,7 +940,11 @@ def _composed_family(c: Composed, plain: bool) -> Family:
 
     def full(ex, c=c, plain=plain):
         M = ex.n_samples
-        sig = RowSignals(np.full(M, c.joint), ex.t, ex.q, ex.dq, ex.ddq, ex.tau_hat)
+        dq = ex.dq
+        if c.effect == "coulomb":   # sliding friction: static (0) in the joint's rest segments
+            dq = ex.dq.copy()
+            dq[:, c.joint] = sliding_velocity(ex, c.joint)
+        sig = RowSignals(np.full(M, c.joint), ex.t, ex.q, dq, ex.ddq, ex.tau_hat)
         X = c.columns(sig)
         return {c.joint: np.hstack([X, c.plain_columns(sig)]) if plain else X}
 
@@ -1095,6 +1139,10 @@ def _validation_rel_err_raw(data: _Data, V: Frame, res: IdentificationResult, ad
     pred = np.zeros(R.n_rows)
     for e, ex in enumerate(R.experiments):
         tq = model_torque(data.model, theta, ex.q, ex.dq, ex.ddq, loaded=ex.loaded and loaded_cols)
+        if isinstance(data.model, LawModel):   # the chosen laws are static (0) in the rest segments
+            rest = rest_mask(ex)
+            if rest.any():
+                tq -= np.where(rest, data.model.sliding_torque(theta, ex.dq), 0.0)
         m = R.row_experiment == e
         pred[m] = tq[R.row_index[m], R.system.joint[m]]
     if added:
@@ -1367,7 +1415,9 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
         "sign_smoothing": [f"joint {r.choice.joint + 1}: sign(dq) smoothed as tanh(dq/v), v = "
                            f"{(r.choice.coulomb.param or r.choice.coulomb.smooth):.3g} (at most the velocity noise "
                            f"floor or {100 * MIN_LAW_SCALE:g} % of the joint's speeds: a processing matter, not a "
-                           f"friction law)" for r in base.laws if r.smoothing],
+                           f"friction law)" for r in base.laws
+                           if r.smoothing and (r.choice.coulomb.param or r.choice.coulomb.smooth)],
+        "static_at_rest": _static_at_rest(data, state.V, base.laws),
     }
     Vs = data.Vs
     # the plotted residuals are those of the errors reported: "before" is the declared model fitted with the

@@ -32,12 +32,30 @@ the fold-to-fold scatter, keep the simpler law.
 Columns are evaluated on the rows by default (the decimated velocity); a caller that decimates columns
 in parallel with ``W`` (RX-90 paper eq. 15) passes ``columns(f)``, which evaluates ``f`` on the
 full-rate velocity of the joint and decimates it (``Frame.full_rate_columns`` style).
+
+Static at rest
+    Every law above describes *sliding* friction. At standstill friction is static: set-valued in
+    ``[-Fs, Fs]``, balancing whatever the other torques leave, its value unknown from the velocity
+    (Armstrong-Helouvry, Dupont & Canudas de Wit 1994, sec. 2.1: static friction and the pre-sliding
+    regime; Gautier's practice leaves the samples of near-zero velocity out of the friction
+    identification). :func:`rest_segments` finds the standstill *segments* of each joint in any data
+    the model is evaluated on, from those data alone: ``|dq_j|`` below :data:`REST_NOISE_MULTIPLE`
+    standard deviations of the velocity noise of the experiment (``Experiment.dq_noise``, estimated
+    from the part of ``q`` above the filter cut-off) for at least :data:`REST_MIN_PERIODS` periods of the
+    dynamics bandwidth ``1/f_dyn``. A velocity reversal of a moving trajectory crosses that band in
+    ``2 K sigma / |ddq|`` (milliseconds on every recording here), far shorter than ``1/f_dyn``, so it is
+    never a rest segment. Inside a segment the sliding columns of the joint (its Coulomb, Stribeck and
+    viscous columns) are evaluated as 0 - the law is evaluated on the *sliding velocity*
+    :func:`sliding_velocity`, ``dq`` with its rest segments set to 0 (every law here is 0 at ``dq = 0``) -
+    in identification and validation alike: the model predicts no friction torque it cannot know, where
+    ``sign(dq)`` would switch between ``+Fc`` and ``-Fc`` on the velocity's wander at standstill.
 """
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import optimize
@@ -50,6 +68,8 @@ __all__ = [
     "COULOMB_LAWS",
     "DELTA_GRID",
     "MIN_GAIN",
+    "REST_MIN_PERIODS",
+    "REST_NOISE_MULTIPLE",
     "VISCOUS_LAWS",
     "FrictionChoice",
     "LawFit",
@@ -57,7 +77,11 @@ __all__ = [
     "friction_column_indices",
     "law_errors",
     "replaced_friction_columns",
+    "rest_mask",
+    "rest_segments",
     "select_friction",
+    "sliding_frame",
+    "sliding_velocity",
     "velocity_grid",
     "viscous_columns",
 ]
@@ -70,6 +94,98 @@ MIN_GAIN = 0.01
 DELTA_GRID = (0.2, 0.35, 0.5, 0.65, 0.8, 1.25, 1.5, 2.0)
 #: points of the log grid of the velocity scales (v of tanh, vs of Stribeck)
 N_VELOCITY_GRID = 14
+#: standstill: |dq_j| below this many standard deviations of the velocity noise (Gaussian noise alone
+#: exceeds it with probability ~1e-23: a rest is not cut into pieces by the noise) ...
+REST_NOISE_MULTIPLE = 10.0
+#: ... for at least this many periods 1/f_dyn of the dynamics bandwidth (a reversal of a moving
+#: trajectory spends 2 K sigma / |ddq| there: 5-40 ms on the TX40, LWR4 and Med 7 recordings)
+REST_MIN_PERIODS = 1.0
+#: floor of the standstill band, as a share of the 95th percentile of |dq_j| of the experiment (noise-free
+#: simulated data, where the estimated noise is ~0)
+REST_REL_FLOOR = 1e-4
+
+
+def rest_segments(dq: np.ndarray, fs: float, noise, f_dyn: float, *, multiple: float = REST_NOISE_MULTIPLE,
+                  min_periods: float = REST_MIN_PERIODS, source: str = "") -> np.ndarray:
+    """Standstill segments of each joint: ``|dq_j| < max(multiple * noise_j, REST_REL_FLOOR * P95|dq_j|)``
+    for at least ``min_periods / f_dyn`` seconds (see the module docstring, "Static at rest").
+
+    Parameters
+    ----------
+    dq : ndarray, shape (M,) or (M, n)
+        Band-pass velocity at full rate, one experiment.
+    fs : float
+        Sampling rate [Hz].
+    noise : float or ndarray, shape (n,)
+        Standard deviation of the velocity noise of each joint (``Experiment.dq_noise``).
+    f_dyn : float
+        Dynamics bandwidth [Hz] (``FilterSettings.dynamics_bandwidth_hz``).
+    multiple, min_periods : float
+        Band in noise standard deviations, shortest segment in periods ``1/f_dyn``.
+    source : str
+        Named in the error message.
+
+    Returns
+    -------
+    ndarray of bool, same shape as ``dq``: True inside a rest segment.
+    """
+    dq = np.asarray(dq, float)
+    one = dq.ndim == 1
+    D = dq[:, None] if one else dq
+    where = f"{source}: " if source else ""
+    if D.ndim != 2:
+        raise IdentificationError(f"{where}rest segments: velocity must be (samples,) or (samples, joints), "
+                                  f"got shape {dq.shape}")
+    if not (np.isfinite(fs) and fs > 0 and np.isfinite(f_dyn) and f_dyn > 0):
+        raise IdentificationError(f"{where}rest segments: sampling rate {fs!r} Hz and dynamics bandwidth "
+                                  f"{f_dyn!r} Hz must be finite and > 0")
+    sig = np.broadcast_to(np.asarray(noise, float), (D.shape[1],))
+    if not np.all(np.isfinite(sig) & (sig >= 0)):
+        raise IdentificationError(f"{where}rest segments: velocity noise {sig.tolist()} must be finite and >= 0")
+    min_len = max(2, int(math.ceil(min_periods * fs / f_dyn)))
+    out = np.zeros(D.shape, bool)
+    if D.shape[0] == 0:
+        return out[:, 0] if one else out
+    A = np.abs(D)
+    p95 = np.quantile(A, 0.95, axis=0)
+    for j in range(D.shape[1]):
+        band = max(multiple * float(sig[j]), REST_REL_FLOOR * float(p95[j]))
+        low = A[:, j] < band if band > 0 else A[:, j] == 0
+        edges = np.diff(np.r_[0, low.astype(np.int8), 0])
+        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        for a, b in zip(starts, ends):
+            if b - a >= min_len:
+                out[a:b, j] = True
+    return out[:, 0] if one else out
+
+
+_REST_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def rest_mask(ex) -> np.ndarray:
+    """Rest segments (M, n) of one experiment of a diagnosis frame (``.frame.Experiment``), from its own
+    band-pass velocity, velocity noise and filter settings (:func:`rest_segments`); cached per experiment."""
+    try:
+        return _REST_CACHE[ex]
+    except (KeyError, TypeError):
+        pass
+    st = ex.settings
+    m = rest_segments(ex.dq, st.fs, ex.dq_noise, st.dynamics_bandwidth_hz, source=getattr(ex, "source", ""))
+    m.setflags(write=False)
+    try:
+        _REST_CACHE[ex] = m
+    except TypeError:
+        pass
+    return m
+
+
+def sliding_velocity(ex, j: int | None = None) -> np.ndarray:
+    """``dq`` of an experiment with its rest segments set to 0 (:func:`rest_mask`): the velocity the
+    sliding-friction laws are evaluated on (every law is 0 there). Joint ``j`` (M,), or all (M, n)."""
+    m = rest_mask(ex)
+    if j is None:
+        return np.where(m, 0.0, ex.dq)
+    return np.where(m[:, j], 0.0, ex.dq[:, j])
 
 
 def coulomb_columns(law: str, dq: np.ndarray, param: float | None = None, smooth: float | None = None) -> np.ndarray:
@@ -471,3 +587,30 @@ class LawModel:
             parts.append(C)
         out = np.concatenate(parts, axis=2)
         return out[0] if single else out
+
+    def sliding_torque(self, theta: Mapping[str, float], dq: np.ndarray) -> np.ndarray:
+        """Torque (N, n) of the chosen friction laws alone at velocities ``dq`` (N, n), parameters by name
+        (missing ones count as 0): what :meth:`regressor` adds on each joint with a law. A caller with
+        rest segments subtracts it there (static at rest, see the module docstring)."""
+        dq = np.asarray(dq, float)
+        out = np.zeros(dq.shape)
+        for ch in self.choices:
+            c = np.array([float(theta.get(nm, 0.0)) for nm in ch.names()])
+            out[:, ch.joint] += ch.columns(dq[:, ch.joint]) @ c
+        return out
+
+
+def sliding_frame(frame):
+    """A copy of a diagnosis frame (``.frame.Frame``) whose experiments carry the sliding velocity
+    (:func:`sliding_velocity`) as ``dq``: candidate columns of sliding friction built on it are 0 in
+    the rest segments (the rest segments of the copy are those of the original)."""
+    exps = []
+    for ex in frame.experiments:
+        m = rest_mask(ex)
+        if not m.any():
+            exps.append(ex)
+            continue
+        new = replace(ex, dq=np.where(m, 0.0, ex.dq))
+        _REST_CACHE[new] = m
+        exps.append(new)
+    return replace(frame, experiments=tuple(exps))

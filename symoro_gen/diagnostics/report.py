@@ -341,8 +341,9 @@ class ResidualReport:
         else:
             L.append("No effect added: no candidate was significant on the identification data and "
                      "better than noise on the validation data.")
-        for line in (self.settings.get("sign_smoothing") or []) if isinstance(self.settings, dict) else []:
-            L.append(f"Note: {line}")
+        for key in ("sign_smoothing", "static_at_rest"):
+            for line in (self.settings.get(key) or []) if isinstance(self.settings, dict) else []:
+                L.append(f"Note: {line}")
         rounds = sorted({c.round for c in self.tried})
         for r in rounds:
             best = self.best_tried(r, n_tried)
@@ -419,6 +420,11 @@ class ResidualReport:
                 L.append(f"   - `{nme}` = {v:.4g} (%sigma {p:.2f})")
             for k, v in e.physical.items():
                 L.append(f"   - {k} = {v:.4g}")
+        notes = [line for key in ("sign_smoothing", "static_at_rest")
+                 for line in ((self.settings.get(key) or []) if isinstance(self.settings, dict) else [])]
+        if notes:
+            L.append("")
+            L += [f"Note: {line}" for line in notes]
         L.append("")
         L.append("## Candidates (best 10 of each round)")
         for r in sorted({c.round for c in self.tried}):
