@@ -36,7 +36,8 @@ white-noise one (as :mod:`.core`). The plain effect's columns (:meth:`Composed.p
 ripple of the same order, a constant, ``dq_j``) are added to the model for that test (partialled out)
 when they are not in it already, so a plain effect the model lacks is not taken for a modulated one
 (on the LWR4 recordings a plain ripple of joint 7 otherwise passes as "modulated by" any signal that
-differs between the experiments); the reported decrease of the joint's residual is the modulation's. A *family* is one (effect, joint, signal, source joint); its grid
+differs between the experiments); a change in time of friction is tested at equal speed (the speed
+modulation of the same effect partialled out too, :meth:`Composed.confounder_columns`); the reported decrease of the joint's residual is the modulation's. A *family* is one (effect, joint, signal, source joint); its grid
 (ripple orders x step times) is searched and its smallest p-value is Bonferroni-corrected by the
 number of grid points ``G`` (``min(1, G p_min)``). The family-wise error over the whole composed
 library - every effect x signal x joint combination - is then controlled by Holm's step-down
@@ -73,6 +74,8 @@ __all__ = [
 
 EFFECTS = ("viscous", "coulomb", "ripple", "constant", "inertia")
 SIGNALS = ("time", "q_own", "q_other", "abs_tau", "tau", "abs_dq", "temperature", "step")
+#: modulations in time: of a friction effect they are tested at equal speed (:meth:`Composed.confounder_columns`)
+TIME_SIGNALS = ("time", "step")
 #: ripple orders (periods per turn of the joint) searched
 RIPPLE_ORDERS = (1, 2, 3, 4, 5, 6, 8, 12, 16)
 #: step times searched (quantiles of the time since start between 10 % and 90 %)
@@ -256,6 +259,28 @@ class Composed:
         E = self._effect(sig, rows)
         X = np.zeros((sig.n_rows, E.shape[1]))
         X[rows] = E
+        return X
+
+    def confounder_columns(self, sig: RowSignals) -> np.ndarray:
+        """Columns (r, c) partialled out of the test besides the plain effect (c = 0 for most candidates).
+
+        A change *in time* (``time``, ``step``) of a friction effect (``viscous``, ``coulomb``) is confounded
+        with the effect's dependence on the joint's own speed whenever the motion before and after differs
+        (point-to-point moves, a faster second half): a viscous law that is not linear in ``dq_j`` looks
+        like a viscous coefficient that changes at the instant the speeds change. So the speed modulation
+        of the same effect, ``effect_j * |dq_j|`` and ``effect_j * dq_j^2`` (standardised on the joint's
+        rows), is partialled out: what is left is a change in time *at equal speed* (Armstrong-Helouvry,
+        Dupont & Canudas de Wit 1994, sec. 2: friction depends on velocity first, on temperature and wear
+        - time - only at a given velocity)."""
+        if self.signal not in TIME_SIGNALS or self.effect not in ("viscous", "coulomb"):
+            return np.zeros((sig.n_rows, 0))
+        rows = np.flatnonzero(sig.joint == self.joint)
+        E = self._effect(sig, rows)
+        a = np.abs(sig.dq[rows, self.joint])
+        X = np.zeros((sig.n_rows, 2))
+        for k, x in enumerate((a, a * a)):
+            sd = float(np.std(x))
+            X[rows, k] = E[:, 0] * ((x - x.mean()) / sd if sd > 0 else 0.0)
         return X
 
     def names(self) -> tuple[str, ...]:
@@ -481,13 +506,13 @@ def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np
     fams = library(sig, **library_kw) if families is None else families
     tester = _Tester(A, y, w, np.asarray(sig.joint), groups)
     rows = []
-    plains: dict = {}   # the plain effect's design depends on (effect, joint, ripple order, Coulomb scale) only
+    plains: dict = {}   # the plain effect's design: (effect, joint, ripple order, Coulomb scale, time-like signal)
     for fam in fams:
         best = None
         for c in fam:
-            key = (c.effect, c.joint, c.order if c.effect == "ripple" else None, c.coulomb_v)
+            key = (c.effect, c.joint, c.order if c.effect == "ripple" else None, c.coulomb_v, c.signal in TIME_SIGNALS)
             if key not in plains:
-                plains[key] = tester.with_plain(c.plain_columns(sig))
+                plains[key] = tester.with_plain(np.hstack([c.plain_columns(sig), c.confounder_columns(sig)]))
             out = tester(c.columns(sig), c.joint, base=plains[key])
             if out is None:
                 continue

@@ -95,7 +95,15 @@ from .friction import (
     viscous_columns,
 )
 from .report import CandidateScore, Effect, ResidualReport
-from .stability import N_FOLDS, BlockedLS, coefficient_ci, ols_wls_agreement, time_blocks
+from .stability import (
+    N_FOLDS,
+    BlockedLS,
+    coefficient_ci,
+    ols_wls_agreement,
+    sided_selection,
+    simulated_noise_placebo,
+    time_blocks,
+)
 from .stats import bonferroni, hac_covariance, hac_lag, segments_of, single_threaded_blas, wald_test
 from .structure import residual_structure
 from .unexplained import rows_to_samples, signal_matrix, unexplained_structure
@@ -694,7 +702,13 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
                       for b in np.unique(sub[own])])
         sd = float(np.std(d, ddof=1)) if d.size > 1 else 0.0
         p_law = float(sst.t.sf(float(np.mean(d)) / (sd / math.sqrt(d.size)), d.size - 1)) if sd > 0 else 1.0
-        if not (float(np.mean(wins)) > MIN_SELECTION_FREQUENCY and p_law < cfg.significance / n):
+        passed = float(np.mean(wins)) > MIN_SELECTION_FREQUENCY and p_law < cfg.significance / n
+        if passed and not (missing or smoothing):
+            # simulated-noise placebo (stability.simulated_noise_placebo): v, vs, delta and the law were
+            # chosen on the folds that judge them; the whole selection re-run on the declared law's fit
+            # plus its own residual shifted in time must never claim the observed gain (clean data, seed 510)
+            passed = _law_beats_noise(ch, A, Y, J, blocks, cols, dq_all, vf, F)[0]
+        if not passed:
             kr = kept()
             if kr is not None:
                 recs.append(kr[0])
@@ -722,6 +736,33 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
 
     F2 = replace(F, system=rebuild(F, F.system))
     return replace(data, model=law_model, F=F2, Vs=rebuild(data.V, data.Vs), decl=new_names), tuple(recs)
+
+
+def _law_gain(ch: FrictionChoice, dq_all: np.ndarray) -> float:
+    """Relative decrease of the out-of-fold squared error a friction-law replacement claims (0 when the
+    declared law is kept or the replacement is only a rounding of sign(dq), see ``MIN_LAW_SCALE``)."""
+    p95 = float(np.quantile(np.abs(dq_all), 0.95))
+    if not ch.replaced or (ch.viscous.law == "linear" and ch.coulomb.law == "tanh"
+                           and float(ch.coulomb.param) < MIN_LAW_SCALE * p95):
+        return 0.0
+    return 1.0 - (ch.cv_rel_err / ch.declared_cv_rel_err) ** 2
+
+
+def _law_beats_noise(ch: FrictionChoice, A, Y, J, blocks, cols, dq_all, vf, F: Frame) -> tuple[bool, list]:
+    """Simulated-noise placebo of a friction-law replacement on joint ``j`` (:func:`.stability.
+    simulated_noise_placebo`): the declared law (sign smoothed at ``vf``) fitted on all rows, its residual
+    shifted in time, the selection ``ch`` came from re-run; its gain must exceed every null one."""
+    j = ch.joint
+    Xd = cols(lambda v: np.hstack([coulomb_columns("sign", v, None, vf), viscous_columns("linear", v)]), 2)
+    M = np.hstack([A, Xd])
+    fitted = M @ np.linalg.lstsq(M, Y, rcond=None)[0]
+    v_grid = velocity_grid(dq_all)
+
+    def gain(y):
+        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols, v_grid=v_grid,
+                                         v_floor=vf), dq_all)
+    return simulated_noise_placebo(gain, fitted, Y - fitted, J * 100000 + F.row_experiment, F.row_experiment,
+                                   _law_gain(ch, dq_all), rng=np.random.default_rng(7919 + j))
 
 
 #: candidate kinds of sliding friction (:mod:`.candidates`): built on the sliding velocity, 0 at rest
@@ -1138,7 +1179,9 @@ def _effect_stability(data: _Data, F: Frame, added: Sequence[_Added], k: int, we
     coefficients on all identification rows (HAC, :func:`.stability.coefficient_ci`); (2) on each of the
     ``N_FOLDS`` time-blocked folds, whether it is *selected*: significant on the fold's training rows
     (joint Wald test at ``1 - level``) and lowering the error of its own joints on the held-out block
-    (the whole model refitted on the training rows). The frequency is the share of folds selecting it."""
+    (the whole model refitted on the training rows). The frequency is the share of folds selecting it; for
+    a step at ``t_s`` (a composed ``step`` modulation) at most the smaller of the shares judged on the
+    held-out rows before ``t_s`` and after it (:func:`.stability.sided_selection`)."""
     Y, J = F.system.Y, F.system.joint
     others = tuple(ad for i, ad in enumerate(added) if i != k)
     _, A, _ = _augmented(data, others)
@@ -1150,13 +1193,21 @@ def _effect_stability(data: _Data, F: Frame, added: Sequence[_Added], k: int, we
     cv = BlockedLS(A, Y, blocks, weights)
     e1, e0 = cv.oof_residual(X), cv.oof_residual(None)
     w = np.ones(Y.size) if weights is None else weights
-    sel = []
+    sel, sig_k = [], []
     for f in cv.folds:   # one per block; the fold's basis of A on its training rows is the one the CI needs
         tr = f.train
         cb = coefficient_ci(A[tr], X[tr], Y[tr], weights=w[tr], groups=groups[tr], level=level, basis=(f.U, f.rank))
         te = own & f.test
+        sig_k.append(cb.excludes_zero)
         sel.append(cb.excludes_zero and float(np.sum(e1[te] ** 2)) < float(np.sum(e0[te] ** 2)))
-    return _Stability(float(np.mean(sel)), ci.low, ci.high, ci.excludes_zero)
+    freq = float(np.mean(sel))
+    comp = dict(added[k].family.info).get("composed")
+    if comp is not None and comp.step_time is not None:
+        # a change in time must be confirmed by held-out data on both sides of it (stability.sided_selection)
+        freq = min(freq, sided_selection(
+            lambda i, rows: sig_k[i] and float(np.sum(e1[rows] ** 2)) < float(np.sum(e0[rows] ** 2)),
+            [own & f.test for f in cv.folds], F.sig["t"] < comp.step_time))
+    return _Stability(freq, ci.low, ci.high, ci.excludes_zero)
 
 
 def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple[_State, dict, list[str]]:
@@ -1197,9 +1248,12 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
         if ad.family.key in set(agr.only_first) | set(agr.only_second):
             continue
         st = info[ad.family.key]
+        comp = dict(ad.family.info).get("composed")
+        sided = (" (a change in time: judged on the held-out rows before and after it, the smaller share)"
+                 if comp is not None and comp.step_time is not None else "")
         msgs.append(f"{labels[ad.family.key]} dropped: not stable (selected in {100 * st['OLS'].frequency:.0f} % / "
-                    f"{100 * st['WLS'].frequency:.0f} % of the {N_FOLDS} time-blocked folds under OLS / WLS weights, "
-                    f"confidence region excluding zero: {st['OLS'].excludes_zero} / {st['WLS'].excludes_zero})")
+                    f"{100 * st['WLS'].frequency:.0f} % of the {N_FOLDS} time-blocked folds under OLS / WLS weights"
+                    f"{sided}, confidence region excluding zero: {st['OLS'].excludes_zero} / {st['WLS'].excludes_zero})")
     dep = []
     for ad in state.added:
         key = ad.family.key

@@ -29,6 +29,11 @@ Acceptance rules
 * :func:`ols_wls_agreement` - the effects named under OLS and under WLS: their intersection, and a
   message when they differ (keep only the common ones, issue 10 item 3).
 * :func:`placebo_stop` - joints on which a placebo column passed the tests: the loop stops there.
+* :func:`sided_selection` - a change in time (a step) must be confirmed by held-out blocks on both sides
+  of it: its selection frequency is the smaller of the two sides'.
+* :func:`simulated_noise_placebo` - a selection whose searched shape parameters are judged on the folds
+  that chose them is re-run on null data (the declared model's prediction plus its own residual shifted
+  in time); the observed gain must beat every null replicate.
 """
 from __future__ import annotations
 
@@ -44,6 +49,7 @@ from .stats import f_sf, hac_covariance, hac_lag, segments_of
 __all__ = [
     "MIN_SELECTION_FREQUENCY",
     "N_FOLDS",
+    "N_NOISE_PLACEBO",
     "Agreement",
     "BlockedLS",
     "CoefficientCI",
@@ -52,6 +58,9 @@ __all__ = [
     "ols_wls_agreement",
     "placebo_stop",
     "selection_frequency",
+    "shifted_residual",
+    "sided_selection",
+    "simulated_noise_placebo",
     "stable",
     "time_blocks",
 ]
@@ -160,23 +169,27 @@ class BlockedLS:
         if w.shape != y.shape or not np.all(np.isfinite(w)) or np.any(w < 0):
             raise ValueError("BlockedLS: weights must be finite, non-negative and one per row")
         self.A, self.y, self.w = A, y, w
-        key = (A.shape, _fingerprint(A), _fingerprint(y), _fingerprint(w), _fingerprint(np.asarray(blocks, float)))
+        # the fold bases depend on A, the weights and the blocks only: reused for equal ones (the
+        # friction-law stage builds the same folds several times per joint, and its simulated-noise
+        # placebo refits them on many y), the y-dependent parts are recomputed
+        key = (A.shape, _fingerprint(A), _fingerprint(w), _fingerprint(np.asarray(blocks, float)))
         hit = _FOLD_CACHE.get(key)
+        if hit is not None and np.array_equal(hit[0], A) and np.array_equal(hit[1], w) \
+                and np.array_equal(hit[2], blocks):
+            bases = hit[3]
+        else:
+            bases = []
+            for tr, te in blocked_folds(blocks):
+                wt = w[tr]
+                U, pinv, rank = _wls_basis(A[tr] * wt[:, None])
+                bases.append((tr, te, wt, U, pinv, rank))
+            _FOLD_CACHE.clear()
+            _FOLD_CACHE[key] = (A.copy(), w.copy(), np.array(blocks, copy=True), bases)
         self.folds: list[_Fold] = []
-        if hit is not None and np.array_equal(hit[0], A) and np.array_equal(hit[1], y) and np.array_equal(hit[2], w) \
-                and np.array_equal(hit[3], blocks):
-            self.folds = hit[4]
-            return
-        for tr, te in blocked_folds(blocks):
-            wt = w[tr]
-            U, pinv, rank = _wls_basis(A[tr] * wt[:, None])
+        for tr, te, wt, U, pinv, rank in bases:
             yw = y[tr] * wt
             th = pinv @ yw
             self.folds.append(_Fold(tr, te, wt, U, pinv, yw - U @ (U.T @ yw), A[te] @ th, rank))
-        # the friction-law stage builds the same folds up to three times per joint (selection, kept law,
-        # acceptance test): keep the last ones (reused for equal A, y, weights and blocks)
-        _FOLD_CACHE.clear()
-        _FOLD_CACHE[key] = (A.copy(), y.copy(), w.copy(), np.array(blocks, copy=True), self.folds)
 
     def oof_residual(self, X: np.ndarray | None = None) -> np.ndarray:
         """Out-of-fold residual ``y - prediction`` of every row (each row predicted by the fold that
@@ -357,3 +370,80 @@ def placebo_stop(placebo_passed: Mapping[int, bool] | Iterable[int]) -> frozense
     if isinstance(placebo_passed, Mapping):
         return frozenset(int(j) for j, ok in placebo_passed.items() if ok)
     return frozenset(int(j) for j in placebo_passed)
+
+
+# ------------------------------------------------------------------------------------------------
+#: simulated-noise replicates of a selection's null distribution (:func:`simulated_noise_placebo`); an
+#: observed gain must exceed all of them (one-sided Monte Carlo p-value <= 1 / (N_NOISE_PLACEBO + 1))
+N_NOISE_PLACEBO = 19
+
+
+def shifted_residual(resid: np.ndarray, groups: np.ndarray, experiment: np.ndarray,
+                     rng: np.random.Generator, fraction: float | None = None) -> np.ndarray:
+    """``resid`` circularly shifted in time within each contiguous segment of ``groups`` (e.g. one joint
+    of one experiment), by the same random fraction (in [0.2, 0.8] of the segment) for every segment of
+    an experiment: the residual keeps its spectrum, its heteroscedasticity per joint and its correlation
+    between joints, and loses any relation to the motion at the same instant (the circular block
+    bootstrap of Politis & Romano 1992 with one block per segment). ``fraction`` fixes the shift of
+    the first experiment (the others stay random)."""
+    resid = np.asarray(resid, float)
+    groups = np.asarray(groups)
+    experiment = np.asarray(experiment)
+    out = np.empty_like(resid)
+    frac = {int(e): float(rng.uniform(0.2, 0.8)) for e in np.unique(experiment)}
+    if fraction is not None and frac:
+        frac[min(frac)] = float(fraction)
+    for idx in segments_of(groups, resid.size):
+        out[idx] = np.roll(resid[idx], int(round(frac[int(experiment[idx[0]])] * idx.size)))
+    return out
+
+
+def simulated_noise_placebo(gain: Callable[[np.ndarray], float], fitted: np.ndarray, resid: np.ndarray,
+                            groups: np.ndarray, experiment: np.ndarray, observed: float, *,
+                            n_rep: int = N_NOISE_PLACEBO, rng: np.random.Generator | None = None) -> tuple[bool, list]:
+    """Does a selection's observed gain beat what the same selection finds on data where the declared
+    model is the truth and the noise is the data's own?
+
+    The null data are ``fitted + shifted_residual(resid)`` (the declared model's prediction plus its own
+    residual moved in time, :func:`shifted_residual`); ``gain(y_null)`` re-runs the *whole* selection
+    (its searches of shape parameters, its choice among laws, its one-standard-error rule) on them and
+    returns the gain it would claim (0 when it keeps the declared model). Searching a shape on the same
+    folds that then judge it biases any cross-validated gain upwards (Cawley & Talbot 2010, "On
+    over-fitting in model selection and subsequent selection bias", JMLR 11); replicating the selection
+    on null data calibrates that bias with the data's noise (a parametric bootstrap of the selection,
+    Efron & Tibshirani 1993, ch. 16). The observed gain passes when it exceeds every null gain:
+    a Monte Carlo p-value ``<= 1 / (n_rep + 1)``. Stops at the first null gain reaching ``observed``.
+
+    Returns ``(passed, null_gains)``."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    fitted = np.asarray(fitted, float)
+    null: list[float] = []
+    # stratified shifts of the first experiment (distinct ones even for short segments), in random order
+    fractions = 0.2 + 0.6 * (rng.permutation(int(n_rep)) + rng.uniform(size=int(n_rep))) / max(int(n_rep), 1)
+    for k in range(int(n_rep)):
+        g = float(gain(fitted + shifted_residual(resid, groups, experiment, rng, fractions[k])))
+        null.append(g)
+        if not g < observed:
+            return False, null
+    return True, null
+
+
+def sided_selection(selected_on: Callable[[int, np.ndarray], bool], tests: Sequence[np.ndarray],
+                    before: np.ndarray) -> float:
+    """Selection frequency of a change in time (a step at ``t_s``), judged on each side of the change.
+
+    A time-invariant effect may be confirmed by any held-out block; a change at ``t_s`` is only confirmed
+    by held-out data on *both* sides of it: blocks after ``t_s`` show that the later level differs from
+    the whole fit's, which any misfit concentrated early gives too (and validation data held out at the end
+    of a recording lie wholly after the change); blocks before ``t_s`` show that the earlier level differs
+    as well. ``selected_on(k, rows)`` says whether fold ``k`` selects the effect judged on the held-out
+    ``rows`` (significant on its training rows and lowering the error on ``rows``); it is asked on the part
+    before ``t_s`` and the part after of each held-out block ``tests[k]`` (rows of the effect's joints), and
+    the frequency is the smaller of the two sides' (each over the blocks that have rows on that side). A side without any held-out rows gives 0: a change that no data precede or follow is
+    not testable."""
+    before = np.asarray(before, bool)
+    freq = []
+    for side in (before, ~before):
+        hits = [bool(selected_on(k, te & side)) for k, te in enumerate(tests) if np.any(te & side)]
+        freq.append(float(np.mean(hits)) if hits else 0.0)
+    return min(freq)

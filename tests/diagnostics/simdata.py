@@ -22,8 +22,14 @@ DT = 0.002
 
 @functools.cache
 def robot_and_model(name: str):
-    """``scara``, ``lwr4`` (generated) or ``scara_bare`` (SCARA declared without rotor inertias and
-    offsets, built in memory: the model that misses ``rotor_inertia`` and ``offset``)."""
+    """``scara``, ``lwr4`` (generated), ``scara_bare`` (SCARA declared without rotor inertias and
+    offsets, built in memory: the model that misses ``rotor_inertia`` and ``offset``) or ``tree_toy``
+    (the branched toy of :mod:`tests.oracles.test_trees`: joints 2 and 3 both carried by joint 1, joint 3
+    prismatic, built in memory)."""
+    if name == "tree_toy":
+        from tests.oracles.test_trees import toy
+
+        return toy()
     if name == "scara_bare":
         from pathlib import Path
 
@@ -44,16 +50,18 @@ def recording(name: str, seed: int, kind: str | None = None, joint: int | None =
 
     ``extra(t, q, dq, ddq, tau) -> (N, n)``: a torque added to the true one (effects built in the test).
     LWR4 simulations use LWR-like friction (FS 0.1-0.5 N m, Table II of the LWR4 paper) unless
-    ``lwr_friction`` is False.
+    ``lwr_friction`` is False; so do the tree toy's (with the default ranges, 0.1-5 N m, its light
+    branches' torques have the sign of their velocity at almost every sample: a torque-dependent friction
+    is then a gain error of the joint, see ``test_effects.test_load_friction_on_friction_dominated_joints_is_a_gain``).
     """
     robot, model = robot_and_model(name)
     rng = np.random.default_rng(seed)
     n = model.N_JOINTS
     amp = np.ones(n)
-    if name.startswith("scara"):
+    if name.startswith("scara") or name == "tree_toy":
         amp[2] = 0.1   # prismatic joint [m]
     t, q, dq, ddq = fourier_trajectory(n, duration, dt, rng, base_frequency_hz=0.1, amplitude=amp)
-    kw = dict(fs_range=(0.1, 0.5), fv_range=(0.1, 1.0)) if (name == "lwr4" and lwr_friction) else {}
+    kw = dict(fs_range=(0.1, 0.5), fv_range=(0.1, 1.0)) if (name in ("lwr4", "tree_toy") and lwr_friction) else {}
     chi = np.asarray(random_physical_parameters(robot, rng, **kw))
     tau = true_torques(model, q, dq, ddq, chi)
     qm, taum = (q, tau) if kind is None else inject_effect(kind, t, q, dq, ddq, tau, joint=joint, **params)

@@ -185,3 +185,53 @@ def test_signals_the_data_cannot_tell_apart_are_reported_as_aliases():
     assert "indistinguishable here from: q" in top.description
     listed = [r.candidate.source for r in res if (r.candidate.effect, r.candidate.signal) == ("inertia", "q_other")]
     assert sorted(listed) == [top.candidate.source, 1]      # q1 and q3 listed once; q2 on its own
+
+
+def _speed_change_rows(seed, law):
+    """One joint moving slowly for 10 s, then three times faster for 10 s (point-to-point-like regimes);
+    its torque is a viscous ``law(dq)`` plus Coulomb friction plus noise. The declared model: ``dq``,
+    ``sign(dq)``, offset."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 20.0, 0.01)
+    ph = rng.uniform(0, 2 * np.pi, 3)
+    dq = sum(np.sin(2 * np.pi * f * t + p) for f, p in zip((0.3, 0.7, 1.1), ph)) / 2.0
+    dq = dq * np.where(t < 10.0, 1.0, 3.0)
+    q = np.cumsum(dq) * 0.01
+    ddq = np.gradient(dq, t)
+    y = law(dq) + 0.5 * np.sign(dq) + 0.05 * rng.standard_normal(t.size)
+    sig = RowSignals(np.zeros(t.size, int), t, q[:, None], dq[:, None], ddq[:, None])
+    A = np.column_stack([dq, np.sign(dq), np.ones(t.size)])
+    return A, y, sig
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_nonlinear_viscous_law_is_not_named_a_change_in_time(seed):
+    """Quadratic drag (``0.3 dq |dq|``) where the speeds differ between the two halves: a viscous
+    coefficient "changing at t = 10 s" fits it, but the speed modulation of the same effect is partialled
+    out of the time-like tests (``Composed.confounder_columns``), so no change in time is named; a true
+    step of the viscous coefficient at equal speeds still is."""
+    A, y, sig = _speed_change_rows(seed, lambda v: 0.3 * v * np.abs(v))
+    lib = library(sig, effects=("viscous",), signals=("step", "time"))
+    res = score_composed(A, y, sig, families=lib)
+    assert not any(r.significant for r in res), [(r.description, r.p_adjusted) for r in res]
+    # without the partialling (the plain effect only) the step is taken for a change of the law
+    naive = score_composed(A, y, sig, families=[[replace_signal(c) for c in f] for f in lib])
+    assert any(r.significant and r.candidate.signal == "step" for r in naive)
+    # a real change: the viscous coefficient drops by 0.4 at t = 12 s, speeds equal on both sides
+    A2, y2, sig2 = _speed_change_rows(seed, lambda v: 0.0 * v)
+    t = sig2.t
+    dq = sig2.dq[:, 0] / np.where(t < 10.0, 1.0, 3.0)            # undo the speed change
+    sig2 = RowSignals(sig2.joint, t, np.cumsum(dq)[:, None] * 0.01, dq[:, None], np.gradient(dq, t)[:, None])
+    A2 = np.column_stack([dq, np.sign(dq), np.ones(t.size)])
+    y2 = 1.0 * dq - 0.4 * dq * (t >= 12.0) + 0.5 * np.sign(dq) + 0.05 * np.random.default_rng(seed).standard_normal(t.size)
+    res2 = score_composed(A2, y2, sig2, families=library(sig2, effects=("viscous",), signals=("step",)))
+    assert res2 and res2[0].significant and abs(res2[0].candidate.step_time - 12.0) < 1.5, res2[:1]
+
+
+def replace_signal(c):
+    """``c`` tested as if its signal were not time-like: its confounder columns are then empty (the test
+    before ``confounder_columns`` existed)."""
+    class _Naive(Composed):
+        def confounder_columns(self, sig):
+            return np.zeros((sig.n_rows, 0))
+    return _Naive(**{f: getattr(c, f) for f in c.__dataclass_fields__})
