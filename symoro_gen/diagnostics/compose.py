@@ -57,7 +57,7 @@ import numpy as np
 
 from ..errors import IdentificationError
 from .stability import _wls_basis
-from .stats import hac_covariance, hac_lag, segments_of, single_threaded_blas, wald_test
+from .stats import hac_covariance, hac_lag, holm, segments_of, single_threaded_blas, wald_test
 
 __all__ = [
     "EFFECTS",
@@ -356,19 +356,6 @@ def library(sig: RowSignals, *, joints: Sequence[int] | None = None, effects: Se
                 for src in sources:
                     fams.append([Composed(eff, j, s, src, k, ts, cv[j]) for k in orders for ts in steps])
     return fams
-
-
-def holm(p: Sequence[float]) -> np.ndarray:
-    """Holm step-down adjusted p-values (family-wise error control, Holm 1979)."""
-    p = np.asarray(p, float)
-    m = p.size
-    order = np.argsort(p)
-    adj = np.empty(m)
-    run = 0.0
-    for i, k in enumerate(order):
-        run = max(run, min(1.0, (m - i) * p[k]))
-        adj[k] = run
-    return adj
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,9 @@
   covariance (or of ``F = (SSB/(B-1)) / (SSW/(N-B))`` divided by the long-run factor).
 * :func:`fisher_g_test` - a periodic component in the residual: the largest periodogram ordinate
   against the local level of the spectrum (robust to coloured residuals).
-* :func:`bonferroni` - multiple-testing correction of a family of p-values.
+* :func:`bonferroni`, :func:`holm` (family-wise, Holm 1979) and :func:`benjamini_hochberg` (false-discovery
+  rate, Benjamini & Hochberg 1995, through ``scipy.stats.false_discovery_control``) - multiple-testing
+  corrections of a family of p-values; the one home of these corrections (the fleet's drift flags use them too).
 """
 from __future__ import annotations
 
@@ -359,3 +361,34 @@ def fisher_g_test(x, dt: float, *, f_max: float | None = None, local_bins: int =
 def bonferroni(p: float, m: int) -> float:
     """``min(1, m p)``."""
     return float(min(1.0, p * max(int(m), 1)))
+
+
+def holm(p) -> np.ndarray:
+    """Holm's step-down adjusted p-values (family-wise error control, Holm 1979), same shape as ``p``.
+
+    ``adj_(i) = max_{k <= i} min(1, (m - k + 1) p_(k))`` over the sorted finite p-values; a NaN p-value
+    (a test that could not be run) stays NaN and does not count in ``m``. Reject where ``adj <= alpha``.
+    """
+    p = np.asarray(p, float)
+    flat = p.reshape(-1)
+    adj = np.full(flat.shape, np.nan)
+    idx = np.flatnonzero(np.isfinite(flat))
+    m = idx.size
+    if m:
+        order = idx[np.argsort(flat[idx], kind="stable")]
+        adj[order] = np.maximum.accumulate(np.minimum(1.0, (m - np.arange(m)) * flat[order]))
+    return adj.reshape(p.shape)
+
+
+def benjamini_hochberg(p) -> np.ndarray:
+    """Benjamini-Hochberg step-up adjusted p-values (false-discovery rate, Benjamini & Hochberg 1995), same
+    shape as ``p``; NaN p-values stay NaN and do not count. Reject where ``adj <= alpha``."""
+    from scipy.stats import false_discovery_control
+
+    p = np.asarray(p, float)
+    flat = p.reshape(-1)
+    adj = np.full(flat.shape, np.nan)
+    idx = np.flatnonzero(np.isfinite(flat))
+    if idx.size:
+        adj[idx] = false_discovery_control(flat[idx], method="bh")
+    return adj.reshape(p.shape)

@@ -54,8 +54,10 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-__all__ = ["HAMPEL_C", "HAMPEL_MIN_ROBOTS", "adjust", "benjamini_hochberg", "dersimonian_laird", "hampel_outliers",
-           "holm", "level_z", "line_fit", "pooled_dispersion", "trend_test"]
+from ..diagnostics.stats import benjamini_hochberg, holm
+
+__all__ = ["HAMPEL_C", "HAMPEL_MIN_ROBOTS", "adjust", "dersimonian_laird", "hampel_outliers",
+           "level_z", "line_fit", "pooled_dispersion", "trend_test"]
 
 #: robust standard deviations (1.4826 MAD, with the robot's own variance) beyond which a robot is left out
 #: of the other robots' reference
@@ -224,38 +226,9 @@ def trend_test(x: np.ndarray, y: np.ndarray, s: np.ndarray, *, dispersion: float
     return slope, se, z, float(2.0 * p)
 
 
-def holm(p: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
-    """Holm's step-down procedure: (reject mask, adjusted p-values); NaN p-values are never rejected."""
-    p = np.asarray(p, float)
-    flat = p.reshape(-1)
-    adj = np.full(flat.shape, np.nan)
-    idx = np.flatnonzero(np.isfinite(flat))
-    m = idx.size
-    if m:
-        order = idx[np.argsort(flat[idx], kind="stable")]
-        a = np.maximum.accumulate(np.minimum(1.0, (m - np.arange(m)) * flat[order]))
-        adj[order] = a
-    return (np.nan_to_num(adj, nan=2.0) <= alpha).reshape(p.shape), adj.reshape(p.shape)
-
-
-def benjamini_hochberg(p: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
-    """Benjamini-Hochberg step-up procedure: (reject mask, adjusted p-values)."""
-    p = np.asarray(p, float)
-    flat = p.reshape(-1)
-    adj = np.full(flat.shape, np.nan)
-    idx = np.flatnonzero(np.isfinite(flat))
-    m = idx.size
-    if m:
-        order = idx[np.argsort(flat[idx], kind="stable")]
-        a = flat[order] * m / np.arange(1, m + 1)
-        adj[order] = np.minimum(1.0, np.minimum.accumulate(a[::-1])[::-1])
-    return (np.nan_to_num(adj, nan=2.0) <= alpha).reshape(p.shape), adj.reshape(p.shape)
-
-
 def adjust(p: np.ndarray, alpha: float, correction: str = "holm") -> tuple[np.ndarray, np.ndarray]:
     """Multiple-testing correction by name: ``"holm"`` (family-wise) or ``"bh"`` (false-discovery rate)."""
-    if correction == "holm":
-        return holm(p, alpha)
-    if correction == "bh":
-        return benjamini_hochberg(p, alpha)
+    if correction in ("holm", "bh"):
+        adj = (holm if correction == "holm" else benjamini_hochberg)(p)
+        return np.nan_to_num(adj, nan=2.0) <= alpha, adj
     raise ValueError(f"correction must be 'holm' or 'bh', got {correction!r}")

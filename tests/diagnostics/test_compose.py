@@ -11,7 +11,6 @@ import pytest
 from symoro_gen.diagnostics.compose import (
     Composed,
     RowSignals,
-    holm,
     library,
     score_composed,
 )
@@ -21,6 +20,7 @@ from symoro_gen.diagnostics.stability import (
     stable,
     time_blocks,
 )
+from symoro_gen.diagnostics.stats import benjamini_hochberg, holm
 
 from .test_friction import scara_rows
 
@@ -149,6 +149,20 @@ def test_holm_matches_the_step_down_definition():
             assert {int(k) for k in np.flatnonzero(adj <= alpha)} == rejected
     assert list(holm([0.01, 0.04, 0.03])) == pytest.approx([0.03, 0.06, 0.06])
     assert not list(itertools.chain(holm([])))
+    # a test that could not be run (NaN) stays NaN and does not count in m
+    np.testing.assert_allclose(holm([0.01, np.nan, 0.03]), [0.02, np.nan, 0.03])
+
+
+def test_benjamini_hochberg_matches_the_step_up_definition():
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        p = rng.uniform(0, 0.05, 9) ** rng.uniform(0.5, 2)
+        adj = benjamini_hochberg(p)
+        srt = np.sort(p)
+        for alpha in (0.01, 0.05):
+            k = max([i + 1 for i in range(p.size) if srt[i] <= alpha * (i + 1) / p.size], default=0)
+            assert int((adj <= alpha).sum()) == k
+    np.testing.assert_allclose(benjamini_hochberg([0.01, np.nan, 0.04]), [0.02, np.nan, 0.04])
 
 
 def test_selection_frequency_over_time_blocked_folds():

@@ -31,10 +31,9 @@ from symoro_gen.fleet import (
 from symoro_gen.fleet.fused import fold_trajectories, fold_trajectory
 from symoro_gen.fleet.stats import (
     HAMPEL_C,
-    benjamini_hochberg,
+    adjust,
     dersimonian_laird,
     hampel_outliers,
-    holm,
     level_z,
     pooled_dispersion,
     trend_test,
@@ -265,11 +264,11 @@ def test_statistics_against_direct_definitions():
     assert np.isclose(t2, t2_ref) and np.isclose(m, (theta / (var + t2)).sum() / (1 / (var + t2)).sum())
     # Holm and BH against their textbook step procedures
     p = rng.uniform(0, 0.02, 12)
-    rej, _ = holm(p, 0.05)
+    rej, _ = adjust(p, 0.05, "holm")
     srt = np.sort(p)
     k = next((i for i in range(12) if srt[i] > 0.05 / (12 - i)), 12)
     assert rej.sum() == k
-    rej, _ = benjamini_hochberg(p, 0.05)
+    rej, _ = adjust(p, 0.05, "bh")
     kk = max([i + 1 for i in range(12) if srt[i] <= 0.05 * (i + 1) / 12], default=0)
     assert rej.sum() == kk
     # the trend slope is the weighted least-squares slope
@@ -357,7 +356,7 @@ def test_robust_reference_statistics():
         other = g.uniform(0, 1, (R, P))                          # the trend tests' p-values: uniform when clean
         for j, robust in enumerate((False, True)):
             z, p, *_ = level_z(th, sd, robust=robust)
-            counts["clean"][j] += holm(np.stack([p, other]), 0.01)[0][0].any()
+            counts["clean"][j] += adjust(np.stack([p, other]), 0.01)[0][0].any()
         if not hampel_outliers(th[:, 0], sd[:, 0] ** 2).any():
             z0, z1 = level_z(th, sd, robust=False)[0][:, 0], level_z(th, sd)[0][:, 0]
             assert np.array_equal(z0, z1)
@@ -365,7 +364,7 @@ def test_robust_reference_statistics():
         th[1, 3] += 10 * tau
         for j, robust in enumerate((False, True)):
             z, p, *_ = level_z(th, sd, robust=robust)
-            rej = holm(np.stack([p, other]), 0.01)[0][0]
+            rej = adjust(np.stack([p, other]), 0.01)[0][0]
             counts["masked"][j] += rej[1, 3]
             rej[:2, 3] = False
             counts["masked_clean"][j] += rej.any()
