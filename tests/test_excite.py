@@ -389,6 +389,24 @@ def test_cli_point_to_point(cli, tmp_path, scara):
     np.testing.assert_allclose(data[idx, n + 1:2 * n + 1], 0, atol=1e-9)
 
 
+def test_cli_spline(cli, tmp_path, scara):
+    _, model = scara
+    csv, js = tmp_path / "spline.csv", tmp_path / "spline.json"
+    cli("--quiet", "excite", "scara", "--kind", "spline", "-o", csv, "--duration", "3", "--coefficients", "10",
+        "--structured-starts", "2", "--rate", "50", "--starts", "1", "--pool", "1", "--max-iter", "10",
+        "--samples", "40", "--json", js, rc=0)
+    out = json.loads(js.read_text())
+    assert out["kind"] == "spline" and out["limits_ok"] is True
+    assert len(out["design"]["control_points"]) == 10
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    n = model.N_JOINTS
+    assert data.shape == (151, 1 + 3 * n)
+    # at rest at both ends
+    np.testing.assert_allclose(data[[0, -1], n + 1:], 0, atol=1e-9)
+    assert out["cond"] == pytest.approx(stacked_cond(model, data[:, 1:n + 1], data[:, n + 1:2 * n + 1],
+                                                     data[:, 2 * n + 1:]), rel=1e-9)
+
+
 def test_cli_report_html(cli, tmp_path, scara):
     """``excite --report``: one self-contained page with the trajectory plot, the cond of the CSV and the
     predicted sigma of every base parameter (those of the JSON, i.e. noise * sqrt(diag((W'W)^-1)))."""
