@@ -17,6 +17,10 @@ Two kinds of motion, both *linear in their design variables* ``X`` (one column p
 * :class:`PointToPointBasis` - via-points joined by synchronised trapezoidal-acceleration
   (double-S) profiles of one fixed shape, as industrial controllers run them (the RX-90 paper's kind
   of motion): the robot stops at every via-point.
+* :class:`SplineBasis` - a clamped cubic B-spline per joint at rest at both ends (Rackl, Lampariello &
+  Hirzinger 2012, ICRA); with :func:`friction_trajectory` starts (bursts at the velocity limit between
+  slow motion, the friction columns' optimum) it reaches a lower cond than the Fourier series on the
+  LWR4 (README, excitation bench).
 
 Position, velocity and acceleration limits are then *linear* constraints on ``X`` (imposed on a
 grid denser than the output one, with a small margin, and verified again on the output samples);
