@@ -12,6 +12,10 @@ sample, sigma_min capped by the friction columns), and where the target (best ra
 optimised cond lie relative to it.
 
     PYTHONPATH=. python bench/bench_excite.py [--robots lwr4 rx90] [--starts 3] [--max-iter 150] [--powers 8 64]
+        [--kind fourier|spline] [--coefficients 60] [--structured N]
+
+``--kind spline`` optimises a cubic B-spline (``symoro_gen.excite.SplineBasis``) instead; the
+baseline stays the 50 random Fourier trajectories.
 """
 from __future__ import annotations
 
@@ -26,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from symoro_gen.excite import (
     FourierBasis,
+    SplineBasis,
     basis_eval,
     cond_lower_bound,
     limits_of,
@@ -39,7 +44,7 @@ TARGET_RATIO = 5.0
 
 
 def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int, max_iter: int, seed: int,
-        pool: int | None, powers=None) -> dict:
+        pool: int | None, powers=None, kind: str = "fourier", coefficients: int = 60, structured: int = 0) -> dict:
     robot, model = model_for(name)
     lim = limits_of(robot)
     basis = FourierBasis(harmonics, 1.0 / duration)
@@ -53,8 +58,9 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
         rand.append(float(sr[0] / sr[-1]))
         rand_smax.append(float(sr[0] / np.sqrt(len(t))))
     t0 = time.perf_counter()
-    res = optimise_excitation(model, basis, lim, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,
-                              pool=pool, powers=powers)
+    design = basis if kind == "fourier" else SplineBasis(coefficients, duration)
+    res = optimise_excitation(model, design, lim, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,
+                              pool=pool, powers=powers, structured=structured)
     wall = time.perf_counter() - t0
     W = np.asarray(model.regressor(res.q, res.dq, res.ddq)).reshape(-1, len(model.BASE_NAMES))
     sv = np.linalg.svd(W, compute_uv=False)
@@ -78,13 +84,19 @@ def main(argv=None) -> int:
     ap.add_argument("--pool", type=int, default=None, help="random designs the IPOPT starts are chosen from")
     ap.add_argument("--powers", type=int, nargs="+", default=None,
                     help="continuation powers of the cond criterion (default symoro_gen.excite.COND_POWERS)")
+    ap.add_argument("--kind", choices=("fourier", "spline"), default="fourier",
+                    help="kind of the optimised trajectory (the random baseline is always the Fourier one)")
+    ap.add_argument("--coefficients", type=int, default=60, help="spline control points per joint")
+    ap.add_argument("--structured", type=int, default=0,
+                    help="designs alternating slow motion and bursts at the velocity limit added to the pool")
     a = ap.parse_args(argv)
     print(f"{'robot':6} {'n':>2} {'nb':>3} {'cond opt':>10} {'best of 50':>11} {'median':>9} {'ratio':>6} "
           f"{'limits':>6} {'wall [s]':>8}")
     ok = True
     for name in a.robots:
         r = run(name, harmonics=a.harmonics, duration=a.duration, rate=a.rate, starts=a.starts,
-                max_iter=a.max_iter, seed=a.seed, pool=a.pool, powers=a.powers)
+                max_iter=a.max_iter, seed=a.seed, pool=a.pool, powers=a.powers, kind=a.kind,
+                coefficients=a.coefficients, structured=a.structured)
         ok &= r["limits_ok"]
         print(f"{r['robot']:6} {r['n']:>2} {r['nb']:>3} {r['cond']:>10.4g} {r['random_best']:>11.4g} "
               f"{r['random_median']:>9.4g} {r['ratio']:>6.2f} {r['limits_ok']!s:>6} {r['wall']:>8.1f}")

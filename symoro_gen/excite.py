@@ -17,6 +17,10 @@ Two kinds of motion, both *linear in their design variables* ``X`` (one column p
 * :class:`PointToPointBasis` - via-points joined by synchronised trapezoidal-acceleration
   (double-S) profiles of one fixed shape, as industrial controllers run them (the RX-90 paper's kind
   of motion): the robot stops at every via-point.
+* :class:`SplineBasis` - a clamped cubic B-spline per joint at rest at both ends (Rackl, Lampariello &
+  Hirzinger 2012, ICRA); with :func:`friction_trajectory` starts (bursts at the velocity limit between
+  slow motion, the friction columns' optimum) it reaches a lower cond than the Fourier series on the
+  LWR4 (README, excitation bench).
 
 Position, velocity and acceleration limits are then *linear* constraints on ``X`` (imposed on a
 grid denser than the output one, with a small margin, and verified again on the output samples);
@@ -64,10 +68,12 @@ __all__ = [
     "FourierBasis",
     "Limits",
     "PointToPointBasis",
+    "SplineBasis",
     "basis_eval",
     "check_limits",
     "cond_lower_bound",
     "friction_ceiling",
+    "friction_trajectory",
     "limits_of",
     "optimise_excitation",
     "output_times",
@@ -284,6 +290,65 @@ class PointToPointBasis:
                 "phases": list(self.PHASES)}
 
 
+class SplineBasis:
+    """Clamped cubic B-spline of ``coefficients`` control points per joint over ``[0, duration]``,
+    at rest (``dq = ddq = 0``) at both ends (Rackl, Lampariello & Hirzinger 2012, "Robot excitation
+    trajectories for dynamic parameter estimation using optimized B-splines", ICRA).
+
+    Uniform knots with the end knots repeated four times; the first three control points are equal
+    (``dq(0) = ddq(0) = 0``) and so are the last three. The design variables of a joint are
+    ``x = (c_start, c_3, ..., c_{M-4}, c_end)``, ``M - 4`` of them. Unlike a Fourier series of a few
+    harmonics, a spline can hold a joint near rest and then at its velocity limit, the velocity
+    distribution the friction columns want (:func:`friction_ceiling`).
+
+    Parameters
+    ----------
+    coefficients : int
+        ``M >= 7`` control points per joint.
+    duration : float
+        [s].
+    """
+
+    kind = "spline"
+    degree = 3
+
+    def __init__(self, coefficients: int, duration: float):
+        if coefficients < 7:
+            raise ExcitationError(f"--coefficients {coefficients}: at least 7 control points are needed")
+        if not duration > 0:
+            raise ExcitationError(f"--duration {duration:g}: must be positive")
+        self.M = int(coefficients)
+        self.duration = float(duration)
+        k = self.degree
+        inner = np.linspace(0.0, self.duration, self.M - k + 1)
+        self.knots = np.concatenate([[0.0] * k, inner, [self.duration] * k])
+        self.m = self.M - 4
+        # full control points = E @ x (the tied end points)
+        E = np.zeros((self.M, self.m))
+        E[:3, 0] = 1.0
+        E[3:self.M - 3, 1:self.m - 1] = np.eye(self.M - 6)
+        E[self.M - 3:, self.m - 1] = 1.0
+        self._E = E
+
+    def matrices(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        from scipy.interpolate import BSpline
+
+        t = np.clip(np.asarray(t, float), 0.0, self.duration)
+        out = []
+        for d in range(3):
+            B = np.zeros((len(t), self.M))
+            for i in range(self.M):
+                c = np.zeros(self.M)
+                c[i] = 1.0
+                spl = BSpline(self.knots, c, self.degree)
+                B[:, i] = spl(t) if d == 0 else spl.derivative(d)(t)
+            out.append(B @ self._E)
+        return out[0], out[1], out[2]
+
+    def coefficients(self, X: np.ndarray) -> dict:
+        return {"control_points": (self._E @ X).tolist(), "knots": self.knots.tolist(), "degree": self.degree}
+
+
 # ---------------------------------------------------------------------------------------------
 def stacked_cond(model: IdentificationModel, q, dq, ddq) -> float:
     """Unscaled 2-norm condition number of the base regressor stacked over the samples."""
@@ -416,6 +481,8 @@ def check_limits(limits: Limits, q, dq, ddq, tau=None, *, rtol: float = 1e-9) ->
 
 def _constant_design(basis, n: int, centre: np.ndarray) -> np.ndarray:
     """Design ``X`` of the motion that stays at ``centre``."""
+    if isinstance(basis, SplineBasis):  # B-splines are a partition of unity
+        return np.outer(np.ones(basis.m), centre)
     t = np.linspace(0.0, 1.0, 5)
     P, _, _ = basis.matrices(t)
     c, *_ = np.linalg.lstsq(P, np.ones(len(t)), rcond=None)
@@ -449,8 +516,62 @@ def random_trajectory(basis, limits: Limits, rng: np.random.Generator, t: np.nda
         R[1:] = rng.standard_normal((basis.m - 1, n)) * (ks ** -decay)[:, None]
         R[0] = rng.uniform(-0.3, 0.3, n) * (limits.q_max - limits.q_min) / 2
         X = X0 + R
+    elif isinstance(basis, SplineBasis):
+        # a random walk of the control points (uniform ones would be all acceleration)
+        X = centre + np.cumsum(rng.standard_normal((basis.m, n)), axis=0) * (limits.q_max - limits.q_min) / 8
     else:
         X = rng.uniform(limits.q_min, limits.q_max, (basis.m, n))
+    return _scale_into(basis, limits, X, X0, t)
+
+
+def friction_trajectory(basis, limits: Limits, rng: np.random.Generator, t: np.ndarray, duration: float, *,
+                        cruise: float = 0.3, creep: float = 0.05) -> np.ndarray:
+    """A feasible design whose every joint alternates slow motion and bursts at its velocity limit.
+
+    The velocity distribution that maximises the smallest eigenvalue of a joint's friction block
+    ``E[(dq, sign dq, 1)(dq, sign dq, 1)^T]`` (:func:`friction_ceiling`) puts a fraction of the time at
+    ``+-dq_max`` and the rest at small nonzero speed. Per joint: the duration is cut into a random
+    number of equal slots, each holding one burst of alternating sign at a random offset (the cruise
+    fraction ``cruise`` of the duration in all, each burst's travel within the joint range), ramps at
+    0.8 of the acceleration limit, ``creep * dq_max`` towards the next burst in between; the position
+    is its integral, fitted by least squares in the basis and scaled into the limits
+    (:func:`random_trajectory`'s scaling on the samples ``t``).
+    """
+    n = limits.n
+    tt = np.linspace(0.0, duration, 4001)
+    dt = tt[1] - tt[0]
+    V = np.zeros((len(tt), n))
+    for j in range(n):
+        v, a = float(limits.dq_max[j]), 0.8 * float(limits.ddq_max[j])
+        ramp = v / a
+        span = (limits.q_max[j] - limits.q_min[j]) * 0.75  # room for the creeping between bursts
+        fits = [k for k in (2, 4, 6, 8) if duration / k >= 2.5 * ramp + 0.2]
+        nb = int(rng.choice(fits)) if fits else 2
+        slot = duration / nb
+        hold = max(0.0, min(cruise * slot, span / v - ramp, slot - 2 * ramp - 0.2))
+        burst = hold + ramp  # the rate limiter adds a ramp at each end
+        sign0 = float(rng.choice([-1.0, 1.0]))
+        target = np.zeros(len(tt))
+        for i in range(nb):
+            sg = sign0 * (-1) ** i
+            lo = i * slot + (0.1 if i else 0.3)
+            hi = max(lo, (i + 1) * slot - burst - 2 * ramp - (0.3 if i == nb - 1 else 0.1))
+            t0 = rng.uniform(lo, hi)
+            target[(tt >= i * slot) & (tt < t0)] = sg * creep * v  # creeping towards this burst's direction
+            target[(tt >= t0) & (tt < t0 + burst)] = sg * v
+            target[(tt >= t0 + burst) & (tt < (i + 1) * slot)] = -sg * creep * v
+        target[tt >= duration - 0.3] = 0.0
+        target[tt < 0.1] = 0.0
+        # rate-limit the target to the acceleration (ramps), starting and ending at rest
+        vel = np.zeros(len(tt))
+        for k in range(1, len(tt)):
+            vel[k] = vel[k - 1] + np.clip(target[k] - vel[k - 1], -a * dt, a * dt)
+        V[:, j] = vel
+    Q = np.cumsum(V, axis=0) * dt
+    Q += ((limits.q_max + limits.q_min) / 2 - (Q.max(0) + Q.min(0)) / 2)
+    P, _, _ = basis.matrices(tt)
+    X, *_ = np.linalg.lstsq(P, Q, rcond=None)
+    X0 = _constant_design(basis, n, (limits.q_max + limits.q_min) / 2)
     return _scale_into(basis, limits, X, X0, t)
 
 
@@ -561,7 +682,8 @@ def output_times(duration: float, rate: float) -> np.ndarray:
 def optimise_excitation(model: IdentificationModel, basis, limits: Limits, duration: float, *, rate: float = 100.0,
                         criterion: str = "cond", starts: int = 4, seed: int = 0, chi_b=None,
                         samples: int | None = None, max_iter: int = 200, margin: float = 0.01,
-                        pool: int | None = None, progress=None, powers=None) -> ExcitationResult:
+                        pool: int | None = None, progress=None, powers=None, structured: int = 0,
+                        initial=()) -> ExcitationResult:
     """Optimise an excitation trajectory (IPOPT from ``starts`` seeded random feasible designs).
 
     Parameters
@@ -613,7 +735,7 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
                               "increase --duration or --rate")
     if samples is None:
         samples = int(min(200, max(8 * nb // n + 1, 20 * basis.m, 40)))
-    period = duration if isinstance(basis, PointToPointBasis) else 2 * math.pi / basis.w
+    period = 2 * math.pi / basis.w if isinstance(basis, FourierBasis) else duration
     t_obj = np.arange(samples) * period / samples if isinstance(basis, FourierBasis) else np.linspace(0, duration, samples)
     nharm = basis.K if isinstance(basis, FourierBasis) else 8
     n_con = int(min(400, max(2 * samples, 40 * nharm)))
@@ -633,8 +755,14 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     records = []
     n_pool = max(int(starts), 10 * int(starts) if pool is None else int(pool))
     candidates: list[tuple[float, float, int, np.ndarray]] = []
-    for _ in range(n_pool):
-        X_init = random_trajectory(basis, lim_start, rng, t_con)
+    inits = [np.asarray(X, float) for X in initial]
+    for i_pool in range(n_pool + int(structured) + len(inits)):
+        if i_pool < len(inits):
+            X_init = inits[i_pool]
+        elif i_pool < len(inits) + int(structured):
+            X_init = friction_trajectory(basis, lim_start, rng, t_con, duration)
+        else:
+            X_init = random_trajectory(basis, lim_start, rng, t_con)
         qdq = basis_eval(basis, X_init, t_out)
         Wc = np.asarray(model.regressor(*qdq)).reshape(-1, nb)
         sv = np.linalg.svd(Wc, compute_uv=False)
@@ -821,11 +949,17 @@ def add_excite_parser(sub) -> None:
     e = sub.add_parser("excite", help="optimal excitation trajectory (Fourier or point-to-point) -> CSV t,q,dq,ddq")
     e.add_argument("robot", help="robot name, robot .toml file (its [limits] are used) or generated package")
     e.add_argument("-o", "--output", required=True, help="CSV to write (header t,q1..qn,dq1..dqn,ddq1..ddqn)")
-    e.add_argument("--kind", choices=("fourier", "p2p"), default="fourier")
+    e.add_argument("--kind", choices=("fourier", "p2p", "spline"), default="fourier",
+                   help="Fourier series, point-to-point via-points, or a cubic B-spline (rest at both ends)")
     e.add_argument("--duration", type=float, default=10.0, help="seconds (Fourier: whole periods of the base frequency)")
     e.add_argument("--harmonics", type=int, default=5, help="Fourier harmonics per joint (>= 2)")
     e.add_argument("--base-frequency", type=float, default=None, help="Fourier base frequency [Hz] (default 1/duration)")
     e.add_argument("--via-points", type=int, default=8, help="p2p: via-points including start and end")
+    e.add_argument("--coefficients", type=int, default=None,
+                   help="spline: control points per joint (default 6 per second of --duration, at least 7)")
+    e.add_argument("--structured-starts", type=int, default=0,
+                   help="also draw this many designs whose joints alternate slow motion and bursts at the "
+                        "velocity limit (the friction columns' optimum) into the pool of starts")
     e.add_argument("--dwell", type=float, default=0.0, help="p2p: rest at each intermediate via-point [s]")
     e.add_argument("--rate", type=float, default=100.0, help="output sampling rate [Hz]")
     e.add_argument("--seed", type=int, default=0)
@@ -862,6 +996,8 @@ def cmd_excite(args) -> int:
             raise ExcitationError(f"--duration {args.duration:g} is not a whole number of periods of "
                                   f"--base-frequency {f:g} Hz (the trajectory would not end at rest)")
         basis: Any = FourierBasis(args.harmonics, f)
+    elif args.kind == "spline":
+        basis = SplineBasis(args.coefficients or max(7, round(6 * args.duration)), args.duration)
     else:
         seg = (args.duration + args.dwell) / (args.via_points - 1) - args.dwell if args.via_points >= 2 else 1.0
         if seg <= 0:
@@ -873,7 +1009,7 @@ def cmd_excite(args) -> int:
         chi_b = np.asarray(model.base_parameters(np.asarray(nominal)), float)
     res = optimise_excitation(model, basis, lim, args.duration, rate=args.rate, criterion=args.criterion,
                               starts=args.starts, seed=args.seed, max_iter=args.max_iter, samples=args.samples,
-                              pool=args.pool,
+                              pool=args.pool, structured=args.structured_starts,
                               chi_b=None if args.no_torque_limits else chi_b)
     write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
     sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)

@@ -14,10 +14,12 @@ from symoro_gen.excite import (
     FourierBasis,
     Limits,
     PointToPointBasis,
+    SplineBasis,
     basis_eval,
     check_limits,
     cond_lower_bound,
     friction_ceiling,
+    friction_trajectory,
     limits_of,
     optimise_excitation,
     output_times,
@@ -91,7 +93,7 @@ def test_shipped_robots_have_cited_limits():
 
 
 # -- bases ------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("basis", [FourierBasis(4, 0.25), PointToPointBasis(5, 1.0, dwell=0.2)])
+@pytest.mark.parametrize("basis", [FourierBasis(4, 0.25), PointToPointBasis(5, 1.0, dwell=0.2), SplineBasis(12, 4.0)])
 def test_bases_rest_at_ends_and_consistent_derivatives(basis):
     rng = np.random.default_rng(0)
     X = rng.standard_normal((basis.m, 3))
@@ -107,6 +109,25 @@ def test_bases_rest_at_ends_and_consistent_derivatives(basis):
     _, dq_t, ddq_t = basis_eval(basis, X, t)
     np.testing.assert_allclose((qp - qm) / (2 * h), dq_t, atol=1e-5)
     np.testing.assert_allclose((dqp - dqm) / (2 * h), ddq_t, atol=1e-3)
+
+
+def test_spline_is_the_scipy_bspline_of_its_control_points():
+    """The spline basis equals scipy's B-spline with the tied end control points (independent evaluation)."""
+    from scipy.interpolate import make_interp_spline
+
+    b = SplineBasis(10, 3.0)
+    x = np.random.default_rng(2).standard_normal(b.m)
+    c = np.concatenate([[x[0]] * 3, x[1:-1], [x[-1]] * 3])
+    assert len(c) == 10
+    t = np.linspace(0, 3, 41)
+    ref = make_interp_spline(np.linspace(0, 3, 10), np.zeros(10), k=3)  # only for its class: same knots below
+    ref = type(ref)(b.knots, c, 3)
+    q, dq, ddq = basis_eval(b, x[:, None], t)
+    np.testing.assert_allclose(q[:, 0], ref(t), atol=1e-12)
+    np.testing.assert_allclose(dq[:, 0], ref.derivative()(t), atol=1e-10)
+    np.testing.assert_allclose(ddq[:, 0], ref.derivative(2)(t), atol=1e-9)
+    with pytest.raises(Exception, match="--coefficients 6"):
+        SplineBasis(6, 3.0)
 
 
 def test_p2p_passes_through_via_points():
@@ -224,6 +245,52 @@ def test_torque_limits_are_imposed(scara):
     assert res.limits_ok == check_limits(lim, res.q, res.dq, res.ddq, tau)["ok"]
 
 
+def _friction_lambda(v):
+    z = np.column_stack([v, np.sign(v), np.ones_like(v)])
+    return float(np.linalg.eigvalsh(z.T @ z / len(v))[0])
+
+
+def test_friction_trajectory_alternates_slow_motion_and_bursts_at_the_limit(scara_limits):
+    """The structured starts: every limit held on the output samples, and every revolute joint spends at least 15 %
+    of the time above 90 % of its velocity limit and a sixth moving below 10 % of it (the two
+    speeds the friction columns want); the friction block's smallest eigenvalue stays below
+    :func:`friction_ceiling` (which bounds every velocity distribution)."""
+    lim = scara_limits
+    T = 6.0
+    t = output_times(T, 100.0)
+    rng = np.random.default_rng(3)
+    sb = SplineBasis(60, T)
+    ceil = np.array([friction_ceiling(v) for v in lim.dq_max])
+    for _ in range(3):
+        X = friction_trajectory(sb, lim.shrunk(0.01), rng, np.linspace(0, T, 2001), T)
+        q, dq, ddq = basis_eval(sb, X, t)
+        assert check_limits(lim, q, dq, ddq)["ok"]
+        # the revolute joints (the prismatic joint 3 crosses its whole 0.2 m range in 0.67 s at its limit)
+        u = (np.abs(dq) / lim.dq_max)[:, [0, 1, 3]]
+        assert np.all((u > 0.9).mean(0) >= 0.15), (u > 0.9).mean(0)
+        assert np.all(((u < 0.1) & (u > 0)).mean(0) >= 1 / 6), ((u < 0.1) & (u > 0)).mean(0)
+        lam = np.array([_friction_lambda(dq[:, j]) for j in range(lim.n)])
+        assert np.all(lam <= ceil + 1e-9)
+
+
+def test_spline_design_from_structured_starts(scara, scara_limits):
+    """A spline design optimised from the structured starts: every limit held on a dense resampling,
+    and cond below the best of 20 random Fourier trajectories of the same duration (the bench's baseline)."""
+    _, model = scara
+    T = 4.0
+    t = output_times(T, RATE)
+    basis = SplineBasis(12, T)
+    res = optimise_excitation(model, basis, scara_limits, T, rate=RATE, starts=1, seed=0, max_iter=30,
+                              pool=1, structured=3, samples=60, powers=(8,))
+    assert res.limits_ok
+    assert check_limits(scara_limits, *basis_eval(basis, res.X, np.linspace(0, T, 20001)))["ok"]
+    assert res.cond == pytest.approx(stacked_cond(model, res.q, res.dq, res.ddq), rel=1e-12)
+    fb = FourierBasis(3, 1 / T)
+    rng = np.random.default_rng(1)
+    rand = [stacked_cond(model, *basis_eval(fb, random_trajectory(fb, scara_limits, rng, t), t)) for _ in range(20)]
+    assert res.cond < min(rand), (res.cond, min(rand))
+
+
 def test_p2p_design_respects_limits(scara, scara_limits):
     _, model = scara
     basis = PointToPointBasis(5, 1.0)
@@ -320,6 +387,24 @@ def test_cli_point_to_point(cli, tmp_path, scara):
     idx = [0, 50, 100, 150]
     np.testing.assert_allclose(data[idx, 1:n + 1], vias, atol=1e-9)
     np.testing.assert_allclose(data[idx, n + 1:2 * n + 1], 0, atol=1e-9)
+
+
+def test_cli_spline(cli, tmp_path, scara):
+    _, model = scara
+    csv, js = tmp_path / "spline.csv", tmp_path / "spline.json"
+    cli("--quiet", "excite", "scara", "--kind", "spline", "-o", csv, "--duration", "3", "--coefficients", "10",
+        "--structured-starts", "2", "--rate", "50", "--starts", "1", "--pool", "1", "--max-iter", "10",
+        "--samples", "40", "--json", js, rc=0)
+    out = json.loads(js.read_text())
+    assert out["kind"] == "spline" and out["limits_ok"] is True
+    assert len(out["design"]["control_points"]) == 10
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    n = model.N_JOINTS
+    assert data.shape == (151, 1 + 3 * n)
+    # at rest at both ends
+    np.testing.assert_allclose(data[[0, -1], n + 1:], 0, atol=1e-9)
+    assert out["cond"] == pytest.approx(stacked_cond(model, data[:, 1:n + 1], data[:, n + 1:2 * n + 1],
+                                                     data[:, 2 * n + 1:]), rel=1e-9)
 
 
 def test_cli_report_html(cli, tmp_path, scara):

@@ -267,7 +267,10 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--physical", action="store_true",
                    help="physically consistent estimate: LS in the standard parameters with every body's pseudo-inertia "
                         "positive definite and IA, FV, FS >= 0 (needs the 'physical' extra: cvxpy, clarabel); "
-                        "'parameters' then holds the base parameters it implies, 'unconstrained' the plain fit")
+                        "'parameters' then holds the base parameters it implies, 'unconstrained' the plain fit. With "
+                        "--method iv|didim it is NOT a constrained IV/DIDIM: the IV/DIDIM estimate is reported as "
+                        "'unconstrained' and the consistent set is the least-squares fit on the measured-state (IDIM) "
+                        "rows, independent of it")
     p.add_argument("--nominal-tolerance", type=float, metavar="TOL",
                    help="with --physical: also bound every standard parameter with a non-zero nominal value to "
                         "|chi - nominal| <= TOL |nominal|")
