@@ -49,7 +49,7 @@ from ..model import IdentificationModel
 from .frame import Frame, model_torque
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
-           "nuisance_columns"]
+           "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE"]
 
 KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity", "time_delay", "gain",
          "drift", "coupling", "rotor_inertia", "offset")
@@ -490,6 +490,44 @@ def _elasticity_coulomb(frame: Frame, ctx: FitContext, m: int, c: float) -> np.n
         return np.zeros((frame.n_rows, 1))
     return frame.full_rate_columns(lambda ex: {m: _col(
         fs * (_sign(ex.dq[:, m] - c * ex.dtau_hat[:, m]) - _sign(ex.dq[:, m])) / c)}, 1)
+
+
+#: a ``gain`` effect's scale ``1 + gamma`` must lie in this range: a torque sensor or drive gain off by more
+#: than a factor 2 (or of the wrong sign) is a units or sign error of the data, not a calibration effect
+GAIN_SCALE_RANGE = (0.5, 2.0)
+#: a ``time_delay`` effect's ``|d|`` must be at most ``MAX_DELAY_PHASE / (2 pi f_dyn)``: its column is the
+#: first-order expansion ``tau(t - d) = tau(t) - d dtau/dt``, whose error at the top of the dynamics band
+#: ``f_dyn`` is ``(2 pi f_dyn d)^2 / 2`` of the torque (50 % at 1 rad): beyond it the fitted "delay" is
+#: whatever ``-dtau/dt`` correlates with, not a lag
+MAX_DELAY_PHASE = 1.0
+
+
+def implausible(family: Family, values, *, f_dyn: float) -> str | None:
+    """Why an effect's identified parameters are physically impossible for the effect it names (None when
+    they are not): a ``gain`` scale outside :data:`GAIN_SCALE_RANGE`, a ``time_delay`` beyond the validity
+    of its first-order column (:data:`MAX_DELAY_PHASE` at the dynamics bandwidth ``f_dyn`` [Hz]), a
+    negative viscous or Coulomb coefficient of a shared motor (``coupling``, variant ``shared``: the
+    motor's friction, absent from the declared model, dissipates). The loop does not add a candidate
+    that makes any effect implausible (:mod:`.core`)."""
+    v = [float(x) for x in values]
+    k = family.kind
+    if k == "gain":
+        lo, hi = GAIN_SCALE_RANGE
+        scale = 1.0 + v[0]
+        if not lo <= scale <= hi:
+            whose = "the joints'" if family.joint is None else f"joint {family.joint + 1}'s"
+            return (f"gain scale {scale:.3g} outside [{lo:g}, {hi:g}] (a sign or units error of {whose} torque in "
+                    f"the data, if it is real)")
+    elif k == "time_delay":
+        d_max = MAX_DELAY_PHASE / (2 * math.pi * float(f_dyn))
+        if abs(v[0]) > d_max:
+            return (f"delay {v[0]:.3g} s beyond the first-order column's validity |d| <= {d_max:.3g} s "
+                    f"(1 rad at the dynamics bandwidth {float(f_dyn):.3g} Hz)")
+    elif k == "coupling" and family.variant == "shared":
+        bad = [f"{p} = {x:.3g}" for p, x in zip(family.params, v) if p in ("FVm", "FSm") and x < 0]
+        if bad:
+            return f"negative friction of the shared motor ({', '.join(bad)})"
+    return None
 
 
 def describe_params(family: Family, value, values: np.ndarray, std: np.ndarray) -> dict:

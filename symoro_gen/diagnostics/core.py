@@ -74,6 +74,7 @@ from .candidates import (
     Family,
     FitContext,
     describe_params,
+    implausible,
     make_families,
     nuisance_columns,
     placebo_families,
@@ -509,6 +510,7 @@ class _State:
     stopped_at_max: bool = False
     stopped_joints: frozenset = frozenset()   # joints where a placebo passed: the loop stopped there
     estimator_dependent: tuple[dict, ...] = ()   # effects named under one weighting only (dropped)
+    implausible: tuple[dict, ...] = ()   # eligible candidates not added: they made an effect implausible
 
 
 @dataclass(frozen=True, eq=False)
@@ -813,7 +815,10 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     stribeck_law = {r.choice.joint for r in laws if not r.smoothing and r.choice.coulomb.law == "stribeck"}
     families = [f for f in families if not (f.kind == "stribeck" and f.joint in stribeck_law)]
     # sliding-friction candidates are static (0) in the rest segments, like the friction laws
-    families = [_static_at_rest_family(f) if f.kind in SLIDING_KINDS else f for f in families]
+    # and so is the shared motor's Coulomb friction sign(dq_j + dq_k) of a coupled pair: built on the
+    # sliding velocities, it is 0 where both joints rest (was the sign of their velocity noise there)
+    families = [_static_at_rest_family(f) if (f.kind in SLIDING_KINDS or (f.kind == "coupling" and f.variant == "shared"))
+                else f for f in families]
     dq_noise = np.max([ex.dq_noise for ex in data.F.experiments], axis=0)
     N_id = nuisance_columns(data.F, data.decl, dq_noise)
     N_v = nuisance_columns(data.V, data.decl, dq_noise)
@@ -1052,14 +1057,15 @@ def _score_composed_round(data: _Data, base: _Baseline, state: _State, D: _Desig
     return tried, eligible
 
 
-def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: DiagnoseSettings) -> _State:
-    """Stage 4 (accept, refine, re-identify): add the best eligible candidate (its searched parameter
-    refined continuously), re-identify with :data:`SELECT_METHOD` (whatever ``cfg.method``: the loop's path
-    must not depend on the estimator) and re-linearise the effects that depend on the fit (fixed point,
-    :data:`RELINEARISE_PASSES`)."""
+def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: DiagnoseSettings,
+                  pick: int = 0) -> _State:
+    """Stage 4 (accept, refine, re-identify): add the eligible candidate ``pick`` (0: the best; its searched
+    parameter refined continuously), re-identify with :data:`SELECT_METHOD` (whatever ``cfg.method``: the
+    loop's path must not depend on the estimator) and re-linearise the effects that depend on the fit
+    (fixed point, :data:`RELINEARISE_PASSES`)."""
     F, V = state.F, state.V
     Y, J = F.system.Y, F.system.joint
-    _, fam, ev, X, Xv, _cs = scored.eligible[0]
+    _, fam, ev, X, Xv, _cs = scored.eligible[pick]
     value = fam.grid[ev.member] if fam.grid else None
     if fam.build_at is not None:
         value = _refine(fam, ev.member, F, scored.ctx, scored.scorer)
@@ -1093,8 +1099,37 @@ def _stage_loop(data: _Data, base: _Baseline, cfg: DiagnoseSettings, rng: np.ran
                         stopped_joints=state.stopped_joints | scored.stopped)
         if not scored.eligible:
             return state
-        state = _stage_accept(data, state, scored, rnd, cfg)
+        # the best eligible candidate whose re-identified model leaves every effect physically possible
+        # (candidates.implausible: e.g. a gain and a delay of one joint fitted jointly into a negative
+        # scale and a 0.4 s lead); the ones passed over are reported
+        new, rejected = None, []
+        for pick in range(min(len(scored.eligible), MAX_IMPLAUSIBLE_TRIES)):
+            trial = _stage_accept(data, state, scored, rnd, cfg, pick=pick)
+            why = _implausible_effects(data, trial.added, trial.res)
+            if not why:
+                new = trial
+                break
+            rejected.append({"candidate": scored.eligible[pick][1].label, "round": rnd, "reasons": why})
+        state = replace(state if new is None else new,
+                        implausible=state.implausible + tuple(rejected))
+        if new is None:
+            return state
     return replace(state, stopped_at_max=True)
+
+
+#: eligible candidates tried per round before the loop stops when each makes an effect implausible
+MAX_IMPLAUSIBLE_TRIES = 5
+
+
+def _implausible_effects(data: _Data, added: Sequence[_Added], res: IdentificationResult) -> list[str]:
+    """Effects of ``added`` whose parameters in ``res`` are physically impossible
+    (:func:`.candidates.implausible`), as ``"label: reason"``."""
+    out = []
+    for ad in added:
+        why = implausible(ad.family, [res.value(nm) for nm in ad.family.names()], f_dyn=data.fdyn)
+        if why:
+            out.append(f"{ad.family.label}: {why}")
+    return out
 
 
 def _full_rate_frame(V: Frame) -> Frame:
@@ -1267,10 +1302,31 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
     if not gone:
         return state, info, msgs
     added = tuple(ad for ad in state.added if ad.family.key in keep)
-    meta = tuple(m for m in state.effects_meta if m["family"].key in keep)
-    names, A, Av = _augmented(data, added)
-    res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
-    Fn, Vn, added = _relinearise(data, state.F, state.V, added, res)
+    while True:
+        names, A, Av = _augmented(data, added)
+        res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
+        # the effects that depend on the fit rebuilt around it, and the fit the report starts from
+        Fn, Vn, added = _relinearise(data, state.F, state.V, added, res)
+        names, A, Av = _augmented(data, added)
+        res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
+        # without the dropped effects an effect accepted beside them can become physically impossible
+        # (LWR4, 10 effects: a torque-modulated constant on joint 5 accepted while a gain of joint 6 was in
+        # the model turns joint 5's delay from 0.07 s into -0.41 s without it): drop the latest effect
+        # sharing a joint with the impossible one and added after it (or that one itself), and re-fit
+        bad = [(k, why) for k, ad in enumerate(added) if (why := implausible(
+            ad.family, [res.value(nm) for nm in ad.family.names()], f_dyn=data.fdyn))]
+        if not bad:
+            break
+        k_bad, why = bad[0]
+        own = set(_own(added[k_bad].family, n))
+        later = [k for k in range(k_bad + 1, len(added)) if set(_own(added[k].family, n)) & own]
+        k_drop = later[-1] if later else k_bad
+        msgs.append(f"{labels[added[k_drop].family.key]} dropped: with the unstable effects removed, "
+                    + (f"it makes {labels[added[k_bad].family.key]} physically impossible ({why})" if later
+                       else f"its parameters are physically impossible ({why})"))
+        added = added[:k_drop] + added[k_drop + 1:]
+    kept = {ad.family.key for ad in added}
+    meta = tuple(m for m in state.effects_meta if m["family"].key in kept)
     return (replace(state, F=Fn, V=Vn, added=added, res=res, effects_meta=meta, estimator_dependent=tuple(dep)),
             info, msgs)
 
@@ -1362,6 +1418,16 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                               reveal_joint=fam.reveal_joint if fam.reveal_joint is not None else fam.joint,
                               modulation=None if comp is None else comp.modulation, selection_frequency=freq, ci=ci,
                               description=desc, ci_level=max(CI_LEVEL, 1.0 - cfg.significance) if st else None))
+    if state.implausible:
+        last: dict = {}
+        for d in state.implausible:
+            last[d["candidate"]] = d
+        warnings.append("not added, the re-identified model with them physically impossible: " + "; ".join(
+            f"{c} (round {d['round']}: {'; '.join(d['reasons'])})" for c, d in last.items()))
+    final_bad = _implausible_effects(data, state.added, res)
+    if final_bad:
+        warnings.append(f"under {cfg.method.upper()} the final fit has physically impossible effect parameters: "
+                        + "; ".join(final_bad))
     F = state.F
     final_resid = Y - A @ np.array([res.value(nm) for nm in names])
     unexpl = _unexplained(F, final_resid) if cfg.unexplained else ()
@@ -1439,7 +1505,8 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                           result_after=res, settings=settings, warnings=tuple(warnings), plot_data=plot_data,
                           before_validation_rel_err_raw=np.asarray(val0_raw),
                           after_validation_rel_err_raw=np.asarray(val1_raw), unexplained=unexpl,
-                          estimator_dependent=tuple(state.estimator_dependent))
+                          estimator_dependent=tuple(state.estimator_dependent),
+                          implausible=tuple(state.implausible))
 
 
 @single_threaded_blas

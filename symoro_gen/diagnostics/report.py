@@ -199,6 +199,10 @@ class ResidualReport:
         Effects the loop accepted that only one weighting (OLS or WLS) names in the stability stage: dropped
         from the model (issue 10 item 3, "keep only the common ones"); ``kind``, ``joint`` (1-based),
         ``modulation``, ``label``, ``named_under``, ``selection_frequency`` and ``excludes_zero`` per weighting.
+    implausible : tuple of dict
+        Eligible candidates the loop did not add because the re-identified model with them had an effect
+        with physically impossible parameters (:func:`.candidates.implausible`): ``candidate``, ``round``,
+        ``reasons``.
     """
 
     robot: str
@@ -222,6 +226,7 @@ class ResidualReport:
     after_validation_rel_err_raw: np.ndarray | None = None
     unexplained: tuple = ()
     estimator_dependent: tuple = ()
+    implausible: tuple = ()
 
     @property
     def unexplained_flagged(self) -> tuple:
@@ -260,6 +265,7 @@ class ResidualReport:
             "unexplained_all": [{**u.to_dict(), "threshold": _f(u.threshold), "flagged": u.flagged}
                                 for u in self.unexplained],
             "estimator_dependent": [dict(d) for d in self.estimator_dependent],
+            "implausible": [dict(d) for d in self.implausible],
             "tried": [c.to_dict() for c in self.tried],
             "placebos": [c.to_dict() for c in self.placebos],
             "structure": {"before": [s.to_dict() for s in self.structure_before if s.significant],

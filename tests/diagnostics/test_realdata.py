@@ -77,3 +77,31 @@ def test_tx40_finds_the_coupled_wrist(shared_data):
     assert fsm == pytest.approx(1.95, rel=0.25)
     assert rep.after_validation_rel_err[4] < 0.5 * rep.before_validation_rel_err[4]
     assert rep.after_validation_rel_err[5] < rep.before_validation_rel_err[5]
+
+
+def test_lwr4_ten_effects_are_physically_possible(shared_data):
+    """With ``max_effects = 10`` the loop used to report a gain of joint 5 of scale -1.10 and a joint-5 delay of
+    -0.41 s (a torque-scaling column and the delay's first-order column fitted jointly, far outside the
+    expansion's validity): every effect reported must now be physically possible, the candidates passed over
+    for it are listed in ``implausible`` and the warnings."""
+    import symoro_gen
+    from symoro_gen.diagnostics import diagnose
+    from symoro_gen.diagnostics.candidates import GAIN_SCALE_RANGE, MAX_DELAY_PHASE
+    from symoro_gen.preprocessing.load import load_trajectory
+
+    paths = [shared_data / LWR4 / f"measurements_{i}.npz" for i in (1, 2, 3)]
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        pytest.skip(f"LWR4 recordings not found: {missing}")
+    tr = [load_trajectory(p, n_joints=7) for p in paths]
+    rep = diagnose(symoro_gen.load_model("lwr4"), [tr[0], tr[2]], validation=[tr[1]], method="ols", max_effects=10)
+    d_max = MAX_DELAY_PHASE / (2 * np.pi * rep.settings["dynamics_bandwidth_hz"])
+    for e in rep.effects:
+        if e.kind == "time_delay":
+            assert abs(e.physical["delay_s"]) <= d_max, rep.summary()
+        if e.kind == "gain":
+            assert GAIN_SCALE_RANGE[0] <= e.physical["scale"] <= GAIN_SCALE_RANGE[1], rep.summary()
+    assert any(e.kind == "time_delay" for e in rep.effects), rep.summary()   # the real ~70 ms lag stays
+    d = rep.to_dict()
+    assert d["implausible"], rep.summary()   # on this recording a joint-5 gain of scale 2.26 is passed over
+    assert all(x["reasons"] for x in d["implausible"])
