@@ -44,7 +44,12 @@ the multiple-testing correction of the flags.
   normal (Birge, Phys. Rev. 40, 1932, for the ratio). The robot's own ratio alone has ``D - 2`` degrees
   of freedom (2 with 4 days): as the reference it would hide a drift whose days also scatter (a drifting
   torque gain, measured z = 52 at p = 4e-4). Without fleet information (:func:`trend_test` alone) the
-  robot's own ratio and ``D - 2`` degrees of freedom are used.
+  robot's own ratio and ``D - 2`` degrees of freedom are used. The pool is screened like the level's
+  reference (:func:`dispersion_outliers`, from ``HAMPEL_MIN_ROBOTS`` robots on): a robot whose scatter
+  about its line exceeds ``phi_0 chi2_{1-p}(D_r - 2)`` (``phi_0`` the median of the robots' ratios, each
+  scaled by the median of its chi-square law; ``p = DISPERSION_SCREEN_P``) is left out of ``phi_k`` — one
+  wildly scattering robot otherwise sets every other robot's slope error and masks their drifts — and
+  keeps its own ratio.
 * **Correction**: Holm's step-down procedure (Holm, Scand. J. Statist. 6, 1979) over every test of
   every robot and parameter controls the family-wise error rate at ``alpha`` (default 0.01), or
   Benjamini-Hochberg (``correction="bh"``) controls the false-discovery rate.
@@ -56,14 +61,16 @@ from scipy import stats
 
 from ..diagnostics.stats import benjamini_hochberg, holm
 
-__all__ = ["HAMPEL_C", "HAMPEL_MIN_ROBOTS", "adjust", "dersimonian_laird", "hampel_outliers",
-           "level_z", "line_fit", "pooled_dispersion", "trend_test"]
+__all__ = ["HAMPEL_C", "HAMPEL_MIN_ROBOTS", "DISPERSION_SCREEN_P", "adjust", "dersimonian_laird",
+           "dispersion_outliers", "hampel_outliers", "level_z", "line_fit", "pooled_dispersion", "trend_test"]
 
 #: robust standard deviations (1.4826 MAD, with the robot's own variance) beyond which a robot is left out
 #: of the other robots' reference
 HAMPEL_C = 5.0
 #: fewest robots with which the screen runs (with 4, the median and MAD of the fleet are not reliable)
 HAMPEL_MIN_ROBOTS = 5
+#: chance that a robot whose days scatter like the fleet's is screened out of the pooled dispersion
+DISPERSION_SCREEN_P = 1e-4
 
 
 def hampel_outliers(theta: np.ndarray, var: np.ndarray, c: float = HAMPEL_C) -> np.ndarray:
@@ -185,11 +192,45 @@ def line_fit(x: np.ndarray, y: np.ndarray, s: np.ndarray) -> tuple[float, float,
     return slope, sxx, chi2, D - 2
 
 
-def pooled_dispersion(chi2: np.ndarray, dof: np.ndarray) -> tuple[float, int]:
-    """The fleet's excess day-to-day scatter of one parameter: ``sum chi2 / sum dof`` over the robots
-    (NaN entries and robots with no degree of freedom skipped), and the pooled degrees of freedom."""
+def dispersion_outliers(chi2: np.ndarray, dof: np.ndarray, p: float = DISPERSION_SCREEN_P) -> np.ndarray:
+    """Robots whose scatter about their own line is incompatible with the fleet's common dispersion:
+    ``chi2_r > phi_0 * chi2_{1-p}(nu_r)``, with ``phi_0 = median_r(chi2_r / median of chi2(nu_r))`` (each
+    robot's ratio scaled by the median of its chi-square law estimates the common ``phi``; the median over
+    robots, breakdown point 50 %, is not moved by a few wild series). All False below
+    :data:`HAMPEL_MIN_ROBOTS` robots with a line (the median of fewer is not a reference).
+
+    Parameters
+    ----------
+    chi2, dof : ndarray, shape (R,)
+        Weighted residual sums of squares about each robot's line and their degrees of freedom
+        (:func:`line_fit`); NaN / 0 for robots without a line (never screened).
+    p : float
+        Chance that a robot sharing the common dispersion is screened out.
+    """
     chi2, dof = np.asarray(chi2, float), np.asarray(dof, float)
     ok = np.isfinite(chi2) & (dof > 0)
+    out = np.zeros(chi2.shape, bool)
+    if int(ok.sum()) < HAMPEL_MIN_ROBOTS:
+        return out
+    phi0 = float(np.median(chi2[ok] / stats.chi2.median(dof[ok])))
+    if not phi0 > 0:
+        return out
+    out[ok] = chi2[ok] > phi0 * stats.chi2.isf(p, dof[ok])
+    return out
+
+
+def pooled_dispersion(chi2: np.ndarray, dof: np.ndarray, *, robust: bool = True) -> tuple[float, int]:
+    """The fleet's excess day-to-day scatter of one parameter: ``sum chi2 / sum dof`` over the robots
+    (NaN entries and robots with no degree of freedom skipped), and the pooled degrees of freedom.
+
+    With ``robust`` (default) the robots :func:`dispersion_outliers` screens out are left out of the pool:
+    one robot whose days scatter wildly (a faulty sensor, a log of another trajectory) would otherwise
+    inflate every other robot's slope error and mask their drifts. It keeps its own, larger, ratio in
+    :func:`trend_test` (the guard ``max(1, phi, own)``)."""
+    chi2, dof = np.asarray(chi2, float), np.asarray(dof, float)
+    ok = np.isfinite(chi2) & (dof > 0)
+    if robust:
+        ok &= ~dispersion_outliers(chi2, dof)
     nu = int(dof[ok].sum())
     return (float(chi2[ok].sum() / nu), nu) if nu > 0 else (np.nan, 0)
 

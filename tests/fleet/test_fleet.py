@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import chi2 as st_chi2
 
 from symoro_gen import load_model
 from symoro_gen.errors import DataFileError
@@ -30,11 +31,14 @@ from symoro_gen.fleet import (
 )
 from symoro_gen.fleet.fused import fold_trajectories, fold_trajectory
 from symoro_gen.fleet.stats import (
+    DISPERSION_SCREEN_P,
     HAMPEL_C,
     adjust,
     dersimonian_laird,
+    dispersion_outliers,
     hampel_outliers,
     level_z,
+    line_fit,
     pooled_dispersion,
     trend_test,
 )
@@ -371,6 +375,71 @@ def test_robust_reference_statistics():
     assert counts["masked"][0] == 0 and counts["masked"][1] >= 25, counts
     assert counts["clean"][1] <= counts["clean"][0] + 1 and counts["clean"][1] <= 3, counts
     assert counts["masked_clean"][1] <= counts["masked_clean"][0] + 1 and counts["masked_clean"][1] <= 3, counts
+
+
+def _trend_flags(y, sd, robust):
+    """Holm-adjusted trend flags (R, P) of day series y (R, D, P) with daily sigmas sd, as the engine
+    computes them (pooled dispersion per parameter), beside uniform level p-values."""
+    R, D, P = y.shape
+    x = np.arange(D, dtype=float)
+    fits = [[line_fit(x, y[r, :, k], sd[r, :, k]) for k in range(P)] for r in range(R)]
+    chi2 = np.array([[f[2] for f in row] for row in fits])
+    nu = np.array([[f[3] for f in row] for row in fits])
+    pt = np.empty((R, P))
+    for k in range(P):
+        phi, dof = pooled_dispersion(chi2[:, k], nu[:, k], robust=robust)
+        for r in range(R):
+            pt[r, k] = trend_test(x, y[r, :, k], sd[r, :, k], dispersion=phi, dof=dof)[3]
+    other = np.random.default_rng(R * D * P).uniform(0, 1, (R, P))
+    return adjust(np.stack([other, pt]), 0.01)[0][1]
+
+
+def test_a_wildly_scattering_robot_no_longer_masks_a_drift():
+    """10 robots x 6 days x 20 parameters whose days scatter 1.5x their sigmas. Robot 0's days on parameter 3
+    scatter 30x (a faulty log series), robot 1 drifts there by 3 sigmas a day. Pooled over all robots, robot
+    0's scatter sets the slope error of every robot (the pooled ratio ~ 90 instead of 2.25) and robot 1's
+    drift is never found; with robot 0 screened out of the pool (``dispersion_outliers``) it is found in
+    >= 80 of 100 fleets, robot 0 itself (no trend, its own large ratio) is not flagged, and clean fleets are
+    flagged no more often than with the plain pool."""
+    R, D, P = 10, 6, 20
+    counts = {"found": [0, 0], "wild_flagged": [0, 0], "clean": [0, 0]}
+    for seed in range(100):
+        g = np.random.default_rng(seed)
+        sd = np.full((R, D, P), 0.01)
+        y = 1.0 + 1.5 * sd * g.standard_normal((R, D, P))
+        for j, robust in enumerate((False, True)):
+            counts["clean"][j] += _trend_flags(y, sd, robust).any()
+        fits = [line_fit(np.arange(float(D)), y[r, :, 0], sd[r, :, 0]) for r in range(R)]
+        scr = dispersion_outliers(np.array([f[2] for f in fits]), np.array([f[3] for f in fits]))
+        assert scr.sum() <= 1                 # a robot sharing the dispersion: screened with chance 1e-4 each
+        y[0, :, 3] = 1.0 + 30 * sd[0, :, 3] * g.standard_normal(D)
+        y[1, :, 3] += 3 * 0.01 * np.arange(D)
+        for j, robust in enumerate((False, True)):
+            rej = _trend_flags(y, sd, robust)
+            counts["found"][j] += rej[1, 3]
+            counts["wild_flagged"][j] += rej[0, 3]
+    assert counts["found"][0] <= 5 and counts["found"][1] >= 80, counts
+    assert counts["wild_flagged"][1] <= 2, counts
+    assert counts["clean"][1] <= counts["clean"][0] + 1 and counts["clean"][1] <= 3, counts
+
+
+def test_dispersion_screen_definition():
+    g = np.random.default_rng(3)
+    nu = np.array([4, 4, 3, 4, 2, 4, 4, 0])
+    chi2 = 2.0 * g.chisquare(np.maximum(nu, 1)).astype(float)
+    chi2[7] = np.nan                          # no line
+    chi2[2] = 200.0
+    ok = nu > 0
+    phi0 = np.median(chi2[ok] / st_chi2.median(nu[ok]))
+    want = np.zeros(8, bool)
+    want[ok] = chi2[ok] > phi0 * st_chi2.isf(DISPERSION_SCREEN_P, nu[ok])
+    assert np.array_equal(dispersion_outliers(chi2, nu), want) and want.tolist() == [i == 2 for i in range(8)]
+    assert not dispersion_outliers(chi2[:4], nu[:4]).any()            # 4 robots: no screen
+    # pooled without the screened robot, and the plain pool on request
+    phi, dof = pooled_dispersion(chi2, nu)
+    keep = ok & ~want
+    assert np.isclose(phi, chi2[keep].sum() / nu[keep].sum()) and dof == nu[keep].sum()
+    assert np.isclose(pooled_dispersion(chi2, nu, robust=False)[0], np.nansum(chi2[ok]) / nu[ok].sum())
 
 
 @pytest.mark.parametrize("seed", [12, 16, 27])
