@@ -74,7 +74,7 @@ def main(argv=None) -> int:
     if bound is not None and bound.bound > lower:
         lower, how = bound.bound, "rigorous cond_lower_bound (above the dual estimate)"
     print(f"{a.robot}: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
-          f"support of the best distribution: {len(b.weights)} states)")
+          f"the best distribution has {len(b.weights)} states of positive weight)")
     if bound is not None:
         print(f"rigorous bound over every trajectory: {bound.describe()}")
     print(f"{a.robot}: relaxation's minimum in [{lower:.3f}, {b.upper:.3f}] (gap {b.upper / lower - 1:.1%}; lower end: "
