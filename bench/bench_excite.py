@@ -43,20 +43,30 @@ from symoro_gen.loader import model_for
 TARGET_RATIO = 5.0
 
 
-def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int, max_iter: int, seed: int,
-        pool: int | None, powers=None, kind: str = "fourier", coefficients: int = 60, structured: int = 0) -> dict:
-    robot, model = model_for(name)
-    lim = limits_of(robot)
+def random_baseline(model, lim, *, harmonics: int = 5, duration: float = 10.0, rate: float = 100.0, seed: int = 0,
+                    count: int = 50) -> tuple[list[float], list[float]]:
+    """cond and sigma_max / sqrt(N) of ``count`` random Fourier trajectories (``harmonics``, one period of
+    ``duration`` s sampled at ``rate``, seeded), each scaled per joint to touch its tightest limit: the
+    issue-11 baseline (the target is the best of them / 5)."""
     basis = FourierBasis(harmonics, 1.0 / duration)
     t = output_times(duration, rate)
     rng = np.random.default_rng(seed)
     rand, rand_smax = [], []
-    for _ in range(50):
+    for _ in range(count):
         Wr = np.asarray(model.regressor(*basis_eval(basis, random_trajectory(basis, lim, rng, t), t))).reshape(
             -1, len(model.BASE_NAMES))
         sr = np.linalg.svd(Wr, compute_uv=False)
         rand.append(float(sr[0] / sr[-1]))
         rand_smax.append(float(sr[0] / np.sqrt(len(t))))
+    return rand, rand_smax
+
+
+def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int, max_iter: int, seed: int,
+        pool: int | None, powers=None, kind: str = "fourier", coefficients: int = 60, structured: int = 0) -> dict:
+    robot, model = model_for(name)
+    lim = limits_of(robot)
+    basis = FourierBasis(harmonics, 1.0 / duration)
+    rand, rand_smax = random_baseline(model, lim, harmonics=harmonics, duration=duration, rate=rate, seed=seed)
     t0 = time.perf_counter()
     design = basis if kind == "fourier" else SplineBasis(coefficients, duration)
     res = optimise_excitation(model, design, lim, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,

@@ -1038,3 +1038,257 @@ def cmd_excite(args) -> int:
         if lim.defaulted:
             print(f"note: the robot file has no {', '.join(lim.defaulted)} in [limits]; defaults used")
     return 0 if res.limits_ok else 3
+
+
+# ---------------------------------------------------------------------------------------------
+# The relaxation over distributions of states (issue 11 section 1: how low can cond go at all?)
+
+
+@dataclass(frozen=True)
+class RelaxationRound:
+    """One round of :func:`relaxation_bracket`: ``primal`` (cond of the best distribution over the
+    round's states), ``dual`` (``sqrt(tr A / (r tr B))``), ``r`` (the largest dual ratio found),
+    ``atoms`` (states in the round's SDP), ``kept`` (states with weight above the pruning threshold),
+    ``seconds`` (wall time since the start), ``sdp_seconds`` (of which in the round's SDP)."""
+
+    round: int
+    atoms: int
+    kept: int
+    primal: float
+    dual: float
+    r: float
+    seconds: float
+    sdp_seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class RelaxationBracket:
+    """``[lower, upper]`` for the smallest cond of the stacked base regressor over every DISTRIBUTION of
+    states within the position, velocity and acceleration limits (no continuity in time: a relaxation
+    of every trajectory, of any duration and sampling, including samples at rest).
+
+    ``upper`` is the cond of an explicit distribution (``states``, ``weights``; recomputed with numpy):
+    a rigorous upper bound on the relaxation's minimum (not on any trajectory's). ``lower`` is
+    ``sqrt(tr A / (r tr B))`` for PSD ``A, B`` and ``r`` the largest ``tr(A G(s)) / tr(B G(s))`` FOUND
+    over the state box (random states plus multistart L-BFGS-B): a lower bound on the cond of every
+    trajectory if ``r`` is the true maximum, i.e. rigorous only as far as that maximisation is global.
+    ``signs``: the ``sign(dq)`` used in each state's Coulomb columns (see :func:`relaxation_rows`).
+    """
+
+    lower: float
+    upper: float
+    rounds: tuple[RelaxationRound, ...]
+    states: np.ndarray
+    signs: np.ndarray
+    weights: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    r: float
+
+
+def _coulomb_columns(model: IdentificationModel) -> list[tuple[int, int]]:
+    """``(joint, column)`` of every base column ``FS<j>`` that is ``sign(dq_j)`` in row ``j`` only
+    (checked on random states; other Coulomb-like columns are left as the model computes them)."""
+    names = list(model.BASE_NAMES)
+    n = int(model.N_JOINTS)
+    rng = np.random.default_rng(1)
+    q, dq, ddq = rng.uniform(-3, 3, (16, n)), rng.uniform(-2, 2, (16, n)), rng.uniform(-5, 5, (16, n))
+    W = np.asarray(model.regressor(q, dq, ddq)).reshape(16, n, len(names))
+    out = []
+    for j in range(n):
+        c = f"FS{j + 1}"
+        if c not in names:
+            continue
+        want = np.zeros((16, n))
+        want[:, j] = np.sign(dq[:, j])
+        if np.abs(W[:, :, names.index(c)] - want).max() <= 1e-12:
+            out.append((j, names.index(c)))
+    return out
+
+
+def relaxation_rows(model: IdentificationModel, states: np.ndarray, signs: np.ndarray | None = None,
+                    coulomb: list[tuple[int, int]] | None = None) -> np.ndarray:
+    """Base regressor rows ``(k, n, nb)`` of states ``(k, 3n)`` = ``(q, dq, ddq)``, with the Coulomb
+    column ``FS_j`` set to ``signs[:, j]`` (default ``sign(dq_j)``).
+
+    The state set is taken CLOSED: at ``dq_j = 0`` the sign may be -1, 0 or +1. ``0`` is a sample
+    exactly at rest (a trajectory may rest on an interval); ``+-1`` the limit of samples moving at a
+    vanishing speed. The infimum of cond over distributions is the same on the set and its closure
+    (cond of ``E[G]`` is continuous where finite), so this changes no bound and lets the maximisations
+    reach the boundary.
+    """
+    states = np.atleast_2d(np.asarray(states, float))
+    n = int(model.N_JOINTS)
+    W = np.asarray(model.regressor(states[:, :n], states[:, n:2 * n], states[:, 2 * n:])).reshape(
+        len(states), n, len(model.BASE_NAMES)).copy()
+    if signs is not None:
+        for j, c in (_coulomb_columns(model) if coulomb is None else coulomb):
+            W[:, j, c] = signs[:, j]
+    return W
+
+
+def relaxation_dual_bound(A: np.ndarray, B: np.ndarray, r: float) -> float:
+    """``sqrt(tr A / (r tr B))`` after projecting ``A, B`` on the PSD cone.
+
+    Weak duality, for any PSD ``A, B``: if ``tr(A G(s)) <= r tr(B G(s))`` for every state ``s``,
+    then for every distribution ``M = E[G] `` with ``lambda_min I <= M <= lambda_max I``,
+    ``lambda_min tr A <= tr(A M) <= r tr(B M) <= r lambda_max tr B``, hence
+    ``cond^2 = lambda_max / lambda_min >= tr A / (r tr B)`` (Boyd & Vandenberghe 2004, sect. 5.2 and
+    7.5: the dual of the E-/cond-optimal design SDP).
+    """
+    A, B = _psd(A), _psd(B)
+    return math.sqrt(float(np.trace(A)) / (r * float(np.trace(B))))
+
+
+def _psd(X: np.ndarray) -> np.ndarray:
+    X = (X + X.T) / 2
+    w, V = np.linalg.eigh(X)
+    return (V * np.clip(w, 0, None)) @ V.T
+
+
+def _random_states(rng: np.random.Generator, limits: Limits, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """States spread over the box with its faces and vertices over-represented: each velocity uniform,
+    exactly +-dq_max, exactly 0 (sign -1, 0 or +1) or slow (< 0.1 dq_max), each acceleration uniform or
+    exactly +-ddq_max."""
+    n = limits.n
+    q = rng.uniform(limits.q_min, limits.q_max, (k, n))
+    mode, sg = rng.integers(0, 4, (k, n)), rng.choice([-1.0, 1.0], (k, n))
+    v = np.where(mode == 0, rng.uniform(-1, 1, (k, n)),
+                 np.where(mode == 1, sg, np.where(mode == 2, 0.0, sg * rng.uniform(0, 0.1, (k, n)))))
+    s = np.where(mode == 2, rng.integers(-1, 2, (k, n)).astype(float), np.sign(v))
+    a = np.where(rng.random((k, n)) < 0.5, rng.uniform(-1, 1, (k, n)), rng.choice([-1.0, 1.0], (k, n)))
+    return np.hstack([q, v * limits.dq_max, a * limits.ddq_max]), s
+
+
+def _ratio(W: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    num = np.einsum("kia,ab,kib->k", W, A, W)
+    den = np.einsum("kia,ab,kib->k", W, B, W)
+    return num / np.maximum(den, 1e-300)
+
+
+def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int = 400, rounds: int = 30,
+                       fresh: int = 30_000, starts: int = 40, add: int = 60, prune: float = 1e-6,
+                       tol: float = 0.02, time_budget: float = math.inf, seed: int = 0,
+                       extra_states: np.ndarray | None = None, progress=None) -> RelaxationBracket:
+    """Bracket the smallest cond over distributions of states within ``limits`` (see
+    :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
+    cond^2 is scale-free, so fix ``lambda_min >= 1``)::
+
+        min kappa  s.t.  sum_i mu_i G_i >= I,  kappa I - sum_i mu_i G_i >= 0,  mu >= 0,
+        G_i = W(s_i)^T W(s_i) / tr(W(s_i)^T W(s_i))
+
+    solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint)
+    and ``B`` (of the second, ``tr B = 1``) price new states: a state with ``tr(A G) > tr(B G)`` would
+    lower the objective. Each round keeps the states of weight > ``prune`` x the largest (plus the new
+    ones), and adds the ``add`` best of ``fresh`` random states and the local maxima (L-BFGS-B over the
+    box, the velocity signs fixed by the start, exact gradients from the generated CasADi model) of the
+    ratio ``tr(A G) / tr(B G)`` from the ``starts`` best random states and ``starts // 4`` random ones.
+    Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds or past ``time_budget`` seconds.
+    ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples) join the first round.
+    """
+    import time
+
+    import cvxpy as cp
+    from scipy.optimize import minimize
+
+    n, nb = limits.n, len(model.BASE_NAMES)
+    rng = np.random.default_rng(seed)
+    coul = _coulomb_columns(model)
+    lo = np.concatenate([limits.q_min, -limits.dq_max, -limits.ddq_max])
+    hi = np.concatenate([limits.q_max, limits.dq_max, limits.ddq_max])
+    X, S = _random_states(rng, limits, atoms)
+    if extra_states is not None:
+        ex = np.asarray(extra_states, float)
+        X, S = np.vstack([X, ex]), np.vstack([S, np.sign(ex[:, n:2 * n])])
+    jac = None
+    if hasattr(model, "casadi_regressor"):
+        ca = _casadi()
+        z = ca.SX.sym("z", 3 * n)
+        Y = model.casadi_regressor()(z[:n], z[n:2 * n], z[2 * n:])
+        jac = ca.Function("ratio_rows", [z], [Y, ca.jacobian(ca.vec(Y), z)])  # vec: column-major
+
+    def rows(Xs, Ss):
+        return relaxation_rows(model, Xs, Ss, coul)
+
+    def local_max(x0, s0, A, B):
+        """Maximise the ratio from x0 with the velocity signs s0 (dq_j in [0, dq_max] for +1, ...)."""
+        lo_s, hi_s = lo.copy(), hi.copy()
+        lo_s[n:2 * n] = np.where(s0 > 0, 0.0, lo[n:2 * n])
+        hi_s[n:2 * n] = np.where(s0 < 0, 0.0, np.where(s0 == 0, 0.0, hi[n:2 * n]))
+        lo_s[n:2 * n] = np.where(s0 == 0, 0.0, lo_s[n:2 * n])
+        c, h = (hi_s + lo_s) / 2, np.maximum((hi_s - lo_s) / 2, 0.0)
+        free = h > 0
+
+        def f(u):
+            zz = c + h * u
+            if jac is None:
+                w = rows(zz[None], s0[None])[0]
+                return -float(_ratio(w[None], A, B)[0])
+            y, J = jac(zz)
+            w, J = np.array(y), np.array(J)
+            for j, col in coul:
+                w[j, col] = s0[j]
+            num, den = float(np.sum(w * (w @ A))), float(np.sum(w * (w @ B)))
+            dnum, dden = 2 * (w @ A), 2 * (w @ B)
+            g = (J.T @ dnum.ravel(order="F")) / den - num / den ** 2 * (J.T @ dden.ravel(order="F"))
+            return -num / den, -g * h
+
+        u0 = np.where(free, np.clip((x0 - c) / np.where(free, h, 1.0), -1, 1), 0.0)
+        bnds = [(-1.0, 1.0) if fr else (0.0, 0.0) for fr in free]
+        res = minimize(f, u0, jac=jac is not None, bounds=bnds, method="L-BFGS-B", options={"maxiter": 300})
+        return c + h * res.x, -float(res.fun)
+
+    t0 = time.perf_counter()
+    hist: list[RelaxationRound] = []
+    best_lower, best_upper = 0.0, math.inf
+    best: dict[str, Any] = {}
+    for rd in range(rounds + 1):
+        W = rows(X, S)
+        G = np.einsum("kia,kib->kab", W, W)
+        tr = np.trace(G, axis1=1, axis2=2)
+        ok = tr > 0
+        X, S, G, tr = X[ok], S[ok], G[ok], tr[ok]
+        Gn = G / tr[:, None, None]
+        t_sdp = time.perf_counter()
+        mu, kap = cp.Variable(len(X), nonneg=True), cp.Variable()
+        Mx = cp.reshape(Gn.reshape(len(X), -1).T @ mu, (nb, nb), order="C")
+        Mx = (Mx + Mx.T) / 2
+        c1, c2 = Mx >> np.eye(nb), kap * np.eye(nb) - Mx >> 0
+        cp.Problem(cp.Minimize(kap), [c1, c2]).solve(solver="CLARABEL")
+        if mu.value is None:
+            raise ExcitationError(f"{model.ROBOT}: the relaxation SDP failed on round {rd} ({len(X)} states)")
+        t_sdp = time.perf_counter() - t_sdp
+        w = np.clip(np.asarray(mu.value), 0, None)
+        ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", w, Gn))
+        primal = math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+        A, B = _psd(np.asarray(c1.dual_value)), _psd(np.asarray(c2.dual_value))
+        # pricing: the dual ratio over the current states, fresh random states and local maxima
+        Xf, Sf = _random_states(rng, limits, fresh)
+        Wf = rows(Xf, Sf)
+        rf = _ratio(Wf, A, B)
+        r_atoms = float(_ratio(W[ok], A, B).max())
+        order = np.argsort(-rf)
+        picks = list(order[:starts]) + list(rng.choice(len(Xf), starts // 4, replace=False))
+        loc = [local_max(Xf[i], Sf[i], A, B) for i in picks]
+        r = max(r_atoms, float(rf.max()), max(v for _, v in loc))
+        dual = relaxation_dual_bound(A, B, r)
+        keep = w > prune * w.max()
+        hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
+                                    t_sdp))
+        if progress is not None:
+            progress(hist[-1])
+        if dual > best_lower:
+            best_lower = dual
+        if primal < best_upper:
+            best_upper = primal
+            pos = w > 0
+            best = {"states": X[pos], "signs": S[pos], "weights": w[pos] / tr[pos], "A": A, "B": B, "r": r}
+        if best_upper <= best_lower * (1 + tol) or hist[-1].seconds > time_budget or rd == rounds:
+            break
+        newX = [Xf[order[:add]]] + [np.array([x for x, v in loc if v > 1.0])] if any(v > 1.0 for _, v in loc) \
+            else [Xf[order[:add]]]
+        newS = [Sf[order[:add]]] + ([np.array([Sf[i] for i, (_, v) in zip(picks, loc) if v > 1.0])]
+                                     if any(v > 1.0 for _, v in loc) else [])
+        X, S = np.vstack([X[keep], *newX]), np.vstack([S[keep], *newS])
+    return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
+                             best["A"], best["B"], best["r"])

@@ -1,0 +1,119 @@
+"""The relaxation of issue 11 section 1 (cond over distributions of states, no continuity in time):
+``symoro_gen.excite.relaxation_bracket`` on the SCARA, checked against trajectories it never saw, the
+weak-duality argument of ``relaxation_dual_bound`` on explicit distributions, and the rigorous
+``cond_lower_bound``."""
+import numpy as np
+import pytest
+
+from symoro_gen.excite import (
+    FourierBasis,
+    basis_eval,
+    cond_lower_bound,
+    limits_of,
+    output_times,
+    random_trajectory,
+    relaxation_bracket,
+    relaxation_dual_bound,
+    relaxation_rows,
+    stacked_cond,
+)
+from symoro_gen.loader import model_for
+
+
+@pytest.fixture(scope="module")
+def scara():
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    b = relaxation_bracket(model, lim, atoms=100, rounds=3, fresh=2000, starts=6, add=20, seed=3)
+    return model, lim, b
+
+
+def _trajectories(model, lim, k, seed):
+    basis, t = FourierBasis(5, 0.1), output_times(10.0, 50.0)
+    rng = np.random.default_rng(seed)
+    return [basis_eval(basis, random_trajectory(basis, lim, rng, t), t) for _ in range(k)]
+
+
+def test_rows_sign_convention():
+    """FS_j follows the given sign (the closed state set); with sign(dq) it is the model's regressor."""
+    _, model = model_for("scara")
+    n, names = model.N_JOINTS, list(model.BASE_NAMES)
+    rng = np.random.default_rng(0)
+    X = np.hstack([rng.uniform(-1, 1, (5, n)), np.zeros((5, n)), rng.uniform(-1, 1, (5, n))])
+    X[:, n] = 0.3  # joint 1 moving, the others at rest
+    ref = np.asarray(model.regressor(X[:, :n], X[:, n:2 * n], X[:, 2 * n:])).reshape(5, n, -1)
+    assert np.array_equal(relaxation_rows(model, X), ref)
+    assert np.array_equal(relaxation_rows(model, X, np.sign(X[:, n:2 * n])), ref)
+    S = np.ones((5, n))
+    W = relaxation_rows(model, X, S)
+    for j in range(n):
+        if f"FS{j + 1}" in names:
+            assert np.all(W[:, j, names.index(f"FS{j + 1}")] == 1.0)
+            assert np.all(ref[:, j, names.index(f"FS{j + 1}")] == (1.0 if j == 0 else 0.0))
+
+
+def test_bracket_is_ordered_and_upper_is_an_explicit_distribution(scara):
+    model, lim, b = scara
+    assert 0 < b.lower <= b.upper * (1 + 1e-6)
+    assert b.upper / b.lower - 1 < 0.25  # converged to a useful bracket on this small arm
+    W = relaxation_rows(model, b.states, b.signs)
+    M = np.einsum("k,kia,kib->ab", b.weights, W, W)
+    ev = np.linalg.eigvalsh(M)
+    assert np.sqrt(ev[-1] / ev[0]) == pytest.approx(b.upper, rel=1e-6)
+    # every state of the support lies in the box, with a sign consistent with its velocity
+    n = model.N_JOINTS
+    q, dq, ddq = b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:]
+    assert np.all((q >= lim.q_min - 1e-9) & (q <= lim.q_max + 1e-9))
+    assert np.all(np.abs(dq) <= lim.dq_max + 1e-9) and np.all(np.abs(ddq) <= lim.ddq_max + 1e-9)
+    assert np.all((np.sign(dq) == b.signs) | (dq == 0))
+
+
+def test_lower_end_holds_on_unseen_trajectories(scara):
+    """The dual estimate is below the cond of random trajectories within the limits, and the dual
+    ratio on their samples does not exceed the r found by the search (what the bound rests on)."""
+    model, lim, b = scara
+    for q, dq, ddq in _trajectories(model, lim, 10, seed=11):
+        assert stacked_cond(model, q, dq, ddq) >= b.lower
+        W = relaxation_rows(model, np.hstack([q, dq, ddq]))
+        num = np.einsum("kia,ab,kib->k", W, b.A, W)
+        den = np.einsum("kia,ab,kib->k", W, b.B, W)
+        assert np.all(num <= b.r * den * (1 + 1e-9))
+
+
+def test_relaxation_is_above_the_rigorous_bound(scara):
+    model, lim, b = scara
+    bound = cond_lower_bound(model, lim)
+    assert bound is not None and b.upper >= bound.bound
+
+
+def test_primal_no_worse_than_a_trajectory_it_was_given():
+    """The uniform distribution over a trajectory's samples is feasible: the first round's primal is at
+    most that trajectory's cond."""
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    q, dq, ddq = _trajectories(model, lim, 1, seed=5)[0]
+    b = relaxation_bracket(model, lim, atoms=20, rounds=0, fresh=500, starts=2, add=5,
+                           extra_states=np.hstack([q, dq, ddq])[::5])
+    c_sub = stacked_cond(model, q[::5], dq[::5], ddq[::5])
+    assert b.rounds[0].primal <= c_sub * (1 + 1e-4)
+
+
+def test_weak_duality_on_explicit_distributions():
+    """sqrt(tr A / (r tr B)) <= cond of every distribution over states where the ratio is <= r, for
+    arbitrary PSD A, B (and symmetric, indefinite inputs are projected on the PSD cone)."""
+    _, model = model_for("scara")
+    n, nb = model.N_JOINTS, len(model.BASE_NAMES)
+    rng = np.random.default_rng(2)
+    X = rng.uniform(-1, 1, (300, 3 * n))
+    W = relaxation_rows(model, X)
+    for _ in range(20):
+        L1, L2 = rng.normal(size=(nb, nb)), rng.normal(size=(nb, nb))
+        A, B = L1 @ L1.T, L2 @ L2.T + np.diag(rng.uniform(-5, 0, nb))  # B indefinite: projected
+        w, V = np.linalg.eigh((B + B.T) / 2)
+        Bp = (V * np.clip(w, 0, None)) @ V.T
+        r = float((np.einsum("kia,ab,kib->k", W, A, W) / np.einsum("kia,ab,kib->k", W, Bp, W)).max())
+        lb = relaxation_dual_bound(A, B, r)
+        for _ in range(5):
+            mu = rng.dirichlet(np.full(len(X), 0.3))
+            ev = np.linalg.eigvalsh(np.einsum("k,kia,kib->ab", mu, W, W))
+            assert lb <= np.sqrt(ev[-1] / ev[0]) * (1 + 1e-9)
