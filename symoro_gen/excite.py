@@ -79,6 +79,7 @@ __all__ = [
     "output_times",
     "predicted_sigma",
     "random_trajectory",
+    "refine_excitation",
     "stacked_cond",
     "write_trajectory_csv",
 ]
@@ -673,6 +674,217 @@ def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndar
     return nlp, {"lbg": np.concatenate(lbg), "ubg": np.concatenate(ubg)}
 
 
+class _Linearisation:
+    """``M(X) = W^T W / N`` of the base regressor stacked over the samples ``t`` and its derivative
+    ``dM/dX`` (the design enters ``q, dq, ddq`` linearly through the basis matrices), from the generated
+    CasADi regressor and its Jacobian with respect to ``(q, dq, ddq)`` (one sample at a time, mapped
+    over chunks of samples); with ``chi_b``, the torques ``W chi_b`` and their derivative too."""
+
+    def __init__(self, model: IdentificationModel, basis, t: np.ndarray, chi_b: np.ndarray | None = None,
+                 chunk: int = 100):
+        ca = _casadi()
+        if not hasattr(model, "casadi_regressor"):
+            raise ExcitationError(f"{model.ROBOT}: the model has no casadi_regressor() (use a generated package: "
+                                  "symoro_gen.load_model)")
+        self.n, self.nb, self.m = int(model.N_JOINTS), len(model.BASE_NAMES), int(basis.m)
+        n = self.n
+        qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
+        Y = model.casadi_regressor()(qs, dqs, ddqs)
+        J = ca.jacobian(ca.vec(Y), ca.vertcat(qs, dqs, ddqs))  # (n nb, 3n), vec column-major
+        self.P, self.D, self.A = basis.matrices(t)
+        self.N = len(t)
+        self.chunk = int(min(chunk, self.N))
+        self.f = ca.Function("YJ", [qs, dqs, ddqs], [Y, J]).map(self.chunk)
+        self.chi_b = None if chi_b is None else np.asarray(chi_b, float)
+
+    def __call__(self, X: np.ndarray):
+        """``M`` (nb, nb), ``dM`` (m, n, nb, nb) (``dM[k, j] = dM/dX[k, j]``) and, with ``chi_b``, the
+        torques (N, n) and their derivative (N, n, m, n)."""
+        n, nb, m, N, c = self.n, self.nb, self.m, self.N, self.chunk
+        q, dq, ddq = self.P @ X, self.D @ X, self.A @ X
+        M = np.zeros((nb, nb))
+        G = np.zeros((m, n, nb, nb))
+        tau = dtau = None
+        if self.chi_b is not None:
+            tau, dtau = np.zeros((N, n)), np.zeros((N, n, m, n))
+        for s0 in range(0, N, c):
+            idx = np.arange(s0, s0 + c)
+            valid = idx < N
+            idx = np.minimum(idx, N - 1)  # the last chunk is padded by repeating the last sample
+            Yc, Jc = self.f(q[idx].T, dq[idx].T, ddq[idx].T)
+            Ys = Yc.full().reshape(n, c, nb).transpose(1, 0, 2)[valid]  # (S, n, nb)
+            # Jc (n nb, 3n c): sample s, variable v -> column s 3n + v; rows vec(Y) = b n + r
+            dY = Jc.full().reshape(nb, n, c, 3 * n).transpose(2, 3, 1, 0)[valid]  # (S, 3n, n, nb)
+            M += np.einsum("sra,srb->ab", Ys, Ys)
+            H = np.matmul(Ys.transpose(0, 2, 1)[:, None], dY)  # (S, 3n, nb, nb): Y_s^T dY_s/dz_v
+            rows = idx[valid]
+            for w, B in enumerate((self.P, self.D, self.A)):
+                Hw = H[:, w * n:(w + 1) * n].reshape(len(rows), n * nb * nb)
+                G += (B[rows].T @ Hw).reshape(m, n, nb, nb)
+            if tau is not None:
+                tau[rows] = Ys @ self.chi_b
+                dT = dY @ self.chi_b  # (S, 3n, n): d tau_s / d z_v
+                for w, B in enumerate((self.P, self.D, self.A)):
+                    # dtau[s, r, k, j] += B[s, k] dT[s, w n + j, r]
+                    dtau[rows] += np.einsum("sk,sjr->srkj", B[rows], dT[:, w * n:(w + 1) * n])
+        dM = (G + G.transpose(0, 1, 3, 2)) / N
+        return M / N, dM, tau, dtau
+
+
+def _cond2(M: np.ndarray) -> float:
+    ev = np.linalg.eigvalsh(M)
+    return float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+
+
+def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.ndarray, t_out: np.ndarray,
+                      t_con: np.ndarray, *, iterations: int = 30, margin: float = 0.01, chi_b=None,
+                      delta: float = 0.05, delta_min: float = 1e-4, delta_max: float = 0.5, check_times=None,
+                      block: int = 16) -> tuple[np.ndarray, list[dict]]:
+    """Lower the TRUE condition number of a design by sequential semidefinite programming.
+
+    The smooth power-mean criterion of the IPOPT stage is loose at the optimum of an eigenvalue problem,
+    where the extreme eigenvalues of ``M = W^T W / N`` coalesce into clusters and ``cond`` is not
+    differentiable (Overton 1992, "Large-scale optimization of eigenvalues", SIAM J. Optim. 2(1); Lewis
+    & Overton 1996, "Eigenvalue optimization", Acta Numerica 5). Each iteration linearises the
+    *matrix* ``M(X + D) ~ M(X) + sum_kj D_kj dM/dX_kj`` (not its eigenvalues, so that clusters are
+    handled; :class:`_Linearisation`, from the generated CasADi regressor) and minimises the ratio
+    ``lambda_max / lambda_min`` of the linearised matrix by Dinkelbach's parametric form (Dinkelbach
+    1967, "On nonlinear fractional programming", Management Science 13(7)): the convex SDP
+
+        minimise  lambda_max(M_lin(D)) - rho lambda_min(M_lin(D)),   rho = cond(W)^2 at X
+
+    with ``M_lin`` compressed to the invariant subspaces of the two clusters (the eigenvectors of ``M(X)``
+    whose eigenvalues are within a factor of 2 of ``lambda_max``, resp. ``lambda_min``, at most ``block``
+    each: Overton's active eigenspaces, which keep the SDP small for any number of base parameters),
+    subject to the position, velocity and acceleration limits of ``X + D`` on the grid ``t_con``
+    (tightened by ``margin``; a bound the current design already exceeds is relaxed to its current
+    value), the sign of every moving output velocity kept (the Coulomb columns ``sign(dq)`` are piecewise
+    constant: a velocity may fall to half its value, not cross zero, so that the linearisation holds), with
+    ``chi_b`` and ``limits.tau_max`` the linearised torque limits at the output samples, and the
+    trust region ``|D_kj| <= delta s_kj`` (``s_kj``: the change of coefficient ``k`` alone that spans a
+    full limit of joint ``j``). Solved by cvxpy with Clarabel. The step is accepted when the true cond
+    on ``t_out`` decreases and every limit holds on ``t_out`` and on ``check_times`` (default: 10x denser
+    than ``t_out``); the radius follows the usual trust-region rule on the ratio of actual to predicted
+    decrease (Conn, Gould & Toint 2000, "Trust-region methods", alg. 6.1.1). Stops after ``iterations``
+    SDPs, when ``delta < delta_min`` or when the SDP predicts no decrease.
+
+    Returns the refined design (never of larger cond than ``X``) and the history of the iterations
+    (``cond`` at the start of each, ``delta``, ``predicted`` and ``actual`` decrease of ``cond^2``,
+    ``accepted``, ``status`` of the SDP).
+    """
+    import cvxpy as cp
+
+    n, nb, m = limits.n, len(model.BASE_NAMES), basis.m
+    X = np.asarray(X, float).copy()
+    cb = None if chi_b is None or limits.tau_max is None else np.asarray(chi_b, float)
+    lin = _Linearisation(model, basis, t_out, cb)
+    check_times = dense_times(t_out, float(t_out[-1])) if check_times is None else check_times
+    lim = limits.shrunk(margin)
+    Pc, Dc, Ac = basis.matrices(t_con)
+    Do = basis.matrices(t_out)[1]
+    with np.errstate(divide="ignore"):
+        h = (limits.q_max - limits.q_min) / 2
+        scale = np.minimum.reduce([h[None] / np.abs(Pc).max(0)[:, None], limits.dq_max[None] / np.abs(Dc).max(0)[:, None],
+                                   limits.ddq_max[None] / np.abs(Ac).max(0)[:, None]])  # (m, n)
+    scale = np.where(np.isfinite(scale), scale, 0.0)
+
+    def feasible(Xc: np.ndarray) -> bool:
+        q, dq, ddq = basis_eval(basis, Xc, t_out)
+        tau = None if cb is None else np.asarray(model.regressor(q, dq, ddq)) @ cb
+        return bool(check_limits(limits, q, dq, ddq, tau)["ok"] and _inside(basis, limits, Xc, check_times))
+
+    def cond2(Xc: np.ndarray) -> float:
+        return stacked_cond(model, *basis_eval(basis, Xc, t_out)) ** 2
+
+    def compress(dM: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """``U^T dM_i U`` of every design variable i, as the columns of a (k^2, m n) matrix."""
+        k = U.shape[1]
+        R = (dM.reshape(m * n * nb, nb) @ U).reshape(m * n, nb, k)
+        return np.einsum("ax,iay->ixy", U, R).reshape(m * n, k * k).T
+
+    history: list[dict] = []
+    M0, dM, tau0, dtau = lin(X)
+    c2 = _cond2(M0)
+    for it in range(int(iterations)):
+        if delta < delta_min:
+            break
+        dq_out = Do @ X
+        # the eigenspaces of the two clusters (Overton 1992): the SDP sees M_lin compressed to the eigenvectors of
+        # M(X) within a factor of 2 of lambda_max and of lambda_min (at most `block` each)
+        w, Q = np.linalg.eigh(M0)
+        top = np.flatnonzero(w >= 0.5 * w[-1])[-block:]
+        bot = np.flatnonzero(w <= 2.0 * w[0])[:block]
+        U, V = Q[:, top], Q[:, bot]
+        ku, kv = len(top), len(bot)
+        BU, BV = compress(dM, U) / w[-1], compress(dM, V) / w[0]
+        d = cp.Variable(m * n)
+        smax, smin = cp.Variable(), cp.Variable()
+        Dm = cp.reshape(d, (m, n), order="C")
+        MU = np.diag(w[top] / w[-1]) + cp.reshape(BU @ d, (ku, ku), order="C")
+        MV = np.diag(w[bot] / w[0]) + cp.reshape(BV @ d, (kv, kv), order="C")
+        cons = [smax * np.eye(ku) - MU >> 0, MV - smin * np.eye(kv) >> 0, cp.abs(d) <= delta * scale.reshape(-1)]
+        for Bm, lo, hi in ((Pc, lim.q_min, lim.q_max), (Dc, -lim.dq_max, lim.dq_max), (Ac, -lim.ddq_max, lim.ddq_max)):
+            cur = Bm @ X
+            cons += [Bm @ Dm <= np.maximum(hi - cur, 0.0), Bm @ Dm >= np.minimum(lo - cur, 0.0)]
+        # the Coulomb columns sign(dq) are piecewise constant: the sign of every moving output sample is kept,
+        # so that the linearisation holds (a velocity may halve towards zero, not cross it)
+        for j in range(n):
+            sg = np.sign(dq_out[:, j])
+            mv = sg != 0
+            if mv.any():
+                floor = 0.5 * np.minimum(np.abs(dq_out[mv, j]), 0.01 * limits.dq_max[j])
+                cons.append(cp.multiply(sg[mv], Do[mv] @ Dm[:, j]) >= floor - np.abs(dq_out[mv, j]))
+        if cb is not None:
+            T = dtau.reshape(-1, m * n)
+            cur = tau0.reshape(-1)
+            tm = np.tile(lim.tau_max, len(t_out))
+            cons += [T @ d <= np.maximum(tm - cur, 0.0), T @ d >= np.minimum(-tm - cur, 0.0)]
+        # Dinkelbach: lambda_max - rho lambda_min with rho = lambda_max / lambda_min at X, divided by lambda_max
+        # (each block scaled by its own extreme eigenvalue, so the SDP's data are O(1)); 0 at D = 0
+        prob = cp.Problem(cp.Minimize(smax - smin), cons)
+        rec: dict = {"iteration": it, "cond": math.sqrt(c2), "delta": delta, "block": [ku, kv]}
+        try:
+            prob.solve(solver="CLARABEL")
+            status = prob.status
+        except cp.error.SolverError as e:  # pragma: no cover - numerical failure of the solver
+            status = f"solver error: {e}"
+        rec["status"] = status
+        if d.value is None or status not in ("optimal", "optimal_inaccurate"):
+            rec.update(accepted=False, predicted=0.0, actual=0.0)
+            history.append(rec)
+            delta /= 4
+            continue
+        D = np.asarray(d.value).reshape(m, n)
+        lu = np.linalg.eigvalsh(np.diag(w[top]) + (BU @ d.value).reshape(ku, ku) * w[-1])[-1]
+        lv = np.linalg.eigvalsh(np.diag(w[bot]) + (BV @ d.value).reshape(kv, kv) * w[0])[0]
+        pred = float(c2 - (lu / lv if lv > 0 else math.inf))
+        rec["predicted"] = pred
+        if not pred > 1e-8 * c2:
+            rec.update(accepted=False, actual=0.0)
+            history.append(rec)
+            break  # the linearised problem sees no descent: a stationary point of the ratio
+        Xn = X + D
+        c2n = cond2(Xn)
+        ok = feasible(Xn)
+        actual = c2 - c2n
+        rec["actual"] = actual
+        rho = actual / pred
+        accepted = bool(ok and actual > 0)
+        rec["accepted"] = accepted
+        history.append(rec)
+        step = float(np.max(np.abs(D) / np.where(scale > 0, scale, 1.0)))
+        if accepted:
+            X = Xn
+            M0, dM, tau0, dtau = lin(X)
+            c2 = _cond2(M0)
+        if not ok or rho < 0.25:
+            delta = 0.5 * min(delta, step)
+        elif rho > 0.75 and step >= 0.99 * delta:
+            delta = min(2 * delta, delta_max)
+    history.append({"iteration": len(history), "cond": math.sqrt(c2), "delta": delta, "final": True})
+    return X, history
+
+
 def output_times(duration: float, rate: float) -> np.ndarray:
     """``0, 1/rate, ..., duration`` (the last sample at ``duration``)."""
     N = round(duration * rate)
@@ -683,7 +895,7 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
                         criterion: str = "cond", starts: int = 4, seed: int = 0, chi_b=None,
                         samples: int | None = None, max_iter: int = 200, margin: float = 0.01,
                         pool: int | None = None, progress=None, powers=None, structured: int = 0,
-                        initial=()) -> ExcitationResult:
+                        initial=(), refine: int = 0) -> ExcitationResult:
     """Optimise an excitation trajectory (IPOPT from ``starts`` seeded random feasible designs).
 
     Parameters
@@ -716,6 +928,9 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
         ``criterion="cond"``: the powers ``p`` of the smooth criterion run in turn from each start,
         each stage warm-started from the previous one (continuation; default :data:`COND_POWERS`),
         ``max_iter`` IPOPT iterations each.
+    refine : int
+        ``criterion="cond"``: at most this many iterations of :func:`refine_excitation` (sequential
+        SDP on the true cond, trust region) applied to each start's IPOPT result; 0 skips it.
 
     Returns
     -------
@@ -794,8 +1009,20 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
                         dense_times(t_out, duration)) if not _inside(basis, limits, X, dense_times(t_out, duration)) else X
         q, dq, ddq = basis_eval(basis, X, t_out)
         c = stacked_cond(model, q, dq, ddq)
-        records.append({"start": s, "cond_start": cond0, "cond": c, "status": status, "iterations": iters,
-                        "powers": list(stages), "cond_stages": stage_conds})
+        rec = {"start": s, "cond_start": cond0, "cond": c, "status": status, "iterations": iters,
+               "powers": list(stages), "cond_stages": stage_conds}
+        if refine and criterion == "cond":
+            tr = time.perf_counter()
+            X_r, hist = refine_excitation(model, basis, limits, X, t_out, t_con, iterations=int(refine), margin=margin,
+                                          chi_b=cb, check_times=dense_times(t_out, duration))
+            c_r = stacked_cond(model, *basis_eval(basis, X_r, t_out))
+            rec.update(cond_ipopt=c, cond=min(c, c_r), refine_sdps=len(hist) - 1,
+                       refine_accepted=sum(1 for h in hist if h.get("accepted")),
+                       refine_conds=[h["cond"] for h in hist],
+                       refine_time=time.perf_counter() - tr)
+            if c_r < c:
+                X, c = X_r, c_r
+        records.append(rec)
         if progress is not None:
             progress(s + 1, int(starts), c)
         if best is None or c < best[0]:
@@ -969,6 +1196,9 @@ def add_excite_parser(sub) -> None:
     e.add_argument("--max-iter", type=int, default=200, help="IPOPT iterations per start")
     e.add_argument("--samples", type=int, default=None, help="samples of the criterion (default from the size of the problem)")
     e.add_argument("--criterion", choices=("cond", "logdet"), default="cond")
+    e.add_argument("--refine", type=int, default=0, metavar="N",
+                   help="cond criterion: then at most N sequential-SDP iterations on the true cond (cvxpy + Clarabel, "
+                        "trust region) from each start's IPOPT result; 0 (default) skips it")
     e.add_argument("--noise", type=float, default=1.0, help="torque-noise standard deviation for the predicted %%sigma [N m]")
     e.add_argument("--no-torque-limits", action="store_true", help="ignore tau_max even with nominal parameters")
     e.add_argument("--json", help="write the figures (cond, limits_ok, predicted sigma...) as JSON here")
@@ -989,6 +1219,8 @@ def cmd_excite(args) -> int:
     lim = limits_of(robot, n)
     if args.duration <= 0 or args.rate <= 0:
         raise ExcitationError("--duration and --rate must be positive")
+    if args.refine < 0:
+        raise ExcitationError(f"--refine {args.refine}: must be a number of iterations >= 0")
     if args.kind == "fourier":
         f = args.base_frequency or 1.0 / args.duration
         periods = args.duration * f
@@ -1009,7 +1241,7 @@ def cmd_excite(args) -> int:
         chi_b = np.asarray(model.base_parameters(np.asarray(nominal)), float)
     res = optimise_excitation(model, basis, lim, args.duration, rate=args.rate, criterion=args.criterion,
                               starts=args.starts, seed=args.seed, max_iter=args.max_iter, samples=args.samples,
-                              pool=args.pool, structured=args.structured_starts,
+                              pool=args.pool, structured=args.structured_starts, refine=args.refine,
                               chi_b=None if args.no_torque_limits else chi_b)
     write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
     sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)
