@@ -1,6 +1,7 @@
 """Excitation design (issue 11 section 1): robot-file limits, the trajectory bases, the optimiser
 against random trajectories, limits at every sample of a dense resampling, and the CLI contract
 (CSV readable, and identifying simulated data on it recovers the truth)."""
+import itertools
 import json
 import math
 from pathlib import Path
@@ -354,7 +355,7 @@ def test_refinement_lowers_the_true_cond_where_the_smooth_criterion_stops_short(
     # the true cond at the start of every SDP iteration never increases
     conds = st["refine_conds"]
     assert conds[0] == pytest.approx(plain.cond, rel=1e-9) and conds[-1] == pytest.approx(refined.cond, rel=1e-9)
-    assert all(b <= a for a, b in zip(conds, conds[1:])), conds
+    assert all(b <= a for a, b in itertools.pairwise(conds)), conds
 
 
 def test_refinement_of_a_converged_spline_design_never_increases_cond(scara, scara_limits):
@@ -472,7 +473,7 @@ def test_cli_point_to_point(cli, tmp_path, scara):
     _, model = scara
     csv, js = tmp_path / "p2p.csv", tmp_path / "p2p.json"
     cli("--quiet", "excite", "scara", "--kind", "p2p", "-o", csv, "--duration", "3", "--via-points", "4",
-        "--rate", "50", "--starts", "1", "--max-iter", "20", "--json", js, rc=0)
+        "--rate", "50", "--starts", "1", "--max-iter", "20", "--refine", "4", "--json", js, rc=0)
     out = json.loads(js.read_text())
     assert out["kind"] == "p2p" and out["limits_ok"] is True
     data = np.loadtxt(csv, delimiter=",", skiprows=1)
@@ -514,7 +515,8 @@ def test_cli_report_html(cli, tmp_path, scara):
     _, model = scara
     csv, js, rep = tmp_path / "t.csv", tmp_path / "t.json", tmp_path / "t.html"
     cli("--quiet", "excite", "scara", "-o", csv, "--duration", "4", "--harmonics", "3", "--rate", "50",
-        "--starts", "1", "--pool", "3", "--max-iter", "20", "--noise", "0.5", "--json", js, "--report", rep, rc=0)
+        "--starts", "1", "--pool", "3", "--max-iter", "20", "--refine", "0", "--noise", "0.5", "--json", js, "--report", rep,
+        rc=0)
     html = rep.read_text()
     out = json.loads(js.read_text())
     assert "data:image/png;base64," in html and "http" not in html.replace("http-equiv", "")
