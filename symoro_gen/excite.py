@@ -776,6 +776,8 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
     (``cond`` at the start of each, ``delta``, ``predicted`` and ``actual`` decrease of ``cond^2``,
     ``accepted``, ``status`` of the SDP).
     """
+    if not _has_cvxpy():
+        raise ExcitationError("the SDP refinement needs cvxpy and clarabel: pip install 'symoro-gen[physical]'")
     import cvxpy as cp
 
     n, nb, m = limits.n, len(model.BASE_NAMES), basis.m
@@ -1183,6 +1185,12 @@ def excitation_report(result: ExcitationResult, model: IdentificationModel, *, n
     return Report(title or f"Excitation trajectory: {model.ROBOT}", tuple(blocks), footer=f"symoro_gen {__version__}")
 
 
+def _has_cvxpy() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("cvxpy") is not None and importlib.util.find_spec("clarabel") is not None
+
+
 def add_excite_parser(sub) -> None:
     """Register ``symoro-gen excite``."""
     e = sub.add_parser("excite", help="optimal excitation trajectory (Fourier or point-to-point) -> CSV t,q,dq,ddq")
@@ -1208,9 +1216,10 @@ def add_excite_parser(sub) -> None:
     e.add_argument("--max-iter", type=int, default=200, help="IPOPT iterations per start")
     e.add_argument("--samples", type=int, default=None, help="samples of the criterion (default from the size of the problem)")
     e.add_argument("--criterion", choices=("cond", "logdet"), default="cond")
-    e.add_argument("--refine", type=int, default=REFINE_ITERATIONS, metavar="N",
+    e.add_argument("--refine", type=int, default=None, metavar="N",
                    help="cond criterion: then at most N sequential-SDP iterations on the true cond (cvxpy + Clarabel, "
-                        "trust region) from each start's IPOPT result (default %(default)s; 0 skips it)")
+                        f"trust region) from each start's IPOPT result (default {REFINE_ITERATIONS} when cvxpy is "
+                        "installed, the 'physical' extra; 0 skips it)")
     e.add_argument("--noise", type=float, default=1.0, help="torque-noise standard deviation for the predicted %%sigma [N m]")
     e.add_argument("--no-torque-limits", action="store_true", help="ignore tau_max even with nominal parameters")
     e.add_argument("--json", help="write the figures (cond, limits_ok, predicted sigma...) as JSON here")
@@ -1231,8 +1240,17 @@ def cmd_excite(args) -> int:
     lim = limits_of(robot, n)
     if args.duration <= 0 or args.rate <= 0:
         raise ExcitationError("--duration and --rate must be positive")
+    refine_note = None
+    if args.refine is None:
+        args.refine = REFINE_ITERATIONS if _has_cvxpy() else 0
+        if not args.refine:
+            refine_note = ("note: cvxpy is not installed, the SDP refinement of the true cond was skipped "
+                           "(pip install 'symoro-gen[physical]')")
     if args.refine < 0:
         raise ExcitationError(f"--refine {args.refine}: must be a number of iterations >= 0")
+    if args.refine and not _has_cvxpy():
+        raise ExcitationError(f"--refine {args.refine} needs cvxpy and clarabel: pip install 'symoro-gen[physical]' "
+                              "(or --refine 0)")
     if args.kind == "fourier":
         f = args.base_frequency or 1.0 / args.duration
         periods = args.duration * f
@@ -1284,6 +1302,8 @@ def cmd_excite(args) -> int:
             print("SDP refinement of the true cond: " + "; ".join(
                 f"{st['cond_ipopt']:.4g} -> {st['cond']:.4g} ({st['refine_accepted']} of {st['refine_sdps']} steps)"
                 for st in refined))
+        if refine_note:
+            print(refine_note)
         if lim.defaulted:
             print(f"note: the robot file has no {', '.join(lim.defaulted)} in [limits]; defaults used")
     return 0 if res.limits_ok else 3

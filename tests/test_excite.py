@@ -506,6 +506,21 @@ def test_cli_spline(cli, tmp_path, scara):
                                                      data[:, 2 * n + 1:]), rel=1e-9)
 
 
+def test_cli_refinement_without_cvxpy(cli, tmp_path, monkeypatch):
+    """cvxpy is an extra: without it the default skips the refinement with a note, an explicit --refine is a
+    one-line error naming the option, and nothing is written."""
+    import symoro_gen.excite as ex
+
+    monkeypatch.setattr(ex, "_has_cvxpy", lambda: False)
+    csv, js = tmp_path / "t.csv", tmp_path / "t.json"
+    r = cli("excite", "scara", "-o", csv, "--duration", "4", "--harmonics", "3", "--rate", "50", "--starts", "1",
+            "--pool", "1", "--max-iter", "5", "--json", js, rc=0)
+    assert "refinement of the true cond was skipped" in r.out
+    assert all("refine_sdps" not in st for st in json.loads(js.read_text())["starts"])
+    r = cli("excite", "scara", "-o", tmp_path / "u.csv", "--refine", "3", rc=2)
+    assert "--refine 3 needs cvxpy" in r.err and not (tmp_path / "u.csv").exists()
+
+
 def test_cli_report_html(cli, tmp_path, scara):
     """``excite --report``: one self-contained page with the trajectory plot, the cond of the CSV and the
     predicted sigma of every base parameter (those of the JSON, i.e. noise * sqrt(diag((W'W)^-1)))."""
