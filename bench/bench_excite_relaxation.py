@@ -16,6 +16,13 @@ with CasADi gradients). Each round prints
   if ``r`` is the global maximum of the ratio over the state box; found by sampling plus local
   maximisation, so rigorous only as far as that search is global.
 
+With ``--stationary`` the distributions must also satisfy the stationarity moments of every periodic or
+rest-to-rest trajectory (``symoro_gen.excite.stationarity_moments``: the mean of ``d/dt f(q, dq)`` is 0 for
+the test functions ``f``, held to ``--moment-tol`` of their scale), the first round seeded with the
+samples of ``--trajectories`` random Fourier trajectories (which satisfy them). ``--verify N`` re-prices
+the final duals on N fresh random states of another seed plus 200 local searches
+(``relaxation_verify``) and prints the lower end they still give.
+
 At the end: the bracket ``[max(dual, cond_lower_bound), primal]`` (the rigorous bound of
 ``symoro_gen.excite.cond_lower_bound`` holds for distributions too: both of its halves are per-sample
 arguments) against the issue's target (best of the 50 random Fourier trajectories of
@@ -23,6 +30,7 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
 
     PYTHONPATH=. python bench/bench_excite_relaxation.py [--robot lwr4|rx90] [--atoms 400] [--rounds 60]
         [--budget SECONDS] [--tol 0.02] [--fresh 30000] [--starts 40] [--add 60] [--seed 0]
+        [--stationary [--moment-tol 0.01] [--trajectories 10]] [--verify 300000]
 """
 from __future__ import annotations
 
@@ -37,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_excite import TARGET_RATIO, random_baseline
 
-from symoro_gen.excite import cond_lower_bound, limits_of, relaxation_bracket
+from symoro_gen.excite import cond_lower_bound, limits_of, relaxation_bracket, relaxation_verify
 from symoro_gen.loader import model_for
 
 
@@ -52,6 +60,11 @@ def main(argv=None) -> int:
     ap.add_argument("--starts", type=int, default=40, help="L-BFGS-B starts per round (best random states; +1/4 random)")
     ap.add_argument("--add", type=int, default=60, help="best random states added per round")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--stationary", action="store_true", help="add the stationarity moments of trajectories")
+    ap.add_argument("--moment-tol", type=float, default=0.01, help="|E[m]| <= tol x scale for each moment")
+    ap.add_argument("--trajectories", type=int, default=None,
+                    help="random Fourier trajectories whose samples join the first round (default 10 with --stationary)")
+    ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
     a = ap.parse_args(argv)
     robot, model = model_for(a.robot)
     lim = limits_of(robot)
@@ -65,22 +78,32 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     b = relaxation_bracket(model, lim, atoms=a.atoms, rounds=a.rounds, fresh=a.fresh, starts=a.starts, add=a.add,
-                           tol=a.tol, time_budget=a.budget, seed=a.seed, progress=show)
+                           tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
+                           moment_tol=a.moment_tol,
+                           trajectories=(10 if a.stationary else 0) if a.trajectories is None else a.trajectories,
+                           progress=show)
     wall = time.perf_counter() - t0
     rand, _ = random_baseline(model, lim)
     target = min(rand) / TARGET_RATIO
     bound = cond_lower_bound(model, lim)
     lower, how = b.lower, "dual estimate"
+    if a.verify:
+        tv = time.perf_counter()
+        r_v, lower_v = relaxation_verify(model, lim, b, states=a.verify, starts=200, seed=a.seed + 1)
+        print(f"{a.robot}: verification on {a.verify} fresh states + 200 local searches: r {b.r:.4f} -> {r_v:.4f}, "
+              f"dual estimate {b.lower:.3f} -> {lower_v:.3f} ({time.perf_counter() - tv:.0f} s)")
+        lower, how = lower_v, "dual estimate, verified"
     if bound is not None and bound.bound > lower:
         lower, how = bound.bound, "rigorous cond_lower_bound (above the dual estimate)"
-    print(f"{a.robot}: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
+    kind = (f"stationary (moment tol {a.moment_tol:g})" if a.stationary else "plain")
+    print(f"{a.robot} [{kind}]: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
           f"the best distribution has {len(b.weights)} states of positive weight)")
     if bound is not None:
         print(f"rigorous bound over every trajectory: {bound.describe()}")
     print(f"{a.robot}: relaxation's minimum in [{lower:.3f}, {b.upper:.3f}] (gap {b.upper / lower - 1:.1%}; lower end: "
           f"{how}; upper end: an explicit distribution of states)")
     verdict = ("the target is BELOW the lower end: no trajectory reaches it" +
-               (" (as far as the dual ratio's maximisation is global)" if how == "dual estimate" else "")
+               (" (as far as the dual ratio's maximisation is global)" if how.startswith("dual") else "")
                if lower > target else
                "the target is ABOVE the relaxation's upper end: a distribution of states reaches it "
                "(a trajectory still has to come close)" if b.upper <= target else

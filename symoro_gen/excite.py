@@ -80,6 +80,9 @@ __all__ = [
     "output_times",
     "predicted_sigma",
     "random_trajectory",
+    "relaxation_verify",
+    "stationarity_moments",
+    "stationarity_scales",
     "refine_excitation",
     "stacked_cond",
     "write_trajectory_csv",
@@ -1342,6 +1345,13 @@ class RelaxationBracket:
     over the state box (random states plus multistart L-BFGS-B): a lower bound on the cond of every
     trajectory if ``r`` is the true maximum, i.e. rigorous only as far as that maximisation is global.
     ``signs``: the ``sign(dq)`` used in each state's Coulomb columns (see :func:`relaxation_rows`).
+
+    With ``stationary`` the distributions are further restricted to those whose stationarity moments
+    (:func:`stationarity_moments`, normalised by :func:`stationarity_scales`) are within ``moment_tol``
+    of zero, as every periodic trajectory's (and every one that starts and ends at rest at the same
+    configuration); ``lam`` and ``c0`` are the multipliers of those constraints in the dual that gives
+    ``lower`` (see :class:`_DualPricer`), and ``lower`` then bounds the cond of every such trajectory.
+    ``A, B, r, lam, c0`` are those of the round that gave ``lower``.
     """
 
     lower: float
@@ -1353,6 +1363,10 @@ class RelaxationBracket:
     A: np.ndarray
     B: np.ndarray
     r: float
+    stationary: bool = False
+    moment_tol: float = 0.0
+    lam: np.ndarray | None = None
+    c0: float = 0.0
 
 
 def _coulomb_columns(model: IdentificationModel) -> list[tuple[int, int]]:
@@ -1435,10 +1449,174 @@ def _ratio(W: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return num / np.maximum(den, 1e-300)
 
 
+def stationarity_moments(q, dq, ddq, lib: Any = np):
+    """The time derivatives ``d/dt f(q, dq) = f_q dq + f_dq ddq`` of the test functions ``f`` =
+    ``q_j``, ``dq_j``, ``dq_j^2/2``, ``q_j^2/2``, ``cos q_j``, ``sin q_j`` (per joint), ``q_i dq_j``,
+    ``cos q_i dq_j``, ``sin q_i dq_j`` (every pair) and ``dq_i dq_j`` (``i < j``).
+
+    Over one period of a periodic trajectory, or any trajectory that starts and ends in the same
+    state (the rest-to-rest designs of ``excite``), the mean of ``d/dt f`` is ``(f(end) - f(start)) / T
+    = 0``: the moment conditions that distinguish the sample distribution of a trajectory from an
+    arbitrary distribution of states (the occupation-measure constraints of Lasserre, Henrion, Prieur
+    and Trelat 2008, [LHPT08]). ``q, dq, ddq``: ``(k, n)`` arrays with ``lib = numpy`` (returns
+    ``(k, m)``), or CasADi ``(n, 1)`` vectors with ``lib = casadi`` (returns an ``(m, 1)`` vector).
+    """
+    if lib is np:
+        q, dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (q, dq, ddq))
+        n = q.shape[1]
+
+        def c(x, j):
+            return x[:, j]
+    else:
+        n = int(q.shape[0])
+
+        def c(x, j):
+            return x[j]
+    out = []
+    for j in range(n):
+        qj, vj, aj = c(q, j), c(dq, j), c(ddq, j)
+        out += [vj, aj, vj * aj, qj * vj, -lib.sin(qj) * vj, lib.cos(qj) * vj]
+    for i in range(n):
+        qi, vi = c(q, i), c(dq, i)
+        si, ci = lib.sin(qi), lib.cos(qi)
+        for j in range(n):
+            vj, aj = c(dq, j), c(ddq, j)
+            out += [vi * vj + qi * aj, -si * vi * vj + ci * aj, ci * vi * vj + si * aj]
+            if i < j:
+                out.append(c(ddq, i) * vj + vi * aj)
+    return np.stack(out, axis=1) if lib is np else lib.vertcat(*out)
+
+
+def stationarity_scales(limits: Limits) -> np.ndarray:
+    """The size of each term of :func:`stationarity_moments` over the limits' box (the sum of the
+    largest magnitudes of its products): the moment ``k`` is held to ``|E[m_k]| <= tol * scale_k``."""
+    qa = np.maximum(np.abs(limits.q_min), np.abs(limits.q_max))
+    v, a = limits.dq_max, limits.ddq_max
+    n = limits.n
+    out = []
+    for j in range(n):
+        out += [v[j], a[j], v[j] * a[j], qa[j] * v[j], v[j], v[j]]
+    for i in range(n):
+        for j in range(n):
+            out += [v[i] * v[j] + qa[i] * a[j], v[i] * v[j] + a[j], v[i] * v[j] + a[j]]
+            if i < j:
+                out.append(a[i] * v[j] + v[i] * a[j])
+    return np.asarray(out, float)
+
+
+class _DualPricer:
+    """The dual ratio of the relaxation SDP at duals ``A, B`` (and, with the stationarity constraints,
+    their multipliers ``lam`` and ``c0``)::
+
+        N(s) / D(s),  N(s) = tr(A G(s)) - lam . m(s) / scale + c0,  D(s) = tr(B G(s))
+
+    Weak duality: if ``N(s) <= r D(s)`` for every state ``s`` of the box, then for every distribution
+    ``M = E[G]`` with ``|E[m]| <= tol scale`` (and ``c0 >= tol sum |lam|``), ``lambda_min tr A <= tr(A M)
+    <= E[N] <= r tr(B M) <= r lambda_max tr B``: ``cond >= sqrt(tr A / (r tr B))``
+    (:func:`relaxation_dual_bound`). ``ratio`` evaluates it on states; ``local_max`` maximises it
+    by L-BFGS-B in the box from a state with its velocity signs held, gradients from the generated
+    CasADi model.
+    """
+
+    def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
+                 lam: np.ndarray | None = None, c0: float = 0.0, *, coulomb=None, jac=None):
+        self.model, self.limits, self.A, self.B = model, limits, A, B
+        self.lam, self.c0 = lam, float(c0)
+        self.n = limits.n
+        self.coul = _coulomb_columns(model) if coulomb is None else coulomb
+        self.scale = stationarity_scales(limits) if lam is not None else None
+        self.jac = jac if jac is not None else self.casadi_jacobian(model, self.n, lam is not None)
+        self.lo = np.concatenate([limits.q_min, -limits.dq_max, -limits.ddq_max])
+        self.hi = np.concatenate([limits.q_max, limits.dq_max, limits.ddq_max])
+
+    @staticmethod
+    def casadi_jacobian(model: IdentificationModel, n: int, moments: bool):
+        if not hasattr(model, "casadi_regressor"):
+            return None
+        ca = _casadi()
+        z = ca.SX.sym("z", 3 * n)
+        Y = model.casadi_regressor()(z[:n], z[n:2 * n], z[2 * n:])
+        out = [Y, ca.jacobian(ca.vec(Y), z)]  # vec: column-major
+        if moments:
+            m = stationarity_moments(z[:n], z[n:2 * n], z[2 * n:], lib=ca)
+            out += [m, ca.jacobian(m, z)]
+        return ca.Function("ratio_rows", [z], out)
+
+    def num_den(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None):
+        X = np.atleast_2d(X)
+        if W is None:
+            W = relaxation_rows(self.model, X, S, self.coul)
+        num = np.einsum("kia,ab,kib->k", W, self.A, W)
+        den = np.einsum("kia,ab,kib->k", W, self.B, W)
+        if self.lam is not None:
+            n = self.n
+            m = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / self.scale
+            num = num - m @ self.lam + self.c0
+        return num, den
+
+    def ratio(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
+        num, den = self.num_den(X, S, W)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.where(num > 0, np.inf, 0.0))
+
+    def local_max(self, x0: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, float]:
+        """Maximise the ratio from ``x0`` with the velocity signs ``s0`` (``dq_j`` in ``[0, dq_max]`` for
+        +1, ``[-dq_max, 0]`` for -1, ``0`` for 0)."""
+        from scipy.optimize import minimize
+
+        n, lo, hi = self.n, self.lo, self.hi
+        lo_s, hi_s = lo.copy(), hi.copy()
+        lo_s[n:2 * n] = np.where(s0 >= 0, 0.0, lo[n:2 * n])
+        hi_s[n:2 * n] = np.where(s0 <= 0, 0.0, hi[n:2 * n])
+        c, h = (hi_s + lo_s) / 2, np.maximum((hi_s - lo_s) / 2, 0.0)
+        free = h > 0
+        A, B, jac = self.A, self.B, self.jac
+
+        def f(u):
+            zz = c + h * u
+            if jac is None:
+                return -float(self.ratio(zz[None], s0[None])[0])
+            res = jac(zz)
+            w, J = np.array(res[0]), np.array(res[1])
+            for j, col in self.coul:
+                w[j, col] = s0[j]
+                J[col * n + j, :] = 0.0
+            num, den = float(np.sum(w * (w @ A))), float(np.sum(w * (w @ B)))
+            gnum = J.T @ (2 * (w @ A)).ravel(order="F")
+            gden = J.T @ (2 * (w @ B)).ravel(order="F")
+            if self.lam is not None:
+                lw = self.lam / self.scale
+                num += -float(np.array(res[2]).ravel() @ lw) + self.c0
+                gnum = gnum - np.array(res[3]).T @ lw
+            den = max(den, 1e-300)
+            return -num / den, -(gnum / den - num / den ** 2 * gden) * h
+
+        u0 = np.where(free, np.clip((x0 - c) / np.where(free, h, 1.0), -1, 1), 0.0)
+        bnds = [(-1.0, 1.0) if fr else (0.0, 0.0) for fr in free]
+        res = minimize(f, u0, jac=jac is not None, bounds=bnds, method="L-BFGS-B", options={"maxiter": 300})
+        x = c + h * res.x
+        return x, float(self.ratio(x[None], s0[None])[0])
+
+
+def _trajectory_states(limits: Limits, rng: np.random.Generator, k: int, samples: int = 200
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The samples of ``k`` random Fourier trajectories (5 harmonics, 10 s, ``samples`` per period)
+    within the limits: states whose uniform distribution satisfies the stationarity moments."""
+    basis = FourierBasis(5, 0.1)
+    t = np.arange(samples) * (10.0 / samples)
+    Xs = []
+    for _ in range(k):
+        q, dq, ddq = basis_eval(basis, random_trajectory(basis, limits, rng, t), t)
+        Xs.append(np.hstack([q, dq, ddq]))
+    X = np.vstack(Xs) if Xs else np.zeros((0, 3 * limits.n))
+    return X, np.sign(X[:, limits.n:2 * limits.n])
+
+
 def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int = 400, rounds: int = 30,
                        fresh: int = 30_000, starts: int = 40, add: int = 60, prune: float = 1e-6,
                        tol: float = 0.02, time_budget: float = math.inf, seed: int = 0,
-                       extra_states: np.ndarray | None = None, progress=None) -> RelaxationBracket:
+                       extra_states: np.ndarray | None = None, stationary: bool = False,
+                       moment_tol: float = 0.01, trajectories: int = 0, progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -1446,118 +1624,129 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         min kappa  s.t.  sum_i mu_i G_i >= I,  kappa I - sum_i mu_i G_i >= 0,  mu >= 0,
         G_i = W(s_i)^T W(s_i) / tr(W(s_i)^T W(s_i))
 
-    solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint)
-    and ``B`` (of the second, ``tr B = 1``) price new states: a state with ``tr(A G) > tr(B G)`` would
-    lower the objective. Each round keeps the states of weight > ``prune`` x the largest (plus the new
-    ones), and adds the ``add`` best of ``fresh`` random states and the local maxima (L-BFGS-B over the
-    box, the velocity signs fixed by the start, exact gradients from the generated CasADi model) of the
-    ratio ``tr(A G) / tr(B G)`` from the ``starts`` best random states and ``starts // 4`` random ones.
-    Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds or past ``time_budget`` seconds.
-    ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples) join the first round.
+    and, with ``stationary``, ``|sum_i mu_i m(s_i) / (tr_i scale)| <= moment_tol sum_i mu_i / tr_i``
+    (the stationarity moments of :func:`stationarity_moments`: every periodic or rest-to-rest
+    trajectory satisfies them, an arbitrary distribution of states does not).
+    Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
+    ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
+    (:class:`_DualPricer`): a state with ratio > 1 would lower the objective. Each round keeps the
+    states of weight > ``prune`` x the largest (plus the new ones), and adds the ``add`` best of
+    ``fresh`` random states and the local maxima of the ratio from the ``starts`` best random states
+    and ``starts // 4`` random ones. Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds
+    or past ``time_budget`` seconds. ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples) and
+    the samples of ``trajectories`` random Fourier trajectories join the first round (with
+    ``stationary`` they make it feasible).
     """
-    import time
-
     import cvxpy as cp
-    from scipy.optimize import minimize
 
     n, nb = limits.n, len(model.BASE_NAMES)
     rng = np.random.default_rng(seed)
     coul = _coulomb_columns(model)
-    lo = np.concatenate([limits.q_min, -limits.dq_max, -limits.ddq_max])
-    hi = np.concatenate([limits.q_max, limits.dq_max, limits.ddq_max])
     X, S = _random_states(rng, limits, atoms)
     if extra_states is not None:
         ex = np.asarray(extra_states, float)
         X, S = np.vstack([X, ex]), np.vstack([S, np.sign(ex[:, n:2 * n])])
-    jac = None
-    if hasattr(model, "casadi_regressor"):
-        ca = _casadi()
-        z = ca.SX.sym("z", 3 * n)
-        Y = model.casadi_regressor()(z[:n], z[n:2 * n], z[2 * n:])
-        jac = ca.Function("ratio_rows", [z], [Y, ca.jacobian(ca.vec(Y), z)])  # vec: column-major
-
-    def rows(Xs, Ss):
-        return relaxation_rows(model, Xs, Ss, coul)
-
-    def local_max(x0, s0, A, B):
-        """Maximise the ratio from x0 with the velocity signs s0 (dq_j in [0, dq_max] for +1, ...)."""
-        lo_s, hi_s = lo.copy(), hi.copy()
-        lo_s[n:2 * n] = np.where(s0 > 0, 0.0, lo[n:2 * n])
-        hi_s[n:2 * n] = np.where(s0 < 0, 0.0, np.where(s0 == 0, 0.0, hi[n:2 * n]))
-        lo_s[n:2 * n] = np.where(s0 == 0, 0.0, lo_s[n:2 * n])
-        c, h = (hi_s + lo_s) / 2, np.maximum((hi_s - lo_s) / 2, 0.0)
-        free = h > 0
-
-        def f(u):
-            zz = c + h * u
-            if jac is None:
-                w = rows(zz[None], s0[None])[0]
-                return -float(_ratio(w[None], A, B)[0])
-            y, J = jac(zz)
-            w, J = np.array(y), np.array(J)
-            for j, col in coul:
-                w[j, col] = s0[j]
-            num, den = float(np.sum(w * (w @ A))), float(np.sum(w * (w @ B)))
-            dnum, dden = 2 * (w @ A), 2 * (w @ B)
-            g = (J.T @ dnum.ravel(order="F")) / den - num / den ** 2 * (J.T @ dden.ravel(order="F"))
-            return -num / den, -g * h
-
-        u0 = np.where(free, np.clip((x0 - c) / np.where(free, h, 1.0), -1, 1), 0.0)
-        bnds = [(-1.0, 1.0) if fr else (0.0, 0.0) for fr in free]
-        res = minimize(f, u0, jac=jac is not None, bounds=bnds, method="L-BFGS-B", options={"maxiter": 300})
-        return c + h * res.x, -float(res.fun)
+    if trajectories:
+        Xt, St = _trajectory_states(limits, rng, trajectories)
+        X, S = np.vstack([X, Xt]), np.vstack([S, St])
+    jac = _DualPricer.casadi_jacobian(model, n, stationary)
+    scale = stationarity_scales(limits)
 
     t0 = time.perf_counter()
     hist: list[RelaxationRound] = []
     best_lower, best_upper = 0.0, math.inf
     best: dict[str, Any] = {}
+    dual_of: dict[str, Any] = {}
     for rd in range(rounds + 1):
-        W = rows(X, S)
+        W = relaxation_rows(model, X, S, coul)
         G = np.einsum("kia,kib->kab", W, W)
         tr = np.trace(G, axis1=1, axis2=2)
         ok = tr > 0
-        X, S, G, tr = X[ok], S[ok], G[ok], tr[ok]
+        X, S, W, G, tr = X[ok], S[ok], W[ok], G[ok], tr[ok]
         Gn = G / tr[:, None, None]
         t_sdp = time.perf_counter()
         mu, kap = cp.Variable(len(X), nonneg=True), cp.Variable()
         Mx = cp.reshape(Gn.reshape(len(X), -1).T @ mu, (nb, nb), order="C")
         Mx = (Mx + Mx.T) / 2
         c1, c2 = Mx >> np.eye(nb), kap * np.eye(nb) - Mx >> 0
-        cp.Problem(cp.Minimize(kap), [c1, c2]).solve(solver="CLARABEL")
+        cons = [c1, c2]
+        if stationary:
+            H = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / scale / tr[:, None]
+            mass = (1.0 / tr) @ mu
+            cp_pos, cp_neg = H.T @ mu - moment_tol * mass <= 0, -H.T @ mu - moment_tol * mass <= 0
+            cons += [cp_pos, cp_neg]
+        prob = cp.Problem(cp.Minimize(kap), cons)
+        try:
+            prob.solve(solver="CLARABEL")
+        except cp.error.SolverError as e:
+            raise ExcitationError(f"{model.ROBOT}: the relaxation SDP failed on round {rd} ({len(X)} states): {e}") \
+                from None
         if mu.value is None:
-            raise ExcitationError(f"{model.ROBOT}: the relaxation SDP failed on round {rd} ({len(X)} states)")
+            raise ExcitationError(f"{model.ROBOT}: the relaxation SDP failed on round {rd} ({len(X)} states): "
+                                  f"{prob.status}" + (" (no distribution of these states meets the stationarity "
+                                                      "moments: add trajectories=)" if stationary else ""))
         t_sdp = time.perf_counter() - t_sdp
         w = np.clip(np.asarray(mu.value), 0, None)
         ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", w, Gn))
         primal = math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
         A, B = _psd(np.asarray(c1.dual_value)), _psd(np.asarray(c2.dual_value))
+        lam, c0 = None, 0.0
+        if stationary:
+            nu_p = np.clip(np.asarray(cp_pos.dual_value, float), 0, None)
+            nu_n = np.clip(np.asarray(cp_neg.dual_value, float), 0, None)
+            lam, c0 = nu_p - nu_n, moment_tol * float(np.sum(nu_p + nu_n))
+        pricer = _DualPricer(model, limits, A, B, lam, c0, coulomb=coul, jac=jac)
         # pricing: the dual ratio over the current states, fresh random states and local maxima
         Xf, Sf = _random_states(rng, limits, fresh)
-        Wf = rows(Xf, Sf)
-        rf = _ratio(Wf, A, B)
-        r_atoms = float(_ratio(W[ok], A, B).max())
+        rf = pricer.ratio(Xf, Sf)
+        r_atoms = float(pricer.ratio(X, S, W).max())
         order = np.argsort(-rf)
         picks = list(order[:starts]) + list(rng.choice(len(Xf), starts // 4, replace=False))
-        loc = [local_max(Xf[i], Sf[i], A, B) for i in picks]
+        loc = [pricer.local_max(Xf[i], Sf[i]) for i in picks]
         r = max(r_atoms, float(rf.max()), max(v for _, v in loc))
-        dual = relaxation_dual_bound(A, B, r)
+        dual = relaxation_dual_bound(A, B, r) if np.isfinite(r) and r > 0 else 0.0
         keep = w > prune * w.max()
         hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
                                     t_sdp))
         if progress is not None:
             progress(hist[-1])
-        if dual > best_lower:
-            best_lower = dual
+        if dual > best_lower or not dual_of:
+            best_lower = max(best_lower, dual)
+            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0}
         if primal < best_upper:
             best_upper = primal
             pos = w > 0
-            best = {"states": X[pos], "signs": S[pos], "weights": w[pos] / tr[pos], "A": A, "B": B, "r": r}
+            best = {"states": X[pos], "signs": S[pos], "weights": w[pos] / tr[pos]}
         if best_upper <= best_lower * (1 + tol) or hist[-1].seconds > time_budget or rd == rounds:
             break
-        newX = [Xf[order[:add]]] + [np.array([x for x, v in loc if v > 1.0])] if any(v > 1.0 for _, v in loc) \
-            else [Xf[order[:add]]]
-        newS = [Sf[order[:add]]] + ([np.array([Sf[i] for i, (_, v) in zip(picks, loc) if v > 1.0])]
-                                     if any(v > 1.0 for _, v in loc) else [])
-        X, S = np.vstack([X[keep], *newX]), np.vstack([S[keep], *newS])
+        good = [(x, Sf[i]) for i, (x, v) in zip(picks, loc) if v > 1.0]
+        newX = [X[keep], Xf[order[:add]]] + ([np.array([x for x, _ in good])] if good else [])
+        newS = [S[keep], Sf[order[:add]]] + ([np.array([s for _, s in good])] if good else [])
+        X, S = np.vstack(newX), np.vstack(newS)
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
-                             best["A"], best["B"], best["r"])
+                             dual_of["A"], dual_of["B"], dual_of["r"], stationary, moment_tol if stationary else 0.0,
+                             dual_of["lam"], dual_of["c0"])
+
+
+def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: RelaxationBracket, *,
+                      states: int = 300_000, starts: int = 200, seed: int = 1, batch: int = 20_000) -> tuple[float, float]:
+    """Re-price the duals that gave ``bracket.lower`` on a search the bracket never ran: ``states``
+    fresh random states (another seed) and L-BFGS-B from the ``starts`` best of them. Returns
+    ``(r, bound)``: the largest ratio found (at least ``bracket.r``) and ``sqrt(tr A / (r tr B))``.
+    A ``bound`` well below ``bracket.lower`` says the bracket's search for ``r`` was not global."""
+    pricer = _DualPricer(model, limits, bracket.A, bracket.B, bracket.lam, bracket.c0)
+    rng = np.random.default_rng(seed)
+    best_r, pool_X, pool_S, pool_r = bracket.r, [], [], []
+    for k0 in range(0, states, batch):
+        Xf, Sf = _random_states(rng, limits, min(batch, states - k0))
+        rf = pricer.ratio(Xf, Sf)
+        best_r = max(best_r, float(rf.max()))
+        top = np.argsort(-rf)[:starts]
+        pool_X.append(Xf[top])
+        pool_S.append(Sf[top])
+        pool_r.append(rf[top])
+    PX, PS, PR = np.vstack(pool_X), np.vstack(pool_S), np.concatenate(pool_r)
+    for i in np.argsort(-PR)[:starts]:
+        best_r = max(best_r, pricer.local_max(PX[i], PS[i])[1])
+    bound = relaxation_dual_bound(bracket.A, bracket.B, best_r) if np.isfinite(best_r) else 0.0
+    return best_r, bound

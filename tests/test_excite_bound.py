@@ -117,3 +117,85 @@ def test_weak_duality_on_explicit_distributions():
             mu = rng.dirichlet(np.full(len(X), 0.3))
             ev = np.linalg.eigvalsh(np.einsum("k,kia,kib->ab", mu, W, W))
             assert lb <= np.sqrt(ev[-1] / ev[0]) * (1 + 1e-9)
+
+
+# --- the stationarity moments: distributions that a trajectory can have -------------------------------
+
+def test_stationarity_moments_vanish_on_trajectories_not_on_random_states():
+    """The mean of every moment over one period of a periodic trajectory is 0 (to quadrature accuracy),
+    over random states it is not; the CasADi form (used for gradients) is the NumPy form."""
+    import casadi as ca
+
+    from symoro_gen.excite import _random_states, stationarity_moments, stationarity_scales
+
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    n = model.N_JOINTS
+    scale = stationarity_scales(lim)
+    for q, dq, ddq in _trajectories(model, lim, 5, seed=21):
+        m = stationarity_moments(q[:-1], dq[:-1], ddq[:-1]) / scale  # one period: drop the repeated end sample
+        assert m.shape[1] == len(scale) == 6 * n + 3 * n * n + n * (n - 1) // 2
+        assert np.abs(m.mean(0)).max() < 1e-6
+    X, _ = _random_states(np.random.default_rng(0), lim, 2000)
+    m = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / scale
+    assert np.abs(m.mean(0)).max() > 0.05
+    z = ca.SX.sym("z", 3 * n)
+    f = ca.Function("m", [z], [stationarity_moments(z[:n], z[n:2 * n], z[2 * n:], lib=ca)])
+    for x in X[:5]:
+        np.testing.assert_allclose(np.array(f(x)).ravel(), stationarity_moments(x[:n], x[n:2 * n], x[2 * n:])[0],
+                                   rtol=1e-12, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def scara_stationary():
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    b = relaxation_bracket(model, lim, atoms=100, rounds=5, fresh=3000, starts=8, add=20, seed=3,
+                           stationary=True, trajectories=5)
+    return model, lim, b
+
+
+def test_stationary_upper_end_is_a_distribution_with_trajectory_moments(scara_stationary):
+    from symoro_gen.excite import stationarity_moments, stationarity_scales
+
+    model, lim, b = scara_stationary
+    n = model.N_JOINTS
+    W = relaxation_rows(model, b.states, b.signs)
+    ev = np.linalg.eigvalsh(np.einsum("k,kia,kib->ab", b.weights, W, W))
+    assert np.sqrt(ev[-1] / ev[0]) == pytest.approx(b.upper, rel=1e-5)
+    p = b.weights / b.weights.sum()
+    m = p @ (stationarity_moments(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:])
+             / stationarity_scales(lim))
+    assert np.abs(m).max() <= b.moment_tol * 1.01
+    assert b.lower <= b.upper
+
+
+def test_stationary_lower_end_holds_on_unseen_trajectories_and_excludes_the_plain_optimum(scara, scara_stationary):
+    """Weak duality with the moment multipliers: the ratio N/D on unseen trajectories' samples stays
+    below r, their cond above the lower end - and that lower end is above the plain relaxation's
+    optimum (a distribution no trajectory can have)."""
+    from symoro_gen.excite import _DualPricer
+
+    model, lim, b = scara_stationary
+    assert b.stationary and b.lam is not None and b.c0 >= b.moment_tol * np.abs(b.lam).sum() * (1 - 1e-9)
+    pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0)
+    for q, dq, ddq in _trajectories(model, lim, 10, seed=12):
+        assert stacked_cond(model, q, dq, ddq) >= b.lower
+        X = np.hstack([q, dq, ddq])
+        num, den = pricer.num_den(X, np.sign(dq))
+        assert np.all(num <= b.r * den * (1 + 1e-9))
+    assert b.lower > scara[2].upper
+
+
+def test_verification_reprices_the_same_duals():
+    """relaxation_verify searches more: r never falls, the bound never rises, and with the search of the
+    bracket itself (same seed and size) nothing changes."""
+    from symoro_gen.excite import relaxation_verify
+
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    b = relaxation_bracket(model, lim, atoms=60, rounds=1, fresh=300, starts=1, add=10, seed=4,
+                           stationary=True, trajectories=3)
+    r, bound = relaxation_verify(model, lim, b, states=5000, starts=10, seed=9)
+    assert r >= b.r and bound <= b.lower * (1 + 1e-12)
+    assert bound == pytest.approx(relaxation_dual_bound(b.A, b.B, r))
