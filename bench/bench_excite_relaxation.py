@@ -40,12 +40,22 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_excite import TARGET_RATIO, random_baseline
 
-from symoro_gen.excite import cond_lower_bound, limits_of, relaxation_bracket, relaxation_verify
+from symoro_gen.excite import (
+    cond_lower_bound,
+    limits_of,
+    relaxation_bracket,
+    relaxation_verify,
+    stationarity_moment_names,
+    stationarity_moments,
+    stationarity_scales,
+)
 from symoro_gen.loader import model_for
 
 
@@ -98,6 +108,13 @@ def main(argv=None) -> int:
     kind = (f"stationary (moment tol {a.moment_tol:g})" if a.stationary else "plain")
     print(f"{a.robot} [{kind}]: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
           f"the best distribution has {len(b.weights)} states of positive weight)")
+    n = model.N_JOINTS
+    p = b.weights / b.weights.sum()
+    m = p @ (stationarity_moments(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:]) / stationarity_scales(lim))
+    k = int(np.argmax(np.abs(m)))
+    print(f"{a.robot}: the best distribution's stationarity moments (0 for every periodic or rest-to-rest trajectory): "
+          f"largest |E[m]| / scale = {abs(m[k]):.3f}, {stationarity_moment_names(n)[k]}; "
+          f"{int(np.sum(np.abs(m) > 0.05))} of {len(m)} above 0.05")
     if bound is not None:
         print(f"rigorous bound over every trajectory: {bound.describe()}")
     print(f"{a.robot}: relaxation's minimum in [{lower:.3f}, {b.upper:.3f}] (gap {b.upper / lower - 1:.1%}; lower end: "

@@ -81,6 +81,7 @@ __all__ = [
     "predicted_sigma",
     "random_trajectory",
     "relaxation_verify",
+    "stationarity_moment_names",
     "stationarity_moments",
     "stationarity_scales",
     "refine_excitation",
@@ -1487,6 +1488,20 @@ def stationarity_moments(q, dq, ddq, lib: Any = np):
     return np.stack(out, axis=1) if lib is np else lib.vertcat(*out)
 
 
+def stationarity_moment_names(n: int) -> list[str]:
+    """The name ``d/dt(f)`` of each term of :func:`stationarity_moments` (same order), joints from 1."""
+    out = []
+    for j in range(1, n + 1):
+        out += [f"d/dt(q{j})", f"d/dt(dq{j})", f"d/dt(dq{j}^2/2)", f"d/dt(q{j}^2/2)", f"d/dt(cos q{j})",
+                f"d/dt(sin q{j})"]
+    for i in range(1, n + 1):
+        for j in range(1, n + 1):
+            out += [f"d/dt(q{i} dq{j})", f"d/dt(cos q{i} dq{j})", f"d/dt(sin q{i} dq{j})"]
+            if i < j:
+                out.append(f"d/dt(dq{i} dq{j})")
+    return out
+
+
 def stationarity_scales(limits: Limits) -> np.ndarray:
     """The size of each term of :func:`stationarity_moments` over the limits' box (the sum of the
     largest magnitudes of its products): the moment ``k`` is held to ``|E[m_k]| <= tol * scale_k``."""
@@ -1598,7 +1613,7 @@ class _DualPricer:
         return x, float(self.ratio(x[None], s0[None])[0])
 
 
-def _trajectory_states(limits: Limits, rng: np.random.Generator, k: int, samples: int = 200
+def _trajectory_states(limits: Limits, rng: np.random.Generator, k: int, samples: int = 50
                        ) -> tuple[np.ndarray, np.ndarray]:
     """The samples of ``k`` random Fourier trajectories (5 harmonics, 10 s, ``samples`` per period)
     within the limits: states whose uniform distribution satisfies the stationarity moments."""
