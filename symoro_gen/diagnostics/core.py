@@ -918,9 +918,34 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
     owned = {j for _, fam, *_ in eligible for j in _own(fam, n)}
     new_stop = frozenset(int(j) for j, *_ in hits if j is not None and j not in owned and j not in stopped)
     eligible = [e for e in eligible if e[1].joint is None or not (set(_own(e[1], n)) & (stopped | new_stop))]
-    eligible.sort(key=lambda t: -t[0])
+    eligible = _rank(eligible)
     return _Round(tried=tuple(tried), placebos=tuple(placebos), placebo_hits=tuple(hits), eligible=tuple(eligible),
                   ctx=ctx, scorer=scorer, stopped=new_stop)
+
+
+#: scores that agree to this relative tolerance are one fit under two names (see :func:`_rank`)
+TIE_RTOL = 1e-9
+
+
+def _rank(eligible: list) -> list:
+    """The eligible candidates of a round, best score first.
+
+    Candidates whose scores agree to :data:`TIE_RTOL` of the better one are the same fit under two names: a
+    composed candidate whose columns span a plain kind's (``constant torque changing with tau_hat`` is the
+    column ``tau_hat``, i.e. a ``gain``). Among them the plain, named kind goes first, so that the verdict
+    does not hang on the last bits of the two scores (which differ between BLAS builds).
+    """
+    eligible = sorted(eligible, key=lambda t: -t[0])
+    out: list = []
+    i = 0
+    while i < len(eligible):
+        lead = eligible[i][0]
+        j = i + 1
+        while j < len(eligible) and eligible[j][0] >= lead - TIE_RTOL * abs(lead):
+            j += 1
+        out += sorted(eligible[i:j], key=lambda t: "composed" in dict(t[1].info))   # stable: plain first
+        i = j
+    return out
 
 
 #: non-significant composed candidates kept in the report per round (the best by adjusted p-value)

@@ -249,3 +249,22 @@ def replace_signal(c):
         def confounder_columns(self, sig):
             return np.zeros((sig.n_rows, 0))
     return _Naive(**{f: getattr(c, f) for f in c.__dataclass_fields__})
+
+
+def test_rank_puts_the_named_kind_first_when_a_composed_candidate_is_the_same_fit():
+    """A composed candidate whose columns span a plain kind's ('constant torque changing with tau_hat' is a
+    gain) scores the same up to the last bits, which differ between BLAS builds: the plain kind goes first
+    whichever rounding wins; a real difference in score still decides."""
+    from types import SimpleNamespace
+
+    from symoro_gen.diagnostics.core import TIE_RTOL, _rank
+
+    plain = SimpleNamespace(info=())
+    composed = SimpleNamespace(info=(("composed", object()), ("plain", False)))
+    other = SimpleNamespace(info=())
+    s = 6.380050004216558
+    for sc_comp in (s * (1 + 2e-15), s * (1 - 2e-15), s):
+        got = _rank([(sc_comp, composed, "c"), (s, plain, "p"), (3.0, other, "o")])
+        assert [t[2] for t in got] == ["p", "c", "o"]
+    got = _rank([(s * (1 + 100 * TIE_RTOL), composed, "c"), (s, plain, "p")])
+    assert [t[2] for t in got] == ["c", "p"]
