@@ -38,8 +38,13 @@ satisfies ``cond(W)^2 <= exp(criterion) <= nb^(2/p) cond(W)^2``; ``p`` is raised
 :func:`cond_lower_bound` bounds from below the cond of ANY trajectory within the velocity limits
 (whatever its duration and samples): the friction columns ``dq_j, sign dq_j, 1`` cap ``sigma_min``
 (:func:`friction_ceiling`), a set of columns with a constant squared norm per sample (the first
-moments of a link turning about a fixed horizontal axis: ``g^2``) floors ``sigma_max``. The value reported, ``cond``, is always the true, unscaled 2-norm condition number of
-the base regressor stacked over the output samples, as the field reports it.
+moments of a link turning about a fixed horizontal axis: ``g^2``) floors ``sigma_max``.
+:func:`relaxation_bracket` brackets the smallest cond over DISTRIBUTIONS of states within the limits (an
+SDP, [BV2004] sect. 7.5, by column generation; a dual lower estimate by weak duality), optionally restricted
+to the distributions that a periodic or rest-to-rest trajectory can have (``stationary=True``: the
+occupation-measure moments of :func:`stationarity_moments`, [LHPT08]); :func:`relaxation_verify` re-prices
+its duals on a larger search. The value reported, ``cond``, is always the true, unscaled 2-norm
+condition number of the base regressor stacked over the output samples, as the field reports it.
 """
 from __future__ import annotations
 
