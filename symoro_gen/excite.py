@@ -1369,10 +1369,14 @@ class RelaxationBracket:
     A: np.ndarray
     B: np.ndarray
     r: float
-    stationary: bool = False
     moment_tol: float = 0.0
     lam: np.ndarray | None = None
     c0: float = 0.0
+
+    @property
+    def stationary(self) -> bool:
+        """Whether the stationarity moments constrained the distributions (their multipliers are set)."""
+        return self.lam is not None
 
 
 def _coulomb_columns(model: IdentificationModel) -> list[tuple[int, int]]:
@@ -1449,16 +1453,38 @@ def _random_states(rng: np.random.Generator, limits: Limits, k: int) -> tuple[np
     return np.hstack([q, v * limits.dq_max, a * limits.ddq_max]), s
 
 
-def _ratio(W: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    num = np.einsum("kia,ab,kib->k", W, A, W)
-    den = np.einsum("kia,ab,kib->k", W, B, W)
-    return num / np.maximum(den, 1e-300)
+#: one term of the stationarity moments: (name, ((sign, ((factor, joint), ...)), ...))
+_Term = tuple[str, tuple[tuple[int, tuple[tuple[str, int], ...]], ...]]
+
+
+def _stationarity_terms(n: int) -> list[_Term]:
+    """The terms of :func:`stationarity_moments`: ``(name, ((sign, factors), ...))``, each a sum of signed
+    products of factors ``("q"|"dq"|"ddq"|"sin"|"cos", joint)`` (``sin``/``cos`` of ``q_joint``)."""
+    out: list[_Term] = []
+    for j in range(n):
+        J = j + 1
+        out += [(f"d/dt(q{J})", ((1, (("dq", j),)),)),
+                (f"d/dt(dq{J})", ((1, (("ddq", j),)),)),
+                (f"d/dt(dq{J}^2/2)", ((1, (("dq", j), ("ddq", j))),)),
+                (f"d/dt(q{J}^2/2)", ((1, (("q", j), ("dq", j))),)),
+                (f"d/dt(cos q{J})", ((-1, (("sin", j), ("dq", j))),)),
+                (f"d/dt(sin q{J})", ((1, (("cos", j), ("dq", j))),))]
+    for i in range(n):
+        for j in range(n):
+            I, J = i + 1, j + 1
+            out += [(f"d/dt(q{I} dq{J})", ((1, (("dq", i), ("dq", j))), (1, (("q", i), ("ddq", j))))),
+                    (f"d/dt(cos q{I} dq{J})", ((-1, (("sin", i), ("dq", i), ("dq", j))), (1, (("cos", i), ("ddq", j))))),
+                    (f"d/dt(sin q{I} dq{J})", ((1, (("cos", i), ("dq", i), ("dq", j))), (1, (("sin", i), ("ddq", j)))))]
+            if i < j:
+                out.append((f"d/dt(dq{I} dq{J})", ((1, (("ddq", i), ("dq", j))), (1, (("dq", i), ("ddq", j))))))
+    return out
 
 
 def stationarity_moments(q, dq, ddq, lib: Any = np):
     """The time derivatives ``d/dt f(q, dq) = f_q dq + f_dq ddq`` of the test functions ``f`` =
     ``q_j``, ``dq_j``, ``dq_j^2/2``, ``q_j^2/2``, ``cos q_j``, ``sin q_j`` (per joint), ``q_i dq_j``,
-    ``cos q_i dq_j``, ``sin q_i dq_j`` (every pair) and ``dq_i dq_j`` (``i < j``).
+    ``cos q_i dq_j``, ``sin q_i dq_j`` (every pair) and ``dq_i dq_j`` (``i < j``)
+    (:func:`stationarity_moment_names` names them, :func:`stationarity_scales` sizes them).
 
     Over one period of a periodic trajectory, or any trajectory that starts and ends in the same
     state (the rest-to-rest designs of ``excite``), the mean of ``d/dt f`` is ``(f(end) - f(start)) / T
@@ -1470,58 +1496,35 @@ def stationarity_moments(q, dq, ddq, lib: Any = np):
     if lib is np:
         q, dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (q, dq, ddq))
         n = q.shape[1]
-
-        def c(x, j):
-            return x[:, j]
+        cols = {"q": q.T, "dq": dq.T, "ddq": ddq.T, "sin": np.sin(q).T, "cos": np.cos(q).T}
     else:
         n = int(q.shape[0])
-
-        def c(x, j):
-            return x[j]
+        cols = {"q": q, "dq": dq, "ddq": ddq, "sin": lib.sin(q), "cos": lib.cos(q)}
     out = []
-    for j in range(n):
-        qj, vj, aj = c(q, j), c(dq, j), c(ddq, j)
-        out += [vj, aj, vj * aj, qj * vj, -lib.sin(qj) * vj, lib.cos(qj) * vj]
-    for i in range(n):
-        qi, vi = c(q, i), c(dq, i)
-        si, ci = lib.sin(qi), lib.cos(qi)
-        for j in range(n):
-            vj, aj = c(dq, j), c(ddq, j)
-            out += [vi * vj + qi * aj, -si * vi * vj + ci * aj, ci * vi * vj + si * aj]
-            if i < j:
-                out.append(c(ddq, i) * vj + vi * aj)
+    for _, products in _stationarity_terms(n):
+        total = 0
+        for sign, factors in products:
+            term = sign
+            for kind, j in factors:
+                term = term * cols[kind][j]
+            total = total + term
+        out.append(total)
     return np.stack(out, axis=1) if lib is np else lib.vertcat(*out)
 
 
 def stationarity_moment_names(n: int) -> list[str]:
     """The name ``d/dt(f)`` of each term of :func:`stationarity_moments` (same order), joints from 1."""
-    out = []
-    for j in range(1, n + 1):
-        out += [f"d/dt(q{j})", f"d/dt(dq{j})", f"d/dt(dq{j}^2/2)", f"d/dt(q{j}^2/2)", f"d/dt(cos q{j})",
-                f"d/dt(sin q{j})"]
-    for i in range(1, n + 1):
-        for j in range(1, n + 1):
-            out += [f"d/dt(q{i} dq{j})", f"d/dt(cos q{i} dq{j})", f"d/dt(sin q{i} dq{j})"]
-            if i < j:
-                out.append(f"d/dt(dq{i} dq{j})")
-    return out
+    return [name for name, _ in _stationarity_terms(n)]
 
 
 def stationarity_scales(limits: Limits) -> np.ndarray:
-    """The size of each term of :func:`stationarity_moments` over the limits' box (the sum of the
-    largest magnitudes of its products): the moment ``k`` is held to ``|E[m_k]| <= tol * scale_k``."""
-    qa = np.maximum(np.abs(limits.q_min), np.abs(limits.q_max))
-    v, a = limits.dq_max, limits.ddq_max
-    n = limits.n
-    out = []
-    for j in range(n):
-        out += [v[j], a[j], v[j] * a[j], qa[j] * v[j], v[j], v[j]]
-    for i in range(n):
-        for j in range(n):
-            out += [v[i] * v[j] + qa[i] * a[j], v[i] * v[j] + a[j], v[i] * v[j] + a[j]]
-            if i < j:
-                out.append(a[i] * v[j] + v[i] * a[j])
-    return np.asarray(out, float)
+    """The size of each term of :func:`stationarity_moments` over the limits' box (the sum over its
+    products of the largest magnitude of each factor: ``max |q_j|``, ``dq_max``, ``ddq_max``, 1 for sin
+    and cos): the moment ``k`` is held to ``|E[m_k]| <= tol * scale_k``."""
+    bound = {"q": np.maximum(np.abs(limits.q_min), np.abs(limits.q_max)), "dq": limits.dq_max,
+             "ddq": limits.ddq_max, "sin": np.ones(limits.n), "cos": np.ones(limits.n)}
+    return np.array([sum(math.prod(float(bound[kind][j]) for kind, j in factors) for _, factors in products)
+                     for _, products in _stationarity_terms(limits.n)])
 
 
 class _DualPricer:
@@ -1540,7 +1543,7 @@ class _DualPricer:
 
     def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
                  lam: np.ndarray | None = None, c0: float = 0.0, *, coulomb=None, jac=None):
-        self.model, self.limits, self.A, self.B = model, limits, A, B
+        self.model, self.A, self.B = model, A, B
         self.lam, self.c0 = lam, float(c0)
         self.n = limits.n
         self.coul = _coulomb_columns(model) if coulomb is None else coulomb
@@ -1744,7 +1747,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         newS = [S[keep], Sf[order[:add]]] + ([np.array([s for _, s in good])] if good else [])
         X, S = np.vstack(newX), np.vstack(newS)
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
-                             dual_of["A"], dual_of["B"], dual_of["r"], stationary, moment_tol if stationary else 0.0,
+                             dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if stationary else 0.0,
                              dual_of["lam"], dual_of["c0"])
 
 
