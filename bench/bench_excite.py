@@ -15,7 +15,12 @@ optimised cond lie relative to it.
         [--kind fourier|spline] [--coefficients 60] [--structured N] [--refine N]
 
 ``--kind spline`` optimises a cubic B-spline (``symoro_gen.excite.SplineBasis``) instead; the
-baseline stays the 50 random Fourier trajectories. ``--refine N`` follows each start's IPOPT result with
+baseline stays the 50 random Fourier trajectories. ``--embed 117 231`` then represents the spline optimum
+exactly in splines of more control points (each level's knot intervals a multiple of the previous one's:
+knot insertion) and refines it there (``--embed-refine`` SDPs each): does more freedom move the optimum?
+``--repeat K`` also compares the optimised design run K times back to back with the random Fourier trajectories
+of period K x duration (repeating a run leaves its cond unchanged; the random baseline of a longer period
+is slower). ``--baseline 5 10 20 30 60`` prints only the random baseline (best, median, target) at each duration. ``--refine N`` follows each start's IPOPT result with
 at most N iterations of ``symoro_gen.excite.refine_excitation`` (sequential SDP on the true cond) and
 prints the cond before and after it.
 """
@@ -34,11 +39,15 @@ from symoro_gen.excite import (
     FourierBasis,
     SplineBasis,
     basis_eval,
+    check_limits,
     cond_lower_bound,
+    dense_times,
     limits_of,
     optimise_excitation,
     output_times,
     random_trajectory,
+    refine_excitation,
+    stacked_cond,
 )
 from symoro_gen.loader import model_for
 
@@ -63,9 +72,14 @@ def random_baseline(model, lim, *, harmonics: int = 5, duration: float = 10.0, r
     return rand, rand_smax
 
 
+def _dense_ok(basis, lim, X, duration: float) -> bool:
+    """Every position, velocity and acceleration limit on 100,000 samples of the design."""
+    return bool(check_limits(lim, *basis_eval(basis, X, np.linspace(0.0, duration, 100_001)))["ok"])
+
+
 def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int, max_iter: int, seed: int,
         pool: int | None, powers=None, kind: str = "fourier", coefficients: int = 60, structured: int = 0,
-        refine: int = 0) -> dict:
+        refine: int = 0, samples: int | None = None, embed=(), embed_refine: int = 30, repeat: int = 1) -> dict:
     robot, model = model_for(name)
     lim = limits_of(robot)
     basis = FourierBasis(harmonics, 1.0 / duration)
@@ -73,15 +87,51 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
     t0 = time.perf_counter()
     design = basis if kind == "fourier" else SplineBasis(coefficients, duration)
     res = optimise_excitation(model, design, lim, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,
-                              pool=pool, powers=powers, structured=structured, refine=refine)
+                              pool=pool, powers=powers, structured=structured, refine=refine, samples=samples)
     wall = time.perf_counter() - t0
-    W = np.asarray(model.regressor(res.q, res.dq, res.ddq)).reshape(-1, len(model.BASE_NAMES))
+    q, dq, ddq, cond = res.q, res.dq, res.ddq, res.cond
+    embedded = []
+    X = res.X
+    for M in embed:
+        if kind != "spline":
+            raise SystemExit("--embed needs --kind spline")
+        if (M - 3) % (design.M - 3):
+            raise SystemExit(f"--embed {M}: {M - 3} knot intervals are not a multiple of {design.M - 3}")
+        fine = SplineBasis(M, duration)
+        td = np.linspace(0.0, duration, 20 * (M - 3) + 1)
+        X_f = np.linalg.lstsq(fine.matrices(td)[0], design.matrices(td)[0] @ X, rcond=None)[0]  # exact: knot insertion
+        t_out = output_times(duration, rate)
+        c_in = stacked_cond(model, *basis_eval(fine, X_f, t_out))
+        te = time.perf_counter()
+        X_r, hist = refine_excitation(model, fine, lim, X_f, t_out, t_out, iterations=embed_refine,
+                                      check_times=dense_times(t_out, duration, fine))
+        c_out = stacked_cond(model, *basis_eval(fine, X_r, t_out))
+        embedded.append({"coefficients": M, "cond_in": c_in, "cond": c_out, "sdps": len(hist) - 1,
+                         "time": time.perf_counter() - te})
+        design, X = fine, X_r
+        if c_out < cond:
+            q, dq, ddq = basis_eval(fine, X_r, t_out)
+            cond = c_out
+    wall = time.perf_counter() - t0
+    limits_ok = res.limits_ok and (not embedded or _dense_ok(design, lim, X, duration))
+    repeated = None
+    if repeat > 1:
+        # the design run `repeat` times back to back (it starts and ends at rest in the same configuration):
+        # its samples are those of one run repeated, so its cond is that of one run, against random Fourier
+        # trajectories of period repeat x duration
+        idx = np.concatenate([np.arange(len(q))] + [np.arange(1, len(q))] * (repeat - 1))
+        Wt = np.asarray(model.regressor(q[idx], dq[idx], ddq[idx])).reshape(-1, len(model.BASE_NAMES))
+        st = np.linalg.svd(Wt, compute_uv=False)
+        rand_long, _ = random_baseline(model, lim, harmonics=harmonics, duration=repeat * duration, rate=rate, seed=seed)
+        repeated = {"repeat": repeat, "duration": repeat * duration, "cond": float(st[0] / st[-1]),
+                    "random_best": min(rand_long), "ratio": min(rand_long) / float(st[0] / st[-1])}
+    W = np.asarray(model.regressor(q, dq, ddq)).reshape(-1, len(model.BASE_NAMES))
     sv = np.linalg.svd(W, compute_uv=False)
     N = W.shape[0] / model.N_JOINTS
     bound = cond_lower_bound(model, lim)
-    return {"robot": name, "n": model.N_JOINTS, "nb": len(model.BASE_NAMES), "cond": res.cond,
-            "random_best": min(rand), "random_median": float(np.median(rand)), "ratio": min(rand) / res.cond,
-            "limits_ok": res.limits_ok, "wall": wall, "starts": res.starts, "bound": bound,
+    return {"robot": name, "n": model.N_JOINTS, "nb": len(model.BASE_NAMES), "cond": cond,
+            "random_best": min(rand), "random_median": float(np.median(rand)), "ratio": min(rand) / cond,
+            "limits_ok": limits_ok, "embedded": embedded, "repeated": repeated, "wall": wall, "starts": res.starts, "bound": bound,
             "smax": float(sv[0] / np.sqrt(N)), "smin": float(sv[-1] / np.sqrt(N)), "random_smax_min": min(rand_smax)}
 
 
@@ -102,16 +152,37 @@ def main(argv=None) -> int:
     ap.add_argument("--coefficients", type=int, default=60, help="spline control points per joint")
     ap.add_argument("--structured", type=int, default=0,
                     help="designs alternating slow motion and bursts at the velocity limit added to the pool")
+    ap.add_argument("--samples", type=int, default=None, help="samples of the IPOPT criterion (default: library's)")
+    ap.add_argument("--embed", type=int, nargs="*", default=[],
+                    help="spline: refine the optimum again in splines of these many control points (knot insertion)")
+    ap.add_argument("--embed-refine", type=int, default=30, help="SDP iterations at each --embed level")
     ap.add_argument("--refine", type=int, default=0,
                     help="sequential-SDP iterations on the true cond after each start's IPOPT result (0: none)")
+    ap.add_argument("--repeat", type=int, default=1, metavar="K",
+                    help="also compare the optimised design run K times back to back (K x duration) with the random "
+                         "Fourier trajectories of period K x duration")
+    ap.add_argument("--baseline", type=float, nargs="+", default=None, metavar="SECONDS",
+                    help="only the 50 random Fourier trajectories (period = duration) at each of these durations: "
+                         "best, median and the target (best / 5); no optimisation")
     a = ap.parse_args(argv)
+    if a.baseline:
+        print(f"{'robot':6} {'duration':>8} {'best of 50':>11} {'median':>9} {'target':>7}")
+        for name in a.robots:
+            robot, model = model_for(name)
+            lim = limits_of(robot)
+            for T in a.baseline:
+                rand, _ = random_baseline(model, lim, harmonics=a.harmonics, duration=T, rate=a.rate, seed=a.seed)
+                print(f"{name:6} {T:>8g} {min(rand):>11.4g} {float(np.median(rand)):>9.4g} "
+                      f"{min(rand) / TARGET_RATIO:>7.4g}", flush=True)
+        return 0
     print(f"{'robot':6} {'n':>2} {'nb':>3} {'cond opt':>10} {'best of 50':>11} {'median':>9} {'ratio':>6} "
           f"{'limits':>6} {'wall [s]':>8}")
     ok = True
     for name in a.robots:
         r = run(name, harmonics=a.harmonics, duration=a.duration, rate=a.rate, starts=a.starts,
                 max_iter=a.max_iter, seed=a.seed, pool=a.pool, powers=a.powers, kind=a.kind,
-                coefficients=a.coefficients, structured=a.structured, refine=a.refine)
+                coefficients=a.coefficients, structured=a.structured, refine=a.refine, samples=a.samples,
+                embed=a.embed, embed_refine=a.embed_refine, repeat=a.repeat)
         ok &= r["limits_ok"]
         print(f"{r['robot']:6} {r['n']:>2} {r['nb']:>3} {r['cond']:>10.4g} {r['random_best']:>11.4g} "
               f"{r['random_median']:>9.4g} {r['ratio']:>6.2f} {r['limits_ok']!s:>6} {r['wall']:>8.1f}")
@@ -130,6 +201,14 @@ def main(argv=None) -> int:
                                                  f"{s['refine_accepted']} steps accepted, {s['refine_time']:.0f} s)"
                                                  if "refine_sdps" in s else "")
                                               for s in r["starts"]))
+        if r["repeated"]:
+            rp = r["repeated"]
+            print(f"        run {rp['repeat']} times ({rp['duration']:g} s): cond {rp['cond']:.4g}; best of 50 random Fourier "
+                  f"of period {rp['duration']:g} s: {rp['random_best']:.4g}; ratio {rp['ratio']:.2f} (a random Fourier "
+                  f"trajectory of period {a.duration:g} s run {rp['repeat']} times keeps its cond: ratio {r['ratio']:.2f})")
+        for e in r["embedded"]:
+            print(f"        embedded in {e['coefficients']} control points: {e['cond_in']:.4g} -> {e['cond']:.4g} "
+                  f"({e['sdps']} SDPs, {e['time']:.0f} s)")
     print(f"target: ratio >= {TARGET_RATIO:g} (best random cond / optimised cond)")
     return 0 if ok else 1
 

@@ -1033,8 +1033,11 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
                "powers": list(stages), "cond_stages": stage_conds}
         if refine and criterion == "cond":
             tr = time.perf_counter()
-            X_r, hist = refine_excitation(model, basis, limits, X, t_out, t_con, iterations=int(refine), margin=margin,
-                                          chi_b=cb, check_times=dense_times(t_out, duration, basis))
+            # a periodic design repeats its samples every period: the refinement works on the first one (a design
+            # of period 10 s over 60 s costs as much as over 10 s); the cond kept is recomputed on all of t_out
+            t_ref = t_out[t_out <= period * (1 + 1e-12)] if period < duration else t_out
+            X_r, hist = refine_excitation(model, basis, limits, X, t_ref, t_con, iterations=int(refine), margin=margin,
+                                          chi_b=cb, check_times=dense_times(t_ref, float(t_ref[-1]), basis))
             c_r = stacked_cond(model, *basis_eval(basis, X_r, t_out))
             rec.update(cond_ipopt=c, cond=min(c, c_r), refine_sdps=len(hist) - 1,
                        refine_accepted=sum(1 for h in hist if h.get("accepted")),

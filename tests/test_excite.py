@@ -358,6 +358,35 @@ def test_refinement_lowers_the_true_cond_where_the_smooth_criterion_stops_short(
     assert all(b <= a for a, b in itertools.pairwise(conds)), conds
 
 
+def test_refinement_of_a_repeated_period_works_on_one_period(scara, scara_limits, monkeypatch):
+    """A Fourier design of period 2 s output over 6 s: the refinement sees the first period's samples only (the
+    others repeat them), and the cond reported is that of all the output samples, equal to one period's (the
+    Gram matrix of three periods is three times one period's, up to the rest sample at the ends: 2 of one
+    period's 101 samples, 4 of the 301)."""
+    import symoro_gen.excite as ex
+
+    _, model = scara
+    seen = []
+    real = ex.refine_excitation
+
+    def spy(model_, basis_, limits_, X_, t_out_, *a, **k):
+        seen.append(np.asarray(t_out_))
+        return real(model_, basis_, limits_, X_, t_out_, *a, **k)
+
+    monkeypatch.setattr(ex, "refine_excitation", spy)
+    basis = FourierBasis(3, 0.5)
+    res = optimise_excitation(model, basis, scara_limits, 6.0, rate=RATE, starts=1, seed=0, max_iter=5, pool=1,
+                              powers=(8,), refine=5)
+    assert len(seen) == 1 and seen[0][-1] == pytest.approx(2.0) and len(seen[0]) == round(2.0 * RATE) + 1
+    assert len(res.t) == round(6.0 * RATE) + 1 and res.starts[0]["refine_accepted"] >= 1
+    assert res.cond == pytest.approx(stacked_cond(model, res.q, res.dq, res.ddq), rel=1e-12)
+    one = stacked_cond(model, *basis_eval(basis, res.X, seen[0]))
+    assert res.cond == pytest.approx(one, rel=2e-2)
+    tiled = np.concatenate([seen[0][:-1], seen[0][:-1] + 2.0, seen[0][:-1] + 4.0, [6.0]])
+    assert res.cond == pytest.approx(stacked_cond(model, *basis_eval(basis, res.X, tiled)), rel=1e-9)
+    assert res.limits_ok and _refined_holds_limits(basis, scara_limits, res.X, 6.0)
+
+
 def test_refinement_of_a_converged_spline_design_never_increases_cond(scara, scara_limits):
     """From an IPOPT optimum of a spline design (structured start), the refinement keeps cond at or below it and
     every limit on a dense resampling; the sign of every moving output velocity is kept (the Coulomb columns)."""
