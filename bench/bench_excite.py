@@ -12,17 +12,19 @@ sample, sigma_min capped by the friction columns), and where the target (best ra
 optimised cond lie relative to it.
 
     PYTHONPATH=. python bench/bench_excite.py [--robots lwr4 rx90] [--starts 3] [--max-iter 150] [--powers 8 64]
-        [--kind fourier|spline] [--coefficients 60] [--structured N] [--refine N]
+        [--kind fourier|spline] [--coefficients 60] [--structured N] [--refine N] [--samples N]
+        [--embed M ...] [--embed-refine N] [--repeat K] [--duration S] [--baseline S ...]
 
 ``--kind spline`` optimises a cubic B-spline (``symoro_gen.excite.SplineBasis``) instead; the
 baseline stays the 50 random Fourier trajectories. ``--embed 117 231`` then represents the spline optimum
 exactly in splines of more control points (each level's knot intervals a multiple of the previous one's:
 knot insertion) and refines it there (``--embed-refine`` SDPs each): does more freedom move the optimum?
-``--repeat K`` also compares the optimised design run K times back to back with the random Fourier trajectories
-of period K x duration (repeating a run leaves its cond unchanged; the random baseline of a longer period
-is slower). ``--baseline 5 10 20 30 60`` prints only the random baseline (best, median, target) at each duration. ``--refine N`` follows each start's IPOPT result with
-at most N iterations of ``symoro_gen.excite.refine_excitation`` (sequential SDP on the true cond) and
-prints the cond before and after it.
+``--repeat K`` also compares the optimised design run K times back to back with the random Fourier
+trajectories of period K x duration (repeating a run leaves its cond unchanged; the random baseline of a
+longer period is slower). ``--baseline 5 10 20 30 60`` prints only the random baseline (best, median,
+target) at each duration. ``--refine N`` follows each start's IPOPT result with at most N iterations of
+``symoro_gen.excite.refine_excitation`` (sequential SDP on the true cond) and prints the cond before and
+after it.
 """
 from __future__ import annotations
 
@@ -88,7 +90,6 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
     design = basis if kind == "fourier" else SplineBasis(coefficients, duration)
     res = optimise_excitation(model, design, lim, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,
                               pool=pool, powers=powers, structured=structured, refine=refine, samples=samples)
-    wall = time.perf_counter() - t0
     q, dq, ddq, cond = res.q, res.dq, res.ddq, res.cond
     embedded = []
     X = res.X
