@@ -16,8 +16,8 @@ with CasADi gradients). Each round prints
   if ``r`` is the global maximum of the ratio over the state box; found by sampling plus local
   maximisation, so rigorous only as far as that search is global.
 
-With ``--stationary`` the distributions must also satisfy the stationarity moments of every periodic or
-rest-to-rest trajectory (``symoro_gen.excite.stationarity_moments``: the mean of ``d/dt f(q, dq)`` is 0 for
+With ``--stationary`` the distributions must also satisfy the stationarity moments of every closed
+trajectory (periodic, or ending where it started: the Fourier designs, not the spline ones) (``symoro_gen.excite.stationarity_moments``: the mean of ``d/dt f(q, dq)`` is 0 for
 the test functions ``f``, held to ``--moment-tol`` of their scale), the first round seeded with the
 samples of ``--trajectories`` random Fourier trajectories (which satisfy them). ``--verify N`` re-prices
 the final duals on N fresh random states of another seed plus 200 local searches
@@ -30,7 +30,12 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
 
     PYTHONPATH=. python bench/bench_excite_relaxation.py [--robot lwr4|rx90] [--atoms 400] [--rounds 60]
         [--budget SECONDS] [--tol 0.02] [--fresh 30000] [--starts 40] [--add 60] [--seed 0]
-        [--stationary [--moment-tol 0.01] [--trajectories 10]] [--verify 300000]
+        [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--bandwidth K] [--verify 300000]
+
+``--degree 3`` adds the test functions of degree 3 (``symoro_gen.excite._degree3_tests``: 1456 more
+conditions on the LWR4, 938 on the RX-90). ``--bandwidth K`` restricts the distributions to those of the
+designs of the bench's Fourier basis (K harmonics, one period of 10 s, 100 Hz): ``E[ddq ddq^T] <= rho
+E[dq dq^T]``, ``rho`` from ``symoro_gen.excite.basis_bandwidth`` - a bound for that design class only.
 """
 from __future__ import annotations
 
@@ -45,12 +50,16 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_excite import TARGET_RATIO, random_baseline
+from bench_excite import TARGET_RATIO, random_baseline, velocity_occupancy
 
 from symoro_gen.excite import (
+    FourierBasis,
+    basis_bandwidth,
     cond_lower_bound,
     limits_of,
+    output_times,
     relaxation_bracket,
+    relaxation_rows,
     relaxation_verify,
     stationarity_moment_names,
     stationarity_moments,
@@ -74,6 +83,9 @@ def main(argv=None) -> int:
     ap.add_argument("--moment-tol", type=float, default=0.01, help="|E[m]| <= tol x scale for each moment")
     ap.add_argument("--trajectories", type=int, default=None,
                     help="random Fourier trajectories whose samples join the first round (default 10 with --stationary)")
+    ap.add_argument("--degree", type=int, choices=(2, 3), default=2, help="degree of the stationarity test functions")
+    ap.add_argument("--bandwidth", type=int, default=None, metavar="K",
+                    help="only the distributions of a Fourier design of K harmonics over 10 s at 100 Hz")
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
     a = ap.parse_args(argv)
     robot, model = model_for(a.robot)
@@ -86,10 +98,14 @@ def main(argv=None) -> int:
               f"dual cond {h.dual:.3f} (lower estimate; r = {h.r:.4f}), SDP {h.sdp_seconds:.0f} s, "
               f"total {h.seconds:.0f} s, load {os.getloadavg()[0]:.1f}", flush=True)
 
+    rho = None if a.bandwidth is None else basis_bandwidth(FourierBasis(a.bandwidth, 0.1), output_times(10.0, 100.0))
+    if rho is not None:
+        print(f"{a.robot}: bandwidth of a {a.bandwidth}-harmonic Fourier design over 10 s at 100 Hz: "
+              f"E[ddq ddq^T] <= {rho:.4g} E[dq dq^T] ((rad/s)^2; (K w)^2 = {(a.bandwidth * 0.2 * np.pi) ** 2:.4g})")
     t0 = time.perf_counter()
     b = relaxation_bracket(model, lim, atoms=a.atoms, rounds=a.rounds, fresh=a.fresh, starts=a.starts, add=a.add,
                            tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
-                           moment_tol=a.moment_tol,
+                           moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho,
                            trajectories=(10 if a.stationary else 0) if a.trajectories is None else a.trajectories,
                            progress=show)
     wall = time.perf_counter() - t0
@@ -105,16 +121,28 @@ def main(argv=None) -> int:
         lower, how = lower_v, "dual estimate, verified"
     if bound is not None and bound.bound > lower:
         lower, how = bound.bound, "rigorous cond_lower_bound (above the dual estimate)"
-    kind = (f"stationary (moment tol {a.moment_tol:g})" if a.stationary else "plain")
+    kind = (f"stationary (moment tol {a.moment_tol:g}, degree {a.degree})" if a.stationary else "plain") + (
+        f", {a.bandwidth}-harmonic bandwidth" if rho is not None else "")
     print(f"{a.robot} [{kind}]: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
           f"the best distribution has {len(b.weights)} states of positive weight)")
     n = model.N_JOINTS
     p = b.weights / b.weights.sum()
-    m = p @ (stationarity_moments(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:]) / stationarity_scales(lim))
+    m = p @ (stationarity_moments(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:], degree=a.degree)
+             / stationarity_scales(lim, a.degree))
     k = int(np.argmax(np.abs(m)))
-    print(f"{a.robot}: the best distribution's stationarity moments (0 for every periodic or rest-to-rest trajectory): "
-          f"largest |E[m]| / scale = {abs(m[k]):.3f}, {stationarity_moment_names(n)[k]}; "
+    print(f"{a.robot}: the best distribution's stationarity moments of degree {a.degree} (0 for every closed trajectory): "
+          f"largest |E[m]| / scale = {abs(m[k]):.3f}, {stationarity_moment_names(n, a.degree)[k]}; "
           f"{int(np.sum(np.abs(m) > 0.05))} of {len(m)} above 0.05")
+    Wb = relaxation_rows(model, b.states, b.signs)
+    ev = np.linalg.eigvalsh(np.einsum("k,kia,kib->ab", p, Wb, Wb))
+    print(f"{a.robot}: the best distribution: sigma_max/sqrt(N) {np.sqrt(ev[-1]):.3g}, sigma_min/sqrt(N) "
+          f"{np.sqrt(ev[0]):.3g}; per joint, weight at the velocity limit / creeping (|dq| >= 0.95 / <= 0.1 dq_max): "
+          f"{velocity_occupancy(b.states[:, n:2 * n], lim.dq_max, p)}")
+    if rho is not None:
+        dq, ddq = b.states[:, n:2 * n], b.states[:, 2 * n:]
+        slack = np.linalg.eigvalsh(rho * (dq.T * p) @ dq - (ddq.T * p) @ ddq)[0]
+        print(f"{a.robot}: the best distribution's bandwidth LMI: smallest eigenvalue of rho E[dq dq^T] - E[ddq ddq^T] "
+              f"= {slack:.3g} (>= 0 up to the solver's tolerance)")
     if bound is not None:
         print(f"rigorous bound over every trajectory: {bound.describe()}")
     print(f"{a.robot}: relaxation's minimum in [{lower:.3f}, {b.upper:.3f}] (gap {b.upper / lower - 1:.1%}; lower end: "

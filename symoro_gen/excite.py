@@ -41,13 +41,14 @@ satisfies ``cond(W)^2 <= exp(criterion) <= nb^(2/p) cond(W)^2``; ``p`` is raised
 moments of a link turning about a fixed horizontal axis: ``g^2``) floors ``sigma_max``.
 :func:`relaxation_bracket` brackets the smallest cond over DISTRIBUTIONS of states within the limits (an
 SDP, [BV2004] sect. 7.5, by column generation; a dual lower estimate by weak duality), optionally restricted
-to the distributions that a periodic or rest-to-rest trajectory can have (``stationary=True``: the
+to the distributions that a closed trajectory (periodic, or ending where it started) can have (``stationary=True``: the
 occupation-measure moments of :func:`stationarity_moments`, [LHPT08]); :func:`relaxation_verify` re-prices
 its duals on a larger search. The value reported, ``cond``, is always the true, unscaled 2-norm
 condition number of the base regressor stacked over the output samples, as the field reports it.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import time
@@ -1361,6 +1362,11 @@ class RelaxationBracket:
     configuration); ``lam`` and ``c0`` are the multipliers of those constraints in the dual that gives
     ``lower`` (see :class:`_DualPricer`), and ``lower`` then bounds the cond of every such trajectory.
     ``A, B, r, lam, c0`` are those of the round that gave ``lower``.
+
+    With ``bandwidth`` (``rho``, from :func:`basis_bandwidth`) the distributions are further restricted
+    by ``E[ddq ddq^T] <= rho E[dq dq^T]`` (an LMI), which every design of a given basis meets on its
+    samples; ``C`` is its multiplier (PSD), and ``lower`` then bounds the cond of every design of that
+    basis (and, with ``stationary``, that returns to its start).
     """
 
     lower: float
@@ -1375,6 +1381,9 @@ class RelaxationBracket:
     moment_tol: float = 0.0
     lam: np.ndarray | None = None
     c0: float = 0.0
+    bandwidth: float | None = None
+    C: np.ndarray | None = None
+    degree: int = 2
 
     @property
     def stationary(self) -> bool:
@@ -1442,6 +1451,27 @@ def _psd(X: np.ndarray) -> np.ndarray:
     return (V * np.clip(w, 0, None)) @ V.T
 
 
+def basis_bandwidth(basis, t: np.ndarray) -> float:
+    """``rho``: the largest ``mean((u . ddq)^2) / mean((u . dq)^2)`` over the samples ``t`` of every
+    design of ``basis`` and every direction ``u`` of joint space (the largest generalised eigenvalue
+    of ``(Phi''^T Phi'', Phi'^T Phi')`` at ``t``: ``u . q(t) = Phi(t) X u`` is itself a design).
+
+    Every design of the basis therefore has ``E[ddq ddq^T] <= rho E[dq dq^T]`` over those samples (an
+    LMI that :func:`relaxation_bracket` can impose with ``bandwidth=rho``): its accelerations cannot
+    vary faster than the basis allows. For a Fourier series of ``K`` harmonics of ``w``, ``rho`` is
+    close to ``(K w)^2``; a distribution of states can have any ratio (accelerations at their limits
+    while the velocity stays at its own, which a trajectory can only do by switching the sign of its
+    acceleration at a rate no smooth basis has).
+    """
+    _, D, A = basis.matrices(np.asarray(t, float))
+    w, V = np.linalg.eigh(D.T @ D)
+    keep = w > 1e-12 * w.max()
+    if (~keep).any() and float(np.linalg.norm(A @ V[:, ~keep])) > 1e-8 * float(np.linalg.norm(A)):
+        raise ExcitationError("basis_bandwidth: a design with no velocity has an acceleration on these samples")
+    Vk = V[:, keep] / np.sqrt(w[keep])
+    return float(np.linalg.eigvalsh(Vk.T @ (A.T @ A) @ Vk)[-1])
+
+
 def _random_states(rng: np.random.Generator, limits: Limits, k: int) -> tuple[np.ndarray, np.ndarray]:
     """States spread over the box with its faces and vertices over-represented: each velocity uniform,
     exactly +-dq_max, exactly 0 (sign -1, 0 or +1) or slow (< 0.1 dq_max), each acceleration uniform or
@@ -1460,9 +1490,48 @@ def _random_states(rng: np.random.Generator, limits: Limits, k: int) -> tuple[np
 _Term = tuple[str, tuple[tuple[int, tuple[tuple[str, int], ...]], ...]]
 
 
-def _stationarity_terms(n: int) -> list[_Term]:
+#: d/dt of each factor of a test function: (sign, factor kinds), of the same joint
+_FACTOR_RATE = {"q": (1, ("dq",)), "dq": (1, ("ddq",)), "sin": (1, ("cos", "dq")), "cos": (-1, ("sin", "dq"))}
+
+
+def _rate_term(factors: tuple[tuple[str, int], ...]) -> _Term:
+    """``d/dt`` of the test function ``prod(factors)`` by the product rule (:data:`_FACTOR_RATE`)."""
+    name = "d/dt(" + " ".join(f"{kind}{j + 1}" if kind in ("q", "dq") else f"{kind} q{j + 1}"
+                              for kind, j in factors) + ")"
+    products = []
+    for k, (kind, j) in enumerate(factors):
+        sign, kinds = _FACTOR_RATE[kind]
+        products.append((sign, tuple((kk, j) for kk in kinds) + factors[:k] + factors[k + 1:]))
+    return name, tuple(products)
+
+
+def _degree3_tests(n: int) -> list[tuple[tuple[str, int], ...]]:
+    """The test functions of degree 3 (:func:`stationarity_moments` with ``degree=3``): products of two
+    trigonometric factors ``t_i t_j`` (``i <= j``; ``cos cos``, ``cos sin``, ``sin cos``, ``sin sin``, only
+    ``cos^2`` and ``cos sin`` for ``i = j``) alone and times each ``dq_k``; ``t_i dq_k dq_l``, ``q_i dq_k dq_l``
+    (``k <= l``) and ``dq_i dq_j dq_k`` (``i <= j <= k``)."""
+    trig = ("cos", "sin")
+    out: list[tuple[tuple[str, int], ...]] = []
+    for i in range(n):
+        for j in range(i, n):
+            for a in trig:
+                for b in trig:
+                    if i == j and a == "sin":  # sin^2 = 1 - cos^2, sin cos = cos sin
+                        continue
+                    phi = ((a, i), (b, j))
+                    out += [phi] + [phi + (("dq", k),) for k in range(n)]
+    pairs = [(k, m) for k in range(n) for m in range(k, n)]
+    out += [((a, i), ("dq", k), ("dq", m)) for i in range(n) for a in ("cos", "sin", "q") for k, m in pairs]
+    out += [(("dq", i), ("dq", j), ("dq", k)) for i in range(n) for j in range(i, n) for k in range(j, n)]
+    return out
+
+
+@functools.cache
+def _stationarity_terms(n: int, degree: int = 2) -> tuple[_Term, ...]:
     """The terms of :func:`stationarity_moments`: ``(name, ((sign, factors), ...))``, each a sum of signed
     products of factors ``("q"|"dq"|"ddq"|"sin"|"cos", joint)`` (``sin``/``cos`` of ``q_joint``)."""
+    if degree not in (2, 3):
+        raise ExcitationError(f"stationarity moments of degree {degree}: 2 or 3")
     out: list[_Term] = []
     for j in range(n):
         J = j + 1
@@ -1480,18 +1549,21 @@ def _stationarity_terms(n: int) -> list[_Term]:
                     (f"d/dt(sin q{I} dq{J})", ((1, (("cos", i), ("dq", i), ("dq", j))), (1, (("sin", i), ("ddq", j)))))]
             if i < j:
                 out.append((f"d/dt(dq{I} dq{J})", ((1, (("ddq", i), ("dq", j))), (1, (("dq", i), ("ddq", j))))))
-    return out
+    if degree == 3:
+        out += [_rate_term(f) for f in _degree3_tests(n)]
+    return tuple(out)
 
 
-def stationarity_moments(q, dq, ddq, lib: Any = np):
+def stationarity_moments(q, dq, ddq, lib: Any = np, degree: int = 2):
     """The time derivatives ``d/dt f(q, dq) = f_q dq + f_dq ddq`` of the test functions ``f`` =
     ``q_j``, ``dq_j``, ``dq_j^2/2``, ``q_j^2/2``, ``cos q_j``, ``sin q_j`` (per joint), ``q_i dq_j``,
-    ``cos q_i dq_j``, ``sin q_i dq_j`` (every pair) and ``dq_i dq_j`` (``i < j``)
+    ``cos q_i dq_j``, ``sin q_i dq_j`` (every pair) and ``dq_i dq_j`` (``i < j``); with ``degree=3``
+    also those of :func:`_degree3_tests` (products of three factors)
     (:func:`stationarity_moment_names` names them, :func:`stationarity_scales` sizes them).
 
     Over one period of a periodic trajectory, or any trajectory that starts and ends in the same
-    state (the rest-to-rest designs of ``excite``), the mean of ``d/dt f`` is ``(f(end) - f(start)) / T
-    = 0``: the moment conditions that distinguish the sample distribution of a trajectory from an
+    state (the Fourier designs of ``excite``; a spline design may end elsewhere), the mean of ``d/dt f`` is
+    ``(f(end) - f(start)) / T = 0``: the moment conditions that distinguish the sample distribution of a trajectory from an
     arbitrary distribution of states (the occupation-measure constraints of Lasserre, Henrion, Prieur
     and Trelat 2008, [LHPT08]). ``q, dq, ddq``: ``(k, n)`` arrays with ``lib = numpy`` (returns
     ``(k, m)``), or CasADi ``(n, 1)`` vectors with ``lib = casadi`` (returns an ``(m, 1)`` vector).
@@ -1504,7 +1576,7 @@ def stationarity_moments(q, dq, ddq, lib: Any = np):
         n = int(q.shape[0])
         cols = {"q": q, "dq": dq, "ddq": ddq, "sin": lib.sin(q), "cos": lib.cos(q)}
     out = []
-    for _, products in _stationarity_terms(n):
+    for _, products in _stationarity_terms(n, degree):
         total = 0
         for sign, factors in products:
             term = sign
@@ -1515,48 +1587,54 @@ def stationarity_moments(q, dq, ddq, lib: Any = np):
     return np.stack(out, axis=1) if lib is np else lib.vertcat(*out)
 
 
-def stationarity_moment_names(n: int) -> list[str]:
+def stationarity_moment_names(n: int, degree: int = 2) -> list[str]:
     """The name ``d/dt(f)`` of each term of :func:`stationarity_moments` (same order), joints from 1."""
-    return [name for name, _ in _stationarity_terms(n)]
+    return [name for name, _ in _stationarity_terms(n, degree)]
 
 
-def stationarity_scales(limits: Limits) -> np.ndarray:
+def stationarity_scales(limits: Limits, degree: int = 2) -> np.ndarray:
     """The size of each term of :func:`stationarity_moments` over the limits' box (the sum over its
     products of the largest magnitude of each factor: ``max |q_j|``, ``dq_max``, ``ddq_max``, 1 for sin
     and cos): the moment ``k`` is held to ``|E[m_k]| <= tol * scale_k``."""
     bound = {"q": np.maximum(np.abs(limits.q_min), np.abs(limits.q_max)), "dq": limits.dq_max,
              "ddq": limits.ddq_max, "sin": np.ones(limits.n), "cos": np.ones(limits.n)}
     return np.array([sum(math.prod(float(bound[kind][j]) for kind, j in factors) for _, factors in products)
-                     for _, products in _stationarity_terms(limits.n)])
+                     for _, products in _stationarity_terms(limits.n, degree)])
 
 
 class _DualPricer:
     """The dual ratio of the relaxation SDP at duals ``A, B`` (and, with the stationarity constraints,
     their multipliers ``lam`` and ``c0``)::
 
-        N(s) / D(s),  N(s) = tr(A G(s)) - lam . m(s) / scale + c0,  D(s) = tr(B G(s))
+        N(s) / D(s),  N(s) = tr(A G(s)) - lam . m(s) / scale + c0 + rho dq^T C dq - ddq^T C ddq,
+        D(s) = tr(B G(s))
 
     Weak duality: if ``N(s) <= r D(s)`` for every state ``s`` of the box, then for every distribution
     ``M = E[G]`` with ``|E[m]| <= tol scale`` (and ``c0 >= tol sum |lam|``), ``lambda_min tr A <= tr(A M)
     <= E[N] <= r tr(B M) <= r lambda_max tr B``: ``cond >= sqrt(tr A / (r tr B))``
-    (:func:`relaxation_dual_bound`). ``ratio`` evaluates it on states; ``local_max`` maximises it
+    (:func:`relaxation_dual_bound`); the bandwidth term (``C`` PSD) has ``E >= 0`` for every distribution
+    with ``E[ddq ddq^T] <= rho E[dq dq^T]``, so the same holds for those. ``ratio`` evaluates it on states; ``local_max`` maximises it
     by L-BFGS-B in the box from a state with its velocity signs held, gradients from the generated
     CasADi model.
     """
 
     def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
-                 lam: np.ndarray | None = None, c0: float = 0.0, *, coulomb=None, jac=None):
+                 lam: np.ndarray | None = None, c0: float = 0.0, *, rho: float | None = None,
+                 C: np.ndarray | None = None, degree: int = 2, coulomb=None, jac=None):
         self.model, self.A, self.B = model, A, B
         self.lam, self.c0 = lam, float(c0)
+        self.rho: float | None = None if rho is None or C is None else float(rho)
+        self.C: np.ndarray | None = None if rho is None or C is None else _psd(np.asarray(C, float))
         self.n = limits.n
         self.coul = _coulomb_columns(model) if coulomb is None else coulomb
-        self.scale = stationarity_scales(limits) if lam is not None else None
-        self.jac = jac if jac is not None else self.casadi_jacobian(model, self.n, lam is not None)
+        self.degree = degree
+        self.scale = stationarity_scales(limits, degree) if lam is not None else None
+        self.jac = jac if jac is not None else self.casadi_jacobian(model, self.n, lam is not None, degree)
         self.lo = np.concatenate([limits.q_min, -limits.dq_max, -limits.ddq_max])
         self.hi = np.concatenate([limits.q_max, limits.dq_max, limits.ddq_max])
 
     @staticmethod
-    def casadi_jacobian(model: IdentificationModel, n: int, moments: bool):
+    def casadi_jacobian(model: IdentificationModel, n: int, moments: bool, degree: int = 2):
         if not hasattr(model, "casadi_regressor"):
             return None
         ca = _casadi()
@@ -1564,7 +1642,7 @@ class _DualPricer:
         Y = model.casadi_regressor()(z[:n], z[n:2 * n], z[2 * n:])
         out = [Y, ca.jacobian(ca.vec(Y), z)]  # vec: column-major
         if moments:
-            m = stationarity_moments(z[:n], z[n:2 * n], z[2 * n:], lib=ca)
+            m = stationarity_moments(z[:n], z[n:2 * n], z[2 * n:], lib=ca, degree=degree)
             out += [m, ca.jacobian(m, z)]
         return ca.Function("ratio_rows", [z], out)
 
@@ -1574,10 +1652,13 @@ class _DualPricer:
             W = relaxation_rows(self.model, X, S, self.coul)
         num = np.einsum("kia,ab,kib->k", W, self.A, W)
         den = np.einsum("kia,ab,kib->k", W, self.B, W)
+        n = self.n
         if self.lam is not None:
-            n = self.n
-            m = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / self.scale
+            m = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:], degree=self.degree) / self.scale
             num = num - m @ self.lam + self.c0
+        if self.C is not None:
+            dq, ddq = X[:, n:2 * n], X[:, 2 * n:]
+            num = num + self.rho * np.einsum("ki,ij,kj->k", dq, self.C, dq) - np.einsum("ki,ij,kj->k", ddq, self.C, ddq)
         return num, den
 
     def ratio(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
@@ -1614,6 +1695,10 @@ class _DualPricer:
                 lw = self.lam / self.scale
                 num += -float(np.array(res[2]).ravel() @ lw) + self.c0
                 gnum = gnum - np.array(res[3]).T @ lw
+            if self.C is not None:
+                Cv, Ca = self.rho * (self.C @ zz[n:2 * n]), self.C @ zz[2 * n:]
+                num += float(zz[n:2 * n] @ Cv - zz[2 * n:] @ Ca)
+                gnum = gnum + np.concatenate([np.zeros(n), 2 * Cv, -2 * Ca])
             den = max(den, 1e-300)
             return -num / den, -(gnum / den - num / den ** 2 * gden) * h
 
@@ -1642,7 +1727,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                        fresh: int = 30_000, starts: int = 40, add: int = 60, prune: float = 1e-6,
                        tol: float = 0.02, time_budget: float = math.inf, seed: int = 0,
                        extra_states: np.ndarray | None = None, stationary: bool = False,
-                       moment_tol: float = 0.01, trajectories: int = 0, progress=None) -> RelaxationBracket:
+                       moment_tol: float = 0.01, degree: int = 2, trajectories: int = 0,
+                       bandwidth: float | None = None, progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -1651,8 +1737,10 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         G_i = W(s_i)^T W(s_i) / tr(W(s_i)^T W(s_i))
 
     and, with ``stationary``, ``|sum_i mu_i m(s_i) / (tr_i scale)| <= moment_tol sum_i mu_i / tr_i``
-    (the stationarity moments of :func:`stationarity_moments`: every periodic or rest-to-rest
-    trajectory satisfies them, an arbitrary distribution of states does not).
+    (the stationarity moments of :func:`stationarity_moments`: every closed trajectory - periodic, or
+    ending where it started - satisfies them, an arbitrary distribution of states does not), and with ``bandwidth``
+    (``rho``) ``sum_i mu_i (rho dq_i dq_i^T - ddq_i ddq_i^T) / tr_i >= 0`` (every design of a basis of
+    that :func:`basis_bandwidth` meets it). ``degree=3`` adds the test functions of degree 3 to the moments.
     Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
     ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
     (:class:`_DualPricer`): a state with ratio > 1 would lower the objective. Each round keeps the
@@ -1675,8 +1763,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     if trajectories:
         Xt, St = _trajectory_states(limits, rng, trajectories)
         X, S = np.vstack([X, Xt]), np.vstack([S, St])
-    jac = _DualPricer.casadi_jacobian(model, n, stationary)
-    scale = stationarity_scales(limits)
+    jac = _DualPricer.casadi_jacobian(model, n, stationary, degree)
+    scale = stationarity_scales(limits, degree)
 
     t0 = time.perf_counter()
     hist: list[RelaxationRound] = []
@@ -1697,10 +1785,16 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         c1, c2 = Mx >> np.eye(nb), kap * np.eye(nb) - Mx >> 0
         cons = [c1, c2]
         if stationary:
-            H = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / scale / tr[:, None]
+            H = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:], degree=degree) / scale / tr[:, None]
             mass = (1.0 / tr) @ mu
             cp_pos, cp_neg = H.T @ mu - moment_tol * mass <= 0, -H.T @ mu - moment_tol * mass <= 0
             cons += [cp_pos, cp_neg]
+        if bandwidth is not None:
+            dq_, ddq_ = X[:, n:2 * n], X[:, 2 * n:]
+            K = (bandwidth * np.einsum("ki,kj->kij", dq_, dq_) - np.einsum("ki,kj->kij", ddq_, ddq_)) / tr[:, None, None]
+            Kx = cp.reshape(K.reshape(len(X), -1).T @ mu, (n, n), order="C")
+            c3 = (Kx + Kx.T) / 2 >> 0
+            cons.append(c3)
         prob = cp.Problem(cp.Minimize(kap), cons)
         try:
             prob.solve(solver="CLARABEL")
@@ -1721,7 +1815,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
             nu_p = np.clip(np.asarray(cp_pos.dual_value, float), 0, None)
             nu_n = np.clip(np.asarray(cp_neg.dual_value, float), 0, None)
             lam, c0 = nu_p - nu_n, moment_tol * float(np.sum(nu_p + nu_n))
-        pricer = _DualPricer(model, limits, A, B, lam, c0, coulomb=coul, jac=jac)
+        C = _psd(np.asarray(c3.dual_value)) if bandwidth is not None else None
+        pricer = _DualPricer(model, limits, A, B, lam, c0, rho=bandwidth, C=C, degree=degree, coulomb=coul, jac=jac)
         # pricing: the dual ratio over the current states, fresh random states and local maxima
         Xf, Sf = _random_states(rng, limits, fresh)
         rf = pricer.ratio(Xf, Sf)
@@ -1738,7 +1833,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
             progress(hist[-1])
         if dual > best_lower or not dual_of:
             best_lower = max(best_lower, dual)
-            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0}
+            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0, "C": C}
         if primal < best_upper:
             best_upper = primal
             pos = w > 0
@@ -1751,7 +1846,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         X, S = np.vstack(newX), np.vstack(newS)
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
                              dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if stationary else 0.0,
-                             dual_of["lam"], dual_of["c0"])
+                             dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree)
 
 
 def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: RelaxationBracket, *,
@@ -1760,7 +1855,8 @@ def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: Relax
     fresh random states (another seed) and L-BFGS-B from the ``starts`` best of them. Returns
     ``(r, bound)``: the largest ratio found (at least ``bracket.r``) and ``sqrt(tr A / (r tr B))``.
     A ``bound`` well below ``bracket.lower`` says the bracket's search for ``r`` was not global."""
-    pricer = _DualPricer(model, limits, bracket.A, bracket.B, bracket.lam, bracket.c0)
+    pricer = _DualPricer(model, limits, bracket.A, bracket.B, bracket.lam, bracket.c0, rho=bracket.bandwidth,
+                         C=bracket.C, degree=bracket.degree)
     rng = np.random.default_rng(seed)
     best_r, pool_X, pool_S, pool_r = bracket.r, [], [], []
     for k0 in range(0, states, batch):

@@ -199,3 +199,104 @@ def test_verification_reprices_the_same_duals():
     r, bound = relaxation_verify(model, lim, b, states=5000, starts=10, seed=9)
     assert r >= b.r and bound <= b.lower * (1 + 1e-12)
     assert bound == pytest.approx(relaxation_dual_bound(b.A, b.B, r))
+
+
+# --- degree-3 test functions and the bandwidth of a design basis -------------------------------------
+
+def test_degree3_moments_vanish_on_trajectories_and_extend_degree2():
+    """degree=3 keeps the degree-2 moments first (same values, names) and adds conditions that one period
+    of a periodic trajectory also meets, random states do not; CasADi form = NumPy form."""
+    import casadi as ca
+
+    from symoro_gen.excite import _random_states, stationarity_moment_names, stationarity_moments, stationarity_scales
+
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    n = model.N_JOINTS
+    s2, s3 = stationarity_scales(lim), stationarity_scales(lim, 3)
+    k2 = len(s2)
+    assert len(s3) > k2 and stationarity_moment_names(n, 3)[:k2] == stationarity_moment_names(n)
+    assert len(set(stationarity_moment_names(n, 3))) == len(s3)
+    for q, dq, ddq in _trajectories(model, lim, 5, seed=23):
+        m3 = stationarity_moments(q[:-1], dq[:-1], ddq[:-1], degree=3)
+        np.testing.assert_array_equal(m3[:, :k2], stationarity_moments(q[:-1], dq[:-1], ddq[:-1]))
+        assert np.abs((m3 / s3).mean(0)).max() < 1e-6
+    X, _ = _random_states(np.random.default_rng(1), lim, 2000)
+    Xp = np.abs(X)  # every joint speeding up in the positive direction: no trajectory returns from that
+    m = stationarity_moments(Xp[:, :n], Xp[:, n:2 * n], Xp[:, 2 * n:], degree=3) / s3
+    assert np.abs(m[:, k2:].mean(0)).max() > 0.05
+    z = ca.SX.sym("z", 3 * n)
+    f = ca.Function("m", [z], [stationarity_moments(z[:n], z[n:2 * n], z[2 * n:], lib=ca, degree=3)])
+    for x in X[:5]:
+        np.testing.assert_allclose(np.array(f(x)).ravel(),
+                                   stationarity_moments(x[:n], x[n:2 * n], x[2 * n:], degree=3)[0], rtol=1e-12, atol=1e-12)
+    # a finite difference of one degree-3 test function along a trajectory: d/dt(cos q1 sin q2 dq2)
+    q, dq, ddq = _trajectories(model, lim, 1, seed=3)[0]
+    k = stationarity_moment_names(n, 3).index("d/dt(cos q1 sin q2 dq2)")
+    g = np.cos(q[:, 0]) * np.sin(q[:, 1]) * dq[:, 1]
+    fd = np.gradient(g, output_times(10.0, 50.0))
+    m = stationarity_moments(q, dq, ddq, degree=3)[:, k]
+    assert np.abs(fd - m)[5:-5].max() < 1e-2 * np.abs(m).max()
+
+
+def test_basis_bandwidth_is_the_largest_ratio_of_any_design():
+    """Every design of the basis has E[ddq ddq^T] <= rho E[dq dq^T] on the samples, and rho is attained
+    (a largest ratio, not a loose bound); for K harmonics of w it lies between ((K-1) w)^2 and (K w)^2."""
+    from symoro_gen.excite import SplineBasis, basis_bandwidth
+
+    robot, _ = model_for("scara")
+    lim = limits_of(robot)
+    t = output_times(10.0, 100.0)
+    rng = np.random.default_rng(4)
+    for basis in (FourierBasis(5, 0.1), SplineBasis(20, 10.0)):
+        rho = basis_bandwidth(basis, t)
+        if isinstance(basis, FourierBasis):
+            w = 2 * np.pi * 0.1
+            assert (4 * w) ** 2 < rho <= (5 * w) ** 2 * (1 + 1e-9)
+        for _ in range(10):
+            _, dq, ddq = basis_eval(basis, random_trajectory(basis, lim, rng, t), t)
+            gap = np.linalg.eigvalsh(rho * dq.T @ dq - ddq.T @ ddq)
+            assert gap[0] >= -1e-9 * gap[-1]
+        _, D, A = basis.matrices(t)
+        ratio = []
+        for _ in range(200):  # random directions of the design space stay below rho
+            y = rng.standard_normal(basis.m)
+            ratio.append(np.sum((A @ y) ** 2) / max(np.sum((D @ y) ** 2), 1e-300))
+        assert max(ratio) <= rho * (1 + 1e-9)
+        from scipy.linalg import eigh  # the maximiser reaches it
+        Gd, Ga = D.T @ D, A.T @ A
+        keep = np.linalg.eigvalsh(Gd) > 1e-12 * np.linalg.eigvalsh(Gd).max()
+        if keep.all():
+            w_, V = eigh(Ga, Gd)
+            y = V[:, -1]
+            assert np.sum((A @ y) ** 2) / np.sum((D @ y) ** 2) == pytest.approx(rho, rel=1e-6)
+
+
+def test_bandwidth_relaxation_meets_its_lmi_and_bounds_the_designs_of_its_basis(scara):
+    """relaxation_bracket(bandwidth=rho): the upper-end distribution satisfies the LMI, its lower end lies
+    above the plain relaxation's optimum (a distribution no 5-harmonic design can have), and weak duality
+    with the LMI multiplier C holds on unseen designs of that basis: the pricer's numerator exceeds
+    tr(A G) by E[tr(C (rho dq dq^T - ddq ddq^T))] >= 0, their cond is above the lower end."""
+    from symoro_gen.excite import _DualPricer, basis_bandwidth
+
+    model, lim, plain = scara
+    n = model.N_JOINTS
+    rho = basis_bandwidth(FourierBasis(5, 0.1), output_times(10.0, 50.0))
+    b = relaxation_bracket(model, lim, atoms=100, rounds=4, fresh=2000, starts=6, add=20, seed=5, trajectories=5,
+                           bandwidth=rho)
+    assert b.bandwidth == rho and b.C is not None and b.lower <= b.upper
+    assert b.lower > plain.upper * 1.05
+    p = b.weights / b.weights.sum()
+    dq, ddq = b.states[:, n:2 * n], b.states[:, 2 * n:]
+    lmi = rho * (dq.T * p) @ dq - (ddq.T * p) @ ddq
+    assert np.linalg.eigvalsh(lmi)[0] >= -1e-5 * np.abs(lmi).max()
+    pricer = _DualPricer(model, lim, b.A, b.B, rho=rho, C=b.C)
+    for q, dq_, ddq_ in _trajectories(model, lim, 10, seed=13):
+        assert stacked_cond(model, q, dq_, ddq_) >= b.lower
+        X = np.hstack([q, dq_, ddq_])
+        num, den = pricer.num_den(X, np.sign(dq_))
+        W = relaxation_rows(model, X)
+        gain = num.mean() - np.einsum("kia,ab,kib->k", W, b.A, W).mean()
+        K = rho * dq_.T @ dq_ / len(q) - ddq_.T @ ddq_ / len(q)
+        assert np.sum(pricer.C * K) > 0 and gain == pytest.approx(np.sum(pricer.C * K), rel=1e-9)
+        assert num.mean() <= b.r * den.mean() * (1 + 1e-9)
