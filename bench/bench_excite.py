@@ -20,7 +20,8 @@ baseline stays the 50 random Fourier trajectories. ``--embed 117 231`` then repr
 exactly in splines of more control points (each level's knot intervals a multiple of the previous one's:
 knot insertion) and refines it there (``--embed-refine`` SDPs each): does more freedom move the optimum?
 ``--repeat K`` also compares the optimised design run K times back to back with the random Fourier
-trajectories of period K x duration (repeating a run leaves its cond unchanged; the random baseline of a
+trajectories of period K x duration (repeating a run that ends where it started leaves its cond unchanged;
+a spline design, which ends elsewhere, is run forward and backward in turn; the random baseline of a
 longer period is slower). ``--baseline 5 10 20 30 60`` prints only the random baseline (best, median,
 target) at each duration. ``--refine N`` follows each start's IPOPT result with at most N iterations of
 ``symoro_gen.excite.refine_excitation`` (sequential SDP on the true cond) and prints the cond before and
@@ -54,6 +55,16 @@ from symoro_gen.excite import (
 from symoro_gen.loader import model_for
 
 TARGET_RATIO = 5.0
+
+
+def velocity_occupancy(dq: np.ndarray, dq_max: np.ndarray, weights: np.ndarray | None = None) -> str:
+    """Per joint, the fraction of the samples (or of the weight) at the velocity limit (|dq| >= 0.95 dq_max)
+    and creeping (|dq| <= 0.1 dq_max): the friction columns' best distribution has about 0.3 at the limit and
+    the rest creeping, nothing in between (``symoro_gen.excite.friction_ceiling``)."""
+    w = np.full(len(dq), 1.0 / len(dq)) if weights is None else weights / weights.sum()
+    r = np.abs(dq) / dq_max
+    at, creep = w @ (r >= 0.95), w @ (r <= 0.1)
+    return " ".join(f"{a:.2f}/{c:.2f}" for a, c in zip(at, creep))
 
 
 def random_baseline(model, lim, *, harmonics: int = 5, duration: float = 10.0, rate: float = 100.0, seed: int = 0,
@@ -115,15 +126,21 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
         check_limits(lim, *basis_eval(design, X, tt))["ok"] for tt in (t_out, dense_times(t_out, duration, design))))
     repeated = None
     if repeat > 1:
-        # the design run `repeat` times back to back (it starts and ends at rest in the same configuration):
-        # its samples are those of one run repeated, so its cond is that of one run, against random Fourier
-        # trajectories of period repeat x duration
-        idx = np.concatenate([np.arange(len(q))] + [np.arange(1, len(q))] * (repeat - 1))
-        Wt = np.asarray(model.regressor(q[idx], dq[idx], ddq[idx])).reshape(-1, len(model.BASE_NAMES))
-        st = np.linalg.svd(Wt, compute_uv=False)
+        # the design run `repeat` times back to back, at rest at every junction. A design that ends where it
+        # started (Fourier) is repeated as it is: its samples repeat, its cond is that of one run. One that
+        # ends elsewhere (a spline) is run forward, then backward (q(T - t): dq -> -dq, ddq unchanged), and so
+        # on, so that each run starts where the previous one stopped. Against random Fourier trajectories of
+        # period repeat x duration.
+        closed = bool(np.abs(q[-1] - q[0]).max() <= 1e-9)
+        runs = [(q, dq, ddq)]
+        for k in range(1, repeat):
+            forward = closed or k % 2 == 0
+            runs.append((q[1:], dq[1:], ddq[1:]) if forward else (q[::-1][1:], -dq[::-1][1:], ddq[::-1][1:]))
+        qr, dqr, ddqr = (np.vstack(c) for c in zip(*runs))
+        c_rep = stacked_cond(model, qr, dqr, ddqr)
         rand_long, _ = random_baseline(model, lim, harmonics=harmonics, duration=repeat * duration, rate=rate, seed=seed)
-        repeated = {"repeat": repeat, "duration": repeat * duration, "cond": float(st[0] / st[-1]),
-                    "random_best": min(rand_long), "ratio": min(rand_long) / float(st[0] / st[-1])}
+        repeated = {"repeat": repeat, "duration": repeat * duration, "cond": c_rep, "closed": closed,
+                    "random_best": min(rand_long), "ratio": min(rand_long) / c_rep}
     W = np.asarray(model.regressor(q, dq, ddq)).reshape(-1, len(model.BASE_NAMES))
     sv = np.linalg.svd(W, compute_uv=False)
     N = W.shape[0] / model.N_JOINTS
@@ -131,7 +148,8 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
     return {"robot": name, "n": model.N_JOINTS, "nb": len(model.BASE_NAMES), "cond": cond,
             "random_best": min(rand), "random_median": float(np.median(rand)), "ratio": min(rand) / cond,
             "limits_ok": limits_ok, "embedded": embedded, "repeated": repeated, "wall": wall, "starts": res.starts, "bound": bound,
-            "smax": float(sv[0] / np.sqrt(N)), "smin": float(sv[-1] / np.sqrt(N)), "random_smax_min": min(rand_smax)}
+            "smax": float(sv[0] / np.sqrt(N)), "smin": float(sv[-1] / np.sqrt(N)), "random_smax_min": min(rand_smax),
+            "occupancy": velocity_occupancy(dq, lim.dq_max)}
 
 
 def main(argv=None) -> int:
@@ -193,6 +211,8 @@ def main(argv=None) -> int:
               f"{r['cond'] / bd.bound:.3g} x the bound (sigma_max/sqrt(N) {r['smax']:.3g} >= {np.sqrt(bd.smax2):.3g}, "
               f"sigma_min/sqrt(N) {r['smin']:.3g} <= {np.sqrt(bd.smin2):.3g}; smallest sigma_max/sqrt(N) of the 50 "
               f"random: {r['random_smax_min']:.3g})")
+        print(f"        per joint, fraction of the samples at the velocity limit / creeping (|dq| >= 0.95 / <= 0.1 "
+              f"dq_max): {r['occupancy']}")
         print("        starts: " + "; ".join(f"{s['cond_start']:.4g} -> "
                                               + " -> ".join(f"{c:.4g}" for c in s.get("cond_stages", [s["cond"]]))
                                               + f" (p = {s.get('powers')}, {s['status']}, {s['iterations']} it)"
@@ -202,7 +222,8 @@ def main(argv=None) -> int:
                                               for s in r["starts"]))
         if r["repeated"]:
             rp = r["repeated"]
-            print(f"        run {rp['repeat']} times ({rp['duration']:g} s): cond {rp['cond']:.4g}; best of 50 random Fourier "
+            how = "times" if rp["closed"] else "times, forward and backward in turn (it ends elsewhere than it starts)"
+            print(f"        run {rp['repeat']} {how} ({rp['duration']:g} s): cond {rp['cond']:.4g}; best of 50 random Fourier "
                   f"of period {rp['duration']:g} s: {rp['random_best']:.4g}; ratio {rp['ratio']:.2f} (a random Fourier "
                   f"trajectory of period {a.duration:g} s run {rp['repeat']} times keeps its cond: ratio {r['ratio']:.2f})")
         for e in r["embedded"]:
