@@ -41,8 +41,8 @@ satisfies ``cond(W)^2 <= exp(criterion) <= nb^(2/p) cond(W)^2``; ``p`` is raised
 moments of a link turning about a fixed horizontal axis: ``g^2``) floors ``sigma_max``.
 :func:`relaxation_bracket` brackets the smallest cond over DISTRIBUTIONS of states within the limits (an
 SDP, [BV2004] sect. 7.5, by column generation; a dual lower estimate by weak duality), optionally restricted
-to the distributions that a closed trajectory (periodic, or ending where it started) can have (``stationary=True``: the
-occupation-measure moments of :func:`stationarity_moments`, [LHPT08]); :func:`relaxation_verify` re-prices
+to the distributions that a closed trajectory (periodic, or ending where it started) can have
+(``stationary=True``: the occupation-measure moments of :func:`stationarity_moments`, [LHPT08]); :func:`relaxation_verify` re-prices
 its duals on a larger search. The value reported, ``cond``, is always the true, unscaled 2-norm
 condition number of the base regressor stacked over the output samples, as the field reports it.
 """
@@ -1562,9 +1562,9 @@ def stationarity_moments(q, dq, ddq, lib: Any = np, degree: int = 2):
     (:func:`stationarity_moment_names` names them, :func:`stationarity_scales` sizes them).
 
     Over one period of a periodic trajectory, or any trajectory that starts and ends in the same
-    state (the Fourier designs of ``excite``; a spline design may end elsewhere), the mean of ``d/dt f`` is
-    ``(f(end) - f(start)) / T = 0``: the moment conditions that distinguish the sample distribution of a trajectory from an
-    arbitrary distribution of states (the occupation-measure constraints of Lasserre, Henrion, Prieur
+    state (the Fourier designs of ``excite``; a spline design may end elsewhere), the mean of ``d/dt f``
+    is ``(f(end) - f(start)) / T = 0``: the moment conditions that distinguish the sample distribution of a
+    trajectory from an arbitrary distribution of states (the occupation-measure constraints of Lasserre, Henrion, Prieur
     and Trelat 2008, [LHPT08]). ``q, dq, ddq``: ``(k, n)`` arrays with ``lib = numpy`` (returns
     ``(k, m)``), or CasADi ``(n, 1)`` vectors with ``lib = casadi`` (returns an ``(m, 1)`` vector).
     """
@@ -1613,9 +1613,9 @@ class _DualPricer:
     ``M = E[G]`` with ``|E[m]| <= tol scale`` (and ``c0 >= tol sum |lam|``), ``lambda_min tr A <= tr(A M)
     <= E[N] <= r tr(B M) <= r lambda_max tr B``: ``cond >= sqrt(tr A / (r tr B))``
     (:func:`relaxation_dual_bound`); the bandwidth term (``C`` PSD) has ``E >= 0`` for every distribution
-    with ``E[ddq ddq^T] <= rho E[dq dq^T]``, so the same holds for those. ``ratio`` evaluates it on states; ``local_max`` maximises it
-    by L-BFGS-B in the box from a state with its velocity signs held, gradients from the generated
-    CasADi model.
+    with ``E[ddq ddq^T] <= rho E[dq dq^T]``, so the same holds for those. ``ratio`` evaluates it on
+    states; ``local_max`` maximises it by L-BFGS-B in the box from a state with its velocity signs held,
+    gradients from the generated CasADi model.
     """
 
     def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
