@@ -17,9 +17,10 @@ with CasADi gradients). Each round prints
   maximisation, so rigorous only as far as that search is global.
 
 With ``--stationary`` the distributions must also satisfy the stationarity moments of every closed
-trajectory (periodic, or ending where it started: the Fourier designs, not the spline ones) (``symoro_gen.excite.stationarity_moments``: the mean of ``d/dt f(q, dq)`` is 0 for
-the test functions ``f``, held to ``--moment-tol`` of their scale), the first round seeded with the
-samples of ``--trajectories`` random Fourier trajectories (which satisfy them). ``--verify N`` re-prices
+trajectory - periodic, or ending where it started: the Fourier designs, not the spline ones
+(``symoro_gen.excite.stationarity_moments``: the mean of ``d/dt f(q, dq)`` is 0 for the test functions
+``f``, held to ``--moment-tol`` of their scale), the first round seeded with the samples of
+``--trajectories`` random Fourier trajectories (which satisfy them; also the default with ``--bandwidth``). ``--verify N`` re-prices
 the final duals on N fresh random states of another seed plus 200 local searches
 (``relaxation_verify``) and prints the lower end they still give.
 
@@ -106,7 +107,7 @@ def main(argv=None) -> int:
     b = relaxation_bracket(model, lim, atoms=a.atoms, rounds=a.rounds, fresh=a.fresh, starts=a.starts, add=a.add,
                            tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
                            moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho,
-                           trajectories=(10 if a.stationary else 0) if a.trajectories is None else a.trajectories,
+                           trajectories=(10 if a.stationary or rho is not None else 0) if a.trajectories is None else a.trajectories,
                            progress=show)
     wall = time.perf_counter() - t0
     rand, _ = random_baseline(model, lim)
@@ -147,11 +148,13 @@ def main(argv=None) -> int:
         print(f"rigorous bound over every trajectory: {bound.describe()}")
     print(f"{a.robot}: relaxation's minimum in [{lower:.3f}, {b.upper:.3f}] (gap {b.upper / lower - 1:.1%}; lower end: "
           f"{how}; upper end: an explicit distribution of states)")
-    verdict = ("the target is BELOW the lower end: no trajectory reaches it" +
+    scope = (f"{a.bandwidth}-harmonic Fourier design of 10 s" if rho is not None else
+             "trajectory that ends where it started" if a.stationary else "trajectory")
+    verdict = (f"the target is BELOW the lower end: no {scope} reaches it" +
                (" (as far as the dual ratio's maximisation is global)" if how.startswith("dual") else "")
                if lower > target else
                "the target is ABOVE the relaxation's upper end: a distribution of states reaches it "
-               "(a trajectory still has to come close)" if b.upper <= target else
+               f"(a {scope} still has to come close)" if b.upper <= target else
                "the target lies inside the bracket: not settled")
     print(f"target (best of 50 random Fourier / {TARGET_RATIO:g}) = {min(rand):.2f} / {TARGET_RATIO:g} = {target:.2f}: "
           f"{verdict}")
