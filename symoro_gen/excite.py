@@ -63,6 +63,7 @@ from .atomic import write_text_atomic
 from .errors import IdentificationError
 from .loader import model_for
 from .model import IdentificationModel
+from .progress import ProgressCounter
 from .report import Figure, Heading, Paragraph, Report, Table, check_report_path
 from .report.document import write_report_files
 from .report.plots import WIDTH_IN, _png, require_matplotlib
@@ -780,7 +781,7 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
     than ``t_out``, and the knots: :func:`dense_times`); the radius follows the usual trust-region rule on the ratio of actual to predicted
     decrease (Conn, Gould & Toint 2000, "Trust-region methods", alg. 6.1.1). Stops after ``iterations``
     SDPs, when ``delta < delta_min`` or when the SDP predicts no decrease. ``progress(record)`` is called
-    after each evaluated step.
+    after each SDP (with the iteration's record).
 
     Returns the refined design (never of larger cond than ``X``) and the history of the iterations
     (``cond`` at the start of each, ``delta``, ``predicted`` and ``actual`` decrease of ``cond^2``,
@@ -820,6 +821,12 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
         return np.einsum("ax,iay->ixy", U, R).reshape(m * n, k * k).T
 
     history: list[dict] = []
+
+    def record(rec: dict) -> None:
+        history.append(rec)
+        if progress is not None:
+            progress(rec)
+
     M0, dM, tau0, dtau = lin(X)
     c2 = _cond2(M0)
     for it in range(int(iterations)):
@@ -870,7 +877,7 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
         rec["status"] = status
         if d.value is None or status not in ("optimal", "optimal_inaccurate"):
             rec.update(accepted=False, predicted=0.0, actual=0.0)
-            history.append(rec)
+            record(rec)
             delta /= 4
             continue
         D = np.asarray(d.value).reshape(m, n)
@@ -880,7 +887,7 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
         rec["predicted"] = pred
         if not pred > 1e-8 * c2:
             rec.update(accepted=False, actual=0.0)
-            history.append(rec)
+            record(rec)
             break  # the linearised problem sees no descent: a stationary point of the ratio
         Xn = X + D
         c2n = cond2(Xn)
@@ -890,9 +897,7 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
         rho = actual / pred
         accepted = bool(ok and actual > 0)
         rec["accepted"] = accepted
-        history.append(rec)
-        if progress is not None:
-            progress(rec)
+        record(rec)
         step = float(np.max(np.abs(D) / np.where(scale > 0, scale, 1.0)))
         if accepted:
             X = Xn
@@ -910,6 +915,60 @@ def output_times(duration: float, rate: float) -> np.ndarray:
     """``0, 1/rate, ..., duration`` (the last sample at ``duration``)."""
     N = round(duration * rate)
     return np.arange(N + 1) / rate
+
+
+def _optimise_start(model: IdentificationModel, basis, limits: Limits, solvers: list, bounds: dict, X_init: np.ndarray,
+                    t_out: np.ndarray, t_con: np.ndarray, period: float, duration: float, margin: float,
+                    cb: np.ndarray | None, refine: int, step, rec: dict) -> tuple[float, np.ndarray]:
+    """One start of :func:`optimise_excitation`: the IPOPT stages in turn (``solvers``), then at most
+    ``refine`` SDP iterations of :func:`refine_excitation`; ``step(k)`` reports ``k`` more of those steps
+    done, ``rec`` receives the start's record. Returns the start's cond on ``t_out`` and its design."""
+    n = limits.n
+    x = X_init.T.reshape(-1)
+    stage_conds, iters, status = [], 0, ""
+    x_best, c_best = x, math.inf
+    for solver in solvers:
+        sol = solver(x0=x, lbg=bounds["lbg"], ubg=bounds["ubg"])
+        step(1)
+        stats = solver.stats()
+        status, iters = stats.get("return_status", ""), iters + stats.get("iter_count", 0)
+        x = np.asarray(sol["x"]).reshape(-1)
+        stage_conds.append(stacked_cond(model, *basis_eval(basis, x.reshape(n, basis.m).T, t_out)))
+        # a failed stage (e.g. IPOPT's Error_In_Step_Computation at a large p) can end worse than it
+        # started: the start's result is its best feasible stage
+        if stage_conds[-1] < c_best and _inside(basis, limits, x.reshape(n, basis.m).T, t_con):
+            x_best, c_best = x, stage_conds[-1]
+        elif stage_conds[-1] >= c_best:
+            x = x_best
+    X = (x_best if math.isfinite(c_best) else x).reshape(n, basis.m).T
+    dense = dense_times(t_out, duration, basis)
+    if not _inside(basis, limits, X, dense):
+        X = _scale_into(basis, limits, X, _constant_design(basis, n, (limits.q_max + limits.q_min) / 2), dense)
+    c = stacked_cond(model, *basis_eval(basis, X, t_out))
+    rec.update(cond=c, status=status, iterations=iters, cond_stages=stage_conds)
+    if refine:
+        tr = time.perf_counter()
+        # a periodic design repeats its samples every period: the refinement works on the first one (a design
+        # of period 10 s over 60 s costs as much as over 10 s); the cond kept is recomputed on all of t_out
+        t_ref = t_out[t_out <= period * (1 + 1e-12)] if period < duration else t_out
+        done = [0]
+
+        def sdp_done(_rec: dict) -> None:
+            done[0] += 1
+            step(1)
+
+        X_r, hist = refine_excitation(model, basis, limits, X, t_ref, t_con, iterations=refine, margin=margin,
+                                      chi_b=cb, check_times=dense_times(t_ref, float(t_ref[-1]), basis),
+                                      progress=sdp_done)
+        step(refine - done[0])  # the refinement stopped early: its remaining steps are done
+        c_r = stacked_cond(model, *basis_eval(basis, X_r, t_out))
+        rec.update(cond_ipopt=c, cond=min(c, c_r), refine_sdps=len(hist) - 1,
+                   refine_accepted=sum(1 for h in hist if h.get("accepted")),
+                   refine_conds=[h["cond"] for h in hist],
+                   refine_time=time.perf_counter() - tr)
+        if c_r < c:
+            X, c = X_r, c_r
+    return c, X
 
 
 def optimise_excitation(model: IdentificationModel, basis, limits: Limits, duration: float, *, rate: float = 100.0,
@@ -952,6 +1011,10 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     refine : int
         ``criterion="cond"``: at most this many iterations of :func:`refine_excitation` (sequential
         SDP on the true cond, trust region) applied to each start's IPOPT result; 0 skips it.
+    progress : None, bool or callable
+        Feedback (as in :func:`symoro_gen.progress.progress_updates`; None: a bar when the command line
+        asks for one): one step per IPOPT stage and per SDP iteration of every start, the bar labelled
+        with the start and the best cond so far.
 
     Returns
     -------
@@ -1009,48 +1072,21 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
             excess = max(0.0, float((np.abs(tau0) / lim_start.tau_max).max()) - 1.0)
         candidates.append((excess, float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf, len(candidates), X_init))
     candidates.sort(key=lambda c: (c[0], c[1], c[2]))
-    for s, (_, cond0, _, X_init) in enumerate(candidates[:int(starts)]):
-        x = X_init.T.reshape(-1)
-        stage_conds, iters = [], 0
-        x_best, c_best = x, math.inf
-        for solver in solvers:
-            sol = solver(x0=x, lbg=bounds["lbg"], ubg=bounds["ubg"])
-            stats = solver.stats()
-            status, iters = stats.get("return_status", ""), iters + stats.get("iter_count", 0)
-            x = np.asarray(sol["x"]).reshape(-1)
-            stage_conds.append(stacked_cond(model, *basis_eval(basis, x.reshape(n, basis.m).T, t_out)))
-            # a failed stage (e.g. IPOPT's Error_In_Step_Computation at a large p) can end worse than it
-            # started: the start's result is its best feasible stage
-            if stage_conds[-1] < c_best and _inside(basis, limits, x.reshape(n, basis.m).T, t_con):
-                x_best, c_best = x, stage_conds[-1]
-            elif stage_conds[-1] >= c_best:
-                x = x_best
-        X = (x_best if math.isfinite(c_best) else x).reshape(n, basis.m).T
-        X = _scale_into(basis, limits, X, _constant_design(basis, n, (limits.q_max + limits.q_min) / 2),
-                        dense_times(t_out, duration, basis)) if not _inside(basis, limits, X, dense_times(t_out, duration, basis)) else X
-        q, dq, ddq = basis_eval(basis, X, t_out)
-        c = stacked_cond(model, q, dq, ddq)
-        rec = {"start": s, "cond_start": cond0, "cond": c, "status": status, "iterations": iters,
-               "powers": list(stages), "cond_stages": stage_conds}
-        if refine and criterion == "cond":
-            tr = time.perf_counter()
-            # a periodic design repeats its samples every period: the refinement works on the first one (a design
-            # of period 10 s over 60 s costs as much as over 10 s); the cond kept is recomputed on all of t_out
-            t_ref = t_out[t_out <= period * (1 + 1e-12)] if period < duration else t_out
-            X_r, hist = refine_excitation(model, basis, limits, X, t_ref, t_con, iterations=int(refine), margin=margin,
-                                          chi_b=cb, check_times=dense_times(t_ref, float(t_ref[-1]), basis))
-            c_r = stacked_cond(model, *basis_eval(basis, X_r, t_out))
-            rec.update(cond_ipopt=c, cond=min(c, c_r), refine_sdps=len(hist) - 1,
-                       refine_accepted=sum(1 for h in hist if h.get("accepted")),
-                       refine_conds=[h["cond"] for h in hist],
-                       refine_time=time.perf_counter() - tr)
-            if c_r < c:
-                X, c = X_r, c_r
-        records.append(rec)
-        if progress is not None:
-            progress(s + 1, int(starts), c)
-        if best is None or c < best[0]:
-            best = (c, X)
+    n_refine = int(refine) if refine and criterion == "cond" else 0
+    counter = ProgressCounter(progress, total=int(starts) * (len(solvers) + n_refine), desc=f"excite {model.ROBOT}",
+                              unit="step")
+    try:
+        for s, (_, cond0, _, X_init) in enumerate(candidates[:int(starts)]):
+            counter.describe(f"excite {model.ROBOT}: start {s + 1}/{int(starts)}"
+                             + (f", best cond {best[0]:.4g}" if best is not None else ""))
+            rec = {"start": s, "cond_start": cond0, "powers": list(stages)}
+            c, X = _optimise_start(model, basis, limits, solvers, bounds, X_init, t_out, t_con, period, duration,
+                                   margin, cb, n_refine, counter.step, rec)
+            records.append(rec)
+            if best is None or c < best[0]:
+                best = (c, X)
+    finally:
+        counter.close()
     assert best is not None
     cond, X = best
     q, dq, ddq = basis_eval(basis, X, t_out)

@@ -261,6 +261,11 @@ class ProgressCounter:
                                      unit_scale=unit_scale)
             self.step = self._bar.update
 
+    def describe(self, desc: str) -> None:
+        """Relabel the bar (what the step in progress is, the best value so far); nothing for a callable."""
+        if self._bar is not None:
+            self._bar.set_description(desc)
+
     def close(self) -> None:
         if self._bar is not None:
             self._bar.close()

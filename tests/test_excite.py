@@ -345,8 +345,11 @@ def test_refinement_lowers_the_true_cond_where_the_smooth_criterion_stops_short(
     basis = FourierBasis(3, 1 / DURATION)
     kw = dict(rate=RATE, starts=1, seed=0, max_iter=5, pool=1, powers=(8,))
     plain = optimise_excitation(model, basis, scara_limits, DURATION, **kw)
-    refined = optimise_excitation(model, basis, scara_limits, DURATION, refine=10, **kw)
+    steps: list[int] = []
+    refined = optimise_excitation(model, basis, scara_limits, DURATION, refine=10, progress=steps.append, **kw)
     st = refined.starts[0]
+    # progress: one step per IPOPT stage and per SDP, reported as they end (then the unused SDPs at once)
+    assert sum(steps) == 1 + 10 and len(steps) >= 1 + st["refine_sdps"], steps
     assert st["cond_ipopt"] == pytest.approx(plain.cond, rel=1e-9)  # the same IPOPT result, then refined
     assert refined.cond < 0.8 * plain.cond, (refined.cond, plain.cond)
     assert refined.cond == pytest.approx(stacked_cond(model, refined.q, refined.dq, refined.ddq), rel=1e-12)
@@ -458,6 +461,20 @@ def test_cli_contract_and_identification_on_the_trajectory(cli, tmp_path, scara)
     scale = max(abs(v) for v in truth.values())
     for name, v in truth.items():
         assert est[name] == pytest.approx(v, abs=2e-2 * scale), name
+
+
+def test_cli_progress_bar_only_when_asked_and_same_trajectory(cli, tmp_path, monkeypatch):
+    """The design can take minutes: a bar names the start and the best cond when stderr is a terminal
+    (forced here by SYMORO_PROGRESS=1), nothing otherwise or with --quiet; the CSV is the same."""
+    args = ["excite", "scara", "--duration", "4", "--harmonics", "3", "--starts", "2", "--max-iter", "5",
+            "--refine", "2"]
+    plain = cli(*args, "-o", tmp_path / "a.csv", rc=0)
+    assert "excite scara" not in plain.err
+    monkeypatch.setenv("SYMORO_PROGRESS", "1")
+    forced = cli(*args, "-o", tmp_path / "b.csv", rc=0)
+    assert "excite scara: start 2/2, best cond" in forced.err, forced.err
+    assert cli("--quiet", *args, "-o", tmp_path / "c.csv", rc=0).err == ""
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes() == (tmp_path / "c.csv").read_bytes()
 
 
 def test_cli_rejects_duration_not_whole_periods(cli, tmp_path):
