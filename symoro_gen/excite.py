@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .atomic import write_text_atomic
+from .atomic import write_bytes_atomic, write_text_atomic
 from .errors import IdentificationError
 from .loader import model_for
 from .model import IdentificationModel
@@ -1127,41 +1127,21 @@ def write_trajectory_csv(path, t, q, dq, ddq) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-def plot_trajectory(result: ExcitationResult, path) -> None:
-    """PNG of every joint's ``q, dq, ddq`` against its limits (dashed)."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:  # pragma: no cover - optional
-        raise ExcitationError("--plot needs matplotlib: pip install 'symoro-gen[plots]'") from None
-    lim, n = result.limits, result.limits.n
-    fig, axes = plt.subplots(n, 3, figsize=(11, 1.6 * n + 0.8), sharex=True, squeeze=False)
-    for j in range(n):
-        for c, (y, lo, hi, lab) in enumerate(((result.q[:, j], lim.q_min[j], lim.q_max[j], f"q{j + 1}"),
-                                              (result.dq[:, j], -lim.dq_max[j], lim.dq_max[j], f"dq{j + 1}"),
-                                              (result.ddq[:, j], -lim.ddq_max[j], lim.ddq_max[j], f"ddq{j + 1}"))):
-            ax = axes[j, c]
-            ax.plot(result.t, y, lw=1)
-            for v in (lo, hi):
-                ax.axhline(v, color="r", ls="--", lw=0.8)
-            ax.set_ylabel(lab)
-    for c in range(3):
-        axes[-1, c].set_xlabel("t [s]")
-    fig.suptitle(f"{result.basis.kind} excitation, cond = {result.cond:.4g}, limits "
-                 f"{'respected' if result.limits_ok else 'VIOLATED'}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+def plot_trajectory(result: ExcitationResult, path, *, robot: str = "") -> None:
+    """PNG file of every joint's ``q, dq, ddq`` against its limits (dashed), titled with the robot, the
+    kind of design and its cond (written atomically)."""
+    title = (f"{robot + ': ' if robot else ''}{result.basis.kind} excitation, cond = {result.cond:.4g}, limits "
+             f"{'respected' if result.limits_ok else 'VIOLATED'}")
+    write_bytes_atomic(path, trajectory_figure_png(result, dpi=90, title=title))
 
 
-def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000) -> bytes:
-    """PNG (report style) of every joint's ``q, dq, ddq`` against its limits (dashed red)."""
+def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000, title: str = "") -> bytes:
+    """PNG (report style) of every joint's ``q, dq, ddq`` against its limits (dashed red), in deg or m."""
 
     MplFigure, FigureCanvasAgg = require_matplotlib()
     lim, n = result.limits, result.limits.n
-    fig = MplFigure(figsize=(WIDTH_IN, 1.5 * n + 0.9), dpi=dpi, facecolor="white")
+    head = 0.35 if title else 0.0
+    fig = MplFigure(figsize=(WIDTH_IN, 1.5 * n + 0.9 + head), dpi=dpi, facecolor="white")
     FigureCanvasAgg(fig)
     axes = fig.subplots(n, 3, squeeze=False, sharex=True)
     k = max(1, len(result.t) // max(max_points, 1))
@@ -1180,7 +1160,11 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
             ax.tick_params(labelsize=7)
     for c in range(3):
         axes[-1, c].set_xlabel("t [s]", fontsize=8)
-    fig.subplots_adjust(left=0.07, right=0.99, top=0.97, bottom=0.5 / (1.5 * n + 0.9), wspace=0.3, hspace=0.25)
+    base = 1.5 * n + 0.9
+    if title:
+        fig.suptitle(title, fontsize=9, y=1 - 0.12 / (base + head))
+    fig.subplots_adjust(left=0.07, right=0.99, top=1 - (0.03 * base + head) / (base + head), bottom=0.5 / (base + head),
+                        wspace=0.3, hspace=0.25)
     return _png(fig, dpi)
 
 
@@ -1282,8 +1266,9 @@ def cmd_excite(args) -> int:
     """``symoro-gen excite``: design, write CSV (and JSON, plot), print a summary."""
 
     if args.report:
-
         check_report_path(args.report)  # before the long optimisation
+    if args.plot or args.report:
+        require_matplotlib()  # the same: a missing extra is said before minutes of optimisation, not after
     robot, model = model_for(args.robot)
     n = model.N_JOINTS
     lim = limits_of(robot, n)
@@ -1336,9 +1321,8 @@ def cmd_excite(args) -> int:
     if args.json:
         write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
     if args.plot:
-        plot_trajectory(res, args.plot)
+        plot_trajectory(res, args.plot, robot=model.ROBOT)
     if args.report:
-
         write_report_files(excitation_report(res, model, noise=args.noise, chi_b=chi_b), args.report)
     if not args.quiet:
         worst = max(max(v) for v in res.usage.values())

@@ -4,6 +4,7 @@ against random trajectories, limits at every sample of a dense resampling, and t
 import itertools
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -565,6 +566,22 @@ def test_cli_refinement_without_cvxpy(cli, tmp_path, monkeypatch):
     assert all("refine_sdps" not in st for st in json.loads(js.read_text())["starts"])
     r = cli("excite", "scara", "-o", tmp_path / "u.csv", "--refine", "3", rc=2)
     assert "--refine 3 needs cvxpy" in r.err and not (tmp_path / "u.csv").exists()
+
+
+def test_cli_plot_without_matplotlib_fails_before_optimising(cli, tmp_path, monkeypatch):
+    """matplotlib is an extra: --plot or --report without it is a one-line error naming the extra, said
+    before the optimisation (which would run for minutes), with nothing written."""
+    import symoro_gen.excite as ex
+
+    def never(*a, **k):
+        raise AssertionError("the optimisation ran")
+
+    monkeypatch.setattr(ex, "optimise_excitation", never)
+    monkeypatch.setitem(sys.modules, "matplotlib.figure", None)  # its import fails
+    for extra in (["--plot", tmp_path / "t.png"], ["--report", tmp_path / "t.html"]):
+        r = cli("excite", "scara", "-o", tmp_path / "t.csv", *extra, rc=2)
+        assert "matplotlib" in r.err and "plots" in r.err, r.err
+        assert not list(tmp_path.iterdir())
 
 
 def test_cli_report_html(cli, tmp_path, scara):
