@@ -20,7 +20,7 @@ Two kinds of motion, both *linear in their design variables* ``X`` (one column p
 * :class:`SplineBasis` - a clamped cubic B-spline per joint at rest at both ends (Rackl, Lampariello &
   Hirzinger 2012, ICRA); with :func:`friction_trajectory` starts (bursts at the velocity limit between
   slow motion, the friction columns' optimum) it reaches a lower cond than the Fourier series on the
-  LWR4 (README, excitation bench).
+  LWR4 (docs/excitation.md).
 
 Position, velocity and acceleration limits are then *linear* constraints on ``X`` (imposed on a
 grid denser than the output one, with a small margin, and verified again on the output samples);
@@ -109,7 +109,7 @@ COND_POWER = 8
 #: within nb^(2/p) of cond^2 near it: 64^(1/64) = 1.07 for p = 64)
 COND_POWERS = (8, 64)
 #: default of ``excite --refine``: SDP iterations on the true cond after IPOPT (on the LWR4 spline bench, 20
-#: iterations took the IPOPT optimum from 29.9 to 25.1, 40 to 24.9; README, excitation bench)
+#: iterations took the IPOPT optimum from 29.9 to 25.1, 40 to 24.9; docs/excitation.md)
 REFINE_ITERATIONS = 20
 
 
