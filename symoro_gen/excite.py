@@ -496,13 +496,15 @@ def check_limits(limits: Limits, q, dq, ddq, tau=None, *, rtol: float = 1e-9) ->
 
 
 def _constant_design(basis, n: int, centre: np.ndarray) -> np.ndarray:
-    """Design ``X`` of the motion that stays at ``centre``."""
-    if isinstance(basis, SplineBasis):  # B-splines are a partition of unity
-        return np.outer(np.ones(basis.m), centre)
-    t = np.linspace(0.0, 1.0, 5)
-    P, _, _ = basis.matrices(t)
-    c, *_ = np.linalg.lstsq(P, np.ones(len(t)), rcond=None)
-    return np.outer(c, centre)
+    """Design ``X`` of the motion that stays at ``centre``: the constant term ``q0`` of a Fourier series;
+    every control point or via-point at ``centre`` for a spline or point-to-point design (partitions of
+    unity). (A least-squares fit of the constant on a few early samples, used before, left a Fourier or
+    point-to-point "constant" that drifted away later in the period wherever the range is not centred
+    on 0: random designs were then scaled about the wrong centre and left their position range.)"""
+    X = np.outer(np.ones(basis.m), centre)
+    if isinstance(basis, FourierBasis):
+        X[1:] = 0.0
+    return X
 
 
 def _scale_into(basis, limits: Limits, X: np.ndarray, X0: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -922,11 +924,16 @@ def _optimise_start(model: IdentificationModel, basis, limits: Limits, solvers: 
                     cb: np.ndarray | None, refine: int, step, rec: dict) -> tuple[float, np.ndarray]:
     """One start of :func:`optimise_excitation`: the IPOPT stages in turn (``solvers``), then at most
     ``refine`` SDP iterations of :func:`refine_excitation`; ``step(k)`` reports ``k`` more of those steps
-    done, ``rec`` receives the start's record. Returns the start's cond on ``t_out`` and its design."""
+    done, ``rec`` receives the start's record. Returns the start's cond on ``t_out`` and its design, never
+    worse than the start's own (IPOPT minimises a smooth bound of cond, which can fall while cond rises)."""
     n = limits.n
     x = X_init.T.reshape(-1)
     stage_conds, iters, status = [], 0, ""
     x_best, c_best = x, math.inf
+    states = basis_eval(basis, X_init, t_out)
+    tau = None if cb is None or limits.tau_max is None else np.asarray(model.regressor(*states)) @ cb
+    if _inside(basis, limits, X_init, t_con) and check_limits(limits, *states, tau)["ok"]:
+        c_best = stacked_cond(model, *states)  # a start within every limit, torques included, is a result too
     for solver in solvers:
         sol = solver(x0=x, lbg=bounds["lbg"], ubg=bounds["ubg"])
         step(1)

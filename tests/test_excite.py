@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from symoro_gen import excite
 from symoro_gen.description.parse import parse_robot_text
 from symoro_gen.errors import RobotFileError
 from symoro_gen.excite import (
@@ -112,6 +113,26 @@ def test_bases_rest_at_ends_and_consistent_derivatives(basis):
     _, dq_t, ddq_t = basis_eval(basis, X, t)
     np.testing.assert_allclose((qp - qm) / (2 * h), dq_t, atol=1e-5)
     np.testing.assert_allclose((dqp - dqm) / (2 * h), ddq_t, atol=1e-3)
+
+
+@pytest.mark.parametrize(("basis", "T"), [(FourierBasis(5, 0.1), 10.0), (FourierBasis(4, 0.25), 4.0),
+                                          (PointToPointBasis(5, 1.0, dwell=0.2), 4.6), (SplineBasis(12, 4.0), 4.0)])
+def test_random_designs_hold_an_off_centre_range(basis, T, scara_limits):
+    """The SCARA's joint 3 ranges over [0, 0.2] m (centre 0.1): the design that stays at the centre is
+    constant over the whole motion, and random designs (the benchmark's baseline) and structured ones stay
+    inside every limit. (Before the fix, the "constant" Fourier design fitted on early samples drifted
+    away from the centre later on, and random designs left their position range by up to 75 %.)"""
+    t = np.linspace(0.0, T, 2001)
+    centre = (scara_limits.q_max + scara_limits.q_min) / 2
+    q0, dq0, ddq0 = basis_eval(basis, excite._constant_design(basis, 4, centre), t)
+    np.testing.assert_allclose(q0, np.broadcast_to(centre, q0.shape), atol=1e-12)
+    np.testing.assert_allclose(np.c_[dq0, ddq0], 0.0, atol=1e-12)
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        X = random_trajectory(basis, scara_limits, rng, t)
+        assert check_limits(scara_limits, *basis_eval(basis, X, t))["ok"]
+    X = friction_trajectory(basis, scara_limits, rng, t, T)
+    assert check_limits(scara_limits, *basis_eval(basis, X, t))["ok"]
 
 
 def test_spline_is_the_scipy_bspline_of_its_control_points():
@@ -336,6 +357,19 @@ def test_refinement_linearisation_is_the_derivative_of_the_information_matrix(sc
 def _refined_holds_limits(basis, lim, X, T):
     t = np.linspace(0, T, 40001)
     return check_limits(lim, *basis_eval(basis, X, t))["ok"]
+
+
+def test_a_start_never_ends_worse_than_it_began(scara, scara_limits):
+    """IPOPT minimises a smooth bound of cond, which can fall while the true cond rises (here after one
+    iteration, before the fix, the second start went from 266.3 to 302.5): each start keeps the best of its
+    start design and its stages."""
+    _, model = scara
+    res = optimise_excitation(model, FourierBasis(3, 1 / 4.0), scara_limits, 4.0, rate=50, starts=3, pool=3, seed=0,
+                              max_iter=1)
+    for st in res.starts:
+        assert st["cond"] <= st["cond_start"] * (1 + 1e-12), st
+    assert res.cond == pytest.approx(min(st["cond"] for st in res.starts), rel=1e-12)
+    assert res.cond == pytest.approx(stacked_cond(model, res.q, res.dq, res.ddq), rel=1e-12) and res.limits_ok
 
 
 def test_refinement_lowers_the_true_cond_where_the_smooth_criterion_stops_short(scara, scara_limits):
