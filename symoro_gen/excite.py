@@ -470,7 +470,8 @@ def predicted_sigma(model: IdentificationModel, q, dq, ddq, noise: float, chi_b=
 
     ``cov = noise^2 (W^T W)^-1`` (Gautier 1997, eq. 9, with the noise variance given instead of
     estimated from the residual). Returns ``sigma`` (nb,) and, when ``chi_b`` is given, the relative
-    ``%sigma = 100 sigma / |chi_b|`` (NaN where ``chi_b`` is 0).
+    ``%sigma = 100 sigma / |chi_b|`` (NaN where ``chi_b`` is 0, or round-off of the regrouping: below
+    1e-9 of the largest ``|chi_b|``, as a URDF's nominal inertias leave - a %sigma of 1e11 says nothing).
     """
     W = np.asarray(model.regressor(q, dq, ddq)).reshape(-1, len(model.BASE_NAMES))
     cov = noise ** 2 * np.linalg.pinv(W.T @ W)
@@ -478,6 +479,7 @@ def predicted_sigma(model: IdentificationModel, q, dq, ddq, noise: float, chi_b=
     if chi_b is None:
         return sig, None
     cb = np.abs(np.asarray(chi_b, float))
+    cb = np.where(cb > 1e-9 * cb.max(initial=0.0), cb, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         pct = np.where(cb > 0, 100.0 * sig / np.where(cb > 0, cb, 1.0), np.nan)
     return sig, pct
