@@ -111,6 +111,8 @@ COND_POWERS = (8, 64)
 #: default of ``excite --refine``: SDP iterations on the true cond after IPOPT (on the LWR4 spline bench, 20
 #: iterations took the IPOPT optimum from 29.9 to 25.1, 40 to 24.9; docs/excitation.md)
 REFINE_ITERATIONS = 20
+#: the SDP refinement's grid: at most this many samples per second of the output (every 10th of a 1-kHz output)
+REFINE_RATE = 100.0
 
 
 class ExcitationError(IdentificationError):
@@ -960,6 +962,9 @@ def _optimise_start(model: IdentificationModel, basis, limits: Limits, solvers: 
         # a periodic design repeats its samples every period: the refinement works on the first one (a design
         # of period 10 s over 60 s costs as much as over 10 s); the cond kept is recomputed on all of t_out
         t_ref = t_out[t_out <= period * (1 + 1e-12)] if period < duration else t_out
+        # ... and on at most REFINE_RATE samples per second: its linearisation grows with the samples (2 GB at
+        # 1 kHz on a 7-joint arm), a smooth design's cond does not (it is recomputed on every output sample)
+        t_ref = np.union1d(t_ref[::max(1, int(round(1.0 / (REFINE_RATE * float(t_out[1] - t_out[0])))))], t_ref[-1:])
         done = [0]
 
         def sdp_done(_rec: dict) -> None:

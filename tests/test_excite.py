@@ -449,6 +449,32 @@ def test_refinement_of_a_repeated_period_works_on_one_period(scara, scara_limits
     assert res.limits_ok and _refined_holds_limits(basis, scara_limits, res.X, 6.0)
 
 
+def test_refinement_of_a_fast_output_works_on_a_coarser_grid(scara, scara_limits, monkeypatch):
+    """A 1-kHz output (a KUKA FRI or Franka controller's rate): the SDP refinement linearises on every 10th
+    sample (REFINE_RATE, 100 Hz, the last sample kept) - its memory grows with the samples, a smooth design's
+    cond does not - while the cond reported and the limits are those of every 1-kHz sample."""
+    import symoro_gen.excite as ex
+
+    _, model = scara
+    seen = []
+    real = ex.refine_excitation
+
+    def spy(model_, basis_, limits_, X_, t_out_, *a, **k):
+        seen.append(np.asarray(t_out_))
+        return real(model_, basis_, limits_, X_, t_out_, *a, **k)
+
+    monkeypatch.setattr(ex, "refine_excitation", spy)
+    basis = FourierBasis(3, 1 / DURATION)
+    res = optimise_excitation(model, basis, scara_limits, DURATION, rate=1000.0, starts=1, seed=0, max_iter=5, pool=1,
+                              powers=(8,), refine=5)
+    assert len(seen) == 1 and len(seen[0]) == round(DURATION * ex.REFINE_RATE) + 1
+    np.testing.assert_allclose(seen[0], res.t[::10], atol=1e-12)
+    assert len(res.t) == round(DURATION * 1000) + 1 and res.starts[0]["refine_accepted"] >= 1
+    assert res.starts[0]["cond"] < res.starts[0]["cond_ipopt"]
+    assert res.cond == pytest.approx(stacked_cond(model, res.q, res.dq, res.ddq), rel=1e-12)
+    assert res.limits_ok and _refined_holds_limits(basis, scara_limits, res.X, DURATION)
+
+
 def test_refinement_of_a_converged_spline_design_never_increases_cond(scara, scara_limits):
     """From an IPOPT optimum of a spline design (structured start), the refinement keeps cond at or below it and
     every limit on a dense resampling; the sign of every moving output velocity is kept (the Coulomb columns)."""
