@@ -924,7 +924,7 @@ def output_times(duration: float, rate: float) -> np.ndarray:
 
 
 def _optimise_start(model: IdentificationModel, basis, limits: Limits, solvers: list, bounds: dict, X_init: np.ndarray,
-                    t_out: np.ndarray, t_con: np.ndarray, period: float, duration: float, margin: float,
+                    *, t_out: np.ndarray, t_con: np.ndarray, period: float, duration: float, margin: float,
                     cb: np.ndarray | None, refine: int, step, rec: dict) -> tuple[float, np.ndarray]:
     """One start of :func:`optimise_excitation`: the IPOPT stages in turn (``solvers``), then at most
     ``refine`` SDP iterations of :func:`refine_excitation`; ``step(k)`` reports ``k`` more of those steps
@@ -985,11 +985,38 @@ def _optimise_start(model: IdentificationModel, basis, limits: Limits, solvers: 
     return c, X
 
 
+#: the inputs of every start, for forked workers (:func:`optimise_excitation` with ``jobs > 1``): set just before
+#: the pool forks and cleared after it, inherited by the children, never pickled (CasADi solvers do not pickle)
+_FORKED: dict[str, Any] = {}
+
+
+def _forked_start(s: int) -> tuple[float, np.ndarray, dict]:
+    """Start ``s`` of :func:`optimise_excitation` in a forked worker: ``(cond, design, record)``."""
+    f = _FORKED
+    rec = dict(f["records"][s])
+    c, X = f["run"](f["inits"][s], step=lambda k: None, rec=rec)
+    return c, X, rec
+
+
+def _worker_count(jobs: int | None, starts: int) -> int:
+    """Processes for ``starts`` starts: ``jobs`` (0: one per CPU this process may use), at most one per
+    start; 1 where processes cannot be forked (the starts' CasADi solvers cannot be sent to spawned ones)."""
+    import multiprocessing as mp
+    import os
+
+    if jobs is not None and jobs < 0:
+        raise ExcitationError(f"--jobs {jobs}: must be a number of processes >= 1, or 0 for one per CPU")
+    if jobs is None or jobs == 1 or starts <= 1 or "fork" not in mp.get_all_start_methods():
+        return 1
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(starts, cpus if jobs == 0 else jobs))
+
+
 def optimise_excitation(model: IdentificationModel, basis, limits: Limits, duration: float, *, rate: float = 100.0,
                         criterion: str = "cond", starts: int = 4, seed: int = 0, chi_b=None,
                         samples: int | None = None, max_iter: int = 200, margin: float = 0.01,
                         pool: int | None = None, progress=None, powers=None, structured: int = 0,
-                        initial=(), refine: int = 0) -> ExcitationResult:
+                        initial=(), refine: int = 0, jobs: int | None = 1) -> ExcitationResult:
     """Optimise an excitation trajectory (IPOPT from ``starts`` seeded random feasible designs).
 
     Parameters
@@ -1028,7 +1055,11 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     progress : None, bool or callable
         Feedback (as in :func:`symoro_gen.progress.progress_updates`; None: a bar when the command line
         asks for one): one step per IPOPT stage and per SDP iteration of every start, the bar labelled
-        with the start and the best cond so far.
+        with the starts done and the best cond so far.
+    jobs : int, optional
+        Processes the starts run in at once (forked workers, Linux; 0: one per CPU this process may use;
+        default 1, in this process). The result is the same whatever ``jobs``: each start is computed alone
+        from its own design, and the first start of the lowest cond is kept.
 
     Returns
     -------
@@ -1065,7 +1096,6 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
     rng = np.random.default_rng(seed)
     lim_start = limits.shrunk(margin)
     best = None
-    records = []
     n_pool = max(int(starts), 10 * int(starts) if pool is None else int(pool))
     candidates: list[tuple[float, float, int, np.ndarray]] = []
     inits = [np.asarray(X, float) for X in initial]
@@ -1087,20 +1117,47 @@ def optimise_excitation(model: IdentificationModel, basis, limits: Limits, durat
         candidates.append((excess, float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf, len(candidates), X_init))
     candidates.sort(key=lambda c: (c[0], c[1], c[2]))
     n_refine = int(refine) if refine and criterion == "cond" else 0
-    counter = ProgressCounter(progress, total=int(starts) * (len(solvers) + n_refine), desc=f"excite {model.ROBOT}",
-                              unit="step")
+    chosen = candidates[:int(starts)]
+    records = [{"start": s, "cond_start": cond0, "powers": list(stages)} for s, (_, cond0, _, _) in enumerate(chosen)]
+    run = functools.partial(_optimise_start, model, basis, limits, solvers, bounds, t_out=t_out, t_con=t_con,
+                            period=period, duration=duration, margin=margin, cb=cb, refine=n_refine)
+    outcome: list[tuple[float, np.ndarray] | None] = [None] * len(chosen)
+    per_start = len(solvers) + n_refine
+    counter = ProgressCounter(progress, total=len(chosen) * per_start, desc=f"excite {model.ROBOT}", unit="step")
+
+    def label(what: str) -> str:
+        got = [o[0] for o in outcome if o is not None]
+        return f"excite {model.ROBOT}: {what}" + (f", best cond {min(got):.4g}" if got else "")
+
     try:
-        for s, (_, cond0, _, X_init) in enumerate(candidates[:int(starts)]):
-            counter.describe(f"excite {model.ROBOT}: start {s + 1}/{int(starts)}"
-                             + (f", best cond {best[0]:.4g}" if best is not None else ""))
-            rec = {"start": s, "cond_start": cond0, "powers": list(stages)}
-            c, X = _optimise_start(model, basis, limits, solvers, bounds, X_init, t_out, t_con, period, duration,
-                                   margin, cb, n_refine, counter.step, rec)
-            records.append(rec)
-            if best is None or c < best[0]:
-                best = (c, X)
+        n_jobs = _worker_count(jobs, len(chosen))
+        if n_jobs > 1:
+            import concurrent.futures as cf
+            import multiprocessing as mp
+
+            # forked workers inherit the CasADi solvers and the model (neither pickles); each returns its start
+            _FORKED.update(run=run, inits=[X0 for *_, X0 in chosen], records=records)
+            try:
+                with cf.ProcessPoolExecutor(n_jobs, mp_context=mp.get_context("fork")) as pool_:
+                    futures = {pool_.submit(_forked_start, s): s for s in range(len(chosen))}
+                    counter.describe(label(f"{len(chosen)} starts in {n_jobs} processes"))
+                    for k, fut in enumerate(cf.as_completed(futures), 1):
+                        s = futures[fut]
+                        c, X, records[s] = fut.result()
+                        outcome[s] = (c, X)
+                        counter.step(per_start)
+                        counter.describe(label(f"{k}/{len(chosen)} starts done"))
+            finally:
+                _FORKED.clear()
+        else:
+            for s, (*_, X_init) in enumerate(chosen):
+                counter.describe(label(f"start {s + 1}/{len(chosen)}"))
+                outcome[s] = run(X_init, step=counter.step, rec=records[s])
     finally:
         counter.close()
+    for o in outcome:  # the first of the lowest cond, whatever order the starts ended in
+        if o is not None and (best is None or o[0] < best[0]):
+            best = o
     assert best is not None
     cond, X = best
     q, dq, ddq = basis_eval(basis, X, t_out)
@@ -1260,6 +1317,8 @@ def add_excite_parser(sub) -> None:
     e.add_argument("--starts", type=int, default=4, help="random starts of IPOPT")
     e.add_argument("--pool", type=int, default=None,
                    help="random feasible designs drawn; the --starts best by cond start IPOPT (default 10 x --starts)")
+    e.add_argument("--jobs", type=int, default=1,
+                   help="run the starts in this many processes at once (0: one per CPU; Linux); the result is the same")
     e.add_argument("--max-iter", type=int, default=200, help="IPOPT iterations per start")
     e.add_argument("--samples", type=int, default=None, help="samples of the criterion (default from the size of the problem)")
     e.add_argument("--criterion", choices=("cond", "logdet"), default="cond")
@@ -1296,6 +1355,7 @@ def cmd_excite(args) -> int:
                            "(pip install 'symoro-gen[physical]')")
     if args.refine < 0:
         raise ExcitationError(f"--refine {args.refine}: must be a number of iterations >= 0")
+    _worker_count(args.jobs, 1)  # a negative --jobs is said now, not after the pool of starts
     if args.refine and not _has_cvxpy():
         raise ExcitationError(f"--refine {args.refine} needs cvxpy and clarabel: pip install 'symoro-gen[physical]' "
                               "(or --refine 0)")
@@ -1319,7 +1379,7 @@ def cmd_excite(args) -> int:
         chi_b = np.asarray(model.base_parameters(np.asarray(nominal)), float)
     res = optimise_excitation(model, basis, lim, args.duration, rate=args.rate, criterion=args.criterion,
                               starts=args.starts, seed=args.seed, max_iter=args.max_iter, samples=args.samples,
-                              pool=args.pool, structured=args.structured_starts, refine=args.refine,
+                              pool=args.pool, structured=args.structured_starts, refine=args.refine, jobs=args.jobs,
                               chi_b=None if args.no_torque_limits else chi_b)
     write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
     sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)

@@ -562,6 +562,28 @@ def test_cli_progress_bar_only_when_asked_and_same_trajectory(cli, tmp_path, mon
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes() == (tmp_path / "c.csv").read_bytes()
 
 
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(), reason="needs fork")
+def test_starts_in_parallel_processes_give_the_same_design(scara, scara_limits):
+    """jobs=2 runs the starts in two forked processes: the same records, the same design, the same cond as
+    one process (each start is computed alone from its own design; the first of the lowest cond is kept)."""
+    _, model = scara
+    kw = dict(rate=RATE, starts=3, seed=2, max_iter=8, pool=6, powers=(8,), refine=2)
+    basis = FourierBasis(3, 1 / DURATION)
+    one = optimise_excitation(model, basis, scara_limits, DURATION, **kw)
+    steps: list[int] = []
+    two = optimise_excitation(model, basis, scara_limits, DURATION, jobs=2, progress=steps.append, **kw)
+    assert np.array_equal(one.X, two.X) and one.cond == two.cond
+    drop = ("refine_time",)
+    assert [{k: v for k, v in r.items() if k not in drop} for r in one.starts] == \
+        [{k: v for k, v in r.items() if k not in drop} for r in two.starts]
+    assert steps == [1 + 2] * 3  # each finished start reports its IPOPT stage and SDPs at once
+
+
+def test_cli_jobs_rejects_a_negative_count(cli, tmp_path):
+    r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--jobs", "-1", rc=2)
+    assert "--jobs -1" in r.err and not (tmp_path / "x.csv").exists()
+
+
 def test_cli_rejects_duration_not_whole_periods(cli, tmp_path):
     r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--duration", "3", "--base-frequency", "0.5", rc=2)
     assert "--duration 3" in r.err and "whole number of periods" in r.err
