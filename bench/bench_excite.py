@@ -90,7 +90,8 @@ def random_baseline(model, lim, *, harmonics: int = 5, duration: float = 10.0, r
 
 def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int, max_iter: int, seed: int,
         pool: int | None, powers=None, kind: str = "fourier", coefficients: int = 60, structured: int = 0,
-        refine: int = 0, samples: int | None = None, embed=(), embed_refine: int = 30, repeat: int = 1) -> dict:
+        refine: int = 0, samples: int | None = None, embed=(), embed_refine: int = 30, repeat: int = 1,
+        jobs: int = 1) -> dict:
     robot, model = model_for(name)
     lim = limits_of(robot)
     basis = FourierBasis(harmonics, 1.0 / duration)
@@ -98,7 +99,8 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
     t0 = time.perf_counter()
     design = basis if kind == "fourier" else SplineBasis(coefficients, duration)
     res = optimise_excitation(model, design, lim, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,
-                              pool=pool, powers=powers, structured=structured, refine=refine, samples=samples)
+                              pool=pool, powers=powers, structured=structured, refine=refine, samples=samples,
+                              jobs=jobs)
     q, dq, ddq, cond = res.q, res.dq, res.ddq, res.cond
     embedded = []
     X = res.X
@@ -165,6 +167,8 @@ def main(argv=None) -> int:
     ap.add_argument("--max-iter", type=int, default=150)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--pool", type=int, default=None, help="random designs the IPOPT starts are chosen from")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="the starts in this many processes (0: one per CPU); same design, shorter wall time")
     ap.add_argument("--powers", type=int, nargs="+", default=None,
                     help="continuation powers of the cond criterion (default symoro_gen.excite.COND_POWERS)")
     ap.add_argument("--kind", choices=("fourier", "spline"), default="fourier",
@@ -202,7 +206,7 @@ def main(argv=None) -> int:
         r = run(name, harmonics=a.harmonics, duration=a.duration, rate=a.rate, starts=a.starts,
                 max_iter=a.max_iter, seed=a.seed, pool=a.pool, powers=a.powers, kind=a.kind,
                 coefficients=a.coefficients, structured=a.structured, refine=a.refine, samples=a.samples,
-                embed=a.embed, embed_refine=a.embed_refine, repeat=a.repeat)
+                embed=a.embed, embed_refine=a.embed_refine, repeat=a.repeat, jobs=a.jobs)
         ok &= r["limits_ok"]
         print(f"{r['robot']:6} {r['n']:>2} {r['nb']:>3} {r['cond']:>10.4g} {r['random_best']:>11.4g} "
               f"{r['random_median']:>9.4g} {r['ratio']:>6.2f} {r['limits_ok']!s:>6} {r['wall']:>8.1f}")
