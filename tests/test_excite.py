@@ -420,22 +420,27 @@ def test_refinement_lowers_the_true_cond_where_the_smooth_criterion_stops_short(
     assert all(b <= a for a, b in itertools.pairwise(conds)), conds
 
 
-def test_refinement_of_a_repeated_period_works_on_one_period(scara, scara_limits, monkeypatch):
-    """A Fourier design of period 2 s output over 6 s: the refinement sees the first period's samples only (the
-    others repeat them), and the cond reported is that of all the output samples, equal to one period's (the
-    Gram matrix of three periods is three times one period's, up to the rest sample at the ends: 2 of one
-    period's 101 samples, 4 of the 301)."""
-    import symoro_gen.excite as ex
-
-    _, model = scara
-    seen = []
-    real = ex.refine_excitation
+@pytest.fixture
+def refinement_grids(monkeypatch):
+    """The output samples each call of refine_excitation inside optimise_excitation is given (a spy)."""
+    seen: list[np.ndarray] = []
+    real = excite.refine_excitation
 
     def spy(model_, basis_, limits_, X_, t_out_, *a, **k):
         seen.append(np.asarray(t_out_))
         return real(model_, basis_, limits_, X_, t_out_, *a, **k)
 
-    monkeypatch.setattr(ex, "refine_excitation", spy)
+    monkeypatch.setattr(excite, "refine_excitation", spy)
+    return seen
+
+
+def test_refinement_of_a_repeated_period_works_on_one_period(scara, scara_limits, refinement_grids):
+    """A Fourier design of period 2 s output over 6 s: the refinement sees the first period's samples only (the
+    others repeat them), and the cond reported is that of all the output samples, equal to one period's (the
+    Gram matrix of three periods is three times one period's, up to the rest sample at the ends: 2 of one
+    period's 101 samples, 4 of the 301)."""
+    _, model = scara
+    seen = refinement_grids
     basis = FourierBasis(3, 0.5)
     res = optimise_excitation(model, basis, scara_limits, 6.0, rate=RATE, starts=1, seed=0, max_iter=5, pool=1,
                               powers=(8,), refine=5)
@@ -449,25 +454,16 @@ def test_refinement_of_a_repeated_period_works_on_one_period(scara, scara_limits
     assert res.limits_ok and _refined_holds_limits(basis, scara_limits, res.X, 6.0)
 
 
-def test_refinement_of_a_fast_output_works_on_a_coarser_grid(scara, scara_limits, monkeypatch):
+def test_refinement_of_a_fast_output_works_on_a_coarser_grid(scara, scara_limits, refinement_grids):
     """A 1-kHz output (a KUKA FRI or Franka controller's rate): the SDP refinement linearises on every 10th
     sample (REFINE_RATE, 100 Hz, the last sample kept) - its memory grows with the samples, a smooth design's
     cond does not - while the cond reported and the limits are those of every 1-kHz sample."""
-    import symoro_gen.excite as ex
-
     _, model = scara
-    seen = []
-    real = ex.refine_excitation
-
-    def spy(model_, basis_, limits_, X_, t_out_, *a, **k):
-        seen.append(np.asarray(t_out_))
-        return real(model_, basis_, limits_, X_, t_out_, *a, **k)
-
-    monkeypatch.setattr(ex, "refine_excitation", spy)
+    seen = refinement_grids
     basis = FourierBasis(3, 1 / DURATION)
     res = optimise_excitation(model, basis, scara_limits, DURATION, rate=1000.0, starts=1, seed=0, max_iter=5, pool=1,
                               powers=(8,), refine=5)
-    assert len(seen) == 1 and len(seen[0]) == round(DURATION * ex.REFINE_RATE) + 1
+    assert len(seen) == 1 and len(seen[0]) == round(DURATION * excite.REFINE_RATE) + 1
     np.testing.assert_allclose(seen[0], res.t[::10], atol=1e-12)
     assert len(res.t) == round(DURATION * 1000) + 1 and res.starts[0]["refine_accepted"] >= 1
     assert res.starts[0]["cond"] < res.starts[0]["cond_ipopt"]
