@@ -638,14 +638,23 @@ def _casadi():
     return ca
 
 
+def _casadi_regressor(model: IdentificationModel):
+    """The model's CasADi regressor ``(q, dq, ddq) -> Y``, or an :class:`ExcitationError` that says why there is none."""
+    if hasattr(model, "casadi_regressor"):
+        return model.casadi_regressor()
+    if hasattr(model, "closed_form_text"):  # a closed-loop model (symoro_gen.closedloop)
+        raise ExcitationError(f"{model.ROBOT} is a closed-loop robot: its model (the tree's projected on the actuated "
+                              "joints) has no CasADi form yet, so excite cannot optimise a trajectory for it "
+                              "(identify and diagnose do work on it)")
+    raise ExcitationError(f"{model.ROBOT}: the model has no casadi_regressor() (use a generated package: "
+                          "symoro_gen.load_model)")
+
+
 def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndarray, t_con: np.ndarray,
                criterion: str, chi_b: np.ndarray | None, margin: float, power: int = COND_POWER) -> tuple[Any, dict]:
     ca = _casadi()
     n, m = limits.n, basis.m
-    if not hasattr(model, "casadi_regressor"):
-        raise ExcitationError(f"{model.ROBOT}: the model has no casadi_regressor() (use a generated package: "
-                              "symoro_gen.load_model)")
-    F = model.casadi_regressor()  # (q, dq, ddq) -> Y (n x nb)
+    F = _casadi_regressor(model)  # (q, dq, ddq) -> Y (n x nb)
     qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
     Y = F(qs, dqs, ddqs)
     G = ca.Function("Yt", [qs, dqs, ddqs], [Y.T])
@@ -704,13 +713,10 @@ class _Linearisation:
     def __init__(self, model: IdentificationModel, basis, t: np.ndarray, chi_b: np.ndarray | None = None,
                  chunk: int = 100):
         ca = _casadi()
-        if not hasattr(model, "casadi_regressor"):
-            raise ExcitationError(f"{model.ROBOT}: the model has no casadi_regressor() (use a generated package: "
-                                  "symoro_gen.load_model)")
         self.n, self.nb, self.m = int(model.N_JOINTS), len(model.BASE_NAMES), int(basis.m)
         n = self.n
         qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
-        Y = model.casadi_regressor()(qs, dqs, ddqs)
+        Y = _casadi_regressor(model)(qs, dqs, ddqs)
         J = ca.jacobian(ca.vec(Y), ca.vertcat(qs, dqs, ddqs))  # (n nb, 3n), vec column-major
         self.P, self.D, self.A = basis.matrices(t)
         self.N = len(t)

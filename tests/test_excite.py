@@ -575,6 +575,14 @@ def test_starts_in_parallel_processes_give_the_same_design(scara, scara_limits):
     assert steps == [1 + 2] * 3  # each finished start reports its IPOPT stage and SDPs at once
 
 
+def test_cli_closed_loop_robot_is_refused_with_the_reason(cli, tmp_path):
+    """The palletizer's model is the tree's projected on the actuated joints, NumPy only: excite says so (not
+    "use a generated package", which the user did) and writes nothing."""
+    r = cli("excite", "palletizer", "-o", tmp_path / "x.csv", "--starts", "1", "--max-iter", "1", rc=2)
+    assert "closed-loop robot" in r.err and "no CasADi form" in r.err, r.err
+    assert not (tmp_path / "x.csv").exists()
+
+
 def test_cli_jobs_rejects_a_negative_count(cli, tmp_path):
     r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--jobs", "-1", rc=2)
     assert "--jobs -1" in r.err and not (tmp_path / "x.csv").exists()
