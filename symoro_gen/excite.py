@@ -934,16 +934,18 @@ def _optimise_start(model: IdentificationModel, basis, limits: Limits, solvers: 
                     cb: np.ndarray | None, refine: int, step, rec: dict) -> tuple[float, np.ndarray]:
     """One start of :func:`optimise_excitation`: the IPOPT stages in turn (``solvers``), then at most
     ``refine`` SDP iterations of :func:`refine_excitation`; ``step(k)`` reports ``k`` more of those steps
-    done, ``rec`` receives the start's record. Returns the start's cond on ``t_out`` and its design, never
+    done, ``rec`` (holding the start's ``cond_start``) receives the start's record. Returns the start's cond on ``t_out`` and its design, never
     worse than the start's own (IPOPT minimises a smooth bound of cond, which can fall while cond rises)."""
     n = limits.n
     x = X_init.T.reshape(-1)
     stage_conds, iters, status = [], 0, ""
     x_best, c_best = x, math.inf
-    states = basis_eval(basis, X_init, t_out)
-    tau = None if cb is None or limits.tau_max is None else np.asarray(model.regressor(*states)) @ cb
-    if _inside(basis, limits, X_init, t_con) and check_limits(limits, *states, tau)["ok"]:
-        c_best = stacked_cond(model, *states)  # a start within every limit, torques included, is a result too
+    torques_ok = True
+    if cb is not None and limits.tau_max is not None:
+        tau = np.asarray(model.regressor(*basis_eval(basis, X_init, t_out))) @ cb
+        torques_ok = bool(np.all(np.abs(tau) <= limits.tau_max * (1 + 1e-9)))
+    if torques_ok and _inside(basis, limits, X_init, t_con):
+        c_best = rec["cond_start"]  # a start within every limit, torques included, is a result too
     for solver in solvers:
         sol = solver(x0=x, lbg=bounds["lbg"], ubg=bounds["ubg"])
         step(1)
@@ -971,16 +973,10 @@ def _optimise_start(model: IdentificationModel, basis, limits: Limits, solvers: 
         # ... and on at most REFINE_RATE samples per second: its linearisation grows with the samples (2 GB at
         # 1 kHz on a 7-joint arm), a smooth design's cond does not (it is recomputed on every output sample)
         t_ref = np.union1d(t_ref[::max(1, int(round(1.0 / (REFINE_RATE * float(t_out[1] - t_out[0])))))], t_ref[-1:])
-        done = [0]
-
-        def sdp_done(_rec: dict) -> None:
-            done[0] += 1
-            step(1)
-
         X_r, hist = refine_excitation(model, basis, limits, X, t_ref, t_con, iterations=refine, margin=margin,
                                       chi_b=cb, check_times=dense_times(t_ref, float(t_ref[-1]), basis),
-                                      progress=sdp_done)
-        step(refine - done[0])  # the refinement stopped early: its remaining steps are done
+                                      progress=lambda _rec: step(1))
+        step(refine - (len(hist) - 1))  # one record per SDP and a final one: the SDPs not run count as done
         c_r = stacked_cond(model, *basis_eval(basis, X_r, t_out))
         rec.update(cond_ipopt=c, cond=min(c, c_r), refine_sdps=len(hist) - 1,
                    refine_accepted=sum(1 for h in hist if h.get("accepted")),
@@ -1217,8 +1213,8 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
 
     MplFigure, FigureCanvasAgg = require_matplotlib()
     lim, n = result.limits, result.limits.n
-    head = 0.35 if title else 0.0
-    fig = MplFigure(figsize=(WIDTH_IN, 1.5 * n + 0.9 + head), dpi=dpi, facecolor="white")
+    base, head = 1.5 * n + 0.9, (0.35 if title else 0.0)  # inches: the grid of axes, the title above it
+    fig = MplFigure(figsize=(WIDTH_IN, base + head), dpi=dpi, facecolor="white")
     FigureCanvasAgg(fig)
     axes = fig.subplots(n, 3, squeeze=False, sharex=True)
     k = max(1, len(result.t) // max(max_points, 1))
@@ -1237,7 +1233,6 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
             ax.tick_params(labelsize=7)
     for c in range(3):
         axes[-1, c].set_xlabel("t [s]", fontsize=8)
-    base = 1.5 * n + 0.9
     if title:
         fig.suptitle(title, fontsize=9, y=1 - 0.12 / (base + head))
     fig.subplots_adjust(left=0.07, right=0.99, top=1 - (0.03 * base + head) / (base + head), bottom=0.5 / (base + head),
