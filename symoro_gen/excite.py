@@ -60,7 +60,7 @@ import numpy as np
 
 from . import __version__
 from .atomic import write_bytes_atomic, write_text_atomic
-from .errors import IdentificationError
+from .errors import IdentificationError, ModelError
 from .loader import model_for
 from .model import IdentificationModel
 from .progress import ProgressCounter
@@ -121,6 +121,22 @@ class ExcitationError(IdentificationError):
 
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
+class PassiveRange:
+    """Position range of a passive joint of a closed-loop robot whose closure is linear (a parallelogram,
+    coupled joints): ``lo <= coef . q + offset <= hi`` in the design's (actuated) positions ``q``.
+
+    Attributes: ``joint`` (the robot joint), ``coef`` (n,), ``offset``, ``lo``, ``hi`` (rad or m),
+    ``prismatic``."""
+
+    joint: int
+    coef: np.ndarray
+    offset: float
+    lo: float
+    hi: float
+    prismatic: bool = False
+
+
+@dataclass(frozen=True)
 class Limits:
     """Per-joint limits used by the design (SI units, arrays of length n).
 
@@ -130,6 +146,9 @@ class Limits:
     tau_max : ndarray (n,) or None
     defaulted : tuple of str
         The fields that were not in the robot file (taken from :data:`DEFAULT_LIMITS`).
+    passive : tuple of PassiveRange
+        A closed-loop robot's passive joint ranges, linear in the actuated positions (``[limits]``
+        ``passive_q_min/passive_q_max`` through the linear closure).
     """
 
     q_min: np.ndarray
@@ -139,6 +158,7 @@ class Limits:
     tau_max: np.ndarray | None = None
     defaulted: tuple[str, ...] = ()
     prismatic: tuple[bool, ...] = ()
+    passive: tuple[PassiveRange, ...] = ()
 
     def is_prismatic(self, j: int) -> bool:
         """Joint ``j`` (0-based) is prismatic (its limits are in m, m/s, m/s^2)."""
@@ -152,25 +172,86 @@ class Limits:
         """The limits tightened by the fraction ``margin`` (positions about the range centre)."""
         c, h = (self.q_max + self.q_min) / 2, (self.q_max - self.q_min) / 2 * (1 - margin)
         tau = None if self.tau_max is None else self.tau_max * (1 - margin)
+        passive = tuple(PassiveRange(p.joint, p.coef, p.offset, (p.lo + p.hi) / 2 - (p.hi - p.lo) / 2 * (1 - margin),
+                                     (p.lo + p.hi) / 2 + (p.hi - p.lo) / 2 * (1 - margin), p.prismatic)
+                        for p in self.passive)
         return Limits(c - h, c + h, self.dq_max * (1 - margin), self.ddq_max * (1 - margin), tau, self.defaulted,
-                      self.prismatic)
+                      self.prismatic, passive)
+
+    def passive_positions(self, q) -> np.ndarray:
+        """The passive joints' positions ``(N, len(passive))`` for the design's positions ``q`` (N, n)."""
+        q = np.asarray(q, float)
+        if not self.passive:
+            return np.zeros((q.shape[0], 0))
+        return q @ np.array([p.coef for p in self.passive]).T + np.array([p.offset for p in self.passive])
+
+    @functools.cached_property
+    def centre(self) -> np.ndarray:
+        """The rest position about which designs are built and scaled: the centre of the position ranges or,
+        with passive ranges, the point that maximises the smallest relative margin ``s*`` to every actuated and
+        passive bound and, among those, is nearest to the centre of the ranges (L1 in half-ranges): two
+        linear programmes (scipy's HiGHS)."""
+        c = (self.q_max + self.q_min) / 2
+        if not self.passive:
+            return c
+        from scipy.optimize import linprog
+
+        n = self.n
+        C = np.vstack([np.eye(n), [p.coef for p in self.passive]])
+        off = np.concatenate([np.zeros(n), [p.offset for p in self.passive]])
+        lo = np.concatenate([self.q_min, [p.lo for p in self.passive]])
+        hi = np.concatenate([self.q_max, [p.hi for p in self.passive]])
+        half = (hi - lo) / 2
+        # 1: variables (q, s): max s  s.t.  C q + off <= hi - s half,  lo + s half <= C q + off,  s <= 1
+        A = np.vstack([np.hstack([C, half[:, None]]), np.hstack([-C, half[:, None]])])
+        b = np.concatenate([hi - off, off - lo])
+        res = linprog(np.r_[np.zeros(n), -1.0], A_ub=A, b_ub=b, bounds=[(None, None)] * n + [(None, 1.0)],
+                      method="highs")
+        if res.status != 0 or -res.fun <= 1e-9:
+            rng = ", ".join(f"joint {p.joint} [{p.lo:.4g}, {p.hi:.4g}]" for p in self.passive)
+            raise ExcitationError(f"no position of the actuated joints within [limits] q_min/q_max keeps the passive "
+                                  f"joints within passive_q_min/passive_q_max ({rng}, through the loop closure): "
+                                  f"check [limits]")
+        s_star = (1 - 1e-6) * -res.fun
+        # 2: variables (q, u): min sum u / half_q  s.t.  the margin s* and |q - c| <= u
+        I, hq = np.eye(n), half[:n]
+        A2 = np.vstack([np.hstack([C, np.zeros((len(C), n))]), np.hstack([-C, np.zeros((len(C), n))]),
+                        np.hstack([I, -I]), np.hstack([-I, -I])])
+        b2 = np.concatenate([hi - off - s_star * half, off - lo - s_star * half, c, -c])
+        res2 = linprog(np.r_[np.zeros(n), 1.0 / hq], A_ub=A2, b_ub=b2, bounds=[(None, None)] * (2 * n), method="highs")
+        return np.asarray((res2.x if res2.status == 0 else res.x)[:n], float)
+
+    def room(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(up, down)``: the room of each joint's position above and below :attr:`centre`."""
+        if not self.passive:
+            h = (self.q_max - self.q_min) / 2
+            return h, h
+        return self.q_max - self.centre, self.centre - self.q_min
 
     def as_dict(self) -> dict:
         d = {k: getattr(self, k).tolist() for k in ("q_min", "q_max", "dq_max", "ddq_max")}
         d["tau_max"] = None if self.tau_max is None else self.tau_max.tolist()
         d["defaulted"] = list(self.defaulted)
+        if self.passive:
+            d["passive"] = [{"joint": p.joint, "coef": p.coef.tolist(), "offset": p.offset, "q_min": p.lo,
+                             "q_max": p.hi} for p in self.passive]
         return d
 
 
-def limits_of(robot: Any, n: int | None = None) -> Limits:
+def limits_of(robot: Any, n: int | None = None, model: Any = None) -> Limits:
     """:class:`Limits` from a :class:`~symoro_gen.description.model.RobotDescription`'s ``[limits]``.
 
     Fields the file does not give are taken from :data:`DEFAULT_LIMITS` (revolute joints: positions
     ``+-pi``, velocities 2 rad/s, accelerations 10 rad/s^2) or :data:`DEFAULT_PRISMATIC_LIMITS`
-    (0.5 m, 0.5 m/s, 2 m/s^2) and listed in ``defaulted``; torque limits stay None.
+    (0.5 m, 0.5 m/s, 2 m/s^2) and listed in ``defaulted``; torque limits stay None. With the ``model`` of a
+    closed-loop robot whose closure is linear (``model.linear_closure()``), ``passive_q_min/passive_q_max``
+    become :class:`PassiveRange` rows through ``q_tree = A q_a + b``.
     """
     n = robot.n_joints if n is None else n
-    prismatic = np.array([getattr(r, "sigma", 0) == 1 for r in robot.joints][:n] + [False] * max(0, n - robot.n_joints))
+    rows = list(getattr(robot, "actuated", None) or robot.joints)  # a closed-loop robot's design is in its actuated joints
+    if len(rows) != n:
+        rows = list(robot.joints)
+    prismatic = np.array([getattr(r, "sigma", 0) == 1 for r in rows][:n] + [False] * max(0, n - len(rows)))
     lim = getattr(robot, "limits", None)
     got = {k: (None if lim is None else getattr(lim, k)) for k in ("q_min", "q_max", "dq_max", "ddq_max", "tau_max")}
     defaulted = []
@@ -182,8 +263,22 @@ def limits_of(robot: Any, n: int | None = None) -> Limits:
         else:
             out[k] = np.asarray(got[k], float)
     tau = None if got["tau_max"] is None else np.asarray(got["tau_max"], float)
-    return Limits(out["q_min"], out["q_max"], out["dq_max"], out["ddq_max"], tau, tuple(defaulted),
-                  tuple(bool(p) for p in prismatic))
+    limits = Limits(out["q_min"], out["q_max"], out["dq_max"], out["ddq_max"], tau, tuple(defaulted),
+                    tuple(bool(p) for p in prismatic), _passive_ranges_of(robot, lim, model))
+    limits.centre  # noqa: B018 - passive ranges that no actuated position meets are said now, not mid-design
+    return limits
+
+
+def _passive_ranges_of(robot: Any, lim: Any, model: Any) -> tuple[PassiveRange, ...]:
+    """The ``[limits]`` passive ranges as rows linear in the actuated positions (see :func:`limits_of`)."""
+    joints = tuple(getattr(lim, "passive_joints", ()) or ())
+    lc = model.linear_closure() if joints and hasattr(model, "linear_closure") else None
+    if lc is None:
+        return ()
+    A = np.array(lc.A.tolist(), float)
+    row = {j: i for i, j in enumerate(lc.joints)}
+    return tuple(PassiveRange(j, A[row[j]], float(lc.b[row[j]]), float(lo), float(hi), robot.row(j).sigma == 1)
+                 for j, lo, hi in zip(joints, lim.passive_q_min, lim.passive_q_max))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -488,13 +583,17 @@ def predicted_sigma(model: IdentificationModel, q, dq, ddq, noise: float, chi_b=
 
 
 def check_limits(limits: Limits, q, dq, ddq, tau=None, *, rtol: float = 1e-9) -> dict:
-    """Per-joint peak usage of each limit (1 = at the limit) and whether every sample is inside."""
+    """Per-joint peak usage of each limit (1 = at the limit) and whether every sample is inside (``passive``:
+    the passive joints' position ranges, :attr:`Limits.passive`)."""
     q, dq, ddq = (np.asarray(x, float) for x in (q, dq, ddq))
     c, h = (limits.q_max + limits.q_min) / 2, (limits.q_max - limits.q_min) / 2
     use = {"q": (np.abs(q - c) / h).max(0), "dq": (np.abs(dq) / limits.dq_max).max(0),
            "ddq": (np.abs(ddq) / limits.ddq_max).max(0)}
     if tau is not None and limits.tau_max is not None:
         use["tau"] = (np.abs(tau) / limits.tau_max).max(0)
+    if limits.passive:
+        lo, hi = np.array([p.lo for p in limits.passive]), np.array([p.hi for p in limits.passive])
+        use["passive"] = (np.abs(limits.passive_positions(q) - (lo + hi) / 2) / ((hi - lo) / 2)).max(0)
     ok = all(bool(np.all(u <= 1 + rtol)) for u in use.values())
     return {"ok": ok, "usage": {k: v.tolist() for k, v in use.items()}}
 
@@ -511,16 +610,26 @@ def _constant_design(basis, n: int, centre: np.ndarray) -> np.ndarray:
     return X
 
 
-def _scale_into(basis, limits: Limits, X: np.ndarray, X0: np.ndarray, t: np.ndarray) -> np.ndarray:
+def _scale_into(basis, limits: Limits, X: np.ndarray, t: np.ndarray) -> np.ndarray:
     """``X0 + k_j (X - X0)`` per joint, with the largest ``k_j`` that keeps joint j inside
-    its position, velocity and acceleration limits at the times ``t`` (``X0``: rest at the centre)."""
+    its position, velocity and acceleration limits at the times ``t`` (``X0``: rest at :attr:`Limits.centre`),
+    then, with passive ranges, one common factor that keeps the passive joints inside theirs."""
     P, D, A = basis.matrices(t)
-    h = (limits.q_max - limits.q_min) / 2
+    X0 = _constant_design(basis, limits.n, limits.centre)
+    up, down = limits.room()
     dX = X - X0
-    with np.errstate(divide="ignore"):
-        k = np.minimum.reduce([h / np.abs(P @ dX).max(0), limits.dq_max / np.abs(D @ dX).max(0),
+    dev = P @ dX
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = np.minimum.reduce([np.minimum(up / np.maximum(dev.max(0), 0.0), down / np.maximum(-dev.min(0), 0.0)) if limits.passive
+                               else up / np.abs(dev).max(0), limits.dq_max / np.abs(D @ dX).max(0),
                                limits.ddq_max / np.abs(A @ dX).max(0)])
-    k = np.where(np.isfinite(k), k, 1.0)
+        k = np.where(np.isfinite(k), k, 1.0)
+        if limits.passive:  # the passive positions are linear in the actuated ones: one factor for all joints
+            p0 = limits.passive_positions(limits.centre[None])[0]
+            pd = limits.passive_positions(dev * k) - limits.passive_positions(np.zeros((1, limits.n)))
+            hi, lo = np.array([p.hi for p in limits.passive]), np.array([p.lo for p in limits.passive])
+            s = np.min(np.r_[1.0, (hi - p0) / np.maximum(pd.max(0), 0.0), (p0 - lo) / np.maximum(-pd.min(0), 0.0)])
+            k = k * (s if np.isfinite(s) else 1.0)
     return X0 + dX * k
 
 
@@ -530,7 +639,7 @@ def random_trajectory(basis, limits: Limits, rng: np.random.Generator, t: np.nda
     position, velocity and acceleration limits is reached on the samples ``t`` (the usual random
     baseline of excitation design)."""
     n = limits.n
-    centre = (limits.q_max + limits.q_min) / 2
+    centre = limits.centre
     X0 = _constant_design(basis, n, centre)
     if isinstance(basis, FourierBasis):
         ks = np.concatenate([np.arange(1, basis.K), np.arange(1, basis.K)]).astype(float)
@@ -543,7 +652,7 @@ def random_trajectory(basis, limits: Limits, rng: np.random.Generator, t: np.nda
         X = centre + np.cumsum(rng.standard_normal((basis.m, n)), axis=0) * (limits.q_max - limits.q_min) / 8
     else:
         X = rng.uniform(limits.q_min, limits.q_max, (basis.m, n))
-    return _scale_into(basis, limits, X, X0, t)
+    return _scale_into(basis, limits, X, t)
 
 
 def friction_trajectory(basis, limits: Limits, rng: np.random.Generator, t: np.ndarray, duration: float, *,
@@ -590,11 +699,10 @@ def friction_trajectory(basis, limits: Limits, rng: np.random.Generator, t: np.n
             vel[k] = vel[k - 1] + np.clip(target[k] - vel[k - 1], -a * dt, a * dt)
         V[:, j] = vel
     Q = np.cumsum(V, axis=0) * dt
-    Q += ((limits.q_max + limits.q_min) / 2 - (Q.max(0) + Q.min(0)) / 2)
+    Q += (limits.centre - (Q.max(0) + Q.min(0)) / 2)
     P, _, _ = basis.matrices(tt)
     X, *_ = np.linalg.lstsq(P, Q, rcond=None)
-    X0 = _constant_design(basis, n, (limits.q_max + limits.q_min) / 2)
-    return _scale_into(basis, limits, X, X0, t)
+    return _scale_into(basis, limits, X, t)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -639,15 +747,16 @@ def _casadi():
 
 
 def _casadi_regressor(model: IdentificationModel):
-    """The model's CasADi regressor ``(q, dq, ddq) -> Y``, or an :class:`ExcitationError` that says why there is none."""
-    if hasattr(model, "casadi_regressor"):
+    """The model's CasADi regressor ``(q, dq, ddq) -> Y``, or an :class:`ExcitationError` that says why there is none
+    (a closed-loop robot has one when its closure is linear: parallelograms, coupled joints)."""
+    if not hasattr(model, "casadi_regressor"):
+        raise ExcitationError(f"{model.ROBOT}: the model has no casadi_regressor() (use a generated package: "
+                              "symoro_gen.load_model)")
+    try:
         return model.casadi_regressor()
-    if hasattr(model, "closed_form_text"):  # a closed-loop model (symoro_gen.closedloop)
-        raise ExcitationError(f"{model.ROBOT} is a closed-loop robot: its model (the tree's projected on the actuated "
-                              "joints) has no CasADi form yet, so excite cannot optimise a trajectory for it "
-                              "(identify and diagnose do work on it)")
-    raise ExcitationError(f"{model.ROBOT}: the model has no casadi_regressor() (use a generated package: "
-                          "symoro_gen.load_model)")
+    except ModelError as e:
+        raise ExcitationError(f"{e}: excite cannot optimise a trajectory for it (identify and diagnose do work "
+                              "on it)") from None
 
 
 def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndarray, t_con: np.ndarray,
@@ -694,6 +803,12 @@ def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndar
     g = [ca.vec(ca.DM(Pc) @ X), ca.vec(ca.DM(Dc) @ X), ca.vec(ca.DM(Ac) @ X)]
     lbg = [np.repeat(lim.q_min, Nc), np.repeat(-lim.dq_max, Nc), np.repeat(-lim.ddq_max, Nc)]
     ubg = [np.repeat(lim.q_max, Nc), np.repeat(lim.dq_max, Nc), np.repeat(lim.ddq_max, Nc)]
+    if lim.passive:  # passive joints of a linear closure: coef . q + offset within [lo, hi]
+        Cp = np.array([p.coef for p in lim.passive])
+        off = np.array([p.offset for p in lim.passive])
+        g.append(ca.vec(ca.DM(Pc) @ X @ ca.DM(Cp.T)))
+        lbg.append(np.repeat(np.array([p.lo for p in lim.passive]) - off, Nc))
+        ubg.append(np.repeat(np.array([p.hi for p in lim.passive]) - off, Nc))
     if chi_b is not None and lim.tau_max is not None:
         Hq = ca.Function("tau", [qs, dqs, ddqs], [Y @ ca.DM(chi_b)])
         T = Hq.map(No)((Po @ X).T, (Do @ X).T, (Ao @ X).T)  # (n, No)
@@ -862,6 +977,11 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
         for Bm, lo, hi in ((Pc, lim.q_min, lim.q_max), (Dc, -lim.dq_max, lim.dq_max), (Ac, -lim.ddq_max, lim.ddq_max)):
             cur = Bm @ X
             cons += [Bm @ Dm <= np.maximum(hi - cur, 0.0), Bm @ Dm >= np.minimum(lo - cur, 0.0)]
+        if lim.passive:
+            Cp = np.array([p.coef for p in lim.passive])
+            cur = lim.passive_positions(Pc @ X)
+            lo, hi = np.array([p.lo for p in lim.passive]), np.array([p.hi for p in lim.passive])
+            cons += [Pc @ Dm @ Cp.T <= np.maximum(hi - cur, 0.0), Pc @ Dm @ Cp.T >= np.minimum(lo - cur, 0.0)]
         # the Coulomb columns sign(dq) are piecewise constant: the sign of every moving output sample is kept,
         # so that the linearisation holds (a velocity may halve towards zero, not cross it)
         for j in range(n):
@@ -962,7 +1082,7 @@ def _optimise_start(model: IdentificationModel, basis, limits: Limits, solvers: 
     X = (x_best if math.isfinite(c_best) else x).reshape(n, basis.m).T
     dense = dense_times(t_out, duration, basis)
     if not _inside(basis, limits, X, dense):
-        X = _scale_into(basis, limits, X, _constant_design(basis, n, (limits.q_max + limits.q_min) / 2), dense)
+        X = _scale_into(basis, limits, X, dense)
     c = stacked_cond(model, *basis_eval(basis, X, t_out))
     rec.update(cond=c, status=status, iterations=iters, cond_stages=stage_conds)
     if refine:
@@ -1200,30 +1320,86 @@ def write_trajectory_csv(path, t, q, dq, ddq) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-def plot_trajectory(result: ExcitationResult, path, *, robot: str = "") -> None:
+def joint_numbers(model: IdentificationModel) -> tuple[int, ...]:
+    """The robot joint of each design column ``q1..qn``: ``1..n``, or a closed-loop robot's actuated joints
+    (``q3`` of a palletizer design is its joint 4)."""
+    return tuple(getattr(model, "ACTUATED_JOINTS", range(1, int(model.N_JOINTS) + 1)))
+
+
+def _joint_label(j: int, joints: tuple[int, ...] | None) -> str:
+    """``"q<j+1>"`` and, when it is another robot joint, ``" (joint k)"``: the suffix of ``q, dq, ddq``."""
+    k = j + 1 if joints is None else joints[j]
+    return f"{j + 1}" + (f" (joint {k})" if k != j + 1 else "")
+
+
+def passive_ranges(model: IdentificationModel, q: np.ndarray) -> dict[int, tuple[float, float]]:
+    """``{joint: (min, max)}`` of the passive joints of a closed-loop robot over the design's positions ``q``
+    (from the loop closure; the design's limits constrain the actuated joints only); ``{}`` for an open one."""
+    closed: Any = model  # a ClosedLoopModel (IdentificationModel does not declare its closure)
+    if not hasattr(closed, "closure"):
+        return {}
+    act = set(joint_numbers(model))
+    z = np.zeros_like(q)
+    qt = closed.closure(q, z, z).q
+    joints = list(closed.kinematics.tree_joints)
+    return {j: (float(qt[:, c].min()), float(qt[:, c].max())) for c, j in enumerate(joints) if j not in act}
+
+
+def _passive_text(model: IdentificationModel, passive: dict[int, tuple[float, float]], limits: Limits) -> str:
+    """One sentence: which robot joints the design's columns are, and the passive joints' ranges against
+    their ``[limits]`` ranges when given (deg or m)."""
+    given = {p.joint: (p.lo, p.hi) for p in limits.passive}
+    robot = getattr(model, "robot")  # noqa: B009 - a ClosedLoopModel's (IdentificationModel does not declare it)
+
+    def rng(j: int, lo: float, hi: float) -> str:
+        f, u, d = (1.0, "m", 4) if robot.row(j).sigma == 1 else (180.0 / math.pi, "deg", 1)
+        lim = f" (limits {f * given[j][0]:.{d}f} .. {f * given[j][1]:.{d}f})" if j in given else ""
+        return f"joint {j} {f * lo:.{d}f} .. {f * hi:.{d}f} {u}{lim}"
+    joints = joint_numbers(model)
+    free = "" if given else " ([limits] has no passive_q_min/passive_q_max: not constrained)"
+    return (f"closed loop: q1..q{len(joints)} are the actuated joints {', '.join(map(str, joints))}; the passive "
+            f"joints move over " + ", ".join(rng(j, *r) for j, r in passive.items()) + free)
+
+
+def plot_trajectory(result: ExcitationResult, path, *, robot: str = "", joints: tuple[int, ...] | None = None) -> None:
     """PNG file of every joint's ``q, dq, ddq`` against its limits (dashed), titled with the robot, the
-    kind of design and its cond (written atomically)."""
+    kind of design and its cond (written atomically); ``joints``: :func:`joint_numbers` for the labels."""
     title = (f"{robot + ': ' if robot else ''}{result.basis.kind} excitation, cond = {result.cond:.4g}, limits "
              f"{'respected' if result.limits_ok else 'VIOLATED'}")
-    write_bytes_atomic(path, trajectory_figure_png(result, dpi=90, title=title))
+    write_bytes_atomic(path, trajectory_figure_png(result, dpi=90, title=title, joints=joints))
 
 
-def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000, title: str = "") -> bytes:
-    """PNG (report style) of every joint's ``q, dq, ddq`` against its limits (dashed red), in deg or m."""
+def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000, title: str = "",
+                          joints: tuple[int, ...] | None = None) -> bytes:
+    """PNG (report style) of every joint's ``q, dq, ddq`` against its limits (dashed red), in deg or m;
+    ``joints``: the robot joint of each column (:func:`joint_numbers`), named in the labels when it differs."""
 
     MplFigure, FigureCanvasAgg = require_matplotlib()
     lim, n = result.limits, result.limits.n
-    base, head = 1.5 * n + 0.9, (0.35 if title else 0.0)  # inches: the grid of axes, the title above it
+    rows = n + len(lim.passive)  # a closed-loop robot's passive joints: one more row each (position only)
+    base, head = 1.5 * rows + 0.9, (0.35 if title else 0.0)  # inches: the grid of axes, the title above it
     fig = MplFigure(figsize=(WIDTH_IN, base + head), dpi=dpi, facecolor="white")
     FigureCanvasAgg(fig)
-    axes = fig.subplots(n, 3, squeeze=False, sharex=True)
+    axes = fig.subplots(rows, 3, squeeze=False, sharex=True)
     k = max(1, len(result.t) // max(max_points, 1))
     t = result.t[::k]
+    passive = lim.passive_positions(result.q[::k])
+    for i, p in enumerate(lim.passive):
+        f, u = (1.0, "m") if p.prismatic else (180.0 / math.pi, "deg")
+        ax = axes[n + i, 0]
+        ax.plot(t, f * passive[:, i], lw=1, color="C1")
+        for v in (p.lo, p.hi):
+            ax.axhline(f * v, color="r", ls="--", lw=0.8)
+        ax.set_ylabel(f"joint {p.joint}, passive [{u}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        for c in (1, 2):
+            axes[n + i, c].set_visible(False)
     for j in range(n):
         f, u = (1.0, "m") if lim.is_prismatic(j) else (180.0 / math.pi, "deg")
-        panels = ((f * result.q[::k, j], f * lim.q_min[j], f * lim.q_max[j], f"q{j + 1} [{u}]"),
-                  (f * result.dq[::k, j], -f * lim.dq_max[j], f * lim.dq_max[j], f"dq{j + 1} [{u}/s]"),
-                  (f * result.ddq[::k, j], -f * lim.ddq_max[j], f * lim.ddq_max[j], f"ddq{j + 1} [{u}/s2]"))
+        jl = _joint_label(j, joints)
+        panels = ((f * result.q[::k, j], f * lim.q_min[j], f * lim.q_max[j], f"q{jl} [{u}]"),
+                  (f * result.dq[::k, j], -f * lim.dq_max[j], f * lim.dq_max[j], f"dq{jl} [{u}/s]"),
+                  (f * result.ddq[::k, j], -f * lim.ddq_max[j], f * lim.ddq_max[j], f"ddq{jl} [{u}/s2]"))
         for c, (y, lo, hi, lab) in enumerate(panels):
             ax = axes[j, c]
             ax.plot(t, y, lw=1)
@@ -1232,7 +1408,9 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
             ax.set_ylabel(lab, fontsize=8)
             ax.tick_params(labelsize=7)
     for c in range(3):
-        axes[-1, c].set_xlabel("t [s]", fontsize=8)
+        axes[n - 1 if c and lim.passive else -1, c].set_xlabel("t [s]", fontsize=8)
+        if c and lim.passive:
+            axes[n - 1, c].tick_params(labelbottom=True)
     if title:
         fig.suptitle(title, fontsize=9, y=1 - 0.12 / (base + head))
     fig.subplots_adjust(left=0.07, right=0.99, top=1 - (0.03 * base + head) / (base + head), bottom=0.5 / (base + head),
@@ -1258,17 +1436,27 @@ def excitation_report(result: ExcitationResult, model: IdentificationModel, *, n
         f"{len(result.starts)} IPOPT start(s), {result.wall_time:.1f} s.")]
     if lim.defaulted:
         blocks.append(Paragraph(f"The robot file gives no {', '.join(lim.defaulted)}: defaults were used."))
+    joints = joint_numbers(model)
+    passive = passive_ranges(model, result.q)
+    if passive:
+        blocks.append(Paragraph(_passive_text(model, passive, lim)))
     blocks.append(Heading("Joint trajectories against the limits"))
     if plots:
-        blocks.append(Figure("trajectory", trajectory_figure_png(result),
-                             caption="q, dq, ddq per joint (rows) against the limits (dashed red)"))
+        blocks.append(Figure("trajectory", trajectory_figure_png(result, joints=joints),
+                             caption="q, dq, ddq per joint (rows) against the limits (dashed red)"
+                                     + ("; below, the passive joints' positions (closed loop)" if lim.passive else "")))
     rows = []
     for j in range(n):
         f, u, d = (1.0, "m", 4) if lim.is_prismatic(j) else (180.0 / math.pi, "deg", 1)
-        rows.append((f"{j + 1}", f"{f * result.q[:, j].min():.{d}f} .. {f * result.q[:, j].max():.{d}f} {u}",
+        rows.append((_joint_label(j, joints), f"{f * result.q[:, j].min():.{d}f} .. {f * result.q[:, j].max():.{d}f} {u}",
                      f"{f * lim.q_min[j]:.{d}f} .. {f * lim.q_max[j]:.{d}f} {u}",
                      *(f"{result.usage[k][j]:.3f}" for k in ("q", "dq", "ddq")),
                      f"{result.usage['tau'][j]:.3f}" if "tau" in result.usage else "-"))
+    qp = lim.passive_positions(result.q)
+    for i, pr in enumerate(lim.passive):
+        f, u, d = (1.0, "m", 4) if pr.prismatic else (180.0 / math.pi, "deg", 1)
+        rows.append((f"joint {pr.joint} (passive)", f"{f * qp[:, i].min():.{d}f} .. {f * qp[:, i].max():.{d}f} {u}",
+                     f"{f * pr.lo:.{d}f} .. {f * pr.hi:.{d}f} {u}", f"{result.usage['passive'][i]:.3f}", "-", "-", "-"))
     blocks.append(Table(("joint", "q range", "limits", "use q", "use dq", "use ddq", "use tau"),
                         tuple(rows), caption="Peak use of each limit (1 = at the limit; q about the range centre)"))
     blocks.append(Heading("Predicted precision of the base parameters"))
@@ -1345,7 +1533,7 @@ def cmd_excite(args) -> int:
         require_matplotlib()  # the same: a missing extra is said before minutes of optimisation, not after
     robot, model = model_for(args.robot)
     n = model.N_JOINTS
-    lim = limits_of(robot, n)
+    lim = limits_of(robot, n, model)
     if args.duration <= 0 or args.rate <= 0:
         raise ExcitationError("--duration and --rate must be positive")
     refine_note = None
@@ -1384,6 +1572,7 @@ def cmd_excite(args) -> int:
                               chi_b=None if args.no_torque_limits else chi_b)
     write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
     sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)
+    passive = passive_ranges(model, res.q)
     out = {
         "robot": model.ROBOT, "kind": basis.kind, "criterion": res.criterion, "cond": res.cond,
         "limits_ok": res.limits_ok, "duration": args.duration, "rate": args.rate, "samples": len(res.t),
@@ -1392,11 +1581,13 @@ def cmd_excite(args) -> int:
         "noise": args.noise, "base_names": list(model.BASE_NAMES), "sigma": sig.tolist(),
         "sigma_pct": None if pct is None else [None if not np.isfinite(v) else float(v) for v in pct],
         "starts": res.starts, "wall_time": res.wall_time, "design": basis.coefficients(res.X),
+        "joints": list(joint_numbers(model)),
+        "passive_ranges": {str(j): list(r) for j, r in passive.items()},
     }
     if args.json:
         write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
     if args.plot:
-        plot_trajectory(res, args.plot, robot=model.ROBOT)
+        plot_trajectory(res, args.plot, robot=model.ROBOT, joints=joint_numbers(model))
     if args.report:
         write_report_files(excitation_report(res, model, noise=args.noise, chi_b=chi_b), args.report)
     if not args.quiet:
@@ -1412,6 +1603,8 @@ def cmd_excite(args) -> int:
                 for st in refined))
         if refine_note:
             print(refine_note)
+        if passive:
+            print(_passive_text(model, passive, lim))
         if lim.defaulted:
             print(f"note: the robot file has no {', '.join(lim.defaulted)} in [limits]; defaults used")
     return 0 if res.limits_ok else 3
@@ -1730,11 +1923,13 @@ class _DualPricer:
 
     @staticmethod
     def casadi_jacobian(model: IdentificationModel, n: int, moments: bool, degree: int = 2):
-        if not hasattr(model, "casadi_regressor"):
+        try:
+            F = _casadi_regressor(model)
+        except ExcitationError:  # priced without gradients (random states only)
             return None
         ca = _casadi()
         z = ca.SX.sym("z", 3 * n)
-        Y = model.casadi_regressor()(z[:n], z[n:2 * n], z[2 * n:])
+        Y = F(z[:n], z[n:2 * n], z[2 * n:])
         out = [Y, ca.jacobian(ca.vec(Y), z)]  # vec: column-major
         if moments:
             m = stationarity_moments(z[:n], z[n:2 * n], z[2 * n:], lib=ca, degree=degree)

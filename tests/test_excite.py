@@ -14,6 +14,7 @@ from symoro_gen import excite
 from symoro_gen.description.parse import parse_robot_text
 from symoro_gen.errors import RobotFileError
 from symoro_gen.excite import (
+    ExcitationError,
     FourierBasis,
     Limits,
     PointToPointBasis,
@@ -21,6 +22,7 @@ from symoro_gen.excite import (
     basis_eval,
     check_limits,
     cond_lower_bound,
+    dense_times,
     friction_ceiling,
     friction_trajectory,
     limits_of,
@@ -575,12 +577,83 @@ def test_starts_in_parallel_processes_give_the_same_design(scara, scara_limits):
     assert steps == [1 + 2] * 3  # each finished start reports its IPOPT stage and SDPs at once
 
 
-def test_cli_closed_loop_robot_is_refused_with_the_reason(cli, tmp_path):
-    """The palletizer's model is the tree's projected on the actuated joints, NumPy only: excite says so (not
-    "use a generated package", which the user did) and writes nothing."""
-    r = cli("excite", "palletizer", "-o", tmp_path / "x.csv", "--starts", "1", "--max-iter", "1", rc=2)
-    assert "closed-loop robot" in r.err and "no CasADi form" in r.err, r.err
-    assert not (tmp_path / "x.csv").exists()
+# -- closed-loop robots: a linear closure (the palletizer's parallelogram) --------------------------------------
+PALLETIZER_PASSIVE = """
+[limits]
+angles = "deg"
+passive_q_min = [-60, -150]
+passive_q_max = [60, 30]
+"""
+
+
+@pytest.fixture(scope="module")
+def palletizer():
+    return model_for("palletizer")
+
+
+def test_closed_loop_casadi_regressor_equals_the_projected_numeric_model(palletizer):
+    """``A^T W_tree(A q + b, ...)[:, keep]`` in CasADi against the numeric closure + projection (Newton on the
+    loop equations, ``G`` from the constraint Jacobian): the same regressor, actuated joints 1, 2, 4, 5."""
+    _, model = palletizer
+    F = model.casadi_regressor()
+    q, dq, ddq = np.random.default_rng(3).uniform(-1.2, 1.2, (3, 12, 4))
+    W = model.regressor(q, dq, ddq)
+    Wc = np.array([np.array(F(q[i], dq[i], ddq[i])) for i in range(len(q))])
+    assert Wc.shape == W.shape == (12, 4, len(model.BASE_NAMES))
+    np.testing.assert_allclose(Wc, W, atol=1e-10 * np.abs(W).max())
+
+
+def test_closed_loop_design_keeps_the_passive_joints_within_their_limits(palletizer):
+    """[limits] passive_q_min/passive_q_max reach the design through the linear closure: every output sample
+    and a 10x resampling keep the passive joints (solved numerically by the loop closure, not by the rows
+    the optimiser used) in range; without them the same design problem folds the parallelogram far beyond."""
+    robot0, model0 = palletizer
+    text = Path(robot0.file).read_text(encoding="utf-8") + PALLETIZER_PASSIVE
+    robot = parse_robot_text(text, file="palletizer+passive.toml")
+    from symoro_gen.closedloop import ClosedLoopModel
+
+    model = ClosedLoopModel(robot, model0.tree)
+    lim = limits_of(robot, model.N_JOINTS, model)
+    assert [p.joint for p in lim.passive] == [3, 6]
+    np.testing.assert_allclose([p.lo for p in lim.passive], np.radians([-60, -150]))
+    basis = FourierBasis(5, 0.1)
+    kw = dict(starts=1, seed=0, max_iter=20, pool=3, refine=2)
+    res = optimise_excitation(model, basis, lim, 10.0, **kw)
+    assert res.limits_ok and max(res.usage["passive"]) <= 1.0
+    for t in (res.t, dense_times(res.t, 10.0, basis)):
+        q, _, _ = basis_eval(basis, res.X, t)
+        z = np.zeros_like(q)
+        qt = model.closure(q, z, z).q
+        for p in lim.passive:
+            assert np.all(qt[:, p.joint - 1] >= p.lo - 1e-9) and np.all(qt[:, p.joint - 1] <= p.hi + 1e-9)
+    free = optimise_excitation(model, basis, limits_of(robot0, model.N_JOINTS, model0), 10.0, **kw)
+    lo3, hi3 = excite.passive_ranges(model0, free.q)[3]
+    assert hi3 - lo3 > math.radians(150)  # the constraint was not idle
+
+
+def test_closed_loop_passive_limits_that_no_actuated_position_meets_are_one_error(palletizer):
+    robot0, model0 = palletizer
+    text = Path(robot0.file).read_text(encoding="utf-8") + PALLETIZER_PASSIVE.replace(
+        "angles", "q_min = [-10, -10, -10, -10]\nq_max = [10, 10, 10, 10]\nangles").replace(
+        "[-60, -150]", "[50, -150]")
+    robot = parse_robot_text(text, file="palletizer+bad.toml")
+    from symoro_gen.closedloop import ClosedLoopModel
+
+    model = ClosedLoopModel(robot, model0.tree)
+    with pytest.raises(ExcitationError, match=r"passive joints within passive_q_min/passive_q_max \(joint 3"):
+        limits_of(robot, 4, model)  # said when the limits are read, before any optimisation
+
+
+def test_cli_closed_loop_robot_writes_actuated_columns_and_the_passive_ranges(cli, tmp_path):
+    """``excite palletizer``: q1..q4 are its actuated joints 1, 2, 4, 5 (the CSV convention of identify), said on
+    stdout and in the JSON beside the passive joints' ranges."""
+    out, js = tmp_path / "p.csv", tmp_path / "p.json"
+    r = cli("excite", "palletizer", "-o", out, "--json", js, "--starts", "1", "--pool", "2", "--max-iter", "5",
+            "--refine", "1")
+    assert out.read_text().splitlines()[0] == "t," + ",".join(f"{k}{j}" for k in ("q", "dq", "ddq") for j in range(1, 5))
+    d = json.loads(js.read_text())
+    assert d["joints"] == [1, 2, 4, 5] and sorted(d["passive_ranges"]) == ["3", "6"]
+    assert "actuated joints 1, 2, 4, 5" in r.out and "no passive_q_min/passive_q_max" in r.out, r.out
 
 
 def test_cli_jobs_rejects_a_negative_count(cli, tmp_path):

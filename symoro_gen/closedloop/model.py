@@ -34,6 +34,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -229,6 +230,7 @@ class ClosedLoopModel:
         self.BASE_NAMES = self.base.names
         self._keep = np.array(self.base.keep, int)
         self._cache: tuple[tuple, ClosedState] | None = None
+        self._linear: tuple | None = None
 
     # ---------------------------------------------------------------------------------------------
     def _inputs(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike):
@@ -276,6 +278,40 @@ class ClosedLoopModel:
     def payload_regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
         """``G^T`` times the tree's payload regressor, (N, n_a, len(PAYLOAD_NAMES))."""
         return self._project("payload_regressor", q, dq, ddq)
+
+    def linear_closure(self):
+        """The exact linear closure ``q_tree = A q_a + b``
+        (:class:`~symoro_gen.closedloop.grouping.LinearClosure`) of a parallelogram or of coupled joints,
+        or ``None`` for a general loop (see :func:`~symoro_gen.closedloop.grouping.detect_linear_closure`);
+        found once."""
+        if self._linear is None:
+            from .grouping import detect_linear_closure  # sympy; grouping imports this module
+
+            self._linear = (detect_linear_closure(self.kinematics),)
+        return self._linear[0]
+
+    def casadi_regressor(self) -> Any:
+        """``casadi.Function regressor_<robot>(q, dq, ddq) -> Y`` (n_a x nb base regressor, actuated joints) for
+        a **linear** closure: ``Y = A^T W_tree(A q + b, A dq, A ddq)[:, keep]`` with the tree package's CasADi
+        regressor (``G = A`` is constant and the closure adds no bias acceleration), the same as
+        :meth:`regressor`. A general loop (a four-bar whose passive angles are not linear in the crank's)
+        has no closed form: :class:`~symoro_gen.errors.ModelError` says so."""
+        lc = self.linear_closure()
+        if lc is None:
+            raise ModelError(f"{self.ROBOT}: the loop closure is not linear in the actuated joints (a general "
+                             "loop, solved numerically), so the model has no CasADi form")
+        import casadi as ca  # heavy; only for optimisation
+
+        A = np.array(lc.A.tolist(), float)
+        b = np.array([float(x) for x in lc.b])
+        tree: Any = self.tree  # a generated package (IdentificationModel does not declare its CasADi form)
+        F = tree.casadi_regressor()
+        n = self.N_JOINTS
+        q, dq, ddq = (ca.SX.sym(s, n) for s in ("q", "dq", "ddq"))
+        At = ca.DM(A)
+        Yt = F(ca.mtimes(At, q) + ca.DM(b), ca.mtimes(At, dq), ca.mtimes(At, ddq))
+        Y = ca.mtimes(At.T, Yt[:, [int(k) for k in self._keep]])
+        return ca.Function(f"regressor_{self.ROBOT}", [q, dq, ddq], [Y])
 
     def base_parameters(self, chi_std: ArrayLike) -> NDArray[np.float64]:
         """Base parameters ``K chi_std`` (see :class:`ClosedLoopBase`), (..., len(BASE_NAMES))."""

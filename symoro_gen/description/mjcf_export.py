@@ -20,8 +20,9 @@ Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
 * a coupled joint (``mimic``, ``q_m = multiplier q_s + offset``) has no motor and a joint equality
   ``<joint joint1="joint<m>" joint2="joint<s>" polycoef="offset multiplier 0 0 0"/>`` (MuJoCo enforces it
   as a soft constraint, as it does every equality);
-* joint ``range`` from the robot file's ``[limits]`` (``q_min``, ``q_max``) when present, ``gravity``
-  from the robot file; ``integrator="RK4"``, ``timestep`` 1 ms (options).
+* joint ``range`` from the robot file's ``[limits]`` (``q_min``, ``q_max``; a passive joint's
+  ``passive_q_min``, ``passive_q_max``) when present, ``gravity`` from the robot file; ``integrator="RK4"``,
+  ``timestep`` 1 ms (options).
 """
 from __future__ import annotations
 

@@ -93,6 +93,10 @@ class JointLimits:
     Each field is a tuple with one entry per moving joint (joint order), or None when the file
     does not give it. Positions in rad (revolute) or m (prismatic), velocities rad/s or m/s,
     accelerations rad/s^2 or m/s^2, torques N m or N. See ``docs/robot-file.md``.
+
+    For a closed-loop or coupled robot, the fields of ``FIELDS`` have one entry per actuated joint, and
+    ``passive_q_min``, ``passive_q_max`` the position range of each passive joint (``mu = 0``), whose joint
+    numbers are ``passive_joints`` (joint order; ``()`` when the file gives no passive range).
     """
 
     q_min: tuple[float, ...] | None = None
@@ -100,6 +104,9 @@ class JointLimits:
     dq_max: tuple[float, ...] | None = None
     ddq_max: tuple[float, ...] | None = None
     tau_max: tuple[float, ...] | None = None
+    passive_q_min: tuple[float, ...] | None = None
+    passive_q_max: tuple[float, ...] | None = None
+    passive_joints: tuple[int, ...] = ()
 
     FIELDS = ("q_min", "q_max", "dq_max", "ddq_max", "tau_max")
 

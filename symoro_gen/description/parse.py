@@ -304,11 +304,12 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     mimic_frames = frozenset(i for i, fr in enumerate(frames, start=1) if isinstance(fr, dict) and "mimic" in fr)
     coupled = bool(mimic_frames)
     model_rows = [r for r in rows if not (r.is_moving and r.mu == 0)] if ("loops" in doc or coupled) else rows
+    passive_rows = [r for r in rows if r.is_moving and r.mu == 0] if ("loops" in doc or coupled) else []
     chain = None
     if "drive_chain" in doc:
         chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in model_rows), bad)
 
-    limits = _parse_limits(doc["limits"], model_rows, bad) if "limits" in doc else None
+    limits = _parse_limits(doc["limits"], model_rows, bad, passive_rows) if "limits" in doc else None
 
     loops, loop_reference = (), {}
     if ("loops" in doc or "loop_reference" in doc) and not bad_sigma:
@@ -438,13 +439,15 @@ def _parse_chain(raw, n, bad) -> DriveChain | None:
     )
 
 
-LIMIT_KEYS = {"angles"} | set(JointLimits.FIELDS)
+PASSIVE_LIMIT_KEYS = ("passive_q_min", "passive_q_max")
+LIMIT_KEYS = {"angles"} | set(JointLimits.FIELDS) | set(PASSIVE_LIMIT_KEYS)
 
 
-def _parse_limits(raw, rows, bad) -> JointLimits | None:
+def _parse_limits(raw, rows, bad, passive=()) -> JointLimits | None:
     """The ``[limits]`` table: per-joint lists ``q_min, q_max, dq_max, ddq_max, tau_max`` (each
-    optional, one number per moving joint) and ``angles = "rad" | "deg"`` (unit of the revolute
-    joints' position, velocity and acceleration entries; default rad). Returned in SI units."""
+    optional, one number per moving joint of ``rows``), ``passive_q_min, passive_q_max`` (one number
+    per ``passive`` joint, :func:`_parse_passive_limits`) and ``angles = "rad" | "deg"`` (unit of the
+    revolute joints' position, velocity and acceleration entries; default rad). Returned in SI units."""
     where = "[limits]"
     if not isinstance(raw, dict):
         bad(where, "", "must be a table of per-joint lists (q_min, q_max, dq_max, ddq_max, tau_max)")
@@ -489,4 +492,49 @@ def _parse_limits(raw, rows, bad) -> JointLimits | None:
     if ("q_min" in raw) != ("q_max" in raw):
         bad(where, "q_max" if "q_min" in raw else "q_min", "missing: q_min and q_max must be given together")
         ok = False
-    return JointLimits(**out) if ok else None
+    pas = _parse_passive_limits(raw, list(passive), unit, bad)
+    return JointLimits(**out, **pas) if ok and pas is not None else None
+
+
+def _parse_passive_limits(raw, passive: list[MdhRow], unit: str, bad) -> dict | None:
+    """``passive_q_min, passive_q_max`` of ``[limits]``: the position range of each passive joint (``mu = 0``
+    of a closed-loop or coupled robot, joint order ``passive``), in the unit of ``q_min, q_max``. The
+    :class:`JointLimits` fields (SI units, with ``passive_joints``; empty when not given), or None after a
+    reported problem."""
+    where = "[limits]"
+    given = [k for k in PASSIVE_LIMIT_KEYS if k in raw]
+    if not given:
+        return {}
+    if not passive:
+        for k in given:
+            bad(where, k, "this robot has no passive joints (mu = 0 joints of a closed-loop or coupled robot)")
+        return None
+    ok = True
+    if len(given) == 1:
+        bad(where, "passive_q_max" if given[0] == "passive_q_min" else "passive_q_min",
+            "missing: passive_q_min and passive_q_max must be given together")
+        ok = False
+    n, joints = len(passive), ", ".join(str(r.j) for r in passive)
+    out: dict[str, tuple] = {"passive_joints": tuple(r.j for r in passive)}
+    for key in given:
+        v = raw[key]
+        if not (isinstance(v, list) and len(v) == n):
+            bad(where, key, f"must be a list of {n} numbers (one per passive joint: joints {joints}), got {v!r}")
+            ok = False
+            continue
+        vals = []
+        for x, r in zip(v, passive):
+            if not _is_number(x):
+                bad(f"{where} passive joint {r.j}", key, f"must be a finite number, got {x!r}")
+                ok = False
+                continue
+            vals.append(float(x) * (math.pi / 180.0 if (unit == "deg" and r.sigma == REVOLUTE) else 1.0))
+        out[key] = tuple(vals)
+    if not ok:
+        return None
+    for r, a, b, xa, xb in zip(passive, out["passive_q_min"], out["passive_q_max"], raw["passive_q_min"],
+                               raw["passive_q_max"]):
+        if a >= b:
+            bad(f"{where} passive joint {r.j}", "passive_q_min", f"passive_q_min {xa!r} must be below passive_q_max {xb!r}")
+            ok = False
+    return out if ok else None

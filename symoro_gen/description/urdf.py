@@ -1058,7 +1058,8 @@ def import_urdf_text(
     nominal_lines = ["[nominal]", "# standard parameters in frame j at its origin [kg, kg m, kg m^2]; FV [N m s/rad], FS [N m]"]
     nominal_lines += [f"{k} = {_num(_snap(v, 1e-15))}" for k, v in nominal]
     parts.append("\n".join(nominal_lines))
-    limits_text = _limits_table([jt for jt in moving if jt.name not in passive])
+    limits_text = _limits_table([jt for jt in moving if jt.name not in passive],
+                                tuple(jt for jt in moving if jt.name in passive))
     if limits_text:
         parts.append(limits_text)
     out = "\n\n".join(parts) + "\n"
@@ -1161,9 +1162,11 @@ def _loop_frames(model: UrdfModel, owner: dict, pose: dict, frames: list, tol: f
         raise RobotFileError(problems)
     return out
 
-def _limits_table(moving: list[UrdfJoint]) -> str:
+def _limits_table(moving: list[UrdfJoint], passive: tuple[UrdfJoint, ...] = ()) -> str:
     """``[limits]`` from the moving joints' ``<limit lower upper velocity effort>`` (a field is written
-    when every joint gives it; the robot file's q is the URDF joint value, so no sign change)."""
+    when every joint gives it; the robot file's q is the URDF joint value, so no sign change), and
+    ``passive_q_min, passive_q_max`` from the ``passive`` joints' ``lower, upper`` (when every one gives
+    both, ``lower < upper``)."""
     cols = {}
     for i, key in enumerate(("q_min", "q_max", "dq_max", "tau_max")):
         vals = [jt.limit[i] if jt.limit is not None else None for jt in moving]
@@ -1175,6 +1178,9 @@ def _limits_table(moving: list[UrdfJoint]) -> str:
             lo < hi for lo, hi in zip(cols["q_min"], cols["q_max"]))):
         cols.pop("q_min", None)
         cols.pop("q_max", None)
+    bounds = [jt.limit[:2] if jt.limit is not None else (None, None) for jt in passive]
+    if bounds and all(lo is not None and hi is not None and lo < hi for lo, hi in bounds):
+        cols["passive_q_min"], cols["passive_q_max"] = [lo for lo, _ in bounds], [hi for _, hi in bounds]
     if not cols:
         return ""
     lines = ["[limits]", "# from the URDF <limit lower upper velocity effort> of each joint [rad or m, /s, N m or N]"]

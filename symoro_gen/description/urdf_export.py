@@ -18,7 +18,8 @@ A coupled joint (``mimic`` in the robot file, ``q_j = multiplier q_s + offset``)
 Drive terms: ``FV`` and ``FS`` go to ``<dynamics damping friction>``; URDF has no field for the rotor
 inertia ``IA`` nor the torque offset ``OFF``: they are written as ``<!-- armature ... -->`` comments in
 the joint and listed by :func:`drive_terms` (the command line writes them to a sidecar JSON). Joint
-``<limit>`` from the robot file's ``[limits]`` when it has one (else +-pi / +-10 m, effort 1000).
+``<limit>`` from the robot file's ``[limits]`` when it has one (a passive joint's ``lower upper`` from
+``passive_q_min, passive_q_max``; else +-pi / +-10 m, effort 1000).
 
 Each link is written physically meaningful: mass >= ``min_mass``, inertia at the centre of mass
 symmetric positive definite and satisfying the triangle inequalities (eigenvalues raised as needed);
@@ -86,13 +87,17 @@ def drive_terms(robot: RobotDescription, vals: dict) -> dict[str, dict[str, floa
 
 
 def joint_limits(robot: RobotDescription, j: int) -> dict[str, float]:
-    """``q_min, q_max, dq_max, tau_max`` of moving joint ``j`` from the robot file's ``[limits]`` (present ones)."""
+    """``q_min, q_max, dq_max, tau_max`` of moving joint ``j`` from the robot file's ``[limits]`` (present ones;
+    a passive joint's ``q_min, q_max`` from ``passive_q_min, passive_q_max``)."""
     lim = getattr(robot, "limits", None)
     if lim is None:
         return {}
     logged = [r.j for r in robot.model_joints]
     if j not in logged:  # a passive joint of a closed-loop robot: [limits] lists the actuated ones
-        return {}
+        if j not in lim.passive_joints or lim.passive_q_min is None or lim.passive_q_max is None:
+            return {}
+        k = lim.passive_joints.index(j)
+        return {"q_min": float(lim.passive_q_min[k]), "q_max": float(lim.passive_q_max[k])}
     k = logged.index(j)
     out = {}
     for f in ("q_min", "q_max", "dq_max", "tau_max"):

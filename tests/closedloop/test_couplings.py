@@ -221,6 +221,16 @@ def test_closed_form_groupings_and_the_emitted_regressor_of_a_coupled_robot(toy)
     np.testing.assert_allclose(ns["regressor"](q, dq, ddq) @ (K @ chi), model.torque(q, dq, ddq, chi), atol=1e-9)
 
 
+def test_casadi_regressor_of_a_coupled_robot_equals_the_projected_model(toy):
+    """The CasADi form (``A^T W_tree(A q + b)``, the offset pi/6 included) that ``excite`` optimises on, against
+    the numeric projection."""
+    _, model = toy
+    F = model.casadi_regressor()
+    q, dq, ddq = np.random.default_rng(5).uniform(-1.5, 1.5, (3, 10, 3))
+    Wc = np.array([np.array(F(q[i], dq[i], ddq[i])) for i in range(len(q))])
+    np.testing.assert_allclose(Wc, model.regressor(q, dq, ddq), atol=1e-12)
+
+
 def test_a_non_integer_revolute_multiplier_keeps_numeric_groupings_with_the_reason():
     robot = parse_robot_text(planar_text("-1.5", "0.3"), file="planar_coupled.toml")
     bp = group_base_parameters(build_regressor(robot))

@@ -156,6 +156,20 @@ def test_closure_residual_and_passive_joints_against_the_closed_form(fourbar):
         assert math.remainder(st.q[i, 2] - ph3, 2 * math.pi) == pytest.approx(0, abs=1e-10)
 
 
+def test_a_general_loop_has_no_casadi_form_and_excite_says_why(fourbar):
+    """The four-bar's passive angles are not linear in the crank's: no closed form, so no CasADi regressor;
+    ``excite`` turns that into its own error naming the reason, not a traceback."""
+    from symoro_gen.errors import ModelError
+    from symoro_gen.excite import ExcitationError, _casadi_regressor
+
+    _, model = fourbar
+    assert model.linear_closure() is None
+    with pytest.raises(ModelError, match="not linear in the actuated joints"):
+        model.casadi_regressor()
+    with pytest.raises(ExcitationError, match=r"not linear.*excite cannot optimise a trajectory for it"):
+        _casadi_regressor(model)
+
+
 def test_base_parameters_of_the_four_bar(fourbar):
     """A one-dof closed chain: the projected regressor's numeric rank equals the base count, and the
     base parameters reproduce the standard model's torques."""

@@ -7,7 +7,7 @@ import math
 import pytest
 import sympy as sp
 
-from symoro_gen.description import load_robot, parse_robot, parse_robot_text, q_symbol
+from symoro_gen.description import load_robot, parse_robot, parse_robot_text, q_symbol, robots_dir
 from symoro_gen.errors import RobotFileError
 from symoro_gen.params import INERTIAL_KINDS, PARAM_KINDS
 
@@ -334,6 +334,65 @@ def test_good_drive_chain():
     robot = parse_robot_text(GOOD + "\n[drive_chain]\nratios = [100, -80, 50]\ndirections = [1, -1, 1]\n")
     assert robot.drive_chain.ratios == (100.0, -80.0, 50.0)
     assert robot.drive_chain.coupling == ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+# ---------------------------------------------------------------- [limits] of the passive joints
+def palletizer_with(limits: str) -> str:
+    """The shipped palletizer (actuated joints 1, 2, 4, 5; passive joints 3, 6) with a ``[limits]`` table."""
+    return (robots_dir() / "palletizer.toml").read_text() + f"\n[limits]\n{limits}\n"
+
+
+@pytest.mark.parametrize("unit, scale", [("rad", 1.0), ("deg", math.pi / 180)])
+def test_passive_limits_in_si_units(unit, scale):
+    text = palletizer_with(f'angles = "{unit}"\nq_min = [-2, -1, -3, -1]\nq_max = [2, 1, 3, 1]\n'
+                           "passive_q_min = [-2.5, -1.5]\npassive_q_max = [-0.5, 1.5]")
+    lim = parse_robot_text(text, file="pal.toml").limits
+    assert lim.passive_joints == (3, 6)
+    assert lim.passive_q_min == pytest.approx((-2.5 * scale, -1.5 * scale), rel=1e-15)
+    assert lim.passive_q_max == pytest.approx((-0.5 * scale, 1.5 * scale), rel=1e-15)
+    assert lim.q_min == pytest.approx((-2 * scale, -scale, -3 * scale, -scale), rel=1e-15)  # actuated: unchanged
+
+
+def test_passive_limits_alone_and_of_a_prismatic_coupled_joint():
+    lim = parse_robot_text(palletizer_with("passive_q_min = [-2, -1]\npassive_q_max = [0, 1]")).limits
+    assert lim.q_min is None and lim.passive_q_min == (-2.0, -1.0) and lim.passive_joints == (3, 6)
+    assert parse_robot_text(palletizer_with("q_min = [-2, -1, -3, -1]\nq_max = [2, 1, 3, 1]")).limits.passive_joints == ()
+    # joint 3 (prismatic) follows joint 2: its range is in m whatever the angle unit
+    text = edit_frame(GOOD, 3, 'r = "q"', 'r = "q"\nmimic = { joint = 2, multiplier = 0.1, offset = 0 }')
+    text += '\n[limits]\nangles = "deg"\nq_min = [-90, -45]\nq_max = [90, 45]\npassive_q_min = [-0.1]\npassive_q_max = [0.2]\n'
+    lim = parse_robot_text(text).limits
+    assert lim.passive_joints == (3,) and lim.passive_q_min == (-0.1,) and lim.passive_q_max == (0.2,)
+    assert lim.q_max == pytest.approx((math.pi / 2, math.pi / 4), rel=1e-15)
+
+
+@pytest.mark.parametrize("limits, where, fld, words", [
+    ("passive_q_min = [-1]\npassive_q_max = [1, 1]", "[limits]", "passive_q_min",
+     ["list of 2 numbers", "passive joint", "joints 3, 6"]),
+    ("passive_q_min = [-1, -1]\npassive_q_max = [1, 1, 1]", "[limits]", "passive_q_max", ["list of 2 numbers"]),
+    ("passive_q_min = -1\npassive_q_max = [1, 1]", "[limits]", "passive_q_min", ["list of 2 numbers"]),
+    ("passive_q_min = [-1, 2]\npassive_q_max = [1, 1]", "[limits] passive joint 6", "passive_q_min",
+     ["passive_q_min 2 must be below passive_q_max 1"]),
+    ("passive_q_min = [1, -1]\npassive_q_max = [1, 1]", "[limits] passive joint 3", "passive_q_min", ["must be below"]),
+    ("passive_q_min = [-1, -1]", "[limits]", "passive_q_max", ["missing", "given together"]),
+    ("passive_q_max = [1, 1]", "[limits]", "passive_q_min", ["missing", "given together"]),
+    ('passive_q_min = ["a", -1]\npassive_q_max = [1, 1]', "[limits] passive joint 3", "passive_q_min",
+     ["finite number", "'a'"]),
+    ("passive_q_min = [-1, -1]\npassive_q_max = [1, nan]", "[limits] passive joint 6", "passive_q_max",
+     ["finite number"]),
+    ("passive_q_min = [-1, true]\npassive_q_max = [1, 1]", "[limits] passive joint 6", "passive_q_min",
+     ["finite number"]),
+    ("passive_min = [-1, -1]", "[limits]", "passive_min", ["unknown field", "passive_q_min"]),
+])
+def test_bad_passive_limits(tmp_path, limits, where, fld, words):
+    err, file = errors_of(palletizer_with(limits), tmp_path, "pal.toml")
+    assert_problem(err, file, where, fld, *words)
+    assert len(err.problems) == 1, str(err)
+
+
+def test_passive_limits_on_a_robot_without_passive_joints(tmp_path):
+    err, file = errors_of(GOOD + "\n[limits]\npassive_q_min = [-1]\npassive_q_max = [1]\n", tmp_path)
+    assert_problem(err, file, "[limits]", "passive_q_min", "no passive joints")
+    assert_problem(err, file, "[limits]", "passive_q_max", "no passive joints")
 
 
 # ---------------------------------------------------------------- several problems at once

@@ -19,7 +19,7 @@ import sympy as sp
 
 from symoro_gen import load_model
 from symoro_gen.closedloop import ClosedLoopModel
-from symoro_gen.description import load_robot, parse_robot_text
+from symoro_gen.description import load_robot, parse_robot_text, robots_dir
 from symoro_gen.description.urdf import import_urdf_text
 from symoro_gen.description.urdf_export import export_urdf
 from symoro_gen.emit.package import build_in_memory
@@ -162,6 +162,38 @@ def test_fourbar_actuated_joint_by_option_and_passive_ones():
     robot = parse_robot_text(text, file="fourbar.toml")
     assert [r.mu for r in robot.joints] == [1, 0, 0] and len(robot.loops) == 1
     assert robot.loops[0].cut.ant == 2 and robot.loops[0].close.ant == 3  # coupler -> rocker
+
+
+def with_limit(urdf: str, joint: str, lower: float, upper: float) -> str:
+    """``urdf`` with the continuous joint ``joint`` made revolute with ``<limit lower upper>``."""
+    i = urdf.index(f'<joint name="{joint}" type="continuous">')
+    k = urdf.index("</joint>", i)
+    return (urdf[:i] + urdf[i:k].replace('type="continuous"', 'type="revolute"')
+            + f'<limit lower="{lower}" upper="{upper}" velocity="2" effort="5"/>' + urdf[k:])
+
+
+def test_passive_joint_limits_are_imported_as_passive_q_min_and_q_max():
+    urdf = with_limit(with_limit(with_limit(fourbar_urdf(), "crank_joint", -3.0, 3.0), "coupler_joint", -0.4, 2.5),
+                      "rocker_joint", -1.25, 0.75)
+    text = import_urdf_text(urdf, file="fourbar.urdf")
+    assert "passive_q_min = [-0.4, -1.25]" in text and "passive_q_max = [2.5, 0.75]" in text
+    lim = parse_robot_text(text, file="fourbar.toml").limits
+    assert lim.q_min == (-3.0,) and lim.q_max == (3.0,) and lim.dq_max == (2.0,) and lim.tau_max == (5.0,)
+    assert lim.passive_joints == (2, 3) and lim.passive_q_min == (-0.4, -1.25) and lim.passive_q_max == (2.5, 0.75)
+    # written only when every passive joint gives lower < upper (the URDF's lower = upper = 0: no range)
+    for partial in (with_limit(fourbar_urdf(), "coupler_joint", -0.4, 2.5),
+                    with_limit(with_limit(fourbar_urdf(), "coupler_joint", -0.4, 2.5), "rocker_joint", 0, 0)):
+        assert "passive_q_" not in import_urdf_text(partial, file="fourbar.urdf")
+
+
+def test_passive_limits_go_through_urdf_export_and_import():
+    pal = parse_robot_text((robots_dir() / "palletizer.toml").read_text()
+                           + '\n[limits]\nangles = "deg"\npassive_q_min = [-150, -30]\npassive_q_max = [-30, 30]\n')
+    urdf = export_urdf(pal, report=[])
+    robot = parse_robot_text(import_urdf_text(urdf, file="palletizer.urdf"), file="palletizer.toml")
+    assert robot.limits.passive_joints == (3, 6)
+    np.testing.assert_allclose(robot.limits.passive_q_min, np.radians([-150, -30]), rtol=1e-12)
+    np.testing.assert_allclose(robot.limits.passive_q_max, np.radians([-30, 30]), rtol=1e-12)
 
 
 def problem(urdf: str, **kw) -> str:
