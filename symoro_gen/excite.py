@@ -178,12 +178,16 @@ class Limits:
         return Limits(c - h, c + h, self.dq_max * (1 - margin), self.ddq_max * (1 - margin), tau, self.defaulted,
                       self.prismatic, passive)
 
+    def passive_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(C, offset, lo, hi)`` of the passive ranges, ``lo <= C q + offset <= hi`` (``C``: (k, n))."""
+        ps = self.passive
+        return (np.array([p.coef for p in ps]).reshape(len(ps), self.n), np.array([p.offset for p in ps]),
+                np.array([p.lo for p in ps]), np.array([p.hi for p in ps]))
+
     def passive_positions(self, q) -> np.ndarray:
         """The passive joints' positions ``(N, len(passive))`` for the design's positions ``q`` (N, n)."""
-        q = np.asarray(q, float)
-        if not self.passive:
-            return np.zeros((q.shape[0], 0))
-        return q @ np.array([p.coef for p in self.passive]).T + np.array([p.offset for p in self.passive])
+        C, off, _, _ = self.passive_rows()
+        return np.asarray(q, float) @ C.T + off
 
     @functools.cached_property
     def centre(self) -> np.ndarray:
@@ -197,10 +201,9 @@ class Limits:
         from scipy.optimize import linprog
 
         n = self.n
-        C = np.vstack([np.eye(n), [p.coef for p in self.passive]])
-        off = np.concatenate([np.zeros(n), [p.offset for p in self.passive]])
-        lo = np.concatenate([self.q_min, [p.lo for p in self.passive]])
-        hi = np.concatenate([self.q_max, [p.hi for p in self.passive]])
+        Cp, op, lp, hp = self.passive_rows()
+        C, off = np.vstack([np.eye(n), Cp]), np.concatenate([np.zeros(n), op])
+        lo, hi = np.concatenate([self.q_min, lp]), np.concatenate([self.q_max, hp])
         half = (hi - lo) / 2
         # 1: variables (q, s): max s  s.t.  C q + off <= hi - s half,  lo + s half <= C q + off,  s <= 1
         A = np.vstack([np.hstack([C, half[:, None]]), np.hstack([-C, half[:, None]])])
@@ -592,7 +595,7 @@ def check_limits(limits: Limits, q, dq, ddq, tau=None, *, rtol: float = 1e-9) ->
     if tau is not None and limits.tau_max is not None:
         use["tau"] = (np.abs(tau) / limits.tau_max).max(0)
     if limits.passive:
-        lo, hi = np.array([p.lo for p in limits.passive]), np.array([p.hi for p in limits.passive])
+        _, _, lo, hi = limits.passive_rows()
         use["passive"] = (np.abs(limits.passive_positions(q) - (lo + hi) / 2) / ((hi - lo) / 2)).max(0)
     ok = all(bool(np.all(u <= 1 + rtol)) for u in use.values())
     return {"ok": ok, "usage": {k: v.tolist() for k, v in use.items()}}
@@ -625,9 +628,8 @@ def _scale_into(basis, limits: Limits, X: np.ndarray, t: np.ndarray) -> np.ndarr
                                limits.ddq_max / np.abs(A @ dX).max(0)])
         k = np.where(np.isfinite(k), k, 1.0)
         if limits.passive:  # the passive positions are linear in the actuated ones: one factor for all joints
-            p0 = limits.passive_positions(limits.centre[None])[0]
-            pd = limits.passive_positions(dev * k) - limits.passive_positions(np.zeros((1, limits.n)))
-            hi, lo = np.array([p.hi for p in limits.passive]), np.array([p.lo for p in limits.passive])
+            C, _, lo, hi = limits.passive_rows()
+            p0, pd = limits.passive_positions(limits.centre[None])[0], (dev * k) @ C.T
             s = np.min(np.r_[1.0, (hi - p0) / np.maximum(pd.max(0), 0.0), (p0 - lo) / np.maximum(-pd.min(0), 0.0)])
             k = k * (s if np.isfinite(s) else 1.0)
     return X0 + dX * k
@@ -803,12 +805,11 @@ def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndar
     g = [ca.vec(ca.DM(Pc) @ X), ca.vec(ca.DM(Dc) @ X), ca.vec(ca.DM(Ac) @ X)]
     lbg = [np.repeat(lim.q_min, Nc), np.repeat(-lim.dq_max, Nc), np.repeat(-lim.ddq_max, Nc)]
     ubg = [np.repeat(lim.q_max, Nc), np.repeat(lim.dq_max, Nc), np.repeat(lim.ddq_max, Nc)]
-    if lim.passive:  # passive joints of a linear closure: coef . q + offset within [lo, hi]
-        Cp = np.array([p.coef for p in lim.passive])
-        off = np.array([p.offset for p in lim.passive])
+    if lim.passive:  # passive joints of a linear closure: C q + offset within [lo, hi]
+        Cp, off, lo, hi = lim.passive_rows()
         g.append(ca.vec(ca.DM(Pc) @ X @ ca.DM(Cp.T)))
-        lbg.append(np.repeat(np.array([p.lo for p in lim.passive]) - off, Nc))
-        ubg.append(np.repeat(np.array([p.hi for p in lim.passive]) - off, Nc))
+        lbg.append(np.repeat(lo - off, Nc))
+        ubg.append(np.repeat(hi - off, Nc))
     if chi_b is not None and lim.tau_max is not None:
         Hq = ca.Function("tau", [qs, dqs, ddqs], [Y @ ca.DM(chi_b)])
         T = Hq.map(No)((Po @ X).T, (Do @ X).T, (Ao @ X).T)  # (n, No)
@@ -978,9 +979,8 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
             cur = Bm @ X
             cons += [Bm @ Dm <= np.maximum(hi - cur, 0.0), Bm @ Dm >= np.minimum(lo - cur, 0.0)]
         if lim.passive:
-            Cp = np.array([p.coef for p in lim.passive])
+            Cp, _, lo, hi = lim.passive_rows()
             cur = lim.passive_positions(Pc @ X)
-            lo, hi = np.array([p.lo for p in lim.passive]), np.array([p.hi for p in lim.passive])
             cons += [Pc @ Dm @ Cp.T <= np.maximum(hi - cur, 0.0), Pc @ Dm @ Cp.T >= np.minimum(lo - cur, 0.0)]
         # the Coulomb columns sign(dq) are piecewise constant: the sign of every moving output sample is kept,
         # so that the linearisation holds (a velocity may halve towards zero, not cross it)

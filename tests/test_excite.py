@@ -631,6 +631,28 @@ def test_closed_loop_design_keeps_the_passive_joints_within_their_limits(palleti
     assert hi3 - lo3 > math.radians(150)  # the constraint was not idle
 
 
+@pytest.mark.parametrize("basis", [FourierBasis(4, 0.25), SplineBasis(12, 4.0), PointToPointBasis(5, 0.8, 0.2)],
+                         ids=["fourier", "spline", "p2p"])
+def test_random_designs_are_scaled_into_passive_ranges(basis):
+    """A passive row ``q2 - q1 + 0.1`` in [0.2, 0.9] whose centre is not the box centre's: every random design
+    is built about the LP centre (inside every range) and scaled into all ranges, passive included."""
+    from symoro_gen.excite import PassiveRange
+
+    box = Limits(np.array([-1.0, -0.5]), np.array([1.0, 1.5]), np.array([2.0, 2.0]), np.array([8.0, 8.0]))
+    lim = Limits(box.q_min, box.q_max, box.dq_max, box.ddq_max,
+                 passive=(PassiveRange(3, np.array([-1.0, 1.0]), 0.1, 0.2, 0.9),))
+    c = lim.centre
+    assert np.all(c > box.q_min) and np.all(c < box.q_max) and 0.2 < c[1] - c[0] + 0.1 < 0.9
+    t = np.linspace(0.0, 4.0, 401)
+    rng = np.random.default_rng(2)
+    for _ in range(10):
+        X = random_trajectory(basis, lim, rng, t)
+        q, dq, ddq = basis_eval(basis, X, t)
+        chk = check_limits(lim, q, dq, ddq)
+        assert chk["ok"] and max(chk["usage"]["passive"]) <= 1 + 1e-9
+        assert np.all(q[:, 1] - q[:, 0] + 0.1 >= 0.2 - 1e-9) and np.all(q[:, 1] - q[:, 0] + 0.1 <= 0.9 + 1e-9)
+
+
 def test_closed_loop_passive_limits_that_no_actuated_position_meets_are_one_error(palletizer):
     robot0, model0 = palletizer
     text = Path(robot0.file).read_text(encoding="utf-8") + PALLETIZER_PASSIVE.replace(
