@@ -51,8 +51,7 @@ from sympy.printing.pycode import PythonCodePrinter
 from ..description.mdh import constant_rotation, position, rot_z
 from ..description.model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, q_symbol
 from ..errors import ModelError
-from .kinematics import LoopKinematics
-from .model import independent_columns, sample_states
+from .kinematics import LoopKinematics, independent_columns, sample_states
 
 __all__ = ["LinearClosure", "ClosedFormBase", "coupling_closure", "detect_linear_closure", "closed_form_base", "closed_form_markdown",
            "closed_loop_regressor", "closed_loop_kernel_source"]

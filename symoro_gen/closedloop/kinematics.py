@@ -44,7 +44,7 @@ from ..description.mdh import joint_sign, row_values, transform
 from ..description.model import FIXED, PRISMATIC, REVOLUTE, MdhRow, RobotDescription
 from ..errors import ModelError
 
-__all__ = ["ClosureError", "LoopKinematics", "ClosedState"]
+__all__ = ["ClosureError", "LoopKinematics", "ClosedState", "independent_columns", "sample_states"]
 
 
 class ClosureError(ModelError):
@@ -347,3 +347,37 @@ class LoopKinematics:
         nt = len(self.tree_joints)
         return ClosedState(q=x[:, :nt], dq=xd[:, :nt], ddq=xdd[:, :nt], q_cut=x[:, nt:], G=G[:, :nt, :],
                            residual=res)
+
+
+def independent_columns(M: NDArray[np.float64], tol: float) -> NDArray[np.float64]:
+    """Distance of each column of ``M`` (columns scaled to unit norm, zero columns excluded by the caller)
+    from the span of the **independent** columns before it, in order: a column at distance ``<= tol``
+    depends on earlier ones (the regrouping order of [G1991]).
+
+    Gram-Schmidt with re-orthogonalisation against the independent columns only: a QR factorisation
+    without pivoting would let a dependent column consume a row direction (its Householder reflector is
+    built from rounding noise), after which a later independent column can look dependent when the
+    matrix has few rows (a coupled joint's energy matrix)."""
+    basis: list[NDArray[np.float64]] = []
+    out = np.zeros(M.shape[1])
+    for i in range(M.shape[1]):
+        v = np.array(M[:, i], float)
+        for _ in range(2):
+            for b in basis:
+                v -= (b @ v) * b
+        d = float(np.linalg.norm(v))
+        out[i] = d
+        if d > tol:
+            basis.append(v / d)
+    return out
+
+
+def sample_states(kin: LoopKinematics, n: int, seed: int = 0, scale: float = 1.0) -> tuple[NDArray[np.float64], ...]:
+    """``n`` random actuated states around the reference assembly: positions within ``0.5 scale`` rad
+    (``0.05 scale`` m for prismatic joints) of it, velocities and accelerations standard normal.
+    Deterministic."""
+    rng = np.random.default_rng(seed)
+    ref = kin._reference[kin._ia]
+    span = scale * np.array([0.05 if r.sigma == PRISMATIC else 0.5 for r in kin.robot.actuated])
+    q = ref + rng.uniform(-1, 1, (n, kin.n_a)) * span
+    return q, rng.standard_normal((n, kin.n_a)), rng.standard_normal((n, kin.n_a))

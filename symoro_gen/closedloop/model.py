@@ -39,10 +39,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..description.model import PRISMATIC, RobotDescription
+from ..description.model import RobotDescription
 from ..errors import ModelError
 from ..model import IdentificationModel
-from .kinematics import ClosedState, ClosureError, LoopKinematics
+from .grouping import LinearClosure, detect_linear_closure
+from .kinematics import ClosedState, ClosureError, LoopKinematics, independent_columns, sample_states
 
 __all__ = ["ClosedLoopBase", "ClosedLoopModel", "closed_loop_base"]
 
@@ -111,40 +112,6 @@ def recognise(c: float, values: dict[str, float], tol: float = 1e-9) -> str | No
                         head = (f"{k:g}*" if k != 1.0 else "") + ("*".join(num) or "1")
                         return sign + head + (f"/{'/'.join(den)}" if den else "")
     return None
-
-
-def independent_columns(M: NDArray[np.float64], tol: float) -> NDArray[np.float64]:
-    """Distance of each column of ``M`` (columns scaled to unit norm, zero columns excluded by the caller)
-    from the span of the **independent** columns before it, in order: a column at distance ``<= tol``
-    depends on earlier ones (the regrouping order of [G1991]).
-
-    Gram-Schmidt with re-orthogonalisation against the independent columns only: a QR factorisation
-    without pivoting would let a dependent column consume a row direction (its Householder reflector is
-    built from rounding noise), after which a later independent column can look dependent when the
-    matrix has few rows (a coupled joint's energy matrix)."""
-    basis: list[NDArray[np.float64]] = []
-    out = np.zeros(M.shape[1])
-    for i in range(M.shape[1]):
-        v = np.array(M[:, i], float)
-        for _ in range(2):
-            for b in basis:
-                v -= (b @ v) * b
-        d = float(np.linalg.norm(v))
-        out[i] = d
-        if d > tol:
-            basis.append(v / d)
-    return out
-
-
-def sample_states(kin: LoopKinematics, n: int, seed: int = 0, scale: float = 1.0) -> tuple[NDArray[np.float64], ...]:
-    """``n`` random actuated states around the reference assembly: positions within ``0.5 scale`` rad
-    (``0.05 scale`` m for prismatic joints) of it, velocities and accelerations standard normal.
-    Deterministic."""
-    rng = np.random.default_rng(seed)
-    ref = kin._reference[kin._ia]
-    span = scale * np.array([0.05 if r.sigma == PRISMATIC else 0.5 for r in kin.robot.actuated])
-    q = ref + rng.uniform(-1, 1, (n, kin.n_a)) * span
-    return q, rng.standard_normal((n, kin.n_a)), rng.standard_normal((n, kin.n_a))
 
 
 def closed_loop_base(kin: LoopKinematics, tree: IdentificationModel, *, n_samples: int = 120,
@@ -279,14 +246,12 @@ class ClosedLoopModel:
         """``G^T`` times the tree's payload regressor, (N, n_a, len(PAYLOAD_NAMES))."""
         return self._project("payload_regressor", q, dq, ddq)
 
-    def linear_closure(self):
+    def linear_closure(self) -> LinearClosure | None:
         """The exact linear closure ``q_tree = A q_a + b``
         (:class:`~symoro_gen.closedloop.grouping.LinearClosure`) of a parallelogram or of coupled joints,
         or ``None`` for a general loop (see :func:`~symoro_gen.closedloop.grouping.detect_linear_closure`);
         found once."""
         if self._linear is None:
-            from .grouping import detect_linear_closure  # sympy; grouping imports this module
-
             self._linear = (detect_linear_closure(self.kinematics),)
         return self._linear[0]
 
