@@ -48,6 +48,8 @@ condition number of the base regressor stacked over the output samples, as the f
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
 import functools
 import json
 import math
@@ -57,9 +59,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import sympy as sp
 
 from . import __version__
 from .atomic import write_bytes_atomic, write_text_atomic
+from .description.mdh import symbolic_transform
 from .errors import IdentificationError, ModelError
 from .loader import model_for
 from .model import IdentificationModel
@@ -113,6 +117,8 @@ COND_POWERS = (8, 64)
 REFINE_ITERATIONS = 20
 #: the SDP refinement's grid: at most this many samples per second of the output (every 10th of a 1-kHz output)
 REFINE_RATE = 100.0
+#: metres the optimiser's floor is raised per unit of its margin (the 1 % margin: 1 cm above ``--z-min``)
+WORKSPACE_MARGIN = 1.0
 
 
 class ExcitationError(IdentificationError):
@@ -136,6 +142,64 @@ class PassiveRange:
     prismatic: bool = False
 
 
+class Workspace:
+    """A floor (or table) plane below the robot: the origin of every moving or tool frame stays at
+    ``z >= z_min`` in the base frame 0 (``excite --z-min``), the robot's forward kinematics (the MDH
+    transforms ``T(ant, j)`` of Khalil & Kleinfinger 1986, geometry substituted) in the design's joint
+    positions (a closed-loop robot's actuated ones, through its linear closure ``q_tree = A q + b``).
+
+    Only frame origins are checked: a link's extent (its radius, a tool's length past its frame) is the
+    user's clearance, added to ``z_min``. ``frames`` are the frames whose origin moves; ``heights(q)``
+    (NumPy) and ``casadi()`` (a CasADi function ``q -> z``) give their heights.
+    """
+
+    def __init__(self, robot: Any, z_min: float, n: int, closure: tuple[np.ndarray, np.ndarray] | None = None):
+        self.z_min, self.n = float(z_min), int(n)
+        qt = list(robot.q)  # the tree's joint symbols, joint order
+        qa = sp.symbols(f"qa0:{self.n}", real=True)
+        if closure is None:
+            sub = dict(zip(qt, qa))
+        else:
+            A, b = closure
+            sub = {qt[i]: sum(float(A[i, k]) * qa[k] for k in range(self.n)) + float(b[i]) for i in range(len(qt))}
+        geo = robot.geometry_subs()
+        T: dict[int, Any] = {0: sp.eye(4)}
+        z: dict[int, Any] = {}
+        for row in robot.rows:
+            T[row.j] = T[row.ant] * symbolic_transform(row).subs(geo)
+            z[row.j] = T[row.j][2, 3].subs(sub)
+        fixed = {j: float(e) for j, e in z.items() if not e.free_symbols}
+        low = {j: v for j, v in fixed.items() if v < self.z_min}
+        if low:
+            j, v = next(iter(low.items()))
+            raise ExcitationError(f"--z-min {self.z_min:g}: the origin of frame {j} is fixed at z = {v:.4g} m in the base "
+                                  f"frame, below it (z is the base frame's: give the floor's height there)")
+        self.frames = tuple(j for j in z if j not in fixed)
+        exprs = [z[j] for j in self.frames]
+        self._np = sp.lambdify([qa], exprs, modules="numpy")
+        self._sym = (qa, exprs)
+
+    def raised(self, dz: float) -> Workspace:
+        """The same floor ``dz`` higher (the margin of the optimiser's constraints)."""
+        out = copy.copy(self)
+        out.z_min = self.z_min + dz
+        return out
+
+    def heights(self, q) -> np.ndarray:
+        """Heights ``(N, len(frames))`` of the moving frame origins for positions ``q`` (N, n)."""
+        q = np.atleast_2d(np.asarray(q, float))
+        out = self._np(q.T)
+        return np.column_stack([np.broadcast_to(np.asarray(v, float), (q.shape[0],)) for v in out])
+
+    def casadi(self):
+        """CasADi function ``q (n) -> z (len(frames))``."""
+        ca = _casadi()
+        qa, exprs = self._sym
+        f = sp.lambdify([qa], exprs, modules=[{"sin": ca.sin, "cos": ca.cos}])
+        qs = ca.SX.sym("q", self.n)
+        return ca.Function("heights", [qs], [ca.vertcat(*f([qs[k] for k in range(self.n)]))])
+
+
 @dataclass(frozen=True)
 class Limits:
     """Per-joint limits used by the design (SI units, arrays of length n).
@@ -149,6 +213,9 @@ class Limits:
     passive : tuple of PassiveRange
         A closed-loop robot's passive joint ranges, linear in the actuated positions (``[limits]``
         ``passive_q_min/passive_q_max`` through the linear closure).
+    workspace : Workspace or None
+        A floor plane the frame origins stay above (``excite --z-min``); :meth:`shrunk` raises it by
+        ``margin * WORKSPACE_MARGIN``.
     """
 
     q_min: np.ndarray
@@ -159,6 +226,7 @@ class Limits:
     defaulted: tuple[str, ...] = ()
     prismatic: tuple[bool, ...] = ()
     passive: tuple[PassiveRange, ...] = ()
+    workspace: Workspace | None = None
 
     def is_prismatic(self, j: int) -> bool:
         """Joint ``j`` (0-based) is prismatic (its limits are in m, m/s, m/s^2)."""
@@ -175,8 +243,9 @@ class Limits:
         passive = tuple(PassiveRange(p.joint, p.coef, p.offset, (p.lo + p.hi) / 2 - (p.hi - p.lo) / 2 * (1 - margin),
                                      (p.lo + p.hi) / 2 + (p.hi - p.lo) / 2 * (1 - margin), p.prismatic)
                         for p in self.passive)
+        ws = None if self.workspace is None else self.workspace.raised(margin * WORKSPACE_MARGIN)
         return Limits(c - h, c + h, self.dq_max * (1 - margin), self.ddq_max * (1 - margin), tau, self.defaulted,
-                      self.prismatic, passive)
+                      self.prismatic, passive, ws)
 
     def passive_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(C, offset, lo, hi)`` of the passive ranges, ``lo <= C q + offset <= hi`` (``C``: (k, n))."""
@@ -270,6 +339,26 @@ def limits_of(robot: Any, n: int | None = None, model: Any = None) -> Limits:
                     tuple(bool(p) for p in prismatic), _passive_ranges_of(robot, lim, model))
     limits.centre  # noqa: B018 - passive ranges that no actuated position meets are said now, not mid-design
     return limits
+
+
+def with_floor(limits: Limits, robot: Any, model: Any, z_min: float) -> Limits:
+    """``limits`` with a :class:`Workspace` floor at ``z_min`` (a closed-loop robot's through its linear closure);
+    an :class:`ExcitationError` when the rest position at :attr:`Limits.centre` already puts a frame origin below
+    it (designs are built about that position)."""
+    closure = None
+    lc = model.linear_closure() if hasattr(model, "linear_closure") else None
+    if lc is not None:
+        closure = (np.array(lc.A.tolist(), float), np.array([float(x) for x in lc.b]))
+    ws = Workspace(robot, z_min, limits.n, closure)
+    out = dataclasses.replace(limits, workspace=ws)
+    h = ws.heights(out.centre[None])[0]
+    if np.any(h <= ws.z_min):
+        i = int(np.argmin(h))
+        raise ExcitationError(f"--z-min {z_min:g}: at the centre of the joint ranges (q = "
+                              f"{np.array2string(out.centre, precision=3)}), the rest position designs are built "
+                              f"about, the origin of frame {ws.frames[i]} is at z = {h[i]:.4g} m, already below the "
+                              "floor: lower --z-min or centre [limits] q_min/q_max on an upright posture")
+    return out
 
 
 def _passive_ranges_of(robot: Any, lim: Any, model: Any) -> tuple[PassiveRange, ...]:
@@ -594,6 +683,10 @@ def check_limits(limits: Limits, q, dq, ddq, tau=None, *, rtol: float = 1e-9) ->
            "ddq": (np.abs(ddq) / limits.ddq_max).max(0)}
     if tau is not None and limits.tau_max is not None:
         use["tau"] = (np.abs(tau) / limits.tau_max).max(0)
+    if limits.workspace is not None:  # 1 = a frame origin on the floor, from its height at the centre
+        ws = limits.workspace
+        ref = ws.heights(limits.centre[None])[0]
+        use["workspace"] = (ref - ws.heights(q).min(0)) / (ref - ws.z_min)
     if limits.passive:
         _, _, lo, hi = limits.passive_rows()
         use["passive"] = (np.abs(limits.passive_positions(q) - (lo + hi) / 2) / ((hi - lo) / 2)).max(0)
@@ -616,7 +709,8 @@ def _constant_design(basis, n: int, centre: np.ndarray) -> np.ndarray:
 def _scale_into(basis, limits: Limits, X: np.ndarray, t: np.ndarray) -> np.ndarray:
     """``X0 + k_j (X - X0)`` per joint, with the largest ``k_j`` that keeps joint j inside
     its position, velocity and acceleration limits at the times ``t`` (``X0``: rest at :attr:`Limits.centre`),
-    then, with passive ranges, one common factor that keeps the passive joints inside theirs."""
+    then, with passive ranges, one common factor that keeps the passive joints inside theirs, and with a
+    workspace floor, the largest common factor (bisection) that keeps every frame origin above it."""
     P, D, A = basis.matrices(t)
     X0 = _constant_design(basis, limits.n, limits.centre)
     up, down = limits.room()
@@ -632,7 +726,19 @@ def _scale_into(basis, limits: Limits, X: np.ndarray, t: np.ndarray) -> np.ndarr
             p0, pd = limits.passive_positions(limits.centre[None])[0], (dev * k) @ C.T
             s = np.min(np.r_[1.0, (hi - p0) / np.maximum(pd.max(0), 0.0), (p0 - lo) / np.maximum(-pd.min(0), 0.0)])
             k = k * (s if np.isfinite(s) else 1.0)
-    return X0 + dX * k
+    X = X0 + dX * k
+    if limits.workspace is not None:  # the floor is not linear in q: bisect a common factor towards the rest at the centre
+        ws = limits.workspace
+
+        def above(f: float) -> bool:
+            return bool(np.all(ws.heights(P @ (X0 + f * (X - X0))) >= ws.z_min))
+        if not above(1.0):
+            lo_f, hi_f = 0.0, 1.0
+            for _ in range(30):
+                mid = (lo_f + hi_f) / 2
+                lo_f, hi_f = (mid, hi_f) if above(mid) else (lo_f, mid)
+            X = X0 + lo_f * (X - X0)
+    return X
 
 
 def random_trajectory(basis, limits: Limits, rng: np.random.Generator, t: np.ndarray, *, decay: float = 1.0) -> np.ndarray:
@@ -810,6 +916,11 @@ def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndar
         g.append(ca.vec(ca.DM(Pc) @ X @ ca.DM(Cp.T)))
         lbg.append(np.repeat(lo - off, Nc))
         ubg.append(np.repeat(hi - off, Nc))
+    if lim.workspace is not None:  # every moving frame origin above the floor at every grid sample
+        Hz = lim.workspace.casadi().map(Nc)((ca.DM(Pc) @ X).T)  # (frames, Nc)
+        g.append(ca.vec(Hz))
+        lbg.append(np.full(Hz.numel(), lim.workspace.z_min))
+        ubg.append(np.full(Hz.numel(), np.inf))
     if chi_b is not None and lim.tau_max is not None:
         Hq = ca.Function("tau", [qs, dqs, ddqs], [Y @ ca.DM(chi_b)])
         T = Hq.map(No)((Po @ X).T, (Do @ X).T, (Ao @ X).T)  # (n, No)
@@ -934,6 +1045,8 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
                                    limits.ddq_max[None] / np.abs(Ac).max(0)[:, None]])  # (m, n)
     scale = np.where(np.isfinite(scale), scale, 0.0)
 
+    heights_jac = None if lim.workspace is None else _floor_linearisation(lim.workspace)
+
     def feasible(Xc: np.ndarray) -> bool:
         q, dq, ddq = basis_eval(basis, Xc, t_out)
         tau = None if cb is None else np.asarray(model.regressor(q, dq, ddq)) @ cb
@@ -982,6 +1095,11 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
             Cp, _, lo, hi = lim.passive_rows()
             cur = lim.passive_positions(Pc @ X)
             cons += [Pc @ Dm @ Cp.T <= np.maximum(hi - cur, 0.0), Pc @ Dm @ Cp.T >= np.minimum(lo - cur, 0.0)]
+        if heights_jac is not None and lim.workspace is not None:  # the frame heights linearised: h + J (Pc D) >= z_min
+            hz, Jz = heights_jac(Pc @ X)
+            E = Pc @ Dm
+            cons += [cp.sum(cp.multiply(Jz[:, f, :], E), axis=1) >= np.minimum(lim.workspace.z_min - hz[:, f], 0.0)
+                     for f in range(hz.shape[1])]
         # the Coulomb columns sign(dq) are piecewise constant: the sign of every moving output sample is kept,
         # so that the linearisation holds (a velocity may halve towards zero, not cross it)
         for j in range(n):
@@ -1041,6 +1159,20 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
             delta = min(2 * delta, delta_max)
     history.append({"iteration": len(history), "cond": math.sqrt(c2), "delta": delta, "final": True})
     return X, history
+
+
+def _floor_linearisation(ws: Workspace):
+    """``q (N, n) -> (h (N, k), J (N, k, n))``: the frame heights of ``ws`` and their Jacobians (CasADi)."""
+    ca = _casadi()
+    qs = ca.SX.sym("q", ws.n)
+    h = ws.casadi()(qs)
+    f = ca.Function("hJ", [qs], [h, ca.jacobian(h, qs)])
+
+    def run(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        H, J = f.map(len(Q))(Q.T)
+        k = len(ws.frames)
+        return np.asarray(H).T, np.asarray(J).reshape(k, len(Q), ws.n).transpose(1, 0, 2)
+    return run
 
 
 def output_times(duration: float, rate: float) -> np.ndarray:
@@ -1345,6 +1477,13 @@ def passive_ranges(model: IdentificationModel, q: np.ndarray) -> dict[int, tuple
     return {j: (float(qt[:, c].min()), float(qt[:, c].max())) for c, j in enumerate(joints) if j not in act}
 
 
+def _floor_text(ws: Workspace, q: np.ndarray) -> str:
+    """One sentence: the floor and the lowest height each moving frame origin reaches (m, base frame)."""
+    low = ws.heights(q).min(0)
+    return (f"floor z >= {ws.z_min:g} m (base frame): lowest frame origins " +
+            ", ".join(f"{j}: {z:.3f}" for j, z in zip(ws.frames, low)) + " m")
+
+
 def _passive_text(model: IdentificationModel, passive: dict[int, tuple[float, float]], limits: Limits) -> str:
     """One sentence: which robot joints the design's columns are, and the passive joints' ranges against
     their ``[limits]`` ranges when given (deg or m)."""
@@ -1376,7 +1515,9 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
 
     MplFigure, FigureCanvasAgg = require_matplotlib()
     lim, n = result.limits, result.limits.n
-    rows = n + len(lim.passive)  # a closed-loop robot's passive joints: one more row each (position only)
+    ws = lim.workspace
+    # a closed-loop robot's passive joints: one more row each (position only); a floor: one row of frame heights
+    rows = n + len(lim.passive) + (ws is not None)
     base, head = 1.5 * rows + 0.9, (0.35 if title else 0.0)  # inches: the grid of axes, the title above it
     fig = MplFigure(figsize=(WIDTH_IN, base + head), dpi=dpi, facecolor="white")
     FigureCanvasAgg(fig)
@@ -1394,6 +1535,16 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
         ax.tick_params(labelsize=7)
         for c in (1, 2):
             axes[n + i, c].set_visible(False)
+    if ws is not None:
+        ax = axes[-1, 0]
+        for f, z in zip(ws.frames, ws.heights(result.q[::k]).T):
+            ax.plot(t, z, lw=0.8, label=f"{f}")
+        ax.axhline(ws.z_min, color="r", ls="--", lw=0.8)
+        ax.set_ylabel("frame origins z [m]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=6, ncol=2, loc="upper left", bbox_to_anchor=(1.02, 1.0), title="frame", title_fontsize=6)
+        for c in (1, 2):
+            axes[-1, c].set_visible(False)
     for j in range(n):
         f, u = (1.0, "m") if lim.is_prismatic(j) else (180.0 / math.pi, "deg")
         jl = _joint_label(j, joints)
@@ -1407,9 +1558,10 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
                 ax.axhline(v, color="r", ls="--", lw=0.8)
             ax.set_ylabel(lab, fontsize=8)
             ax.tick_params(labelsize=7)
+    extra = rows > n
     for c in range(3):
-        axes[n - 1 if c and lim.passive else -1, c].set_xlabel("t [s]", fontsize=8)
-        if c and lim.passive:
+        axes[n - 1 if c and extra else -1, c].set_xlabel("t [s]", fontsize=8)
+        if c and extra:
             axes[n - 1, c].tick_params(labelbottom=True)
     if title:
         fig.suptitle(title, fontsize=9, y=1 - 0.12 / (base + head))
@@ -1440,11 +1592,16 @@ def excitation_report(result: ExcitationResult, model: IdentificationModel, *, n
     passive = passive_ranges(model, result.q)
     if passive:
         blocks.append(Paragraph(_passive_text(model, passive, lim)))
+    if lim.workspace is not None:
+        blocks.append(Paragraph(_floor_text(lim.workspace, result.q) + " (frame origins only: the links' extent is "
+                                "the clearance given in --z-min)"))
     blocks.append(Heading("Joint trajectories against the limits"))
     if plots:
         blocks.append(Figure("trajectory", trajectory_figure_png(result, joints=joints),
                              caption="q, dq, ddq per joint (rows) against the limits (dashed red)"
-                                     + ("; below, the passive joints' positions (closed loop)" if lim.passive else "")))
+                                     + ("; below, the passive joints' positions (closed loop)" if lim.passive else "")
+                                     + ("; last, the height of every moving frame origin above the floor (dashed)"
+                                        if lim.workspace is not None else "")))
     rows = []
     for j in range(n):
         f, u, d = (1.0, "m", 4) if lim.is_prismatic(j) else (180.0 / math.pi, "deg", 1)
@@ -1517,6 +1674,9 @@ def add_excite_parser(sub) -> None:
                         "installed, the 'physical' extra; 0 skips it)")
     e.add_argument("--noise", type=float, default=1.0, help="torque-noise standard deviation for the predicted %%sigma [N m]")
     e.add_argument("--no-torque-limits", action="store_true", help="ignore tau_max even with nominal parameters")
+    e.add_argument("--z-min", type=float, default=None, metavar="Z",
+                   help="floor or table plane: every moving frame origin stays at z >= Z [m] in the base frame 0 "
+                        "(add the links' radius as clearance)")
     e.add_argument("--json", help="write the figures (cond, limits_ok, predicted sigma...) as JSON here")
     e.add_argument("--plot", help="PNG of the joint trajectories against the limits")
     e.add_argument("--report", help="report (.html self-contained, or .md with its images beside it): trajectories "
@@ -1534,6 +1694,8 @@ def cmd_excite(args) -> int:
     robot, model = model_for(args.robot)
     n = model.N_JOINTS
     lim = limits_of(robot, n, model)
+    if args.z_min is not None:
+        lim = with_floor(lim, robot, model, args.z_min)
     if args.duration <= 0 or args.rate <= 0:
         raise ExcitationError("--duration and --rate must be positive")
     refine_note = None
@@ -1582,6 +1744,9 @@ def cmd_excite(args) -> int:
         "sigma_pct": None if pct is None else [None if not np.isfinite(v) else float(v) for v in pct],
         "starts": res.starts, "wall_time": res.wall_time, "design": basis.coefficients(res.X),
         "joints": list(joint_numbers(model)),
+        "workspace": None if lim.workspace is None else {
+            "z_min": lim.workspace.z_min, "frames": list(lim.workspace.frames),
+            "lowest_z": lim.workspace.heights(res.q).min(0).tolist()},
         "passive_ranges": {str(j): list(r) for j, r in passive.items()},
     }
     if args.json:
@@ -1605,6 +1770,8 @@ def cmd_excite(args) -> int:
             print(refine_note)
         if passive:
             print(_passive_text(model, passive, lim))
+        if lim.workspace is not None:
+            print(_floor_text(lim.workspace, res.q))
         if lim.defaulted:
             print(f"note: the robot file has no {', '.join(lim.defaulted)} in [limits]; defaults used")
     return 0 if res.limits_ok else 3

@@ -678,6 +678,98 @@ def test_cli_closed_loop_robot_writes_actuated_columns_and_the_passive_ranges(cl
     assert "actuated joints 1, 2, 4, 5" in r.out and "no passive_q_min/passive_q_max" in r.out, r.out
 
 
+# -- a floor: every moving frame origin above z_min (excite --z-min) ------------------------------------------
+def _origins_z(robot, q_tree):
+    """Heights of every frame origin by the numeric MDH transforms chained frame by frame (independent of the
+    sympy forward kinematics that Workspace builds)."""
+    from symoro_gen.description.mdh import row_transform
+
+    subs, N = robot.geometry_subs(), q_tree.shape[0]
+    col = {r.j: i for i, r in enumerate(robot.joints)}
+    T = {0: np.broadcast_to(np.eye(4), (N, 4, 4))}
+    for row in robot.rows:
+        T[row.j] = T[row.ant] @ row_transform(row, subs, q_tree[:, col[row.j]] if row.j in col else np.zeros(N))
+    return {j: T[j][:, 2, 3] for j in T if j}
+
+
+@pytest.fixture(scope="module")
+def lwr4():
+    return model_for("lwr4")
+
+
+def test_workspace_heights_and_their_casadi_jacobian_against_the_numeric_transforms(lwr4):
+    robot, model = lwr4
+    ws = excite.Workspace(robot, -0.3, model.N_JOINTS)
+    q = np.random.default_rng(4).uniform(-2, 2, (20, 7))
+    ref = _origins_z(robot, q)
+    assert ws.frames == tuple(j for j in ref if np.ptp(ref[j]) > 0)  # the frames whose origin moves
+    np.testing.assert_allclose(ws.heights(q), np.column_stack([ref[j] for j in ws.frames]), atol=1e-12)
+    h, J = excite._floor_linearisation(ws)(q)
+    np.testing.assert_allclose(h, ws.heights(q), atol=1e-12)
+    for j in range(7):
+        dq = np.zeros(7)
+        dq[j] = 1e-6
+        np.testing.assert_allclose(J[:, :, j], (ws.heights(q + dq) - ws.heights(q - dq)) / 2e-6, atol=1e-7)
+
+
+def test_a_design_keeps_every_frame_origin_above_the_floor(lwr4):
+    """A floor at the LWR4's shoulder (z = 0 of its base frame): every output sample and the 10x resampling keep
+    every frame origin above it (the independent transforms), through IPOPT, the refinement and the starts;
+    without it the same design problem takes the elbow and the wrist half a metre lower."""
+    robot, model = lwr4
+    free_lim = limits_of(robot, 7, model)
+    lim = excite.with_floor(free_lim, robot, model, 0.0)
+    basis = FourierBasis(5, 0.1)
+    kw = dict(starts=1, seed=0, max_iter=20, pool=3, refine=2)
+    res = optimise_excitation(model, basis, lim, 10.0, **kw)
+    assert res.limits_ok and max(res.usage["workspace"]) <= 1.0
+    for t in (res.t, dense_times(res.t, 10.0, basis)):
+        q, _, _ = basis_eval(basis, res.X, t)
+        assert min(z.min() for z in _origins_z(robot, q).values()) >= -1e-9
+    free = optimise_excitation(model, basis, free_lim, 10.0, **kw)
+    assert min(z.min() for z in _origins_z(robot, free.q).values()) < -0.3  # the floor was not idle
+
+
+def test_a_floor_above_the_rest_posture_or_a_fixed_frame_is_one_error(lwr4):
+    """Designs are built about the centre of the ranges: joint 2 in [80, 120] deg leans the upper arm 100 deg from
+    upright, its wrist (frame 5, 0.79 m out) 0.79 cos(100 deg) = -0.137 m below the shoulder, the lowest origin;
+    a frame that cannot move is checked alone."""
+    import dataclasses
+
+    robot, model = lwr4
+    lim = limits_of(robot, 7, model)
+    lo, hi = lim.q_min.copy(), lim.q_max.copy()
+    lo[1], hi[1] = math.radians(80), math.radians(120)
+    leaning = dataclasses.replace(lim, q_min=lo, q_max=hi)
+    with pytest.raises(ExcitationError, match=r"--z-min -0.05: at the centre of the joint ranges .* frame 5 is at "
+                                              r"z = -0\.137\d* m, already below the floor"):
+        excite.with_floor(leaning, robot, model, -0.05)
+    with pytest.raises(ExcitationError, match=r"--z-min 0.1: the origin of frame 1 is fixed at z = 0 m"):
+        excite.with_floor(lim, robot, model, 0.1)
+
+
+def test_a_closed_loop_floor_goes_through_the_closure(palletizer):
+    """The palletizer's floor: its passive joints from the linear closure, the same heights as the tree's
+    transforms at the numerically closed state."""
+    robot, model = palletizer
+    lim = excite.with_floor(limits_of(robot, 4, model), robot, model, -0.5)
+    q = np.random.default_rng(6).uniform(-1, 1, (10, 4))
+    z0 = np.zeros_like(q)
+    ref = _origins_z(robot, model.closure(q, z0, z0).q)
+    np.testing.assert_allclose(lim.workspace.heights(q), np.column_stack([ref[j] for j in lim.workspace.frames]),
+                               atol=1e-12)
+
+
+def test_cli_z_min_writes_the_lowest_heights(cli, tmp_path):
+    out, js = tmp_path / "f.csv", tmp_path / "f.json"
+    r = cli("excite", "scara", "-o", out, "--json", js, "--z-min", "-0.5", "--starts", "1", "--pool", "2",
+            "--max-iter", "5", "--refine", "1", "--duration", "4", "--rate", "50")
+    d = json.loads(js.read_text())
+    ws = d["workspace"]
+    assert ws["z_min"] == -0.5 and len(ws["frames"]) == len(ws["lowest_z"]) and min(ws["lowest_z"]) >= -0.5
+    assert "floor z >= -0.5 m (base frame): lowest frame origins" in r.out, r.out
+
+
 def test_cli_jobs_rejects_a_negative_count(cli, tmp_path):
     r = cli("excite", "scara", "-o", tmp_path / "x.csv", "--jobs", "-1", rc=2)
     assert "--jobs -1" in r.err and not (tmp_path / "x.csv").exists()
