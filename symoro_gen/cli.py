@@ -80,6 +80,7 @@ def cmd_generate(args) -> int:
 def cmd_build(args) -> int:
     """Compile the C kernels of a generated package (``symoro-gen build ROBOT``)."""
     m = load_model(args.robot)
+    m = getattr(m, "tree", m)  # a closed-loop or coupled robot: the kernels are its tree's package's
     model = getattr(m, "_MODEL", None)
     if model is None:
         raise ModelError(f"{args.robot}: not a generated package with C kernels")

@@ -578,14 +578,6 @@ def test_starts_in_parallel_processes_give_the_same_design(scara, scara_limits):
 
 
 # -- closed-loop robots: a linear closure (the palletizer's parallelogram) --------------------------------------
-PALLETIZER_PASSIVE = """
-[limits]
-angles = "deg"
-passive_q_min = [-60, -150]
-passive_q_max = [60, 30]
-"""
-
-
 @pytest.fixture(scope="module")
 def palletizer():
     return model_for("palletizer")
@@ -601,34 +593,6 @@ def test_closed_loop_casadi_regressor_equals_the_projected_numeric_model(palleti
     Wc = np.array([np.array(F(q[i], dq[i], ddq[i])) for i in range(len(q))])
     assert Wc.shape == W.shape == (12, 4, len(model.BASE_NAMES))
     np.testing.assert_allclose(Wc, W, atol=1e-10 * np.abs(W).max())
-
-
-def test_closed_loop_design_keeps_the_passive_joints_within_their_limits(palletizer):
-    """[limits] passive_q_min/passive_q_max reach the design through the linear closure: every output sample
-    and a 10x resampling keep the passive joints (solved numerically by the loop closure, not by the rows
-    the optimiser used) in range; without them the same design problem folds the parallelogram far beyond."""
-    robot0, model0 = palletizer
-    text = Path(robot0.file).read_text(encoding="utf-8") + PALLETIZER_PASSIVE
-    robot = parse_robot_text(text, file="palletizer+passive.toml")
-    from symoro_gen.closedloop import ClosedLoopModel
-
-    model = ClosedLoopModel(robot, model0.tree)
-    lim = limits_of(robot, model.N_JOINTS, model)
-    assert [p.joint for p in lim.passive] == [3, 6]
-    np.testing.assert_allclose([p.lo for p in lim.passive], np.radians([-60, -150]))
-    basis = FourierBasis(5, 0.1)
-    kw = dict(starts=1, seed=0, max_iter=20, pool=3, refine=2)
-    res = optimise_excitation(model, basis, lim, 10.0, **kw)
-    assert res.limits_ok and max(res.usage["passive"]) <= 1.0
-    for t in (res.t, dense_times(res.t, 10.0, basis)):
-        q, _, _ = basis_eval(basis, res.X, t)
-        z = np.zeros_like(q)
-        qt = model.closure(q, z, z).q
-        for p in lim.passive:
-            assert np.all(qt[:, p.joint - 1] >= p.lo - 1e-9) and np.all(qt[:, p.joint - 1] <= p.hi + 1e-9)
-    free = optimise_excitation(model, basis, limits_of(robot0, model.N_JOINTS, model0), 10.0, **kw)
-    lo3, hi3 = excite.passive_ranges(model0, free.q)[3]
-    assert hi3 - lo3 > math.radians(150)  # the constraint was not idle
 
 
 @pytest.mark.parametrize("basis", [FourierBasis(4, 0.25), SplineBasis(12, 4.0), PointToPointBasis(5, 0.8, 0.2)],
@@ -653,11 +617,40 @@ def test_random_designs_are_scaled_into_passive_ranges(basis):
         assert np.all(q[:, 1] - q[:, 0] + 0.1 >= 0.2 - 1e-9) and np.all(q[:, 1] - q[:, 0] + 0.1 <= 0.9 + 1e-9)
 
 
+def test_closed_loop_design_keeps_the_passive_joints_within_their_limits(palletizer):
+    """The shipped palletizer's [limits] passive_q_min/passive_q_max (joint 3 in [20, 160] deg, joint 6 in
+    [-160, -20]) reach the design through the linear closure: every output sample and a 10x resampling keep
+    the passive joints (solved numerically by the loop closure, not by the rows the optimiser used) in range;
+    without them, the same actuated limits let the same design problem leave that range."""
+    import dataclasses
+
+    robot, model = palletizer
+    lim = limits_of(robot, model.N_JOINTS, model)
+    assert [p.joint for p in lim.passive] == [3, 6]
+    np.testing.assert_allclose([p.lo for p in lim.passive], np.radians([20, -160]))
+    basis = FourierBasis(5, 0.1)
+    kw = dict(starts=1, seed=0, max_iter=20, pool=3, refine=2)
+    res = optimise_excitation(model, basis, lim, 10.0, **kw)
+    assert res.limits_ok and max(res.usage["passive"]) <= 1.0
+    for t in (res.t, dense_times(res.t, 10.0, basis)):
+        q, _, _ = basis_eval(basis, res.X, t)
+        z = np.zeros_like(q)
+        qt = model.closure(q, z, z).q
+        for p in lim.passive:
+            assert np.all(qt[:, p.joint - 1] >= p.lo - 1e-9) and np.all(qt[:, p.joint - 1] <= p.hi + 1e-9)
+    free = optimise_excitation(model, basis, dataclasses.replace(lim, passive=()), 10.0, **kw)
+    lo3, hi3 = excite.passive_ranges(model, free.q)[3]
+    assert lo3 < math.radians(20) - 0.05 or hi3 > math.radians(160) + 0.05  # the constraint was not idle
+
+
 def test_closed_loop_passive_limits_that_no_actuated_position_meets_are_one_error(palletizer):
     robot0, model0 = palletizer
-    text = Path(robot0.file).read_text(encoding="utf-8") + PALLETIZER_PASSIVE.replace(
-        "angles", "q_min = [-10, -10, -10, -10]\nq_max = [10, 10, 10, 10]\nangles").replace(
-        "[-60, -150]", "[50, -150]")
+    """Actuated joints within +-10 deg leave the elbow angle q5 - q2 within +-20 deg: no position meets 50 .. 160."""
+    text = Path(robot0.file).read_text(encoding="utf-8")
+    for old, new in (("q_min = [-180, -90, -120, -30]", "q_min = [-10, -10, -10, -10]"),
+                     ("q_max = [180, 30, 120, 120]", "q_max = [10, 10, 10, 10]"), ("passive_q_min = [20,", "passive_q_min = [50,")):
+        assert old in text
+        text = text.replace(old, new)
     robot = parse_robot_text(text, file="palletizer+bad.toml")
     from symoro_gen.closedloop import ClosedLoopModel
 
@@ -675,7 +668,7 @@ def test_cli_closed_loop_robot_writes_actuated_columns_and_the_passive_ranges(cl
     assert out.read_text().splitlines()[0] == "t," + ",".join(f"{k}{j}" for k in ("q", "dq", "ddq") for j in range(1, 5))
     d = json.loads(js.read_text())
     assert d["joints"] == [1, 2, 4, 5] and sorted(d["passive_ranges"]) == ["3", "6"]
-    assert "actuated joints 1, 2, 4, 5" in r.out and "no passive_q_min/passive_q_max" in r.out, r.out
+    assert "actuated joints 1, 2, 4, 5" in r.out and "joint 3 " in r.out and "(limits 20.0 .. 160.0)" in r.out, r.out
 
 
 # -- a floor: every moving frame origin above z_min (excite --z-min) ------------------------------------------

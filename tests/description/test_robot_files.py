@@ -338,8 +338,8 @@ def test_good_drive_chain():
 
 # ---------------------------------------------------------------- [limits] of the passive joints
 def palletizer_with(limits: str) -> str:
-    """The shipped palletizer (actuated joints 1, 2, 4, 5; passive joints 3, 6) with a ``[limits]`` table."""
-    return (robots_dir() / "palletizer.toml").read_text() + f"\n[limits]\n{limits}\n"
+    """The shipped palletizer (actuated joints 1, 2, 4, 5; passive joints 3, 6) with this ``[limits]`` table instead of its own."""
+    return (robots_dir() / "palletizer.toml").read_text().split("\n[limits]", 1)[0] + f"\n[limits]\n{limits}\n"
 
 
 @pytest.mark.parametrize("unit, scale", [("rad", 1.0), ("deg", math.pi / 180)])

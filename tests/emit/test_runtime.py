@@ -166,6 +166,14 @@ def test_build_command(pkg, capsys):
     assert "already built" in capsys.readouterr().out
 
 
+@pytest.mark.skipif(not HAVE_CC, reason="no C compiler on this machine")
+def test_build_command_on_a_closed_loop_robot_builds_its_tree_package(capsys):
+    """``make robot ROBOT=palletizer`` ends with ``symoro-gen build palletizer``: load_model returns the
+    closed-loop model, whose tree package carries the kernels (it used to say "not a generated package")."""
+    assert main(["build", "palletizer"]) == 0
+    assert "palletizer: C kernels" in capsys.readouterr().out
+
+
 def test_build_command_reports_a_compile_error(pkg, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("CC", _fake_cc(tmp_path, 'echo "x.c:3: error: boom" >&2; exit 1'))
     assert main(["build", str(pkg)]) == 2
