@@ -583,6 +583,14 @@ def palletizer():
     return model_for("palletizer")
 
 
+def _short_design(model, lim):
+    """A short 10-s Fourier design (one start, 20 IPOPT iterations, 2 SDPs) and its positions on the output
+    samples and on the 10x resampling the limits are checked on."""
+    basis = FourierBasis(5, 0.1)
+    res = optimise_excitation(model, basis, lim, 10.0, starts=1, seed=0, max_iter=20, pool=3, refine=2)
+    return res, [basis_eval(basis, res.X, t)[0] for t in (res.t, dense_times(res.t, 10.0, basis))]
+
+
 def test_closed_loop_casadi_regressor_equals_the_projected_numeric_model(palletizer):
     """``A^T W_tree(A q + b, ...)[:, keep]`` in CasADi against the numeric closure + projection (Newton on the
     loop equations, ``G`` from the constraint Jacobian): the same regressor, actuated joints 1, 2, 4, 5."""
@@ -628,17 +636,14 @@ def test_closed_loop_design_keeps_the_passive_joints_within_their_limits(palleti
     lim = limits_of(robot, model.N_JOINTS, model)
     assert [p.joint for p in lim.passive] == [3, 6]
     np.testing.assert_allclose([p.lo for p in lim.passive], np.radians([20, -160]))
-    basis = FourierBasis(5, 0.1)
-    kw = dict(starts=1, seed=0, max_iter=20, pool=3, refine=2)
-    res = optimise_excitation(model, basis, lim, 10.0, **kw)
+    res, grids = _short_design(model, lim)
     assert res.limits_ok and max(res.usage["passive"]) <= 1.0
-    for t in (res.t, dense_times(res.t, 10.0, basis)):
-        q, _, _ = basis_eval(basis, res.X, t)
+    for q in grids:
         z = np.zeros_like(q)
         qt = model.closure(q, z, z).q
         for p in lim.passive:
             assert np.all(qt[:, p.joint - 1] >= p.lo - 1e-9) and np.all(qt[:, p.joint - 1] <= p.hi + 1e-9)
-    free = optimise_excitation(model, basis, dataclasses.replace(lim, passive=()), 10.0, **kw)
+    free, _ = _short_design(model, dataclasses.replace(lim, passive=()))
     lo3, hi3 = excite.passive_ranges(model, free.q)[3]
     assert lo3 < math.radians(20) - 0.05 or hi3 > math.radians(160) + 0.05  # the constraint was not idle
 
@@ -712,14 +717,11 @@ def test_a_design_keeps_every_frame_origin_above_the_floor(lwr4):
     robot, model = lwr4
     free_lim = limits_of(robot, 7, model)
     lim = excite.with_floor(free_lim, robot, model, 0.0)
-    basis = FourierBasis(5, 0.1)
-    kw = dict(starts=1, seed=0, max_iter=20, pool=3, refine=2)
-    res = optimise_excitation(model, basis, lim, 10.0, **kw)
+    res, grids = _short_design(model, lim)
     assert res.limits_ok and max(res.usage["workspace"]) <= 1.0
-    for t in (res.t, dense_times(res.t, 10.0, basis)):
-        q, _, _ = basis_eval(basis, res.X, t)
+    for q in grids:
         assert min(z.min() for z in _origins_z(robot, q).values()) >= -1e-9
-    free = optimise_excitation(model, basis, free_lim, 10.0, **kw)
+    free, _ = _short_design(model, free_lim)
     assert min(z.min() for z in _origins_z(robot, free.q).values()) < -0.3  # the floor was not idle
 
 
