@@ -666,7 +666,8 @@ def test_closed_loop_passive_limits_that_no_actuated_position_meets_are_one_erro
 
 def test_cli_closed_loop_robot_writes_actuated_columns_and_the_passive_ranges(cli, tmp_path):
     """``excite palletizer``: q1..q4 are its actuated joints 1, 2, 4, 5 (the CSV convention of identify), said on
-    stdout and in the JSON beside the passive joints' ranges."""
+    stdout and in the JSON beside the passive joints' ranges; a recording simulated on the CSV identifies the
+    closed-loop base parameters through ``symoro-gen identify palletizer``."""
     out, js = tmp_path / "p.csv", tmp_path / "p.json"
     r = cli("excite", "palletizer", "-o", out, "--json", js, "--starts", "1", "--pool", "2", "--max-iter", "5",
             "--refine", "1")
@@ -674,6 +675,20 @@ def test_cli_closed_loop_robot_writes_actuated_columns_and_the_passive_ranges(cl
     d = json.loads(js.read_text())
     assert d["joints"] == [1, 2, 4, 5] and sorted(d["passive_ranges"]) == ["3", "6"]
     assert "actuated joints 1, 2, 4, 5" in r.out and "joint 3 " in r.out and "(limits 20.0 .. 160.0)" in r.out, r.out
+    # a recording simulated on it (the closed chain's torques at the actuated joints) identifies the nominal values
+    robot, model = model_for("palletizer")
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    t, q, dq, ddq = data[:, 0], data[:, 1:5], data[:, 5:9], data[:, 9:13]
+    chi = np.asarray(robot.nominal_vector(), float)
+    rec = simulate_recording(model, t, q, dq, ddq, chi, noise_tau=1e-2, rng=np.random.default_rng(5),
+                             keep_derivatives=True)
+    write_recording_csv(tmp_path / "rec.csv", rec)
+    cli("--quiet", "identify", "palletizer", tmp_path / "rec.csv", "--json", tmp_path / "id.json", rc=0)
+    got = json.loads((tmp_path / "id.json").read_text())["parameters"]
+    est = dict(zip(got["names"], got["values"]))
+    truth = dict(zip(model.BASE_NAMES, model.base_parameters(chi)))
+    scale = max(abs(v) for v in truth.values())
+    assert max(abs(est[k] - v) for k, v in truth.items()) < 2e-2 * scale
 
 
 # -- a floor: every moving frame origin above z_min (excite --z-min) ------------------------------------------
