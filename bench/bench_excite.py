@@ -13,7 +13,7 @@ optimised cond lie relative to it.
 
     PYTHONPATH=. python bench/bench_excite.py [--robots lwr4 rx90] [--starts 3] [--max-iter 150] [--powers 8 64]
         [--kind fourier|spline] [--coefficients 60] [--structured N] [--refine N] [--samples N]
-        [--embed M ...] [--embed-refine N] [--repeat K] [--duration S] [--baseline S ...]
+        [--embed M ...] [--embed-refine N] [--repeat K] [--duration S] [--ddq-scale F] [--baseline S ...]
 
 ``--kind spline`` optimises a cubic B-spline (``symoro_gen.excite.SplineBasis``) instead; the
 baseline stays the 50 random Fourier trajectories. ``--embed 117 231`` then represents the spline optimum
@@ -25,11 +25,14 @@ a spline design, which ends elsewhere, is run forward and backward in turn; the 
 longer period is slower). ``--baseline 5 10 20 30 60`` prints only the random baseline (best, median,
 target) at each duration. ``--refine N`` follows each start's IPOPT result with at most N iterations of
 ``symoro_gen.excite.refine_excitation`` (sequential SDP on the true cond) and prints the cond before and
-after it.
+after it. ``--ddq-scale F`` gives the optimised design F times the robot's acceleration limits (the random
+baseline and the target keep the robot's): does continuity in time - the time a joint needs to change its
+velocity - hold the designs back?
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -91,14 +94,15 @@ def random_baseline(model, lim, *, harmonics: int = 5, duration: float = 10.0, r
 def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int, max_iter: int, seed: int,
         pool: int | None, powers=None, kind: str = "fourier", coefficients: int = 60, structured: int = 0,
         refine: int = 0, samples: int | None = None, embed=(), embed_refine: int = 30, repeat: int = 1,
-        jobs: int = 1) -> dict:
+        jobs: int = 1, ddq_scale: float = 1.0) -> dict:
     robot, model = model_for(name)
     lim = limits_of(robot)
+    lim_opt = dataclasses.replace(lim, ddq_max=lim.ddq_max * ddq_scale)  # the design's; the baseline keeps lim
     basis = FourierBasis(harmonics, 1.0 / duration)
     rand, rand_smax = random_baseline(model, lim, harmonics=harmonics, duration=duration, rate=rate, seed=seed)
     t0 = time.perf_counter()
     design = basis if kind == "fourier" else SplineBasis(coefficients, duration)
-    res = optimise_excitation(model, design, lim, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,
+    res = optimise_excitation(model, design, lim_opt, duration, rate=rate, starts=starts, seed=seed + 1, max_iter=max_iter,
                               pool=pool, powers=powers, structured=structured, refine=refine, samples=samples,
                               jobs=jobs)
     q, dq, ddq, cond = res.q, res.dq, res.ddq, res.cond
@@ -115,7 +119,7 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
         X_f = np.linalg.lstsq(fine.matrices(td)[0], design.matrices(td)[0] @ X, rcond=None)[0]  # exact: knot insertion
         c_in = stacked_cond(model, *basis_eval(fine, X_f, t_out))
         te = time.perf_counter()
-        X_r, hist = refine_excitation(model, fine, lim, X_f, t_out, t_out, iterations=embed_refine,
+        X_r, hist = refine_excitation(model, fine, lim_opt, X_f, t_out, t_out, iterations=embed_refine,
                                       check_times=dense_times(t_out, duration, fine))
         c_out = stacked_cond(model, *basis_eval(fine, X_r, t_out))
         embedded.append({"coefficients": M, "cond_in": c_in, "cond": c_out, "sdps": len(hist) - 1,
@@ -128,7 +132,7 @@ def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int,
     # the embedded design is held to the limits as optimise_excitation holds its result: on the output samples
     # and on the 10x denser resampling with the knots
     limits_ok = res.limits_ok and (not embedded or all(
-        check_limits(lim, *basis_eval(design, X, tt))["ok"] for tt in (t_out, dense_times(t_out, duration, design))))
+        check_limits(lim_opt, *basis_eval(design, X, tt))["ok"] for tt in (t_out, dense_times(t_out, duration, design))))
     repeated = None
     if repeat > 1:
         # the design run `repeat` times back to back, at rest at every junction. A design that ends where it
@@ -185,6 +189,9 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1, metavar="K",
                     help="also compare the optimised design run K times back to back (K x duration) with the random "
                          "Fourier trajectories of period K x duration")
+    ap.add_argument("--ddq-scale", type=float, default=1.0, metavar="F",
+                    help="the optimised design's acceleration limits times F (the random baseline keeps the robot's): "
+                         "does continuity in time hold the designs back?")
     ap.add_argument("--baseline", type=float, nargs="+", default=None, metavar="SECONDS",
                     help="only the 50 random Fourier trajectories (period = duration) at each of these durations: "
                          "best, median and the target (best / 5); no optimisation")
@@ -206,7 +213,7 @@ def main(argv=None) -> int:
         r = run(name, harmonics=a.harmonics, duration=a.duration, rate=a.rate, starts=a.starts,
                 max_iter=a.max_iter, seed=a.seed, pool=a.pool, powers=a.powers, kind=a.kind,
                 coefficients=a.coefficients, structured=a.structured, refine=a.refine, samples=a.samples,
-                embed=a.embed, embed_refine=a.embed_refine, repeat=a.repeat, jobs=a.jobs)
+                embed=a.embed, embed_refine=a.embed_refine, repeat=a.repeat, jobs=a.jobs, ddq_scale=a.ddq_scale)
         ok &= r["limits_ok"]
         print(f"{r['robot']:6} {r['n']:>2} {r['nb']:>3} {r['cond']:>10.4g} {r['random_best']:>11.4g} "
               f"{r['random_median']:>9.4g} {r['ratio']:>6.2f} {r['limits_ok']!s:>6} {r['wall']:>8.1f}")
