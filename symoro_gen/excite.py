@@ -178,6 +178,7 @@ class Workspace:
         exprs = [z[j] for j in self.frames]
         self._np = sp.lambdify([qa], exprs, modules="numpy")
         self._sym = (qa, exprs)
+        self._ca: Any = None  # the CasADi function, built on first use (every IPOPT start and SDP refinement uses it)
 
     def raised(self, dz: float) -> Workspace:
         """The same floor ``dz`` higher (the margin of the optimiser's constraints)."""
@@ -192,12 +193,14 @@ class Workspace:
         return np.column_stack([np.broadcast_to(np.asarray(v, float), (q.shape[0],)) for v in out])
 
     def casadi(self):
-        """CasADi function ``q (n) -> z (len(frames))``."""
-        ca = _casadi()
-        qa, exprs = self._sym
-        f = sp.lambdify([qa], exprs, modules=[{"sin": ca.sin, "cos": ca.cos}])
-        qs = ca.SX.sym("q", self.n)
-        return ca.Function("heights", [qs], [ca.vertcat(*f([qs[k] for k in range(self.n)]))])
+        """CasADi function ``q (n) -> z (len(frames))`` (built once)."""
+        if self._ca is None:
+            ca = _casadi()
+            qa, exprs = self._sym
+            f = sp.lambdify([qa], exprs, modules=[{"sin": ca.sin, "cos": ca.cos}])
+            qs = ca.SX.sym("q", self.n)
+            self._ca = ca.Function("heights", [qs], [ca.vertcat(*f([qs[k] for k in range(self.n)]))])
+        return self._ca
 
 
 @dataclass(frozen=True)
@@ -348,7 +351,7 @@ def with_floor(limits: Limits, robot: Any, model: Any, z_min: float) -> Limits:
     closure = None
     lc = model.linear_closure() if hasattr(model, "linear_closure") else None
     if lc is not None:
-        closure = (np.array(lc.A.tolist(), float), np.array([float(x) for x in lc.b]))
+        closure = lc.numeric()
     ws = Workspace(robot, z_min, limits.n, closure)
     out = dataclasses.replace(limits, workspace=ws)
     h = ws.heights(out.centre[None])[0]
@@ -367,9 +370,9 @@ def _passive_ranges_of(robot: Any, lim: Any, model: Any) -> tuple[PassiveRange, 
     lc = model.linear_closure() if joints and hasattr(model, "linear_closure") else None
     if lc is None:
         return ()
-    A = np.array(lc.A.tolist(), float)
+    A, b = lc.numeric()
     row = {j: i for i, j in enumerate(lc.joints)}
-    return tuple(PassiveRange(j, A[row[j]], float(lc.b[row[j]]), float(lo), float(hi), robot.row(j).sigma == 1)
+    return tuple(PassiveRange(j, A[row[j]], float(b[row[j]]), float(lo), float(hi), robot.row(j).sigma == 1)
                  for j, lo, hi in zip(joints, lim.passive_q_min, lim.passive_q_max))
 
 

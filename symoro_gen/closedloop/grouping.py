@@ -37,6 +37,7 @@ numeric ones of :func:`symoro_gen.closedloop.model.closed_loop_base`.
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -81,6 +82,10 @@ class LinearClosure:
     A: sp.Matrix
     b: tuple[sp.Expr, ...]
     error: float
+
+    def numeric(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(A, b)`` as float arrays, shapes (n_tree, n_a) and (n_tree,)."""
+        return np.array(self.A.tolist(), float), np.array([float(x) for x in self.b])
 
     def substitutions(self) -> dict[sp.Symbol, sp.Expr]:
         """``{q_p: sum_i A_pi q_i + b_p}`` for the passive tree joints."""
@@ -166,12 +171,10 @@ def detect_linear_closure(kin: LoopKinematics, *, n_fit: int = 40, n_check: int 
         # an offset that is no simple fraction (of pi) stays a number: the relations then carry its sine
         # and cosine as numbers (printed), still exact to rounding
         b.append(e if e is not None else sp.Float(round(off, 12), 15))
-    An = np.array(A.tolist(), float)
-    bn = np.array([float(x) for x in b])
+    closure = LinearClosure(tuple(tree), tuple(kin.actuated), A, tuple(b), 0.0)
+    An, bn = closure.numeric()
     err = float(np.max(np.abs(qa2 @ An.T + bn - qt2)))
-    if err > tol:
-        return None
-    return LinearClosure(tuple(tree), tuple(kin.actuated), A, tuple(b), err)
+    return None if err > tol else dataclasses.replace(closure, error=err)
 
 
 # ---- energy functions in the actuated variables ------------------------------------------------

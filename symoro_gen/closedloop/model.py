@@ -267,8 +267,7 @@ class ClosedLoopModel:
                              "loop, solved numerically), so the model has no CasADi form")
         import casadi as ca  # heavy; only for optimisation
 
-        A = np.array(lc.A.tolist(), float)
-        b = np.array([float(x) for x in lc.b])
+        A, b = lc.numeric()
         tree: Any = self.tree  # a generated package (IdentificationModel does not declare its CasADi form)
         F = tree.casadi_regressor()
         n = self.N_JOINTS
