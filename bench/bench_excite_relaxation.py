@@ -55,6 +55,7 @@ from bench_excite import TARGET_RATIO, random_baseline, velocity_occupancy
 
 from symoro_gen.excite import (
     FourierBasis,
+    RestMoments,
     basis_bandwidth,
     cond_lower_bound,
     limits_of,
@@ -85,6 +86,9 @@ def main(argv=None) -> int:
     ap.add_argument("--trajectories", type=int, default=None,
                     help="random Fourier trajectories whose samples join the first round (default 10 with --stationary)")
     ap.add_argument("--degree", type=int, choices=(2, 3), default=2, help="degree of the stationarity test functions")
+    ap.add_argument("--rest", action="store_true",
+                    help="add the moments of every trajectory at rest at both ends (RestMoments: the momentum "
+                         "regressor's and the frame velocities' rates); alone: a bound on every excite design")
     ap.add_argument("--bandwidth", type=int, default=None, metavar="K",
                     help="only the distributions of a Fourier design of K harmonics over 10 s at 100 Hz")
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
@@ -106,9 +110,9 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     b = relaxation_bracket(model, lim, atoms=a.atoms, rounds=a.rounds, fresh=a.fresh, starts=a.starts, add=a.add,
                            tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
-                           moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho,
-                           trajectories=(10 if a.stationary or rho is not None else 0) if a.trajectories is None else a.trajectories,
-                           progress=show)
+                           moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho, rest=a.rest, robot=robot,
+                           trajectories=(10 if a.stationary or a.rest or rho is not None else 0) if a.trajectories is None
+                           else a.trajectories, progress=show)
     wall = time.perf_counter() - t0
     rand, _ = random_baseline(model, lim)
     target = min(rand) / TARGET_RATIO
@@ -122,7 +126,9 @@ def main(argv=None) -> int:
         lower, how = lower_v, "dual estimate, verified"
     if bound is not None and bound.bound > lower:
         lower, how = bound.bound, "rigorous cond_lower_bound (above the dual estimate)"
-    kind = (f"stationary (moment tol {a.moment_tol:g}, degree {a.degree})" if a.stationary else "plain") + (
+    kind = (f"stationary (moment tol {a.moment_tol:g}, degree {a.degree})" if a.stationary else
+            "" if a.rest else "plain") + (", " if a.stationary and a.rest else "") + (
+        f"rest (moment tol {a.moment_tol:g})" if a.rest else "") + (
         f", {a.bandwidth}-harmonic bandwidth" if rho is not None else "")
     print(f"{a.robot} [{kind}]: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
           f"the best distribution has {len(b.weights)} states of positive weight)")
@@ -134,6 +140,13 @@ def main(argv=None) -> int:
     print(f"{a.robot}: the best distribution's stationarity moments of degree {a.degree} (0 for every closed trajectory): "
           f"largest |E[m]| / scale = {abs(m[k]):.3f}, {stationarity_moment_names(n, a.degree)[k]}; "
           f"{int(np.sum(np.abs(m) > 0.05))} of {len(m)} above 0.05")
+    rest = b.rest if b.rest is not None else RestMoments(model, lim, robot)
+    m = p @ (rest.numpy(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:]) / rest.scale)
+    order = np.argsort(-np.abs(m))[:3]
+    mean_acc = p @ rest.numpy(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:])
+    print(f"{a.robot}: the best distribution's rest moments (0 for every trajectory at rest at both ends): largest "
+          f"|E[m]| / scale " + ", ".join(f"{abs(m[k]):.3f} ({rest.names[k]} = {mean_acc[k]:.3g})" for k in order) +
+          f"; {int(np.sum(np.abs(m) > 0.05))} of {len(m)} above 0.05")
     Wb = relaxation_rows(model, b.states, b.signs)
     ev = np.linalg.eigvalsh(np.einsum("k,kia,kib->ab", p, Wb, Wb))
     print(f"{a.robot}: the best distribution: sigma_max/sqrt(N) {np.sqrt(ev[-1]):.3g}, sigma_min/sqrt(N) "
@@ -149,7 +162,8 @@ def main(argv=None) -> int:
     print(f"{a.robot}: relaxation's minimum in [{lower:.3f}, {b.upper:.3f}] (gap {b.upper / lower - 1:.1%}; lower end: "
           f"{how}; upper end: an explicit distribution of states)")
     scope = (f"{a.bandwidth}-harmonic Fourier design of 10 s" if rho is not None else
-             "trajectory that ends where it started" if a.stationary else "trajectory")
+             "trajectory that ends where it started" if a.stationary else
+             "trajectory at rest at both ends (every excite design)" if a.rest else "trajectory")
     verdict = (f"the target is BELOW the lower end: no {scope} reaches it" +
                (" (as far as the dual ratio's maximisation is global)" if how.startswith("dual") else "")
                if lower > target else

@@ -142,6 +142,27 @@ class PassiveRange:
     prismatic: bool = False
 
 
+def mdh_frames(robot: Any, n: int, closure: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> tuple[tuple, dict[int, Any], dict]:
+    """``(qa, T, sub)``: the base-frame transform ``T[j]`` of every frame ``j`` of ``robot`` (the MDH transforms
+    ``T(ant, j)`` of Khalil & Kleinfinger 1986 chained, geometry substituted; sympy, in the robot's joint
+    symbols) and ``sub``, the substitution that puts them in ``n`` design joint symbols ``qa``: the robot's
+    joints, or a closed-loop robot's actuated ones through its linear closure ``q_tree = A qa + b``
+    (``closure = (A, b)``)."""
+    qt = list(robot.q)  # the tree's joint symbols, joint order
+    qa = sp.symbols(f"qa0:{n}", real=True)
+    if closure is None:
+        sub = dict(zip(qt, qa))
+    else:
+        A, b = closure
+        sub = {qt[i]: sum(float(A[i, k]) * qa[k] for k in range(n)) + float(b[i]) for i in range(len(qt))}
+    geo = robot.geometry_subs()
+    T: dict[int, Any] = {0: sp.eye(4)}
+    for row in robot.rows:
+        T[row.j] = T[row.ant] * symbolic_transform(row).subs(geo)
+    return qa, {j: M for j, M in T.items() if j != 0}, sub
+
+
 class Workspace:
     """A floor (or table) plane below the robot: the origin of every moving or tool frame stays at
     ``z >= z_min`` in the base frame 0 (``excite --z-min``), the robot's forward kinematics (the MDH
@@ -155,19 +176,8 @@ class Workspace:
 
     def __init__(self, robot: Any, z_min: float, n: int, closure: tuple[np.ndarray, np.ndarray] | None = None):
         self.z_min, self.n = float(z_min), int(n)
-        qt = list(robot.q)  # the tree's joint symbols, joint order
-        qa = sp.symbols(f"qa0:{self.n}", real=True)
-        if closure is None:
-            sub = dict(zip(qt, qa))
-        else:
-            A, b = closure
-            sub = {qt[i]: sum(float(A[i, k]) * qa[k] for k in range(self.n)) + float(b[i]) for i in range(len(qt))}
-        geo = robot.geometry_subs()
-        T: dict[int, Any] = {0: sp.eye(4)}
-        z: dict[int, Any] = {}
-        for row in robot.rows:
-            T[row.j] = T[row.ant] * symbolic_transform(row).subs(geo)
-            z[row.j] = T[row.j][2, 3].subs(sub)
+        qa, frames, sub = mdh_frames(robot, self.n, closure)
+        z = {j: T[2, 3].subs(sub) for j, T in frames.items()}
         fixed = {j: float(e) for j, e in z.items() if not e.free_symbols}
         low = {j: v for j, v in fixed.items() if v < self.z_min}
         if low:
@@ -196,10 +206,8 @@ class Workspace:
         """CasADi function ``q (n) -> z (len(frames))`` (built once)."""
         if self._ca is None:
             ca = _casadi()
-            qa, exprs = self._sym
-            f = sp.lambdify([qa], exprs, modules=[{"sin": ca.sin, "cos": ca.cos}])
             qs = ca.SX.sym("q", self.n)
-            self._ca = ca.Function("heights", [qs], [ca.vertcat(*f([qs[k] for k in range(self.n)]))])
+            self._ca = ca.Function("heights", [qs], [_sympy_casadi(*self._sym, qs)])
         return self._ca
 
 
@@ -1819,7 +1827,10 @@ class RelaxationBracket:
     of zero, as every periodic trajectory's (and every one that starts and ends at rest at the same
     configuration); ``lam`` and ``c0`` are the multipliers of those constraints in the dual that gives
     ``lower`` (see :class:`_DualPricer`), and ``lower`` then bounds the cond of every such trajectory.
-    ``A, B, r, lam, c0`` are those of the round that gave ``lower``.
+    ``A, B, r, lam, c0`` are those of the round that gave ``lower``. ``rest`` (a :class:`RestMoments`) adds
+    the moments of every trajectory that starts and ends at rest to those constraints (``lam`` covers both,
+    the closed ones first when ``closed``); ``lower`` then bounds the cond of every such trajectory
+    (closed or not, as ``closed`` says).
 
     With ``bandwidth`` (``rho``, from :func:`basis_bandwidth`) the distributions are further restricted
     by ``E[ddq ddq^T] <= rho E[dq dq^T]`` (an LMI), which every design of a given basis meets on its
@@ -1842,11 +1853,13 @@ class RelaxationBracket:
     bandwidth: float | None = None
     C: np.ndarray | None = None
     degree: int = 2
+    closed: bool = True
+    rest: RestMoments | None = None
 
     @property
     def stationary(self) -> bool:
-        """Whether the stationarity moments constrained the distributions (their multipliers are set)."""
-        return self.lam is not None
+        """Whether the stationarity moments of closed trajectories constrained the distributions."""
+        return self.lam is not None and self.closed
 
 
 def _coulomb_columns(model: IdentificationModel) -> list[tuple[int, int]]:
@@ -2078,21 +2091,22 @@ class _DualPricer:
 
     def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
                  lam: np.ndarray | None = None, c0: float = 0.0, *, rho: float | None = None,
-                 C: np.ndarray | None = None, degree: int = 2, coulomb=None, jac=None):
+                 C: np.ndarray | None = None, degree: int = 2, closed: bool = True, rest: RestMoments | None = None,
+                 coulomb=None, jac=None):
         self.model, self.A, self.B = model, A, B
         self.lam, self.c0 = lam, float(c0)
         self.rho: float | None = None if rho is None or C is None else float(rho)
         self.C: np.ndarray | None = None if rho is None or C is None else _psd(np.asarray(C, float))
         self.n = limits.n
         self.coul = _coulomb_columns(model) if coulomb is None else coulomb
-        self.degree = degree
-        self.scale = stationarity_scales(limits, degree) if lam is not None else None
-        self.jac = jac if jac is not None else self.casadi_jacobian(model, self.n, lam is not None, degree)
+        self.moments = _MomentSet(limits, degree if closed else None, rest) if lam is not None else None
+        self.scale = None if self.moments is None else self.moments.scale
+        self.jac = jac if jac is not None else self.casadi_jacobian(model, self.n, self.moments)
         self.lo = np.concatenate([limits.q_min, -limits.dq_max, -limits.ddq_max])
         self.hi = np.concatenate([limits.q_max, limits.dq_max, limits.ddq_max])
 
     @staticmethod
-    def casadi_jacobian(model: IdentificationModel, n: int, moments: bool, degree: int = 2):
+    def casadi_jacobian(model: IdentificationModel, n: int, moments: _MomentSet | None):
         try:
             F = _casadi_regressor(model)
         except ExcitationError:  # priced without gradients (random states only)
@@ -2101,8 +2115,8 @@ class _DualPricer:
         z = ca.SX.sym("z", 3 * n)
         Y = F(z[:n], z[n:2 * n], z[2 * n:])
         out = [Y, ca.jacobian(ca.vec(Y), z)]  # vec: column-major
-        if moments:
-            m = stationarity_moments(z[:n], z[n:2 * n], z[2 * n:], lib=ca, degree=degree)
+        if moments is not None:
+            m = moments.casadi(z)
             out += [m, ca.jacobian(m, z)]
         return ca.Function("ratio_rows", [z], out)
 
@@ -2113,9 +2127,8 @@ class _DualPricer:
         num = np.einsum("kia,ab,kib->k", W, self.A, W)
         den = np.einsum("kia,ab,kib->k", W, self.B, W)
         n = self.n
-        if self.lam is not None:
-            m = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:], degree=self.degree) / self.scale
-            num = num - m @ self.lam + self.c0
+        if self.moments is not None:
+            num = num - self.moments.numpy(X) / self.scale @ self.lam + self.c0
         if self.C is not None:
             dq, ddq = X[:, n:2 * n], X[:, 2 * n:]
             num = num + self.rho * np.einsum("ki,ij,kj->k", dq, self.C, dq) - np.einsum("ki,ij,kj->k", ddq, self.C, ddq)
@@ -2151,7 +2164,7 @@ class _DualPricer:
             num, den = float(np.sum(w * (w @ A))), float(np.sum(w * (w @ B)))
             gnum = J.T @ (2 * (w @ A)).ravel(order="F")
             gden = J.T @ (2 * (w @ B)).ravel(order="F")
-            if self.lam is not None:
+            if self.moments is not None:
                 lw = self.lam / self.scale
                 num += -float(np.array(res[2]).ravel() @ lw) + self.c0
                 gnum = gnum - np.array(res[3]).T @ lw
@@ -2167,6 +2180,106 @@ class _DualPricer:
         res = minimize(f, u0, jac=jac is not None, bounds=bnds, method="L-BFGS-B", options={"maxiter": 300})
         x = c + h * res.x
         return x, float(self.ratio(x[None], s0[None])[0])
+
+
+class RestMoments:
+    """The moment conditions of every trajectory that starts and ends at rest (every design of ``excite``:
+    Fourier, spline, point-to-point) or returns to its starting state: ``E[d/dt f(q, dq)] = 0`` for test
+    functions ``f`` that vanish at rest (``f(q, 0) = 0``), since the mean of ``d/dt f`` over the experiment is
+    ``(f(end) - f(start)) / T`` (the occupation-measure argument of [LHPT08], without the return to the
+    starting configuration that :func:`stationarity_moments` need).
+
+    The test functions are the robot's own: the entries of the momentum regressor
+    ``Y_p(q, dq) = W(q, 0, dq) - W(q, 0, 0)`` (``M(q) dq = Y_p chi``, the generalised momentum linear in the
+    base parameters) and, with ``robot``, the base-frame velocities of every frame origin and rotation
+    matrix (``dp_j/dt``, ``dR_j/dt`` of the MDH transforms). Their rates are the accelerations the
+    regressor's inertial and first-moment columns carry: a distribution of states whose wrist accelerates
+    downwards on average (the plain relaxation's optimum does: its first-moment columns then cancel part of
+    gravity) meets every stationarity moment of degree 2 but not these. Rates from the generated CasADi
+    model (``jtimes``); the entries that vanish on ``samples`` random states of the limits (seeded) are
+    dropped, and each kept one is scaled by its largest magnitude on them (``scale``; the tolerance of
+    :func:`relaxation_bracket` is relative to it). ``numpy(q, dq, ddq)`` gives ``(k, m)``, ``casadi`` an
+    ``(m, 1)`` expression; ``names`` name each ``d/dt f``.
+    """
+
+    def __init__(self, model: IdentificationModel, limits: Limits, robot: Any = None, *, samples: int = 20_000,
+                 seed: int = 0):
+        ca = _casadi()
+        n = limits.n
+        q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
+        F = _casadi_regressor(model)
+        zero = ca.SX.zeros(n)
+        f = [ca.vec(F(q, zero, dq) - F(q, zero, zero))]  # column-major: joint fastest
+        names = [f"d/dt(Yp[{j + 1}, {b}])" for b in model.BASE_NAMES for j in range(n)]
+        if robot is not None:
+            kin, kin_names = _frame_kinematics(robot, model, n, q)
+            f.append(ca.jtimes(kin, q, dq))
+            names += [f"d/dt(d/dt {s})" for s in kin_names]
+        fv = ca.vertcat(*f)
+        rate = ca.jtimes(fv, q, dq) + ca.jtimes(fv, dq, ddq)
+        X, _ = _random_states(np.random.default_rng(seed), limits, samples)
+        V = np.array(ca.Function("rate", [q, dq, ddq], [rate]).map(len(X))(X[:, :n].T, X[:, n:2 * n].T,
+                                                                            X[:, 2 * n:].T)).T
+        size = np.abs(V).max(axis=0)
+        keep = np.flatnonzero(size > 1e-9 * max(float(size.max()), 1e-300))
+        self.n = n
+        self.names = [names[k] for k in keep]
+        self.scale = size[keep]
+        self._f = ca.Function("rest_moments", [q, dq, ddq], [rate[[int(k) for k in keep]]])
+
+    def numpy(self, q, dq, ddq) -> np.ndarray:
+        q, dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (q, dq, ddq))
+        return np.array(self._f.map(len(q))(q.T, dq.T, ddq.T)).T.reshape(len(q), len(self.names))
+
+    def casadi(self, q, dq, ddq):
+        return self._f(q, dq, ddq)
+
+
+def _frame_kinematics(robot: Any, model: Any, n: int, q) -> tuple[Any, list[str]]:
+    """The base-frame origin ``p_j`` and rotation ``R_j`` (row by row) of every frame of ``robot``
+    (:func:`mdh_frames`; a closed-loop robot's through its ``model``'s linear closure) as a CasADi expression
+    in the design's joint positions ``q`` (SX, ``n``), with their names."""
+    lc = model.linear_closure() if hasattr(model, "linear_closure") else None
+    qa, frames, sub = mdh_frames(robot, n, None if lc is None else lc.numeric())
+    exprs, names = [], []
+    for j, T in frames.items():
+        exprs += [e.subs(sub) for e in list(T[:3, 3]) + list(T[:3, :3])]
+        names += [f"p{j}.{c}" for c in "xyz"] + [f"R{j}[{a},{b}]" for a in range(1, 4) for b in range(1, 4)]
+    return _sympy_casadi(qa, exprs, q), names
+
+
+def _sympy_casadi(qa: tuple, exprs: list, q) -> Any:
+    """The sympy expressions ``exprs`` in the symbols ``qa`` as one CasADi column in ``q`` (SX)."""
+    ca = _casadi()
+    vals = sp.lambdify([qa], exprs, modules=[{"sin": ca.sin, "cos": ca.cos}])([q[k] for k in range(len(qa))])
+    return ca.vertcat(*[v if isinstance(v, ca.SX) else ca.SX(float(v)) for v in vals])
+
+
+class _MomentSet:
+    """The moment conditions a relaxation holds: the closed-trajectory ones of :func:`stationarity_moments`
+    (``degree``, or None) and the rest-to-rest ones of a :class:`RestMoments` (or None), concatenated."""
+
+    def __init__(self, limits: Limits, degree: int | None, rest: RestMoments | None):
+        self.degree, self.rest, self.n = degree, rest, limits.n
+        parts = ([stationarity_scales(limits, degree)] if degree is not None else []) + (
+            [rest.scale] if rest is not None else [])
+        self.scale = np.concatenate(parts) if parts else np.zeros(0)
+        self.names = (stationarity_moment_names(limits.n, degree) if degree is not None else []) + (
+            list(rest.names) if rest is not None else [])
+
+    def numpy(self, X: np.ndarray) -> np.ndarray:
+        n = self.n
+        q, dq, ddq = X[:, :n], X[:, n:2 * n], X[:, 2 * n:]
+        parts = ([stationarity_moments(q, dq, ddq, degree=self.degree)] if self.degree is not None else []) + (
+            [self.rest.numpy(q, dq, ddq)] if self.rest is not None else [])
+        return np.hstack(parts) if parts else np.zeros((len(X), 0))
+
+    def casadi(self, z):
+        ca, n = _casadi(), self.n
+        q, dq, ddq = z[:n], z[n:2 * n], z[2 * n:]
+        parts = ([stationarity_moments(q, dq, ddq, lib=ca, degree=self.degree)] if self.degree is not None else []) + (
+            [self.rest.casadi(q, dq, ddq)] if self.rest is not None else [])
+        return ca.vertcat(*parts)
 
 
 def _trajectory_states(limits: Limits, rng: np.random.Generator, k: int, samples: int = 50
@@ -2188,7 +2301,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                        tol: float = 0.02, time_budget: float = math.inf, seed: int = 0,
                        extra_states: np.ndarray | None = None, stationary: bool = False,
                        moment_tol: float = 0.01, degree: int = 2, trajectories: int = 0,
-                       bandwidth: float | None = None, progress=None) -> RelaxationBracket:
+                       bandwidth: float | None = None, rest: bool = False, robot: Any = None,
+                       progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -2201,7 +2315,10 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     ending where it started - satisfies them, an arbitrary distribution of states does not), and with ``bandwidth``
     (``rho``) ``sum_i mu_i (rho dq_i dq_i^T - ddq_i ddq_i^T) / tr_i >= 0`` (every design of a basis of
     that :func:`basis_bandwidth` meets it). ``degree=3`` adds the test functions of degree 3 to the moments.
-    Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
+    With ``rest`` the moments of :class:`RestMoments` (the momentum regressor's and, with ``robot``, the frame
+    velocities' rates) join them, held the same way: every trajectory that starts and ends at rest - every
+    design of ``excite``, a spline that ends elsewhere included - satisfies them; ``rest`` alone bounds all of
+    those, ``rest`` with ``stationary`` the closed ones. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
     ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
     (:class:`_DualPricer`): a state with ratio > 1 would lower the objective. Each round keeps the
     states of weight > ``prune`` x the largest (plus the new ones), and adds the ``add`` best of
@@ -2209,7 +2326,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     and ``starts // 4`` random ones. Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds
     or past ``time_budget`` seconds. ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples) and
     the samples of ``trajectories`` random Fourier trajectories join the first round (with
-    ``stationary`` they make it feasible).
+    ``stationary`` or ``rest`` they make it feasible).
     """
     import cvxpy as cp
 
@@ -2223,8 +2340,9 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     if trajectories:
         Xt, St = _trajectory_states(limits, rng, trajectories)
         X, S = np.vstack([X, Xt]), np.vstack([S, St])
-    jac = _DualPricer.casadi_jacobian(model, n, stationary, degree)
-    scale = stationarity_scales(limits, degree)
+    rest_m = RestMoments(model, limits, robot) if rest else None
+    moments = _MomentSet(limits, degree if stationary else None, rest_m) if stationary or rest else None
+    jac = _DualPricer.casadi_jacobian(model, n, moments)
 
     t0 = time.perf_counter()
     hist: list[RelaxationRound] = []
@@ -2244,8 +2362,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         Mx = (Mx + Mx.T) / 2
         c1, c2 = Mx >> np.eye(nb), kap * np.eye(nb) - Mx >> 0
         cons = [c1, c2]
-        if stationary:
-            H = stationarity_moments(X[:, :n], X[:, n:2 * n], X[:, 2 * n:], degree=degree) / scale / tr[:, None]
+        if moments is not None:
+            H = moments.numpy(X) / moments.scale / tr[:, None]
             mass = (1.0 / tr) @ mu
             cp_pos, cp_neg = H.T @ mu - moment_tol * mass <= 0, -H.T @ mu - moment_tol * mass <= 0
             cons += [cp_pos, cp_neg]
@@ -2264,19 +2382,20 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         if mu.value is None:
             raise ExcitationError(f"{model.ROBOT}: the relaxation SDP failed on round {rd} ({len(X)} states): "
                                   f"{prob.status}" + (" (no distribution of these states meets the stationarity "
-                                                      "moments: add trajectories=)" if stationary else ""))
+                                                      "moments: add trajectories=)" if moments is not None else ""))
         t_sdp = time.perf_counter() - t_sdp
         w = np.clip(np.asarray(mu.value), 0, None)
         ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", w, Gn))
         primal = math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
         A, B = _psd(np.asarray(c1.dual_value)), _psd(np.asarray(c2.dual_value))
         lam, c0 = None, 0.0
-        if stationary:
+        if moments is not None:
             nu_p = np.clip(np.asarray(cp_pos.dual_value, float), 0, None)
             nu_n = np.clip(np.asarray(cp_neg.dual_value, float), 0, None)
             lam, c0 = nu_p - nu_n, moment_tol * float(np.sum(nu_p + nu_n))
         C = _psd(np.asarray(c3.dual_value)) if bandwidth is not None else None
-        pricer = _DualPricer(model, limits, A, B, lam, c0, rho=bandwidth, C=C, degree=degree, coulomb=coul, jac=jac)
+        pricer = _DualPricer(model, limits, A, B, lam, c0, rho=bandwidth, C=C, degree=degree, closed=stationary,
+                             rest=rest_m, coulomb=coul, jac=jac)
         # pricing: the dual ratio over the current states, fresh random states and local maxima
         Xf, Sf = _random_states(rng, limits, fresh)
         rf = pricer.ratio(Xf, Sf)
@@ -2305,8 +2424,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         newS = [S[keep], Sf[order[:add]]] + ([np.array([s for _, s in good])] if good else [])
         X, S = np.vstack(newX), np.vstack(newS)
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
-                             dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if stationary else 0.0,
-                             dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree)
+                             dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if moments is not None else 0.0,
+                             dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree, stationary, rest_m)
 
 
 def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: RelaxationBracket, *,
@@ -2316,7 +2435,7 @@ def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: Relax
     ``(r, bound)``: the largest ratio found (at least ``bracket.r``) and ``sqrt(tr A / (r tr B))``.
     A ``bound`` well below ``bracket.lower`` says the bracket's search for ``r`` was not global."""
     pricer = _DualPricer(model, limits, bracket.A, bracket.B, bracket.lam, bracket.c0, rho=bracket.bandwidth,
-                         C=bracket.C, degree=bracket.degree)
+                         C=bracket.C, degree=bracket.degree, closed=bracket.closed, rest=bracket.rest)
     rng = np.random.default_rng(seed)
     best_r, pool_X, pool_S, pool_r = bracket.r, [], [], []
     for k0 in range(0, states, batch):

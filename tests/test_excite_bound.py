@@ -299,3 +299,93 @@ def test_bandwidth_relaxation_meets_its_lmi_and_bounds_the_designs_of_its_basis(
         K = rho * dq_.T @ dq_ / len(q) - ddq_.T @ ddq_ / len(q)
         assert np.sum(pricer.C * K) > 0 and gain == pytest.approx(np.sum(pricer.C * K), rel=1e-9)
         assert num.mean() <= b.r * den.mean() * (1 + 1e-9)
+
+
+# --- the rest-to-rest moments: the momentum regressor and the frame kinematics ------------------------
+
+def _rest_designs(lim, k, seed, t):
+    """Random rest-to-rest spline designs (they end elsewhere than they start)."""
+    from symoro_gen.excite import SplineBasis
+
+    basis = SplineBasis(30, 10.0)
+    rng = np.random.default_rng(seed)
+    return [basis_eval(basis, random_trajectory(basis, lim, rng, t), t) for _ in range(k)]
+
+
+@pytest.mark.parametrize("name", ["scara", "palletizer"])
+def test_rest_moments_vanish_on_rest_to_rest_designs_that_end_elsewhere(name):
+    """Every RestMoments condition has mean 0 over a spline design at rest at both ends that ends elsewhere
+    (where the closed-trajectory stationarity moments do not vanish), not over random states; the CasADi
+    form is the NumPy form; and two rates against finite differences of their test functions along a
+    design: the momentum regressor (Y_p = W(q, 0, dq) - W(q, 0, 0), from the NumPy regressor) and the
+    height of the last frame origin (from the Workspace's forward kinematics). The palletizer's design is
+    in its actuated joints (the closure carries the kinematics)."""
+    import casadi as ca
+
+    from symoro_gen.excite import RestMoments, Workspace, _random_states, stationarity_moments, stationarity_scales
+
+    robot, model = model_for(name)
+    lim = limits_of(robot, model=model)
+    n = lim.n
+    R = RestMoments(model, lim, robot)
+    assert len(R.names) == len(set(R.names)) == len(R.scale) and np.all(R.scale > 0)
+    assert any(s.startswith("d/dt(Yp[") for s in R.names) and any(s.startswith("d/dt(d/dt p") for s in R.names)
+    t = np.linspace(0.0, 10.0, 4001)
+    w = np.full(len(t), 1.0)
+    w[[0, -1]] = 0.5  # the trapezoidal mean: exact up to the quadrature error
+    w /= w.sum()
+    for q, dq, ddq in _rest_designs(lim, 3, 31, t):
+        assert np.abs(q[-1] - q[0]).max() > 0.1
+        assert np.abs(w @ R.numpy(q, dq, ddq) / R.scale).max() < 1e-5
+        if name == "scara":
+            assert np.abs(w @ stationarity_moments(q, dq, ddq) / stationarity_scales(lim)).max() > 0.01
+    X, _ = _random_states(np.random.default_rng(0), lim, 2000)
+    assert np.abs(R.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]).mean(0) / R.scale).max() > 0.02
+    z = ca.SX.sym("z", 3 * n)
+    f = ca.Function("m", [z], [R.casadi(z[:n], z[n:2 * n], z[2 * n:])])
+    for x in X[:5]:
+        np.testing.assert_allclose(np.array(f(x)).ravel(), R.numpy(x[:n], x[n:2 * n], x[2 * n:])[0],
+                                   rtol=1e-12, atol=1e-12)
+    q, dq, ddq = _rest_designs(lim, 1, 32, t)[0]
+    m = R.numpy(q, dq, ddq)
+    nb = len(model.BASE_NAMES)
+    zero = np.zeros_like(q)
+    Yp = (np.asarray(model.regressor(q, zero, dq)) - np.asarray(model.regressor(q, zero, zero))).reshape(len(t), n, nb)
+    b, j = next((b, j) for b in range(nb) for j in range(n)
+                if f"d/dt(Yp[{j + 1}, {model.BASE_NAMES[b]}])" in R.names and np.ptp(Yp[:, j, b]) > 1e-3)
+    k = R.names.index(f"d/dt(Yp[{j + 1}, {model.BASE_NAMES[b]}])")
+    fd = np.gradient(Yp[:, j, b], t)
+    assert np.abs(fd - m[:, k])[5:-5].max() < 1e-2 * np.abs(m[:, k]).max()  # a spline: jerk jumps at its knots
+    lc = model.linear_closure() if hasattr(model, "linear_closure") else None
+    ws = Workspace(robot, -1e9, n, None if lc is None else lc.numeric())
+    last = ws.frames[-1]
+    k = R.names.index(f"d/dt(d/dt p{last}.z)")
+    fd = np.gradient(np.gradient(ws.heights(q)[:, -1], t), t)
+    assert np.abs(fd - m[:, k])[10:-10].max() < 1e-2 * np.abs(m[:, k]).max()
+
+
+def test_rest_relaxation_bounds_designs_that_end_elsewhere_and_excludes_the_plain_optimum(scara):
+    """relaxation_bracket(rest=True): the upper-end distribution meets the rest moments; weak duality with
+    their multipliers holds on unseen rest-to-rest spline designs (not closed: the stationary bound does not
+    apply to them), whose cond stays above the lower end; that lower end is above the plain relaxation's
+    optimum (on the SCARA, it accelerates joint 3 one way on average, which no trajectory at rest at both
+    ends does)."""
+    from symoro_gen.excite import _DualPricer
+
+    robot, model = model_for("scara")
+    lim, plain = scara[1], scara[2]
+    n = model.N_JOINTS
+    b = relaxation_bracket(model, lim, atoms=100, rounds=4, fresh=2000, starts=6, add=20, seed=3, trajectories=5,
+                           rest=True, robot=robot)
+    assert b.rest is not None and not b.closed and not b.stationary and b.lam is not None
+    assert len(b.lam) == len(b.rest.names)
+    p = b.weights / b.weights.sum()
+    m = p @ (b.rest.numpy(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:]) / b.rest.scale)
+    assert np.abs(m).max() <= b.moment_tol * 1.01
+    assert plain.upper * 1.1 < b.lower <= b.upper
+    pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0, closed=False, rest=b.rest)
+    t = output_times(10.0, 100.0)
+    for q, dq, ddq in _rest_designs(lim, 8, 33, t):
+        assert stacked_cond(model, q, dq, ddq) >= b.lower
+        num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
+        assert np.all(num <= b.r * den * (1 + 1e-9))
