@@ -31,7 +31,14 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
 
     PYTHONPATH=. python bench/bench_excite_relaxation.py [--robot lwr4|rx90] [--atoms 400] [--rounds 60]
         [--budget SECONDS] [--tol 0.02] [--fresh 30000] [--starts 40] [--add 60] [--seed 0]
-        [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--bandwidth K] [--verify 300000]
+        [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--rest] [--bandwidth K] [--verify 300000]
+
+``--rest`` adds the moments of every trajectory that starts and ends at rest (every design of ``excite``,
+closed or not: ``symoro_gen.excite.RestMoments``, the rates of the momentum regressor and of every frame's
+velocity, whose mean is 0 over such a trajectory), held to ``--moment-tol`` of their size; alone it bounds
+every ``excite`` design, with ``--stationary`` the closed ones. The bench prints, for the best distribution
+of every run, its largest rest moments and the first-moment columns in its motion and at rest (a relaxation
+without ``--rest`` lets the arm fall on average, cancelling part of gravity in those columns).
 
 ``--degree 3`` adds the test functions of degree 3 (``symoro_gen.excite._degree3_tests``: 1456 more
 conditions on the LWR4, 938 on the RX-90). ``--bandwidth K`` restricts the distributions to those of the
@@ -152,6 +159,13 @@ def main(argv=None) -> int:
     print(f"{a.robot}: the best distribution: sigma_max/sqrt(N) {np.sqrt(ev[-1]):.3g}, sigma_min/sqrt(N) "
           f"{np.sqrt(ev[0]):.3g}; per joint, weight at the velocity limit / creeping (|dq| >= 0.95 / <= 0.1 dq_max): "
           f"{velocity_occupancy(b.states[:, n:2 * n], lim.dq_max, p)}")
+    fm = [i for i, c in enumerate(model.BASE_NAMES) if c[:2] in ("MX", "MY", "MZ")]
+    if fm:  # the first moments: gravity alone at rest, gravity and the frames' accelerations in motion
+        at_rest = np.hstack([b.states[:, :n], np.zeros((len(p), 2 * n))])
+        Wr = relaxation_rows(model, at_rest, np.zeros((len(p), n)))
+        print(f"{a.robot}: the best distribution's first-moment columns ({len(fm)}): sum of E[|column|^2] "
+              f"{p @ (Wb[:, :, fm] ** 2).sum((1, 2)):.4g} in its motion, {p @ (Wr[:, :, fm] ** 2).sum((1, 2)):.4g} at rest "
+              f"in its configurations (gravity alone)")
     if rho is not None:
         dq, ddq = b.states[:, n:2 * n], b.states[:, 2 * n:]
         slack = np.linalg.eigvalsh(rho * (dq.T * p) @ dq - (ddq.T * p) @ ddq)[0]

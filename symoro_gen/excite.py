@@ -42,8 +42,9 @@ moments of a link turning about a fixed horizontal axis: ``g^2``) floors ``sigma
 :func:`relaxation_bracket` brackets the smallest cond over DISTRIBUTIONS of states within the limits (an
 SDP, [BV2004] sect. 7.5, by column generation; a dual lower estimate by weak duality), optionally restricted
 to the distributions that a closed trajectory (periodic, or ending where it started) can have
-(``stationary=True``: the occupation-measure moments of :func:`stationarity_moments`, [LHPT08]); :func:`relaxation_verify` re-prices
-its duals on a larger search. The value reported, ``cond``, is always the true, unscaled 2-norm
+(``stationary=True``: the occupation-measure moments of :func:`stationarity_moments`, [LHPT08]) and to those
+of every trajectory at rest at both ends (``rest=True``: :class:`RestMoments`, the rates of the momentum
+regressor and of the frame velocities); :func:`relaxation_verify` re-prices its duals on a larger search. The value reported, ``cond``, is always the true, unscaled 2-norm
 condition number of the base regressor stacked over the output samples, as the field reports it.
 """
 from __future__ import annotations
@@ -2193,9 +2194,9 @@ class RestMoments:
     ``Y_p(q, dq) = W(q, 0, dq) - W(q, 0, 0)`` (``M(q) dq = Y_p chi``, the generalised momentum linear in the
     base parameters) and, with ``robot``, the base-frame velocities of every frame origin and rotation
     matrix (``dp_j/dt``, ``dR_j/dt`` of the MDH transforms). Their rates are the accelerations the
-    regressor's inertial and first-moment columns carry: a distribution of states whose wrist accelerates
-    downwards on average (the plain relaxation's optimum does: its first-moment columns then cancel part of
-    gravity) meets every stationarity moment of degree 2 but not these. Rates from the generated CasADi
+    regressor's inertial and first-moment columns carry: a distribution of states whose arm accelerates
+    downwards on average (the LWR4's plain relaxation optimum does: its first-moment columns then cancel
+    part of gravity) can meet the stationarity moments of degree 2, not these. Rates from the generated CasADi
     model (``jtimes``); the entries that vanish on ``samples`` random states of the limits (seeded) are
     dropped, and each kept one is scaled by its largest magnitude on them (``scale``; the tolerance of
     :func:`relaxation_bracket` is relative to it). ``numpy(q, dq, ddq)`` gives ``(k, m)``, ``casadi`` an
