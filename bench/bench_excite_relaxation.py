@@ -148,9 +148,9 @@ def main(argv=None) -> int:
           f"largest |E[m]| / scale = {abs(m[k]):.3f}, {stationarity_moment_names(n, a.degree)[k]}; "
           f"{int(np.sum(np.abs(m) > 0.05))} of {len(m)} above 0.05")
     rest = b.rest if b.rest is not None else RestMoments(model, lim, robot)
-    m = p @ (rest.numpy(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:]) / rest.scale)
-    order = np.argsort(-np.abs(m))[:3]
     mean_acc = p @ rest.numpy(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:])
+    m = mean_acc / rest.scale
+    order = np.argsort(-np.abs(m))[:3]
     print(f"{a.robot}: the best distribution's rest moments (0 for every trajectory at rest at both ends): largest "
           f"|E[m]| / scale " + ", ".join(f"{abs(m[k]):.3f} ({rest.names[k]} = {mean_acc[k]:.3g})" for k in order) +
           f"; {int(np.sum(np.abs(m) > 0.05))} of {len(m)} above 0.05")

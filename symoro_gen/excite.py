@@ -2101,7 +2101,6 @@ class _DualPricer:
         self.n = limits.n
         self.coul = _coulomb_columns(model) if coulomb is None else coulomb
         self.moments = _MomentSet(limits, degree if closed else None, rest) if lam is not None else None
-        self.scale = None if self.moments is None else self.moments.scale
         self.jac = jac if jac is not None else self.casadi_jacobian(model, self.n, self.moments)
         self.lo = np.concatenate([limits.q_min, -limits.dq_max, -limits.ddq_max])
         self.hi = np.concatenate([limits.q_max, limits.dq_max, limits.ddq_max])
@@ -2129,7 +2128,7 @@ class _DualPricer:
         den = np.einsum("kia,ab,kib->k", W, self.B, W)
         n = self.n
         if self.moments is not None:
-            num = num - self.moments.numpy(X) / self.scale @ self.lam + self.c0
+            num = num - self.moments.numpy(X) / self.moments.scale @ self.lam + self.c0
         if self.C is not None:
             dq, ddq = X[:, n:2 * n], X[:, 2 * n:]
             num = num + self.rho * np.einsum("ki,ij,kj->k", dq, self.C, dq) - np.einsum("ki,ij,kj->k", ddq, self.C, ddq)
@@ -2166,7 +2165,7 @@ class _DualPricer:
             gnum = J.T @ (2 * (w @ A)).ravel(order="F")
             gden = J.T @ (2 * (w @ B)).ravel(order="F")
             if self.moments is not None:
-                lw = self.lam / self.scale
+                lw = self.lam / self.moments.scale
                 num += -float(np.array(res[2]).ravel() @ lw) + self.c0
                 gnum = gnum - np.array(res[3]).T @ lw
             if self.C is not None:
@@ -2268,19 +2267,22 @@ class _MomentSet:
         self.names = (stationarity_moment_names(limits.n, degree) if degree is not None else []) + (
             list(rest.names) if rest is not None else [])
 
-    def numpy(self, X: np.ndarray) -> np.ndarray:
+    def _parts(self, z, lib: Any) -> list:
         n = self.n
-        q, dq, ddq = X[:, :n], X[:, n:2 * n], X[:, 2 * n:]
-        parts = ([stationarity_moments(q, dq, ddq, degree=self.degree)] if self.degree is not None else []) + (
-            [self.rest.numpy(q, dq, ddq)] if self.rest is not None else [])
+        q, dq, ddq = (z[:, :n], z[:, n:2 * n], z[:, 2 * n:]) if lib is np else (z[:n], z[n:2 * n], z[2 * n:])
+        out = [stationarity_moments(q, dq, ddq, lib=lib, degree=self.degree)] if self.degree is not None else []
+        if self.rest is not None:
+            out.append(self.rest.numpy(q, dq, ddq) if lib is np else self.rest.casadi(q, dq, ddq))
+        return out
+
+    def numpy(self, X: np.ndarray) -> np.ndarray:
+        """``(k, m)`` for the states ``X`` (``(k, 3n)``)."""
+        parts = self._parts(X, np)
         return np.hstack(parts) if parts else np.zeros((len(X), 0))
 
     def casadi(self, z):
-        ca, n = _casadi(), self.n
-        q, dq, ddq = z[:n], z[n:2 * n], z[2 * n:]
-        parts = ([stationarity_moments(q, dq, ddq, lib=ca, degree=self.degree)] if self.degree is not None else []) + (
-            [self.rest.casadi(q, dq, ddq)] if self.rest is not None else [])
-        return ca.vertcat(*parts)
+        """``(m, 1)`` for the CasADi state vector ``z`` (``3n``)."""
+        return _casadi().vertcat(*self._parts(z, _casadi()))
 
 
 def _trajectory_states(limits: Limits, rng: np.random.Generator, k: int, samples: int = 50
