@@ -96,9 +96,17 @@ def main(argv=None) -> int:
     ap.add_argument("--rest", action="store_true",
                     help="add the moments of every trajectory at rest at both ends (RestMoments: the momentum "
                          "regressor's and the frame velocities' rates); alone: a bound on every excite design")
+    ap.add_argument("--kinetic", choices=("energy", "joint"), default=None,
+                    help="with --rest, also the rates of the kinetic-energy regressor's entries (energy) or of "
+                         "dq_j times the momentum regressor's row j (joint): test functions quadratic in dq")
+    ap.add_argument("--braking", action="store_true",
+                    help="only states from which every joint can still stop before the end of its range "
+                         "(braking_speed: dq^2 <= 2 ddq_max x the room left), as every design's samples")
     ap.add_argument("--bandwidth", type=int, default=None, metavar="K",
                     help="only the distributions of a Fourier design of K harmonics over 10 s at 100 Hz")
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
+    ap.add_argument("--save", default=None, metavar="NPZ",
+                    help="write the best distribution (states, signs, weights) and the duals of the lower end here")
     a = ap.parse_args(argv)
     robot, model = model_for(a.robot)
     lim = limits_of(robot)
@@ -117,7 +125,8 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     b = relaxation_bracket(model, lim, atoms=a.atoms, rounds=a.rounds, fresh=a.fresh, starts=a.starts, add=a.add,
                            tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
-                           moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho, rest=a.rest, robot=robot,
+                           moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho, rest=a.rest, robot=robot, kinetic=a.kinetic,
+                           braking=a.braking,
                            trajectories=(10 if a.stationary or a.rest or rho is not None else 0) if a.trajectories is None
                            else a.trajectories, progress=show)
     wall = time.perf_counter() - t0
@@ -135,12 +144,16 @@ def main(argv=None) -> int:
         lower, how = bound.bound, "rigorous cond_lower_bound (above the dual estimate)"
     kind = (f"stationary (moment tol {a.moment_tol:g}, degree {a.degree})" if a.stationary else
             "" if a.rest else "plain") + (", " if a.stationary and a.rest else "") + (
-        f"rest (moment tol {a.moment_tol:g})" if a.rest else "") + (
-        f", {a.bandwidth}-harmonic bandwidth" if rho is not None else "")
+        f"rest (moment tol {a.moment_tol:g}{', kinetic ' + a.kinetic if a.kinetic else ''})" if a.rest else "") + (
+        f", {a.bandwidth}-harmonic bandwidth" if rho is not None else "") + (", braking" if a.braking else "")
     print(f"{a.robot} [{kind}]: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
           f"the best distribution has {len(b.weights)} states of positive weight)")
     n = model.N_JOINTS
     p = b.weights / b.weights.sum()
+    if a.save:
+        np.savez(a.save, states=b.states, signs=b.signs, weights=p, lower=lower, upper=b.upper, A=b.A, B=b.B,
+                 r=b.r, lam=np.zeros(0) if b.lam is None else b.lam, c0=b.c0)
+        print(f"{a.robot}: best distribution and duals written to {a.save}")
     m = p @ (stationarity_moments(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:], degree=a.degree)
              / stationarity_scales(lim, a.degree))
     k = int(np.argmax(np.abs(m)))

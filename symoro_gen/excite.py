@@ -1856,6 +1856,7 @@ class RelaxationBracket:
     degree: int = 2
     closed: bool = True
     rest: RestMoments | None = None
+    braking: bool = False
 
     @property
     def stationary(self) -> bool:
@@ -1944,10 +1945,30 @@ def basis_bandwidth(basis, t: np.ndarray) -> float:
     return float(np.linalg.eigvalsh(Vk.T @ (A.T @ A) @ Vk)[-1])
 
 
-def _random_states(rng: np.random.Generator, limits: Limits, k: int) -> tuple[np.ndarray, np.ndarray]:
+#: position slack of :func:`braking_speed`, a fraction of each joint's range
+BRAKING_SLACK = 1e-3
+
+
+def braking_speed(limits: Limits, q: np.ndarray, sign: np.ndarray, slack: float = BRAKING_SLACK) -> np.ndarray:
+    """The largest speed a joint can have at ``q`` moving in direction ``sign`` (+1 towards ``q_max``, -1
+    towards ``q_min``) in a trajectory that stays within its range and acceleration limit and stops before
+    it ends (at rest at the end, or turning back): it must be able to brake before the end of its range,
+    ``dq^2 <= 2 ddq_max (q_max + d - q)`` (resp. ``(q - q_min + d)``); capped by ``dq_max``. ``d = slack x
+    (q_max - q_min)`` covers a sampled design: its limits hold on a grid, between whose points the motion may
+    overshoot a range end by a little (a sample at the end itself with a small speed). Every sample of every
+    ``excite`` design (at rest at both ends, or periodic) satisfies it; a state of the box near a range end
+    at full speed does not (the LWR4's joints need 22 deg to stop from their velocity limit, the RX-90's
+    wrist up to 145 deg)."""
+    d = slack * (limits.q_max - limits.q_min)
+    room = np.clip(np.where(np.asarray(sign) > 0, limits.q_max - q, q - limits.q_min) + d, 0.0, None)
+    return np.minimum(limits.dq_max, np.sqrt(2.0 * limits.ddq_max * room))
+
+
+def _random_states(rng: np.random.Generator, limits: Limits, k: int, braking: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """States spread over the box with its faces and vertices over-represented: each velocity uniform,
     exactly +-dq_max, exactly 0 (sign -1, 0 or +1) or slow (< 0.1 dq_max), each acceleration uniform or
-    exactly +-ddq_max."""
+    exactly +-ddq_max. With ``braking`` each speed is then capped by :func:`braking_speed` (the same draws)."""
     n = limits.n
     q = rng.uniform(limits.q_min, limits.q_max, (k, n))
     mode, sg = rng.integers(0, 4, (k, n)), rng.choice([-1.0, 1.0], (k, n))
@@ -1955,7 +1976,10 @@ def _random_states(rng: np.random.Generator, limits: Limits, k: int) -> tuple[np
                  np.where(mode == 1, sg, np.where(mode == 2, 0.0, sg * rng.uniform(0, 0.1, (k, n)))))
     s = np.where(mode == 2, rng.integers(-1, 2, (k, n)).astype(float), np.sign(v))
     a = np.where(rng.random((k, n)) < 0.5, rng.uniform(-1, 1, (k, n)), rng.choice([-1.0, 1.0], (k, n)))
-    return np.hstack([q, v * limits.dq_max, a * limits.ddq_max]), s
+    dq = v * limits.dq_max
+    if braking:
+        dq = np.sign(dq) * np.minimum(np.abs(dq), braking_speed(limits, q, np.sign(dq)))
+    return np.hstack([q, dq, a * limits.ddq_max]), s
 
 
 #: one term of the stationarity moments: (name, ((sign, ((factor, joint), ...)), ...))
@@ -2093,8 +2117,9 @@ class _DualPricer:
     def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
                  lam: np.ndarray | None = None, c0: float = 0.0, *, rho: float | None = None,
                  C: np.ndarray | None = None, degree: int = 2, closed: bool = True, rest: RestMoments | None = None,
-                 coulomb=None, jac=None):
+                 coulomb=None, jac=None, braking: bool = False):
         self.model, self.A, self.B = model, A, B
+        self.limits, self.braking = limits, braking
         self.lam, self.c0 = lam, float(c0)
         self.rho: float | None = None if rho is None or C is None else float(rho)
         self.C: np.ndarray | None = None if rho is None or C is None else _psd(np.asarray(C, float))
@@ -2139,9 +2164,24 @@ class _DualPricer:
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.where(num > 0, np.inf, 0.0))
 
+    def _braked(self, zz: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """With ``braking``: the box point ``zz`` with its speeds rescaled from ``[0, dq_max]`` to ``[0,
+        braking_speed(q)]``, the factor ``d|dq|/d|dq_box|`` and ``d dq/d q`` of that map (per joint)."""
+        n, lim = self.n, self.limits
+        q, frac = zz[:n], np.abs(zz[n:2 * n]) / lim.dq_max
+        d = BRAKING_SLACK * (lim.q_max - lim.q_min)
+        room = np.clip(np.where(s0 > 0, lim.q_max - q, q - lim.q_min) + d, 0.0, None)
+        sq = np.sqrt(2.0 * lim.ddq_max * room)
+        cap = np.minimum(lim.dq_max, sq)
+        dcap = np.where((sq < lim.dq_max) & (sq > 0), -s0 * lim.ddq_max / np.maximum(sq, 1e-12), 0.0)
+        out = zz.copy()
+        out[n:2 * n] = s0 * cap * frac
+        return out, cap / lim.dq_max, s0 * frac * dcap
+
     def local_max(self, x0: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, float]:
         """Maximise the ratio from ``x0`` with the velocity signs ``s0`` (``dq_j`` in ``[0, dq_max]`` for
-        +1, ``[-dq_max, 0]`` for -1, ``0`` for 0)."""
+        +1, ``[-dq_max, 0]`` for -1, ``0`` for 0; with ``braking``, ``dq_max`` replaced by
+        :func:`braking_speed` at ``q``, through a change of variables that keeps the box)."""
         from scipy.optimize import minimize
 
         n, lo, hi = self.n, self.lo, self.hi
@@ -2151,9 +2191,17 @@ class _DualPricer:
         c, h = (hi_s + lo_s) / 2, np.maximum((hi_s - lo_s) / 2, 0.0)
         free = h > 0
         A, B, jac = self.A, self.B, self.jac
+        braking = self.braking
+        if braking:  # start from the box point that maps to x0
+            x0 = np.array(x0, float)
+            cap0 = braking_speed(self.limits, x0[:n], s0)
+            x0[n:2 * n] = s0 * np.where(cap0 > 0, np.abs(x0[n:2 * n]) / np.where(cap0 > 0, cap0, 1.0), 0.0) \
+                * self.limits.dq_max
 
         def f(u):
             zz = c + h * u
+            if braking:
+                zz, dv, dqq = self._braked(zz, s0)
             if jac is None:
                 return -float(self.ratio(zz[None], s0[None])[0])
             res = jac(zz)
@@ -2173,12 +2221,17 @@ class _DualPricer:
                 num += float(zz[n:2 * n] @ Cv - zz[2 * n:] @ Ca)
                 gnum = gnum + np.concatenate([np.zeros(n), 2 * Cv, -2 * Ca])
             den = max(den, 1e-300)
-            return -num / den, -(gnum / den - num / den ** 2 * gden) * h
+            g = gnum / den - num / den ** 2 * gden
+            if braking:  # chain rule through the speed map
+                g = np.concatenate([g[:n] + g[n:2 * n] * dqq, g[n:2 * n] * dv, g[2 * n:]])
+            return -num / den, -g * h
 
         u0 = np.where(free, np.clip((x0 - c) / np.where(free, h, 1.0), -1, 1), 0.0)
         bnds = [(-1.0, 1.0) if fr else (0.0, 0.0) for fr in free]
         res = minimize(f, u0, jac=jac is not None, bounds=bnds, method="L-BFGS-B", options={"maxiter": 300})
         x = c + h * res.x
+        if braking:
+            x = self._braked(x, s0)[0]
         return x, float(self.ratio(x[None], s0[None])[0])
 
 
@@ -2203,14 +2256,23 @@ class RestMoments:
     """
 
     def __init__(self, model: IdentificationModel, limits: Limits, robot: Any = None, *, samples: int = 20_000,
-                 seed: int = 0):
+                 seed: int = 0, kinetic: str | None = None):
         ca = _casadi()
         n = limits.n
         q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
         F = _casadi_regressor(model)
         zero = ca.SX.zeros(n)
-        f = [ca.vec(F(q, zero, dq) - F(q, zero, zero))]  # column-major: joint fastest
+        Yp = F(q, zero, dq) - F(q, zero, zero)
+        f = [ca.vec(Yp)]  # column-major: joint fastest
         names = [f"d/dt(Yp[{j + 1}, {b}])" for b in model.BASE_NAMES for j in range(n)]
+        if kinetic == "energy":
+            f.append(0.5 * ca.mtimes(Yp.T, dq))
+            names += [f"d/dt(T[{b}])" for b in model.BASE_NAMES]
+        elif kinetic == "joint":
+            f.append(ca.vec(ca.mtimes(ca.diag(dq), Yp)))
+            names += [f"d/dt(dq{j + 1} Yp[{j + 1}, {b}])" for b in model.BASE_NAMES for j in range(n)]
+        elif kinetic is not None:
+            raise ValueError(f"kinetic must be None, 'energy' or 'joint', not {kinetic!r}")
         if robot is not None:
             kin, kin_names = _frame_kinematics(robot, model, n, q)
             f.append(ca.jtimes(kin, q, dq))
@@ -2305,7 +2367,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                        extra_states: np.ndarray | None = None, stationary: bool = False,
                        moment_tol: float = 0.01, degree: int = 2, trajectories: int = 0,
                        bandwidth: float | None = None, rest: bool = False, robot: Any = None,
-                       progress=None) -> RelaxationBracket:
+                       kinetic: str | None = None, braking: bool = False, progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -2336,14 +2398,17 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     n, nb = limits.n, len(model.BASE_NAMES)
     rng = np.random.default_rng(seed)
     coul = _coulomb_columns(model)
-    X, S = _random_states(rng, limits, atoms)
+    X, S = _random_states(rng, limits, atoms, braking)
     if extra_states is not None:
         ex = np.asarray(extra_states, float)
         X, S = np.vstack([X, ex]), np.vstack([S, np.sign(ex[:, n:2 * n])])
     if trajectories:
         Xt, St = _trajectory_states(limits, rng, trajectories)
         X, S = np.vstack([X, Xt]), np.vstack([S, St])
-    rest_m = RestMoments(model, limits, robot) if rest else None
+    if braking:  # the given and trajectory states too (a sampled trajectory may exceed it by its sampling error)
+        X[:, n:2 * n] = np.sign(X[:, n:2 * n]) * np.minimum(np.abs(X[:, n:2 * n]),
+                                                            braking_speed(limits, X[:, :n], np.sign(X[:, n:2 * n])))
+    rest_m = RestMoments(model, limits, robot, kinetic=kinetic) if rest else None
     moments = _MomentSet(limits, degree if stationary else None, rest_m) if stationary or rest else None
     jac = _DualPricer.casadi_jacobian(model, n, moments)
 
@@ -2398,9 +2463,9 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
             lam, c0 = nu_p - nu_n, moment_tol * float(np.sum(nu_p + nu_n))
         C = _psd(np.asarray(c3.dual_value)) if bandwidth is not None else None
         pricer = _DualPricer(model, limits, A, B, lam, c0, rho=bandwidth, C=C, degree=degree, closed=stationary,
-                             rest=rest_m, coulomb=coul, jac=jac)
+                             rest=rest_m, coulomb=coul, jac=jac, braking=braking)
         # pricing: the dual ratio over the current states, fresh random states and local maxima
-        Xf, Sf = _random_states(rng, limits, fresh)
+        Xf, Sf = _random_states(rng, limits, fresh, braking)
         rf = pricer.ratio(Xf, Sf)
         r_atoms = float(pricer.ratio(X, S, W).max())
         order = np.argsort(-rf)
@@ -2428,7 +2493,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         X, S = np.vstack(newX), np.vstack(newS)
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
                              dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if moments is not None else 0.0,
-                             dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree, stationary, rest_m)
+                             dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree, stationary, rest_m,
+                             braking)
 
 
 def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: RelaxationBracket, *,
@@ -2438,11 +2504,12 @@ def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: Relax
     ``(r, bound)``: the largest ratio found (at least ``bracket.r``) and ``sqrt(tr A / (r tr B))``.
     A ``bound`` well below ``bracket.lower`` says the bracket's search for ``r`` was not global."""
     pricer = _DualPricer(model, limits, bracket.A, bracket.B, bracket.lam, bracket.c0, rho=bracket.bandwidth,
-                         C=bracket.C, degree=bracket.degree, closed=bracket.closed, rest=bracket.rest)
+                         C=bracket.C, degree=bracket.degree, closed=bracket.closed, rest=bracket.rest,
+                         braking=bracket.braking)
     rng = np.random.default_rng(seed)
     best_r, pool_X, pool_S, pool_r = bracket.r, [], [], []
     for k0 in range(0, states, batch):
-        Xf, Sf = _random_states(rng, limits, min(batch, states - k0))
+        Xf, Sf = _random_states(rng, limits, min(batch, states - k0), bracket.braking)
         rf = pricer.ratio(Xf, Sf)
         best_r = max(best_r, float(rf.max()))
         top = np.argsort(-rf)[:starts]

@@ -389,3 +389,135 @@ def test_rest_relaxation_bounds_designs_that_end_elsewhere_and_excludes_the_plai
         assert stacked_cond(model, q, dq, ddq) >= b.lower
         num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
         assert np.all(num <= b.r * den * (1 + 1e-9))
+
+
+@pytest.mark.parametrize("name", ["scara", "palletizer"])
+def test_kinetic_rest_moments_are_the_power_balance_and_vanish_at_rest_to_rest(name):
+    """RestMoments(kinetic=...): test functions quadratic in dq. The rates of the kinetic-energy
+    regressor's entries (``T_b = dq^T Y_p[:, b] / 2``) equal the power of the inertial and Coriolis part of
+    each rigid-body column, ``sum_j dq_j (W_jb(q, dq, ddq) - W_jb(q, 0, 0))`` (the energy theorem, from the
+    NumPy regressor: independent of the CasADi derivative); the rates of ``dq_j Y_p[j, b]`` match finite
+    differences; both vanish on average over rest-to-rest designs that end elsewhere, not over random states."""
+    from symoro_gen.excite import RestMoments, _random_states
+
+    robot, model = model_for(name)
+    lim = limits_of(robot, model=model)
+    n, nb = lim.n, len(model.BASE_NAMES)
+    E = RestMoments(model, lim, robot, kinetic="energy")
+    J = RestMoments(model, lim, robot, kinetic="joint")
+    base = len(RestMoments(model, lim, robot).names)
+    assert len(E.names) > base and len(J.names) > len(E.names)
+    t = np.linspace(0.0, 10.0, 4001)
+    w = np.full(len(t), 1.0)
+    w[[0, -1]] = 0.5
+    w /= w.sum()
+    designs = _rest_designs(lim, 3, 41, t)
+    for R in (E, J):
+        for q, dq, ddq in designs:
+            assert np.abs(w @ R.numpy(q, dq, ddq) / R.scale).max() < 1e-5
+        X, _ = _random_states(np.random.default_rng(0), lim, 2000)
+        assert np.abs(R.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]).mean(0) / R.scale)[base:].max() > 0.02
+    q, dq, ddq = designs[0]
+    zero = np.zeros_like(q)
+    W = np.asarray(model.regressor(q, dq, ddq)).reshape(len(t), n, nb)
+    W0 = np.asarray(model.regressor(q, zero, zero)).reshape(len(t), n, nb)
+    power = np.einsum("kj,kjb->kb", dq, W - W0)
+    m = E.numpy(q, dq, ddq)
+    checked = 0
+    for b, c in enumerate(model.BASE_NAMES):
+        if c.startswith(("FV", "FS", "OFF")) or f"d/dt(T[{c}])" not in E.names:
+            continue
+        k = E.names.index(f"d/dt(T[{c}])")
+        np.testing.assert_allclose(m[:, k], power[:, b], rtol=1e-6, atol=1e-7 * E.scale[k])
+        checked += 1
+    assert checked >= 3
+    Yp = np.asarray(model.regressor(q, zero, dq)).reshape(len(t), n, nb) - W0
+    m = J.numpy(q, dq, ddq)
+    b, j = next((b, j) for b in range(nb) for j in range(n)
+                if f"d/dt(dq{j + 1} Yp[{j + 1}, {model.BASE_NAMES[b]}])" in J.names and np.ptp(Yp[:, j, b]) > 1e-3)
+    k = J.names.index(f"d/dt(dq{j + 1} Yp[{j + 1}, {model.BASE_NAMES[b]}])")
+    fd = np.gradient(dq[:, j] * Yp[:, j, b], t)
+    assert np.abs(fd - m[:, k])[5:-5].max() < 1e-2 * np.abs(m[:, k]).max()
+    with pytest.raises(ValueError, match="kinetic"):
+        RestMoments(model, lim, robot, kinetic="potential")
+
+
+# --- braking: the states a trajectory within its range and acceleration limits can be in --------------
+
+def test_braking_speed_holds_on_designs_and_is_met_by_a_stop_at_the_range_end():
+    """braking_speed is a property of trajectories, not a guess: every sample of random rest-to-rest spline
+    designs and random Fourier trajectories within the limits is below it, and a joint that runs at its
+    velocity limit and brakes at its acceleration limit to stop exactly at the end of its range (the fastest
+    approach there is) meets it with equality all along the braking; the sampler and the pricer's local
+    search keep to it, and the latter's gradient through the change of variables matches finite differences."""
+    import scipy.optimize as so
+
+    from symoro_gen.excite import _DualPricer, _random_states, braking_speed
+
+    robot, model = model_for("rx90")
+    lim = limits_of(robot)
+    n = lim.n
+    t = output_times(10.0, 200.0)
+    for q, dq, _ddq in _rest_designs(lim, 3, 51, t) + _trajectories(model, lim, 3, 52):
+        assert np.all(np.abs(dq) <= braking_speed(lim, q, np.sign(dq)))
+    j, v, a = 3, lim.dq_max[3], lim.ddq_max[3]  # joint 4 (wrist): a braking distance of ~100 deg
+    tb = np.linspace(0.0, v / a, 200)
+    qb = lim.q_max[j] - v ** 2 / (2 * a) + v * tb - a * tb ** 2 / 2
+    dqb = v - a * tb
+    Q = np.tile((lim.q_min + lim.q_max) / 2, (len(tb), 1))
+    Q[:, j] = qb
+    sb = np.ones((len(tb), n))
+    ratio = dqb[:-1] / braking_speed(lim, Q, sb, slack=0.0)[:-1, j]
+    np.testing.assert_allclose(ratio, 1.0, rtol=1e-9)
+    assert np.all(braking_speed(lim, Q, sb)[:, j] >= braking_speed(lim, Q, sb, slack=0.0)[:, j])
+    assert v ** 2 / (2 * a) > np.radians(30)  # the constraint matters on this arm
+    rng = np.random.default_rng(5)
+    X, S = _random_states(rng, lim, 4000, braking=True)
+    assert np.all(np.abs(X[:, n:2 * n]) <= braking_speed(lim, X[:, :n], np.sign(X[:, n:2 * n])) + 1e-12)
+    X0, _ = _random_states(np.random.default_rng(5), lim, 4000)
+    assert np.any(np.abs(X0[:, n:2 * n]) > braking_speed(lim, X0[:, :n], np.sign(X0[:, n:2 * n])) * 1.5)
+    nb = len(model.BASE_NAMES)
+    M = rng.normal(size=(nb, nb))
+    A, B = M @ M.T, np.eye(nb)
+    pricer = _DualPricer(model, lim, A, B, braking=True)
+    errs, orig = [], so.minimize
+
+    def checked(fun, x0, jac=None, bounds=None, **kw):
+        u = np.array([rng.uniform(lo, hi) for lo, hi in bounds])
+        g = fun(u)[1]
+        fd = np.array([(fun(u + e)[0] - fun(u - e)[0]) / 2e-6 if lo < hi else 0.0
+                       for e, (lo, hi) in zip(np.eye(len(u)) * 1e-6, bounds)])
+        errs.append(np.abs(g - fd).max() / np.abs(fd).max())
+        return orig(fun, x0, jac=jac, bounds=bounds, **kw)
+
+    so.minimize = checked
+    try:
+        for x, s in zip(X[:4], S[:4]):
+            xm, r = pricer.local_max(x, s)
+            assert r >= pricer.ratio(x[None], s[None])[0] * (1 - 1e-9)
+            assert np.all(np.abs(xm[n:2 * n]) <= braking_speed(lim, xm[:n], s) * (1 + 1e-9))
+            assert np.all(xm[n:2 * n] * s >= 0)
+    finally:
+        so.minimize = orig
+    assert len(errs) == 4 and max(errs) < 1e-4
+
+
+def test_braking_relaxation_bounds_unseen_designs(scara):
+    """relaxation_bracket(braking=True): its distribution's states keep to braking_speed, and weak duality
+    with its duals holds on the samples of unseen designs (which keep to it too)."""
+    from symoro_gen.excite import _DualPricer, braking_speed
+
+    robot, model = model_for("scara")
+    lim = scara[1]
+    n = lim.n
+    b = relaxation_bracket(model, lim, atoms=100, rounds=3, fresh=2000, starts=6, add=20, seed=3, trajectories=5,
+                           rest=True, robot=robot, braking=True)
+    assert b.braking and b.lower <= b.upper
+    dq = b.states[:, n:2 * n]
+    assert np.all(np.abs(dq) <= braking_speed(lim, b.states[:, :n], np.sign(dq)) * (1 + 1e-9))
+    pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0, closed=False, rest=b.rest, braking=True)
+    t = output_times(10.0, 100.0)
+    for q, dq, ddq in _rest_designs(lim, 6, 53, t):
+        assert stacked_cond(model, q, dq, ddq) >= b.lower
+        num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
+        assert np.all(num <= b.r * den * (1 + 1e-9))
