@@ -1,5 +1,5 @@
 """The relaxation of issue 11 section 1 (cond over distributions of states, no continuity in time):
-``symoro_gen.excite.relaxation_bracket`` on the SCARA, checked against trajectories it never saw, the
+``symoro_gen.excite_relaxation.relaxation_bracket`` on the SCARA, checked against trajectories it never saw, the
 weak-duality argument of ``relaxation_dual_bound`` on explicit distributions, and the rigorous
 ``cond_lower_bound``."""
 import numpy as np
@@ -13,11 +13,9 @@ from symoro_gen.excite import (
     limits_of,
     output_times,
     random_trajectory,
-    relaxation_bracket,
-    relaxation_dual_bound,
-    relaxation_rows,
     stacked_cond,
 )
+from symoro_gen.excite_relaxation import relaxation_bracket, relaxation_dual_bound, relaxation_rows
 from symoro_gen.loader import model_for
 
 
@@ -127,7 +125,7 @@ def test_stationarity_moments_vanish_on_trajectories_not_on_random_states():
     over random states it is not; the CasADi form (used for gradients) is the NumPy form."""
     import casadi as ca
 
-    from symoro_gen.excite import _random_states, stationarity_moments, stationarity_scales
+    from symoro_gen.excite_relaxation import _random_states, stationarity_moments, stationarity_scales
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -157,7 +155,7 @@ def scara_stationary():
 
 
 def test_stationary_upper_end_is_a_distribution_with_trajectory_moments(scara_stationary):
-    from symoro_gen.excite import stationarity_moments, stationarity_scales
+    from symoro_gen.excite_relaxation import stationarity_moments, stationarity_scales
 
     model, lim, b = scara_stationary
     n = model.N_JOINTS
@@ -175,7 +173,7 @@ def test_stationary_lower_end_holds_on_unseen_trajectories_and_excludes_the_plai
     """Weak duality with the moment multipliers: the ratio N/D on unseen trajectories' samples stays
     below r, their cond above the lower end - and that lower end is above the plain relaxation's
     optimum (a distribution no trajectory can have)."""
-    from symoro_gen.excite import _DualPricer
+    from symoro_gen.excite_relaxation import _DualPricer
 
     model, lim, b = scara_stationary
     assert b.stationary and b.lam is not None and b.c0 >= b.moment_tol * np.abs(b.lam).sum() * (1 - 1e-9)
@@ -191,7 +189,7 @@ def test_stationary_lower_end_holds_on_unseen_trajectories_and_excludes_the_plai
 def test_verification_reprices_the_same_duals():
     """relaxation_verify searches more: r never falls, the bound never rises, and with the search of the
     bracket itself (same seed and size) nothing changes."""
-    from symoro_gen.excite import relaxation_verify
+    from symoro_gen.excite_relaxation import relaxation_verify
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -209,7 +207,12 @@ def test_degree3_moments_vanish_on_trajectories_and_extend_degree2():
     of a periodic trajectory also meets, random states do not; CasADi form = NumPy form."""
     import casadi as ca
 
-    from symoro_gen.excite import _random_states, stationarity_moment_names, stationarity_moments, stationarity_scales
+    from symoro_gen.excite_relaxation import (
+        _random_states,
+        stationarity_moment_names,
+        stationarity_moments,
+        stationarity_scales,
+    )
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -243,7 +246,8 @@ def test_degree3_moments_vanish_on_trajectories_and_extend_degree2():
 def test_basis_bandwidth_is_the_largest_ratio_of_any_design():
     """Every design of the basis has E[ddq ddq^T] <= rho E[dq dq^T] on the samples, and rho is attained
     (a largest ratio, not a loose bound); for K harmonics of w it lies between ((K-1) w)^2 and (K w)^2."""
-    from symoro_gen.excite import SplineBasis, basis_bandwidth
+    from symoro_gen.excite import SplineBasis
+    from symoro_gen.excite_relaxation import basis_bandwidth
 
     robot, _ = model_for("scara")
     lim = limits_of(robot)
@@ -276,7 +280,7 @@ def test_bandwidth_relaxation_meets_its_lmi_and_bounds_the_designs_of_its_basis(
     above the plain relaxation's optimum (a distribution no 5-harmonic design can have), and weak duality
     with the LMI multiplier C holds on unseen designs of that basis: the pricer's numerator exceeds
     tr(A G) by E[tr(C (rho dq dq^T - ddq ddq^T))] >= 0, their cond is above the lower end."""
-    from symoro_gen.excite import _DualPricer, basis_bandwidth
+    from symoro_gen.excite_relaxation import _DualPricer, basis_bandwidth
 
     model, lim, plain = scara
     n = model.N_JOINTS
@@ -322,7 +326,8 @@ def test_rest_moments_vanish_on_rest_to_rest_designs_that_end_elsewhere(name):
     in its actuated joints (the closure carries the kinematics)."""
     import casadi as ca
 
-    from symoro_gen.excite import RestMoments, Workspace, _random_states, stationarity_moments, stationarity_scales
+    from symoro_gen.excite import Workspace
+    from symoro_gen.excite_relaxation import RestMoments, _random_states, stationarity_moments, stationarity_scales
 
     robot, model = model_for(name)
     lim = limits_of(robot, model=model)
@@ -370,7 +375,7 @@ def test_rest_relaxation_bounds_designs_that_end_elsewhere_and_excludes_the_plai
     apply to them), whose cond stays above the lower end; that lower end is above the plain relaxation's
     optimum (on the SCARA, it accelerates joint 3 one way on average, which no trajectory at rest at both
     ends does)."""
-    from symoro_gen.excite import _DualPricer
+    from symoro_gen.excite_relaxation import _DualPricer
 
     robot, model = model_for("scara")
     lim, plain = scara[1], scara[2]
@@ -398,7 +403,7 @@ def test_kinetic_rest_moments_are_the_power_balance_and_vanish_at_rest_to_rest(n
     each rigid-body column, ``sum_j dq_j (W_jb(q, dq, ddq) - W_jb(q, 0, 0))`` (the energy theorem, from the
     NumPy regressor: independent of the CasADi derivative); the rates of ``dq_j Y_p[j, b]`` match finite
     differences; both vanish on average over rest-to-rest designs that end elsewhere, not over random states."""
-    from symoro_gen.excite import RestMoments, _random_states
+    from symoro_gen.excite_relaxation import RestMoments, _random_states
 
     robot, model = model_for(name)
     lim = limits_of(robot, model=model)
@@ -452,7 +457,7 @@ def test_braking_speed_holds_on_designs_and_is_met_by_a_stop_at_the_range_end():
     search keep to it, and the latter's gradient through the change of variables matches finite differences."""
     import scipy.optimize as so
 
-    from symoro_gen.excite import _DualPricer, _random_states, braking_speed
+    from symoro_gen.excite_relaxation import _DualPricer, _random_states, braking_speed
 
     robot, model = model_for("rx90")
     lim = limits_of(robot)
@@ -505,7 +510,7 @@ def test_braking_speed_holds_on_designs_and_is_met_by_a_stop_at_the_range_end():
 def test_braking_relaxation_bounds_unseen_designs(scara):
     """relaxation_bracket(braking=True): its distribution's states keep to braking_speed, and weak duality
     with its duals holds on the samples of unseen designs (which keep to it too)."""
-    from symoro_gen.excite import _DualPricer, braking_speed
+    from symoro_gen.excite_relaxation import _DualPricer, braking_speed
 
     robot, model = model_for("scara")
     lim = scara[1]

@@ -1,0 +1,781 @@
+"""How low can the cond of an excitation design go at all? (issue 11, section 1)
+
+A relaxation of every trajectory: the smallest cond of the stacked base regressor over DISTRIBUTIONS of
+states ``(q, dq, ddq)`` within the limits, without continuity in time. :func:`relaxation_bracket` brackets
+it by column generation on an SDP ([BV2004] sect. 7.5): the upper end is the cond of an explicit
+distribution, the lower end a dual estimate by weak duality (as far as the maximisation of the dual ratio
+over states, :class:`_DualPricer`, is global; :func:`relaxation_verify` re-prices it on a larger search).
+Conditions every design meets restrict the distributions and sharpen the bound:
+
+* ``stationary=True``: the occupation-measure moments of a closed trajectory (periodic, or ending where it
+  started), :func:`stationarity_moments` ([LHPT08]);
+* ``rest=True``: those of every trajectory at rest at both ends, :class:`RestMoments` (the rates of the
+  momentum regressor and of the frame velocities; ``kinetic=`` adds test functions quadratic in ``dq``);
+* ``braking=True``: only states from which every joint can still stop before the end of its range
+  (:func:`braking_speed`);
+* ``bandwidth=``: the accelerations a design basis allows (:func:`basis_bandwidth`, an LMI).
+
+The rigorous per-sample bound :func:`symoro_gen.excite.cond_lower_bound` and the designs themselves are
+:mod:`symoro_gen.excite`'s; measurements in docs/excitation.md.
+"""
+from __future__ import annotations
+
+import functools
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .excite import (
+    ExcitationError,
+    FourierBasis,
+    Limits,
+    _casadi,
+    _casadi_regressor,
+    _sympy_casadi,
+    basis_eval,
+    mdh_frames,
+    random_trajectory,
+)
+from .model import IdentificationModel
+
+__all__ = [
+    "BRAKING_SLACK",
+    "RelaxationBracket",
+    "RelaxationRound",
+    "RestMoments",
+    "basis_bandwidth",
+    "braking_speed",
+    "relaxation_bracket",
+    "relaxation_dual_bound",
+    "relaxation_rows",
+    "relaxation_verify",
+    "stationarity_moment_names",
+    "stationarity_moments",
+    "stationarity_scales",
+]
+
+@dataclass(frozen=True)
+class RelaxationRound:
+    """One round of :func:`relaxation_bracket`: ``primal`` (cond of the best distribution over the
+    round's states), ``dual`` (``sqrt(tr A / (r tr B))``), ``r`` (the largest dual ratio found),
+    ``atoms`` (states in the round's SDP), ``kept`` (states with weight above the pruning threshold),
+    ``seconds`` (wall time since the start), ``sdp_seconds`` (of which in the round's SDP)."""
+
+    round: int
+    atoms: int
+    kept: int
+    primal: float
+    dual: float
+    r: float
+    seconds: float
+    sdp_seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class RelaxationBracket:
+    """``[lower, upper]`` for the smallest cond of the stacked base regressor over every DISTRIBUTION of
+    states within the position, velocity and acceleration limits (no continuity in time: a relaxation
+    of every trajectory, of any duration and sampling, including samples at rest).
+
+    ``upper`` is the cond of an explicit distribution (``states``, ``weights``; recomputed with numpy):
+    a rigorous upper bound on the relaxation's minimum (not on any trajectory's). ``lower`` is
+    ``sqrt(tr A / (r tr B))`` for PSD ``A, B`` and ``r`` the largest ``tr(A G(s)) / tr(B G(s))`` FOUND
+    over the state box (random states plus multistart L-BFGS-B): a lower bound on the cond of every
+    trajectory if ``r`` is the true maximum, i.e. rigorous only as far as that maximisation is global.
+    ``signs``: the ``sign(dq)`` used in each state's Coulomb columns (see :func:`relaxation_rows`).
+
+    With ``stationary`` the distributions are further restricted to those whose stationarity moments
+    (:func:`stationarity_moments`, normalised by :func:`stationarity_scales`) are within ``moment_tol``
+    of zero, as every periodic trajectory's (and every one that starts and ends at rest at the same
+    configuration); ``lam`` and ``c0`` are the multipliers of those constraints in the dual that gives
+    ``lower`` (see :class:`_DualPricer`), and ``lower`` then bounds the cond of every such trajectory.
+    ``A, B, r, lam, c0`` are those of the round that gave ``lower``. ``rest`` (a :class:`RestMoments`) adds
+    the moments of every trajectory that starts and ends at rest to those constraints (``lam`` covers both,
+    the closed ones first when ``closed``); ``lower`` then bounds the cond of every such trajectory
+    (closed or not, as ``closed`` says).
+
+    With ``bandwidth`` (``rho``, from :func:`basis_bandwidth`) the distributions are further restricted
+    by ``E[ddq ddq^T] <= rho E[dq dq^T]`` (an LMI), which every design of a given basis meets on its
+    samples; ``C`` is its multiplier (PSD), and ``lower`` then bounds the cond of every design of that
+    basis (and, with ``stationary``, that returns to its start).
+    """
+
+    lower: float
+    upper: float
+    rounds: tuple[RelaxationRound, ...]
+    states: np.ndarray
+    signs: np.ndarray
+    weights: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    r: float
+    moment_tol: float = 0.0
+    lam: np.ndarray | None = None
+    c0: float = 0.0
+    bandwidth: float | None = None
+    C: np.ndarray | None = None
+    degree: int = 2
+    closed: bool = True
+    rest: RestMoments | None = None
+    braking: bool = False
+
+    @property
+    def stationary(self) -> bool:
+        """Whether the stationarity moments of closed trajectories constrained the distributions."""
+        return self.lam is not None and self.closed
+
+
+def _coulomb_columns(model: IdentificationModel) -> list[tuple[int, int]]:
+    """``(joint, column)`` of every base column ``FS<j>`` that is ``sign(dq_j)`` in row ``j`` only
+    (checked on random states; other Coulomb-like columns are left as the model computes them)."""
+    names = list(model.BASE_NAMES)
+    n = int(model.N_JOINTS)
+    rng = np.random.default_rng(1)
+    q, dq, ddq = rng.uniform(-3, 3, (16, n)), rng.uniform(-2, 2, (16, n)), rng.uniform(-5, 5, (16, n))
+    W = np.asarray(model.regressor(q, dq, ddq)).reshape(16, n, len(names))
+    out = []
+    for j in range(n):
+        c = f"FS{j + 1}"
+        if c not in names:
+            continue
+        want = np.zeros((16, n))
+        want[:, j] = np.sign(dq[:, j])
+        if np.abs(W[:, :, names.index(c)] - want).max() <= 1e-12:
+            out.append((j, names.index(c)))
+    return out
+
+
+def relaxation_rows(model: IdentificationModel, states: np.ndarray, signs: np.ndarray | None = None,
+                    coulomb: list[tuple[int, int]] | None = None) -> np.ndarray:
+    """Base regressor rows ``(k, n, nb)`` of states ``(k, 3n)`` = ``(q, dq, ddq)``, with the Coulomb
+    column ``FS_j`` set to ``signs[:, j]`` (default ``sign(dq_j)``).
+
+    The state set is taken CLOSED: at ``dq_j = 0`` the sign may be -1, 0 or +1. ``0`` is a sample
+    exactly at rest (a trajectory may rest on an interval); ``+-1`` the limit of samples moving at a
+    vanishing speed. The infimum of cond over distributions is the same on the set and its closure
+    (cond of ``E[G]`` is continuous where finite), so this changes no bound and lets the maximisations
+    reach the boundary.
+    """
+    states = np.atleast_2d(np.asarray(states, float))
+    n = int(model.N_JOINTS)
+    W = np.asarray(model.regressor(states[:, :n], states[:, n:2 * n], states[:, 2 * n:])).reshape(
+        len(states), n, len(model.BASE_NAMES)).copy()
+    if signs is not None:
+        for j, c in (_coulomb_columns(model) if coulomb is None else coulomb):
+            W[:, j, c] = signs[:, j]
+    return W
+
+
+def relaxation_dual_bound(A: np.ndarray, B: np.ndarray, r: float) -> float:
+    """``sqrt(tr A / (r tr B))`` after projecting ``A, B`` on the PSD cone.
+
+    Weak duality, for any PSD ``A, B``: if ``tr(A G(s)) <= r tr(B G(s))`` for every state ``s``,
+    then for every distribution ``M = E[G] `` with ``lambda_min I <= M <= lambda_max I``,
+    ``lambda_min tr A <= tr(A M) <= r tr(B M) <= r lambda_max tr B``, hence
+    ``cond^2 = lambda_max / lambda_min >= tr A / (r tr B)`` (Boyd & Vandenberghe 2004, sect. 5.2 and
+    7.5: the dual of the E-/cond-optimal design SDP).
+    """
+    A, B = _psd(A), _psd(B)
+    return math.sqrt(float(np.trace(A)) / (r * float(np.trace(B))))
+
+
+def _psd(X: np.ndarray) -> np.ndarray:
+    X = (X + X.T) / 2
+    w, V = np.linalg.eigh(X)
+    return (V * np.clip(w, 0, None)) @ V.T
+
+
+def basis_bandwidth(basis, t: np.ndarray) -> float:
+    """``rho``: the largest ``mean((u . ddq)^2) / mean((u . dq)^2)`` over the samples ``t`` of every
+    design of ``basis`` and every direction ``u`` of joint space (the largest generalised eigenvalue
+    of ``(Phi''^T Phi'', Phi'^T Phi')`` at ``t``: ``u . q(t) = Phi(t) X u`` is itself a design).
+
+    Every design of the basis therefore has ``E[ddq ddq^T] <= rho E[dq dq^T]`` over those samples (an
+    LMI that :func:`relaxation_bracket` can impose with ``bandwidth=rho``): its accelerations cannot
+    vary faster than the basis allows. For a Fourier series of ``K`` harmonics of ``w``, ``rho`` is
+    close to ``(K w)^2``; a distribution of states can have any ratio (accelerations at their limits
+    while the velocity stays at its own, which a trajectory can only do by switching the sign of its
+    acceleration at a rate no smooth basis has).
+    """
+    _, D, A = basis.matrices(np.asarray(t, float))
+    w, V = np.linalg.eigh(D.T @ D)
+    keep = w > 1e-12 * w.max()
+    if (~keep).any() and float(np.linalg.norm(A @ V[:, ~keep])) > 1e-8 * float(np.linalg.norm(A)):
+        raise ExcitationError("basis_bandwidth: a design with no velocity has an acceleration on these samples")
+    Vk = V[:, keep] / np.sqrt(w[keep])
+    return float(np.linalg.eigvalsh(Vk.T @ (A.T @ A) @ Vk)[-1])
+
+
+#: position slack of :func:`braking_speed`, a fraction of each joint's range
+BRAKING_SLACK = 1e-3
+
+
+def braking_speed(limits: Limits, q: np.ndarray, sign: np.ndarray, slack: float = BRAKING_SLACK) -> np.ndarray:
+    """The largest speed a joint can have at ``q`` moving in direction ``sign`` (+1 towards ``q_max``, -1
+    towards ``q_min``) in a trajectory that stays within its range and acceleration limit and stops before
+    it ends (at rest at the end, or turning back): it must be able to brake before the end of its range,
+    ``dq^2 <= 2 ddq_max (q_max + d - q)`` (resp. ``(q - q_min + d)``); capped by ``dq_max``. ``d = slack x
+    (q_max - q_min)`` covers a sampled design: its limits hold on a grid, between whose points the motion may
+    overshoot a range end by a little (a sample at the end itself with a small speed). Every sample of every
+    ``excite`` design (at rest at both ends, or periodic) satisfies it; a state of the box near a range end
+    at full speed does not (the LWR4's joints need 22 deg to stop from their velocity limit, the RX-90's
+    wrist up to 145 deg)."""
+    d = slack * (limits.q_max - limits.q_min)
+    room = np.clip(np.where(np.asarray(sign) > 0, limits.q_max - q, q - limits.q_min) + d, 0.0, None)
+    return np.minimum(limits.dq_max, np.sqrt(2.0 * limits.ddq_max * room))
+
+
+def _random_states(rng: np.random.Generator, limits: Limits, k: int, braking: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """States spread over the box with its faces and vertices over-represented: each velocity uniform,
+    exactly +-dq_max, exactly 0 (sign -1, 0 or +1) or slow (< 0.1 dq_max), each acceleration uniform or
+    exactly +-ddq_max. With ``braking`` each speed is then capped by :func:`braking_speed` (the same draws)."""
+    n = limits.n
+    q = rng.uniform(limits.q_min, limits.q_max, (k, n))
+    mode, sg = rng.integers(0, 4, (k, n)), rng.choice([-1.0, 1.0], (k, n))
+    v = np.where(mode == 0, rng.uniform(-1, 1, (k, n)),
+                 np.where(mode == 1, sg, np.where(mode == 2, 0.0, sg * rng.uniform(0, 0.1, (k, n)))))
+    s = np.where(mode == 2, rng.integers(-1, 2, (k, n)).astype(float), np.sign(v))
+    a = np.where(rng.random((k, n)) < 0.5, rng.uniform(-1, 1, (k, n)), rng.choice([-1.0, 1.0], (k, n)))
+    dq = v * limits.dq_max
+    if braking:
+        dq = np.sign(dq) * np.minimum(np.abs(dq), braking_speed(limits, q, np.sign(dq)))
+    return np.hstack([q, dq, a * limits.ddq_max]), s
+
+
+#: one term of the stationarity moments: (name, ((sign, ((factor, joint), ...)), ...))
+_Term = tuple[str, tuple[tuple[int, tuple[tuple[str, int], ...]], ...]]
+
+
+#: d/dt of each factor of a test function: (sign, factor kinds), of the same joint
+_FACTOR_RATE = {"q": (1, ("dq",)), "dq": (1, ("ddq",)), "sin": (1, ("cos", "dq")), "cos": (-1, ("sin", "dq"))}
+
+
+def _rate_term(factors: tuple[tuple[str, int], ...]) -> _Term:
+    """``d/dt`` of the test function ``prod(factors)`` by the product rule (:data:`_FACTOR_RATE`)."""
+    name = "d/dt(" + " ".join(f"{kind}{j + 1}" if kind in ("q", "dq") else f"{kind} q{j + 1}"
+                              for kind, j in factors) + ")"
+    products = []
+    for k, (kind, j) in enumerate(factors):
+        sign, kinds = _FACTOR_RATE[kind]
+        products.append((sign, tuple((kk, j) for kk in kinds) + factors[:k] + factors[k + 1:]))
+    return name, tuple(products)
+
+
+def _degree3_tests(n: int) -> list[tuple[tuple[str, int], ...]]:
+    """The test functions of degree 3 (:func:`stationarity_moments` with ``degree=3``): products of two
+    trigonometric factors ``t_i t_j`` (``i <= j``; ``cos cos``, ``cos sin``, ``sin cos``, ``sin sin``, only
+    ``cos^2`` and ``cos sin`` for ``i = j``) alone and times each ``dq_k``; ``t_i dq_k dq_l``, ``q_i dq_k dq_l``
+    (``k <= l``) and ``dq_i dq_j dq_k`` (``i <= j <= k``)."""
+    trig = ("cos", "sin")
+    out: list[tuple[tuple[str, int], ...]] = []
+    for i in range(n):
+        for j in range(i, n):
+            for a in trig:
+                for b in trig:
+                    if i == j and a == "sin":  # sin^2 = 1 - cos^2, sin cos = cos sin
+                        continue
+                    phi = ((a, i), (b, j))
+                    out += [phi] + [phi + (("dq", k),) for k in range(n)]
+    pairs = [(k, m) for k in range(n) for m in range(k, n)]
+    out += [((a, i), ("dq", k), ("dq", m)) for i in range(n) for a in ("cos", "sin", "q") for k, m in pairs]
+    out += [(("dq", i), ("dq", j), ("dq", k)) for i in range(n) for j in range(i, n) for k in range(j, n)]
+    return out
+
+
+@functools.cache
+def _stationarity_terms(n: int, degree: int = 2) -> tuple[_Term, ...]:
+    """The terms of :func:`stationarity_moments`: ``(name, ((sign, factors), ...))``, each a sum of signed
+    products of factors ``("q"|"dq"|"ddq"|"sin"|"cos", joint)`` (``sin``/``cos`` of ``q_joint``)."""
+    if degree not in (2, 3):
+        raise ExcitationError(f"stationarity moments of degree {degree}: 2 or 3")
+    out: list[_Term] = []
+    for j in range(n):
+        J = j + 1
+        out += [(f"d/dt(q{J})", ((1, (("dq", j),)),)),
+                (f"d/dt(dq{J})", ((1, (("ddq", j),)),)),
+                (f"d/dt(dq{J}^2/2)", ((1, (("dq", j), ("ddq", j))),)),
+                (f"d/dt(q{J}^2/2)", ((1, (("q", j), ("dq", j))),)),
+                (f"d/dt(cos q{J})", ((-1, (("sin", j), ("dq", j))),)),
+                (f"d/dt(sin q{J})", ((1, (("cos", j), ("dq", j))),))]
+    for i in range(n):
+        for j in range(n):
+            I, J = i + 1, j + 1
+            out += [(f"d/dt(q{I} dq{J})", ((1, (("dq", i), ("dq", j))), (1, (("q", i), ("ddq", j))))),
+                    (f"d/dt(cos q{I} dq{J})", ((-1, (("sin", i), ("dq", i), ("dq", j))), (1, (("cos", i), ("ddq", j))))),
+                    (f"d/dt(sin q{I} dq{J})", ((1, (("cos", i), ("dq", i), ("dq", j))), (1, (("sin", i), ("ddq", j)))))]
+            if i < j:
+                out.append((f"d/dt(dq{I} dq{J})", ((1, (("ddq", i), ("dq", j))), (1, (("dq", i), ("ddq", j))))))
+    if degree == 3:
+        out += [_rate_term(f) for f in _degree3_tests(n)]
+    return tuple(out)
+
+
+def stationarity_moments(q, dq, ddq, lib: Any = np, degree: int = 2):
+    """The time derivatives ``d/dt f(q, dq) = f_q dq + f_dq ddq`` of the test functions ``f`` =
+    ``q_j``, ``dq_j``, ``dq_j^2/2``, ``q_j^2/2``, ``cos q_j``, ``sin q_j`` (per joint), ``q_i dq_j``,
+    ``cos q_i dq_j``, ``sin q_i dq_j`` (every pair) and ``dq_i dq_j`` (``i < j``); with ``degree=3``
+    also those of :func:`_degree3_tests` (products of three factors)
+    (:func:`stationarity_moment_names` names them, :func:`stationarity_scales` sizes them).
+
+    Over one period of a periodic trajectory, or any trajectory that starts and ends in the same
+    state (the Fourier designs of ``excite``; a spline design may end elsewhere), the mean of ``d/dt f``
+    is ``(f(end) - f(start)) / T = 0``: the moment conditions that distinguish the sample distribution of a
+    trajectory from an arbitrary distribution of states (the occupation-measure constraints of Lasserre, Henrion, Prieur
+    and Trelat 2008, [LHPT08]). ``q, dq, ddq``: ``(k, n)`` arrays with ``lib = numpy`` (returns
+    ``(k, m)``), or CasADi ``(n, 1)`` vectors with ``lib = casadi`` (returns an ``(m, 1)`` vector).
+    """
+    if lib is np:
+        q, dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (q, dq, ddq))
+        n = q.shape[1]
+        cols = {"q": q.T, "dq": dq.T, "ddq": ddq.T, "sin": np.sin(q).T, "cos": np.cos(q).T}
+    else:
+        n = int(q.shape[0])
+        cols = {"q": q, "dq": dq, "ddq": ddq, "sin": lib.sin(q), "cos": lib.cos(q)}
+    out = []
+    for _, products in _stationarity_terms(n, degree):
+        total = 0
+        for sign, factors in products:
+            term = sign
+            for kind, j in factors:
+                term = term * cols[kind][j]
+            total = total + term
+        out.append(total)
+    return np.stack(out, axis=1) if lib is np else lib.vertcat(*out)
+
+
+def stationarity_moment_names(n: int, degree: int = 2) -> list[str]:
+    """The name ``d/dt(f)`` of each term of :func:`stationarity_moments` (same order), joints from 1."""
+    return [name for name, _ in _stationarity_terms(n, degree)]
+
+
+def stationarity_scales(limits: Limits, degree: int = 2) -> np.ndarray:
+    """The size of each term of :func:`stationarity_moments` over the limits' box (the sum over its
+    products of the largest magnitude of each factor: ``max |q_j|``, ``dq_max``, ``ddq_max``, 1 for sin
+    and cos): the moment ``k`` is held to ``|E[m_k]| <= tol * scale_k``."""
+    bound = {"q": np.maximum(np.abs(limits.q_min), np.abs(limits.q_max)), "dq": limits.dq_max,
+             "ddq": limits.ddq_max, "sin": np.ones(limits.n), "cos": np.ones(limits.n)}
+    return np.array([sum(math.prod(float(bound[kind][j]) for kind, j in factors) for _, factors in products)
+                     for _, products in _stationarity_terms(limits.n, degree)])
+
+
+class _DualPricer:
+    """The dual ratio of the relaxation SDP at duals ``A, B`` (and, with the stationarity constraints,
+    their multipliers ``lam`` and ``c0``)::
+
+        N(s) / D(s),  N(s) = tr(A G(s)) - lam . m(s) / scale + c0 + rho dq^T C dq - ddq^T C ddq,
+        D(s) = tr(B G(s))
+
+    Weak duality: if ``N(s) <= r D(s)`` for every state ``s`` of the box, then for every distribution
+    ``M = E[G]`` with ``|E[m]| <= tol scale`` (and ``c0 >= tol sum |lam|``), ``lambda_min tr A <= tr(A M)
+    <= E[N] <= r tr(B M) <= r lambda_max tr B``: ``cond >= sqrt(tr A / (r tr B))``
+    (:func:`relaxation_dual_bound`); the bandwidth term (``C`` PSD) has ``E >= 0`` for every distribution
+    with ``E[ddq ddq^T] <= rho E[dq dq^T]``, so the same holds for those. ``ratio`` evaluates it on
+    states; ``local_max`` maximises it by L-BFGS-B in the box from a state with its velocity signs held,
+    gradients from the generated CasADi model.
+    """
+
+    def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
+                 lam: np.ndarray | None = None, c0: float = 0.0, *, rho: float | None = None,
+                 C: np.ndarray | None = None, degree: int = 2, closed: bool = True, rest: RestMoments | None = None,
+                 coulomb=None, jac=None, braking: bool = False):
+        self.model, self.A, self.B = model, A, B
+        self.limits, self.braking = limits, braking
+        self.lam, self.c0 = lam, float(c0)
+        self.rho: float | None = None if rho is None or C is None else float(rho)
+        self.C: np.ndarray | None = None if rho is None or C is None else _psd(np.asarray(C, float))
+        self.n = limits.n
+        self.coul = _coulomb_columns(model) if coulomb is None else coulomb
+        self.moments = _MomentSet(limits, degree if closed else None, rest) if lam is not None else None
+        self.jac = jac if jac is not None else self.casadi_jacobian(model, self.n, self.moments)
+        self.lo = np.concatenate([limits.q_min, -limits.dq_max, -limits.ddq_max])
+        self.hi = np.concatenate([limits.q_max, limits.dq_max, limits.ddq_max])
+
+    @staticmethod
+    def casadi_jacobian(model: IdentificationModel, n: int, moments: _MomentSet | None):
+        try:
+            F = _casadi_regressor(model)
+        except ExcitationError:  # priced without gradients (random states only)
+            return None
+        ca = _casadi()
+        z = ca.SX.sym("z", 3 * n)
+        Y = F(z[:n], z[n:2 * n], z[2 * n:])
+        out = [Y, ca.jacobian(ca.vec(Y), z)]  # vec: column-major
+        if moments is not None:
+            m = moments.casadi(z)
+            out += [m, ca.jacobian(m, z)]
+        return ca.Function("ratio_rows", [z], out)
+
+    def num_den(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None):
+        X = np.atleast_2d(X)
+        if W is None:
+            W = relaxation_rows(self.model, X, S, self.coul)
+        num = np.einsum("kia,ab,kib->k", W, self.A, W)
+        den = np.einsum("kia,ab,kib->k", W, self.B, W)
+        n = self.n
+        if self.moments is not None:
+            num = num - self.moments.numpy(X) / self.moments.scale @ self.lam + self.c0
+        if self.C is not None:
+            dq, ddq = X[:, n:2 * n], X[:, 2 * n:]
+            num = num + self.rho * np.einsum("ki,ij,kj->k", dq, self.C, dq) - np.einsum("ki,ij,kj->k", ddq, self.C, ddq)
+        return num, den
+
+    def ratio(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
+        num, den = self.num_den(X, S, W)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.where(num > 0, np.inf, 0.0))
+
+    def _braked(self, zz: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """With ``braking``: the box point ``zz`` with its speeds rescaled from ``[0, dq_max]`` to ``[0,
+        braking_speed(q)]``, the factor ``d|dq|/d|dq_box|`` and ``d dq/d q`` of that map (per joint)."""
+        n, lim = self.n, self.limits
+        q, frac = zz[:n], np.abs(zz[n:2 * n]) / lim.dq_max
+        d = BRAKING_SLACK * (lim.q_max - lim.q_min)
+        room = np.clip(np.where(s0 > 0, lim.q_max - q, q - lim.q_min) + d, 0.0, None)
+        sq = np.sqrt(2.0 * lim.ddq_max * room)
+        cap = np.minimum(lim.dq_max, sq)
+        dcap = np.where((sq < lim.dq_max) & (sq > 0), -s0 * lim.ddq_max / np.maximum(sq, 1e-12), 0.0)
+        out = zz.copy()
+        out[n:2 * n] = s0 * cap * frac
+        return out, cap / lim.dq_max, s0 * frac * dcap
+
+    def local_max(self, x0: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, float]:
+        """Maximise the ratio from ``x0`` with the velocity signs ``s0`` (``dq_j`` in ``[0, dq_max]`` for
+        +1, ``[-dq_max, 0]`` for -1, ``0`` for 0; with ``braking``, ``dq_max`` replaced by
+        :func:`braking_speed` at ``q``, through a change of variables that keeps the box)."""
+        from scipy.optimize import minimize
+
+        n, lo, hi = self.n, self.lo, self.hi
+        lo_s, hi_s = lo.copy(), hi.copy()
+        lo_s[n:2 * n] = np.where(s0 >= 0, 0.0, lo[n:2 * n])
+        hi_s[n:2 * n] = np.where(s0 <= 0, 0.0, hi[n:2 * n])
+        c, h = (hi_s + lo_s) / 2, np.maximum((hi_s - lo_s) / 2, 0.0)
+        free = h > 0
+        A, B, jac = self.A, self.B, self.jac
+        braking = self.braking
+        if braking:  # start from the box point that maps to x0
+            x0 = np.array(x0, float)
+            cap0 = braking_speed(self.limits, x0[:n], s0)
+            x0[n:2 * n] = s0 * np.where(cap0 > 0, np.abs(x0[n:2 * n]) / np.where(cap0 > 0, cap0, 1.0), 0.0) \
+                * self.limits.dq_max
+
+        def f(u):
+            zz = c + h * u
+            if braking:
+                zz, dv, dqq = self._braked(zz, s0)
+            if jac is None:
+                return -float(self.ratio(zz[None], s0[None])[0])
+            res = jac(zz)
+            w, J = np.array(res[0]), np.array(res[1])
+            for j, col in self.coul:
+                w[j, col] = s0[j]
+                J[col * n + j, :] = 0.0
+            num, den = float(np.sum(w * (w @ A))), float(np.sum(w * (w @ B)))
+            gnum = J.T @ (2 * (w @ A)).ravel(order="F")
+            gden = J.T @ (2 * (w @ B)).ravel(order="F")
+            if self.moments is not None:
+                lw = self.lam / self.moments.scale
+                num += -float(np.array(res[2]).ravel() @ lw) + self.c0
+                gnum = gnum - np.array(res[3]).T @ lw
+            if self.C is not None:
+                Cv, Ca = self.rho * (self.C @ zz[n:2 * n]), self.C @ zz[2 * n:]
+                num += float(zz[n:2 * n] @ Cv - zz[2 * n:] @ Ca)
+                gnum = gnum + np.concatenate([np.zeros(n), 2 * Cv, -2 * Ca])
+            den = max(den, 1e-300)
+            g = gnum / den - num / den ** 2 * gden
+            if braking:  # chain rule through the speed map
+                g = np.concatenate([g[:n] + g[n:2 * n] * dqq, g[n:2 * n] * dv, g[2 * n:]])
+            return -num / den, -g * h
+
+        u0 = np.where(free, np.clip((x0 - c) / np.where(free, h, 1.0), -1, 1), 0.0)
+        bnds = [(-1.0, 1.0) if fr else (0.0, 0.0) for fr in free]
+        res = minimize(f, u0, jac=jac is not None, bounds=bnds, method="L-BFGS-B", options={"maxiter": 300})
+        x = c + h * res.x
+        if braking:
+            x = self._braked(x, s0)[0]
+        return x, float(self.ratio(x[None], s0[None])[0])
+
+
+class RestMoments:
+    """The moment conditions of every trajectory that starts and ends at rest (every design of ``excite``:
+    Fourier, spline, point-to-point) or returns to its starting state: ``E[d/dt f(q, dq)] = 0`` for test
+    functions ``f`` that vanish at rest (``f(q, 0) = 0``), since the mean of ``d/dt f`` over the experiment is
+    ``(f(end) - f(start)) / T`` (the occupation-measure argument of [LHPT08], without the return to the
+    starting configuration that :func:`stationarity_moments` need).
+
+    The test functions are the robot's own: the entries of the momentum regressor
+    ``Y_p(q, dq) = W(q, 0, dq) - W(q, 0, 0)`` (``M(q) dq = Y_p chi``, the generalised momentum linear in the
+    base parameters) and, with ``robot``, the base-frame velocities of every frame origin and rotation
+    matrix (``dp_j/dt``, ``dR_j/dt`` of the MDH transforms). Their rates are the accelerations the
+    regressor's inertial and first-moment columns carry: a distribution of states whose arm accelerates
+    downwards on average (the LWR4's plain relaxation optimum does: its first-moment columns then cancel
+    part of gravity) can meet the stationarity moments of degree 2, not these. Rates from the generated CasADi
+    model (``jtimes``); the entries that vanish on ``samples`` random states of the limits (seeded) are
+    dropped, and each kept one is scaled by its largest magnitude on them (``scale``; the tolerance of
+    :func:`relaxation_bracket` is relative to it). ``numpy(q, dq, ddq)`` gives ``(k, m)``, ``casadi`` an
+    ``(m, 1)`` expression; ``names`` name each ``d/dt f``.
+    """
+
+    def __init__(self, model: IdentificationModel, limits: Limits, robot: Any = None, *, samples: int = 20_000,
+                 seed: int = 0, kinetic: str | None = None):
+        ca = _casadi()
+        n = limits.n
+        q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
+        F = _casadi_regressor(model)
+        zero = ca.SX.zeros(n)
+        Yp = F(q, zero, dq) - F(q, zero, zero)
+        f = [ca.vec(Yp)]  # column-major: joint fastest
+        names = [f"d/dt(Yp[{j + 1}, {b}])" for b in model.BASE_NAMES for j in range(n)]
+        if kinetic == "energy":
+            f.append(0.5 * ca.mtimes(Yp.T, dq))
+            names += [f"d/dt(T[{b}])" for b in model.BASE_NAMES]
+        elif kinetic == "joint":
+            f.append(ca.vec(ca.mtimes(ca.diag(dq), Yp)))
+            names += [f"d/dt(dq{j + 1} Yp[{j + 1}, {b}])" for b in model.BASE_NAMES for j in range(n)]
+        elif kinetic is not None:
+            raise ValueError(f"kinetic must be None, 'energy' or 'joint', not {kinetic!r}")
+        if robot is not None:
+            kin, kin_names = _frame_kinematics(robot, model, n, q)
+            f.append(ca.jtimes(kin, q, dq))
+            names += [f"d/dt(d/dt {s})" for s in kin_names]
+        fv = ca.vertcat(*f)
+        rate = ca.jtimes(fv, q, dq) + ca.jtimes(fv, dq, ddq)
+        X, _ = _random_states(np.random.default_rng(seed), limits, samples)
+        V = np.array(ca.Function("rate", [q, dq, ddq], [rate]).map(len(X))(X[:, :n].T, X[:, n:2 * n].T,
+                                                                            X[:, 2 * n:].T)).T
+        size = np.abs(V).max(axis=0)
+        keep = np.flatnonzero(size > 1e-9 * max(float(size.max()), 1e-300))
+        self.n = n
+        self.names = [names[k] for k in keep]
+        self.scale = size[keep]
+        self._f = ca.Function("rest_moments", [q, dq, ddq], [rate[[int(k) for k in keep]]])
+
+    def numpy(self, q, dq, ddq) -> np.ndarray:
+        q, dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (q, dq, ddq))
+        return np.array(self._f.map(len(q))(q.T, dq.T, ddq.T)).T.reshape(len(q), len(self.names))
+
+    def casadi(self, q, dq, ddq):
+        return self._f(q, dq, ddq)
+
+
+def _frame_kinematics(robot: Any, model: Any, n: int, q) -> tuple[Any, list[str]]:
+    """The base-frame origin ``p_j`` and rotation ``R_j`` (row by row) of every frame of ``robot``
+    (:func:`mdh_frames`; a closed-loop robot's through its ``model``'s linear closure) as a CasADi expression
+    in the design's joint positions ``q`` (SX, ``n``), with their names."""
+    lc = model.linear_closure() if hasattr(model, "linear_closure") else None
+    qa, frames, sub = mdh_frames(robot, n, None if lc is None else lc.numeric())
+    exprs, names = [], []
+    for j, T in frames.items():
+        exprs += [e.subs(sub) for e in list(T[:3, 3]) + list(T[:3, :3])]
+        names += [f"p{j}.{c}" for c in "xyz"] + [f"R{j}[{a},{b}]" for a in range(1, 4) for b in range(1, 4)]
+    return _sympy_casadi(qa, exprs, q), names
+
+
+
+class _MomentSet:
+    """The moment conditions a relaxation holds: the closed-trajectory ones of :func:`stationarity_moments`
+    (``degree``, or None) and the rest-to-rest ones of a :class:`RestMoments` (or None), concatenated."""
+
+    def __init__(self, limits: Limits, degree: int | None, rest: RestMoments | None):
+        self.degree, self.rest, self.n = degree, rest, limits.n
+        parts = ([stationarity_scales(limits, degree)] if degree is not None else []) + (
+            [rest.scale] if rest is not None else [])
+        self.scale = np.concatenate(parts) if parts else np.zeros(0)
+        self.names = (stationarity_moment_names(limits.n, degree) if degree is not None else []) + (
+            list(rest.names) if rest is not None else [])
+
+    def _parts(self, z, lib: Any) -> list:
+        n = self.n
+        q, dq, ddq = (z[:, :n], z[:, n:2 * n], z[:, 2 * n:]) if lib is np else (z[:n], z[n:2 * n], z[2 * n:])
+        out = [stationarity_moments(q, dq, ddq, lib=lib, degree=self.degree)] if self.degree is not None else []
+        if self.rest is not None:
+            out.append(self.rest.numpy(q, dq, ddq) if lib is np else self.rest.casadi(q, dq, ddq))
+        return out
+
+    def numpy(self, X: np.ndarray) -> np.ndarray:
+        """``(k, m)`` for the states ``X`` (``(k, 3n)``)."""
+        parts = self._parts(X, np)
+        return np.hstack(parts) if parts else np.zeros((len(X), 0))
+
+    def casadi(self, z):
+        """``(m, 1)`` for the CasADi state vector ``z`` (``3n``)."""
+        return _casadi().vertcat(*self._parts(z, _casadi()))
+
+
+def _trajectory_states(limits: Limits, rng: np.random.Generator, k: int, samples: int = 50
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The samples of ``k`` random Fourier trajectories (5 harmonics, 10 s, ``samples`` per period)
+    within the limits: states whose uniform distribution satisfies the stationarity moments."""
+    basis = FourierBasis(5, 0.1)
+    t = np.arange(samples) * (10.0 / samples)
+    Xs = []
+    for _ in range(k):
+        q, dq, ddq = basis_eval(basis, random_trajectory(basis, limits, rng, t), t)
+        Xs.append(np.hstack([q, dq, ddq]))
+    X = np.vstack(Xs) if Xs else np.zeros((0, 3 * limits.n))
+    return X, np.sign(X[:, limits.n:2 * limits.n])
+
+
+def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int = 400, rounds: int = 30,
+                       fresh: int = 30_000, starts: int = 40, add: int = 60, prune: float = 1e-6,
+                       tol: float = 0.02, time_budget: float = math.inf, seed: int = 0,
+                       extra_states: np.ndarray | None = None, stationary: bool = False,
+                       moment_tol: float = 0.01, degree: int = 2, trajectories: int = 0,
+                       bandwidth: float | None = None, rest: bool = False, robot: Any = None,
+                       kinetic: str | None = None, braking: bool = False, progress=None) -> RelaxationBracket:
+    """Bracket the smallest cond over distributions of states within ``limits`` (see
+    :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
+    cond^2 is scale-free, so fix ``lambda_min >= 1``)::
+
+        min kappa  s.t.  sum_i mu_i G_i >= I,  kappa I - sum_i mu_i G_i >= 0,  mu >= 0,
+        G_i = W(s_i)^T W(s_i) / tr(W(s_i)^T W(s_i))
+
+    and, with ``stationary``, ``|sum_i mu_i m(s_i) / (tr_i scale)| <= moment_tol sum_i mu_i / tr_i``
+    (the stationarity moments of :func:`stationarity_moments`: every closed trajectory - periodic, or
+    ending where it started - satisfies them, an arbitrary distribution of states does not), and with ``bandwidth``
+    (``rho``) ``sum_i mu_i (rho dq_i dq_i^T - ddq_i ddq_i^T) / tr_i >= 0`` (every design of a basis of
+    that :func:`basis_bandwidth` meets it). ``degree=3`` adds the test functions of degree 3 to the moments.
+    With ``rest`` the moments of :class:`RestMoments` (the momentum regressor's and, with ``robot``, the frame
+    velocities' rates) join them, held the same way: every trajectory that starts and ends at rest - every
+    design of ``excite``, a spline that ends elsewhere included - satisfies them; ``rest`` alone bounds all of
+    those, ``rest`` with ``stationary`` the closed ones. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
+    ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
+    (:class:`_DualPricer`): a state with ratio > 1 would lower the objective. Each round keeps the
+    states of weight > ``prune`` x the largest (plus the new ones), and adds the ``add`` best of
+    ``fresh`` random states and the local maxima of the ratio from the ``starts`` best random states
+    and ``starts // 4`` random ones. Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds
+    or past ``time_budget`` seconds. ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples) and
+    the samples of ``trajectories`` random Fourier trajectories join the first round (with
+    ``stationary`` or ``rest`` they make it feasible).
+    """
+    import cvxpy as cp
+
+    n, nb = limits.n, len(model.BASE_NAMES)
+    rng = np.random.default_rng(seed)
+    coul = _coulomb_columns(model)
+    X, S = _random_states(rng, limits, atoms, braking)
+    if extra_states is not None:
+        ex = np.asarray(extra_states, float)
+        X, S = np.vstack([X, ex]), np.vstack([S, np.sign(ex[:, n:2 * n])])
+    if trajectories:
+        Xt, St = _trajectory_states(limits, rng, trajectories)
+        X, S = np.vstack([X, Xt]), np.vstack([S, St])
+    if braking:  # the given and trajectory states too (a sampled trajectory may exceed it by its sampling error)
+        X[:, n:2 * n] = np.sign(X[:, n:2 * n]) * np.minimum(np.abs(X[:, n:2 * n]),
+                                                            braking_speed(limits, X[:, :n], np.sign(X[:, n:2 * n])))
+    rest_m = RestMoments(model, limits, robot, kinetic=kinetic) if rest else None
+    moments = _MomentSet(limits, degree if stationary else None, rest_m) if stationary or rest else None
+    jac = _DualPricer.casadi_jacobian(model, n, moments)
+
+    t0 = time.perf_counter()
+    hist: list[RelaxationRound] = []
+    best_lower, best_upper = 0.0, math.inf
+    best: dict[str, Any] = {}
+    dual_of: dict[str, Any] = {}
+    for rd in range(rounds + 1):
+        W = relaxation_rows(model, X, S, coul)
+        G = np.einsum("kia,kib->kab", W, W)
+        tr = np.trace(G, axis1=1, axis2=2)
+        ok = tr > 0
+        X, S, W, G, tr = X[ok], S[ok], W[ok], G[ok], tr[ok]
+        Gn = G / tr[:, None, None]
+        t_sdp = time.perf_counter()
+        mu, kap = cp.Variable(len(X), nonneg=True), cp.Variable()
+        Mx = cp.reshape(Gn.reshape(len(X), -1).T @ mu, (nb, nb), order="C")
+        Mx = (Mx + Mx.T) / 2
+        c1, c2 = Mx >> np.eye(nb), kap * np.eye(nb) - Mx >> 0
+        cons = [c1, c2]
+        if moments is not None:
+            H = moments.numpy(X) / moments.scale / tr[:, None]
+            mass = (1.0 / tr) @ mu
+            cp_pos, cp_neg = H.T @ mu - moment_tol * mass <= 0, -H.T @ mu - moment_tol * mass <= 0
+            cons += [cp_pos, cp_neg]
+        if bandwidth is not None:
+            dq_, ddq_ = X[:, n:2 * n], X[:, 2 * n:]
+            K = (bandwidth * np.einsum("ki,kj->kij", dq_, dq_) - np.einsum("ki,kj->kij", ddq_, ddq_)) / tr[:, None, None]
+            Kx = cp.reshape(K.reshape(len(X), -1).T @ mu, (n, n), order="C")
+            c3 = (Kx + Kx.T) / 2 >> 0
+            cons.append(c3)
+        prob = cp.Problem(cp.Minimize(kap), cons)
+        try:
+            prob.solve(solver="CLARABEL")
+        except cp.error.SolverError as e:
+            raise ExcitationError(f"{model.ROBOT}: the relaxation SDP failed on round {rd} ({len(X)} states): {e}") \
+                from None
+        if mu.value is None:
+            raise ExcitationError(f"{model.ROBOT}: the relaxation SDP failed on round {rd} ({len(X)} states): "
+                                  f"{prob.status}" + (" (no distribution of these states meets the stationarity "
+                                                      "moments: add trajectories=)" if moments is not None else ""))
+        t_sdp = time.perf_counter() - t_sdp
+        w = np.clip(np.asarray(mu.value), 0, None)
+        ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", w, Gn))
+        primal = math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+        A, B = _psd(np.asarray(c1.dual_value)), _psd(np.asarray(c2.dual_value))
+        lam, c0 = None, 0.0
+        if moments is not None:
+            nu_p = np.clip(np.asarray(cp_pos.dual_value, float), 0, None)
+            nu_n = np.clip(np.asarray(cp_neg.dual_value, float), 0, None)
+            lam, c0 = nu_p - nu_n, moment_tol * float(np.sum(nu_p + nu_n))
+        C = _psd(np.asarray(c3.dual_value)) if bandwidth is not None else None
+        pricer = _DualPricer(model, limits, A, B, lam, c0, rho=bandwidth, C=C, degree=degree, closed=stationary,
+                             rest=rest_m, coulomb=coul, jac=jac, braking=braking)
+        # pricing: the dual ratio over the current states, fresh random states and local maxima
+        Xf, Sf = _random_states(rng, limits, fresh, braking)
+        rf = pricer.ratio(Xf, Sf)
+        r_atoms = float(pricer.ratio(X, S, W).max())
+        order = np.argsort(-rf)
+        picks = list(order[:starts]) + list(rng.choice(len(Xf), starts // 4, replace=False))
+        loc = [pricer.local_max(Xf[i], Sf[i]) for i in picks]
+        r = max(r_atoms, float(rf.max()), max(v for _, v in loc))
+        dual = relaxation_dual_bound(A, B, r) if np.isfinite(r) and r > 0 else 0.0
+        keep = w > prune * w.max()
+        hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
+                                    t_sdp))
+        if progress is not None:
+            progress(hist[-1])
+        if dual > best_lower or not dual_of:
+            best_lower = max(best_lower, dual)
+            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0, "C": C}
+        if primal < best_upper:
+            best_upper = primal
+            pos = w > 0
+            best = {"states": X[pos], "signs": S[pos], "weights": w[pos] / tr[pos]}
+        if best_upper <= best_lower * (1 + tol) or hist[-1].seconds > time_budget or rd == rounds:
+            break
+        good = [(x, Sf[i]) for i, (x, v) in zip(picks, loc) if v > 1.0]
+        newX = [X[keep], Xf[order[:add]]] + ([np.array([x for x, _ in good])] if good else [])
+        newS = [S[keep], Sf[order[:add]]] + ([np.array([s for _, s in good])] if good else [])
+        X, S = np.vstack(newX), np.vstack(newS)
+    return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
+                             dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if moments is not None else 0.0,
+                             dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree, stationary, rest_m,
+                             braking)
+
+
+def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: RelaxationBracket, *,
+                      states: int = 300_000, starts: int = 200, seed: int = 1, batch: int = 20_000) -> tuple[float, float]:
+    """Re-price the duals that gave ``bracket.lower`` on a search the bracket never ran: ``states``
+    fresh random states (another seed) and L-BFGS-B from the ``starts`` best of them. Returns
+    ``(r, bound)``: the largest ratio found (at least ``bracket.r``) and ``sqrt(tr A / (r tr B))``.
+    A ``bound`` well below ``bracket.lower`` says the bracket's search for ``r`` was not global."""
+    pricer = _DualPricer(model, limits, bracket.A, bracket.B, bracket.lam, bracket.c0, rho=bracket.bandwidth,
+                         C=bracket.C, degree=bracket.degree, closed=bracket.closed, rest=bracket.rest,
+                         braking=bracket.braking)
+    rng = np.random.default_rng(seed)
+    best_r, pool_X, pool_S, pool_r = bracket.r, [], [], []
+    for k0 in range(0, states, batch):
+        Xf, Sf = _random_states(rng, limits, min(batch, states - k0), bracket.braking)
+        rf = pricer.ratio(Xf, Sf)
+        best_r = max(best_r, float(rf.max()))
+        top = np.argsort(-rf)[:starts]
+        pool_X.append(Xf[top])
+        pool_S.append(Sf[top])
+        pool_r.append(rf[top])
+    PX, PS, PR = np.vstack(pool_X), np.vstack(pool_S), np.concatenate(pool_r)
+    for i in np.argsort(-PR)[:starts]:
+        best_r = max(best_r, pricer.local_max(PX[i], PS[i])[1])
+    bound = relaxation_dual_bound(bracket.A, bracket.B, best_r) if np.isfinite(best_r) else 0.0
+    return best_r, bound
