@@ -23,6 +23,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,6 +49,7 @@ __all__ = [
     "RestMoments",
     "basis_bandwidth",
     "braking_speed",
+    "mixture_cond",
     "relaxation_bracket",
     "relaxation_dual_bound",
     "relaxation_rows",
@@ -167,6 +169,38 @@ def relaxation_rows(model: IdentificationModel, states: np.ndarray, signs: np.nd
         for j, c in (_coulomb_columns(model) if coulomb is None else coulomb):
             W[:, j, c] = signs[:, j]
     return W
+
+
+def mixture_cond(matrices: np.ndarray) -> tuple[float, np.ndarray]:
+    """The smallest cond over MIXTURES of designs: ``matrices`` ``(k, nb, nb)`` are the information matrices
+    ``W_i^T W_i / N_i`` of ``k`` designs (per sample); a mixture runs design ``i`` for a fraction ``p_i`` of
+    the time, ``M = sum_i p_i M_i``. Returns ``(cond, p)``: ``sqrt(lambda_max / lambda_min)`` of the best
+    mixture (recomputed from the weights, whatever the solver's accuracy) and its time fractions (summing to
+    1). The SDP of :func:`relaxation_bracket` with whole designs
+    as atoms (cvxpy + Clarabel). Every condition that the relaxations hold for every design (a linear
+    moment condition, a set the states keep to) holds for every mixture too, so no such relaxation can bound
+    a single design's cond above this value for the designs it is given."""
+    import cvxpy as cp
+
+    Ms = np.asarray(matrices, float)
+    if Ms.ndim != 3 or Ms.shape[1] != Ms.shape[2] or len(Ms) == 0:
+        raise ValueError(f"mixture_cond: matrices must be (k, nb, nb) with k >= 1, not {Ms.shape}")
+    k, nb = Ms.shape[0], Ms.shape[1]
+    tr = np.trace(Ms, axis1=1, axis2=2)
+    Mn = Ms / tr[:, None, None]
+    w, kap = cp.Variable(k, nonneg=True), cp.Variable()
+    S = cp.reshape(Mn.reshape(k, -1).T @ w, (nb, nb), order="C")
+    S = (S + S.T) / 2
+    prob = cp.Problem(cp.Minimize(kap), [S >> np.eye(nb), kap * np.eye(nb) - S >> 0])
+    with warnings.catch_warnings():  # "optimal_inaccurate": the cond returned is recomputed from the weights
+        warnings.simplefilter("ignore", UserWarning)
+        prob.solve(solver="CLARABEL")
+    if w.value is None:  # no mixture has full rank
+        return math.inf, np.full(k, 1.0 / k)
+    wv = np.clip(np.asarray(w.value), 0, None)
+    ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", wv, Mn))
+    p = wv / tr
+    return (math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf), p / p.sum()
 
 
 def relaxation_dual_bound(A: np.ndarray, B: np.ndarray, r: float) -> float:

@@ -526,3 +526,33 @@ def test_braking_relaxation_bounds_unseen_designs(scara):
         assert stacked_cond(model, q, dq, ddq) >= b.lower
         num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
         assert np.all(num <= b.r * den * (1 + 1e-9))
+
+
+def test_mixture_cond_is_the_best_time_sharing_of_designs():
+    """mixture_cond: the cond of the returned time fractions' mixture is what it reports, no better than any
+    random mixture of the same designs and no worse than the best single one; two designs that excite
+    complementary halves of the parameters mix into a well-conditioned experiment that neither is."""
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    from symoro_gen.excite_relaxation import mixture_cond
+
+    Ms = []
+    for q, dq, ddq in _trajectories(model, lim, 6, 61):
+        W = np.asarray(model.regressor(q, dq, ddq)).reshape(-1, len(model.BASE_NAMES))
+        Ms.append(W.T @ W / len(q))
+    Ms = np.array(Ms)
+    c, p = mixture_cond(Ms)
+    assert p.shape == (6,) and np.all(p >= 0) and p.sum() == pytest.approx(1.0)
+    ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", p, Ms))
+    assert np.sqrt(ev[-1] / ev[0]) == pytest.approx(c, rel=1e-9)
+    singles = [np.sqrt(e[-1] / e[0]) for e in map(np.linalg.eigvalsh, Ms)]
+    assert c <= min(singles) * (1 + 1e-6)
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        e = np.linalg.eigvalsh(np.einsum("k,kab->ab", rng.dirichlet(np.ones(6)), Ms))
+        assert np.sqrt(e[-1] / e[0]) >= c * (1 - 1e-4)
+    D1, D2 = np.diag([1.0, 1.0, 1e-4, 1e-4]), np.diag([1e-4, 1e-4, 4.0, 4.0])
+    c2, p2 = mixture_cond(np.array([D1, D2]))
+    assert c2 == pytest.approx(1.0, rel=1e-4) and p2[0] == pytest.approx(0.8, rel=1e-3)
+    with pytest.raises(ValueError, match="mixture_cond"):
+        mixture_cond(np.zeros((2, 3)))

@@ -1,0 +1,116 @@
+"""Benchmark: what MIXTURES of 10-s designs reach (issue 11 section 1; docs/excitation.md, "Why no
+relaxation over distributions can settle the target").
+
+Every condition the relaxations of ``symoro_gen.excite_relaxation`` hold for every design (a moment of the
+distribution of states within a tolerance of zero, a set the states keep to) holds for every mixture of
+designs too: design 1 run for a fraction ``p1`` of the time, design 2 for ``p2``, ... So none of them can
+bound the cond of a single design above the best mixture's. This bench measures the best mixture
+(``mixture_cond``: an SDP over the time fractions) of
+
+* the random Fourier trajectories of the issue-11 baseline (5 harmonics, 10 s, each scaled to touch its
+  tightest limit on the 10x denser grid; seed 0: the first 50 are the bench's baseline), ``--random``;
+* ``--optimised K`` spline designs optimised from K seeds (one start each: 60 control points, structured
+  starts, IPOPT, SDP refinement; ``--max-iter``, ``--refine``), alone and with their time-reversed runs
+  (``q(T - t)``: the same cond, the friction columns' signs flipped),
+
+against the best single design of each set and the target (best of the first 50 random / 5).
+
+    PYTHONPATH=. python bench/bench_excite_mixture.py --robots lwr4 rx90 --random 50 400 --optimised 8
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from symoro_gen.excite import (
+    FourierBasis,
+    SplineBasis,
+    basis_eval,
+    check_limits,
+    dense_times,
+    limits_of,
+    optimise_excitation,
+    output_times,
+    random_trajectory,
+)
+from symoro_gen.excite_relaxation import mixture_cond
+from symoro_gen.loader import model_for
+
+TARGET_RATIO = 5.0
+
+
+def information(model, q, dq, ddq) -> np.ndarray:
+    """``W^T W / N`` of the base regressor stacked over the samples."""
+    W = np.asarray(model.regressor(q, dq, ddq)).reshape(-1, len(model.BASE_NAMES))
+    return W.T @ W / len(q)
+
+
+def cond_of(M: np.ndarray) -> float:
+    ev = np.linalg.eigvalsh(M)
+    return float(np.sqrt(ev[-1] / ev[0])) if ev[0] > 0 else float("inf")
+
+
+def random_matrices(model, lim, count: int, seed: int = 0) -> np.ndarray:
+    """The information matrices of ``count`` random Fourier trajectories, drawn as the baseline of
+    ``bench_excite.py`` draws them (same seed: the same first trajectories)."""
+    basis = FourierBasis(5, 0.1)
+    t = output_times(10.0, 100.0)
+    t_dense = dense_times(t, 10.0, basis)
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        X = random_trajectory(basis, lim, rng, t_dense)
+        assert check_limits(lim, *basis_eval(basis, X, t_dense))["ok"]
+        out.append(information(model, *basis_eval(basis, X, t)))
+    return np.array(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--robots", nargs="+", default=["lwr4", "rx90"])
+    ap.add_argument("--random", nargs="*", type=int, default=[50, 400], help="sizes of the random sets (seed 0)")
+    ap.add_argument("--optimised", type=int, default=0, metavar="K", help="optimised spline designs (seeds 1..K)")
+    ap.add_argument("--max-iter", type=int, default=150)
+    ap.add_argument("--refine", type=int, default=10)
+    a = ap.parse_args(argv)
+    for name in a.robots:
+        robot, model = model_for(name)
+        lim = limits_of(robot)
+        base = random_matrices(model, lim, 50)
+        target = min(cond_of(M) for M in base) / TARGET_RATIO
+        print(f"{name}: target (best of the 50 random / {TARGET_RATIO:g}) = {target:.2f}", flush=True)
+        for count in a.random:
+            t0 = time.perf_counter()
+            Ms = base[:count] if count <= 50 else random_matrices(model, lim, count)
+            c, p = mixture_cond(Ms)
+            print(f"{name}: {count} random Fourier designs: best single {min(cond_of(M) for M in Ms):.2f}, "
+                  f"best mixture {c:.2f} ({int(np.sum(p > 1e-3))} designs above 0.1 % of the time, largest "
+                  f"share {p.max():.2f}; {time.perf_counter() - t0:.0f} s)", flush=True)
+        if a.optimised:
+            fwd, both = [], []
+            for s in range(1, a.optimised + 1):
+                t0 = time.perf_counter()
+                res = optimise_excitation(model, SplineBasis(60, 10.0), lim, 10.0, rate=100.0, starts=1, seed=s,
+                                          max_iter=a.max_iter, pool=10, structured=10, refine=a.refine, jobs=1)
+                M = information(model, res.q, res.dq, res.ddq)
+                Mr = information(model, res.q[::-1], -res.dq[::-1], res.ddq[::-1])
+                fwd.append(M)
+                both += [M, Mr]
+                print(f"{name}: optimised design, seed {s}: cond {res.cond:.2f} (limits held: {res.limits_ok}; "
+                      f"{time.perf_counter() - t0:.0f} s)", flush=True)
+            c, p = mixture_cond(np.array(fwd))
+            c2, _ = mixture_cond(np.array(both))
+            print(f"{name}: {a.optimised} optimised designs: best single {min(cond_of(M) for M in fwd):.2f}, best "
+                  f"mixture {c:.2f} (shares {', '.join(f'{x:.2f}' for x in np.sort(p)[::-1] if x > 1e-3)}), "
+                  f"with their time-reversed runs {c2:.2f}; target {target:.2f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
