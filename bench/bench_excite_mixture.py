@@ -13,9 +13,14 @@ bound the cond of a single design above the best mixture's. This bench measures 
   starts, IPOPT, SDP refinement; ``--max-iter``, ``--refine``), alone and with their time-reversed runs
   (``q(T - t)``: the same cond, the friction columns' signs flipped),
 
-against the best single design of each set and the target (best of the first 50 random / 5).
+against the best single design of each set and the target (best of the first 50 random / 5). ``--price R``
+then runs R rounds of column generation over designs: the duals ``A, B`` of the mixture SDP price a new
+design (IPOPT on ``-log tr(A M) + log tr(B M)`` within the limits, through the generated CasADi model, from
+the pool design of the largest ratio and from a structured start), which joins the pool - how far mixtures
+of (locally priced) designs go.
 
     PYTHONPATH=. python bench/bench_excite_mixture.py --robots lwr4 rx90 --random 50 400 --optimised 8
+    PYTHONPATH=. python bench/bench_excite_mixture.py --robots rx90 --random --optimised 8 --price 10
 """
 from __future__ import annotations
 
@@ -28,18 +33,20 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from symoro_gen import excite as E
 from symoro_gen.excite import (
     FourierBasis,
     SplineBasis,
     basis_eval,
     check_limits,
     dense_times,
+    friction_trajectory,
     limits_of,
     optimise_excitation,
     output_times,
     random_trajectory,
 )
-from symoro_gen.excite_relaxation import mixture_cond
+from symoro_gen.excite_relaxation import mixture_cond, mixture_duals
 from symoro_gen.loader import model_for
 
 TARGET_RATIO = 5.0
@@ -71,6 +78,36 @@ def random_matrices(model, lim, count: int, seed: int = 0) -> np.ndarray:
     return np.array(out)
 
 
+def pricer(model, lim, basis, max_iter: int):
+    """IPOPT on the dual ratio of a mixture SDP: ``solve(X0, A, B) -> X`` within the limits."""
+    import casadi as ca
+
+    n, nb = lim.n, len(model.BASE_NAMES)
+    t_obj, t_con = np.linspace(0, 10, 200), np.linspace(0, 10, 400)
+    nlp, bounds = E._build_nlp(model, basis, lim, t_obj, t_con, "logdet", None, 0.01)  # its constraints
+    x = nlp["x"]
+    X = ca.reshape(x, basis.m, n)
+    qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
+    G = ca.Function("Yt", [qs, dqs, ddqs], [E._casadi_regressor(model)(qs, dqs, ddqs).T])
+    Po, Do, Ao = (ca.DM(M) for M in basis.matrices(t_obj))
+    Z = G.map(len(t_obj))((Po @ X).T, (Do @ X).T, (Ao @ X).T)
+    M = Z @ Z.T
+    Ap, Bp = ca.MX.sym("A", nb, nb), ca.MX.sym("B", nb, nb)
+    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": int(max_iter), "ipopt.tol": 1e-6,
+            "ipopt.hessian_approximation": "limited-memory", "ipopt.sb": "yes"}
+    solver = ca.nlpsol("price", "ipopt", {"x": x, "p": ca.vertcat(ca.vec(Ap), ca.vec(Bp)), "g": nlp["g"],
+                                          "f": -ca.log(ca.trace(Ap @ M)) + ca.log(ca.trace(Bp @ M))}, opts)
+    dense = E.dense_times(output_times(10.0, 100.0), 10.0, basis)
+
+    def solve(X0, A, B):
+        sol = solver(x0=X0.T.reshape(-1), p=np.concatenate([A.T.reshape(-1), B.T.reshape(-1)]),
+                     lbg=bounds["lbg"], ubg=bounds["ubg"])
+        Xn = np.asarray(sol["x"]).reshape(n, basis.m).T
+        return Xn if E._inside(basis, lim, Xn, dense) else E._scale_into(basis, lim, Xn, dense)
+
+    return solve
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robots", nargs="+", default=["lwr4", "rx90"])
@@ -78,6 +115,7 @@ def main(argv=None) -> int:
     ap.add_argument("--optimised", type=int, default=0, metavar="K", help="optimised spline designs (seeds 1..K)")
     ap.add_argument("--max-iter", type=int, default=150)
     ap.add_argument("--refine", type=int, default=10)
+    ap.add_argument("--price", type=int, default=0, metavar="R", help="rounds of column generation over designs")
     a = ap.parse_args(argv)
     for name in a.robots:
         robot, model = model_for(name)
@@ -93,7 +131,8 @@ def main(argv=None) -> int:
                   f"best mixture {c:.2f} ({int(np.sum(p > 1e-3))} designs above 0.1 % of the time, largest "
                   f"share {p.max():.2f}; {time.perf_counter() - t0:.0f} s)", flush=True)
         if a.optimised:
-            fwd, both = [], []
+            fwd, both, designs = [], [], []
+            basis, t = SplineBasis(60, 10.0), output_times(10.0, 100.0)
             for s in range(1, a.optimised + 1):
                 t0 = time.perf_counter()
                 res = optimise_excitation(model, SplineBasis(60, 10.0), lim, 10.0, rate=100.0, starts=1, seed=s,
@@ -102,6 +141,7 @@ def main(argv=None) -> int:
                 Mr = information(model, res.q[::-1], -res.dq[::-1], res.ddq[::-1])
                 fwd.append(M)
                 both += [M, Mr]
+                designs.append(res.X)
                 print(f"{name}: optimised design, seed {s}: cond {res.cond:.2f} (limits held: {res.limits_ok}; "
                       f"{time.perf_counter() - t0:.0f} s)", flush=True)
             c, p = mixture_cond(np.array(fwd))
@@ -109,6 +149,20 @@ def main(argv=None) -> int:
             print(f"{name}: {a.optimised} optimised designs: best single {min(cond_of(M) for M in fwd):.2f}, best "
                   f"mixture {c:.2f} (shares {', '.join(f'{x:.2f}' for x in np.sort(p)[::-1] if x > 1e-3)}), "
                   f"with their time-reversed runs {c2:.2f}; target {target:.2f}", flush=True)
+            if a.price:
+                solve, rng, t0 = pricer(model, lim, basis, a.max_iter), np.random.default_rng(7), time.perf_counter()
+                for rd in range(a.price + 1):
+                    c, p, A, B = mixture_duals(np.array(fwd))
+                    ratio = [float(np.trace(A @ M) / np.trace(B @ M)) for M in fwd]
+                    print(f"{name}: pricing round {rd}: {len(fwd)} designs, best mixture {c:.3f} "
+                          f"({time.perf_counter() - t0:.0f} s)", flush=True)
+                    if rd == a.price:
+                        break
+                    for X0 in (designs[int(np.argmax(ratio))],
+                               friction_trajectory(basis, lim.shrunk(0.01), rng, np.linspace(0, 10, 400), 10.0)):
+                        Xn = solve(X0, A, B)
+                        designs.append(Xn)
+                        fwd.append(information(model, *basis_eval(basis, Xn, t)))
     return 0
 
 

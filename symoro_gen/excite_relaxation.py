@@ -50,6 +50,7 @@ __all__ = [
     "basis_bandwidth",
     "braking_speed",
     "mixture_cond",
+    "mixture_duals",
     "relaxation_bracket",
     "relaxation_dual_bound",
     "relaxation_rows",
@@ -172,11 +173,18 @@ def relaxation_rows(model: IdentificationModel, states: np.ndarray, signs: np.nd
 
 
 def mixture_cond(matrices: np.ndarray) -> tuple[float, np.ndarray]:
+    """See :func:`mixture_duals` (the same SDP; cond and time fractions only)."""
+    c, p, _, _ = mixture_duals(matrices)
+    return c, p
+
+
+def mixture_duals(matrices: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """The smallest cond over MIXTURES of designs: ``matrices`` ``(k, nb, nb)`` are the information matrices
     ``W_i^T W_i / N_i`` of ``k`` designs (per sample); a mixture runs design ``i`` for a fraction ``p_i`` of
     the time, ``M = sum_i p_i M_i``. Returns ``(cond, p)``: ``sqrt(lambda_max / lambda_min)`` of the best
     mixture (recomputed from the weights, whatever the solver's accuracy) and its time fractions (summing to
-    1). The SDP of :func:`relaxation_bracket` with whole designs
+    1), and the duals ``A`` (of ``M >= I``) and ``B`` (of ``kappa I >= M``, PSD) that price a new design by
+    ``tr(A M) / tr(B M)`` (``bench/bench_excite_mixture.py --price``). The SDP of :func:`relaxation_bracket` with whole designs
     as atoms (cvxpy + Clarabel). Every condition that the relaxations hold for every design (a linear
     moment condition, a set the states keep to) holds for every mixture too, so no such relaxation can bound
     a single design's cond above this value for the designs it is given."""
@@ -191,16 +199,18 @@ def mixture_cond(matrices: np.ndarray) -> tuple[float, np.ndarray]:
     w, kap = cp.Variable(k, nonneg=True), cp.Variable()
     S = cp.reshape(Mn.reshape(k, -1).T @ w, (nb, nb), order="C")
     S = (S + S.T) / 2
-    prob = cp.Problem(cp.Minimize(kap), [S >> np.eye(nb), kap * np.eye(nb) - S >> 0])
+    c1, c2 = S >> np.eye(nb), kap * np.eye(nb) - S >> 0
+    prob = cp.Problem(cp.Minimize(kap), [c1, c2])
     with warnings.catch_warnings():  # "optimal_inaccurate": the cond returned is recomputed from the weights
         warnings.simplefilter("ignore", UserWarning)
         prob.solve(solver="CLARABEL")
     if w.value is None:  # no mixture has full rank
-        return math.inf, np.full(k, 1.0 / k)
+        return math.inf, np.full(k, 1.0 / k), np.zeros((nb, nb)), np.zeros((nb, nb))
     wv = np.clip(np.asarray(w.value), 0, None)
     ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", wv, Mn))
     p = wv / tr
-    return (math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf), p / p.sum()
+    return ((math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf), p / p.sum(), _psd(np.asarray(c1.dual_value)),
+            _psd(np.asarray(c2.dual_value)))
 
 
 def relaxation_dual_bound(A: np.ndarray, B: np.ndarray, r: float) -> float:
