@@ -265,8 +265,8 @@ def braking_speed(limits: Limits, q: np.ndarray, sign: np.ndarray, slack: float 
     (q_max - q_min)`` covers a sampled design: its limits hold on a grid, between whose points the motion may
     overshoot a range end by a little (a sample at the end itself with a small speed). Every sample of every
     ``excite`` design (at rest at both ends, or periodic) satisfies it; a state of the box near a range end
-    at full speed does not (the LWR4's joints need 22 deg to stop from their velocity limit, the RX-90's
-    wrist up to 145 deg)."""
+    at full speed does not (the LWR4's joints need 20-52 deg to stop from their velocity limit, the RX-90's
+    50-153 deg)."""
     d = slack * (limits.q_max - limits.q_min)
     room = np.clip(np.where(np.asarray(sign) > 0, limits.q_max - q, q - limits.q_min) + d, 0.0, None)
     return np.minimum(limits.dq_max, np.sqrt(2.0 * limits.ddq_max * room))
