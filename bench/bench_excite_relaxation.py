@@ -31,7 +31,8 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
 
     PYTHONPATH=. python bench/bench_excite_relaxation.py [--robot lwr4|rx90] [--atoms 400] [--rounds 60]
         [--budget SECONDS] [--tol 0.02] [--fresh 30000] [--starts 40] [--add 60] [--seed 0]
-        [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--rest] [--bandwidth K] [--verify 300000]
+        [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--rest [--kinetic energy|joint]]
+        [--braking] [--bandwidth K] [--verify 300000] [--save OUT.npz]
 
 ``--rest`` adds the moments of every trajectory that starts and ends at rest (every design of ``excite``,
 closed or not: ``symoro_gen.excite_relaxation.RestMoments``, the rates of the momentum regressor and of every frame's
@@ -39,6 +40,11 @@ velocity, whose mean is 0 over such a trajectory), held to ``--moment-tol`` of t
 every ``excite`` design, with ``--stationary`` the closed ones. The bench prints, for the best distribution
 of every run, its largest rest moments and the first-moment columns in its motion and at rest (a relaxation
 without ``--rest`` lets the arm fall on average, cancelling part of gravity in those columns).
+``--kinetic`` adds test functions quadratic in ``dq`` to those moments (the kinetic-energy regressor's
+entries, or every ``dq_j Y_p[j, b]``); ``--braking`` keeps every state to ``braking_speed`` (a joint at speed
+must be able to stop before the end of its range); ``--save`` writes the best distribution and the duals.
+Neither condition moves the floors (docs/excitation.md, "Why no relaxation over distributions can settle
+the target").
 
 ``--degree 3`` adds the test functions of degree 3 (``symoro_gen.excite_relaxation._degree3_tests``: 1456 more
 conditions on the LWR4, 938 on the RX-90). ``--bandwidth K`` restricts the distributions to those of the

@@ -561,6 +561,11 @@ class RestMoments:
     dropped, and each kept one is scaled by its largest magnitude on them (``scale``; the tolerance of
     :func:`relaxation_bracket` is relative to it). ``numpy(q, dq, ddq)`` gives ``(k, m)``, ``casadi`` an
     ``(m, 1)`` expression; ``names`` name each ``d/dt f``.
+
+    ``kinetic`` adds test functions quadratic in ``dq``: ``"energy"`` the entries of the kinetic-energy
+    regressor ``T_b = dq^T Y_p[:, b] / 2`` (whose rates are each column's power ``sum_j dq_j (W_jb(q, dq, ddq) -
+    W_jb(q, 0, 0))``, Gautier's energy model), ``"joint"`` every ``dq_j Y_p[j, b]``. Measured on the LWR4 and
+    the SCARA, they do not move the relaxation (docs/excitation.md).
     """
 
     def __init__(self, model: IdentificationModel, limits: Limits, robot: Any = None, *, samples: int = 20_000,
@@ -685,7 +690,10 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     With ``rest`` the moments of :class:`RestMoments` (the momentum regressor's and, with ``robot``, the frame
     velocities' rates) join them, held the same way: every trajectory that starts and ends at rest - every
     design of ``excite``, a spline that ends elsewhere included - satisfies them; ``rest`` alone bounds all of
-    those, ``rest`` with ``stationary`` the closed ones. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
+    those, ``rest`` with ``stationary`` the closed ones; ``kinetic`` (``"energy"`` or ``"joint"``) adds test
+    functions quadratic in ``dq`` to them (:class:`RestMoments`). With ``braking`` every state keeps to
+    :func:`braking_speed` (the random ones, the pricer's local searches and the given ones), as every design's
+    samples do. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
     ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
     (:class:`_DualPricer`): a state with ratio > 1 would lower the objective. Each round keeps the
     states of weight > ``prune`` x the largest (plus the new ones), and adds the ``add`` best of
