@@ -76,19 +76,27 @@ def random_baseline(model, lim, *, harmonics: int = 5, duration: float = 10.0, r
     ``duration`` s sampled at ``rate``, seeded), each scaled per joint to touch its tightest limit on the
     10x denser resampling the optimised designs are checked on (so that both hold the same limits between
     samples too): the issue-11 baseline (the target is the best of them / 5)."""
+    rand, rand_smax = [], []
+    for q, dq, ddq in random_designs(lim, harmonics=harmonics, duration=duration, rate=rate, seed=seed, count=count):
+        Wr = np.asarray(model.regressor(q, dq, ddq)).reshape(-1, len(model.BASE_NAMES))
+        sr = np.linalg.svd(Wr, compute_uv=False)
+        rand.append(float(sr[0] / sr[-1]))
+        rand_smax.append(float(sr[0] / np.sqrt(len(q))))
+    return rand, rand_smax
+
+
+def random_designs(lim, *, harmonics: int = 5, duration: float = 10.0, rate: float = 100.0, seed: int = 0,
+                   count: int = 50):
+    """``(q, dq, ddq)`` at ``rate`` of the baseline's ``count`` random Fourier trajectories (see
+    :func:`random_baseline`), one at a time."""
     basis = FourierBasis(harmonics, 1.0 / duration)
     t = output_times(duration, rate)
     t_dense = dense_times(t, duration, basis)
     rng = np.random.default_rng(seed)
-    rand, rand_smax = [], []
     for _ in range(count):
         X = random_trajectory(basis, lim, rng, t_dense)
         assert check_limits(lim, *basis_eval(basis, X, t_dense))["ok"]
-        Wr = np.asarray(model.regressor(*basis_eval(basis, X, t))).reshape(-1, len(model.BASE_NAMES))
-        sr = np.linalg.svd(Wr, compute_uv=False)
-        rand.append(float(sr[0] / sr[-1]))
-        rand_smax.append(float(sr[0] / np.sqrt(len(t))))
-    return rand, rand_smax
+        yield basis_eval(basis, X, t)
 
 
 def run(name: str, *, harmonics: int, duration: float, rate: float, starts: int, max_iter: int, seed: int,

@@ -32,19 +32,18 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_excite import random_designs
 
 from symoro_gen import excite as E
 from symoro_gen.excite import (
-    FourierBasis,
     SplineBasis,
     basis_eval,
-    check_limits,
-    dense_times,
     friction_trajectory,
     limits_of,
     optimise_excitation,
     output_times,
-    random_trajectory,
 )
 from symoro_gen.excite_relaxation import mixture_cond, mixture_duals
 from symoro_gen.loader import model_for
@@ -66,32 +65,18 @@ def cond_of(M: np.ndarray) -> float:
 def random_matrices(model, lim, count: int, seed: int = 0) -> np.ndarray:
     """The information matrices of ``count`` random Fourier trajectories, drawn as the baseline of
     ``bench_excite.py`` draws them (same seed: the same first trajectories)."""
-    basis = FourierBasis(5, 0.1)
-    t = output_times(10.0, 100.0)
-    t_dense = dense_times(t, 10.0, basis)
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(count):
-        X = random_trajectory(basis, lim, rng, t_dense)
-        assert check_limits(lim, *basis_eval(basis, X, t_dense))["ok"]
-        out.append(information(model, *basis_eval(basis, X, t)))
-    return np.array(out)
+    return np.array([information(model, *qdq) for qdq in random_designs(lim, seed=seed, count=count)])
 
 
 def pricer(model, lim, basis, max_iter: int):
     """IPOPT on the dual ratio of a mixture SDP: ``solve(X0, A, B) -> X`` within the limits."""
     import casadi as ca
 
-    n, nb = lim.n, len(model.BASE_NAMES)
+    nb = len(model.BASE_NAMES)
     t_obj, t_con = np.linspace(0, 10, 200), np.linspace(0, 10, 400)
     nlp, bounds = E._build_nlp(model, basis, lim, t_obj, t_con, "logdet", None, 0.01)  # its constraints
     x = nlp["x"]
-    X = ca.reshape(x, basis.m, n)
-    qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
-    G = ca.Function("Yt", [qs, dqs, ddqs], [E._casadi_regressor(model)(qs, dqs, ddqs).T])
-    Po, Do, Ao = (ca.DM(M) for M in basis.matrices(t_obj))
-    Z = G.map(len(t_obj))((Po @ X).T, (Do @ X).T, (Ao @ X).T)
-    M = Z @ Z.T
+    M = E.design_information(model, basis, x, t_obj)
     Ap, Bp = ca.MX.sym("A", nb, nb), ca.MX.sym("B", nb, nb)
     opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": int(max_iter), "ipopt.tol": 1e-6,
             "ipopt.hessian_approximation": "limited-memory", "ipopt.sb": "yes"}
@@ -102,7 +87,7 @@ def pricer(model, lim, basis, max_iter: int):
     def solve(X0, A, B):
         sol = solver(x0=X0.T.reshape(-1), p=np.concatenate([A.T.reshape(-1), B.T.reshape(-1)]),
                      lbg=bounds["lbg"], ubg=bounds["ubg"])
-        Xn = np.asarray(sol["x"]).reshape(n, basis.m).T
+        Xn = np.asarray(sol["x"]).reshape(lim.n, basis.m).T
         return Xn if E._inside(basis, lim, Xn, dense) else E._scale_into(basis, lim, Xn, dense)
 
     return solve

@@ -81,6 +81,7 @@ __all__ = [
     "basis_eval",
     "check_limits",
     "cond_lower_bound",
+    "design_information",
     "friction_ceiling",
     "friction_trajectory",
     "limits_of",
@@ -871,6 +872,21 @@ def _casadi_regressor(model: IdentificationModel):
                               "on it)") from None
 
 
+def design_information(model: IdentificationModel, basis, x, t: np.ndarray):
+    """``W^T W / (n N)`` of the base regressor stacked over the samples ``t`` of the design ``x`` (a CasADi
+    column of the design variables, ``X`` column-major: column j = joint j), as a CasADi expression from the
+    generated model: the information matrix every criterion of :func:`optimise_excitation` is a function of
+    (and the dual ratio that ``bench/bench_excite_mixture.py --price`` maximises)."""
+    ca = _casadi()
+    n = int(x.numel()) // int(basis.m)
+    qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
+    G = ca.Function("Yt", [qs, dqs, ddqs], [_casadi_regressor(model)(qs, dqs, ddqs).T])
+    X = ca.reshape(x, basis.m, n)
+    P, D, A = (ca.DM(M) for M in basis.matrices(t))
+    Z = G.map(len(t))((P @ X).T, (D @ X).T, (A @ X).T)  # (nb, n N): [Y_1^T, Y_2^T, ...]
+    return (Z @ Z.T) / (n * len(t))
+
+
 def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndarray, t_con: np.ndarray,
                criterion: str, chi_b: np.ndarray | None, margin: float, power: int = COND_POWER) -> tuple[Any, dict]:
     ca = _casadi()
@@ -878,13 +894,11 @@ def _build_nlp(model: IdentificationModel, basis, limits: Limits, t_obj: np.ndar
     F = _casadi_regressor(model)  # (q, dq, ddq) -> Y (n x nb)
     qs, dqs, ddqs = ca.MX.sym("q", n), ca.MX.sym("dq", n), ca.MX.sym("ddq", n)
     Y = F(qs, dqs, ddqs)
-    G = ca.Function("Yt", [qs, dqs, ddqs], [Y.T])
     x = ca.MX.sym("x", m * n)
     X = ca.reshape(x, m, n)  # column-major: column j = design of joint j
     Po, Do, Ao = (ca.DM(M) for M in basis.matrices(t_obj))
     No = len(t_obj)
-    Z = G.map(No)((Po @ X).T, (Do @ X).T, (Ao @ X).T)  # (nb, n No): [Y_1^T, Y_2^T, ...]
-    M = (Z @ Z.T) / (n * No)
+    M = design_information(model, basis, x, t_obj)
     if criterion == "cond":
         # cond(W)^2 = lambda_max / lambda_min of M, with the power means
         # lambda_max <= tr(M^p)^(1/p) <= nb^(1/p) lambda_max (and alike for M^-1): smooth, tight for large p.

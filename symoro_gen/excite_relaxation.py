@@ -172,6 +172,19 @@ def relaxation_rows(model: IdentificationModel, states: np.ndarray, signs: np.nd
     return W
 
 
+def _cond_sdp(Gn: np.ndarray):
+    """The variables and LMIs of the cond SDP over mixtures of the trace-normalised matrices ``Gn``
+    (``(k, nb, nb)``): weights ``mu >= 0``, ``kappa``, ``sum mu_i Gn_i >= I`` and ``kappa I >= sum mu_i Gn_i``
+    (cond^2 <= kappa; [BV2004] sect. 7.5). Shared by :func:`relaxation_bracket` and :func:`mixture_duals`."""
+    import cvxpy as cp
+
+    k, nb = Gn.shape[0], Gn.shape[1]
+    mu, kap = cp.Variable(k, nonneg=True), cp.Variable()
+    Mx = cp.reshape(Gn.reshape(k, -1).T @ mu, (nb, nb), order="C")
+    Mx = (Mx + Mx.T) / 2
+    return mu, kap, Mx >> np.eye(nb), kap * np.eye(nb) - Mx >> 0
+
+
 def mixture_cond(matrices: np.ndarray) -> tuple[float, np.ndarray]:
     """See :func:`mixture_duals` (the same SDP; cond and time fractions only)."""
     c, p, _, _ = mixture_duals(matrices)
@@ -196,10 +209,7 @@ def mixture_duals(matrices: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, 
     k, nb = Ms.shape[0], Ms.shape[1]
     tr = np.trace(Ms, axis1=1, axis2=2)
     Mn = Ms / tr[:, None, None]
-    w, kap = cp.Variable(k, nonneg=True), cp.Variable()
-    S = cp.reshape(Mn.reshape(k, -1).T @ w, (nb, nb), order="C")
-    S = (S + S.T) / 2
-    c1, c2 = S >> np.eye(nb), kap * np.eye(nb) - S >> 0
+    w, kap, c1, c2 = _cond_sdp(Mn)
     prob = cp.Problem(cp.Minimize(kap), [c1, c2])
     with warnings.catch_warnings():  # "optimal_inaccurate": the cond returned is recomputed from the weights
         warnings.simplefilter("ignore", UserWarning)
@@ -267,9 +277,27 @@ def braking_speed(limits: Limits, q: np.ndarray, sign: np.ndarray, slack: float 
     ``excite`` design (at rest at both ends, or periodic) satisfies it; a state of the box near a range end
     at full speed does not (the LWR4's joints need 20-52 deg to stop from their velocity limit, the RX-90's
     50-153 deg)."""
+    return _braking(limits, q, sign, slack)[0]
+
+
+def _braking(limits: Limits, q: np.ndarray, sign: np.ndarray, slack: float = BRAKING_SLACK
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`braking_speed` and its derivative with respect to ``q``."""
     d = slack * (limits.q_max - limits.q_min)
-    room = np.clip(np.where(np.asarray(sign) > 0, limits.q_max - q, q - limits.q_min) + d, 0.0, None)
-    return np.minimum(limits.dq_max, np.sqrt(2.0 * limits.ddq_max * room))
+    sign = np.asarray(sign)
+    room = np.clip(np.where(sign > 0, limits.q_max - q, q - limits.q_min) + d, 0.0, None)
+    sq = np.sqrt(2.0 * limits.ddq_max * room)
+    dcap = np.where((sq < limits.dq_max) & (sq > 0), -sign * limits.ddq_max / np.maximum(sq, 1e-12), 0.0)
+    return np.minimum(limits.dq_max, sq), dcap
+
+
+def _brake(limits: Limits, X: np.ndarray) -> np.ndarray:
+    """The states ``X`` (``(k, 3n)``) with every speed capped by :func:`braking_speed` (directions kept)."""
+    n = limits.n
+    out = np.array(X, float)
+    dq = out[:, n:2 * n]
+    out[:, n:2 * n] = np.sign(dq) * np.minimum(np.abs(dq), braking_speed(limits, out[:, :n], np.sign(dq)))
+    return out
 
 
 def _random_states(rng: np.random.Generator, limits: Limits, k: int, braking: bool = False
@@ -284,10 +312,8 @@ def _random_states(rng: np.random.Generator, limits: Limits, k: int, braking: bo
                  np.where(mode == 1, sg, np.where(mode == 2, 0.0, sg * rng.uniform(0, 0.1, (k, n)))))
     s = np.where(mode == 2, rng.integers(-1, 2, (k, n)).astype(float), np.sign(v))
     a = np.where(rng.random((k, n)) < 0.5, rng.uniform(-1, 1, (k, n)), rng.choice([-1.0, 1.0], (k, n)))
-    dq = v * limits.dq_max
-    if braking:
-        dq = np.sign(dq) * np.minimum(np.abs(dq), braking_speed(limits, q, np.sign(dq)))
-    return np.hstack([q, dq, a * limits.ddq_max]), s
+    X = np.hstack([q, v * limits.dq_max, a * limits.ddq_max])
+    return (_brake(limits, X) if braking else X), s
 
 
 #: one term of the stationarity moments: (name, ((sign, ((factor, joint), ...)), ...))
@@ -476,12 +502,8 @@ class _DualPricer:
         """With ``braking``: the box point ``zz`` with its speeds rescaled from ``[0, dq_max]`` to ``[0,
         braking_speed(q)]``, the factor ``d|dq|/d|dq_box|`` and ``d dq/d q`` of that map (per joint)."""
         n, lim = self.n, self.limits
-        q, frac = zz[:n], np.abs(zz[n:2 * n]) / lim.dq_max
-        d = BRAKING_SLACK * (lim.q_max - lim.q_min)
-        room = np.clip(np.where(s0 > 0, lim.q_max - q, q - lim.q_min) + d, 0.0, None)
-        sq = np.sqrt(2.0 * lim.ddq_max * room)
-        cap = np.minimum(lim.dq_max, sq)
-        dcap = np.where((sq < lim.dq_max) & (sq > 0), -s0 * lim.ddq_max / np.maximum(sq, 1e-12), 0.0)
+        frac = np.abs(zz[n:2 * n]) / lim.dq_max
+        cap, dcap = _braking(lim, zz[:n], s0)
         out = zz.copy()
         out[n:2 * n] = s0 * cap * frac
         return out, cap / lim.dq_max, s0 * frac * dcap
@@ -705,7 +727,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     """
     import cvxpy as cp
 
-    n, nb = limits.n, len(model.BASE_NAMES)
+    n = limits.n
     rng = np.random.default_rng(seed)
     coul = _coulomb_columns(model)
     X, S = _random_states(rng, limits, atoms, braking)
@@ -716,8 +738,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         Xt, St = _trajectory_states(limits, rng, trajectories)
         X, S = np.vstack([X, Xt]), np.vstack([S, St])
     if braking:  # the given and trajectory states too (a sampled trajectory may exceed it by its sampling error)
-        X[:, n:2 * n] = np.sign(X[:, n:2 * n]) * np.minimum(np.abs(X[:, n:2 * n]),
-                                                            braking_speed(limits, X[:, :n], np.sign(X[:, n:2 * n])))
+        X = _brake(limits, X)
     rest_m = RestMoments(model, limits, robot, kinetic=kinetic) if rest else None
     moments = _MomentSet(limits, degree if stationary else None, rest_m) if stationary or rest else None
     jac = _DualPricer.casadi_jacobian(model, n, moments)
@@ -735,10 +756,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         X, S, W, G, tr = X[ok], S[ok], W[ok], G[ok], tr[ok]
         Gn = G / tr[:, None, None]
         t_sdp = time.perf_counter()
-        mu, kap = cp.Variable(len(X), nonneg=True), cp.Variable()
-        Mx = cp.reshape(Gn.reshape(len(X), -1).T @ mu, (nb, nb), order="C")
-        Mx = (Mx + Mx.T) / 2
-        c1, c2 = Mx >> np.eye(nb), kap * np.eye(nb) - Mx >> 0
+        mu, kap, c1, c2 = _cond_sdp(Gn)
         cons = [c1, c2]
         if moments is not None:
             H = moments.numpy(X) / moments.scale / tr[:, None]
