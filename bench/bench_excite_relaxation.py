@@ -107,6 +107,10 @@ def main(argv=None) -> int:
                          "(braking_speed: dq^2 <= 2 ddq_max x the room left), as every design's samples")
     ap.add_argument("--bandwidth", type=int, default=None, metavar="K",
                     help="only the distributions of a Fourier design of K harmonics over 10 s at 100 Hz")
+    ap.add_argument("--features", type=int, default=0, metavar="K",
+                    help="with --rest, add each round the K random test functions (FeatureMoments, vanishing at rest) "
+                         "the best distribution violates most: a cutting plane over the occupation-measure conditions")
+    ap.add_argument("--dictionary", type=int, default=20_000, help="random test functions to choose them from")
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
     ap.add_argument("--save", default=None, metavar="NPZ",
                     help="write the best distribution (states, signs, weights) and the duals of the lower end here")
@@ -129,7 +133,7 @@ def main(argv=None) -> int:
     b = relaxation_bracket(model, lim, atoms=a.atoms, rounds=a.rounds, fresh=a.fresh, starts=a.starts, add=a.add,
                            tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
                            moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho, rest=a.rest, robot=robot, kinetic=a.kinetic,
-                           braking=a.braking,
+                           braking=a.braking, features=a.features, dictionary=a.dictionary,
                            trajectories=(10 if a.stationary or a.rest or rho is not None else 0) if a.trajectories is None
                            else a.trajectories, progress=show)
     wall = time.perf_counter() - t0
@@ -148,7 +152,8 @@ def main(argv=None) -> int:
     kind = (f"stationary (moment tol {a.moment_tol:g}, degree {a.degree})" if a.stationary else
             "" if a.rest else "plain") + (", " if a.stationary and a.rest else "") + (
         f"rest (moment tol {a.moment_tol:g}{', kinetic ' + a.kinetic if a.kinetic else ''})" if a.rest else "") + (
-        f", {a.bandwidth}-harmonic bandwidth" if rho is not None else "") + (", braking" if a.braking else "")
+        f", {a.bandwidth}-harmonic bandwidth" if rho is not None else "") + (", braking" if a.braking else "") + (
+        f", {len(b.features)} random test functions of the lower end's round" if b.features is not None else "")
     print(f"{a.robot} [{kind}]: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
           f"the best distribution has {len(b.weights)} states of positive weight)")
     n = model.N_JOINTS

@@ -65,7 +65,8 @@ class RelaxationRound:
     """One round of :func:`relaxation_bracket`: ``primal`` (cond of the best distribution over the
     round's states), ``dual`` (``sqrt(tr A / (r tr B))``), ``r`` (the largest dual ratio found),
     ``atoms`` (states in the round's SDP), ``kept`` (states with weight above the pruning threshold),
-    ``seconds`` (wall time since the start), ``sdp_seconds`` (of which in the round's SDP)."""
+    ``seconds`` (wall time since the start), ``sdp_seconds`` (of which in the round's SDP), ``cuts`` (random
+    test functions of :class:`FeatureMoments` in the round's relaxation)."""
 
     round: int
     atoms: int
@@ -75,6 +76,7 @@ class RelaxationRound:
     r: float
     seconds: float
     sdp_seconds: float = 0.0
+    cuts: int = 0
 
 
 @dataclass(frozen=True)
@@ -124,6 +126,8 @@ class RelaxationBracket:
     closed: bool = True
     rest: RestMoments | None = None
     braking: bool = False
+    features: FeatureMoments | None = None
+    upper_features: FeatureMoments | None = None
 
     @property
     def stationary(self) -> bool:
@@ -451,7 +455,7 @@ class _DualPricer:
     def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
                  lam: np.ndarray | None = None, c0: float = 0.0, *, rho: float | None = None,
                  C: np.ndarray | None = None, degree: int = 2, closed: bool = True, rest: RestMoments | None = None,
-                 coulomb=None, jac=None, braking: bool = False):
+                 coulomb=None, jac=None, braking: bool = False, features: FeatureMoments | None = None):
         self.model, self.A, self.B = model, A, B
         self.limits, self.braking = limits, braking
         self.lam, self.c0 = lam, float(c0)
@@ -459,7 +463,7 @@ class _DualPricer:
         self.C: np.ndarray | None = None if rho is None or C is None else _psd(np.asarray(C, float))
         self.n = limits.n
         self.coul = _coulomb_columns(model) if coulomb is None else coulomb
-        self.moments = _MomentSet(limits, degree if closed else None, rest) if lam is not None else None
+        self.moments = _MomentSet(limits, degree if closed else None, rest, features) if lam is not None else None
         self.jac = jac if jac is not None else self.casadi_jacobian(model, self.n, self.moments)
         self.lo = np.concatenate([limits.q_min, -limits.dq_max, -limits.ddq_max])
         self.hi = np.concatenate([limits.q_max, limits.dq_max, limits.ddq_max])
@@ -632,6 +636,80 @@ class RestMoments:
         return self._f(q, dq, ddq)
 
 
+class FeatureMoments:
+    """Random test functions that vanish at rest, for a cutting plane over test functions::
+
+        f_k(q, dq) = dq_{j_k} cos(omega_k . q + nu_k . dq + phi_k),
+        d/dt f_k   = ddq_{j_k} c_k - dq_{j_k} s_k (omega_k . dq + nu_k . ddq),
+
+    ``c_k, s_k`` the cosine and sine of the phase. Every trajectory at rest at both ends has ``E[d/dt f_k] =
+    0`` over its samples (to quadrature accuracy), as for :class:`RestMoments`; unlike those (the robot's own
+    test functions, a few hundred) this is a dictionary as large as wanted, from which
+    :func:`relaxation_bracket` (``features=K``) adds each round the ``K`` that its current best distribution
+    violates most — the separation step of a cutting plane over the occupation-measure conditions
+    ([LHPT08]: ``E[d/dt f] = 0`` for *every* smooth ``f`` vanishing at rest). Each feature involves 1 to 3
+    joints' positions (frequencies ``2 pi g s / range``, ``g`` standard normal, ``s`` in ``scales``) and 0 to 2
+    joints' velocities (``2 pi g s / (2 dq_max)``); seeded. ``scale`` is the analytic bound of ``|d/dt f_k|``
+    over the limits' box, ``ddq_max_j + dq_max_j (|omega_k| . dq_max + |nu_k| . ddq_max)``, to which the
+    relaxation's tolerance is relative.
+    """
+
+    def __init__(self, limits: Limits, count: int, *, seed: int = 0, scales: tuple[float, ...] = (0.5, 1.0, 2.0),
+                 _arrays: tuple[np.ndarray, ...] | None = None):
+        n = limits.n
+        if _arrays is None:
+            ids = np.arange(count)
+            rng = np.random.default_rng(seed)
+            span = np.where(np.isfinite(limits.q_max - limits.q_min), limits.q_max - limits.q_min, 2 * np.pi)
+            joint = rng.integers(0, n, count)
+            omega, nu = np.zeros((count, n)), np.zeros((count, n))
+            for k in range(count):
+                s = rng.choice(scales)
+                for i in rng.choice(n, rng.integers(1, min(3, n) + 1), replace=False):
+                    omega[k, i] = 2 * np.pi * s * rng.standard_normal() / span[i]
+                for i in rng.choice(n, rng.integers(0, min(2, n) + 1), replace=False):
+                    nu[k, i] = 2 * np.pi * s * rng.standard_normal() / (2 * limits.dq_max[i])
+            phase = rng.uniform(0, 2 * np.pi, count)
+        else:
+            ids, joint, omega, nu, phase = _arrays
+        self.n, self.ids, self.joint, self.omega, self.nu, self.phase = n, ids, joint, omega, nu, phase
+        self.scale = limits.ddq_max[joint] + limits.dq_max[joint] * (
+            np.abs(omega) @ limits.dq_max + np.abs(nu) @ limits.ddq_max)
+        self.names = [f"d/dt(dq{j + 1} cos(feature {k}))" for k, j in zip(ids, joint)]
+        self._limits = limits
+
+    def __len__(self) -> int:
+        return len(self.joint)
+
+    def subset(self, index) -> FeatureMoments:
+        """The features ``index`` (an index array), as a new set."""
+        index = np.asarray(index, int)
+        return FeatureMoments(self._limits, 0, _arrays=tuple(a[index] for a in self._all()))
+
+    def _all(self) -> tuple[np.ndarray, ...]:
+        return self.ids, self.joint, self.omega, self.nu, self.phase
+
+    def numpy(self, q, dq, ddq) -> np.ndarray:
+        """``(k, m)`` rates at the states ``q, dq, ddq`` (each ``(k, n)``)."""
+        q, dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (q, dq, ddq))
+        arg = q @ self.omega.T + dq @ self.nu.T + self.phase
+        return ddq[:, self.joint] * np.cos(arg) - dq[:, self.joint] * np.sin(arg) * (dq @ self.omega.T + ddq @ self.nu.T)
+
+    def casadi(self, q, dq, ddq):
+        """``(m, 1)`` CasADi expression of the rates."""
+        ca = _casadi()
+        if not len(self):
+            return ca.SX.zeros(0, 1)
+        Om, Nu = ca.DM(self.omega), ca.DM(self.nu)
+        arg = ca.mtimes(Om, q) + ca.mtimes(Nu, dq) + ca.DM(self.phase)
+        sel = [int(j) for j in self.joint]
+        return ddq[sel] * ca.cos(arg) - dq[sel] * ca.sin(arg) * (ca.mtimes(Om, dq) + ca.mtimes(Nu, ddq))
+
+    def __add__(self, other: FeatureMoments) -> FeatureMoments:
+        return FeatureMoments(self._limits, 0, _arrays=tuple(np.concatenate([a, b]) for a, b in zip(
+            self._all(), other._all())))
+
+
 def _frame_kinematics(robot: Any, model: Any, n: int, q) -> tuple[Any, list[str]]:
     """The base-frame origin ``p_j`` and rotation ``R_j`` (row by row) of every frame of ``robot``
     (:func:`mdh_frames`; a closed-loop robot's through its ``model``'s linear closure) as a CasADi expression
@@ -648,22 +726,27 @@ def _frame_kinematics(robot: Any, model: Any, n: int, q) -> tuple[Any, list[str]
 
 class _MomentSet:
     """The moment conditions a relaxation holds: the closed-trajectory ones of :func:`stationarity_moments`
-    (``degree``, or None) and the rest-to-rest ones of a :class:`RestMoments` (or None), concatenated."""
+    (``degree``, or None), the rest-to-rest ones of a :class:`RestMoments` (or None) and the random ones of a
+    :class:`FeatureMoments` (or None), concatenated."""
 
-    def __init__(self, limits: Limits, degree: int | None, rest: RestMoments | None):
+    def __init__(self, limits: Limits, degree: int | None, rest: RestMoments | None,
+                 features: FeatureMoments | None = None):
         self.degree, self.rest, self.n = degree, rest, limits.n
+        self.features = features if features is not None and len(features) else None
         parts = ([stationarity_scales(limits, degree)] if degree is not None else []) + (
-            [rest.scale] if rest is not None else [])
+            [rest.scale] if rest is not None else []) + ([self.features.scale] if self.features is not None else [])
         self.scale = np.concatenate(parts) if parts else np.zeros(0)
         self.names = (stationarity_moment_names(limits.n, degree) if degree is not None else []) + (
-            list(rest.names) if rest is not None else [])
+            list(rest.names) if rest is not None else []) + (
+            list(self.features.names) if self.features is not None else [])
 
     def _parts(self, z, lib: Any) -> list:
         n = self.n
         q, dq, ddq = (z[:, :n], z[:, n:2 * n], z[:, 2 * n:]) if lib is np else (z[:n], z[n:2 * n], z[2 * n:])
         out = [stationarity_moments(q, dq, ddq, lib=lib, degree=self.degree)] if self.degree is not None else []
-        if self.rest is not None:
-            out.append(self.rest.numpy(q, dq, ddq) if lib is np else self.rest.casadi(q, dq, ddq))
+        for part in (self.rest, self.features):
+            if part is not None:
+                out.append(part.numpy(q, dq, ddq) if lib is np else part.casadi(q, dq, ddq))
         return out
 
     def numpy(self, X: np.ndarray) -> np.ndarray:
@@ -696,7 +779,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                        extra_states: np.ndarray | None = None, stationary: bool = False,
                        moment_tol: float = 0.01, degree: int = 2, trajectories: int = 0,
                        bandwidth: float | None = None, rest: bool = False, robot: Any = None,
-                       kinetic: str | None = None, braking: bool = False, progress=None) -> RelaxationBracket:
+                       kinetic: str | None = None, braking: bool = False, features: int = 0,
+                       dictionary: int = 20_000, progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -739,8 +823,15 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         X, S = np.vstack([X, Xt]), np.vstack([S, St])
     if braking:  # the given and trajectory states too (a sampled trajectory may exceed it by its sampling error)
         X = _brake(limits, X)
+    if features and not rest:
+        raise ValueError("features= needs rest=True (the random test functions vanish at rest)")
+    seeds = np.zeros(len(X), bool)
+    if features:  # the trajectories' samples stay in every round: they keep the growing cuts feasible
+        seeds[len(X) - (len(Xt) if trajectories else 0):] = True
     rest_m = RestMoments(model, limits, robot, kinetic=kinetic) if rest else None
-    moments = _MomentSet(limits, degree if stationary else None, rest_m) if stationary or rest else None
+    pool = FeatureMoments(limits, dictionary, seed=seed + 1) if features else None
+    cuts = pool.subset([]) if pool is not None else None
+    moments = _MomentSet(limits, degree if stationary else None, rest_m, cuts) if stationary or rest else None
     jac = _DualPricer.casadi_jacobian(model, n, moments)
 
     t0 = time.perf_counter()
@@ -753,7 +844,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         G = np.einsum("kia,kib->kab", W, W)
         tr = np.trace(G, axis1=1, axis2=2)
         ok = tr > 0
-        X, S, W, G, tr = X[ok], S[ok], W[ok], G[ok], tr[ok]
+        X, S, W, G, tr, seeds = X[ok], S[ok], W[ok], G[ok], tr[ok], seeds[ok]
         Gn = G / tr[:, None, None]
         t_sdp = time.perf_counter()
         mu, kap, c1, c2 = _cond_sdp(Gn)
@@ -791,7 +882,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
             lam, c0 = nu_p - nu_n, moment_tol * float(np.sum(nu_p + nu_n))
         C = _psd(np.asarray(c3.dual_value)) if bandwidth is not None else None
         pricer = _DualPricer(model, limits, A, B, lam, c0, rho=bandwidth, C=C, degree=degree, closed=stationary,
-                             rest=rest_m, coulomb=coul, jac=jac, braking=braking)
+                             rest=rest_m, coulomb=coul, jac=jac, braking=braking, features=cuts)
         # pricing: the dual ratio over the current states, fresh random states and local maxima
         Xf, Sf = _random_states(rng, limits, fresh, braking)
         rf = pricer.ratio(Xf, Sf)
@@ -803,26 +894,38 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         dual = relaxation_dual_bound(A, B, r) if np.isfinite(r) and r > 0 else 0.0
         keep = w > prune * w.max()
         hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
-                                    t_sdp))
+                                    t_sdp, 0 if cuts is None else len(cuts)))
         if progress is not None:
             progress(hist[-1])
         if dual > best_lower or not dual_of:
             best_lower = max(best_lower, dual)
-            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0, "C": C}
+            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0, "C": C, "features": cuts}
         if primal < best_upper:
             best_upper = primal
             pos = w > 0
-            best = {"states": X[pos], "signs": S[pos], "weights": w[pos] / tr[pos]}
+            best = {"states": X[pos], "signs": S[pos], "weights": w[pos] / tr[pos], "features": cuts}
         if best_upper <= best_lower * (1 + tol) or hist[-1].seconds > time_budget or rd == rounds:
             break
+        if pool is not None and cuts is not None:  # separation: the features the best distribution violates most
+            p = w / tr
+            viol = np.abs(p @ pool.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / pool.scale) / p.sum()
+            viol[cuts.ids] = 0.0
+            new = [int(k) for k in np.argsort(-viol)[:features] if viol[k] > moment_tol]
+            if new:
+                cuts = cuts + pool.subset(new)
+                moments = _MomentSet(limits, degree if stationary else None, rest_m, cuts)
+                jac = _DualPricer.casadi_jacobian(model, n, moments)
+                best_upper = math.inf  # a tighter relaxation: its upper end starts again
+        keep = keep | seeds
         good = [(x, Sf[i]) for i, (x, v) in zip(picks, loc) if v > 1.0]
         newX = [X[keep], Xf[order[:add]]] + ([np.array([x for x, _ in good])] if good else [])
         newS = [S[keep], Sf[order[:add]]] + ([np.array([s for _, s in good])] if good else [])
+        seeds = np.concatenate([seeds[keep], np.zeros(sum(len(x) for x in newX[1:]), bool)])
         X, S = np.vstack(newX), np.vstack(newS)
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
                              dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if moments is not None else 0.0,
                              dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree, stationary, rest_m,
-                             braking)
+                             braking, dual_of["features"], best["features"])
 
 
 def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: RelaxationBracket, *,
@@ -833,7 +936,7 @@ def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: Relax
     A ``bound`` well below ``bracket.lower`` says the bracket's search for ``r`` was not global."""
     pricer = _DualPricer(model, limits, bracket.A, bracket.B, bracket.lam, bracket.c0, rho=bracket.bandwidth,
                          C=bracket.C, degree=bracket.degree, closed=bracket.closed, rest=bracket.rest,
-                         braking=bracket.braking)
+                         braking=bracket.braking, features=bracket.features)
     rng = np.random.default_rng(seed)
     best_r, pool_X, pool_S, pool_r = bracket.r, [], [], []
     for k0 in range(0, states, batch):

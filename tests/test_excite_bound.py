@@ -556,3 +556,70 @@ def test_mixture_cond_is_the_best_time_sharing_of_designs():
     assert c2 == pytest.approx(1.0, rel=1e-4) and p2[0] == pytest.approx(0.8, rel=1e-3)
     with pytest.raises(ValueError, match="mixture_cond"):
         mixture_cond(np.zeros((2, 3)))
+
+
+# --- random test functions: a cutting plane over the occupation-measure conditions ---------------------
+
+def test_feature_moments_are_rates_that_vanish_at_rest_to_rest_and_are_bounded_by_their_scale():
+    """FeatureMoments: each rate is d/dt of dq_j cos(omega . q + nu . dq + phi) along a design (finite
+    differences of the test function itself), the CasADi form is the NumPy form, the means vanish over
+    rest-to-rest designs that end elsewhere (not over random states), no state of the box exceeds the
+    analytic ``scale``, and subset/concatenation keep each feature's identity."""
+    import casadi as ca
+
+    from symoro_gen.excite_relaxation import FeatureMoments, _random_states
+
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    n = lim.n
+    F = FeatureMoments(lim, 300, seed=4)
+    t = np.linspace(0.0, 10.0, 4001)
+    q, dq, ddq = _rest_designs(lim, 1, 61, t)[0]
+    m = F.numpy(q, dq, ddq)
+    for k in (0, 17, 123):
+        f = dq[:, F.joint[k]] * np.cos(q @ F.omega[k] + dq @ F.nu[k] + F.phase[k])
+        fd = np.gradient(f, t)
+        assert np.abs(fd - m[:, k])[5:-5].max() < 1e-2 * np.abs(m[:, k]).max()
+    w = np.full(len(t), 1.0)
+    w[[0, -1]] = 0.5
+    w /= w.sum()
+    for q, dq, ddq in _rest_designs(lim, 3, 62, t):
+        assert np.abs(w @ F.numpy(q, dq, ddq) / F.scale).max() < 1e-5
+    X, _ = _random_states(np.random.default_rng(5), lim, 5000)
+    V = F.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:])
+    assert np.all(np.abs(V) <= F.scale * (1 + 1e-12))
+    assert np.abs(V.mean(0) / F.scale).max() > 0.02
+    z = ca.SX.sym("z", 3 * n)
+    f = ca.Function("m", [z], [F.casadi(z[:n], z[n:2 * n], z[2 * n:])])
+    np.testing.assert_allclose(np.array(f(X[0])).ravel(), V[0], rtol=1e-12, atol=1e-12)
+    G = F.subset([5, 2]) + F.subset([250])
+    assert list(G.ids) == [5, 2, 250] and G.names == [F.names[5], F.names[2], F.names[250]]
+    np.testing.assert_array_equal(G.numpy(X[:3, :n], X[:3, n:2 * n], X[:3, 2 * n:]), V[:3][:, [5, 2, 250]])
+
+
+def test_feature_cuts_hold_on_the_final_distribution_and_weak_duality_on_designs():
+    """relaxation_bracket(rest=True, features=K): cuts are added (the rest-only optimum violates random test
+    functions), the upper-end distribution meets the rest moments and every cut of its round, and weak duality
+    with the lower end's multipliers (cuts included) holds on unseen rest-to-rest designs, whose cond stays
+    above the lower end."""
+    from symoro_gen.excite_relaxation import _DualPricer
+
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    n = model.N_JOINTS
+    b = relaxation_bracket(model, lim, atoms=100, rounds=4, fresh=2000, starts=6, add=20, seed=3, trajectories=5,
+                           rest=True, robot=robot, features=10, dictionary=2000, tol=0.0)
+    assert b.rounds[0].cuts == 0 and b.rounds[-1].cuts >= 10 and b.lam is not None
+    assert b.features is not None and len(b.lam) == len(b.rest.names) + len(b.features)
+    p = b.weights / b.weights.sum()
+    X = b.states
+    assert np.abs(p @ (b.rest.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / b.rest.scale)).max() <= b.moment_tol * 1.01
+    cut = b.upper_features
+    assert cut is not None and len(cut) == b.rounds[-1].cuts
+    assert np.abs(p @ (cut.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / cut.scale)).max() <= b.moment_tol * 1.01
+    pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0, closed=False, rest=b.rest, features=b.features)
+    t = output_times(10.0, 100.0)
+    for q, dq, ddq in _rest_designs(lim, 8, 63, t):
+        assert stacked_cond(model, q, dq, ddq) >= b.lower
+        num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
+        assert np.all(num <= b.r * den * (1 + 1e-9))
