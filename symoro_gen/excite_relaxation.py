@@ -11,6 +11,9 @@ Conditions every design meets restrict the distributions and sharpen the bound:
   started), :func:`stationarity_moments` ([LHPT08]);
 * ``rest=True``: those of every trajectory at rest at both ends, :class:`RestMoments` (the rates of the
   momentum regressor and of the frame velocities; ``kinetic=`` adds test functions quadratic in ``dq``);
+* ``features=K`` (with ``rest``): a cutting plane over the occupation-measure conditions, random test
+  functions that vanish at rest (:class:`FeatureMoments`), the ``K`` most violated added every ``cut_every``
+  rounds;
 * ``braking=True``: only states from which every joint can still stop before the end of its range
   (:func:`braking_speed`);
 * ``bandwidth=``: the accelerations a design basis allows (:func:`basis_bandwidth`, an LMI).
@@ -106,6 +109,10 @@ class RelaxationBracket:
     by ``E[ddq ddq^T] <= rho E[dq dq^T]`` (an LMI), which every design of a given basis meets on its
     samples; ``C`` is its multiplier (PSD), and ``lower`` then bounds the cond of every design of that
     basis (and, with ``stationary``, that returns to its start).
+
+    With random test functions (``relaxation_bracket(features=K)``), ``features`` are those of the round that
+    gave ``lower`` (``lam`` covers them last) and ``upper_features`` those the ``upper`` distribution meets
+    (the cuts of its round; the cut set grows, so the two may differ).
     """
 
     lower: float
@@ -759,6 +766,11 @@ class _MomentSet:
         return _casadi().vertcat(*self._parts(z, _casadi()))
 
 
+#: samples of one period of a trajectory atom (relaxation_bracket with features): the uniform mean of the
+#: random test functions' rates over them is exact to aliasing beyond this harmonic
+_DESIGN_SAMPLES = 1000
+
+
 def _trajectory_states(limits: Limits, rng: np.random.Generator, k: int, samples: int = 50
                        ) -> tuple[np.ndarray, np.ndarray]:
     """The samples of ``k`` random Fourier trajectories (5 harmonics, 10 s, ``samples`` per period)
@@ -780,7 +792,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                        moment_tol: float = 0.01, degree: int = 2, trajectories: int = 0,
                        bandwidth: float | None = None, rest: bool = False, robot: Any = None,
                        kinetic: str | None = None, braking: bool = False, features: int = 0,
-                       dictionary: int = 20_000, progress=None) -> RelaxationBracket:
+                       dictionary: int = 20_000, cut_every: int = 1, progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -797,7 +809,13 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     velocities' rates) join them, held the same way: every trajectory that starts and ends at rest - every
     design of ``excite``, a spline that ends elsewhere included - satisfies them; ``rest`` alone bounds all of
     those, ``rest`` with ``stationary`` the closed ones; ``kinetic`` (``"energy"`` or ``"joint"``) adds test
-    functions quadratic in ``dq`` to them (:class:`RestMoments`). With ``braking`` every state keeps to
+    functions quadratic in ``dq`` to them (:class:`RestMoments`). With ``rest`` and ``features=K``, every
+    ``cut_every`` rounds the ``K`` random test functions of a seeded dictionary of ``dictionary``
+    (:class:`FeatureMoments`) that the round's best distribution violates most (beyond ``moment_tol``) join the
+    moments for the following rounds - a cutting plane over the conditions ``E[d/dt f] = 0`` that every
+    trajectory at rest at both ends meets for every ``f`` vanishing at rest; the ``trajectories`` then join as
+    whole-trajectory atoms (the mean over one period, sampled 1000 times, as in :func:`mixture_cond`), which meet
+    every cut and keep the SDP feasible, and the upper end restarts with each batch of cuts (the relaxation got tighter; every round's lower end still bounds every such trajectory). With ``braking`` every state keeps to
     :func:`braking_speed` (the random ones, the pricer's local searches and the given ones), as every design's
     samples do. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
     ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
@@ -818,21 +836,30 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     if extra_states is not None:
         ex = np.asarray(extra_states, float)
         X, S = np.vstack([X, ex]), np.vstack([S, np.sign(ex[:, n:2 * n])])
-    if trajectories:
-        Xt, St = _trajectory_states(limits, rng, trajectories)
-        X, S = np.vstack([X, Xt]), np.vstack([S, St])
-    if braking:  # the given and trajectory states too (a sampled trajectory may exceed it by its sampling error)
-        X = _brake(limits, X)
     if features and not rest:
         raise ValueError("features= needs rest=True (the random test functions vanish at rest)")
-    seeds = np.zeros(len(X), bool)
-    if features:  # the trajectories' samples stay in every round: they keep the growing cuts feasible
-        seeds[len(X) - (len(Xt) if trajectories else 0):] = True
+    designs: list[tuple[np.ndarray, np.ndarray]] = []  # with features: whole trajectories as atoms
+    if trajectories:
+        per = _DESIGN_SAMPLES if features else 50
+        Xt, St = _trajectory_states(limits, rng, trajectories, samples=per)
+        if features:
+            designs = [(Xt[k * per:(k + 1) * per], St[k * per:(k + 1) * per]) for k in range(trajectories)]
+        else:
+            X, S = np.vstack([X, Xt]), np.vstack([S, St])
+    if braking:  # the given and trajectory states too (a sampled trajectory may exceed it by its sampling error)
+        X = _brake(limits, X)
+        designs = [(_brake(limits, x), s) for x, s in designs]
     rest_m = RestMoments(model, limits, robot, kinetic=kinetic) if rest else None
     pool = FeatureMoments(limits, dictionary, seed=seed + 1) if features else None
     cuts = pool.subset([]) if pool is not None else None
     moments = _MomentSet(limits, degree if stationary else None, rest_m, cuts) if stationary or rest else None
     jac = _DualPricer.casadi_jacobian(model, n, moments)
+    # a design atom: the mean information matrix of a trajectory's samples (one full period) and its trace
+    dG = np.array([np.einsum("kia,kib->ab", w_, w_) / len(x) for x, s in designs
+                   for w_ in [relaxation_rows(model, x, s, coul)]]).reshape(len(designs), *([len(model.BASE_NAMES)] * 2))
+    dtr = np.trace(dG, axis1=1, axis2=2) if designs else np.zeros(0)
+    dpool = np.array([pool.numpy(x[:, :n], x[:, n:2 * n], x[:, 2 * n:]).mean(0) for x, _ in designs]) \
+        if pool is not None and designs else None
 
     t0 = time.perf_counter()
     hist: list[RelaxationRound] = []
@@ -844,20 +871,28 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         G = np.einsum("kia,kib->kab", W, W)
         tr = np.trace(G, axis1=1, axis2=2)
         ok = tr > 0
-        X, S, W, G, tr, seeds = X[ok], S[ok], W[ok], G[ok], tr[ok], seeds[ok]
-        Gn = G / tr[:, None, None]
+        X, S, W, G, tr = X[ok], S[ok], W[ok], G[ok], tr[ok]
+        k_s = len(X)  # the states; the design atoms follow them
+        Gn = np.concatenate([G / tr[:, None, None], dG / dtr[:, None, None]]) if designs else G / tr[:, None, None]
+        tr_all = np.concatenate([tr, dtr])
         t_sdp = time.perf_counter()
         mu, kap, c1, c2 = _cond_sdp(Gn)
         cons = [c1, c2]
         if moments is not None:
-            H = moments.numpy(X) / moments.scale / tr[:, None]
-            mass = (1.0 / tr) @ mu
+            H = moments.numpy(X)
+            if designs:
+                H = np.vstack([H] + [moments.numpy(x).mean(0) for x, _ in designs])
+            H = H / moments.scale / tr_all[:, None]
+            mass = (1.0 / tr_all) @ mu
             cp_pos, cp_neg = H.T @ mu - moment_tol * mass <= 0, -H.T @ mu - moment_tol * mass <= 0
             cons += [cp_pos, cp_neg]
         if bandwidth is not None:
             dq_, ddq_ = X[:, n:2 * n], X[:, 2 * n:]
             K = (bandwidth * np.einsum("ki,kj->kij", dq_, dq_) - np.einsum("ki,kj->kij", ddq_, ddq_)) / tr[:, None, None]
-            Kx = cp.reshape(K.reshape(len(X), -1).T @ mu, (n, n), order="C")
+            if designs:
+                K = np.concatenate([K] + [(bandwidth * x[:, n:2 * n].T @ x[:, n:2 * n] - x[:, 2 * n:].T @ x[:, 2 * n:])[None]
+                                          / len(x) / t_ for (x, _), t_ in zip(designs, dtr)])
+            Kx = cp.reshape(K.reshape(len(K), -1).T @ mu, (n, n), order="C")
             c3 = (Kx + Kx.T) / 2 >> 0
             cons.append(c3)
         prob = cp.Problem(cp.Minimize(kap), cons)
@@ -871,8 +906,9 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                                   f"{prob.status}" + (" (no distribution of these states meets the stationarity "
                                                       "moments: add trajectories=)" if moments is not None else ""))
         t_sdp = time.perf_counter() - t_sdp
-        w = np.clip(np.asarray(mu.value), 0, None)
-        ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", w, Gn))
+        w_all = np.clip(np.asarray(mu.value), 0, None)
+        w, w_d = w_all[:k_s], w_all[k_s:]
+        ev = np.linalg.eigvalsh(np.einsum("k,kab->ab", w_all, Gn))
         primal = math.sqrt(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
         A, B = _psd(np.asarray(c1.dual_value)), _psd(np.asarray(c2.dual_value))
         lam, c0 = None, 0.0
@@ -892,7 +928,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         loc = [pricer.local_max(Xf[i], Sf[i]) for i in picks]
         r = max(r_atoms, float(rf.max()), max(v for _, v in loc))
         dual = relaxation_dual_bound(A, B, r) if np.isfinite(r) and r > 0 else 0.0
-        keep = w > prune * w.max()
+        keep = w > prune * w_all.max()
         hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
                                     t_sdp, 0 if cuts is None else len(cuts)))
         if progress is not None:
@@ -903,12 +939,19 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         if primal < best_upper:
             best_upper = primal
             pos = w > 0
-            best = {"states": X[pos], "signs": S[pos], "weights": w[pos] / tr[pos], "features": cuts}
+            used = [d for d in range(len(designs)) if w_d[d] > 0]  # a design atom: its samples, equal shares
+            best = {"states": np.vstack([X[pos]] + [designs[d][0] for d in used]),
+                    "signs": np.vstack([S[pos]] + [designs[d][1] for d in used]),
+                    "weights": np.concatenate([w[pos] / tr[pos]] + [np.full(len(designs[d][0]), w_d[d] / dtr[d]
+                                                                             / len(designs[d][0])) for d in used]),
+                    "features": cuts}
         if best_upper <= best_lower * (1 + tol) or hist[-1].seconds > time_budget or rd == rounds:
             break
-        if pool is not None and cuts is not None:  # separation: the features the best distribution violates most
-            p = w / tr
-            viol = np.abs(p @ pool.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / pool.scale) / p.sum()
+        if pool is not None and cuts is not None and (rd + 1) % cut_every == 0:
+            # separation: the features the best distribution violates most
+            p, p_d = w / tr, (w_d / dtr if designs else np.zeros(0))
+            v = p @ pool.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) + (p_d @ dpool if dpool is not None else 0.0)
+            viol = np.abs(v / pool.scale) / (p.sum() + p_d.sum())
             viol[cuts.ids] = 0.0
             new = [int(k) for k in np.argsort(-viol)[:features] if viol[k] > moment_tol]
             if new:
@@ -916,11 +959,9 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                 moments = _MomentSet(limits, degree if stationary else None, rest_m, cuts)
                 jac = _DualPricer.casadi_jacobian(model, n, moments)
                 best_upper = math.inf  # a tighter relaxation: its upper end starts again
-        keep = keep | seeds
         good = [(x, Sf[i]) for i, (x, v) in zip(picks, loc) if v > 1.0]
         newX = [X[keep], Xf[order[:add]]] + ([np.array([x for x, _ in good])] if good else [])
         newS = [S[keep], Sf[order[:add]]] + ([np.array([s for _, s in good])] if good else [])
-        seeds = np.concatenate([seeds[keep], np.zeros(sum(len(x) for x in newX[1:]), bool)])
         X, S = np.vstack(newX), np.vstack(newS)
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
                              dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if moments is not None else 0.0,
