@@ -31,8 +31,9 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
 
     PYTHONPATH=. python bench/bench_excite_relaxation.py [--robot lwr4|rx90] [--atoms 400] [--rounds 60]
         [--budget SECONDS] [--tol 0.02] [--fresh 30000] [--starts 40] [--add 60] [--seed 0]
-        [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--rest [--kinetic energy|joint]]
-        [--braking] [--bandwidth K] [--verify 300000] [--save OUT.npz]
+        [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--rest [--kinetic energy|joint]
+        [--features K [--cut-every R] [--dictionary 20000]]] [--braking] [--bandwidth K] [--verify 300000]
+        [--save OUT.npz]
 
 ``--rest`` adds the moments of every trajectory that starts and ends at rest (every design of ``excite``,
 closed or not: ``symoro_gen.excite_relaxation.RestMoments``, the rates of the momentum regressor and of every frame's
@@ -45,6 +46,10 @@ entries, or every ``dq_j Y_p[j, b]``); ``--braking`` keeps every state to ``brak
 must be able to stop before the end of its range); ``--save`` writes the best distribution and the duals.
 Neither condition moves the floors (docs/excitation.md, "Why no relaxation over distributions can settle
 the target").
+``--features K`` (with ``--rest``) is a cutting plane over the occupation-measure conditions: every
+``--cut-every`` rounds the K random test functions (``FeatureMoments``: ``dq_j cos(omega.q + nu.dq + phi)``, which
+vanish at rest) of a seeded dictionary that the best distribution violates most join the moments; the
+``--trajectories`` then enter as whole-trajectory atoms (docs/excitation.md, "Random test functions").
 
 ``--degree 3`` adds the test functions of degree 3 (``symoro_gen.excite_relaxation._degree3_tests``: 1456 more
 conditions on the LWR4, 938 on the RX-90). ``--bandwidth K`` restricts the distributions to those of the
@@ -156,7 +161,8 @@ def main(argv=None) -> int:
             "" if a.rest else "plain") + (", " if a.stationary and a.rest else "") + (
         f"rest (moment tol {a.moment_tol:g}{', kinetic ' + a.kinetic if a.kinetic else ''})" if a.rest else "") + (
         f", {a.bandwidth}-harmonic bandwidth" if rho is not None else "") + (", braking" if a.braking else "") + (
-        f", {len(b.features)} random test functions of the lower end's round" if b.features is not None else "")
+        f", random test functions: {len(b.upper_features)} in the upper end's round, {len(b.features)} in the lower "
+        f"end's" if b.features is not None and b.upper_features is not None else "")
     print(f"{a.robot} [{kind}]: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
           f"the best distribution has {len(b.weights)} states of positive weight)")
     n = model.N_JOINTS
