@@ -116,6 +116,10 @@ def main(argv=None) -> int:
                     help="with --rest, add each round the K random test functions (FeatureMoments, vanishing at rest) "
                          "the best distribution violates most: a cutting plane over the occupation-measure conditions")
     ap.add_argument("--dictionary", type=int, default=20_000, help="random test functions to choose them from")
+    ap.add_argument("--cut-at", type=int, nargs="+", default=None, metavar="ROUND",
+                    help="add the --features cuts after these rounds only (instead of --cut-every)")
+    ap.add_argument("--start", default=None, metavar="NPZ",
+                    help="the states of a --save'd best distribution join the first round (a warm start)")
     ap.add_argument("--cut-every", type=int, default=1, metavar="R",
                     help="add the --features cuts every R rounds (the column generation converges in between)")
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
@@ -141,7 +145,9 @@ def main(argv=None) -> int:
                            tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
                            moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho, rest=a.rest, robot=robot, kinetic=a.kinetic,
                            braking=a.braking, features=a.features, dictionary=a.dictionary,
-                           cut_every=a.cut_every,
+                           cut_every=a.cut_every, cut_at=None if a.cut_at is None else tuple(a.cut_at),
+                           extra_states=None if a.start is None else np.load(a.start)["states"],
+                           extra_signs=None if a.start is None else np.load(a.start)["signs"],
                            trajectories=(10 if a.stationary or a.rest or rho is not None else 0) if a.trajectories is None
                            else a.trajectories, progress=show)
     wall = time.perf_counter() - t0

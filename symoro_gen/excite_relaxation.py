@@ -788,11 +788,13 @@ def _trajectory_states(limits: Limits, rng: np.random.Generator, k: int, samples
 def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int = 400, rounds: int = 30,
                        fresh: int = 30_000, starts: int = 40, add: int = 60, prune: float = 1e-6,
                        tol: float = 0.02, time_budget: float = math.inf, seed: int = 0,
-                       extra_states: np.ndarray | None = None, stationary: bool = False,
+                       extra_states: np.ndarray | None = None, extra_signs: np.ndarray | None = None,
+                       stationary: bool = False,
                        moment_tol: float = 0.01, degree: int = 2, trajectories: int = 0,
                        bandwidth: float | None = None, rest: bool = False, robot: Any = None,
                        kinetic: str | None = None, braking: bool = False, features: int = 0,
-                       dictionary: int = 20_000, cut_every: int = 1, progress=None) -> RelaxationBracket:
+                       dictionary: int = 20_000, cut_every: int = 1, cut_at: tuple[int, ...] | None = None,
+                       progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -810,7 +812,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     design of ``excite``, a spline that ends elsewhere included - satisfies them; ``rest`` alone bounds all of
     those, ``rest`` with ``stationary`` the closed ones; ``kinetic`` (``"energy"`` or ``"joint"``) adds test
     functions quadratic in ``dq`` to them (:class:`RestMoments`). With ``rest`` and ``features=K``, every
-    ``cut_every`` rounds the ``K`` random test functions of a seeded dictionary of ``dictionary``
+    ``cut_every`` rounds (or after each round of ``cut_at``) the ``K`` random test functions of a seeded dictionary of ``dictionary``
     (:class:`FeatureMoments`) that the round's best distribution violates most (beyond ``moment_tol``) join the
     moments for the following rounds - a cutting plane over the conditions ``E[d/dt f] = 0`` that every
     trajectory at rest at both ends meets for every ``f`` vanishing at rest; the ``trajectories`` then join as
@@ -824,7 +826,9 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     ``fresh`` random states and the local maxima of the ratio from the ``starts`` best random states
     and ``starts // 4`` random ones. Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds
     or past ``time_budget`` seconds. ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples) and
-    the samples of ``trajectories`` random Fourier trajectories join the first round (with
+    the samples of ``trajectories`` random Fourier trajectories join the first round (``extra_signs``: the
+    Coulomb signs of ``extra_states``, default ``sign(dq)``; a saved distribution's own keep its states at rest
+    with sign +-1) (with
     ``stationary`` or ``rest`` they make it feasible).
     """
     import cvxpy as cp
@@ -835,7 +839,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     X, S = _random_states(rng, limits, atoms, braking)
     if extra_states is not None:
         ex = np.asarray(extra_states, float)
-        X, S = np.vstack([X, ex]), np.vstack([S, np.sign(ex[:, n:2 * n])])
+        sg = np.sign(ex[:, n:2 * n]) if extra_signs is None else np.asarray(extra_signs, float)
+        X, S = np.vstack([X, ex]), np.vstack([S, sg])
     if features and not rest:
         raise ValueError("features= needs rest=True (the random test functions vanish at rest)")
     designs: list[tuple[np.ndarray, np.ndarray]] = []  # with features: whole trajectories as atoms
@@ -947,7 +952,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                     "features": cuts}
         if best_upper <= best_lower * (1 + tol) or hist[-1].seconds > time_budget or rd == rounds:
             break
-        if pool is not None and cuts is not None and (rd + 1) % cut_every == 0:
+        if pool is not None and cuts is not None and (rd in cut_at if cut_at is not None else (rd + 1) % cut_every == 0):
             # separation: the features the best distribution violates most
             p, p_d = w / tr, (w_d / dtr if designs else np.zeros(0))
             v = p @ pool.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) + (p_d @ dpool if dpool is not None else 0.0)
