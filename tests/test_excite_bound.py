@@ -316,6 +316,15 @@ def _rest_designs(lim, k, seed, t):
     return [basis_eval(basis, random_trajectory(basis, lim, rng, t), t) for _ in range(k)]
 
 
+def _weak_duality_on_rest_designs(model, lim, b, pricer, k, seed):
+    """On ``k`` unseen rest-to-rest spline designs (100 Hz, 10 s): cond >= the bracket's lower end, and the
+    dual ratio at every sample <= the bracket's ``r`` (what weak duality rests on)."""
+    for q, dq, ddq in _rest_designs(lim, k, seed, output_times(10.0, 100.0)):
+        assert stacked_cond(model, q, dq, ddq) >= b.lower
+        num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
+        assert np.all(num <= b.r * den * (1 + 1e-9))
+
+
 @pytest.mark.parametrize("name", ["scara", "palletizer"])
 def test_rest_moments_vanish_on_rest_to_rest_designs_that_end_elsewhere(name):
     """Every RestMoments condition has mean 0 over a spline design at rest at both ends that ends elsewhere
@@ -389,11 +398,7 @@ def test_rest_relaxation_bounds_designs_that_end_elsewhere_and_excludes_the_plai
     assert np.abs(m).max() <= b.moment_tol * 1.01
     assert plain.upper * 1.1 < b.lower <= b.upper
     pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0, closed=False, rest=b.rest)
-    t = output_times(10.0, 100.0)
-    for q, dq, ddq in _rest_designs(lim, 8, 33, t):
-        assert stacked_cond(model, q, dq, ddq) >= b.lower
-        num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
-        assert np.all(num <= b.r * den * (1 + 1e-9))
+    _weak_duality_on_rest_designs(model, lim, b, pricer, 8, 33)
 
 
 @pytest.mark.parametrize("name", ["scara", "palletizer"])
@@ -521,11 +526,7 @@ def test_braking_relaxation_bounds_unseen_designs(scara):
     dq = b.states[:, n:2 * n]
     assert np.all(np.abs(dq) <= braking_speed(lim, b.states[:, :n], np.sign(dq)) * (1 + 1e-9))
     pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0, closed=False, rest=b.rest, braking=True)
-    t = output_times(10.0, 100.0)
-    for q, dq, ddq in _rest_designs(lim, 6, 53, t):
-        assert stacked_cond(model, q, dq, ddq) >= b.lower
-        num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
-        assert np.all(num <= b.r * den * (1 + 1e-9))
+    _weak_duality_on_rest_designs(model, lim, b, pricer, 6, 53)
 
 
 def test_mixture_cond_is_the_best_time_sharing_of_designs():
@@ -618,11 +619,7 @@ def test_feature_cuts_hold_on_the_final_distribution_and_weak_duality_on_designs
     assert cut is not None and len(cut) == b.rounds[-1].cuts
     assert np.abs(p @ (cut.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) / cut.scale)).max() <= b.moment_tol * 1.01
     pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0, closed=False, rest=b.rest, features=b.features)
-    t = output_times(10.0, 100.0)
-    for q, dq, ddq in _rest_designs(lim, 8, 63, t):
-        assert stacked_cond(model, q, dq, ddq) >= b.lower
-        num, den = pricer.num_den(np.hstack([q, dq, ddq]), np.sign(dq))
-        assert np.all(num <= b.r * den * (1 + 1e-9))
+    _weak_duality_on_rest_designs(model, lim, b, pricer, 8, 63)
 
 
 @pytest.mark.parametrize("name", ["rx90", "lwr4"])
