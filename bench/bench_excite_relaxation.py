@@ -141,14 +141,15 @@ def main(argv=None) -> int:
     if rho is not None:
         print(f"{a.robot}: bandwidth of a {a.bandwidth}-harmonic Fourier design over 10 s at 100 Hz: "
               f"E[ddq ddq^T] <= {rho:.4g} E[dq dq^T] ((rad/s)^2; (K w)^2 = {(a.bandwidth * 0.2 * np.pi) ** 2:.4g})")
+    start = None if a.start is None else np.load(a.start)
     t0 = time.perf_counter()
     b = relaxation_bracket(model, lim, atoms=a.atoms, rounds=a.rounds, fresh=a.fresh, starts=a.starts, add=a.add,
                            tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
                            moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho, rest=a.rest, robot=robot, kinetic=a.kinetic,
                            braking=a.braking, features=a.features, dictionary=a.dictionary,
                            cut_every=a.cut_every, cut_at=None if a.cut_at is None else tuple(a.cut_at),
-                           extra_states=None if a.start is None else np.load(a.start)["states"],
-                           extra_signs=None if a.start is None else np.load(a.start)["signs"],
+                           extra_states=None if start is None else start["states"],
+                           extra_signs=None if start is None else start["signs"],
                            trajectories=(10 if a.stationary or a.rest or rho is not None else 0) if a.trajectories is None
                            else a.trajectories, progress=show)
     wall = time.perf_counter() - t0

@@ -812,12 +812,14 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     design of ``excite``, a spline that ends elsewhere included - satisfies them; ``rest`` alone bounds all of
     those, ``rest`` with ``stationary`` the closed ones; ``kinetic`` (``"energy"`` or ``"joint"``) adds test
     functions quadratic in ``dq`` to them (:class:`RestMoments`). With ``rest`` and ``features=K``, every
-    ``cut_every`` rounds (or after each round of ``cut_at``) the ``K`` random test functions of a seeded dictionary of ``dictionary``
-    (:class:`FeatureMoments`) that the round's best distribution violates most (beyond ``moment_tol``) join the
-    moments for the following rounds - a cutting plane over the conditions ``E[d/dt f] = 0`` that every
-    trajectory at rest at both ends meets for every ``f`` vanishing at rest; the ``trajectories`` then join as
-    whole-trajectory atoms (the mean over one period, sampled 1000 times, as in :func:`mixture_cond`), which meet
-    every cut and keep the SDP feasible, and the upper end restarts with each batch of cuts (the relaxation got tighter; every round's lower end still bounds every such trajectory). With ``braking`` every state keeps to
+    ``cut_every`` rounds (or after each round listed in ``cut_at``) the ``K`` random test functions of a seeded
+    dictionary of ``dictionary`` (:class:`FeatureMoments`) that the round's best distribution violates most
+    (beyond ``moment_tol``) join the moments for the following rounds - a cutting plane over the conditions
+    ``E[d/dt f] = 0`` that every trajectory at rest at both ends meets for every ``f`` vanishing at rest; the
+    ``trajectories`` then join as whole-trajectory atoms (the mean over one period sampled 1000 times, as in
+    :func:`mixture_cond`), which meet every cut and keep the SDP feasible; the upper end restarts with each
+    batch of cuts (the relaxation got tighter), and every round's lower end still bounds every such
+    trajectory. With ``braking`` every state keeps to
     :func:`braking_speed` (the random ones, the pricer's local searches and the given ones), as every design's
     samples do. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
     ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
@@ -825,11 +827,10 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     states of weight > ``prune`` x the largest (plus the new ones), and adds the ``add`` best of
     ``fresh`` random states and the local maxima of the ratio from the ``starts`` best random states
     and ``starts // 4`` random ones. Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds
-    or past ``time_budget`` seconds. ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples) and
-    the samples of ``trajectories`` random Fourier trajectories join the first round (``extra_signs``: the
-    Coulomb signs of ``extra_states``, default ``sign(dq)``; a saved distribution's own keep its states at rest
-    with sign +-1) (with
-    ``stationary`` or ``rest`` they make it feasible).
+    or past ``time_budget`` seconds. ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples or a saved
+    distribution's states, with their Coulomb signs ``extra_signs``, default ``sign(dq)``) and the samples of
+    ``trajectories`` random Fourier trajectories join the first round (with ``stationary`` or ``rest`` they
+    make it feasible).
     """
     import cvxpy as cp
 
@@ -860,9 +861,12 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     moments = _MomentSet(limits, degree if stationary else None, rest_m, cuts) if stationary or rest else None
     jac = _DualPricer.casadi_jacobian(model, n, moments)
     # a design atom: the mean information matrix of a trajectory's samples (one full period) and its trace
-    dG = np.array([np.einsum("kia,kib->ab", w_, w_) / len(x) for x, s in designs
-                   for w_ in [relaxation_rows(model, x, s, coul)]]).reshape(len(designs), *([len(model.BASE_NAMES)] * 2))
-    dtr = np.trace(dG, axis1=1, axis2=2) if designs else np.zeros(0)
+    nb = len(model.BASE_NAMES)
+    dG = np.zeros((len(designs), nb, nb))
+    for d, (x, s) in enumerate(designs):
+        Wd = relaxation_rows(model, x, s, coul)
+        dG[d] = np.einsum("kia,kib->ab", Wd, Wd) / len(x)
+    dtr = np.trace(dG, axis1=1, axis2=2)
     dpool = np.array([pool.numpy(x[:, :n], x[:, n:2 * n], x[:, 2 * n:]).mean(0) for x, _ in designs]) \
         if pool is not None and designs else None
 
