@@ -47,10 +47,12 @@ from .model import IdentificationModel
 
 __all__ = [
     "BRAKING_SLACK",
+    "FeatureMoments",
     "RelaxationBracket",
     "RelaxationRound",
     "RestMoments",
     "basis_bandwidth",
+    "feature_dictionary",
     "braking_speed",
     "mixture_cond",
     "mixture_duals",
@@ -702,6 +704,13 @@ class FeatureMoments:
         arg = q @ self.omega.T + dq @ self.nu.T + self.phase
         return ddq[:, self.joint] * np.cos(arg) - dq[:, self.joint] * np.sin(arg) * (dq @ self.omega.T + ddq @ self.nu.T)
 
+    def weighted_sum(self, X: np.ndarray, p: np.ndarray, chunk: int = 1000) -> np.ndarray:
+        """``p @ rates(X)`` for the states ``X`` (``(k, 3n)``) and weights ``p`` (``(k,)``), ``chunk`` features
+        at a time (a large dictionary over many states would not fit in memory at once)."""
+        n = self.n
+        return np.concatenate([p @ self.subset(np.arange(k, min(k + chunk, len(self)))).numpy(
+            X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) for k in range(0, len(self), chunk)]) if len(self) else np.zeros(0)
+
     def casadi(self, q, dq, ddq):
         """``(m, 1)`` CasADi expression of the rates."""
         ca = _casadi()
@@ -715,6 +724,12 @@ class FeatureMoments:
     def __add__(self, other: FeatureMoments) -> FeatureMoments:
         return FeatureMoments(self._limits, 0, _arrays=tuple(np.concatenate([a, b]) for a, b in zip(
             self._all(), other._all())))
+
+
+def feature_dictionary(limits: Limits, count: int, seed: int = 0) -> FeatureMoments:
+    """The dictionary of random test functions :func:`relaxation_bracket` draws its cuts from for its ``seed``
+    (``count`` = its ``dictionary``)."""
+    return FeatureMoments(limits, count, seed=seed + 1)
 
 
 def _frame_kinematics(robot: Any, model: Any, n: int, q) -> tuple[Any, list[str]]:
@@ -856,7 +871,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         X = _brake(limits, X)
         designs = [(_brake(limits, x), s) for x, s in designs]
     rest_m = RestMoments(model, limits, robot, kinetic=kinetic) if rest else None
-    pool = FeatureMoments(limits, dictionary, seed=seed + 1) if features else None
+    pool = feature_dictionary(limits, dictionary, seed) if features else None
     cuts = pool.subset([]) if pool is not None else None
     moments = _MomentSet(limits, degree if stationary else None, rest_m, cuts) if stationary or rest else None
     jac = _DualPricer.casadi_jacobian(model, n, moments)
@@ -867,7 +882,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         Wd = relaxation_rows(model, x, s, coul)
         dG[d] = np.einsum("kia,kib->ab", Wd, Wd) / len(x)
     dtr = np.trace(dG, axis1=1, axis2=2)
-    dpool = np.array([pool.numpy(x[:, :n], x[:, n:2 * n], x[:, 2 * n:]).mean(0) for x, _ in designs]) \
+    dpool = np.array([pool.weighted_sum(x, np.full(len(x), 1.0 / len(x))) for x, _ in designs]) \
         if pool is not None and designs else None
 
     t0 = time.perf_counter()
@@ -959,7 +974,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         if pool is not None and cuts is not None and (rd in cut_at if cut_at is not None else (rd + 1) % cut_every == 0):
             # separation: the features the best distribution violates most
             p, p_d = w / tr, (w_d / dtr if designs else np.zeros(0))
-            v = p @ pool.numpy(X[:, :n], X[:, n:2 * n], X[:, 2 * n:]) + (p_d @ dpool if dpool is not None else 0.0)
+            v = pool.weighted_sum(X, p) + (p_d @ dpool if dpool is not None else 0.0)
             viol = np.abs(v / pool.scale) / (p.sum() + p_d.sum())
             viol[cuts.ids] = 0.0
             new = [int(k) for k in np.argsort(-viol)[:features] if viol[k] > moment_tol]

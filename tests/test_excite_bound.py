@@ -565,7 +565,8 @@ def test_feature_moments_are_rates_that_vanish_at_rest_to_rest_and_are_bounded_b
     """FeatureMoments: each rate is d/dt of dq_j cos(omega . q + nu . dq + phi) along a design (finite
     differences of the test function itself), the CasADi form is the NumPy form, the means vanish over
     rest-to-rest designs that end elsewhere (not over random states), no state of the box exceeds the
-    analytic ``scale``, and subset/concatenation keep each feature's identity."""
+    analytic ``scale``, subset/concatenation keep each feature's identity, and the chunked weighted sum is the
+    plain one."""
     import casadi as ca
 
     from symoro_gen.excite_relaxation import FeatureMoments, _random_states
@@ -596,6 +597,8 @@ def test_feature_moments_are_rates_that_vanish_at_rest_to_rest_and_are_bounded_b
     G = F.subset([5, 2]) + F.subset([250])
     assert list(G.ids) == [5, 2, 250] and G.names == [F.names[5], F.names[2], F.names[250]]
     np.testing.assert_array_equal(G.numpy(X[:3, :n], X[:3, n:2 * n], X[:3, 2 * n:]), V[:3][:, [5, 2, 250]])
+    p = np.random.default_rng(6).random(len(X))
+    np.testing.assert_allclose(F.weighted_sum(X, p, chunk=7), p @ V, rtol=1e-12, atol=1e-9)
 
 
 def test_feature_cuts_hold_on_the_final_distribution_and_weak_duality_on_designs():
