@@ -120,7 +120,9 @@ def main(argv=None) -> int:
     ap.add_argument("--cut-at", type=int, nargs="+", default=None, metavar="ROUND",
                     help="add the --features cuts after these rounds only (instead of --cut-every)")
     ap.add_argument("--start", default=None, metavar="NPZ",
-                    help="the states of a --save'd best distribution join the first round (a warm start)")
+                    help="the states of a --save'd best distribution join the first round (a warm start); its "
+                         "trajectory atoms stay whole, and with --rest its random test functions are held from round 0 "
+                         "(a cut run continues where it stopped)")
     ap.add_argument("--cut-every", type=int, default=1, metavar="R",
                     help="add the --features cuts every R rounds (the column generation converges in between)")
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
@@ -142,14 +144,29 @@ def main(argv=None) -> int:
         print(f"{a.robot}: bandwidth of a {a.bandwidth}-harmonic Fourier design over 10 s at 100 Hz: "
               f"E[ddq ddq^T] <= {rho:.4g} E[dq dq^T] ((rad/s)^2; (K w)^2 = {(a.bandwidth * 0.2 * np.pi) ** 2:.4g})")
     start = None if a.start is None else np.load(a.start)
+    start_states = start_signs = None
+    start_designs: list = []
+    start_cuts = ()
+    if start is not None:
+        # a saved run: its states, its whole-trajectory atoms (the last blocks) and, with --rest, its cuts
+        sizes = [int(k) for k in start["design_sizes"]] if "design_sizes" in start.files else []
+        cut = len(start["states"]) - sum(sizes)
+        start_states, start_signs = start["states"][:cut], start["signs"][:cut]
+        for k in sizes:
+            start_designs.append((start["states"][cut:cut + k], start["signs"][cut:cut + k]))
+            cut += k
+        if a.rest and "cut_ids" in start.files:
+            start_cuts = tuple(int(k) for k in start["cut_ids"])
+        print(f"{a.robot}: warm start from {a.start}: {len(start_states)} states, {len(start_designs)} trajectory atoms, "
+              f"{len(start_cuts)} random test functions held from round 0", flush=True)
     t0 = time.perf_counter()
     b = relaxation_bracket(model, lim, atoms=a.atoms, rounds=a.rounds, fresh=a.fresh, starts=a.starts, add=a.add,
                            tol=a.tol, time_budget=a.budget, seed=a.seed, stationary=a.stationary,
                            moment_tol=a.moment_tol, degree=a.degree, bandwidth=rho, rest=a.rest, robot=robot, kinetic=a.kinetic,
                            braking=a.braking, features=a.features, dictionary=a.dictionary,
                            cut_every=a.cut_every, cut_at=None if a.cut_at is None else tuple(a.cut_at),
-                           extra_states=None if start is None else start["states"],
-                           extra_signs=None if start is None else start["signs"],
+                           extra_states=start_states, extra_signs=start_signs, extra_designs=start_designs,
+                           cuts=start_cuts,
                            trajectories=(10 if a.stationary or a.rest or rho is not None else 0) if a.trajectories is None
                            else a.trajectories, progress=show)
     wall = time.perf_counter() - t0
@@ -177,7 +194,8 @@ def main(argv=None) -> int:
     p = b.weights / b.weights.sum()
     if a.save:
         np.savez(a.save, states=b.states, signs=b.signs, weights=p, lower=lower, upper=b.upper, A=b.A, B=b.B,
-                 r=b.r, lam=np.zeros(0) if b.lam is None else b.lam, c0=b.c0)
+                 r=b.r, lam=np.zeros(0) if b.lam is None else b.lam, c0=b.c0, design_sizes=np.array(b.design_sizes, int),
+                 cut_ids=np.zeros(0, int) if b.upper_features is None else np.asarray(b.upper_features.ids, int))
         print(f"{a.robot}: best distribution and duals written to {a.save}")
     m = p @ (stationarity_moments(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:], degree=a.degree)
              / stationarity_scales(lim, a.degree))

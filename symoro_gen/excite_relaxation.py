@@ -27,6 +27,7 @@ import functools
 import math
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -114,7 +115,9 @@ class RelaxationBracket:
 
     With random test functions (``relaxation_bracket(features=K)``), ``features`` are those of the round that
     gave ``lower`` (``lam`` covers them last) and ``upper_features`` those the ``upper`` distribution meets
-    (the cuts of its round; the cut set grows, so the two may differ).
+    (the cuts of its round; the cut set grows, so the two may differ). ``design_sizes``: the whole-trajectory
+    atoms of the ``upper`` distribution, the last blocks of ``states`` (each a trajectory's samples in equal
+    shares), so that a saved run can continue (``relaxation_bracket(extra_designs=, cuts=)``).
     """
 
     lower: float
@@ -137,6 +140,7 @@ class RelaxationBracket:
     braking: bool = False
     features: FeatureMoments | None = None
     upper_features: FeatureMoments | None = None
+    design_sizes: tuple[int, ...] = ()
 
     @property
     def stationary(self) -> bool:
@@ -809,6 +813,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                        bandwidth: float | None = None, rest: bool = False, robot: Any = None,
                        kinetic: str | None = None, braking: bool = False, features: int = 0,
                        dictionary: int = 20_000, cut_every: int = 1, cut_at: tuple[int, ...] | None = None,
+                       cuts: Sequence[int] = (), extra_designs: Sequence[tuple[np.ndarray, np.ndarray]] = (),
                        progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
@@ -845,7 +850,10 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     or past ``time_budget`` seconds. ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples or a saved
     distribution's states, with their Coulomb signs ``extra_signs``, default ``sign(dq)``) and the samples of
     ``trajectories`` random Fourier trajectories join the first round (with ``stationary`` or ``rest`` they
-    make it feasible).
+    make it feasible). ``cuts`` (ids in the dictionary, e.g. a saved run's :attr:`RelaxationBracket.upper_features`
+    ``.ids``) are held from the first round on, and ``extra_designs`` (``(states, signs)`` of whole trajectories,
+    e.g. a saved distribution's design blocks, :attr:`RelaxationBracket.design_sizes`) join as whole-trajectory
+    atoms: with both, a saved run continues where it stopped.
     """
     import cvxpy as cp
 
@@ -857,13 +865,16 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         ex = np.asarray(extra_states, float)
         sg = np.sign(ex[:, n:2 * n]) if extra_signs is None else np.asarray(extra_signs, float)
         X, S = np.vstack([X, ex]), np.vstack([S, sg])
-    if features and not rest:
-        raise ValueError("features= needs rest=True (the random test functions vanish at rest)")
-    designs: list[tuple[np.ndarray, np.ndarray]] = []  # with features: whole trajectories as atoms
+    if (features or len(cuts)) and not rest:
+        raise ValueError("features= and cuts= need rest=True (the random test functions vanish at rest)")
+    with_cuts = bool(features or len(cuts))
+    # with cuts: whole trajectories as atoms
+    designs: list[tuple[np.ndarray, np.ndarray]] = [(np.asarray(x, float), np.asarray(s_, float))
+                                                    for x, s_ in extra_designs]
     if trajectories:
-        per = _DESIGN_SAMPLES if features else 50
+        per = _DESIGN_SAMPLES if with_cuts else 50
         Xt, St = _trajectory_states(limits, rng, trajectories, samples=per)
-        if features:
+        if with_cuts:
             designs = [(Xt[k * per:(k + 1) * per], St[k * per:(k + 1) * per]) for k in range(trajectories)]
         else:
             X, S = np.vstack([X, Xt]), np.vstack([S, St])
@@ -871,9 +882,11 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         X = _brake(limits, X)
         designs = [(_brake(limits, x), s) for x, s in designs]
     rest_m = RestMoments(model, limits, robot, kinetic=kinetic) if rest else None
-    pool = feature_dictionary(limits, dictionary, seed) if features else None
-    cuts = pool.subset([]) if pool is not None else None
-    moments = _MomentSet(limits, degree if stationary else None, rest_m, cuts) if stationary or rest else None
+    pool = feature_dictionary(limits, dictionary, seed) if with_cuts else None
+    if len(cuts) and (min(cuts) < 0 or max(cuts) >= dictionary):
+        raise ValueError(f"cuts= must be ids in the dictionary of {dictionary} test functions")
+    held = pool.subset(sorted(set(int(k) for k in cuts))) if pool is not None else None
+    moments = _MomentSet(limits, degree if stationary else None, rest_m, held) if stationary or rest else None
     jac = _DualPricer.casadi_jacobian(model, n, moments)
     # a design atom: the mean information matrix of a trajectory's samples (one full period) and its trace
     nb = len(model.BASE_NAMES)
@@ -942,7 +955,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
             lam, c0 = nu_p - nu_n, moment_tol * float(np.sum(nu_p + nu_n))
         C = _psd(np.asarray(c3.dual_value)) if bandwidth is not None else None
         pricer = _DualPricer(model, limits, A, B, lam, c0, rho=bandwidth, C=C, degree=degree, closed=stationary,
-                             rest=rest_m, coulomb=coul, jac=jac, braking=braking, features=cuts)
+                             rest=rest_m, coulomb=coul, jac=jac, braking=braking, features=held)
         # pricing: the dual ratio over the current states, fresh random states and local maxima
         Xf, Sf = _random_states(rng, limits, fresh, braking)
         rf = pricer.ratio(Xf, Sf)
@@ -954,12 +967,12 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         dual = relaxation_dual_bound(A, B, r) if np.isfinite(r) and r > 0 else 0.0
         keep = w > prune * w_all.max()
         hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
-                                    t_sdp, 0 if cuts is None else len(cuts)))
+                                    t_sdp, 0 if held is None else len(held)))
         if progress is not None:
             progress(hist[-1])
         if dual > best_lower or not dual_of:
             best_lower = max(best_lower, dual)
-            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0, "C": C, "features": cuts}
+            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0, "C": C, "features": held}
         if primal < best_upper:
             best_upper = primal
             pos = w > 0
@@ -968,19 +981,19 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                     "signs": np.vstack([S[pos]] + [designs[d][1] for d in used]),
                     "weights": np.concatenate([w[pos] / tr[pos]] + [np.full(len(designs[d][0]), w_d[d] / dtr[d]
                                                                              / len(designs[d][0])) for d in used]),
-                    "features": cuts}
+                    "features": held, "design_sizes": tuple(len(designs[d][0]) for d in used)}
         if best_upper <= best_lower * (1 + tol) or hist[-1].seconds > time_budget or rd == rounds:
             break
-        if pool is not None and cuts is not None and (rd in cut_at if cut_at is not None else (rd + 1) % cut_every == 0):
+        if pool is not None and features and held is not None and (rd in cut_at if cut_at is not None else (rd + 1) % cut_every == 0):
             # separation: the features the best distribution violates most
             p, p_d = w / tr, (w_d / dtr if designs else np.zeros(0))
             v = pool.weighted_sum(X, p) + (p_d @ dpool if dpool is not None else 0.0)
             viol = np.abs(v / pool.scale) / (p.sum() + p_d.sum())
-            viol[cuts.ids] = 0.0
+            viol[held.ids] = 0.0
             new = [int(k) for k in np.argsort(-viol)[:features] if viol[k] > moment_tol]
             if new:
-                cuts = cuts + pool.subset(new)
-                moments = _MomentSet(limits, degree if stationary else None, rest_m, cuts)
+                held = held + pool.subset(new)
+                moments = _MomentSet(limits, degree if stationary else None, rest_m, held)
                 jac = _DualPricer.casadi_jacobian(model, n, moments)
                 best_upper = math.inf  # a tighter relaxation: its upper end starts again
         good = [(x, Sf[i]) for i, (x, v) in zip(picks, loc) if v > 1.0]
@@ -990,7 +1003,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
                              dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if moments is not None else 0.0,
                              dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree, stationary, rest_m,
-                             braking, dual_of["features"], best["features"])
+                             braking, dual_of["features"], best["features"], best["design_sizes"])
 
 
 def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: RelaxationBracket, *,

@@ -625,6 +625,35 @@ def test_feature_cuts_hold_on_the_final_distribution_and_weak_duality_on_designs
     _weak_duality_on_rest_designs(model, lim, b, pricer, 8, 63)
 
 
+def test_a_saved_cut_run_continues_where_it_stopped():
+    """relaxation_bracket(cuts=, extra_designs=): the cuts of a run's upper end (``upper_features.ids``) held from
+    round 0 and its distribution given back (its plain states, and its whole-trajectory atoms as the blocks
+    ``design_sizes`` says) start the next run at that run's upper end or below (the saved distribution is
+    feasible for it), with the same cuts and no new ones unless asked; cuts need ``rest=True`` and ids in the
+    dictionary."""
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    kw = dict(atoms=100, fresh=2000, starts=6, add=20, seed=3, rest=True, robot=robot, dictionary=2000, tol=0.0)
+    b = relaxation_bracket(model, lim, rounds=2, trajectories=5, features=10, cut_at=(0,), **kw)
+    assert b.upper_features is not None and len(b.upper_features) == 10
+    ids = [int(k) for k in b.upper_features.ids]
+    plain = cut = len(b.states) - sum(b.design_sizes)
+    designs = []
+    for k in b.design_sizes:  # each block: one trajectory's samples in equal shares
+        assert np.ptp(b.weights[cut:cut + k]) <= 1e-12 * b.weights[cut:cut + k].max()
+        designs.append((b.states[cut:cut + k], b.signs[cut:cut + k]))
+        cut += k
+    c = relaxation_bracket(model, lim, rounds=1, trajectories=0, cuts=ids, extra_states=b.states[:plain],
+                           extra_signs=b.signs[:plain], extra_designs=designs, **kw)
+    assert [h.cuts for h in c.rounds] == [10, 10]
+    assert sorted(int(k) for k in c.upper_features.ids) == sorted(ids)
+    assert c.rounds[0].primal <= b.upper * (1 + 1e-3)
+    with pytest.raises(ValueError, match="rest=True"):
+        relaxation_bracket(model, lim, rounds=0, cuts=ids)
+    with pytest.raises(ValueError, match="ids in the dictionary"):
+        relaxation_bracket(model, lim, rounds=0, cuts=[5000], **kw)
+
+
 @pytest.mark.parametrize("name", ["rx90", "lwr4"])
 def test_random_cuts_hold_on_designs_sampled_at_100_hz_within_the_bench_tolerance(name):
     """What the cut relaxation bounds: the cond is taken over a design's 100-Hz samples, whose uniform mean
