@@ -32,8 +32,10 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
     PYTHONPATH=. python bench/bench_excite_relaxation.py [--robot lwr4|rx90] [--atoms 400] [--rounds 60]
         [--budget SECONDS] [--tol 0.02] [--fresh 30000] [--starts 40] [--add 60] [--seed 0]
         [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--rest [--kinetic energy|joint]
-        [--features K [--cut-every R] [--dictionary 20000]]] [--braking] [--bandwidth K] [--verify 300000]
-        [--save OUT.npz]
+        [--features K [--cut-every R | --cut-at ROUND ...] [--dictionary 20000]]] [--braking] [--bandwidth K]
+        [--verify 300000 [--verify-starts 200]] [--save OUT.npz] [--start SAVED.npz]
+    PYTHONPATH=. python bench/bench_excite_relaxation.py --robot R --rest [--moment-tol T] [--braking]
+        --reverify SAVED.npz [--verify 400000] [--verify-starts 1000] [--seed S]
 
 ``--rest`` adds the moments of every trajectory that starts and ends at rest (every design of ``excite``,
 closed or not: ``symoro_gen.excite_relaxation.RestMoments``, the rates of the momentum regressor and of every frame's
@@ -44,12 +46,15 @@ without ``--rest`` lets the arm fall on average, cancelling part of gravity in t
 ``--kinetic`` adds test functions quadratic in ``dq`` to those moments (the kinetic-energy regressor's
 entries, or every ``dq_j Y_p[j, b]``); ``--braking`` keeps every state to ``braking_speed`` (a joint at speed
 must be able to stop before the end of its range); ``--save`` writes the best distribution and the duals.
-Neither condition moves the floors (docs/excitation.md, "Why no relaxation over distributions can settle
-the target").
+Neither condition moves the floors (docs/excitation.md, "What no relaxation over distributions can do").
 ``--features K`` (with ``--rest``) is a cutting plane over the occupation-measure conditions: every
 ``--cut-every`` rounds the K random test functions (``FeatureMoments``: ``dq_j cos(omega.q + nu.dq + phi)``, which
 vanish at rest) of a seeded dictionary that the best distribution violates most join the moments; the
 ``--trajectories`` then enter as whole-trajectory atoms (docs/excitation.md, "Random test functions").
+``--save`` also writes the cuts and the trajectory atoms, which ``--start`` restores: a cut run continues where it
+stopped, its cuts held from round 0. ``--reverify`` re-prices a saved run's lower-end duals on a search of its
+own (more states, more local searches, another seed): a deeper search can only find larger dual ratios, so its
+lower end is the more trustworthy one.
 
 ``--degree 3`` adds the test functions of degree 3 (``symoro_gen.excite_relaxation._degree3_tests``: 1456 more
 conditions on the LWR4, 938 on the RX-90). ``--bandwidth K`` restricts the distributions to those of the
@@ -73,10 +78,12 @@ from bench_excite import TARGET_RATIO, random_baseline, velocity_occupancy
 
 from symoro_gen.excite import FourierBasis, cond_lower_bound, limits_of, output_times
 from symoro_gen.excite_relaxation import (
+    RelaxationBracket,
     RestMoments,
     basis_bandwidth,
     feature_dictionary,
     relaxation_bracket,
+    relaxation_dual_bound,
     relaxation_rows,
     relaxation_verify,
     stationarity_moment_names,
@@ -84,6 +91,27 @@ from symoro_gen.excite_relaxation import (
     stationarity_scales,
 )
 from symoro_gen.loader import model_for
+
+
+def _reverify(a, model, lim, robot) -> int:
+    """``--reverify NPZ``: the lower end of a saved ``--rest`` run, re-priced on a search of its own (a deeper
+    search can only find larger dual ratios, hence a lower, more trustworthy lower end)."""
+    d = np.load(a.reverify)
+    ids = d["cut_ids"] if "cut_ids" in d.files else np.zeros(0, int)
+    run_seed = int(d["seed"]) if "seed" in d.files else 0  # the run's seed: its cuts' dictionary
+    feats = feature_dictionary(lim, a.dictionary, run_seed).subset(ids) if len(ids) else None
+    b = RelaxationBracket(0.0, float(d["upper"]), (), d["states"], d["signs"], d["weights"], d["A"], d["B"],
+                          float(d["r"]), a.moment_tol, d["lam"], float(d["c0"]), closed=False,
+                          rest=RestMoments(model, lim, robot), braking=a.braking, features=feats)
+    if len(b.lam) != len(b.rest.names) + (0 if feats is None else len(feats)):
+        raise SystemExit(f"{a.reverify}: {len(b.lam)} moment multipliers, not those of a --rest run of {a.robot} "
+                         f"with {len(ids)} random test functions")
+    t0 = time.perf_counter()
+    r, bound = relaxation_verify(model, lim, b, states=a.verify or 300_000, starts=a.verify_starts, seed=a.seed)
+    print(f"{a.robot}: {a.reverify}: saved r {b.r:.4f} (dual estimate {relaxation_dual_bound(b.A, b.B, b.r):.3f}); "
+          f"{a.verify or 300_000} fresh states + {a.verify_starts} local searches (seed {a.seed}): r {r:.4f}, "
+          f"lower end {bound:.3f} ({time.perf_counter() - t0:.0f} s); upper end {b.upper:.3f}")
+    return 0
 
 
 def main(argv=None) -> int:
@@ -128,9 +156,16 @@ def main(argv=None) -> int:
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
     ap.add_argument("--save", default=None, metavar="NPZ",
                     help="write the best distribution (states, signs, weights) and the duals of the lower end here")
+    ap.add_argument("--verify-starts", type=int, default=200, metavar="K",
+                    help="local searches of the verification (from the K best of its fresh states)")
+    ap.add_argument("--reverify", default=None, metavar="NPZ",
+                    help="only re-price the lower-end duals of a --save'd --rest run (give its --moment-tol and "
+                         "--braking) on --verify fresh states and --verify-starts local searches, seed --seed")
     a = ap.parse_args(argv)
     robot, model = model_for(a.robot)
     lim = limits_of(robot)
+    if a.reverify:
+        return _reverify(a, model, lim, robot)
     print(f"{a.robot}: {model.N_JOINTS} joints, {len(model.BASE_NAMES)} base parameters; load "
           f"{os.getloadavg()[0]:.1f}", flush=True)
 
@@ -176,8 +211,8 @@ def main(argv=None) -> int:
     lower, how = b.lower, "dual estimate"
     if a.verify:
         tv = time.perf_counter()
-        r_v, lower_v = relaxation_verify(model, lim, b, states=a.verify, starts=200, seed=a.seed + 1)
-        print(f"{a.robot}: verification on {a.verify} fresh states + 200 local searches: r {b.r:.4f} -> {r_v:.4f}, "
+        r_v, lower_v = relaxation_verify(model, lim, b, states=a.verify, starts=a.verify_starts, seed=a.seed + 1)
+        print(f"{a.robot}: verification on {a.verify} fresh states + {a.verify_starts} local searches: r {b.r:.4f} -> {r_v:.4f}, "
               f"dual estimate {b.lower:.3f} -> {lower_v:.3f} ({time.perf_counter() - tv:.0f} s)")
         lower, how = lower_v, "dual estimate, verified"
     if bound is not None and bound.bound > lower:
@@ -195,7 +230,8 @@ def main(argv=None) -> int:
     if a.save:
         np.savez(a.save, states=b.states, signs=b.signs, weights=p, lower=lower, upper=b.upper, A=b.A, B=b.B,
                  r=b.r, lam=np.zeros(0) if b.lam is None else b.lam, c0=b.c0, design_sizes=np.array(b.design_sizes, int),
-                 cut_ids=np.zeros(0, int) if b.upper_features is None else np.asarray(b.upper_features.ids, int))
+                 cut_ids=np.zeros(0, int) if b.upper_features is None else np.asarray(b.upper_features.ids, int),
+                 seed=a.seed)
         print(f"{a.robot}: best distribution and duals written to {a.save}")
     m = p @ (stationarity_moments(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:], degree=a.degree)
              / stationarity_scales(lim, a.degree))
