@@ -672,3 +672,37 @@ def test_random_cuts_hold_on_designs_sampled_at_100_hz_within_the_bench_toleranc
     for basis, tol in ((FourierBasis(5, 0.1), 1e-12), (SplineBasis(60, 10.0), 1e-3), (SplineBasis(231, 10.0), 1e-3)):
         q, dq, ddq = basis_eval(basis, random_trajectory(basis, lim, rng, t), t)
         assert np.abs(F.numpy(q, dq, ddq).mean(0) / F.scale).max() < tol
+
+
+def test_bench_saves_continues_and_reverifies_a_cut_run(tmp_path):
+    """The commands docs/excitation.md gives for the cut runs: ``--save`` writes the cuts and the trajectory atoms,
+    ``--start`` continues with the cuts held from round 0, ``--reverify`` re-prices the saved lower-end duals on a
+    search of its own, which can only find larger dual ratios (its lower end at most the run's estimate)."""
+    import os
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    small = ["--robot", "scara", "--rest", "--atoms", "100", "--fresh", "2000", "--starts", "6", "--add", "20",
+             "--dictionary", "500", "--trajectories", "3", "--tol", "0"]
+
+    def bench(*args):
+        out = subprocess.run([sys.executable, str(root / "bench" / "bench_excite_relaxation.py"), *small, *args],
+                             capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return out.stdout
+
+    first, second = tmp_path / "cut.npz", tmp_path / "cut2.npz"
+    bench("--features", "5", "--cut-at", "0", "--rounds", "1", "--save", str(first))
+    saved = np.load(first)
+    assert len(saved["cut_ids"]) == 5 and sum(saved["design_sizes"]) <= len(saved["states"])
+    out = bench("--start", str(first), "--rounds", "0", "--save", str(second))
+    assert re.search(r"warm start from .*: \d+ states, \d+ trajectory atoms, 5 random test functions held", out)
+    assert sorted(np.load(second)["cut_ids"]) == sorted(saved["cut_ids"])
+    out = bench("--reverify", str(second), "--verify", "3000", "--verify-starts", "4", "--seed", "5")
+    m = re.search(r"dual estimate ([\d.]+)\); 3000 fresh states \+ 4 local searches \(seed 5\): r [\d.]+, lower end ([\d.]+)",
+                  out)
+    assert m and float(m.group(2)) <= float(m.group(1)) + 1e-3
