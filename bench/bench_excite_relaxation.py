@@ -86,6 +86,7 @@ from symoro_gen.excite_relaxation import (
     relaxation_dual_bound,
     relaxation_rows,
     relaxation_verify,
+    split_saved_atoms,
     stationarity_moment_names,
     stationarity_moments,
     stationarity_scales,
@@ -184,12 +185,8 @@ def main(argv=None) -> int:
     start_cuts = ()
     if start is not None:
         # a saved run: its states, its whole-trajectory atoms (the last blocks) and, with --rest, its cuts
-        sizes = [int(k) for k in start["design_sizes"]] if "design_sizes" in start.files else []
-        cut = len(start["states"]) - sum(sizes)
-        start_states, start_signs = start["states"][:cut], start["signs"][:cut]
-        for k in sizes:
-            start_designs.append((start["states"][cut:cut + k], start["signs"][cut:cut + k]))
-            cut += k
+        start_states, start_signs, start_designs = split_saved_atoms(
+            start["states"], start["signs"], start["design_sizes"] if "design_sizes" in start.files else ())
         if a.rest and "cut_ids" in start.files:
             start_cuts = tuple(int(k) for k in start["cut_ids"])
         print(f"{a.robot}: warm start from {a.start}: {len(start_states)} states, {len(start_designs)} trajectory atoms, "

@@ -61,6 +61,7 @@ __all__ = [
     "relaxation_dual_bound",
     "relaxation_rows",
     "relaxation_verify",
+    "split_saved_atoms",
     "stationarity_moment_names",
     "stationarity_moments",
     "stationarity_scales",
@@ -736,6 +737,19 @@ def feature_dictionary(limits: Limits, count: int, seed: int = 0) -> FeatureMome
     return FeatureMoments(limits, count, seed=seed + 1)
 
 
+def split_saved_atoms(states: np.ndarray, signs: np.ndarray, design_sizes: Sequence[int]
+                      ) -> tuple[np.ndarray, np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """A saved distribution (:attr:`RelaxationBracket.states`, ``signs``, ``design_sizes``) as the arguments
+    that continue it: ``(extra_states, extra_signs, extra_designs)`` of :func:`relaxation_bracket` - the plain
+    states first, then one ``(states, signs)`` block per whole-trajectory atom."""
+    plain = cut = len(states) - int(sum(design_sizes))
+    designs = []
+    for k in map(int, design_sizes):
+        designs.append((states[cut:cut + k], signs[cut:cut + k]))
+        cut += k
+    return states[:plain], signs[:plain], designs
+
+
 def _frame_kinematics(robot: Any, model: Any, n: int, q) -> tuple[Any, list[str]]:
     """The base-frame origin ``p_j`` and rotation ``R_j`` (row by row) of every frame of ``robot``
     (:func:`mdh_frames`; a closed-loop robot's through its ``model``'s linear closure) as a CasADi expression
@@ -868,7 +882,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     if (features or len(cuts)) and not rest:
         raise ValueError("features= and cuts= need rest=True (the random test functions vanish at rest)")
     with_cuts = bool(features or len(cuts))
-    # with cuts: whole trajectories as atoms
+    # whole trajectories as atoms: the given ones, and with cuts the random ones below
     designs: list[tuple[np.ndarray, np.ndarray]] = [(np.asarray(x, float), np.asarray(s_, float))
                                                     for x, s_ in extra_designs]
     if trajectories:

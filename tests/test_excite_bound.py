@@ -631,20 +631,22 @@ def test_a_saved_cut_run_continues_where_it_stopped():
     ``design_sizes`` says) start the next run at that run's upper end or below (the saved distribution is
     feasible for it), with the same cuts and no new ones unless asked; cuts need ``rest=True`` and ids in the
     dictionary."""
+    from symoro_gen.excite_relaxation import split_saved_atoms
+
     robot, model = model_for("scara")
     lim = limits_of(robot)
     kw = dict(atoms=100, fresh=2000, starts=6, add=20, seed=3, rest=True, robot=robot, dictionary=2000, tol=0.0)
     b = relaxation_bracket(model, lim, rounds=2, trajectories=5, features=10, cut_at=(0,), **kw)
     assert b.upper_features is not None and len(b.upper_features) == 10
     ids = [int(k) for k in b.upper_features.ids]
-    plain = cut = len(b.states) - sum(b.design_sizes)
-    designs = []
+    cut = len(b.states) - sum(b.design_sizes)
     for k in b.design_sizes:  # each block: one trajectory's samples in equal shares
         assert np.ptp(b.weights[cut:cut + k]) <= 1e-12 * b.weights[cut:cut + k].max()
-        designs.append((b.states[cut:cut + k], b.signs[cut:cut + k]))
         cut += k
-    c = relaxation_bracket(model, lim, rounds=1, trajectories=0, cuts=ids, extra_states=b.states[:plain],
-                           extra_signs=b.signs[:plain], extra_designs=designs, **kw)
+    states, signs, designs = split_saved_atoms(b.states, b.signs, b.design_sizes)
+    assert len(designs) == len(b.design_sizes) and len(states) + sum(b.design_sizes) == len(b.states)
+    c = relaxation_bracket(model, lim, rounds=1, trajectories=0, cuts=ids, extra_states=states,
+                           extra_signs=signs, extra_designs=designs, **kw)
     assert [h.cuts for h in c.rounds] == [10, 10]
     assert sorted(int(k) for k in c.upper_features.ids) == sorted(ids)
     assert c.rounds[0].primal <= b.upper * (1 + 1e-3)
