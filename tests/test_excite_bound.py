@@ -9,6 +9,7 @@ from scipy.linalg import eigh
 from symoro_gen.excite import (
     FourierBasis,
     basis_eval,
+    check_limits,
     cond_lower_bound,
     limits_of,
     output_times,
@@ -708,3 +709,53 @@ def test_bench_saves_continues_and_reverifies_a_cut_run(tmp_path):
     m = re.search(r"dual estimate ([\d.]+)\); 3000 fresh states \+ 4 local searches \(seed 5\): r [\d.]+, lower end ([\d.]+)",
                   out)
     assert m and float(m.group(2)) <= float(m.group(1)) + 1e-3
+
+
+def test_bench_prices_rest_to_rest_pieces_and_their_equal_time_sets(tmp_path):
+    """``bench_excite_mixture.py --pieces``: every priced piece is a spline at rest at both ends within the limits,
+    the best mixture never rises as pieces join the pool, and K distinct pieces for equal times (``--equal``)
+    never beat the mixture of all (the SDP's optimum over every time sharing); ``best_equal_set`` ends where
+    no exchange of one piece lowers cond."""
+    import itertools
+    import os
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from symoro_gen.excite import SplineBasis
+
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    out = subprocess.run([sys.executable, str(root / "bench" / "bench_excite_mixture.py"), "--robots", "scara",
+                          "--random", "--pieces", "1", "--points", "9", "--init", "8", "--per-round", "2",
+                          "--price", "2", "--max-iter", "20", "--equal", "2", "4", "--save", str(tmp_path / "p.npz")],
+                         capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    mixes = [float(x) for x in re.findall(r"round \d+: \d+ pieces, best mixture ([\d.]+)", out.stdout)]
+    assert len(mixes) == 3 and all(b <= a * (1 + 1e-3) for a, b in itertools.pairwise(mixes))
+    equal = [float(x) for x in re.findall(r"for equal times \(\d+ s of motion\): cond ([\d.]+)", out.stdout)]
+    assert len(equal) == 2 and min(equal) >= mixes[-1] * (1 - 1e-3)
+    saved = np.load(tmp_path / "p.npz")
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    basis, t = SplineBasis(9, 1.0), np.linspace(0.0, 1.0, 1001)
+    assert len(saved["designs"]) == 8 + 2 * 2
+    for X in saved["designs"]:
+        q, dq, ddq = basis_eval(basis, X, t)
+        assert check_limits(lim, q, dq, ddq)["ok"]
+        assert np.abs(dq[[0, -1]]).max() < 1e-9 and np.abs(ddq[[0, -1]]).max() < 1e-6
+
+    sys.path.insert(0, str(root / "bench"))
+    try:
+        from bench_excite_mixture import best_equal_set, cond_of
+    finally:
+        sys.path.remove(str(root / "bench"))
+    Ms = saved["Ms"]
+    c, sel = best_equal_set(Ms, 3, [0, 1, 2])
+    assert c <= cond_of(Ms[[0, 1, 2]].mean(0)) and len(set(sel)) == 3
+    for slot in range(3):
+        for j in set(range(len(Ms))) - set(sel):
+            trial = list(sel)
+            trial[slot] = j
+            assert cond_of(Ms[trial].mean(0)) >= c - 1e-9
