@@ -79,12 +79,12 @@ def random_matrices(model, lim, count: int, seed: int = 0) -> np.ndarray:
     return np.array([information(model, *qdq) for qdq in random_designs(lim, seed=seed, count=count)])
 
 
-def pricer(model, lim, basis, max_iter: int):
-    """IPOPT on the dual ratio of a mixture SDP: ``solve(X0, A, B) -> X`` within the limits."""
+def _ratio_solver(model, lim, basis, max_iter: int, t_obj: np.ndarray, t_con: np.ndarray, dense: np.ndarray):
+    """IPOPT on ``-log tr(A M) + log tr(B M)`` of the design ``basis`` (``M`` on ``t_obj``; the limits with a 1 %
+    margin on ``t_con``): ``solve(X0, A, B) -> X``, checked on ``dense`` and scaled into the limits if need be."""
     import casadi as ca
 
     nb = len(model.BASE_NAMES)
-    t_obj, t_con = np.linspace(0, 10, 200), np.linspace(0, 10, 400)
     nlp, bounds = E._build_nlp(model, basis, lim, t_obj, t_con, "logdet", None, 0.01)  # its constraints
     x = nlp["x"]
     M = E.design_information(model, basis, x, t_obj)
@@ -93,7 +93,6 @@ def pricer(model, lim, basis, max_iter: int):
             "ipopt.hessian_approximation": "limited-memory", "ipopt.sb": "yes"}
     solver = ca.nlpsol("price", "ipopt", {"x": x, "p": ca.vertcat(ca.vec(Ap), ca.vec(Bp)), "g": nlp["g"],
                                           "f": -ca.log(ca.trace(Ap @ M)) + ca.log(ca.trace(Bp @ M))}, opts)
-    dense = E.dense_times(output_times(10.0, 100.0), 10.0, basis)
 
     def solve(X0, A, B):
         sol = solver(x0=X0.T.reshape(-1), p=np.concatenate([A.T.reshape(-1), B.T.reshape(-1)]),
@@ -104,31 +103,21 @@ def pricer(model, lim, basis, max_iter: int):
     return solve
 
 
+def pricer(model, lim, basis, max_iter: int):
+    """IPOPT on the dual ratio of a mixture SDP: ``solve(X0, A, B) -> X`` within the limits."""
+    return _ratio_solver(model, lim, basis, max_iter, np.linspace(0, 10, 200), np.linspace(0, 10, 400),
+                         E.dense_times(output_times(10.0, 100.0), 10.0, basis))
+
+
 def piece_pricer(model, lim, basis, max_iter: int):
     """IPOPT on the dual ratio ``tr(A M) / tr(B M)`` of a mixture SDP over pieces of the spline ``basis`` (its own
     duration): ``solve(X0, A, B) -> X`` within the limits (1 % margin in the NLP; checked, and scaled into them
     if need be, on the dense grid), ``info(X) -> W^T W / N`` at 100 Hz, the NLP's constraint grid and the
     dense grid."""
-    import casadi as ca
-
-    nb, D = len(model.BASE_NAMES), basis.duration
-    t_obj, t_con = np.linspace(0, D, int(40 * D) + 1), np.linspace(0, D, int(80 * D) + 1)
-    t_out = np.arange(0, D + 1e-9, 0.01)
+    D = basis.duration
+    t_con, t_out = np.linspace(0, D, int(80 * D) + 1), np.arange(0, D + 1e-9, 0.01)
     dense = E.dense_times(t_out, D, basis)
-    nlp, bounds = E._build_nlp(model, basis, lim, t_obj, t_con, "logdet", None, 0.01)  # its constraints
-    x = nlp["x"]
-    M = E.design_information(model, basis, x, t_obj)
-    Ap, Bp = ca.MX.sym("A", nb, nb), ca.MX.sym("B", nb, nb)
-    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": int(max_iter), "ipopt.tol": 1e-6,
-            "ipopt.hessian_approximation": "limited-memory", "ipopt.sb": "yes"}
-    solver = ca.nlpsol("price", "ipopt", {"x": x, "p": ca.vertcat(ca.vec(Ap), ca.vec(Bp)), "g": nlp["g"],
-                                          "f": -ca.log(ca.trace(Ap @ M)) + ca.log(ca.trace(Bp @ M))}, opts)
-
-    def solve(X0, A, B):
-        sol = solver(x0=X0.T.reshape(-1), p=np.concatenate([A.T.reshape(-1), B.T.reshape(-1)]),
-                     lbg=bounds["lbg"], ubg=bounds["ubg"])
-        Xn = np.asarray(sol["x"]).reshape(lim.n, basis.m).T
-        return Xn if E._inside(basis, lim, Xn, dense) else E._scale_into(basis, lim, Xn, dense)
+    solve = _ratio_solver(model, lim, basis, max_iter, np.linspace(0, D, int(40 * D) + 1), t_con, dense)
 
     def info(X):
         return information(model, *basis_eval(basis, X, t_out))
