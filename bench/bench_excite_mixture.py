@@ -20,8 +20,8 @@ the pool design of the largest ratio and from a structured start), which joins t
 of (locally priced) designs go.
 
 ``--pieces S`` prices short rest-to-rest *pieces* instead: cubic splines of ``--points`` control points over
-``S`` seconds, each at rest at both ends and anywhere within the limits; ``--init`` random ones (half
-structured, half random walks), then ``--price R`` rounds, each adding ``--per-round`` pieces priced by IPOPT
+``S`` seconds, each at rest at both ends and anywhere within the limits; ``--init`` random ones (each
+structured or a random walk, at even odds), then ``--price R`` rounds, each adding ``--per-round`` pieces priced by IPOPT
 (half from the pool pieces of the largest dual ratio, half from fresh random ones). A mixture of pieces is a
 long experiment cut at its rests (the moves between pieces left out). ``--equal K ...`` then asks what ``K``
 *distinct* pieces run for equal times reach (``K x S`` seconds of motion: the best set found by exchanges
