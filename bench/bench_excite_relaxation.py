@@ -32,7 +32,7 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
     PYTHONPATH=. python bench/bench_excite_relaxation.py [--robot lwr4|rx90] [--atoms 400] [--rounds 60]
         [--budget SECONDS] [--tol 0.02] [--fresh 30000] [--starts 40] [--add 60] [--seed 0]
         [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--rest [--kinetic energy|joint]
-        [--features K [--cut-every R | --cut-at ROUND ...] [--dictionary 20000]]] [--braking] [--bandwidth K]
+        [--features K [--cut-every R | --cut-at ROUND ...] [--dictionary 20000]]] [--braking] [--transit L] [--bandwidth K]
         [--verify 300000 [--verify-starts 200]] [--save OUT.npz] [--start SAVED.npz]
     PYTHONPATH=. python bench/bench_excite_relaxation.py --robot R --rest [--moment-tol T] [--braking]
         --reverify SAVED.npz [--verify 400000] [--verify-starts 1000] [--seed S]
@@ -56,6 +56,12 @@ stopped, its cuts held from round 0. ``--reverify`` re-prices a saved run's lowe
 own (more states, more local searches, another seed): a deeper search can only find larger dual ratios, so its
 lower end is the more trustworthy one.
 
+``--transit L`` holds the ``TransitInequalities`` of ``L`` speed levels per joint: a joint's time at a speed is
+bounded by its time at the speeds below it, since each burst must cross them at the acceleration limit at most and
+can last only as long as the range allows (valid for every design at rest at both ends sampled at 100 Hz or finer,
+of any duration, and every mixture of them); the bench then prints the friction ceilings under them
+(``transit_friction_ceiling``) and, for every run, how far the best distribution is from meeting them.
+
 ``--degree 3`` adds the test functions of degree 3 (``symoro_gen.excite_relaxation._degree3_tests``: 1456 more
 conditions on the LWR4, 938 on the RX-90). ``--bandwidth K`` restricts the distributions to those of the
 designs of the bench's Fourier basis (K harmonics, one period of 10 s, 100 Hz): ``E[ddq ddq^T] <= rho
@@ -76,10 +82,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_excite import TARGET_RATIO, random_baseline, velocity_occupancy
 
-from symoro_gen.excite import FourierBasis, cond_lower_bound, limits_of, output_times
+from symoro_gen.excite import FourierBasis, cond_lower_bound, friction_ceiling, limits_of, output_times
 from symoro_gen.excite_relaxation import (
     RelaxationBracket,
     RestMoments,
+    TransitInequalities,
     basis_bandwidth,
     feature_dictionary,
     relaxation_bracket,
@@ -90,6 +97,7 @@ from symoro_gen.excite_relaxation import (
     stationarity_moment_names,
     stationarity_moments,
     stationarity_scales,
+    transit_friction_ceiling,
 )
 from symoro_gen.loader import model_for
 
@@ -103,7 +111,9 @@ def _reverify(a, model, lim, robot) -> int:
     feats = feature_dictionary(lim, a.dictionary, run_seed).subset(ids) if len(ids) else None
     b = RelaxationBracket(0.0, float(d["upper"]), (), d["states"], d["signs"], d["weights"], d["A"], d["B"],
                           float(d["r"]), a.moment_tol, d["lam"], float(d["c0"]), closed=False,
-                          rest=RestMoments(model, lim, robot), braking=a.braking, features=feats)
+                          rest=RestMoments(model, lim, robot), braking=a.braking, features=feats,
+                          transit=TransitInequalities(lim, int(d["transit"])) if "transit" in d.files and int(d["transit"])
+                          else None, eta=d["eta"] if "eta" in d.files and len(d["eta"]) else None)
     if len(b.lam) != len(b.rest.names) + (0 if feats is None else len(feats)):
         raise SystemExit(f"{a.reverify}: {len(b.lam)} moment multipliers, not those of a --rest run of {a.robot} "
                          f"with {len(ids)} random test functions")
@@ -154,6 +164,9 @@ def main(argv=None) -> int:
                          "(a cut run continues where it stopped)")
     ap.add_argument("--cut-every", type=int, default=1, metavar="R",
                     help="add the --features cuts every R rounds (the column generation converges in between)")
+    ap.add_argument("--transit", type=int, default=0, metavar="L",
+                    help="hold the TransitInequalities of L speed levels per joint (the time a burst of speed costs "
+                         "at the speeds below it, for designs sampled at 100 Hz or finer)")
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
     ap.add_argument("--save", default=None, metavar="NPZ",
                     help="write the best distribution (states, signs, weights) and the duals of the lower end here")
@@ -198,7 +211,7 @@ def main(argv=None) -> int:
                            braking=a.braking, features=a.features, dictionary=a.dictionary,
                            cut_every=a.cut_every, cut_at=None if a.cut_at is None else tuple(a.cut_at),
                            extra_states=start_states, extra_signs=start_signs, extra_designs=start_designs,
-                           cuts=start_cuts,
+                           cuts=start_cuts, transit=a.transit,
                            trajectories=(10 if a.stationary or a.rest or rho is not None else 0) if a.trajectories is None
                            else a.trajectories, progress=show)
     wall = time.perf_counter() - t0
@@ -218,6 +231,7 @@ def main(argv=None) -> int:
             "" if a.rest else "plain") + (", " if a.stationary and a.rest else "") + (
         f"rest (moment tol {a.moment_tol:g}{', kinetic ' + a.kinetic if a.kinetic else ''})" if a.rest else "") + (
         f", {a.bandwidth}-harmonic bandwidth" if rho is not None else "") + (", braking" if a.braking else "") + (
+        f", transit ({a.transit} levels)" if a.transit else "") + (
         f", random test functions: {len(b.upper_features)} in the upper end's round, {len(b.features)} in the lower "
         f"end's" if b.features is not None and b.upper_features is not None else "")
     print(f"{a.robot} [{kind}]: dual estimate {b.lower:.3f}, primal {b.upper:.3f} ({len(b.rounds)} rounds, {wall:.0f} s; "
@@ -228,7 +242,7 @@ def main(argv=None) -> int:
         np.savez(a.save, states=b.states, signs=b.signs, weights=p, lower=lower, upper=b.upper, A=b.A, B=b.B,
                  r=b.r, lam=np.zeros(0) if b.lam is None else b.lam, c0=b.c0, design_sizes=np.array(b.design_sizes, int),
                  cut_ids=np.zeros(0, int) if b.upper_features is None else np.asarray(b.upper_features.ids, int),
-                 seed=a.seed)
+                 seed=a.seed, transit=a.transit, eta=np.zeros(0) if b.eta is None else b.eta)
         print(f"{a.robot}: best distribution and duals written to {a.save}")
     m = p @ (stationarity_moments(b.states[:, :n], b.states[:, n:2 * n], b.states[:, 2 * n:], degree=a.degree)
              / stationarity_scales(lim, a.degree))
@@ -243,6 +257,9 @@ def main(argv=None) -> int:
     print(f"{a.robot}: the best distribution's rest moments (0 for every trajectory at rest at both ends): largest "
           f"|E[m]| / scale " + ", ".join(f"{abs(m[k]):.3f} ({rest.names[k]} = {mean_acc[k]:.3g})" for k in order) +
           f"; {int(np.sum(np.abs(m) > 0.05))} of {len(m)} above 0.05")
+    tri = b.transit if b.transit is not None else TransitInequalities(lim, a.transit or 8)
+    print(f"{a.robot}: the best distribution against the {len(tri)} transit inequalities of {tri.levels} speed levels "
+          f"(<= 0 for every design sampled at 100 Hz or finer): largest E[g] / (1 + kappa) {tri.worst(b.states, p):.3g}")
     pool = feature_dictionary(lim, a.dictionary, a.seed)  # the dictionary --features draws its cuts from
     v = np.abs(pool.weighted_sum(b.states, p) / pool.scale)
     print(f"{a.robot}: the best distribution against {len(pool)} random test functions that vanish at rest "
@@ -268,6 +285,10 @@ def main(argv=None) -> int:
               f"= {slack:.3g} (>= 0 up to the solver's tolerance)")
     if bound is not None:
         print(f"rigorous bound over every trajectory: {bound.describe()}")
+    if b.transit is not None:
+        cap = np.sqrt(transit_friction_ceiling(lim, b.transit) / np.array([friction_ceiling(v) for v in lim.dq_max]))
+        print(f"{a.robot}: friction ceilings under the transit inequalities, per joint, as a fraction of friction_ceiling's "
+              f"(sqrt): " + " ".join(f"{c:.4f}" for c in cap))
     print(f"{a.robot}: relaxation's minimum in [{lower:.3f}, {b.upper:.3f}] (gap {b.upper / lower - 1:.1%}; lower end: "
           f"{how}; upper end: an explicit distribution of states)")
     scope = (f"{a.bandwidth}-harmonic Fourier design of 10 s" if rho is not None else

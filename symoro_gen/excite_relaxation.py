@@ -16,7 +16,9 @@ Conditions every design meets restrict the distributions and sharpen the bound:
   rounds;
 * ``braking=True``: only states from which every joint can still stop before the end of its range
   (:func:`braking_speed`);
-* ``bandwidth=``: the accelerations a design basis allows (:func:`basis_bandwidth`, an LMI).
+* ``bandwidth=``: the accelerations a design basis allows (:func:`basis_bandwidth`, an LMI);
+* ``transit=L``: the time between speeds that every burst of a joint costs within its range and acceleration
+  limit (:class:`TransitInequalities`, linear inequalities on the distribution of each joint's speed).
 
 The rigorous per-sample bound :func:`symoro_gen.excite.cond_lower_bound` and the designs themselves are
 :mod:`symoro_gen.excite`'s; measurements in docs/excitation.md.
@@ -52,6 +54,8 @@ __all__ = [
     "RelaxationBracket",
     "RelaxationRound",
     "RestMoments",
+    "TRANSIT_DT",
+    "TransitInequalities",
     "basis_bandwidth",
     "feature_dictionary",
     "braking_speed",
@@ -65,6 +69,7 @@ __all__ = [
     "stationarity_moment_names",
     "stationarity_moments",
     "stationarity_scales",
+    "transit_friction_ceiling",
 ]
 
 @dataclass(frozen=True)
@@ -119,6 +124,10 @@ class RelaxationBracket:
     (the cuts of its round; the cut set grows, so the two may differ). ``design_sizes``: the whole-trajectory
     atoms of the ``upper`` distribution, the last blocks of ``states`` (each a trajectory's samples in equal
     shares), so that a saved run can continue (``relaxation_bracket(extra_designs=, cuts=)``).
+
+    With ``transit`` (:class:`TransitInequalities`) the distributions also meet ``E[g] <= 0`` (the time
+    between speeds that every burst of a design costs); ``eta >= 0`` are their multipliers in the dual that
+    gives ``lower``.
     """
 
     lower: float
@@ -142,6 +151,8 @@ class RelaxationBracket:
     features: FeatureMoments | None = None
     upper_features: FeatureMoments | None = None
     design_sizes: tuple[int, ...] = ()
+    transit: TransitInequalities | None = None
+    eta: np.ndarray | None = None
 
     @property
     def stationary(self) -> bool:
@@ -334,6 +345,103 @@ def _random_states(rng: np.random.Generator, limits: Limits, k: int, braking: bo
     return (_brake(limits, X) if braking else X), s
 
 
+#: the sampling interval [s] the transit inequalities hold for by default: every design sampled at 100 Hz or faster
+TRANSIT_DT = 0.01
+
+
+class TransitInequalities:
+    """The time a joint spends between speeds, which a trajectory cannot skip: ``E[g(s)] <= 0`` for every
+    design at rest at both ends (or periodic), of any duration, and every mixture of them.
+
+    A *burst* of joint ``j`` in direction ``sigma`` is a maximal interval with ``sigma dq_j >= u1 > 0``
+    that reaches ``u2 > u1``. The joint enters it and leaves it from below ``u1`` (the design is at rest at
+    both ends), and ``|ddq_j| <= a`` (its acceleration limit), so each crossing of the band ``[u1, u2)``
+    lasts at least ``(u2 - u1)/a``; within the burst the joint moves one way, by at most its range ``R``,
+    of which at least ``(u2^2 - u1^2)/a`` during the two crossings, so its time at ``sigma dq_j >= u2``
+    is at most ``(R - (u2^2 - u1^2)/a)/u2``. Summed over the bursts and counted on samples ``dt`` apart
+    (an interval of length ``L`` holds at least ``L/dt - 1`` and at most ``L/dt + 1`` of them)::
+
+        P(sigma dq_j >= u2) <= kappa P(u1 <= sigma dq_j < u2),
+        kappa = ((R - (u2^2 - u1^2)/a)/u2 + dt) / (2 ((u2 - u1)/a - dt)),
+
+    for every design sampled at ``dt`` or finer (``kappa`` falls with ``dt``). Thresholds ``u = k
+    dq_max_j / levels``, ``k = 1..levels``, every pair (bands narrower than ``1.5 a dt`` skipped), both
+    directions, every joint: ``g = 1(sigma dq_j >= u2) - kappa 1(u1 <= sigma dq_j < u2)``. A distribution
+    that jumps between creeping and the velocity limit (the friction columns' best, which every
+    relaxation without this condition picks) violates it: on the LWR4 it caps the friction ceiling of
+    joints 1-2 at 0.982 and 0.974 of :func:`symoro_gen.excite.friction_ceiling`'s. Neither a moment
+    ``E[d/dt f] = 0`` nor :func:`braking_speed` (a set of states) implies it.
+    """
+
+    def __init__(self, limits: Limits, levels: int = 8, dt: float = TRANSIT_DT):
+        if levels < 2 or not dt >= 0:
+            raise ValueError(f"transit inequalities: levels {levels} must be >= 2 and dt {dt} >= 0")
+        rows = []  # (joint, sign, u1, u2, kappa)
+        for j in range(limits.n):
+            V, a, R = float(limits.dq_max[j]), float(limits.ddq_max[j]), float(limits.q_max[j] - limits.q_min[j])
+            us = V * np.arange(1, levels + 1) / levels
+            for i2 in range(1, levels):
+                u2 = float(us[i2])
+                for u1 in us[:i2]:
+                    du = u2 - float(u1)
+                    if du / a <= 1.5 * dt:
+                        continue
+                    kap = (max(R - (u2 ** 2 - float(u1) ** 2) / a, 0.0) / u2 + dt) / (2 * (du / a - dt))
+                    for sg in (1.0, -1.0):
+                        rows.append((j, sg, float(u1), u2, kap))
+        self.levels, self.dt, self.n = int(levels), float(dt), limits.n
+        arr = np.array(rows, float).reshape(-1, 5)
+        self.joint, self.sign = arr[:, 0].astype(int), arr[:, 1]
+        self.u1, self.u2, self.kappa = arr[:, 2], arr[:, 3], arr[:, 4]
+
+    def __len__(self) -> int:
+        return len(self.kappa)
+
+    def numpy(self, X: np.ndarray) -> np.ndarray:
+        """``g`` (``(k, m)``) at the states ``X`` (``(k, 3n)``); ``E[g] <= 0`` for every design."""
+        X = np.atleast_2d(np.asarray(X, float))
+        v = X[:, self.n + self.joint] * self.sign  # (k, m): the speed in each row's direction
+        hi = v >= self.u2
+        band = (v >= self.u1) & ~hi
+        return hi.astype(float) - self.kappa * band
+
+    def worst(self, X: np.ndarray, p: np.ndarray | None = None) -> float:
+        """The largest ``E[g] / (1 + kappa)`` over the rows, for the states ``X`` in proportions ``p`` (equal
+        shares by default): <= 0 for every design; the share of its time a distribution would have to move
+        into the bands to meet the conditions."""
+        g = self.numpy(X)
+        p = np.full(len(g), 1.0 / len(g)) if p is None else np.asarray(p, float) / np.sum(p)
+        return float(np.max((p @ g) / (1.0 + self.kappa))) if len(self) else 0.0
+
+
+def transit_friction_ceiling(limits: Limits, transit: TransitInequalities, grid: int = 400) -> np.ndarray:
+    """Per joint, the largest ``lambda_min`` of the friction block ``E[z z^T]``, ``z = (dq, sign dq, 1)``, over
+    the velocity distributions on ``[-dq_max, dq_max]`` that meet the joint's rows of ``transit`` (an SDP on a
+    grid of ``grid`` speeds per direction plus rest and creeping, cvxpy + Clarabel): the cap of
+    :func:`symoro_gen.excite.friction_ceiling` once a burst to the velocity limit costs time at the speeds
+    below it. (The grid makes it a slight under-estimate of the supremum; it is a figure, not a bound.)"""
+    import cvxpy as cp
+
+    out = np.zeros(limits.n)
+    for j in range(limits.n):
+        V = float(limits.dq_max[j])
+        s = V * np.arange(1, grid + 1) / grid
+        v = np.concatenate([[0.0, 0.0, 0.0], s, -s])
+        sg = np.concatenate([[0.0, 1.0, -1.0], np.ones(grid), -np.ones(grid)])  # creeping: speed -> 0, sign kept
+        Z = np.stack([v, sg, np.ones_like(v)], 1)
+        w, t = cp.Variable(len(v), nonneg=True), cp.Variable()
+        M = cp.reshape(np.einsum("ka,kb->kab", Z, Z).reshape(len(v), 9).T @ w, (3, 3), order="C")
+        cons = [cp.sum(w) == 1, (M + M.T) / 2 - t * np.eye(3) >> 0]
+        rows = np.flatnonzero(transit.joint == j)
+        if len(rows):
+            X = np.zeros((len(v), 3 * limits.n))
+            X[:, limits.n + j] = v
+            cons.append(transit.numpy(X)[:, rows].T @ w <= 0)
+        cp.Problem(cp.Maximize(t), cons).solve(solver="CLARABEL")
+        out[j] = float(np.asarray(t.value))
+    return out
+
+
 #: one term of the stationarity moments: (name, ((sign, ((factor, joint), ...)), ...))
 _Term = tuple[str, tuple[tuple[int, tuple[tuple[str, int], ...]], ...]]
 
@@ -454,14 +562,15 @@ class _DualPricer:
     """The dual ratio of the relaxation SDP at duals ``A, B`` (and, with the stationarity constraints,
     their multipliers ``lam`` and ``c0``)::
 
-        N(s) / D(s),  N(s) = tr(A G(s)) - lam . m(s) / scale + c0 + rho dq^T C dq - ddq^T C ddq,
+        N(s) / D(s),  N(s) = tr(A G(s)) - lam . m(s) / scale + c0 + rho dq^T C dq - ddq^T C ddq - eta . g(s),
         D(s) = tr(B G(s))
 
     Weak duality: if ``N(s) <= r D(s)`` for every state ``s`` of the box, then for every distribution
     ``M = E[G]`` with ``|E[m]| <= tol scale`` (and ``c0 >= tol sum |lam|``), ``lambda_min tr A <= tr(A M)
     <= E[N] <= r tr(B M) <= r lambda_max tr B``: ``cond >= sqrt(tr A / (r tr B))``
     (:func:`relaxation_dual_bound`); the bandwidth term (``C`` PSD) has ``E >= 0`` for every distribution
-    with ``E[ddq ddq^T] <= rho E[dq dq^T]``, so the same holds for those. ``ratio`` evaluates it on
+    with ``E[ddq ddq^T] <= rho E[dq dq^T]``, so the same holds for those; the transit term (``eta >= 0``,
+    ``g`` of :class:`TransitInequalities`) has ``E >= 0`` for every distribution with ``E[g] <= 0``. ``ratio`` evaluates it on
     states; ``local_max`` maximises it by L-BFGS-B in the box from a state with its velocity signs held,
     gradients from the generated CasADi model.
     """
@@ -469,8 +578,11 @@ class _DualPricer:
     def __init__(self, model: IdentificationModel, limits: Limits, A: np.ndarray, B: np.ndarray,
                  lam: np.ndarray | None = None, c0: float = 0.0, *, rho: float | None = None,
                  C: np.ndarray | None = None, degree: int = 2, closed: bool = True, rest: RestMoments | None = None,
-                 coulomb=None, jac=None, braking: bool = False, features: FeatureMoments | None = None):
+                 coulomb=None, jac=None, braking: bool = False, features: FeatureMoments | None = None,
+                 transit: TransitInequalities | None = None, eta: np.ndarray | None = None):
         self.model, self.A, self.B = model, A, B
+        self.transit = transit if transit is not None and eta is not None and len(transit) else None
+        self.eta = None if self.transit is None else np.clip(np.asarray(eta, float), 0.0, None)
         self.limits, self.braking = limits, braking
         self.lam, self.c0 = lam, float(c0)
         self.rho: float | None = None if rho is None or C is None else float(rho)
@@ -506,6 +618,8 @@ class _DualPricer:
         n = self.n
         if self.moments is not None:
             num = num - self.moments.numpy(X) / self.moments.scale @ self.lam + self.c0
+        if self.transit is not None:
+            num = num - self.transit.numpy(X) @ self.eta
         if self.C is not None:
             dq, ddq = X[:, n:2 * n], X[:, 2 * n:]
             num = num + self.rho * np.einsum("ki,ij,kj->k", dq, self.C, dq) - np.einsum("ki,ij,kj->k", ddq, self.C, ddq)
@@ -564,6 +678,8 @@ class _DualPricer:
                 lw = self.lam / self.moments.scale
                 num += -float(np.array(res[2]).ravel() @ lw) + self.c0
                 gnum = gnum - np.array(res[3]).T @ lw
+            if self.transit is not None:  # piecewise constant in dq: no gradient
+                num -= float(self.transit.numpy(zz[None])[0] @ self.eta)
             if self.C is not None:
                 Cv, Ca = self.rho * (self.C @ zz[n:2 * n]), self.C @ zz[2 * n:]
                 num += float(zz[n:2 * n] @ Cv - zz[2 * n:] @ Ca)
@@ -828,7 +944,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                        kinetic: str | None = None, braking: bool = False, features: int = 0,
                        dictionary: int = 20_000, cut_every: int = 1, cut_at: tuple[int, ...] | None = None,
                        cuts: Sequence[int] = (), extra_designs: Sequence[tuple[np.ndarray, np.ndarray]] = (),
-                       progress=None) -> RelaxationBracket:
+                       transit: int = 0, transit_dt: float = TRANSIT_DT, progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -855,7 +971,9 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     batch of cuts (the relaxation got tighter), and every round's lower end still bounds every such
     trajectory. With ``braking`` every state keeps to
     :func:`braking_speed` (the random ones, the pricer's local searches and the given ones), as every design's
-    samples do. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
+    samples do. With ``transit=L`` (levels) the distributions meet the :class:`TransitInequalities` of
+    ``L`` speed levels per joint for designs sampled every ``transit_dt`` s or finer: every burst of a joint to
+    a speed costs it time at the speeds below. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
     ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
     (:class:`_DualPricer`): a state with ratio > 1 would lower the objective. Each round keeps the
     states of weight > ``prune`` x the largest (plus the new ones), and adds the ``add`` best of
@@ -902,6 +1020,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     held = pool.subset(sorted(set(int(k) for k in cuts))) if pool is not None else None
     moments = _MomentSet(limits, degree if stationary else None, rest_m, held) if stationary or rest else None
     jac = _DualPricer.casadi_jacobian(model, n, moments)
+    trans = TransitInequalities(limits, transit, transit_dt) if transit else None
     # a design atom: the mean information matrix of a trajectory's samples (one full period) and its trace
     nb = len(model.BASE_NAMES)
     dG = np.zeros((len(designs), nb, nb))
@@ -937,6 +1056,12 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
             mass = (1.0 / tr_all) @ mu
             cp_pos, cp_neg = H.T @ mu - moment_tol * mass <= 0, -H.T @ mu - moment_tol * mass <= 0
             cons += [cp_pos, cp_neg]
+        if trans is not None:
+            Tg = trans.numpy(X)
+            if designs:
+                Tg = np.vstack([Tg] + [trans.numpy(x).mean(0) for x, _ in designs])
+            c_tr = (Tg / tr_all[:, None]).T @ mu <= 0
+            cons.append(c_tr)
         if bandwidth is not None:
             dq_, ddq_ = X[:, n:2 * n], X[:, 2 * n:]
             K = (bandwidth * np.einsum("ki,kj->kij", dq_, dq_) - np.einsum("ki,kj->kij", ddq_, ddq_)) / tr[:, None, None]
@@ -968,8 +1093,9 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
             nu_n = np.clip(np.asarray(cp_neg.dual_value, float), 0, None)
             lam, c0 = nu_p - nu_n, moment_tol * float(np.sum(nu_p + nu_n))
         C = _psd(np.asarray(c3.dual_value)) if bandwidth is not None else None
+        eta = np.clip(np.asarray(c_tr.dual_value, float), 0, None) if trans is not None else None
         pricer = _DualPricer(model, limits, A, B, lam, c0, rho=bandwidth, C=C, degree=degree, closed=stationary,
-                             rest=rest_m, coulomb=coul, jac=jac, braking=braking, features=held)
+                             rest=rest_m, coulomb=coul, jac=jac, braking=braking, features=held, transit=trans, eta=eta)
         # pricing: the dual ratio over the current states, fresh random states and local maxima
         Xf, Sf = _random_states(rng, limits, fresh, braking)
         rf = pricer.ratio(Xf, Sf)
@@ -986,7 +1112,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
             progress(hist[-1])
         if dual > best_lower or not dual_of:
             best_lower = max(best_lower, dual)
-            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0, "C": C, "features": held}
+            dual_of = {"A": A, "B": B, "r": r, "lam": lam, "c0": c0, "C": C, "features": held, "eta": eta}
         if primal < best_upper:
             best_upper = primal
             pos = w > 0
@@ -1017,7 +1143,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     return RelaxationBracket(best_lower, best_upper, tuple(hist), best["states"], best["signs"], best["weights"],
                              dual_of["A"], dual_of["B"], dual_of["r"], moment_tol if moments is not None else 0.0,
                              dual_of["lam"], dual_of["c0"], bandwidth, dual_of["C"], degree, stationary, rest_m,
-                             braking, dual_of["features"], best["features"], best["design_sizes"])
+                             braking, dual_of["features"], best["features"], best["design_sizes"], trans, dual_of["eta"])
 
 
 def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: RelaxationBracket, *,
@@ -1028,7 +1154,7 @@ def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: Relax
     A ``bound`` well below ``bracket.lower`` says the bracket's search for ``r`` was not global."""
     pricer = _DualPricer(model, limits, bracket.A, bracket.B, bracket.lam, bracket.c0, rho=bracket.bandwidth,
                          C=bracket.C, degree=bracket.degree, closed=bracket.closed, rest=bracket.rest,
-                         braking=bracket.braking, features=bracket.features)
+                         braking=bracket.braking, features=bracket.features, transit=bracket.transit, eta=bracket.eta)
     rng = np.random.default_rng(seed)
     best_r, pool_X, pool_S, pool_r = bracket.r, [], [], []
     for k0 in range(0, states, batch):

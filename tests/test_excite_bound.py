@@ -759,3 +759,94 @@ def test_bench_prices_rest_to_rest_pieces_and_their_equal_time_sets(tmp_path):
             trial = list(sel)
             trial[slot] = j
             assert cond_of(Ms[trial].mean(0)) >= c - 1e-9
+
+
+def test_transit_inequalities_hold_on_designs_and_are_nearly_met_by_a_full_range_sweep():
+    """TransitInequalities: E[g] <= 0 on the samples of random rest-to-rest spline designs, structured designs
+    (bursts at the velocity limit) and random Fourier designs at 100 Hz and 1 kHz (and kappa falls with the
+    sampling interval, so the 100-Hz rows hold for every finer sampling); a joint that sweeps its whole range
+    once at its acceleration and velocity limits (the fastest burst there is) comes within 20 % of the
+    widest bands' bound; the distribution that jumps between creeping and the velocity limit violates them."""
+    from symoro_gen.excite import SplineBasis, dense_times, friction_trajectory
+    from symoro_gen.excite_relaxation import TransitInequalities
+
+    robot, model = model_for("rx90")
+    lim = limits_of(robot)
+    n = lim.n
+    T = TransitInequalities(lim, 8)
+    assert len(T) > 0 and np.all(T.kappa > 0) and set(T.joint) == set(range(n))
+    T_fine = TransitInequalities(lim, 8, dt=0.001)
+    assert len(T_fine) >= len(T)
+    rng = np.random.default_rng(61)
+    inner = lim.shrunk(0.01)
+    for rate in (100.0, 1000.0):
+        t = output_times(10.0, rate)
+        designs = _rest_designs(lim, 3, 62, t) + _trajectories(model, lim, 3, 63)
+        sb = SplineBasis(60, 10.0)
+        for _ in range(3):
+            designs.append(basis_eval(sb, friction_trajectory(sb, inner, rng, dense_times(t, 10.0, sb), 10.0), t))
+        for q, dq, ddq in designs:
+            assert check_limits(lim, q, dq, ddq)["ok"]
+            assert T.worst(np.hstack([q, dq, ddq])) <= 0.0
+    # kappa of the same rows is smaller at a finer sampling
+    key = {(j, s, round(u1, 12), round(u2, 12)): k for j, s, u1, u2, k in zip(T_fine.joint, T_fine.sign, T_fine.u1,
+                                                                         T_fine.u2, T_fine.kappa)}
+    assert all(k > key[(j, s, round(u1, 12), round(u2, 12))]
+               for j, s, u1, u2, k in zip(T.joint, T.sign, T.u1, T.u2, T.kappa))
+    # joint 1 sweeps its range: up to the velocity limit at the acceleration limit, cruise, stop at the other end
+    j, v, a = 0, lim.dq_max[0], lim.ddq_max[0]
+    R = lim.q_max[j] - lim.q_min[j]
+    tr, tc = v / a, (R - v ** 2 / a) / v
+    t = np.arange(0.0, 2 * tr + tc + 1e-12, 0.01)
+    vel = np.minimum.reduce([a * t, np.full_like(t, v), a * (2 * tr + tc - t)]).clip(0.0)
+    X = np.zeros((len(t), 3 * n))
+    X[:, :n] = (lim.q_min + lim.q_max) / 2
+    X[:, n + j] = vel
+    g = T.numpy(X).mean(0)
+    rows = (T.joint == j) & (T.sign > 0) & (T.u2 < v * (1 - 1e-9))
+    assert np.all(g[rows] <= 0.0)
+    u1, u2 = T.u1[rows], T.u2[rows]
+    hi = (vel[:, None] >= u2).mean(0)
+    band = ((vel[:, None] >= u1) & (vel[:, None] < u2)).mean(0)
+    wide = (u1 == u1.min()) & (u2 == u2.max())
+    assert np.all(hi[wide] / (T.kappa[rows][wide] * band[wide]) > 0.8)
+    # the relaxations' favourite: 30 % at the velocity limit, the rest creeping - nothing in between
+    Xj = np.zeros((2, 3 * n))
+    Xj[0, n:2 * n], Xj[1, n:2 * n] = lim.dq_max, 0.01 * lim.dq_max
+    assert T.worst(Xj, np.array([0.3, 0.7])) > 0.02
+
+
+def test_transit_friction_ceiling_is_below_the_friction_ceiling():
+    """transit_friction_ceiling: without rows (every band narrower than the sampling allows) it is
+    friction_ceiling's one-dimensional optimum; with the rows of 8 levels it is a few per cent below it."""
+    from symoro_gen.excite import friction_ceiling
+    from symoro_gen.excite_relaxation import TransitInequalities, transit_friction_ceiling
+
+    robot, _ = model_for("rx90")
+    lim = limits_of(robot)
+    c0 = np.array([friction_ceiling(v) for v in lim.dq_max])
+    none = TransitInequalities(lim, 8, dt=10.0)
+    assert len(none) == 0
+    np.testing.assert_allclose(transit_friction_ceiling(lim, none, grid=200), c0, rtol=2e-3)
+    c = transit_friction_ceiling(lim, TransitInequalities(lim, 8), grid=200)
+    assert np.all(c < c0 * 0.995) and np.all(c > c0 * 0.9)
+
+
+def test_transit_relaxation_meets_its_inequalities_rises_and_bounds_unseen_designs():
+    """relaxation_bracket(transit=8) on the SCARA: its distribution meets the transit inequalities (the rest
+    relaxation's does not: it jumps between creeping and the velocity limits), its upper end is above the rest
+    relaxation's, and weak duality with the inequalities' multipliers holds on unseen rest-to-rest designs."""
+    from symoro_gen.excite_relaxation import TransitInequalities, _DualPricer
+
+    robot, model = model_for("scara")
+    lim = limits_of(robot)
+    kw = dict(rounds=8, seed=3, trajectories=5, rest=True, robot=robot)
+    plain = relaxation_bracket(model, lim, **kw)
+    b = relaxation_bracket(model, lim, transit=8, **kw)
+    T = TransitInequalities(lim, 8)
+    assert b.transit is not None and len(b.eta) == len(T) and np.all(b.eta >= 0)
+    assert T.worst(plain.states, plain.weights) > 0.01
+    assert T.worst(b.states, b.weights) <= 1e-6
+    assert b.upper > plain.upper * 1.01 and b.lower <= b.upper
+    pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0, closed=False, rest=b.rest, transit=b.transit, eta=b.eta)
+    _weak_duality_on_rest_designs(model, lim, b, pricer, 6, 64)
