@@ -305,6 +305,21 @@ class Limits:
             return h, h
         return self.q_max - self.centre, self.centre - self.q_min
 
+    def defaulted_text(self) -> str:
+        """The fields the robot file does not give and the values used for them, e.g. ``"ddq_max (10 rad/s^2
+        for the revolute joints)"``; empty when every field is given."""
+        units = {"q_min": ("rad", "m"), "q_max": ("rad", "m"), "dq_max": ("rad/s", "m/s"), "ddq_max": ("rad/s^2", "m/s^2")}
+        parts = []
+        for k in self.defaulted:
+            vals = np.abs(getattr(self, k))
+            kinds = []
+            for prismatic, name in ((False, "revolute"), (True, "prismatic")):
+                sel = [j for j in range(self.n) if self.is_prismatic(j) == prismatic]
+                if sel:
+                    kinds.append(f"{vals[sel[0]]:g} {units[k][int(prismatic)]} for the {name} joints")
+            parts.append(f"{k} ({'; '.join(kinds)})")
+        return ", ".join(parts)
+
     def as_dict(self) -> dict:
         d = {k: getattr(self, k).tolist() for k in ("q_min", "q_max", "dq_max", "ddq_max")}
         d["tau_max"] = None if self.tau_max is None else self.tau_max.tolist()
@@ -1605,7 +1620,8 @@ def excitation_report(result: ExcitationResult, model: IdentificationModel, *, n
         f"at every output sample and on a 10x denser resampling (peak usage {worst:.3f}); "
         f"{len(result.starts)} IPOPT start(s), {result.wall_time:.1f} s.")]
     if lim.defaulted:
-        blocks.append(Paragraph(f"The robot file gives no {', '.join(lim.defaulted)}: defaults were used."))
+        blocks.append(Paragraph(f"The robot file gives no {', '.join(lim.defaulted)} in [limits]: the design used "
+                                f"{lim.defaulted_text()}."))
     joints = joint_numbers(model)
     passive = passive_ranges(model, result.q)
     if passive:
@@ -1791,7 +1807,8 @@ def cmd_excite(args) -> int:
         if lim.workspace is not None:
             print(_floor_text(lim.workspace, res.q))
         if lim.defaulted:
-            print(f"note: the robot file has no {', '.join(lim.defaulted)} in [limits]; defaults used")
+            print(f"note: the robot file has no {', '.join(lim.defaulted)} in [limits]; used {lim.defaulted_text()} "
+                  "(give them in [limits] if the robot's differ)")
     return 0 if res.limits_ok else 3
 
 def _sympy_casadi(qa: tuple, exprs: list, q) -> Any:

@@ -74,6 +74,20 @@ def test_limits_table_in_si_units(scara_limits):
     assert lim.tau_max is None
 
 
+def test_defaulted_limits_say_what_was_used():
+    """A [limits] table without ddq_max (a URDF gives no accelerations): the field is defaulted per joint kind and
+    the text the command prints names the values used, in the units of each kind."""
+    from symoro_gen.description import robots_dir
+
+    text = (robots_dir() / "scara.toml").read_text() + SCARA_LIMITS.replace("ddq_max = [600, 600, 1.5, 900]\n", "")
+    lim = limits_of(parse_robot_text(text, file="arm.toml"))
+    assert lim.defaulted == ("ddq_max",)
+    np.testing.assert_allclose(lim.ddq_max, [10.0, 10.0, 2.0, 10.0])
+    assert lim.defaulted_text() == ("ddq_max (10 rad/s^2 for the revolute joints; 2 m/s^2 for the prismatic "
+                                    "joints)")
+    assert limits_of(parse_robot_text(text + "ddq_max = [600, 600, 1.5, 900]\n", file="arm.toml")).defaulted_text() == ""
+
+
 def test_limits_errors_name_file_joint_and_field():
     from symoro_gen.description import robots_dir
 
