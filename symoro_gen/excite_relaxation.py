@@ -643,7 +643,53 @@ class _DualPricer:
     def local_max(self, x0: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, float]:
         """Maximise the ratio from ``x0`` with the velocity signs ``s0`` (``dq_j`` in ``[0, dq_max]`` for
         +1, ``[-dq_max, 0]`` for -1, ``0`` for 0; with ``braking``, ``dq_max`` replaced by
-        :func:`braking_speed` at ``q``, through a change of variables that keeps the box)."""
+        :func:`braking_speed` at ``q``, through a change of variables that keeps the box); with transit
+        inequalities, see :meth:`local_max_with_signs` (the signs may change). Returns ``(state, ratio)``."""
+        x, _, r = self.local_max_with_signs(x0, s0)
+        return x, r
+
+    def local_max_with_signs(self, x0: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """:meth:`local_max`, returning ``(state, signs, ratio)``. The transit term is piecewise constant in
+        the speeds (no gradient there, and L-BFGS-B cannot cross its steps), so with transit inequalities the
+        smooth search alternates with scans of each joint's speed over ``[-dq_max, dq_max]`` (both signs at
+        rest; the other coordinates held), each followed by the smooth search from the best point found, until
+        a scan gains nothing."""
+        x, r = self._local_max_signed(x0, s0)
+        s = np.array(s0, float)
+        if self.transit is None:
+            return x, s, r
+        for _ in range(4):
+            x2, s2, r2 = self._speed_scan(x, s, r)
+            if not r2 > r * (1 + 1e-9):
+                break
+            x3, r3 = self._local_max_signed(x2, s2)
+            x, s, r = (x3, s2, r3) if r3 >= r2 else (x2, s2, r2)
+        return x, s, r
+
+    def _speed_scan(self, x: np.ndarray, s: np.ndarray, r: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """One sweep over the joints: each joint's speed set to the best of a grid (32 points per transit
+        level and direction, and rest with either sign) with the others held."""
+        assert self.transit is not None
+        n, lim = self.n, self.limits
+        x, s = np.array(x, float), np.array(s, float)
+        grid = np.linspace(-1.0, 1.0, 64 * self.transit.levels + 1)
+        for j in range(n):
+            v = np.concatenate([grid * lim.dq_max[j], [0.0, 0.0]])
+            sg = np.concatenate([np.sign(grid), [1.0, -1.0]])
+            if self.braking:  # only the speeds a design can have there
+                up = braking_speed(lim, x[:n], np.ones(n))[j]
+                down = braking_speed(lim, x[:n], -np.ones(n))[j]
+                keep = np.abs(v) <= np.where(sg > 0, up, down)
+                v, sg = v[keep], sg[keep]
+            Xc, Sc = np.tile(x, (len(v), 1)), np.tile(s, (len(v), 1))
+            Xc[:, n + j], Sc[:, j] = v, sg
+            rc = self.ratio(Xc, Sc)
+            k = int(np.argmax(rc))
+            if rc[k] > r * (1 + 1e-12):
+                x, s, r = Xc[k], Sc[k], float(rc[k])
+        return x, s, r
+
+    def _local_max_signed(self, x0: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, float]:
         from scipy.optimize import minimize
 
         n, lo, hi = self.n, self.lo, self.hi
@@ -1102,8 +1148,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         r_atoms = float(pricer.ratio(X, S, W).max())
         order = np.argsort(-rf)
         picks = list(order[:starts]) + list(rng.choice(len(Xf), starts // 4, replace=False))
-        loc = [pricer.local_max(Xf[i], Sf[i]) for i in picks]
-        r = max(r_atoms, float(rf.max()), max(v for _, v in loc))
+        loc = [pricer.local_max_with_signs(Xf[i], Sf[i]) for i in picks]
+        r = max(r_atoms, float(rf.max()), max(v for *_, v in loc))
         dual = relaxation_dual_bound(A, B, r) if np.isfinite(r) and r > 0 else 0.0
         keep = w > prune * w_all.max()
         hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
@@ -1136,7 +1182,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                 moments = _MomentSet(limits, degree if stationary else None, rest_m, held)
                 jac = _DualPricer.casadi_jacobian(model, n, moments)
                 best_upper = math.inf  # a tighter relaxation: its upper end starts again
-        good = [(x, Sf[i]) for i, (x, v) in zip(picks, loc) if v > 1.0]
+        good = [(x, s_) for x, s_, v in loc if v > 1.0]
         newX = [X[keep], Xf[order[:add]]] + ([np.array([x for x, _ in good])] if good else [])
         newS = [S[keep], Sf[order[:add]]] + ([np.array([s for _, s in good])] if good else [])
         X, S = np.vstack(newX), np.vstack(newS)

@@ -840,7 +840,7 @@ def test_transit_relaxation_meets_its_inequalities_rises_and_bounds_unseen_desig
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
-    kw = dict(rounds=8, seed=3, trajectories=5, rest=True, robot=robot)
+    kw = dict(atoms=100, rounds=4, fresh=2000, starts=6, add=20, seed=3, trajectories=5, rest=True, robot=robot)
     plain = relaxation_bracket(model, lim, **kw)
     b = relaxation_bracket(model, lim, transit=8, **kw)
     T = TransitInequalities(lim, 8)
@@ -850,3 +850,17 @@ def test_transit_relaxation_meets_its_inequalities_rises_and_bounds_unseen_desig
     assert b.upper > plain.upper * 1.01 and b.lower <= b.upper
     pricer = _DualPricer(model, lim, b.A, b.B, b.lam, b.c0, closed=False, rest=b.rest, transit=b.transit, eta=b.eta)
     _weak_duality_on_rest_designs(model, lim, b, pricer, 6, 64)
+    # the pricer's local search crosses the transit term's steps: its result is no worse than the smooth search
+    # alone and no single joint's speed moved anywhere on a fine grid (either sign at rest) raises the ratio
+    n = lim.n
+    X0, S0 = b.states[:5], b.signs[:5]
+    for x0, s0 in zip(X0, S0):
+        x, s, r = pricer.local_max_with_signs(x0, s0)
+        assert r >= pricer._local_max_signed(x0, s0)[1] * (1 - 1e-9)
+        assert r == pytest.approx(pricer.ratio(x[None], s[None])[0], rel=1e-12)
+        assert np.all((np.sign(x[n:2 * n]) == s) | (x[n:2 * n] == 0))
+        for j in range(n):
+            v = np.linspace(-lim.dq_max[j], lim.dq_max[j], 1001)
+            Xc, Sc = np.tile(x, (len(v), 1)), np.tile(s, (len(v), 1))
+            Xc[:, n + j], Sc[:, j] = v, np.sign(v)
+            assert pricer.ratio(Xc, Sc).max() <= r * (1 + 1e-2)
