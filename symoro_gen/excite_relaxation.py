@@ -368,9 +368,11 @@ class TransitInequalities:
     dq_max_j / levels``, ``k = 1..levels``, every pair (bands narrower than ``1.5 a dt`` skipped), both
     directions, every joint: ``g = 1(sigma dq_j >= u2) - kappa 1(u1 <= sigma dq_j < u2)``. A distribution
     that jumps between creeping and the velocity limit (the friction columns' best, which every
-    relaxation without this condition picks) violates it: on the LWR4 it caps the friction ceiling of
-    joints 1-2 at 0.982 and 0.974 of :func:`symoro_gen.excite.friction_ceiling`'s. Neither a moment
-    ``E[d/dt f] = 0`` nor :func:`braking_speed` (a set of states) implies it.
+    relaxation without this condition picks) violates it: with 8 levels it caps the ``sigma`` of the friction
+    block of the LWR4's joints 1-2 at 0.987 and 0.981 of :func:`symoro_gen.excite.friction_ceiling`'s
+    (:func:`transit_friction_ceiling`). The moments held by the relaxations (polynomial or oscillating in the
+    speeds) barely imply it; test functions ``(q_j - c) h(dq_j)`` with ``h`` a step in speed would, and
+    :func:`braking_speed` (a set of states) does not.
     """
 
     def __init__(self, limits: Limits, levels: int = 8, dt: float = TRANSIT_DT):
