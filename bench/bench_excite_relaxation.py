@@ -58,7 +58,8 @@ lower end is the more trustworthy one.
 
 ``--transit L`` holds the ``TransitInequalities`` of ``L`` speed levels per joint: a joint's time at a speed is
 bounded by its time at the speeds below it, since each burst must cross them at the acceleration limit at most and
-can last only as long as the range allows (valid for every design at rest at both ends sampled at 100 Hz or finer,
+can last only as long as the range allows (valid for every trajectory at rest at both ends and the 100-Hz samples of
+every such design whose speed does not dip below a threshold and back within a burst,
 of any duration, and every mixture of them); the bench then prints the friction ceilings under them
 (``transit_friction_ceiling``) and, for every run, how far the best distribution is from meeting them.
 
@@ -166,7 +167,7 @@ def main(argv=None) -> int:
                     help="add the --features cuts every R rounds (the column generation converges in between)")
     ap.add_argument("--transit", type=int, default=0, metavar="L",
                     help="hold the TransitInequalities of L speed levels per joint (the time a burst of speed costs "
-                         "at the speeds below it, for designs sampled at 100 Hz or finer)")
+                         "at the speeds below it; see TransitInequalities for the designs it covers)")
     ap.add_argument("--verify", type=int, default=0, help="re-price the final duals on this many fresh states")
     ap.add_argument("--save", default=None, metavar="NPZ",
                     help="write the best distribution (states, signs, weights) and the duals of the lower end here")
@@ -259,7 +260,7 @@ def main(argv=None) -> int:
           f"; {int(np.sum(np.abs(m) > 0.05))} of {len(m)} above 0.05")
     tri = b.transit if b.transit is not None else TransitInequalities(lim, a.transit or 8)
     print(f"{a.robot}: the best distribution against the {len(tri)} transit inequalities of {tri.levels} speed levels "
-          f"(<= 0 for every design sampled at 100 Hz or finer): largest E[g] / (1 + kappa) {tri.worst(b.states, p):.3g}")
+          f"(<= 0 for every trajectory at rest at both ends): largest E[g] / (1 + kappa) {tri.worst(b.states, p):.3g}")
     pool = feature_dictionary(lim, a.dictionary, a.seed)  # the dictionary --features draws its cuts from
     v = np.abs(pool.weighted_sum(b.states, p) / pool.scale)
     print(f"{a.robot}: the best distribution against {len(pool)} random test functions that vanish at rest "

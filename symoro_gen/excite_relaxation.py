@@ -364,7 +364,11 @@ class TransitInequalities:
         P(sigma dq_j >= u2) <= kappa P(u1 <= sigma dq_j < u2),
         kappa = ((R - (u2^2 - u1^2)/a)/u2 + dt) / (2 ((u2 - u1)/a - dt)),
 
-    for every design sampled at ``dt`` or finer (``kappa`` falls with ``dt``). Thresholds ``u = k
+    for the time average of every trajectory (``dt = 0``) and, with the ``dt`` terms, for the samples every ``dt``
+    or finer (``kappa`` falls with ``dt``) of every design whose speed, within a burst, stays at or above ``u2``
+    once it has reached it (a speed that dips below ``u2`` and back within a burst gives each time at ``>= u2``
+    its own sampling term, which the samples in the dip need not pay for: not covered; the tests' designs keep
+    below 0.46 of the bound). Thresholds ``u = k
     dq_max_j / levels``, ``k = 1..levels``, every pair (bands narrower than ``1.5 a dt`` skipped), both
     directions, every joint: ``g = 1(sigma dq_j >= u2) - kappa 1(u1 <= sigma dq_j < u2)``. A distribution
     that jumps between creeping and the velocity limit (the friction columns' best, which every
@@ -1020,7 +1024,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     trajectory. With ``braking`` every state keeps to
     :func:`braking_speed` (the random ones, the pricer's local searches and the given ones), as every design's
     samples do. With ``transit=L`` (levels) the distributions meet the :class:`TransitInequalities` of
-    ``L`` speed levels per joint for designs sampled every ``transit_dt`` s or finer: every burst of a joint to
+    ``L`` speed levels per joint, with the sampling terms of ``transit_dt`` (see there for the designs covered): every burst of a joint to
     a speed costs it time at the speeds below. Solved by cvxpy + Clarabel on a finite set of states, whose duals ``A`` (of the first constraint),
     ``B`` (of the second, ``tr B = 1``) and the moment multipliers price new states
     (:class:`_DualPricer`): a state with ratio > 1 would lower the objective. Each round keeps the
