@@ -679,13 +679,13 @@ class _DualPricer:
         n, lim = self.n, self.limits
         x, s = np.array(x, float), np.array(s, float)
         grid = np.linspace(-1.0, 1.0, 64 * self.transit.levels + 1)
+        if self.braking:  # the scan moves speeds only: the caps at the state's positions hold for the whole sweep
+            up, down = braking_speed(lim, x[:n], np.ones(n)), braking_speed(lim, x[:n], -np.ones(n))
         for j in range(n):
             v = np.concatenate([grid * lim.dq_max[j], [0.0, 0.0]])
             sg = np.concatenate([np.sign(grid), [1.0, -1.0]])
             if self.braking:  # only the speeds a design can have there
-                up = braking_speed(lim, x[:n], np.ones(n))[j]
-                down = braking_speed(lim, x[:n], -np.ones(n))[j]
-                keep = np.abs(v) <= np.where(sg > 0, up, down)
+                keep = np.abs(v) <= np.where(sg > 0, up[j], down[j])
                 v, sg = v[keep], sg[keep]
             Xc, Sc = np.tile(x, (len(v), 1)), np.tile(s, (len(v), 1))
             Xc[:, n + j], Sc[:, j] = v, sg
@@ -1080,6 +1080,9 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         Wd = relaxation_rows(model, x, s, coul)
         dG[d] = np.einsum("kia,kib->ab", Wd, Wd) / len(x)
     dtr = np.trace(dG, axis1=1, axis2=2)
+    # the design atoms' transit means: fixed, computed once
+    dtrans = np.array([trans.numpy(x).mean(0) for x, _ in designs]).reshape(len(designs), len(trans)) \
+        if trans is not None else np.zeros((len(designs), 0))
     dpool = np.array([pool.weighted_sum(x, np.full(len(x), 1.0 / len(x))) for x, _ in designs]) \
         if pool is not None and designs else None
 
@@ -1111,7 +1114,7 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         if trans is not None:
             Tg = trans.numpy(X)
             if designs:
-                Tg = np.vstack([Tg] + [trans.numpy(x).mean(0) for x, _ in designs])
+                Tg = np.vstack([Tg, dtrans])
             c_tr = (Tg / tr_all[:, None]).T @ mu <= 0
             cons.append(c_tr)
         if bandwidth is not None:
