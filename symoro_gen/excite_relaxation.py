@@ -564,6 +564,22 @@ def stationarity_scales(limits: Limits, degree: int = 2) -> np.ndarray:
                      for _, products in _stationarity_terms(limits.n, degree)])
 
 
+#: the probe speeds of a speed scan (fractions of ``dq_max``), and the two it checks the cubic through them at
+SCAN_PROBES = np.array([-1.0, -1.0 / 3.0, 1.0 / 3.0, 1.0])
+_SCAN_CHECKS = np.array([-0.8125, 0.6171875])
+
+
+def _lagrange(nodes: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``(len(t), len(nodes))``: the Lagrange basis of ``nodes`` at ``t`` (the polynomial through values
+    ``y`` at the nodes is ``L @ y``)."""
+    L = np.ones((len(t), len(nodes)))
+    for a, ta in enumerate(nodes):
+        for b, tb in enumerate(nodes):
+            if a != b:
+                L[:, a] *= (t - tb) / (ta - tb)
+    return L
+
+
 class _DualPricer:
     """The dual ratio of the relaxation SDP at duals ``A, B`` (and, with the stationarity constraints,
     their multipliers ``lam`` and ``c0``)::
@@ -615,15 +631,17 @@ class _DualPricer:
             out += [m, ca.jacobian(m, z)]
         return ca.Function("ratio_rows", [z], out)
 
-    def num_den(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None):
+    def num_den(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None, rest: np.ndarray | None = None):
+        """``N, D`` at the states ``X`` with the velocity signs ``S``; ``W`` their regressor rows and ``rest``
+        their rest moments when the caller has them (:meth:`_speed_scan`)."""
         X = np.atleast_2d(X)
         if W is None:
             W = relaxation_rows(self.model, X, S, self.coul)
-        num = np.einsum("kia,ab,kib->k", W, self.A, W)
-        den = np.einsum("kia,ab,kib->k", W, self.B, W)
+        num = np.einsum("kia,kia->k", W @ self.A, W)  # tr(A W^T W) per state, through BLAS
+        den = np.einsum("kia,kia->k", W @ self.B, W)
         n = self.n
         if self.moments is not None:
-            num = num - self.moments.numpy(X) / self.moments.scale @ self.lam + self.c0
+            num = num - self.moments.numpy(X, rest) / self.moments.scale @ self.lam + self.c0
         if self.transit is not None:
             num = num - self.transit.numpy(X) @ self.eta
         if self.C is not None:
@@ -689,11 +707,44 @@ class _DualPricer:
                 v, sg = v[keep], sg[keep]
             Xc, Sc = np.tile(x, (len(v), 1)), np.tile(s, (len(v), 1))
             Xc[:, n + j], Sc[:, j] = v, sg
-            rc = self.ratio(Xc, Sc)
+            W, R = self._scan_rows(x, s, j, v, Sc)
+            num, den = self.num_den(Xc, Sc, W, R)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rc = np.where(den > 0, num / np.where(den > 0, den, 1.0), np.where(num > 0, np.inf, 0.0))
             k = int(np.argmax(rc))
             if rc[k] > r * (1 + 1e-12):
                 x, s, r = Xc[k], Sc[k], float(rc[k])
         return x, s, r
+
+    def _scan_rows(self, x: np.ndarray, s: np.ndarray, j: int, v: np.ndarray, S: np.ndarray):
+        """The regressor rows (Coulomb columns from the signs ``S``) and the rest moments of the state ``x``
+        with joint ``j``'s speed set to each of ``v``, from :data:`SCAN_PROBES`: the rows of a Newton-Euler
+        regressor are quadratic in one joint's speed (the others held) and the rest moments at most cubic
+        (rates of test functions at most quadratic in ``dq``), so the cubic through four probes gives them on
+        the whole scan. Checked at two more speeds; a model whose rows are not polynomial in the speed (e.g. a
+        smooth friction term) gets ``(None, None)`` and is evaluated state by state."""
+        n, vmax = self.n, float(self.limits.dq_max[j])
+        t = np.concatenate([SCAN_PROBES, _SCAN_CHECKS])
+        P, Sp = np.tile(x, (len(t), 1)), np.tile(s, (len(t), 1))
+        P[:, n + j], Sp[:, j] = t * vmax, 1.0  # the Coulomb columns are set below
+        L = _lagrange(SCAN_PROBES, np.concatenate([_SCAN_CHECKS, v / vmax]))
+        nc = len(_SCAN_CHECKS)
+        out = []
+        for vals in (relaxation_rows(self.model, P, Sp, self.coul),
+                     self.moments.rest.numpy(P[:, :n], P[:, n:2 * n], P[:, 2 * n:])
+                     if self.moments is not None and self.moments.rest is not None else None):
+            if vals is None:
+                out.append(None)
+                continue
+            fit = np.tensordot(L, vals[:len(SCAN_PROBES)], axes=1)
+            size = max(float(np.abs(vals).max()), 1e-300)
+            if not np.abs(fit[:nc] - vals[len(SCAN_PROBES):]).max() <= 1e-9 * size:
+                return None, None
+            out.append(fit[nc:])
+        W = out[0]
+        for jj, col in self.coul:
+            W[:, jj, col] = S[:, jj]
+        return W, out[1]
 
     def _local_max_signed(self, x0: np.ndarray, s0: np.ndarray) -> tuple[np.ndarray, float]:
         from scipy.optimize import minimize
@@ -948,18 +999,21 @@ class _MomentSet:
             list(rest.names) if rest is not None else []) + (
             list(self.features.names) if self.features is not None else [])
 
-    def _parts(self, z, lib: Any) -> list:
+    def _parts(self, z, lib: Any, rest: np.ndarray | None = None) -> list:
         n = self.n
         q, dq, ddq = (z[:, :n], z[:, n:2 * n], z[:, 2 * n:]) if lib is np else (z[:n], z[n:2 * n], z[2 * n:])
         out = [stationarity_moments(q, dq, ddq, lib=lib, degree=self.degree)] if self.degree is not None else []
         for part in (self.rest, self.features):
             if part is not None:
-                out.append(part.numpy(q, dq, ddq) if lib is np else part.casadi(q, dq, ddq))
+                if part is self.rest and rest is not None:
+                    out.append(rest)
+                else:
+                    out.append(part.numpy(q, dq, ddq) if lib is np else part.casadi(q, dq, ddq))
         return out
 
-    def numpy(self, X: np.ndarray) -> np.ndarray:
-        """``(k, m)`` for the states ``X`` (``(k, 3n)``)."""
-        parts = self._parts(X, np)
+    def numpy(self, X: np.ndarray, rest: np.ndarray | None = None) -> np.ndarray:
+        """``(k, m)`` for the states ``X`` (``(k, 3n)``); ``rest``: their rest moments, if already known."""
+        parts = self._parts(X, np, rest)
         return np.hstack(parts) if parts else np.zeros((len(X), 0))
 
     def casadi(self, z):

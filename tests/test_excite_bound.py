@@ -864,3 +864,48 @@ def test_transit_relaxation_meets_its_inequalities_rises_and_bounds_unseen_desig
             Xc, Sc = np.tile(x, (len(v), 1)), np.tile(s, (len(v), 1))
             Xc[:, n + j], Sc[:, j] = v, np.sign(v)
             assert pricer.ratio(Xc, Sc).max() <= r * (1 + 1e-2)
+
+
+@pytest.mark.parametrize("name", ["scara", "lwr4"])
+def test_speed_scan_rows_from_four_probes_equal_the_direct_evaluation(name):
+    """The speed scan's regressor rows and rest moments come from the cubic through four probe speeds
+    (``_DualPricer._scan_rows``: the rows are quadratic in one joint's speed, the rest moments at most cubic):
+    equal to evaluating every state of the scan, on random states, every joint and both signs; a model whose rows
+    are not polynomial in the speed is detected and evaluated state by state."""
+    from types import SimpleNamespace
+
+    from symoro_gen.excite_relaxation import RestMoments, _DualPricer, _random_states
+
+    robot, model = model_for(name)
+    lim = limits_of(robot)
+    n, nb = lim.n, len(model.BASE_NAMES)
+    rest = RestMoments(model, lim, robot)
+    rng = np.random.default_rng(5)
+    M = rng.standard_normal((nb, nb))
+    A, B = M @ M.T, np.eye(nb)
+    lam = rng.standard_normal(len(rest.names))
+    pricer = _DualPricer(model, lim, A, B, lam, 1.0, closed=False, rest=rest)
+    X, S = _random_states(rng, lim, 4)
+    for x, s in zip(X, S):
+        for j in range(n):
+            v = np.concatenate([np.linspace(-1, 1, 41) * lim.dq_max[j], [0.0, 0.0]])
+            Sc = np.tile(s, (len(v), 1))
+            Sc[:, j] = np.concatenate([np.sign(v[:-2]), [1.0, -1.0]])
+            Xc = np.tile(x, (len(v), 1))
+            Xc[:, n + j] = v
+            W, R = pricer._scan_rows(x, s, j, v, Sc)
+            Wd = relaxation_rows(model, Xc, Sc)
+            Rd = rest.numpy(Xc[:, :n], Xc[:, n:2 * n], Xc[:, 2 * n:])
+            assert np.abs(W - Wd).max() <= 1e-9 * np.abs(Wd).max()
+            assert np.abs(R - Rd).max() <= 1e-9 * np.abs(Rd).max()
+            num, den = pricer.num_den(Xc, Sc, W, R)
+            numd, dend = pricer.num_den(Xc, Sc)
+            assert num == pytest.approx(numd, rel=1e-9, abs=1e-9 * np.abs(numd).max())
+            assert den == pytest.approx(dend, rel=1e-9)
+    # rows with a smooth-friction column (tanh of the speed): not a polynomial, detected
+    smooth = SimpleNamespace(N_JOINTS=model.N_JOINTS, BASE_NAMES=model.BASE_NAMES, regressor=lambda q, dq, ddq: (
+        np.asarray(model.regressor(q, dq, ddq)).reshape(len(q), n, nb) * (1 + np.tanh(dq / 0.1))[:, :, None]))
+    p2 = _DualPricer(smooth, lim, A, B, lam, 1.0, closed=False, rest=rest, coulomb=pricer.coul, jac=False)
+    x, s = X[0], S[0]
+    v = np.linspace(-1, 1, 11) * lim.dq_max[0]
+    assert p2._scan_rows(x, s, 0, v, np.tile(s, (len(v), 1))) == (None, None)
