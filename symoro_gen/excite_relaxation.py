@@ -358,17 +358,23 @@ class TransitInequalities:
     both ends), and ``|ddq_j| <= a`` (its acceleration limit), so each crossing of the band ``[u1, u2)``
     lasts at least ``(u2 - u1)/a``; within the burst the joint moves one way, by at most its range ``R``,
     of which at least ``(u2^2 - u1^2)/a`` during the two crossings, so its time at ``sigma dq_j >= u2``
-    is at most ``(R - (u2^2 - u1^2)/a)/u2``. Summed over the bursts and counted on samples ``dt`` apart
-    (an interval of length ``L`` holds at least ``L/dt - 1`` and at most ``L/dt + 1`` of them)::
+    is at most ``(R - (u2^2 - u1^2)/a)/u2``. Summed over the bursts::
 
         P(sigma dq_j >= u2) <= kappa P(u1 <= sigma dq_j < u2),
-        kappa = ((R - (u2^2 - u1^2)/a)/u2 + dt) / (2 ((u2 - u1)/a - dt)),
+        kappa = ((R - (u2^2 - u1^2)/a)/u2) / (2 (u2 - u1)/a)                       (time average, dt = 0)
+        kappa = max(1, ((R - (u2^2 - u1^2)/a)/(u2 - a dt/4) + dt) / (2 ((u2 - u1)/a - dt)))   (samples dt apart)
 
-    for the time average of every trajectory (``dt = 0``) and, with the ``dt`` terms, for the samples every ``dt``
-    or finer (``kappa`` falls with ``dt``) of every design whose speed, within a burst, stays at or above ``u2``
-    once it has reached it (a speed that dips below ``u2`` and back within a burst gives each time at ``>= u2``
-    its own sampling term, which the samples in the dip need not pay for: not covered; the tests' designs keep
-    below 0.46 of the bound). Thresholds ``u = k
+    The first holds for the time average of every trajectory at rest at both ends (or periodic), of any
+    duration, and every mixture of them. The second for the samples every ``dt`` (``kappa`` falls with
+    ``dt``, so the rows of ``dt`` hold for every finer sampling) of every such design, whatever its speed does
+    within a burst: group a burst's samples at ``>= u2`` into ``m`` runs of consecutive samples. Each crossing
+    holds at least ``(u2 - u1)/(a dt) - 1`` samples in the band, and the runs are separated by at least one
+    band sample each, so the burst has ``N_B >= 2 ((u2 - u1)/(a dt) - 1) + m - 1`` samples in the band; between
+    two consecutive samples of a run the speed is at least ``u2 - a |t - t_k|`` and the joint moves at least
+    ``dt (u2 - a dt/4)``, and those steps lie between the two crossings, so a run of ``k`` samples has ``k - 1
+    <= (R - (u2^2 - u1^2)/a)/(dt (u2 - a dt/4))`` summed over the runs and ``N_H <= that + 1 + (m - 1)``.
+    With ``kappa`` as above, ``kappa N_B >= N_H`` for every ``m`` (the ``max(1, .)`` covers the ``m - 1``
+    extra runs). Thresholds ``u = k
     dq_max_j / levels``, ``k = 1..levels``, every pair (bands narrower than ``1.5 a dt`` skipped), both
     directions, every joint: ``g = 1(sigma dq_j >= u2) - kappa 1(u1 <= sigma dq_j < u2)``. A distribution
     that jumps between creeping and the velocity limit (the friction columns' best, which every
@@ -390,9 +396,11 @@ class TransitInequalities:
                 u2 = float(us[i2])
                 for u1 in us[:i2]:
                     du = u2 - float(u1)
-                    if du / a <= 1.5 * dt:
+                    if du / a <= 1.5 * dt or u2 <= a * dt / 2:
                         continue
-                    kap = (max(R - (u2 ** 2 - float(u1) ** 2) / a, 0.0) / u2 + dt) / (2 * (du / a - dt))
+                    kap = (max(R - (u2 ** 2 - float(u1) ** 2) / a, 0.0) / (u2 - a * dt / 4) + dt) / (2 * (du / a - dt))
+                    if dt > 0:  # several runs at >= u2 within a burst, each separated by one band sample
+                        kap = max(kap, 1.0)
                     for sg in (1.0, -1.0):
                         rows.append((j, sg, float(u1), u2, kap))
         self.levels, self.dt, self.n = int(levels), float(dt), limits.n
