@@ -59,8 +59,7 @@ lower end is the more trustworthy one.
 ``--transit L`` holds the ``TransitInequalities`` of ``L`` speed levels per joint: a joint's time at a speed is
 bounded by its time at the speeds below it, since each burst must cross them at the acceleration limit at most and
 can last only as long as the range allows (valid for every trajectory at rest at both ends and the 100-Hz samples of
-every such design whose speed does not dip below a threshold and back within a burst,
-of any duration, and every mixture of them); the bench then prints the friction ceilings under them
+every such design, of any duration, and every mixture of them); the bench then prints the friction ceilings under them
 (``transit_friction_ceiling``) and, for every run, how far the best distribution is from meeting them.
 
 ``--degree 3`` adds the test functions of degree 3 (``symoro_gen.excite_relaxation._degree3_tests``: 1456 more
