@@ -737,7 +737,7 @@ class _DualPricer:
         P[:, n + j], Sp[:, j] = t * vmax, 1.0  # the Coulomb columns are set below
         L = _lagrange(SCAN_PROBES, np.concatenate([_SCAN_CHECKS, v / vmax]))
         nc = len(_SCAN_CHECKS)
-        out = []
+        out: list[np.ndarray | None] = []
         for vals in (relaxation_rows(self.model, P, Sp, self.coul),
                      self.moments.rest.numpy(P[:, :n], P[:, n:2 * n], P[:, 2 * n:])
                      if self.moments is not None and self.moments.rest is not None else None):
@@ -750,6 +750,7 @@ class _DualPricer:
                 return None, None
             out.append(fit[nc:])
         W = out[0]
+        assert W is not None
         for jj, col in self.coul:
             W[:, jj, col] = S[:, jj]
         return W, out[1]
