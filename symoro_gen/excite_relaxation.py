@@ -396,7 +396,7 @@ class TransitInequalities:
                 u2 = float(us[i2])
                 for u1 in us[:i2]:
                     du = u2 - float(u1)
-                    if du / a <= 1.5 * dt or u2 <= a * dt / 2:
+                    if du / a <= 1.5 * dt:  # (so u2 > u1 + 1.5 a dt > a dt/4 too)
                         continue
                     kap = (max(R - (u2 ** 2 - float(u1) ** 2) / a, 0.0) / (u2 - a * dt / 4) + dt) / (2 * (du / a - dt))
                     if dt > 0:  # several runs at >= u2 within a burst, each separated by one band sample
@@ -657,8 +657,8 @@ class _DualPricer:
             num = num + self.rho * np.einsum("ki,ij,kj->k", dq, self.C, dq) - np.einsum("ki,ij,kj->k", ddq, self.C, ddq)
         return num, den
 
-    def ratio(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
-        num, den = self.num_den(X, S, W)
+    def ratio(self, X: np.ndarray, S: np.ndarray, W: np.ndarray | None = None, rest: np.ndarray | None = None) -> np.ndarray:
+        num, den = self.num_den(X, S, W, rest)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.where(num > 0, np.inf, 0.0))
 
@@ -715,10 +715,7 @@ class _DualPricer:
                 v, sg = v[keep], sg[keep]
             Xc, Sc = np.tile(x, (len(v), 1)), np.tile(s, (len(v), 1))
             Xc[:, n + j], Sc[:, j] = v, sg
-            W, R = self._scan_rows(x, s, j, v, Sc)
-            num, den = self.num_den(Xc, Sc, W, R)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                rc = np.where(den > 0, num / np.where(den > 0, den, 1.0), np.where(num > 0, np.inf, 0.0))
+            rc = self.ratio(Xc, Sc, *self._scan_rows(x, s, j, v, Sc))
             k = int(np.argmax(rc))
             if rc[k] > r * (1 + 1e-12):
                 x, s, r = Xc[k], Sc[k], float(rc[k])
