@@ -764,9 +764,9 @@ def test_bench_prices_rest_to_rest_pieces_and_their_equal_time_sets(tmp_path):
 def test_transit_inequalities_hold_on_designs_and_are_nearly_met_by_a_full_range_sweep():
     """TransitInequalities: E[g] <= 0 on the samples of random rest-to-rest spline designs, structured designs
     (bursts at the velocity limit) and random Fourier designs at 100 Hz and 1 kHz (and kappa falls with the
-    sampling interval, so the 100-Hz rows hold for every finer sampling); a joint that sweeps its whole range
-    once at its acceleration and velocity limits (the fastest burst there is) comes within 20 % of the
-    widest bands' bound; the distribution that jumps between creeping and the velocity limit violates them."""
+    sampling interval, so the 100-Hz rows hold for every finer sampling); the distribution that jumps between
+    creeping and the velocity limit violates them (a sweep of a joint's range at its limits, nearly meeting the
+    widest bands' bound: test_transit_inequalities_hold_on_bursts_whose_speed_dips_between_samples)."""
     from symoro_gen.excite import SplineBasis, dense_times, friction_trajectory
     from symoro_gen.excite_relaxation import TransitInequalities
 
@@ -793,23 +793,6 @@ def test_transit_inequalities_hold_on_designs_and_are_nearly_met_by_a_full_range
                                                                          T_fine.u2, T_fine.kappa)}
     fine = np.array([key[(j, s, round(u1, 12), round(u2, 12))] for j, s, u1, u2 in zip(T.joint, T.sign, T.u1, T.u2)])
     assert np.all((T.kappa > fine) | ((T.kappa == 1.0) & (fine == 1.0))) and np.any(T.kappa > 1.0)
-    # joint 1 sweeps its range: up to the velocity limit at the acceleration limit, cruise, stop at the other end
-    j, v, a = 0, lim.dq_max[0], lim.ddq_max[0]
-    R = lim.q_max[j] - lim.q_min[j]
-    tr, tc = v / a, (R - v ** 2 / a) / v
-    t = np.arange(0.0, 2 * tr + tc + 1e-12, 0.01)
-    vel = np.minimum.reduce([a * t, np.full_like(t, v), a * (2 * tr + tc - t)]).clip(0.0)
-    X = np.zeros((len(t), 3 * n))
-    X[:, :n] = (lim.q_min + lim.q_max) / 2
-    X[:, n + j] = vel
-    g = T.numpy(X).mean(0)
-    rows = (T.joint == j) & (T.sign > 0) & (T.u2 < v * (1 - 1e-9))
-    assert np.all(g[rows] <= 0.0)
-    u1, u2 = T.u1[rows], T.u2[rows]
-    hi = (vel[:, None] >= u2).mean(0)
-    band = ((vel[:, None] >= u1) & (vel[:, None] < u2)).mean(0)
-    wide = (u1 == u1.min()) & (u2 == u2.max())
-    assert np.all(hi[wide] / (T.kappa[rows][wide] * band[wide]) > 0.8)
     # the relaxations' favourite: 30 % at the velocity limit, the rest creeping - nothing in between
     Xj = np.zeros((2, 3 * n))
     Xj[0, n:2 * n], Xj[1, n:2 * n] = lim.dq_max, 0.01 * lim.dq_max
@@ -917,7 +900,9 @@ def test_transit_inequalities_hold_on_bursts_whose_speed_dips_between_samples(na
     the acceleration limit that cruises at u2 (the sharpest case: its widest rows within 10 % of equality) and
     one whose cruise has a ripple at half the sampling rate (its samples alternate between u2 and just below:
     as many runs at >= u2 as the range allows, each separated by one band sample), sampled at 100 Hz with
-    random phases, at rest at both ends and within the range."""
+    random phases, at rest at both ends and within the range. The widest band's burst - a sweep of the joint's
+    whole range at its acceleration and velocity limits, the fastest burst there is - comes within 20 % of the
+    bound on every joint whose widest row is not at the floor kappa = 1."""
     from symoro_gen.excite_relaxation import TRANSIT_DT, TransitInequalities
 
     robot, _ = model_for(name)
@@ -949,5 +934,6 @@ def test_transit_inequalities_hold_on_bursts_whose_speed_dips_between_samples(na
             assert hi.sum() > 3 and (d == 0 or np.any(hi[1:] != hi[:-1]))
             assert float(T.numpy(X)[:, r].mean()) <= 0.0
             if d == 0 and u1 == T.u1[T.joint == j].min() and u2 == T.u2[T.joint == j].max():
-                sharp.append(hi.mean() / (T.kappa[r] * band.mean()))
-    assert len(sharp) == n and max(sharp) > 0.9
+                sharp.append((hi.mean() / (T.kappa[r] * band.mean()), T.kappa[r]))
+    assert len(sharp) == n and max(f for f, _ in sharp) > 0.9
+    assert all(f > 0.8 for f, k in sharp if k > 1.0) and sum(k > 1.0 for _, k in sharp) >= 2
