@@ -35,7 +35,7 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
         [--features K [--cut-every R | --cut-at ROUND ...] [--dictionary 20000]]] [--braking] [--transit L] [--bandwidth K]
         [--verify 300000 [--verify-starts 200]] [--save OUT.npz] [--start SAVED.npz]
     PYTHONPATH=. python bench/bench_excite_relaxation.py --robot R --rest [--moment-tol T] [--braking]
-        --reverify SAVED.npz [--verify 400000] [--verify-starts 1000] [--seed S]
+        --reverify SAVED.npz [--verify 400000] [--verify-starts 1000] [--seed S] [--perturb K]
 
 ``--rest`` adds the moments of every trajectory that starts and ends at rest (every design of ``excite``,
 closed or not: ``symoro_gen.excite_relaxation.RestMoments``, the rates of the momentum regressor and of every frame's
@@ -54,7 +54,9 @@ vanish at rest) of a seeded dictionary that the best distribution violates most 
 ``--save`` also writes the cuts and the trajectory atoms, which ``--start`` restores: a cut run continues where it
 stopped, its cuts held from round 0. ``--reverify`` re-prices a saved run's lower-end duals on a search of its
 own (more states, more local searches, another seed): a deeper search can only find larger dual ratios, so its
-lower end is the more trustworthy one.
+lower end is the more trustworthy one. ``--perturb K`` adds a search of another kind: ``K`` perturbations of every
+atom of the saved distribution at 1-30 % of the box (the dual ratio is at its largest at the atoms of an optimal
+distribution), with its own ``--verify-starts`` local searches; without ``--verify`` it runs without the fresh states.
 
 ``--transit L`` holds the ``TransitInequalities`` of ``L`` speed levels per joint: a joint's time at a speed is
 bounded by its time at the speeds below it, since each burst must cross them at the acceleration limit at most and
@@ -84,6 +86,7 @@ from bench_excite import TARGET_RATIO, random_baseline, velocity_occupancy
 
 from symoro_gen.excite import FourierBasis, cond_lower_bound, friction_ceiling, limits_of, output_times
 from symoro_gen.excite_relaxation import (
+    PERTURB_SCALES,
     RelaxationBracket,
     RestMoments,
     TransitInequalities,
@@ -118,9 +121,12 @@ def _reverify(a, model, lim, robot) -> int:
         raise SystemExit(f"{a.reverify}: {len(b.lam)} moment multipliers, not those of a --rest run of {a.robot} "
                          f"with {len(ids)} random test functions")
     t0 = time.perf_counter()
-    r, bound = relaxation_verify(model, lim, b, states=a.verify or 300_000, starts=a.verify_starts, seed=a.seed)
+    states = 0 if a.perturb and not a.verify else a.verify or 300_000
+    r, bound = relaxation_verify(model, lim, b, states=states, starts=a.verify_starts, seed=a.seed, perturb=a.perturb)
+    how = " + ".join(([f"{states} fresh states"] if states else [])
+                     + ([f"{a.perturb} perturbations of each atom x {len(PERTURB_SCALES)} scales"] if a.perturb else []))
     print(f"{a.robot}: {a.reverify}: saved r {b.r:.4f} (dual estimate {relaxation_dual_bound(b.A, b.B, b.r):.3f}); "
-          f"{a.verify or 300_000} fresh states + {a.verify_starts} local searches (seed {a.seed}): r {r:.4f}, "
+          f"{how}, each + {a.verify_starts} local searches (seed {a.seed}): r {r:.4f}, "
           f"lower end {bound:.3f} ({time.perf_counter() - t0:.0f} s); upper end {b.upper:.3f}")
     return 0
 
@@ -172,6 +178,9 @@ def main(argv=None) -> int:
                     help="write the best distribution (states, signs, weights) and the duals of the lower end here")
     ap.add_argument("--verify-starts", type=int, default=200, metavar="K",
                     help="local searches of the verification (from the K best of its fresh states)")
+    ap.add_argument("--perturb", type=int, default=0, metavar="K",
+                    help="with --reverify: also search K random perturbations of every atom of the saved distribution "
+                         "at each scale of PERTURB_SCALES (alone: without the fresh states unless --verify is given)")
     ap.add_argument("--reverify", default=None, metavar="NPZ",
                     help="only re-price the lower-end duals of a --save'd --rest run (give its --moment-tol and "
                          "--braking) on --verify fresh states and --verify-starts local searches, seed --seed")
