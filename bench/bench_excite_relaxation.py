@@ -33,7 +33,7 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
         [--budget SECONDS] [--tol 0.02] [--fresh 30000] [--starts 40] [--add 60] [--seed 0]
         [--stationary [--moment-tol 0.01] [--trajectories 10] [--degree 2|3]] [--rest [--kinetic energy|joint]
         [--features K [--cut-every R | --cut-at ROUND ...] [--dictionary 20000]]] [--braking] [--transit L] [--bandwidth K]
-        [--verify 300000 [--verify-starts 200]] [--save OUT.npz] [--start SAVED.npz]
+        [--perturb K] [--verify 300000 [--verify-starts 200]] [--save OUT.npz] [--start SAVED.npz]
     PYTHONPATH=. python bench/bench_excite_relaxation.py --robot R --rest [--moment-tol T] [--braking]
         --reverify SAVED.npz [--verify 400000] [--verify-starts 1000] [--seed S] [--perturb K]
 
@@ -179,8 +179,9 @@ def main(argv=None) -> int:
     ap.add_argument("--verify-starts", type=int, default=200, metavar="K",
                     help="local searches of the verification (from the K best of its fresh states)")
     ap.add_argument("--perturb", type=int, default=0, metavar="K",
-                    help="with --reverify: also search K random perturbations of every atom of the saved distribution "
-                         "at each scale of PERTURB_SCALES (alone: without the fresh states unless --verify is given)")
+                    help="also price K random perturbations of every kept atom at each scale of PERTURB_SCALES each "
+                         "round (local searches from the --starts best), and in the verification; with --reverify: "
+                         "of every atom of the saved distribution (alone: without the fresh states unless --verify)")
     ap.add_argument("--reverify", default=None, metavar="NPZ",
                     help="only re-price the lower-end duals of a --save'd --rest run (give its --moment-tol and "
                          "--braking) on --verify fresh states and --verify-starts local searches, seed --seed")
@@ -220,7 +221,7 @@ def main(argv=None) -> int:
                            braking=a.braking, features=a.features, dictionary=a.dictionary,
                            cut_every=a.cut_every, cut_at=None if a.cut_at is None else tuple(a.cut_at),
                            extra_states=start_states, extra_signs=start_signs, extra_designs=start_designs,
-                           cuts=start_cuts, transit=a.transit,
+                           cuts=start_cuts, transit=a.transit, perturb=a.perturb,
                            trajectories=(10 if a.stationary or a.rest or rho is not None else 0) if a.trajectories is None
                            else a.trajectories, progress=show)
     wall = time.perf_counter() - t0
@@ -230,8 +231,10 @@ def main(argv=None) -> int:
     lower, how = b.lower, "dual estimate"
     if a.verify:
         tv = time.perf_counter()
-        r_v, lower_v = relaxation_verify(model, lim, b, states=a.verify, starts=a.verify_starts, seed=a.seed + 1)
-        print(f"{a.robot}: verification on {a.verify} fresh states + {a.verify_starts} local searches: r {b.r:.4f} -> {r_v:.4f}, "
+        r_v, lower_v = relaxation_verify(model, lim, b, states=a.verify, starts=a.verify_starts, seed=a.seed + 1,
+                                         perturb=a.perturb)
+        also = f" + {a.perturb} perturbations of each atom ({a.verify_starts} more local searches)" if a.perturb else ""
+        print(f"{a.robot}: verification on {a.verify} fresh states + {a.verify_starts} local searches{also}: r {b.r:.4f} -> {r_v:.4f}, "
               f"dual estimate {b.lower:.3f} -> {lower_v:.3f} ({time.perf_counter() - tv:.0f} s)")
         lower, how = lower_v, "dual estimate, verified"
     if bound is not None and bound.bound > lower:

@@ -1057,7 +1057,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
                        kinetic: str | None = None, braking: bool = False, features: int = 0,
                        dictionary: int = 20_000, cut_every: int = 1, cut_at: tuple[int, ...] | None = None,
                        cuts: Sequence[int] = (), extra_designs: Sequence[tuple[np.ndarray, np.ndarray]] = (),
-                       transit: int = 0, transit_dt: float = TRANSIT_DT, progress=None) -> RelaxationBracket:
+                       transit: int = 0, transit_dt: float = TRANSIT_DT, perturb: int = 0,
+                       progress=None) -> RelaxationBracket:
     """Bracket the smallest cond over distributions of states within ``limits`` (see
     :class:`RelaxationBracket`) by column generation on the SDP (Boyd & Vandenberghe 2004, sect. 7.5;
     cond^2 is scale-free, so fix ``lambda_min >= 1``)::
@@ -1091,7 +1092,8 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
     (:class:`_DualPricer`): a state with ratio > 1 would lower the objective. Each round keeps the
     states of weight > ``prune`` x the largest (plus the new ones), and adds the ``add`` best of
     ``fresh`` random states and the local maxima of the ratio from the ``starts`` best random states
-    and ``starts // 4`` random ones. Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds
+    and ``starts // 4`` random ones; with ``perturb=K`` also from the ``starts`` best of ``K`` random perturbations
+    of every kept state at each scale of :data:`PERTURB_SCALES` (as :func:`relaxation_verify`). Stops when ``primal / dual - 1 <= tol``, after ``rounds`` rounds
     or past ``time_budget`` seconds. ``extra_states`` (``(k, 3n)``, e.g. a trajectory's samples or a saved
     distribution's states, with their Coulomb signs ``extra_signs``, default ``sign(dq)``) and the samples of
     ``trajectories`` random Fourier trajectories join the first round (with ``stationary`` or ``rest`` they
@@ -1220,6 +1222,11 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         picks = list(order[:starts]) + list(rng.choice(len(Xf), starts // 4, replace=False))
         loc = [pricer.local_max_with_signs(Xf[i], Sf[i]) for i in picks]
         r = max(r_atoms, float(rf.max()), max(v for *_, v in loc))
+        if perturb:  # around the atoms, where the ratio is largest (complementary slackness)
+            on = w > prune * w_all.max()
+            PX, PS, PR = _perturbed_states(pricer, X[on], S[on], rng, perturb)
+            loc += [pricer.local_max_with_signs(PX[i], PS[i]) for i in np.argsort(-PR)[:starts]]
+            r = max(r, float(PR.max()), max(v for *_, v in loc))
         dual = relaxation_dual_bound(A, B, r) if np.isfinite(r) and r > 0 else 0.0
         keep = w > prune * w_all.max()
         hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
@@ -1296,7 +1303,8 @@ def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: Relax
             pool_r.append(rf[top])
         pools.append((np.vstack(pool_X), np.vstack(pool_S), np.concatenate(pool_r)))
     if perturb:
-        pools.append(_perturbed_atoms(pricer, bracket, rng, perturb))
+        keep = bracket.weights > 1e-6 * bracket.weights.max()
+        pools.append(_perturbed_states(pricer, bracket.states[keep], bracket.signs[keep], rng, perturb))
     for PX, PS, PR in pools:
         best_r = max(best_r, float(PR.max()))
         for i in np.argsort(-PR)[:starts]:
@@ -1309,20 +1317,18 @@ def relaxation_verify(model: IdentificationModel, limits: Limits, bracket: Relax
 PERTURB_SCALES = (0.01, 0.03, 0.1, 0.3)
 
 
-def _perturbed_atoms(pricer: _DualPricer, bracket: RelaxationBracket, rng: np.random.Generator, k: int
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The best of ``k`` random perturbations of every atom of ``bracket`` at every scale of
-    :data:`PERTURB_SCALES`: ``(states, signs, ratios)``, one row per atom and scale."""
+def _perturbed_states(pricer: _DualPricer, X0: np.ndarray, S0: np.ndarray, rng: np.random.Generator, k: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The best of ``k`` random perturbations of every state of ``X0`` (signs ``S0``) at every scale of
+    :data:`PERTURB_SCALES`: ``(states, signs, ratios)``, one row per state and scale."""
     n = pricer.n
     lo, hi = pricer.lo, pricer.hi
-    keep = bracket.weights > 1e-6 * bracket.weights.max()
-    X0, S0 = bracket.states[keep], bracket.signs[keep]
     out_X, out_S, out_r = [], [], []
     for scale in PERTURB_SCALES:
         for x0, s0 in zip(X0, S0):
             move = rng.random((k, 3 * n)) < rng.uniform(0.0, 1.0, (k, 1))
             X = np.clip(x0 + move * rng.normal(0.0, scale, (k, 3 * n)) * (hi - lo), lo, hi)
-            if bracket.braking:
+            if pricer.braking:
                 X = _brake(pricer.limits, X)
             dq = X[:, n:2 * n]
             S = np.where(dq != 0, np.sign(dq), s0)
