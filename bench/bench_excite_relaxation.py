@@ -123,10 +123,11 @@ def _reverify(a, model, lim, robot) -> int:
     t0 = time.perf_counter()
     states = 0 if a.perturb and not a.verify else a.verify or 300_000
     r, bound = relaxation_verify(model, lim, b, states=states, starts=a.verify_starts, seed=a.seed, perturb=a.perturb)
-    how = " + ".join(([f"{states} fresh states"] if states else [])
-                     + ([f"{a.perturb} perturbations of each atom x {len(PERTURB_SCALES)} scales"] if a.perturb else []))
+    how = ", ".join(([f"{states} fresh states + {a.verify_starts} local searches"] if states else [])
+                    + ([f"{a.perturb} perturbations of each atom x {len(PERTURB_SCALES)} scales + {a.verify_starts} "
+                        "local searches"] if a.perturb else []))
     print(f"{a.robot}: {a.reverify}: saved r {b.r:.4f} (dual estimate {relaxation_dual_bound(b.A, b.B, b.r):.3f}); "
-          f"{how}, each + {a.verify_starts} local searches (seed {a.seed}): r {r:.4f}, "
+          f"{how} (seed {a.seed}): r {r:.4f}, "
           f"lower end {bound:.3f} ({time.perf_counter() - t0:.0f} s); upper end {b.upper:.3f}")
     return 0
 

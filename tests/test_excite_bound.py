@@ -752,6 +752,10 @@ def test_bench_saves_continues_and_reverifies_a_cut_run(tmp_path):
     m = re.search(r"dual estimate ([\d.]+)\); 3000 fresh states \+ 4 local searches \(seed 5\): r [\d.]+, lower end ([\d.]+)",
                   out)
     assert m and float(m.group(2)) <= float(m.group(1)) + 1e-3
+    out = bench("--reverify", str(second), "--perturb", "3", "--verify-starts", "2", "--seed", "5")
+    m = re.search(r"dual estimate ([\d.]+)\); 3 perturbations of each atom x 4 scales \+ 2 local searches \(seed 5\): "
+                  r"r [\d.]+, lower end ([\d.]+)", out)
+    assert m and float(m.group(2)) <= float(m.group(1)) + 1e-3
 
 
 def test_bench_prices_rest_to_rest_pieces_and_their_equal_time_sets(tmp_path):
