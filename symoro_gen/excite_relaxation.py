@@ -1222,13 +1222,12 @@ def relaxation_bracket(model: IdentificationModel, limits: Limits, *, atoms: int
         picks = list(order[:starts]) + list(rng.choice(len(Xf), starts // 4, replace=False))
         loc = [pricer.local_max_with_signs(Xf[i], Sf[i]) for i in picks]
         r = max(r_atoms, float(rf.max()), max(v for *_, v in loc))
-        if perturb:  # around the atoms, where the ratio is largest (complementary slackness)
-            on = w > prune * w_all.max()
-            PX, PS, PR = _perturbed_states(pricer, X[on], S[on], rng, perturb)
+        keep = w > prune * w_all.max()
+        if perturb:  # around the kept atoms, where the ratio is largest (complementary slackness)
+            PX, PS, PR = _perturbed_states(pricer, X[keep], S[keep], rng, perturb)
             loc += [pricer.local_max_with_signs(PX[i], PS[i]) for i in np.argsort(-PR)[:starts]]
             r = max(r, float(PR.max()), max(v for *_, v in loc))
         dual = relaxation_dual_bound(A, B, r) if np.isfinite(r) and r > 0 else 0.0
-        keep = w > prune * w_all.max()
         hist.append(RelaxationRound(rd, len(X), int(keep.sum()), primal, dual, r, time.perf_counter() - t0,
                                     t_sdp, 0 if held is None else len(held)))
         if progress is not None:
