@@ -15,7 +15,7 @@ import warnings
 from pathlib import Path
 
 from . import progress
-from .atomic import write_text_atomic
+from .atomic import FORCE_HELP, Target, check_outputs, json_output, write_output_text
 from .errors import (
     DataFileError,
     IdentificationError,
@@ -54,7 +54,10 @@ def cmd_generate(args) -> int:
     robot = load_robot(args.robot)
     out = Path(args.out) if args.out else generated_dir()
     check_name(robot)
-    check_replaceable(out / robot.name, robot.name, args.force)  # before the (long) generation
+    # the package folder is replaced whole: never over the robot file; and only a package generate wrote
+    # from this robot file (emit.package.check_replaceable), before the (long) generation
+    check_outputs({"--out": Target(out / robot.name, folder=True, owner="caller")}, [("ROBOT", robot.file)])
+    check_replaceable(out / robot.name, robot.name, args.force, robot_file=robot.file)
     # the steps of emit_robot, one bar over them
     # through the module: tests replace progress.progress_bar
     with progress.progress_bar(generation_steps(robot), f"{robot.name}", unit="step") as bar:
@@ -92,7 +95,8 @@ def cmd_build(args) -> int:
 
 def _output(text: str, args, *, robot_file: bool = False) -> int:
     """Write a command's text to ``--output`` (atomically; robot files validated, never overwritten
-    without ``--force``) or to standard output."""
+    without ``--force``; other files only over a file symoro-gen wrote, see :mod:`symoro_gen.atomic`)
+    or to standard output."""
     if not args.output:
         sys.stdout.write(text)
         return 0
@@ -101,7 +105,7 @@ def _output(text: str, args, *, robot_file: bool = False) -> int:
 
         write_robot_toml(text, args.output, overwrite=args.force)
     else:
-        write_text_atomic(Path(args.output), text)
+        write_output_text(Path(args.output), text, force=args.force, label="-o/--output")
     if not args.quiet:
         print(f"wrote {args.output}")
     return 0
@@ -176,22 +180,18 @@ def _export_values(args):
 
 def _write_export(args, text: str, report: list, sidecar: dict | None, what: str, robot, chi, pay) -> int:
     """Print the notes about changed links, write the text and, with ``--from`` and ``-o``, the sidecar JSON."""
-    import json
-
     from .description.urdf_export import drive_terms, link_values
 
     for msg in report:
         print(f"note: {msg}", file=sys.stderr)
     rc = _output(text, args)
     if args.output and sidecar is not None:
-        from .atomic import write_text_atomic
-
         side = Path(str(args.output) + ".json")
         sidecar["drive"] = drive_terms(robot, link_values(robot, chi, pay))
         sidecar["drive_note"] = ("IA (rotor inertia) and OFF (torque offset) have no URDF field: MuJoCo's armature "
                                  "holds IA; FV, FS are URDF <dynamics damping friction>")
         sidecar["changed_links"] = report
-        write_text_atomic(side, json.dumps(sidecar, indent=2) + "\n")
+        write_output_text(side, json_output(sidecar, what), force=args.force, label="-o/--output (its .json)")
         if not args.quiet:
             print(f"wrote {side}")
     return rc
@@ -253,7 +253,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     ip = sub.add_parser("import-par", help="SYMORO+/OpenSYMORO .par file -> robot .toml")
     ip.add_argument("file")
     ip.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
-    ip.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    ip.add_argument("--force", action="store_true", help="overwrite an existing robot file (never the input)")
     ip.set_defaults(func=cmd_import_par)
 
     iu = sub.add_parser("import-urdf", help="URDF chain or tree -> robot .toml (MDH + nominal parameters)")
@@ -265,7 +265,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                     help="a URDF with <loop_joint> elements: the actuated joints (default: those named by its "
                          "<transmission> elements); the other moving joints are passive")
     iu.add_argument("-o", "--output", help="write the .toml here (default: stdout)")
-    iu.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    iu.add_argument("--force", action="store_true", help="overwrite an existing robot file (never the input)")
     iu.set_defaults(func=cmd_import_urdf)
 
     eu = sub.add_parser("export-urdf", help="robot .toml (optionally with identified parameters) -> URDF")
@@ -276,6 +276,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                          "whose regrouping gives its base parameters (needs the 'physical' extra)")
     eu.add_argument("-o", "--output", help="write the URDF here (default: stdout); with --from also OUTPUT.json "
                     "(drive terms, how far each body moved from nominal)")
+    eu.add_argument("--force", action="store_true", help=FORCE_HELP)
     eu.set_defaults(func=cmd_export_urdf)
 
     em = sub.add_parser("export-mjcf", help="robot .toml (optionally with an identification) -> MuJoCo MJCF")
@@ -284,11 +285,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                     help="JSON result of `symoro-gen identify` (as for export-urdf --from)")
     em.add_argument("--timestep", type=float, default=0.001, help="MuJoCo timestep [s] (default 0.001)")
     em.add_argument("-o", "--output", help="write the MJCF here (default: stdout); with --from also OUTPUT.json")
+    em.add_argument("--force", action="store_true", help=FORCE_HELP)
     em.set_defaults(func=cmd_export_mjcf)
 
     ep = sub.add_parser("export-par", help="robot .toml -> SYMORO+/OpenSYMORO .par file")
     ep.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
     ep.add_argument("-o", "--output", help="write the .par here (default: stdout)")
+    ep.add_argument("--force", action="store_true", help=FORCE_HELP)
     ep.set_defaults(func=cmd_export_par)
 
     for extra in _EXTRA_COMMANDS:
@@ -373,7 +376,97 @@ def _check_options(args) -> None:
             raise OptionError(f"{flag} {v:g}: {what}")
 
 
-_OUTPUT_OPTIONS = ("output", "out", "json", "report", "plots")
+_OUTPUT_OPTIONS = ("output", "out", "json", "report", "plot", "plots")
+
+#: the output options of the commands (attribute -> spelling), checked by :func:`check_command_outputs`
+_OUTPUT_FLAGS = {"output": "-o/--output", "json": "--json", "report": "--report", "plot": "--plot"}
+#: the options naming files a command reads (attribute -> spelling); DATA-like ones may be q=..,tau=.. specs
+_INPUT_FLAGS = {"file": "FILE", "data": "DATA", "validate": "--validate", "loaded": "--loaded", "logs": "LOGS",
+                "reference": "--reference", "format": "--format", "params": "--params", "from_result": "--from"}
+_SPEC_INPUTS = ("data", "validate", "loaded")
+
+
+def _robot_inputs(robot: str) -> list[tuple[str, str | os.PathLike[str] | None]]:
+    """The robot file (and generated package folder) a ROBOT argument names."""
+    p = Path(robot)
+    if p.exists():
+        return [("ROBOT", p)]
+    from .description import robots_dir
+
+    out: list[tuple[str, str | os.PathLike[str] | None]] = []
+    cand = robots_dir() / f"{robot}.toml"
+    if p.suffix != ".toml" and cand.is_file():
+        out.append(("ROBOT", cand))
+    pkg = generated_dir() / robot
+    if p.suffix != ".toml" and (pkg / "manifest.json").is_file():
+        out.append(("ROBOT", pkg))
+    return out
+
+
+def command_inputs(args) -> list[tuple[str, str | os.PathLike[str] | None]]:
+    """``(option, path)`` of every file or folder the command of ``args`` reads."""
+    cmd = getattr(args, "command", "")
+    inputs: list[tuple[str, str | os.PathLike[str] | None]] = []
+    if getattr(args, "robot", None) and cmd != "build":
+        inputs += _robot_inputs(str(args.robot))
+    for attr, flag in _INPUT_FLAGS.items():
+        v = getattr(args, attr, None)
+        if not v:
+            continue
+        items = v if isinstance(v, (list, tuple)) else [v]
+        if attr == "logs" and getattr(args, "by", None):  # fleet: the log files its --by pattern takes
+            from .fleet.files import discover
+
+            inputs += [(flag, f.path) for f in discover(items, args.by)]
+            continue
+        for item in items:
+            if attr in _SPEC_INPUTS:
+                from .preprocessing.load import parse_data_spec
+
+                try:
+                    files = list(parse_data_spec(item).files.values())
+                except SymoroError:
+                    files = [item]  # the command says what is wrong with it
+                inputs += [(flag, f) for f in files]
+            else:
+                inputs.append((flag, item))
+    return inputs
+
+
+def command_outputs(args) -> dict[str, str | os.PathLike[str] | Target | None]:
+    """Option -> path or :class:`~symoro_gen.atomic.Target` of every file the command of ``args`` writes
+    (``generate`` checks its package folder itself)."""
+    cmd = getattr(args, "command", "")
+    outputs: dict[str, str | os.PathLike[str] | Target | None] = {}
+    for attr, flag in _OUTPUT_FLAGS.items():
+        v = getattr(args, attr, None)
+        if not v:
+            continue
+        if attr == "report":
+            from .report.document import report_targets
+
+            outputs.update(report_targets(flag, v))
+        elif attr == "output" and cmd in ("import-par", "import-urdf"):  # robot files: never without --force
+            outputs[flag] = Target(Path(v), owner="never")
+        else:
+            outputs[flag] = v
+    if cmd in ("export-urdf", "export-mjcf") and getattr(args, "output", None) and getattr(args, "from_result", None):
+        outputs["-o/--output (its .json)"] = str(args.output) + ".json"
+    if getattr(args, "plots", None):  # diagnose --plots DIR: written into; its diagnosis-*.png replaced or removed
+        from .diagnostics.plots import existing_plots
+
+        outputs["--plots"] = Target(Path(args.plots), owner="caller")
+        outputs.update({f"--plots ({p.name})": p for p in existing_plots(args.plots)})
+    return outputs
+
+
+def check_command_outputs(args) -> None:
+    """The rule of :func:`symoro_gen.atomic.check_outputs` for the command of ``args``, before any work:
+    no output is an input, no two outputs are one file, an existing file is replaced only when
+    symoro-gen wrote it or with ``--force``."""
+    outputs = command_outputs(args)
+    if outputs:
+        check_outputs(outputs, command_inputs(args), force=bool(getattr(args, "force", False)))
 
 
 def _os_error_message(exc: OSError, args) -> str:
@@ -474,6 +567,7 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.formatwarning = _format_warning
             _check_options(args)
+            check_command_outputs(args)
             with progress_mode("off" if args.quiet else "auto"):
                 status = int(args.func(args) or 0)
             sys.stdout.flush()

@@ -75,6 +75,17 @@ class OptionError(SymoroError, ValueError):
     """A command-line option has a value the command cannot use (the message starts with the option)."""
 
 
+class OutputError(SymoroError, FileExistsError):
+    """An output cannot be written where asked: it is one of the command's inputs, two outputs are the
+    same file, or an existing file there was not written by symoro-gen (``--force`` / ``force=True``
+    replaces that one; see :func:`symoro_gen.atomic.check_outputs`). The message names the option and
+    the path."""
+
+    def __init__(self, message: str, hint: str | None = None):
+        super().__init__(message)
+        self.hint = hint
+
+
 class ShapeError(SymoroError, TypeError):
     """An array argument has the wrong shape or type."""
 

@@ -48,7 +48,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
-import json
 import math
 import time
 import warnings
@@ -59,7 +58,7 @@ import numpy as np
 import sympy as sp
 
 from . import __version__
-from .atomic import write_bytes_atomic, write_text_atomic
+from .atomic import FORCE_HELP, json_output, write_output_bytes, write_output_text
 from .description.mdh import symbolic_transform
 from .errors import IdentificationError, ModelError
 from .loader import model_for
@@ -1475,13 +1474,14 @@ def basis_eval(basis, X: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndar
     return P @ X, D @ X, A @ X
 
 
-def write_trajectory_csv(path, t, q, dq, ddq) -> None:
-    """CSV with header ``t,q1..qn,dq1..dqn,ddq1..ddqn`` (SI units, full precision)."""
+def write_trajectory_csv(path, t, q, dq, ddq, *, force: bool = False) -> None:
+    """CSV with header ``t,q1..qn,dq1..dqn,ddq1..ddqn`` (SI units, full precision). An existing file is
+    replaced only when it is such a trajectory (the header marks it), unless ``force``."""
     n = q.shape[1]
     head = ["t"] + [f"q{j}" for j in range(1, n + 1)] + [f"dq{j}" for j in range(1, n + 1)] + [f"ddq{j}" for j in range(1, n + 1)]
     data = np.column_stack([t, q, dq, ddq])
     lines = [",".join(head)] + [",".join(f"{v:.17g}" for v in row) for row in data]
-    write_text_atomic(path, "\n".join(lines) + "\n")
+    write_output_text(path, "\n".join(lines) + "\n", force=force)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1533,12 +1533,14 @@ def _passive_text(model: IdentificationModel, passive: dict[int, tuple[float, fl
             f"joints move over " + ", ".join(rng(j, *r) for j, r in passive.items()) + free)
 
 
-def plot_trajectory(result: ExcitationResult, path, *, robot: str = "", joints: tuple[int, ...] | None = None) -> None:
+def plot_trajectory(result: ExcitationResult, path, *, robot: str = "", joints: tuple[int, ...] | None = None,
+                    force: bool = False) -> None:
     """PNG file of every joint's ``q, dq, ddq`` against its limits (dashed), titled with the robot, the
-    kind of design and its cond (written atomically); ``joints``: :func:`joint_numbers` for the labels."""
+    kind of design and its cond (written atomically; an existing PNG symoro-gen did not write is replaced
+    only with ``force``); ``joints``: :func:`joint_numbers` for the labels."""
     title = (f"{robot + ': ' if robot else ''}{result.basis.kind} excitation, cond = {result.cond:.4g}, limits "
              f"{'respected' if result.limits_ok else 'VIOLATED'}")
-    write_bytes_atomic(path, trajectory_figure_png(result, dpi=90, title=title, joints=joints))
+    write_output_bytes(path, trajectory_figure_png(result, dpi=90, title=title, joints=joints), force=force)
 
 
 def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000, title: str = "",
@@ -1715,6 +1717,7 @@ def add_excite_parser(sub) -> None:
     e.add_argument("--plot", help="PNG of the joint trajectories against the limits")
     e.add_argument("--report", help="report (.html self-contained, or .md with its images beside it): trajectories "
                                     "against the limits, cond, limit usage, predicted %%sigma at --noise")
+    e.add_argument("--force", action="store_true", help=FORCE_HELP)
     e.set_defaults(func=cmd_excite)
 
 
@@ -1766,7 +1769,8 @@ def cmd_excite(args) -> int:
                               starts=args.starts, seed=args.seed, max_iter=args.max_iter, samples=args.samples,
                               pool=args.pool, structured=args.structured_starts, refine=args.refine, jobs=args.jobs,
                               chi_b=None if args.no_torque_limits else chi_b)
-    write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq)
+    force = getattr(args, "force", False)
+    write_trajectory_csv(args.output, res.t, res.q, res.dq, res.ddq, force=force)
     sig, pct = predicted_sigma(model, res.q, res.dq, res.ddq, args.noise, chi_b)
     passive = passive_ranges(model, res.q)
     out = {
@@ -1784,11 +1788,11 @@ def cmd_excite(args) -> int:
         "passive_ranges": {str(j): list(r) for j, r in passive.items()},
     }
     if args.json:
-        write_text_atomic(args.json, json.dumps(out, indent=2) + "\n")
+        write_output_text(args.json, json_output(out, "excite"), force=force)
     if args.plot:
-        plot_trajectory(res, args.plot, robot=model.ROBOT, joints=joint_numbers(model))
+        plot_trajectory(res, args.plot, robot=model.ROBOT, joints=joint_numbers(model), force=force)
     if args.report:
-        write_report_files(excitation_report(res, model, noise=args.noise, chi_b=chi_b), args.report)
+        write_report_files(excitation_report(res, model, noise=args.noise, chi_b=chi_b), args.report, force=force)
     if not args.quiet:
         worst = max(max(v) for v in res.usage.values())
         print(f"{model.ROBOT}: {basis.kind} excitation, {len(res.t)} samples at {args.rate:g} Hz -> {args.output}")

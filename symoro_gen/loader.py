@@ -97,15 +97,26 @@ def _inside_repo(path: Path) -> bool:
     return True
 
 
-def _generate(robot: RobotDescription, out_dir: Path) -> Path:
+def _generate(robot: RobotDescription, out_dir: Path, *, any_source: bool = False) -> Path:
+    """Generate ``out_dir/<robot>``; ``any_source``: an existing package of this robot may come from
+    another robot file (the cache, keyed by the file's content)."""
     # sympy and the Newton-Euler/emission stack (~0.5 s to import) only when generating
     from .emit.package import emit_robot, written_by_generate
 
     target = out_dir / robot.name
     if target.exists() and not written_by_generate(target, robot.name):
         raise ModelError(f"{target} exists and is not a generated package of {robot.name}")
-    emit_robot(robot, out_dir)
+    emit_robot(robot, out_dir, force=any_source)
     return target
+
+
+def _from_other_file(target: Path, robot: RobotDescription) -> bool:
+    """``target`` is a generated package of another robot file (of the same robot name)."""
+    if not (target / "manifest.json").is_file():
+        return False
+    from .emit.package import other_source
+
+    return other_source(target, robot.file) is not None
 
 
 #: closed-loop models already built in this process: (package folder, robot-file sha256) -> model
@@ -163,11 +174,12 @@ def _model_of_robot(robot: RobotDescription) -> IdentificationModel:
                 not beside.exists() or os.access(beside, os.W_OK))
         except OSError:
             writable = False
-        if writable and (not target.exists() or (target / "manifest.json").is_file()):
+        if writable and (not target.exists() or ((target / "manifest.json").is_file()
+                                                 and not _from_other_file(target, robot))):
             return _import_checked(_generate(robot, beside), robot)
     cached = cache_dir() / robot.file_hash[:16]
     if not (_is_package(cached / robot.name) and _manifest_sha(cached / robot.name) == robot.file_hash):
-        _generate(robot, cached)
+        _generate(robot, cached, any_source=True)
     return _import_checked(cached / robot.name, robot)
 
 

@@ -59,7 +59,7 @@ import sympy as sp
 from sympy.printing.str import StrPrinter
 
 from ..atomic import write_text_atomic
-from ..errors import Problem, RobotFileError, SymoroError
+from ..errors import OutputError, Problem, RobotFileError
 from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from .expr import ExprError, parse_expression
 from .model import FIXED, PRISMATIC, REVOLUTE, RobotDescription, q_symbol
@@ -68,12 +68,12 @@ from .parse import load_robot, parse_robot_text
 __all__ = ["import_par", "import_par_text", "export_par", "write_robot_toml", "OutputExistsError", "DEFAULT_GRAVITY_Z"]
 
 
-class OutputExistsError(SymoroError, FileExistsError):
+class OutputExistsError(OutputError):
     """The output file exists and overwriting was not asked for (nothing written)."""
 
     def __init__(self, path: os.PathLike | str):
-        super().__init__(f"{path} exists; not overwritten")
-        self.hint = "pass overwrite=True (--force on the command line) to replace it"
+        super().__init__(f"{path} exists; not overwritten",
+                         "pass overwrite=True (--force on the command line) to replace it")
 
 #: gravity used for a symbolic ``G = {0,0,G3}`` without a numeric value (z axis pointing up)
 DEFAULT_GRAVITY_Z = -9.81

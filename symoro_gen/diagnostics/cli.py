@@ -14,9 +14,9 @@ are a contract. ``--loaded DATA... [--payload NAME=VALUE...]`` as in ``identify`
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
+from ..atomic import FORCE_HELP
 from ..preprocessing.cli import add_data_options, data_block, data_notes, data_text, load_data
 
 __all__ = ["add_diagnose_parser", "run_diagnose"]
@@ -95,12 +95,13 @@ def run_diagnose(args) -> dict:
     out["data"] = data_block(reports)  # per file: path, rows read, dropped, resampled, experiments
     out["validate"] = [str(p) for p in args.validate or ()]
     out["loaded"] = [str(p) for p in args.loaded or ()]
+    force = getattr(args, "force", False)
     if args.json:
-        from ..atomic import write_text_atomic
+        from ..atomic import json_output, write_output_text
 
-        write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
+        write_output_text(Path(args.json), json_output(out, "diagnose"), force=force)
     if args.plots:
-        files = rep.write_plots(args.plots)
+        files = rep.write_plots(args.plots, force=force)
         if not files and not args.quiet:
             print("note: no plots written (matplotlib is not installed: pip install 'symoro_gen[plots]')")
     if args.report:
@@ -110,7 +111,7 @@ def run_diagnose(args) -> dict:
                      sources={"identification data": [str(p) for p in args.data],
                               "loaded": [str(p) for p in args.loaded or ()],
                               "validation data": [str(p) for p in args.validate or ()]},
-                     text=rep.summary(), notes=data_notes(reports))
+                     text=rep.summary(), notes=data_notes(reports), force=force)
     if not args.quiet:
         print(rep.summary() + "\n\n" + data_text(reports))
     return out
@@ -146,5 +147,6 @@ def add_diagnose_parser(subparsers) -> None:
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.md|OUT.html", help="write a report (tables and plots) here")
     p.add_argument("--plots", metavar="DIR", help="write the plots as PNG files in this folder")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_data_options(p)
     p.set_defaults(func=lambda a: (run_diagnose(a), 0)[1])

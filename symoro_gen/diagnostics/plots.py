@@ -9,16 +9,22 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..atomic import write_bytes_atomic
+from ..atomic import check_replaceable, mark_png, write_bytes_atomic, written_by_symoro
 from ..report import MissingDependencyError, build_report
 
-__all__ = ["write_plots"]
+__all__ = ["existing_plots", "write_plots"]
 
 #: every figure of a diagnosis is named ``diagnosis-*.png``; older ones in the folder are replaced
 STEM = "diagnosis-"
 
 
-def write_plots(report, folder) -> list[Path]:
+def existing_plots(folder) -> list[Path]:
+    """The ``diagnosis-*.png`` files already in ``folder``: :func:`write_plots` replaces or removes them."""
+    folder = Path(folder)
+    return sorted(folder.glob(f"{STEM}*.png")) if folder.is_dir() else []
+
+
+def write_plots(report, folder, *, force: bool = False) -> list[Path]:
     """Write the diagnosis figures of ``report`` (a :class:`~.report.ResidualReport`) as PNG files.
 
     Returns
@@ -26,20 +32,27 @@ def write_plots(report, folder) -> list[Path]:
     list of Path
         Files written, ``folder/<figure name>.png``; empty when matplotlib is not installed. Files
         ``diagnosis-*.png`` of an earlier diagnosis in the folder that this one does not write are removed.
+
+    Raises
+    ------
+    OutputError
+        Without ``force``, a ``diagnosis-*.png`` in the folder that symoro-gen did not write (nothing written).
     """
     try:
         rep = build_report(diagnosis=report, robot=report.robot, plots=True)
     except MissingDependencyError:
         return []
     folder = Path(folder)
+    for old in existing_plots(folder):  # replaced or removed below: only symoro-gen's, unless force
+        check_replaceable(old, force, label="plot")
     folder.mkdir(parents=True, exist_ok=True)
     names = {f"{fig.name}.png" for fig in rep.figures}
-    for old in folder.glob(f"{STEM}*.png"):   # figures of an earlier diagnosis in the same folder
-        if old.name not in names:
+    for old in existing_plots(folder):   # figures of an earlier diagnosis in the same folder
+        if old.name not in names and (force or written_by_symoro(old)):
             old.unlink()
     out = []
     for fig in rep.figures:
         p = folder / f"{fig.name}.png"
-        write_bytes_atomic(p, fig.png)
+        write_bytes_atomic(p, mark_png(fig.png))
         out.append(p)
     return out

@@ -459,10 +459,11 @@ class ResidualReport:
             L += [f"{i}. {w}" for i, w in enumerate(self.warnings, 1)]
         return "\n".join(L) + "\n"
 
-    def write_plots(self, folder) -> list[Path]:
+    def write_plots(self, folder, *, force: bool = False) -> list[Path]:
         """Residual before/after each effect against the signal that revealed it, and the error norms
-        (needs matplotlib; Agg backend). Returns the files written (empty without matplotlib)."""
-        return write_plots(self, folder)
+        (needs matplotlib; Agg backend). Returns the files written (empty without matplotlib). Existing
+        ``diagnosis-*.png`` files symoro-gen did not write are replaced only with ``force``."""
+        return write_plots(self, folder, force=force)
 
     def __repr__(self) -> str:
         return (f"ResidualReport(robot={self.robot!r}, method={self.method!r}, "

@@ -52,7 +52,7 @@ def check_generated(folder: Path | None = None, robots: list[str] | None = None)
     out: dict[str, list[str]] = {}
     with tempfile.TemporaryDirectory(prefix="symoro_check_") as td:
         for name in names:
-            emit_robot(load_robot(name), Path(td))
+            emit_robot(load_robot(name), Path(td), source_base=folder.parent)  # robot_file_path as in folder
             out[name] = compare_packages(folder / name, Path(td) / name)
     return out
 

@@ -14,7 +14,10 @@ Files are deterministic (sorted symbols, no timestamps, no absolute paths, no to
 ``manifest.json``, floats printed as ``repr(float)``) and written atomically: everything goes to a
 temporary sibling folder that replaces the target in one rename, so a failure never leaves a
 half-written package. An existing target is replaced only when a previous ``generate`` wrote it
-(it has this robot's ``manifest.json``), unless ``force=True``.
+(it has this robot's ``manifest.json``) from the same robot file (``robot_file_path`` in the manifest:
+the file's path relative to the parent of the output folder, ``robots/<robot>.toml`` for the
+repository's ``generated/``), unless ``force=True``: a robot file that reuses a shipped robot's
+``name`` does not silently replace the shipped package.
 """
 from __future__ import annotations
 
@@ -35,7 +38,7 @@ import sympy as sp
 from numpy.typing import ArrayLike, NDArray
 
 from .. import __version__
-from ..atomic import ordinary_mode
+from ..atomic import ordinary_mode, same_file
 from ..baseparams.regroup import BaseParameterMap, group_base_parameters
 from ..description.model import RobotDescription
 from ..dynamics.graph import ExprGraph
@@ -238,17 +241,22 @@ package's ``casadi_regressor()`` wraps it in a ``casadi.Function`` (symoro_gen.r
 
 def emit_robot(robot: RobotDescription, out_dir: str | os.PathLike[str], *,
                progress: Callable[[str, int], object] | None = None,
-               force: bool = False) -> EmittedModule:
+               force: bool = False, source_base: str | os.PathLike[str] | None = None) -> EmittedModule:
     """Generate ``out_dir/<robot>/`` for ``robot`` (Newton-Euler, base parameters, emission).
+
+    ``source_base``: the folder the manifest's ``robot_file_path`` is relative to (default: the parent of
+    ``out_dir``). An existing package is replaced only when generated from the same robot file, unless
+    ``force`` (:func:`check_replaceable`).
 
     Returns
     -------
     EmittedModule
     """
     check_name(robot)
+    check_replaceable(Path(out_dir) / robot.name, robot.name, force, robot_file=robot.file)
     reg = build_regressor(robot, progress=progress)
     bp = group_base_parameters(reg)
-    return emit_from(reg, bp, out_dir, force=force)
+    return emit_from(reg, bp, out_dir, force=force, source_base=source_base)
 
 
 def base_graph(reg: SymbolicRegressor, bp: BaseParameterMap, substituted: ExprGraph | None = None) -> ExprGraph:
@@ -277,8 +285,22 @@ def model_graphs(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[str
     return graphs, names
 
 
-def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[str, str], OpCount]:
-    """The files of the generated package of ``reg.robot`` (name -> text), and the base op count."""
+def robot_file_path(robot_file: str, base: str | os.PathLike[str]) -> str | None:
+    """``robot_file`` relative to ``base`` (POSIX separators), as ``manifest.json`` records it; None for a
+    description not read from a file (``"<string>"``)."""
+    if not robot_file or robot_file.startswith("<"):
+        return None
+    f = os.path.abspath(robot_file)
+    try:
+        return Path(os.path.relpath(f, os.path.abspath(base))).as_posix()
+    except ValueError:  # another drive (Windows)
+        return Path(f).as_posix()
+
+
+def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: str | None = None
+                  ) -> tuple[dict[str, str], OpCount]:
+    """The files of the generated package of ``reg.robot`` (name -> text), and the base op count;
+    ``robot_path``: the robot file as the manifest records it (:func:`robot_file_path`)."""
     robot = reg.robot
     check_name(robot)
     subs = robot.geometry_subs()
@@ -324,6 +346,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
         "robot": robot.name,
         "robot_file": Path(robot.file).name,
         "robot_file_sha256": robot.file_hash,
+        **({"robot_file_path": robot_path} if robot_path is not None else {}),
         "tool_versions": tool_versions(),
         "n_joints": n,
         "standard_names": list(reg.standard_names),
@@ -346,11 +369,13 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap) -> tuple[dict[st
 
 
 def emit_from(reg: SymbolicRegressor, bp: BaseParameterMap, out_dir: str | os.PathLike[str], *,
-              force: bool = False) -> EmittedModule:
-    """Write the package of ``reg.robot`` to ``out_dir/<robot>/`` (see :func:`write_package_atomic`)."""
-    files, ops = package_files(reg, bp)
+              force: bool = False, source_base: str | os.PathLike[str] | None = None) -> EmittedModule:
+    """Write the package of ``reg.robot`` to ``out_dir/<robot>/`` (see :func:`write_package_atomic`);
+    ``source_base`` as for :func:`emit_robot`."""
+    base = os.path.dirname(os.path.abspath(out_dir)) if source_base is None else source_base
+    files, ops = package_files(reg, bp, robot_path=robot_file_path(reg.robot.file, base))
     target = Path(out_dir) / reg.robot.name
-    write_package_atomic(target, files, robot=reg.robot.name, force=force)
+    write_package_atomic(target, files, robot=reg.robot.name, force=force, robot_file=reg.robot.file)
     return EmittedModule(reg.robot.name, target, tuple(sorted(files)), len(reg.standard_names),
                          len(bp.base_names), ops)
 
@@ -365,28 +390,67 @@ def written_by_generate(target: Path, robot: str | None = None) -> bool:
             and (robot is None or man.get("robot") == robot))
 
 
-def check_replaceable(target: Path, robot: str | None, force: bool = False) -> None:
+def package_source(target: Path) -> str | None:
+    """The robot file the package ``target`` was generated from, as its ``manifest.json`` records it:
+    ``robot_file_path`` resolved against the parent of the output folder (a path), or, for a package
+    written before that field, the file name ``robot_file``; None when the manifest says neither."""
+    try:
+        man = json.loads((Path(target) / "manifest.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(man, dict):
+        return None
+    rel = man.get("robot_file_path")
+    if isinstance(rel, str) and rel:
+        return os.path.normpath(os.path.join(os.path.abspath(target), os.pardir, os.pardir, rel))
+    name = man.get("robot_file")
+    return name if isinstance(name, str) and name else None
+
+
+def other_source(target: Path, robot_file: str | None) -> str | None:
+    """The robot file the package ``target`` comes from when it is not ``robot_file`` (else None): a
+    package recorded with a path is compared by file identity (:func:`symoro_gen.atomic.same_file`), an
+    older one by file name."""
+    if robot_file is None:
+        return None
+    src = package_source(target)
+    if src is None:
+        return None
+    if os.path.isabs(src):
+        return None if same_file(src, robot_file) else src
+    return None if Path(robot_file).name == src else src
+
+
+def check_replaceable(target: Path, robot: str | None, force: bool = False, *, robot_file: str | None = None) -> None:
     """Raise :class:`ModelError` when ``target`` exists and is not a package of ``robot`` that a previous
-    ``generate`` wrote (``force`` skips the check)."""
+    ``generate`` wrote, or (given ``robot_file``) was generated from another robot file (``force`` skips
+    the check)."""
     if force or not (target.exists() or target.is_symlink()):
         return
     if target.is_dir() and not target.is_symlink() and written_by_generate(target, robot):
-        return
+        src = other_source(target, robot_file)
+        if src is None:
+            return
+        err = ModelError(f"{target} was generated from the robot file {src}; {robot_file} is another robot file "
+                         f"with the same name {robot!r}: not replacing the package")
+        err.hint = (f"give the robot another `name` in {robot_file}, choose another --out, or pass --force to "
+                    "replace the package")
+        raise err
     what = "a folder" if target.is_dir() else "a file"
     raise ModelError(f"{target} exists and is {what} not written by `symoro-gen generate` (no manifest.json of "
                      "this robot); not replacing it. Choose another --out, or pass --force to replace it")
 
 
 def write_package_atomic(target: Path, files: dict[str, str], *, robot: str | None = None,
-                         force: bool = False) -> None:
+                         force: bool = False, robot_file: str | None = None) -> None:
     """Write ``files`` as the folder ``target`` in one rename (old content replaced whole).
 
-    An existing ``target`` is replaced only when it is a generated package (of ``robot``);
-    anything else there is a :class:`ModelError` naming it, unless ``force``. No temporary or
-    backup folder is left behind, whatever happens.
+    An existing ``target`` is replaced only when it is a generated package (of ``robot``, from
+    ``robot_file`` when given); anything else there is a :class:`ModelError` naming it, unless
+    ``force``. No temporary or backup folder is left behind, whatever happens.
     """
     target = Path(target)
-    check_replaceable(target, robot, force)
+    check_replaceable(target, robot, force, robot_file=robot_file)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.generating-", dir=target.parent))

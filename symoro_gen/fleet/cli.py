@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..atomic import FORCE_HELP, json_output, write_output_text
 from ..observations import AssemblyOptions
 from ..preprocessing.cli import add_data_options, format_from_args
 from .engine import DEFAULT_ALPHA, identify_fleet
@@ -29,6 +30,7 @@ def add_fleet_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="OUT.json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md", help="write a report with the plot of every flagged "
                    "parameter over the days (plots need matplotlib: the 'plots' extra)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--alpha", type=float, default=DEFAULT_ALPHA,
                    help="level of the flags after the multiple-testing correction (default %(default)s)")
     p.add_argument("--correction", choices=("holm", "bh"), default="holm",
@@ -60,10 +62,11 @@ def run_fleet(args) -> int:
                          alpha=args.alpha, correction=args.correction, retries=args.retries,
                          segment_samples=args.segment_samples, diagnose=args.diagnose,
                          diagnose_method=args.diagnose_method)
-    if args.json:
-        res.write_json(args.json)
+    force = getattr(args, "force", False)
+    if args.json:  # FleetResult.write_json's text, marked as symoro-gen's (see symoro_gen.atomic)
+        write_output_text(args.json, json_output(res.to_json(), "fleet", indent=1, allow_nan=True), force=force)
     if args.report:
-        write_fleet_report(args.report, res)
+        write_fleet_report(args.report, res, force=force)
     if not getattr(args, "quiet", False):
         print(res.summary())
         t = res.timing

@@ -88,6 +88,7 @@ def fleet_report(res: FleetResult, *, plots: bool = True) -> Report:
     return Report(title=f"Fleet of {len(res.robots)} {res.model} robots", blocks=tuple(blocks))
 
 
-def write_fleet_report(path, res: FleetResult, *, plots: bool = True) -> Path:
-    """Write the fleet report as ``.html`` (self-contained) or ``.md``."""
-    return write_report_files(fleet_report(res, plots=plots), path)
+def write_fleet_report(path, res: FleetResult, *, plots: bool = True, force: bool = False) -> Path:
+    """Write the fleet report as ``.html`` (self-contained) or ``.md`` (an existing file symoro-gen did
+    not write is replaced only with ``force``)."""
+    return write_report_files(fleet_report(res, plots=plots), path, force=force)

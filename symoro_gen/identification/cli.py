@@ -1,12 +1,12 @@
 """``symoro-gen identify``: recorded data -> identified parameters, gains, validation (JSON/Markdown)."""
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from ..atomic import FORCE_HELP
 from ..errors import IdentificationError, OptionError
 from ..model import IdentificationModel
 from ..observations.assembly import assemble
@@ -119,9 +119,9 @@ def run_identify(args) -> dict:
     else:
         ref_text = ""
     if args.json:
-        from ..atomic import write_text_atomic
+        from ..atomic import json_output, write_output_text
 
-        write_text_atomic(Path(args.json), json.dumps(out, indent=2) + "\n")
+        write_output_text(Path(args.json), json_output(out, "identify"), force=getattr(args, "force", False))
     text = res.summary()
     if closed is not None:
         text = closed.summary() + "\n\n" + text
@@ -227,7 +227,7 @@ def _write_report(args, robot, model: IdentificationModel, res, dg, sys_u, sys_l
                "validation data": list(args.validate or ())}
     write_report(args.report, res, robot=robot.name, sources=sources, identification=ident, validation=valid,
                  payload_names=model.PAYLOAD_NAMES, payload=payload, drive=dg, reference=reference, notes=notes,
-                 raw_errors=raw, text=text)
+                 raw_errors=raw, text=text, force=getattr(args, "force", False))
 
 
 def add_identify_parser(sub) -> None:
@@ -278,5 +278,6 @@ def add_identify_parser(sub) -> None:
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "
                         "images in OUT_files/ (plots need the 'plots' extra: matplotlib)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_data_options(p, validate_fraction=True)
     p.set_defaults(func=lambda a: (run_identify(a), 0)[1])

@@ -13,14 +13,13 @@ Exit 0 (with warnings) when the recording is usable, 2 with the reason when it i
 from __future__ import annotations
 
 import io
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import write_text_atomic
+from ..atomic import FORCE_HELP, json_output, mark_png, write_output_text
 from ..errors import IdentificationError
 from ..identification.assemble import build_observation
 from ..identification.estimators import REL_STD_WARN_PCT
@@ -257,7 +256,8 @@ def _report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str):
             ax2.set_xlabel("t [s]")
             buf = io.BytesIO()
             fig.savefig(buf, format="png", metadata={"Software": None})
-            blocks.append(Figure(f"exp{k + 1}_joint{j + 1}", buf.getvalue(), caption=f"{tr.source}, joint {j + 1}"))
+            blocks.append(Figure(f"exp{k + 1}_joint{j + 1}", mark_png(buf.getvalue()),
+                                 caption=f"{tr.source}, joint {j + 1}"))
     blocks.append(Preformatted(insp.summary()))
     return Report(f"Inspection of recordings for {robot}", tuple(blocks))
 
@@ -270,10 +270,11 @@ def run_inspect(args) -> int:
     robot, model = model_for(args.robot)
     trajs, reports = load_data(args, args.data, robot)
     insp = inspect_recordings(model, trajs, reports, cutoff_hz=args.cutoff, n_d=args.decimate)
+    force = getattr(args, "force", False)
     if args.json:
-        write_text_atomic(Path(args.json), json.dumps({"robot": robot.name, **insp.to_dict()}, indent=2) + "\n")
+        write_output_text(Path(args.json), json_output({"robot": robot.name, **insp.to_dict()}, "inspect"), force=force)
     if args.report:
-        write_report_files(_report(insp, trajs, robot.name), args.report)
+        write_report_files(_report(insp, trajs, robot.name), args.report, force=force)
     if not args.quiet or not insp.usable:
         print(insp.summary())
     return 0 if insp.usable else 2
@@ -288,5 +289,6 @@ def add_inspect_parser(sub) -> None:
     p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
     p.add_argument("--json", help="write the findings as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md", help="write a report with a plot per joint here")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_data_options(p)
     p.set_defaults(func=run_inspect)

@@ -493,11 +493,12 @@ def check_report_path(path) -> str:
     return kind
 
 
-def write_report(path, result=None, **kwargs) -> Path:
+def write_report(path, result=None, *, force: bool = False, **kwargs) -> Path:
     """Build a report (:func:`build_report`, same keyword arguments) and write it to ``path``:
     ``.html``/``.htm`` one self-contained page (images as base64 PNG, no external asset),
     ``.md``/``.markdown`` Markdown with its images in ``<stem>_files/`` beside it. Atomic (temporary
-    file + rename).
+    file + rename); an existing file symoro-gen did not write is replaced only with ``force``
+    (:func:`~symoro_gen.report.document.write_report_files`).
 
     Returns
     -------
@@ -505,4 +506,4 @@ def write_report(path, result=None, **kwargs) -> Path:
     """
     path = Path(path)
     check_report_path(path)
-    return write_report_files(build_report(result, **kwargs), path)
+    return write_report_files(build_report(result, **kwargs), path, force=force)

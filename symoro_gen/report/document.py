@@ -13,11 +13,19 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..atomic import replace_folder_atomic, write_bytes_atomic
+from ..atomic import (
+    GENERATOR,
+    MARKDOWN_MARK,
+    Target,
+    check_replaceable,
+    mark_png,
+    replace_folder_atomic,
+    write_bytes_atomic,
+)
 from ..errors import SymoroError
 
 __all__ = ["ReportError", "Heading", "Paragraph", "Table", "Figure", "ItemList", "Preformatted", "Report", "png_size",
-           "render_html_fragment", "report_kind", "asset_folder", "write_report_files", "REPORT_SUFFIXES"]
+           "render_html_fragment", "report_kind", "asset_folder", "report_targets", "write_report_files", "REPORT_SUFFIXES"]
 
 #: suffixes :func:`write_report_files` accepts, and the format each means
 REPORT_SUFFIXES = {".html": "html", ".htm": "html", ".md": "md", ".markdown": "md"}
@@ -253,7 +261,7 @@ class Report:
         body = render_html_fragment((Heading(self.title, 1),) + self.blocks)
         foot = f"<footer>{_e(self.footer)}</footer>" if self.footer else ""
         return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-                f"<title>{_e(self.title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n<main>\n"
+                f"<meta name=\"generator\" content=\"{GENERATOR}\">\n<title>{_e(self.title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n<main>\n"
                 f"{body}\n{foot}\n</main>\n</body>\n</html>\n")
 
     def to_markdown(self, folder: str) -> str:
@@ -277,6 +285,15 @@ def asset_folder(path) -> Path:
     return path.with_name(path.stem + "_files")
 
 
+def report_targets(option: str, path) -> dict[str, Target]:
+    """The files a report at ``path`` writes, for :func:`symoro_gen.atomic.check_outputs`: the report and,
+    for Markdown, its image folder (replaced whole)."""
+    out = {option: Target(Path(path))}
+    if report_kind(path) == "md":
+        out[f"{option} (its image folder)"] = Target(asset_folder(path), folder=True)
+    return out
+
+
 def _replace_folder_atomic(folder: Path, files: dict[str, bytes]) -> None:
     """Write ``files`` into a temporary sibling folder, then swap it in place of ``folder``."""
     if folder.exists() and not folder.is_dir():
@@ -284,9 +301,13 @@ def _replace_folder_atomic(folder: Path, files: dict[str, bytes]) -> None:
     replace_folder_atomic(folder, files)
 
 
-def write_report_files(report: Report, path) -> Path:
+def write_report_files(report: Report, path, *, force: bool = False) -> Path:
     """Write ``report`` to ``path`` (``.html``/``.htm``: one self-contained page; ``.md``/``.markdown``:
     the text, with its images in ``<stem>_files/`` beside it), atomically.
+
+    An existing report (and image folder) is replaced only when symoro-gen wrote it (its mark: a
+    ``generator`` meta tag, a last Markdown comment line, PNG images with a ``Software`` chunk), unless
+    ``force`` (:func:`symoro_gen.atomic.check_replaceable`).
 
     Returns
     -------
@@ -297,17 +318,22 @@ def write_report_files(report: Report, path) -> Path:
     ------
     ReportError
         Unknown suffix.
+    OutputError
+        An existing file or image folder that symoro-gen did not write, without ``force``.
     """
     path = Path(path)
     kind = report_kind(path)
     if kind is None:
         raise ReportError(f"report {path}: unknown suffix {path.suffix!r}; use one of {', '.join(REPORT_SUFFIXES)}")
+    check_replaceable(path, force, label="report")
+    if kind == "md" and report.figures:
+        check_replaceable(asset_folder(path), force, folder=True, label="report image folder")
     path.parent.mkdir(parents=True, exist_ok=True)
     if kind == "html":
         write_bytes_atomic(path, report.to_html().encode("utf-8"))
     else:
         folder = asset_folder(path)
         if report.figures:
-            _replace_folder_atomic(folder, {f"{fig.name}.png": fig.png for fig in report.figures})
-        write_bytes_atomic(path, report.to_markdown(folder.name).encode("utf-8"))
+            _replace_folder_atomic(folder, {f"{fig.name}.png": mark_png(fig.png) for fig in report.figures})
+        write_bytes_atomic(path, (report.to_markdown(folder.name) + MARKDOWN_MARK).encode("utf-8"))
     return path

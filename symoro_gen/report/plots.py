@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..atomic import mark_png
 from ..errors import SymoroError
 from .document import Figure
 
@@ -87,9 +88,10 @@ def _figure_and_axes(nrows: int, ncols: int, *, ax_h: float, gap: float, top: fl
 
 def _png(fig, dpi: int) -> bytes:
     buf = io.BytesIO()
-    # no Software/version text chunk: the same data give the same bytes across matplotlib versions' metadata
+    # no matplotlib Software/version text chunk: the same data give the same bytes across matplotlib
+    # versions' metadata; symoro-gen's own mark instead (a figure file is then known as its output)
     fig.savefig(buf, format="png", dpi=dpi, facecolor="white", metadata={"Software": None})
-    return buf.getvalue()
+    return mark_png(buf.getvalue())
 
 
 def _stride(m: int, max_points: int) -> int:

@@ -5,7 +5,7 @@ import io
 
 import numpy as np
 
-from ..atomic import write_text_atomic
+from ..atomic import check_replaceable, write_text_atomic
 from ..description.model import RobotDescription
 from ..dynamics.numeric import inverse_dynamics
 from ..preprocessing.drive_chain import joint_to_motor
@@ -122,17 +122,26 @@ def simulate_recording(model_or_robot, t, q, dq, ddq, chi_std, *, chi_payload=No
                       loaded=(chi_payload is not None) if loaded is None else bool(loaded), meta=meta)
 
 
-def write_recording_csv(path, recording: Trajectory) -> None:
+def write_recording_csv(path, recording: Trajectory, *, force: bool = False) -> None:
     """Write a recording as the CSV that ``symoro-gen identify`` reads: ``t,q1..qn,tau1..taun``.
 
-    One header line, then one row per sample (full precision), written atomically.
+    One header line, then one row per sample (full precision), written atomically. An existing file is
+    never replaced without ``force`` (it may be a measured recording: its format is the same).
 
     Parameters
     ----------
     path : str or PathLike
     recording : Trajectory
         Its ``t``, ``q`` and ``tau`` are written (velocities and accelerations are not).
+    force : bool
+        Replace an existing file.
+
+    Raises
+    ------
+    OutputError
+        ``path`` exists and ``force`` is false (nothing written).
     """
+    check_replaceable(path, force, owner="never", label="recording")
     n = recording.q.shape[1]
     head = ",".join(["t"] + [f"q{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
     buf = io.StringIO()

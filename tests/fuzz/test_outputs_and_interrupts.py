@@ -20,6 +20,7 @@ def _prepare(tmp_path):
     (tmp_path / "a_dir").mkdir()
     (tmp_path / "a_dir" / "inside.txt").write_text("keep me too\n")
     (tmp_path / "existing.par").write_text("(* a user's file *)\n")
+    (tmp_path / "previous.par").write_text("(* SYMORO+ : parameters of a robot, written by symoro_gen *)\n")
 
 
 OUTPUTS = [
@@ -27,7 +28,8 @@ OUTPUTS = [
     ("a_file/x.par", (2,)),            # below a regular file
     ("missing/deeper/x.par", (0, 2)),  # missing folders
     ("x" * 300 + ".par", (2,)),        # name too long for the file system
-    ("existing.par", (0, 2)),          # an existing file (export-par may overwrite a .par; robot files never)
+    ("existing.par", (2,)),            # a user's existing file: never replaced without --force
+    ("previous.par", (0, 2)),          # a previous export (its mark): export-par replaces it; robot files never
     ("", (0, 2)),                      # empty: standard output or an error
 ]
 
@@ -57,7 +59,7 @@ def test_output_paths(cli, tmp_path, command, out, allowed):
     else:
         # only the output (or what is below the folder it names) changed; user files are intact
         assert "a_file" not in changed and "a_dir/inside.txt" not in changed, changed
-        if command in ("import-par", "import-urdf") and out == "existing.par":
+        if command in ("import-par", "import-urdf") and out in ("existing.par", "previous.par"):
             pytest.fail("a robot file was written over an existing file without --force")
 
 
@@ -178,8 +180,11 @@ ID_OUTPUTS = [
     ("a_file/x", (2,)),                # below a regular file
     ("missing/deeper/x", (0, 2)),      # missing folders: created, or an error
     ("x" * 300, (2,)),                 # name too long for the file system
-    ("existing", (0,)),                # a previous result is replaced
+    ("existing", (2,)),                # a file symoro-gen did not write: refused without --force
+    ("previous", (0,)),                # a previous result (its mark) is replaced
 ]
+#: a previous result of each kind, as identify writes them (their marks: see symoro_gen.atomic)
+PREVIOUS = {".json": '{\n  "generator": "symoro-gen identify"\n}\n', ".md": "# old\n\n<!-- written by symoro-gen -->\n"}
 
 
 @pytest.mark.parametrize("option, suffix", [("--json", ".json"), ("--report", ".md")])
@@ -193,6 +198,7 @@ def test_identify_output_paths(cli, tmp_path, option, suffix, out, allowed):
     (tmp_path / "rec.csv").write_text(CSV)
     name = out if out == "a_dir" else out + suffix
     (tmp_path / ("existing" + suffix)).write_text("old result\n")
+    (tmp_path / ("previous" + suffix)).write_text(PREVIOUS[suffix])
     before = snapshot(tmp_path)
     res = cli("-q", "identify", "scara", tmp_path / "rec.csv", option, tmp_path / name, rc=None)
     after = snapshot(tmp_path)

@@ -6,6 +6,8 @@ import sys
 
 import pytest
 
+from symoro_gen.atomic import mark_png
+from symoro_gen.errors import OutputError
 from symoro_gen.report import (
     Figure,
     Heading,
@@ -97,11 +99,19 @@ def test_markdown_escapes_and_rewrites_the_image_folder(tmp_path):
     md = out.read_text(encoding="utf-8")
     assert md.startswith("# Report one\n")
     assert "| x\\|y | 1 |" in md and "![a figure](r_files/fig.png)" in md
-    assert (tmp_path / "sub" / "r_files" / "fig.png").read_bytes() == _png()
-    (tmp_path / "sub" / "r_files" / "stale.png").write_bytes(b"old")
+    assert (tmp_path / "sub" / "r_files" / "fig.png").read_bytes() == mark_png(_png())  # marked as symoro-gen's
+    assert decode_png(mark_png(_png())).tolist() == decode_png(_png()).tolist()
+    (tmp_path / "sub" / "r_files" / "stale.png").write_bytes(mark_png(_png(3, 3)))  # an earlier report's image
     document.write_report_files(_tiny_report("two", _png(9, 4)), out)
     assert sorted(p.name for p in (tmp_path / "sub" / "r_files").iterdir()) == ["fig.png"]
-    assert (tmp_path / "sub" / "r_files" / "fig.png").read_bytes() == _png(9, 4)
+    assert (tmp_path / "sub" / "r_files" / "fig.png").read_bytes() == mark_png(_png(9, 4))
+    # a file symoro-gen did not write in the image folder: the folder is not replaced without force
+    (tmp_path / "sub" / "r_files" / "notes.txt").write_text("mine\n")
+    with pytest.raises(OutputError, match=r"notes\.txt"):
+        document.write_report_files(_tiny_report("two", _png(9, 4)), out)
+    assert (tmp_path / "sub" / "r_files" / "notes.txt").read_text() == "mine\n"
+    document.write_report_files(_tiny_report("two", _png(9, 4)), out, force=True)
+    assert sorted(p.name for p in (tmp_path / "sub" / "r_files").iterdir()) == ["fig.png"]
     assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == ["r.md", "r_files"]
     html = document.write_report_files(_tiny_report("three", _png()), tmp_path / "r.html").read_text()
     assert "&lt;b&gt;tag&lt;/b&gt;" in html and "<b>tag</b>" not in html
