@@ -43,6 +43,12 @@ def generated_dir() -> Path:
     return Path(env) if env else REPO_ROOT / "generated"
 
 
+def robots_dir() -> Path:
+    """Folder holding the shipped robot files (``$SYMORO_ROBOTS`` overrides)."""
+    env = os.environ.get("SYMORO_ROBOTS")
+    return Path(env) if env else REPO_ROOT / "robots"
+
+
 def cache_dir() -> Path:
     """User cache of models generated from robot files (``$XDG_CACHE_HOME/symoro_gen/models``)."""
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
@@ -216,12 +222,15 @@ def load_model(source: str | os.PathLike[str] | RobotDescription) -> Identificat
 
         return _model_of_robot(load_robot(p))
     cand = generated_dir() / str(source)
-    if _is_package(cand):
+    shipped = robots_dir() / f"{source}.toml"
+    named = p.name == str(source) and shipped.is_file()
+    # a name means the robot file robots/<name>.toml when there is one (as model_for and every command read it):
+    # generated/<name>/ stands for it only when generated from that file (same sha256); otherwise the file's
+    # own package is found or generated (never another file's package under the same name)
+    if _is_package(cand) and (not named or _manifest_sha(cand) == hashlib.sha256(shipped.read_bytes()).hexdigest()):
         return _import_checked(cand)
-    from .description import robots_dir  # sympy: only for robot files
-
-    if (robots_dir() / f"{source}.toml").is_file() and p.name == str(source):
-        from .description import load_robot
+    if named:
+        from .description import load_robot  # sympy: only for robot files
 
         return _model_of_robot(load_robot(str(source)))
     known = sorted(x.name for x in generated_dir().glob("*") if _is_package(x))

@@ -21,6 +21,7 @@ except ModuleNotFoundError:  # pragma: no cover - python < 3.11
     import tomli as tomllib  # type: ignore
 
 from ..errors import Problem, RobotFileError, RobotFileWarning
+from ..loader import robots_dir
 from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from .expr import ExprError, parse_expression
 from .inertia import check_physical_consistency
@@ -34,12 +35,6 @@ FRAME_OPTIONAL = ("mu", "gamma", "b", "drive", "mimic")
 CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _RESERVED = {"q", "pi", "sin", "cos", "tan", "sqrt", "atan2"}
-
-
-def robots_dir() -> Path:
-    """Folder holding the shipped robot files (``$SYMORO_ROBOTS`` overrides)."""
-    env = os.environ.get("SYMORO_ROBOTS")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "robots"
 
 
 def resolve_robot_path(name_or_path: str | os.PathLike) -> Path:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..atomic import FORCE_HELP, json_output, write_output_text
+from ..atomic import FORCE_HELP
 from ..observations import AssemblyOptions
 from ..preprocessing.cli import add_data_options, format_from_args
 from .engine import DEFAULT_ALPHA, identify_fleet
@@ -63,8 +63,8 @@ def run_fleet(args) -> int:
                          segment_samples=args.segment_samples, diagnose=args.diagnose,
                          diagnose_method=args.diagnose_method)
     force = getattr(args, "force", False)
-    if args.json:  # FleetResult.write_json's text, marked as symoro-gen's (see symoro_gen.atomic)
-        write_output_text(args.json, json_output(res.to_json(), "fleet", indent=1, allow_nan=True), force=force)
+    if args.json:
+        res.write_json(args.json, force=force)
     if args.report:
         write_fleet_report(args.report, res, force=force)
     if not getattr(args, "quiet", False):

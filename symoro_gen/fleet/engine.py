@@ -9,7 +9,6 @@ started by dask-jobqueue or on Kubernetes; the workers need symoro_gen and the g
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import math
 import os
@@ -22,11 +21,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..atomic import write_text_atomic
+from ..atomic import json_output, write_output_text
 from ..description import load_robot
+from ..description.model import RobotDescription
 from ..diagnostics import diagnose
 from ..errors import SymoroError
 from ..identification.estimators import fit_wls
+from ..loader import model_for
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
 from ..report.plots import MissingDependencyError
@@ -160,8 +161,10 @@ class FleetResult:
             out["diagnoses"] = self.diagnoses
         return out
 
-    def write_json(self, path) -> None:
-        write_text_atomic(path, json.dumps(self.to_json(), indent=1, allow_nan=True) + "\n")
+    def write_json(self, path, *, force: bool = False) -> None:
+        """The JSON of :meth:`to_json`, marked as symoro-gen's; an existing file that symoro-gen did not write is
+        replaced only with ``force`` (:func:`symoro_gen.atomic.check_replaceable`)."""
+        write_output_text(path, json_output(self.to_json(), "fleet", indent=1, allow_nan=True), force=force)
 
     def summary(self) -> str:
         """A few lines for the terminal."""
@@ -223,14 +226,29 @@ def _ref_name(ref) -> str:
     return os.fspath(ref) if isinstance(ref, (str, os.PathLike)) else str(getattr(ref, "ROBOT", "model"))
 
 
-def _model_ref(model) -> tuple[object, IdentificationModel]:
-    """What the tasks receive (a name or package path when possible: workers load it once) and the model."""
+def _model_ref(model) -> tuple[object, IdentificationModel, RobotDescription | None]:
+    """What the tasks receive, the model and the robot description behind it.
+
+    A robot name or robot file is resolved as ``identify`` resolves it (:func:`~symoro_gen.loader.model_for`:
+    the robot file, and the package generated from *that* file, wherever it is), never by the name alone: a
+    ``generated/<name>/`` written from another file must not give the fleet another model than ``identify``
+    has on the same log. The tasks then receive the folder of that package (workers import it once), or the
+    robot file when the model is not a plain package (closed loops: built from the file). A generated package
+    folder is used as it is (its drive chain: ``robots/<ROBOT>.toml``'s, :func:`_drive_chain`).
+    """
     if isinstance(model, (str, os.PathLike)):
-        return os.fspath(model), resolve_model(os.fspath(model))
+        path = os.fspath(model)
+        if os.path.isfile(os.path.join(path, "__init__.py")):   # a generated package folder, as given
+            return path, resolve_model(path), None
+        robot, mdl = model_for(path)
+        f = getattr(mdl, "__file__", None)
+        if f and os.path.basename(f) == "__init__.py":
+            return os.path.dirname(f), mdl, robot
+        return (os.path.abspath(robot.file) if robot.file else mdl), mdl, robot
     f = getattr(model, "__file__", None)
     if f and os.path.basename(f) == "__init__.py":
-        return os.path.dirname(f), model
-    return model, model
+        return os.path.dirname(f), model, None
+    return model, model, None
 
 
 def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *, scheduler: str | None = None,
@@ -294,10 +312,10 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     if segment_samples is not None and segment_samples < 1000:
         raise FleetError(f"segment_samples must be >= 1000, got {segment_samples!r}")
-    ref, mdl = _model_ref(model)
+    ref, mdl, robot = _model_ref(model)
     load_kw = dict(load_kw or {})
     if "drive_chain" not in load_kw:
-        load_kw["drive_chain"] = _drive_chain(model, mdl)
+        load_kw["drive_chain"] = robot.drive_chain if robot is not None else _drive_chain(mdl)
     plain = plain_format(load_kw.get("fmt"))
     files = segments(discover(logs, by), segment_samples if plain else None)
     t0 = time.perf_counter()
@@ -367,18 +385,14 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
                        partials={"days": day_p, "robots": robot_p, "fleet": fleet_p}, diagnoses=diagnoses)
 
 
-def _drive_chain(model, mdl):
-    """The ``[drive_chain]`` of the robot file behind ``model`` (its name or file; for a package folder or a
-    model object, ``robots/<ROBOT>.toml``), None when it has none or no robot file is found."""
-
-    cands = [os.fspath(model)] if isinstance(model, (str, os.PathLike)) else []
+def _drive_chain(mdl):
+    """The ``[drive_chain]`` of ``robots/<ROBOT>.toml`` for a model object whose robot file is not known, None
+    when it has none or no such file is found."""
     if getattr(mdl, "ROBOT", None):
-        cands.append(str(mdl.ROBOT))
-    for c in cands:
         try:
-            return load_robot(c).drive_chain
+            return load_robot(str(mdl.ROBOT)).drive_chain
         except (SymoroError, OSError, ValueError):
-            continue
+            return None
     return None
 
 
