@@ -35,7 +35,7 @@ under ``[nominal]``, with ``FVj`` / ``FSj`` from the joint's ``<dynamics damping
 Links fixed to the base are ground and carry nothing. Moving joints off the chain (and
 beyond the tip) are left out with a warning.
 
-Closed loops (issue 13) follow the ``<loop_joint>`` extension element read by Drake's former
+Closed loops follow the ``<loop_joint>`` extension element read by Drake's former
 RigidBodyTree parser, RigidBodyDynamics.jl and Isaac Sim's URDF importer (the most common spelling;
 URDF itself has no loops, and Pinocchio, urdfdom and ROS tools ignore the element)::
 
@@ -56,9 +56,9 @@ error: a cut joint is revolute or prismatic. The actuated joints are those named
 whole (no ``tip``); the loop solver starts from the URDF zero configuration, which should be an
 assembled one (a loop open there is warned about).
 
-Two decisions (issue 15, issue 13), stated to the user:
+Two decisions, stated to the user:
 
-* a ``<mimic joint multiplier offset>`` joint is a **coupled joint** of the robot file (issue 13): a
+* a ``<mimic joint multiplier offset>`` joint is a **coupled joint** of the robot file: a
   passive frame (``mu = 0``, no drive terms) with ``mimic = { joint = J, multiplier = k, offset = c }``,
   ``q = k q_J + c`` exactly as URDF's mimic (the robot file's ``q`` is the URDF joint value); the model
   projects the tree on the actuated joints (:mod:`symoro_gen.closedloop`). A mimic of a mimic is composed

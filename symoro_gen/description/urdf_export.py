@@ -7,7 +7,7 @@ of mass; FV and FS become ``<dynamics damping friction>``.
 
 An identification (``--from result.json`` of ``symoro-gen identify``) gives every standard parameter
 through :func:`symoro_gen.identification.physical.standard_set_from_result`: a physically consistent
-set whose regrouping is the identified base parameters (issue 14). The older ``--params`` replaces only
+set whose regrouping is the identified base parameters (consistent export). The older ``--params`` replaces only
 the standard parameters the result names (regrouped ones are ignored, with a warning).
 
 A coupled joint (``mimic`` in the robot file, ``q_j = multiplier q_s + offset``) gets URDF's
@@ -128,7 +128,7 @@ def link_values(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
 
 
 def inertial_of(vals: dict, j: int, report: list | None, what: str = "export"):
-    """(mass, com, I_c) of link ``j`` made physical; a change is reported (issue 15: never silent)."""
+    """(mass, com, I_c) of link ``j`` made physical; a change is reported (never silent)."""
     p10 = [vals.get(f"{k}{j}", 0.0) for k in INERTIAL_KINDS]
     if not any(p10):
         return None

@@ -1,4 +1,4 @@
-"""Compositional candidate library: a physical effect modulated by a signal (issue 10, item 2).
+"""Compositional candidate library: a physical effect modulated by a signal (the loop's composed candidates).
 
 A composed candidate on joint ``j`` is ``effect_j(row) * m(row)``: extra columns on the rows of joint
 ``j`` (zeros elsewhere), linear in new coefficients once its grid parameter is fixed.

@@ -149,7 +149,7 @@ MIN_SELECTION_FREQUENCY = 0.5
 #: exclude "no effect" at this level)
 CI_LEVEL = 0.99
 #: estimator of the loop's own re-identifications (the fit the candidates are linearised around, the row
-#: weights of the scoring): fixed, so that *what* is named does not depend on ``method`` (issue 10 item 3);
+#: weights of the scoring): fixed, so that *what* is named does not depend on ``method`` (stability stage);
 #: the stability stage then tests every effect under OLS *and* WLS weights and keeps the common ones, and
 #: only the reported identifications (errors before/after, parameters, %sigma) use ``method``
 SELECT_METHOD = "ols"
@@ -614,7 +614,7 @@ def _stage_assemble(model: IdentificationModel, trajectories, validation, holdou
 
 
 def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_LawRecord, ...]]:
-    """Stage "friction law" (issue 10 item 1): for each joint in turn, choose the Coulomb law (sign, tanh
+    """Stage "friction law": for each joint in turn, choose the Coulomb law (sign, tanh
     with searched ``v``, Stribeck) and the viscous law (linear, ``|dq|^delta``) by time-blocked
     cross-validation on the *identification* rows (:func:`.friction.select_friction`: the whole model
     refitted on the training blocks, error of the joint's held-out rows; a law replaces a simpler one
@@ -913,7 +913,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
         c_tried, c_elig = _score_composed_round(data, base, state, D, ctx, scorer, rnd, cfg, placebo_bounds, gain_of)
         tried += c_tried
         eligible += c_elig
-    # placebo stop (issue 10 item 3): a joint where a placebo column passed the tests is closed for the
+    # placebo stop (stability stage): a joint where a placebo column passed the tests is closed for the
     # rest of the loop, unless a candidate of that joint beat every placebo of it in this round
     owned = {j for _, fam, *_ in eligible for j in _own(fam, n)}
     new_stop = frozenset(int(j) for j, *_ in hits if j is not None and j not in owned and j not in stopped)
@@ -1271,7 +1271,7 @@ def _effect_stability(data: _Data, F: Frame, added: Sequence[_Added], k: int, we
 
 
 def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple[_State, dict, list[str]]:
-    """Stage "stability" (issue 10 item 3): every effect the loop accepted is re-examined against the final
+    """Stage "stability": every effect the loop accepted is re-examined against the final
     model under OLS weights (1) and under WLS weights (``1/sigma_j`` of the final residual): it is *named*
     under a weighting when it is selected in most time-blocked folds (> :data:`MIN_SELECTION_FREQUENCY`)
     and the confidence region of its coefficients excludes "no effect" at :data:`CI_LEVEL`. Only the
@@ -1357,7 +1357,7 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
 
 
 def _unexplained(F: Frame, resid: np.ndarray, seed: int = 0) -> tuple:
-    """Stage "unexplained" (issue 10 item 4): out-of-fold boosted trees on the final identification residual
+    """Stage "unexplained": out-of-fold boosted trees on the final identification residual
     of each joint from every joint's q, dq, ddq, tau_hat and t (:func:`.unexplained.unexplained_structure`;
     threshold ``max(MIN_SHARE, max null share + NULL_MARGIN)``, null = block-permuted residual)."""
 

@@ -1,4 +1,4 @@
-"""The "plain expert model" of issue 10: the baseline the diagnosis loop must beat on every joint.
+"""The "plain expert model": the baseline the diagnosis loop must beat on every joint.
 
 Base parameters of the declared model + per joint a smooth Coulomb friction ``Fc_j tanh(dq_j / v_j)``,
 a viscous term ``Fv_j dq_j`` and an offset ``OFF_j``, solved by (weighted) least squares on the
@@ -8,7 +8,7 @@ columns (``FS_j``, ``FV_j``, ``OFF_j``) are replaced by these, so a model declar
 (an imported URDF) gets them too. Each ``v_j`` is chosen by time-blocked cross-validation
 (:func:`.friction.select_friction` restricted to the ``tanh`` law; :mod:`.stability` for the folds).
 
-Errors are given on both metrics of issue 9 ("Honest errors"):
+Errors are given on both metrics:
 
 * ``rel_err``: ``||Y_j - W_j theta|| / ||Y_j||`` on the filtered, decimated system (the papers' metric);
 * ``rel_err_raw``: the model evaluated at full rate on the band-pass states against the **raw measured

@@ -1,4 +1,4 @@
-"""Friction-law selection per joint by time-blocked cross-validation (issue 10, item 1).
+"""Friction-law selection per joint by time-blocked cross-validation (the loop's first stage).
 
 The declared models carry the classical friction of the identification papers, ``FS_j sign(dq_j) +
 FV_j dq_j`` (RX-90 paper eq. 2, Coulomb + viscous). At standstill and velocity reversals the

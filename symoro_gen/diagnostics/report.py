@@ -197,7 +197,7 @@ class ResidualReport:
     unexplained : tuple of UnexplainedItem
     estimator_dependent : tuple of dict
         Effects the loop accepted that only one weighting (OLS or WLS) names in the stability stage: dropped
-        from the model (issue 10 item 3, "keep only the common ones"); ``kind``, ``joint`` (1-based),
+        from the model ("keep only the common ones"); ``kind``, ``joint`` (1-based),
         ``modulation``, ``label``, ``named_under``, ``selection_frequency`` and ``excludes_zero`` per weighting.
     implausible : tuple of dict
         Eligible candidates the loop did not add because the re-identified model with them had an effect

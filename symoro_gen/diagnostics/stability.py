@@ -1,5 +1,5 @@
 """Stability of what the diagnosis loop names: time-blocked folds, selection frequency, confidence
-intervals, OLS-vs-WLS agreement and the placebo stop rule (issue 10, item 3).
+intervals, OLS-vs-WLS agreement and the placebo stop rule (the loop's stability stage).
 
 Everything here works on plain arrays and small frozen dataclasses, so that the staged
 ``diagnose`` can call it at any stage.
@@ -27,7 +27,7 @@ Acceptance rules
   Student-t intervals and the joint Wald test of "no effect"; an effect is kept only when the Wald
   test rejects ``beta = 0`` at ``level`` (its confidence ellipsoid excludes the origin).
 * :func:`ols_wls_agreement` - the effects named under OLS and under WLS: their intersection, and a
-  message when they differ (keep only the common ones, issue 10 item 3).
+  message when they differ (keep only the common ones).
 * :func:`placebo_stop` - joints on which a placebo column passed the tests: the loop stops there.
 * :func:`sided_selection` - a change in time (a step) must be confirmed by held-out blocks on both sides
   of it: its selection frequency is the smaller of the two sides'.

@@ -1,5 +1,5 @@
 """What is still missing after the loop: structure in the residual that no candidate explains
-(issue 10, item 4).
+(the loop's last stage).
 
 For each joint ``j``, a non-parametric model (scikit-learn's ``HistGradientBoostingRegressor``,
 gradient-boosted trees) predicts the final residual ``e_j`` from the signals of *all* joints
@@ -68,7 +68,7 @@ class Unexplained:
     Attributes
     ----------
     joint : int
-        1-based (the JSON contract of issue 10).
+        1-based (the JSON contract of ``diagnose``).
     share : float
         Out-of-fold R^2 of the residual, in [0, 1].
     threshold : float

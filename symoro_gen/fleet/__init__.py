@@ -1,4 +1,4 @@
-"""Fleet identification (issue 12): many robots of one model, one log per robot and day, identified on
+"""Fleet identification: many robots of one model, one log per robot and day, identified on
 Dask distributed with exact TSQR reductions, pooled into a fleet model, and the robots whose parameters
 drift away from the fleet flagged (random-effects distance and trend over days, Holm-corrected).
 

@@ -1,6 +1,6 @@
 """The fused per-chunk kernel of a fleet run: band-pass ``q``, evaluate the base regressor, low-pass and
 decimate it and fold it into the per-joint QR factors, streaming, so that the full-rate ``W`` never
-exists in memory (issue 12, "the per-chunk kernel is the cost of everything").
+exists in memory (the per-chunk kernel is the cost of everything a fleet run does).
 
 It computes the rows of :func:`~symoro_gen.observations.iter_chunks` with the default FIR decimation
 (Gautier's parallel decimation, RX-90 paper eq. 14-16: zero-phase Butterworth of ``q``, central

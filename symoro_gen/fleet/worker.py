@@ -1,7 +1,7 @@
 """What a fleet's Dask worker runs once, kept apart from the engine so that a worker imports only the
 per-log kernel's path (:mod:`symoro_gen.fleet.kernel`), never the engine's statistics, diagnosis,
 robot-file parser (SymPy) or plotting: the worker's start ("cold run") pays for those imports otherwise
-(issue 12, the per-worker setup of docs/fleet.md).
+(the per-worker setup of docs/fleet.md).
 """
 from __future__ import annotations
 

@@ -604,7 +604,7 @@ def standard_from_base(model: IdentificationModel, chi_b, nominal=None, *,
     module docstring (pseudo-inertias positive definite, ``IA, FV, FS >= 0``). When that is
     infeasible (the identified base parameters are not those of any physical robot), returns the
     consistent set minimising ``||(K chi_st - chi_b) / s_b||^2`` (plus a tiny pull toward nominal)
-    and says so in ``notes`` (issue 14).
+    and says so in ``notes``.
 
     Parameters
     ----------
