@@ -1,13 +1,13 @@
-"""Benchmark: what MIXTURES of 10-s designs reach (issue 11 section 1; docs/excitation.md, "Why no
+"""Benchmark: what MIXTURES of 10-s designs reach (docs/excitation.md, "Why no
 relaxation over distributions can settle the target").
 
-Every condition the relaxations of ``symoro_gen.excite_relaxation`` hold for every design (a moment of the
+Every condition the relaxations of ``research.excite_relaxation`` hold for every design (a moment of the
 distribution of states within a tolerance of zero, a set the states keep to) holds for every mixture of
 designs too: design 1 run for a fraction ``p1`` of the time, design 2 for ``p2``, ... So none of them can
 bound the cond of a single design above the best mixture's. This bench measures the best mixture
 (``mixture_cond``: an SDP over the time fractions) of
 
-* the random Fourier trajectories of the issue-11 baseline (5 harmonics, 10 s, each scaled to touch its
+* the random Fourier trajectories of the excitation benchmark's baseline (5 harmonics, 10 s, each scaled to touch its
   tightest limit on the 10x denser grid; seed 0: the first 50 are the bench's baseline), ``--random``;
 * ``--optimised K`` spline designs optimised from K seeds (one start each: 60 control points, structured
   starts, IPOPT, SDP refinement; ``--max-iter``, ``--refine``), alone and with their time-reversed runs
@@ -46,6 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_excite import random_designs
 
+from research.excite_relaxation import mixture_cond, mixture_duals
 from symoro_gen import excite as E
 from symoro_gen.excite import (
     SplineBasis,
@@ -56,7 +57,6 @@ from symoro_gen.excite import (
     output_times,
     random_trajectory,
 )
-from symoro_gen.excite_relaxation import mixture_cond, mixture_duals
 from symoro_gen.loader import model_for
 
 TARGET_RATIO = 5.0
@@ -85,7 +85,7 @@ def _ratio_solver(model, lim, basis, max_iter: int, t_obj: np.ndarray, t_con: np
     import casadi as ca
 
     nb = len(model.BASE_NAMES)
-    nlp, bounds = E._build_nlp(model, basis, lim, t_obj, t_con, "logdet", None, 0.01)  # its constraints
+    nlp, bounds = E.build_nlp(model, basis, lim, t_obj, t_con, "logdet", None, 0.01)  # its constraints
     x = nlp["x"]
     M = E.design_information(model, basis, x, t_obj)
     Ap, Bp = ca.MX.sym("A", nb, nb), ca.MX.sym("B", nb, nb)
@@ -98,7 +98,7 @@ def _ratio_solver(model, lim, basis, max_iter: int, t_obj: np.ndarray, t_con: np
         sol = solver(x0=X0.T.reshape(-1), p=np.concatenate([A.T.reshape(-1), B.T.reshape(-1)]),
                      lbg=bounds["lbg"], ubg=bounds["ubg"])
         Xn = np.asarray(sol["x"]).reshape(lim.n, basis.m).T
-        return Xn if E._inside(basis, lim, Xn, dense) else E._scale_into(basis, lim, Xn, dense)
+        return Xn if E.inside_limits(basis, lim, Xn, dense) else E.scale_into(basis, lim, Xn, dense)
 
     return solve
 
@@ -155,7 +155,7 @@ def price_pieces(model, lim, a) -> None:
     def fresh():  # scaled into the limits on the dense grid, as the priced pieces are checked
         X = (friction_trajectory(basis, lim.shrunk(0.01), rng, t_con, a.pieces) if rng.random() < 0.5
              else random_trajectory(basis, lim, rng, t_con))
-        return X if E._inside(basis, lim, X, dense) else E._scale_into(basis, lim, X, dense)
+        return X if E.inside_limits(basis, lim, X, dense) else E.scale_into(basis, lim, X, dense)
 
     designs = [fresh() for _ in range(a.init)]
     Ms = [info(X) for X in designs]

@@ -4,7 +4,7 @@ Issue 11 section 1 asks for cond >= 5x below the best of 50 random Fourier traje
 stacked regressor gives ``W^T W / N = E[G(s)]``, ``G(s) = W(s)^T W(s)``, the mean over its samples
 ``s = (q, dq, ddq)``. Dropping the continuity in time (the relaxation), the smallest cond over
 distributions of states within the position, velocity and acceleration limits is a linear SDP
-(Boyd & Vandenberghe 2004, sect. 7.5), bracketed by ``symoro_gen.excite_relaxation.relaxation_bracket``: column
+(Boyd & Vandenberghe 2004, sect. 7.5), bracketed by ``research.excite_relaxation.relaxation_bracket``: column
 generation (cvxpy + Clarabel on the states of weight > 1e-6 of the largest plus the new ones; new states
 from fresh random states and multistart L-BFGS-B maximisation of the dual ratio ``tr(A G(s))/tr(B G(s))``
 with CasADi gradients). Each round prints
@@ -18,7 +18,7 @@ with CasADi gradients). Each round prints
 
 With ``--stationary`` the distributions must also satisfy the stationarity moments of every closed
 trajectory - periodic, or ending where it started: the Fourier designs, not the spline ones
-(``symoro_gen.excite_relaxation.stationarity_moments``: the mean of ``d/dt f(q, dq)`` is 0 for the test functions
+(``research.excite_relaxation.stationarity_moments``: the mean of ``d/dt f(q, dq)`` is 0 for the test functions
 ``f``, held to ``--moment-tol`` of their scale), the first round seeded with the samples of
 ``--trajectories`` random Fourier trajectories (which satisfy them; also the default with ``--bandwidth``). ``--verify N`` re-prices
 the final duals on N fresh random states of another seed plus 200 local searches
@@ -26,7 +26,7 @@ the final duals on N fresh random states of another seed plus 200 local searches
 
 At the end: the bracket ``[max(dual, cond_lower_bound), primal]`` (the rigorous bound of
 ``symoro_gen.excite.cond_lower_bound`` holds for distributions too: both of its halves are per-sample
-arguments) against the issue's target (best of the 50 random Fourier trajectories of
+arguments) against the excitation benchmark's target (best of the 50 random Fourier trajectories of
 ``bench/bench_excite.py``, 5 harmonics, 10 s, 100 Hz, seed 0, / 5).
 
     PYTHONPATH=. python bench/bench_excite_relaxation.py [--robot lwr4|rx90] [--atoms 400] [--rounds 60]
@@ -38,7 +38,7 @@ arguments) against the issue's target (best of the 50 random Fourier trajectorie
         --reverify SAVED.npz [--verify 400000] [--verify-starts 1000] [--seed S] [--perturb K]
 
 ``--rest`` adds the moments of every trajectory that starts and ends at rest (every design of ``excite``,
-closed or not: ``symoro_gen.excite_relaxation.RestMoments``, the rates of the momentum regressor and of every frame's
+closed or not: ``research.excite_relaxation.RestMoments``, the rates of the momentum regressor and of every frame's
 velocity, whose mean is 0 over such a trajectory), held to ``--moment-tol`` of their size; alone it bounds
 every ``excite`` design, with ``--stationary`` the closed ones. The bench prints, for the best distribution
 of every run, its largest rest moments and the first-moment columns in its motion and at rest (a relaxation
@@ -64,10 +64,10 @@ can last only as long as the range allows (valid for every trajectory at rest at
 every such design, of any duration, and every mixture of them); the bench then prints the friction ceilings under them
 (``transit_friction_ceiling``) and, for every run, how far the best distribution is from meeting them.
 
-``--degree 3`` adds the test functions of degree 3 (``symoro_gen.excite_relaxation._degree3_tests``: 1456 more
+``--degree 3`` adds the test functions of degree 3 (``research.excite_relaxation._degree3_tests``: 1456 more
 conditions on the LWR4, 938 on the RX-90). ``--bandwidth K`` restricts the distributions to those of the
 designs of the bench's Fourier basis (K harmonics, one period of 10 s, 100 Hz): ``E[ddq ddq^T] <= rho
-E[dq dq^T]``, ``rho`` from ``symoro_gen.excite_relaxation.basis_bandwidth`` - a bound for that design class only.
+E[dq dq^T]``, ``rho`` from ``research.excite_relaxation.basis_bandwidth`` - a bound for that design class only.
 """
 from __future__ import annotations
 
@@ -84,8 +84,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_excite import TARGET_RATIO, random_baseline, velocity_occupancy
 
-from symoro_gen.excite import FourierBasis, cond_lower_bound, friction_ceiling, limits_of, output_times
-from symoro_gen.excite_relaxation import (
+from research.excite_relaxation import (
     PERTURB_SCALES,
     RelaxationBracket,
     RestMoments,
@@ -102,6 +101,7 @@ from symoro_gen.excite_relaxation import (
     stationarity_scales,
     transit_friction_ceiling,
 )
+from symoro_gen.excite import FourierBasis, cond_lower_bound, friction_ceiling, limits_of, output_times
 from symoro_gen.loader import model_for
 
 

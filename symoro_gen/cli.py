@@ -334,7 +334,7 @@ def _inspect_parser(sub):
 
 
 def _excite_parser(sub):
-    from .excite import add_excite_parser
+    from .excite.cli import add_excite_parser
 
     add_excite_parser(sub)
 

@@ -1,4 +1,4 @@
-"""Excitation design (issue 11 section 1): robot-file limits, the trajectory bases, the optimiser
+"""Excitation design: robot-file limits, the trajectory bases, the optimiser
 against random trajectories, limits at every sample of a dense resampling, and the CLI contract
 (CSV readable, and identifying simulated data on it recovers the truth)."""
 import itertools
@@ -141,7 +141,7 @@ def test_random_designs_hold_an_off_centre_range(basis, T, scara_limits):
     away from the centre later on, and random designs left their position range by up to 75 %.)"""
     t = np.linspace(0.0, T, 2001)
     centre = (scara_limits.q_max + scara_limits.q_min) / 2
-    q0, dq0, ddq0 = basis_eval(basis, excite._constant_design(basis, 4, centre), t)
+    q0, dq0, ddq0 = basis_eval(basis, excite.constant_design(basis, 4, centre), t)
     np.testing.assert_allclose(q0, np.broadcast_to(centre, q0.shape), atol=1e-12)
     np.testing.assert_allclose(np.c_[dq0, ddq0], 0.0, atol=1e-12)
     rng = np.random.default_rng(0)
@@ -370,7 +370,7 @@ def test_p2p_design_respects_limits(scara, scara_limits):
 def test_refinement_linearisation_is_the_derivative_of_the_information_matrix(scara, scara_limits, kind):
     """``M = W^T W / N`` and ``dM/dX`` (and the torques and their derivative) of the refinement's linearisation
     against the regressor and central differences (chunks of 64 samples: the last one padded)."""
-    from symoro_gen.excite import _Linearisation
+    from symoro_gen.excite import Linearisation
 
     _, model = scara
     T = 4.0
@@ -379,7 +379,7 @@ def test_refinement_linearisation_is_the_derivative_of_the_information_matrix(sc
     rng = np.random.default_rng(7)
     X = random_trajectory(basis, scara_limits, rng, t)
     chi = rng.normal(size=len(model.BASE_NAMES))
-    lin = _Linearisation(model, basis, t, chi, chunk=64)
+    lin = Linearisation(model, basis, t, chi, chunk=64)
     M, dM, tau, dtau = lin(X)
     W = np.asarray(model.regressor(*basis_eval(basis, X, t))).reshape(-1, len(model.BASE_NAMES))
     np.testing.assert_allclose(M, W.T @ W / len(t), atol=1e-12 * np.abs(M).max())
@@ -446,7 +446,7 @@ def refinement_grids(monkeypatch):
         seen.append(np.asarray(t_out_))
         return real(model_, basis_, limits_, X_, t_out_, *a, **k)
 
-    monkeypatch.setattr(excite, "refine_excitation", spy)
+    monkeypatch.setattr(excite.optimise, "refine_excitation", spy)  # where the optimiser looks it up
     return seen
 
 
@@ -731,7 +731,7 @@ def test_workspace_heights_and_their_casadi_jacobian_against_the_numeric_transfo
     ref = _origins_z(robot, q)
     assert ws.frames == tuple(j for j in ref if np.ptp(ref[j]) > 0)  # the frames whose origin moves
     np.testing.assert_allclose(ws.heights(q), np.column_stack([ref[j] for j in ws.frames]), atol=1e-12)
-    h, J = excite._floor_linearisation(ws)(q)
+    h, J = excite.floor_linearisation(ws)(q)
     np.testing.assert_allclose(h, ws.heights(q), atol=1e-12)
     for j in range(7):
         dq = np.zeros(7)
@@ -877,9 +877,9 @@ def test_cli_spline(cli, tmp_path, scara):
 def test_cli_refinement_without_cvxpy(cli, tmp_path, monkeypatch):
     """cvxpy is an extra: without it the default skips the refinement with a note, an explicit --refine is a
     one-line error naming the option, and nothing is written."""
-    import symoro_gen.excite as ex
+    import symoro_gen.excite.cli as ex  # the command looks has_cvxpy up there
 
-    monkeypatch.setattr(ex, "_has_cvxpy", lambda: False)
+    monkeypatch.setattr(ex, "has_cvxpy", lambda: False)
     csv, js = tmp_path / "t.csv", tmp_path / "t.json"
     r = cli("excite", "scara", "-o", csv, "--duration", "4", "--harmonics", "3", "--rate", "50", "--starts", "1",
             "--pool", "1", "--max-iter", "5", "--json", js, rc=0)
@@ -892,7 +892,7 @@ def test_cli_refinement_without_cvxpy(cli, tmp_path, monkeypatch):
 def test_cli_plot_without_matplotlib_fails_before_optimising(cli, tmp_path, monkeypatch):
     """matplotlib is an extra: --plot or --report without it is a one-line error naming the extra, said
     before the optimisation (which would run for minutes), with nothing written."""
-    import symoro_gen.excite as ex
+    import symoro_gen.excite.cli as ex  # the command looks optimise_excitation up there
 
     def never(*a, **k):
         raise AssertionError("the optimisation ran")
@@ -913,9 +913,11 @@ def test_cli_report_html(cli, tmp_path, scara):
 
     _, model = scara
     csv, js, rep = tmp_path / "t.csv", tmp_path / "t.json", tmp_path / "t.html"
-    cli("--quiet", "excite", "scara", "-o", csv, "--duration", "4", "--harmonics", "3", "--rate", "50",
-        "--starts", "1", "--pool", "3", "--max-iter", "20", "--refine", "0", "--noise", "0.5", "--json", js, "--report", rep,
-        rc=0)
+    # --effort thorough: the search this test was written for (the default quick one draws another figure, whose
+    # base64 text happens to contain "http")
+    cli("--quiet", "excite", "scara", "-o", csv, "--duration", "4", "--harmonics", "3", "--rate", "50", "--effort",
+        "thorough", "--starts", "1", "--pool", "3", "--max-iter", "20", "--refine", "0", "--noise", "0.5", "--json", js,
+        "--report", rep, rc=0)
     html = rep.read_text()
     out = json.loads(js.read_text())
     assert "data:image/png;base64," in html and "http" not in html.replace("http-equiv", "")
@@ -935,7 +937,7 @@ def test_cli_report_html(cli, tmp_path, scara):
 
 def test_ipopt_starts_are_the_best_of_the_random_pool(scara, scara_limits, monkeypatch):
     """``pool`` random feasible designs are drawn; the ``starts`` of lowest cond start IPOPT."""
-    import symoro_gen.excite as ex
+    import symoro_gen.excite.optimise as ex  # the pool of starts looks random_trajectory up there
 
     _, model = scara
     drawn = []
@@ -953,3 +955,62 @@ def test_ipopt_starts_are_the_best_of_the_random_pool(scara, scara_limits, monke
     t = output_times(DURATION, RATE)
     conds = sorted(stacked_cond(model, *basis_eval(basis, X, t)) for X in drawn)
     np.testing.assert_allclose([s["cond_start"] for s in res.starts], conds[:2], rtol=1e-10)
+
+
+# -- settings and efforts ----------------------------------------------------------------------------------------
+def test_settings_are_checked_once_and_keywords_override_them(scara, scara_limits):
+    """``ExciteSettings`` refuses a bad value when made (the error names the option); ``optimise_excitation`` takes
+    a settings object, its fields as keywords, or both (the keywords win), with the same design either way."""
+    import re
+
+    from symoro_gen.excite import ExciteSettings, RefineSettings
+
+    for bad, option in (({"starts": 0}, "--starts 0"), ({"jobs": -1}, "--jobs -1"), ({"refine": -2}, "--refine -2"),
+                        ({"criterion": "trace"}, "--criterion 'trace'"), ({"powers": (8, 12)}, "power 12")):
+        with pytest.raises(ExcitationError, match=re.escape(option)):
+            ExciteSettings(**bad)
+    with pytest.raises(ExcitationError, match="--refine -1"):
+        RefineSettings(iterations=-1)
+    assert ExciteSettings(powers=[8, 64]).powers == (8, 64) and ExciteSettings().stages == excite.COND_POWERS
+    assert ExciteSettings(criterion="logdet", powers=(16,)).stages == (excite.COND_POWER,)
+    _, model = scara
+    basis = FourierBasis(3, 1 / DURATION)
+    kw = dict(starts=1, pool=2, seed=4, max_iter=5, powers=(8,))
+    a = optimise_excitation(model, basis, scara_limits, DURATION, ExciteSettings(**kw), rate=RATE)
+    b = optimise_excitation(model, basis, scara_limits, DURATION, rate=RATE, **kw)
+    c = optimise_excitation(model, basis, scara_limits, DURATION, ExciteSettings(**{**kw, "seed": 9}), rate=RATE, seed=4)
+    assert np.array_equal(a.X, b.X) and np.array_equal(a.X, c.X) and a.cond == b.cond == c.cond
+    with pytest.raises(TypeError):
+        optimise_excitation(model, basis, scara_limits, DURATION, no_such_setting=1)
+
+
+def _excite_args(*argv: str):
+    import argparse
+
+    from symoro_gen.excite.cli import add_excite_parser
+
+    ap = argparse.ArgumentParser()
+    add_excite_parser(ap.add_subparsers())
+    return ap.parse_args(["excite", "scara", "-o", "x.csv", *argv])
+
+
+def test_the_command_runs_the_quick_effort_unless_told_and_options_override_it(monkeypatch):
+    """Without options the command runs ``--effort quick``; ``--effort thorough`` is what the command ran before
+    (4 starts, the best of 40 random designs, IPOPT with p = 8 then 64 at most 200 iterations each, 20 SDPs);
+    ``--starts``, ``--pool``, ``--max-iter`` and ``--refine`` override the effort's value."""
+    import symoro_gen.excite.cli as excite_cli
+    from symoro_gen.excite import EFFORTS, ExciteSettings
+
+    monkeypatch.setattr(excite_cli, "has_cvxpy", lambda: True)
+    quick, _ = excite_cli.settings_of(_excite_args())
+    assert quick == ExciteSettings(**EFFORTS["quick"]) and quick.starts == 1 and quick.refine > 0
+    thorough, _ = excite_cli.settings_of(_excite_args("--effort", "thorough"))
+    assert thorough == ExciteSettings(starts=4, pool=None, max_iter=200, powers=(8, 64), refine=20)
+    mixed, _ = excite_cli.settings_of(_excite_args("--effort", "thorough", "--starts", "2", "--refine", "0",
+                                                   "--max-iter", "50", "--seed", "3", "--jobs", "2"))
+    assert (mixed.starts, mixed.refine, mixed.max_iter, mixed.powers, mixed.seed, mixed.jobs) == (2, 0, 50, (8, 64), 3, 2)
+    more, _ = excite_cli.settings_of(_excite_args("--starts", "8"))
+    assert more.starts == 8 and more.pool == 80  # at least 10 per start, as the thorough effort draws
+    monkeypatch.setattr(excite_cli, "has_cvxpy", lambda: False)
+    skipped, note = excite_cli.settings_of(_excite_args())
+    assert skipped.refine == 0 and "skipped" in (note or "")

@@ -1,11 +1,12 @@
-"""The relaxation of issue 11 section 1 (cond over distributions of states, no continuity in time):
-``symoro_gen.excite_relaxation.relaxation_bracket`` on the SCARA, checked against trajectories it never saw, the
+"""The relaxation of the excitation design (cond over distributions of states, no continuity in time):
+``research.excite_relaxation.relaxation_bracket`` on the SCARA, checked against trajectories it never saw, the
 weak-duality argument of ``relaxation_dual_bound`` on explicit distributions, and the rigorous
 ``cond_lower_bound``."""
 import numpy as np
 import pytest
 from scipy.linalg import eigh
 
+from research.excite_relaxation import relaxation_bracket, relaxation_dual_bound, relaxation_rows
 from symoro_gen.excite import (
     FourierBasis,
     basis_eval,
@@ -16,7 +17,6 @@ from symoro_gen.excite import (
     random_trajectory,
     stacked_cond,
 )
-from symoro_gen.excite_relaxation import relaxation_bracket, relaxation_dual_bound, relaxation_rows
 from symoro_gen.loader import model_for
 
 
@@ -126,7 +126,7 @@ def test_stationarity_moments_vanish_on_trajectories_not_on_random_states():
     over random states it is not; the CasADi form (used for gradients) is the NumPy form."""
     import casadi as ca
 
-    from symoro_gen.excite_relaxation import _random_states, stationarity_moments, stationarity_scales
+    from research.excite_relaxation import _random_states, stationarity_moments, stationarity_scales
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -156,7 +156,7 @@ def scara_stationary():
 
 
 def test_stationary_upper_end_is_a_distribution_with_trajectory_moments(scara_stationary):
-    from symoro_gen.excite_relaxation import stationarity_moments, stationarity_scales
+    from research.excite_relaxation import stationarity_moments, stationarity_scales
 
     model, lim, b = scara_stationary
     n = model.N_JOINTS
@@ -174,7 +174,7 @@ def test_stationary_lower_end_holds_on_unseen_trajectories_and_excludes_the_plai
     """Weak duality with the moment multipliers: the ratio N/D on unseen trajectories' samples stays
     below r, their cond above the lower end - and that lower end is above the plain relaxation's
     optimum (a distribution no trajectory can have)."""
-    from symoro_gen.excite_relaxation import _DualPricer
+    from research.excite_relaxation import _DualPricer
 
     model, lim, b = scara_stationary
     assert b.stationary and b.lam is not None and b.c0 >= b.moment_tol * np.abs(b.lam).sum() * (1 - 1e-9)
@@ -190,7 +190,7 @@ def test_stationary_lower_end_holds_on_unseen_trajectories_and_excludes_the_plai
 def test_verification_reprices_the_same_duals():
     """relaxation_verify searches more: r never falls, the bound never rises, and with the search of the
     bracket itself (same seed and size) nothing changes."""
-    from symoro_gen.excite_relaxation import relaxation_verify
+    from research.excite_relaxation import relaxation_verify
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -206,7 +206,7 @@ def test_perturbed_atoms_are_states_of_the_box_priced_as_such_and_reach_the_rand
     (a joint at rest keeps its atom's sign), their ratios are the pricer's; alone with its local searches the
     search reaches the largest ratio that a deep random search finds (within 1 %), which the bracket's own
     pricing missed by more than that."""
-    from symoro_gen.excite_relaxation import PERTURB_SCALES, _DualPricer, _perturbed_states, relaxation_verify
+    from research.excite_relaxation import PERTURB_SCALES, _DualPricer, _perturbed_states, relaxation_verify
 
     model, lim, b = scara_stationary
     n = model.N_JOINTS
@@ -230,7 +230,7 @@ def test_bracket_priced_around_its_atoms_leaves_the_deeper_searches_nothing_to_f
     """relaxation_bracket(perturb=K) also prices perturbations of its atoms every round: on the SCARA the same
     five rounds that, without it, left a ratio > 1 % above their own to the deeper searches (test above) now
     leave them nothing (within 0.2 %), so the lower end survives verification, and the upper end is no higher."""
-    from symoro_gen.excite_relaxation import relaxation_verify
+    from research.excite_relaxation import relaxation_verify
 
     model, lim, plain = scara_stationary  # the same five rounds without perturbations
     b = relaxation_bracket(model, lim, atoms=100, rounds=5, fresh=3000, starts=8, add=20, seed=3, stationary=True,
@@ -248,7 +248,7 @@ def test_degree3_moments_vanish_on_trajectories_and_extend_degree2():
     of a periodic trajectory also meets, random states do not; CasADi form = NumPy form."""
     import casadi as ca
 
-    from symoro_gen.excite_relaxation import (
+    from research.excite_relaxation import (
         _random_states,
         stationarity_moment_names,
         stationarity_moments,
@@ -287,8 +287,8 @@ def test_degree3_moments_vanish_on_trajectories_and_extend_degree2():
 def test_basis_bandwidth_is_the_largest_ratio_of_any_design():
     """Every design of the basis has E[ddq ddq^T] <= rho E[dq dq^T] on the samples, and rho is attained
     (a largest ratio, not a loose bound); for K harmonics of w it lies between ((K-1) w)^2 and (K w)^2."""
+    from research.excite_relaxation import basis_bandwidth
     from symoro_gen.excite import SplineBasis
-    from symoro_gen.excite_relaxation import basis_bandwidth
 
     robot, _ = model_for("scara")
     lim = limits_of(robot)
@@ -321,7 +321,7 @@ def test_bandwidth_relaxation_meets_its_lmi_and_bounds_the_designs_of_its_basis(
     above the plain relaxation's optimum (a distribution no 5-harmonic design can have), and weak duality
     with the LMI multiplier C holds on unseen designs of that basis: the pricer's numerator exceeds
     tr(A G) by E[tr(C (rho dq dq^T - ddq ddq^T))] >= 0, their cond is above the lower end."""
-    from symoro_gen.excite_relaxation import _DualPricer, basis_bandwidth
+    from research.excite_relaxation import _DualPricer, basis_bandwidth
 
     model, lim, plain = scara
     n = model.N_JOINTS
@@ -376,8 +376,8 @@ def test_rest_moments_vanish_on_rest_to_rest_designs_that_end_elsewhere(name):
     in its actuated joints (the closure carries the kinematics)."""
     import casadi as ca
 
+    from research.excite_relaxation import RestMoments, _random_states, stationarity_moments, stationarity_scales
     from symoro_gen.excite import Workspace
-    from symoro_gen.excite_relaxation import RestMoments, _random_states, stationarity_moments, stationarity_scales
 
     robot, model = model_for(name)
     lim = limits_of(robot, model=model)
@@ -425,7 +425,7 @@ def test_rest_relaxation_bounds_designs_that_end_elsewhere_and_excludes_the_plai
     apply to them), whose cond stays above the lower end; that lower end is above the plain relaxation's
     optimum (on the SCARA, it accelerates joint 3 one way on average, which no trajectory at rest at both
     ends does)."""
-    from symoro_gen.excite_relaxation import _DualPricer
+    from research.excite_relaxation import _DualPricer
 
     robot, model = model_for("scara")
     lim, plain = scara[1], scara[2]
@@ -449,7 +449,7 @@ def test_kinetic_rest_moments_are_the_power_balance_and_vanish_at_rest_to_rest(n
     each rigid-body column, ``sum_j dq_j (W_jb(q, dq, ddq) - W_jb(q, 0, 0))`` (the energy theorem, from the
     NumPy regressor: independent of the CasADi derivative); the rates of ``dq_j Y_p[j, b]`` match finite
     differences; both vanish on average over rest-to-rest designs that end elsewhere, not over random states."""
-    from symoro_gen.excite_relaxation import RestMoments, _random_states
+    from research.excite_relaxation import RestMoments, _random_states
 
     robot, model = model_for(name)
     lim = limits_of(robot, model=model)
@@ -503,7 +503,7 @@ def test_braking_speed_holds_on_designs_and_is_met_by_a_stop_at_the_range_end():
     search keep to it, and the latter's gradient through the change of variables matches finite differences."""
     import scipy.optimize as so
 
-    from symoro_gen.excite_relaxation import _DualPricer, _random_states, braking_speed
+    from research.excite_relaxation import _DualPricer, _random_states, braking_speed
 
     robot, model = model_for("rx90")
     lim = limits_of(robot)
@@ -556,7 +556,7 @@ def test_braking_speed_holds_on_designs_and_is_met_by_a_stop_at_the_range_end():
 def test_braking_relaxation_bounds_unseen_designs(scara):
     """relaxation_bracket(braking=True): its distribution's states keep to braking_speed, and weak duality
     with its duals holds on the samples of unseen designs (which keep to it too)."""
-    from symoro_gen.excite_relaxation import _DualPricer, braking_speed
+    from research.excite_relaxation import _DualPricer, braking_speed
 
     robot, model = model_for("scara")
     lim = scara[1]
@@ -576,7 +576,7 @@ def test_mixture_cond_is_the_best_time_sharing_of_designs():
     complementary halves of the parameters mix into a well-conditioned experiment that neither is."""
     robot, model = model_for("scara")
     lim = limits_of(robot)
-    from symoro_gen.excite_relaxation import mixture_cond
+    from research.excite_relaxation import mixture_cond
 
     Ms = []
     for q, dq, ddq in _trajectories(model, lim, 6, 61):
@@ -610,7 +610,7 @@ def test_feature_moments_are_rates_that_vanish_at_rest_to_rest_and_are_bounded_b
     plain one."""
     import casadi as ca
 
-    from symoro_gen.excite_relaxation import FeatureMoments, _random_states
+    from research.excite_relaxation import FeatureMoments, _random_states
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -647,7 +647,7 @@ def test_feature_cuts_hold_on_the_final_distribution_and_weak_duality_on_designs
     optimum violates random test functions), the upper-end distribution meets the rest moments and every cut of its round, and weak duality
     with the lower end's multipliers (cuts included) holds on unseen rest-to-rest designs, whose cond stays
     above the lower end."""
-    from symoro_gen.excite_relaxation import _DualPricer
+    from research.excite_relaxation import _DualPricer
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -672,7 +672,7 @@ def test_a_saved_cut_run_continues_where_it_stopped():
     ``design_sizes`` says) start the next run at that run's upper end or below (the saved distribution is
     feasible for it), with the same cuts and no new ones unless asked; cuts need ``rest=True`` and ids in the
     dictionary."""
-    from symoro_gen.excite_relaxation import split_saved_atoms
+    from research.excite_relaxation import split_saved_atoms
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -704,8 +704,8 @@ def test_random_cuts_hold_on_designs_sampled_at_100_hz_within_the_bench_toleranc
     function of a dictionary like the bench's (5,000 here, seed 1) to rounding; rest-to-rest splines of up to 231 control
     points over 10 s meet them within the bench's --moment-tol 0.001 of their scale (the error grows with the
     knot density: jerk jumps at every knot)."""
+    from research.excite_relaxation import FeatureMoments
     from symoro_gen.excite import SplineBasis
-    from symoro_gen.excite_relaxation import FeatureMoments
 
     robot, _ = model_for(name)
     lim = limits_of(robot)
@@ -811,8 +811,8 @@ def test_transit_inequalities_hold_on_designs_and_are_nearly_met_by_a_full_range
     sampling interval, so the 100-Hz rows hold for every finer sampling); the distribution that jumps between
     creeping and the velocity limit violates them (a sweep of a joint's range at its limits, nearly meeting the
     widest bands' bound: test_transit_inequalities_hold_on_bursts_whose_speed_dips_between_samples)."""
+    from research.excite_relaxation import TransitInequalities
     from symoro_gen.excite import SplineBasis, dense_times, friction_trajectory
-    from symoro_gen.excite_relaxation import TransitInequalities
 
     robot, model = model_for("rx90")
     lim = limits_of(robot)
@@ -846,8 +846,8 @@ def test_transit_inequalities_hold_on_designs_and_are_nearly_met_by_a_full_range
 def test_transit_friction_ceiling_is_below_the_friction_ceiling():
     """transit_friction_ceiling: without rows (every band narrower than the sampling allows) it is
     friction_ceiling's one-dimensional optimum; with the rows of 8 levels it is a few per cent below it."""
+    from research.excite_relaxation import TransitInequalities, transit_friction_ceiling
     from symoro_gen.excite import friction_ceiling
-    from symoro_gen.excite_relaxation import TransitInequalities, transit_friction_ceiling
 
     robot, _ = model_for("rx90")
     lim = limits_of(robot)
@@ -863,7 +863,7 @@ def test_transit_relaxation_meets_its_inequalities_rises_and_bounds_unseen_desig
     """relaxation_bracket(transit=8) on the SCARA: its distribution meets the transit inequalities (the rest
     relaxation's does not: it jumps between creeping and the velocity limits), its upper end is above the rest
     relaxation's, and weak duality with the inequalities' multipliers holds on unseen rest-to-rest designs."""
-    from symoro_gen.excite_relaxation import TransitInequalities, _DualPricer
+    from research.excite_relaxation import TransitInequalities, _DualPricer
 
     robot, model = model_for("scara")
     lim = limits_of(robot)
@@ -901,7 +901,7 @@ def test_speed_scan_rows_from_four_probes_equal_the_direct_evaluation(name):
     are not polynomial in the speed is detected and evaluated state by state."""
     from types import SimpleNamespace
 
-    from symoro_gen.excite_relaxation import RestMoments, _DualPricer, _random_states
+    from research.excite_relaxation import RestMoments, _DualPricer, _random_states
 
     robot, model = model_for(name)
     lim = limits_of(robot)
@@ -947,7 +947,7 @@ def test_transit_inequalities_hold_on_bursts_whose_speed_dips_between_samples(na
     random phases, at rest at both ends and within the range. The widest band's burst - a sweep of the joint's
     whole range at its acceleration and velocity limits, the fastest burst there is - comes within 20 % of the
     bound on every joint whose widest row is not at the floor kappa = 1."""
-    from symoro_gen.excite_relaxation import TRANSIT_DT, TransitInequalities
+    from research.excite_relaxation import TRANSIT_DT, TransitInequalities
 
     robot, _ = model_for(name)
     lim = limits_of(robot)

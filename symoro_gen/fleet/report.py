@@ -16,7 +16,7 @@ from ..report.document import (
     Table,
     write_report_files,
 )
-from ..report.plots import _figure_and_axes, _png
+from ..report.plots import _figure_and_axes, figure_png
 from .engine import FleetResult
 
 __all__ = ["fleet_report", "write_fleet_report"]
@@ -48,7 +48,7 @@ def _flag_figure(res: FleetResult, flag: dict, idx: int, dpi: int = 90) -> Figur
     ax.set_title(f"{flag['robot']} {flag['parameter']}: {flag['test']} z = {flag['z']:.1f}", fontsize=10)
     ax.legend(fontsize=7, loc="best")
     safe = "".join(c if c.isalnum() else "-" for c in f"flag-{idx}-{flag['robot']}-{flag['parameter']}")
-    return Figure(safe, _png(fig, dpi), caption=f"{flag['parameter']} of {flag['robot']} over the days (error bars "
+    return Figure(safe, figure_png(fig, dpi), caption=f"{flag['parameter']} of {flag['robot']} over the days (error bars "
                   "±2σ of each day's estimate) among the other robots (grey) and the fleet band")
 
 

@@ -19,7 +19,7 @@ from ..atomic import mark_png
 from ..errors import SymoroError
 from .document import Figure
 
-__all__ = ["MissingDependencyError", "require_matplotlib", "torque_figure", "singular_values_figure",
+__all__ = ["MissingDependencyError", "require_matplotlib", "figure_png", "torque_figure", "singular_values_figure",
            "residual_figure", "error_bars_figure", "DPI", "WIDTH_IN", "MAX_POINTS", "N_BINS"]
 
 #: resolution of every figure [dots per inch]; with WIDTH_IN the figures are 1100 px wide
@@ -86,7 +86,8 @@ def _figure_and_axes(nrows: int, ncols: int, *, ax_h: float, gap: float, top: fl
     return fig, axes
 
 
-def _png(fig, dpi: int) -> bytes:
+def figure_png(fig, dpi: int) -> bytes:
+    """The PNG bytes of a matplotlib figure at ``dpi``, white background, marked as symoro-gen's output."""
     buf = io.BytesIO()
     # no matplotlib Software/version text chunk: the same data give the same bytes across matplotlib
     # versions' metadata; symoro-gen's own mark instead (a figure file is then known as its output)
@@ -156,7 +157,7 @@ def torque_figure(name: str, title: str, measured: np.ndarray, reconstructed: np
             ax.set_xlabel("sample (decimated)", fontsize=8, labelpad=1)
     fig.suptitle(title, fontsize=11, y=1 - 0.12 / fig.get_figheight(), va="top")
     _figure_legend(fig, axes[0][0])
-    png = _png(fig, dpi)
+    png = figure_png(fig, dpi)
     every = max(strides) if strides else 1
     cap = (f"{title}. Blue: measured; red dashed: reconstructed by the inverse dynamic model with the identified "
            f"parameters; x axis: decimated samples of each joint, experiments one after the other"
@@ -191,7 +192,7 @@ def singular_values_figure(name: str, s: np.ndarray, *, title: str, caption: str
     ax.grid(True, which="both", color="#e0e0e0", lw=0.6)
     ax.tick_params(labelsize=8)
     ax.set_title(title, fontsize=10, loc="left")
-    return Figure(name, _png(fig, dpi), title if caption is None else caption)
+    return Figure(name, figure_png(fig, dpi), title if caption is None else caption)
 
 
 def _binned(x: np.ndarray, r: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
@@ -238,7 +239,7 @@ def residual_figure(name: str, title: str, panels: Sequence[tuple[str, np.ndarra
     _figure_legend(fig, axes[0], markerscale=2.5)
     cap = (f"{title}. Grey: residual of the model before the effect was added; blue: after; lines: means in "
            f"{n_bins} bins of equal counts")
-    return Figure(name, _png(fig, dpi), cap if caption is None else caption)
+    return Figure(name, figure_png(fig, dpi), cap if caption is None else caption)
 
 
 def error_bars_figure(name: str, title: str, series: Sequence[tuple[str, Sequence[float]]], *,
@@ -264,4 +265,4 @@ def error_bars_figure(name: str, title: str, series: Sequence[tuple[str, Sequenc
     ax.grid(True, axis="y", color="#e0e0e0", lw=0.6)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0), frameon=False)
     ax.set_title(title, fontsize=10, loc="left")
-    return Figure(name, _png(fig, dpi), title)
+    return Figure(name, figure_png(fig, dpi), title)

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Motion", "FourierSeries", "fourier_trajectory", "ptp_trajectory", "double_s_times", "random_states"]
+__all__ = ["Motion", "FourierSeries", "fourier_trajectory", "ptp_trajectory", "double_s_times", "piecewise_jerk",
+           "random_states"]
 
 
 @dataclass(frozen=True)
@@ -164,8 +165,9 @@ def double_s_times(h: float, vmax: float, amax: float, jmax: float) -> tuple[flo
     return Tj, Ta, Tv
 
 
-def _piecewise_jerk(phases, tau):
-    """Position, velocity, acceleration at times ``tau`` of a rest-to-rest piecewise-constant-jerk profile."""
+def piecewise_jerk(phases, tau):
+    """Position, velocity, acceleration at times ``tau`` of a rest-to-rest piecewise-constant-jerk profile, and
+    the position at its end: ``(P, V, A, p_end)``; ``phases`` are ``(duration, jerk)`` pairs."""
     p = v = a = 0.0
     starts = []
     t0 = 0.0
@@ -232,7 +234,7 @@ def ptp_trajectory(via_points, vmax, amax, jmax, dt: float, *, dwell: float = 0.
             m = int(math.ceil(T / dt - 1e-9))
             lam = m * dt / T  # time stretch >= 1 keeps every bound
             u = np.arange(1, m + 1) * dt / lam
-            s, ds, dds, s_end = _piecewise_jerk(phases, np.minimum(u, T))
+            s, ds, dds, s_end = piecewise_jerk(phases, np.minimum(u, T))
             s, ds, dds = s / s_end, ds / (s_end * lam), dds / (s_end * lam * lam)
             s[-1], ds[-1], dds[-1] = 1.0, 0.0, 0.0
             qs.append(P[seg] + np.outer(s, h))

@@ -160,14 +160,14 @@ def test_a_general_loop_has_no_casadi_form_and_excite_says_why(fourbar):
     """The four-bar's passive angles are not linear in the crank's: no closed form, so no CasADi regressor;
     ``excite`` turns that into its own error naming the reason, not a traceback."""
     from symoro_gen.errors import ModelError
-    from symoro_gen.excite import ExcitationError, _casadi_regressor
+    from symoro_gen.excite import ExcitationError, casadi_regressor
 
     _, model = fourbar
     assert model.linear_closure() is None
     with pytest.raises(ModelError, match="not linear in the actuated joints"):
         model.casadi_regressor()
     with pytest.raises(ExcitationError, match=r"not linear.*excite cannot optimise a trajectory for it"):
-        _casadi_regressor(model)
+        casadi_regressor(model)
 
 
 def test_base_parameters_of_the_four_bar(fourbar):

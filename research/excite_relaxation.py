@@ -1,4 +1,4 @@
-"""How low can the cond of an excitation design go at all? (issue 11, section 1)
+"""How low can the cond of an excitation design go at all?
 
 A relaxation of every trajectory: the smallest cond of the stacked base regressor over DISTRIBUTIONS of
 states ``(q, dq, ddq)`` within the limits, without continuity in time. :func:`relaxation_bracket` brackets
@@ -21,7 +21,8 @@ Conditions every design meets restrict the distributions and sharpen the bound:
   limit (:class:`TransitInequalities`, linear inequalities on the distribution of each joint's speed).
 
 The rigorous per-sample bound :func:`symoro_gen.excite.cond_lower_bound` and the designs themselves are
-:mod:`symoro_gen.excite`'s; measurements in docs/excitation.md.
+:mod:`symoro_gen.excite`'s (this research module imports the package, never the reverse); measurements in
+docs/excitation.md.
 """
 from __future__ import annotations
 
@@ -35,18 +36,18 @@ from typing import Any
 
 import numpy as np
 
-from .excite import (
+from symoro_gen.excite import (
     ExcitationError,
     FourierBasis,
     Limits,
-    _casadi,
-    _casadi_regressor,
-    _sympy_casadi,
     basis_eval,
+    casadi_regressor,
+    load_casadi,
     mdh_frames,
     random_trajectory,
+    sympy_to_casadi,
 )
-from .model import IdentificationModel
+from symoro_gen.model import IdentificationModel
 
 __all__ = [
     "BRAKING_SLACK",
@@ -628,10 +629,10 @@ class _DualPricer:
     @staticmethod
     def casadi_jacobian(model: IdentificationModel, n: int, moments: _MomentSet | None):
         try:
-            F = _casadi_regressor(model)
+            F = casadi_regressor(model)
         except ExcitationError:  # priced without gradients (random states only)
             return None
-        ca = _casadi()
+        ca = load_casadi()
         z = ca.SX.sym("z", 3 * n)
         Y = F(z[:n], z[n:2 * n], z[2 * n:])
         out = [Y, ca.jacobian(ca.vec(Y), z)]  # vec: column-major
@@ -836,10 +837,10 @@ class RestMoments:
 
     def __init__(self, model: IdentificationModel, limits: Limits, robot: Any = None, *, samples: int = 20_000,
                  seed: int = 0, kinetic: str | None = None):
-        ca = _casadi()
+        ca = load_casadi()
         n = limits.n
         q, dq, ddq = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
-        F = _casadi_regressor(model)
+        F = casadi_regressor(model)
         zero = ca.SX.zeros(n)
         Yp = F(q, zero, dq) - F(q, zero, zero)
         f = [ca.vec(Yp)]  # column-major: joint fastest
@@ -944,7 +945,7 @@ class FeatureMoments:
 
     def casadi(self, q, dq, ddq):
         """``(m, 1)`` CasADi expression of the rates."""
-        ca = _casadi()
+        ca = load_casadi()
         if not len(self):
             return ca.SX.zeros(0, 1)
         Om, Nu = ca.DM(self.omega), ca.DM(self.nu)
@@ -986,7 +987,7 @@ def _frame_kinematics(robot: Any, model: Any, n: int, q) -> tuple[Any, list[str]
     for j, T in frames.items():
         exprs += [e.subs(sub) for e in list(T[:3, 3]) + list(T[:3, :3])]
         names += [f"p{j}.{c}" for c in "xyz"] + [f"R{j}[{a},{b}]" for a in range(1, 4) for b in range(1, 4)]
-    return _sympy_casadi(qa, exprs, q), names
+    return sympy_to_casadi(qa, exprs, q), names
 
 
 
@@ -1025,7 +1026,7 @@ class _MomentSet:
 
     def casadi(self, z):
         """``(m, 1)`` for the CasADi state vector ``z`` (``3n``)."""
-        return _casadi().vertcat(*self._parts(z, _casadi()))
+        return load_casadi().vertcat(*self._parts(z, load_casadi()))
 
 
 #: samples of one period of a trajectory atom (relaxation_bracket with features): the uniform mean of the
