@@ -8,6 +8,7 @@ it is a terminal (``SYMORO_PROGRESS=1`` forces them, ``=0`` or ``--quiet`` hides
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 import traceback
@@ -309,9 +310,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def _identify_parser(sub):
-    from .identification.cli import add_identify_parser
-
-    add_identify_parser(sub)
+    importlib.import_module("symoro_gen.commands.identify").add_parser(sub)
 
 
 def _demo_parser(sub):

@@ -73,13 +73,13 @@ def run_diagnose(args) -> dict:
 
         check_report_path(args.report)
     kinds = KINDS if not args.candidates else tuple(args.candidates)
-    from ..identification.cli import _payload_values
+    from ..commands.common import payload_values
 
     robot, model = model_for(args.robot)
     data, reports = load_data(args, args.data, robot, loaded=False)
     loaded, rep_l = load_data(args, args.loaded, robot, loaded=True) if args.loaded else (None, ())
     reports += rep_l
-    known = _payload_values(args.payload, tuple(getattr(model, "PAYLOAD_NAMES", ())))
+    known = payload_values(args.payload, tuple(getattr(model, "PAYLOAD_NAMES", ())))
     if known and not loaded:
         from ..errors import IdentificationError
 

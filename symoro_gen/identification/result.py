@@ -61,9 +61,13 @@ def relative_std_pct(values, std) -> np.ndarray:
     return out
 
 
-def _json_float(x: float):
+def json_float(x: float):
+    """A float for JSON: the value, or None when it is not finite (JSON has no NaN)."""
     x = float(x)
     return x if math.isfinite(x) else None
+
+
+_json_float = json_float  # the name its users in this package still import (physical.py)
 
 
 def _fmt(x: float, width: int = 11) -> str:
@@ -118,9 +122,9 @@ class Gains:
         return {
             "names": list(self.names),
             "joints": [j + 1 for j in self.joints],
-            "values": [_json_float(v) for v in self.values],
-            "std": [_json_float(v) for v in self.std],
-            "rel_std_pct": [_json_float(v) for v in self.rel_std_pct],
+            "values": [json_float(v) for v in self.values],
+            "std": [json_float(v) for v in self.std],
+            "rel_std_pct": [json_float(v) for v in self.rel_std_pct],
         }
 
 
@@ -399,14 +403,14 @@ class IdentificationResult:
             "method": self.method,
             "parameters": {
                 "names": list(self.names),
-                "values": [_json_float(v) for v in self.values],
-                "std": [_json_float(v) for v in self.std],
-                "rel_std_pct": [_json_float(v) for v in self.rel_std_pct],
+                "values": [json_float(v) for v in self.values],
+                "std": [json_float(v) for v in self.std],
+                "rel_std_pct": [json_float(v) for v in self.rel_std_pct],
             },
-            "rel_err": [_json_float(v) for v in self.rel_err],
-            "cond": _json_float(self.cond),
-            "cond_scaled": _json_float(self.cond_scaled),
-            "sigma": _json_float(self.sigma),
+            "rel_err": [json_float(v) for v in self.rel_err],
+            "cond": json_float(self.cond),
+            "cond_scaled": json_float(self.cond_scaled),
+            "sigma": json_float(self.sigma),
             "n_rows": self.n_rows,
             "fixed": {k: v for k, v in self.fixed},
             "eliminated": list(self.eliminated),
@@ -415,11 +419,11 @@ class IdentificationResult:
         if self.unexcited:
             out["unexcited"] = list(self.unexcited)
         if self.rel_err_raw is not None:
-            out["rel_err_raw"] = [_json_float(v) for v in self.rel_err_raw]
+            out["rel_err_raw"] = [json_float(v) for v in self.rel_err_raw]
         if self.rel_err_basis is not None:
             out["rel_err_basis"] = self.rel_err_basis
         if self.joint_sigma is not None:
-            out["joint_sigma"] = [_json_float(v) for v in self.joint_sigma]
+            out["joint_sigma"] = [json_float(v) for v in self.joint_sigma]
         if self.gains is not None:
             out["gains"] = self.gains.to_dict()
         return out

@@ -12,6 +12,7 @@ import html
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from ..atomic import (
     GENERATOR,
@@ -125,6 +126,8 @@ class Figure:
     caption : str
     width, height : int
         Pixels, read from the PNG.
+    figure : matplotlib.figure.Figure or None
+        The figure drawn (kept for ``plot()``), not part of the document.
     """
 
     name: str
@@ -132,6 +135,8 @@ class Figure:
     caption: str = ""
     width: int = field(init=False)
     height: int = field(init=False)
+    #: the matplotlib figure the PNG was drawn from, when kept (``.plot()`` of a result returns it)
+    figure: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.name or not all(c.isalnum() or c in "-_" for c in self.name):

@@ -161,7 +161,7 @@ def torque_figure(name: str, title: str, measured: np.ndarray, reconstructed: np
     cap = (f"{title}. Blue: measured; red dashed: reconstructed by the inverse dynamic model with the identified "
            f"parameters; x axis: decimated samples of each joint, experiments one after the other"
            + (f" (one sample in {every} drawn)" if every > 1 else "") + ".")
-    return Figure(name, png, cap if caption is None else caption)
+    return Figure(name, png, cap if caption is None else caption, figure=fig)
 
 
 def _figure_legend(fig, ax, markerscale: float = 1.0) -> None:
@@ -191,7 +191,7 @@ def singular_values_figure(name: str, s: np.ndarray, *, title: str, caption: str
     ax.grid(True, which="both", color="#e0e0e0", lw=0.6)
     ax.tick_params(labelsize=8)
     ax.set_title(title, fontsize=10, loc="left")
-    return Figure(name, _png(fig, dpi), title if caption is None else caption)
+    return Figure(name, _png(fig, dpi), title if caption is None else caption, figure=fig)
 
 
 def _binned(x: np.ndarray, r: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
@@ -238,7 +238,7 @@ def residual_figure(name: str, title: str, panels: Sequence[tuple[str, np.ndarra
     _figure_legend(fig, axes[0], markerscale=2.5)
     cap = (f"{title}. Grey: residual of the model before the effect was added; blue: after; lines: means in "
            f"{n_bins} bins of equal counts")
-    return Figure(name, _png(fig, dpi), cap if caption is None else caption)
+    return Figure(name, _png(fig, dpi), cap if caption is None else caption, figure=fig)
 
 
 def error_bars_figure(name: str, title: str, series: Sequence[tuple[str, Sequence[float]]], *,
@@ -264,4 +264,4 @@ def error_bars_figure(name: str, title: str, series: Sequence[tuple[str, Sequenc
     ax.grid(True, axis="y", color="#e0e0e0", lw=0.6)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0), frameon=False)
     ax.set_title(title, fontsize=10, loc="left")
-    return Figure(name, _png(fig, dpi), title)
+    return Figure(name, _png(fig, dpi), title, figure=fig)
