@@ -105,13 +105,13 @@ def run_diagnose(args) -> dict:
         if not files and not args.quiet:
             print("note: no plots written (matplotlib is not installed: pip install 'symoro_gen[plots]')")
     if args.report:
-        from ..report import write_report
+        from ..workflows.reporting import ReportContent, write_report
 
-        write_report(args.report, diagnosis=rep, robot=robot.name,
-                     sources={"identification data": [str(p) for p in args.data],
-                              "loaded": [str(p) for p in args.loaded or ()],
-                              "validation data": [str(p) for p in args.validate or ()]},
-                     text=rep.summary(), notes=data_notes(reports), force=force)
+        content = ReportContent(robot=robot.name, sources={
+            "identification data": [str(p) for p in args.data], "loaded": [str(p) for p in args.loaded or ()],
+            "validation data": [str(p) for p in args.validate or ()]}, text=rep.summary(),
+            notes=data_notes(reports))
+        write_report(args.report, diagnosis=rep, content=content, force=force)
     if not args.quiet:
         print(rep.summary() + "\n\n" + data_text(reports))
     return out

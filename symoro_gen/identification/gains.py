@@ -25,7 +25,6 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import IdentificationError
-from ..report.tables import drive_gains_html
 from .accumulate import check_finite, factor_system
 from .essential import essential_raw
 from .estimators import (
@@ -41,6 +40,7 @@ from .estimators import (
 )
 from .observation import ObservationSystem
 from .payload import fit_with_known_payload, split_experiments
+from .render import drive_gains_html
 from .result import Gains, IdentificationResult, _fmt, per_joint_rel_err, relative_std_pct
 
 #: ||W_L^j chi_L|| / ||V_b^j|| below which the payload does not excite joint j (gain not identifiable)

@@ -24,7 +24,7 @@ from ..model import IdentificationModel
 from ..observations.assembly import Assembly, basis_text, merge_metric_basis
 from ..observations.raw import raw_error_sums
 from ..observations.system import ObservationSystem
-from ..report.tables import gains_html, result_html
+from .render import gains_html, method_label, result_html
 
 #: summary() lists the known (fixed) parameters one per line up to this many
 MAX_FIXED_LISTED = 12
@@ -34,12 +34,6 @@ def _frozen(a, dtype=float) -> np.ndarray:
     out = np.array(a, dtype=dtype, copy=True)
     out.setflags(write=False)
     return out
-
-
-def method_label(method: str) -> str:
-    """The estimator's name in headers: ``IDIM-OLS``, ``IDIM-IV``...; DIDIM is not an IDIM method
-    (output error in closed loop, Gautier, Janot & Vandanjon 2013) and keeps its own name."""
-    return "DIDIM" if str(method).upper() == "DIDIM" else f"IDIM-{method}"
 
 
 def relative_std_pct(values, std) -> np.ndarray:

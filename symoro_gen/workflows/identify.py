@@ -29,6 +29,7 @@ from ..identification.iv import identify_iv
 from ..identification.payload import identify_payload
 from ..identification.physical import identify_physical
 from ..identification.reference import compare_with_reference, format_comparison
+from ..identification.render import IdentificationBlocks
 from ..identification.result import basis_text, json_float
 from ..identification.systems import stack_systems
 from ..model import IdentificationModel
@@ -36,10 +37,9 @@ from ..observations.assembly import Assembly, assemble
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
 from ..preprocessing.logformat import LoadReport, LogFormat, hold_back
-from ..report import write_report
-from ..report.build import build_report
 from ..simulate.closed_loop import PIDGains
 from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, provenance, resolve_robot
+from .reporting import ReportContent, build_report, write_report
 
 __all__ = ["IdentifyOptions", "IdentifyResults", "check_payload", "identify"]
 
@@ -198,7 +198,9 @@ class IdentifyResults(Results):
         return text + "\n\n" + _data_text(self.reports)
 
     # ---- report and figures -------------------------------------------------------------------------
-    def _report_kwargs(self) -> dict:
+    def report_content(self) -> ReportContent:
+        """What the report shows besides the result: the systems, the payload re-identified on loaded validation
+        data, drive gains, the reference table, raw errors, notes."""
         model, res = self.model, self.result
         sys_u, sys_l, sys_v = (self.systems.get(k) for k in ("unloaded", "loaded", "validation"))
         loaded = sys_l is not None
@@ -217,19 +219,20 @@ class IdentifyResults(Results):
                 notes.append(f"payload not re-identified on the validation data: {exc}")
         sources = {"identification data": [str(p) for p in self.data], "loaded": [str(p) for p in self.loaded],
                    "validation data": [str(p) for p in self.validate]}
-        return dict(robot=self.robot.name, sources=sources, identification=ident, validation=valid,
-                    payload_names=model.PAYLOAD_NAMES, payload=payload, drive=self.drive,
-                    reference=list(self.reference_rows) if self.reference_rows is not None else None, notes=notes,
-                    raw_errors=raw, text=self.physical.summary() if self.physical is not None else None)
+        blocks = IdentificationBlocks(identification=ident, validation=valid, payload_names=model.PAYLOAD_NAMES,
+                                      payload=payload, drive=self.drive, raw_errors=raw,
+                                      reference=list(self.reference_rows) if self.reference_rows is not None else None)
+        return ReportContent(robot=self.robot.name, sources=sources, blocks=blocks, notes=notes,
+                             text=self.physical.summary() if self.physical is not None else None)
 
     def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """Tables and plots ([GB-gains] and [LWR4-TLS] tables, measured vs reconstructed torques, singular values;
         with loaded validation data the payload re-identified with the robot known), ``.html`` or ``.md``."""
-        return write_report(path, self.result, force=force, **self._report_kwargs())
+        return write_report(path, self.result, content=self.report_content(), force=force)
 
     def figures(self) -> list:
         """Measured and reconstructed torque of every data set, and the scaled singular values of ``W``."""
-        rep = build_report(self.result, **self._report_kwargs())
+        rep = build_report(self.result, content=self.report_content())
         return [f.figure for f in rep.figures if f.figure is not None]
 
 

@@ -88,7 +88,8 @@ def diagnosis():
 
 
 def test_diagnosis_report_plots_the_residual_before_and_after_each_effect(diagnosis, tmp_path):
-    from symoro_gen.report import diagnosis_plot_series, write_report
+    from symoro_gen.diagnostics.render import diagnosis_plot_series
+    from symoro_gen.workflows.reporting import write_report
 
     rep = diagnosis
     assert [(e.kind, e.joint) for e in rep.effects][:1] == [("stribeck", 1)]
@@ -124,7 +125,7 @@ def test_diagnosis_report_plots_the_residual_before_and_after_each_effect(diagno
 
 
 def test_diagnosis_html_tables_without_plots(diagnosis):
-    from symoro_gen.report import diagnosis_html
+    from symoro_gen.diagnostics.render import diagnosis_html
 
     from .test_repr_html import parse
 
