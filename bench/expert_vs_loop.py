@@ -39,7 +39,7 @@ from symoro_gen.description.urdf import import_urdf
 from symoro_gen.diagnostics import diagnose
 from symoro_gen.diagnostics.expert import expert_residuals, filtered_data, fit_expert, no_worse
 from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
-from symoro_gen.preprocessing.load import load_trajectories, load_trajectory
+from symoro_gen.preprocessing.readers import load_trajectories, load_trajectory
 from symoro_gen.preprocessing.trajectory import Trajectory
 
 HOLDOUT = 0.3

@@ -420,7 +420,7 @@ def command_inputs(args) -> list[tuple[str, str | os.PathLike[str] | None]]:
             continue
         for item in items:
             if attr in _SPEC_INPUTS:
-                from .preprocessing.load import parse_data_spec
+                from .preprocessing.readers import parse_data_spec
 
                 try:
                     files = list(parse_data_spec(item).files.values())

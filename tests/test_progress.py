@@ -207,7 +207,7 @@ def recordings(tmp_path_factory):
 
 
 def test_load_progress_per_file(recordings):
-    from symoro_gen.preprocessing.load import load_trajectories
+    from symoro_gen.preprocessing.readers import load_trajectories
 
     robot, _, files, _ = recordings
     got = []

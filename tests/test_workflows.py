@@ -16,7 +16,7 @@ import pytest
 import symoro_gen
 from symoro_gen.errors import OptionError
 from symoro_gen.loader import model_for
-from symoro_gen.preprocessing.load import load_trajectory
+from symoro_gen.preprocessing import load_trajectory
 from symoro_gen.workflows import SCHEMA_VERSION, IdentifyOptions
 
 from .golden.inputs import write_inputs

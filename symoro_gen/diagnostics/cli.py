@@ -5,7 +5,7 @@
                         [--report OUT.md|OUT.html] [--plots DIR]
 
 ROBOT is a robot name (robots/, generated/) or a robot .toml file; DATA are recordings the loaders of
-:mod:`symoro_gen.preprocessing.load` read (CSV/NPZ/MAT or a ``q=..,tau=..,dt=..`` spec), mapped to the
+:mod:`symoro_gen.preprocessing.readers` read (CSV/NPZ/MAT or a ``q=..,tau=..,dt=..`` spec), mapped to the
 joint side by the robot file's drive chain. Without ``--validate`` the last ``--holdout`` share of each
 recording is held out for validation. The JSON keys ``before``, ``after`` (``rel_err``,
 ``validation_rel_err``, ``validation_rel_err_raw``), ``effects`` (``kind``, ``joint``, ``modulation``,

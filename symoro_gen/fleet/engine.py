@@ -274,10 +274,9 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
         Filters and block size (default: the papers' rules, ``keep_signals=False``).
     load_kw : dict, optional
         How the logs are read (:func:`~symoro_gen.fleet.files.read_experiments`): ``fmt``, the
-        :class:`~symoro_gen.preprocessing.logformat.LogFormat` of the command line's data options (every
-        format, Parquet included), or keywords of ``load_trajectory``; ``drive_chain``: default the robot
-        file's ``[drive_chain]`` (motor-side logs mapped to the joint side, as ``identify`` does; found from
-        the robot name or file, or ``robots/<ROBOT>.toml`` for a model object).
+        :class:`~symoro_gen.preprocessing.readers.LogFormat` of the command line's data options (every
+        format, Parquet included), ``loaded``; ``drive_chain``: default the robot file's ``[drive_chain]``
+        (motor-side logs mapped to the joint side, as ``identify`` does; a model object: ``robots/<ROBOT>.toml``).
     alpha : float
         Level of the flags after correction (0.01).
     correction : {"holm", "bh"}
@@ -329,13 +328,13 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
         # malloc settings and the model once per worker (name per model: idempotent on a shared cluster)
         cl.register_plugin(FleetWorkerSetup(ref, os.getpid()), name=f"symoro-fleet-setup-{_ref_name(ref)}")
         day_f, robot_f = {}, {}
-        for r, days in groups.items():
-            for d, logs_rd in days.items():
+        for r, logs_by_day in groups.items():
+            for d, logs_rd in logs_by_day.items():
                 parts = [cl.submit(kernel, ref, lf, opts, load_kw,
                                    key=f"{run}-file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
                                    retries=retries, pure=False) for i, lf in enumerate(logs_rd)]
                 day_f[r, d] = _tree(cl, parts, f"{run}-day-{r}-{d}", retries)
-            robot_f[r] = _tree(cl, [day_f[r, d] for d in days], f"{run}-robot-{r}", retries)
+            robot_f[r] = _tree(cl, [day_f[r, d] for d in logs_by_day], f"{run}-robot-{r}", retries)
         fleet_f = _tree(cl, list(robot_f.values()), f"{run}-fleet", retries)
         keys = list(day_f)
         got = cl.gather([day_f[k] for k in keys] + [robot_f[r] for r in groups] + [fleet_f])
@@ -351,18 +350,7 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     fleet = _fit(fleet_p, names)
     if fleet is None:
         raise FleetError("fleet: the pooled logs do not identify the base parameters")
-    days: dict[str, dict[str, Estimate]] = {}
-    robots: dict[str, Estimate] = {}
-    for r in groups:
-        e = _fit(robot_p[r], names, skipped, f"robot {r}")
-        if e is None:
-            continue
-        robots[r] = e
-        days[r] = {}
-        for d in groups[r]:
-            ed = _fit(day_p[r, d], names, skipped, f"robot {r}, day {d}")
-            if ed is not None:
-                days[r][d] = ed
+    days, robots = _robot_estimates(groups, day_p, robot_p, names, skipped)
     result = _judge(mdl, names, days, robots, fleet, skipped, alpha, correction)
     fmt = load_kw.get("fmt")
     settings = {"by": by, "scheduler": scheduler or ("client" if client is not None else "local"),
@@ -383,6 +371,24 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
                        level=result["level"], trend=result["trend"], flagged=result["flagged"], skipped=skipped,
                        settings=settings, timing=timing,
                        partials={"days": day_p, "robots": robot_p, "fleet": fleet_p}, diagnoses=diagnoses)
+
+
+def _robot_estimates(groups: dict[str, dict[str, list[LogFile]]], day_p: dict, robot_p: dict, names: Sequence[str],
+                     skipped: list) -> tuple[dict[str, dict[str, Estimate]], dict[str, Estimate]]:
+    """The estimates per robot and day, and per robot (those that cannot be fitted are listed in ``skipped``)."""
+    days: dict[str, dict[str, Estimate]] = {}
+    robots: dict[str, Estimate] = {}
+    for r in groups:
+        e = _fit(robot_p[r], names, skipped, f"robot {r}")
+        if e is None:
+            continue
+        robots[r] = e
+        days[r] = {}
+        for d in groups[r]:
+            ed = _fit(day_p[r, d], names, skipped, f"robot {r}, day {d}")
+            if ed is not None:
+                days[r][d] = ed
+    return days, robots
 
 
 def _drive_chain(mdl):

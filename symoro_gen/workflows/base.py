@@ -31,7 +31,7 @@ from ..description.model import RobotDescription
 from ..errors import ModelError, OptionError, SymoroError
 from ..loader import REPO_ROOT, model_for
 from ..model import IdentificationModel
-from ..preprocessing.logformat import LoadReport, LogFormat, load_logs
+from ..preprocessing.readers import LoadReport, LogFormat, read_recordings
 from ..preprocessing.trajectory import Trajectory
 from ..report.plots import require_matplotlib
 
@@ -201,7 +201,7 @@ def as_trajectories(data, fmt: LogFormat | None, robot, *, loaded: bool = False
     trajs: list[Trajectory] = []
     reports: list[LoadReport] = []
     paths = [it for it in items if _is_path(it)]
-    read, reps = load_logs(paths, fmt, n_joints=n, robot=robot, drive_chain=robot.drive_chain,
+    read, reps = read_recordings(paths, fmt, n_joints=n, robot=robot, drive_chain=robot.drive_chain,
                            loaded=loaded) if paths else ((), ())
     by_file = iter(zip(reps, _group(read, reps)))
     for k, it in enumerate(items):

@@ -36,7 +36,8 @@ from ..model import IdentificationModel
 from ..observations.assembly import Assembly, assemble
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
-from ..preprocessing.logformat import LoadReport, LogFormat, hold_back
+from ..preprocessing.readers import LoadReport, LogFormat
+from ..preprocessing.trajectory import hold_back
 from ..simulate.closed_loop import PIDGains
 from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, provenance, resolve_robot
 from .reporting import ReportContent, build_report, write_report

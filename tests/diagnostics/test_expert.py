@@ -106,7 +106,7 @@ def test_friction_laws_chosen_on_decimated_rows_replace_the_declared_ones(record
 def test_tx40_expert_beats_the_declared_coulomb_on_joint_4(shared_data):
     """Measured: on the TX40 recording (held-out last 30 %) the smooth Coulomb law of the expert model
     predicts joint 4 far better than sign(dq) (filtered 0.43 -> 0.16, raw 0.60 -> 0.27)."""
-    from symoro_gen.preprocessing.load import load_trajectories
+    from symoro_gen.preprocessing.readers import load_trajectories
 
     d = shared_data / "staubli_tx40_figaroh" / "data"
     if not (d / "pos_read_data.csv").is_file():

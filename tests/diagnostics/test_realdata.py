@@ -24,7 +24,7 @@ TX40 = Path("staubli_tx40_figaroh") / "data"
 def lwr4_report(shared_data):
     import symoro_gen
     from symoro_gen.diagnostics import diagnose
-    from symoro_gen.preprocessing.load import load_trajectory
+    from symoro_gen.preprocessing.readers import load_trajectory
 
     paths = [shared_data / LWR4 / f"measurements_{i}.npz" for i in (1, 2, 3)]
     missing = [str(p) for p in paths if not p.is_file()]
@@ -59,7 +59,7 @@ def test_lwr4_loop_runs_and_names_what_it_adds(lwr4_report):
 def test_tx40_finds_the_coupled_wrist(shared_data):
     from symoro_gen.diagnostics import diagnose
     from symoro_gen.loader import model_for
-    from symoro_gen.preprocessing.load import load_trajectory
+    from symoro_gen.preprocessing.readers import load_trajectory
 
     folder = shared_data / TX40
     if not (folder / "pos_read_data.csv").is_file():
@@ -87,7 +87,7 @@ def test_lwr4_ten_effects_are_physically_possible(shared_data):
     import symoro_gen
     from symoro_gen.diagnostics import diagnose
     from symoro_gen.diagnostics.candidates import GAIN_SCALE_RANGE, MAX_DELAY_PHASE
-    from symoro_gen.preprocessing.load import load_trajectory
+    from symoro_gen.preprocessing.readers import load_trajectory
 
     paths = [shared_data / LWR4 / f"measurements_{i}.npz" for i in (1, 2, 3)]
     missing = [str(p) for p in paths if not p.is_file()]

@@ -44,7 +44,7 @@ from symoro_gen.fleet.stats import (
 )
 from symoro_gen.identification import fit_wls
 from symoro_gen.observations import AssemblyOptions
-from symoro_gen.preprocessing.load import load_trajectory
+from symoro_gen.preprocessing.readers import load_trajectory
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import write_recording_csv
 

@@ -24,7 +24,7 @@ from symoro_gen.identification.accumulate import accumulate
 from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
 from symoro_gen.preprocessing.drive_chain import joint_to_motor
 from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
-from symoro_gen.preprocessing.logformat import make_format
+from symoro_gen.preprocessing.readers import make_format
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
 
