@@ -12,7 +12,7 @@ __version__ = "0.1.0"
 from .loader import load_model
 
 #: names served by symoro_gen.workflows on first use
-_WORKFLOWS = ("identify", "IdentifyOptions", "IdentifyResults")
+_WORKFLOWS = ("identify", "IdentifyOptions", "IdentifyResults", "diagnose", "DiagnoseOptions", "DiagnoseResults")
 
 __all__ = ["load_model", "__version__", *_WORKFLOWS]
 

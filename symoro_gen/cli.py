@@ -321,9 +321,7 @@ def _demo_parser(sub):
 
 
 def _diagnose_parser(sub):
-    from .diagnostics.cli import add_diagnose_parser
-
-    add_diagnose_parser(sub)
+    importlib.import_module("symoro_gen.commands.diagnose").add_parser(sub)
 
 
 def _inspect_parser(sub):

@@ -3,6 +3,7 @@ wrote before the workflows existed (tests/golden): ``to_dict()`` is exactly the 
 text; options are named (an unknown one names the nearest); data as paths, Trajectory objects or arrays."""
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import os
@@ -142,3 +143,82 @@ def test_report_and_plot(inputs, tmp_path):
                          env=env, check=True).stdout.splitlines()
     assert len(out) == 2 and all(line.startswith("MissingDependencyError") and "[plots]" in line for line in out), out
     assert not (tmp_path / "no.html").exists()
+
+
+# ---- diagnose ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def diagnosed(cli, inputs, tmp_path_factory):
+    """``symoro-gen diagnose scara A --validate B --json OUT --plots DIR`` (the golden command, with plots) and
+    the same through the library: (stdout, written JSON, plots written, DiagnoseResults)."""
+    a, b = inputs
+    out = tmp_path_factory.mktemp("diagnose")
+    # --plots prints a note instead of writing without matplotlib (the 'plots' extra): only with it
+    plots = ("--plots", out / "plots") if importlib.util.find_spec("matplotlib") else ()
+    r = cli("diagnose", "scara", a, "--validate", b, "--json", out / "d.json", *plots)
+    res = symoro_gen.diagnose("scara", [a], validate=[b])
+    return r.out, json.loads((out / "d.json").read_text()), sorted((out / "plots").glob("*.png")), res
+
+
+def test_diagnose_command_matches_the_golden_output(inputs, diagnosed):
+    a, _ = inputs
+    text, written, _, _ = diagnosed
+    _same(written, json.loads((GOLDEN / "diagnose.json").read_text()))
+    assert list(written)[:2] == ["generator", "schema_version"] and list(written)[-1] == "provenance"
+    assert written["generator"] == "symoro-gen diagnose" and written["schema_version"] == SCHEMA_VERSION
+    prov = written["provenance"]
+    assert [Path(x["path"]).name for x in prov["inputs"]] == ["scara_a.csv", "scara_b.csv"]
+    assert all(len(x["sha256"]) == 64 for x in prov["inputs"]) and prov["seeds"] == {"seed": 0}
+    assert prov["options"]["method"] == "ols" and prov["options"]["max_effects"] == 5
+    assert _normalise_text(text, a.parent) == _normalise_text((GOLDEN / "diagnose.txt").read_text(), "/tmp/golden/in")
+
+
+def test_diagnose_api_is_the_command(diagnosed):
+    text, written, plots, res = diagnosed
+    assert isinstance(res, symoro_gen.DiagnoseResults) and res.options == symoro_gen.DiagnoseOptions()
+    assert res.to_dict() == written                      # exactly the command's JSON
+    assert res.summary() + "\n" == text                  # exactly its text
+    assert "<table" in res._repr_html_()
+    if importlib.util.find_spec("matplotlib"):  # --plots wrote the figures of the diagnosis
+        assert plots and all(p.name.startswith("diagnosis-") for p in plots)
+
+
+def test_diagnose_options_are_named_and_checked(inputs):
+    a, b = inputs
+    with pytest.raises(OptionError, match="unknown option 'max_efects'; did you mean 'max_effects'"):
+        symoro_gen.diagnose("scara", a, max_efects=1)
+    with pytest.raises(OptionError, match="unknown option 'candidate'; did you mean 'candidates'"):
+        symoro_gen.diagnose("scara", a, candidate=("spring",))
+    with pytest.raises(OptionError, match="method 'ridge'"):
+        symoro_gen.diagnose("scara", a, method="ridge")
+    with pytest.raises(OptionError, match=r"--significance 1\.5"):
+        symoro_gen.DiagnoseOptions(significance=1.5)
+    with pytest.raises(OptionError, match="unknown kind 'sprung'"):
+        symoro_gen.DiagnoseOptions(candidates=("sprung",))
+    with pytest.raises(OptionError, match="not both"):
+        symoro_gen.diagnose("scara", a, options=symoro_gen.DiagnoseOptions(), max_effects=1)
+
+
+def test_diagnose_data_as_trajectories(inputs, diagnosed):
+    """Trajectory objects and (t, q, tau) arrays give the diagnosis the files give (their names aside)."""
+    a, b = inputs
+    *_, ref = diagnosed
+    ta, tb = (load_trajectory(p, n_joints=4) for p in (a, b))
+    opts = symoro_gen.DiagnoseOptions(candidates=("spring", "offset"), max_effects=1)
+    by_file = symoro_gen.diagnose("scara", a, validate=b, options=opts)
+    res = symoro_gen.diagnose(model_for("scara")[1], ta, validate=(tb.t, tb.q, tb.tau), options=opts)
+    d, f = res.to_dict(), by_file.to_dict()
+    assert d["before"] == f["before"] and d["after"] == f["after"] and d["effects"] == f["effects"]
+    assert d["validate"] == ["<array 1>"] and d["provenance"]["inputs"][0] == {"path": str(a), "sha256": None}
+    assert [c["kind"] for c in d["tried"]] == [c["kind"] for c in f["tried"]]
+    assert np.array_equal(res.residual.before_rel_err, by_file.residual.before_rel_err)
+    assert res.residual.settings["candidates"] == ["spring", "offset"] != ref.residual.settings["candidates"]
+
+
+def test_diagnose_report_and_figures(diagnosed, tmp_path):
+    pytest.importorskip("matplotlib")
+    *_, res = diagnosed
+    figs = res.plot()
+    assert figs and all(hasattr(f, "savefig") for f in figs)
+    page = res.report(tmp_path / "d.html")
+    assert page.read_text().startswith("<!DOCTYPE html>") and "Residual diagnosis" in page.read_text()
+    assert json.loads(res.write_json(tmp_path / "d.json").read_text()) == res.to_dict()

@@ -49,7 +49,7 @@ from ..model import IdentificationModel
 from .frame import Frame, model_torque
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
-           "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE"]
+           "nuisance_columns", "implausible", "clear_torque_cache", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE"]
 
 KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity", "time_delay", "gain",
          "drift", "coupling", "rotor_inertia", "offset")
@@ -435,6 +435,11 @@ def _gain_column(frame: Frame, ctx: FitContext, j: int) -> np.ndarray:
 
 
 _UNSHIFTED: dict = {}   # one-entry cache of the unshifted model torque (frame, context) of the elasticity secant
+
+
+def clear_torque_cache() -> None:
+    """Forget the elasticity secant's cached unshifted model torque (it is keyed by frame identity)."""
+    _UNSHIFTED.clear()
 
 
 def _elasticity_smooth(frame: Frame, ctx: FitContext, m: int, c: float) -> np.ndarray:

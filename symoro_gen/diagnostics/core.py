@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from scipy import stats as sst
@@ -64,15 +64,16 @@ from ..errors import IdentificationError
 from ..identification.method import identify
 from ..identification.result import IdentificationResult
 from ..model import IdentificationModel
+from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
 from ..preprocessing.trajectory import Trajectory
 from ..progress import progress_bar
 from .candidates import (
-    _UNSHIFTED,
     ALL,
     REVEAL,
     Family,
     FitContext,
+    clear_torque_cache,
     describe_params,
     implausible,
     make_families,
@@ -407,21 +408,59 @@ def _as_list(trajectories) -> list[Trajectory]:
 # The stages of diagnose(): assemble -> fit baseline -> (score candidates -> accept and re-identify)*
 # -> final re-identification -> report. Each stage takes and returns frozen values.
 # ------------------------------------------------------------------------------------------------
+#: the assembly options :func:`.frame.build_frame` sets for the diagnosis' frames
+_FRAME_SET = ("dynamics_bandwidth_hz", "payload_columns", "keep_signals")
+
+
 @dataclass(frozen=True)
 class DiagnoseSettings:
-    """The settings of one diagnosis (see :func:`diagnose` for their meaning)."""
+    """The settings of one diagnosis, validated once (the defaults are those of ``symoro-gen diagnose``).
 
-    method: str
-    candidates: tuple[str, ...]
-    significance: float
-    max_effects: int
-    holdout: float
-    min_rel_improvement: float
-    n_placebo: int
-    identifiability_tol: float
-    structure: bool
-    friction_laws: bool = True
-    composed: bool = True
+    Attributes
+    ----------
+    method : {"ols", "wls", "tls"}
+        Estimator of the reported identifications (candidate scoring always uses per-joint weighted LS).
+    candidates : sequence of str
+        Kinds to try (default all, :data:`~.candidates.KINDS`, plus ``"friction_law"`` - the friction-law
+        stage - and ``"composed"`` - the composed library); an explicit list runs those two only when it
+        names them (unless ``friction_laws``/``composed`` say otherwise). Stored without those two names.
+    significance : float
+        Family-wise level of each round, in (0, 1).
+    max_effects : int
+        Most effects added.
+    holdout : float
+        Share of each identification experiment held out when no validation data are given.
+    min_rel_improvement : float
+        Smallest relative decrease of the validation error norm of the effect's joint.
+    n_placebo : int
+        Placebo candidates per joint and round (0: none).
+    identifiability_tol : float
+        Candidates with a column (almost) in the span of the model are skipped.
+    structure : bool
+        Run the residual-structure tests (:func:`.structure.residual_structure`).
+    friction_laws : bool, optional
+        Stage "friction law" (:func:`_stage_friction`); default (None): with the default ``candidates`` or
+        when they name ``"friction_law"``.
+    composed : bool, optional
+        Composed candidates (effect x modulating signal, :mod:`.compose`) in each round; default (None):
+        with the default ``candidates`` or when they name ``"composed"``.
+    unexplained : bool
+        Stage "unexplained" (:mod:`.unexplained`, needs scikit-learn).
+    stability : bool
+        Stage "stability" (:func:`_stage_stability`).
+    """
+
+    method: str = "ols"
+    candidates: tuple[str, ...] = ALL
+    significance: float = SIGNIFICANCE
+    max_effects: int = MAX_EFFECTS
+    holdout: float = HOLDOUT
+    min_rel_improvement: float = MIN_REL_IMPROVEMENT
+    n_placebo: int = N_PLACEBO
+    identifiability_tol: float = IDENTIFIABILITY_TOL
+    structure: bool = True
+    friction_laws: bool | None = None
+    composed: bool | None = None
     unexplained: bool = True
     stability: bool = True
 
@@ -430,8 +469,14 @@ class DiagnoseSettings:
             raise IdentificationError(f"unknown identification method {self.method!r}; use 'ols', 'wls' or 'tls'")
         if not 0 < self.significance < 1:
             raise ValueError(f"significance must lie in (0, 1), got {self.significance!r}")
+        kinds = tuple(self.candidates)
+        everything = kinds == tuple(ALL)
+        if self.friction_laws is None:
+            object.__setattr__(self, "friction_laws", everything or "friction_law" in kinds)
+        if self.composed is None:
+            object.__setattr__(self, "composed", everything or "composed" in kinds)
         object.__setattr__(self, "method", self.method.lower())
-        object.__setattr__(self, "candidates", tuple(self.candidates))
+        object.__setattr__(self, "candidates", tuple(k for k in kinds if k not in ("friction_law", "composed")))
 
 
 @dataclass(frozen=True, eq=False)
@@ -580,11 +625,21 @@ def _move_known(system: ObservationSystem, fixed: dict) -> ObservationSystem:
     return ObservationSystem(system.W[:, keep], Y, tuple(system.names[i] for i in keep), system.joint)
 
 
+def _filter_keywords(assembly: AssemblyOptions) -> dict:
+    """The assembly options set away from their defaults, as keywords of :func:`.frame.build_frame` (which
+    sets ``dynamics_bandwidth_hz``, ``payload_columns`` and ``keep_signals`` itself)."""
+    default = AssemblyOptions()
+    return {f.name: getattr(assembly, f.name) for f in fields(assembly)
+            if f.name not in _FRAME_SET and getattr(assembly, f.name) != getattr(default, f.name)}
+
+
 def _stage_assemble(model: IdentificationModel, trajectories, validation, holdout: float,
-                    dynamics_bandwidth_hz: float | None, filter_kw: dict, payload=None) -> _Data:
+                    assembly: AssemblyOptions, payload=None) -> _Data:
     """Stage 1: split off the validation data (or take the given ones), choose one ``f_dyn`` and
     assemble both with the observations stage (:func:`.frame.build_frame`); known payload parameters
     (``payload``) are moved to ``Y`` as in ``identify --loaded ... --payload``."""
+    dynamics_bandwidth_hz = assembly.dynamics_bandwidth_hz
+    filter_kw = _filter_keywords(assembly)
     ident = _as_list(trajectories)
     fixed = {str(k): float(v) for k, v in dict(payload or {}).items()}
     names_pay = tuple(getattr(model, "PAYLOAD_NAMES", ()))
@@ -1207,11 +1262,11 @@ def _validation_rel_err_raw(data: _Data, V: Frame, res: IdentificationResult, ad
         pred[m] = tq[R.row_index[m], R.system.joint[m]]
     if added:
         ctx = FitContext(model=data.model, theta=dict(theta), predictions={id(R): pred.copy()})
-        _UNSHIFTED.clear()   # the elasticity secant caches the unshifted torque by frame identity
+        clear_torque_cache()   # the elasticity secant caches the unshifted torque by frame identity
         for ad in added:
             X = _build_one(ad.family, R, ctx, ad.value)
             pred += X @ np.array([res.value(nm) for nm in ad.family.names()])
-        _UNSHIFTED.clear()
+        clear_torque_cache()
     if keep is not None:   # per-sample residuals for block-wise comparisons (plot_data["valid_raw"])
         keep.update(e=R.system.Y - pred, y=R.system.Y, joint=R.system.joint, experiment=R.row_experiment,
                     index=R.row_index)
@@ -1535,13 +1590,9 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
 
 
 @single_threaded_blas
-def diagnose(model: IdentificationModel, trajectories, *, validation=None, method: str = "ols",
-             candidates: Sequence[str] = ALL, significance: float = SIGNIFICANCE, max_effects: int = MAX_EFFECTS,
-             holdout: float = HOLDOUT, min_rel_improvement: float = MIN_REL_IMPROVEMENT, n_placebo: int = N_PLACEBO,
-             identifiability_tol: float = IDENTIFIABILITY_TOL, rng: np.random.Generator | None = None,
-             dynamics_bandwidth_hz: float | None = None, structure: bool = True, loaded=None, payload=None,
-             friction_laws: bool | None = None, composed: bool | None = None, unexplained: bool = True,
-             stability: bool = True, **filter_kw) -> ResidualReport:
+def diagnose(model: IdentificationModel, trajectories, settings: DiagnoseSettings | None = None, *,
+             validation=None, loaded=None, payload=None, rng: np.random.Generator | None = None,
+             assembly: AssemblyOptions | None = None) -> ResidualReport:
     """Find what the declared model misses, add it, and measure the gain on validation data.
 
     The stages (each a function over frozen values): :func:`_stage_assemble` (observations stage:
@@ -1557,52 +1608,24 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
         ``payload_regressor`` for loaded experiments).
     trajectories : Trajectory or sequence of Trajectory
         Identification experiments (only ``t``, ``q`` and ``tau`` are used).
+    settings : DiagnoseSettings, optional
+        Method, candidate kinds, significance, most effects, hold-out share, stages run (default: the
+        defaults of :class:`DiagnoseSettings`, those of ``symoro-gen diagnose``).
     validation : Trajectory or sequence of Trajectory, optional
-        Validation experiments; default: the last ``holdout`` share of each identification experiment.
-    method : {"ols", "wls", "tls"}
-        Estimator of the reported identifications (candidate scoring always uses per-joint weighted LS).
-    candidates : sequence of str
-        Kinds to try (default all, :data:`~.candidates.KINDS`, plus ``"friction_law"`` - the friction-law
-        stage - and ``"composed"`` - the composed library); an explicit list runs those two only when it
-        names them (unless ``friction_laws``/``composed`` say otherwise).
-    significance : float
-        Family-wise level of each round.
-    max_effects : int
-        Most effects added.
-    holdout : float
-        Share held out when ``validation`` is None.
-    min_rel_improvement : float
-        Smallest relative decrease of the validation error norm of the effect's joint.
-    n_placebo : int
-        Placebo candidates per joint and round (0: none).
-    identifiability_tol : float
-        Candidates with a column (almost) in the span of the model are skipped.
-    rng : numpy.random.Generator, optional
-        Draws the placebos (default ``np.random.default_rng(0)``: reproducible).
-    dynamics_bandwidth_hz : float, optional
-        ``f_dyn`` of the filter rules, default the largest estimate over the identification data;
-        the same value is used for every experiment (identification and validation).
-    structure : bool
-        Run the residual-structure tests (:func:`.structure.residual_structure`).
+        Validation experiments; default: the last ``settings.holdout`` share of each identification experiment.
     loaded : Trajectory or sequence of Trajectory, optional
         Identification experiments with the payload (``identify --loaded``): marked loaded, the payload's
         columns (``PAYLOAD_NAMES``) are added to their rows.
     payload : mapping name -> value, optional
-        Known payload parameters (``identify --payload M8=4.6``): moved to ``Y`` (identification paper on
-        payloads, eq. 7), the others identified.
-    friction_laws : bool, optional
-        Stage "friction law" (:func:`_stage_friction`); default: with the default ``candidates`` or when
-        they name ``"friction_law"``.
-    composed : bool, optional
-        Composed candidates (effect x modulating signal, :mod:`.compose`) in each round; default: with the
-        default ``candidates`` or when they name ``"composed"``.
-    unexplained : bool
-        Stage "unexplained" (:mod:`.unexplained`, needs scikit-learn).
-    stability : bool
-        Stage "stability" (:func:`_stage_stability`).
-    **filter_kw
-        ``cutoff_hz``, ``n_d``, ``order``, ``ftype`` for the assembly
-        (:class:`~symoro_gen.observations.AssemblyOptions`).
+        Known payload parameters (``identify --payload M8=4.6``): moved to ``Y`` ([LWR4-TLS] eq. 7), the
+        others identified.
+    rng : numpy.random.Generator, optional
+        Draws the placebos (default ``np.random.default_rng(0)``: reproducible).
+    assembly : AssemblyOptions, optional
+        Filter and decimation of the assembly ([GB-gains] eq. 14-16: ``cutoff_hz``, ``n_d``, ``order``,
+        ``ftype``...); ``dynamics_bandwidth_hz`` is ``f_dyn`` of the filter rules, default the largest
+        estimate over the identification data, the same value for every experiment (identification and
+        validation). The frames keep their signals and set their payload columns themselves.
 
     Returns
     -------
@@ -1610,21 +1633,12 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
         Errors before/after on the filtered, decimated system (``*_rel_err``, the papers' metric) and,
         on validation data, on the raw measured torque (``*_validation_rel_err_raw``).
     """
-    everything = tuple(candidates) == tuple(ALL)
-    if friction_laws is None:
-        friction_laws = everything or "friction_law" in candidates
-    if composed is None:
-        composed = everything or "composed" in candidates
-    candidates = tuple(k for k in candidates if k not in ("friction_law", "composed"))
-    cfg = DiagnoseSettings(method=method, candidates=tuple(candidates), significance=significance,
-                           max_effects=max_effects, holdout=holdout, min_rel_improvement=min_rel_improvement,
-                           n_placebo=n_placebo, identifiability_tol=identifiability_tol, structure=structure,
-                           friction_laws=friction_laws, composed=composed, unexplained=unexplained, stability=stability)
+    cfg = DiagnoseSettings() if settings is None else settings
     rng = np.random.default_rng(0) if rng is None else rng
     trajs = _as_list(trajectories)
     if loaded is not None:
         trajs += [replace(tr, loaded=True) for tr in _as_list(loaded)]
-    data0 = _stage_assemble(model, trajs, validation, holdout, dynamics_bandwidth_hz, filter_kw, payload)
+    data0 = _stage_assemble(model, trajs, validation, cfg.holdout, assembly or AssemblyOptions(), payload)
     data, laws = _stage_friction(data0, cfg) if cfg.friction_laws else (data0, ())
     base = _stage_baseline(data0, data, laws, cfg)
     state = _stage_loop(data, base, cfg, rng)
@@ -1632,3 +1646,5 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
     if cfg.stability:
         state, stab, msgs = _stage_stability(data, state, cfg)
     return _stage_report(data, base, state, cfg, data0=data0, stab=stab, stab_msgs=msgs)
+
+

@@ -24,7 +24,7 @@ import numpy as np
 from ..atomic import json_output, write_output_text
 from ..description import load_robot
 from ..description.model import RobotDescription
-from ..diagnostics import diagnose
+from ..diagnostics import DiagnoseSettings, diagnose
 from ..errors import SymoroError
 from ..identification.estimators import fit_wls
 from ..loader import model_for
@@ -422,7 +422,7 @@ def _diagnose_flagged(model, flagged: list[dict], groups: dict[str, dict[str, li
                 raise FleetError("no log of that day")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                rep = diagnose(model, trajs, method=method)
+                rep = diagnose(model, trajs, DiagnoseSettings(method=method))
             to_json = getattr(rep, "to_json", None) or rep.to_dict
             entry.update(summary=rep.summary(), report=to_json())
         except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is reported, the fleet result stands

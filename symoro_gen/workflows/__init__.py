@@ -4,9 +4,12 @@ frozen results object (``summary()``, ``to_dict()``, ``report(path)``, ``plot()`
 
 ======================  ==================================================================
 ``identify``            recordings -> base parameters, gains, validation errors
+``diagnose``            recordings -> effects the model misses, added, re-identified
 ======================  ==================================================================
 """
 from .base import SCHEMA_VERSION, Options, Results
+from .diagnose import DiagnoseOptions, DiagnoseResults, diagnose
 from .identify import IdentifyOptions, IdentifyResults, identify
 
-__all__ = ["SCHEMA_VERSION", "IdentifyOptions", "IdentifyResults", "Options", "Results", "identify"]
+__all__ = ["SCHEMA_VERSION", "DiagnoseOptions", "DiagnoseResults", "IdentifyOptions", "IdentifyResults", "Options",
+           "Results", "diagnose", "identify"]
