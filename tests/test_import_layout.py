@@ -24,8 +24,6 @@ PKG = Path(symoro_gen.__file__).resolve().parent
 LAZY_OK: dict[str, dict[str, str]] = {
     # the command-line entry points: `symoro-gen --help` and the light commands start without sympy/scipy
     "cli.py": {"*": "lazy sub-command registration and generation stack (see the comment in cli.py)"},
-    # `import symoro_gen` stays light: the workflows (scipy, sympy) load on first use of symoro_gen.identify...
-    "__init__.py": {"": "symoro_gen.workflows, on first use of a workflow name (module __getattr__)"},
     "diagnostics/cli.py": {"*": "sub-command module, imported by symoro_gen.cli"},
     # `import symoro_gen` and every generated package stay free of sympy (test_light_entry_points)
     "loader.py": {"description": "sympy", "description.model": "sympy", "emit.package": "sympy",
