@@ -9,7 +9,7 @@ import pytest
 
 import symoro_gen
 from symoro_gen.commands import fleet as fleet_command
-from symoro_gen.errors import OptionError
+from symoro_gen.errors import OptionError, OutputError
 from symoro_gen.workflows import SCHEMA_VERSION, FleetOptions, FleetResults
 
 BY = "{robot}/{day}.parquet"
@@ -82,7 +82,7 @@ def test_exports_are_the_commands(cli, tmp_path, command, suffix, call):
     res.write(g)
     other = tmp_path / f"other{suffix}"
     other.write_text("mine")
-    with pytest.raises(Exception, match="not written by symoro-gen|--force|force"):
+    with pytest.raises(OutputError, match="was not written by symoro-gen"):
         res.write(other)
 
 
