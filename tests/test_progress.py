@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from symoro_gen import progress as P
-from symoro_gen.cli import generation_steps
+from symoro_gen.commands.generate import generation_steps
 from symoro_gen.simulate import write_recording_csv
 
 

@@ -19,8 +19,8 @@ from ..atomic import mark_png
 from ..errors import SymoroError
 from .document import Figure
 
-__all__ = ["MissingDependencyError", "require_matplotlib", "torque_figure", "singular_values_figure",
-           "residual_figure", "error_bars_figure", "DPI", "WIDTH_IN", "MAX_POINTS", "N_BINS"]
+__all__ = ["MissingDependencyError", "figure_and_axes", "figure_png", "require_matplotlib", "torque_figure",
+           "singular_values_figure", "residual_figure", "error_bars_figure", "DPI", "WIDTH_IN", "MAX_POINTS", "N_BINS"]
 
 #: resolution of every figure [dots per inch]; with WIDTH_IN the figures are 1100 px wide
 DPI = 100
@@ -92,6 +92,11 @@ def _png(fig, dpi: int) -> bytes:
     # versions' metadata; symoro-gen's own mark instead (a figure file is then known as its output)
     fig.savefig(buf, format="png", dpi=dpi, facecolor="white", metadata={"Software": None})
     return mark_png(buf.getvalue())
+
+
+#: the public names of the figure helpers other plotting modules share (fleet report)
+figure_and_axes = _figure_and_axes
+figure_png = _png
 
 
 def _stride(m: int, max_points: int) -> int:

@@ -36,6 +36,7 @@ from ..model import IdentificationModel
 from ..observations.assembly import Assembly, assemble
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
+from ..params import check_payload
 from ..preprocessing.readers import LoadReport, LogFormat
 from ..preprocessing.trajectory import hold_back
 from ..simulate.closed_loop import PIDGains
@@ -364,17 +365,6 @@ def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_ba
         out["unconstrained"] = res_u.rel_err_on(sys_v)
         out["unconstrained_raw"] = res_u.rel_err_raw_on(model, asm_v)
     return out, sys_v, asm_v
-
-
-def check_payload(payload: Mapping[str, float], names: Sequence[str]) -> dict[str, float]:
-    """Known payload parameters, each a payload parameter of the robot (the message names the one that is not)."""
-    out = {}
-    for k, v in (payload or {}).items():
-        if k not in names:
-            raise IdentificationError(f"--payload {k}: not a payload parameter of this robot "
-                                      f"({', '.join(names) or 'none'})")
-        out[k] = float(v)
-    return out
 
 
 def _run_closed_loop(opts: IdentifyOptions, model: IdentificationModel, unloaded, asm_opts, loaded, known):
