@@ -1,6 +1,5 @@
 """symoro_gen: MDH robot table -> symbolic identification model -> identified parameters."""
-__version__ = "0.1.0"
-
 from .loader import load_model
+from .version import __version__
 
 __all__ = ["load_model", "__version__"]
