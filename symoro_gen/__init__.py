@@ -11,11 +11,10 @@ SciPy)::
 ``symoro_gen.fleet`` is the fleet package (``symoro_gen.fleet.simulate_fleet``...), callable as the ``fleet``
 workflow: ``symoro_gen.fleet("scara", ["logs"], by="{robot}/{day}.parquet")``.
 """
-__version__ = "0.1.0"
-
 import importlib
 
 from .loader import load_model
+from .version import __version__
 
 #: names served by symoro_gen.workflows on first use
 _WORKFLOWS = ("identify", "IdentifyOptions", "IdentifyResults", "diagnose", "DiagnoseOptions", "DiagnoseResults",

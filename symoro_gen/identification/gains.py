@@ -33,10 +33,10 @@ from .estimators import (
     REL_STD_WARN_PCT,
     ZERO_COL_TOL,
     Options,
-    _poor_warning,
     fit_ols,
     fit_raw,
     fit_wls,
+    poorly_identified_warnings,
 )
 from .observation import ObservationSystem
 from .payload import fit_with_known_payload, split_experiments
@@ -309,7 +309,7 @@ def sensor_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None, 
     y = Y * g[joint]
     rel_err = per_joint_rel_err(residual, y, joint, n)
     gains = Gains(tuple(range(n)), g, gstd, relative_std_pct(g, gstd))
-    warnings = list(raw.warnings) + _poor_warning(pnames, x, raw.std[ppos], opts)
+    warnings = list(raw.warnings) + poorly_identified_warnings(pnames, x, raw.std[ppos], opts)
     badg = [f"g{j + 1} ({p:.3g}%)" for j, p in enumerate(gains.rel_std_pct) if p > opts.rel_std_warn_pct]
     if badg:
         warnings.append(f"gains poorly identified: {', '.join(badg)}")

@@ -193,7 +193,8 @@ def _constraints(cp, x, lay: _Layout, s: np.ndarray, body_scale: np.ndarray, nom
                  known: Mapping[str, float], nominal_tolerance: float | None):
     """cvxpy constraints on ``x`` (in SI units) with labels for the active-set report."""
     G = _pseudo_map()
-    cons, labels = [], []
+    cons = []
+    labels: list[tuple[str, str, tuple[int, ...] | int, float]] = []  # kind, name, where, reference value
     for (label, b), bs in zip(lay.bodies, body_scale):
         P = cp.reshape(G @ x[list(b)], (4, 4), order="F")
         cons.append((P + P.T) / 2 >> PSD_MARGIN * bs * np.eye(4))
