@@ -25,13 +25,9 @@ PKG = Path(symoro_gen.__file__).resolve().parent
 LAZY_OK: dict[str, dict[str, str]] = {
     # the command-line entry points: `symoro-gen --help` and the light commands start without sympy/scipy
     "cli.py": {"*": "lazy sub-command registration and generation stack (see the comment in cli.py)"},
-    # `import symoro_gen` stays light: the workflows (scipy, sympy) load on first use of symoro_gen.identify...
-    "__init__.py": {"": "symoro_gen.workflows, on first use of a workflow name (module __getattr__)"},
     # `import symoro_gen` and every generated package stay free of sympy (test_light_entry_points)
     "loader.py": {"description": "sympy", "description.model": "sympy", "emit.package": "sympy",
                   "closedloop": "sympy (closed-loop robots only)"},
-    # owned by another helper in round 2 (baseparams); left for the lead after the merge
-    "baseparams/regroup.py": {"emit.numpy_backend": "not yet moved (round-2 file of another helper)"},
 }
 
 
@@ -122,31 +118,17 @@ CIRCLE_EDGES_OK: dict[tuple[str, str], str] = {
     # the command line: `symoro_gen.cli` registers the sub-commands lazily and the sub-command modules take
     # OptionError from it and their data options from preprocessing.cli (cli.py and */cli.py are being
     # reworked: OptionError and the shared data options want a home of their own)
-    ("symoro_gen.preprocessing.cli", "symoro_gen.cli"): "OptionError lives in cli.py",
-    ("symoro_gen.diagnostics.cli", "symoro_gen.cli"): "OptionError lives in cli.py",
-    # the results table of the report is imported by the identification result and imports its labels
-    # back (report/tables.py and identification/result.py are being reworked)
-    ("symoro_gen.report.tables", "symoro_gen.identification.result"): "method_label lives in result.py",
 }
 
 #: private names imported across modules, in files of work in progress: (importer, source, name) -> reason.
 #: Remove an entry when the import is gone (test_allow_lists_are_current).
 PRIVATE_IMPORTS_OK: dict[tuple[str, str, str], str] = {
-    ("symoro_gen.diagnostics.cli", "symoro_gen.identification.cli", "_payload_values"): "cli.py files in rework",
-    ("symoro_gen.identification.cli", "symoro_gen.identification.result", "_json_float"): "result.py in rework",
-    ("symoro_gen.identification.physical", "symoro_gen.identification.result", "_json_float"): "result.py in rework",
-    ("symoro_gen.identification.gains", "symoro_gen.identification.result", "_fmt"): "result.py in rework",
     ("symoro_gen.excite", "symoro_gen.report.plots", "_png"): "excite and report in rework",
     ("symoro_gen.excite", "symoro_gen.simulate.trajectories", "_piecewise_jerk"): "excite in rework",
     ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_casadi"): "excite in rework",
     ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_casadi_regressor"): "excite in rework",
     ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_sympy_casadi"): "excite in rework",
-    ("symoro_gen.fleet.report", "symoro_gen.report.plots", "_figure_and_axes"): "fleet and report in rework",
-    ("symoro_gen.fleet.report", "symoro_gen.report.plots", "_png"): "fleet and report in rework",
     ("symoro_gen.fleet.worker", "symoro_gen.fleet.kernel", "_column_map"): "fleet in rework",
-    **{("symoro_gen.preprocessing.logformat", "symoro_gen.preprocessing.load", name): "preprocessing in rework"
-       for name in ("_Column", "_check_time", "_fmt_ranges", "_load_arrays", "_read_arrays", "_resolve_csv_columns",
-                    "_runs", "_unit_checks", "_warn")},
 }
 
 
@@ -338,17 +320,12 @@ def _n_parameters(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
 #: functions longer than MAX_FUNCTION_LINES or with more than MAX_PARAMETERS parameters (self and cls not
 #: counted), in files of work in progress: "module:function" -> reason. Remove an entry when it holds.
 SIZE_OK: dict[str, str] = {
-    "symoro_gen.diagnostics.core:diagnose": "its keywords are being redone (API work)",
     "symoro_gen.excite:refine_excitation": "excite in rework",
     "symoro_gen.excite:_optimise_start": "excite in rework",
     "symoro_gen.excite:optimise_excitation": "excite in rework",
     "symoro_gen.excite_relaxation:relaxation_bracket": "excite in rework",
     "symoro_gen.excite_relaxation:__init__": "excite in rework",
-    "symoro_gen.fleet.engine:identify_fleet": "fleet in rework",
     "symoro_gen.preprocessing.filtering:choose_filter_settings": "preprocessing in rework",
-    "symoro_gen.preprocessing.load:load_trajectory": "preprocessing in rework",
-    "symoro_gen.preprocessing.logformat:load_log": "preprocessing in rework",
-    "symoro_gen.report.build:build_report": "report in rework",
 }
 MAX_FUNCTION_LINES = 120
 MAX_PARAMETERS = 12

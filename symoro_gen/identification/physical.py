@@ -49,7 +49,7 @@ from ..errors import IdentificationError
 from ..model import IdentificationModel
 from ..observations.system import ObservationSystem
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, split_name
-from .result import IdentificationResult, _json_float, per_joint_rel_err
+from .result import IdentificationResult, json_float, per_joint_rel_err
 
 __all__ = [
     "DEFAULT_REGULARIZATION",
@@ -417,16 +417,16 @@ class PhysicalResult:
         plus the payload, the implied base parameters and the cost of consistency."""
         return {
             "names": list(self.names),
-            "values": [_json_float(v) for v in self.values],
+            "values": [json_float(v) for v in self.values],
             "active_constraints": list(self.active_constraints),
-            "payload": {"names": list(self.payload_names), "values": [_json_float(v) for v in self.payload_values]},
-            "base": {"names": list(self.base_names), "values": [_json_float(v) for v in self.base_values]},
+            "payload": {"names": list(self.payload_names), "values": [json_float(v) for v in self.payload_values]},
+            "base": {"names": list(self.base_names), "values": [json_float(v) for v in self.base_values]},
             "known": dict(self.known),
-            "cost": _json_float(self.cost),
-            "cost_unconstrained": _json_float(self.cost_unconstrained),
-            "residual_increase_pct": _json_float(self.residual_increase_pct),
-            "rel_err": [_json_float(v) for v in self.rel_err],
-            "rel_err_unconstrained": [_json_float(v) for v in self.rel_err_unconstrained],
+            "cost": json_float(self.cost),
+            "cost_unconstrained": json_float(self.cost_unconstrained),
+            "residual_increase_pct": json_float(self.residual_increase_pct),
+            "rel_err": [json_float(v) for v in self.rel_err],
+            "rel_err_unconstrained": [json_float(v) for v in self.rel_err_unconstrained],
             "bodies": list(self.bodies),
             "solver": self.solver,
             "status": self.status,

@@ -61,10 +61,9 @@ def json_float(x: float):
     return x if math.isfinite(x) else None
 
 
-_json_float = json_float  # the name its users in this package still import (physical.py)
 
-
-def _fmt(x: float, width: int = 11) -> str:
+def fmt_number(x: float, width: int = 11) -> str:
+    """A number right-aligned in ``width`` characters (4 significant digits; scientific outside [1e-3, 1e5))."""
     if not np.isfinite(x):
         return f"{'inf' if x > 0 else ('-inf' if x < 0 else 'nan'):>{width}}"
     return f"{x:>{width}.4g}" if abs(x) >= 1e-3 and abs(x) < 1e5 else f"{x:>{width}.3e}"
@@ -358,14 +357,14 @@ class IdentificationResult:
         if self.gains is not None:
             lines.append(f"{'Gain':<10}{'Value':>11}{'2 sigma':>11}{'%sigma':>9}")
             for n, v, s, p in zip(self.gains.names, self.gains.values, self.gains.std, self.gains.rel_std_pct):
-                lines.append(f"{n:<10}{_fmt(v)}{_fmt(2 * s)}{p:>9.2f}")
+                lines.append(f"{n:<10}{fmt_number(v)}{fmt_number(2 * s)}{p:>9.2f}")
             lines.append("")
         lines.append(f"{'Param.':<10}{'Value':>11}{'2 sigma':>11}{'%sigma':>9}")
         for n, v, s, p in zip(self.names, self.values, self.std, self.rel_std_pct):
-            lines.append(f"{n:<10}{_fmt(v)}{_fmt(2 * s)}{p:>9.2f}")
+            lines.append(f"{n:<10}{fmt_number(v)}{fmt_number(2 * s)}{p:>9.2f}")
         if len(self.fixed) <= MAX_FIXED_LISTED:
             for n, v in self.fixed:
-                lines.append(f"{n:<10}{_fmt(v)}{'known':>11}{'-':>9}")
+                lines.append(f"{n:<10}{fmt_number(v)}{'known':>11}{'-':>9}")
         else:
             lines.append(f"({len(self.fixed)} known parameters moved to the left-hand side: "
                          f"{', '.join(n for n, _ in self.fixed[:5])}, ...)")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from ..cli import OptionError
+from ..errors import OptionError
 from .readers import ABSURD_VALUE, LoadReport, LogFormat, make_format, read_recordings
 from .trajectory import Trajectory, hold_back
 
