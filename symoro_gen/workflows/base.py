@@ -35,7 +35,7 @@ from ..preprocessing.readers import LoadReport, LogFormat, read_recordings
 from ..preprocessing.trajectory import Trajectory
 from ..report.plots import require_matplotlib
 
-__all__ = ["SCHEMA_VERSION", "DataLike", "Options", "Results", "as_trajectories", "check_option_names",
+__all__ = ["SCHEMA_VERSION", "DataLike", "Options", "Results", "as_trajectories", "check_option_names", "listed",
            "file_sha256", "package_commit", "provenance", "resolve_robot"]
 
 #: version of the JSON written by the commands and returned by ``Results.to_dict()`` (docs/json-output.md):
@@ -187,6 +187,16 @@ def _trajectory_of(item, n: int, loaded: bool, k: int) -> Trajectory:
 
 def _is_path(item) -> bool:
     return isinstance(item, (str, os.PathLike))
+
+
+def listed(x) -> tuple:
+    """Data given as one item (a path, a Trajectory, a ``(t, q, tau)`` tuple) or a list of them, as a tuple."""
+    if x is None:
+        return ()
+    if _is_path(x) or not isinstance(x, (list, tuple)) or (
+            isinstance(x, tuple) and len(x) == 3 and not all(_is_path(i) for i in x)):
+        return (x,)
+    return tuple(x)
 
 
 def as_trajectories(data, fmt: LogFormat | None, robot, *, loaded: bool = False

@@ -32,7 +32,7 @@ from ..observations.options import AssemblyOptions
 from ..preprocessing.cli import data_notes, data_text
 from ..preprocessing.readers import LoadReport, LogFormat
 from ..report import Figure, require_matplotlib
-from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, provenance, resolve_robot
+from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, listed, provenance, resolve_robot
 from .identify import check_payload
 from .reporting import ReportContent, write_report
 
@@ -236,18 +236,9 @@ def diagnose(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
     return _run(robot, data, validate, loaded, opts)
 
 
-def _listed(x) -> tuple:
-    if x is None:
-        return ()
-    if isinstance(x, (str, os.PathLike)) or not isinstance(x, (list, tuple)) or (
-            isinstance(x, tuple) and len(x) == 3 and not all(isinstance(i, (str, os.PathLike)) for i in x)):
-        return (x,)
-    return tuple(x)
-
-
 def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> DiagnoseResults:
     robot, model = resolve_robot(robot_like)
-    data, validate, loaded_data = _listed(data), _listed(validate), _listed(loaded_data)
+    data, validate, loaded_data = listed(data), listed(validate), listed(loaded_data)
     if not data:
         raise OptionError("diagnose: no identification data given")
     ident, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)

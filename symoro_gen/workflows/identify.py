@@ -37,10 +37,11 @@ from ..observations.assembly import Assembly, assemble
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
 from ..params import check_payload
+from ..preprocessing.cli import data_text
 from ..preprocessing.readers import LoadReport, LogFormat
 from ..preprocessing.trajectory import hold_back
 from ..simulate.closed_loop import PIDGains
-from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, provenance, resolve_robot
+from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, listed, provenance, resolve_robot
 from .reporting import ReportContent, build_report, write_report
 
 __all__ = ["IdentifyOptions", "IdentifyResults", "check_payload", "identify"]
@@ -197,7 +198,7 @@ class IdentifyResults(Results):
         if self.reference_rows is not None:
                 text += "\n\nBeside the reference table " + str(self.options.reference) + ":\n" + \
                 format_comparison(list(self.reference_rows))
-        return text + "\n\n" + _data_text(self.reports)
+        return text + "\n\n" + data_text(self.reports)
 
     # ---- report and figures -------------------------------------------------------------------------
     def report_content(self) -> ReportContent:
@@ -238,14 +239,6 @@ class IdentifyResults(Results):
         return [f.figure for f in rep.figures if f.figure is not None]
 
 
-def _data_text(reports: Sequence[LoadReport]) -> str:
-    lines = ["Data:"]
-    for r in reports:
-        lines.append("  " + r.summary())
-        lines += [f"    dropped {d}" for d in r.dropped] + [f"    note: {x}" for x in r.notes]
-    return "\n".join(lines)
-
-
 # ---- the workflow ---------------------------------------------------------------------------------------
 def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLike = None,
              method: str = "wls", options: IdentifyOptions | None = None, **kwargs: Any) -> IdentifyResults:
@@ -279,18 +272,9 @@ def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
     return _run(robot, data, validate, loaded, opts)
 
 
-def _listed(x) -> tuple:
-    if x is None:
-        return ()
-    if isinstance(x, (str, os.PathLike)) or not isinstance(x, (list, tuple)) or (
-            isinstance(x, tuple) and len(x) == 3 and not all(isinstance(i, (str, os.PathLike)) for i in x)):
-        return (x,)
-    return tuple(x)
-
-
 def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> IdentifyResults:
     robot, model = resolve_robot(robot_like)
-    data, validate, loaded_data = _listed(data), _listed(validate), _listed(loaded_data)
+    data, validate, loaded_data = listed(data), listed(validate), listed(loaded_data)
     if not data:
         raise OptionError("identify: no identification data given")
     unloaded, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
