@@ -36,10 +36,11 @@ sys.path.insert(0, str(ROOT))
 import symoro_gen
 from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.description.urdf import import_urdf
-from symoro_gen.diagnostics import diagnose
+from symoro_gen.diagnostics import DiagnoseSettings, diagnose
 from symoro_gen.diagnostics.expert import expert_residuals, filtered_data, fit_expert, no_worse
+from symoro_gen.observations import AssemblyOptions
 from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
-from symoro_gen.preprocessing.load import load_trajectories, load_trajectory
+from symoro_gen.preprocessing.readers import load_trajectories, load_trajectory
 from symoro_gen.preprocessing.trajectory import Trajectory
 
 HOLDOUT = 0.3
@@ -104,7 +105,8 @@ def run(name, model, ident, valid, methods) -> dict:
         ex_filt, ex_raw = expert_residuals(model, ex, vdata)
         t_ex = time.perf_counter() - t0
         t0 = time.perf_counter()
-        rep = diagnose(model, ident, validation=valid, method=method, dynamics_bandwidth_hz=fdyn)
+        rep = diagnose(model, ident, DiagnoseSettings(method=method), validation=valid,
+                       assembly=AssemblyOptions(dynamics_bandwidth_hz=fdyn))
         t_loop = time.perf_counter() - t0
         ok_f, d_f, se_f = no_worse(rep.plot_data["valid_filtered"], ex_filt, n)
         ok_r, d_r, se_r = no_worse(rep.plot_data["valid_raw"], ex_raw, n)

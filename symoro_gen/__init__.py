@@ -1,6 +1,35 @@
-"""symoro_gen: MDH robot table -> symbolic identification model -> identified parameters."""
-__version__ = "0.1.0"
+"""symoro_gen: MDH robot table -> symbolic identification model -> identified parameters.
+
+``load_model`` is imported with the package; the workflows (``identify``, ``fleet``, ``export_urdf``...) and
+their option and result types load on first use, so that ``import symoro_gen`` stays light (no SymPy, no
+SciPy)::
+
+    import symoro_gen
+    res = symoro_gen.identify("lwr4", ["a.csv", "c.csv"], validate=["b.csv"], method="wls")
+    print(res.summary())
+
+``symoro_gen.fleet`` is the fleet package (``symoro_gen.fleet.simulate_fleet``...), callable as the ``fleet``
+workflow: ``symoro_gen.fleet("scara", ["logs"], by="{robot}/{day}.parquet")``.
+"""
+import importlib
 
 from .loader import load_model
+from .version import __version__
 
-__all__ = ["load_model", "__version__"]
+#: names served by symoro_gen.workflows on first use
+_WORKFLOWS = ("identify", "IdentifyOptions", "IdentifyResults", "diagnose", "DiagnoseOptions", "DiagnoseResults",
+              "fleet", "FleetOptions", "FleetResults", "export_urdf", "export_mjcf", "export_par", "ExportResults")
+
+__all__ = ["load_model", "__version__", *_WORKFLOWS]
+
+
+def __getattr__(name: str):
+    if name == "fleet":  # the fleet package, callable as the workflow (symoro_gen.fleet.__init__)
+        return importlib.import_module("symoro_gen.fleet")
+    if name in _WORKFLOWS:
+        return getattr(importlib.import_module("symoro_gen.workflows"), name)
+    raise AttributeError(f"module 'symoro_gen' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + list(_WORKFLOWS))

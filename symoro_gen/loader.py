@@ -29,25 +29,12 @@ from typing import TYPE_CHECKING, cast
 
 from .errors import ModelError
 from .model import IdentificationModel, check_model
+from .paths import REPO_ROOT as REPO_ROOT
+from .paths import generated_dir as generated_dir
+from .paths import robots_dir as robots_dir
 
 if TYPE_CHECKING:
     from .description.model import RobotDescription
-
-#: the repository holding this package (``generated/`` and ``robots/`` live there)
-REPO_ROOT = Path(__file__).resolve().parents[1]
-
-
-def generated_dir() -> Path:
-    """Default folder of generated models (``$SYMORO_GENERATED`` overrides)."""
-    env = os.environ.get("SYMORO_GENERATED")
-    return Path(env) if env else REPO_ROOT / "generated"
-
-
-def robots_dir() -> Path:
-    """Folder holding the shipped robot files (``$SYMORO_ROBOTS`` overrides)."""
-    env = os.environ.get("SYMORO_ROBOTS")
-    return Path(env) if env else REPO_ROOT / "robots"
-
 
 def cache_dir() -> Path:
     """User cache of models generated from robot files (``$XDG_CACHE_HOME/symoro_gen/models``)."""

@@ -10,6 +10,10 @@ A payload (fixed link, sigma = 2) has only the 10 inertial ones.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
+from .errors import IdentificationError
+
 INERTIAL_KINDS: tuple[str, ...] = ("XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M")
 DRIVE_KINDS: tuple[str, ...] = ("IA", "FV", "FS", "OFF")
 PARAM_KINDS: tuple[str, ...] = INERTIAL_KINDS + DRIVE_KINDS
@@ -57,3 +61,14 @@ def split_name(name: str) -> tuple[str, int, bool]:
         if base.startswith(kind) and base[len(kind):].isdigit():
             return kind, int(base[len(kind):]), regrouped
     raise ValueError(f"not a standard parameter name: {name!r}")
+
+
+def check_payload(payload: Mapping[str, float] | None, names: Sequence[str]) -> dict[str, float]:
+    """Known payload parameters, each a payload parameter of the robot (the message names the one that is not)."""
+    out = {}
+    for k, v in (payload or {}).items():
+        if k not in names:
+            raise IdentificationError(f"--payload {k}: not a payload parameter of this robot "
+                                      f"({', '.join(names) or 'none'})")
+        out[k] = float(v)
+    return out

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from symoro_gen import cli as cli_module
+from symoro_gen.commands import export_par as export_par_command
 from symoro_gen.simulate import write_recording_csv
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,7 +120,7 @@ def test_unexpected_failure_is_an_internal_error(monkeypatch, cli):
     def boom(args):
         raise RuntimeError("something broke\nsecond line")
 
-    monkeypatch.setattr(cli_module, "cmd_export_par", boom)
+    monkeypatch.setattr(export_par_command, "run", boom)
     err = cli("export-par", "scara", rc=1).err.splitlines()
     assert err == ["symoro-gen: internal error: RuntimeError: something broke",
                    "hint: this is a bug in symoro-gen; rerun with --debug and report the traceback"]
@@ -130,7 +131,7 @@ def test_interrupt(monkeypatch, cli):
     def stop(args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli_module, "cmd_export_par", stop)
+    monkeypatch.setattr(export_par_command, "run", stop)
     assert cli("export-par", "scara", rc=130).err == "symoro-gen: interrupted\n"
 
 

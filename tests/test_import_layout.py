@@ -1,4 +1,5 @@
-"""Import layout of the package: no import circle, no hidden function-local imports, light entry points.
+"""Import layout of the package: no import circle, no hidden function-local imports, light entry points;
+no private name imported across modules; short functions with few parameters.
 
 Every module of ``symoro_gen`` is imported alone, as the first module of the package, in a fresh
 interpreter state (a circle shows up as an ImportError on a partially initialised module for some entry
@@ -24,16 +25,9 @@ PKG = Path(symoro_gen.__file__).resolve().parent
 LAZY_OK: dict[str, dict[str, str]] = {
     # the command-line entry points: `symoro-gen --help` and the light commands start without sympy/scipy
     "cli.py": {"*": "lazy sub-command registration and generation stack (see the comment in cli.py)"},
-    "identification/cli.py": {"*": "sub-command module, imported by symoro_gen.cli"},
-    "diagnostics/cli.py": {"*": "sub-command module, imported by symoro_gen.cli"},
     # `import symoro_gen` and every generated package stay free of sympy (test_light_entry_points)
     "loader.py": {"description": "sympy", "description.model": "sympy", "emit.package": "sympy",
                   "closedloop": "sympy (closed-loop robots only)"},
-    # diagnostics -> report: the label table of diagnostics cannot be imported at the top of report
-    "report/build.py": {"diagnostics.structure": "import circle diagnostics -> report"},
-    "report/tables.py": {"identification.result": "import circle identification.result -> report"},
-    # owned by another helper in round 2 (baseparams); left for the lead after the merge
-    "baseparams/regroup.py": {"emit.numpy_backend": "not yet moved (round-2 file of another helper)"},
 }
 
 
@@ -113,10 +107,261 @@ def test_no_function_local_imports():
     assert not found, f"function-local imports (hide import circles): {found}"
 
 
+# ------------------------------------------------------------------------------------------------
+# The import graph read from the source (every import of the package's own modules, at any depth: module
+# level and inside functions alike; ``if TYPE_CHECKING:`` imports are left out, they never run).
+# ------------------------------------------------------------------------------------------------
+
+#: import edges left out of the circle check, each closing a circle through files of work in progress:
+#: (importer, imported) -> reason. Remove an entry when its edge is gone (test_allow_lists_are_current).
+CIRCLE_EDGES_OK: dict[tuple[str, str], str] = {
+    # the command line: `symoro_gen.cli` registers the sub-commands lazily and the sub-command modules take
+    # OptionError from it and their data options from preprocessing.cli (cli.py and */cli.py are being
+    # reworked: OptionError and the shared data options want a home of their own)
+}
+
+#: private names imported across modules, in files of work in progress: (importer, source, name) -> reason.
+#: Remove an entry when the import is gone (test_allow_lists_are_current).
+PRIVATE_IMPORTS_OK: dict[tuple[str, str, str], str] = {
+    ("symoro_gen.excite", "symoro_gen.report.plots", "_png"): "excite and report in rework",
+    ("symoro_gen.excite", "symoro_gen.simulate.trajectories", "_piecewise_jerk"): "excite in rework",
+    ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_casadi"): "excite in rework",
+    ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_casadi_regressor"): "excite in rework",
+    ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_sympy_casadi"): "excite in rework",
+    ("symoro_gen.fleet.worker", "symoro_gen.fleet.kernel", "_column_map"): "fleet in rework",
+}
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def _run_time_imports(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
+    """Every import statement of a module except those under ``if TYPE_CHECKING:``."""
+    out: list[ast.Import | ast.ImportFrom] = []
+
+    def visit(node: ast.AST) -> None:
+        if isinstance(node, ast.If) and _is_type_checking(node.test):
+            for sub in node.orelse:
+                visit(sub)
+            return
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            out.append(node)
+        for sub in ast.iter_child_nodes(node):
+            visit(sub)
+
+    visit(tree)
+    return out
+
+
+def _absolute(module: str, is_package: bool, node: ast.ImportFrom) -> str:
+    """The absolute module name an ``from ... import`` reads from."""
+    if not node.level:
+        return node.module or ""
+    base = module.split(".") if is_package else module.split(".")[:-1]
+    base = base[:len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _add(lines: list[str], where: str) -> None:
+    if where not in lines:
+        lines.append(where)
+
+
+def _import_graph(files: dict[str, Path] | None = None, root: Path | None = None
+                  ) -> tuple[dict[str, dict[str, list[str]]], list[tuple]]:
+    """``(edges, private)``: ``edges[a][b]`` lists the lines (``file:line``) where module ``a`` imports module
+    ``b`` of the package; ``private`` the ``(importer, source, name, where)`` of every private name (one
+    leading underscore) imported from another module of the package.
+
+    ``from package import name`` counts as an import of ``package.name`` when that is a module, else of
+    ``package``. Importing ``a.b.c`` also runs the ``__init__`` of ``a`` and ``a.b``: those are not counted,
+    or a package whose ``__init__`` re-exports its modules would make every sibling import a circle."""
+    files = dict(_modules()) if files is None else files
+    root = PKG.parent if root is None else root
+    edges: dict[str, dict[str, list[str]]] = {m: {} for m in files}
+    private: list[tuple] = []
+    for mod, f in files.items():
+        rel = f.relative_to(root).as_posix()
+        for node in _run_time_imports(ast.parse(f.read_text())):
+            where = f"{rel}:{node.lineno}"
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names if a.name.split(".")[0] == "symoro_gen"]
+                for t in targets:
+                    if t in files and t != mod:
+                        _add(edges[mod].setdefault(t, []), where)
+                continue
+            src = _absolute(mod, f.name == "__init__.py", node)
+            if src.split(".")[0] != "symoro_gen":
+                continue
+            for a in node.names:
+                target = f"{src}.{a.name}" if f"{src}.{a.name}" in files else src
+                if target in files and target != mod:
+                    _add(edges[mod].setdefault(target, []), where)
+                if a.name.startswith("_") and not a.name.startswith("__") and target != mod:
+                    private.append((mod, src, a.name, where))
+    return edges, private
+
+
+def _circles(edges: dict[str, dict[str, list[str]]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def connect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in edges.get(v, {}):
+            if w not in index:
+                connect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(edges):
+        if v not in index:
+            connect(v)
+    return out
+
+
+def _circle_report(edges: dict[str, dict[str, list[str]]]) -> list[str]:
+    """One line per import inside each circle (the lines to cut one of)."""
+    lines = []
+    for comp in _circles(edges):
+        inside = set(comp)
+        lines.append("circle: " + " <-> ".join(comp))
+        lines += [f"    {a} -> {b} ({', '.join(w)})" for a in comp for b, w in sorted(edges[a].items()) if b in inside]
+    return lines
+
+
+def _without(edges: dict[str, dict[str, list[str]]], allowed) -> dict[str, dict[str, list[str]]]:
+    return {a: {b: w for b, w in bs.items() if (a, b) not in allowed} for a, bs in edges.items()}
+
+
+def test_no_import_circle_counting_function_level_imports():
+    """No module imports, even from inside a function, a module that imports it back (directly or through
+    others): the module-level order of imports then decides whether the package can be imported, and a
+    lazy import only hides the circle until someone moves it."""
+    edges, _ = _import_graph()
+    assert sum(len(b) for b in edges.values()) > 200, "the walk found the package's imports"
+    report = _circle_report(_without(edges, CIRCLE_EDGES_OK))
+    assert not report, "import circles:\n" + "\n".join(report)
+
+
+def test_no_private_name_imported_from_another_module():
+    """A name with a leading underscore is its module's business: another module that needs it needs a
+    public name (in that module, or in a module both can import)."""
+    _, private = _import_graph()
+    found = [f"{where}: {imp} imports {name} from {src}" for imp, src, name, where in private
+             if (imp, src, name) not in PRIVATE_IMPORTS_OK]
+    assert not found, "private names imported across modules:\n" + "\n".join(found)
+
+
+def test_allow_lists_are_current():
+    """Every allowed circle edge and private import still exists (remove the entries the rework has made
+    unnecessary: the lists only shrink)."""
+    edges, private = _import_graph()
+    stale = [f"edge {a} -> {b}" for a, b in CIRCLE_EDGES_OK if b not in edges.get(a, {})]
+    seen = {(imp, src, name) for imp, src, name, _ in private}
+    stale += [f"private {name} of {src} in {imp}" for imp, src, name in PRIVATE_IMPORTS_OK
+              if (imp, src, name) not in seen]
+    assert not stale, "allow-list entries no longer needed: " + "; ".join(stale)
+
+
+def test_the_checks_see_a_circle_and_a_private_import(tmp_path):
+    """The checks themselves: a package of three modules with a circle through a function-level import
+    (and one under ``if TYPE_CHECKING:``, which does not count), and a private import."""
+    pkg = tmp_path / "symoro_gen"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from .b import f\n")
+    (pkg / "b.py").write_text("def f():\n    from symoro_gen.c import _g\n    return _g\n")
+    (pkg / "c.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from . import b\n"
+                              "def _g():\n    from . import a\n")
+    files = {"symoro_gen": pkg / "__init__.py", **{f"symoro_gen.{m}": pkg / f"{m}.py" for m in "abc"}}
+    edges, private = _import_graph(files, root=tmp_path)
+    assert edges["symoro_gen.c"] == {"symoro_gen.a": ["symoro_gen/c.py:5"]}   # the TYPE_CHECKING one left out
+    assert _circles(edges) == [["symoro_gen.a", "symoro_gen.b", "symoro_gen.c"]]
+    assert [p[:3] for p in private] == [("symoro_gen.b", "symoro_gen.c", "_g")]
+    assert not _circles(_without(edges, {("symoro_gen.b", "symoro_gen.c")}))
+
+
+def _functions() -> list[tuple[str, ast.FunctionDef | ast.AsyncFunctionDef]]:
+    out = []
+    for mod, f in _modules():
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                out.append((mod, node))
+    return out
+
+
+def _n_parameters(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
+    a = fn.args
+    n = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + (a.vararg is not None) + (a.kwarg is not None)
+    first = (a.posonlyargs + a.args)[:1]
+    return n - (1 if first and first[0].arg in ("self", "cls") else 0)
+
+
+#: functions longer than MAX_FUNCTION_LINES or with more than MAX_PARAMETERS parameters (self and cls not
+#: counted), in files of work in progress: "module:function" -> reason. Remove an entry when it holds.
+SIZE_OK: dict[str, str] = {
+    "symoro_gen.excite:refine_excitation": "excite in rework",
+    "symoro_gen.excite:_optimise_start": "excite in rework",
+    "symoro_gen.excite:optimise_excitation": "excite in rework",
+    "symoro_gen.excite_relaxation:relaxation_bracket": "excite in rework",
+    "symoro_gen.excite_relaxation:__init__": "excite in rework",
+    "symoro_gen.preprocessing.filtering:choose_filter_settings": "preprocessing in rework",
+}
+MAX_FUNCTION_LINES = 120
+MAX_PARAMETERS = 12
+
+
+def _oversized() -> dict[str, str]:
+    out = {}
+    for mod, fn in _functions():
+        lines = fn.end_lineno - fn.lineno + 1 if fn.end_lineno is not None else 0
+        n = _n_parameters(fn)
+        if lines > MAX_FUNCTION_LINES or n > MAX_PARAMETERS:
+            out[f"{mod}:{fn.name}"] = f"{lines} lines, {n} parameters"
+    return out
+
+
+def test_functions_are_short_and_take_few_parameters():
+    """No function over MAX_FUNCTION_LINES lines (docstring included) and no signature over MAX_PARAMETERS
+    parameters (options that belong together are one dataclass, or one typed group of keywords)."""
+    big = _oversized()
+    found = [f"{k}: {v}" for k, v in sorted(big.items()) if k not in SIZE_OK]
+    assert not found, "\n".join(found)
+    stale = [k for k in SIZE_OK if k not in big]
+    assert not stale, f"SIZE_OK entries no longer needed: {stale}"
+
+
 def test_lazy_ok_lists_only_existing_files():
-    """The allow-list stays true: every file it names exists."""
+    """The allow-list stays true: every file it names exists, and still imports lazily every module it names."""
     missing = [rel for rel in LAZY_OK if not (PKG / rel).is_file()]
     assert not missing, missing
+    stale = []
+    for rel, allowed in LAZY_OK.items():
+        lazy = {mod for node in ast.walk(ast.parse((PKG / rel).read_text()))
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+                for sub in ast.walk(node) if (mod := _own_import(sub)) is not None}
+        stale += [f"{rel}: {mod}" for mod in allowed if mod != "*" and mod not in lazy]
+    assert not stale, f"LAZY_OK entries no longer needed: {stale}"
 
 
 def _loaded(code: str) -> list[str]:

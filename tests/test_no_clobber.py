@@ -280,6 +280,7 @@ def test_a_report_folder_holding_an_input_is_refused(cli, ws, tmp_path):
 def test_generate_does_not_replace_a_package_of_another_robot_file(cli, tmp_path, monkeypatch):
     """A copy of robots/scara.toml with another D2 (same name) does not replace the shipped package."""
     from symoro_gen import cli as cli_module
+    from symoro_gen.commands import generate as generate_command
 
     repo = tmp_path / "repo"
     (repo / "robots").mkdir(parents=True)
@@ -293,6 +294,7 @@ def test_generate_does_not_replace_a_package_of_another_robot_file(cli, tmp_path
     assert "D2 = 0.4" in copy.read_text()
     shipped = {p.name: p.read_bytes() for p in (repo / "generated" / "scara").iterdir()}
     monkeypatch.setattr(cli_module, "generated_dir", lambda: repo / "generated")
+    monkeypatch.setattr(generate_command, "generated_dir", lambda: repo / "generated")
     for argv in (["generate", copy], ["generate", copy, "--out", repo / "generated"]):  # default --out, and given
         res = cli(*argv, rc=2)
         assert res.err_lines[0] == (f"symoro-gen: error: {repo / 'generated' / 'scara'} was generated from the robot "

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from symoro_gen import progress as P
-from symoro_gen.cli import generation_steps
+from symoro_gen.commands.generate import generation_steps
 from symoro_gen.simulate import write_recording_csv
 
 
@@ -207,7 +207,7 @@ def recordings(tmp_path_factory):
 
 
 def test_load_progress_per_file(recordings):
-    from symoro_gen.preprocessing.load import load_trajectories
+    from symoro_gen.preprocessing.readers import load_trajectories
 
     robot, _, files, _ = recordings
     got = []

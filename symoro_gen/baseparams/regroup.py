@@ -252,7 +252,8 @@ def _is_expanded(e: sp.Expr, memo: dict | None = None) -> bool:
     return True
 
 
-def _split_constant(term: sp.Expr, fs: set, memo: dict | None = None) -> tuple[sp.Expr, sp.Expr]:
+def _split_constant(term: sp.Expr, fs: set | _LazyFreeSymbols, memo: dict | None = None
+                    ) -> tuple[sp.Expr, sp.Expr]:
     """``term.as_independent(*fs, as_Add=False)`` for a term with one symbolic factor, without building
     the set of the relation's free symbols once per term (what ``as_independent`` does with them).
     ``memo``: whether a factor has free symbols, per distinct factor, kept across calls."""
@@ -781,7 +782,7 @@ class _ExactSolver:
         basis = np.zeros((0, m))
         for r in range(An.shape[0]):
             v = An[r] - basis.T @ (basis @ An[r]) if basis.size else An[r]
-            if np.linalg.norm(v) > 1e-9 * max(1.0, np.linalg.norm(An[r])):
+            if np.linalg.norm(v) > 1e-9 * max(1.0, float(np.linalg.norm(An[r]))):
                 chosen.append(r)
                 basis = np.vstack([basis, v / np.linalg.norm(v)])
                 if len(chosen) == m:

@@ -33,12 +33,12 @@ import numpy as np
 from .mdh import joint_sign
 from .model import FIXED, REVOLUTE, RobotDescription
 from .urdf_export import (
-    _comment,
-    _fmt,
     constant_transform,
     inertial_of,
     joint_limits,
     link_values,
+    xml_comment,
+    xml_float,
 )
 
 __all__ = ["export_mjcf", "quat_from_matrix"]
@@ -66,13 +66,13 @@ def quat_from_matrix(R) -> tuple[float, float, float, float]:
     else:
         S = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
         q = ((R[1, 0] - R[0, 1]) / S, (R[0, 2] + R[2, 0]) / S, (R[1, 2] + R[2, 1]) / S, 0.25 * S)
-    q = np.array(q, float)
-    q /= np.linalg.norm(q)
-    return tuple(float(v) for v in q)
+    u = np.array(q, float)
+    u /= np.linalg.norm(u)
+    return float(u[0]), float(u[1]), float(u[2]), float(u[3])
 
 
 def _v(xs) -> str:
-    return " ".join(_fmt(x) for x in xs)
+    return " ".join(xml_float(x) for x in xs)
 
 
 def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, notes=(), report: list | None = None,
@@ -99,12 +99,12 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
     vals = link_values(robot, chi_std, chi_payload)
     g = robot.gravity
     out = ["<?xml version=\"1.0\"?>", f"<mujoco model={quoteattr(robot.name)}>",
-           f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({_comment(robot.source[:120])}) -->",
+           f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({xml_comment(robot.source[:120])}) -->",
            ("  <!-- MDH frame j = body link<j> (pos/quat: T(ant, j) at q = 0), joint j about/along its z axis; "
             "armature = IA, damping = FV, frictionloss = FS -->")]
-    out += [f"  <!-- {_comment(n)} -->" for n in notes]
+    out += [f"  <!-- {xml_comment(n)} -->" for n in notes]
     out += ['  <compiler angle="radian" inertiafromgeom="false" autolimits="true"/>',
-            f'  <option gravity="{_v(g)}" timestep="{_fmt(timestep)}" integrator="{integrator}"/>',
+            f'  <option gravity="{_v(g)}" timestep="{xml_float(timestep)}" integrator="{integrator}"/>',
             "  <worldbody>"]
     children: dict[int, list] = {}
     for row in robot.rows:
@@ -124,7 +124,7 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
         if inert is not None:
             m, c, Ic = inert
             full = (Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2])
-            out.append(f'{ind}  <inertial pos="{_v(c)}" mass="{_fmt(m)}" fullinertia="{_v(full)}"/>')
+            out.append(f'{ind}  <inertial pos="{_v(c)}" mass="{xml_float(m)}" fullinertia="{_v(full)}"/>')
         if row.sigma != FIXED:
             s = joint_sign(row)
             attrs = [f'name="joint{j}"', f'type="{"hinge" if row.sigma == REVOLUTE else "slide"}"', 'pos="0 0 0"',
@@ -132,14 +132,14 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
             for key, attr in (("IA", "armature"), ("FV", "damping"), ("FS", "frictionloss")):
                 v = vals.get(f"{key}{j}", 0.0)
                 if v:
-                    attrs.append(f'{attr}="{_fmt(max(v, 0.0))}"')
+                    attrs.append(f'{attr}="{xml_float(max(v, 0.0))}"')
             lim = joint_limits(robot, j)
             if "q_min" in lim and "q_max" in lim:
-                attrs.append(f'range="{_fmt(lim["q_min"])} {_fmt(lim["q_max"])}"')
+                attrs.append(f'range="{xml_float(lim["q_min"])} {xml_float(lim["q_max"])}"')
             out.append(f"{ind}  <joint {' '.join(attrs)}/>")
             off = vals.get(f"OFF{j}", 0.0)
             if off:
-                out.append(f"{ind}  <!-- torque offset OFF{j} = {_fmt(off)} (no MuJoCo field) -->")
+                out.append(f"{ind}  <!-- torque offset OFF{j} = {xml_float(off)} (no MuJoCo field) -->")
             if robot.coupling(j) is None:  # a coupled joint is passive: no motor
                 joints.append((j, lim))
         for ch in children.get(j, ()):
@@ -152,12 +152,13 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
     if robot.couplings:  # coupled (mimic) joints: q_m = offset + multiplier q_s, MuJoCo's joint equality
         out.append("  <equality>")
         out += [f'    <joint joint1="joint{c.joint}" joint2="joint{c.source}" '
-                f'polycoef="{_fmt(float(c.offset))} {_fmt(float(c.multiplier))} 0 0 0"/>' for c in robot.couplings]
+                f'polycoef="{xml_float(float(c.offset))} {xml_float(float(c.multiplier))} 0 0 0"/>'
+                for c in robot.couplings]
         out.append("  </equality>")
     if motors and joints:
         out.append("  <actuator>")
         for j, lim in joints:
-            rng = f' ctrlrange="{_fmt(-lim["tau_max"])} {_fmt(lim["tau_max"])}"' if "tau_max" in lim else ""
+            rng = f' ctrlrange="{xml_float(-lim["tau_max"])} {xml_float(lim["tau_max"])}"' if "tau_max" in lim else ""
             out.append(f'    <motor name="motor{j}" joint="joint{j}" gear="1"{rng}/>')
         out.append("  </actuator>")
     out.append("</mujoco>")

@@ -109,9 +109,11 @@ class _Entry:
 
 
 class _Statement:
+    """``KEY = {list}`` (``items``, ``scalar`` None) or ``KEY = value`` (``scalar``, no items)."""
+
     __slots__ = ("key", "line", "items", "scalar")
 
-    def __init__(self, key: str, line: int, items: list[_Entry] | None, scalar: _Entry | None):
+    def __init__(self, key: str, line: int, items: list[_Entry], scalar: _Entry | None):
         self.key, self.line, self.items, self.scalar = key, line, items, scalar
 
 
@@ -151,7 +153,8 @@ _NEXT_STMT_RE = re.compile(r"\n[ \t]*[A-Za-z_][A-Za-z0-9_]*[ \t]*=")
 
 def _split_items(body: str, body_start: int, text: str, line: int, key: str, bad) -> list[_Entry]:
     """Split a list body at the commas outside parentheses."""
-    items, depth, start = [], 0, 0
+    items: list[_Entry] = []
+    depth, start = 0, 0
     if not body.strip():
         return []
     for i, ch in enumerate(body + ","):
@@ -214,7 +217,7 @@ def _statements(text: str, bad) -> list[_Statement]:
             if not value:
                 bad(line, key, "missing value after '='")
                 continue
-            out.append(_Statement(key, line, None, _Entry(value, line)))
+            out.append(_Statement(key, line, [], _Entry(value, line)))
     return out
 
 
@@ -281,385 +284,487 @@ def import_par(path: str | os.PathLike, *, values: Mapping[str, float] | None = 
 def import_par_text(text: str, file: str = "<string>", *, values: Mapping[str, float] | None = None,
                     payload: int | None = None, angle_tol: float = 1e-9) -> str:
     """Same as :func:`import_par` on the text of a ``.par`` file (``file`` used in messages)."""
-    probs: list[Problem] = []
-
-    def bad(line: int | None, fld: str, msg: str, frame: int | None = None) -> None:
-        where = ", ".join(x for x in (f"line {line}" if line else "", f"frame {frame}" if frame else "") if x)
-        probs.append(Problem(file, where, fld, msg))
-
+    imp = _ParImport(file)
     m = re.search(r"\(\*\s*Robotname\s*=\s*'([^']*)'\s*\*\)", text)
     robot_name = _identifier(m.group(1) if m else (Path(file).stem if file != "<string>" else "robot"))
-    stmts = _statements(_blank_comments(text, bad), bad)
+    imp.sort_statements(_statements(_blank_comments(text, imp.bad), imp.bad))
+    imp.take_values(values)
+    imp.check_header()
+    imp.count_frames()
+    if imp.probs and not imp.geom:
+        raise RobotFileError(imp.probs)
+    imp.read_geometric_cells()
+    imp.find_joint_variables()
+    imp.check_geometric_symbols()
+    imp.read_gravity()
+    imp.check_fixed_base()
+    imp.read_links_and_loops()
+    imp.read_dynamic_lists()
+    imp.choose_payload(payload)
+    imp.check_value_names()
+    if imp.probs:
+        raise RobotFileError(imp.probs)
+    toml = imp.toml_text(robot_name, angle_tol)
+    imp.validate(toml)
+    return toml
 
-    # ---- sort the statements
-    header: dict[str, tuple[int, object]] = {}
-    geom: dict[str, _Statement] = {}
-    dyn: dict[str, _Statement] = {}
-    other: dict[str, _Statement] = {}
-    given: dict[str, tuple[float, int]] = {}
-    seen: dict[str, int] = {}
-    for st in stmts:
-        key = _GEOM_ALIASES.get(st.key, st.key) if st.items is not None else st.key
-        if key in seen:
-            bad(st.line, st.key, f"given twice (first on line {seen[key]})")
-            continue
-        seen[key] = st.line
-        if st.items is None:
-            raw = st.scalar.text
-            if key in _HEADER_INTS:
-                if not re.fullmatch(r"\d+", raw):
-                    bad(st.line, key, f"must be a non-negative integer, got {raw!r}")
-                else:
-                    header[key] = (st.line, int(raw))
-            elif key in _HEADER_BOOLS:
-                if raw not in _BOOL_WORDS:
-                    bad(st.line, key, f"must be 0/1 or True/False, got {raw!r}")
-                else:
-                    header[key] = (st.line, _BOOL_WORDS[raw])
-            else:
-                try:
-                    e = _expr(st.scalar)
-                except ExprError as exc:
-                    bad(st.line, key, str(exc))
-                    continue
-                if e.free_symbols or not e.is_real:
-                    bad(st.line, key, f"a numeric value must be a number, got {raw!r}")
-                    continue
-                given[key] = (float(e), st.line)
-        elif key in _GEOM_KEYS.values():
-            geom[key] = st
-        elif key in _DYN_KEYS:
-            dyn[key] = st
-        elif key in _IGNORED_LISTS or key in _BASE_MOTION or key in ("G", "Z", "eta"):
-            other[key] = st
-        else:
-            bad(st.line, st.key, "unknown list (expected the SYMORO keys Ant Sigma B d R gamma Alpha Mu Theta, "
-                                 "XX..M IA FV FS, FX..CZ, QP QDP GAM, W0 WP0 V0 VP0, G, Z, or OFF)")
 
-    numeric: dict[str, float] = {k: v for k, (v, _) in given.items()}
-    for k, v in (values or {}).items():
-        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)):
-            bad(None, k, f"value passed for {k!r} must be a finite number, got {v!r}")
-        else:
-            numeric[k] = float(v)
+class _ParImport:
+    """One import of a ``.par`` text, step by step: each step reads what the earlier ones stored and
+    reports its problems through :meth:`bad` (all of them raised at once in a :class:`RobotFileError`)."""
 
-    # ---- structure
-    if "Type" in header and header["Type"][1] not in (0, 1, 2):
-        bad(header["Type"][0], "Type", f"must be 0 (simple), 1 (tree) or 2 (closed), got {header['Type'][1]}")
-    for k in _HEADER_BOOLS:
-        if header.get(k, (0, False))[1]:
-            bad(header[k][0], k, f"{k} = 1 is not supported: symoro_gen models fixed-base robots")
-    if "NJ" in header and "NL" in header and header["NJ"][1] != header["NL"][1] and header.get("Type", (0, 0))[1] != 2:
-        bad(header["NJ"][0], "NJ", f"NJ = {header['NJ'][1]} differs from NL = {header['NL'][1]}: a structure with "
-                                   "closed loops must say Type = 2")
+    def __init__(self, file: str) -> None:
+        self.file = file
+        self.probs: list[Problem] = []
+        # the statements sorted by role (header: NF NL NJ Type is_floating is_mobile -> (line, value);
+        # given: the ``NAME = number`` lines -> (value, line))
+        self.header: dict[str, tuple[int, int]] = {}
+        self.geom: dict[str, _Statement] = {}
+        self.dyn: dict[str, _Statement] = {}
+        self.other: dict[str, _Statement] = {}
+        self.given: dict[str, tuple[float, int]] = {}
+        self.numeric: dict[str, float] = {}
+        # the geometric table: frames, cells (field, frame) -> (expression, entry), joint types and variables
+        self.nf = 0
+        self.cells: dict[tuple[str, int], tuple[sp.Expr, _Entry]] = {}
+        self.sigmas: dict[int, int] = {}
+        self.joint_var: dict[int, sp.Symbol] = {}
+        self.reported: set[tuple[str, int]] = set()  # cells whose symbols are already reported (no cascade)
+        # gravity and the notes written into the robot file
+        self.notes: list[str] = []
+        self.g_symbols: set[str] = set()
+        self.gravity = [0.0, 0.0, DEFAULT_GRAVITY_Z]
+        # links, joints and closed loops (links 1..NL, cut joints NL+1..NJ, closing frames NJ+1..NF)
+        self.nl = self.nj = self.nb = self.nlinks = 0
+        self.closed = False
+        # the dynamic lists
+        self.nominal: dict[str, float] = {}
+        self.drive: dict[int, list[str]] = {}
+        self.inertia_given: dict[int, bool] = {}
+        self.dyn_symbol_at: dict[str, str] = {}  # a symbol names one parameter only
+        self.payload: int | None = None
 
-    for k in _REQUIRED_GEOM:
-        if k not in geom:
-            bad(None, _PAR_SPELLING[k], "missing list (the geometric table needs Ant, Sigma, d, R, Alpha, Theta)")
-    lengths = {k: len(st.items) for k, st in geom.items()}
-    nf = header["NF"][1] if "NF" in header else (Counter(lengths.values()).most_common(1)[0][0] if lengths else 0)
-    for st in geom.values():
-        if len(st.items) != nf:
-            bad(st.line, st.key, f"has {len(st.items)} entries, expected {nf} (one per frame, NF = {nf})")
-    if probs and not geom:
-        raise RobotFileError(probs)
+    def bad(self, line: int | None, fld: str, msg: str, frame: int | None = None) -> None:
+        where = ", ".join(x for x in (f"line {line}" if line else "", f"frame {frame}" if frame else "") if x)
+        self.probs.append(Problem(self.file, where, fld, msg))
 
-    # ---- geometric entries
-    cells: dict[tuple[str, int], tuple[sp.Expr, _Entry]] = {}
-    for k, st in geom.items():
-        for j, entry in enumerate(st.items[:nf], start=1):
-            if not entry.text:
-                continue
-            try:
-                e = _expr(entry)
-            except ExprError as exc:
-                bad(entry.line, st.key, str(exc), j)
-                continue
-            if k in _INT_FIELDS and not (e.is_Integer or (e.is_Float and float(e).is_integer())):
-                bad(entry.line, st.key, f"must be an integer, got {entry.text!r}", j)
-                continue
-            cells[(k, j)] = (e, entry)
-
-    def cell(k: str, j: int, default=0):
-        c = cells.get((k, j))
+    def cell(self, k: str, j: int, default: int = 0) -> sp.Expr:
+        c = self.cells.get((k, j))
         return c[0] if c else sp.Integer(default)
 
-    sigmas = {j: int(cell("sigma", j)) for j in range(1, nf + 1)}
-    joint_var: dict[int, sp.Symbol] = {}
-    reported: set[tuple[str, int]] = set()  # cells whose symbols are already reported (no cascade)
-    for j in range(1, nf + 1):
-        s = sigmas[j]
-        if s not in (REVOLUTE, PRISMATIC, FIXED):
-            reported |= {("theta", j), ("r", j)}
-            if ("sigma", j) in cells:
-                bad(cells[("sigma", j)][1].line, _spelled(geom, "sigma"),
-                    f"must be 0 (revolute), 1 (prismatic) or 2 (fixed), got {s}", j)
-            continue
-        if s == FIXED:
-            continue
-        fld = "theta" if s == REVOLUTE else "r"
-        if (fld, j) not in cells:
-            continue
-        e, entry = cells[(fld, j)]
-        reported.add((fld, j))  # cleared below once the joint variable is found
-        cand = sorted((x for x in e.free_symbols if x.name not in numeric), key=lambda x: x.name)
+    # ------------------------------------------------------------------ statements and header
+    def sort_statements(self, stmts: list[_Statement]) -> None:
+        """Header integers and flags, geometric, dynamic and other lists, ``NAME = number`` values."""
+        seen: dict[str, int] = {}
+        for st in stmts:
+            key = _GEOM_ALIASES.get(st.key, st.key) if st.scalar is None else st.key
+            if key in seen:
+                self.bad(st.line, st.key, f"given twice (first on line {seen[key]})")
+                continue
+            seen[key] = st.line
+            if st.scalar is not None:
+                self._sort_scalar(key, st, st.scalar)
+            elif key in _GEOM_KEYS.values():
+                self.geom[key] = st
+            elif key in _DYN_KEYS:
+                self.dyn[key] = st
+            elif key in _IGNORED_LISTS or key in _BASE_MOTION or key in ("G", "Z", "eta"):
+                self.other[key] = st
+            else:
+                self.bad(st.line, st.key, "unknown list (expected the SYMORO keys Ant Sigma B d R gamma Alpha Mu "
+                                          "Theta, XX..M IA FV FS, FX..CZ, QP QDP GAM, W0 WP0 V0 VP0, G, Z, or OFF)")
+
+    def _sort_scalar(self, key: str, st: _Statement, scalar: _Entry) -> None:
+        raw = scalar.text
+        if key in _HEADER_INTS:
+            if not re.fullmatch(r"\d+", raw):
+                self.bad(st.line, key, f"must be a non-negative integer, got {raw!r}")
+            else:
+                self.header[key] = (st.line, int(raw))
+        elif key in _HEADER_BOOLS:
+            if raw not in _BOOL_WORDS:
+                self.bad(st.line, key, f"must be 0/1 or True/False, got {raw!r}")
+            else:
+                self.header[key] = (st.line, _BOOL_WORDS[raw])
+        else:
+            try:
+                e = _expr(scalar)
+            except ExprError as exc:
+                self.bad(st.line, key, str(exc))
+                return
+            if e.free_symbols or not e.is_real:
+                self.bad(st.line, key, f"a numeric value must be a number, got {raw!r}")
+                return
+            self.given[key] = (float(e), st.line)
+
+    def take_values(self, values: Mapping[str, float] | None) -> None:
+        """The numeric values of symbols: the file's ``NAME = number`` lines overridden by ``values``."""
+        self.numeric = {k: v for k, (v, _) in self.given.items()}
+        for k, v in (values or {}).items():
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)):
+                self.bad(None, k, f"value passed for {k!r} must be a finite number, got {v!r}")
+            else:
+                self.numeric[k] = float(v)
+
+    def check_header(self) -> None:
+        header = self.header
+        if "Type" in header and header["Type"][1] not in (0, 1, 2):
+            self.bad(header["Type"][0], "Type",
+                     f"must be 0 (simple), 1 (tree) or 2 (closed), got {header['Type'][1]}")
+        for k in _HEADER_BOOLS:
+            if header.get(k, (0, False))[1]:
+                self.bad(header[k][0], k, f"{k} = 1 is not supported: symoro_gen models fixed-base robots")
+        if ("NJ" in header and "NL" in header and header["NJ"][1] != header["NL"][1]
+                and header.get("Type", (0, 0))[1] != 2):
+            self.bad(header["NJ"][0], "NJ", f"NJ = {header['NJ'][1]} differs from NL = {header['NL'][1]}: a "
+                                            "structure with closed loops must say Type = 2")
+
+    def count_frames(self) -> None:
+        """NF (the header's, else the most common length of the geometric lists); every list must have NF
+        entries."""
+        for k in _REQUIRED_GEOM:
+            if k not in self.geom:
+                self.bad(None, _PAR_SPELLING[k],
+                         "missing list (the geometric table needs Ant, Sigma, d, R, Alpha, Theta)")
+        lengths = {k: len(st.items) for k, st in self.geom.items()}
+        self.nf = self.header["NF"][1] if "NF" in self.header else (
+            Counter(lengths.values()).most_common(1)[0][0] if lengths else 0)
+        for st in self.geom.values():
+            if len(st.items) != self.nf:
+                self.bad(st.line, st.key,
+                         f"has {len(st.items)} entries, expected {self.nf} (one per frame, NF = {self.nf})")
+
+    # ------------------------------------------------------------------ geometric table
+    def read_geometric_cells(self) -> None:
+        for k, st in self.geom.items():
+            for j, entry in enumerate(st.items[:self.nf], start=1):
+                if not entry.text:
+                    continue
+                try:
+                    e = _expr(entry)
+                except ExprError as exc:
+                    self.bad(entry.line, st.key, str(exc), j)
+                    continue
+                if k in _INT_FIELDS and not (e.is_Integer or (e.is_Float and float(e).is_integer())):
+                    self.bad(entry.line, st.key, f"must be an integer, got {entry.text!r}", j)
+                    continue
+                self.cells[(k, j)] = (e, entry)
+
+    def find_joint_variables(self) -> None:
+        """The joint type of every frame and the joint variable of every moving one (the only symbol
+        without a numeric value in Theta, revolute, or R, prismatic)."""
+        self.sigmas = {j: int(self.cell("sigma", j)) for j in range(1, self.nf + 1)}
+        for j in range(1, self.nf + 1):
+            s = self.sigmas[j]
+            if s not in (REVOLUTE, PRISMATIC, FIXED):
+                self.reported |= {("theta", j), ("r", j)}
+                if ("sigma", j) in self.cells:
+                    self.bad(self.cells[("sigma", j)][1].line, _spelled(self.geom, "sigma"),
+                             f"must be 0 (revolute), 1 (prismatic) or 2 (fixed), got {s}", j)
+                continue
+            if s == FIXED:
+                continue
+            fld = "theta" if s == REVOLUTE else "r"
+            if (fld, j) not in self.cells:
+                continue
+            self.reported.add((fld, j))  # cleared once the joint variable is found
+            v = self._joint_variable(j, s, fld)
+            if v is not None:
+                self.joint_var[j] = v
+                self.reported.discard((fld, j))
+
+    def _joint_variable(self, j: int, s: int, fld: str) -> sp.Symbol | None:
+        e, entry = self.cells[(fld, j)]
+        spelled = _spelled(self.geom, fld)
+        cand = sorted((x for x in e.free_symbols if x.name not in self.numeric), key=lambda x: x.name)
         kind = "revolute" if s == REVOLUTE else "prismatic"
         if not cand:
-            bad(entry.line, _spelled(geom, fld), f"a {kind} frame needs its joint variable in {_spelled(geom, fld)} "
-                                                 f"(e.g. {'t' if s == REVOLUTE else 'r'}{j}), got {entry.text!r}", j)
-            continue
+            self.bad(entry.line, spelled, f"a {kind} frame needs its joint variable in {spelled} "
+                                          f"(e.g. {'t' if s == REVOLUTE else 'r'}{j}), got {entry.text!r}", j)
+            return None
         if len(cand) > 1:
-            bad(entry.line, _spelled(geom, fld),
-                f"several symbols without numeric value ({', '.join(c.name for c in cand)}): the joint variable "
-                f"must be the only one; give the others a value with a line 'NAME = number'", j)
-            continue
+            self.bad(entry.line, spelled,
+                     f"several symbols without numeric value ({', '.join(c.name for c in cand)}): the joint "
+                     f"variable must be the only one; give the others a value with a line 'NAME = number'", j)
+            return None
         v = cand[0]
         if sp.diff(e, v) not in (1, -1) or sp.diff(e, v, 2) != 0:
-            bad(entry.line, _spelled(geom, fld), f"must be {v} + constant or -{v} + constant, got {entry.text!r}", j)
-            continue
-        joint_var[j] = v
-        reported.discard((fld, j))
+            self.bad(entry.line, spelled, f"must be {v} + constant or -{v} + constant, got {entry.text!r}", j)
+            return None
+        return v
 
-    owners = {v: j for j, v in joint_var.items()}
-    for (k, j), (e, entry) in sorted(cells.items(), key=lambda kv: (kv[0][1], kv[1][1].line)):
-        if (k, j) in reported:
-            continue
-        for x in sorted(e.free_symbols, key=lambda x: x.name):
-            if joint_var.get(j) == x and k == ("theta" if sigmas[j] == REVOLUTE else "r"):
+    def check_geometric_symbols(self) -> None:
+        """Every other symbol of the table has a numeric value, an allowed name, and is no joint variable."""
+        owners = {v: j for j, v in self.joint_var.items()}
+        for (k, j), (e, entry) in sorted(self.cells.items(), key=lambda kv: (kv[0][1], kv[1][1].line)):
+            if (k, j) in self.reported:
                 continue
-            if x in owners:
-                bad(entry.line, _spelled(geom, k), f"{x} is the joint variable of frame {owners[x]}; "
-                                                   f"it cannot appear elsewhere", j)
-            elif x.name not in numeric:
-                bad(entry.line, _spelled(geom, k),
-                    f"symbol {x.name!r} has no numeric value: add a line '{x.name} = <number>' to the .par file "
-                    f"(symoro_gen extension, ignored by SYMORO) or pass values={{'{x.name}': ...}}", j)
-            elif x.name in _RESERVED or not _NAME_RE.match(x.name):
-                bad(entry.line, _spelled(geom, k), f"symbol name {x.name!r} is reserved in symoro_gen robot files; "
-                                                   f"rename it", j)
+            spelled = _spelled(self.geom, k)
+            for x in sorted(e.free_symbols, key=lambda x: x.name):
+                if self.joint_var.get(j) == x and k == ("theta" if self.sigmas[j] == REVOLUTE else "r"):
+                    continue
+                if x in owners:
+                    self.bad(entry.line, spelled, f"{x} is the joint variable of frame {owners[x]}; "
+                                                  f"it cannot appear elsewhere", j)
+                elif x.name not in self.numeric:
+                    self.bad(entry.line, spelled,
+                             f"symbol {x.name!r} has no numeric value: add a line '{x.name} = <number>' to the .par "
+                             f"file (symoro_gen extension, ignored by SYMORO) or pass values={{'{x.name}': ...}}", j)
+                elif x.name in _RESERVED or not _NAME_RE.match(x.name):
+                    self.bad(entry.line, spelled, f"symbol name {x.name!r} is reserved in symoro_gen robot files; "
+                                                  f"rename it", j)
 
-    # ---- gravity, base, flexible joints
-    notes: list[str] = []
-    g_symbols: set[str] = set()
-    gravity = [0.0, 0.0, DEFAULT_GRAVITY_Z]
-    if "G" not in other:
-        notes.append(f"gravity: the .par file has no G list; taken as [0, 0, {DEFAULT_GRAVITY_Z}] (z axis up)")
-    else:
-        st = other["G"]
+    # ------------------------------------------------------------------ gravity, base, flexible joints
+    def read_gravity(self) -> None:
+        if "G" not in self.other:
+            self.notes.append(f"gravity: the .par file has no G list; taken as [0, 0, {DEFAULT_GRAVITY_Z}] "
+                              "(z axis up)")
+            return
+        st = self.other["G"]
         if len(st.items) != 3:
-            bad(st.line, "G", f"must have 3 entries, got {len(st.items)}")
+            self.bad(st.line, "G", f"must have 3 entries, got {len(st.items)}")
+            return
+        exprs: list[sp.Expr | None] = []
+        for entry in st.items:
+            try:
+                exprs.append(_expr(entry))
+            except ExprError as exc:
+                self.bad(entry.line, "G", str(exc))
+                exprs.append(None)
+        parsed = [e for e in exprs if e is not None]
+        if len(parsed) < len(exprs):
+            return
+        self.g_symbols |= {x.name for e in parsed for x in e.free_symbols}
+        subs = {sp.Symbol(k, real=True): v for k, v in self.numeric.items()}
+        vals = [e.subs(subs) for e in parsed]
+        if all(v.is_number for v in vals):
+            self.gravity = [float(v) for v in vals]
+        elif vals[0] == 0 and vals[1] == 0 and vals[2].is_Symbol:
+            self.notes.append(f"gravity: {vals[2]} in the .par file has no numeric value; taken as "
+                              f"{DEFAULT_GRAVITY_Z} m/s^2 (z axis up). Edit if the base frame differs.")
         else:
-            exprs = []
-            for entry in st.items:
-                try:
-                    exprs.append(_expr(entry))
-                except ExprError as exc:
-                    bad(entry.line, "G", str(exc))
-                    exprs.append(None)
-            if None not in exprs:
-                g_symbols |= {x.name for e in exprs for x in e.free_symbols}
-                subs = {sp.Symbol(k, real=True): v for k, v in numeric.items()}
-                vals = [e.subs(subs) for e in exprs]
-                if all(v.is_number for v in vals):
-                    gravity = [float(v) for v in vals]
-                elif vals[0] == 0 and vals[1] == 0 and vals[2].is_Symbol:
-                    notes.append(f"gravity: {vals[2]} in the .par file has no numeric value; taken as "
-                                 f"{DEFAULT_GRAVITY_Z} m/s^2 (z axis up). Edit if the base frame differs.")
-                else:
-                    names = sorted({x.name for v in vals for x in v.free_symbols})
-                    bad(st.line, "G", f"gravity symbols {', '.join(names)} have no numeric value: add lines "
-                                      f"'NAME = <m/s^2>' to the .par file or pass values=")
-    if "Z" in other:
-        st = other["Z"]
-        ident = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
-        ok = len(st.items) == 16
-        if ok:
-            for entry, ref in zip(st.items, ident):
-                try:
-                    e = _expr(entry)
-                except ExprError:
-                    ok = False
-                    break
-                if not e.is_number or abs(float(e) - ref) > 1e-12:
-                    ok = False
-                    break
-        if not ok:
-            bad(st.line, "Z", "the base transformation Z (fT0) must be the identity: symoro_gen has no base "
-                              "transform; fold it into frame 1 (gamma, b, alpha, d, theta, r)")
-    for k in _BASE_MOTION:
-        if k in other and not all(_is_zero(e) for e in other[k].items):
-            bad(other[k].line, k, f"{k} must be zero: symoro_gen models fixed-base robots")
-    if "eta" in other and not all(_is_zero(e) for e in other["eta"].items):
-        bad(other["eta"].line, "eta", "flexible joints (eta = 1) are not supported")
+            names = sorted({x.name for v in vals for x in v.free_symbols})
+            self.bad(st.line, "G", f"gravity symbols {', '.join(names)} have no numeric value: add lines "
+                                   f"'NAME = <m/s^2>' to the .par file or pass values=")
 
-    # ---- dynamic lists: nominal values, drive terms, payload
-    nl = header["NL"][1] if "NL" in header else nf
-    closed = header.get("Type", (0, 0))[1] == 2 or header.get("NJ", (0, nl))[1] != nl  # reported above
-    if nl != nf and not closed:
-        bad(header["NL"][0], "NL", f"NL = {nl} differs from the number of frames {nf}: every frame of a simple or "
-                                   f"tree structure is a link")
-    nj = header["NJ"][1] if "NJ" in header else nl
-    nb = nj - nl  # closed loops: links 1..NL, cut joints NL+1..NJ, closing frames NJ+1..NF (KK1986)
-    if closed:
+    def check_fixed_base(self) -> None:
+        """The base transform is the identity, the base does not move, no joint is flexible."""
+        other = self.other
+        if "Z" in other:
+            st = other["Z"]
+            ident = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
+            ok = len(st.items) == 16
+            if ok:
+                for entry, ref in zip(st.items, ident):
+                    try:
+                        e = _expr(entry)
+                    except ExprError:
+                        ok = False
+                        break
+                    if not e.is_number or abs(float(e) - ref) > 1e-12:
+                        ok = False
+                        break
+            if not ok:
+                self.bad(st.line, "Z", "the base transformation Z (fT0) must be the identity: symoro_gen has no "
+                                       "base transform; fold it into frame 1 (gamma, b, alpha, d, theta, r)")
+        for k in _BASE_MOTION:
+            if k in other and not all(_is_zero(e) for e in other[k].items):
+                self.bad(other[k].line, k, f"{k} must be zero: symoro_gen models fixed-base robots")
+        if "eta" in other and not all(_is_zero(e) for e in other["eta"].items):
+            self.bad(other["eta"].line, "eta", "flexible joints (eta = 1) are not supported")
+
+    # ------------------------------------------------------------------ links, loops, dynamic lists, payload
+    def read_links_and_loops(self) -> None:
+        """NL, NJ and the closed loops (KK1986: links 1..NL, cut joints NL+1..NJ, closing frames NJ+1..NF)."""
+        header, nf = self.header, self.nf
+        nl = self.nl = header["NL"][1] if "NL" in header else nf
+        closed = self.closed = header.get("Type", (0, 0))[1] == 2 or header.get("NJ", (0, nl))[1] != nl
+        if nl != nf and not closed:
+            self.bad(header["NL"][0], "NL", f"NL = {nl} differs from the number of frames {nf}: every frame of a "
+                                            f"simple or tree structure is a link")
+        nj = self.nj = header["NJ"][1] if "NJ" in header else nl
+        nb = self.nb = nj - nl
+        self.nlinks = nl if closed else nf  # frames carrying a body
+        if not closed:
+            return
         if "NL" not in header or "NJ" not in header:
-            bad(header.get("Type", (None, 0))[0], "Type", "a closed-loop structure needs NL and NJ")
+            self.bad(header.get("Type", (None, 0))[0], "Type", "a closed-loop structure needs NL and NJ")
         elif nb <= 0:
-            bad(header["Type"][0] if "Type" in header else header["NJ"][0], "Type" if "Type" in header else "NJ",
-                f"Type = 2 is a closed-loop structure: it needs more joints than links (NJ > NL), got NJ = {nj}, "
-                f"NL = {nl}")
+            self.bad(header["Type"][0] if "Type" in header else header["NJ"][0], "Type" if "Type" in header else "NJ",
+                     f"Type = 2 is a closed-loop structure: it needs more joints than links (NJ > NL), got "
+                     f"NJ = {nj}, NL = {nl}")
         elif nf != nj + nb:
-            bad(header["NF"][0] if "NF" in header else None, "NF",
-                f"a closed-loop structure has NF = NJ + (NJ - NL) = {nj + nb} frames (one closing frame per cut "
-                f"joint), got {nf}")
+            self.bad(header["NF"][0] if "NF" in header else None, "NF",
+                     f"a closed-loop structure has NF = NJ + (NJ - NL) = {nj + nb} frames (one closing frame per "
+                     f"cut joint), got {nf}")
         else:
             for j in range(nl + 1, nf + 1):
-                if (sigmas[j] == FIXED) != (j > nj):
+                if (self.sigmas[j] == FIXED) != (j > nj):
                     what = "a cut joint (revolute or prismatic)" if j <= nj else "a closing frame (Sigma = 2)"
-                    bad(cells[("sigma", j)][1].line if ("sigma", j) in cells else None, _spelled(geom, "sigma"),
-                        f"frame {j} must be {what}", j)
-    nlinks = nl if closed else nf  # frames carrying a body
-    for k, st in dyn.items():
-        if len(st.items) != nl:
-            bad(st.line, k, f"has {len(st.items)} entries, expected {nl} (one per link, NL = {nl})")
-    nominal: dict[str, float] = {}
-    drive: dict[int, list[str]] = {j: [] for j in range(1, nf + 1)}
-    inertia_given: dict[int, bool] = {}
-    dyn_symbol_at: dict[str, str] = {}  # a symbol names one parameter only
-    for j in range(1, nlinks + 1):
-        moving = sigmas[j] in (REVOLUTE, PRISMATIC)
-        any_inertia = False
-        for k in _DYN_KEYS:
-            st = dyn.get(k)
-            if st is None or j > len(st.items):
-                state, value = "symbol", None  # not given: a parameter to identify
-            else:
-                entry = st.items[j - 1]
-                try:
-                    e = _expr(entry)
-                except ExprError as exc:
-                    bad(entry.line, k, str(exc), j)
+                    self.bad(self.cells[("sigma", j)][1].line if ("sigma", j) in self.cells else None,
+                             _spelled(self.geom, "sigma"), f"frame {j} must be {what}", j)
+
+    def read_dynamic_lists(self) -> None:
+        """Nominal values, drive terms (IA FV FS OFF of the moving joints) and which links carry inertia."""
+        for k, st in self.dyn.items():
+            if len(st.items) != self.nl:
+                self.bad(st.line, k, f"has {len(st.items)} entries, expected {self.nl} (one per link, NL = {self.nl})")
+        self.drive = {j: [] for j in range(1, self.nf + 1)}
+        for j in range(1, self.nlinks + 1):
+            moving = self.sigmas[j] in (REVOLUTE, PRISMATIC)
+            any_inertia = False
+            for k in _DYN_KEYS:
+                read = self._dynamic_entry(k, j)
+                if read is None:
                     continue
-                if e.is_number:
-                    state, value = ("zero", 0.0) if e == 0 else ("number", float(e))
-                elif e.is_Symbol:
-                    state, value = "symbol", numeric.get(e.name)
-                    here = f"{k}{j}"
-                    if e.name in dyn_symbol_at and (sigmas[j] != FIXED or k in INERTIAL_KINDS):
-                        bad(entry.line, k, f"symbol {e.name} already stands for {dyn_symbol_at[e.name]}: symoro_gen "
-                                           f"parameters are independent; write {here} (or a number)", j)
-                        continue
-                    if sigmas[j] != FIXED or k in INERTIAL_KINDS:
-                        dyn_symbol_at[e.name] = here
-                else:
-                    bad(entry.line, k, f"must be a number or a single parameter symbol, got {entry.text!r}", j)
-                    continue
-            if k in INERTIAL_KINDS:
-                any_inertia |= state != "zero"
-                if value is not None or state == "zero":
-                    nominal[f"{k}{j}"] = 0.0 if value is None else value
-            elif moving and state != "zero":
-                drive[j].append(k)
-                if value is not None:
-                    nominal[f"{k}{j}"] = value
-        inertia_given[j] = any_inertia
+                state, value = read
+                if k in INERTIAL_KINDS:
+                    any_inertia |= state != "zero"
+                    if value is not None or state == "zero":
+                        self.nominal[f"{k}{j}"] = 0.0 if value is None else value
+                elif moving and state != "zero":
+                    self.drive[j].append(k)
+                    if value is not None:
+                        self.nominal[f"{k}{j}"] = value
+            self.inertia_given[j] = any_inertia
 
-    fixed_with_inertia = [j for j in range(1, nlinks + 1) if sigmas[j] == FIXED and inertia_given[j]]
-    if payload is None:
-        if len(fixed_with_inertia) > 1:
-            bad(dyn["XX"].line if "XX" in dyn else None, "XX",
-                f"fixed frames {fixed_with_inertia} all carry inertial parameters; symoro_gen supports one payload: "
-                f"choose it with payload=<frame> and set the others' inertial entries to 0")
-        payload = fixed_with_inertia[0] if len(fixed_with_inertia) == 1 else None
-    else:
-        others = [j for j in fixed_with_inertia if j != payload]
-        if others:
-            bad(dyn["XX"].line if "XX" in dyn else None, "XX",
-                f"fixed frames {others} carry inertial parameters but the payload is frame {payload}")
-    for j in range(1, nlinks + 1):  # keep nominal values of moving links and of the payload only
-        if sigmas[j] == FIXED and j != payload:
-            for k in INERTIAL_KINDS:
-                nominal.pop(f"{k}{j}", None)
+    def _dynamic_entry(self, k: str, j: int) -> tuple[str, float | None] | None:
+        """``(state, nominal value)`` of parameter ``k`` of link ``j``: state ``zero`` (absent), ``number``
+        (known) or ``symbol`` (to identify, nominal value from the given values); None when reported."""
+        st = self.dyn.get(k)
+        if st is None or j > len(st.items):
+            return "symbol", None  # not given: a parameter to identify
+        entry = st.items[j - 1]
+        try:
+            e = _expr(entry)
+        except ExprError as exc:
+            self.bad(entry.line, k, str(exc), j)
+            return None
+        if e.is_number:
+            return ("zero", 0.0) if e == 0 else ("number", float(e))
+        if not e.is_Symbol:
+            self.bad(entry.line, k, f"must be a number or a single parameter symbol, got {entry.text!r}", j)
+            return None
+        here = f"{k}{j}"
+        named = self.sigmas[j] != FIXED or k in INERTIAL_KINDS
+        if e.name in self.dyn_symbol_at and named:
+            self.bad(entry.line, k, f"symbol {e.name} already stands for {self.dyn_symbol_at[e.name]}: symoro_gen "
+                                    f"parameters are independent; write {here} (or a number)", j)
+            return None
+        if named:
+            self.dyn_symbol_at[e.name] = here
+        return "symbol", self.numeric.get(e.name)
 
-    for k in sorted(set(numeric) - set(dyn_symbol_at) - g_symbols):
-        if k in _RESERVED or not _NAME_RE.match(k):
-            line = given[k][1] if k in given else None
-            bad(line, k, f"{k!r} is a reserved name in symoro_gen robot files; rename the symbol")
-    if probs:
-        raise RobotFileError(probs)
+    def choose_payload(self, payload: int | None) -> None:
+        """The one fixed frame carrying inertial parameters (or the one given); the nominal inertial values
+        of the other fixed frames are dropped."""
+        fixed_with_inertia = [j for j in range(1, self.nlinks + 1)
+                              if self.sigmas[j] == FIXED and self.inertia_given[j]]
+        xx_line = self.dyn["XX"].line if "XX" in self.dyn else None
+        if payload is None:
+            if len(fixed_with_inertia) > 1:
+                self.bad(xx_line, "XX", f"fixed frames {fixed_with_inertia} all carry inertial parameters; symoro_gen "
+                                        f"supports one payload: choose it with payload=<frame> and set the others' "
+                                        f"inertial entries to 0")
+            payload = fixed_with_inertia[0] if len(fixed_with_inertia) == 1 else None
+        else:
+            others = [j for j in fixed_with_inertia if j != payload]
+            if others:
+                self.bad(xx_line, "XX", f"fixed frames {others} carry inertial parameters but the payload is frame "
+                                        f"{payload}")
+        self.payload = payload
+        for j in range(1, self.nlinks + 1):  # keep nominal values of moving links and of the payload only
+            if self.sigmas[j] == FIXED and j != payload:
+                for k in INERTIAL_KINDS:
+                    self.nominal.pop(f"{k}{j}", None)
 
-    # ---- write TOML
-    geometric = {x.name for e, _ in cells.values() for x in e.free_symbols} - {v.name for v in joint_var.values()}
-    unused = set(numeric) - geometric - set(dyn_symbol_at) - g_symbols
-    used = sorted(geometric | unused)
-    lines = [f"# Imported from the SYMORO .par file {Path(file).name} by symoro_gen.description.par.import_par."]
-    lines += [f"# Note: {n}" for n in notes]
-    lines += [f"name = {_toml_str(robot_name)}",
-              f"source = {_toml_str(f'SYMORO .par file {file}')}",
-              f"gravity = [{', '.join(_toml_float(g) for g in gravity)}]"]
-    if payload is not None:
-        lines.append(f"payload = {payload}")
-    actuated = [j for j in range(1, nlinks + 1) if sigmas[j] != FIXED and int(cell("mu", j, 1)) == 1]
-    top_drive = Counter(tuple(drive[j]) for j in actuated).most_common(1)[0][0] if actuated else None
-    if top_drive is not None:
-        lines.append(f"drive = [{', '.join(_toml_str(d) for d in top_drive)}]")
-    if used:
-        lines += ["", "[values]"] + [f"{n} = {_toml_float(numeric[n])}" for n in used]
-    if closed:
-        lines.append("# Note: closed loops; the loop is assembled from the zero configuration unless a [loop_reference] "
-                     "table gives a closed, non-singular one")
-    for j in range(1, nlinks + 1):
-        s = sigmas[j]
-        mu = int(cell("mu", j, 0 if s == FIXED else 1))
-        subs = {joint_var[j]: q_symbol(j)} if j in joint_var else {}
-        lines += ["", "[[frames]]", f"j = {j}", f"ant = {int(cell('ant', j))}", f"sigma = {s}"]
+    def check_value_names(self) -> None:
+        for k in sorted(set(self.numeric) - set(self.dyn_symbol_at) - self.g_symbols):
+            if k in _RESERVED or not _NAME_RE.match(k):
+                line = self.given[k][1] if k in self.given else None
+                self.bad(line, k, f"{k!r} is a reserved name in symoro_gen robot files; rename the symbol")
+
+    # ------------------------------------------------------------------ the robot file
+    def toml_text(self, robot_name: str, angle_tol: float) -> str:
+        geometric = ({x.name for e, _ in self.cells.values() for x in e.free_symbols}
+                     - {v.name for v in self.joint_var.values()})
+        unused = set(self.numeric) - geometric - set(self.dyn_symbol_at) - self.g_symbols
+        used = sorted(geometric | unused)
+        lines = [f"# Imported from the SYMORO .par file {Path(self.file).name} by "
+                 "symoro_gen.description.par.import_par."]
+        lines += [f"# Note: {n}" for n in self.notes]
+        lines += [f"name = {_toml_str(robot_name)}",
+                  f"source = {_toml_str(f'SYMORO .par file {self.file}')}",
+                  f"gravity = [{', '.join(_toml_float(g) for g in self.gravity)}]"]
+        if self.payload is not None:
+            lines.append(f"payload = {self.payload}")
+        actuated = [j for j in range(1, self.nlinks + 1)
+                    if self.sigmas[j] != FIXED and int(self.cell("mu", j, 1)) == 1]
+        top_drive = Counter(tuple(self.drive[j]) for j in actuated).most_common(1)[0][0] if actuated else None
+        if top_drive is not None:
+            lines.append(f"drive = [{', '.join(_toml_str(d) for d in top_drive)}]")
+        if used:
+            lines += ["", "[values]"] + [f"{n} = {_toml_float(self.numeric[n])}" for n in used]
+        if self.closed:
+            lines.append("# Note: closed loops; the loop is assembled from the zero configuration unless a "
+                         "[loop_reference] table gives a closed, non-singular one")
+        for j in range(1, self.nlinks + 1):
+            lines += self._frame_lines(j, top_drive, angle_tol)
+        for ell in range(1, self.nb + 1 if self.closed else 1):
+            lines += ["", "[[loops]]"]
+            for part, j in (("cut", self.nl + ell), ("close", self.nj + ell)):
+                fields = [f"ant = {int(self.cell('ant', j))}", f"sigma = {self.sigmas[j]}"]
+                fields += self._geometry_fields(j, angle_tol)
+                lines.append(f"{part} = {{ {', '.join(fields)} }}")
+        if self.nominal:
+            order = {f"{k}{j}": (j, i) for j in range(1, self.nf + 1) for i, k in enumerate(_DYN_KEYS)}
+            lines += ["", "[nominal]"] + [f"{k} = {_toml_float(self.nominal[k])}"
+                                          for k in sorted(self.nominal, key=lambda k: order[k])]
+        return "\n".join(lines) + "\n"
+
+    def _frame_lines(self, j: int, top_drive: tuple[str, ...] | None, angle_tol: float) -> list[str]:
+        s = self.sigmas[j]
+        mu = int(self.cell("mu", j, 0 if s == FIXED else 1))
+        lines = ["", "[[frames]]", f"j = {j}", f"ant = {int(self.cell('ant', j))}", f"sigma = {s}"]
         if mu != (0 if s == FIXED else 1):
             lines.append(f"mu = {mu}")
+        lines += self._geometry_fields(j, angle_tol)
+        if s != FIXED and (tuple(self.drive[j]) != top_drive if mu == 1 else bool(self.drive[j])):
+            lines.append(f"drive = [{', '.join(_toml_str(d) for d in self.drive[j])}]")
+        return lines
+
+    def _geometry_fields(self, j: int, angle_tol: float) -> list[str]:
+        """``gamma b alpha d theta r`` of frame ``j`` (gamma and b only when not zero), the joint variable
+        written ``q``."""
+        subs = {self.joint_var[j]: q_symbol(j)} if j in self.joint_var else {}
+        fields = []
         for k in ("gamma", "b", "alpha", "d", "theta", "r"):
-            e = cell(k, j).subs(subs)
+            e = self.cell(k, j).subs(subs)
             if k in ("gamma", "alpha", "theta"):
-                e = _snap_angle(e, angle_tol, q_symbol(j) if s == REVOLUTE else None)
+                e = _snap_angle(e, angle_tol, q_symbol(j) if self.sigmas[j] == REVOLUTE else None)
             if k in ("gamma", "b") and e == 0:
                 continue
-            lines.append(f"{k} = {_toml_expr(e, q_symbol(j))}")
-        if s != FIXED and (tuple(drive[j]) != top_drive if mu == 1 else bool(drive[j])):
-            lines.append(f"drive = [{', '.join(_toml_str(d) for d in drive[j])}]")
-    for ell in range(1, nb + 1 if closed else 1):
-        lines += ["", "[[loops]]"]
-        for part, j in (("cut", nl + ell), ("close", nj + ell)):
-            subs = {joint_var[j]: q_symbol(j)} if j in joint_var else {}
-            fields = [f"ant = {int(cell('ant', j))}", f"sigma = {sigmas[j]}"]
-            for k in ("gamma", "b", "alpha", "d", "theta", "r"):
-                e = cell(k, j).subs(subs)
-                if k in ("gamma", "alpha", "theta"):
-                    e = _snap_angle(e, angle_tol, q_symbol(j) if sigmas[j] == REVOLUTE else None)
-                if k in ("gamma", "b") and e == 0:
-                    continue
-                fields.append(f"{k} = {_toml_expr(e, q_symbol(j))}")
-            lines.append(f"{part} = {{ {', '.join(fields)} }}")
-    if nominal:
-        order = {f"{k}{j}": (j, i) for j in range(1, nf + 1) for i, k in enumerate(_DYN_KEYS)}
-        lines += ["", "[nominal]"] + [f"{k} = {_toml_float(nominal[k])}" for k in sorted(nominal, key=order.get)]
-    toml = "\n".join(lines) + "\n"
+            fields.append(f"{k} = {_toml_expr(e, q_symbol(j))}")
+        return fields
 
-    # ---- validate with the robot-file parser; report its findings against the .par lines
-    try:
-        parse_robot_text(toml, file=file)
-    except RobotFileError as err:
-        mapped = []
-        for p in err.problems:
-            mm = re.fullmatch(r"frame (\d+)", p.where)
-            if mm and p.field in geom:
-                j = int(mm.group(1))
-                st = geom[p.field]
-                line = st.items[j - 1].line if j <= len(st.items) else st.line
-                mapped.append(Problem(file, f"line {line}, frame {j}", st.key, p.message))
-            elif p.where == "[nominal]" and (mk := re.fullmatch(r"([A-Z]+)\d+", p.field)) and mk.group(1) in dyn:
-                kind = mk.group(1)
-                mapped.append(Problem(file, f"line {dyn[kind].line}", kind, p.message))
-            else:
-                mapped.append(Problem(file, p.where, p.field, p.message))
-        raise RobotFileError(mapped) from None
-    return toml
+    def validate(self, toml: str) -> None:
+        """The robot-file parser's findings on the TOML text, reported against the ``.par`` lines."""
+        try:
+            parse_robot_text(toml, file=self.file)
+        except RobotFileError as err:
+            raise RobotFileError([self._par_problem(p) for p in err.problems]) from None
+
+    def _par_problem(self, p: Problem) -> Problem:
+        mm = re.fullmatch(r"frame (\d+)", p.where)
+        if mm and p.field in self.geom:
+            j = int(mm.group(1))
+            st = self.geom[p.field]
+            line = st.items[j - 1].line if j <= len(st.items) else st.line
+            return Problem(self.file, f"line {line}, frame {j}", st.key, p.message)
+        if p.where == "[nominal]" and (mk := re.fullmatch(r"([A-Z]+)\d+", p.field)) and mk.group(1) in self.dyn:
+            kind = mk.group(1)
+            return Problem(self.file, f"line {self.dyn[kind].line}", kind, p.message)
+        return Problem(self.file, p.where, p.field, p.message)
 
 
 def _spelled(geom: dict[str, _Statement], k: str) -> str:

@@ -9,24 +9,39 @@ import hashlib
 import math
 import os
 import re
+import sys
 import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import sympy as sp
 
-try:
+if sys.version_info >= (3, 11):
     import tomllib
-except ModuleNotFoundError:  # pragma: no cover - python < 3.11
-    import tomli as tomllib  # type: ignore
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 from ..errors import Problem, RobotFileError, RobotFileWarning
-from ..loader import robots_dir
 from ..params import DRIVE_KINDS, INERTIAL_KINDS
+from ..paths import robots_dir
 from .expr import ExprError, parse_expression
 from .inertia import check_physical_consistency
 from .loops import check_passive, parse_couplings, parse_loops
-from .model import FIXED, PRISMATIC, REVOLUTE, Coupling, DriveChain, JointLimits, MdhRow, RobotDescription, q_symbol
+from .model import (
+    FIXED,
+    PRISMATIC,
+    REVOLUTE,
+    Coupling,
+    DriveChain,
+    JointLimits,
+    LoopClosure,
+    MdhRow,
+    RobotDescription,
+    q_symbol,
+)
 
 TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits",
             "loops", "loop_reference"}
@@ -78,250 +93,96 @@ def _is_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
+class _Problems:
+    """The problems found in one robot file, all reported at once in a :class:`RobotFileError`."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+        self.found: list[Problem] = []
+
+    def bad(self, where: str, fld: str, msg: str) -> None:
+        self.found.append(Problem(self.file, where, fld, msg))
+
+    def at(self, where: str, fld: str) -> bool:
+        return any(p.where == where and p.field == fld for p in self.found)
+
+
+@dataclass
+class _Values:
+    """The ``[values]`` table: the valid entries, the names already reported, ``all_reported`` when the
+    table itself is (its symbols are not reported again one by one)."""
+
+    raw: dict
+    values: dict[str, float]
+    reported: set[str]
+    all_reported: bool
+
+
+@dataclass
+class _Frames:
+    """The ``[[frames]]`` entries read: the rows, where each symbol is first used, the frames whose sigma is
+    missing or bad (the checks that depend on it are skipped)."""
+
+    entries: list
+    rows: list[MdhRow]
+    used_symbols: dict[str, str]
+    bad_sigma: set[int]
+
+
 def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     """Parse robot-file text; ``file`` is used in messages only."""
-    probs: list[Problem] = []
-
-    def bad(where: str, fld: str, msg: str) -> None:
-        probs.append(Problem(file, where, fld, msg))
-
-    def probs_at(where: str, fld: str) -> bool:
-        return any(p.where == where and p.field == fld for p in probs)
-
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"at line (\d+), column (\d+)", str(exc))
         where = f"line {m.group(1)}, column {m.group(2)}" if m else ""
         raise RobotFileError([Problem(file, where, "", f"malformed TOML: {exc}")]) from None
-
+    probs = _Problems(file)
+    bad = probs.bad
     for k in sorted(set(doc) - TOP_KEYS):
         bad("top level", k, f"unknown field (allowed: {', '.join(sorted(TOP_KEYS))})")
-
-    name = doc.get("name", Path(file).stem if file != "<string>" else "")
-    if not isinstance(name, str) or not _NAME_RE.match(name or ""):
-        bad("top level", "name", f"robot name must be an identifier, got {name!r}")
-        name = "robot"
-    source = doc.get("source", "")
-    if not isinstance(source, str):
-        bad("top level", "source", "must be a string")
-        source = ""
-
-    gravity = doc.get("gravity", [0.0, 0.0, -9.81])
-    if not (isinstance(gravity, list) and len(gravity) == 3 and all(_is_number(g) for g in gravity)):
-        bad("top level", "gravity", f"must be a list of 3 numbers, got {gravity!r}")
-        gravity = [0.0, 0.0, -9.81]
-
-    default_drive = doc.get("drive", list(DRIVE_KINDS))
-    default_drive = _check_drive(default_drive, "top level", bad)
+    name, source, gravity = _read_header(doc, file, bad)
+    default_drive = _check_drive(doc.get("drive", list(DRIVE_KINDS)), "top level", bad)
     if default_drive is None:  # reported; all four kinds, so that [nominal] drive terms are not reported again
         default_drive = DRIVE_KINDS
-
-    # geometric constants
-    values_raw = doc.get("values", {})
-    values: dict[str, float] = {}
-    reported_values: set[str] = set()  # symbols whose [values] entry is already reported
-    values_reported = False
-    if not isinstance(values_raw, dict):
-        bad("top level", "values", "must be a table of NAME = number")
-        values_raw, values_reported = {}, True  # its symbols are not reported again one by one
-    else:
-        for k, v in values_raw.items():
-            if k in _RESERVED or not _NAME_RE.match(k):
-                bad("[values]", k, "reserved or invalid symbol name")
-                reported_values.add(k)
-            elif not _is_number(v):
-                bad("[values]", k, f"value must be a finite number, got {v!r}")
-                reported_values.add(k)
-            else:
-                values[k] = float(v)
-
-    frames = doc.get("frames")
-    rows: list[MdhRow] = []
-    used_symbols: dict[str, str] = {}
-    # Fields are checked in dependency order (sigma before mu, drive and the joint variable); a
-    # field already reported stops the checks that depend on it, so one bad field gives one line.
-    bad_sigma: set[int] = set()
-    if not isinstance(frames, list) or not frames:
-        bad("top level", "frames", "missing: the MDH table must be given as [[frames]] entries")
-        frames = []
-    for idx, fr in enumerate(frames, start=1):
-        where = f"frame {fr.get('j', idx) if isinstance(fr, dict) else idx}"
-        if not isinstance(fr, dict):
-            bad(where, "", "each [[frames]] entry must be a table")
-            continue
-        for k in sorted(set(fr) - set(FRAME_REQUIRED) - set(FRAME_OPTIONAL)):
-            bad(where, k, f"unknown field (allowed: {', '.join(FRAME_REQUIRED + FRAME_OPTIONAL)})")
-        missing = [k for k in FRAME_REQUIRED if k not in fr]
-        for k in missing:
-            bad(where, k, "missing field")
-        j = fr.get("j")
-        if not (isinstance(j, int) and not isinstance(j, bool)) or j != idx:
-            bad(where, "j", f"frames must be numbered 1, 2, ... in order; entry {idx} has j = {j!r}")
-            j = idx
-        sigma = fr.get("sigma", 0)
-        sigma_ok = "sigma" in fr and sigma in (0, 1, 2) and not isinstance(sigma, bool)
-        if "sigma" in fr and not sigma_ok:
-            bad(where, "sigma", f"must be 0 (revolute), 1 (prismatic) or 2 (fixed), got {sigma!r}")
-        if not sigma_ok:
-            sigma = 0
-            bad_sigma.add(j)
-        ant = fr.get("ant", j - 1)
-        if not (isinstance(ant, int) and not isinstance(ant, bool)):
-            bad(where, "ant", f"must be an integer frame number, got {ant!r}")
-            ant = j - 1
-        elif ant < 0 or ant >= j:
-            what = "points forward (ant must be < j)" if ant >= j else "is out of range (ant >= 0)"
-            bad(where, "ant", f"antecedent {ant} {what}")
-            ant = j - 1
-        mu = fr.get("mu", 0 if sigma == FIXED or "mimic" in fr else 1)  # a coupled joint is passive
-        if mu not in (0, 1) or isinstance(mu, bool):
-            bad(where, "mu", f"must be 0 (passive) or 1 (actuated), got {mu!r}")
-            mu = 1
-        if sigma == FIXED and mu == 1 and "mu" in fr:
-            bad(where, "mu", "a fixed frame (sigma = 2) cannot be actuated")
-        drive = fr.get("drive", None)
-        if drive is None:
-            drive = tuple(default_drive) if (sigma != FIXED and mu == 1) else ()
-        else:
-            checked = _check_drive(drive, where, bad)
-            drive = checked if checked is not None else (tuple(default_drive) if sigma != FIXED else ())
-            if sigma == FIXED and checked:
-                bad(where, "drive", "a fixed frame has no drive chain")
-        q = q_symbol(j)
-        syms = {k: sp.Symbol(k, real=True) for k in values_raw if isinstance(k, str)} if isinstance(values_raw, dict) else {}
-        syms["q"] = q
-        ex: dict[str, sp.Expr] = {}
-        for k in ("gamma", "b", "alpha", "d", "theta", "r"):
-            raw = fr.get(k, 0)
-            try:
-                e = parse_expression(raw, syms)
-            except ExprError as exc:
-                if not (values_reported and str(exc).startswith("unknown name")):  # [values] already reported
-                    bad(where, k, str(exc))
-                e = sp.Integer(0)
-            for s in e.free_symbols:
-                if s != q:
-                    used_symbols.setdefault(s.name, where)
-            ex[k] = e
-        # joint variable placement (depends on sigma: not checked when sigma is missing or bad)
-        var_field = {REVOLUTE: "theta", PRISMATIC: "r"}.get(sigma) if sigma_ok else None
-        for k, e in ex.items() if sigma_ok else ():
-            if q in e.free_symbols and k != var_field:
-                if sigma == FIXED:
-                    bad(where, k, "a fixed frame (sigma = 2) has no joint variable q")
-                else:
-                    bad(where, k, f"joint variable q may only appear in {var_field} for sigma = {sigma}")
-        if var_field and var_field not in missing and not probs_at(where, var_field):
-            e = ex[var_field]
-            if q not in e.free_symbols:
-                bad(where, var_field, f"must contain the joint variable q (e.g. \"q\" or \"q - pi/2\"), got {fr.get(var_field)!r}")
-            elif sp.diff(e, q) not in (1, -1) or sp.diff(e, q, 2) != 0:
-                bad(where, var_field, f"must be q + constant (or -q + constant), got {fr.get(var_field)!r}")
-        rows.append(MdhRow(j=j, ant=ant, sigma=sigma, mu=mu, drive=tuple(drive), **ex))
-
-    for s, where in sorted(used_symbols.items()):
-        if s not in values and s not in reported_values and not values_reported:
+    vals = _read_values(doc, bad)
+    fr = _read_frames(doc, default_drive, vals, probs)
+    rows, bad_sigma = fr.rows, fr.bad_sigma
+    for s, where in sorted(fr.used_symbols.items()):
+        if s not in vals.values and s not in vals.reported and not vals.all_reported:
             bad(where, "values", f"symbol {s!r} has no numeric value (add it under [values])")
-
-    # every geometric field must be finite with the [values] given (d = "1/L3" with L3 = 0 is not)
-    if not probs:
-        vsubs = {sp.Symbol(k, real=True): sp.Rational(v) for k, v in values.items()}
-        for fr, r in zip(frames, rows):
-            for k in ("gamma", "b", "alpha", "d", "theta", "r"):
-                val = getattr(r, k).xreplace({**vsubs, q_symbol(r.j): sp.Integer(0)})
-                if val.is_finite is not True:
-                    what = "infinite (division by zero)" if val.has(sp.zoo, sp.oo) else "undefined"
-                    bad(f"frame {r.j}", k, f"{fr.get(k)!r} is {what} with the [values] given")
-
-    # moving frames first, fixed ones after
-    seen_fixed = None
-    for r in rows:
-        if r.j in bad_sigma:
-            continue
-        if r.sigma == FIXED:
-            seen_fixed = seen_fixed or r.j
-        elif seen_fixed is not None:
-            bad(f"frame {r.j}", "sigma", f"moving frames must come before fixed ones (frame {seen_fixed} is fixed)")
-    if rows and not bad_sigma and not any(r.is_moving for r in rows):
-        bad("top level", "frames", "the robot has no moving joint")
-
-    payload = doc.get("payload")
-    payload_given = payload  # kept to avoid a cascade of [nominal] errors when the payload itself is bad
-    if payload is not None:
-        if not (isinstance(payload, int) and not isinstance(payload, bool)):
-            bad("top level", "payload", f"must be the frame number of the payload, got {payload!r}")
-            payload = None
-        elif not (1 <= payload <= len(rows)):
-            bad("top level", "payload", f"payload frame {payload} does not exist (frames 1..{len(rows)})")
-            payload = None
-        elif payload in bad_sigma:
-            payload = None  # its sigma is already reported
-        elif rows[payload - 1].sigma != FIXED:
-            bad(f"frame {payload}", "sigma", "the payload frame must be fixed (sigma = 2)")
-            payload = None
-
-    nominal = None
-    if "nominal" in doc:
-        raw = doc["nominal"]
-        nominal = {}
-        if not isinstance(raw, dict):
-            bad("[nominal]", "", "must be a table of PARAM = number")
-        else:
-            allowed = set()
-            for r in rows:
-                if r.is_moving:
-                    allowed |= {f"{k}{r.j}" for k in INERTIAL_KINDS}
-                    allowed |= {f"{k}{r.j}" for k in r.drive}
-            if payload is not None:
-                allowed |= {f"{k}{payload}" for k in INERTIAL_KINDS}
-            rejected_payload = set()
-            if payload is None and payload_given is not None:
-                # the payload is already reported: its nominal values (on the frame it names, or on any
-                # fixed frame when it names none) are not reported again
-                frames_ = {payload_given} if isinstance(payload_given, int) and not isinstance(payload_given, bool) \
-                    else {r.j for r in rows if r.sigma == FIXED or r.j in bad_sigma}
-                rejected_payload = {f"{k}{f_}" for k in INERTIAL_KINDS for f_ in frames_}
-            for k, v in raw.items():
-                if k in rejected_payload:
-                    continue  # the payload entry is already reported
-                if k not in allowed:
-                    bad("[nominal]", k, "not a standard parameter of this robot")
-                elif not _is_number(v):
-                    bad("[nominal]", k, f"value must be a number, got {v!r}")
-                elif v < 0 and k.rstrip("0123456789") in _NON_NEGATIVE:
-                    bad("[nominal]", k, f"{_NON_NEGATIVE[k.rstrip('0123456789')]} cannot be negative, got {v!r}")
-                else:
-                    nominal[k] = float(v)
-            _warn_inconsistent_inertia(nominal, rows, payload, file)
+    if not probs.found:
+        _check_finite_geometry(fr.entries, rows, vals.values, bad)
+    _check_frame_order(rows, bad_sigma, bad)
+    payload = _read_payload(doc.get("payload"), rows, bad_sigma, bad)
+    nominal = _read_nominal(doc, rows, payload, bad_sigma, probs) if "nominal" in doc else None
 
     # per-joint tables of a closed-loop robot are per actuated joint (the passive ones are not logged)
-    mimic_frames = frozenset(i for i, fr in enumerate(frames, start=1) if isinstance(fr, dict) and "mimic" in fr)
+    mimic_frames = frozenset(i for i, f in enumerate(fr.entries, start=1) if isinstance(f, dict) and "mimic" in f)
     coupled = bool(mimic_frames)
     model_rows = [r for r in rows if not (r.is_moving and r.mu == 0)] if ("loops" in doc or coupled) else rows
     passive_rows = [r for r in rows if r.is_moving and r.mu == 0] if ("loops" in doc or coupled) else []
     chain = None
     if "drive_chain" in doc:
         chain = _parse_chain(doc["drive_chain"], sum(r.is_moving for r in model_rows), bad)
-
     limits = _parse_limits(doc["limits"], model_rows, bad, passive_rows) if "limits" in doc else None
-
-    loops, loop_reference = (), {}
+    loops: tuple[LoopClosure, ...] = ()
+    loop_reference: dict[str, float] = {}
     if ("loops" in doc or "loop_reference" in doc) and not bad_sigma:
-        loops, loop_reference = parse_loops(doc.get("loops"), doc.get("loop_reference"), rows, values, bad)
+        loops, loop_reference = parse_loops(doc.get("loops"), doc.get("loop_reference"), rows, vals.values, bad)
     couplings: tuple[Coupling, ...] = ()
     if coupled and not bad_sigma:
-        couplings = parse_couplings(frames, rows, bad)
+        couplings = parse_couplings(fr.entries, rows, bad)
     if not bad_sigma:
         check_passive(rows, loops, couplings, bad, mimic_frames)
 
-    if probs:
-        raise RobotFileError(probs)
+    if probs.found:
+        raise RobotFileError(probs.found)
     return RobotDescription(
         name=name,
         rows=tuple(rows),
-        gravity=tuple(float(g) for g in gravity),
-        values=values,
+        gravity=gravity,
+        values=vals.values,
         payload=payload,
         nominal=nominal,
         source=source,
@@ -333,6 +194,244 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         loop_reference=loop_reference,
         couplings=couplings,
     )
+
+
+def _read_header(doc: dict, file: str, bad: Callable[[str, str, str], None]
+                 ) -> tuple[str, str, tuple[float, float, float]]:
+    """``name`` (default: the file's stem), ``source`` and ``gravity`` of the top level."""
+    name = doc.get("name", Path(file).stem if file != "<string>" else "")
+    if not isinstance(name, str) or not _NAME_RE.match(name or ""):
+        bad("top level", "name", f"robot name must be an identifier, got {name!r}")
+        name = "robot"
+    source = doc.get("source", "")
+    if not isinstance(source, str):
+        bad("top level", "source", "must be a string")
+        source = ""
+    gravity = doc.get("gravity", [0.0, 0.0, -9.81])
+    if not (isinstance(gravity, list) and len(gravity) == 3 and all(_is_number(g) for g in gravity)):
+        bad("top level", "gravity", f"must be a list of 3 numbers, got {gravity!r}")
+        gravity = [0.0, 0.0, -9.81]
+    return name, source, (float(gravity[0]), float(gravity[1]), float(gravity[2]))
+
+
+def _read_values(doc: dict, bad: Callable[[str, str, str], None]) -> _Values:
+    """The geometric constants of ``[values]``."""
+    raw = doc.get("values", {})
+    values: dict[str, float] = {}
+    reported: set[str] = set()
+    if not isinstance(raw, dict):
+        bad("top level", "values", "must be a table of NAME = number")
+        return _Values({}, values, reported, True)
+    for k, v in raw.items():
+        if k in _RESERVED or not _NAME_RE.match(k):
+            bad("[values]", k, "reserved or invalid symbol name")
+            reported.add(k)
+        elif not _is_number(v):
+            bad("[values]", k, f"value must be a finite number, got {v!r}")
+            reported.add(k)
+        else:
+            values[k] = float(v)
+    return _Values(raw, values, reported, False)
+
+
+def _read_frames(doc: dict, default_drive: tuple[str, ...], vals: _Values, probs: _Problems) -> _Frames:
+    """The MDH table. Fields are checked in dependency order (sigma before mu, drive and the joint
+    variable); a field already reported stops the checks that depend on it, so one bad field gives one
+    line."""
+    frames = doc.get("frames")
+    out = _Frames([], [], {}, set())
+    if not isinstance(frames, list) or not frames:
+        probs.bad("top level", "frames", "missing: the MDH table must be given as [[frames]] entries")
+        return out
+    out.entries = frames
+    for idx, fr in enumerate(frames, start=1):
+        where = f"frame {fr.get('j', idx) if isinstance(fr, dict) else idx}"
+        if not isinstance(fr, dict):
+            probs.bad(where, "", "each [[frames]] entry must be a table")
+            continue
+        out.rows.append(_read_frame(idx, fr, where, default_drive, vals, out, probs))
+    return out
+
+
+def _read_frame(idx: int, fr: dict, where: str, default_drive: tuple[str, ...], vals: _Values, out: _Frames,
+                probs: _Problems) -> MdhRow:
+    """One ``[[frames]]`` entry (``out``: the symbols used and the frames whose sigma is bad, updated)."""
+    bad = probs.bad
+    for k in sorted(set(fr) - set(FRAME_REQUIRED) - set(FRAME_OPTIONAL)):
+        bad(where, k, f"unknown field (allowed: {', '.join(FRAME_REQUIRED + FRAME_OPTIONAL)})")
+    missing = [k for k in FRAME_REQUIRED if k not in fr]
+    for k in missing:
+        bad(where, k, "missing field")
+    j = fr.get("j")
+    if not (isinstance(j, int) and not isinstance(j, bool)) or j != idx:
+        bad(where, "j", f"frames must be numbered 1, 2, ... in order; entry {idx} has j = {j!r}")
+        j = idx
+    sigma = fr.get("sigma", 0)
+    sigma_ok = "sigma" in fr and sigma in (0, 1, 2) and not isinstance(sigma, bool)
+    if "sigma" in fr and not sigma_ok:
+        bad(where, "sigma", f"must be 0 (revolute), 1 (prismatic) or 2 (fixed), got {sigma!r}")
+    if not sigma_ok:
+        sigma = 0
+        out.bad_sigma.add(j)
+    ant, mu, drive = _frame_joint(fr, where, j, sigma, default_drive, bad)
+    q = q_symbol(j)
+    ex = _frame_geometry(fr, where, q, vals, out.used_symbols, bad)
+    if sigma_ok:
+        _check_joint_variable(fr, where, sigma, q, ex, missing, probs)
+    return MdhRow(j=j, ant=ant, sigma=sigma, mu=mu, drive=tuple(drive), **ex)
+
+
+def _frame_joint(fr: dict, where: str, j: int, sigma: int, default_drive: tuple[str, ...],
+                 bad: Callable[[str, str, str], None]) -> tuple[int, int, tuple[str, ...]]:
+    """``ant``, ``mu`` and the drive terms of frame ``j``."""
+    ant = fr.get("ant", j - 1)
+    if not (isinstance(ant, int) and not isinstance(ant, bool)):
+        bad(where, "ant", f"must be an integer frame number, got {ant!r}")
+        ant = j - 1
+    elif ant < 0 or ant >= j:
+        what = "points forward (ant must be < j)" if ant >= j else "is out of range (ant >= 0)"
+        bad(where, "ant", f"antecedent {ant} {what}")
+        ant = j - 1
+    mu = fr.get("mu", 0 if sigma == FIXED or "mimic" in fr else 1)  # a coupled joint is passive
+    if mu not in (0, 1) or isinstance(mu, bool):
+        bad(where, "mu", f"must be 0 (passive) or 1 (actuated), got {mu!r}")
+        mu = 1
+    if sigma == FIXED and mu == 1 and "mu" in fr:
+        bad(where, "mu", "a fixed frame (sigma = 2) cannot be actuated")
+    drive = fr.get("drive")
+    if drive is None:
+        drive = tuple(default_drive) if (sigma != FIXED and mu == 1) else ()
+    else:
+        checked = _check_drive(drive, where, bad)
+        drive = checked if checked is not None else (tuple(default_drive) if sigma != FIXED else ())
+        if sigma == FIXED and checked:
+            bad(where, "drive", "a fixed frame has no drive chain")
+    return ant, mu, drive
+
+
+def _frame_geometry(fr: dict, where: str, q: sp.Symbol, vals: _Values, used_symbols: dict[str, str],
+                    bad: Callable[[str, str, str], None]) -> dict[str, sp.Expr]:
+    """The six geometric expressions of a frame (0 for a reported one); the first frame using each
+    symbol is noted in ``used_symbols``."""
+    syms = {k: sp.Symbol(k, real=True) for k in vals.raw if isinstance(k, str)}
+    syms["q"] = q
+    ex: dict[str, sp.Expr] = {}
+    for k in ("gamma", "b", "alpha", "d", "theta", "r"):
+        raw = fr.get(k, 0)
+        try:
+            e = parse_expression(raw, syms)
+        except ExprError as exc:
+            if not (vals.all_reported and str(exc).startswith("unknown name")):  # [values] already reported
+                bad(where, k, str(exc))
+            e = sp.Integer(0)
+        for s in e.free_symbols:
+            if s != q:
+                used_symbols.setdefault(s.name, where)
+        ex[k] = e
+    return ex
+
+
+def _check_joint_variable(fr: dict, where: str, sigma: int, q: sp.Symbol, ex: dict[str, sp.Expr],
+                          missing: list[str], probs: _Problems) -> None:
+    """The joint variable ``q`` appears in theta (revolute) or r (prismatic) only, as ``±q + constant``."""
+    var_field = {REVOLUTE: "theta", PRISMATIC: "r"}.get(sigma)
+    for k, e in ex.items():
+        if q in e.free_symbols and k != var_field:
+            if sigma == FIXED:
+                probs.bad(where, k, "a fixed frame (sigma = 2) has no joint variable q")
+            else:
+                probs.bad(where, k, f"joint variable q may only appear in {var_field} for sigma = {sigma}")
+    if var_field and var_field not in missing and not probs.at(where, var_field):
+        e = ex[var_field]
+        if q not in e.free_symbols:
+            probs.bad(where, var_field, f"must contain the joint variable q (e.g. \"q\" or \"q - pi/2\"), "
+                                        f"got {fr.get(var_field)!r}")
+        elif sp.diff(e, q) not in (1, -1) or sp.diff(e, q, 2) != 0:
+            probs.bad(where, var_field, f"must be q + constant (or -q + constant), got {fr.get(var_field)!r}")
+
+
+def _check_finite_geometry(frames: list, rows: list[MdhRow], values: dict[str, float],
+                           bad: Callable[[str, str, str], None]) -> None:
+    """Every geometric field is finite with the ``[values]`` given (``d = "1/L3"`` with ``L3 = 0`` is not)."""
+    vsubs = {sp.Symbol(k, real=True): sp.Rational(v) for k, v in values.items()}
+    for fr, r in zip(frames, rows):
+        for k in ("gamma", "b", "alpha", "d", "theta", "r"):
+            val = getattr(r, k).xreplace({**vsubs, q_symbol(r.j): sp.Integer(0)})
+            if val.is_finite is not True:
+                what = "infinite (division by zero)" if val.has(sp.zoo, sp.oo) else "undefined"
+                bad(f"frame {r.j}", k, f"{fr.get(k)!r} is {what} with the [values] given")
+
+
+def _check_frame_order(rows: list[MdhRow], bad_sigma: set[int], bad: Callable[[str, str, str], None]) -> None:
+    """Moving frames first, fixed ones after; at least one moving joint."""
+    seen_fixed = None
+    for r in rows:
+        if r.j in bad_sigma:
+            continue
+        if r.sigma == FIXED:
+            seen_fixed = seen_fixed or r.j
+        elif seen_fixed is not None:
+            bad(f"frame {r.j}", "sigma", f"moving frames must come before fixed ones (frame {seen_fixed} is fixed)")
+    if rows and not bad_sigma and not any(r.is_moving for r in rows):
+        bad("top level", "frames", "the robot has no moving joint")
+
+
+def _read_payload(payload: object, rows: list[MdhRow], bad_sigma: set[int],
+                  bad: Callable[[str, str, str], None]) -> int | None:
+    """The payload frame (a fixed frame), None when absent or reported."""
+    if payload is None:
+        return None
+    if not (isinstance(payload, int) and not isinstance(payload, bool)):
+        bad("top level", "payload", f"must be the frame number of the payload, got {payload!r}")
+        return None
+    if not (1 <= payload <= len(rows)):
+        bad("top level", "payload", f"payload frame {payload} does not exist (frames 1..{len(rows)})")
+        return None
+    if payload in bad_sigma:
+        return None  # its sigma is already reported
+    if rows[payload - 1].sigma != FIXED:
+        bad(f"frame {payload}", "sigma", "the payload frame must be fixed (sigma = 2)")
+        return None
+    return payload
+
+
+def _read_nominal(doc: dict, rows: list[MdhRow], payload: int | None, bad_sigma: set[int],
+                  probs: _Problems) -> dict[str, float]:
+    """The ``[nominal]`` values of the standard parameters of the moving links, their drive terms and the
+    payload."""
+    raw = doc["nominal"]
+    nominal: dict[str, float] = {}
+    if not isinstance(raw, dict):
+        probs.bad("[nominal]", "", "must be a table of PARAM = number")
+        return nominal
+    allowed = set()
+    for r in rows:
+        if r.is_moving:
+            allowed |= {f"{k}{r.j}" for k in INERTIAL_KINDS}
+            allowed |= {f"{k}{r.j}" for k in r.drive}
+    if payload is not None:
+        allowed |= {f"{k}{payload}" for k in INERTIAL_KINDS}
+    rejected_payload = set()
+    payload_given = doc.get("payload")  # a bad payload is reported once, not again in [nominal]
+    if payload is None and payload_given is not None:
+        # the payload is already reported: its nominal values (on the frame it names, or on any
+        # fixed frame when it names none) are not reported again
+        frames_ = {payload_given} if isinstance(payload_given, int) and not isinstance(payload_given, bool) \
+            else {r.j for r in rows if r.sigma == FIXED or r.j in bad_sigma}
+        rejected_payload = {f"{k}{f_}" for k in INERTIAL_KINDS for f_ in frames_}
+    for k, v in raw.items():
+        if k in rejected_payload:
+            continue  # the payload entry is already reported
+        if k not in allowed:
+            probs.bad("[nominal]", k, "not a standard parameter of this robot")
+        elif not _is_number(v):
+            probs.bad("[nominal]", k, f"value must be a number, got {v!r}")
+        elif v < 0 and k.rstrip("0123456789") in _NON_NEGATIVE:
+            probs.bad("[nominal]", k, f"{_NON_NEGATIVE[k.rstrip('0123456789')]} cannot be negative, got {v!r}")
+        else:
+            nominal[k] = float(v)
+    _warn_inconsistent_inertia(nominal, rows, payload, probs.file)
+    return nominal
 
 
 _NON_NEGATIVE = {"M": "a mass", "IA": "a rotor inertia", "FV": "a viscous friction coefficient",
@@ -364,7 +463,7 @@ def _warn_inconsistent_inertia(nominal: dict, rows, payload, file: str) -> None:
             reasons = ["values too large to check"]
         if reasons:
             warnings.warn(f"{file}, [nominal], fields 'XX{j}'..'M{j}': the nominal values of link {j} are not "
-                          f"those of a rigid body: {'; '.join(reasons)}", RobotFileWarning, stacklevel=3)
+                          f"those of a rigid body: {'; '.join(reasons)}", RobotFileWarning, stacklevel=4)
 
 
 def _check_drive(drive, where, bad):
@@ -455,7 +554,7 @@ def _parse_limits(raw, rows, bad, passive=()) -> JointLimits | None:
         unit = "rad"
     moving = [r for r in rows if r.is_moving]
     n = len(moving)
-    out: dict[str, tuple[float, ...] | None] = {}
+    out: dict[str, Any] = {}  # JointLimits fields: a tuple per joint or None
     ok = True
     for key in JointLimits.FIELDS:
         v = raw.get(key)

@@ -359,8 +359,9 @@ def parse_urdf_text(text: str, file: str = "<string>", *, snap_angles: float = 0
         limit = None
         le = el.find("limit")
         if le is not None:
-            limit = tuple(rd.floats(le, k, 1, where, f"limit/{k}")[0] if le.get(k) is not None else None
-                          for k in ("lower", "upper", "velocity", "effort"))
+            lower, upper, velocity, effort = (rd.floats(le, k, 1, where, f"limit/{k}")[0] if le.get(k) is not None
+                                              else None for k in ("lower", "upper", "velocity", "effort"))
+            limit = (lower, upper, velocity, effort)
         joints[name] = UrdfJoint(name, typ, parent or "", child or "", rd.origin(el, where), axis, damping, friction,
                                  mimic=mimic, limit=limit, mimic_multiplier=float(mult if mult is not None else 1.0),
                                  mimic_offset=float(moff if moff is not None else 0.0))
@@ -470,6 +471,7 @@ def _select_chain(model: UrdfModel, base: str | None, tip: str | None, *,
     lk = base
     while lk != root:
         jt = model.parent_joint(lk)
+        assert jt is not None  # one root: every other link has a parent joint
         if jt.is_moving:
             raise RobotFileError([Problem(f, f"base link {base}", "base", f"the base is carried by moving joint {jt.name!r}; choose a base fixed to the root link {root!r}")])
         lk = jt.parent
@@ -549,7 +551,8 @@ def _couplings(model: UrdfModel, moving: list[UrdfJoint]) -> dict[str, tuple[str
             k, c = k * cur.mimic_multiplier, c + k * cur.mimic_offset
             if tgt is None:
                 err = f"mimics joint {cur.mimic!r}, which is not defined"
-            elif tgt.name in seen:
+                break
+            if tgt.name in seen:
                 err = "mimic joints form a cycle: " + " -> ".join(seen + [tgt.name])
             elif not tgt.is_moving:
                 err = f"mimics joint {tgt.name!r}, a {tgt.type} joint (no joint variable)"
@@ -620,7 +623,8 @@ def _kk_frames(points, axes, base_frame: str, tol: float, parents=None):
     n = len(points)
     parents = list(range(-1, n - 1)) if parents is None else list(parents)
     X, Z = np.array([1.0, 0, 0]), np.array([0, 0, 1.0])
-    zs, signs = [], []
+    zs: list[np.ndarray] = []
+    signs: list[int] = []
     first_root = parents.index(-1)
     for i, a in enumerate(axes):
         p = parents[i]
@@ -841,194 +845,45 @@ def import_urdf_text(
         raise ValueError(f"base_frame must be 'joint' or 'link', got {base_frame!r}")
     model = parse_urdf_text(text, file=file, snap_angles=snap_angles)
     f = model.file
-    if model.loops and tip is not None:
-        raise RobotFileError([Problem(f, "tip link", tip, "a URDF with <loop_joint> elements is imported whole "
-                                      "(the tree below the base and its loops): give no tip")])
-    base, selected = _select_chain(model, base, tip, allow_tree=True)
-    tree = selected is None or bool(model.loops)  # several moving chains below the base, or loops: the whole tree
-    chain = _select_tree(model, base) if tree else selected
-    tip = base if tree else chain[-1].child
-
-    # link poses (base-link frame, q = 0) of the whole subtree below the base
-    pose = {base: np.eye(4)}
-    stack = [base]
-    while stack:
-        lk = stack.pop()
-        for jt in model.child_joints(lk):
-            pose[jt.child] = pose[lk] @ jt.origin
-            stack.append(jt.child)
-
-    # gravity in the base-link frame
-    R_root_base = np.eye(3)
-    lk = base
-    while model.parent_joint(lk) is not None:
-        jt = model.parent_joint(lk)
-        R_root_base = jt.origin[:3, :3] @ R_root_base
-        lk = jt.parent
-    g_base = R_root_base.T @ np.asarray(gravity, float)
-
+    base, chain, tree, tip = _imported_part(model, base, tip)
+    pose = _link_poses(model, base)
+    g_base = _gravity_in_base(model, base, gravity)
     moving = [jt for jt in chain if jt.is_moving]
     n = len(moving)
     index = {jt.name: i for i, jt in enumerate(moving)}
     coupled = _couplings(model, moving)
     passive = _passive_joints(model, moving, actuated, coupled)
-    parents = []  # index of the moving joint carrying each moving joint (-1: the base); ant = parent + 1
-    for jt in moving:
-        up = model.parent_joint(jt.parent) if jt.parent != base else None
-        while up is not None and up.name not in index:
-            up = model.parent_joint(up.parent) if up.parent != base else None
-        parents.append(-1 if up is None else index[up.name])
+    parents = _moving_parents(model, base, moving, index)
     points = [pose[jt.child][:3, 3] for jt in moving]
     axes = [_unit(pose[jt.child][:3, :3] @ jt.axis) for jt in moving]
     frames, signs = _kk_frames(points, axes, base_frame, tol, parents)
 
-    # which moving link carries each link (None: ground); ignored moving side joints
-    owner: dict[str, int | None] = {base: None}
-    ignored: list[str] = []
-    on_chain = {jt.name for jt in chain}
-    for jt in chain:  # parents before children (a chain, or a tree depth first)
-        owner[jt.child] = index[jt.name] + 1 if jt.is_moving else owner[jt.parent]
-    for lk in [base] + [jt.child for jt in chain]:
-        stack = [jt for jt in model.child_joints(lk) if jt.name not in on_chain]
-        while stack:
-            jt = stack.pop()
-            if jt.type != "fixed":
-                ignored.append(jt.name)
-                continue
-            owner[jt.child] = owner[jt.parent]
-            stack.extend(model.child_joints(jt.child))
-    if ignored:
-        warnings.warn(
-            f"{f}: moving joints outside the chain {base} -> {tip} are left out of the model "
-            f"(with what they carry): {', '.join(sorted(ignored))}",
-            UserWarning,
-            stacklevel=2,
-        )
-
-    # standard parameters of each moving link, in its MDH frame at the origin
-    inertial = {i: np.zeros(10) for i in range(1, n + 1)}
-    J = {i: np.zeros((3, 3)) for i in range(1, n + 1)}
+    owner, ignored = _link_owners(model, base, chain, index)
     no_inertial = sorted(lk for lk, i in owner.items() if i is not None and model.links[lk].inertial is None)
     known = {i for lk, i in owner.items() if i is not None and model.links[lk].inertial is not None}
     unknown_links = [i for i in range(1, n + 1) if i not in known]
-    if no_inertial:
-        what = (f"MDH link(s) {', '.join(map(str, unknown_links))} get no inertial [nominal] values (unknown)"
-                if unknown_links else "they count as massless in the [nominal] values of their MDH link")
-        warnings.warn(f"{f}: link(s) {', '.join(no_inertial)} carried by a moving joint have no <inertial>: "
-                      f"their mass and inertia are unknown; {what}", UserWarning, stacklevel=2)
-    for lk, i in owner.items():
-        ine = model.links[lk].inertial
-        if i is None or ine is None:
-            continue
-        T = _inv(frames[i]) @ pose[lk] @ ine.origin
-        R, c, m = T[:3, :3], T[:3, 3], ine.mass
-        J[i] += parallel_axis(R @ ine.inertia @ R.T, m, c)
-        inertial[i][6:9] += m * c
-        inertial[i][9] += m
-    for i in range(1, n + 1):
-        Ji = J[i]
-        inertial[i][:6] = six_from_matrix(Ji)
+    _warn_left_out(f, f"{base} -> {tip}", ignored, no_inertial, unknown_links)
+    inertial = _standard_parameters(model, owner, pose, frames, n)
     loop_frames = _loop_frames(model, owner, pose, frames, tol)
 
-    # rows
-    rows = []
-    for i in range(1, n + 1):
-        ant = parents[i - 1] + 1
-        T = _inv(frames[ant]) @ frames[i]
-        params = _mdh_from_transform(T, tol)
-        err = np.abs(mdh_transform(*params) - T).max()
-        if err > 1e3 * tol:  # pragma: no cover - internal consistency check
-            raise ModelError(f"{f}: MDH decomposition of joint {moving[i - 1].name} is off by {err:.2e}")
-        rows.append((i, ant, 0 if moving[i - 1].type != "prismatic" else 1, params, moving[i - 1]))
+    rows = _mdh_rows(f, frames, parents, moving, tol)
     tip_fixed = not tree and chain[-1].type == "fixed"
     if tip_fixed:
         T = _inv(frames[n]) @ pose[tip]
         rows.append((n + 1, n, 2, _mdh_from_transform(T, tol), None))
 
-    # text
-    values: dict[str, float] = {}
+    out = _UrdfText(tol, symbols, index, coupled, passive)
+    for j, ant, sigma, params, jt in rows:
+        out.frame(j, ant, sigma, params, jt, signs[j - 1] if jt is not None else 1, tip)
+        if jt is not None:
+            out.nominal_values(j, jt, inertial[j] if j not in unknown_links else None)
+    for ell, (lj, cut, close) in enumerate(loop_frames, start=1):
+        out.loop(len(rows) + ell, len(loop_frames), lj, cut, close)
 
-    def length(x: float, sym: str) -> str:
-        x = _snap(x, tol)
-        if x == 0.0:
-            return "0"
-        if symbols:
-            values[sym] = x
-            return f'"{sym}"'
-        return _num(x)
-
-    robot_name = name if name is not None else _identifier(model.name or Path(file).stem or "robot")
-    g0 = frames[0][:3, :3].T @ g_base
-    frame_note = "frame 0 = frame 1 at q = 0" if base_frame == "joint" else f"frame 0 = link {base}"
-    what = f"tree below {base}" if tree else f"chain {base} -> {tip}"
-    source = (
-        f"URDF {Path(file).name} (robot '{model.name}'), {what}, {frame_note}; "
-        "imported by symoro_gen.description.urdf.import_urdf; nominal values from the URDF inertials "
-        "(FV, FS from <dynamics damping friction>)"
-    )
-    out_frames = []
-    nominal: list[tuple[str, float]] = []
-    for j, ant, sigma, (gamma, b, alpha, d, theta, r), jt in rows:
-        lines = ["[[frames]]  # " + (f"URDF joint {jt.name} ({jt.type}), link {jt.child}" if jt else f"fixed frame of the tip link {tip}"),
-                 f"j = {j}", f"ant = {ant}", f"sigma = {sigma}"]
-        if jt is not None and jt.name in coupled:
-            src, k_, c_ = coupled[jt.name]
-            off = _angle_str(c_, tol) if sigma == 0 else repr(_snap(c_, tol))
-            off = off if re.fullmatch(r"-?[0-9.eE+-]+", off) else f'"{off}"'  # a number, or "pi/2"
-            lines.append(f"mimic = {{ joint = {index[src] + 1}, multiplier = {_num(_snap(k_, tol))}, offset = {off} }}"
-                         f'  # URDF <mimic joint="{jt.mimic}">')
-        elif jt is not None and jt.name in passive:
-            lines.append("mu = 0")
-        g_s, b_s = _angle_str(gamma, tol), length(b, f"B{j}")
-        if g_s != "0" or b_s != "0":
-            lines += [f'gamma = "{g_s}"', f"b = {b_s}"]
-        lines += [f'alpha = "{_angle_str(alpha, tol)}"', f"d = {length(d, f'D{j}')}"]
-        if sigma == 0:
-            var = "q" if signs[j - 1] > 0 else "-q"
-            lines += [f'theta = "{_offset_expr(var, _angle_str(theta, tol))}"', f"r = {length(r, f'RL{j}')}"]
-        elif sigma == 1:
-            var = "q" if signs[j - 1] > 0 else "-q"
-            r_s = length(r, f"RL{j}")
-            r_s = r_s.strip('"') if r_s != "0" else "0"
-            lines += [f'theta = "{_angle_str(theta, tol)}"', f'r = "{_offset_expr(var, r_s)}"']
-        else:
-            lines += [f'theta = "{_angle_str(theta, tol)}"', f"r = {length(r, f'RL{j}')}"]
-        out_frames.append("\n".join(lines))
-        if jt is not None and j not in unknown_links:
-            nominal += [(f"{kind}{j}", v) for kind, v in zip(INERTIAL_KINDS, inertial[j])]
-        if jt is not None and jt.name not in passive:  # passive joints carry no drive terms
-            if jt.damping is not None:
-                nominal.append((f"FV{j}", jt.damping))
-            if jt.friction is not None:
-                nominal.append((f"FS{j}", jt.friction))
-
-    loop_parts = []
-    for l, (lj, (ant1, sig, p1), (ant2, p2)) in enumerate(loop_frames, start=1):
-        k = len(rows) + l  # the cut frame; its closing frame is k + (number of loops)
-        cut, close = [f"ant = {ant1}", f"sigma = {sig}"], [f"ant = {ant2}", "sigma = 2"]
-        for out_l, prm, kk, var in ((cut, p1, k, sig), (close, p2, k + len(loop_frames), None)):
-            gamma, b, alpha, d, theta, r = prm
-            g_s, b_s = _angle_str(gamma, tol), length(b, f"B{kk}")
-            if g_s != "0" or b_s != "0":
-                out_l += [f'gamma = "{g_s}"', f"b = {b_s}"]
-            out_l += [f'alpha = "{_angle_str(alpha, tol)}"', f"d = {length(d, f'D{kk}')}"]
-            r_s = length(r, f"RL{kk}")
-            if var == 0:
-                out_l += [f'theta = "{_offset_expr("q", _angle_str(theta, tol))}"', f"r = {r_s}"]
-            elif var == 1:
-                out_l += [f'theta = "{_angle_str(theta, tol)}"', f'r = "{_offset_expr("q", r_s.strip(chr(34)) if r_s != "0" else "0")}"']
-            else:
-                out_l += [f'theta = "{_angle_str(theta, tol)}"', f"r = {r_s}"]
-        loop_parts.append(f"[[loops]]  # URDF loop_joint {lj.name} ({lj.type}): cut frame {k} on link {lj.link1}, "
-                          f"closing frame {k + len(loop_frames)} on link {lj.link2}\ncut = {{ " + ", ".join(cut)
-                          + " }\nclose = { " + ", ".join(close) + " }")
-
-    head = [
-        f"# Imported from {file} by symoro_gen.description.urdf.import_urdf.",
-        f"# Chain {base} -> {tip}: " + ", ".join(f"{jt.name} ({jt.type})" for jt in chain) + "." if not tree else
-        f"# Tree below {base} (frames depth first, branches by ant): "
-        + ", ".join(f"{jt.name} ({jt.type})" for jt in chain) + ".",
-    ]
+    chain_text = ", ".join(f"{jt.name} ({jt.type})" for jt in chain)
+    head = [f"# Imported from {file} by symoro_gen.description.urdf.import_urdf.",
+            f"# Chain {base} -> {tip}: {chain_text}." if not tree else
+            f"# Tree below {base} (frames depth first, branches by ant): {chain_text}."]
     if ignored:
         head.append("# Left out (moving joints off the chain, and what they carry): " + ", ".join(sorted(ignored)) + ".")
     if no_inertial:
@@ -1045,27 +900,233 @@ def import_urdf_text(
     if tip_fixed:
         head.append(f"# Frame {n + 1} is the tip link {tip} (fixed); its inertia is included in link {n}. "
                     f"Set payload = {n + 1} to identify a payload there.")
-    head += [
-        f"name = {json.dumps(robot_name)}",
-        f"source = {json.dumps(source)}",
-        "gravity = [" + ", ".join(_num(_snap(x, tol)) for x in g0) + "]",
-    ]
-    parts = ["\n".join(head)]
-    if values:
-        parts.append("[values]\n" + "\n".join(f"{k} = {_num(v)}" for k, v in values.items()))
-    parts += out_frames
-    parts += loop_parts
-    nominal_lines = ["[nominal]", "# standard parameters in frame j at its origin [kg, kg m, kg m^2]; FV [N m s/rad], FS [N m]"]
-    nominal_lines += [f"{k} = {_num(_snap(v, 1e-15))}" for k, v in nominal]
-    parts.append("\n".join(nominal_lines))
-    limits_text = _limits_table([jt for jt in moving if jt.name not in passive],
-                                tuple(jt for jt in moving if jt.name in passive))
-    if limits_text:
-        parts.append(limits_text)
-    out = "\n\n".join(parts) + "\n"
-    parse_robot_text(out, file=f"{file} (imported)")  # the output is a valid robot file, or say why
-    return out
+    robot_name = name if name is not None else _identifier(model.name or Path(file).stem or "robot")
+    frame_note = "frame 0 = frame 1 at q = 0" if base_frame == "joint" else f"frame 0 = link {base}"
+    what = f"tree below {base}" if tree else f"chain {base} -> {tip}"
+    source = (f"URDF {Path(file).name} (robot '{model.name}'), {what}, {frame_note}; "
+              "imported by symoro_gen.description.urdf.import_urdf; nominal values from the URDF inertials "
+              "(FV, FS from <dynamics damping friction>)")
+    g0 = frames[0][:3, :3].T @ g_base
+    head += [f"name = {json.dumps(robot_name)}", f"source = {json.dumps(source)}",
+             "gravity = [" + ", ".join(_num(_snap(x, tol)) for x in g0) + "]"]
+    text_out = out.text(head, _limits_table([jt for jt in moving if jt.name not in passive],
+                                            tuple(jt for jt in moving if jt.name in passive)))
+    parse_robot_text(text_out, file=f"{file} (imported)")  # the output is a valid robot file, or say why
+    return text_out
 
+
+def _imported_part(model: UrdfModel, base: str | None, tip: str | None
+                   ) -> tuple[str, list[UrdfJoint], bool, str]:
+    """``(base, joints, tree, tip)``: the chain from base to tip, or the whole tree below the base (``tree``,
+    and then ``tip`` is the base) when it branches into several moving chains or has loops."""
+    if model.loops and tip is not None:
+        raise RobotFileError([Problem(model.file, "tip link", tip, "a URDF with <loop_joint> elements is imported "
+                                      "whole (the tree below the base and its loops): give no tip")])
+    base, selected = _select_chain(model, base, tip, allow_tree=True)
+    if selected is None or model.loops:  # several moving chains below the base, or loops: the whole tree
+        return base, _select_tree(model, base), True, base
+    return base, selected, False, selected[-1].child
+
+
+def _warn_left_out(f: str, chain: str, ignored: list[str], no_inertial: list[str], unknown_links: list[int]) -> None:
+    """Warn (at the caller of :func:`import_urdf_text`) about the moving side joints left out of the chain
+    and the carried links without ``<inertial>``."""
+    if ignored:
+        warnings.warn(
+            f"{f}: moving joints outside the chain {chain} are left out of the model "
+            f"(with what they carry): {', '.join(sorted(ignored))}",
+            UserWarning,
+            stacklevel=3,
+        )
+    if no_inertial:
+        what = (f"MDH link(s) {', '.join(map(str, unknown_links))} get no inertial [nominal] values (unknown)"
+                if unknown_links else "they count as massless in the [nominal] values of their MDH link")
+        warnings.warn(f"{f}: link(s) {', '.join(no_inertial)} carried by a moving joint have no <inertial>: "
+                      f"their mass and inertia are unknown; {what}", UserWarning, stacklevel=3)
+
+
+def _link_poses(model: UrdfModel, base: str) -> dict[str, np.ndarray]:
+    """Link poses (base-link frame, q = 0) of the whole subtree below the base."""
+    pose = {base: np.eye(4)}
+    stack = [base]
+    while stack:
+        lk = stack.pop()
+        for jt in model.child_joints(lk):
+            pose[jt.child] = pose[lk] @ jt.origin
+            stack.append(jt.child)
+    return pose
+
+
+def _gravity_in_base(model: UrdfModel, base: str, gravity) -> np.ndarray:
+    """The gravity vector (given in the root link's frame) in the base link's frame."""
+    R_root_base = np.eye(3)
+    lk = base
+    jt = model.parent_joint(lk)
+    while jt is not None:
+        R_root_base = jt.origin[:3, :3] @ R_root_base
+        lk = jt.parent
+        jt = model.parent_joint(lk)
+    return R_root_base.T @ np.asarray(gravity, float)
+
+
+def _moving_parents(model: UrdfModel, base: str, moving: list[UrdfJoint], index: dict[str, int]) -> list[int]:
+    """Index of the moving joint carrying each moving joint (-1: the base); ``ant = parent + 1``."""
+    parents = []
+    for jt in moving:
+        up = model.parent_joint(jt.parent) if jt.parent != base else None
+        while up is not None and up.name not in index:
+            up = model.parent_joint(up.parent) if up.parent != base else None
+        parents.append(-1 if up is None else index[up.name])
+    return parents
+
+
+def _link_owners(model: UrdfModel, base: str, chain: list[UrdfJoint], index: dict[str, int]
+                 ) -> tuple[dict[str, int | None], list[str]]:
+    """Which MDH link carries each URDF link (None: the ground), and the moving side joints left out
+    (with what they carry)."""
+    owner: dict[str, int | None] = {base: None}
+    ignored: list[str] = []
+    on_chain = {jt.name for jt in chain}
+    for jt in chain:  # parents before children (a chain, or a tree depth first)
+        owner[jt.child] = index[jt.name] + 1 if jt.is_moving else owner[jt.parent]
+    for lk in [base] + [jt.child for jt in chain]:
+        stack = [jt for jt in model.child_joints(lk) if jt.name not in on_chain]
+        while stack:
+            jt = stack.pop()
+            if jt.type != "fixed":
+                ignored.append(jt.name)
+                continue
+            owner[jt.child] = owner[jt.parent]
+            stack.extend(model.child_joints(jt.child))
+    return owner, ignored
+
+
+def _standard_parameters(model: UrdfModel, owner: dict[str, int | None], pose: dict[str, np.ndarray],
+                         frames: list, n: int) -> dict[int, np.ndarray]:
+    """The standard parameters of each moving link, in its MDH frame at the origin (the inertials of every
+    URDF link it carries summed)."""
+    inertial = {i: np.zeros(10) for i in range(1, n + 1)}
+    J = {i: np.zeros((3, 3)) for i in range(1, n + 1)}
+    for lk, i in owner.items():
+        ine = model.links[lk].inertial
+        if i is None or ine is None:
+            continue
+        T = _inv(frames[i]) @ pose[lk] @ ine.origin
+        R, c, m = T[:3, :3], T[:3, 3], ine.mass
+        J[i] += parallel_axis(R @ ine.inertia @ R.T, m, c)
+        inertial[i][6:9] += m * c
+        inertial[i][9] += m
+    for i in range(1, n + 1):
+        inertial[i][:6] = six_from_matrix(J[i])
+    return inertial
+
+
+def _mdh_rows(f: str, frames: list, parents: list[int], moving: list[UrdfJoint], tol: float) -> list[tuple]:
+    """``(j, ant, sigma, MDH parameters, URDF joint)`` of every moving joint."""
+    rows: list[tuple] = []
+    for i in range(1, len(moving) + 1):
+        ant = parents[i - 1] + 1
+        T = _inv(frames[ant]) @ frames[i]
+        params = _mdh_from_transform(T, tol)
+        err = np.abs(mdh_transform(*params) - T).max()
+        if err > 1e3 * tol:  # pragma: no cover - internal consistency check
+            raise ModelError(f"{f}: MDH decomposition of joint {moving[i - 1].name} is off by {err:.2e}")
+        rows.append((i, ant, 0 if moving[i - 1].type != "prismatic" else 1, params, moving[i - 1]))
+    return rows
+
+
+class _UrdfText:
+    """The robot-file text of a URDF import, written part by part: ``[[frames]]``, ``[[loops]]``, the
+    ``[nominal]`` values, and the lengths written as symbols (``[values]``, in order of appearance)."""
+
+    def __init__(self, tol: float, symbols: bool, index: dict[str, int],
+                 coupled: dict[str, tuple[str, float, float]], passive: set[str]) -> None:
+        self.tol, self.symbols, self.index, self.coupled, self.passive = tol, symbols, index, coupled, passive
+        self.values: dict[str, float] = {}
+        self.frames: list[str] = []
+        self.loops: list[str] = []
+        self.nominal: list[tuple[str, float]] = []
+
+    def length(self, x: float, sym: str) -> str:
+        x = _snap(x, self.tol)
+        if x == 0.0:
+            return "0"
+        if self.symbols:
+            self.values[sym] = x
+            return f'"{sym}"'
+        return _num(x)
+
+    def geometry(self, k: int, params: tuple[float, ...], var: int | None, sign: int = 1) -> list[str]:
+        """``gamma b alpha d theta r`` of frame ``k`` (gamma and b only when not zero); ``var``: 0 revolute
+        (``theta = ±q + ...``), 1 prismatic (``r = ±q + ...``), None fixed; ``sign``: that of q."""
+        tol = self.tol
+        gamma, b, alpha, d, theta, r = params
+        out = []
+        g_s, b_s = _angle_str(gamma, tol), self.length(b, f"B{k}")
+        if g_s != "0" or b_s != "0":
+            out += [f'gamma = "{g_s}"', f"b = {b_s}"]
+        out += [f'alpha = "{_angle_str(alpha, tol)}"', f"d = {self.length(d, f'D{k}')}"]
+        q = "q" if sign > 0 else "-q"
+        if var == 0:
+            out += [f'theta = "{_offset_expr(q, _angle_str(theta, tol))}"', f"r = {self.length(r, f'RL{k}')}"]
+        elif var == 1:
+            r_s = self.length(r, f"RL{k}")
+            r_s = r_s.strip('"') if r_s != "0" else "0"
+            out += [f'theta = "{_angle_str(theta, tol)}"', f'r = "{_offset_expr(q, r_s)}"']
+        else:
+            out += [f'theta = "{_angle_str(theta, tol)}"', f"r = {self.length(r, f'RL{k}')}"]
+        return out
+
+    def frame(self, j: int, ant: int, sigma: int, params: tuple[float, ...], jt: UrdfJoint | None, sign: int,
+              tip: str) -> None:
+        """The ``[[frames]]`` entry of frame ``j`` (``jt``: its URDF joint, None for the tip link's frame)."""
+        tol = self.tol
+        lines = ["[[frames]]  # " + (f"URDF joint {jt.name} ({jt.type}), link {jt.child}" if jt
+                                     else f"fixed frame of the tip link {tip}"),
+                 f"j = {j}", f"ant = {ant}", f"sigma = {sigma}"]
+        if jt is not None and jt.name in self.coupled:
+            src, k_, c_ = self.coupled[jt.name]
+            off = _angle_str(c_, tol) if sigma == 0 else repr(_snap(c_, tol))
+            off = off if re.fullmatch(r"-?[0-9.eE+-]+", off) else f'"{off}"'  # a number, or "pi/2"
+            lines.append(f"mimic = {{ joint = {self.index[src] + 1}, multiplier = {_num(_snap(k_, tol))}, "
+                         f'offset = {off} }}  # URDF <mimic joint="{jt.mimic}">')
+        elif jt is not None and jt.name in self.passive:
+            lines.append("mu = 0")
+        lines += self.geometry(j, params, sigma if sigma in (0, 1) else None, sign)
+        self.frames.append("\n".join(lines))
+
+    def nominal_values(self, j: int, jt: UrdfJoint, inertial: np.ndarray | None) -> None:
+        """The standard parameters of link ``j`` (None: unknown) and its drive terms (none when passive)."""
+        if inertial is not None:
+            self.nominal += [(f"{kind}{j}", v) for kind, v in zip(INERTIAL_KINDS, inertial)]
+        if jt.name not in self.passive:  # passive joints carry no drive terms
+            if jt.damping is not None:
+                self.nominal.append((f"FV{j}", jt.damping))
+            if jt.friction is not None:
+                self.nominal.append((f"FS{j}", jt.friction))
+
+    def loop(self, k: int, n_loops: int, lj: UrdfLoopJoint, cut_frame: tuple, close_frame: tuple) -> None:
+        """The ``[[loops]]`` entry of a ``<loop_joint>``: cut frame ``k``, closing frame ``k + n_loops``."""
+        (ant1, sig, p1), (ant2, p2) = cut_frame, close_frame
+        cut = [f"ant = {ant1}", f"sigma = {sig}"] + self.geometry(k, p1, sig)
+        close = [f"ant = {ant2}", "sigma = 2"] + self.geometry(k + n_loops, p2, None)
+        self.loops.append(f"[[loops]]  # URDF loop_joint {lj.name} ({lj.type}): cut frame {k} on link {lj.link1}, "
+                          f"closing frame {k + n_loops} on link {lj.link2}\ncut = {{ " + ", ".join(cut)
+                          + " }\nclose = { " + ", ".join(close) + " }")
+
+    def text(self, head: list[str], limits_text: str) -> str:
+        parts = ["\n".join(head)]
+        if self.values:
+            parts.append("[values]\n" + "\n".join(f"{k} = {_num(v)}" for k, v in self.values.items()))
+        parts += self.frames
+        parts += self.loops
+        nominal_lines = ["[nominal]", "# standard parameters in frame j at its origin [kg, kg m, kg m^2]; "
+                                      "FV [N m s/rad], FS [N m]"]
+        nominal_lines += [f"{k} = {_num(_snap(v, 1e-15))}" for k, v in self.nominal]
+        parts.append("\n".join(nominal_lines))
+        if limits_text:
+            parts.append(limits_text)
+        return "\n\n".join(parts) + "\n"
 
 
 def _passive_joints(model: UrdfModel, moving: list[UrdfJoint], actuated, coupled=None) -> set[str]:
@@ -1167,11 +1228,12 @@ def _limits_table(moving: list[UrdfJoint], passive: tuple[UrdfJoint, ...] = ()) 
     when every joint gives it; the robot file's q is the URDF joint value, so no sign change), and
     ``passive_q_min, passive_q_max`` from the ``passive`` joints' ``lower, upper`` (when every one gives
     both, ``lower < upper``)."""
-    cols = {}
+    cols: dict[str, list[float]] = {}
     for i, key in enumerate(("q_min", "q_max", "dq_max", "tau_max")):
-        vals = [jt.limit[i] if jt.limit is not None else None for jt in moving]
-        if vals and all(v is not None for v in vals):
-            if key in ("dq_max", "tau_max") and not all(v > 0 for v in vals):  # type: ignore[operator]
+        given = [jt.limit[i] if jt.limit is not None else None for jt in moving]
+        vals = [v for v in given if v is not None]
+        if given and len(vals) == len(given):
+            if key in ("dq_max", "tau_max") and not all(v > 0 for v in vals):
                 continue  # URDF writes 0 for "unknown"
             cols[key] = vals
     if ("q_min" in cols) != ("q_max" in cols) or ("q_min" in cols and not all(
@@ -1179,8 +1241,9 @@ def _limits_table(moving: list[UrdfJoint], passive: tuple[UrdfJoint, ...] = ()) 
         cols.pop("q_min", None)
         cols.pop("q_max", None)
     bounds = [jt.limit[:2] if jt.limit is not None else (None, None) for jt in passive]
-    if bounds and all(lo is not None and hi is not None and lo < hi for lo, hi in bounds):
-        cols["passive_q_min"], cols["passive_q_max"] = [lo for lo, _ in bounds], [hi for _, hi in bounds]
+    ranges = [(lo, hi) for lo, hi in bounds if lo is not None and hi is not None and lo < hi]
+    if bounds and len(ranges) == len(bounds):
+        cols["passive_q_min"], cols["passive_q_max"] = [lo for lo, _ in ranges], [hi for _, hi in ranges]
     if not cols:
         return ""
     lines = ["[limits]", "# from the URDF <limit lower upper velocity effort> of each joint [rad or m, /s, N m or N]"]

@@ -72,7 +72,8 @@ def physical_inertial(p10, *, min_mass: float = 1e-6, min_inertia: float = 1e-9)
     return m, c, V @ np.diag(w) @ V.T
 
 
-def _fmt(x: float) -> str:
+def xml_float(x: float) -> str:
+    """A number as written in the exported URDF and MJCF files (the shortest text that reads back exactly)."""
     return repr(float(x))
 
 
@@ -164,8 +165,8 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
     """
     vals = link_values(robot, chi_std, chi_payload, params=params)
     out = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>",
-           f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({_comment(robot.source[:120])}) -->"]
-    out += [f"  <!-- {_comment(n)} -->" for n in notes]
+           f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({xml_comment(robot.source[:120])}) -->"]
+    out += [f"  <!-- {xml_comment(n)} -->" for n in notes]
     out.append('  <link name="base_link"/>')
     for row in robot.rows:
         j = row.j
@@ -175,10 +176,10 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
             m, c, Ic = inert
             out += [
                 "    <inertial>",
-                f'      <origin xyz="{_fmt(c[0])} {_fmt(c[1])} {_fmt(c[2])}" rpy="0 0 0"/>',
-                f'      <mass value="{_fmt(m)}"/>',
-                f'      <inertia ixx="{_fmt(Ic[0, 0])}" ixy="{_fmt(Ic[0, 1])}" ixz="{_fmt(Ic[0, 2])}" '
-                f'iyy="{_fmt(Ic[1, 1])}" iyz="{_fmt(Ic[1, 2])}" izz="{_fmt(Ic[2, 2])}"/>',
+                f'      <origin xyz="{xml_float(c[0])} {xml_float(c[1])} {xml_float(c[2])}" rpy="0 0 0"/>',
+                f'      <mass value="{xml_float(m)}"/>',
+                f'      <inertia ixx="{xml_float(Ic[0, 0])}" ixy="{xml_float(Ic[0, 1])}" ixz="{xml_float(Ic[0, 2])}" '
+                f'iyy="{xml_float(Ic[1, 1])}" iyz="{xml_float(Ic[1, 2])}" izz="{xml_float(Ic[2, 2])}"/>',
                 "    </inertial>",
             ]
         out.append("  </link>")
@@ -189,26 +190,28 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
         out.append(f'  <joint name="joint{j}" type="{kind}">')
         out.append(f'    <parent link="{parent}"/>')
         out.append(f'    <child link="link{j}"/>')
-        out.append(f'    <origin xyz="{_fmt(T[0, 3])} {_fmt(T[1, 3])} {_fmt(T[2, 3])}" '
-                   f'rpy="{_fmt(rpy[0])} {_fmt(rpy[1])} {_fmt(rpy[2])}"/>')
+        out.append(f'    <origin xyz="{xml_float(T[0, 3])} {xml_float(T[1, 3])} {xml_float(T[2, 3])}" '
+                   f'rpy="{xml_float(rpy[0])} {xml_float(rpy[1])} {xml_float(rpy[2])}"/>')
         if row.sigma != FIXED:
             s = joint_sign(row)
             out.append(f'    <axis xyz="0 0 {s}"/>')
             lim = joint_limits(robot, j)
             dflt = math.pi if row.sigma == REVOLUTE else 10.0
-            out.append(f'    <limit lower="{_fmt(lim.get("q_min", -dflt))}" upper="{_fmt(lim.get("q_max", dflt))}" '
-                       f'effort="{_fmt(lim.get("tau_max", 1000.0))}" velocity="{_fmt(lim.get("dq_max", 100.0))}"/>')
+            out.append(f'    <limit lower="{xml_float(lim.get("q_min", -dflt))}" '
+                       f'upper="{xml_float(lim.get("q_max", dflt))}" '
+                       f'effort="{xml_float(lim.get("tau_max", 1000.0))}" '
+                       f'velocity="{xml_float(lim.get("dq_max", 100.0))}"/>')
             cp = robot.coupling(j)
             if cp is not None:  # a coupled joint: URDF's mimic, q_j = multiplier q_source + offset
-                out.append(f'    <mimic joint="joint{cp.source}" multiplier="{_fmt(float(cp.multiplier))}" '
-                           f'offset="{_fmt(float(cp.offset))}"/>')
+                out.append(f'    <mimic joint="joint{cp.source}" multiplier="{xml_float(float(cp.multiplier))}" '
+                           f'offset="{xml_float(float(cp.offset))}"/>')
             fv, fs = vals.get(f"FV{j}", 0.0), vals.get(f"FS{j}", 0.0)
             if fv or fs:
-                out.append(f'    <dynamics damping="{_fmt(max(fv, 0.0))}" friction="{_fmt(max(fs, 0.0))}"/>')
+                out.append(f'    <dynamics damping="{xml_float(max(fv, 0.0))}" friction="{xml_float(max(fs, 0.0))}"/>')
             ia, off = vals.get(f"IA{j}", 0.0), vals.get(f"OFF{j}", 0.0)
             if ia or off:
-                out.append(f"    <!-- armature (rotor inertia IA{j}, no URDF field): {_fmt(ia)} "
-                           f"{'kg m^2' if row.sigma == REVOLUTE else 'kg'}; torque offset OFF{j}: {_fmt(off)} -->")
+                out.append(f"    <!-- armature (rotor inertia IA{j}, no URDF field): {xml_float(ia)} "
+                           f"{'kg m^2' if row.sigma == REVOLUTE else 'kg'}; torque offset OFF{j}: {xml_float(off)} -->")
         out.append("  </joint>")
     out += _loop_elements(robot)
     out.append("</robot>")
@@ -233,8 +236,8 @@ def _loop_elements(robot: RobotDescription) -> list[str]:
             T = row_transform(row, subs, q=0.0)
             rpy = rpy_from_matrix(T[:3, :3])
             link = "base_link" if row.ant == 0 else f"link{row.ant}"
-            out.append(f'    <{tag} link="{link}" xyz="{_fmt(T[0, 3])} {_fmt(T[1, 3])} {_fmt(T[2, 3])}" '
-                       f'rpy="{_fmt(rpy[0])} {_fmt(rpy[1])} {_fmt(rpy[2])}"/>')
+            out.append(f'    <{tag} link="{link}" xyz="{xml_float(T[0, 3])} {xml_float(T[1, 3])} {xml_float(T[2, 3])}" '
+                       f'rpy="{xml_float(rpy[0])} {xml_float(rpy[1])} {xml_float(rpy[2])}"/>')
         out.append(f'    <axis xyz="0 0 {joint_sign(lp.cut)}"/>')
         out.append("  </loop_joint>")
     for row in robot.actuated:
@@ -247,6 +250,6 @@ def _loop_elements(robot: RobotDescription) -> list[str]:
     return out
 
 
-def _comment(text: str) -> str:
-    """Text safe inside an XML comment (no ``--``)."""
+def xml_comment(text: str) -> str:
+    """Text safe inside an XML comment (no ``--``), for the URDF and MJCF exports."""
     return str(text).replace("--", "- -")

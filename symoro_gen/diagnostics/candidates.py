@@ -46,10 +46,10 @@ import numpy as np
 from scipy.special import erf
 
 from ..model import IdentificationModel
-from .frame import Frame, model_torque
+from .frame import Experiment, Frame, model_torque
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
-           "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE"]
+           "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "clear_elasticity_cache"]
 
 KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity", "time_delay", "gain",
          "drift", "coupling", "rotor_inertia", "offset")
@@ -165,6 +165,7 @@ class Family:
     @property
     def label(self) -> str:
         if self.kind == "coupling":
+            assert self.joint is not None and self.partner is not None  # a coupling names both joints
             a, b = self.joint + 1, self.partner + 1
             return f"coupling{a}{'<' if self.variant == 'one-way' else '+'}{b}"
         return f"{self.kind}{'' if self.joint is None else self.joint + 1}"
@@ -207,89 +208,151 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
     if bad:
         raise ValueError(f"unknown candidate kind(s) {bad}; known: {', '.join(KINDS)}")
     n = frame.n_joints
-    v98, qmin, qmax = _stats(frame)
-    tau98 = np.quantile(np.abs(frame.samples()["tau"]), 0.98, axis=0)
-    dq_noise = np.max([ex.dq_noise for ex in frame.experiments], axis=0)
-    T = max(float(ex.t[-1]) for ex in frame.experiments)
-    T = T if T > 0 else 1.0
-    fdec = min(ex.settings.decimation_cutoff_hz for ex in frame.experiments)
+    st = _FrameScales.of(frame)
     out: list[Family] = []
     ks = set(kinds)
     for j in range(n):
-        if "stribeck" in ks and v98[j] > 0:
-            lo, hi, m = stribeck_grid
-            vlo = max(lo * v98[j], STRIBECK_NOISE_FLOOR * dq_noise[j])
-            grid = tuple(float(v) for v in np.geomspace(vlo, max(hi * v98[j], 2 * vlo), int(m)))
+        out += _friction_families(j, ks, st, stribeck_grid)
+        out += _position_families(j, ks, st, ripple_orders)
+        out += _model_torque_families(j, ks, st)
+        out += _signal_families(j, ks, st)
+    out += _all_joint_families(n, ks)
+    # columns that do not depend on the fit are the same in every round (the frames keep their q, dq,
+    # ddq, t arrays when the model torque is re-attached): build them once per frame
+    return [f if f.depends_on_fit else replace(f, build=_memo_build(f.build)) for f in out]
 
-            def b_str(fr, ctx, j=j, grid=grid):
-                X = fr.full_rate_columns(
-                    lambda ex: {j: np.stack([_sign(ex.dq[:, j]) * np.exp(-(ex.dq[:, j] / vs) ** 2) for vs in grid], 1)},
-                    len(grid))
-                return [X[:, i:i + 1] for i in range(len(grid))]
 
-            def b_str_at(fr, ctx, vs, j=j):
-                return fr.full_rate_columns(
-                    lambda ex: {j: _col(_sign(ex.dq[:, j]) * np.exp(-(ex.dq[:, j] / vs) ** 2))}, 1)
+@dataclass(frozen=True, eq=False)
+class _FrameScales:
+    """What the identification frame fixes for the search grids and scalings of the candidates: per joint
+    the 98th percentiles of |dq| and |tau|, the position range and the velocity noise; the longest
+    experiment's duration and the lowest decimation cut-off."""
 
-            out.append(Family("stribeck", j, ("Fst",), b_str, grid_label="vs", grid=grid, reveal="dq",
-                              build_at=b_str_at))
-        if "load_friction" in ks:
-            out.append(Family("load_friction", j, ("mu",), lambda fr, ctx, j=j: [fr.full_rate_columns(
-                lambda ex: {j: _col(np.abs(ex.tau_hat[:, j]) * _sign(ex.dq[:, j]))}, 1)], reveal="tau_hat",
-                depends_on_fit=True))
-        if "position_ripple" in ks:
-            span = qmax[j] - qmin[j]
-            orders = tuple(float(k) for k in ripple_orders
-                           if (not math.isfinite(fdec) or k * v98[j] / (2 * math.pi) <= 0.5 * fdec)
-                           and k * span >= math.pi)
-            if orders:
-                def b_rip(fr, ctx, j=j, orders=orders):
-                    X = fr.full_rate_columns(lambda ex: {j: np.concatenate(
-                        [np.stack([np.sin(k * ex.q[:, j]), np.cos(k * ex.q[:, j])], 1) for k in orders], 1)},
-                        2 * len(orders))
-                    return [X[:, 2 * i:2 * i + 2] for i in range(len(orders))]
+    v98: np.ndarray
+    qmin: np.ndarray
+    qmax: np.ndarray
+    tau98: np.ndarray
+    dq_noise: np.ndarray
+    T: float
+    fdec: float
 
-                out.append(Family("position_ripple", j, ("a_sin", "a_cos"), b_rip, grid_label="k", grid=orders,
-                                  reveal="q"))
-        if "spring" in ks and qmax[j] > qmin[j]:
-            c, h = 0.5 * (qmax[j] + qmin[j]), 0.5 * (qmax[j] - qmin[j])
+    @classmethod
+    def of(cls, frame: Frame) -> _FrameScales:
+        v98, qmin, qmax = _stats(frame)
+        tau98 = np.quantile(np.abs(frame.samples()["tau"]), 0.98, axis=0)
+        dq_noise = np.max([ex.dq_noise for ex in frame.experiments], axis=0)
+        T = max(float(ex.t[-1]) for ex in frame.experiments)
+        T = T if T > 0 else 1.0
+        fdec = min(ex.settings.decimation_cutoff_hz for ex in frame.experiments)
+        return cls(v98, qmin, qmax, tau98, dq_noise, T, fdec)
 
-            def b_spr(fr, ctx, j=j, c=c, h=h):
-                def f(ex):
-                    s = (ex.q[:, j] - c) / h
-                    return {j: np.stack([s, s * s, s * s * s], 1)}
-                return [fr.full_rate_columns(f, 3)]
 
-            out.append(Family("spring", j, ("k1", "k2", "k3"), b_spr, reveal="q",
-                              info=(("center", float(c)), ("half_range", float(h)))))
-        if "elasticity" in ks and tau98[j] > 0:
-            c_hi = ELASTIC_MAX_DEFLECTION / tau98[j]
-            mags = np.geomspace(c_hi / ELASTIC_RANGE, c_hi, ELASTIC_GRID)
-            grid = tuple(float(x) for x in np.concatenate([-mags[::-1], mags]))
+def _friction_families(j: int, ks: set[str], st: _FrameScales, stribeck_grid) -> list[Family]:
+    """Stribeck and load-dependent friction of joint j."""
+    v98, dq_noise = st.v98, st.dq_noise
+    out: list[Family] = []
+    if "stribeck" in ks and v98[j] > 0:
+        lo, hi, m = stribeck_grid
+        vlo = max(lo * v98[j], STRIBECK_NOISE_FLOOR * dq_noise[j])
+        grid = tuple(float(v) for v in np.geomspace(vlo, max(hi * v98[j], 2 * vlo), int(m)))
 
-            def b_el(fr, ctx, j=j, grid=grid):
-                return [_elasticity_smooth(fr, ctx, j, c) + _elasticity_coulomb(fr, ctx, j, c) for c in grid]
+        def b_str(fr, ctx, j=j, grid=grid):
+            X = fr.full_rate_columns(
+                lambda ex: {j: np.stack([_sign(ex.dq[:, j]) * np.exp(-(ex.dq[:, j] / vs) ** 2) for vs in grid], 1)},
+                len(grid))
+            return [X[:, i:i + 1] for i in range(len(grid))]
 
-            def b_el_at(fr, ctx, c, j=j):
-                return _elasticity_smooth(fr, ctx, j, c) + _elasticity_coulomb(fr, ctx, j, c)
+        def b_str_at(fr, ctx, vs, j=j):
+            return fr.full_rate_columns(
+                lambda ex: {j: _col(_sign(ex.dq[:, j]) * np.exp(-(ex.dq[:, j] / vs) ** 2))}, 1)
 
-            out.append(Family("elasticity", j, ("c",), b_el, grid_label="c_search", grid=grid, reveal="tau_hat",
-                              depends_on_fit=True, build_at=b_el_at, self_consistent=True))
-        if "time_delay" in ks:
-            out.append(Family("time_delay", j, ("d",), lambda fr, ctx, j=j: [fr.full_rate_columns(
-                lambda ex: {j: _col(-ex.dtau_hat[:, j])}, 1)], reveal="dtau_hat", depends_on_fit=True))
-        if "gain" in ks:
-            out.append(Family("gain", j, ("gamma",), lambda fr, ctx, j=j: [_gain_column(fr, ctx, j)],
-                              reveal="tau_hat", depends_on_fit=True))
-        if "drift" in ks:
-            out.append(Family("drift", j, ("a1", "a2"), lambda fr, ctx, j=j, T=T: [fr.full_rate_columns(
-                lambda ex: {j: np.stack([ex.t / T, (ex.t / T) ** 2], 1)}, 2)], reveal="t"))
-        if "rotor_inertia" in ks:
-            out.append(Family("rotor_inertia", j, ("IA",), lambda fr, ctx, j=j: [fr.full_rate_columns(
-                lambda ex: {j: _col(ex.ddq[:, j])}, 1)], reveal="ddq"))
-        if "offset" in ks:
-            out.append(Family("offset", j, ("OFF",), lambda fr, ctx, j=j: [fr.full_rate_columns(
-                lambda ex: {j: np.ones((ex.n_samples, 1))}, 1)], reveal="t"))
+        out.append(Family("stribeck", j, ("Fst",), b_str, grid_label="vs", grid=grid, reveal="dq",
+                          build_at=b_str_at))
+    if "load_friction" in ks:
+        out.append(Family("load_friction", j, ("mu",), lambda fr, ctx, j=j: [fr.full_rate_columns(
+            lambda ex: {j: _col(np.abs(ex.tau_hat[:, j]) * _sign(ex.dq[:, j]))}, 1)], reveal="tau_hat",
+            depends_on_fit=True))
+    return out
+
+
+def _position_families(j: int, ks: set[str], st: _FrameScales, ripple_orders: Sequence[int]
+                        ) -> list[Family]:
+    """Position ripple and spring of joint j."""
+    v98, qmin, qmax, fdec = st.v98, st.qmin, st.qmax, st.fdec
+    out: list[Family] = []
+    if "position_ripple" in ks:
+        span = qmax[j] - qmin[j]
+        orders = tuple(float(k) for k in ripple_orders
+                       if (not math.isfinite(fdec) or k * v98[j] / (2 * math.pi) <= 0.5 * fdec)
+                       and k * span >= math.pi)
+        if orders:
+            def b_rip(fr, ctx, j=j, orders=orders):
+                X = fr.full_rate_columns(lambda ex: {j: np.concatenate(
+                    [np.stack([np.sin(k * ex.q[:, j]), np.cos(k * ex.q[:, j])], 1) for k in orders], 1)},
+                    2 * len(orders))
+                return [X[:, 2 * i:2 * i + 2] for i in range(len(orders))]
+
+            out.append(Family("position_ripple", j, ("a_sin", "a_cos"), b_rip, grid_label="k", grid=orders,
+                              reveal="q"))
+    if "spring" in ks and qmax[j] > qmin[j]:
+        c, h = 0.5 * (qmax[j] + qmin[j]), 0.5 * (qmax[j] - qmin[j])
+
+        def b_spr(fr, ctx, j=j, c=c, h=h):
+            def f(ex):
+                s = (ex.q[:, j] - c) / h
+                return {j: np.stack([s, s * s, s * s * s], 1)}
+            return [fr.full_rate_columns(f, 3)]
+
+        out.append(Family("spring", j, ("k1", "k2", "k3"), b_spr, reveal="q",
+                          info=(("center", float(c)), ("half_range", float(h)))))
+    return out
+
+
+def _model_torque_families(j: int, ks: set[str], st: _FrameScales) -> list[Family]:
+    """Elasticity, time delay and gain of joint j (columns built on the model torque of the current fit)."""
+    tau98 = st.tau98
+    out: list[Family] = []
+    if "elasticity" in ks and tau98[j] > 0:
+        c_hi = ELASTIC_MAX_DEFLECTION / tau98[j]
+        mags = np.geomspace(c_hi / ELASTIC_RANGE, c_hi, ELASTIC_GRID)
+        grid = tuple(float(x) for x in np.concatenate([-mags[::-1], mags]))
+
+        def b_el(fr, ctx, j=j, grid=grid):
+            return [_elasticity_smooth(fr, ctx, j, c) + _elasticity_coulomb(fr, ctx, j, c) for c in grid]
+
+        def b_el_at(fr, ctx, c, j=j):
+            return _elasticity_smooth(fr, ctx, j, c) + _elasticity_coulomb(fr, ctx, j, c)
+
+        out.append(Family("elasticity", j, ("c",), b_el, grid_label="c_search", grid=grid, reveal="tau_hat",
+                          depends_on_fit=True, build_at=b_el_at, self_consistent=True))
+    if "time_delay" in ks:
+        out.append(Family("time_delay", j, ("d",), lambda fr, ctx, j=j: [fr.full_rate_columns(
+            lambda ex: {j: _col(-ex.dtau_hat[:, j])}, 1)], reveal="dtau_hat", depends_on_fit=True))
+    if "gain" in ks:
+        out.append(Family("gain", j, ("gamma",), lambda fr, ctx, j=j: [_gain_column(fr, ctx, j)],
+                          reveal="tau_hat", depends_on_fit=True))
+    return out
+
+
+def _signal_families(j: int, ks: set[str], st: _FrameScales) -> list[Family]:
+    """Drift in time, rotor inertia and offset of joint j."""
+    T = st.T
+    out: list[Family] = []
+    if "drift" in ks:
+        out.append(Family("drift", j, ("a1", "a2"), lambda fr, ctx, j=j, T=T: [fr.full_rate_columns(
+            lambda ex: {j: np.stack([ex.t / T, (ex.t / T) ** 2], 1)}, 2)], reveal="t"))
+    if "rotor_inertia" in ks:
+        out.append(Family("rotor_inertia", j, ("IA",), lambda fr, ctx, j=j: [fr.full_rate_columns(
+            lambda ex: {j: _col(ex.ddq[:, j])}, 1)], reveal="ddq"))
+    if "offset" in ks:
+        out.append(Family("offset", j, ("OFF",), lambda fr, ctx, j=j: [fr.full_rate_columns(
+            lambda ex: {j: np.ones((ex.n_samples, 1))}, 1)], reveal="t"))
+    return out
+
+
+def _all_joint_families(n: int, ks: set[str]) -> list[Family]:
+    """The effects of several joints: one time delay of every joint, couplings of joint pairs."""
+    out: list[Family] = []
     if "time_delay" in ks and n > 1:
         out.append(Family("time_delay", None, ("d",), lambda fr, ctx: [fr.full_rate_columns(
             lambda ex: {k: _col(-ex.dtau_hat[:, k]) for k in range(n)}, 1)], variant="all", reveal="dtau_hat",
@@ -313,9 +376,7 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
 
                     out.append(Family("coupling", j, ("IAm", "FVm", "FSm"), b_sh, partner=k, variant="shared",
                                       reveal="ddq", reveal_joint=k))
-    # columns that do not depend on the fit are the same in every round (the frames keep their q, dq,
-    # ddq, t arrays when the model torque is re-attached): build them once per frame
-    return [f if f.depends_on_fit else replace(f, build=_memo_build(f.build)) for f in out]
+    return out
 
 
 #: frames whose columns a memoised family keeps (identification, validation, and one more)
@@ -369,9 +430,15 @@ def nuisance_columns(frame: Frame, names: Sequence[str], dq_noise: np.ndarray) -
         s = float(dq_noise[j])
         if s <= 0 or not any(nm.startswith("FS") and nm[2:].rstrip("R") == str(j + 1) for nm in names):
             continue
-        cols.append(frame.full_rate_columns(
-            lambda ex, j=j, s=s: {j: _col(erf(ex.dq[:, j] / (math.sqrt(2.0) * s)) - _sign(ex.dq[:, j]))}, 1))
+        cols.append(frame.full_rate_columns(_smoothed_sign_gap(j, s), 1))
     return np.hstack(cols) if cols else np.zeros((frame.n_rows, 0))
+
+
+def _smoothed_sign_gap(j: int, s: float) -> Callable[[Experiment], dict[int, np.ndarray]]:
+    """The full-rate column ``erf(dq_j / (sqrt(2) s)) - sign(dq_j)`` of joint j of an experiment."""
+    def column(ex: Experiment) -> dict[int, np.ndarray]:
+        return {j: _col(erf(ex.dq[:, j] / (math.sqrt(2.0) * s)) - _sign(ex.dq[:, j]))}
+    return column
 
 
 def placebo_families(frame: Frame, rng: np.random.Generator, per_joint: int, *, n_sines: int = 3) -> list[Family]:
@@ -437,6 +504,12 @@ def _gain_column(frame: Frame, ctx: FitContext, j: int) -> np.ndarray:
 _UNSHIFTED: dict = {}   # one-entry cache of the unshifted model torque (frame, context) of the elasticity secant
 
 
+def clear_elasticity_cache() -> None:
+    """Forget the unshifted model torque the elasticity secant caches by frame and context identity (to be
+    called around a pass that builds columns on a frame whose identity may be reused)."""
+    _UNSHIFTED.clear()
+
+
 def _elasticity_smooth(frame: Frame, ctx: FitContext, m: int, c: float) -> np.ndarray:
     """Secant ``(tau_hat(x - c d) - tau_hat(x)) / c`` of the model torque (all joints' rows, Coulomb terms
     left out, see :func:`_elasticity_coulomb`) with ``x = (q, dq, ddq)`` and ``d`` = joint m's model
@@ -488,8 +561,11 @@ def _elasticity_coulomb(frame: Frame, ctx: FitContext, m: int, c: float) -> np.n
     fs = _coulomb_value(ctx.theta, m)
     if not ELASTIC_COULOMB or fs == 0.0 or c == 0.0:
         return np.zeros((frame.n_rows, 1))
-    return frame.full_rate_columns(lambda ex: {m: _col(
-        fs * (_sign(ex.dq[:, m] - c * ex.dtau_hat[:, m]) - _sign(ex.dq[:, m])) / c)}, 1)
+    def column(ex: Experiment) -> dict[int, np.ndarray]:
+        assert ex.dtau_hat is not None  # the model torque is attached before the candidates are built
+        return {m: _col(fs * (_sign(ex.dq[:, m] - c * ex.dtau_hat[:, m]) - _sign(ex.dq[:, m])) / c)}
+
+    return frame.full_rate_columns(column, 1)
 
 
 #: a ``gain`` effect's scale ``1 + gamma`` must lie in this range: a torque sensor or drive gain off by more

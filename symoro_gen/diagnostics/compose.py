@@ -56,7 +56,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import IdentificationError
-from .stability import _wls_basis
+from .stability import wls_basis
 from .stats import hac_covariance, hac_lag, holm, segments_of, single_threaded_blas, wald_test
 
 __all__ = [
@@ -401,7 +401,7 @@ class _Tester:
     def __init__(self, A, y, w, joint, groups):
         self.w = w
         self.joint = joint
-        U, _, rank = _wls_basis(A * w[:, None])
+        U, _, rank = wls_basis(A * w[:, None])
         self.U, self.rank = U, rank
         yw = y * w
         self.e0 = yw - U @ (U.T @ yw)

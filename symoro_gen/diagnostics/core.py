@@ -53,8 +53,8 @@ Known limits
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Hashable, Sequence
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from scipy import stats as sst
@@ -64,15 +64,16 @@ from ..errors import IdentificationError
 from ..identification.method import identify
 from ..identification.result import IdentificationResult
 from ..model import IdentificationModel
+from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
 from ..preprocessing.trajectory import Trajectory
 from ..progress import progress_bar
 from .candidates import (
-    _UNSHIFTED,
     ALL,
     REVEAL,
     Family,
     FitContext,
+    clear_elasticity_cache,
     describe_params,
     implausible,
     make_families,
@@ -81,11 +82,12 @@ from .candidates import (
 )
 from .compose import Composed, RowSignals, score_composed
 from .compose import library as composed_library
-from .frame import Frame, attach_model_torque, build_frame, common_bandwidth, model_torque, split_holdout
+from .frame import Experiment, Frame, attach_model_torque, build_frame, common_bandwidth, model_torque, split_holdout
 from .friction import (
     FrictionChoice,
     LawFit,
     LawModel,
+    LawSearch,
     coulomb_columns,
     friction_column_indices,
     rest_mask,
@@ -390,6 +392,12 @@ def _refine(fam: Family, member: int, F: Frame, ctx: FitContext, scorer: _Scorer
     return sgn * float(np.exp(r.x)) if r.fun <= rss(math.log(abs(v))) else v
 
 
+def _residual_of(res: IdentificationResult) -> np.ndarray:
+    """The identification residual of a fit (every fit here is of an observation system: it has one)."""
+    assert res.residual is not None
+    return res.residual
+
+
 def _fit(system: ObservationSystem, method: str) -> IdentificationResult:
     return identify(system, method=method)
 
@@ -407,21 +415,59 @@ def _as_list(trajectories) -> list[Trajectory]:
 # The stages of diagnose(): assemble -> fit baseline -> (score candidates -> accept and re-identify)*
 # -> final re-identification -> report. Each stage takes and returns frozen values.
 # ------------------------------------------------------------------------------------------------
+#: the assembly options :func:`.frame.build_frame` sets for the diagnosis' frames
+_FRAME_SET = ("dynamics_bandwidth_hz", "payload_columns", "keep_signals")
+
+
 @dataclass(frozen=True)
 class DiagnoseSettings:
-    """The settings of one diagnosis (see :func:`diagnose` for their meaning)."""
+    """The settings of one diagnosis, validated once (the defaults are those of ``symoro-gen diagnose``).
 
-    method: str
-    candidates: tuple[str, ...]
-    significance: float
-    max_effects: int
-    holdout: float
-    min_rel_improvement: float
-    n_placebo: int
-    identifiability_tol: float
-    structure: bool
-    friction_laws: bool = True
-    composed: bool = True
+    Attributes
+    ----------
+    method : {"ols", "wls", "tls"}
+        Estimator of the reported identifications (candidate scoring always uses per-joint weighted LS).
+    candidates : sequence of str
+        Kinds to try (default all, :data:`~.candidates.KINDS`, plus ``"friction_law"`` - the friction-law
+        stage - and ``"composed"`` - the composed library); an explicit list runs those two only when it
+        names them (unless ``friction_laws``/``composed`` say otherwise). Stored without those two names.
+    significance : float
+        Family-wise level of each round, in (0, 1).
+    max_effects : int
+        Most effects added.
+    holdout : float
+        Share of each identification experiment held out when no validation data are given.
+    min_rel_improvement : float
+        Smallest relative decrease of the validation error norm of the effect's joint.
+    n_placebo : int
+        Placebo candidates per joint and round (0: none).
+    identifiability_tol : float
+        Candidates with a column (almost) in the span of the model are skipped.
+    structure : bool
+        Run the residual-structure tests (:func:`.structure.residual_structure`).
+    friction_laws : bool, optional
+        Stage "friction law" (:func:`_stage_friction`); default (None): with the default ``candidates`` or
+        when they name ``"friction_law"``.
+    composed : bool, optional
+        Composed candidates (effect x modulating signal, :mod:`.compose`) in each round; default (None):
+        with the default ``candidates`` or when they name ``"composed"``.
+    unexplained : bool
+        Stage "unexplained" (:mod:`.unexplained`, needs scikit-learn).
+    stability : bool
+        Stage "stability" (:func:`_stage_stability`).
+    """
+
+    method: str = "ols"
+    candidates: tuple[str, ...] = ALL
+    significance: float = SIGNIFICANCE
+    max_effects: int = MAX_EFFECTS
+    holdout: float = HOLDOUT
+    min_rel_improvement: float = MIN_REL_IMPROVEMENT
+    n_placebo: int = N_PLACEBO
+    identifiability_tol: float = IDENTIFIABILITY_TOL
+    structure: bool = True
+    friction_laws: bool | None = None
+    composed: bool | None = None
     unexplained: bool = True
     stability: bool = True
 
@@ -430,8 +476,14 @@ class DiagnoseSettings:
             raise IdentificationError(f"unknown identification method {self.method!r}; use 'ols', 'wls' or 'tls'")
         if not 0 < self.significance < 1:
             raise ValueError(f"significance must lie in (0, 1), got {self.significance!r}")
+        kinds = tuple(self.candidates)
+        everything = kinds == tuple(ALL)
+        if self.friction_laws is None:
+            object.__setattr__(self, "friction_laws", everything or "friction_law" in kinds)
+        if self.composed is None:
+            object.__setattr__(self, "composed", everything or "composed" in kinds)
         object.__setattr__(self, "method", self.method.lower())
-        object.__setattr__(self, "candidates", tuple(self.candidates))
+        object.__setattr__(self, "candidates", tuple(k for k in kinds if k not in ("friction_law", "composed")))
 
 
 @dataclass(frozen=True, eq=False)
@@ -580,11 +632,21 @@ def _move_known(system: ObservationSystem, fixed: dict) -> ObservationSystem:
     return ObservationSystem(system.W[:, keep], Y, tuple(system.names[i] for i in keep), system.joint)
 
 
+def _filter_keywords(assembly: AssemblyOptions) -> dict:
+    """The assembly options set away from their defaults, as keywords of :func:`.frame.build_frame` (which
+    sets ``dynamics_bandwidth_hz``, ``payload_columns`` and ``keep_signals`` itself)."""
+    default = AssemblyOptions()
+    return {f.name: getattr(assembly, f.name) for f in fields(assembly)
+            if f.name not in _FRAME_SET and getattr(assembly, f.name) != getattr(default, f.name)}
+
+
 def _stage_assemble(model: IdentificationModel, trajectories, validation, holdout: float,
-                    dynamics_bandwidth_hz: float | None, filter_kw: dict, payload=None) -> _Data:
+                    assembly: AssemblyOptions, payload=None) -> _Data:
     """Stage 1: split off the validation data (or take the given ones), choose one ``f_dyn`` and
     assemble both with the observations stage (:func:`.frame.build_frame`); known payload parameters
     (``payload``) are moved to ``Y`` as in ``identify --loaded ... --payload``."""
+    dynamics_bandwidth_hz = assembly.dynamics_bandwidth_hz
+    filter_kw = _filter_keywords(assembly)
     ident = _as_list(trajectories)
     fixed = {str(k): float(v) for k, v in dict(payload or {}).items()}
     names_pay = tuple(getattr(model, "PAYLOAD_NAMES", ()))
@@ -633,119 +695,169 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
     W = F.system.W
     recs: list[_LawRecord] = []
     for j in range(n):
-        fs, fv = friction_column_indices(names, j)
-        missing = not fs and not fv
-        A = np.delete(W, fs + fv, axis=1)
-        an = [nm for i, nm in enumerate(names) if i not in set(fs + fv)]
-        off = missing and f"OFF{j + 1}" not in names
-        if off:
-            A = np.hstack([A, np.equal(J, j).astype(float)[:, None]])
-            an.append(f"OFF{j + 1}")
-
-        def cols(f, p, j=j):
-            # laws of sliding friction: evaluated on the sliding velocity (0 in the joint's rest segments)
-            return F.full_rate_columns(lambda ex: {j: f(sliding_velocity(ex, j))}, p)
-        dq_all = np.concatenate([e_.dq[:, j] for e_ in F.experiments])
+        jf = _joint_friction(F, W, names, j, float(dq_noise[j]))
         try:
-            ch = select_friction(A, Y, J, j, np.zeros(Y.size), blocks, columns=cols, v_grid=velocity_grid(dq_all),
-                                 v_floor=V_FLOOR_NOISE * max(float(dq_noise[j]), 1e-9))
+            ch = select_friction(jf.A, Y, J, j, np.zeros(Y.size), blocks, columns=jf.cols,
+                                 search=LawSearch(v_grid=velocity_grid(jf.dq_all), v_floor=jf.vf))
         except IdentificationError:
             continue   # the joint does not move: nothing to choose
-        vf = V_FLOOR_NOISE * max(float(dq_noise[j]), 1e-9)
-
-        def kept(ch=ch, j=j, vf=vf, missing=missing, A=A, an=an, cols=cols):
-            """The declared law with sign(dq) smoothed at the velocity noise floor (what the CV compared
-            against): the sign of a velocity that is noise (standstill, reversals) has no meaning, and a
-            chattering Coulomb column costs the most where the robot rests (TX40 j4: 0.42 vs 0.17). Where the
-            CV prefers the true sign, the declared law itself (still static in the rest segments)."""
-            if missing:
-                return None
-            # only where time-blocked CV does not prefer the true sign (on clean simulated data with the
-            # true law sign(dq), smoothing can cost a joint 16 % of its validation error)
-            cvk = BlockedLS(A, Y, blocks)
-            rows = np.equal(J, j)
-            e_s = cvk.oof_residual(cols(lambda v: np.hstack([coulomb_columns("sign", v, None, vf),
-                                                             viscous_columns("linear", v)]), 2))[rows]
-            e_d = cvk.oof_residual(cols(lambda v: np.hstack([coulomb_columns("sign", v),
-                                                             viscous_columns("linear", v)]), 2))[rows]
-            sm = None if float(e_s @ e_s) > float(e_d @ e_d) else vf
-            k = FrictionChoice(j, LawFit("sign", None, ch.declared_cv_rel_err, sm),
-                               LawFit("linear", None, ch.declared_cv_rel_err), ch.candidates, {}, ch.n_folds, ch.unit)
-            return _LawRecord(k, False, False, math.nan, math.nan, True), np.hstack([A, cols(k.columns, 2)]), an + list(k.names())
-
-        if not (ch.replaced or missing):
-            kr = kept()
-            if kr is not None:
-                recs.append(kr[0])
-                W, names = kr[1], kr[2]
-            continue
-        # a tanh scale below MIN_LAW_SCALE of the joint's speeds only rounds sign(dq) off where the band-pass
-        # velocity misses the true reversal or chatters at standstill (seen on clean simulated data too):
-        # applied when it passes the tests below, but as a smoothing of the declared sign, not as an effect
-        p95 = float(np.quantile(np.abs(dq_all), 0.95))
-        smoothing = bool(not missing and ch.viscous.law == "linear" and ch.coulomb.law == "tanh"
-                         and float(ch.coulomb.param) < MIN_LAW_SCALE * p95)
-        X = cols(ch.columns, len(ch.names()))
-        cv = BlockedLS(A, Y, blocks)
-        e_new = cv.oof_residual(X)
-        # the reference is the declared law with its sign smoothed at the noise floor (as in the CV
-        # selection): smoothing sign(dq) against velocity noise at reversals is not a change of law
-        e_old = cv.oof_residual(cols(lambda v, vf=vf: np.hstack([coulomb_columns("sign", v, None, vf),
-                                                                 viscous_columns("linear", v)]), 2)
-                                if not missing else None)
-        own = np.equal(J, j)
-        wins = [float(np.sum(e_new[own & (blocks == b)] ** 2)) < float(np.sum(e_old[own & (blocks == b)] ** 2))
-                for b in np.unique(blocks)]
-        # noise-aware acceptance: the out-of-fold gain must be consistent over time, not a few lucky
-        # samples (e.g. velocity noise at reversals): paired one-sided t test of the squared-error decrease
-        # over N_LAW_SUBBLOCKS contiguous sub-blocks, Bonferroni over the joints, and most folds won
-        sub = time_blocks(F.row_experiment, F.row_index, N_LAW_SUBBLOCKS)
-        d = np.array([float(np.sum(e_old[own & (sub == b)] ** 2) - np.sum(e_new[own & (sub == b)] ** 2))
-                      for b in np.unique(sub[own])])
-        sd = float(np.std(d, ddof=1)) if d.size > 1 else 0.0
-        p_law = float(sst.t.sf(float(np.mean(d)) / (sd / math.sqrt(d.size)), d.size - 1)) if sd > 0 else 1.0
-        passed = float(np.mean(wins)) > MIN_SELECTION_FREQUENCY and p_law < cfg.significance / n
-        if passed and not (missing or smoothing):
-            # simulated-noise placebo (stability.simulated_noise_placebo): v, vs, delta and the law were
-            # chosen on the folds that judge them; the whole selection re-run on the declared law's fit
-            # plus its own residual shifted in time must never claim the observed gain (clean data, seed 510)
-            passed = _law_beats_noise(ch, A, Y, J, blocks, cols, dq_all, vf, F)[0]
-        if not passed:
-            kr = kept()
-            if kr is not None:
-                recs.append(kr[0])
-                W, names = kr[1], kr[2]
-            continue
-        recs.append(_LawRecord(ch, missing, off, float(np.mean(wins)), p_law, smoothing))
-        W = np.hstack([A, X])
-        names = an + list(ch.names())
+        if ch.replaced or jf.missing:
+            rec, X = _law_replacement(jf, ch, F, blocks, cfg.significance / n)
+            if rec is not None:
+                recs.append(rec)
+                W = np.hstack([jf.A, X])
+                names = jf.an + list(ch.names())
+                continue
+        kr = _declared_law_kept(jf, ch, Y, J, blocks)
+        if kr is not None:
+            recs.append(kr[0])
+            W, names = kr[1], kr[2]
     if not recs:
         return data, ()
     law_model = LawModel(data.model, [r.choice for r in recs], [r.choice.joint for r in recs if r.offset])
     pay = tuple(nm for nm in data.decl if nm not in set(data.model.BASE_NAMES))
     new_names = tuple(law_model.BASE_NAMES) + pay
+    F2 = replace(F, system=_with_friction_laws(F, F.system, recs, new_names))
+    Vs = _with_friction_laws(data.V, data.Vs, recs, new_names)
+    return replace(data, model=law_model, F=F2, Vs=Vs, decl=new_names), tuple(recs)
 
-    def rebuild(frame: Frame, system: ObservationSystem) -> ObservationSystem:
-        col = {nm: system.W[:, i] for i, nm in enumerate(system.names)}
-        for r in recs:
-            ch = r.choice
-            X = frame.full_rate_columns(lambda ex, ch=ch: {ch.joint: ch.columns(sliding_velocity(ex, ch.joint))},
-                                        len(ch.names()))
-            col.update(zip(ch.names(), X.T))
-            if r.offset:
-                col[f"OFF{ch.joint + 1}"] = (system.joint == ch.joint).astype(float)
-        return ObservationSystem(np.column_stack([col[nm] for nm in new_names]), system.Y, new_names, system.joint)
 
-    F2 = replace(F, system=rebuild(F, F.system))
-    return replace(data, model=law_model, F=F2, Vs=rebuild(data.V, data.Vs), decl=new_names), tuple(recs)
+@dataclass(frozen=True, eq=False)
+class _JointFriction:
+    """One joint in the friction-law stage: the design without its friction columns (``A``, names ``an``;
+    with an offset column when it is declared without friction, ``off``), the hook building its law
+    columns on the sliding velocity, its velocities at full rate and the velocity floor of ``sign``."""
+
+    j: int
+    A: np.ndarray
+    an: list[str]
+    missing: bool
+    off: bool
+    cols: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray]
+    dq_all: np.ndarray
+    vf: float
+
+
+def _joint_friction(F: Frame, W: np.ndarray, names: list[str], j: int, dq_noise: float) -> _JointFriction:
+    fs, fv = friction_column_indices(names, j)
+    missing = not fs and not fv
+    A = np.delete(W, fs + fv, axis=1)
+    an = [nm for i, nm in enumerate(names) if i not in set(fs + fv)]
+    off = missing and f"OFF{j + 1}" not in names
+    if off:
+        A = np.hstack([A, np.equal(F.system.joint, j).astype(float)[:, None]])
+        an.append(f"OFF{j + 1}")
+    dq_all = np.concatenate([e_.dq[:, j] for e_ in F.experiments])
+    return _JointFriction(j, A, an, missing, off, _sliding_columns(F, j), dq_all,
+                          V_FLOOR_NOISE * max(dq_noise, 1e-9))
+
+
+def _sliding_columns(F: Frame, j: int) -> Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray]:
+    """The ``columns`` hook of :func:`.friction.select_friction` for joint ``j``: the laws of sliding
+    friction, evaluated on the sliding velocity (0 in the joint's rest segments) at full rate."""
+    def cols(f: Callable[[np.ndarray], np.ndarray], p: int) -> np.ndarray:
+        return F.full_rate_columns(lambda ex: {j: f(sliding_velocity(ex, j))}, p)
+    return cols
+
+
+def _smoothed_declared_law(vf: float | None) -> Callable[[np.ndarray], np.ndarray]:
+    """The declared law's columns, ``sign(dq)`` (smoothed at ``vf`` when given) and ``dq``."""
+    def law(v: np.ndarray) -> np.ndarray:
+        return np.hstack([coulomb_columns("sign", v, None, vf), viscous_columns("linear", v)])
+    return law
+
+
+def _declared_law_kept(jf: _JointFriction, ch: FrictionChoice, Y: np.ndarray, J: np.ndarray, blocks: np.ndarray
+                       ) -> tuple[_LawRecord, np.ndarray, list[str]] | None:
+    """The declared law with sign(dq) smoothed at the velocity noise floor (what the CV compared
+    against): the sign of a velocity that is noise (standstill, reversals) has no meaning, and a
+    chattering Coulomb column costs the most where the robot rests (TX40 j4: 0.42 vs 0.17). Where the
+    CV prefers the true sign, the declared law itself (still static in the rest segments). None for a
+    joint declared without friction."""
+    if jf.missing:
+        return None
+    # only where time-blocked CV does not prefer the true sign (on clean simulated data with the
+    # true law sign(dq), smoothing can cost a joint 16 % of its validation error)
+    cvk = BlockedLS(jf.A, Y, blocks)
+    rows = np.equal(J, jf.j)
+    e_s = cvk.oof_residual(jf.cols(_smoothed_declared_law(jf.vf), 2))[rows]
+    e_d = cvk.oof_residual(jf.cols(_smoothed_declared_law(None), 2))[rows]
+    sm = None if float(e_s @ e_s) > float(e_d @ e_d) else jf.vf
+    k = FrictionChoice(jf.j, LawFit("sign", None, ch.declared_cv_rel_err, sm),
+                       LawFit("linear", None, ch.declared_cv_rel_err), ch.candidates, {}, ch.n_folds, ch.unit)
+    return (_LawRecord(k, False, False, math.nan, math.nan, True), np.hstack([jf.A, jf.cols(k.columns, 2)]),
+            jf.an + list(k.names()))
+
+
+def _rounds_sign_off(ch: FrictionChoice, dq_all: np.ndarray) -> bool:
+    """A tanh scale below MIN_LAW_SCALE of the joint's speeds (with the linear viscous law) only rounds
+    sign(dq) off where the band-pass velocity misses the true reversal or chatters at standstill (seen on
+    clean simulated data too)."""
+    p95 = float(np.quantile(np.abs(dq_all), 0.95))
+    return (ch.viscous.law == "linear" and ch.coulomb.law == "tanh" and ch.coulomb.param is not None
+            and float(ch.coulomb.param) < MIN_LAW_SCALE * p95)
+
+
+def _law_replacement(jf: _JointFriction, ch: FrictionChoice, F: Frame, blocks: np.ndarray, alpha: float
+                     ) -> tuple[_LawRecord | None, np.ndarray]:
+    """The record of the law ``ch`` chose for the joint and its columns, or None when it does not pass the
+    tests against the declared law (``alpha``: the significance level of the joint)."""
+    Y, J = F.system.Y, F.system.joint
+    # a rounding of sign(dq) is applied when it passes the tests below, but as a smoothing of the declared
+    # sign, not as an effect
+    smoothing = bool(not jf.missing and _rounds_sign_off(ch, jf.dq_all))
+    X = jf.cols(ch.columns, len(ch.names()))
+    cv = BlockedLS(jf.A, Y, blocks)
+    e_new = cv.oof_residual(X)
+    # the reference is the declared law with its sign smoothed at the noise floor (as in the CV
+    # selection): smoothing sign(dq) against velocity noise at reversals is not a change of law
+    e_old = cv.oof_residual(jf.cols(_smoothed_declared_law(jf.vf), 2) if not jf.missing else None)
+    own = np.equal(J, jf.j)
+    wins = [float(np.sum(e_new[own & (blocks == b)] ** 2)) < float(np.sum(e_old[own & (blocks == b)] ** 2))
+            for b in np.unique(blocks)]
+    # noise-aware acceptance: the out-of-fold gain must be consistent over time, not a few lucky
+    # samples (e.g. velocity noise at reversals): paired one-sided t test of the squared-error decrease
+    # over N_LAW_SUBBLOCKS contiguous sub-blocks, Bonferroni over the joints, and most folds won
+    sub = time_blocks(F.row_experiment, F.row_index, N_LAW_SUBBLOCKS)
+    d = np.array([float(np.sum(e_old[own & (sub == b)] ** 2) - np.sum(e_new[own & (sub == b)] ** 2))
+                  for b in np.unique(sub[own])])
+    sd = float(np.std(d, ddof=1)) if d.size > 1 else 0.0
+    p_law = float(sst.t.sf(float(np.mean(d)) / (sd / math.sqrt(d.size)), d.size - 1)) if sd > 0 else 1.0
+    passed = float(np.mean(wins)) > MIN_SELECTION_FREQUENCY and p_law < alpha
+    if passed and not (jf.missing or smoothing):
+        # simulated-noise placebo (stability.simulated_noise_placebo): v, vs, delta and the law were
+        # chosen on the folds that judge them; the whole selection re-run on the declared law's fit
+        # plus its own residual shifted in time must never claim the observed gain (clean data, seed 510)
+        passed = _law_beats_noise(ch, jf.A, Y, J, blocks, jf.cols, jf.dq_all, jf.vf, F)[0]
+    if not passed:
+        return None, X
+    return _LawRecord(ch, jf.missing, jf.off, float(np.mean(wins)), p_law, smoothing), X
+
+
+def _with_friction_laws(frame: Frame, system: ObservationSystem, recs: Sequence[_LawRecord],
+                        new_names: tuple[str, ...]) -> ObservationSystem:
+    """``system`` with the columns of the chosen laws (and offsets) in place of the declared ones."""
+    col = {nm: system.W[:, i] for i, nm in enumerate(system.names)}
+    for r in recs:
+        ch = r.choice
+        X = frame.full_rate_columns(_sliding_law_columns(ch), len(ch.names()))
+        col.update(zip(ch.names(), X.T))
+        if r.offset:
+            col[f"OFF{ch.joint + 1}"] = (system.joint == ch.joint).astype(float)
+    return ObservationSystem(np.column_stack([col[nm] for nm in new_names]), system.Y, new_names, system.joint)
+
+
+def _sliding_law_columns(ch: FrictionChoice) -> Callable[[Experiment], dict[int, np.ndarray]]:
+    """The chosen laws' columns of an experiment, on the sliding velocity of the joint."""
+    def columns(ex: Experiment) -> dict[int, np.ndarray]:
+        return {ch.joint: ch.columns(sliding_velocity(ex, ch.joint))}
+    return columns
 
 
 def _law_gain(ch: FrictionChoice, dq_all: np.ndarray) -> float:
     """Relative decrease of the out-of-fold squared error a friction-law replacement claims (0 when the
     declared law is kept or the replacement is only a rounding of sign(dq), see ``MIN_LAW_SCALE``)."""
-    p95 = float(np.quantile(np.abs(dq_all), 0.95))
-    if not ch.replaced or (ch.viscous.law == "linear" and ch.coulomb.law == "tanh"
-                           and float(ch.coulomb.param) < MIN_LAW_SCALE * p95):
+    if not ch.replaced or _rounds_sign_off(ch, dq_all):
         return 0.0
     return 1.0 - (ch.cv_rel_err / ch.declared_cv_rel_err) ** 2
 
@@ -755,14 +867,14 @@ def _law_beats_noise(ch: FrictionChoice, A, Y, J, blocks, cols, dq_all, vf, F: F
     simulated_noise_placebo`): the declared law (sign smoothed at ``vf``) fitted on all rows, its residual
     shifted in time, the selection ``ch`` came from re-run; its gain must exceed every null one."""
     j = ch.joint
-    Xd = cols(lambda v: np.hstack([coulomb_columns("sign", v, None, vf), viscous_columns("linear", v)]), 2)
+    Xd = cols(_smoothed_declared_law(vf), 2)
     M = np.hstack([A, Xd])
     fitted = M @ np.linalg.lstsq(M, Y, rcond=None)[0]
     v_grid = velocity_grid(dq_all)
 
     def gain(y):
-        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols, v_grid=v_grid,
-                                         v_floor=vf), dq_all)
+        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols,
+                                         search=LawSearch(v_grid=v_grid, v_floor=vf)), dq_all)
     return simulated_noise_placebo(gain, fitted, Y - fitted, J * 100000 + F.row_experiment, F.row_experiment,
                                    _law_gain(ch, dq_all), rng=np.random.default_rng(7919 + j))
 
@@ -851,15 +963,17 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
         bar.update(1)
         Xs = fam.build(F, ctx)
         Xvs = fam.build(V, ctx)
-        best, reasons = None, []
+        best: _Eval | None = None
+        reasons: list[str] = []
         for i, (X, Xv) in enumerate(zip(Xs, Xvs)):
-            ev = scorer.evaluate(X, Xv)
-            if isinstance(ev, str):
-                reasons.append(ev)
+            one = scorer.evaluate(X, Xv)
+            if isinstance(one, str):
+                reasons.append(one)
                 continue
-            ev.member = i
-            if best is None or ev.p_value < best.p_value or (ev.p_value == best.p_value and ev.score > best.score):
-                best = ev
+            one.member = i
+            if (best is None or one.p_value < best.p_value
+                    or (one.p_value == best.p_value and one.score > best.score)):
+                best = one
         if best is not None:
             best.p_value = bonferroni(best.p_value, fam.n_members)
         evals.append((fam, best, reasons[0] if reasons and best is None else "", Xs, Xvs))
@@ -879,7 +993,10 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
         return max(float((ev.rel_before[j] - ev.rel_after[j]) / ev.rel_before[j])
                    if ev.rel_before[j] > 0 else 0.0 for j in own)
 
-    eligible, tried, placebos, hits = [], [], [], []
+    eligible: list[tuple] = []
+    tried: list[CandidateScore] = []
+    placebos: list[CandidateScore] = []
+    hits: list[tuple[int | None, int, str, float]] = []
     for fam, ev, why, Xs, Xvs in evals:
         search = {fam.grid_label: fam.grid[ev.member]} if (ev is not None and fam.grid) else {}
         if ev is None:
@@ -1116,7 +1233,7 @@ def _stage_loop(data: _Data, base: _Baseline, cfg: DiagnoseSettings, rng: np.ran
     ``max_effects``."""
     F, V, added = _relinearise(data, data.F, data.V, (), base.res_start)
     state = _State(F=F, V=V, added=added, res=base.res_start,
-                   round_resid=((base.res_start.residual, data.Vs.Y - base.res_start.predict(data.Vs)),))
+                   round_resid=((_residual_of(base.res_start), data.Vs.Y - base.res_start.predict(data.Vs)),))
     for rnd in range(1, cfg.max_effects + 1):
         scored = _stage_score(data, base, state, rnd, cfg, rng)
         state = replace(state, tried=state.tried + scored.tried, placebos=state.placebos + scored.placebos,
@@ -1172,7 +1289,7 @@ def _full_rate_frame(V: Frame) -> Frame:
             E.append(np.full(ex.n_samples, e))
             R.append(np.arange(ex.n_samples))
     joint, row_exp, row_idx = np.concatenate(J), np.concatenate(E), np.concatenate(R)
-    sig = {}
+    sig: dict[str, np.ndarray] = {}
     for k in keys:   # all joints' signals at each row's sample
         full = np.zeros((joint.size, n))
         for e, ex in enumerate(exps):
@@ -1207,11 +1324,11 @@ def _validation_rel_err_raw(data: _Data, V: Frame, res: IdentificationResult, ad
         pred[m] = tq[R.row_index[m], R.system.joint[m]]
     if added:
         ctx = FitContext(model=data.model, theta=dict(theta), predictions={id(R): pred.copy()})
-        _UNSHIFTED.clear()   # the elasticity secant caches the unshifted torque by frame identity
+        clear_elasticity_cache()   # the elasticity secant caches the unshifted torque by frame identity
         for ad in added:
             X = _build_one(ad.family, R, ctx, ad.value)
             pred += X @ np.array([res.value(nm) for nm in ad.family.names()])
-        _UNSHIFTED.clear()
+        clear_elasticity_cache()
     if keep is not None:   # per-sample residuals for block-wise comparisons (plot_data["valid_raw"])
         keep.update(e=R.system.Y - pred, y=R.system.Y, joint=R.system.joint, experiment=R.row_experiment,
                     index=R.row_index)
@@ -1288,7 +1405,8 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
     e = Y - A @ np.linalg.lstsq(A, Y, rcond=None)[0]
     w_wls = 1.0 / _joint_sigma(e, J, n, A.shape[1])[J]
     level = max(CI_LEVEL, 1.0 - cfg.significance)
-    info, named = {}, {"OLS": [], "WLS": []}
+    info: dict[tuple, dict[str, _Stability]] = {}
+    named: dict[str, list[tuple]] = {"OLS": [], "WLS": []}
     for k, ad in enumerate(state.added):
         st = {"OLS": _effect_stability(data, F, state.added, k, None, level),
               "WLS": _effect_stability(data, F, state.added, k, w_wls, level)}
@@ -1296,8 +1414,9 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
         for lab, x in st.items():
             if x.named:
                 named[lab].append(ad.family.key)
-    labels = {ad.family.key: (ad.family.label + (f" ({ad.family.variant})" if ad.family.variant else ""))
-              for ad in state.added}
+    labels: dict[Hashable, str] = {
+        ad.family.key: (ad.family.label + (f" ({ad.family.variant})" if ad.family.variant else ""))
+        for ad in state.added}
     agr = ols_wls_agreement(named["OLS"], named["WLS"], describe=lambda key: labels[key])
     keep = set(agr.common)
     msgs = []
@@ -1377,7 +1496,7 @@ def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
         phys["v" if ch.coulomb.law == "tanh" else "vs"] = float(ch.coulomb.param)
     if ch.coulomb.smooth is not None:
         phys["v_sign"] = float(ch.coulomb.smooth)
-    if ch.viscous.law == "power":
+    if ch.viscous.law == "power" and ch.viscous.param is not None:
         phys["delta"] = float(ch.viscous.param)
     desc = ch.describe()
     if rec.added:
@@ -1397,9 +1516,52 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     """Stage 5-6 (re-identify, report): the final model identified with every effect, its errors on
     both metrics, the effects with their physical reading, residual structure, warnings."""
     n = data.n
-    Y, J = data.F.system.Y, data.F.system.joint
+    Y = data.F.system.Y
     data0 = data if data0 is None else data0
-    stab = stab or {}
+    state, res, names, A, Av = _final_fit(data, base, state, cfg)
+    val1 = res.rel_err_on(ObservationSystem(Av, data.Vs.Y, names, data.Vs.joint))
+    val0_raw = _validation_rel_err_raw(data0, state.V, base.res0, ())
+    raw_keep: dict = {}
+    val1_raw = _validation_rel_err_raw(data, state.V, res, state.added, keep=raw_keep)
+    effects = [_law_effect(r, res) for r in base.laws if not r.smoothing]
+    effects += _loop_effects(state, res, cfg, stab or {})
+    final_bad = _implausible_effects(data, state.added, res)
+    F = state.F
+    final_resid = Y - A @ np.array([res.value(nm) for nm in names])
+    unexpl = _unexplained(F, final_resid) if cfg.unexplained else ()
+    s_before = residual_structure(F, _residual_of(base.res0), significance=cfg.significance) if cfg.structure else ()
+    s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
+                                 significance=cfg.significance) if cfg.structure else ()
+    warnings = _report_warnings(state, res, cfg, stab_msgs, final_bad, unexpl, s_after)
+    Vs = data.Vs
+    # the plotted residuals are those of the errors reported: "before" is the declared model fitted with the
+    # user's estimator (the loop's own rounds run on SELECT_METHOD's fit), "after" the final refit
+    e_valid = Vs.Y - Av @ np.array([res.value(nm) for nm in names])
+    rounds = list(state.round_resid)
+    if base.res0.residual is not None:
+        rounds[0] = (np.asarray(base.res0.residual), data0.Vs.Y - base.res0.predict(data0.Vs))
+    rounds[-1] = (final_resid, e_valid)
+    plot_data = {"frame": F, "vframe": state.V, "round_resid": rounds,
+                 "valid_filtered": dict(e=e_valid, y=Vs.Y, joint=Vs.joint,
+                                        experiment=state.V.row_experiment, index=state.V.row_index),
+                 "valid_raw": raw_keep}
+    return ResidualReport(robot=str(getattr(data.model, "ROBOT", "?")), method=cfg.method, n_joints=n,
+                          before_rel_err=np.asarray(base.res0.rel_err), before_validation_rel_err=base.val0,
+                          after_rel_err=np.asarray(res.rel_err), after_validation_rel_err=np.asarray(val1),
+                          effects=tuple(effects), tried=state.tried, placebos=state.placebos,
+                          structure_before=s_before, structure_after=s_after, result_before=base.res0,
+                          result_after=res, settings=_report_settings(data, base, state, cfg), warnings=warnings,
+                          plot_data=plot_data, before_validation_rel_err_raw=np.asarray(val0_raw),
+                          after_validation_rel_err_raw=np.asarray(val1_raw), unexplained=unexpl,
+                          estimator_dependent=tuple(state.estimator_dependent),
+                          implausible=tuple(state.implausible))
+
+
+def _final_fit(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSettings
+               ) -> tuple[_State, IdentificationResult, tuple[str, ...], np.ndarray, np.ndarray]:
+    """The final model identified with the user's estimator (the state with its effects rebuilt around
+    that fit), its names and identification/validation columns."""
+    Y, J = data.F.system.Y, data.F.system.joint
     names, A, Av = _augmented(data, state.added)
     res = state.res
     if state.added or base.laws or cfg.method != SELECT_METHOD:
@@ -1412,14 +1574,12 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
             state = replace(state, F=Fn, V=Vn, added=added)
             names, A, Av = _augmented(data, state.added)
             res = _fit(ObservationSystem(A, Y, names, J), cfg.method)
-    val1 = res.rel_err_on(ObservationSystem(Av, data.Vs.Y, names, data.Vs.joint))
-    val0_raw = _validation_rel_err_raw(data0, state.V, base.res0, ())
-    raw_keep: dict = {}
-    val1_raw = _validation_rel_err_raw(data, state.V, res, state.added, keep=raw_keep)
-    warnings: list[str] = list(stab_msgs)
-    if state.stopped_at_max:
-        warnings.append(f"stopped at max_effects = {cfg.max_effects}: more effects may be significant")
-    effects = [_law_effect(r, res) for r in base.laws if not r.smoothing]
+    return state, res, names, A, Av
+
+
+def _loop_effects(state: _State, res: IdentificationResult, cfg: DiagnoseSettings, stab: dict) -> list[Effect]:
+    """The effects the loop added, read on the final fit ``res`` (with their stability when examined)."""
+    effects = []
     final_value = {ad.family.key: ad.value for ad in state.added}
     wkey = "WLS" if cfg.method == "wls" else "OLS"
     for meta in state.effects_meta:
@@ -1443,28 +1603,31 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                               reveal_joint=fam.reveal_joint if fam.reveal_joint is not None else fam.joint,
                               modulation=None if comp is None else comp.modulation, selection_frequency=freq, ci=ci,
                               description=desc, ci_level=max(CI_LEVEL, 1.0 - cfg.significance) if st else None))
+    return effects
+
+
+def _report_warnings(state: _State, res: IdentificationResult, cfg: DiagnoseSettings, stab_msgs: Sequence[str],
+                     final_bad: Sequence[str], unexpl: tuple, s_after: tuple) -> tuple[str, ...]:
+    """The report's warnings: the stability stage's messages, the loop's stops, the candidates left out
+    as implausible, the final fit's impossible effects, placebos that passed, and structure left."""
+    warnings: list[str] = list(stab_msgs)
+    if state.stopped_at_max:
+        warnings.append(f"stopped at max_effects = {cfg.max_effects}: more effects may be significant")
     if state.implausible:
         last: dict = {}
         for d in state.implausible:
             last[d["candidate"]] = d
         warnings.append("not added, the re-identified model with them physically impossible: " + "; ".join(
             f"{c} (round {d['round']}: {'; '.join(d['reasons'])})" for c, d in last.items()))
-    final_bad = _implausible_effects(data, state.added, res)
     if final_bad:
         warnings.append(f"under {cfg.method.upper()} the final fit has physically impossible effect parameters: "
                         + "; ".join(final_bad))
-    F = state.F
-    final_resid = Y - A @ np.array([res.value(nm) for nm in names])
-    unexpl = _unexplained(F, final_resid) if cfg.unexplained else ()
     if state.stopped_joints:
         warnings.append("placebo columns (random functions of time or of the motion, no physical meaning) passed the "
                         "significance and validation tests on joint(s) "
                         + ", ".join(str(j + 1) for j in sorted(state.stopped_joints))
                         + " and no candidate there beat them: the loop stopped on these joints (their residual holds "
                           "structure the library cannot name specifically; see 'unexplained')")
-    s_before = residual_structure(F, base.res0.residual, significance=cfg.significance) if cfg.structure else ()
-    s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
-                                 significance=cfg.significance) if cfg.structure else ()
     warnings += [f"final identification: {w}" for w in res.warnings if "TLS" in w or "rank-deficient" in w]
     hits: dict = {}
     for joint, rnd, variant, score in state.placebo_hits:
@@ -1487,8 +1650,14 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
         warnings.append("structure left in the identification residual: " + "; ".join(
             f"joint {x.joint + 1} vs {x.label} ({100 * x.eta2:.0f} % explained)" for x in top)
             + " (see 'structure')")
+    return tuple(warnings)
+
+
+def _report_settings(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSettings) -> dict:
+    """The settings of the diagnosis as the report lists them (data, filter, loop, friction laws)."""
+    F = state.F
     st = F.experiments[0].settings
-    settings = {
+    return {
         "method": cfg.method, "significance": cfg.significance, "max_effects": cfg.max_effects,
         "min_rel_improvement": cfg.min_rel_improvement, "n_placebo": cfg.n_placebo,
         "identifiability_tol": cfg.identifiability_tol, "candidates": list(cfg.candidates),
@@ -1510,38 +1679,12 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                            if r.smoothing and (r.choice.coulomb.param or r.choice.coulomb.smooth)],
         "static_at_rest": _static_at_rest(data, state.V, base.laws),
     }
-    Vs = data.Vs
-    # the plotted residuals are those of the errors reported: "before" is the declared model fitted with the
-    # user's estimator (the loop's own rounds run on SELECT_METHOD's fit), "after" the final refit
-    e_valid = Vs.Y - Av @ np.array([res.value(nm) for nm in names])
-    rounds = list(state.round_resid)
-    if base.res0.residual is not None:
-        rounds[0] = (np.asarray(base.res0.residual), data0.Vs.Y - base.res0.predict(data0.Vs))
-    rounds[-1] = (final_resid, e_valid)
-    plot_data = {"frame": F, "vframe": state.V, "round_resid": rounds,
-                 "valid_filtered": dict(e=e_valid, y=Vs.Y, joint=Vs.joint,
-                                        experiment=state.V.row_experiment, index=state.V.row_index),
-                 "valid_raw": raw_keep}
-    return ResidualReport(robot=str(getattr(data.model, "ROBOT", "?")), method=cfg.method, n_joints=n,
-                          before_rel_err=np.asarray(base.res0.rel_err), before_validation_rel_err=base.val0,
-                          after_rel_err=np.asarray(res.rel_err), after_validation_rel_err=np.asarray(val1),
-                          effects=tuple(effects), tried=state.tried, placebos=state.placebos,
-                          structure_before=s_before, structure_after=s_after, result_before=base.res0,
-                          result_after=res, settings=settings, warnings=tuple(warnings), plot_data=plot_data,
-                          before_validation_rel_err_raw=np.asarray(val0_raw),
-                          after_validation_rel_err_raw=np.asarray(val1_raw), unexplained=unexpl,
-                          estimator_dependent=tuple(state.estimator_dependent),
-                          implausible=tuple(state.implausible))
 
 
 @single_threaded_blas
-def diagnose(model: IdentificationModel, trajectories, *, validation=None, method: str = "ols",
-             candidates: Sequence[str] = ALL, significance: float = SIGNIFICANCE, max_effects: int = MAX_EFFECTS,
-             holdout: float = HOLDOUT, min_rel_improvement: float = MIN_REL_IMPROVEMENT, n_placebo: int = N_PLACEBO,
-             identifiability_tol: float = IDENTIFIABILITY_TOL, rng: np.random.Generator | None = None,
-             dynamics_bandwidth_hz: float | None = None, structure: bool = True, loaded=None, payload=None,
-             friction_laws: bool | None = None, composed: bool | None = None, unexplained: bool = True,
-             stability: bool = True, **filter_kw) -> ResidualReport:
+def diagnose(model: IdentificationModel, trajectories, settings: DiagnoseSettings | None = None, *,
+             validation=None, loaded=None, payload=None, rng: np.random.Generator | None = None,
+             assembly: AssemblyOptions | None = None) -> ResidualReport:
     """Find what the declared model misses, add it, and measure the gain on validation data.
 
     The stages (each a function over frozen values): :func:`_stage_assemble` (observations stage:
@@ -1557,52 +1700,24 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
         ``payload_regressor`` for loaded experiments).
     trajectories : Trajectory or sequence of Trajectory
         Identification experiments (only ``t``, ``q`` and ``tau`` are used).
+    settings : DiagnoseSettings, optional
+        Method, candidate kinds, significance, most effects, hold-out share, stages run (default: the
+        defaults of :class:`DiagnoseSettings`, those of ``symoro-gen diagnose``).
     validation : Trajectory or sequence of Trajectory, optional
-        Validation experiments; default: the last ``holdout`` share of each identification experiment.
-    method : {"ols", "wls", "tls"}
-        Estimator of the reported identifications (candidate scoring always uses per-joint weighted LS).
-    candidates : sequence of str
-        Kinds to try (default all, :data:`~.candidates.KINDS`, plus ``"friction_law"`` - the friction-law
-        stage - and ``"composed"`` - the composed library); an explicit list runs those two only when it
-        names them (unless ``friction_laws``/``composed`` say otherwise).
-    significance : float
-        Family-wise level of each round.
-    max_effects : int
-        Most effects added.
-    holdout : float
-        Share held out when ``validation`` is None.
-    min_rel_improvement : float
-        Smallest relative decrease of the validation error norm of the effect's joint.
-    n_placebo : int
-        Placebo candidates per joint and round (0: none).
-    identifiability_tol : float
-        Candidates with a column (almost) in the span of the model are skipped.
-    rng : numpy.random.Generator, optional
-        Draws the placebos (default ``np.random.default_rng(0)``: reproducible).
-    dynamics_bandwidth_hz : float, optional
-        ``f_dyn`` of the filter rules, default the largest estimate over the identification data;
-        the same value is used for every experiment (identification and validation).
-    structure : bool
-        Run the residual-structure tests (:func:`.structure.residual_structure`).
+        Validation experiments; default: the last ``settings.holdout`` share of each identification experiment.
     loaded : Trajectory or sequence of Trajectory, optional
         Identification experiments with the payload (``identify --loaded``): marked loaded, the payload's
         columns (``PAYLOAD_NAMES``) are added to their rows.
     payload : mapping name -> value, optional
-        Known payload parameters (``identify --payload M8=4.6``): moved to ``Y`` (identification paper on
-        payloads, eq. 7), the others identified.
-    friction_laws : bool, optional
-        Stage "friction law" (:func:`_stage_friction`); default: with the default ``candidates`` or when
-        they name ``"friction_law"``.
-    composed : bool, optional
-        Composed candidates (effect x modulating signal, :mod:`.compose`) in each round; default: with the
-        default ``candidates`` or when they name ``"composed"``.
-    unexplained : bool
-        Stage "unexplained" (:mod:`.unexplained`, needs scikit-learn).
-    stability : bool
-        Stage "stability" (:func:`_stage_stability`).
-    **filter_kw
-        ``cutoff_hz``, ``n_d``, ``order``, ``ftype`` for the assembly
-        (:class:`~symoro_gen.observations.AssemblyOptions`).
+        Known payload parameters (``identify --payload M8=4.6``): moved to ``Y`` ([LWR4-TLS] eq. 7), the
+        others identified.
+    rng : numpy.random.Generator, optional
+        Draws the placebos (default ``np.random.default_rng(0)``: reproducible).
+    assembly : AssemblyOptions, optional
+        Filter and decimation of the assembly ([GB-gains] eq. 14-16: ``cutoff_hz``, ``n_d``, ``order``,
+        ``ftype``...); ``dynamics_bandwidth_hz`` is ``f_dyn`` of the filter rules, default the largest
+        estimate over the identification data, the same value for every experiment (identification and
+        validation). The frames keep their signals and set their payload columns themselves.
 
     Returns
     -------
@@ -1610,21 +1725,12 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
         Errors before/after on the filtered, decimated system (``*_rel_err``, the papers' metric) and,
         on validation data, on the raw measured torque (``*_validation_rel_err_raw``).
     """
-    everything = tuple(candidates) == tuple(ALL)
-    if friction_laws is None:
-        friction_laws = everything or "friction_law" in candidates
-    if composed is None:
-        composed = everything or "composed" in candidates
-    candidates = tuple(k for k in candidates if k not in ("friction_law", "composed"))
-    cfg = DiagnoseSettings(method=method, candidates=tuple(candidates), significance=significance,
-                           max_effects=max_effects, holdout=holdout, min_rel_improvement=min_rel_improvement,
-                           n_placebo=n_placebo, identifiability_tol=identifiability_tol, structure=structure,
-                           friction_laws=friction_laws, composed=composed, unexplained=unexplained, stability=stability)
+    cfg = DiagnoseSettings() if settings is None else settings
     rng = np.random.default_rng(0) if rng is None else rng
     trajs = _as_list(trajectories)
     if loaded is not None:
         trajs += [replace(tr, loaded=True) for tr in _as_list(loaded)]
-    data0 = _stage_assemble(model, trajs, validation, holdout, dynamics_bandwidth_hz, filter_kw, payload)
+    data0 = _stage_assemble(model, trajs, validation, cfg.holdout, assembly or AssemblyOptions(), payload)
     data, laws = _stage_friction(data0, cfg) if cfg.friction_laws else (data0, ())
     base = _stage_baseline(data0, data, laws, cfg)
     state = _stage_loop(data, base, cfg, rng)
@@ -1632,3 +1738,5 @@ def diagnose(model: IdentificationModel, trajectories, *, validation=None, metho
     if cfg.stability:
         state, stab, msgs = _stage_stability(data, state, cfg)
     return _stage_report(data, base, state, cfg, data0=data0, stab=stab, stab_msgs=msgs)
+
+

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -31,8 +32,8 @@ from ..model import IdentificationModel
 from ..preprocessing.filtering import FilterSettings, decimate, filter_and_differentiate
 from ..preprocessing.trajectory import Trajectory
 from .frame import noise_gains
-from .friction import select_friction, velocity_grid
-from .stability import N_FOLDS, _wls_basis, time_blocks
+from .friction import LawSearch, select_friction, velocity_grid
+from .stability import N_FOLDS, time_blocks, wls_basis
 
 __all__ = [
     "DeclaredFit",
@@ -130,7 +131,7 @@ class FilteredData:
     def columns(self, f: Callable[[_Exp], np.ndarray]) -> np.ndarray:
         """Decimated rows of per-sample columns: ``f(experiment) -> (M, n, p)`` (slice ``[:, j, :]`` is the
         value on joint ``j``'s row) evaluated at full rate, decimated in parallel with ``Y``; (r, p)."""
-        out = None
+        out: np.ndarray | None = None
         n = self.n_joints
         for e, ex in enumerate(self.experiments):
             full = np.asarray(f(ex), float)
@@ -141,7 +142,7 @@ class FilteredData:
             for j in range(n):
                 m = (self.row_experiment == e) & (self.joint == j)
                 out[m] = dec[self.row_index[m], j, :]
-        return out
+        return out if out is not None else np.zeros((self.Y.size, 0))
 
     def joint_columns(self, j: int, f: Callable[[np.ndarray], np.ndarray], p: int) -> np.ndarray:
         """Columns ``f(dq_j full rate) -> (M, p)`` on the rows of joint ``j`` (zeros elsewhere), decimated
@@ -324,7 +325,7 @@ def fit_declared(model: IdentificationModel, data: FilteredData, *, method: str 
 
 
 def _wls(M: np.ndarray, y: np.ndarray, joint: np.ndarray, n: int, method: str) -> np.ndarray:
-    _, pinv, rank = _wls_basis(M)
+    _, pinv, rank = wls_basis(M)
     theta = pinv @ y
     if method == "wls":
         e = y - M @ theta
@@ -333,9 +334,14 @@ def _wls(M: np.ndarray, y: np.ndarray, joint: np.ndarray, n: int, method: str) -
         sig = np.sqrt(rss / np.maximum(cnt - rank * cnt / max(y.size, 1), 1.0))
         sig = np.maximum(sig, 1e-9 * max(sig.max(), 1e-300))
         w = 1.0 / sig[joint]
-        _, pinv, _ = _wls_basis(M * w[:, None])
+        _, pinv, _ = wls_basis(M * w[:, None])
         theta = pinv @ (y * w)
     return theta
+
+
+def _tanh_column(x: np.ndarray, v: float) -> np.ndarray:
+    """The smooth Coulomb column ``tanh(dq / v)``, shape (M, 1)."""
+    return np.tanh(x / v)[:, None]
 
 
 def fit_expert(model: IdentificationModel, data: FilteredData, *, method: str = "ols",
@@ -370,12 +376,12 @@ def fit_expert(model: IdentificationModel, data: FilteredData, *, method: str = 
         c = k0 + 3 * j
         A = np.delete(base, [c, c + 1], axis=1)
         ch = select_friction(A, data.Y, data.joint, j, np.zeros(data.Y.size), blocks, weights=weights,
-                             columns=lambda f, p, j=j: data.joint_columns(j, f, p), laws=("tanh",),
-                             min_gain=0.0, v_grid=velocity_grid(dq_all[:, j]))
+                             columns=partial(data.joint_columns, j),
+                             search=LawSearch(laws=("tanh",), min_gain=0.0, v_grid=velocity_grid(dq_all[:, j])))
         tanh = next(c_ for c_ in ch.candidates if c_.law == "tanh")
         v[j] = tanh.param
         cv[j] = tanh.cv_rel_err
-        base[:, c] = data.joint_columns(j, lambda x, vj=v[j]: np.tanh(x / vj)[:, None], 1)[:, 0]
+        base[:, c] = data.joint_columns(j, partial(_tanh_column, v=float(v[j])), 1)[:, 0]
     theta = _wls(base, data.Y, data.joint, n, method)
     rel = joint_rel_err(data.Y - base @ theta, data.Y, data.joint, n)
     return ExpertModel(names, theta, v, method, cv, rel)

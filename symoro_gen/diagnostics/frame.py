@@ -35,11 +35,11 @@ from ..observations.raw import full_rate_torque
 from ..observations.system import ObservationSystem
 from ..preprocessing.filtering import (
     FilterSettings,
-    _fir_decimate,
     decimate,
     decimation_filter,
     estimate_dynamics_bandwidth,
     filter_and_differentiate,
+    fir_decimate,
 )
 from ..preprocessing.trajectory import Trajectory
 
@@ -114,7 +114,7 @@ class Experiment:
         st = self.settings
         x = np.asarray(x, float)
         if st.ftype == "fir" and st.n_d > 1 and x.ndim == 2:
-            return _fir_decimate(np.ascontiguousarray(x), _fir_taps(st.n_d, st.cutoff_ratio), st.n_d)
+            return fir_decimate(np.ascontiguousarray(x), _fir_taps(st.n_d, st.cutoff_ratio), st.n_d)
         return decimate(x, st.n_d, ftype=st.ftype, cutoff_ratio=st.cutoff_ratio, source=self.source)
 
 
@@ -216,7 +216,8 @@ def split_holdout(trajectories: Sequence[Trajectory], fraction: float) -> tuple[
     (validation) holding ``fraction`` of its samples. Both keep the time origin of the recording."""
     if not 0.0 < fraction < 1.0:
         raise ValueError(f"holdout fraction must lie in (0, 1), got {fraction!r}")
-    ident, valid = [], []
+    ident: list[Trajectory] = []
+    valid: list[Trajectory] = []
     for tr in trajectories:
         N = tr.n_samples
         k = int(round(N * (1.0 - fraction)))

@@ -56,13 +56,14 @@ import math
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 from scipy import optimize
 
 from ..errors import IdentificationError
 from ..model import IdentificationModel
-from .stability import N_FOLDS, BlockedLS, _wls_basis
+from .stability import N_FOLDS, BlockedLS, wls_basis
 
 __all__ = [
     "COULOMB_LAWS",
@@ -73,6 +74,7 @@ __all__ = [
     "VISCOUS_LAWS",
     "FrictionChoice",
     "LawFit",
+    "LawSearch",
     "coulomb_columns",
     "friction_column_indices",
     "law_errors",
@@ -196,10 +198,10 @@ def coulomb_columns(law: str, dq: np.ndarray, param: float | None = None, smooth
     if law == "sign":
         return (np.sign(dq) if smooth is None else np.tanh(dq / float(smooth)))[:, None]
     if law == "tanh":
-        return np.tanh(dq / float(param))[:, None]
+        return np.tanh(dq / _law_parameter(law, param))[:, None]
     if law == "stribeck":
         s = np.sign(dq) if smooth is None else np.tanh(dq / float(smooth))
-        return np.column_stack([s, np.exp(-(dq / float(param)) ** 2) * s])
+        return np.column_stack([s, np.exp(-(dq / _law_parameter(law, param)) ** 2) * s])
     raise ValueError(f"unknown Coulomb law {law!r}; use one of {COULOMB_LAWS}")
 
 
@@ -209,8 +211,16 @@ def viscous_columns(law: str, dq: np.ndarray, param: float | None = None) -> np.
     if law == "linear":
         return dq[:, None]
     if law == "power":
-        return (np.abs(dq) ** float(param) * np.sign(dq))[:, None]
+        return (np.abs(dq) ** _law_parameter(law, param) * np.sign(dq))[:, None]
     raise ValueError(f"unknown viscous law {law!r}; use one of {VISCOUS_LAWS}")
+
+
+def _law_parameter(law: str, param: float | None) -> float:
+    """The shape parameter a ``tanh``, ``stribeck`` or ``power`` law needs (a TypeError without it, as
+    ``float(None)``)."""
+    if param is None:
+        raise TypeError(f"the {law!r} friction law needs its shape parameter")
+    return float(param)
 
 
 @dataclass(frozen=True)
@@ -350,12 +360,41 @@ def _search(err: Callable[[float], float], grid: np.ndarray, refine: bool, log: 
     return best, best_err
 
 
+@dataclass(frozen=True, eq=False)
+class LawSearch:
+    """What :func:`select_friction` tries and how.
+
+    Attributes
+    ----------
+    laws : sequence of str
+        Laws allowed (``sign`` and ``linear`` are always tried: the declared reference).
+    min_gain : float
+        Relative decrease of the CV error a more complex law needs to replace a simpler one.
+    v_grid : ndarray, optional
+        Velocity scales searched (default :func:`velocity_grid` of ``dq`` on joint ``j``'s rows).
+    delta_grid : sequence of float
+        Exponents of the ``power`` viscous law.
+    refine : bool
+        Refine ``v`` and ``delta`` continuously between grid points.
+    v_floor : float, optional
+        Smallest velocity scale of any ``sign`` in the laws, e.g. 3 times the standard deviation of the
+        velocity noise: ``sign(dq)`` becomes ``tanh(dq / v_floor)`` (so the declared law does not chatter
+        on noise at standstill, where identification data without rest phases give no evidence either
+        way), and the tanh search starts there. Default: none (a true ``sign``).
+    """
+
+    laws: Sequence[str] = COULOMB_LAWS + VISCOUS_LAWS
+    min_gain: float = MIN_GAIN
+    v_grid: np.ndarray | None = None
+    delta_grid: Sequence[float] = DELTA_GRID
+    refine: bool = True
+    v_floor: float | None = None
+
+
 def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq: np.ndarray, blocks: np.ndarray, *,
                     weights: np.ndarray | None = None,
                     columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray] | None = None,
-                    laws: Sequence[str] = COULOMB_LAWS + VISCOUS_LAWS, min_gain: float = MIN_GAIN,
-                    v_grid: np.ndarray | None = None, delta_grid: Sequence[float] = DELTA_GRID,
-                    refine: bool = True, unit: str = "rad/s", v_floor: float | None = None) -> FrictionChoice:
+                    search: LawSearch | None = None, unit: str = "rad/s") -> FrictionChoice:
     """Choose the Coulomb and viscous laws of joint ``j`` by time-blocked cross-validation.
 
     Parameters
@@ -379,28 +418,17 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
     columns : callable, optional
         ``columns(f, p) -> (r, p)``: the (decimated) columns of ``f(dq_j_full_rate) -> (M, p)`` on the
         rows of joint ``j`` (zeros elsewhere). Default: ``f`` applied to ``dq`` on joint ``j``'s rows.
-    laws : sequence of str
-        Laws allowed (``sign`` and ``linear`` are always tried: the declared reference).
-    min_gain : float
-        Relative decrease of the CV error a more complex law needs to replace a simpler one.
-    v_grid : ndarray, optional
-        Velocity scales searched (default :func:`velocity_grid` of ``dq`` on joint ``j``'s rows).
-    delta_grid : sequence of float
-        Exponents of the ``power`` viscous law.
-    refine : bool
-        Refine ``v`` and ``delta`` continuously between grid points.
+    search : LawSearch, optional
+        The laws tried, the gain a law needs, the grids of its shape parameter, the velocity floor of
+        ``sign`` (default :class:`LawSearch`: every law, :data:`MIN_GAIN`, no floor).
     unit : str
         Velocity unit in the description.
-    v_floor : float, optional
-        Smallest velocity scale of any ``sign`` in the laws, e.g. 3 times the standard deviation of the
-        velocity noise: ``sign(dq)`` becomes ``tanh(dq / v_floor)`` (so the declared law does not chatter
-        on noise at standstill, where identification data without rest phases give no evidence either
-        way), and the tanh search starts there. Default: none (a true ``sign``).
 
     Returns
     -------
     FrictionChoice
     """
+    search = LawSearch() if search is None else search
     A = np.asarray(A, float)
     y = np.asarray(y, float)
     joint = np.asarray(joint)
@@ -412,104 +440,146 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
     rows = joint == j
     if not rows.any():
         raise IdentificationError(f"friction: joint {j + 1} has no rows")
-    bad = [x for x in laws if x not in COULOMB_LAWS + VISCOUS_LAWS]
+    bad = [x for x in search.laws if x not in COULOMB_LAWS + VISCOUS_LAWS]
     if bad:
         raise ValueError(f"select_friction: unknown laws {bad}; use {COULOMB_LAWS + VISCOUS_LAWS}")
-    if columns is None:
-        def columns(f, p):
-            X = np.zeros((r, p))
-            X[rows] = np.asarray(f(dq[rows]), float).reshape(-1, p)
-            return X
-    grid = velocity_grid(dq[rows]) if v_grid is None else np.asarray(v_grid, float)
+    cols = _row_columns(dq, rows) if columns is None else columns
+    grid = _velocity_search_grid(dq[rows], search)
+    sel = _LawSelection(BlockedLS(A, y, blocks, weights), y, rows, np.asarray(blocks)[rows], cols, search, grid)
+    best_c, best_v = sel.coordinate_descent()
+    n_folds = len(sel.cv.folds)
+    choice = FrictionChoice(j, best_c, best_v, tuple(sel.tried), {}, n_folds, unit)
+    coef = _law_coefficients(A, y, weights, cols, choice)
+    return FrictionChoice(j, best_c, best_v, tuple(sel.tried), coef, n_folds, unit)
+
+
+def _row_columns(dq: np.ndarray, rows: np.ndarray) -> Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray]:
+    """The default ``columns`` hook of :func:`select_friction`: ``f`` of the rows' velocity, on joint j's rows."""
+    def columns(f: Callable[[np.ndarray], np.ndarray], p: int) -> np.ndarray:
+        X = np.zeros((dq.size, p))
+        X[rows] = np.asarray(f(dq[rows]), float).reshape(-1, p)
+        return X
+    return columns
+
+
+def _velocity_search_grid(dq_rows: np.ndarray, search: LawSearch) -> np.ndarray:
+    """The velocity scales tried for ``tanh`` and ``stribeck``: the search's grid (default
+    :func:`velocity_grid`), from ``v_floor`` up when there is one."""
+    grid = velocity_grid(dq_rows) if search.v_grid is None else np.asarray(search.v_grid, float)
+    v_floor = search.v_floor
     if v_floor is not None:
         if not v_floor > 0:
             raise ValueError(f"select_friction: v_floor must be > 0, got {v_floor!r}")
         grid = np.unique(np.r_[v_floor, grid[grid > v_floor]])
         if grid.size < 3:
             grid = v_floor * np.geomspace(1.0, 10.0, 4)
-    cv = BlockedLS(A, y, blocks, weights)
-    n_folds = len(cv.folds)
+    return grid
 
-    def oof(claw, cpar, vlaw="linear", vpar=None, smooth=None):
+
+class _LawSelection:
+    """The coordinate descent of :func:`select_friction` on one joint: out-of-fold errors of law
+    combinations, the one-standard-error rule between two laws, every law tried (``tried``)."""
+
+    def __init__(self, cv: BlockedLS, y: np.ndarray, rows: np.ndarray, fold_of: np.ndarray,
+                 columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray], search: LawSearch,
+                 grid: np.ndarray) -> None:
+        self.cv, self.rows, self.columns, self.search, self.grid = cv, rows, columns, search, grid
+        self.den = float(np.sum(y[rows] ** 2))
+        self.fold_of = fold_of
+        self.fold_ids = np.unique(fold_of)
+        self.tried: list[LawFit] = []
+
+    def oof(self, claw, cpar, vlaw="linear", vpar=None, smooth=None) -> np.ndarray:
         pc = 2 if claw == "stribeck" else 1
-        X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]),
-                    pc + 1)
-        return cv.oof_residual(X)[rows]
+        X = self.columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth),
+                                              viscous_columns(vlaw, v, vpar)]), pc + 1)
+        return self.cv.oof_residual(X)[self.rows]
 
-    den = float(np.sum(y[rows] ** 2))
-    fold_of = np.asarray(blocks)[rows]
-    fold_ids = np.unique(fold_of)
+    def err(self, *a, **k) -> float:
+        e = self.oof(*a, **k)
+        return math.sqrt(float(e @ e) / self.den) if self.den > 0 else math.inf
 
-    def err(*a, **k):
-        e = oof(*a, **k)
-        return math.sqrt(float(e @ e) / den) if den > 0 else math.inf
-
-    def better(new: LawFit, new_args: tuple, old: LawFit, old_args: tuple) -> bool:
+    def better(self, new: LawFit, new_args: tuple, old: LawFit, old_args: tuple) -> bool:
         """``new`` (the more complex law) replaces ``old``: its CV error is lower by more than ``min_gain``
         *and* by more than one standard error of the paired difference over the time-blocked folds (the
         one-standard-error rule, Hastie, Tibshirani & Friedman 2009, sec. 7.10; Breiman et al. 1984): a
         gain inside the fold-to-fold scatter keeps the simpler law."""
-        if not new.cv_rel_err < old.cv_rel_err * (1.0 - min_gain):
+        if not new.cv_rel_err < old.cv_rel_err * (1.0 - self.search.min_gain):
             return False
-        e_new, e_old = oof(*new_args), oof(*old_args)
-        d = np.array([float(np.sum(e_old[fold_of == b] ** 2) - np.sum(e_new[fold_of == b] ** 2)) for b in fold_ids])
+        e_new, e_old = self.oof(*new_args), self.oof(*old_args)
+        fold_of = self.fold_of
+        d = np.array([float(np.sum(e_old[fold_of == b] ** 2) - np.sum(e_new[fold_of == b] ** 2))
+                      for b in self.fold_ids])
         if d.size < 2:
             return True
         return bool(np.mean(d) > np.std(d, ddof=1) / math.sqrt(d.size))
 
-    tried: list[LawFit] = []
-
-    def choose_coulomb(vlaw, vpar):
-        best = LawFit("sign", None, err("sign", None, vlaw, vpar, v_floor), v_floor)
+    def choose_coulomb(self, vlaw: str, vpar: float | None) -> LawFit:
+        v_floor = self.search.v_floor
+        best = LawFit("sign", None, self.err("sign", None, vlaw, vpar, v_floor), v_floor)
         best_args: tuple = ("sign", None, vlaw, vpar, v_floor)
-        tried.append(best)
+        self.tried.append(best)
         smooth = v_floor
         for law in ("tanh", "stribeck"):
-            if law not in laws:
+            if law not in self.search.laws:
                 continue
-            p, e = _search(lambda v, law=law, sm=smooth: err(law, v, vlaw, vpar, sm), grid, refine)
+            p, e = _search(partial(self._coulomb_error, law, vlaw=vlaw, vpar=vpar, smooth=smooth), self.grid,
+                           self.search.refine)
             fit = LawFit(law, p, e, smooth if law == "stribeck" else None)
             args = (law, p, vlaw, vpar, smooth if law == "stribeck" else None)
             if law == "tanh":
                 smooth = p
-            tried.append(fit)
-            if better(fit, args, best, best_args):
+            self.tried.append(fit)
+            if self.better(fit, args, best, best_args):
                 best, best_args = fit, args
         return best
 
-    def choose_viscous(c):
-        best = LawFit("linear", None, err(c.law, c.param, smooth=c.smooth))
-        if "power" in laws and len(delta_grid):
-            d, e = _search(lambda d: err(c.law, c.param, "power", d, c.smooth), np.asarray(delta_grid, float), refine)
+    def _coulomb_error(self, law: str, v: float, *, vlaw: str, vpar: float | None, smooth: float | None) -> float:
+        return self.err(law, v, vlaw, vpar, smooth)
+
+    def choose_viscous(self, c: LawFit) -> LawFit:
+        best = LawFit("linear", None, self.err(c.law, c.param, smooth=c.smooth))
+        delta_grid = self.search.delta_grid
+        if "power" in self.search.laws and len(delta_grid):
+            d, e = _search(lambda d: self.err(c.law, c.param, "power", d, c.smooth), np.asarray(delta_grid, float),
+                           self.search.refine)
             fit = LawFit("power", d, e)
-            tried.append(fit)
-            if better(fit, (c.law, c.param, "power", d, c.smooth), best, (c.law, c.param, "linear", None, c.smooth)):
+            self.tried.append(fit)
+            if self.better(fit, (c.law, c.param, "power", d, c.smooth), best,
+                           (c.law, c.param, "linear", None, c.smooth)):
                 best = fit
         return best
 
-    # coordinate descent: Coulomb law (linear viscous), viscous law (chosen Coulomb), and once more the
-    # Coulomb law with a non-linear viscous term (|dq|^delta with delta < 1 mimics a Stribeck/tanh knee)
-    best_c = choose_coulomb("linear", None)
-    best_v = choose_viscous(best_c)
-    if best_v.law != "linear":
-        c2 = choose_coulomb(best_v.law, best_v.param)
-        if c2.law != best_c.law:
-            best_c = c2
-            best_v = choose_viscous(c2)
-            if best_v.law == "linear":
-                best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err, c2.smooth)
-    choice = FrictionChoice(j, best_c, best_v, tuple(tried), {}, n_folds, unit)
-    # coefficients of the chosen laws on all rows (weighted LS of the whole model)
+    def coordinate_descent(self) -> tuple[LawFit, LawFit]:
+        """Coulomb law (linear viscous), viscous law (chosen Coulomb), and once more the Coulomb law with a
+        non-linear viscous term (|dq|^delta with delta < 1 mimics a Stribeck/tanh knee)."""
+        best_c = self.choose_coulomb("linear", None)
+        best_v = self.choose_viscous(best_c)
+        if best_v.law != "linear":
+            c2 = self.choose_coulomb(best_v.law, best_v.param)
+            if c2.law != best_c.law:
+                best_c = c2
+                best_v = self.choose_viscous(c2)
+                if best_v.law == "linear":
+                    best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err, c2.smooth)
+        return best_c, best_v
+
+
+def _law_coefficients(A: np.ndarray, y: np.ndarray, weights: np.ndarray | None,
+                      columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray],
+                      choice: FrictionChoice) -> dict[str, float]:
+    """Coefficients of the chosen laws on all rows (weighted LS of the whole model): ``Fc`` (and ``Fs``
+    for Stribeck), ``Fv``."""
     X = columns(choice.columns, 2 + (choice.coulomb.law == "stribeck"))
-    w = np.ones(r) if weights is None else np.asarray(weights, float)
+    w = np.ones(y.size) if weights is None else np.asarray(weights, float)
     M = np.hstack([A, X]) * w[:, None]
-    _, pinv, _ = _wls_basis(M)
+    _, pinv, _ = wls_basis(M)
     theta = pinv @ (y * w)
     bx = theta[A.shape[1]:]
     coef = {"Fc": float(bx[0]), "Fv": float(bx[-1])}
     if choice.coulomb.law == "stribeck":
         coef["Fs"] = float(bx[0] + bx[1])
-    return FrictionChoice(j, best_c, best_v, tuple(tried), coef, n_folds, unit)
+    return coef
 
 
 def law_errors(choice: FrictionChoice) -> dict[str, float]:

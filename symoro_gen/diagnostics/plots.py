@@ -1,6 +1,6 @@
 """PNG plots of a residual diagnosis, written to a folder (``symoro-gen diagnose --plots DIR``).
 
-The figures are those of the diagnosis section of :mod:`symoro_gen.report` (matplotlib, Agg backend):
+The figures are those of the diagnosis section of the report (:mod:`symoro_gen.diagnostics.render`) (matplotlib, Agg backend):
 relative error norms per joint before/after, and for every effect added the residual of its joint
 before and after it, against the signal that revealed it (identification and validation data), plus
 measured vs reconstructed torques of the final model.
@@ -10,7 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..atomic import check_replaceable, mark_png, write_bytes_atomic, written_by_symoro
-from ..report import MissingDependencyError, build_report
+from ..report import Figure, MissingDependencyError, require_matplotlib
+from .render import diagnosis_blocks
 
 __all__ = ["existing_plots", "write_plots"]
 
@@ -39,19 +40,20 @@ def write_plots(report, folder, *, force: bool = False) -> list[Path]:
         Without ``force``, a ``diagnosis-*.png`` in the folder that symoro-gen did not write (nothing written).
     """
     try:
-        rep = build_report(diagnosis=report, robot=report.robot, plots=True)
+        require_matplotlib()
     except MissingDependencyError:
         return []
+    figures = [b for b in diagnosis_blocks(report, [], plots=True) if isinstance(b, Figure)]
     folder = Path(folder)
     for old in existing_plots(folder):  # replaced or removed below: only symoro-gen's, unless force
         check_replaceable(old, force, label="plot")
     folder.mkdir(parents=True, exist_ok=True)
-    names = {f"{fig.name}.png" for fig in rep.figures}
+    names = {f"{fig.name}.png" for fig in figures}
     for old in existing_plots(folder):   # figures of an earlier diagnosis in the same folder
         if old.name not in names and (force or written_by_symoro(old)):
             old.unlink()
     out = []
-    for fig in rep.figures:
+    for fig in figures:
         p = folder / f"{fig.name}.png"
         write_bytes_atomic(p, mark_png(fig.png))
         out.append(p)

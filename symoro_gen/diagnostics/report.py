@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..identification.result import IdentificationResult
-from ..report import diagnosis_html
 from .plots import write_plots
+from .render import diagnosis_html
 
 __all__ = ["CandidateScore", "Effect", "ResidualReport"]
 

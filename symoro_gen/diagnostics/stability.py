@@ -114,8 +114,8 @@ def blocked_folds(blocks: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(blocks != b, blocks == b) for b in np.unique(blocks)]
 
 
-def _wls_basis(Aw: np.ndarray):
-    """Orthonormal basis U, pseudo-inverse and rank of the weighted design."""
+def wls_basis(Aw: np.ndarray):
+    """Orthonormal basis U, pseudo-inverse and rank of the weighted design (shared by the candidate fits)."""
     if Aw.shape[1] == 0:
         return np.zeros((Aw.shape[0], 0)), np.zeros((0, Aw.shape[0])), 0
     U, s, Vt = np.linalg.svd(Aw, full_matrices=False)
@@ -181,7 +181,7 @@ class BlockedLS:
             bases = []
             for tr, te in blocked_folds(blocks):
                 wt = w[tr]
-                U, pinv, rank = _wls_basis(A[tr] * wt[:, None])
+                U, pinv, rank = wls_basis(A[tr] * wt[:, None])
                 bases.append((tr, te, wt, U, pinv, rank))
             _FOLD_CACHE.clear()
             _FOLD_CACHE[key] = (A.copy(), w.copy(), np.array(blocks, copy=True), bases)
@@ -295,7 +295,7 @@ def coefficient_ci(A: np.ndarray, X: np.ndarray, y: np.ndarray, *, weights: np.n
         raise ValueError(f"coefficient_ci: level must lie in (0, 1), got {level!r}")
     X = np.asarray(X, float).reshape(len(y), -1)
     w = np.ones(len(y)) if weights is None else np.asarray(weights, float)
-    U, rank = basis if basis is not None else _wls_basis(np.asarray(A, float) * w[:, None])[::2]
+    U, rank = basis if basis is not None else wls_basis(np.asarray(A, float) * w[:, None])[::2]
     Xw = X * w[:, None]
     Xp = Xw - U @ (U.T @ Xw)
     yw = np.asarray(y, float) * w

@@ -96,7 +96,7 @@ def residual_structure(frame: Frame, residual: np.ndarray, *, significance: floa
     """
     residual = np.asarray(residual, float)
     n = frame.n_joints
-    raw = []
+    raw: list[tuple[int, str, int | None, float, float, float | None]] = []
     for j in range(n):
         rows = frame.rows_of(j)
         if rows.size < 3 * n_bins:
@@ -124,8 +124,8 @@ def residual_structure(frame: Frame, residual: np.ndarray, *, significance: floa
         raw.append((j, "frequency", None, best[1], best[2], best[0]))
     m = len(raw)
     out = []
-    for j, sig, k, eta2, p, f in raw:
+    for j, sig, k, eta2, p, f_hz in raw:
         pc = bonferroni(p, m)
-        out.append(StructureItem(j, sig, k, float(eta2), pc, pc < significance, f))
+        out.append(StructureItem(j, sig, k, float(eta2), pc, pc < significance, f_hz))
     out.sort(key=lambda s: (s.joint, -s.eta2))
     return tuple(out)

@@ -201,49 +201,68 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
     -------
     SymbolicRegressor
     """
-    g = GraphBuilder()
-    rows = robot.rows
-    joint_frames = tuple(r.j for r in robot.joints)
-    row_of = {f: i for i, f in enumerate(joint_frames)}
-
-    # per-frame rotation ant_R_j (entries simplified: named sin/cos) and position ant_P_j
-    R: dict[int, sp.Matrix] = {}
-    P: dict[int, list] = {}
-    for row in rows:
-        Rc = constant_rotation(row)
-        th = row.theta
-        if th.free_symbols - set(robot.geometry_symbols) or not th.is_number:
-            S = g.name(sp.sin(th), f"S{row.j}")
-            C = g.name(sp.cos(th), f"C{row.j}")
-            Rz = sp.Matrix([[C, -S, 0], [S, C, 0], [0, 0, 1]])
-        else:
-            Rz = rot_z(th)
-        Rm = (Rc * Rz).applyfunc(sp.expand)
-        R[row.j] = Rm
-        pos = position(row)
-        P[row.j] = [g.name(sp.expand(pos[i]), f"P{row.j}{'xyz'[i]}") for i in range(3)]
-
-    # the sign of each joint variable (sympy.diff of theta or r), once per row: carry() asks it at every step
-    sign = {row.j: joint_sign(row) for row in rows if row.sigma in (REVOLUTE, PRISMATIC)}
-
-    zero = [sp.Integer(0)] * 3
-    w = {0: zero}
-    wd = {0: zero}
-    # gravity enters as an upward acceleration of the base
+    ne = _NewtonEuler(robot, symbolic_gravity)
+    ne.forward(progress)
+    ne.backward(progress, columns)
+    joint_frames = ne.joint_frames
+    inputs = tuple(q_symbol(f) for f in joint_frames) + tuple(dq_symbol(f) for f in joint_frames)
+    inputs += tuple(ddq_symbol(f) for f in joint_frames) + robot.geometry_symbols
     if symbolic_gravity:
-        gsym = {int(s.name[1:]) - 1: s for s in gravity_symbols(robot)}
-        vd = {0: [-gsym[i] if i in gsym else sp.Integer(0) for i in range(3)]}
-    else:
-        vd = {0: [sp.Integer(int(-x)) if float(x).is_integer() else sp.Float(-x) for x in robot.gravity]}
-    U: dict[int, sp.Matrix] = {}
+        inputs += tuple(gravity_symbols(robot))
+    graph = ExprGraph(inputs, tuple(ne.g.defs), ne.outputs)
+    return SymbolicRegressor(robot, graph, robot.standard_names, robot.payload_names, joint_frames)
 
-    WW: dict[int, dict[str, sp.Expr]] = {}
 
-    def products(j):
+class _NewtonEuler:
+    """The customized Newton-Euler recursion of one robot, its intermediate variables named in the graph
+    builder ``g`` in the order the recursion meets them (that order is the generated code's)."""
+
+    def __init__(self, robot: RobotDescription, symbolic_gravity: bool) -> None:
+        self.robot = robot
+        self.g = GraphBuilder()
+        self.rows = robot.rows
+        self.joint_frames = tuple(r.j for r in robot.joints)
+        self.row_of = {f: i for i, f in enumerate(self.joint_frames)}
+        self.R: dict[int, sp.Matrix] = {}  # ant_R_j (entries simplified: named sin/cos)
+        self.P: dict[int, list] = {}  # ant_P_j
+        self.frame_transforms()
+        # the sign of each joint variable (sympy.diff of theta or r), once per row: carry() asks it at every step
+        self.sign = {row.j: joint_sign(row) for row in self.rows if row.sigma in (REVOLUTE, PRISMATIC)}
+        zero = [sp.Integer(0)] * 3
+        self.w: dict[int, list] = {0: zero}
+        self.wd: dict[int, list] = {0: zero}
+        # gravity enters as an upward acceleration of the base
+        if symbolic_gravity:
+            gsym = {int(s.name[1:]) - 1: s for s in gravity_symbols(robot)}
+            self.vd: dict[int, list] = {0: [-gsym[i] if i in gsym else sp.Integer(0) for i in range(3)]}
+        else:
+            self.vd = {0: [sp.Integer(int(-x)) if float(x).is_integer() else sp.Float(-x) for x in robot.gravity]}
+        self.U: dict[int, sp.Matrix] = {}
+        self.WW: dict[int, dict[str, sp.Expr]] = {}
+        self.outputs: dict[tuple[int, str], sp.Expr] = {}
+
+    def frame_transforms(self) -> None:
+        """Per-frame rotation ``ant_R_j`` and position ``ant_P_j``."""
+        g = self.g
+        for row in self.rows:
+            Rc = constant_rotation(row)
+            th = row.theta
+            if th.free_symbols - set(self.robot.geometry_symbols) or not th.is_number:
+                S = g.name(sp.sin(th), f"S{row.j}")
+                C = g.name(sp.cos(th), f"C{row.j}")
+                Rz = sp.Matrix([[C, -S, 0], [S, C, 0], [0, 0, 1]])
+            else:
+                Rz = rot_z(th)
+            self.R[row.j] = (Rc * Rz).applyfunc(sp.expand)
+            pos = position(row)
+            self.P[row.j] = [g.name(sp.expand(pos[i]), f"P{row.j}{'xyz'[i]}") for i in range(3)]
+
+    def products(self, j: int) -> dict[str, sp.Expr]:
         """The six products of angular-velocity components of frame j, named once."""
-        if j not in WW:
-            wx, wy, wz = w[j]
-            WW[j] = {
+        if j not in self.WW:
+            g = self.g
+            wx, wy, wz = self.w[j]
+            self.WW[j] = {
                 "xx": g.name(wx * wx, f"WW{j}xx"),
                 "yy": g.name(wy * wy, f"WW{j}yy"),
                 "zz": g.name(wz * wz, f"WW{j}zz"),
@@ -251,14 +270,14 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
                 "xz": g.name(wx * wz, f"WW{j}xz"),
                 "yz": g.name(wy * wz, f"WW{j}yz"),
             }
-        return WW[j]
+        return self.WW[j]
 
-    def u_matrix(j):
+    def u_matrix(self, j: int) -> sp.Matrix:
         """U_j = skew(wd_j) + skew(w_j)^2, entries named."""
-        if j in U:
-            return U[j]
-        Wd = wd[j]
-        p = products(j)
+        if j in self.U:
+            return self.U[j]
+        Wd = self.wd[j]
+        p = self.products(j)
         m = sp.Matrix(
             [
                 [-p["yy"] - p["zz"], p["xy"] - Wd[2], p["xz"] + Wd[1]],
@@ -267,103 +286,102 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
             ]
         )
         names = [["XX", "XY", "XZ"], ["YX", "YY", "YZ"], ["ZX", "ZY", "ZZ"]]
-        U[j] = sp.Matrix(3, 3, lambda a, b: g.name(m[a, b], f"U{j}{names[a][b]}"))
-        return U[j]
+        self.U[j] = sp.Matrix(3, 3, lambda a, b: self.g.name(m[a, b], f"U{j}{names[a][b]}"))
+        return self.U[j]
 
-    for row in rows:
-        j, a = row.j, row.ant
-        Rm = R[j]
-        wa = _matTvec(Rm, w[a])
-        wa = g.vec(wa, f"wi{j}")
-        wda = g.vec(_matTvec(Rm, wd[a]), f"wdi{j}")
-        # acceleration of origin j in frame ant, then rotated
-        if a == 0:
-            acc_a = list(vd[0])
-        else:
-            Ua = u_matrix(a)
-            acc_a = [vd[a][i] + _dot((Ua[i, k], P[j][k]) for k in range(3)) for i in range(3)]
-            acc_a = g.vec(acc_a, f"va{j}")
-        vj = g.vec(_matTvec(Rm, acc_a), f"vd{j}")
-        if row.sigma == REVOLUTE:
-            sg = sign[j]
-            qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
-            w[j] = [wa[0], wa[1], g.name(wa[2] + qd, f"w{j}z")]
-            wd[j] = g.vec([wda[0] + qd * wa[1], wda[1] - qd * wa[0], wda[2] + qdd], f"wd{j}")
-            vd[j] = vj
-        elif row.sigma == PRISMATIC:
-            sg = sign[j]
-            qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
-            w[j], wd[j] = wa, wda
-            # + 2 w x (qd z) + qdd z
-            vd[j] = g.vec([vj[0] + 2 * qd * wa[1], vj[1] - 2 * qd * wa[0], vj[2] + qdd], f"vd{j}")
-        else:
-            w[j], wd[j], vd[j] = wa, wda, vj
-        if progress:
-            progress("forward", j)
+    def forward(self, progress) -> None:
+        """Angular velocity, angular acceleration and linear acceleration of every frame origin."""
+        g, w, wd, vd, P = self.g, self.w, self.wd, self.vd, self.P
+        for row in self.rows:
+            j, a = row.j, row.ant
+            Rm = self.R[j]
+            wa = _matTvec(Rm, w[a])
+            wa = g.vec(wa, f"wi{j}")
+            wda = g.vec(_matTvec(Rm, wd[a]), f"wdi{j}")
+            # acceleration of origin j in frame ant, then rotated
+            if a == 0:
+                acc_a = list(vd[0])
+            else:
+                Ua = self.u_matrix(a)
+                acc_a = [vd[a][i] + _dot((Ua[i, k], P[j][k]) for k in range(3)) for i in range(3)]
+                acc_a = g.vec(acc_a, f"va{j}")
+            vj = g.vec(_matTvec(Rm, acc_a), f"vd{j}")
+            if row.sigma == REVOLUTE:
+                sg = self.sign[j]
+                qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
+                w[j] = [wa[0], wa[1], g.name(wa[2] + qd, f"w{j}z")]
+                wd[j] = g.vec([wda[0] + qd * wa[1], wda[1] - qd * wa[0], wda[2] + qdd], f"wd{j}")
+                vd[j] = vj
+            elif row.sigma == PRISMATIC:
+                sg = self.sign[j]
+                qd, qdd = sg * dq_symbol(j), sg * ddq_symbol(j)
+                w[j], wd[j] = wa, wda
+                # + 2 w x (qd z) + qdd z
+                vd[j] = g.vec([vj[0] + 2 * qd * wa[1], vj[1] - 2 * qd * wa[0], vj[2] + qdd], f"vd{j}")
+            else:
+                w[j], wd[j], vd[j] = wa, wda, vj
+            if progress:
+                progress("forward", j)
 
-    outputs: dict[tuple[int, str], sp.Expr] = {}
-
-    def add(i: int, name: str, e) -> None:
+    def add(self, i: int, name: str, e) -> None:
         e = sp.sympify(e)
         if e != 0:
-            outputs[(i, name)] = outputs.get((i, name), 0) + e
+            self.outputs[(i, name)] = self.outputs.get((i, name), 0) + e
 
-    def carry(k: int, name: str, f: list, n: list) -> None:
+    def carry(self, k: int, name: str, f: list, n: list) -> None:
         """Project the wrench (f, n) of link k on joint k, then carry it to the base."""
+        rows, sign, row_of = self.rows, self.sign, self.row_of
         j = k
         while j != 0:
             row = rows[j - 1]
             if row.sigma == REVOLUTE:
-                add(row_of[j], name, sign[j] * n[2])
+                self.add(row_of[j], name, sign[j] * n[2])
             elif row.sigma == PRISMATIC:
-                add(row_of[j], name, sign[j] * f[2])
+                self.add(row_of[j], name, sign[j] * f[2])
             a = row.ant
             if a == 0:
                 break
             # is anything upstream a joint?  if not, stop.
-            if not any(rows[x - 1].is_moving for x in robot.ancestors(j)):
+            if not any(rows[x - 1].is_moving for x in self.robot.ancestors(j)):
                 break
-            Rm = R[j]
-            fa = g.vec(_matvec(Rm, f), f"F{name}_{a}")
-            cr = _cross(P[j], fa)
-            na = g.vec([_plus(x, y) for x, y in zip(_matvec(Rm, n), cr)], f"N{name}_{a}")
+            Rm = self.R[j]
+            fa = self.g.vec(_matvec(Rm, f), f"F{name}_{a}")
+            cr = _cross(self.P[j], fa)
+            na = self.g.vec([_plus(x, y) for x, y in zip(_matvec(Rm, n), cr)], f"N{name}_{a}")
             f, n, j = fa, na, a
 
-    for row in rows:
-        is_payload = robot.payload is not None and row.j == robot.payload
-        if not row.is_moving and not is_payload:
-            continue
-        k = row.j
-        Uk = u_matrix(k)
-        Wd, V = wd[k], vd[k]
-        for kind in INERTIAL_KINDS:
-            name = param_name(kind, k)
-            if columns is not None and name not in columns:
+    def backward(self, progress, columns) -> None:
+        """The elementary wrench of every standard (and payload) parameter on its link, carried back and
+        projected on the joint axes; the drive-chain columns of every moving joint."""
+        robot = self.robot
+        for row in self.rows:
+            is_payload = robot.payload is not None and row.j == robot.payload
+            if not row.is_moving and not is_payload:
                 continue
-            if kind in INERTIAL_KINDS[:6]:
-                # N = E wd + w x (E w), written with the named products of w
-                n_ = _inertia_moment(kind, Wd, products(k))
-                f_ = [sp.Integer(0)] * 3
-            elif kind == "M":
-                f_, n_ = list(V), [sp.Integer(0)] * 3
-            else:
-                e = {"MX": [1, 0, 0], "MY": [0, 1, 0], "MZ": [0, 0, 1]}[kind]
-                f_ = [Uk[i, "XYZ".index(kind[1])] for i in range(3)]
-                n_ = _cross(e, V)
-            n_ = g.vec(n_, f"n{name}_")
-            carry(k, name, f_, n_)
-        if row.is_moving:
-            i = row_of[k]
-            extra = {"IA": ddq_symbol(k), "FV": dq_symbol(k), "FS": sp.sign(dq_symbol(k)), "OFF": sp.Integer(1)}
-            for kind in row.drive:
-                if columns is None or param_name(kind, k) in columns:
-                    add(i, param_name(kind, k), extra[kind])
-        if progress:
-            progress("backward", k)
-
-    inputs = tuple(q_symbol(f) for f in joint_frames) + tuple(dq_symbol(f) for f in joint_frames)
-    inputs += tuple(ddq_symbol(f) for f in joint_frames) + robot.geometry_symbols
-    if symbolic_gravity:
-        inputs += tuple(gravity_symbols(robot))
-    graph = ExprGraph(inputs, tuple(g.defs), outputs)
-    return SymbolicRegressor(robot, graph, robot.standard_names, robot.payload_names, joint_frames)
+            k = row.j
+            Uk = self.u_matrix(k)
+            Wd, V = self.wd[k], self.vd[k]
+            for kind in INERTIAL_KINDS:
+                name = param_name(kind, k)
+                if columns is not None and name not in columns:
+                    continue
+                if kind in INERTIAL_KINDS[:6]:
+                    # N = E wd + w x (E w), written with the named products of w
+                    n_ = _inertia_moment(kind, Wd, self.products(k))
+                    f_ = [sp.Integer(0)] * 3
+                elif kind == "M":
+                    f_, n_ = list(V), [sp.Integer(0)] * 3
+                else:
+                    e = {"MX": [1, 0, 0], "MY": [0, 1, 0], "MZ": [0, 0, 1]}[kind]
+                    f_ = [Uk[i, "XYZ".index(kind[1])] for i in range(3)]
+                    n_ = _cross(e, V)
+                n_ = self.g.vec(n_, f"n{name}_")
+                self.carry(k, name, f_, n_)
+            if row.is_moving:
+                i = self.row_of[k]
+                extra = {"IA": ddq_symbol(k), "FV": dq_symbol(k), "FS": sp.sign(dq_symbol(k)), "OFF": sp.Integer(1)}
+                for kind in row.drive:
+                    if columns is None or param_name(kind, k) in columns:
+                        self.add(i, param_name(kind, k), extra[kind])
+            if progress:
+                progress("backward", k)

@@ -37,7 +37,6 @@ import numpy as np
 import sympy as sp
 from numpy.typing import ArrayLike, NDArray
 
-from .. import __version__
 from ..atomic import ordinary_mode, same_file
 from ..baseparams.regroup import BaseParameterMap, group_base_parameters
 from ..description.model import RobotDescription
@@ -45,6 +44,7 @@ from ..dynamics.graph import ExprGraph
 from ..dynamics.newton_euler import SymbolicRegressor, build_regressor
 from ..errors import ModelError, Problem, RobotFileError
 from ..runtime.batch import evaluate
+from ..version import __version__
 from .backends.c import c_source
 from .backends.casadi import casadi_function, casadi_source
 from .backends.numpy import kernel_source, load_kernel

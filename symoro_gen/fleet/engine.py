@@ -9,6 +9,7 @@ started by dask-jobqueue or on Kubernetes; the workers need symoro_gen and the g
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import os
@@ -18,29 +19,31 @@ import uuid
 import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from ..atomic import json_output, write_output_text
+from ..atomic import json_output
 from ..description import load_robot
 from ..description.model import RobotDescription
-from ..diagnostics import diagnose
+from ..diagnostics import DiagnoseSettings, diagnose
 from ..errors import SymoroError
 from ..identification.estimators import fit_wls
 from ..loader import model_for
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
 from ..report.plots import MissingDependencyError
+from ..workflows.base import SCHEMA_VERSION, Results, provenance
 from .files import FleetError, LogFile, discover, group_by, plain_format, read_experiments, segments
 from .kernel import Partial, merge_partials, process_file, resolve_model
+from .options import DEFAULT_ALPHA, FleetOptions
+from .report import flag_figures, write_fleet_report
 from .stats import adjust, dersimonian_laird, hampel_outliers, level_z, line_fit, pooled_dispersion, trend_test
 from .worker import FleetWorkerSetup, tune_malloc
 
-__all__ = ["DEFAULT_ALPHA", "Z_DAY", "Estimate", "FleetResult", "FleetWorkerSetup", "identify_fleet", "open_client",
-           "tune_malloc"]
+__all__ = ["DEFAULT_ALPHA", "Z_DAY", "Estimate", "FleetOptions", "FleetResult", "FleetWorkerSetup", "identify_fleet",
+           "open_client", "tune_malloc"]
 
-#: family-wise error rate of the flags (Holm) or false-discovery rate (BH)
-DEFAULT_ALPHA = 0.01
 #: a day is listed in a flag when its own distance to the fleet exceeds this
 Z_DAY = 3.0
 
@@ -110,8 +113,11 @@ class Estimate:
 
 
 @dataclass(frozen=True, eq=False)
-class FleetResult:
-    """What a fleet run found (see :meth:`to_json` for the contract)."""
+class FleetResult(Results):
+    """What a fleet run found: the results object of the ``fleet`` workflow (:meth:`to_dict` is the JSON
+    contract, :meth:`summary` the command's text, :meth:`report` and :meth:`figures` the drift plots)."""
+
+    command = "fleet"
 
     model: str
     names: tuple[str, ...]
@@ -126,6 +132,8 @@ class FleetResult:
     timing: dict = field(default_factory=dict)
     partials: dict = field(default_factory=dict, repr=False)
     diagnoses: dict = field(default_factory=dict)                # robot -> closed-loop diagnosis (``diagnose=True``)
+    options: FleetOptions = field(default_factory=FleetOptions, repr=False)
+    inputs: tuple[str, ...] = ()                                 # the log files read
 
     @property
     def robot_names(self) -> list[str]:
@@ -138,11 +146,17 @@ class FleetResult:
         return (days, np.array([self.days[robot][d].values[k] for d in days]),
                 np.array([self.days[robot][d].std[k] for d in days]))
 
-    def to_json(self) -> dict:
-        """The JSON document: ``robots`` {robot: {``days``: {day: {names, values, std}}, ``estimate``,
-        ``z``, ``z_trend``, ``slope``}}, ``fleet`` {names, values, std, between_robot_std}, ``flagged``
-        [{robot, parameter, z, days, ...}], ``skipped`` [{file, error}], ``settings``, ``timing`` and, with
-        ``diagnose=True``, ``diagnoses`` {robot: {day, files, summary, report} or {day, files, error}}."""
+    @functools.cached_property
+    def _provenance(self) -> dict:
+        return provenance(self.options, self.inputs)
+
+    def to_dict(self) -> dict:
+        """Exactly the JSON of ``symoro-gen fleet --json``: ``generator``, ``schema_version``, ``model``,
+        ``robots`` {robot: {``days``: {day: {names, values, std}}, ``estimate``, ``z``, ``z_trend``,
+        ``slope_per_day``}}, ``fleet`` {names, values, std, between_robot_std}, ``flagged`` [{robot, parameter, z,
+        days, ...}], ``skipped`` [{file, error}], ``settings``, ``timing``, with ``diagnose`` ``diagnoses``
+        {robot: {day, files, summary, report} or {day, files, error}}, and ``provenance`` (options, every log
+        file with its sha256, computed once)."""
         rob = {}
         for i, r in enumerate(self.robots):
             rob[r] = {
@@ -155,16 +169,27 @@ class FleetResult:
         fleet = self.fleet.to_json()
         tau = self.level.get("tau_all")
         fleet["between_robot_std"] = _floats(tau) if tau is not None else None
-        out = {"model": self.model, "robots": rob, "fleet": fleet, "flagged": self.flagged,
-               "skipped": self.skipped, "settings": self.settings, "timing": self.timing}
+        out = {"generator": f"symoro-gen {self.command}", "schema_version": SCHEMA_VERSION, "model": self.model,
+               "robots": rob, "fleet": fleet, "flagged": self.flagged, "skipped": self.skipped,
+               "settings": self.settings, "timing": self.timing}
         if self.settings.get("diagnose"):
             out["diagnoses"] = self.diagnoses
+        out["provenance"] = self._provenance
         return out
 
-    def write_json(self, path, *, force: bool = False) -> None:
-        """The JSON of :meth:`to_json`, marked as symoro-gen's; an existing file that symoro-gen did not write is
-        replaced only with ``force`` (:func:`symoro_gen.atomic.check_replaceable`)."""
-        write_output_text(path, json_output(self.to_json(), "fleet", indent=1, allow_nan=True), force=force)
+    def json_text(self) -> str:
+        """The JSON the command writes (indent 1; a NaN the statistics may give is kept as NaN)."""
+        return json_output(self.to_dict(), self.command, indent=1, allow_nan=True)
+
+    def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+        """The fleet report (flags, skipped logs, the fleet estimate, every flagged parameter over the days):
+        ``.html`` self-contained or ``.md`` with its images beside it (plots: the 'plots' extra)."""
+        return write_fleet_report(path, self, force=force)
+
+    def figures(self) -> list:
+        """One figure per flagged parameter: its values over the days for the flagged robot, the other robots
+        and the fleet band."""
+        return [f.figure for f in flag_figures(self) if f.figure is not None]
 
     def summary(self) -> str:
         """A few lines for the terminal."""
@@ -251,11 +276,9 @@ def _model_ref(model) -> tuple[object, IdentificationModel, RobotDescription | N
     return model, model, None
 
 
-def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *, scheduler: str | None = None,
-                   client=None, options: AssemblyOptions | None = None, load_kw: dict | None = None,
-                   alpha: float = DEFAULT_ALPHA, correction: str = "holm", retries: int = 2,
-                   segment_samples: int | None = None, kernel: Callable[..., Partial] = process_file,
-                   diagnose: bool = False, diagnose_method: str = "wls") -> FleetResult:
+def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, options: FleetOptions | None = None,
+                   *, client=None, assembly: AssemblyOptions | None = None, load_kw: dict | None = None,
+                   kernel: Callable[..., Partial] = process_file) -> FleetResult:
     """Identify every robot of a fleet per day, pool the fleet and flag the robots that drift.
 
     Parameters
@@ -266,36 +289,22 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
         Files, globs or folders (CSV, NPZ, MAT, Parquet).
     by : str
         Pattern naming the robot and the day in the end of each path, e.g. ``"{robot}/{day}.parquet"``.
-    scheduler : str, optional
-        See :func:`open_client` (ignored when ``client`` is given).
+    options : FleetOptions, optional
+        Every option of the ``fleet`` command: scheduler (ignored when ``client`` is given), flag level and
+        correction, retries, filters and block size, segments, the diagnosis of the flagged robots, and how the
+        logs are read (``data_format``). Default: ``FleetOptions()``.
     client : distributed.Client, optional
         An open client to use (not closed here).
-    options : AssemblyOptions, optional
-        Filters and block size (default: the papers' rules, ``keep_signals=False``).
+    assembly : AssemblyOptions, optional
+        Filters and block size in full, instead of those of ``options`` (:meth:`FleetOptions.assembly`).
     load_kw : dict, optional
-        How the logs are read (:func:`~symoro_gen.fleet.files.read_experiments`): ``fmt``, the
-        :class:`~symoro_gen.preprocessing.logformat.LogFormat` of the command line's data options (every
-        format, Parquet included), or keywords of ``load_trajectory``; ``drive_chain``: default the robot
-        file's ``[drive_chain]`` (motor-side logs mapped to the joint side, as ``identify`` does; found from
-        the robot name or file, or ``robots/<ROBOT>.toml`` for a model object).
-    alpha : float
-        Level of the flags after correction (0.01).
-    correction : {"holm", "bh"}
-        Holm (family-wise error rate) or Benjamini-Hochberg (false-discovery rate).
-    retries : int
-        Times Dask re-runs a task that failed (worker lost, exception).
-    segment_samples : int, optional
-        Cut Parquet logs longer than this into segments, one task and one experiment each (its own filter
-        edges), read row group by row group: a worker's memory is then bounded by the segment whatever
-        the log length. Default: one task per log. Only for logs read as they are (no data options).
+        More keywords of the log reader (:func:`~symoro_gen.fleet.files.read_experiments`); ``drive_chain``:
+        default the robot file's ``[drive_chain]`` (motor-side logs mapped to the joint side, as ``identify``
+        does; found from the robot name or file, or ``robots/<ROBOT>.toml`` for a model object), ``None`` to read
+        the logs as they are.
     kernel : callable
         The per-file task, ``kernel(model_ref, log, options, load_kw) -> Partial`` (default
         :func:`~symoro_gen.fleet.kernel.process_file`).
-    diagnose : bool
-        Close the loop on every flagged robot: :func:`symoro_gen.diagnostics.diagnose` on its logs of the
-        last day listed in its flags (what the declared model misses there); summaries in ``diagnoses``.
-    diagnose_method : str
-        The estimator of those diagnoses (``"ols"``, ``"wls"``, ``"tls"``).
 
     Returns
     -------
@@ -306,45 +315,74 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
     FleetError
         No log could be used.
     """
-    if not (0 < alpha < 1):
-        raise FleetError(f"alpha must be in (0, 1), got {alpha!r}")
-    adjust(np.array([0.5]), alpha, correction)  # validates the name
-    opts = AssemblyOptions(keep_signals=False) if options is None else options
-    if segment_samples is not None and segment_samples < 1000:
-        raise FleetError(f"segment_samples must be >= 1000, got {segment_samples!r}")
+    fo = FleetOptions() if options is None else options
+    opts = fo.assembly() if assembly is None else assembly
     ref, mdl, robot = _model_ref(model)
-    load_kw = dict(load_kw or {})
+    load_kw = {"fmt": fo.data_format, **(load_kw or {})}
     if "drive_chain" not in load_kw:
         load_kw["drive_chain"] = robot.drive_chain if robot is not None else _drive_chain(mdl)
     plain = plain_format(load_kw.get("fmt"))
-    files = segments(discover(logs, by), segment_samples if plain else None)
+    files = segments(discover(logs, by), fo.segment_samples if plain else None)
     t0 = time.perf_counter()
-    ctx = contextlib.nullcontext(client) if client is not None else open_client(scheduler)
+    ctx = contextlib.nullcontext(client) if client is not None else open_client(fo.scheduler)
     with ctx as cl:
         t_start = time.perf_counter() - t0
         groups = group_by(files)
-        # task keys unique to this run: a scheduler keeps results by key, and another run on the same
-        # client (other files, other options, same robot and day names) must never reuse them
-        run = f"fleet-{uuid.uuid4().hex[:12]}"
-        # malloc settings and the model once per worker (name per model: idempotent on a shared cluster)
-        cl.register_plugin(FleetWorkerSetup(ref, os.getpid()), name=f"symoro-fleet-setup-{_ref_name(ref)}")
-        day_f, robot_f = {}, {}
-        for r, days in groups.items():
-            for d, logs_rd in days.items():
-                parts = [cl.submit(kernel, ref, lf, opts, load_kw,
-                                   key=f"{run}-file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
-                                   retries=retries, pure=False) for i, lf in enumerate(logs_rd)]
-                day_f[r, d] = _tree(cl, parts, f"{run}-day-{r}-{d}", retries)
-            robot_f[r] = _tree(cl, [day_f[r, d] for d in days], f"{run}-robot-{r}", retries)
-        fleet_f = _tree(cl, list(robot_f.values()), f"{run}-fleet", retries)
-        keys = list(day_f)
-        got = cl.gather([day_f[k] for k in keys] + [robot_f[r] for r in groups] + [fleet_f])
-        n_workers = len(cl.scheduler_info().get("workers", {}))
+        day_p, robot_p, fleet_p, n_workers = _reduce(cl, ref, groups, opts, load_kw, kernel, fo.retries)
     t_run = time.perf_counter() - t0 - t_start
-    day_p = dict(zip(keys, got[:len(keys)]))
-    robot_p = dict(zip(groups, got[len(keys):-1]))
-    fleet_p: Partial = got[-1]
     skipped = [{"file": f, "error": e} for f, e in fleet_p.skipped]
+    names, fleet, days, robots = _estimates(day_p, robot_p, fleet_p, groups, skipped)
+    result = _judge(mdl, names, days, robots, fleet, skipped, fo.alpha, fo.correction)
+    fmt = load_kw.get("fmt")
+    settings = {"by": by, "scheduler": fo.scheduler or ("client" if client is not None else "local"),
+                "alpha": fo.alpha, "correction": fo.correction,
+                "segment_samples": fo.segment_samples if plain else None,
+                "tasks": len(files), "z_day": Z_DAY, "workers": n_workers,
+                "estimator": "IDIM-WLS", "assembly": opts.summary(),
+                "data_options": list(fmt.options()) if fmt is not None else [],
+                "drive_chain": load_kw.get("drive_chain") is not None, "diagnose": bool(fo.diagnose)}
+    diagnoses = {}
+    if fo.diagnose:
+        t_d = time.perf_counter()
+        diagnoses = _diagnose_flagged(mdl, result["flagged"], group_by(files), load_kw, fo.diagnose_method)
+        settings["diagnose_method"] = fo.diagnose_method
+        settings["diagnose_s"] = round(time.perf_counter() - t_d, 3)
+    timing = {"startup_s": round(t_start, 3), "run_s": round(t_run, 3),
+              "samples": int(fleet_p.samples), "samples_per_s": fleet_p.samples / t_run if t_run > 0 else None}
+    return FleetResult(model=str(getattr(mdl, "ROBOT", ref)), names=names, days=days, robots=robots, fleet=fleet,
+                       level=result["level"], trend=result["trend"], flagged=result["flagged"], skipped=skipped,
+                       settings=settings, timing=timing,
+                       partials={"days": day_p, "robots": robot_p, "fleet": fleet_p}, diagnoses=diagnoses,
+                       options=fo, inputs=tuple(dict.fromkeys(f.path for f in files)))
+
+
+def _reduce(cl, ref, groups: dict, opts: AssemblyOptions, load_kw: dict, kernel: Callable[..., Partial],
+            retries: int) -> tuple[dict, dict, Partial, int]:
+    """One task per log and the TSQR trees per robot-day, robot and fleet on the cluster: the merged
+    partials ``(per (robot, day), per robot, fleet)`` and the number of workers."""
+    # task keys unique to this run: a scheduler keeps results by key, and another run on the same
+    # client (other files, other options, same robot and day names) must never reuse them
+    run = f"fleet-{uuid.uuid4().hex[:12]}"
+    # malloc settings and the model once per worker (name per model: idempotent on a shared cluster)
+    cl.register_plugin(FleetWorkerSetup(ref, os.getpid()), name=f"symoro-fleet-setup-{_ref_name(ref)}")
+    day_f, robot_f = {}, {}
+    for r, days in groups.items():
+        for d, logs_rd in days.items():
+            parts = [cl.submit(kernel, ref, lf, opts, load_kw,
+                               key=f"{run}-file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
+                               retries=retries, pure=False) for i, lf in enumerate(logs_rd)]
+            day_f[r, d] = _tree(cl, parts, f"{run}-day-{r}-{d}", retries)
+        robot_f[r] = _tree(cl, [day_f[r, d] for d in days], f"{run}-robot-{r}", retries)
+    fleet_f = _tree(cl, list(robot_f.values()), f"{run}-fleet", retries)
+    keys = list(day_f)
+    got = cl.gather([day_f[k] for k in keys] + [robot_f[r] for r in groups] + [fleet_f])
+    n_workers = len(cl.scheduler_info().get("workers", {}))
+    return dict(zip(keys, got[:len(keys)])), dict(zip(groups, got[len(keys):-1])), got[-1], n_workers
+
+
+def _estimates(day_p: dict, robot_p: dict, fleet_p: Partial, groups: dict, skipped: list) -> tuple:
+    """``(names, fleet, days, robots)``: IDIM-WLS on the fleet's, each robot's and each robot-day's factors (a
+    robot or day that does not identify the model is added to ``skipped``)."""
     if fleet_p.acc is None:
         raise FleetError("fleet: no log could be used; " + "; ".join(s["error"] for s in skipped[:3]))
     names = tuple(fleet_p.acc.names)
@@ -363,26 +401,7 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, *,
             ed = _fit(day_p[r, d], names, skipped, f"robot {r}, day {d}")
             if ed is not None:
                 days[r][d] = ed
-    result = _judge(mdl, names, days, robots, fleet, skipped, alpha, correction)
-    fmt = load_kw.get("fmt")
-    settings = {"by": by, "scheduler": scheduler or ("client" if client is not None else "local"),
-                "alpha": alpha, "correction": correction, "segment_samples": segment_samples if plain else None,
-                "tasks": len(files), "z_day": Z_DAY, "workers": n_workers,
-                "estimator": "IDIM-WLS", "assembly": opts.summary(),
-                "data_options": list(fmt.options()) if fmt is not None else [],
-                "drive_chain": load_kw.get("drive_chain") is not None, "diagnose": bool(diagnose)}
-    diagnoses = {}
-    if diagnose:
-        t_d = time.perf_counter()
-        diagnoses = _diagnose_flagged(mdl, result["flagged"], group_by(files), load_kw, diagnose_method)
-        settings["diagnose_method"] = diagnose_method
-        settings["diagnose_s"] = round(time.perf_counter() - t_d, 3)
-    timing = {"startup_s": round(t_start, 3), "run_s": round(t_run, 3),
-              "samples": int(fleet_p.samples), "samples_per_s": fleet_p.samples / t_run if t_run > 0 else None}
-    return FleetResult(model=str(getattr(mdl, "ROBOT", ref)), names=names, days=days, robots=robots, fleet=fleet,
-                       level=result["level"], trend=result["trend"], flagged=result["flagged"], skipped=skipped,
-                       settings=settings, timing=timing,
-                       partials={"days": day_p, "robots": robot_p, "fleet": fleet_p}, diagnoses=diagnoses)
+    return names, fleet, days, robots
 
 
 def _drive_chain(mdl):
@@ -416,7 +435,7 @@ def _diagnose_flagged(model, flagged: list[dict], groups: dict[str, dict[str, li
                 raise FleetError("no log of that day")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                rep = diagnose(model, trajs, method=method)
+                rep = diagnose(model, trajs, DiagnoseSettings(method=method))
             to_json = getattr(rep, "to_json", None) or rep.to_dict
             entry.update(summary=rep.summary(), report=to_json())
         except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is reported, the fleet result stands

@@ -1,7 +1,7 @@
-"""A fleet's log files: expansion of files and globs, robot and day from each path (``--by``), reading
-of one log (CSV, NPZ, MAT through :func:`~symoro_gen.preprocessing.load.load_trajectory`, Parquet
-through pyarrow; with the data options of the command line, every format through
-:func:`~symoro_gen.preprocessing.logformat.load_log`), motor-side data mapped by the robot's drive chain.
+"""A fleet's log files: expansion of files and globs, robot and day from each path (``--by``), long Parquet
+logs cut into segments, and each log read through the front door of the readers,
+:func:`~symoro_gen.preprocessing.readers.read_recording` (CSV, NPZ, MAT, Parquet; with the data options of
+the command line, every format), motor-side data mapped by the robot's drive chain.
 
 Parquet logs hold one experiment per file; read as they are, with the columns of the CSV format: ``t,
 q1..qn, tau1..taun`` (``dq1..``, ``ddq1..`` optional), as :func:`write_parquet` writes them; any other
@@ -14,21 +14,19 @@ import itertools
 import os
 import re
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import DataFileError, Problem, SymoroError
-from ..preprocessing.drive_chain import motor_to_joint
-from ..preprocessing.load import load_trajectory
-from ..preprocessing.logformat import LogFormat, load_log
+from ..preprocessing.readers import LogFormat, read_recording
+from ..preprocessing.readers.parquet import is_parquet, parquet_rows
 from ..preprocessing.trajectory import Trajectory
 from ..report.plots import MissingDependencyError
 
 __all__ = ["FleetError", "LogFile", "compile_pattern", "discover", "read_log", "require_pyarrow", "write_parquet"]
-
-PARQUET_SUFFIXES = (".parquet", ".pq")
 
 
 class FleetError(SymoroError, ValueError):
@@ -137,22 +135,13 @@ def discover(logs: Iterable, pattern: str) -> list[LogFile]:
     return sorted(out)
 
 
-def require_pyarrow():
+def require_pyarrow() -> Any:
     """Import :mod:`pyarrow.parquet`, or fail naming the ``fleet`` extra."""
     try:
-        import pyarrow.parquet as pq
+        import pyarrow.parquet as pq  # type: ignore[import-untyped]
     except ImportError:  # pragma: no cover - depends on the installation
         raise MissingDependencyError("Parquet logs need pyarrow: pip install 'symoro-gen[fleet]'") from None
     return pq
-
-
-def parquet_rows(path: str) -> int:
-    """Number of samples of a Parquet log (from its footer, nothing else is read)."""
-    pq = require_pyarrow()
-    try:
-        return int(pq.ParquetFile(path).metadata.num_rows)
-    except Exception as exc:  # noqa: BLE001 - pyarrow raises ArrowInvalid, OSError... on a damaged file
-        raise DataFileError([Problem(path, "", "", f"cannot read as Parquet ({type(exc).__name__}: {exc})")]) from None
 
 
 def segments(logs: Sequence[LogFile], samples: int | None) -> list[LogFile]:
@@ -161,9 +150,11 @@ def segments(logs: Sequence[LogFile], samples: int | None) -> list[LogFile]:
     A log whose footer cannot be read is kept whole (its task reports it)."""
     if not samples:
         return list(logs)
+    if any(is_parquet(lf.path) for lf in logs):
+        require_pyarrow()
     out = []
     for lf in logs:
-        if not lf.path.lower().endswith(PARQUET_SUFFIXES):
+        if not is_parquet(lf.path):
             out.append(lf)
             continue
         try:
@@ -180,101 +171,42 @@ def segments(logs: Sequence[LogFile], samples: int | None) -> list[LogFile]:
     return out
 
 
-def _read_table(path: str, start: int, stop: int):
-    """The Parquet table, or only the row groups holding samples ``[start, stop)`` sliced to them."""
-    pq = require_pyarrow()
-    if stop < 0:
-        return pq.read_table(path)
-    f = pq.ParquetFile(path)
-    groups, first, row = [], None, 0
-    for g in range(f.metadata.num_row_groups):
-        n = f.metadata.row_group(g).num_rows
-        if row + n > start and row < stop:
-            groups.append(g)
-            first = row if first is None else first
-        row += n
-    return f.read_row_groups(groups).slice(start - first, stop - start)
+def plain_format(fmt: LogFormat | None) -> bool:
+    """Whether logs read with ``fmt`` are read as they are (no column mapping, units, time base or
+    resampling): only then are long Parquet logs cut into segments."""
+    return fmt is None or (fmt.is_plain and fmt.dt is None)
 
 
-def _read_parquet(path: str, n_joints: int, loaded: bool, start: int = 0, stop: int = -1) -> Trajectory:
-    try:
-        table = _read_table(path, start, stop)
-    except Exception as exc:  # noqa: BLE001 - pyarrow raises ArrowInvalid, OSError... on a damaged file
-        raise DataFileError([Problem(path, "", "", f"cannot read as Parquet ({type(exc).__name__}: {exc})")]) from None
-    cols = set(table.column_names)
-    need = ["t"] + [f"q{j}" for j in range(1, n_joints + 1)] + [f"tau{j}" for j in range(1, n_joints + 1)]
-    missing = [c for c in need if c not in cols]
-    if missing:
-        raise DataFileError([Problem(path, "", missing[0], f"missing column(s) {', '.join(missing)} "
-                                     f"(expected t, q1..q{n_joints}, tau1..tau{n_joints})")])
+def read_experiments(path: str, n_joints: int, *, fmt: LogFormat | None = None, drive_chain=None,
+                     loaded: bool = False, start: int = 0, stop: int = -1) -> tuple[Trajectory, ...]:
+    """The experiments of one log, read as ``identify`` reads its DATA files
+    (:func:`~symoro_gen.preprocessing.readers.read_recording`).
 
-    def block(prefix: str):
-        names = [f"{prefix}{j}" for j in range(1, n_joints + 1)]
-        if not all(c in cols for c in names):
-            return None
-        return np.column_stack([table.column(c).to_numpy(zero_copy_only=False) for c in names]).astype(float)
-
-    t = table.column("t").to_numpy(zero_copy_only=False).astype(float)
-    q, tau = block("q"), block("tau")
-    for name, a in (("t", t), ("q", q), ("tau", tau)):
-        bad = ~np.isfinite(a)
-        if bad.any():
-            rows = np.flatnonzero(bad.reshape(a.shape[0], -1).any(axis=1))
-            raise DataFileError([Problem(path, f"rows {rows[0] + 1}-{rows[-1] + 1}", name,
-                                         f"{rows.size} row(s) with NaN/inf or missing values")])
-    if t.size < 2 or np.any(np.diff(t) <= 0):
-        raise DataFileError([Problem(path, "", "t", "time must be strictly increasing with >= 2 samples")])
-    src = path if stop < 0 else f"{path}[{start}:{stop}]"
-    return Trajectory(t=t, q=q, tau=tau, dq=block("dq"), ddq=block("ddq"), source=src, loaded=loaded,
-                      meta={"format": "parquet", "rows": (start, stop)})
+    ``fmt``: the :class:`~symoro_gen.preprocessing.readers.LogFormat` of the command line's data options
+    (``--columns --tau-scale --deg --dt --resample --drop-bad-rows``, docs/data-files.md; a log may then
+    split at gaps); ``start``, ``stop``: a segment of a Parquet log; ``drive_chain`` (the robot file's
+    ``[drive_chain]``): motor-side data mapped to the joint side, the same function as ``identify``.
+    """
+    trajs, _ = read_recording(path, fmt, n_joints=n_joints, drive_chain=drive_chain, loaded=loaded, start=start,
+                              stop=stop)
+    return trajs
 
 
 def read_log(path: str, n_joints: int, *, loaded: bool = False, start: int = 0, stop: int = -1,
-             drive_chain=None, **load_kw) -> Trajectory:
-    """One log file as a :class:`Trajectory` (Parquet here, other formats by ``load_trajectory``);
-    ``start``, ``stop``: only those samples of a Parquet log; ``drive_chain``: the data are motor-side
-    (mapped to the joint side by :func:`~symoro_gen.preprocessing.drive_chain.motor_to_joint`, as
-    ``load_trajectory`` does).
+             drive_chain=None) -> Trajectory:
+    """One log file read as it is, as one :class:`Trajectory` (``start``, ``stop``: only those samples of
+    a Parquet log); see :func:`read_experiments`.
 
     Raises
     ------
     DataFileError
         Naming the file (and the column and rows) when it cannot be read.
     """
-    if str(path).lower().endswith(PARQUET_SUFFIXES):
-        tr = _read_parquet(str(path), n_joints, loaded, start, stop)
-        if drive_chain is None:
-            return tr
-        q, tau, dq, ddq = motor_to_joint(drive_chain, tr.q, tr.tau, tr.dq, tr.ddq)
-        return replace(tr, q=q, tau=tau, dq=dq, ddq=ddq, meta={**tr.meta, "drive_chain": True})
-    return load_trajectory(path, n_joints=n_joints, loaded=loaded, drive_chain=drive_chain, **load_kw)
+    (tr,) = read_experiments(str(path), n_joints, drive_chain=drive_chain, loaded=loaded, start=start, stop=stop)
+    return tr
 
 
-def plain_format(fmt: LogFormat | None) -> bool:
-    """Whether logs read with ``fmt`` are read as they are (no column mapping, units, time base or
-    resampling): Parquet logs are then read by this module, row group by row group (segments)."""
-    return fmt is None or (fmt.is_plain and fmt.dt is None)
-
-
-def read_experiments(path: str, n_joints: int, *, fmt: LogFormat | None = None, drive_chain=None, loaded: bool = False,
-                     start: int = 0, stop: int = -1, **load_kw) -> tuple[Trajectory, ...]:
-    """The experiments of one log, read as ``identify`` reads its DATA files.
-
-    With a :class:`~symoro_gen.preprocessing.logformat.LogFormat` that changes anything (the ``--columns
-    --tau-scale --deg --dt --resample --drop-bad-rows`` options, docs/data-files.md) every format, Parquet
-    included, is read by :func:`~symoro_gen.preprocessing.logformat.load_log` (a log may then split at
-    gaps); otherwise a Parquet log is read here (``start``, ``stop``: a segment) and the others by
-    ``load_trajectory`` with ``load_kw``. ``drive_chain`` (the robot file's ``[drive_chain]``): motor-side
-    data mapped to the joint side, the same function as ``identify``.
-    """
-    if plain_format(fmt):
-        return (read_log(path, n_joints, loaded=loaded, start=start, stop=stop, drive_chain=drive_chain, **load_kw),)
-    if stop >= 0:
-        raise FleetError(f"{path}: segments of a log need the plain format (no --columns, units or resampling)")
-    return tuple(load_log(path, fmt, n_joints=n_joints, drive_chain=drive_chain, loaded=loaded)[0])
-
-
-def write_parquet(path, recording: Trajectory, *, row_group_size: int = 100_000) -> None:
+def write_parquet(path: str | os.PathLike, recording: Trajectory, *, row_group_size: int = 100_000) -> None:
     """Write a recording as a Parquet log ``t, q1..qn, tau1..taun`` (read back by :func:`read_log`).
 
     Written to a temporary name and renamed, so a reader never sees half a file.
@@ -286,12 +218,12 @@ def write_parquet(path, recording: Trajectory, *, row_group_size: int = 100_000)
     cols = {"t": recording.t}
     cols.update({f"q{j + 1}": recording.q[:, j] for j in range(n)})
     cols.update({f"tau{j + 1}": recording.tau[:, j] for j in range(n)})
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
     pq.write_table(pa.table({k: np.ascontiguousarray(v, float) for k, v in cols.items()}), tmp,
                    row_group_size=row_group_size)
-    os.replace(tmp, path)
+    os.replace(tmp, out)
 
 
 def group_by(files: Sequence[LogFile]) -> dict[str, dict[str, list[LogFile]]]:

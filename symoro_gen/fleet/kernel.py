@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -88,7 +89,7 @@ def merge_accumulators(a: Accumulator, b: Accumulator) -> Accumulator:
     Rs, rows, yy = [], [], []
     for j in range(nj):
         parts = [x.R[j] for x in (a, b) if j < x.n_joints]
-        R = np.linalg.qr(np.vstack(parts), mode="r") if len(parts) > 1 else parts[0]
+        R = cast(np.ndarray, np.linalg.qr(np.vstack(parts), mode="r")) if len(parts) > 1 else parts[0]
         if R.shape[0] < c1:
             R = np.vstack([R, np.zeros((c1 - R.shape[0], c1))])
         Rs.append(R)
@@ -128,9 +129,8 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
         Filters and block size (``keep_signals`` is ignored).
     load_kw : dict, optional
         Keywords of :func:`~symoro_gen.fleet.files.read_experiments`: ``fmt`` (a
-        :class:`~symoro_gen.preprocessing.logformat.LogFormat`, the command line's data options, for every
-        format), ``drive_chain`` (motor-side logs) or the keywords of
-        :func:`~symoro_gen.preprocessing.load.load_trajectory`.
+        :class:`~symoro_gen.preprocessing.readers.LogFormat`, the command line's data options, for every
+        format), ``drive_chain`` (motor-side logs), ``loaded``.
     """
     model = resolve_model(model_ref)
     opts = AssemblyOptions(keep_signals=False) if options is None else options

@@ -4,6 +4,7 @@ over the days for the flagged robot against the other robots and the fleet band 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,16 +17,18 @@ from ..report.document import (
     Table,
     write_report_files,
 )
-from ..report.plots import _figure_and_axes, figure_png
-from .engine import FleetResult
+from ..report.plots import figure_and_axes, figure_png
 
-__all__ = ["fleet_report", "write_fleet_report"]
+if TYPE_CHECKING:  # the engine's result holds report() and figures(), which call this module
+    from .engine import FleetResult
+
+__all__ = ["flag_figures", "fleet_report", "write_fleet_report"]
 
 
 def _flag_figure(res: FleetResult, flag: dict, idx: int, dpi: int = 90) -> Figure:
     """One parameter over the days: every robot (grey), the flagged one (red, ±2σ), the fleet band."""
     k = res.names.index(flag["parameter"])
-    fig, axes = _figure_and_axes(1, 1, ax_h=2.6, gap=0.3, top=0.4, bottom=0.6, dpi=dpi)
+    fig, axes = figure_and_axes(1, 1, ax_h=2.6, gap=0.3, top=0.4, bottom=0.6, dpi=dpi)
     ax = axes[0, 0]
     all_days = sorted({d for r in res.days for d in res.days[r]})
     x_of = {d: i for i, d in enumerate(all_days)}
@@ -48,8 +51,13 @@ def _flag_figure(res: FleetResult, flag: dict, idx: int, dpi: int = 90) -> Figur
     ax.set_title(f"{flag['robot']} {flag['parameter']}: {flag['test']} z = {flag['z']:.1f}", fontsize=10)
     ax.legend(fontsize=7, loc="best")
     safe = "".join(c if c.isalnum() else "-" for c in f"flag-{idx}-{flag['robot']}-{flag['parameter']}")
-    return Figure(safe, figure_png(fig, dpi), caption=f"{flag['parameter']} of {flag['robot']} over the days (error bars "
-                  "±2σ of each day's estimate) among the other robots (grey) and the fleet band")
+    return Figure(safe, figure_png(fig, dpi), caption=f"{flag['parameter']} of {flag['robot']} over the days (error "
+                  "bars ±2σ of each day's estimate) among the other robots (grey) and the fleet band", figure=fig)
+
+
+def flag_figures(res: FleetResult) -> list[Figure]:
+    """The figure of every flagged parameter (its matplotlib figure kept in ``Figure.figure``)."""
+    return [_flag_figure(res, f, i) for i, f in enumerate(res.flagged)]
 
 
 def fleet_report(res: FleetResult, *, plots: bool = True) -> Report:
@@ -66,7 +74,7 @@ def fleet_report(res: FleetResult, *, plots: bool = True) -> Report:
         blocks.append(Table(("robot", "parameter", "test", "z", "p (adjusted)", "days"), rows,
                             caption="Flagged robots and parameters", numeric=(False, False, False, True, True, False)))
         if plots:
-            blocks += [_flag_figure(res, f, i) for i, f in enumerate(res.flagged)]
+            blocks += flag_figures(res)
     if res.diagnoses:
         blocks.append(Heading("Closed loop: diagnosis of the flagged robots"))
         for r, d in res.diagnoses.items():

@@ -42,6 +42,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -50,11 +51,14 @@ from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
 from ..preprocessing.trajectory import Trajectory
-from ..simulate.closed_loop import FRICTION_EPS, ForwardDynamics
+from ..simulate.closed_loop import ForwardDynamics
 from .estimators import fit_ols
-from .iv import MAX_ITER, TOL, IterativeIdentification, _tracking, iterate, simulated_output
+from .iv import IterativeIdentification, LoopOptions, LoopSettings, iterate, simulated_output, tracking_error_rms
 from .physical import identify_physical
 from .result import per_joint_rel_err, relative_std_pct
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 __all__ = ["didim_system", "hac_score_covariance", "identify_didim", "output_error_statistics"]
 
@@ -77,11 +81,9 @@ def didim_system(model: IdentificationModel, setup, theta) -> tuple[ObservationS
 
 
 def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory],
-                   options: AssemblyOptions | None = None, *, references=None, gains=None,
-                   bandwidth_hz: float | None = None, friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER,
-                   tol: float = TOL, start=None, jacobian: str = "auto",
+                   options: AssemblyOptions | None = None, *, jacobian: str = "auto",
                    fd_budget_s: float = FD_BUDGET_S, physical: str = "never",
-                   nominal_tolerance: float | None = None) -> IterativeIdentification:
+                   nominal_tolerance: float | None = None, **loop: Unpack[LoopOptions]) -> IterativeIdentification:
     """DIDIM (GJV2013): Gauss–Newton on the output error ``Y - T(chi)`` of the closed-loop
     simulation with the current estimate, iterated from IDIM-OLS.
 
@@ -92,18 +94,6 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
         Measured, unloaded recordings (``t, q, tau``).
     options : AssemblyOptions
         Filtering and decimation (as IDIM-OLS). ``min_velocity`` selects rows by the measured velocity.
-    references : sequence of array_like (N, n) or None
-        Recorded reference positions per experiment (default ``Trajectory.meta['q_ref']``, else the
-        measured positions low-passed, see :func:`~symoro_gen.identification.iv.closed_loop_setup`).
-    gains : PIDGains or sequence of PIDGains, optional
-        The real controller's gains (default: PD at ``bandwidth_hz`` from the OLS estimate).
-    friction_eps : float
-        Coulomb smoothing of the simulation.
-    max_iter, tol
-        Iterations at most; stop when ``|chi_k+1 - chi_k| / |chi_k| < tol``.
-    start : array_like or mapping, optional
-        First estimate to simulate; default the IDIM-OLS estimate (or, when it cannot be simulated, the
-        OLS fit on the reference states; :func:`~symoro_gen.identification.iv.iterate`).
     jacobian : {"auto", "fd", "simulated"}
         The sensitivity ``J = dT/dchi`` of the covariance: finite differences of the simulation
         (``"fd"``), ``W_s`` (``"simulated"``), or finite differences when they fit in ``fd_budget_s``.
@@ -121,12 +111,28 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
         With the constrained step: bound every standard parameter with a non-zero nominal value to
         ``|chi - nominal| <= tol |nominal|`` (keeps e.g. the inertia about the last axis away from 0, where
         the simulation of a joint with Coulomb friction becomes infinitely stiff).
+    **loop
+        The closed-loop iteration (:class:`~symoro_gen.identification.iv.LoopSettings`):
+
+        references : sequence of array_like (N, n) or None
+            Recorded reference positions per experiment (default ``Trajectory.meta['q_ref']``, else the
+            measured positions low-passed, see :func:`~symoro_gen.identification.iv.closed_loop_setup`).
+        gains : PIDGains or sequence of PIDGains, optional
+            The real controller's gains (default: PD at ``bandwidth_hz`` from the OLS estimate).
+        friction_eps : float
+            Coulomb smoothing of the simulation.
+        max_iter, tol
+            Iterations at most; stop when ``|chi_k+1 - chi_k| / |chi_k| < tol``.
+        start : array_like or mapping, optional
+            First estimate to simulate; default the IDIM-OLS estimate (or, when it cannot be simulated, the
+            OLS fit on the reference states; :func:`~symoro_gen.identification.iv.iterate`).
 
     Returns
     -------
     IterativeIdentification
         ``result.method == "DIDIM"``; ``result.residual`` is the output error ``Y - T(chi)``.
     """
+    lp = LoopSettings.of("identify_didim", loop)
     if jacobian not in ("auto", "fd", "simulated"):
         raise IdentificationError(f"DIDIM jacobian {jacobian!r}: expected auto, fd or simulated")
     if physical not in ("auto", "always", "never"):
@@ -138,7 +144,7 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
     # far from the solution (start not given), GJV2013's re-fit of Y on W_s is the robust step (it does not
     # rest on T(chi + d) ~ T(chi) + W_s d, poor while the simulated robot tracks badly); once its iterates
     # move by less than REFIT_SWITCH, the output-error step takes over (unbiased fixed point)
-    state: dict = {"refit": start is None, "prev": None, "W_filtered": None}
+    state: dict = {"refit": lp.start is None, "prev": None, "W_filtered": None}
 
     def simulate(model_, setup, theta):
         theta = np.asarray(theta, float)
@@ -165,8 +171,7 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
         constrained.append(len(constrained) + 1)
         return replace(res, values=np.asarray(phys.base_values, float))
 
-    it = iterate(model, trajs, options, step, "DIDIM", references=references, gains=gains, bandwidth_hz=bandwidth_hz,
-                 friction_eps=friction_eps, max_iter=max_iter, tol=tol, start=start, simulate=simulate)
+    it = iterate(model, trajs, options, step, "DIDIM", simulate=simulate, **loop)
     if constrained:
         it = replace(it, result=replace(it.result, warnings=it.result.warnings + (
             f"DIDIM: {len(constrained)} of {it.iterations} Gauss-Newton step(s) constrained to physically consistent "
@@ -180,7 +185,7 @@ def identify_didim(model: IdentificationModel, trajectories: Trajectory | Sequen
             f"DIDIM did not converge: the simulated closed loop does not reproduce the recording (output error "
             f"||Y - T|| / ||Y|| per joint {', '.join(f'{x:.2g}' for x in it.result.rel_err)}; simulated tracking error "
             f"RMS up to {it.tracking_error[worst]:.3g} rad on joint {worst + 1}; reference: {src}; controller: "
-            f"{'given' if gains is not None else 'default PD from the start estimate'}). DIDIM needs the real "
+            f"{'given' if lp.gains is not None else 'default PD from the start estimate'}). DIDIM needs the real "
             f"controller (--kp/--kd/--ki) and its recorded reference; without them use IDIM (--method ols/wls) or "
             f"IDIM-IV",)))
     return it
@@ -295,4 +300,4 @@ def output_error_statistics(model: IdentificationModel, it: IterativeIdentificat
                   rel_err=per_joint_rel_err(e, Y, ms.system.joint, ms.system.n_joints),
                   warnings=res.warnings + tuple(notes))
     stats = {"jacobian": "finite differences" if use_fd else "W_s", "hac_lags": lags}
-    return replace(it, result=new, tracking_error=_tracking(so.runs), statistics=stats)
+    return replace(it, result=new, tracking_error=tracking_error_rms(so.runs), statistics=stats)

@@ -21,7 +21,7 @@ from .estimators import (
     ZERO_COL_TOL,
     Options,
     RawFit,
-    _as_accumulator,
+    as_accumulator,
     fit_raw,
     make_result,
 )
@@ -142,7 +142,7 @@ def essential_parameters(data: ObservationSystem | Accumulator, r_sigma: float =
                    zero_col_tol=zero_col_tol)
     m = method.lower()
     use_w = m == "ols" or (m == "tls" and weighting in (None, False, "none"))
-    acc, system = _as_accumulator(data, use_weights=use_w)
+    acc, system = as_accumulator(data, use_weights=use_w)
     raw, raw0, history = essential_raw(acc, m, r_sigma, keep, opts, weighting)
     eliminated = tuple(s.removed for s in history)
     result = make_result(raw, acc, system, opts, eliminated=eliminated, keep=keep)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import cast
+from typing import Any, TypedDict, cast
 
 import numpy as np
 
@@ -71,8 +71,29 @@ class RawFit:
         return relative_std_pct(self.values, self.std)
 
 
+class Tolerances(TypedDict, total=False):
+    """The tolerance keywords of the estimators (``fit_ols``, ``fit_wls``, ``fit_tls``: fields of
+    :class:`Options`), e.g. passed on through :func:`~.payload.fit_with_known_payload`."""
+
+    rank_tol: float
+    cond_warn: float
+    rel_std_warn_pct: float
+    zero_col_tol: float
+
+
+def tolerance_keywords(function: str, keywords: dict[str, Any]) -> dict[str, Any]:
+    """``keywords`` when they are tolerances (:class:`Tolerances`); otherwise the TypeError Python raises for
+    an unexpected keyword argument of ``function``."""
+    unknown = [k for k in keywords if k not in Tolerances.__annotations__]
+    if unknown:
+        raise TypeError(f"{function}() got an unexpected keyword argument {unknown[0]!r}")
+    return keywords
+
+
 # ---------------------------------------------------------------------------- helpers
-def _as_accumulator(data, use_weights: bool) -> tuple[Accumulator, ObservationSystem | None]:
+def as_accumulator(data, use_weights: bool) -> tuple[Accumulator, ObservationSystem | None]:
+    """The factored normal equations of ``data`` (an accumulator as is, a system factored) and the system
+    (``None`` for an accumulator)."""
     if isinstance(data, Accumulator):
         return data, None
     if isinstance(data, ObservationSystem):
@@ -263,7 +284,9 @@ def _inf_std_for_null(std: np.ndarray, Vt: np.ndarray, rank: int, opts: Options)
     return std
 
 
-def _poor_warning(names, values, std, opts: Options, keep: Sequence[str] = ()) -> list[str]:
+def poorly_identified_warnings(names, values, std, opts: Options, keep: Sequence[str] = ()) -> list[str]:
+    """The warning naming the parameters whose relative standard deviation exceeds the limit (``keep``
+    excepted), or no warning."""
     pct = relative_std_pct(values, std)
     bad = [(n, p) for n, p in zip(names, pct) if p > opts.rel_std_warn_pct and n not in keep]
     if not bad:
@@ -475,7 +498,8 @@ def make_result(raw: RawFit, acc: Accumulator, system: ObservationSystem | None,
     else:
         residual = None
         rel_err = rel_err_from_factors(acc, raw.active, raw.values)
-    warnings = list(extra_warnings) + list(raw.warnings) + _poor_warning(names, raw.values, raw.std, opts, keep)
+    warnings = (list(extra_warnings) + list(raw.warnings)
+                + poorly_identified_warnings(names, raw.values, raw.std, opts, keep))
     return IdentificationResult(
         method=raw.method, names=names, values=raw.values, std=raw.std,
         rel_std_pct=raw.rel_std_pct, cov=raw.cov, cond=raw.cond, cond_scaled=raw.cond_scaled,
@@ -513,7 +537,7 @@ def fit_ols(data: ObservationSystem | Accumulator, *, rank_tol: float = RANK_TOL
         Non-finite data, all-zero columns, r <= c.
     """
     opts = _opts(rank_tol, cond_warn, rel_std_warn_pct, zero_col_tol)
-    acc, system = _as_accumulator(data, use_weights=True)
+    acc, system = as_accumulator(data, use_weights=True)
     return make_result(fit_raw(acc, "ols", None, opts), acc, system, opts)
 
 
@@ -532,7 +556,7 @@ def fit_wls(data: ObservationSystem | Accumulator, *, rank_tol: float = RANK_TOL
         ``sigma`` is the standard deviation of the weighted residual (about 1).
     """
     opts = _opts(rank_tol, cond_warn, rel_std_warn_pct, zero_col_tol)
-    acc, system = _as_accumulator(data, use_weights=False)
+    acc, system = as_accumulator(data, use_weights=False)
     return make_result(fit_raw(acc, "wls", None, opts), acc, system, opts)
 
 
@@ -557,5 +581,5 @@ def fit_tls(data: ObservationSystem | Accumulator, weighting: str | None = None,
         ``sigma`` is sigma_W (eq. 15), ``cov`` eq. 16, ``cond`` that of W.
     """
     opts = _opts(rank_tol, cond_warn, rel_std_warn_pct, zero_col_tol)
-    acc, system = _as_accumulator(data, use_weights=weighting in (None, False, "none"))
+    acc, system = as_accumulator(data, use_weights=weighting in (None, False, "none"))
     return make_result(fit_raw(acc, "tls", None, opts, weighting=weighting), acc, system, opts)

@@ -25,7 +25,6 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import IdentificationError
-from ..report.tables import drive_gains_html
 from .accumulate import check_finite, factor_system
 from .essential import essential_raw
 from .estimators import (
@@ -34,14 +33,15 @@ from .estimators import (
     REL_STD_WARN_PCT,
     ZERO_COL_TOL,
     Options,
-    _poor_warning,
     fit_ols,
     fit_raw,
     fit_wls,
+    poorly_identified_warnings,
 )
 from .observation import ObservationSystem
 from .payload import fit_with_known_payload, split_experiments
-from .result import Gains, IdentificationResult, _fmt, per_joint_rel_err, relative_std_pct
+from .render import drive_gains_html
+from .result import Gains, IdentificationResult, fmt_number, per_joint_rel_err, relative_std_pct
 
 #: ||W_L^j chi_L|| / ||V_b^j|| below which the payload does not excite joint j (gain not identifiable)
 PAYLOAD_EXCITATION_TOL = 1e-6
@@ -68,10 +68,10 @@ class DriveGainsResult:
     def summary(self) -> str:
         lines = ["Drive gains, per-joint weighted LS with a known payload (eq. 27)", "",
                  f"{'':<10}" + "".join(f"{'joint ' + str(j + 1):>12}" for j in self.gains.joints),
-                 f"{'g':<10}" + "".join(_fmt(v, 12) for v in self.gains.values),
-                 f"{'2 sigma':<10}" + "".join(_fmt(2 * s, 12) for s in self.gains.std),
+                 f"{'g':<10}" + "".join(fmt_number(v, 12) for v in self.gains.values),
+                 f"{'2 sigma':<10}" + "".join(fmt_number(2 * s, 12) for s in self.gains.std),
                  f"{'%sigma':<10}" + "".join(f"{p:>12.2f}" for p in self.gains.rel_std_pct),
-                 f"{'cond(W)':<10}" + "".join(_fmt(r.cond, 12) for r in self.per_joint)]
+                 f"{'cond(W)':<10}" + "".join(fmt_number(r.cond, 12) for r in self.per_joint)]
         if self.warnings:
             lines += ["", "Warnings:"] + [f"[{i}] {w}" for i, w in enumerate(self.warnings, 1)]
         return "\n".join(lines)
@@ -309,7 +309,7 @@ def sensor_gains(unloaded: ObservationSystem, loaded: ObservationSystem | None, 
     y = Y * g[joint]
     rel_err = per_joint_rel_err(residual, y, joint, n)
     gains = Gains(tuple(range(n)), g, gstd, relative_std_pct(g, gstd))
-    warnings = list(raw.warnings) + _poor_warning(pnames, x, raw.std[ppos], opts)
+    warnings = list(raw.warnings) + poorly_identified_warnings(pnames, x, raw.std[ppos], opts)
     badg = [f"g{j + 1} ({p:.3g}%)" for j, p in enumerate(gains.rel_std_pct) if p > opts.rel_std_warn_pct]
     if badg:
         warnings.append(f"gains poorly identified: {', '.join(badg)}")

@@ -24,8 +24,9 @@ The shared machinery of IDIM-IV and DIDIM (:mod:`.didim`) lives here: :class:`Cl
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -41,8 +42,11 @@ from .estimators import COND_WARN, REL_STD_WARN_PCT, fit_ols
 from .physical import base_matrix, standard_from_base
 from .result import IdentificationResult, per_joint_rel_err, relative_std_pct
 
-__all__ = ["ClosedLoopSetup", "IterativeIdentification", "SimulatedOutput", "closed_loop_setup", "identify_iv", "iterate",
-           "iv_fit", "physical_projection", "reference_ols", "simulated_output", "simulated_system"]
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
+__all__ = ["ClosedLoopSetup", "IterativeIdentification", "LoopOptions", "LoopSettings", "SimulatedOutput",
+           "closed_loop_setup", "identify_iv", "iterate", "iv_fit", "physical_projection", "reference_ols", "simulated_output", "simulated_system"]
 
 #: default convergence tolerance on ``|chi_k+1 - chi_k| / |chi_k|``
 TOL = 1e-3
@@ -50,6 +54,44 @@ TOL = 1e-3
 MAX_ITER = 20
 #: step halvings tried when a new estimate cannot be simulated
 MAX_HALVINGS = 4
+
+
+class LoopOptions(TypedDict, total=False):
+    """The keywords of the closed-loop iteration shared by IDIM-IV and DIDIM (:func:`iterate`,
+    :func:`identify_iv`, :func:`~.didim.identify_didim`; defaults in :class:`LoopSettings`)."""
+
+    references: Sequence[Any] | None
+    gains: PIDGains | Sequence[PIDGains] | None
+    bandwidth_hz: float | None
+    friction_eps: float
+    max_iter: int
+    tol: float
+    start: Any
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """The closed-loop iteration's settings: the simulated controller (``references``, ``gains``,
+    ``bandwidth_hz``, ``friction_eps``: see :func:`closed_loop_setup`), the first estimate simulated
+    (``start``, None: the IDIM-OLS estimate) and the stop (``max_iter`` iterations at most, relative change
+    below ``tol``)."""
+
+    references: Sequence[Any] | None = None
+    gains: PIDGains | Sequence[PIDGains] | None = None
+    bandwidth_hz: float | None = None
+    friction_eps: float = FRICTION_EPS
+    max_iter: int = MAX_ITER
+    tol: float = TOL
+    start: Any = None
+
+    @classmethod
+    def of(cls, function: str, keywords: Mapping[str, Any]) -> LoopSettings:
+        """The settings of the keywords given to ``function`` (an unknown keyword is the TypeError Python
+        raises for it)."""
+        unknown = [k for k in keywords if k not in cls.__dataclass_fields__]
+        if unknown:
+            raise TypeError(f"{function}() got an unexpected keyword argument {unknown[0]!r}")
+        return cls(**keywords)
 
 
 @dataclass(frozen=True, eq=False)
@@ -321,7 +363,8 @@ class IterativeIdentification:
                 f"RMS per joint: {', '.join(f'{x:.3g}' for x in self.tracking_error)}")
 
 
-def _tracking(runs) -> np.ndarray:
+def tracking_error_rms(runs) -> np.ndarray:
+    """RMS per joint of the closed-loop tracking error ``q_ref - q`` over every simulated run."""
     num = sum(np.sum((r.q_ref - r.q) ** 2, axis=0) for r in runs)
     den = sum(r.q.shape[0] for r in runs)
     return np.sqrt(num / den)
@@ -427,9 +470,7 @@ def _simulable(model: IdentificationModel, setup: ClosedLoopSetup, theta) -> str
 
 
 def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory], options: AssemblyOptions | None,
-            step, label: str, *, references=None, gains=None, bandwidth_hz: float | None = None,
-            friction_eps: float = FRICTION_EPS, max_iter: int = MAX_ITER, tol: float = TOL,
-            start=None, simulate=None) -> IterativeIdentification:
+            step, label: str, *, simulate=None, **loop: Unpack[LoopOptions]) -> IterativeIdentification:
     """The iteration shared by IDIM-IV and DIDIM: simulate the current estimate in closed loop, assemble
     the simulated states, ``chi_k+1 = step(measured_system, simulated_system)``, until the relative
     change is below ``tol``. ``simulate(model, setup, theta) -> (system, runs)`` builds the simulated
@@ -441,8 +482,10 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
     When neither can, the physically consistent projection of IDIM-OLS (:func:`physical_projection`)
     starts. When a new estimate cannot be simulated, its physically consistent projection is simulated
     instead; when that fails too, the step from the last simulated estimate is halved (up to
-    :data:`MAX_HALVINGS` times), as a damped Gauss–Newton iteration does.
+    :data:`MAX_HALVINGS` times), as a damped Gauss–Newton iteration does. ``loop``: :class:`LoopSettings`.
     """
+    lp = LoopSettings.of("iterate", loop)
+    max_iter, tol = lp.max_iter, lp.tol
     opts = AssemblyOptions() if options is None else options
     trajs = (trajectories,) if isinstance(trajectories, Trajectory) else tuple(trajectories)
     sim_fn = simulated_system if simulate is None else simulate
@@ -452,38 +495,10 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
     if tuple(measured.system.names) != tuple(model.BASE_NAMES):
         raise IdentificationError(f"{label} needs the base-parameter columns of the model")
     ols = fit_ols(measured.system)
-    theta = ols.values if start is None else parameter_vector(model, start)
-    source = "IDIM-OLS" if start is None else "given"
-    setup = closed_loop_setup(model, trajs, opts, theta, references=references, gains=gains,
-                              bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
-    notes = []
-    if start is None:
-        why = _simulable(model, setup, theta)
-        if why is not None:
-            alt = reference_ols(model, setup).values
-            if gains is None:  # the default gains came from the rejected estimate
-                setup = closed_loop_setup(model, trajs, opts, alt, references=references, gains=None,
-                                          bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
-            why2 = _simulable(model, setup, alt)
-            if why2 is None:
-                theta, source = alt, "OLS on the reference states"
-                notes.append(f"{label} started from the OLS fit on the reference states: the IDIM-OLS estimate cannot "
-                             f"be simulated ({why})")
-            else:
-                proj = physical_projection(model, ols.values)
-                if proj is not None and gains is None:  # default gains from the start actually simulated
-                    setup = closed_loop_setup(model, trajs, opts, proj, references=references, gains=None,
-                                              bandwidth_hz=bandwidth_hz, friction_eps=friction_eps, measured=measured)
-                why3 = "cvxpy is not installed" if proj is None else _simulable(model, setup, proj)
-                if proj is None or why3 is not None:
-                    raise IdentificationError(
-                        f"{label}: cannot simulate the IDIM-OLS start ({why}), the OLS fit on the reference states "
-                        f"({why2}) nor the physically consistent projection of IDIM-OLS ({why3}); filter more "
-                        f"(a lower cutoff) or give a physical start (start=...)")
-                theta, source = proj, "physical projection of IDIM-OLS"
-                notes.append(f"{label} started from the physically consistent projection of the IDIM-OLS estimate "
-                             f"(neither it ({why}) nor the OLS fit on the reference states ({why2}) can be simulated)")
-    history, changes = [theta], []
+    notes: list[str] = []
+    theta, source, setup = _simulable_start(model, trajs, opts, measured, ols, lp, label, notes)
+    history = [theta]
+    changes: list[float] = []
     res, runs, converged = ols, [], False
     prev = None
     for _ in range(int(max_iter)):
@@ -540,7 +555,48 @@ def iterate(model: IdentificationModel, trajectories: Trajectory | Sequence[Traj
                      f">= {tol:g})")
     res = replace(res, warnings=tuple(notes) + res.warnings)
     return IterativeIdentification(res, ols, len(changes), converged, np.array(history), np.array(changes), setup,
-                                   _tracking(runs), source)
+                                   tracking_error_rms(runs), source)
+
+
+def _simulable_start(model: IdentificationModel, trajs: tuple[Trajectory, ...], opts: AssemblyOptions,
+                     measured: Assembly, ols: IdentificationResult, lp: LoopSettings, label: str, notes: list[str]
+                     ) -> tuple[np.ndarray, str, ClosedLoopSetup]:
+    """The first estimate simulated, what it is, and the closed-loop setup (see :func:`iterate`): ``start``
+    when given, else IDIM-OLS, else the OLS fit on the reference states, else the physically consistent
+    projection of IDIM-OLS (said in ``notes``)."""
+    theta = ols.values if lp.start is None else parameter_vector(model, lp.start)
+    source = "IDIM-OLS" if lp.start is None else "given"
+
+    def setup_at(theta0: np.ndarray, gains) -> ClosedLoopSetup:
+        return closed_loop_setup(model, trajs, opts, theta0, references=lp.references, gains=gains,
+                                 bandwidth_hz=lp.bandwidth_hz, friction_eps=lp.friction_eps, measured=measured)
+
+    setup = setup_at(theta, lp.gains)
+    if lp.start is not None:
+        return theta, source, setup
+    why = _simulable(model, setup, theta)
+    if why is None:
+        return theta, source, setup
+    alt = reference_ols(model, setup).values
+    if lp.gains is None:  # the default gains came from the rejected estimate
+        setup = setup_at(alt, None)
+    why2 = _simulable(model, setup, alt)
+    if why2 is None:
+        notes.append(f"{label} started from the OLS fit on the reference states: the IDIM-OLS estimate cannot "
+                     f"be simulated ({why})")
+        return alt, "OLS on the reference states", setup
+    proj = physical_projection(model, ols.values)
+    if proj is not None and lp.gains is None:  # default gains from the start actually simulated
+        setup = setup_at(proj, None)
+    why3 = "cvxpy is not installed" if proj is None else _simulable(model, setup, proj)
+    if proj is None or why3 is not None:
+        raise IdentificationError(
+            f"{label}: cannot simulate the IDIM-OLS start ({why}), the OLS fit on the reference states "
+            f"({why2}) nor the physically consistent projection of IDIM-OLS ({why3}); filter more "
+            f"(a lower cutoff) or give a physical start (start=...)")
+    notes.append(f"{label} started from the physically consistent projection of the IDIM-OLS estimate "
+                 f"(neither it ({why}) nor the OLS fit on the reference states ({why2}) can be simulated)")
+    return proj, "physical projection of IDIM-OLS", setup
 
 
 def identify_iv(model: IdentificationModel, trajectories: Trajectory | Sequence[Trajectory],

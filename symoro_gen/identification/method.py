@@ -74,6 +74,8 @@ def identify(data: ObservationSystem | Accumulator | Trajectory | Sequence[Traje
             raise IdentificationError(f"the {m} method needs the measured trajectories, not an observation system")
         fn = identify_iv if m == "iv" else identify_didim
         return fn(model, data, options, **(closed_loop or {})).result
+    if not isinstance(data, (ObservationSystem, Accumulator)):  # what the estimators say of anything else
+        raise IdentificationError(f"expected an ObservationSystem or an Accumulator, got {type(data).__name__}")
     if essential:
         return essential_parameters(data, r_sigma=r_sigma, method=m, weighting=weighting, keep=keep,
                                     **tolerances).result

@@ -10,16 +10,20 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg
 
 from ..errors import IdentificationError
-from .estimators import COND_WARN, RANK_TOL, REL_STD_WARN_PCT, ZERO_COL_TOL
+from .estimators import COND_WARN, RANK_TOL, REL_STD_WARN_PCT, ZERO_COL_TOL, Tolerances, tolerance_keywords
 from .method import identify
 from .observation import ObservationSystem
 from .result import IdentificationResult, per_joint_rel_err
 from .systems import apply_gains, fix_parameters, select_rows, stack_systems
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 
 def split_experiments(unloaded: ObservationSystem, loaded: ObservationSystem | None,
@@ -86,9 +90,7 @@ def split_experiments(unloaded: ObservationSystem, loaded: ObservationSystem | N
 def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSystem | None,
                            known: Mapping[str, float], method: str = "wls", *,
                            essential: bool = False, r_sigma: float = 30.0, weighting: str | None = None,
-                           payload_names: Sequence[str] | None = None, gains=None,
-                           rank_tol: float = RANK_TOL, cond_warn: float = COND_WARN,
-                           rel_std_warn_pct: float = REL_STD_WARN_PCT, zero_col_tol: float = ZERO_COL_TOL
+                           payload_names: Sequence[str] | None = None, gains=None, **tolerances: Unpack[Tolerances]
                            ) -> IdentificationResult:
     """Robot base parameters + unknown payload parameters with a partly known payload (eq. 7).
 
@@ -109,12 +111,15 @@ def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSyste
         Payload columns; default: columns of ``loaded`` not in ``unloaded``.
     gains : Gains or array_like (n_joints,), optional
         Measurements scaled by these gains first (``tau = g v``).
+    **tolerances
+        rank_tol, cond_warn, rel_std_warn_pct, zero_col_tol (:class:`~.estimators.Tolerances`).
 
     Returns
     -------
     IdentificationResult
         Parameters ``chi`` and ``chi_ul``; ``fixed`` holds ``chi_kl``.
     """
+    tol_kw = tolerance_keywords("fit_with_known_payload", dict(tolerances))
     unloaded, loaded, pay = split_experiments(unloaded, loaded, payload_names)
     bad = [k for k in known if k not in pay]
     if bad:
@@ -123,9 +128,7 @@ def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSyste
         unloaded, loaded = apply_gains(unloaded, gains), apply_gains(loaded, gains)
     full = stack_systems(unloaded, loaded)
     system = fix_parameters(full, known)
-    res = identify(system, method=method, essential=essential, r_sigma=r_sigma, weighting=weighting,
-                   rank_tol=rank_tol, cond_warn=cond_warn, rel_std_warn_pct=rel_std_warn_pct,
-                   zero_col_tol=zero_col_tol)
+    res = identify(system, method=method, essential=essential, r_sigma=r_sigma, weighting=weighting, **tol_kw)
     # same residual; error norms relative to the measured torques, not to Y - W_kl chi_kl
     assert res.residual is not None  # identify() on a system keeps its residual
     rel_err = per_joint_rel_err(res.residual, full.Y, full.joint, res.rel_err.size)

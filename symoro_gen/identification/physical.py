@@ -49,7 +49,7 @@ from ..errors import IdentificationError
 from ..model import IdentificationModel
 from ..observations.system import ObservationSystem
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, split_name
-from .result import IdentificationResult, _json_float, per_joint_rel_err
+from .result import IdentificationResult, json_float, per_joint_rel_err
 
 __all__ = [
     "DEFAULT_REGULARIZATION",
@@ -193,7 +193,8 @@ def _constraints(cp, x, lay: _Layout, s: np.ndarray, body_scale: np.ndarray, nom
                  known: Mapping[str, float], nominal_tolerance: float | None):
     """cvxpy constraints on ``x`` (in SI units) with labels for the active-set report."""
     G = _pseudo_map()
-    cons, labels = [], []
+    cons = []
+    labels: list[tuple[str, str, tuple[int, ...] | int, float]] = []  # kind, name, where, reference value
     for (label, b), bs in zip(lay.bodies, body_scale):
         P = cp.reshape(G @ x[list(b)], (4, 4), order="F")
         cons.append((P + P.T) / 2 >> PSD_MARGIN * bs * np.eye(4))
@@ -416,16 +417,16 @@ class PhysicalResult:
         plus the payload, the implied base parameters and the cost of consistency."""
         return {
             "names": list(self.names),
-            "values": [_json_float(v) for v in self.values],
+            "values": [json_float(v) for v in self.values],
             "active_constraints": list(self.active_constraints),
-            "payload": {"names": list(self.payload_names), "values": [_json_float(v) for v in self.payload_values]},
-            "base": {"names": list(self.base_names), "values": [_json_float(v) for v in self.base_values]},
+            "payload": {"names": list(self.payload_names), "values": [json_float(v) for v in self.payload_values]},
+            "base": {"names": list(self.base_names), "values": [json_float(v) for v in self.base_values]},
             "known": dict(self.known),
-            "cost": _json_float(self.cost),
-            "cost_unconstrained": _json_float(self.cost_unconstrained),
-            "residual_increase_pct": _json_float(self.residual_increase_pct),
-            "rel_err": [_json_float(v) for v in self.rel_err],
-            "rel_err_unconstrained": [_json_float(v) for v in self.rel_err_unconstrained],
+            "cost": json_float(self.cost),
+            "cost_unconstrained": json_float(self.cost_unconstrained),
+            "residual_increase_pct": json_float(self.residual_increase_pct),
+            "rel_err": [json_float(v) for v in self.rel_err],
+            "rel_err_unconstrained": [json_float(v) for v in self.rel_err_unconstrained],
             "bodies": list(self.bodies),
             "solver": self.solver,
             "status": self.status,

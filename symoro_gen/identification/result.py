@@ -24,7 +24,7 @@ from ..model import IdentificationModel
 from ..observations.assembly import Assembly, basis_text, merge_metric_basis
 from ..observations.raw import raw_error_sums
 from ..observations.system import ObservationSystem
-from ..report.tables import gains_html, result_html
+from .render import gains_html, method_label, result_html
 
 #: summary() lists the known (fixed) parameters one per line up to this many
 MAX_FIXED_LISTED = 12
@@ -34,12 +34,6 @@ def _frozen(a, dtype=float) -> np.ndarray:
     out = np.array(a, dtype=dtype, copy=True)
     out.setflags(write=False)
     return out
-
-
-def method_label(method: str) -> str:
-    """The estimator's name in headers: ``IDIM-OLS``, ``IDIM-IV``...; DIDIM is not an IDIM method
-    (output error in closed loop, Gautier, Janot & Vandanjon 2013) and keeps its own name."""
-    return "DIDIM" if str(method).upper() == "DIDIM" else f"IDIM-{method}"
 
 
 def relative_std_pct(values, std) -> np.ndarray:
@@ -61,12 +55,15 @@ def relative_std_pct(values, std) -> np.ndarray:
     return out
 
 
-def _json_float(x: float):
+def json_float(x: float):
+    """A float for JSON: the value, or None when it is not finite (JSON has no NaN)."""
     x = float(x)
     return x if math.isfinite(x) else None
 
 
-def _fmt(x: float, width: int = 11) -> str:
+
+def fmt_number(x: float, width: int = 11) -> str:
+    """A number right-aligned in ``width`` characters (4 significant digits; scientific outside [1e-3, 1e5))."""
     if not np.isfinite(x):
         return f"{'inf' if x > 0 else ('-inf' if x < 0 else 'nan'):>{width}}"
     return f"{x:>{width}.4g}" if abs(x) >= 1e-3 and abs(x) < 1e5 else f"{x:>{width}.3e}"
@@ -118,9 +115,9 @@ class Gains:
         return {
             "names": list(self.names),
             "joints": [j + 1 for j in self.joints],
-            "values": [_json_float(v) for v in self.values],
-            "std": [_json_float(v) for v in self.std],
-            "rel_std_pct": [_json_float(v) for v in self.rel_std_pct],
+            "values": [json_float(v) for v in self.values],
+            "std": [json_float(v) for v in self.std],
+            "rel_std_pct": [json_float(v) for v in self.rel_std_pct],
         }
 
 
@@ -360,14 +357,14 @@ class IdentificationResult:
         if self.gains is not None:
             lines.append(f"{'Gain':<10}{'Value':>11}{'2 sigma':>11}{'%sigma':>9}")
             for n, v, s, p in zip(self.gains.names, self.gains.values, self.gains.std, self.gains.rel_std_pct):
-                lines.append(f"{n:<10}{_fmt(v)}{_fmt(2 * s)}{p:>9.2f}")
+                lines.append(f"{n:<10}{fmt_number(v)}{fmt_number(2 * s)}{p:>9.2f}")
             lines.append("")
         lines.append(f"{'Param.':<10}{'Value':>11}{'2 sigma':>11}{'%sigma':>9}")
         for n, v, s, p in zip(self.names, self.values, self.std, self.rel_std_pct):
-            lines.append(f"{n:<10}{_fmt(v)}{_fmt(2 * s)}{p:>9.2f}")
+            lines.append(f"{n:<10}{fmt_number(v)}{fmt_number(2 * s)}{p:>9.2f}")
         if len(self.fixed) <= MAX_FIXED_LISTED:
             for n, v in self.fixed:
-                lines.append(f"{n:<10}{_fmt(v)}{'known':>11}{'-':>9}")
+                lines.append(f"{n:<10}{fmt_number(v)}{'known':>11}{'-':>9}")
         else:
             lines.append(f"({len(self.fixed)} known parameters moved to the left-hand side: "
                          f"{', '.join(n for n, _ in self.fixed[:5])}, ...)")
@@ -399,14 +396,14 @@ class IdentificationResult:
             "method": self.method,
             "parameters": {
                 "names": list(self.names),
-                "values": [_json_float(v) for v in self.values],
-                "std": [_json_float(v) for v in self.std],
-                "rel_std_pct": [_json_float(v) for v in self.rel_std_pct],
+                "values": [json_float(v) for v in self.values],
+                "std": [json_float(v) for v in self.std],
+                "rel_std_pct": [json_float(v) for v in self.rel_std_pct],
             },
-            "rel_err": [_json_float(v) for v in self.rel_err],
-            "cond": _json_float(self.cond),
-            "cond_scaled": _json_float(self.cond_scaled),
-            "sigma": _json_float(self.sigma),
+            "rel_err": [json_float(v) for v in self.rel_err],
+            "cond": json_float(self.cond),
+            "cond_scaled": json_float(self.cond_scaled),
+            "sigma": json_float(self.sigma),
             "n_rows": self.n_rows,
             "fixed": {k: v for k, v in self.fixed},
             "eliminated": list(self.eliminated),
@@ -415,11 +412,11 @@ class IdentificationResult:
         if self.unexcited:
             out["unexcited"] = list(self.unexcited)
         if self.rel_err_raw is not None:
-            out["rel_err_raw"] = [_json_float(v) for v in self.rel_err_raw]
+            out["rel_err_raw"] = [json_float(v) for v in self.rel_err_raw]
         if self.rel_err_basis is not None:
             out["rel_err_basis"] = self.rel_err_basis
         if self.joint_sigma is not None:
-            out["joint_sigma"] = [_json_float(v) for v in self.joint_sigma]
+            out["joint_sigma"] = [json_float(v) for v in self.joint_sigma]
         if self.gains is not None:
             out["gains"] = self.gains.to_dict()
         return out

@@ -64,15 +64,15 @@ from ..errors import DataFileError, ModelError, Problem, ShapeError
 from ..model import IdentificationModel
 from ..preprocessing.filtering import (
     FilterSettings,
-    _fir_decimate,
-    _fir_decimate_padded,
-    _group_size,
     blas_threads,
     butterworth_settle_samples,
     choose_filter_settings,
     decimation_filter,
     filter_and_differentiate,
     fir_buffer_length,
+    fir_decimate,
+    fir_decimate_padded,
+    fir_group_size,
     min_filter_samples,
 )
 from ..preprocessing.trajectory import Trajectory
@@ -396,130 +396,163 @@ class _Evaluator:
 def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterSettings, opts: AssemblyOptions,
                        ev: _Evaluator, sink: _SignalSink | None = None) -> Iterator[_Block]:
     """Decimated blocks of one experiment (before velocity removal and regrouping); the filtered
-    kinematics go to ``sink`` when given."""
-    n = traj.n_joints
-    N = traj.n_samples
-    src = traj.source
-    if n != ev.n:
-        raise ShapeError(f"{src}: trajectory has {n} joints, model {getattr(model, 'ROBOT', '?')} has {ev.n}")
-    use_rec = opts.use_recorded_derivatives
-    if use_rec and (traj.dq is None or traj.ddq is None):
-        raise DataFileError([Problem(src, "", "dq/ddq", "use_recorded_derivatives=True but the trajectory has "
-                                     "no recorded velocities/accelerations")])
-    e = st.edge_samples
-    nd = st.n_d
-    Nseg = N - 2 * e
-    need = max(min_filter_samples(st.order, nd, st.ftype), nd)
-    if min_filter_samples(st.order) > N or Nseg < need:
-        raise DataFileError([Problem(src, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
-                                     f"{2 * e} dropped at the edges, at least {need} must remain "
-                                     f"(cut-off {st.cutoff_hz:.4g} Hz, n_d = {nd})")])
-    c = ev.nb + ev.npay
-    payload_on = ev.npay > 0 and traj.loaded
-    keep = ev.columns(payload_on)  # flat (n, c) indices of the buffer's W columns
-    Cw = keep.size
-    Cb = Cw + n  # buffer: kept W columns, then Y
-    fs = st.fs
-    margin = 0 if use_rec else butterworth_settle_samples(fs, st.cutoff_hz, st.order) + 2
-    fir = nd > 1 and st.ftype == "fir"
-    iir = nd > 1 and st.ftype == "iir"
-    if fir:
-        h = decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio)
-        L = h.size
-        half = (L - 1) // 2
-        group = _group_size(nd)
-    n_out_total = -(-Nseg // nd)
-    # outputs per block
-    budget_rows = max(1, int(opts.max_chunk_mb * 1e6 / (8.0 * Cb)))
-    if iir:
-        per_block = n_out_total
-    elif opts.chunk_samples is not None:
-        per_block = max(1, int(opts.chunk_samples) // nd)
-    elif fir:
-        per_block = max(1, (budget_rows - L) // nd)
-    else:
-        per_block = budget_rows
-    if fir:
-        per_block = max(group, per_block // group * group)
-    per_block = min(per_block, n_out_total)
-    vmin = opts.velocity_threshold(n)
-    need_vmin = vmin is not None
-    habs: np.ndarray | None = None
-    if need_vmin:  # weights of the decimation filter, normalised, to measure each row's exposure to slow samples
-        habs = np.abs(decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio)) if nd > 1 else None
-        if habs is not None:
-            habs /= habs.sum()
+    kinematics go to ``sink`` when given. A generator: the experiment is checked when the first block
+    is asked for."""
+    yield from _ExperimentBlocks(model, traj, st, opts, ev, sink).blocks()
 
-    def kinematics(a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+
+class _ExperimentBlocks:
+    """The blocks of one experiment: their layout (FIR decimation: zero-padded overlapping buffers; IIR: the
+    whole experiment at once; no decimation: plain chunks), the kinematics filtered per block, and the
+    buffers of W (kept columns), Y and dq reused for every block."""
+
+    def __init__(self, model: IdentificationModel, traj: Trajectory, st: FilterSettings, opts: AssemblyOptions,
+                 ev: _Evaluator, sink: _SignalSink | None) -> None:
+        self.traj, self.st, self.opts, self.ev, self.sink = traj, st, opts, ev, sink
+        n = self.n = traj.n_joints
+        N = self.N = traj.n_samples
+        src = traj.source
+        if n != ev.n:
+            raise ShapeError(f"{src}: trajectory has {n} joints, model {getattr(model, 'ROBOT', '?')} has {ev.n}")
+        self.use_rec = opts.use_recorded_derivatives
+        if self.use_rec and (traj.dq is None or traj.ddq is None):
+            raise DataFileError([Problem(src, "", "dq/ddq", "use_recorded_derivatives=True but the trajectory has "
+                                         "no recorded velocities/accelerations")])
+        e = self.e = st.edge_samples
+        nd = self.nd = st.n_d
+        self.Nseg = N - 2 * e
+        need = max(min_filter_samples(st.order, nd, st.ftype), nd)
+        if min_filter_samples(st.order) > N or self.Nseg < need:
+            raise DataFileError([Problem(src, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
+                                         f"{2 * e} dropped at the edges, at least {need} must remain "
+                                         f"(cut-off {st.cutoff_hz:.4g} Hz, n_d = {nd})")])
+        self.c = ev.nb + ev.npay
+        self.payload_on = ev.npay > 0 and traj.loaded
+        self.keep = ev.columns(self.payload_on)  # flat (n, c) indices of the buffer's W columns
+        self.margin = 0 if self.use_rec else butterworth_settle_samples(st.fs, st.cutoff_hz, st.order) + 2
+        self.fir = nd > 1 and st.ftype == "fir"
+        self.iir = nd > 1 and st.ftype == "iir"
+        self.h = np.zeros(0)
+        self.L = self.half = 0
+        self.group = 1
+        if self.fir:
+            self.h = decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio)
+            self.L = self.h.size
+            self.half = (self.L - 1) // 2
+            self.group = fir_group_size(nd)
+        self.n_out_total = -(-self.Nseg // nd)
+        self.per_block = self._outputs_per_block(self.keep.size + n)
+        self.vmin = opts.velocity_threshold(n)
+        self.habs: np.ndarray | None = None
+        if self.vmin is not None and nd > 1:
+            # weights of the decimation filter, normalised, to measure each row's exposure to slow samples
+            habs = np.abs(decimation_filter(nd, ftype="fir", cutoff_ratio=st.cutoff_ratio))
+            self.habs = habs / habs.sum()
+
+    def _outputs_per_block(self, Cb: int) -> int:
+        """Decimated outputs per block (``Cb`` buffer columns: kept W columns, then Y)."""
+        opts, nd = self.opts, self.nd
+        budget_rows = max(1, int(opts.max_chunk_mb * 1e6 / (8.0 * Cb)))
+        if self.iir:
+            per_block = self.n_out_total
+        elif opts.chunk_samples is not None:
+            per_block = max(1, int(opts.chunk_samples) // nd)
+        elif self.fir:
+            per_block = max(1, (budget_rows - self.L) // nd)
+        else:
+            per_block = budget_rows
+        if self.fir:
+            per_block = max(self.group, per_block // self.group * self.group)
+        return min(per_block, self.n_out_total)
+
+    def kinematics(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, dq, ddq on segment samples [a, b)."""
-        lo_full, hi_full = e + a, e + b
-        if use_rec:
-            assert traj.dq is not None and traj.ddq is not None  # checked above
+        traj, st = self.traj, self.st
+        lo_full, hi_full = self.e + a, self.e + b
+        if self.use_rec:
+            assert traj.dq is not None and traj.ddq is not None  # checked in __init__
             return traj.q[lo_full:hi_full], traj.dq[lo_full:hi_full], traj.ddq[lo_full:hi_full]
-        lo = max(0, lo_full - margin)
-        hi = min(N, hi_full + margin)
-        qf, dq, ddq = filter_and_differentiate(traj.q[lo:hi], fs, st.cutoff_hz, st.order, source=src)
+        lo = max(0, lo_full - self.margin)
+        hi = min(self.N, hi_full + self.margin)
+        qf, dq, ddq = filter_and_differentiate(traj.q[lo:hi], st.fs, st.cutoff_hz, st.order, source=traj.source)
         s = slice(lo_full - lo, hi_full - lo)
         return qf[s], dq[s], ddq[s]
 
-    def fill(bufs: list[np.ndarray], dqbuf: np.ndarray | None, r0: int, a: int, b: int) -> None:
+    def fill(self, bufs: list[np.ndarray], dqbuf: np.ndarray | None, r0: int, a: int, b: int) -> None:
         """W (kept columns), Y and dq of segment samples [a, b) into rows [r0, r0 + b - a)."""
-        q, dq, ddq = kinematics(a, b)
+        q, dq, ddq = self.kinematics(a, b)
         r1 = r0 + b - a
-        ev.write(bufs[0][r0:r1], bufs[1][r0:r1] if payload_on else None, q, dq, ddq)
-        bufs[-1][r0:r1] = traj.tau[e + a:e + b]
+        self.ev.write(bufs[0][r0:r1], bufs[1][r0:r1] if self.payload_on else None, q, dq, ddq)
+        bufs[-1][r0:r1] = self.traj.tau[self.e + a:self.e + b]
         if dqbuf is not None:
             dqbuf[r0:r1] = dq
-        if sink is not None:
-            sink.write(a, b, q, dq, ddq)
+        if self.sink is not None:
+            self.sink.write(a, b, q, dq, ddq)
 
-    def unpack(decs: list[np.ndarray], k: int) -> tuple[np.ndarray, np.ndarray]:
-        Wd = np.zeros((k, n * c))
-        Wd[:, keep] = np.concatenate(decs[:-1], axis=1)
-        return Wd.reshape(k, n, c), decs[-1]
+    def unpack(self, decs: list[np.ndarray], k: int) -> tuple[np.ndarray, np.ndarray]:
+        Wd = np.zeros((k, self.n * self.c))
+        Wd[:, self.keep] = np.concatenate(decs[:-1], axis=1)
+        return Wd.reshape(k, self.n, self.c), decs[-1]
 
-    if fir:
-        rows_max = fir_buffer_length(per_block, nd, L, group)
-    elif iir:
-        rows_max = Nseg
-    else:
-        rows_max = per_block
-    widths = [ev.nz_base.size] + ([ev.nz_pay.size] if payload_on else []) + [n]
-    bufs = [np.empty((rows_max, w)) for w in widths]  # base W, payload W, Y: reused for every block
-    dqbuf = np.empty((rows_max, n)) if need_vmin else None
-    for k0 in range(0, n_out_total, per_block):
-        k1 = min(n_out_total, k0 + per_block)
-        k = k1 - k0
-        if fir:
-            start = k0 * nd - half  # segment index of buffer row 0
-            rows = fir_buffer_length(k, nd, L, group)
-            a = max(0, start)
-            b = min(Nseg, (k1 - 1) * nd + half + 1)
-            r0, r1 = a - start, b - start
-            Bs = [x[:rows] for x in bufs]
-            for x in Bs:  # zero padding beyond the experiment's ends (as resample_poly)
-                x[:r0] = 0.0
-                x[r1:] = 0.0
-            fill(Bs, dqbuf, r0, a, b)
-            with blas_threads(opts.blas_threads):
-                decs = [_fir_decimate_padded(x, h, nd, k, group) for x in Bs]
-                slow = _fir_decimate_padded(_slow_indicator(dqbuf[:rows], vmin, slice(r0, r1)), habs, nd, k, group) \
-                    if vmin is not None and dqbuf is not None and habs is not None else None
-        elif iir:
-            fill(bufs, dqbuf, 0, 0, Nseg)
-            with blas_threads(opts.blas_threads):
-                slow = _fir_decimate(_slow_indicator(dqbuf, vmin, slice(0, Nseg)), habs, nd) \
-                    if vmin is not None and dqbuf is not None and habs is not None else None
-            sos = decimation_filter(nd, ftype="iir", cutoff_ratio=st.cutoff_ratio)
-            decs = [signal.sosfiltfilt(sos, x, axis=0)[::nd] for x in bufs]
+    def blocks(self) -> Iterator[_Block]:
+        ev, n, nd = self.ev, self.n, self.nd
+        if self.fir:
+            rows_max = fir_buffer_length(self.per_block, nd, self.L, self.group)
+        elif self.iir:
+            rows_max = self.Nseg
         else:
-            Bs = [x[:k] for x in bufs]
-            fill(Bs, dqbuf, 0, k0, k1)
-            slow = _slow_indicator(dqbuf[:k], vmin, slice(0, k)) if vmin is not None and dqbuf is not None else None
-            decs = [x.copy() for x in Bs]
-        Wd, Yd = unpack(decs, k)
-        idx = e + np.arange(k0, k1) * nd
-        yield _Block(Wd=Wd, Yd=Yd, slow=slow, idx=idx)
+            rows_max = self.per_block
+        widths = [ev.nz_base.size] + ([ev.nz_pay.size] if self.payload_on else []) + [n]
+        bufs = [np.empty((rows_max, w)) for w in widths]  # base W, payload W, Y: reused for every block
+        dqbuf = np.empty((rows_max, n)) if self.vmin is not None else None
+        for k0 in range(0, self.n_out_total, self.per_block):
+            k1 = min(self.n_out_total, k0 + self.per_block)
+            k = k1 - k0
+            if self.fir:
+                decs, slow = self._fir_block(bufs, dqbuf, k0, k1)
+            elif self.iir:
+                decs, slow = self._iir_block(bufs, dqbuf)
+            else:
+                Bs = [x[:k] for x in bufs]
+                self.fill(Bs, dqbuf, 0, k0, k1)
+                slow = _slow_indicator(dqbuf[:k], self.vmin, slice(0, k)) \
+                    if self.vmin is not None and dqbuf is not None else None
+                decs = [x.copy() for x in Bs]
+            Wd, Yd = self.unpack(decs, k)
+            idx = self.e + np.arange(k0, k1) * nd
+            yield _Block(Wd=Wd, Yd=Yd, slow=slow, idx=idx)
+
+    def _fir_block(self, bufs: list[np.ndarray], dqbuf: np.ndarray | None, k0: int, k1: int
+                   ) -> tuple[list[np.ndarray], np.ndarray | None]:
+        """Outputs [k0, k1) of the FIR decimation: the zero-padded buffer rows they need, filled and filtered."""
+        nd, h, group, half, vmin, habs = self.nd, self.h, self.group, self.half, self.vmin, self.habs
+        k = k1 - k0
+        start = k0 * nd - half  # segment index of buffer row 0
+        rows = fir_buffer_length(k, nd, self.L, group)
+        a = max(0, start)
+        b = min(self.Nseg, (k1 - 1) * nd + half + 1)
+        r0, r1 = a - start, b - start
+        Bs = [x[:rows] for x in bufs]
+        for x in Bs:  # zero padding beyond the experiment's ends (as resample_poly)
+            x[:r0] = 0.0
+            x[r1:] = 0.0
+        self.fill(Bs, dqbuf, r0, a, b)
+        with blas_threads(self.opts.blas_threads):
+            decs = [fir_decimate_padded(x, h, nd, k, group) for x in Bs]
+            slow = fir_decimate_padded(_slow_indicator(dqbuf[:rows], vmin, slice(r0, r1)), habs, nd, k, group) \
+                if vmin is not None and dqbuf is not None and habs is not None else None
+        return decs, slow
+
+    def _iir_block(self, bufs: list[np.ndarray], dqbuf: np.ndarray | None
+                   ) -> tuple[list[np.ndarray], np.ndarray | None]:
+        """The whole experiment through the IIR decimation filter (forward and backward)."""
+        nd, vmin, habs = self.nd, self.vmin, self.habs
+        self.fill(bufs, dqbuf, 0, 0, self.Nseg)
+        with blas_threads(self.opts.blas_threads):
+            slow = fir_decimate(_slow_indicator(dqbuf, vmin, slice(0, self.Nseg)), habs, nd) \
+                if vmin is not None and dqbuf is not None and habs is not None else None
+        sos = decimation_filter(nd, ftype="iir", cutoff_ratio=self.st.cutoff_ratio)
+        return [signal.sosfiltfilt(sos, x, axis=0)[::nd] for x in bufs], slow
 
 
 def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, tol: float, removed: np.ndarray

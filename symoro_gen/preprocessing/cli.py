@@ -1,7 +1,7 @@
 """The data options every command that reads DATA shares (identify, diagnose, inspect).
 
 :func:`add_data_options` registers them on an argparse parser, :func:`load_data` turns the parsed
-arguments into trajectories and :class:`~symoro_gen.preprocessing.logformat.LoadReport` s,
+arguments into trajectories and :class:`~symoro_gen.preprocessing.readers.LoadReport` s,
 :func:`data_block` / :func:`data_text` echo the reports (JSON ``data`` block, text output).
 """
 from __future__ import annotations
@@ -9,9 +9,9 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from ..cli import OptionError
-from .logformat import ABSURD_VALUE, LoadReport, LogFormat, hold_back, load_logs, make_format
-from .trajectory import Trajectory
+from ..errors import OptionError
+from .readers import ABSURD_VALUE, LoadReport, LogFormat, make_format, read_recordings
+from .trajectory import Trajectory, hold_back
 
 __all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "data_text", "data_notes",
            "split_held_back"]
@@ -55,8 +55,8 @@ def load_data(args, paths: Sequence, robot, *, loaded: bool = False
               ) -> tuple[tuple[Trajectory, ...], tuple[LoadReport, ...]]:
     """Read ``paths`` with the data options of ``args`` for ``robot`` (its drive chain applied)."""
     fmt = format_from_args(args)
-    return load_logs(paths, fmt, n_joints=len(robot.model_joints), robot=robot, drive_chain=robot.drive_chain,
-                     loaded=loaded)
+    return read_recordings(paths, fmt, n_joints=len(robot.model_joints), robot=robot, drive_chain=robot.drive_chain,
+                           loaded=loaded)
 
 
 def split_held_back(args, trajectories):

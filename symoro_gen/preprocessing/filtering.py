@@ -475,7 +475,7 @@ def _fir_group_matrix(h: np.ndarray, n_d: int, group: int) -> np.ndarray:
     return D
 
 
-def _fir_decimate_padded(buf: np.ndarray, h: np.ndarray, n_d: int, n_out: int, group: int) -> np.ndarray:
+def fir_decimate_padded(buf: np.ndarray, h: np.ndarray, n_d: int, n_out: int, group: int) -> np.ndarray:
     """Outputs ``y[k] = sum_m h[m] buf[k n_d + m]`` for k < n_out; ``buf`` 2-D C-contiguous and long enough."""
     L = h.size
     G = -(-n_out // group)
@@ -490,22 +490,23 @@ def _fir_decimate_padded(buf: np.ndarray, h: np.ndarray, n_d: int, n_out: int, g
 
 
 def fir_buffer_length(n_out: int, n_d: int, L: int, group: int) -> int:
-    """Rows the padded buffer of :func:`_fir_decimate_padded` needs for ``n_out`` outputs."""
+    """Rows the padded buffer of :func:`fir_decimate_padded` needs for ``n_out`` outputs."""
     G = -(-n_out // group)
     return (G - 1) * group * n_d + (group - 1) * n_d + L
 
 
-def _group_size(n_d: int) -> int:
+def fir_group_size(n_d: int) -> int:
+    """Outputs computed per matrix product by :func:`fir_decimate_padded`."""
     return 16
 
 
-def _fir_decimate(x: np.ndarray, h: np.ndarray, n_d: int) -> np.ndarray:
+def fir_decimate(x: np.ndarray, h: np.ndarray, n_d: int) -> np.ndarray:
     """FIR decimation aligned as ``scipy.signal.resample_poly(x, 1, n_d, window=h)`` (axis 0, 2-D x)."""
     N, C = x.shape
     L = h.size
     half = (L - 1) // 2
     n_out = -(-N // n_d)
-    group = _group_size(n_d)
+    group = fir_group_size(n_d)
     rows = fir_buffer_length(n_out, n_d, L, group)
     cols = np.flatnonzero(np.any(x != 0.0, axis=0))
     out = np.zeros((n_out, C))
@@ -513,7 +514,7 @@ def _fir_decimate(x: np.ndarray, h: np.ndarray, n_d: int) -> np.ndarray:
         return out
     buf = np.zeros((max(rows, half + N), cols.size))
     buf[half:half + N] = x[:, cols] if cols.size < C else x
-    out[:, cols] = _fir_decimate_padded(buf, h, n_d, n_out, group)
+    out[:, cols] = fir_decimate_padded(buf, h, n_d, n_out, group)
     return out
 
 
@@ -556,7 +557,7 @@ def decimate(x, n_d: int, *, axis: int = 0, ftype: str = "fir", cutoff_ratio: fl
     elif ftype == "fir":
         h = decimation_filter(n_d, ftype="fir", cutoff_ratio=cutoff_ratio)
         with blas_threads(1):
-            y = _fir_decimate(np.ascontiguousarray(flat), h, n_d)
+            y = fir_decimate(np.ascontiguousarray(flat), h, n_d)
     else:
         raise ValueError(f"ftype must be 'fir' or 'iir', got {ftype!r}")
     return np.moveaxis(y.reshape((y.shape[0],) + xm.shape[1:]), 0, axis)

@@ -30,7 +30,7 @@ from ..report import Figure, Heading, ItemList, Preformatted, Report, Table, che
 from ..report.document import write_report_files
 from .cli import add_data_options, data_block, data_text, load_data
 from .filtering import choose_filter_settings, filter_and_differentiate
-from .logformat import LoadReport
+from .readers import LoadReport
 from .trajectory import Trajectory
 
 __all__ = ["JointStats", "ExperimentStats", "Inspection", "inspect_recordings", "add_inspect_parser", "run_inspect"]

@@ -1,7 +1,9 @@
-"""Measured (or simulated) joint trajectories: the value type data loaders return."""
+"""Measured (or simulated) joint trajectories: the value type data loaders return, and
+:func:`hold_back` (each experiment split in time, the last part held back for validation)."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -81,3 +83,23 @@ class Trajectory:
     def dt(self) -> float:
         """Median sampling period [s]."""
         return float(np.median(np.diff(self.t)))
+
+
+def hold_back(trajectories: Sequence[Trajectory], fraction: float
+              ) -> tuple[tuple[Trajectory, ...], tuple[Trajectory, ...]]:
+    """Split each experiment in time: the first ``1 - fraction`` for identification, the last
+    ``fraction`` for validation (a held-back part of the same recording)."""
+    if not 0 < fraction < 1:
+        raise ValueError(f"the held-back fraction must lie between 0 and 1, got {fraction:g}")
+    ident, valid = [], []
+    for tr in trajectories:
+        k = int(round(tr.n_samples * (1 - fraction)))
+
+        def part(a, b, tag, tr=tr):
+            cut = {f: (getattr(tr, f)[a:b] if getattr(tr, f) is not None else None)
+                   for f in ("t", "q", "tau", "dq", "ddq", "deflection")}
+            return replace(tr, **cut, source=f"{tr.source} [{tag}]", meta={**tr.meta, "part": tag})
+
+        ident.append(part(0, k, f"first {100 * (1 - fraction):.3g} %"))
+        valid.append(part(k, tr.n_samples, f"last {100 * fraction:.3g} %"))
+    return tuple(ident), tuple(valid)

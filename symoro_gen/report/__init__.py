@@ -1,24 +1,13 @@
-"""Reports of identifications and residual diagnoses: the papers' tables and matplotlib plots, as one
-self-contained HTML page or as Markdown with its images beside it; HTML tables for Jupyter.
+"""The reports' generic toolkit: documents (headings, paragraphs, tables, figures, preformatted text) rendered as
+one self-contained HTML page or as Markdown with its images beside it; matplotlib figures of torques, residuals,
+singular values and error bars; number formats and per-joint error tables. It imports no domain object: each
+stage renders its own blocks with it (:mod:`symoro_gen.identification.render`,
+:mod:`symoro_gen.diagnostics.render`), and the workflows compose them (:mod:`symoro_gen.workflows.reporting`:
+``write_report``; ``symoro_gen.identify(...).report(path)``).
 
-Typical use::
-
-    from symoro_gen.report import write_report
-    write_report("lwr4.html", result, robot="lwr4", identification={"identification data": sys_u},
-                 validation={"validation data": sys_v})          # or "lwr4.md"
-    write_report("diag.html", diagnosis=residual_report)         # symoro_gen.diagnostics.diagnose(...)
-
-Plots need matplotlib (the ``plots`` extra); without it :func:`write_report` raises
-:class:`MissingDependencyError` naming the extra, and ``plots=False`` writes the tables alone.
+Plots need matplotlib (the ``plots`` extra); without it the figures raise :class:`MissingDependencyError` naming
+the extra.
 """
-from .build import (
-                    build_report,
-                    check_report_path,
-                    diagnosis_html,
-                    diagnosis_plot_series,
-                    scaled_singular_values,
-                    write_report,
-)
 from .document import (
                     REPORT_SUFFIXES,
                     Figure,
@@ -30,13 +19,14 @@ from .document import (
                     ReportError,
                     Table,
                     asset_folder,
+                    check_report_path,
                     png_size,
+                    render_html_fragment,
                     report_kind,
+                    write_report_files,
 )
 from .plots import MissingDependencyError, require_matplotlib
-from .tables import drive_gains_html, gains_html, result_html
 
-__all__ = ["build_report", "write_report", "check_report_path", "diagnosis_plot_series", "scaled_singular_values",
-           "Report", "Heading", "Paragraph", "Table", "Figure", "ItemList", "Preformatted", "ReportError",
-           "REPORT_SUFFIXES", "asset_folder", "png_size", "report_kind", "MissingDependencyError",
-           "require_matplotlib", "result_html", "gains_html", "drive_gains_html", "diagnosis_html"]
+__all__ = ["check_report_path", "Report", "Heading", "Paragraph", "Table", "Figure", "ItemList", "Preformatted",
+           "ReportError", "MissingDependencyError", "require_matplotlib", "REPORT_SUFFIXES", "asset_folder", "png_size",
+           "render_html_fragment", "report_kind", "write_report_files"]

@@ -12,6 +12,7 @@ import html
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from ..atomic import (
     GENERATOR,
@@ -25,7 +26,8 @@ from ..atomic import (
 from ..errors import SymoroError
 
 __all__ = ["ReportError", "Heading", "Paragraph", "Table", "Figure", "ItemList", "Preformatted", "Report", "png_size",
-           "render_html_fragment", "report_kind", "asset_folder", "report_targets", "write_report_files", "REPORT_SUFFIXES"]
+           "render_html_fragment", "report_kind", "asset_folder", "report_targets", "write_report_files", "REPORT_SUFFIXES",
+           "check_report_path"]
 
 #: suffixes :func:`write_report_files` accepts, and the format each means
 REPORT_SUFFIXES = {".html": "html", ".htm": "html", ".md": "md", ".markdown": "md"}
@@ -125,6 +127,8 @@ class Figure:
     caption : str
     width, height : int
         Pixels, read from the PNG.
+    figure : matplotlib.figure.Figure or None
+        The figure drawn (kept for ``plot()``), not part of the document.
     """
 
     name: str
@@ -132,6 +136,8 @@ class Figure:
     caption: str = ""
     width: int = field(init=False)
     height: int = field(init=False)
+    #: the matplotlib figure the PNG was drawn from, when kept (``.plot()`` of a result returns it)
+    figure: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.name or not all(c.isalnum() or c in "-_" for c in self.name):
@@ -337,3 +343,13 @@ def write_report_files(report: Report, path, *, force: bool = False) -> Path:
             _replace_folder_atomic(folder, {f"{fig.name}.png": mark_png(fig.png) for fig in report.figures})
         write_bytes_atomic(path, (report.to_markdown(folder.name) + MARKDOWN_MARK).encode("utf-8"))
     return path
+
+
+def check_report_path(path) -> str:
+    """``"html"`` or ``"md"`` for a report path; :class:`ReportError` for another suffix (check it before
+    a long computation)."""
+    kind = report_kind(path)
+    if kind is None:
+        raise ReportError(f"report {path}: unknown suffix {Path(path).suffix!r}; use one of "
+                          f"{', '.join(REPORT_SUFFIXES)}")
+    return kind

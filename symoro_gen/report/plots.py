@@ -19,8 +19,8 @@ from ..atomic import mark_png
 from ..errors import SymoroError
 from .document import Figure
 
-__all__ = ["MissingDependencyError", "require_matplotlib", "figure_png", "torque_figure", "singular_values_figure",
-           "residual_figure", "error_bars_figure", "DPI", "WIDTH_IN", "MAX_POINTS", "N_BINS"]
+__all__ = ["MissingDependencyError", "figure_and_axes", "figure_png", "require_matplotlib", "torque_figure",
+           "singular_values_figure", "residual_figure", "error_bars_figure", "DPI", "WIDTH_IN", "MAX_POINTS", "N_BINS"]
 
 #: resolution of every figure [dots per inch]; with WIDTH_IN the figures are 1100 px wide
 DPI = 100
@@ -95,6 +95,10 @@ def figure_png(fig, dpi: int) -> bytes:
     return mark_png(buf.getvalue())
 
 
+#: the public name of the figure helper other plotting modules share (fleet report)
+figure_and_axes = _figure_and_axes
+
+
 def _stride(m: int, max_points: int) -> int:
     return max(1, int(math.ceil(m / max(int(max_points), 1))))
 
@@ -162,7 +166,7 @@ def torque_figure(name: str, title: str, measured: np.ndarray, reconstructed: np
     cap = (f"{title}. Blue: measured; red dashed: reconstructed by the inverse dynamic model with the identified "
            f"parameters; x axis: decimated samples of each joint, experiments one after the other"
            + (f" (one sample in {every} drawn)" if every > 1 else "") + ".")
-    return Figure(name, png, cap if caption is None else caption)
+    return Figure(name, png, cap if caption is None else caption, figure=fig)
 
 
 def _figure_legend(fig, ax, markerscale: float = 1.0) -> None:
@@ -192,7 +196,7 @@ def singular_values_figure(name: str, s: np.ndarray, *, title: str, caption: str
     ax.grid(True, which="both", color="#e0e0e0", lw=0.6)
     ax.tick_params(labelsize=8)
     ax.set_title(title, fontsize=10, loc="left")
-    return Figure(name, figure_png(fig, dpi), title if caption is None else caption)
+    return Figure(name, figure_png(fig, dpi), title if caption is None else caption, figure=fig)
 
 
 def _binned(x: np.ndarray, r: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
@@ -239,7 +243,7 @@ def residual_figure(name: str, title: str, panels: Sequence[tuple[str, np.ndarra
     _figure_legend(fig, axes[0], markerscale=2.5)
     cap = (f"{title}. Grey: residual of the model before the effect was added; blue: after; lines: means in "
            f"{n_bins} bins of equal counts")
-    return Figure(name, figure_png(fig, dpi), cap if caption is None else caption)
+    return Figure(name, figure_png(fig, dpi), cap if caption is None else caption, figure=fig)
 
 
 def error_bars_figure(name: str, title: str, series: Sequence[tuple[str, Sequence[float]]], *,
@@ -265,4 +269,4 @@ def error_bars_figure(name: str, title: str, series: Sequence[tuple[str, Sequenc
     ax.grid(True, axis="y", color="#e0e0e0", lw=0.6)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0), frameon=False)
     ax.set_title(title, fontsize=10, loc="left")
-    return Figure(name, figure_png(fig, dpi), title)
+    return Figure(name, figure_png(fig, dpi), title, figure=fig)

@@ -1,8 +1,6 @@
-"""The papers' tables as report blocks, from result objects (no plotting, no matplotlib).
-
-Used by :func:`symoro_gen.report.build_report` and by the ``_repr_html_`` methods of the result
-objects (Jupyter). Result objects are read through their public attributes only.
-"""
+"""Generic table helpers of the reports (no domain object, no plotting): number formats, the per-joint error
+table, warnings, HTML fragments for Jupyter. Each stage renders its own blocks with them
+(:mod:`symoro_gen.identification.render`, :mod:`symoro_gen.diagnostics.render`)."""
 from __future__ import annotations
 
 import math
@@ -11,11 +9,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .document import Heading, ItemList, Paragraph, Table, render_html_fragment
+from .document import Heading, ItemList, Table, render_html_fragment
 
-__all__ = ["fmt_value", "fmt_pct", "parameter_table", "gains_table", "drive_gains_table", "rel_err_table",
-           "payload_table", "reference_table", "warnings_block", "result_blocks", "result_html", "gains_html",
-           "drive_gains_html", "POOR_PCT", "is_mass_name", "unique_in_order"]
+__all__ = ["POOR_PCT", "fmt_err", "fmt_known", "fmt_pct", "fmt_value", "html_fragment", "is_mass_name", "is_poor",
+           "raw_err_table", "rel_err_table", "slug", "unique_in_order", "warnings_block"]
 
 #: %sigma above which a parameter row is marked as poorly identified (the estimators' warning level)
 POOR_PCT = 30.0
@@ -62,57 +59,9 @@ def fmt_err(x) -> str:
     return f"{x:.4f}" if math.isfinite(x) else "-"
 
 
-def _poor(pct: float) -> bool:
+def is_poor(pct: float) -> bool:
+    """A %sigma above :data:`POOR_PCT` (or not finite): a poorly identified parameter."""
     return not (float(pct) <= POOR_PCT)
-
-
-def parameter_table(result, caption: str = "Identified parameters", names: Sequence[str] | None = None) -> Table:
-    """Parameter, value, 2σ, %σ (RX-90 paper Table 3, LWR4 paper Table II); known (fixed) parameters
-    marked ``known``, cancelled ones (essential parameters) ``cancelled``.
-
-    Parameters
-    ----------
-    result : IdentificationResult
-    names : sequence of str, optional
-        Only these parameters (estimated, fixed or cancelled), in this order.
-    """
-    est = {n: (float(v), float(s), float(p)) for n, v, s, p in
-           zip(result.names, result.values, result.std, result.rel_std_pct)}
-    fixed = dict(result.fixed)
-    cancelled = set(result.eliminated)
-    order = list(names) if names is not None else list(result.names) + [n for n, _ in result.fixed] + list(result.eliminated)
-    rows, classes = [], []
-    for n in order:
-        if n in est:
-            v, s, p = est[n]
-            rows.append((n, fmt_value(v), fmt_value(2 * s), fmt_pct(p), "poorly identified" if _poor(p) else ""))
-            classes.append("poor" if _poor(p) else "")
-        elif n in fixed:
-            rows.append((n, fmt_known(fixed[n]), "-", "-", "known"))
-            classes.append("")
-        elif n in cancelled:
-            rows.append((n, "0", "-", "-", "cancelled (essential parameters)"))
-            classes.append("")
-    return Table(("Parameter", "Value", "2σ", "%σ", "Note"), tuple(rows), caption,
-                 numeric=(False, True, True, True, False), row_classes=tuple(classes))
-
-
-def gains_table(gains, caption: str = "Gains", cond: Sequence[float] | None = None) -> Table:
-    """Gain, joint, value, 2σ, %σ (LWR4 paper Table II, RX-90 paper Table 4); optional cond(W) per gain."""
-    head = ["Gain", "Joint", "Value", "2σ", "%σ"] + (["cond(W)"] if cond is not None else [])
-    rows, classes = [], []
-    for k, (n, j, v, s, p) in enumerate(zip(gains.names, gains.joints, gains.values, gains.std, gains.rel_std_pct)):
-        r = [n, str(j + 1), fmt_value(v), fmt_value(2 * s), fmt_pct(p)]
-        if cond is not None:
-            r.append(fmt_value(cond[k]))
-        rows.append(tuple(r))
-        classes.append("poor" if _poor(p) else "")
-    return Table(tuple(head), tuple(rows), caption, numeric=(False,) + (True,) * (len(head) - 1),
-                 row_classes=tuple(classes))
-
-
-def drive_gains_table(dg, caption: str = "Drive gains, per-joint weighted LS with a known payload (RX-90 eq. 27)") -> Table:
-    return gains_table(dg.gains, caption, cond=[r.cond for r in dg.per_joint])
 
 
 def rel_err_table(rows: Sequence[tuple[str, Sequence[float]]], n_joints: int,
@@ -127,46 +76,12 @@ def rel_err_table(rows: Sequence[tuple[str, Sequence[float]]], n_joints: int,
     return Table(head, tuple(body), caption)
 
 
-def payload_table(result, payload_names: Sequence[str], caption: str = "Payload parameters") -> Table | None:
-    """The payload's parameters of a result (identified, known or cancelled); None when it has none."""
-    have = set(result.names) | {n for n, _ in result.fixed} | set(result.eliminated)
-    names = [n for n in payload_names if n in have]
-    if not names:
-        return None
-    return parameter_table(result, caption, names=names)
-
-
-def payload_mass_text(result, payload_names: Sequence[str], what: str) -> str | None:
-    """``"payload mass M8 = 4.614 kg (known)"``-style sentence; None when the result has no mass."""
-    fixed = dict(result.fixed)
-    for n in payload_names:
-        if not is_mass_name(n):
-            continue
-        if n in result.names:
-            i = result.names.index(n)
-            return (f"{what}: {n} = {fmt_value(result.values[i])} kg, 2σ = {fmt_value(2 * result.std[i])} kg, "
-                    f"%σ = {fmt_pct(result.rel_std_pct[i])}")
-        if n in fixed:
-            return f"{what}: {n} = {fmt_known(fixed[n])} kg (known, weighed)"
-    return None
-
-
-def reference_table(rows, caption: str = "Beside the published reference table") -> Table:
-    """Rows of :func:`symoro_gen.identification.reference.compare_with_reference`."""
-    body, classes = [], []
-    for r in rows:
-        if r.name is None:
-            body.append((r.expression, "-", "", "", fmt_value(r.ref), fmt_pct(r.ref_rel_std_pct), "not in our model"))
-            classes.append("")
-        else:
-            body.append((r.expression, r.name, fmt_value(r.ours), fmt_pct(r.ours_rel_std_pct), fmt_value(r.ref),
-                         fmt_pct(r.ref_rel_std_pct), "yes" if r.agree_2sigma else "no"))
-            classes.append("" if r.agree_2sigma else "poor")
-    n = sum(r.agree_2sigma is not None for r in rows)
-    a = sum(bool(r.agree_2sigma) for r in rows)
-    return Table(("Reference expression", "Ours", "Value", "%σ", "Reference", "%σ", "Within 2σ"), tuple(body),
-                 f"{caption}: {a} of {n} comparable parameters agree within 2σ",
-                 numeric=(False, False, True, True, True, True, False), row_classes=tuple(classes))
+def raw_err_table(rows, n_joints: int) -> Table:
+    """Raw-torque relative error norms (``rel_err_raw``), its own table with a header saying so."""
+    t = rel_err_table(rows, n_joints, caption=(
+        "Relative error norms on the raw measured torque: ‖τ_j − τ̂_j‖/‖τ_j‖, the model at full rate on the "
+        "filtered states against the unfiltered torque, every sample (no row selection)"))
+    return Table(("Data (raw measured torque)",) + tuple(t.header[1:]), t.rows, t.caption)
 
 
 def warnings_block(warnings: Sequence[str]) -> list:
@@ -184,42 +99,14 @@ def unique_in_order(items) -> tuple[str, ...]:
     return tuple(out)
 
 
-def result_overview(result) -> str:
-    from ..identification.result import method_label
-
-    return (f"{method_label(result.method)}: {result.n_rows} equations, {result.n_params} parameters; "
-            f"cond(W) = {fmt_value(result.cond)} (columns scaled: {fmt_value(result.cond_scaled)}); "
-            f"σ = {fmt_value(result.sigma)}")
-
-
-def result_blocks(result, *, heading_level: int = 3) -> list:
-    """Overview line, gains, parameters, relative error norms and warnings of one result."""
-    blocks: list = [Paragraph(result_overview(result))]
-    if getattr(result, "gains", None) is not None:
-        blocks.append(gains_table(result.gains))
-    blocks.append(parameter_table(result))
-    blocks.append(rel_err_table([("identification", result.rel_err)], result.n_joints))
-    if getattr(result, "joint_sigma", None) is not None:
-        blocks.append(Paragraph("Row weights 1/σ_j with σ_j = "
-                                + ", ".join(fmt_value(s) for s in result.joint_sigma)))
-    blocks += warnings_block(result.warnings)
-    return blocks
+def slug(text: str) -> str:
+    """``text`` as a file-name stem: lower case, letters and digits, ``-`` between words."""
+    s = "".join(c if c.isalnum() else "-" for c in text.lower())
+    while "--" in s:
+        s = s.replace("--", "-")
+    return s.strip("-") or "figure"
 
 
-def _fragment(blocks) -> str:
-    return '<div class="symoro-gen-result">' + render_html_fragment(blocks) + "</div>"
-
-
-def result_html(result) -> str:
-    """HTML tables of an :class:`~symoro_gen.identification.result.IdentificationResult` (Jupyter)."""
-    return _fragment(result_blocks(result))
-
-
-def gains_html(gains) -> str:
-    """HTML table of a :class:`~symoro_gen.identification.result.Gains` (Jupyter)."""
-    return _fragment([gains_table(gains)])
-
-
-def drive_gains_html(dg) -> str:
-    """HTML of a :class:`~symoro_gen.identification.gains.DriveGainsResult` (Jupyter)."""
-    return _fragment([drive_gains_table(dg)] + warnings_block(dg.warnings))
+def html_fragment(blocks, css_class: str) -> str:
+    """Blocks as an HTML fragment in a ``<div class=...>`` (``_repr_html_`` of the results)."""
+    return f'<div class="{css_class}">' + render_html_fragment(blocks) + "</div>"

@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import io
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -11,7 +14,57 @@ from ..dynamics.numeric import inverse_dynamics
 from ..preprocessing.drive_chain import joint_to_motor
 from ..preprocessing.trajectory import Trajectory
 
-__all__ = ["true_torques", "simulate_recording", "write_recording_csv"]
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
+__all__ = ["true_torques", "simulate_recording", "write_recording_csv", "RecordingOptions", "RecordingSettings"]
+
+
+class RecordingOptions(TypedDict, total=False):
+    """How :func:`simulate_recording` logs the motion: the keywords of :class:`RecordingSettings`."""
+
+    gains: Any
+    noise_q: Any
+    noise_tau: Any
+    keep_derivatives: bool
+    drive_chain: Any
+    chunk_samples: int
+
+
+@dataclass(frozen=True, eq=False)
+class RecordingSettings:
+    """How a simulated recording is logged.
+
+    Attributes
+    ----------
+    gains : float or array_like (n,), optional
+        Torque-sensor / drive gains (default 1): ``tau_measured = tau_true / gains``.
+    noise_q, noise_tau : float or array_like (n,)
+        Standard deviations of white Gaussian noise on positions [rad] and on the recorded torque signal.
+    keep_derivatives : bool
+        Also store the true ``dq``, ``ddq`` in the trajectory (default: only ``t, q, tau`` as a logger would).
+    drive_chain : DriveChain, optional
+        Return motor-side positions and torques (to test the loaders' drive-chain mapping).
+    chunk_samples : int
+        Samples per evaluation of the torques (:func:`true_torques`).
+    """
+
+    gains: Any = None
+    noise_q: Any = 0.0
+    noise_tau: Any = 0.0
+    keep_derivatives: bool = False
+    drive_chain: Any = None
+    chunk_samples: int = 50_000
+
+    @classmethod
+    def of(cls, function: str, keywords: Mapping[str, Any]) -> RecordingSettings:
+        """The settings of the keywords given to ``function`` (an unknown keyword is the TypeError Python
+        raises for it)."""
+        names = {f.name for f in fields(cls)}
+        unknown = [k for k in keywords if k not in names]
+        if unknown:
+            raise TypeError(f"{function}() got an unexpected keyword argument {unknown[0]!r}")
+        return cls(**keywords)
 
 
 def true_torques(model_or_robot, q, dq, ddq, chi_std, chi_payload=None, *, chunk_samples: int = 50_000):
@@ -52,10 +105,9 @@ def true_torques(model_or_robot, q, dq, ddq, chi_std, chi_payload=None, *, chunk
     return out
 
 
-def simulate_recording(model_or_robot, t, q, dq, ddq, chi_std, *, chi_payload=None, gains=None,
-                       noise_q=0.0, noise_tau=0.0, rng: np.random.Generator | None = None,
-                       source: str = "<simulated>", loaded: bool | None = None, keep_derivatives: bool = False,
-                       drive_chain=None, chunk_samples: int = 50_000) -> Trajectory:
+def simulate_recording(model_or_robot, t, q, dq, ddq, chi_std, *, chi_payload=None,
+                       rng: np.random.Generator | None = None, source: str = "<simulated>", loaded: bool | None = None,
+                       **logging: Unpack[RecordingOptions]) -> Trajectory:
     """A recording as a controller would log it, from a known model and motion.
 
     ``tau_measured = tau_true / gains + noise_tau * N(0, 1)``, ``q_measured = q + noise_q * N(0, 1)``:
@@ -74,29 +126,26 @@ def simulate_recording(model_or_robot, t, q, dq, ddq, chi_std, *, chi_payload=No
         True standard parameters.
     chi_payload : array_like, shape (10,), optional
         True payload parameters; the recording is then ``loaded`` (unless told otherwise).
-    gains : float or array_like (n,), optional
-        Torque-sensor / drive gains (default 1).
-    noise_q, noise_tau : float or array_like (n,)
-        Standard deviations of white Gaussian noise on positions [rad] and on the recorded torque signal.
     rng : numpy.random.Generator
         Required when there is noise.
     source : str
         Name of the recording (messages).
     loaded : bool, optional
         Default: ``chi_payload is not None``.
-    keep_derivatives : bool
-        Also store the true ``dq``, ``ddq`` in the trajectory (default: only ``t, q, tau`` as a logger would).
-    drive_chain : DriveChain, optional
-        Return motor-side positions and torques (to test the loaders' drive-chain mapping).
+    **logging
+        How the motion is logged (:class:`RecordingSettings`): ``gains``, ``noise_q``, ``noise_tau``,
+        ``keep_derivatives``, ``drive_chain``, ``chunk_samples``.
 
     Returns
     -------
     Trajectory
         ``meta`` holds ``simulated``, ``gains``, ``noise_q``, ``noise_tau``.
     """
+    log = RecordingSettings.of("simulate_recording", logging)
+    gains, noise_q, noise_tau, drive_chain = log.gains, log.noise_q, log.noise_tau, log.drive_chain
     q = np.atleast_2d(np.asarray(q, float))
     N, n = q.shape
-    tau = true_torques(model_or_robot, q, dq, ddq, chi_std, chi_payload, chunk_samples=chunk_samples)
+    tau = true_torques(model_or_robot, q, dq, ddq, chi_std, chi_payload, chunk_samples=log.chunk_samples)
     g = np.ones(n) if gains is None else np.broadcast_to(np.asarray(gains, float), (n,)).copy()
     if np.any(g == 0) or not np.all(np.isfinite(g)):
         raise ValueError(f"gains must be finite and non-zero, got {gains!r}")
@@ -112,8 +161,8 @@ def simulate_recording(model_or_robot, t, q, dq, ddq, chi_std, *, chi_payload=No
     if np.any(nt != 0):
         assert rng is not None
         tau_meas = tau_meas + rng.standard_normal(tau_meas.shape) * nt
-    dq_out = np.asarray(dq, float) if keep_derivatives else None
-    ddq_out = np.asarray(ddq, float) if keep_derivatives else None
+    dq_out = np.asarray(dq, float) if log.keep_derivatives else None
+    ddq_out = np.asarray(ddq, float) if log.keep_derivatives else None
     if drive_chain is not None:
         q_meas, tau_meas, dq_out, ddq_out = joint_to_motor(drive_chain, q_meas, tau_meas, dq_out, ddq_out)
     meta = {"simulated": True, "gains": g.tolist(), "noise_q": nq.tolist(), "noise_tau": nt.tolist(),

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import symoro_gen.diagnostics.core as core
-from symoro_gen.diagnostics import diagnose
+from symoro_gen.diagnostics import DiagnoseSettings, diagnose
 
 from .simdata import recording
 
@@ -37,8 +37,8 @@ def _keys(rep):
 @pytest.mark.slow
 def test_same_effects_under_ols_and_wls_and_the_report_uses_the_chosen_estimator():
     model, tr = _heteroscedastic()
-    ols = diagnose(model, tr, method="ols", structure=False, unexplained=False)
-    wls = diagnose(model, tr, method="wls", structure=False, unexplained=False)
+    ols = diagnose(model, tr, DiagnoseSettings(method="ols", structure=False, unexplained=False))
+    wls = diagnose(model, tr, DiagnoseSettings(method="wls", structure=False, unexplained=False))
     assert ("time_delay", 1, None) in _keys(ols), _keys(ols)
     assert _keys(ols) == _keys(wls)
     assert ols.to_dict()["estimator_dependent"] == wls.to_dict()["estimator_dependent"]
@@ -63,7 +63,7 @@ def test_an_effect_one_weighting_rejects_is_dropped_and_reported(monkeypatch):
         return st if weights is None else core._Stability(0.0, st.ci_low, st.ci_high, False)
 
     monkeypatch.setattr(core, "_effect_stability", ols_only)
-    reps = [diagnose(model, tr, method=m, structure=False, unexplained=False) for m in ("ols", "wls")]
+    reps = [diagnose(model, tr, DiagnoseSettings(method=m, structure=False, unexplained=False)) for m in ("ols", "wls")]
     for rep in reps:
         d = rep.to_dict()
         assert not [e for e in d["effects"] if e["kind"] == "time_delay"], d["effects"]

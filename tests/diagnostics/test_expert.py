@@ -16,6 +16,7 @@ from symoro_gen.diagnostics.expert import (
     fit_linear,
 )
 from symoro_gen.diagnostics.friction import (
+    LawSearch,
     friction_column_indices,
     replaced_friction_columns,
     select_friction,
@@ -91,7 +92,7 @@ def test_friction_laws_chosen_on_decimated_rows_replace_the_declared_ones(record
         fs, fv = friction_column_indices(model.BASE_NAMES, j)
         ch = select_friction(np.delete(W, fs + fv, axis=1), data.Y, data.joint, j, np.zeros(data.Y.size), blocks,
                              columns=lambda f, p, j=j: data.joint_columns(j, f, p),
-                             v_grid=velocity_grid(data.experiments[0].dq[:, j]))
+                             search=LawSearch(v_grid=velocity_grid(data.experiments[0].dq[:, j])))
         assert ch.coulomb.law == "tanh" and ch.coulomb.param == pytest.approx(V_TRUE[j], rel=0.3), ch.describe()
         choices.append(ch)
     names, cols = replaced_friction_columns(model, choices)
@@ -106,7 +107,7 @@ def test_friction_laws_chosen_on_decimated_rows_replace_the_declared_ones(record
 def test_tx40_expert_beats_the_declared_coulomb_on_joint_4(shared_data):
     """Measured: on the TX40 recording (held-out last 30 %) the smooth Coulomb law of the expert model
     predicts joint 4 far better than sign(dq) (filtered 0.43 -> 0.16, raw 0.60 -> 0.27)."""
-    from symoro_gen.preprocessing.load import load_trajectories
+    from symoro_gen.preprocessing.readers import load_trajectories
 
     d = shared_data / "staubli_tx40_figaroh" / "data"
     if not (d / "pos_read_data.csv").is_file():

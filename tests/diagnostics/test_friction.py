@@ -14,6 +14,7 @@ from symoro_gen.diagnostics.expert import stacked_regressor
 from symoro_gen.diagnostics.friction import (
     FrictionChoice,
     LawFit,
+    LawSearch,
     coulomb_columns,
     friction_column_indices,
     law_errors,
@@ -53,7 +54,7 @@ def case(seed, j, coulomb=("sign", None), viscous=("linear", None), **kw):
         y[rows] += 1.5 * th[fs[0]] * C[:, 1]
     A = np.delete(W, fs + fv, axis=1)
     blocks = time_blocks(np.zeros(y.size, int), S, 5)
-    return select_friction(A, y, J, j, d["dq"][S, j], blocks, **kw), th[fs[0]], th[fv[0]]
+    return select_friction(A, y, J, j, d["dq"][S, j], blocks, search=LawSearch(**kw)), th[fs[0]], th[fv[0]]
 
 
 def test_tanh_friction_is_chosen_with_its_velocity_scale():
@@ -100,7 +101,7 @@ def test_bad_input_is_named():
     with pytest.raises(IdentificationError, match="does not move"):
         select_friction(d["W"], y, d["J"], 0, np.zeros(y.size), blocks)
     with pytest.raises(ValueError, match="unknown laws"):
-        select_friction(d["W"], y, d["J"], 0, d["dq"][d["S"], 0], blocks, laws=("coulomb",))
+        select_friction(d["W"], y, d["J"], 0, d["dq"][d["S"], 0], blocks, search=LawSearch(laws=("coulomb",)))
 
 
 def test_v_floor_smooths_sign_and_bounds_the_search():

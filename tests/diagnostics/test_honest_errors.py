@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from symoro_gen.diagnostics import diagnose
+from symoro_gen.diagnostics import DiagnoseSettings, diagnose
 
 from .simdata import recording
 
@@ -13,7 +13,7 @@ from .simdata import recording
 @pytest.fixture(scope="module")
 def stribeck():
     model, tr = recording("scara", 11, "stribeck", 1, Fst=1.0, vs=0.1)
-    return model, tr, diagnose(model, tr, method="ols", max_effects=2)
+    return model, tr, diagnose(model, tr, DiagnoseSettings(method="ols", max_effects=2))
 
 
 def test_json_has_both_metrics_and_says_what_they_are_on(stribeck):

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from symoro_gen.diagnostics import diagnose
+from symoro_gen.diagnostics import DiagnoseSettings, diagnose
 
 from .simdata import recording
 
@@ -44,7 +44,7 @@ FAMILIES = {
 def test_composed_family_is_named_and_cuts_the_error(name):
     j, effect, modulation, f = FAMILIES[name]
     model, tr = recording("scara", 11, duration=DURATION, dt=DT, extra=_scaled(1.5)(f))
-    rep = diagnose(model, tr, unexplained=False)
+    rep = diagnose(model, tr, DiagnoseSettings(unexplained=False))
     d = rep.to_dict()
     named = [(e["kind"], e["joint"], (e["modulation"] or "").split(":")[0]) for e in d["effects"]]
     assert (effect, j + 1, modulation) in named, rep.summary()
@@ -75,7 +75,7 @@ def test_effect_outside_the_library_is_reported_as_unexplained():
         out[:, 1] = 3.0 * (q[:, 1] - _play(q[:, 1], 0.15))
         return out
     model, tr = recording("scara", 12, duration=DURATION, dt=DT, extra=extra)
-    rep = diagnose(model, tr, max_effects=2)
+    rep = diagnose(model, tr, DiagnoseSettings(max_effects=2))
     d = rep.to_dict()
     flagged = {u["joint"]: u for u in d["unexplained"]}
     assert 2 in flagged, (d["unexplained_all"], rep.summary())
@@ -93,7 +93,7 @@ def test_json_contract_and_friction_law_replacement():
         out[:, 0] = 1.5 * (np.tanh(dq[:, 0] / 0.3) - np.sign(dq[:, 0]))
         return out
     model, tr = recording("scara", 13, duration=DURATION, dt=DT, extra=extra)
-    rep = diagnose(model, tr, unexplained=False, max_effects=1)
+    rep = diagnose(model, tr, DiagnoseSettings(unexplained=False, max_effects=1))
     d = rep.to_dict()
     first = d["effects"][0]
     assert (first["kind"], first["joint"]) == ("friction_law", 1), rep.summary()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from symoro_gen.diagnostics import diagnose
+from symoro_gen.diagnostics import DiagnoseSettings, diagnose
 
 from .simdata import recording
 
@@ -27,7 +27,7 @@ def test_clean_data_nothing_added_nothing_flagged_over_30_seeds(seeds):
     added, flagged = {}, {}
     for seed in seeds:
         model, tr = recording("scara", seed, duration=10.0, dt=0.01)
-        rep = diagnose(model, tr, structure=False)
+        rep = diagnose(model, tr, DiagnoseSettings(structure=False))
         d = rep.to_dict()
         if d["effects"]:
             added[seed] = [(e["kind"], e["joint"], e["modulation"]) for e in d["effects"]]

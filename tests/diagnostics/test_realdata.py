@@ -23,15 +23,15 @@ TX40 = Path("staubli_tx40_figaroh") / "data"
 @pytest.fixture(scope="module")
 def lwr4_report(shared_data):
     import symoro_gen
-    from symoro_gen.diagnostics import diagnose
-    from symoro_gen.preprocessing.load import load_trajectory
+    from symoro_gen.diagnostics import DiagnoseSettings, diagnose
+    from symoro_gen.preprocessing.readers import load_trajectory
 
     paths = [shared_data / LWR4 / f"measurements_{i}.npz" for i in (1, 2, 3)]
     missing = [str(p) for p in paths if not p.is_file()]
     if missing:
         pytest.skip(f"LWR4 recordings not found: {missing}")
     tr = [load_trajectory(p, n_joints=7) for p in paths]
-    return diagnose(symoro_gen.load_model("lwr4"), [tr[0], tr[2]], validation=[tr[1]], method="ols")
+    return diagnose(symoro_gen.load_model("lwr4"), [tr[0], tr[2]], DiagnoseSettings(method="ols"), validation=[tr[1]])
 
 
 def test_lwr4_loop_runs_and_names_what_it_adds(lwr4_report):
@@ -57,9 +57,9 @@ def test_lwr4_loop_runs_and_names_what_it_adds(lwr4_report):
 
 
 def test_tx40_finds_the_coupled_wrist(shared_data):
-    from symoro_gen.diagnostics import diagnose
+    from symoro_gen.diagnostics import DiagnoseSettings, diagnose
     from symoro_gen.loader import model_for
-    from symoro_gen.preprocessing.load import load_trajectory
+    from symoro_gen.preprocessing.readers import load_trajectory
 
     folder = shared_data / TX40
     if not (folder / "pos_read_data.csv").is_file():
@@ -67,7 +67,7 @@ def test_tx40_finds_the_coupled_wrist(shared_data):
     robot, model = model_for("tx40")
     tr = load_trajectory("q=pos_read_data.csv,tau=curr_data.csv,dt=0.0002", robot=robot,
                          drive_chain=robot.drive_chain, base_dir=folder)
-    rep = diagnose(model, tr, max_effects=2)
+    rep = diagnose(model, tr, DiagnoseSettings(max_effects=2))
     first = next(e for e in rep.effects if e.kind != "friction_law")   # after the friction-law stage
     assert (first.kind, first.variant, first.joint, first.partner) == ("coupling", "shared", 4, 5), rep.summary()
     # published priors (TX40_config.yaml): Iam6 = 0.00964 kg m^2, fvm6 = 0.616 N m s/rad, fsm6 = 1.95 N m
@@ -85,16 +85,17 @@ def test_lwr4_ten_effects_are_physically_possible(shared_data):
     expansion's validity): every effect reported must now be physically possible, the candidates passed over
     for it are listed in ``implausible`` and the warnings."""
     import symoro_gen
-    from symoro_gen.diagnostics import diagnose
+    from symoro_gen.diagnostics import DiagnoseSettings, diagnose
     from symoro_gen.diagnostics.candidates import GAIN_SCALE_RANGE, MAX_DELAY_PHASE
-    from symoro_gen.preprocessing.load import load_trajectory
+    from symoro_gen.preprocessing.readers import load_trajectory
 
     paths = [shared_data / LWR4 / f"measurements_{i}.npz" for i in (1, 2, 3)]
     missing = [str(p) for p in paths if not p.is_file()]
     if missing:
         pytest.skip(f"LWR4 recordings not found: {missing}")
     tr = [load_trajectory(p, n_joints=7) for p in paths]
-    rep = diagnose(symoro_gen.load_model("lwr4"), [tr[0], tr[2]], validation=[tr[1]], method="ols", max_effects=10)
+    rep = diagnose(symoro_gen.load_model("lwr4"), [tr[0], tr[2]], DiagnoseSettings(method="ols", max_effects=10),
+                   validation=[tr[1]])
     d_max = MAX_DELAY_PHASE / (2 * np.pi * rep.settings["dynamics_bandwidth_hz"])
     for e in rep.effects:
         if e.kind == "time_delay":

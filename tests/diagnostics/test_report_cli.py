@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from symoro_gen.diagnostics import ResidualReport, diagnose
+from symoro_gen.diagnostics import DiagnoseSettings, ResidualReport, diagnose
 from symoro_gen.simulate import write_recording_csv
 
 from .simdata import recording
@@ -15,7 +15,7 @@ from .simdata import recording
 def stribeck_report():
     model, tr = recording("scara", 11, "stribeck", 1, Fst=1.0, vs=0.1)
     # the plain candidate path: with the friction-law stage the Stribeck law is chosen there (round 0)
-    return diagnose(model, tr, friction_laws=False)
+    return diagnose(model, tr, DiagnoseSettings(friction_laws=False))
 
 
 def test_json_contract(stribeck_report):
@@ -107,7 +107,7 @@ def test_progress_bar_over_candidates(monkeypatch, capsys):
     model, tr = recording("scara", 12)
     monkeypatch.setenv("SYMORO_PROGRESS", "1")
     with progress_mode("auto"):  # what the CLI sets unless --quiet
-        diagnose(model, tr, max_effects=1)
+        diagnose(model, tr, DiagnoseSettings(max_effects=1))
     assert "diagnose: round 1" in capsys.readouterr().err
-    diagnose(model, tr, max_effects=1)  # library default: no bars
+    diagnose(model, tr, DiagnoseSettings(max_effects=1))  # library default: no bars
     assert "diagnose: round" not in capsys.readouterr().err

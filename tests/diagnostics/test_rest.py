@@ -16,10 +16,11 @@ import pytest
 
 import symoro_gen
 from symoro_gen.description import load_robot
-from symoro_gen.diagnostics import diagnose, friction
+from symoro_gen.diagnostics import DiagnoseSettings, diagnose, friction
 from symoro_gen.diagnostics.frame import build_frame
 from symoro_gen.diagnostics.friction import rest_mask, rest_segments
 from symoro_gen.errors import IdentificationError
+from symoro_gen.observations import AssemblyOptions
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
 
@@ -149,9 +150,9 @@ def _no_rest(dq, fs, noise, f_dyn, **kw):
 
 
 def _run(model, ident, valid):
-    return diagnose(model, ident, validation=valid, method="ols", candidates=("friction_law", "stribeck"),
-                    max_effects=1, structure=False, unexplained=False, stability=False, n_placebo=0,
-                    dynamics_bandwidth_hz=1.0)
+    cfg = DiagnoseSettings(method="ols", candidates=("friction_law", "stribeck"), max_effects=1, structure=False,
+                           unexplained=False, stability=False, n_placebo=0)
+    return diagnose(model, ident, cfg, validation=valid, assembly=AssemblyOptions(dynamics_bandwidth_hz=1.0))
 
 
 def test_static_at_rest_cuts_the_validation_error_where_the_robot_rests(monkeypatch):

@@ -115,7 +115,7 @@ def test_identify_with_gains_matches_schema(tmp_path, cli):
 @pytest.fixture(scope="module")
 def diagnose_report():
     """A diagnosis of simulated data with a Stribeck effect injected on joint 1."""
-    from symoro_gen.diagnostics import diagnose, inject_effect
+    from symoro_gen.diagnostics import DiagnoseSettings, diagnose, inject_effect
     from symoro_gen.loader import model_for
     from symoro_gen.preprocessing.trajectory import Trajectory
     from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
@@ -130,7 +130,7 @@ def diagnose_report():
         qm, taum = inject_effect("stribeck", t, q, dq, ddq, tau, joint=0, Fst=2.0, vs=0.1)
         trs.append(Trajectory(t=t, q=qm + 1e-5 * rng.standard_normal(qm.shape),
                               tau=taum + 0.01 * rng.standard_normal(taum.shape), source=f"sim{k}"))
-    return diagnose(model, trs[:1], validation=trs[1:], method="ols")
+    return diagnose(model, trs[:1], DiagnoseSettings(method="ols"), validation=trs[1:])
 
 
 def test_diagnose_output_matches_schema(diagnose_report):

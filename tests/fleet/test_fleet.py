@@ -21,6 +21,7 @@ from symoro_gen.errors import DataFileError
 from symoro_gen.fleet import (
     Drift,
     FleetError,
+    FleetOptions,
     compile_pattern,
     discover,
     identify_fleet,
@@ -44,7 +45,7 @@ from symoro_gen.fleet.stats import (
 )
 from symoro_gen.identification import fit_wls
 from symoro_gen.observations import AssemblyOptions
-from symoro_gen.preprocessing.load import load_trajectory
+from symoro_gen.preprocessing.readers import load_trajectory
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import write_recording_csv
 
@@ -96,7 +97,7 @@ def test_distributed_equals_single_process(small_fleet, threads_client, chunk_sa
     files = discover([root], BY)
     assert {f.path[-4:] for f in files} == {".csv", "quet"}
     ref = _reference(model, files, opts)   # same blocks: the filters' block borders are part of the method
-    res = identify_fleet("scara", [root], BY, client=threads_client, options=opts)
+    res = identify_fleet("scara", [root], BY, client=threads_client, assembly=opts)
     assert not res.skipped
     for (r, d), fit in ref.items():
         e = res.days[r][d]
@@ -122,7 +123,7 @@ def test_segments_are_tasks_of_bounded_memory_and_exact(small_fleet, threads_cli
     shutil.copytree(root0, root)
     whole = read_log(str(root / "r00" / "d00.parquet"), 4)
     write_parquet(root / "r00" / "d00.parquet", whole, row_group_size=700)     # several row groups
-    res = identify_fleet("scara", [root], BY, client=threads_client, segment_samples=1500)
+    res = identify_fleet("scara", [root], BY, FleetOptions(segment_samples=1500), client=threads_client)
     assert res.settings["tasks"] == 3 * 8 + 1 and not res.skipped            # 8 Parquet logs of 4001 samples, 1 CSV
     model = load_model("scara")
     opts = AssemblyOptions(keep_signals=False)
@@ -138,7 +139,7 @@ def test_lost_worker_is_retried_and_result_unchanged(small_fleet, threads_client
     root, _ = small_fleet
     base = identify_fleet("scara", [root], BY, client=threads_client)
     marker = tmp_path / "killed"
-    res = identify_fleet("scara", [root], BY, scheduler="local:2", retries=3,
+    res = identify_fleet("scara", [root], BY, FleetOptions(scheduler="local:2", retries=3),
                          kernel=functools.partial(kill_once, marker=str(marker)))
     assert marker.exists(), "no worker was killed"
     assert res.settings["workers"] >= 1 and not res.skipped
@@ -231,7 +232,7 @@ def test_flagged_json_entries_and_plots(tmp_path, threads_client):
     simulate_fleet(tmp_path / "logs", "scara", n_robots=4, n_days=3, duration=6.0,
                    drifts=(Drift("r02", "FS2", 0.2),), seed=2)
     res = identify_fleet("scara", [tmp_path / "logs"], "{robot}/{day}.parquet", client=threads_client)
-    doc = json.loads(json.dumps(res.to_json()))
+    doc = json.loads(json.dumps(res.to_dict()))
     assert doc["flagged"] and all(f["robot"] == "r02" for f in doc["flagged"])
     f = doc["flagged"][0]
     assert set(f) >= {"robot", "parameter", "z", "days"} and isinstance(f["z"], float)

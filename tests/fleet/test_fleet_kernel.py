@@ -10,7 +10,7 @@ import pytest
 
 from symoro_gen import load_model
 from symoro_gen.description import load_robot
-from symoro_gen.fleet import Drift, identify_fleet, open_client, read_log, simulate_fleet, write_parquet
+from symoro_gen.fleet import Drift, FleetOptions, identify_fleet, open_client, read_log, simulate_fleet, write_parquet
 from symoro_gen.fleet.fused import (
     WELCH_SEGMENT,
     column_map,
@@ -24,7 +24,7 @@ from symoro_gen.identification.accumulate import accumulate
 from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
 from symoro_gen.preprocessing.drive_chain import joint_to_motor
 from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
-from symoro_gen.preprocessing.logformat import make_format
+from symoro_gen.preprocessing.readers import make_format
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
 
@@ -188,7 +188,7 @@ def test_parquet_logs_honour_the_data_options(tmp_path, threads_client, cli):
         pq.write_table(pa.table(cols), tmp_path / "raw" / r / "d00.parquet")
     fmt = make_format(columns="t=time,q=pos_0:pos_3,tau=cur_0:cur_3", tau_scale="2.5", deg=True)
     plain = identify_fleet("scara", [tmp_path / "plain"], BY, client=threads_client)
-    got = identify_fleet("scara", [tmp_path / "raw"], BY, client=threads_client, load_kw={"fmt": fmt})
+    got = identify_fleet("scara", [tmp_path / "raw"], BY, FleetOptions(data_format=fmt), client=threads_client)
     assert not got.skipped
     for r in ("r00", "r01"):
         a, b = got.days[r]["d00"].values, plain.days[r]["d00"].values
@@ -233,7 +233,7 @@ def test_diagnose_closes_the_loop_on_the_flagged_robot(tmp_path, threads_client)
     JSON report are in the result, the JSON and the text."""
     simulate_fleet(tmp_path, "scara", n_robots=4, n_days=3, duration=6.0, drifts=(Drift("r02", "FS2", 0.2),),
                    seed=2)
-    res = identify_fleet("scara", [tmp_path], BY, client=threads_client, diagnose=True)
+    res = identify_fleet("scara", [tmp_path], BY, FleetOptions(diagnose=True), client=threads_client)
     assert "r02" in {f["robot"] for f in res.flagged}
     assert set(res.diagnoses) == {f["robot"] for f in res.flagged}          # one diagnosis per flagged robot
     d = res.diagnoses["r02"]
@@ -242,7 +242,7 @@ def test_diagnose_closes_the_loop_on_the_flagged_robot(tmp_path, threads_client)
     assert d["files"] == [str(tmp_path / "r02" / f"{d['day']}.parquet")]
     assert isinstance(d["summary"], str) and d["summary"]
     assert {"before", "after", "effects"} <= set(d["report"])
-    doc = json.loads(json.dumps(res.to_json()))
+    doc = json.loads(json.dumps(res.to_dict()))
     assert doc["diagnoses"]["r02"]["day"] == d["day"]
     assert "diagnosis of r02" in res.summary()
 

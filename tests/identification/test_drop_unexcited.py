@@ -123,7 +123,7 @@ def test_diagnose_on_a_still_joint_names_file_and_joint_before_computing(cli, re
     assert "--drop-unexcited" in res.err and "Traceback" not in res.err
     assert not out.exists()
     # a joint still in one file but moving in another is excited: no refusal from this check
-    from symoro_gen.diagnostics.cli import _refuse_still_joints
-    from symoro_gen.preprocessing.load import load_trajectory
+    from symoro_gen.preprocessing.readers import load_trajectory
+    from symoro_gen.workflows.diagnose import refuse_still_joints
 
-    _refuse_still_joints([load_trajectory(d / f, n_joints=4) for f in ("still.csv", "moving.csv")])
+    refuse_still_joints([load_trajectory(d / f, n_joints=4) for f in ("still.csv", "moving.csv")])

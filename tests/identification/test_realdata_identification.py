@@ -21,7 +21,7 @@ LWR4_DIR = Path("kuka_lwr4_flobaroid") / "data" / "KUKA" / "HW"
 def lwr4_real(shared_data):
     import symoro_gen
     from symoro_gen.identification.assemble import build_observation
-    from symoro_gen.preprocessing.load import load_trajectory
+    from symoro_gen.preprocessing.readers import load_trajectory
 
     paths = [shared_data / LWR4_DIR / f"measurements_{i}.npz" for i in (1, 2, 3)]
     missing = [str(p) for p in paths if not p.is_file()]

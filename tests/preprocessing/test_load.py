@@ -11,7 +11,7 @@ import scipy.io
 
 from symoro_gen.description import parse_robot_text
 from symoro_gen.errors import DataFileError
-from symoro_gen.preprocessing.load import DataWarning, load_trajectories, load_trajectory, parse_data_spec
+from symoro_gen.preprocessing.readers import DataWarning, load_trajectories, load_trajectory, parse_data_spec
 
 N_J = 3
 FS = 100.0
@@ -412,7 +412,8 @@ def _damaged_archives(tmp_path):
 
 @pytest.mark.parametrize("plain", [True, False], ids=["load_trajectory", "load_log"])
 def test_damaged_binary_files_name_the_file(tmp_path, plain):
-    from symoro_gen.preprocessing.logformat import load_log, make_format
+    from symoro_gen.preprocessing.readers import make_format
+    from symoro_gen.preprocessing.readers import read_recording as load_log
 
     for name, data in _damaged_archives(tmp_path).items():
         (tmp_path / name).write_bytes(data)
@@ -431,7 +432,8 @@ def test_damaged_binary_files_name_the_file(tmp_path, plain):
 def test_absurd_value_is_an_error_in_every_loader(tmp_path, plain):
     """A 1e308 position used to pass the plain loader (a degrees warning) and fail later as 'W has
     non-finite values' without the file; both loaders now name file, row and column."""
-    from symoro_gen.preprocessing.logformat import ABSURD_VALUE, load_log, make_format
+    from symoro_gen.preprocessing.readers import ABSURD_VALUE, make_format
+    from symoro_gen.preprocessing.readers import read_recording as load_log
 
     t, q, tau = _signals()
     q[20, 1] = 1e308

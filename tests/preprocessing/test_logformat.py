@@ -12,16 +12,18 @@ from symoro_gen.errors import DataFileError
 from symoro_gen.identification import identify
 from symoro_gen.identification.assemble import build_observation
 from symoro_gen.loader import model_for
-from symoro_gen.preprocessing.load import load_trajectory, parse_data_spec, step_regime_changes
-from symoro_gen.preprocessing.logformat import (
+from symoro_gen.preprocessing.readers import (
     LogFormat,
-    hold_back,
-    load_log,
-    load_logs,
+    load_trajectory,
     make_format,
     parse_columns,
+    parse_data_spec,
     read_format_file,
+    step_regime_changes,
 )
+from symoro_gen.preprocessing.readers import read_recording as load_log
+from symoro_gen.preprocessing.readers import read_recordings as load_logs
+from symoro_gen.preprocessing.trajectory import hold_back
 from symoro_gen.simulate.parameters import random_physical_parameters
 from symoro_gen.simulate.recording import true_torques
 from symoro_gen.simulate.trajectories import fourier_trajectory

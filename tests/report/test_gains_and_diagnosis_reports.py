@@ -84,11 +84,13 @@ def diagnosis():
         qm, tm = dg.inject_effect("stribeck", t, q, dq, ddq, tau, joint=1, Fst=3.0, vs=0.1)
         trs.append(Trajectory(t, qm + rng.normal(0, 1e-5, q.shape), tm + rng.normal(0, 0.05, tau.shape),
                               source=f"simulated {k}"))
-    return dg.diagnose(model, trs[:1], validation=trs[1:], method="wls", candidates=("stribeck", "offset", "drift"))
+    return dg.diagnose(model, trs[:1], dg.DiagnoseSettings(method="wls", candidates=("stribeck", "offset", "drift")),
+                       validation=trs[1:])
 
 
 def test_diagnosis_report_plots_the_residual_before_and_after_each_effect(diagnosis, tmp_path):
-    from symoro_gen.report import diagnosis_plot_series, write_report
+    from symoro_gen.diagnostics.render import diagnosis_plot_series
+    from symoro_gen.workflows.reporting import write_report
 
     rep = diagnosis
     assert [(e.kind, e.joint) for e in rep.effects][:1] == [("stribeck", 1)]
@@ -124,7 +126,7 @@ def test_diagnosis_report_plots_the_residual_before_and_after_each_effect(diagno
 
 
 def test_diagnosis_html_tables_without_plots(diagnosis):
-    from symoro_gen.report import diagnosis_html
+    from symoro_gen.diagnostics.render import diagnosis_html
 
     from .test_repr_html import parse
 

@@ -152,7 +152,7 @@ def _hide_matplotlib(monkeypatch):
 
 
 def test_missing_matplotlib_names_the_extra(monkeypatch, tmp_path, cli):
-    from symoro_gen.report import build_report
+    from symoro_gen.workflows.reporting import ReportContent, build_report
 
     _hide_matplotlib(monkeypatch)
     with pytest.raises(MissingDependencyError, match="'plots' extra") as exc:
@@ -163,7 +163,7 @@ def test_missing_matplotlib_names_the_extra(monkeypatch, tmp_path, cli):
     assert "'plots' extra" in err and "hint: pip install 'symoro_gen[plots]'" in err
     assert not list(tmp_path.iterdir())
     # tables alone need no matplotlib
-    rep = build_report(None, title="t", plots=False, notes=["n"])
+    rep = build_report(None, content=ReportContent(title="t", plots=False, notes=["n"]))
     assert rep.figures == () and "<li>n</li>" in rep.to_html()
 
 

@@ -94,6 +94,8 @@ def test_simulated_recording_carries_gains_and_noise():
     np.testing.assert_array_equal(noisy.dq, dq)
     with pytest.raises(ValueError, match="rng"):
         simulate_recording(robot, t, q, dq, ddq, chi, noise_tau=0.1)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'noise'"):   # a misspelt logging keyword
+        simulate_recording(robot, t, q, dq, ddq, chi, noise=0.1)
 
 
 def test_model_and_robot_paths_agree():

@@ -1,20 +1,48 @@
-"""``symoro-gen fleet ROBOT LOGS... --by PATTERN``: identify a fleet on Dask and flag drifting robots."""
+"""``symoro-gen fleet ROBOT LOGS... --by PATTERN``: identify a fleet on Dask and flag drifting robots.
+
+A leaf: the arguments become :class:`~symoro_gen.fleet.options.FleetOptions`, the workflow
+:func:`symoro_gen.workflows.fleet.fleet` runs, its result is written (``--json``: ``to_dict()``, ``--report``)
+and printed (``summary()``; the throughput on standard error).
+"""
 from __future__ import annotations
 
 import argparse
 import sys
 
 from ..atomic import FORCE_HELP
-from ..observations import AssemblyOptions
+from ..fleet.options import DEFAULT_ALPHA
 from ..preprocessing.cli import add_data_options, format_from_args
-from .engine import DEFAULT_ALPHA, identify_fleet
-from .report import write_fleet_report
+from ..workflows.fleet import FleetOptions, fleet
 
-__all__ = ["add_fleet_parser", "run_fleet"]
+__all__ = ["add_parser", "options_from_args", "run"]
 
 
-def add_fleet_parser(sub) -> argparse.ArgumentParser:
-    """Register the ``fleet`` sub-command."""
+def options_from_args(args) -> FleetOptions:
+    """The workflow's options from the parsed arguments."""
+    return FleetOptions(scheduler=args.scheduler, alpha=args.alpha, correction=args.correction, retries=args.retries,
+                        cutoff=args.cutoff, decimate=args.decimate, segment_samples=args.segment_samples,
+                        chunk_samples=args.chunk_samples, diagnose=args.diagnose,
+                        diagnose_method=args.diagnose_method, data_format=format_from_args(args))
+
+
+def run(args) -> int:
+    """Run the command; 0 whether or not robots are flagged (the flags are in the output)."""
+    res = fleet(args.robot, args.logs, by=args.by, options=options_from_args(args))
+    force = bool(getattr(args, "force", False))
+    if args.json:
+        res.write_json(args.json, force=force)
+    if args.report:
+        res.report(args.report, force=force)
+    if not getattr(args, "quiet", False):
+        print(res.summary())
+        t = res.timing
+        print(f"{t['samples']} samples in {t['run_s']:.1f} s on {res.settings['workers']} worker(s) "
+              f"({t['samples_per_s']:.3g} samples/s)", file=sys.stderr)
+    return 0
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """Register ``fleet`` (Dask and pyarrow are imported only when it runs)."""
     p = sub.add_parser("fleet", help="identify many robots of one model from their logs (Dask) and flag drifts",
                        description="Identify every robot of a fleet per day from its logs on a Dask cluster "
                                    "(exact TSQR reductions), pool the fleet, and flag the robots whose parameters "
@@ -49,27 +77,5 @@ def add_fleet_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--diagnose-method", choices=("ols", "wls", "tls"), default="wls",
                    help="estimator of those diagnoses (default %(default)s)")
     add_data_options(p)
-    p.set_defaults(func=run_fleet)
+    p.set_defaults(func=run)
     return p
-
-
-def run_fleet(args) -> int:
-    """Run the command; 0 whether or not robots are flagged (the flags are in the output)."""
-    opts = AssemblyOptions(keep_signals=False, cutoff_hz=args.cutoff, n_d=args.decimate,
-                           chunk_samples=args.chunk_samples)
-    load_kw = {"fmt": format_from_args(args)}
-    res = identify_fleet(args.robot, args.logs, args.by, scheduler=args.scheduler, options=opts, load_kw=load_kw,
-                         alpha=args.alpha, correction=args.correction, retries=args.retries,
-                         segment_samples=args.segment_samples, diagnose=args.diagnose,
-                         diagnose_method=args.diagnose_method)
-    force = getattr(args, "force", False)
-    if args.json:
-        res.write_json(args.json, force=force)
-    if args.report:
-        write_fleet_report(args.report, res, force=force)
-    if not getattr(args, "quiet", False):
-        print(res.summary())
-        t = res.timing
-        print(f"{t['samples']} samples in {t['run_s']:.1f} s on {res.settings['workers']} worker(s) "
-              f"({t['samples_per_s']:.3g} samples/s)", file=sys.stderr)
-    return 0

@@ -1,0 +1,99 @@
+"""``symoro-gen identify``: recorded data -> identified parameters, gains, validation (text, JSON, report).
+
+A leaf: the arguments become :class:`~symoro_gen.workflows.identify.IdentifyOptions`, the workflow
+:func:`symoro_gen.workflows.identify.identify` runs, its result is written (``--json``: ``to_dict()``,
+``--report``) and printed (``summary()``).
+"""
+from __future__ import annotations
+
+from ..atomic import FORCE_HELP
+from ..preprocessing.cli import add_data_options, format_from_args
+from ..report import check_report_path, require_matplotlib
+from ..workflows.identify import IdentifyOptions, IdentifyResults, identify
+from .common import parse_payload
+
+__all__ = ["add_parser", "options_from_args", "run"]
+
+
+def options_from_args(args) -> IdentifyOptions:
+    """The workflow's options from the parsed arguments."""
+    return IdentifyOptions(
+        method=args.method, validate_loaded=args.validate_loaded,
+        validate_fraction=getattr(args, "validate_fraction", None), payload=parse_payload(args.payload),
+        gains=args.gains, essential=args.essential, r_sigma=args.r_sigma, cutoff=args.cutoff,
+        decimate=args.decimate, min_velocity=args.min_velocity, drop_unexcited=args.drop_unexcited,
+        reference=args.reference, kp=args.kp, kd=args.kd, ki=args.ki, bandwidth=args.bandwidth,
+        max_iter=args.max_iter, start=args.start, physical=getattr(args, "physical", False),
+        nominal_tolerance=getattr(args, "nominal_tolerance", None), data_format=format_from_args(args))
+
+
+def run(args) -> int:
+    """Run ``identify``: the workflow, then its outputs; 0 on success."""
+    if args.report:  # before the long computation: a bad suffix or a missing matplotlib fails at once
+        check_report_path(args.report)
+        require_matplotlib()
+    opts = options_from_args(args)
+    res: IdentifyResults = identify(args.robot, list(args.data), validate=args.validate, loaded=args.loaded,
+                                    options=opts)
+    force = bool(getattr(args, "force", False))
+    if args.json:
+        res.write_json(args.json, force=force)
+    if args.report:
+        res.report(args.report, force=force)
+    if not args.quiet:
+        print(res.summary())
+    return 0
+
+
+def add_parser(sub) -> None:
+    """Register ``identify``."""
+    p = sub.add_parser("identify", help="identify base parameters (and gains) from recorded data")
+    p.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
+    p.add_argument("data", nargs="+", help="recordings without payload (CSV/NPZ/MAT, or q=..,tau=..,dt=.. spec)")
+    p.add_argument("--method", choices=("ols", "wls", "tls", "iv", "didim"), default="wls",
+                   help="estimator: IDIM-OLS/WLS/TLS, or the closed-loop ones IDIM-IV and DIDIM (iterated simulations; "
+                        "reference = the filtered measured positions, controller = --kp/--kd/--ki or a PD at --bandwidth)")
+    p.add_argument("--validate", nargs="+", help="validation recordings (relative error norms, Table III)")
+    p.add_argument("--validate-loaded", action="store_true", help="the validation recordings carry the payload")
+    p.add_argument("--loaded", nargs="+", help="recordings with the payload mounted")
+    p.add_argument("--payload", nargs="+", metavar="NAME=VALUE", help="known payload parameters, e.g. M8=4.6136")
+    p.add_argument("--gains", choices=("sensor", "drive"), help="also identify torque-sensor (IDIM-TLS) or drive gains")
+    p.add_argument("--essential", action="store_true", help="reduce to the essential parameters")
+    p.add_argument("--r-sigma", type=float, default=30.0, help="stop ratio of the essential procedure (default 30)")
+    p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
+    p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
+    p.add_argument("--min-velocity", type=float, help="drop identification rows that depend on samples slower than "
+                   "this [rad/s] (Coulomb friction is ill-defined near zero velocity); validation errors use every sample")
+    p.add_argument("--drop-unexcited", action="store_true",
+                   help="leave out the parameters the data do not excite (their columns of W are zero, e.g. a joint "
+                        "that stands still) and report them as not identified, instead of stopping")
+    p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
+    cl = p.add_argument_group("closed-loop estimators (--method iv|didim)")
+    cl.add_argument("--kp", type=float, nargs="+", help="position gain(s) of the robot's PID controller, per joint")
+    cl.add_argument("--kd", type=float, nargs="+", help="velocity gain(s) of the controller, per joint")
+    cl.add_argument("--ki", type=float, nargs="+", help="integral gain(s) of the controller, per joint (default 0)")
+    cl.add_argument("--bandwidth", type=float, help="without --kp/--kd: PD gains placing each joint at this "
+                    "bandwidth [Hz] (default 10, at most rate/30)")
+    cl.add_argument("--max-iter", type=int, default=20, help="iterations at most (default 20)")
+    cl.add_argument("--start", choices=("ols", "nominal"), default="ols",
+                    help="first estimate simulated: IDIM-OLS (default; the OLS fit on the reference states when it is "
+                         "not physical) or the robot file's nominal parameters")
+
+
+    p.add_argument("--physical", action="store_true",
+                   help="physically consistent estimate: LS in the standard parameters with every body's pseudo-inertia "
+                        "positive definite and IA, FV, FS >= 0 (needs the 'physical' extra: cvxpy, clarabel); "
+                        "'parameters' then holds the base parameters it implies, 'unconstrained' the plain fit. With "
+                        "--method iv|didim it is NOT a constrained IV/DIDIM: the IV/DIDIM estimate is reported as "
+                        "'unconstrained' and the consistent set is the least-squares fit on the measured-state (IDIM) "
+                        "rows, independent of it")
+    p.add_argument("--nominal-tolerance", type=float, metavar="TOL",
+                   help="with --physical: also bound every standard parameter with a non-zero nominal value to "
+                        "|chi - nominal| <= TOL |nominal|")
+    p.add_argument("--json", help="write the results as JSON here")
+    p.add_argument("--report", metavar="OUT.html|OUT.md",
+                   help="write a report here: tables and plots, one self-contained .html page or .md with its "
+                        "images in OUT_files/ (plots need the 'plots' extra: matplotlib)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    add_data_options(p, validate_fraction=True)
+    p.set_defaults(func=run)

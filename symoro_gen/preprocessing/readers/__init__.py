@@ -1,0 +1,246 @@
+"""Reading recordings: one front door, :func:`read_recording` (one file, or the files of a split
+recording, = one experiment, unless resampling splits it at gaps), for every format.
+
+Formats, one module each: delimited text (:mod:`.text`: ``.csv .txt .tsv .dat``), arrays
+(:mod:`.arrays`: ``.npz``, MATLAB ``.mat``), Parquet (:mod:`.parquet`, read by segment of row groups for
+the fleet), split recordings (:mod:`.split`: a spec string ``q=pos.csv,tau=cur.csv,dt=0.0002``). What
+they share (roles, column resolution, problems named by rows and lines, checks of values, time and
+units) is in :mod:`.common`.
+
+Two readings of the same columns: the plain one (:mod:`.plain`, the file as it is: every problem raised
+together, unit mix-ups warned about; :func:`load_trajectory` with a ``columns`` mapping and limits from
+Python) and the one with the data options (:mod:`.logs`, a :class:`LogFormat` from :mod:`.options`:
+columns by index or name, units, time base, resampling, bad rows dropped, with a :class:`LoadReport`).
+:func:`read_recording` takes the plain one when the format changes nothing but ``dt`` (Parquet logs and
+segments always take the other).
+
+Default columns of a table with a header: ``t, q1..qn, tau1..taun [, dq1..dqn] [, ddq1..ddqn]``; default
+array keys in :mod:`.arrays`. ``drive_chain`` (a :class:`~symoro_gen.description.model.DriveChain`,
+usually ``robot.drive_chain``) says the data are motor-side: positions, velocities, accelerations and
+torques are mapped to the joint side by :func:`~symoro_gen.preprocessing.drive_chain.motor_to_joint`.
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+
+from ...errors import DataFileError, Problem
+from ...progress import progress_updates
+from ..trajectory import Trajectory
+from .arrays import ARRAY_SUFFIXES, read_array_file
+from .common import ABSURD_VALUE, DEFAULT_CHECKS, LOG_ROLES, DataChecks, DataWarning, RawColumns, step_regime_changes
+from .logs import log_trajectories
+from .options import LoadReport, LogFormat, make_format, parse_columns, read_format_file
+from .parquet import PARQUET_SUFFIXES, is_parquet, read_parquet_file
+from .plain import plain_trajectory
+from .split import DataSpec, parse_data_spec, read_split
+from .text import TEXT_SUFFIXES, read_text_file
+
+__all__ = [
+    "read_recording", "read_recordings", "load_trajectory", "load_trajectories",
+    "LogFormat", "LoadReport", "make_format", "parse_columns", "read_format_file",
+    "DataSpec", "parse_data_spec", "DataChecks", "DataWarning", "step_regime_changes",
+    "ABSURD_VALUE", "LOG_ROLES", "PARQUET_SUFFIXES",
+]
+
+PathOrSpec = str | os.PathLike | DataSpec
+
+
+def _read_columns(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors: Sequence[tuple[str, str]],
+                  dt: float | None, probs: list[Problem], strict: bool, start: int = 0, stop: int = -1
+                  ) -> RawColumns:
+    """The columns of each role, by the reader of the file's format (``strict``: the plain reading)."""
+    if spec.is_split:
+        if stop >= 0:
+            raise ValueError(f"{spec.text}: only Parquet logs are read by segment (start, stop)")
+        return read_split(spec, n, dt, probs, strict=strict)
+    file = spec.files["file"]
+    if not Path(file).exists():
+        raise DataFileError([Problem(file, "", "", "file not found")])
+    if is_parquet(file):
+        return read_parquet_file(file, n, mapping=mapping, selectors=selectors, dt=dt, probs=probs, strict=strict,
+                                 start=start, stop=stop)
+    if stop >= 0:
+        raise ValueError(f"{file}: only Parquet logs are read by segment (start, stop)")
+    suffix = Path(file).suffix.lower()
+    if suffix in TEXT_SUFFIXES:
+        return read_text_file(file, n, mapping=mapping, selectors=selectors, dt=dt, probs=probs, strict=strict)
+    if suffix in ARRAY_SUFFIXES:
+        return read_array_file(file, suffix[1:], n, mapping=mapping, selectors=selectors, dt=dt, probs=probs)
+    raise DataFileError([Problem(file, "", "", f"unknown data format {suffix!r} "
+                                 "(expected .csv, .txt, .npz, .mat, .parquet or a q=...,tau=... spec)")])
+
+
+def _joint_count(robot, n_joints: int | None) -> int:
+    if robot is not None and n_joints is None:
+        n_joints = len(robot.model_joints)
+    if n_joints is None or int(n_joints) < 1:
+        raise ValueError("n_joints (or robot) is required")
+    return int(n_joints)
+
+
+def _joint_types(robot) -> list[int] | None:
+    return [r.sigma for r in robot.model_joints] if robot is not None else None
+
+
+def load_trajectory(path: PathOrSpec, *, n_joints: int | None = None, columns: Mapping | None = None,
+                    dt: float | None = None, loaded: bool | None = None, drive_chain=None, robot=None,
+                    base_dir=None, checks: DataChecks = DEFAULT_CHECKS) -> Trajectory:
+    """Read one experiment as it is (the plain reading; see the package docstring for formats and
+    :mod:`.plain` for the checks).
+
+    Parameters
+    ----------
+    path : str or PathLike or DataSpec
+        A ``.csv``/``.txt``, ``.npz``, ``.mat`` or ``.parquet`` file, or a spec string
+        ``"q=a.csv,tau=b.csv,dt=0.0002"``.
+    n_joints : int
+        Number of joints of the robot (default ``robot.n_joints``).
+    columns : mapping, optional
+        Role (``t q tau dq ddq``) -> column name template with ``{j}`` (the 1-based joint number, e.g.
+        ``{"q": "pos_{j}"}``), list of ``n`` names, or for ``"t"`` one name (tables); array key (NPZ/MAT).
+    dt : float, optional
+        Sampling period [s] when the data have no time; overrides a time column (with a warning).
+    loaded : bool, optional
+        Payload mounted during this experiment (default: the spec's ``loaded=``, else False).
+    drive_chain : DriveChain, optional
+        The data are motor-side; map them to the joint side.
+    robot : RobotDescription, optional
+        Supplies ``n_joints`` and the joint types used by the unit checks.
+    base_dir : path, optional
+        Base of the relative paths in a spec string.
+    checks : DataChecks
+        Limits of the time checks, of the length and of the unit-mix-up warnings.
+
+    Returns
+    -------
+    Trajectory
+        Joint-side ``t`` [s], ``q``, ``tau`` (and ``dq``, ``ddq`` when present), ``source`` = the path
+        or spec, ``meta`` with the format, files, column names, unused columns and time statistics.
+
+    Raises
+    ------
+    DataFileError
+        Listing every problem found (file, column, rows).
+    """
+    n = _joint_count(robot, n_joints)
+    spec = parse_data_spec(path, base_dir=base_dir)
+    dt = spec.dt if dt is None else dt
+    if loaded is None:
+        loaded = bool(spec.loaded) if spec.loaded is not None else False
+    if spec.is_split and columns:
+        raise ValueError("columns cannot be used with a split-file spec (each file holds one role)")
+    probs: list[Problem] = []
+    raw = _read_columns(spec, n, mapping=columns, selectors=(), dt=dt, probs=probs, strict=True)
+    return plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
+                            joint_types=_joint_types(robot), checks=checks)
+
+
+def load_trajectories(paths: Iterable, *, progress=None, **kwargs) -> tuple[Trajectory, ...]:
+    """Load several experiments (one per path/spec); same keyword arguments as :func:`load_trajectory`.
+
+    Problems of all files are reported together in one :class:`DataFileError`.
+
+    ``progress``: None shows a per-file bar when the ambient mode allows it (the command line, see
+    :mod:`symoro_gen.progress`), False none, a callable is called with 1 after each file.
+    """
+    paths = list(paths)
+    out: list[Trajectory] = []
+    probs: list[Problem] = []
+    with progress_updates(progress, total=len(paths), desc="loading data", unit="file") as step:
+        for p in paths:
+            try:
+                out.append(load_trajectory(p, **kwargs))
+            except DataFileError as exc:
+                probs.extend(exc.problems)
+            step(1)
+    if probs:
+        raise DataFileError(probs)
+    return tuple(out)
+
+
+def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None, n_joints: int | None = None,
+                   drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None
+                   ) -> tuple[tuple[Trajectory, ...], LoadReport]:
+    """Read one DATA file (or split-file spec) with a :class:`LogFormat`.
+
+    Parameters
+    ----------
+    path : str or PathLike or DataSpec
+        A ``.csv``/``.txt``/``.npz``/``.mat``/``.parquet`` file or a ``q=..,tau=..,dt=..`` spec.
+    fmt : LogFormat, optional
+        Default: the file's own names (the plain reading, as :func:`load_trajectory`).
+    robot, n_joints, drive_chain, base_dir
+        As for :func:`load_trajectory`.
+    loaded : bool
+        Payload mounted during this experiment.
+    start, stop : int
+        Only the samples ``[start, stop)`` of a Parquet log (``stop < 0``: the whole file), read row
+        group by row group; the experiment is named ``path[start:stop]``.
+
+    Returns
+    -------
+    (trajectories, report)
+        One trajectory per experiment (a file splits at gaps with ``resample``), and what was done.
+
+    Raises
+    ------
+    DataFileError
+        One line per problem, naming the file, rows (and file lines) and column.
+    """
+    fmt = fmt or LogFormat()
+    if robot is None and n_joints is None:
+        raise TypeError("read_recording: give n_joints or robot")
+    n = _joint_count(robot, n_joints)
+    spec = parse_data_spec(path, base_dir=base_dir)
+    if spec.dt is not None and fmt.dt is not None and not math.isclose(spec.dt, fmt.dt, rel_tol=1e-12):
+        raise DataFileError([Problem(spec.text, "", "dt", f"the spec says dt = {spec.dt:g} s, --dt {fmt.dt:g}: "
+                                     "give the sampling period once")])
+    dt = fmt.dt if fmt.dt is not None else spec.dt
+    joint_types = _joint_types(robot)
+    if fmt.is_plain and stop < 0 and (spec.is_split or not is_parquet(spec.files["file"])):
+        probs: list[Problem] = []
+        raw = _read_columns(spec, n, mapping=None, selectors=(), dt=dt, probs=probs, strict=True)
+        tr = plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types)
+        rep = LoadReport(file=tr.source, rows_read=tr.n_samples, step_from=tr.meta.get("dt_median"),
+                         step_jitter=float(tr.meta.get("dt_max_rel_jitter", 0.0)), samples=(tr.n_samples,),
+                         options=fmt.options())
+        return (tr,), rep
+    if spec.is_split and fmt.columns:
+        raise DataFileError([Problem(spec.text, "", "columns", "--columns cannot be used with a split-file "
+                                     "spec (each file holds one role)")])
+    probs = []
+    raw = _read_columns(spec, n, mapping=None, selectors=fmt.columns, dt=dt, probs=probs, strict=False,
+                        start=start, stop=stop)
+    if probs:
+        raise DataFileError(probs)
+    return log_trajectories(raw, fmt, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types)
+
+
+def read_recordings(paths: Iterable, fmt: LogFormat | None = None, *, progress=None, **kwargs
+                    ) -> tuple[tuple[Trajectory, ...], tuple[LoadReport, ...]]:
+    """:func:`read_recording` on several files; the problems of all files are raised together.
+
+    ``progress``: as for :func:`load_trajectories` (a per-file bar on the command line)."""
+    paths = list(paths)
+    trajs: list[Trajectory] = []
+    reps: list[LoadReport] = []
+    probs: list[Problem] = []
+    hint = None
+    with progress_updates(progress, total=len(paths), desc="loading data", unit="file") as step:
+        for p in paths:
+            try:
+                tr, rep = read_recording(p, fmt, **kwargs)
+            except DataFileError as exc:
+                probs.extend(exc.problems)
+                hint = hint or exc.hint
+                step(1)
+                continue
+            trajs.extend(tr)
+            reps.append(rep)
+            step(1)
+    if probs:
+        raise DataFileError(probs, hint=hint)
+    return tuple(trajs), tuple(reps)

@@ -1,0 +1,266 @@
+"""The data options: a :class:`LogFormat` (how to read the DATA files: columns, time base, units,
+resampling, bad rows), as command-line options or a TOML file with the same keys (see
+``docs/data-files.md``)::
+
+    columns = "t=0,q=1:7,tau=13:19"     # 0-based indices, Python slices (headerless files)
+    # columns = "q=q_0:q_6,tau=tau_0:tau_6"   # header names; a name range spans the header inclusively
+    dt = 0.01                           # sampling period [s] when there is no time column
+    tau_scale = [0.5, 0.5, 0.3]         # logged signal -> N m (one per joint, or one for all)
+    deg = false                         # positions (q, q_link, dq, ddq) logged in degrees
+    resample = false                    # irregular time stamps -> uniform grid at the median step
+    max_gap = 0.05                      # [s] longer steps split the file (default 5 median steps)
+    drop_bad_rows = false               # drop malformed / non-finite / absurd rows, counted
+
+and the :class:`LoadReport` that says what reading one file did.
+
+Roles: ``t``, ``q``, ``tau`` (``q`` and ``tau`` required), ``dq``, ``ddq``, and ``q_link`` (a second,
+link-side position: the model uses it, and the deflection ``q_motor / ratio - q_link`` is kept on
+:attr:`Trajectory.deflection`). In ``.npz``/``.mat`` files a role names an array, nested MATLAB
+structs with dotted names (``q=rec.act_pos_mot_deg``).
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10
+    import tomli as tomllib
+
+from ...errors import DataFileError, Problem
+from .common import LOG_ROLES
+
+__all__ = ["LogFormat", "LoadReport", "parse_columns", "read_format_file", "make_format", "FORMAT_KEYS",
+           "MAX_GAP_STEPS"]
+
+#: default ``max_gap`` in median steps
+MAX_GAP_STEPS = 5
+FORMAT_KEYS = ("columns", "dt", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows")
+
+
+@dataclass(frozen=True)
+class LogFormat:
+    """How to read the DATA files of a command (every file of it).
+
+    Attributes
+    ----------
+    columns : tuple of (role, spec)
+        From ``--columns`` (:func:`parse_columns`); empty: the file's own names (the default names of
+        :mod:`~symoro_gen.preprocessing.readers`).
+    dt : float or None
+        Sampling period [s] when the file has no time column.
+    tau_scale : tuple of float or None
+        Factor(s) turning the logged torque signal into N m (one for all joints, or one per joint);
+        applied before the drive chain.
+    deg : bool
+        Positions logged in degrees.
+    resample : bool
+        Resample irregular time stamps on a uniform grid at the median step (linear interpolation,
+        cubic for positions); steps longer than ``max_gap`` split the file.
+    max_gap : float or None
+        [s]; default ``MAX_GAP_STEPS`` median steps.
+    drop_bad_rows : bool
+        Drop rows with a wrong number of fields, unparsable or non-finite numbers, or ``|value| >
+        ABSURD_VALUE`` (outside the time column); without it such rows are an error naming them.
+    origin : str
+        Where the format came from (a TOML file), for messages.
+    """
+
+    columns: tuple[tuple[str, str], ...] = ()
+    dt: float | None = None
+    tau_scale: tuple[float, ...] | None = None
+    deg: bool = False
+    resample: bool = False
+    max_gap: float | None = None
+    drop_bad_rows: bool = False
+    origin: str = ""
+
+    @property
+    def column_map(self) -> dict[str, str]:
+        return dict(self.columns)
+
+    @property
+    def is_plain(self) -> bool:
+        """Nothing beyond ``dt``: the plain reading (:func:`~symoro_gen.preprocessing.readers.load_trajectory`)
+        reads the file as is."""
+        return not (self.columns or self.tau_scale or self.deg or self.resample or self.drop_bad_rows)
+
+    def options(self) -> tuple[str, ...]:
+        """The options that change data, as command-line text (echoed in outputs)."""
+        out = []
+        if self.columns:
+            out.append("--columns " + ",".join(f"{k}={v}" for k, v in self.columns))
+        if self.dt is not None:
+            out.append(f"--dt {self.dt:g}")
+        if self.tau_scale:
+            out.append("--tau-scale " + ",".join(f"{v:g}" for v in self.tau_scale))
+        if self.deg:
+            out.append("--deg")
+        if self.resample:
+            out.append("--resample" + (f" --max-gap {self.max_gap:g}" if self.max_gap is not None else ""))
+        if self.drop_bad_rows:
+            out.append("--drop-bad-rows")
+        return tuple(out)
+
+
+def parse_columns(spec: str, *, where: str = "--columns") -> tuple[tuple[str, str], ...]:
+    """Parse ``"t=0,q=1:7,tau=13:19"`` or ``"q=q_0:q_6,tau=tau_0:tau_6"`` into (role, selector) pairs.
+
+    Raises
+    ------
+    DataFileError
+        Unknown or repeated role, missing ``=``, empty selector.
+    """
+    out: dict[str, str] = {}
+    for item in str(spec).split(","):
+        item = item.strip()
+        if not item:
+            continue
+        if "=" not in item:
+            raise DataFileError([Problem(where, f"item {item!r}", "", "expected ROLE=COLUMNS, e.g. q=1:7")])
+        k, v = (s.strip() for s in item.split("=", 1))
+        if k not in LOG_ROLES:
+            raise DataFileError([Problem(where, f"item {item!r}", k,
+                                         f"unknown role (allowed: {', '.join(LOG_ROLES)})")])
+        if k in out:
+            raise DataFileError([Problem(where, f"item {item!r}", k, "role given twice")])
+        if not v:
+            raise DataFileError([Problem(where, f"item {item!r}", k, "no column given")])
+        out[k] = v
+    for k in ("q", "tau"):
+        if k not in out:
+            raise DataFileError([Problem(where, "", k, f"missing: --columns must say which columns are {k}")])
+    return tuple(out.items())
+
+
+def _floats(v, where, key) -> tuple[float, ...]:
+    items = v if isinstance(v, (list, tuple)) else str(v).split(",")
+    try:
+        out = tuple(float(x) for x in items)
+    except (TypeError, ValueError):
+        raise DataFileError([Problem(where, "", key, f"{v!r}: expected numbers separated by commas")]) from None
+    if not out or not all(math.isfinite(x) and x != 0 for x in out):
+        raise DataFileError([Problem(where, "", key, f"{v!r}: factors must be finite and non-zero")])
+    return out
+
+
+def _positive(v, where, key) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        x = float("nan")
+    if not (x > 0 and math.isfinite(x)):
+        raise DataFileError([Problem(where, "", key, f"{v!r}: must be a positive number of seconds")])
+    return x
+
+
+def read_format_file(path) -> dict:
+    """Read a ``--format FILE.toml``: the keys of :class:`LogFormat` (``columns`` as a string or a
+    table role -> selector). Unknown keys are an error naming the file and the key."""
+    path = str(path)
+    try:
+        with open(path, "rb") as f:
+            d = tomllib.load(f)
+    except FileNotFoundError:
+        raise DataFileError([Problem(path, "", "", "format file not found")]) from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise DataFileError([Problem(path, "", "", f"not a TOML file: {exc}")]) from None
+    bad = [k for k in d if k not in FORMAT_KEYS]
+    if bad:
+        raise DataFileError([Problem(path, "", bad[0], f"unknown key (allowed: {', '.join(FORMAT_KEYS)})")])
+    if isinstance(d.get("columns"), dict):
+        d["columns"] = ",".join(f"{k}={v}" for k, v in d["columns"].items())
+    for k in ("deg", "resample", "drop_bad_rows"):
+        if k in d and not isinstance(d[k], bool):
+            raise DataFileError([Problem(path, "", k, f"{d[k]!r}: must be true or false")])
+    return d
+
+
+def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=None, max_gap=None,
+                drop_bad_rows=None, format_file=None) -> LogFormat:
+    """A :class:`LogFormat` from options (None: not given) over a format file's keys."""
+    base = read_format_file(format_file) if format_file else {}
+    origin = str(format_file) if format_file else "command line"
+    given = dict(columns=columns, dt=dt, tau_scale=tau_scale, deg=deg, resample=resample, max_gap=max_gap,
+                 drop_bad_rows=drop_bad_rows)
+    where = {k: ("command line" if v is not None else origin) for k, v in given.items()}
+    merged = {k: (v if v is not None else base.get(k)) for k, v in given.items()}
+    cols = parse_columns(merged["columns"], where=f"{where['columns']}: columns") if merged["columns"] else ()
+    return LogFormat(
+        columns=cols,
+        dt=_positive(merged["dt"], where["dt"], "dt") if merged["dt"] is not None else None,
+        tau_scale=(_floats(merged["tau_scale"], where["tau_scale"], "tau_scale") if merged["tau_scale"] is not None
+                   else None),
+        deg=bool(merged["deg"]),
+        resample=bool(merged["resample"]),
+        max_gap=_positive(merged["max_gap"], where["max_gap"], "max_gap") if merged["max_gap"] is not None else None,
+        drop_bad_rows=bool(merged["drop_bad_rows"]),
+        origin=str(format_file or ""),
+    )
+
+
+@dataclass(frozen=True)
+class LoadReport:
+    """What reading one DATA file did (echoed in text, JSON ``data`` blocks and reports).
+
+    Attributes
+    ----------
+    file : str
+        The path or split-file spec.
+    rows_read : int
+        Data rows in the file.
+    rows_dropped : int
+        Rows dropped by ``--drop-bad-rows``.
+    dropped : tuple of str
+        Which rows and why (``"rows 12-14 (lines 13-15): wrong number of fields"``).
+    resampled : bool
+    step_from, step_to : float or None
+        Median step of the file and step of the uniform grid [s] (``step_to`` None when not resampled).
+    step_jitter : float
+        Largest relative deviation of a time step from the median (0 with ``dt``).
+    gaps : int
+        Steps longer than ``max_gap`` (splits).
+    experiments : int
+        Experiments after splitting.
+    samples : tuple of int
+        Samples per experiment.
+    options : tuple of str
+        Every option that changed data.
+    """
+
+    file: str
+    rows_read: int
+    rows_dropped: int = 0
+    dropped: tuple[str, ...] = ()
+    resampled: bool = False
+    step_from: float | None = None
+    step_to: float | None = None
+    step_jitter: float = 0.0
+    gaps: int = 0
+    experiments: int = 1
+    samples: tuple[int, ...] = ()
+    options: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict:
+        return {"file": self.file, "rows_read": self.rows_read, "rows_dropped": self.rows_dropped,
+                "dropped": list(self.dropped), "resampled": self.resampled, "step_from": self.step_from,
+                "step_to": self.step_to, "step_jitter": self.step_jitter, "gaps": self.gaps,
+                "experiments": self.experiments, "samples": list(self.samples), "options": list(self.options),
+                "notes": list(self.notes)}
+
+    def summary(self) -> str:
+        """One line: ``file: 1647 rows read, 0 dropped, not resampled, 1 experiment (options)``."""
+        s = f"{self.file}: {self.rows_read} rows read, {self.rows_dropped} dropped"
+        if self.resampled:
+            s += f", resampled {self.step_from:.6g} s -> {self.step_to:.6g} s"
+        else:
+            s += ", not resampled"
+        s += f", {self.experiments} experiment{'s' if self.experiments != 1 else ''}"
+        if self.gaps:
+            s += f" ({self.gaps} gap{'s' if self.gaps != 1 else ''} split)"
+        if self.options:
+            s += " [" + " ".join(self.options) + "]"
+        return s

@@ -1,0 +1,124 @@
+"""Delimited text tables (``.csv``, ``.txt``, ``.tsv``, ``.dat``): ``,``, ``;``, tab or blank separated, a
+header line (the first line with a non-numeric field) optional, ``#`` comment lines skipped.
+
+One reader, :func:`read_table`, keeps every row and marks the bad ones (wrong number of fields,
+missing or non-numeric values) by file line. The plain reading stops at them
+(:func:`~.common.raise_malformed`); the reading with the data options drops them or names them with the
+other bad values.
+"""
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ...errors import DataFileError, Problem
+from .common import RawColumns, Table, not_text_problem, open_problem, raise_malformed, table_columns
+
+__all__ = ["TEXT_SUFFIXES", "read_table", "read_text_file"]
+
+TEXT_SUFFIXES = (".csv", ".txt", ".tsv", ".dat")
+
+
+def _delimiter(line: str) -> str | None:
+    for d in (",", ";", "\t"):
+        if d in line:
+            return d
+    return None
+
+
+def _number(s: str) -> float | None:
+    try:
+        return float(s)
+    except ValueError:
+        return None
+
+
+def _read_lines(path: str) -> list[str]:
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            return f.read().split("\n")
+    except OSError as exc:
+        raise DataFileError([open_problem(path, exc)]) from None
+    except UnicodeDecodeError as exc:
+        raise DataFileError([not_text_problem(path, exc)]) from None
+
+
+def _parse_rows(tab: Table, body: list[str], split) -> None:
+    """Field by field, marking rows with the wrong number of fields and unparsable cells."""
+    ncol = tab.data.shape[1]
+    for r, ln in enumerate(body):
+        parts = split(ln)
+        if len(parts) != ncol:
+            tab.bad_fields[r] = True
+            continue
+        for c, s in enumerate(parts):
+            x = _number(s)
+            if x is None:
+                tab.unparsable[r, c] = True
+                shown = tab.bad_text.setdefault(c, [])
+                if len(shown) < 3:
+                    shown.append(s)
+            else:
+                tab.data[r, c] = x
+
+
+def read_table(path: str) -> Table:
+    """Read a delimited numeric text table, keeping every row (bad ones marked, by file line).
+
+    The header (a first line with a non-numeric field) is optional. Fast path: :func:`numpy.loadtxt`;
+    when it fails, field by field so that every bad row can be named.
+    """
+    lines = _read_lines(path)
+    first_i = next((i for i, ln in enumerate(lines) if ln.strip()), None)
+    if first_i is None:
+        raise DataFileError([Problem(path, "line 1", "", "empty file (no header, no data)")])
+    delim = _delimiter(lines[first_i])
+
+    def split(ln: str) -> list[str]:
+        return [s.strip() for s in (ln.split(delim) if delim else ln.split())]
+
+    head = split(lines[first_i])
+    has_header = not all(_number(x) is not None for x in head)
+    ncol = len(head)
+    start = first_i + 1 if has_header else first_i
+    rows = [(i + 1, ln) for i, ln in enumerate(lines[start:], start=start)
+            if ln.strip() and not ln.lstrip().startswith("#")]
+    N = len(rows)
+    body = [ln for _, ln in rows]
+    tab = Table(path, head if has_header else None, np.full((N, ncol), np.nan), np.array([i for i, _ in rows], int),
+                np.zeros(N, bool), np.zeros((N, ncol), bool), first_line=first_i + 1)
+    if not N:
+        return tab
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fast = np.loadtxt(body, delimiter=delim, ndmin=2, dtype=float)
+        if fast.shape == (N, ncol):
+            tab.data = fast
+            return tab
+    except ValueError:
+        pass
+    _parse_rows(tab, body, split)
+    return tab
+
+
+def read_text_file(path: str, n: int, *, mapping: Mapping | None, selectors: Sequence[tuple[str, str]],
+                   dt: float | None, probs: list[Problem], strict: bool) -> RawColumns:
+    """One experiment in a text table: the columns of its roles.
+
+    ``strict`` (the plain reading): the header must name the columns (``t, q1..qn, tau1..taun`` or a
+    ``columns`` mapping) and a malformed row is an error at once; otherwise bad rows are marked for the
+    caller, and a file without a header is read by ``--columns`` indices.
+    """
+    tab = read_table(path)
+    if strict:
+        if tab.names is None:
+            raise DataFileError([Problem(path, "line 1", "", "no header line: the columns must be named "
+                                         "(t, q1..qn, tau1..taun), or give a columns mapping")])
+        raise_malformed(tab)
+    elif tab.names is None and not selectors:
+        raise DataFileError([Problem(path, "line 1", "", "no header line: say which columns are what with "
+                                     "--columns, e.g. t=0,q=1:7,tau=7:13 (0-based indices)")])
+    return table_columns(tab, "csv", n, mapping=mapping, selectors=selectors, dt=dt, probs=probs)

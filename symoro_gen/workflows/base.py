@@ -1,0 +1,278 @@
+"""What every workflow shares (the library's use cases: identify, diagnose, inspect, excite, fleet, export).
+
+* :class:`Options`: the named options of a workflow, a frozen dataclass validated once; an unknown option
+  name raises with the nearest valid one (:func:`check_option_names`).
+* :class:`Results`: what a workflow returns (statsmodels' ``fit()`` returning a results object):
+  ``summary()`` (the command's text), ``to_dict()`` (exactly the command's JSON), ``_repr_html_()``
+  (Jupyter), ``report(path)``, ``plot()`` and ``write_json(path)``.
+* :func:`resolve_robot`: a robot given as a name, a robot file, a :class:`RobotDescription` or a loaded model.
+* :func:`as_trajectories`: data given as paths, :class:`Trajectory` objects or ``(t, q, tau)`` arrays.
+* :func:`provenance`: the JSON's provenance block (package version and commit, options, input hashes, seeds).
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import functools
+import hashlib
+import html
+import json
+import os
+import subprocess
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .. import __version__
+from ..atomic import json_output, write_output_text
+from ..description.model import RobotDescription
+from ..errors import ModelError, OptionError, SymoroError
+from ..loader import REPO_ROOT, model_for
+from ..model import IdentificationModel
+from ..preprocessing.readers import LoadReport, LogFormat, read_recordings
+from ..preprocessing.trajectory import Trajectory
+from ..report.plots import require_matplotlib
+
+__all__ = ["SCHEMA_VERSION", "DataLike", "Options", "Results", "as_trajectories", "check_option_names", "listed",
+           "file_sha256", "package_commit", "provenance", "resolve_robot"]
+
+#: version of the JSON written by the commands and returned by ``Results.to_dict()`` (docs/json-output.md):
+#: 2 added ``schema_version`` and ``provenance``
+SCHEMA_VERSION = 2
+
+#: what a workflow accepts as data: a path, a Trajectory, ``(t, q, tau)`` arrays or a mapping with those keys
+DataLike = Any
+
+
+def check_option_names(names: Iterable[str], valid: Sequence[str], what: str) -> None:
+    """Raise :class:`OptionError` for the first name not in ``valid``, naming the nearest valid one."""
+    for name in names:
+        if name in valid:
+            continue
+        near = difflib.get_close_matches(name, valid, n=1, cutoff=0.5)
+        hint = f"; did you mean {near[0]!r}?" if near else f"; valid options: {', '.join(valid)}"
+        raise OptionError(f"{what}: unknown option {name!r}{hint}")
+
+
+def _jsonable(x: Any) -> Any:
+    """Options as JSON: paths and strings as text, sequences as lists, mappings as objects, LogFormat as its
+    command-line options, NumPy numbers as floats."""
+    if isinstance(x, LogFormat):
+        return list(x.options())
+    if isinstance(x, (str, bool, int, float)) or x is None:
+        return x
+    if isinstance(x, os.PathLike):
+        return os.fspath(x)
+    if isinstance(x, Mapping):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in x]
+    return str(x)
+
+
+@dataclasses.dataclass(frozen=True)
+class Options:
+    """Base of the workflows' options (frozen dataclasses; each subclass validates in ``__post_init__``)."""
+
+    @classmethod
+    def option_names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    @classmethod
+    def create(cls, what: str, **given: Any):
+        """The options from keywords, every name checked (:func:`check_option_names`)."""
+        check_option_names(given, cls.option_names(), what)
+        return cls(**given)
+
+    def as_dict(self) -> dict:
+        """Every option, JSON-ready (the provenance block's ``options``)."""
+        return {f.name: _jsonable(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+
+class Results:
+    """Base of the workflows' results: a subclass sets :attr:`command` and implements :meth:`to_dict`,
+    :meth:`summary`, and where it has them :meth:`report` and :meth:`figures`."""
+
+    command: ClassVar[str] = ""
+
+    def to_dict(self) -> dict:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def summary(self) -> str:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def _repr_html_(self) -> str:
+        """The summary as preformatted HTML (Jupyter)."""
+        return f'<pre class="symoro-gen-{self.command}">{html.escape(self.summary())}</pre>'
+
+    def json_text(self) -> str:
+        """The JSON the command writes (``to_dict()``, its ``generator`` mark first)."""
+        return json_output(self.to_dict(), self.command)
+
+    def write_json(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+        """Write :meth:`json_text` to ``path`` (an existing file symoro-gen did not write only with ``force``)."""
+        write_output_text(path, self.json_text(), force=force)
+        return Path(path)
+
+    def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+        """Write a report (``.html`` self-contained or ``.md`` with its images beside it)."""
+        raise OptionError(f"{type(self).__name__}: no report for this result")
+
+    def figures(self) -> list:
+        """The figures of :meth:`plot` (matplotlib figures)."""
+        return []
+
+    def plot(self) -> list:
+        """Matplotlib figures of the result (needs the 'plots' extra)."""
+        require_matplotlib()
+        return self.figures()
+
+
+def resolve_robot(robot) -> tuple[RobotDescription, IdentificationModel]:
+    """``(RobotDescription, model)`` for a robot name, a robot file, a :class:`RobotDescription` or a loaded
+    model (its robot file: ``robots/<ROBOT>.toml``, or the one its package was generated from)."""
+    if isinstance(robot, (str, os.PathLike, RobotDescription)):
+        return model_for(robot)
+    if isinstance(robot, IdentificationModel) or hasattr(robot, "BASE_NAMES"):
+        desc = getattr(robot, "robot", None) or getattr(robot, "description", None)
+        if isinstance(desc, RobotDescription):
+            return desc, robot
+        try:
+            d, _ = model_for(str(robot.ROBOT))
+        except SymoroError as exc:
+            raise ModelError(f"model {getattr(robot, 'ROBOT', '?')!r}: its robot file is not found ({exc}); give "
+                             "the robot as a name, a robot file or a RobotDescription") from None
+        return d, robot
+    raise OptionError(f"robot: expected a robot name, a robot file, a RobotDescription or a model, "
+                      f"got {type(robot).__name__}")
+
+
+def _in_memory_report(tr: Trajectory) -> LoadReport:
+    d = np.diff(tr.t)
+    h = float(np.median(d)) if d.size else None
+    return LoadReport(file=tr.source, rows_read=tr.n_samples, step_from=h,
+                      step_jitter=float(np.abs(d - h).max() / h) if h else 0.0, samples=(tr.n_samples,))
+
+
+def _trajectory_of(item, n: int, loaded: bool, k: int) -> Trajectory:
+    """A Trajectory from a Trajectory, a mapping ``{"t", "q", "tau"}`` or a ``(t, q, tau)`` tuple."""
+    if isinstance(item, Trajectory):
+        return item if item.loaded == loaded else dataclasses.replace(item, loaded=loaded)
+    if isinstance(item, Mapping):
+        missing = [key for key in ("t", "q", "tau") if key not in item]
+        if missing:
+            raise OptionError(f"data item {k + 1}: a mapping needs the keys t, q, tau (missing {', '.join(missing)})")
+        t, q, tau = item["t"], item["q"], item["tau"]
+    elif isinstance(item, tuple) and len(item) == 3:
+        t, q, tau = item
+    else:
+        raise OptionError(f"data item {k + 1}: expected a path, a Trajectory, a (t, q, tau) tuple or a mapping "
+                          f"with those keys, got {type(item).__name__}")
+    t, q, tau = (np.asarray(a, float) for a in (t, q, tau))
+    q, tau = (a.reshape(-1, 1) if a.ndim == 1 else a for a in (q, tau))
+    if t.ndim != 1 or q.shape != (t.size, n) or tau.shape != (t.size, n):
+        raise OptionError(f"data item {k + 1}: t must have shape (N,), q and tau (N, {n}) for this robot; got "
+                          f"{t.shape}, {q.shape}, {tau.shape}")
+    if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
+        raise OptionError(f"data item {k + 1}: t must be finite and strictly increasing")
+    return Trajectory(t=t, q=q, tau=tau, source=f"<array {k + 1}>", loaded=loaded)
+
+
+def _is_path(item) -> bool:
+    return isinstance(item, (str, os.PathLike))
+
+
+def listed(x) -> tuple:
+    """Data given as one item (a path, a Trajectory, a ``(t, q, tau)`` tuple) or a list of them, as a tuple."""
+    if x is None:
+        return ()
+    if _is_path(x) or not isinstance(x, (list, tuple)) or (
+            isinstance(x, tuple) and len(x) == 3 and not all(_is_path(i) for i in x)):
+        return (x,)
+    return tuple(x)
+
+
+def as_trajectories(data, fmt: LogFormat | None, robot, *, loaded: bool = False
+                    ) -> tuple[tuple[Trajectory, ...], tuple[LoadReport, ...]]:
+    """The experiments and load reports of ``data``: one path, Trajectory or ``(t, q, tau)``, or a list of them
+    (files read with ``fmt`` and the robot's drive chain, as the commands read their DATA)."""
+    if data is None:
+        return (), ()
+    items = [data] if _is_path(data) or isinstance(data, (Trajectory, Mapping)) or (
+        isinstance(data, tuple) and len(data) == 3 and not all(_is_path(x) for x in data)) else list(data)
+    n = len(robot.model_joints)
+    trajs: list[Trajectory] = []
+    reports: list[LoadReport] = []
+    paths = [it for it in items if _is_path(it)]
+    read, reps = read_recordings(paths, fmt, n_joints=n, robot=robot, drive_chain=robot.drive_chain,
+                           loaded=loaded) if paths else ((), ())
+    by_file = iter(zip(reps, _group(read, reps)))
+    for k, it in enumerate(items):
+        if _is_path(it):
+            rep, trs = next(by_file)
+            trajs += trs
+            reports.append(rep)
+        else:
+            tr = _trajectory_of(it, n, loaded, k)
+            trajs.append(tr)
+            reports.append(_in_memory_report(tr))
+    return tuple(trajs), tuple(reports)
+
+
+def _group(trajs: Sequence[Trajectory], reps: Sequence[LoadReport]) -> list[list[Trajectory]]:
+    """The experiments of each file (a report counts its file's experiments)."""
+    out, i = [], 0
+    for r in reps:
+        out.append(list(trajs[i:i + r.experiments]))
+        i += r.experiments
+    return out
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str | None:
+    """sha256 of a file's bytes (None when it is not a readable file)."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def package_commit() -> str | None:
+    """The git commit of the checkout the package runs from (None outside a git checkout)."""
+    if not (REPO_ROOT / ".git").exists():
+        return None
+    try:
+        out = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "HEAD"], capture_output=True, text=True,
+                             timeout=5, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+def provenance(options: Options, inputs: Iterable = (), seeds: Mapping[str, Any] | None = None) -> dict:
+    """The JSON's provenance block: package version and commit, every option, each input file with its sha256
+    (in-memory data as its source name, hash null), the seeds used."""
+    files = []
+    for x in inputs:
+        if _is_path(x):
+            files.append({"path": os.fspath(x), "sha256": file_sha256(x)})
+        else:
+            files.append({"path": str(getattr(x, "source", "<in memory>")), "sha256": None})
+    return {"package": {"name": "symoro_gen", "version": __version__, "commit": package_commit()},
+            "options": options.as_dict(), "inputs": files, "seeds": dict(seeds or {})}
+
+
+def dumps(obj: Mapping) -> str:
+    """JSON text as the commands write it (indent 2)."""
+    return json.dumps(obj, indent=2) + "\n"

@@ -1,0 +1,259 @@
+"""``diagnose``: recordings → what the residual says the declared model misses, added, re-identified.
+
+The workflow of ``symoro-gen diagnose`` as a library call::
+
+    res = symoro_gen.diagnose("rx90", "spring1.csv", validate="spring2.csv", candidates=("spring", "offset"))
+    res.summary(); res.to_dict()["effects"]; res.report("rx90.html"); res.plot()
+
+The declared model is identified (IDIM-OLS/WLS/TLS on the filtered, decimated system, [GB-gains] eq. 14-22),
+its residual is tested for structure, candidate effects are scored as extra columns of ``W`` (HAC Wald test on
+the identification data, validation-error drop, placebo columns), the best is added and the model
+re-identified, until nothing is significant (:func:`symoro_gen.diagnostics.diagnose`).
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..diagnostics.candidates import KINDS
+from ..diagnostics.core import HOLDOUT, MAX_EFFECTS, SIGNIFICANCE, DiagnoseSettings
+from ..diagnostics.core import diagnose as run_loop
+from ..diagnostics.render import diagnosis_blocks, diagnosis_html
+from ..diagnostics.report import ResidualReport
+from ..errors import IdentificationError, OptionError
+from ..identification.estimators import still_joints
+from ..model import IdentificationModel
+from ..observations.options import AssemblyOptions
+from ..preprocessing.cli import data_notes, data_text
+from ..preprocessing.readers import LoadReport, LogFormat
+from ..report import Figure, require_matplotlib
+from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, listed, provenance, resolve_robot
+from .identify import check_payload
+from .reporting import ReportContent, write_report
+
+__all__ = ["CANDIDATE_KINDS", "METHODS", "DiagnoseOptions", "DiagnoseResults", "diagnose", "refuse_still_joints"]
+
+METHODS = ("ols", "wls", "tls")
+#: what ``candidates`` may name: the effect kinds, the friction-law stage and the composed library
+CANDIDATE_KINDS = (*KINDS, "friction_law", "composed")
+
+
+@dataclass(frozen=True)
+class DiagnoseOptions(Options):
+    """Every option of ``diagnose`` (the command's flags without their dashes; see ``symoro-gen diagnose --help``).
+
+    Attributes
+    ----------
+    method : {"ols", "wls", "tls"}
+        Estimator of the reported identifications (the loop scores and selects with OLS/WLS weights).
+    candidates : sequence of str, optional
+        Effect kinds to try (default all: :data:`~symoro_gen.diagnostics.KINDS`, the friction law of each
+        joint chosen by cross-validation and the composed effects); ``"friction_law"`` and ``"composed"`` run
+        those stages only when named.
+    significance : float
+        Family-wise level of each round, in (0, 1).
+    max_effects : int
+        Most effects added (>= 0).
+    holdout : float
+        Share of each recording held out for validation when no validation data are given, in (0, 1).
+    cutoff, decimate : optional
+        Butterworth cut-off of q [Hz] and decimation factor (default: the papers' rules, [GB-gains] eq. 14-16).
+    seed : int
+        Seed of the placebo candidates.
+    payload : mapping of str to float
+        Known payload parameters (``{"M8": 4.6136}``); needs ``loaded`` recordings.
+    data_format : LogFormat, optional
+        How the files are read (columns, time base, units, resampling: docs/data-files.md).
+    """
+
+    method: str = "ols"
+    candidates: Sequence[str] | None = None
+    significance: float = SIGNIFICANCE
+    max_effects: int = MAX_EFFECTS
+    holdout: float = HOLDOUT
+    cutoff: float | None = None
+    decimate: int | None = None
+    seed: int = 0
+    payload: Mapping[str, float] = field(default_factory=dict)
+    data_format: LogFormat = field(default_factory=LogFormat)
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise OptionError(f"method {self.method!r}: one of {', '.join(METHODS)}")
+        if self.candidates is not None:
+            object.__setattr__(self, "candidates", tuple(self.candidates))
+            for k in self.candidates:
+                if k not in CANDIDATE_KINDS:
+                    raise OptionError(f"candidates: unknown kind {k!r}; one of {', '.join(CANDIDATE_KINDS)}")
+        checks = (("significance", "--significance", lambda v: 0 < v < 1, "must lie between 0 and 1"),
+                  ("holdout", "--holdout", lambda v: 0 < v < 1, "must lie between 0 and 1 (a share of each recording)"),
+                  ("max_effects", "--max-effects", lambda v: v >= 0, "must be >= 0"),
+                  ("cutoff", "--cutoff", lambda v: v > 0, "must be a positive frequency in Hz"),
+                  ("decimate", "--decimate", lambda v: v >= 1, "must be an integer >= 1"))
+        for attr, flag, ok, what in checks:
+            v = getattr(self, attr)
+            if v is not None and not ok(v):
+                raise OptionError(f"{flag} {v:g}: {what}")
+        object.__setattr__(self, "payload", dict(self.payload or {}))
+        if self.data_format is None:
+            object.__setattr__(self, "data_format", LogFormat())
+
+    def settings(self) -> DiagnoseSettings:
+        """The loop's settings (:class:`~symoro_gen.diagnostics.core.DiagnoseSettings`)."""
+        kinds = KINDS if self.candidates is None else tuple(self.candidates)
+        return DiagnoseSettings(method=self.method, candidates=kinds, significance=self.significance,
+                                max_effects=self.max_effects, holdout=self.holdout)
+
+    def assembly(self) -> AssemblyOptions:
+        """The assembly's filter settings (``cutoff``, ``decimate``; the rest by the papers' rules)."""
+        return AssemblyOptions(cutoff_hz=self.cutoff, n_d=self.decimate)
+
+
+def _names(items: Sequence[Any]) -> list[str]:
+    """Paths as given, Trajectory objects by their source, arrays as ``<array k>`` (as they are loaded)."""
+    return [os.fspath(p) if isinstance(p, (str, os.PathLike)) else str(getattr(p, "source", f"<array {k + 1}>"))
+            for k, p in enumerate(items)]
+
+
+@dataclass(frozen=True, eq=False)
+class DiagnoseResults(Results):
+    """What ``diagnose`` found (see :meth:`to_dict` for the JSON contract, docs/json-output.md).
+
+    ``residual`` is the loop's :class:`~symoro_gen.diagnostics.ResidualReport` (effects, candidates tried,
+    errors before and after, the identification results before and after).
+    """
+
+    command = "diagnose"
+
+    robot: Any
+    model: IdentificationModel
+    options: DiagnoseOptions
+    residual: ResidualReport
+    data: tuple[Any, ...]
+    loaded: tuple[Any, ...]
+    validate: tuple[Any, ...]
+    reports: tuple[LoadReport, ...]
+    inputs: tuple[Any, ...] = ()
+
+    def to_dict(self) -> dict:
+        """Exactly the JSON of ``symoro-gen diagnose --json`` (its ``generator`` mark first)."""
+        out: dict[str, Any] = {"generator": "symoro-gen diagnose", "schema_version": SCHEMA_VERSION}
+        out.update(self.residual.to_dict())
+        out["data"] = [r.to_dict() for r in self.reports]  # per file: path, rows read, dropped, resampled
+        out["validate"] = _names(self.validate)
+        out["loaded"] = _names(self.loaded)
+        out["provenance"] = provenance(self.options, self.inputs, seeds={"seed": self.options.seed})
+        return out
+
+    def summary(self) -> str:
+        """Exactly the text ``symoro-gen diagnose`` prints."""
+        return self.residual.summary() + "\n\n" + data_text(self.reports)
+
+    def _repr_html_(self) -> str:
+        """The diagnosis' tables (Jupyter)."""
+        return diagnosis_html(self.residual)
+
+    def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+        """Errors before/after, the effects with their parameters, the candidates of each round, the residual
+        before and after each effect against the signal that revealed it; ``.html`` or ``.md``."""
+        sources = {"identification data": _names(self.data), "loaded": _names(self.loaded),
+                   "validation data": _names(self.validate)}
+        content = ReportContent(robot=self.robot.name, sources=sources, text=self.residual.summary(),
+                                notes=data_notes(self.reports))
+        return write_report(path, diagnosis=self.residual, content=content, force=force)
+
+    def figures(self) -> list:
+        """Relative error norms before/after, the residual before and after each effect against the signal that
+        revealed it, measured and reconstructed torques of the final model."""
+        require_matplotlib()
+        blocks = diagnosis_blocks(self.residual, [], plots=True)
+        return [b.figure for b in blocks if isinstance(b, Figure) and b.figure is not None]
+
+    def write_plots(self, folder: str | os.PathLike[str], *, force: bool = False) -> list[Path]:
+        """The figures as ``diagnosis-*.png`` files in ``folder`` (:meth:`ResidualReport.write_plots`; empty
+        without matplotlib)."""
+        return self.residual.write_plots(folder, force=force)
+
+
+def refuse_still_joints(trajectories) -> None:
+    """A joint that stands still in every identification recording leaves its drive-chain columns of W zero:
+    the loop cannot fit the declared model, so say which files and joints, before the long computation
+    (``identify --drop-unexcited`` identifies the other parameters)."""
+    trs = list(trajectories)
+    per: dict[int, list[tuple[str, float]]] = {}
+    for src, j, span in still_joints(trs):
+        per.setdefault(j, []).append((src, span))
+    still = {j: v for j, v in per.items() if len(v) == len(trs)}  # still in every file
+    if not still:
+        return
+    files = list(dict.fromkeys(src for v in still.values() for src, _ in v))
+    shown = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
+    why = ", ".join(f"joint {j} does not move (q{j} spans at most {max(s for _, s in v):.3g})"
+                    for j, v in sorted(still.items()))
+    err = IdentificationError(f"{shown}: {why}: the parameters of its motion (rotor inertia, friction) have no "
+                              "effect on these data, and diagnose needs the declared model identifiable")
+    err.hint = ("record a trajectory that moves every joint (symoro-gen excite), or identify the other "
+                "parameters with `symoro-gen identify ... --drop-unexcited`")
+    raise err
+
+
+# ---- the workflow ---------------------------------------------------------------------------------------
+def diagnose(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLike = None, method: str = "ols",
+             options: DiagnoseOptions | None = None, **kwargs: Any) -> DiagnoseResults:
+    """Find what the declared model misses in the residual, add it, re-identify, report errors before/after.
+
+    Parameters
+    ----------
+    robot : str, path, RobotDescription or model
+        A robot name (``robots/``), a robot file, a description or a loaded model.
+    data : path, Trajectory, (t, q, tau) arrays, or a list of them
+        Identification recordings without payload.
+    validate : same as ``data``, optional
+        Validation recordings; default: the last ``holdout`` share of each identification recording.
+    loaded : same as ``data``, optional
+        Identification recordings with the payload mounted (its columns added to their rows).
+    method : {"ols", "wls", "tls"}
+        Estimator of the reported identifications.
+    options : DiagnoseOptions, optional
+        All options at once; or give them by name (``candidates=("spring",)``, ``max_effects=2``...): an
+        unknown name raises :class:`~symoro_gen.errors.OptionError` naming the nearest valid one.
+
+    Returns
+    -------
+    DiagnoseResults
+    """
+    if options is None:
+        opts = DiagnoseOptions.create("diagnose", method=method, **kwargs)
+    else:
+        if kwargs:
+            raise OptionError("diagnose: give the options either as options= or by name, not both")
+        opts = options if method == "ols" or method == options.method else replace(options, method=method)
+    return _run(robot, data, validate, loaded, opts)
+
+
+def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> DiagnoseResults:
+    robot, model = resolve_robot(robot_like)
+    data, validate, loaded_data = listed(data), listed(validate), listed(loaded_data)
+    if not data:
+        raise OptionError("diagnose: no identification data given")
+    ident, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
+    loaded, rep_l = (as_trajectories(list(loaded_data), opts.data_format, robot, loaded=True)
+                     if loaded_data else ((), ()))
+    reports += rep_l
+    known = check_payload(opts.payload, tuple(getattr(model, "PAYLOAD_NAMES", ())))
+    if known and not loaded:
+        raise IdentificationError("--payload needs recordings with the payload: give them with --loaded")
+    refuse_still_joints(ident)
+    valid, rep_v = as_trajectories(list(validate), opts.data_format, robot) if validate else ((), ())
+    reports += rep_v
+    residual = run_loop(model, ident, opts.settings(), validation=valid if validate else None,
+                        loaded=loaded if loaded_data else None, payload=known,
+                        rng=np.random.default_rng(opts.seed), assembly=opts.assembly())
+    return DiagnoseResults(robot=robot, model=model, options=opts, residual=residual, data=data,
+                           loaded=loaded_data, validate=validate, reports=tuple(reports),
+                           inputs=(*data, *loaded_data, *validate))

@@ -1,0 +1,225 @@
+"""``export_urdf``, ``export_mjcf``, ``export_par``: a robot (and an identification) -> URDF, MuJoCo MJCF or
+SYMORO+ ``.par`` text.
+
+The workflows of ``symoro-gen export-urdf``, ``export-mjcf`` and ``export-par`` as library calls::
+
+    res = symoro_gen.export_urdf("lwr4", from_result="lwr4.json")   # or an IdentifyResults, or its to_dict()
+    res.text; res.notes; res.sidecar; res.write("lwr4.urdf")
+
+With ``from_result`` every body comes from a physically consistent standard set whose regrouping gives the
+identified base parameters (the 'physical' extra); ``res.sidecar`` then holds the drive terms and how far each
+body moved from nominal (written as ``OUT.json`` beside the file). These workflows stay free of SciPy (the light
+commands start without it): the identification stack is loaded only when ``from_result`` is given
+(:func:`_standard_set_from_result`), and the results are not :class:`~symoro_gen.workflows.base.Results`
+(whose module loads the data readers) but offer the same ``summary()``, ``to_dict()``, ``json_text()``.
+"""
+from __future__ import annotations
+
+import html
+import importlib
+import json
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..atomic import json_output, write_output_text
+from ..description import load_robot
+from ..description.mjcf_export import export_mjcf as mjcf_text
+from ..description.model import RobotDescription
+from ..description.par import export_par as par_text
+from ..description.urdf_export import drive_terms, link_values
+from ..description.urdf_export import export_urdf as urdf_text
+from ..errors import ModelError
+from ..loader import model_for
+
+__all__ = ["ExportResults", "export_mjcf", "export_par", "export_urdf"]
+
+#: an identification result: the path of a ``symoro-gen identify`` JSON, its content, or an ``IdentifyResults``
+ResultLike = Any
+
+DRIVE_NOTE = ("IA (rotor inertia) and OFF (torque offset) have no URDF field: MuJoCo's armature holds IA; FV, FS "
+              "are URDF <dynamics damping friction>")
+
+
+@dataclass(frozen=True, eq=False)
+class ExportResults:
+    """The text an export writes, the notes about the links it changed and, from an identification, the sidecar.
+
+    Attributes
+    ----------
+    command : {"export-urdf", "export-mjcf", "export-par"}
+    robot : RobotDescription
+    text : str
+        The URDF, MJCF or ``.par`` text (what the command writes to ``-o`` or prints).
+    notes : tuple of str
+        What the exporter changed to write a valid file (the command's ``note:`` lines on standard error).
+    sidecar : dict, optional
+        With ``from_result``: the robot, the result's file, whether the regrouping is exact, the bodies, the drive
+        terms and the changed links (the command's ``OUTPUT.json``).
+    """
+
+    command: str
+    robot: RobotDescription
+    text: str
+    notes: tuple[str, ...] = ()
+    sidecar: Mapping[str, Any] | None = field(default=None, repr=False)
+
+    def summary(self) -> str:
+        """The text (what the command prints without ``-o``)."""
+        return self.text
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def _repr_html_(self) -> str:
+        return f'<pre class="symoro-gen-{self.command}">{html.escape(self.text)}</pre>'
+
+    def to_dict(self) -> dict:
+        """The sidecar as the command writes it (``generator`` first); without an identification, the robot
+        and the changed links."""
+        body = dict(self.sidecar) if self.sidecar is not None else {"robot": self.robot.name,
+                                                                    "changed_links": list(self.notes)}
+        return {"generator": f"symoro-gen {self.command}", **body}
+
+    def json_text(self) -> str:
+        """The sidecar's JSON text (:meth:`to_dict`)."""
+        return json_output(self.to_dict(), self.command)
+
+    def write(self, path: str | os.PathLike[str], *, force: bool = False) -> list[Path]:
+        """Write the text to ``path`` and, with a sidecar, ``PATH.json``; an existing file symoro-gen did not
+        write is replaced only with ``force``. Returns the paths written."""
+        write_output_text(Path(path), self.text, force=force, label="-o/--output")
+        out = [Path(path)]
+        if self.sidecar is not None:
+            side = Path(str(path) + ".json")
+            write_output_text(side, self.json_text(), force=force, label="-o/--output (its .json)")
+            out.append(side)
+        return out
+
+
+@dataclass(frozen=True)
+class _Values:
+    """What an export writes beside the robot file's nominal values (all None/empty: the nominal robot)."""
+
+    chi: list[float] | None = None
+    payload: list[float] | None = None
+    header: tuple[str, ...] = ()
+    sidecar: dict | None = None
+
+
+def _description(robot) -> RobotDescription:
+    return robot if isinstance(robot, RobotDescription) else load_robot(robot)
+
+
+def _result_dict(result: ResultLike) -> tuple[dict, str]:
+    """``(JSON content, source name)`` of an identification result given as a path, a mapping or a results
+    object (``to_dict()``)."""
+    if isinstance(result, (str, os.PathLike)):
+        src = os.fspath(result)
+        try:
+            doc = json.loads(Path(src).read_text())
+        except (OSError, ValueError) as exc:
+            raise ModelError(f"{src}: not a result of `symoro-gen identify` ({exc})") from None
+    else:
+        src = "the identification result"
+        doc = result.to_dict() if hasattr(result, "to_dict") else result
+    if not isinstance(doc, dict):
+        raise ModelError(f"{src}: not a result of `symoro-gen identify` (a JSON object is expected)")
+    return doc, src
+
+
+def _standard_set_from_result(*args: Any, **kwargs: Any) -> Any:
+    """:func:`symoro_gen.identification.physical.standard_set_from_result`, its module (SciPy, the 'physical'
+    extra's solver) loaded on this first use only: an export without an identification stays light."""
+    return importlib.import_module("symoro_gen.identification.physical").standard_set_from_result(*args, **kwargs)
+
+
+def _values(robot: RobotDescription, result: ResultLike) -> _Values:
+    """The standard and payload values, header notes and sidecar of an export from an identification."""
+    doc, src = _result_dict(result)
+    name = Path(src).name if isinstance(result, (str, os.PathLike)) else src
+    _, model = model_for(robot)
+    nominal = dict(zip(robot.standard_names, robot.nominal_vector() or ()))
+    sb, payload = _standard_set_from_result(model, doc, nominal, source=src)
+    vals = sb.as_dict()
+    chi = [vals.get(n, 0.0) for n in robot.standard_names]
+    pay = None
+    notes = [f"inertial and drive parameters from {name}: physically consistent standard set whose regrouping "
+             f"{'is exactly' if sb.exact else 'is the closest (least squares) to'} the identified base parameters"]
+    if robot.payload is not None:
+        if payload:
+            pay = [payload[n] for n in robot.payload_names]
+            notes.append(f"payload (frame {robot.payload}) as identified in {name}")
+        else:  # the identified model is the robot without the payload: do not mount the nominal one
+            pay = [0.0] * len(robot.payload_names)
+            notes.append(f"payload (frame {robot.payload}) not identified in {name}: written without mass")
+    notes += list(sb.notes)
+    for b in (b for b in sb.bodies if "mass_change" in b):
+        notes.append(f"{b['body']}: mass {b['mass']:.6g} kg ({b['mass_change']:+.3g} from nominal), centre of mass "
+                     f"moved {b['com_shift']:.3g} m" + (f", inertia changed {100 * b['inertia_change_rel']:.3g} %"
+                                                        if b.get("inertia_change_rel") is not None else ""))
+    sidecar = {"robot": robot.name, "from": src, "exact": sb.exact, "base_error": sb.base_error,
+               "notes": list(sb.notes), "bodies": list(sb.bodies), "active_constraints": list(sb.active_constraints)}
+    return _Values(chi, pay, tuple(notes), sidecar)
+
+
+def _finish(command: str, robot: RobotDescription, text: str, changed: list[str], v: _Values) -> ExportResults:
+    sidecar = None
+    if v.sidecar is not None:
+        sidecar = dict(v.sidecar, drive=drive_terms(robot, link_values(robot, v.chi, v.payload)),
+                       drive_note=DRIVE_NOTE, changed_links=list(changed))
+    return ExportResults(command, robot, text, tuple(changed), sidecar)
+
+
+def _identified_parameters(params: ResultLike) -> dict[str, float]:
+    """``name -> value`` of an identify result's ``parameters`` (a mapping without that key is taken as the
+    names and values themselves)."""
+    if isinstance(params, Mapping) and "parameters" not in params:
+        return {str(n): float(v) for n, v in params.items() if v is not None}
+    doc, src = _result_dict(params)
+    try:
+        p = doc["parameters"]
+        return {n: v for n, v in zip(p["names"], p["values"]) if v is not None}
+    except (KeyError, TypeError) as exc:
+        raise ModelError(f"{src}: not a result of `symoro-gen identify` ({exc})") from None
+
+
+def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = None) -> ExportResults:
+    """The robot as URDF (``symoro-gen export-urdf``).
+
+    Parameters
+    ----------
+    robot : str, path or RobotDescription
+        A robot name (``robots/``), a robot file or a description.
+    params : path, mapping or IdentifyResults, optional
+        An identification whose standard parameters (those it names) replace the nominal ones.
+    from_result : path, mapping or IdentifyResults, optional
+        An identification: every body from a physically consistent standard set whose regrouping gives its
+        base parameters (the 'physical' extra); fills :attr:`ExportResults.sidecar`.
+    """
+    desc = _description(robot)
+    if params is not None and from_result is not None:
+        raise ModelError("export-urdf: give --from RESULT.json or --params RESULT.json, not both")
+    v = _values(desc, from_result) if from_result is not None else _Values()
+    named = _identified_parameters(params) if params is not None else None
+    changed: list[str] = []
+    text = urdf_text(desc, v.chi, v.payload, params=named, notes=v.header, report=changed)
+    return _finish("export-urdf", desc, text, changed, v)
+
+
+def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.001) -> ExportResults:
+    """The robot as a MuJoCo MJCF model (``symoro-gen export-mjcf``); ``from_result`` as for :func:`export_urdf`,
+    ``timestep`` MuJoCo's [s]."""
+    desc = _description(robot)
+    v = _values(desc, from_result) if from_result is not None else _Values()
+    changed: list[str] = []
+    text = mjcf_text(desc, v.chi, v.payload, notes=v.header, report=changed, timestep=timestep)
+    return _finish("export-mjcf", desc, text, changed, v)
+
+
+def export_par(robot) -> ExportResults:
+    """The robot as a SYMORO+/OpenSYMORO ``.par`` file (``symoro-gen export-par``)."""
+    desc = _description(robot)
+    return ExportResults("export-par", desc, par_text(desc))

@@ -1,0 +1,408 @@
+"""``identify``: recordings → identified base parameters (and gains), validated on other recordings.
+
+The workflow of ``symoro-gen identify`` as a library call::
+
+    res = symoro_gen.identify("lwr4", ["a.csv", "c.csv"], validate=["b.csv"], method="wls")
+    res.summary(); res.to_dict()["validation"]["rel_err"]; res.report("lwr4.html"); res.plot()
+
+Filtering and parallel decimation ([GB-gains] eq. 14-16), IDIM-OLS/WLS/TLS ([GB-gains] eq. 17-22,
+[LWR4-TLS] eq. 8-16), essential parameters, a known payload, drive gains ([GB-gains] eq. 25-27) or
+torque-sensor gains ([LWR4-TLS]), IDIM-IV and DIDIM, physically consistent estimates.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import IdentificationError, OptionError
+from ..identification import fit_with_known_payload, identify_with_drive_gains, sensor_gains
+from ..identification import identify as fit
+from ..identification.didim import identify_didim
+from ..identification.estimators import drop_unexcited, with_unexcited
+from ..identification.iv import identify_iv
+from ..identification.payload import identify_payload
+from ..identification.physical import identify_physical
+from ..identification.reference import compare_with_reference, format_comparison
+from ..identification.render import IdentificationBlocks
+from ..identification.result import basis_text, json_float
+from ..identification.systems import stack_systems
+from ..model import IdentificationModel
+from ..observations.assembly import Assembly, assemble
+from ..observations.options import AssemblyOptions
+from ..observations.system import ObservationSystem
+from ..params import check_payload
+from ..preprocessing.cli import data_text
+from ..preprocessing.readers import LoadReport, LogFormat
+from ..preprocessing.trajectory import hold_back
+from ..simulate.closed_loop import PIDGains
+from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, listed, provenance, resolve_robot
+from .reporting import ReportContent, build_report, write_report
+
+__all__ = ["IdentifyOptions", "IdentifyResults", "check_payload", "identify"]
+
+METHODS = ("ols", "wls", "tls", "iv", "didim")
+
+
+@dataclass(frozen=True)
+class IdentifyOptions(Options):
+    """Every option of ``identify`` (the command's flags without their dashes; see ``symoro-gen identify --help``).
+
+    Attributes
+    ----------
+    method : {"ols", "wls", "tls", "iv", "didim"}
+    validate_loaded : bool
+        The validation recordings carry the payload.
+    validate_fraction : float, optional
+        Hold back the last share (0 < F < 1) of each identification recording for validation.
+    payload : mapping of str to float
+        Known payload parameters (``{"M8": 4.6136}``).
+    gains : {"sensor", "drive"}, optional
+        Also identify torque-sensor (IDIM-TLS) or drive gains.
+    essential : bool
+    r_sigma : float
+        Stop ratio of the essential procedure.
+    cutoff, decimate : optional
+        Butterworth cut-off of q [Hz] and decimation factor (default: the papers' rules).
+    min_velocity : float, optional
+        Drop identification rows depending on samples slower than this [rad/s].
+    drop_unexcited : bool
+        Leave out the parameters the data do not excite instead of stopping.
+    reference : path, optional
+        Published base-parameter table (CSV) to compare with.
+    kp, kd, ki, bandwidth, max_iter, start
+        The closed-loop estimators' controller and iterations (``method="iv"|"didim"``).
+    physical : bool
+        Physically consistent estimate (cvxpy, Clarabel: the 'physical' extra).
+    nominal_tolerance : float, optional
+        With ``physical``: ``|chi - nominal| <= TOL |nominal|``.
+    data_format : LogFormat, optional
+        How the files are read (columns, time base, units, resampling: docs/data-files.md).
+    """
+
+    method: str = "wls"
+    validate_loaded: bool = False
+    validate_fraction: float | None = None
+    payload: Mapping[str, float] = field(default_factory=dict)
+    gains: str | None = None
+    essential: bool = False
+    r_sigma: float = 30.0
+    cutoff: float | None = None
+    decimate: int | None = None
+    min_velocity: float | None = None
+    drop_unexcited: bool = False
+    reference: str | os.PathLike[str] | None = None
+    kp: Sequence[float] | None = None
+    kd: Sequence[float] | None = None
+    ki: Sequence[float] | None = None
+    bandwidth: float | None = None
+    max_iter: int = 20
+    start: str = "ols"
+    physical: bool = False
+    nominal_tolerance: float | None = None
+    data_format: LogFormat = field(default_factory=LogFormat)
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise OptionError(f"method {self.method!r}: one of {', '.join(METHODS)}")
+        if self.gains not in (None, "sensor", "drive"):
+            raise OptionError(f"gains {self.gains!r}: 'sensor' or 'drive'")
+        if self.start not in ("ols", "nominal"):
+            raise OptionError(f"start {self.start!r}: 'ols' or 'nominal'")
+        if self.validate_fraction is not None and not 0 < self.validate_fraction < 1:
+            raise OptionError(f"--validate-fraction {self.validate_fraction:g}: must lie between 0 and 1 (a share "
+                              "of each recording)")
+        if self.nominal_tolerance is not None and not self.physical:
+            raise IdentificationError("--nominal-tolerance bounds the --physical estimate: add --physical")
+        object.__setattr__(self, "payload", dict(self.payload or {}))
+        if self.data_format is None:
+            object.__setattr__(self, "data_format", LogFormat())
+
+
+@dataclass(frozen=True, eq=False)
+class IdentifyResults(Results):
+    """What ``identify`` found (see :meth:`to_dict` for the JSON contract, docs/json-output.md)."""
+
+    command = "identify"
+
+    robot: Any
+    model: IdentificationModel
+    options: IdentifyOptions
+    result: Any                                  # IdentificationResult (the consistent one with physical)
+    data: tuple[Any, ...]
+    loaded: tuple[Any, ...]
+    validate: tuple[Any, ...]
+    reports: tuple[LoadReport, ...]
+    systems: Mapping[str, ObservationSystem | None]
+    assemblies: Mapping[str, Assembly | None]
+    drive: Any = None
+    closed: Any = None
+    physical: Any = None
+    unconstrained: Any = None
+    validation: Mapping[str, Any] | None = None
+    reference_rows: tuple[Any, ...] | None = None
+    held_back: tuple[str, ...] = ()
+    inputs: tuple[Any, ...] = ()
+
+    # ---- the JSON ---------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """Exactly the JSON of ``symoro-gen identify --json`` (its ``generator`` mark first)."""
+        out: dict[str, Any] = {"generator": "symoro-gen identify", "schema_version": SCHEMA_VERSION,
+                               "robot": self.robot.name, "data": [],
+                               "loaded": [str(p) for p in self.loaded]}
+        if self.physical is not None:
+            out["unconstrained"] = self.unconstrained.to_dict()
+            out["physical"] = self.physical.to_dict()
+        out.update(self.result.to_dict())
+        if self.closed is not None:
+            out["iterations"] = self.closed.to_dict()
+        if self.validation is not None:
+            v = self.validation
+            out["validation"] = {"data": list(v["data"]), "rel_err": [json_float(x) for x in v["rel_err"]],
+                                 "rel_err_raw": [json_float(x) for x in v["rel_err_raw"]],
+                                 "rel_err_basis": v["basis"]}
+            if self.physical is not None:
+                out["unconstrained"]["validation"] = {"rel_err": [json_float(x) for x in v["unconstrained"]],
+                                                      "rel_err_raw": [json_float(x) for x in v["unconstrained_raw"]]}
+        out["data"] = [r.to_dict() for r in self.reports]
+        if self.reference_rows is not None:
+            out["reference"] = [
+                {"expression": r.expression, "name": r.name, "ref": r.ref, "ref_rel_std_pct": r.ref_rel_std_pct,
+                 "agree_2sigma": r.agree_2sigma} for r in self.reference_rows]
+        out["provenance"] = provenance(self.options, self.inputs)
+        return out
+
+    # ---- the text ---------------------------------------------------------------------------------
+    def summary(self) -> str:
+        """Exactly the text ``symoro-gen identify`` prints."""
+        text = self.result.summary()
+        if self.closed is not None:
+            text = self.closed.summary() + "\n\n" + text
+        v = self.validation
+        if v is not None:
+            vb = v["basis"]
+            text += ("\n\nValidation (relative error norm per joint): every sample, no row selection\n"
+                     f"  on the {basis_text(vb)}:\n    " + "  ".join(f"{x:.4f}" for x in v["rel_err"])
+                     + f"\n  on the raw measured torque (model at full rate on the filtered states, {vb['samples']} "
+                     "samples per joint):\n    " + "  ".join(f"{x:.4f}" for x in v["rel_err_raw"]))
+            if self.physical is not None:
+                text += ("\n  unconstrained estimate, same data:\n    " + "  ".join(f"{x:.4f}" for x in v["unconstrained"])
+                         + "\n    raw: " + "  ".join(f"{x:.4f}" for x in v["unconstrained_raw"]))
+        if self.physical is not None:
+            text += "\n\n" + self.physical.summary()
+        if self.reference_rows is not None:
+                text += "\n\nBeside the reference table " + str(self.options.reference) + ":\n" + \
+                format_comparison(list(self.reference_rows))
+        return text + "\n\n" + data_text(self.reports)
+
+    # ---- report and figures -------------------------------------------------------------------------
+    def report_content(self) -> ReportContent:
+        """What the report shows besides the result: the systems, the payload re-identified on loaded validation
+        data, drive gains, the reference table, raw errors, notes."""
+        model, res = self.model, self.result
+        sys_u, sys_l, sys_v = (self.systems.get(k) for k in ("unloaded", "loaded", "validation"))
+        loaded = sys_l is not None
+        ident = [("identification data" + (" (unloaded)" if loaded else ""), sys_u)]
+        if loaded:
+            ident.append(("identification data (loaded)", sys_l))
+        vl = self.options.validate_loaded
+        valid = [("validation data" + (" (loaded)" if vl else ""), sys_v)] if sys_v is not None else []
+        raw = [(valid[0][0], self.validation["rel_err_raw"])] if valid and self.validation is not None else []
+        payload, notes = None, ["data " + r.summary() for r in self.reports]
+        if sys_v is not None and vl and any(n in sys_v.names for n in model.PAYLOAD_NAMES):
+            try:
+                payload = identify_payload(sys_v, res, payload_names=[n for n in model.PAYLOAD_NAMES if n in sys_v.names],
+                                           gains=res.gains, method=self.options.method)
+            except IdentificationError as exc:
+                notes.append(f"payload not re-identified on the validation data: {exc}")
+        sources = {"identification data": [str(p) for p in self.data], "loaded": [str(p) for p in self.loaded],
+                   "validation data": [str(p) for p in self.validate]}
+        blocks = IdentificationBlocks(identification=ident, validation=valid, payload_names=model.PAYLOAD_NAMES,
+                                      payload=payload, drive=self.drive, raw_errors=raw,
+                                      reference=list(self.reference_rows) if self.reference_rows is not None else None)
+        return ReportContent(robot=self.robot.name, sources=sources, blocks=blocks, notes=notes,
+                             text=self.physical.summary() if self.physical is not None else None)
+
+    def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+        """Tables and plots ([GB-gains] and [LWR4-TLS] tables, measured vs reconstructed torques, singular values;
+        with loaded validation data the payload re-identified with the robot known), ``.html`` or ``.md``."""
+        return write_report(path, self.result, content=self.report_content(), force=force)
+
+    def figures(self) -> list:
+        """Measured and reconstructed torque of every data set, and the scaled singular values of ``W``."""
+        rep = build_report(self.result, content=self.report_content())
+        return [f.figure for f in rep.figures if f.figure is not None]
+
+
+# ---- the workflow ---------------------------------------------------------------------------------------
+def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLike = None,
+             method: str = "wls", options: IdentifyOptions | None = None, **kwargs: Any) -> IdentifyResults:
+    """Identify a robot's base parameters (and gains) from recordings; validate on others.
+
+    Parameters
+    ----------
+    robot : str, path, RobotDescription or model
+        A robot name (``robots/``), a robot file, a description or a loaded model.
+    data : path, Trajectory, (t, q, tau) arrays, or a list of them
+        Recordings without payload.
+    validate : same as ``data``, optional
+        Validation recordings (relative error norms, [LWR4-TLS] Table III).
+    loaded : same as ``data``, optional
+        Recordings with the payload mounted.
+    method : {"ols", "wls", "tls", "iv", "didim"}
+    options : IdentifyOptions, optional
+        All options at once; or give them by name (``essential=True``, ``cutoff=10``...): an unknown name
+        raises :class:`~symoro_gen.errors.OptionError` naming the nearest valid one.
+
+    Returns
+    -------
+    IdentifyResults
+    """
+    if options is None:
+        opts = IdentifyOptions.create("identify", method=method, **kwargs)
+    else:
+        if kwargs:
+            raise OptionError("identify: give the options either as options= or by name, not both")
+        opts = options if method == "wls" or method == options.method else replace(options, method=method)
+    return _run(robot, data, validate, loaded, opts)
+
+
+def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> IdentifyResults:
+    robot, model = resolve_robot(robot_like)
+    data, validate, loaded_data = listed(data), listed(validate), listed(loaded_data)
+    if not data:
+        raise OptionError("identify: no identification data given")
+    unloaded, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
+    held_back: tuple = ()
+    if opts.validate_fraction is not None:
+        unloaded, held_back = hold_back(unloaded, opts.validate_fraction)
+    loaded, rep_l = (as_trajectories(list(loaded_data), opts.data_format, robot, loaded=True)
+                     if loaded_data else ((), ()))
+    reports += rep_l
+    known = check_payload(opts.payload, model.PAYLOAD_NAMES)
+    if (opts.gains or known) and not loaded:
+        raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
+    # min_velocity (row selection) applies to the identification rows only; validation uses every sample
+    asm_opts = AssemblyOptions(cutoff_hz=opts.cutoff, n_d=opts.decimate, min_velocity=opts.min_velocity)
+    asm_u = assemble(model, unloaded, replace(asm_opts, payload_columns=False))
+    asm_l = assemble(model, loaded, replace(asm_opts, payload_columns=True)) if loaded else None
+    # a joint that stands still leaves columns of W zero: an error naming the files, or drop_unexcited
+    (sys_u, sys_l), unexcited = drop_unexcited([asm_u.system, asm_l.system if asm_l is not None else None],
+                                               (*unloaded, *loaded), drop=opts.drop_unexcited)
+    assert sys_u is not None  # drop_unexcited returns a system for each system given
+    if unexcited and opts.method in ("iv", "didim"):
+        raise OptionError(f"--drop-unexcited is not available with --method {opts.method} (it simulates every joint)")
+    dg = closed = None
+    if opts.method in ("iv", "didim"):
+        closed = _run_closed_loop(opts, model, unloaded, asm_opts, loaded, known)
+        res = closed.result
+    elif opts.gains == "sensor":
+        res = sensor_gains(sys_u, sys_l, known, essential=opts.essential, r_sigma=opts.r_sigma)
+    elif opts.gains == "drive":
+        res, dg = identify_with_drive_gains(sys_u, sys_l, known, method=opts.method)
+    elif loaded:
+        res = fit_with_known_payload(sys_u, sys_l, known, method=opts.method, essential=opts.essential,
+                                     r_sigma=opts.r_sigma)
+    else:
+        res = fit(sys_u, method=opts.method, essential=opts.essential, r_sigma=opts.r_sigma)
+    res = with_unexcited(res, unexcited).with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
+    phys = res_u = None
+    if opts.physical:
+        phys, res_u, res = _physical(opts, robot, model, res, sys_u, sys_l, known, asm_u, asm_l)
+    validation, sys_v, asm_v = _validate(opts, robot, model, res, res_u, validate, held_back, asm_opts,
+                                         bool(loaded))
+    if validation is not None:
+        reports += validation.pop("reports")
+    rows = None
+    if opts.reference:
+        rows = tuple(compare_with_reference(res, opts.reference))
+    inputs = (*data, *loaded_data, *validate) + ((opts.reference,) if opts.reference else ())
+    return IdentifyResults(robot=robot, model=model, options=opts, result=res, data=data, loaded=loaded_data,
+                           validate=validate, reports=tuple(reports),
+                           systems={"unloaded": sys_u, "loaded": sys_l, "validation": sys_v},
+                           assemblies={"unloaded": asm_u, "loaded": asm_l, "validation": asm_v}, drive=dg,
+                           closed=closed, physical=phys, unconstrained=res_u, validation=validation,
+                           reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs)
+
+
+def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_back, asm_opts, has_payload):
+    """Relative errors on the validation recordings and the held-back parts (None without either)."""
+    if not (validate or held_back):
+        return None, None, None
+    vtr, rep_v = (as_trajectories(list(validate), opts.data_format, robot, loaded=opts.validate_loaded)
+                  if validate else ((), ()))
+    vtr = tuple(held_back) + tuple(vtr)
+    asm_v = assemble(model, vtr, replace(asm_opts, min_velocity=None,
+                                         payload_columns=bool(opts.validate_loaded) or has_payload))
+    sys_v = asm_v.system
+    out: dict[str, Any] = {"data": [tr.source for tr in held_back] + [str(p) if isinstance(p, (str, os.PathLike))
+                                                                       else getattr(p, "source", "<array>")
+                                                                       for p in validate],
+                           "rel_err": res.rel_err_on(sys_v), "rel_err_raw": res.rel_err_raw_on(model, asm_v),
+                           "basis": asm_v.metric_basis(), "reports": tuple(rep_v)}
+    if res_u is not None:
+        out["unconstrained"] = res_u.rel_err_on(sys_v)
+        out["unconstrained_raw"] = res_u.rel_err_raw_on(model, asm_v)
+    return out, sys_v, asm_v
+
+
+def _run_closed_loop(opts: IdentifyOptions, model: IdentificationModel, unloaded, asm_opts, loaded, known):
+    """``method="iv"|"didim"``: IDIM-IV / DIDIM on the unloaded recordings (closed-loop simulations)."""
+    if loaded or known or opts.gains or opts.essential:
+        raise IdentificationError(f"--method {opts.method} identifies the robot without payload from the DATA "
+                                  f"recordings: --loaded, --payload, --gains and --essential are not available with it")
+    gains = None
+    given = [x for x in (opts.kp, opts.kd, opts.ki) if x]
+    if given:
+        if not opts.kp or not opts.kd:
+            raise IdentificationError("--kp and --kd go together (--ki is optional): the controller's gains per joint")
+        n = model.N_JOINTS
+        vals = []
+        for name, x in (("--kp", list(opts.kp)), ("--kd", list(opts.kd)), ("--ki", list(opts.ki or [0.0]))):
+            if len(x) not in (1, n):
+                raise IdentificationError(f"{name}: give 1 value or {n} (one per joint), got {len(x)}")
+            vals.append(np.asarray(x * n if len(x) == 1 else x, float))
+        gains = PIDGains(*vals)
+    start = None
+    if opts.start == "nominal":
+        nominal = getattr(model, "nominal_parameters", lambda: None)()
+        if nominal is None or not any(float(x) != 0 for x in nominal):
+            raise IdentificationError(f"--start nominal: the robot file of {model.ROBOT} declares no nominal "
+                                      f"inertial parameters")
+        start = model.base_parameters(nominal)
+    fn = identify_iv if opts.method == "iv" else identify_didim
+    return fn(model, unloaded, asm_opts, gains=gains, bandwidth_hz=opts.bandwidth, max_iter=opts.max_iter,
+              start=start)
+
+
+def _physical(opts: IdentifyOptions, robot, model: IdentificationModel, res, sys_u, sys_l, known, asm_u, asm_l):
+    """``physical``: the consistent estimate on the same (gain-scaled, WLS-weighted) rows.
+
+    Returns ``(PhysicalResult, unconstrained result, consistent result)``; the consistent result has the
+    implied base parameters in the unconstrained result's names, its raw-torque errors attached.
+    """
+    system = stack_systems(sys_u, sys_l) if sys_l is not None else sys_u
+    system = ObservationSystem(system.W, res.scaled_measurements(system), system.names, system.joint)
+    joint_sigma: list[float] | None = None
+    if res.joint_sigma is not None:  # WLS: weights 1/sigma_j from the unconstrained residual per joint
+        rho = system.Y - res.predict(system)
+        n_j = np.bincount(system.joint, minlength=system.n_joints)
+        s_j = np.sqrt(np.bincount(system.joint, weights=rho ** 2, minlength=system.n_joints) / np.maximum(n_j, 1))
+        joint_sigma = np.where(s_j > 0, s_j, 1.0).tolist()
+    nominal = dict(zip(robot.standard_names, robot.nominal_vector() or ()))
+    if robot.payload is not None and robot.nominal_payload() is not None:
+        nominal.update(zip(robot.payload_names, robot.nominal_payload()))
+    phys = identify_physical(model, system, joint_sigma=joint_sigma, known=known, nominal=nominal,
+                             nominal_tolerance=opts.nominal_tolerance)
+    res_p = phys.as_identification_result(res).with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
+    return phys, res, res_p
+
+
+def options_field_names() -> tuple[str, ...]:
+    """The option names of :func:`identify` (its keywords besides robot, data, validate, loaded, options)."""
+    return tuple(f.name for f in dataclasses.fields(IdentifyOptions))
