@@ -9,7 +9,8 @@ SciPy)::
     print(res.summary())
 
 ``symoro_gen.fleet`` is the fleet package (``symoro_gen.fleet.simulate_fleet``...), callable as the ``fleet``
-workflow: ``symoro_gen.fleet("scara", ["logs"], by="{robot}/{day}.parquet")``.
+workflow: ``symoro_gen.fleet("scara", ["logs"], by="{robot}/{day}.parquet")``; ``symoro_gen.excite`` likewise is
+the excitation package, callable as the ``excite`` workflow.
 """
 import importlib
 
@@ -18,14 +19,15 @@ from .version import __version__
 
 #: names served by symoro_gen.workflows on first use
 _WORKFLOWS = ("identify", "IdentifyOptions", "IdentifyResults", "diagnose", "DiagnoseOptions", "DiagnoseResults",
+              "inspect", "InspectOptions", "InspectResults", "excite", "ExciteOptions", "ExciteResults",
               "fleet", "FleetOptions", "FleetResults", "export_urdf", "export_mjcf", "export_par", "ExportResults")
 
 __all__ = ["load_model", "__version__", *_WORKFLOWS]
 
 
 def __getattr__(name: str):
-    if name == "fleet":  # the fleet package, callable as the workflow (symoro_gen.fleet.__init__)
-        return importlib.import_module("symoro_gen.fleet")
+    if name in ("fleet", "excite"):  # the packages, callable as the workflows (their __init__)
+        return importlib.import_module(f"symoro_gen.{name}")
     if name in _WORKFLOWS:
         return getattr(importlib.import_module("symoro_gen.workflows"), name)
     raise AttributeError(f"module 'symoro_gen' has no attribute {name!r}")

@@ -47,29 +47,13 @@ def _leaf(module: str):
     return register
 
 
-def _diagnose_parser(sub):
-    importlib.import_module("symoro_gen.commands.diagnose").add_parser(sub)
-
-
-def _inspect_parser(sub):
-    from .preprocessing.inspect import add_inspect_parser
-
-    add_inspect_parser(sub)
-
-
-def _excite_parser(sub):
-    from .excite.cli import add_excite_parser
-
-    add_excite_parser(sub)
-
-
 #: every sub-command, in the order of ``symoro-gen --help``: its registration, which imports its module (the
 #: leaves of symoro_gen.commands, by importlib) only when the command is about to run or the full help is asked
 _COMMANDS: dict = {
     "generate": _leaf("generate"), "build": _leaf("build"), "import-par": _leaf("import_par"),
     "import-urdf": _leaf("import_urdf"), "export-urdf": _leaf("export_urdf"), "export-mjcf": _leaf("export_mjcf"),
-    "export-par": _leaf("export_par"), "identify": _leaf("identify"), "diagnose": _diagnose_parser,
-    "inspect": _inspect_parser, "demo": _leaf("demo"), "excite": _excite_parser,
+    "export-par": _leaf("export_par"), "identify": _leaf("identify"), "diagnose": _leaf("diagnose"),
+    "inspect": _leaf("inspect"), "demo": _leaf("demo"), "excite": _leaf("excite"),
     "fleet": _leaf("fleet"),  # Dask and pyarrow are imported only when it runs
 }
 

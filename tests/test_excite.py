@@ -877,7 +877,7 @@ def test_cli_spline(cli, tmp_path, scara):
 def test_cli_refinement_without_cvxpy(cli, tmp_path, monkeypatch):
     """cvxpy is an extra: without it the default skips the refinement with a note, an explicit --refine is a
     one-line error naming the option, and nothing is written."""
-    import symoro_gen.excite.cli as ex  # the command looks has_cvxpy up there
+    import symoro_gen.workflows.excite as ex  # the workflow looks has_cvxpy up there
 
     monkeypatch.setattr(ex, "has_cvxpy", lambda: False)
     csv, js = tmp_path / "t.csv", tmp_path / "t.json"
@@ -892,7 +892,7 @@ def test_cli_refinement_without_cvxpy(cli, tmp_path, monkeypatch):
 def test_cli_plot_without_matplotlib_fails_before_optimising(cli, tmp_path, monkeypatch):
     """matplotlib is an extra: --plot or --report without it is a one-line error naming the extra, said
     before the optimisation (which would run for minutes), with nothing written."""
-    import symoro_gen.excite.cli as ex  # the command looks optimise_excitation up there
+    import symoro_gen.workflows.excite as ex  # the workflow looks optimise_excitation up there
 
     def never(*a, **k):
         raise AssertionError("the optimisation ran")
@@ -987,10 +987,10 @@ def test_settings_are_checked_once_and_keywords_override_them(scara, scara_limit
 def _excite_args(*argv: str):
     import argparse
 
-    from symoro_gen.excite.cli import add_excite_parser
+    from symoro_gen.commands.excite import add_parser
 
     ap = argparse.ArgumentParser()
-    add_excite_parser(ap.add_subparsers())
+    add_parser(ap.add_subparsers())
     return ap.parse_args(["excite", "scara", "-o", "x.csv", *argv])
 
 
@@ -998,19 +998,23 @@ def test_the_command_runs_the_quick_effort_unless_told_and_options_override_it(m
     """Without options the command runs ``--effort quick``; ``--effort thorough`` is what the command ran before
     (4 starts, the best of 40 random designs, IPOPT with p = 8 then 64 at most 200 iterations each, 20 SDPs);
     ``--starts``, ``--pool``, ``--max-iter`` and ``--refine`` override the effort's value."""
-    import symoro_gen.excite.cli as excite_cli
+    import symoro_gen.workflows.excite as excite_workflow
+    from symoro_gen.commands.excite import options_from_args
     from symoro_gen.excite import EFFORTS, ExciteSettings
 
-    monkeypatch.setattr(excite_cli, "has_cvxpy", lambda: True)
-    quick, _ = excite_cli.settings_of(_excite_args())
+    def settings_of(args):
+        return options_from_args(args).settings()
+
+    monkeypatch.setattr(excite_workflow, "has_cvxpy", lambda: True)
+    quick, _ = settings_of(_excite_args())
     assert quick == ExciteSettings(**EFFORTS["quick"]) and quick.starts == 1 and quick.refine > 0
-    thorough, _ = excite_cli.settings_of(_excite_args("--effort", "thorough"))
+    thorough, _ = settings_of(_excite_args("--effort", "thorough"))
     assert thorough == ExciteSettings(starts=4, pool=None, max_iter=200, powers=(8, 64), refine=20)
-    mixed, _ = excite_cli.settings_of(_excite_args("--effort", "thorough", "--starts", "2", "--refine", "0",
+    mixed, _ = settings_of(_excite_args("--effort", "thorough", "--starts", "2", "--refine", "0",
                                                    "--max-iter", "50", "--seed", "3", "--jobs", "2"))
     assert (mixed.starts, mixed.refine, mixed.max_iter, mixed.powers, mixed.seed, mixed.jobs) == (2, 0, 50, (8, 64), 3, 2)
-    more, _ = excite_cli.settings_of(_excite_args("--starts", "8"))
+    more, _ = settings_of(_excite_args("--starts", "8"))
     assert more.starts == 8 and more.pool == 80  # at least 10 per start, as the thorough effort draws
-    monkeypatch.setattr(excite_cli, "has_cvxpy", lambda: False)
-    skipped, note = excite_cli.settings_of(_excite_args())
+    monkeypatch.setattr(excite_workflow, "has_cvxpy", lambda: False)
+    skipped, note = settings_of(_excite_args())
     assert skipped.refine == 0 and "skipped" in (note or "")

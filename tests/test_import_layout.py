@@ -123,11 +123,6 @@ CIRCLE_EDGES_OK: dict[tuple[str, str], str] = {
 #: private names imported across modules, in files of work in progress: (importer, source, name) -> reason.
 #: Remove an entry when the import is gone (test_allow_lists_are_current).
 PRIVATE_IMPORTS_OK: dict[tuple[str, str, str], str] = {
-    ("symoro_gen.excite", "symoro_gen.report.plots", "_png"): "excite and report in rework",
-    ("symoro_gen.excite", "symoro_gen.simulate.trajectories", "_piecewise_jerk"): "excite in rework",
-    ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_casadi"): "excite in rework",
-    ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_casadi_regressor"): "excite in rework",
-    ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_sympy_casadi"): "excite in rework",
     ("symoro_gen.fleet.worker", "symoro_gen.fleet.kernel", "_column_map"): "fleet in rework",
 }
 
@@ -320,11 +315,6 @@ def _n_parameters(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
 #: functions longer than MAX_FUNCTION_LINES or with more than MAX_PARAMETERS parameters (self and cls not
 #: counted), in files of work in progress: "module:function" -> reason. Remove an entry when it holds.
 SIZE_OK: dict[str, str] = {
-    "symoro_gen.excite:refine_excitation": "excite in rework",
-    "symoro_gen.excite:_optimise_start": "excite in rework",
-    "symoro_gen.excite:optimise_excitation": "excite in rework",
-    "symoro_gen.excite_relaxation:relaxation_bracket": "excite in rework",
-    "symoro_gen.excite_relaxation:__init__": "excite in rework",
     "symoro_gen.preprocessing.filtering:choose_filter_settings": "preprocessing in rework",
 }
 MAX_FUNCTION_LINES = 120

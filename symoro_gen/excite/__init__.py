@@ -51,10 +51,18 @@ The package, one module per concern (this module re-exports their public names):
 * :mod:`~symoro_gen.excite.criterion` - cond, its smooth bound, the information matrix, the lower bound;
 * :mod:`~symoro_gen.excite.optimise` - the IPOPT multistart (:class:`ExciteSettings`, the efforts :data:`EFFORTS`);
 * :mod:`~symoro_gen.excite.refine` - the SDP refinement on the true cond;
-* :mod:`~symoro_gen.excite.output` - CSV, figure and report;
-* :mod:`~symoro_gen.excite.cli` - the ``symoro-gen excite`` command (imported only by the command line).
+* :mod:`~symoro_gen.excite.output` - CSV, figure and report.
+
+The package is also the ``excite`` workflow: ``symoro_gen.excite(robot, duration=20, output="t.csv")`` calls
+:func:`symoro_gen.workflows.excite.excite` (so that the library's ``symoro_gen.excite`` is both this package and the
+workflow, whichever was imported first); the command is :mod:`symoro_gen.commands.excite`.
 """
 from __future__ import annotations
+
+import importlib
+import sys
+import types
+from typing import Any
 
 from .bases import FourierBasis, PointToPointBasis, SplineBasis, basis_eval, dense_times, output_times
 from .criterion import (
@@ -156,3 +164,14 @@ __all__ = [
     "plot_trajectory",
     "trajectory_figure_png",
 ]
+
+
+class _ExcitePackage(types.ModuleType):
+    """This package, callable as the ``excite`` workflow."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        """``symoro_gen.excite(robot, **options)``: :func:`symoro_gen.workflows.excite.excite`."""
+        return importlib.import_module("symoro_gen.workflows.excite").excite(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _ExcitePackage

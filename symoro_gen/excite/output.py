@@ -26,6 +26,7 @@ __all__ = [
     "passive_ranges",
     "passive_text",
     "plot_trajectory",
+    "trajectory_figure",
     "trajectory_figure_png",
     "write_trajectory_csv",
 ]
@@ -101,7 +102,13 @@ def plot_trajectory(result: ExcitationResult, path, *, robot: str = "", joints: 
 
 def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000, title: str = "",
                           joints: tuple[int, ...] | None = None) -> bytes:
-    """PNG (report style) of every joint's ``q, dq, ddq`` against its limits (dashed red), in deg or m;
+    """PNG (report style) of :func:`trajectory_figure`."""
+    return figure_png(trajectory_figure(result, dpi=dpi, max_points=max_points, title=title, joints=joints), dpi)
+
+
+def trajectory_figure(result: ExcitationResult, *, dpi: int = 80, max_points: int = 2000, title: str = "",
+                      joints: tuple[int, ...] | None = None):
+    """Matplotlib figure of every joint's ``q, dq, ddq`` against its limits (dashed red), in deg or m;
     ``joints``: the robot joint of each column (:func:`joint_numbers`), named in the labels when it differs."""
 
     MplFigure, FigureCanvasAgg = require_matplotlib()
@@ -158,7 +165,7 @@ def trajectory_figure_png(result: ExcitationResult, *, dpi: int = 80, max_points
         fig.suptitle(title, fontsize=9, y=1 - 0.12 / (base + head))
     fig.subplots_adjust(left=0.07, right=0.99, top=1 - (0.03 * base + head) / (base + head), bottom=0.5 / (base + head),
                         wspace=0.3, hspace=0.25)
-    return figure_png(fig, dpi)
+    return fig
 
 
 def excitation_report(result: ExcitationResult, model: IdentificationModel, *, noise: float, chi_b=None,

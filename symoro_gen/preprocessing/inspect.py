@@ -1,4 +1,4 @@
-"""``symoro-gen inspect ROBOT DATA...``: what a recording can and cannot give, before identifying.
+"""What a recording can and cannot give, before identifying (the ``inspect`` workflow's computation).
 
 Per file: sampling rate and jitter, gaps, dropped rows (from :class:`LoadReport`); per experiment and
 joint: standstill fraction, saturation (samples stuck at the column's bound), the low-pass cut-off and
@@ -8,32 +8,31 @@ for all experiments: the condition number of ``W`` assembled by the identificati
 predicted relative standard deviation ``%sigma`` (Gautier 1990; LWR4 paper eq. 11) exceeds
 ``REL_STD_WARN_PCT``: the parameters this recording cannot identify.
 
-Exit 0 (with warnings) when the recording is usable, 2 with the reason when it is not.
+The use case is :func:`symoro_gen.workflows.inspect.inspect`, the command :mod:`symoro_gen.commands.inspect`
+(exit 0, with warnings, when the recording is usable; 2 with the reason when it is not).
 """
 from __future__ import annotations
 
 import io
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from ..atomic import FORCE_HELP, json_output, mark_png, write_output_text
+from ..atomic import mark_png
 from ..errors import IdentificationError
 from ..identification.assemble import build_observation
 from ..identification.estimators import REL_STD_WARN_PCT
 from ..identification.method import identify
-from ..loader import model_for
 from ..model import IdentificationModel
-from ..report import Figure, Heading, ItemList, Preformatted, Report, Table, check_report_path, require_matplotlib
-from ..report.document import write_report_files
-from .cli import add_data_options, data_block, data_text, load_data
+from ..report import Figure, Heading, ItemList, Preformatted, Report, Table, require_matplotlib
+from .cli import data_block, data_text
 from .filtering import choose_filter_settings, filter_and_differentiate
 from .readers import LoadReport
 from .trajectory import Trajectory
 
-__all__ = ["JointStats", "ExperimentStats", "Inspection", "inspect_recordings", "add_inspect_parser", "run_inspect"]
+__all__ = ["JointStats", "ExperimentStats", "Inspection", "inspect_recordings", "inspection_report", "signal_figures"]
 
 #: |dq| below which a joint is at a standstill [rad/s or m/s]
 STANDSTILL_VELOCITY = 0.01
@@ -220,9 +219,28 @@ def inspect_recordings(model: IdentificationModel, trajectories: Sequence[Trajec
     return Inspection(tuple(reports), tuple(exps), cond, cond_s, names, pct, tuple(dict.fromkeys(warn)), tuple(errs))
 
 
-def _report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str):
-    """An HTML/Markdown report: the summary tables and one plot per joint (q and tau against t)."""
+def signal_figures(trajectories: Sequence[Trajectory]) -> list[tuple[str, Any, str]]:
+    """One matplotlib figure per experiment and joint (q and tau against t): ``(name, figure, caption)``."""
     MplFigure, Canvas = require_matplotlib()
+    out = []
+    for k, tr in enumerate(trajectories):
+        for j in range(tr.n_joints):
+            fig = MplFigure(figsize=(8, 3.2), dpi=80)
+            Canvas(fig)
+            ax1, ax2 = fig.subplots(2, 1, sharex=True)
+            step = max(1, tr.n_samples // 4000)
+            ax1.plot(tr.t[::step], tr.q[::step, j], lw=0.8)
+            ax1.set_ylabel(f"q{j + 1}")
+            ax2.plot(tr.t[::step], tr.tau[::step, j], lw=0.8, color="C1")
+            ax2.set_ylabel(f"tau{j + 1}")
+            ax2.set_xlabel("t [s]")
+            out.append((f"exp{k + 1}_joint{j + 1}", fig, f"{tr.source}, joint {j + 1}"))
+    return out
+
+
+def inspection_report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str) -> Report:
+    """An HTML/Markdown report: the summary tables and one plot per joint (q and tau against t)."""
+    require_matplotlib()
     blocks: list = [Heading("Files", 2),
                     Table(("file", "rows read", "dropped", "resampled", "step [s]", "jitter [%]", "gaps", "experiments"),
                           tuple((r.file, str(r.rows_read), str(r.rows_dropped), "yes" if r.resampled else "no",
@@ -243,52 +261,9 @@ def _report(insp: Inspection, trajectories: Sequence[Trajectory], robot: str):
     if insp.warnings or insp.errors:
         blocks.append(ItemList(tuple(insp.errors) + tuple(insp.warnings)))
     blocks.append(Heading("Signals per joint", 2))
-    for k, tr in enumerate(trajectories):
-        for j in range(tr.n_joints):
-            fig = MplFigure(figsize=(8, 3.2), dpi=80)
-            Canvas(fig)
-            ax1, ax2 = fig.subplots(2, 1, sharex=True)
-            step = max(1, tr.n_samples // 4000)
-            ax1.plot(tr.t[::step], tr.q[::step, j], lw=0.8)
-            ax1.set_ylabel(f"q{j + 1}")
-            ax2.plot(tr.t[::step], tr.tau[::step, j], lw=0.8, color="C1")
-            ax2.set_ylabel(f"tau{j + 1}")
-            ax2.set_xlabel("t [s]")
-            buf = io.BytesIO()
-            fig.savefig(buf, format="png", metadata={"Software": None})
-            blocks.append(Figure(f"exp{k + 1}_joint{j + 1}", mark_png(buf.getvalue()),
-                                 caption=f"{tr.source}, joint {j + 1}"))
+    for name, fig, caption in signal_figures(trajectories):
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", metadata={"Software": None})
+        blocks.append(Figure(name, mark_png(buf.getvalue()), caption=caption))
     blocks.append(Preformatted(insp.summary()))
     return Report(f"Inspection of recordings for {robot}", tuple(blocks))
-
-
-def run_inspect(args) -> int:
-    """The command; returns the exit status (0 usable, 2 not usable)."""
-    if args.report:
-        check_report_path(args.report)
-        require_matplotlib()
-    robot, model = model_for(args.robot)
-    trajs, reports = load_data(args, args.data, robot)
-    insp = inspect_recordings(model, trajs, reports, cutoff_hz=args.cutoff, n_d=args.decimate)
-    force = getattr(args, "force", False)
-    if args.json:
-        write_output_text(Path(args.json), json_output({"robot": robot.name, **insp.to_dict()}, "inspect"), force=force)
-    if args.report:
-        write_report_files(_report(insp, trajs, robot.name), args.report, force=force)
-    if not args.quiet or not insp.usable:
-        print(insp.summary())
-    return 0 if insp.usable else 2
-
-
-def add_inspect_parser(sub) -> None:
-    p = sub.add_parser("inspect", help="what a recording can give: sampling, gaps, bad rows, standstill, "
-                                       "saturation, filter cut-off, cond(W), parameters it cannot identify")
-    p.add_argument("robot", help="robot name in robots/ or path to a robot .toml file")
-    p.add_argument("data", nargs="+", help="recordings (CSV/NPZ/MAT, or q=..,tau=..,dt=.. spec)")
-    p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
-    p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
-    p.add_argument("--json", help="write the findings as JSON here")
-    p.add_argument("--report", metavar="OUT.html|OUT.md", help="write a report with a plot per joint here")
-    p.add_argument("--force", action="store_true", help=FORCE_HELP)
-    add_data_options(p)
-    p.set_defaults(func=run_inspect)

@@ -5,6 +5,8 @@ frozen results object (``summary()``, ``to_dict()``, ``report(path)``, ``plot()`
 ======================  ==================================================================
 ``identify``            recordings -> base parameters, gains, validation errors
 ``diagnose``            recordings -> effects the model misses, added, re-identified
+``inspect``             recordings -> what they can give: sampling, gaps, standstill, cond(W), %sigma
+``excite``              robot and its limits -> an optimal excitation trajectory
 ``fleet``               the logs of a fleet -> per-day and fleet estimates, drift flags (Dask)
 ``export_urdf``         robot (and an identification) -> URDF text, notes, sidecar
 ``export_mjcf``         robot (and an identification) -> MuJoCo MJCF text, notes, sidecar
@@ -13,8 +15,8 @@ frozen results object (``summary()``, ``to_dict()``, ``report(path)``, ``plot()`
 
 The names are imported on first use (PEP 562): each workflow loads only what it needs (the exports stay free
 of SciPy, so the light commands start quickly), and the engines below a workflow (the fleet engine) may use
-:mod:`symoro_gen.workflows.base` without an import circle through this package. ``identify``, ``diagnose`` and ``fleet`` are
-the functions, as an eager ``from .identify import identify`` would bind them, even once their modules are
+:mod:`symoro_gen.workflows.base` without an import circle through this package. ``identify``, ``diagnose``, ``inspect``, ``excite``
+and ``fleet`` are the functions, as an eager ``from .identify import identify`` would bind them, even once their modules are
 imported (:class:`_Package`).
 """
 from __future__ import annotations
@@ -27,21 +29,26 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .base import SCHEMA_VERSION, Options, Results
     from .diagnose import DiagnoseOptions, DiagnoseResults, diagnose
+    from .excite import ExciteOptions, ExciteResults, excite
     from .export import ExportResults, export_mjcf, export_par, export_urdf
     from .fleet import FleetOptions, FleetResults, fleet
     from .identify import IdentifyOptions, IdentifyResults, identify
+    from .inspect import InspectOptions, InspectResults, inspect
 
 _WHERE = {
     "SCHEMA_VERSION": "base", "Options": "base", "Results": "base",
     "IdentifyOptions": "identify", "IdentifyResults": "identify", "identify": "identify",
     "DiagnoseOptions": "diagnose", "DiagnoseResults": "diagnose", "diagnose": "diagnose",
+    "InspectOptions": "inspect", "InspectResults": "inspect", "inspect": "inspect",
+    "ExciteOptions": "excite", "ExciteResults": "excite", "excite": "excite",
     "FleetOptions": "fleet", "FleetResults": "fleet", "fleet": "fleet",
     "ExportResults": "export", "export_urdf": "export", "export_mjcf": "export", "export_par": "export",
 }
 
-__all__ = ["SCHEMA_VERSION", "DiagnoseOptions", "DiagnoseResults", "ExportResults", "FleetOptions", "FleetResults", "IdentifyOptions", "IdentifyResults",
-           "Options", "Results", "diagnose", "export_mjcf", "export_par", "export_urdf", "fleet",
-           "identify"]
+__all__ = ["SCHEMA_VERSION", "DiagnoseOptions", "DiagnoseResults", "ExciteOptions", "ExciteResults", "ExportResults",
+           "FleetOptions", "FleetResults", "IdentifyOptions", "IdentifyResults", "InspectOptions", "InspectResults",
+           "Options", "Results", "diagnose", "excite", "export_mjcf", "export_par", "export_urdf", "fleet",
+           "identify", "inspect"]
 
 
 def __getattr__(name: str) -> Any:
