@@ -1,4 +1,4 @@
-"""Closed-loop benchmark (issue 13), on the palletizer (robots/palletizer.toml: 6 tree joints, 4 actuated,
+"""Closed-loop benchmark, on the palletizer (robots/palletizer.toml: 6 tree joints, 4 actuated,
 one parallelogram).
 
 Prints:

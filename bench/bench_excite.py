@@ -1,4 +1,4 @@
-"""Benchmark: optimised excitation vs the best of 50 random Fourier trajectories (issue 11 section 1).
+"""Benchmark: optimised excitation vs the best of 50 random Fourier trajectories.
 
 For the KUKA LWR4 (7 joints) and the Staubli RX-90 (6 joints), with the ``[limits]`` of their robot
 files: a Fourier design (5 harmonics, 10 s = one period, 100 Hz) optimised by ``symoro_gen.excite``

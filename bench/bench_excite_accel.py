@@ -1,4 +1,4 @@
-"""Do the acceleration limits hold the excitation designs back? (issue 11 section 1, the 5x target)
+"""Do the acceleration limits hold the excitation designs back? (the 5x target)
 
 The relaxation over distributions of states (``bench/bench_excite_relaxation.py``) ignores continuity in
 time; one way a trajectory pays for continuity is the time a joint needs to change its velocity, set by the

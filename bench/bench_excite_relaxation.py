@@ -1,6 +1,6 @@
 """How low can cond go if the trajectory were free to be ANY distribution of states within the limits?
 
-Issue 11 section 1 asks for cond >= 5x below the best of 50 random Fourier trajectories. A trajectory's
+The target asked for cond >= 5x below the best of 50 random Fourier trajectories. A trajectory's
 stacked regressor gives ``W^T W / N = E[G(s)]``, ``G(s) = W(s)^T W(s)``, the mean over its samples
 ``s = (q, dq, ddq)``. Dropping the continuity in time (the relaxation), the smallest cond over
 distributions of states within the position, velocity and acceleration limits is a linear SDP

@@ -1,4 +1,4 @@
-"""Fleet benchmark (issue 12).
+"""Fleet benchmark.
 
 1. The per-chunk kernel (:mod:`symoro_gen.fleet.fused`: filter, evaluate the base regressor in cache,
    low-pass and decimate it with a polyphase FIR carried across batches, fold into the QR factors; the

@@ -1,4 +1,4 @@
-"""Generator benchmarks (issues 2 and 13).
+"""Generator benchmarks.
 
 Prints each figure and its ratio to its anchor or target:
 * generation end to end for every robot of robots/ (parse, Newton-Euler, base parameters, emit NumPy +
@@ -6,9 +6,9 @@ Prints each figure and its ratio to its anchor or target:
 * generation time against the number of frames, 2..14, for two families of serial chains with the
   14 parameters per joint (random non-zero d and r): "industrial" (alpha in {0, -pi/2, pi/2}, as in
   the robots people build) and "general" (arbitrary alpha), with the exponent p of t ~ n^p fitted by
-  least squares on log t against log n; targets (issue 13): any 14-frame structure <= 5 s, LWR4 <= 0.5 s
+  least squares on log t against log n; targets: any 14-frame structure <= 5 s, LWR4 <= 0.5 s
   (OpenSYMORO's range), growth <= n^1.5;
-* the LWR4 with all 14 parameters per joint, as before (issue 2):
+* the LWR4 with all 14 parameters per joint, as before:
   compiling the C kernels (`build()`, done once; importing compiles nothing);
   anchors: SymPyBotics 3.2 s, OpenSYMORO 0.4-0.6 s (measured on this machine class; not re-run);
 * operation count of the emitted base regressor; anchors SymPyBotics 730 mul / 458 add,

@@ -1,4 +1,4 @@
-"""Identification benchmark (issue 3): one hour of 7-joint data at 1 kHz (3.6 million samples,
+"""Identification benchmark: one hour of 7-joint data at 1 kHz (3.6 million samples,
 simulated LWR4 with its URDF nominal values): filter, decimate, assemble W and solve OLS and
 TLS, streaming the data in chunks. Targets: <= 60 s and peak memory <= 1.5 GB on 2 cores.
 

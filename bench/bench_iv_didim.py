@@ -1,4 +1,4 @@
-"""IDIM-OLS vs IDIM-IV vs DIDIM on simulated closed-loop data with noisy positions (issue 11 section 3).
+"""IDIM-OLS vs IDIM-IV vs DIDIM on simulated closed-loop data with noisy positions.
 
 A SCARA (4 joints) with random physical parameters tracks a random Fourier reference (0.2 Hz, 5
 harmonics, 10 s at 200 Hz) under a PD controller at 6.7 Hz (``default_gains``); the logged positions

@@ -1,4 +1,4 @@
-"""Tree-structured robots (issue 13): generation time and operation counts, and how the time grows.
+"""Tree-structured robots: generation time and operation counts, and how the time grows.
 
 The SDA10F dual-arm torso of ``robots/sda10f.toml`` (a waist carrying two 7-joint arms, 15 frames)
 and the same torso cut to ``k`` joints per arm (1 + 2k frames, k = 1..7): each generated end to end

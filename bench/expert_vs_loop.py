@@ -1,4 +1,4 @@
-"""The plain expert model of issue 10 against the current ``diagnose`` loop, on the real recordings.
+"""The plain expert model against the current ``diagnose`` loop, on the real recordings.
 
 For each recording of ``../shared/data`` (LWR4: identify on files 1 and 3, validate on file 2; TX40: the
 split CSVs through the drive chain of ``robots/tx40.toml``, last 30 % held out; LBR Med 7:

@@ -27,7 +27,7 @@ def _hidden_leftovers(folder: Path) -> list:
 
 
 def test_generate_replaces_only_a_package_it_wrote(tmp_path, cli):
-    """Issue 15: a user's folder or file at OUT/<name> is an error naming it; --force overrides."""
+    """A user's folder or file at OUT/<name> is an error naming it; --force overrides."""
     cli("--quiet", "generate", "scara", "--out", tmp_path, rc=0)
     cli("--quiet", "generate", "scara", "--out", tmp_path, rc=0)  # its own package: replaced
     assert _hidden_leftovers(tmp_path) == []

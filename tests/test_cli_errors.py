@@ -76,7 +76,7 @@ def _case(d: Path):
 
 
 CASES = list(_case(Path("/x")))
-SEVERAL = {"identify: wrong robot for data"}  # files with several problems (one bad sigma is ONE line: issue 15)
+SEVERAL = {"identify: wrong robot for data"}  # files with several problems (one bad sigma is ONE line)
 
 
 @pytest.mark.parametrize("name", CASES)
@@ -158,7 +158,7 @@ def _commands():
 
 def test_diagnose_bad_input(data, cli):
     if "diagnose" not in _commands():
-        pytest.skip("the diagnose command is not there yet (issue 4)")
+        pytest.skip("the diagnose command is not there yet")
     cases = [(["diagnose", "scara", str(data / "missing.csv")], "missing.csv"),
              (["diagnose", "scara", str(data / "nan.csv")], "nan.csv"),
              (["diagnose", "no_such_robot", str(data / "good.csv")], "no such robot")]

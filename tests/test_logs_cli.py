@@ -1,4 +1,4 @@
-"""Real controller logs from the command line (issue 9): the three recordings of ../shared/data in
+"""Real controller logs from the command line: the three recordings of ../shared/data in
 their original formats, the LBR Med 7 identified from its URDF with validation on a held-back part,
 `symoro-gen inspect`, and one-line errors naming file, rows and column."""
 from __future__ import annotations

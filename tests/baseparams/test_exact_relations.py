@@ -1,6 +1,6 @@
 """Base-parameter relations are exact and symbolic, and keep the physics.
 
-Properties checked (issue 8, Gautier & Khalil 1990; Khalil & Dombre 2002 ch. 12):
+Properties checked (Gautier & Khalil 1990; Khalil & Dombre 2002 ch. 12):
 
 * no relation has a float coefficient; geometry and gravity stay symbols (robots/ and random robots);
 * the relations hold for *other* values of the geometry and of gravity: the standard regressor of

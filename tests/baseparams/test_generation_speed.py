@@ -1,4 +1,4 @@
-"""The shortcuts that make generation fast (issue 13) compute what the long way computes.
+"""The shortcuts that make generation fast compute what the long way computes.
 
 No timings here (bench/bench_generator.py measures them); each shortcut is checked against the
 plain computation it replaces:

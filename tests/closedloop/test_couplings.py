@@ -1,4 +1,4 @@
-"""Coupled (mimic) joints, ``q_m = multiplier * q_s + offset`` (issue 13): the robot-file syntax and its
+"""Coupled (mimic) joints, ``q_m = multiplier * q_s + offset``: the robot-file syntax and its
 errors, the model (the tree projected on the actuated joints by the constant ``G``), the closed-form
 groupings, identification, and a robot with both a loop and a coupling.
 

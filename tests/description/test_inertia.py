@@ -85,7 +85,7 @@ def test_inconsistent_bodies_are_named():
         com_from_standard([1.0, 2.0])
 
 
-#: patterns of the conventions that have one home (issue 8): a second copy in the package fails here
+#: patterns of the conventions that have one home: a second copy in the package fails here
 _ONE_HOME = {
     "parallel-axis theorem": (re.compile(r"np\.eye\(3\)\s*-\s*np\.outer\("), "description/inertia.py"),
     "tuple of the ten inertial names": (re.compile(r'"XX",\s*"XY",\s*"XZ",\s*"YY",\s*"YZ",\s*"ZZ",\s*"MX"'),

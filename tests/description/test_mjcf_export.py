@@ -1,4 +1,4 @@
-"""export-mjcf (issue 14): MuJoCo's inverse and forward dynamics on the exported model against ours."""
+"""export-mjcf: MuJoCo's inverse and forward dynamics on the exported model against ours."""
 import json
 
 import numpy as np

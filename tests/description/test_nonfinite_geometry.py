@@ -1,4 +1,4 @@
-"""Issue 15: a geometric field without a finite value is a one-line robot-file error.
+"""A geometric field without a finite value is a one-line robot-file error.
 
 ``d = "1/L3"`` with ``L3 = 0`` used to reach base-parameter detection and fail there as an
 internal error; it is now reported by the parser, naming the file, the frame and the field.

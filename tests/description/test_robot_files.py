@@ -496,7 +496,7 @@ def test_defaults():
     assert r.row(1).gamma == 0 and r.row(1).b == 0 and r.row(1).mu == 1
 
 
-# ---------------------------------------------------------------- one bad field, one line (issue 15)
+# ---------------------------------------------------------------- one bad field, one line
 @pytest.mark.parametrize("value", ["nan", "inf", "-inf", '"short"', "true", "[1, 2]"])
 def test_bad_value_reported_once(tmp_path, value):
     err, file = errors_of(GOOD.replace("L2 = 0.3", f"L2 = {value}"), tmp_path)

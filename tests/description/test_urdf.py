@@ -352,7 +352,7 @@ def test_link_with_two_parents_is_not_a_tree():
         parse_urdf_text(text, file="two.urdf")
 
 
-# ---- decisions of issue 15: <mimic> joints and links without <inertial> ---------------------
+# ---- decisions: <mimic> joints and links without <inertial> ---------------------
 def _two_joint_urdf(rng, *, mimic: str | None = None, inertial2: bool = True, tool_inertial: bool = True,
                     finger_mimic: bool = False) -> str:
     """base -> joint1 -> link1 -> joint2 -> link2 -> (fixed) tool, optionally a mimic on joint2 and a

@@ -98,7 +98,7 @@ def test_cli_export_urdf_with_identified_params(tmp_path, cli):
     cli("export-urdf", "rx90", "--params", tmp_path / "missing.json", rc=2)
 
 
-# ---- export-urdf --from RESULT.json (issue 14) -----------------------------------------------------
+# ---- export-urdf --from RESULT.json -----------------------------------------------------
 def _drive(robot, vals, q, dq, ddq):
     """IA ddq + FV dq + FS sign(dq) + OFF per joint (the drive terms URDF has no RNEA for)."""
     out = np.zeros(robot.n_joints)
@@ -154,7 +154,7 @@ def test_export_from_identified_base_parameters(tmp_path, cli):
 
 
 def test_nominal_inconsistency_is_reported(tmp_path, cli):
-    """Issue 15: a payload with a mass and no inertia is changed, and the user is told."""
+    """A payload with a mass and no inertia is changed, and the user is told."""
     r = cli("export-urdf", "lwr4", "-o", tmp_path / "l.urdf")
     assert "link 8" in r.err and "not physically consistent" in r.err
 

@@ -1,4 +1,4 @@
-"""Closed loops from URDF (issue 13): ``<loop_joint>`` + ``<transmission>`` -> ``[[loops]]`` and passive joints.
+"""Closed loops from URDF: ``<loop_joint>`` + ``<transmission>`` -> ``[[loops]]`` and passive joints.
 
 * the palletizer exported to URDF (``export_urdf`` writes the loop joint and the transmissions) and imported
   again gives the same actuated torques as ``robots/palletizer.toml`` (different MDH frames, same robot);

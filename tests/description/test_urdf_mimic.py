@@ -1,4 +1,4 @@
-"""URDF ``<mimic>`` joints (issue 13): a gripper-like URDF imports with its second finger and a geared
+"""URDF ``<mimic>`` joints: a gripper-like URDF imports with its second finger and a geared
 wrist as coupled joints, whose actuated torques equal Pinocchio's RNEA on the same URDF built with
 Pinocchio's own mimic joints (``buildModelFromXML(..., mimic=True)``, ``JointModelMimic``); a robot file
 with couplings written by ``export-urdf`` and imported again gives the same actuated torques (different MDH

@@ -1,4 +1,4 @@
-"""Issue 10 item 3: the effects ``diagnose`` names must not depend on OLS vs WLS; where the two weightings
+"""The effects ``diagnose`` names must not depend on OLS vs WLS; where the two weightings
 disagree on an effect, only the common ones are kept and the others are reported as estimator-dependent.
 
 The loop re-identifies with a fixed estimator (``core.SELECT_METHOD``) and the stability stage tests every

@@ -1,4 +1,4 @@
-"""The plain expert model of issue 10 (symoro_gen.diagnostics.expert): decimated columns equal to the
+"""The plain expert model (symoro_gen.diagnostics.expert): decimated columns equal to the
 assembler's, the tanh velocity scales of simulated friction recovered, and validation errors on both
 metrics (filtered system, raw torque at full rate)."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The diagnosis reports its errors on both metrics (issue 9): the filtered, decimated system and the raw
+"""The diagnosis reports its errors on both metrics: the filtered, decimated system and the raw
 measured validation torque, the latter with the model and its effects at full rate."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The closed loop of issue 10 on simulated SCARA recordings (truth known): each composed effect family
+"""The closed loop on simulated SCARA recordings (truth known): each composed effect family
 (effect x modulating signal) is named on its joint and cuts that joint's validation error by >= 30 %; an
 effect outside the library is reported as unexplained structure on its joint; the JSON contract."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``diagnose --loaded ... --payload ...`` (issue 10 item 5): recordings with a payload go through the loop
+"""``diagnose --loaded ... --payload ...``: recordings with a payload go through the loop
 as in ``identify`` - their rows get the payload's columns, known payload parameters are moved to ``Y``."""
 from __future__ import annotations
 

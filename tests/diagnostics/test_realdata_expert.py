@@ -1,4 +1,4 @@
-"""Issue 10 on the real recordings of ../shared/data (skipped when absent): on each arm (KUKA LWR4,
+"""The loop against the plain expert model on the real recordings of ../shared/data (skipped when absent): on each arm (KUKA LWR4,
 Staubli TX40, KUKA LBR Med 7) the loop's final model is no worse than the plain expert model (base
 parameters + Fc tanh(dq/v) + Fv dq + offset, v by time-blocked CV) on every joint, on validation data,
 on both metrics (filtered decimated system and raw measured torque), under OLS and WLS; and the loop

@@ -1,4 +1,4 @@
-"""Static friction at rest (issue 10, TX40 joint 3): the rest-segment detector
+"""Static friction at rest (TX40 joint 3): the rest-segment detector
 (:func:`symoro_gen.diagnostics.friction.rest_segments`) and the rule that evaluates the sliding-friction
 laws as 0 inside the segments, in identification and validation alike.
 

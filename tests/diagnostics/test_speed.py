@@ -1,4 +1,4 @@
-"""The shortcuts that make ``diagnose`` fast (issue 10, 60 s budget) give what the long way gives:
+"""The shortcuts that make ``diagnose`` fast (60 s budget) give what the long way gives:
 p-value tails from ``scipy.special`` against ``scipy.stats``, the HAC covariance on sliced contiguous
 segments against the Bartlett sum, confidence intervals from a fold's basis against a fresh SVD,
 reused time-blocked folds against new ones (and never stale), fit-independent candidate columns

@@ -1,4 +1,4 @@
-"""The documentation tests hold for any valid robot a user adds to ``robots/`` (issue 15).
+"""The documentation tests hold for any valid robot a user adds to ``robots/``.
 
 README "Adding a robot" and tutorial 1 tell the user to write ``robots/<name>.toml`` and generate
 it; the pages must still run afterwards, including when the user followed the tutorials (which

@@ -149,7 +149,7 @@ def test_diagnose_cli_output_matches_schema(scara_files, cli):
     from .runner import available_commands
 
     if "diagnose" not in available_commands():
-        pytest.skip("the diagnose command is not there yet (issue 4)")
+        pytest.skip("the diagnose command is not there yet")
     d, files = scara_files
     out = d / "diag.json"
     cli("--quiet", "diagnose", "scara", files[0], "--validate", files[1], "--json", out, rc=0)

@@ -1,4 +1,4 @@
-"""The kernel and model tests hold for any valid robot a user adds to ``robots/`` (issue 15).
+"""The kernel and model tests hold for any valid robot a user adds to ``robots/``.
 
 README "Adding a robot" says: write ``robots/<name>.toml``, run ``symoro-gen generate <name>``. In a
 copy of the checkout, this test does exactly that with a robot unlike the shipped ones (an R-P-R arm

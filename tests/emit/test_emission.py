@@ -52,7 +52,7 @@ def test_compare_packages_ignores_only_tool_versions(tmp_path):
 
 
 def test_generated_files_carry_no_tool_version_and_no_numpy_repr(tmp_path):
-    """The files depend on the robot file and the generator only (issue 8: determinism)."""
+    """The files depend on the robot file and the generator only (determinism)."""
     import numpy
     import sympy
 

@@ -150,7 +150,7 @@ def test_out_argument_is_filled_in_place(robot_and_model):
     out = np.full((10, m.N_JOINTS, len(m.BASE_NAMES)), np.nan)
     r = m.regressor(q, dq, ddq, out=out)
     assert r is out and np.isfinite(out).all()
-    # another buffer may differ in alignment, hence SIMD/scalar split: one rounding step (issue 15)
+    # another buffer may differ in alignment, hence SIMD/scalar split: one rounding step
     ref = m.regressor(q, dq, ddq)
     assert np.max(np.abs(out - ref)) <= 1e-13 * max(1.0, np.abs(ref).max())
     with pytest.raises(ValueError, match="out must be"):
@@ -194,7 +194,7 @@ def test_c_kernel_any_alignment_and_sample_count(robot_and_model):
         ref = np.stack([m.regressor(q[k], dq[k], ddq[k]) for k in range(N)])
         raw = np.empty(N * m.N_JOINTS * nb + 1)
         unaligned = raw[1:].reshape(N, m.N_JOINTS, nb)
-        # SIMD lanes and the scalar remainder may round one step differently (issue 15: 1.8e-15 seen)
+        # SIMD lanes and the scalar remainder may round one step differently (1.8e-15 seen)
         tol = 1e-13 * max(1.0, np.abs(ref).max())
         assert np.max(np.abs(m.regressor(q, dq, ddq, out=unaligned) - ref)) <= tol
         assert np.max(np.abs(m.regressor(q, dq, ddq) - ref)) <= tol

@@ -1,6 +1,6 @@
 """symoro_gen.runtime: generated packages compile nothing at import; C is built by `symoro-gen build`
 or on first use, and every failure (no compiler, compile error, timeout) falls back to NumPy with one
-warning, kills the compiler and leaves no partial library (issues 8 and 15)."""
+warning, kills the compiler and leaves no partial library."""
 import json
 import os
 import shutil
@@ -182,7 +182,7 @@ def test_build_command_reports_a_compile_error(pkg, tmp_path, monkeypatch, capsy
 
 
 def test_every_model_satisfies_the_contract():
-    """Generated package, InMemoryModel and NumericModel: one IdentificationModel contract (issue 8)."""
+    """Generated package, InMemoryModel and NumericModel: one IdentificationModel contract."""
     robot = load_robot("scara")
     gen = import_package(ROOT / "generated" / "scara")
     mem = build_in_memory(robot)

@@ -1,4 +1,4 @@
-"""Fleet identification (issue 12): exactness of the distributed TSQR against the single-process
+"""Fleet identification: exactness of the distributed TSQR against the single-process
 accumulator, a lost worker, a damaged log, drift detection on simulated fleets, the JSON contract."""
 from __future__ import annotations
 

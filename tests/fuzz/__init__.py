@@ -1,4 +1,4 @@
-"""Fuzz suite of issue 15: malformed and unusual inputs through the command line, each case checking
+"""Fuzz suite: malformed and unusual inputs through the command line, each case checking
 the exit status, a one-line message naming the file (and field), and that nothing outside the
 command's output was touched (:mod:`tests.fuzz.helpers`).
 

@@ -1,4 +1,4 @@
-"""What every fuzz case checks (issue 15): the exit status, a message naming the file (and the field
+"""What every fuzz case checks: the exit status, a message naming the file (and the field
 when the mutation targeted one), and that nothing outside the command's output was touched.
 
 ``run_case(cli, workdir, argv, output=..., file=...)`` snapshots ``workdir`` (every file's bytes,

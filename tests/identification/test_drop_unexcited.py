@@ -1,4 +1,4 @@
-"""A joint that stands still (issue 15): ``identify`` names the file, the joint and the parameters it
+"""A joint that stands still: ``identify`` names the file, the joint and the parameters it
 cannot identify, and ``--drop-unexcited`` identifies the others and reports those as not identified.
 
 Reference: simulated recordings (truth known) in which joint 2 of the SCARA is held at a constant

@@ -1,4 +1,4 @@
-"""Honest errors (issue 9): the observations stage's provenance and signals, ``rel_err`` on the filtered,
+"""Honest errors: the observations stage's provenance and signals, ``rel_err`` on the filtered,
 decimated system beside ``rel_err_raw`` on the raw measured torque, validation on every sample.
 
 References are independent of the code under test: the true parameters of a simulation, the noise

@@ -1,4 +1,4 @@
-"""IDIM-IV, DIDIM and the closed-loop simulator they rest on (issue 11 section 3).
+"""IDIM-IV, DIDIM and the closed-loop simulator they rest on.
 
 The truth is known: a SCARA (4 joints) with random physical parameters tracks a Fourier reference under
 a digital PD controller (:func:`symoro_gen.simulate.closed_loop.simulate_closed_loop`); the logged

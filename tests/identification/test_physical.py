@@ -1,4 +1,4 @@
-"""identify --physical (issue 11 §2) and standard_from_base (issue 14) on simulated arms with known truth."""
+"""identify --physical and standard_from_base on simulated arms with known truth."""
 import json
 
 import numpy as np

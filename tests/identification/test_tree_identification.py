@@ -1,4 +1,4 @@
-"""Identification and diagnosis of tree-structured robots on simulated data with known truth (issue 13).
+"""Identification and diagnosis of tree-structured robots on simulated data with known truth.
 
 * The SDA10F dual-arm torso (``robots/sda10f.toml``, 15 joints, 156 base parameters): its generated base
   regressor at random states, torques from known standard parameters plus noise; IDIM-OLS and -WLS

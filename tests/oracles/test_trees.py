@@ -1,4 +1,4 @@
-"""Tree-structured robots end to end (issue 13): a branching 3-link toy, the SDA10F dual-arm torso
+"""Tree-structured robots end to end: a branching 3-link toy, the SDA10F dual-arm torso
 (``robots/sda10f.toml``: a waist carrying two 7-joint arms) and random trees.
 
 References, independent of the symbolic model: the plain numeric Newton-Euler

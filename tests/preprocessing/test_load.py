@@ -392,7 +392,7 @@ def test_npz_arrays_of_different_lengths(tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------
-# damaged binary files and absurd values: the same one-problem errors from both loaders (issue 15)
+# damaged binary files and absurd values: the same one-problem errors from both loaders
 # ---------------------------------------------------------------------------------------------
 def _damaged_archives(tmp_path):
     """name -> bytes: an .npz cut in half, one with a zeroed stretch (CRC), a zip header with nothing behind,

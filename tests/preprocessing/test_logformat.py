@@ -1,4 +1,4 @@
-"""Controller logs as they come (issue 9): synthetic recordings with known truth, written the way real
+"""Controller logs as they come: synthetic recordings with known truth, written the way real
 arms log them (jitter, dropped packets, currents with gains, degrees, no header, malformed rows, nested
 MAT structs, two encoders on a compliant joint), read with a LogFormat and identified to the same
 result as the clean file (within the estimated standard deviations)."""
@@ -211,7 +211,7 @@ def test_hold_back_last_fraction(truth, tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------
-# issue 15: silently wrong inputs become errors
+# silently wrong inputs become errors
 # ---------------------------------------------------------------------------------------------
 def test_sampling_period_change_detected(tmp_path):
     """2 ms then 4 ms: both steps within 50 % of the median, still a change of regime."""
