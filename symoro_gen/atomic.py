@@ -13,14 +13,16 @@ emitter).
   folder replaced whole that holds one, nor inside an input folder -- refused even with ``--force``;
 * two outputs of one command are never the same file;
 * an existing file is replaced only when symoro-gen wrote it (:func:`written_by_symoro`: the mark each
-  format carries), otherwise only with ``--force`` (``force=True``). Robot files and recordings are
-  never replaced without it, even when symoro-gen wrote them: they are meant to be edited or kept.
+  format carries), otherwise only with ``--force`` (``force=True``). Robot files and CSV recordings are
+  never replaced without it, even when symoro-gen wrote them: they are meant to be edited or kept (a
+  CSV recording has no mark: a measured one looks the same).
 
 The marks: JSON results start with ``"generator": "symoro-gen <command>"``; URDF, MJCF and Markdown
 carry an ``<!-- ... by symoro-gen ... -->`` comment (Markdown on its last line), ``.par`` files a
 ``(* ... written by symoro_gen *)`` first line, HTML reports ``<meta name="generator"
-content="symoro-gen">``, PNG figures a ``Software: symoro-gen`` text chunk, and ``excite``'s trajectory
-CSV its header ``t,q1..qn,dq1..dqn,ddq1..ddqn``. A folder replaced whole (a Markdown report's
+content="symoro-gen">``, PNG figures a ``Software: symoro-gen`` text chunk, Parquet logs (the fleet
+simulator's) the key-value metadata ``generator: symoro-gen`` (:data:`PARQUET_MARK`), and ``excite``'s
+trajectory CSV its header ``t,q1..qn,dq1..dqn,ddq1..ddqn``. A folder replaced whole (a Markdown report's
 ``<stem>_files/``) is symoro-gen's when every file in it is.
 """
 from __future__ import annotations
@@ -35,14 +37,14 @@ import zlib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, BinaryIO, Literal
 
 from .errors import OutputError
 
-__all__ = ["FORCE_HELP", "GENERATOR", "MARKDOWN_MARK", "Target", "check_outputs", "check_replaceable", "folder_written_by_symoro",
-           "inside", "json_output", "mark_png", "ordinary_mode", "replace_folder_atomic", "same_file",
-           "write_bytes_atomic", "write_output_bytes", "write_output_text", "write_text_atomic",
-           "written_by_symoro"]
+__all__ = ["FORCE_HELP", "GENERATOR", "MARKDOWN_MARK", "PARQUET_MARK", "Target", "check_outputs",
+           "check_replaceable", "folder_written_by_symoro", "inside", "json_output", "mark_png", "ordinary_mode",
+           "replace_folder_atomic", "same_file", "write_bytes_atomic", "write_output_bytes", "write_output_text",
+           "write_text_atomic", "written_by_symoro"]
 
 #: the name every output carries (see the module docstring)
 GENERATOR = "symoro-gen"
@@ -156,6 +158,11 @@ _TEXT_MARKS = (
 #: the last line of a Markdown report (its mark)
 MARKDOWN_MARK = f"\n<!-- written by {GENERATOR} -->\n"
 _TRAJECTORY_HEADER = re.compile(r"t((?:,q\d+)+)((?:,dq\d+)+)((?:,ddq\d+)+)")
+_PARQUET_MAGIC = b"PAR1"
+#: the key-value metadata of a Parquet file symoro-gen wrote (its schema metadata: its mark)
+PARQUET_MARK = {b"generator": GENERATOR.encode("ascii")}
+#: that pair as it stands in the file's footer (Thrift compact protocol: a KeyValue struct, two binary fields)
+_PARQUET_MARK_BYTES = b"".join(b"\x18" + bytes([len(x)]) + x for kv in PARQUET_MARK.items() for x in kv) + b"\x00"
 
 
 def mark_png(png: bytes) -> bytes:
@@ -182,6 +189,20 @@ def _png_marked(png: bytes) -> bool:
     return False
 
 
+def _parquet_marked(fh: BinaryIO, size: int) -> bool:
+    """The Parquet file open in ``fh`` (``size`` bytes) carries :data:`PARQUET_MARK` in its footer's key-value
+    metadata (the footer: its length in the 4 bytes before the closing ``PAR1``)."""
+    if size < 12:
+        return False
+    fh.seek(size - 8)
+    tail = fh.read(8)
+    n = struct.unpack("<I", tail[:4])[0]
+    if tail[4:] != _PARQUET_MAGIC or n > size - 12:
+        return False
+    fh.seek(size - 8 - n)
+    return _PARQUET_MARK_BYTES in fh.read(n)
+
+
 def _trajectory_header(line: str) -> bool:
     """``t,q1..qn,dq1..dqn,ddq1..ddqn`` (the header of ``excite``'s CSV), n >= 1."""
     m = _TRAJECTORY_HEADER.fullmatch(line.strip())
@@ -204,6 +225,8 @@ def written_by_symoro(path: str | os.PathLike[str]) -> bool:
             if head[:8] == _PNG_SIGNATURE:
                 return _png_marked(head + fh.read(1 << 20))
             size = fh.seek(0, os.SEEK_END)
+            if head[:4] == _PARQUET_MAGIC:
+                return _parquet_marked(fh, size)
             fh.seek(max(0, size - 256))
             tail = fh.read()
     except OSError:

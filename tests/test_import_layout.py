@@ -123,7 +123,6 @@ CIRCLE_EDGES_OK: dict[tuple[str, str], str] = {
 #: private names imported across modules, in files of work in progress: (importer, source, name) -> reason.
 #: Remove an entry when the import is gone (test_allow_lists_are_current).
 PRIVATE_IMPORTS_OK: dict[tuple[str, str, str], str] = {
-    ("symoro_gen.fleet.worker", "symoro_gen.fleet.kernel", "_column_map"): "fleet in rework",
 }
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -392,3 +393,45 @@ def test_python_api_writers(tmp_path):
                 write(user)
         else:
             write(user)  # its own previous output
+
+
+def test_parquet_logs(tmp_path):
+    """Parquet logs (``write_parquet``, the fleet simulator's writer) are inputs of other commands: a
+    Parquet file symoro-gen did not write is refused with an error naming it (its bytes unchanged) and
+    replaced with force=True; a log symoro-gen wrote (its schema metadata ``generator: symoro-gen``) is
+    re-written. ``simulate_fleet`` checks every log before writing any."""
+    pa = pytest.importorskip("pyarrow")
+    pq = pytest.importorskip("pyarrow.parquet")
+    from symoro_gen.fleet import simulate_fleet, write_parquet
+    from symoro_gen.preprocessing.trajectory import Trajectory
+
+    def foreign(path: Path) -> str:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(pa.table({"t": [0.0, 1.0], "q1": [0.0, 0.0], "tau1": [1.0, 1.0]}), path)  # a measured log
+        assert not written_by_symoro(path)
+        return _digest(path)
+
+    t = np.linspace(0, 1, 5)
+    rec = Trajectory(t=t, q=np.zeros((5, 2)), tau=np.ones((5, 2)))
+    log = tmp_path / "log.parquet"
+    before = foreign(log)
+    with pytest.raises(OutputError, match=f"{re.escape(str(log))}: the file exists and was not written by symoro-gen"):
+        write_parquet(log, rec)
+    assert _digest(log) == before
+    write_parquet(log, rec, force=True)
+    assert written_by_symoro(log) and _digest(log) != before
+    write_parquet(log, Trajectory(t=t, q=np.ones((5, 2)), tau=np.ones((5, 2))))    # its own log: re-written
+    assert pq.read_table(log).column("q1").to_pylist() == [1.0] * 5
+
+    kw = dict(n_robots=2, n_days=1, duration=0.5, fs=100.0, drifts=())
+    truth = simulate_fleet(tmp_path / "fl", **kw)
+    assert all(written_by_symoro(f) for f in truth.files)
+    simulate_fleet(tmp_path / "fl", **kw, seed=1)                                   # its own logs: re-written
+    first, second = truth.files
+    before = foreign(second)
+    mtime = first.stat().st_mtime_ns
+    with pytest.raises(OutputError, match=re.escape(str(second))):
+        simulate_fleet(tmp_path / "fl", **kw)
+    assert _digest(second) == before and first.stat().st_mtime_ns == mtime       # nothing written
+    simulate_fleet(tmp_path / "fl", **kw, force=True)
+    assert written_by_symoro(second)

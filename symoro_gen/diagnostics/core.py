@@ -1350,6 +1350,10 @@ class _Stability:
         return self.excludes_zero and self.frequency > MIN_SELECTION_FREQUENCY
 
 
+#: Stability of the accepted effects: family key -> weighting ("OLS", "WLS") -> :class:`_Stability`
+_StabilityInfo = dict[tuple, dict[str, _Stability]]
+
+
 def _effect_stability(data: _Data, F: Frame, added: Sequence[_Added], k: int, weights: np.ndarray | None,
                       level: float) -> _Stability:
     """Effect ``k`` of ``added`` against the model with every other one: (1) confidence intervals of its
@@ -1387,7 +1391,7 @@ def _effect_stability(data: _Data, F: Frame, added: Sequence[_Added], k: int, we
     return _Stability(freq, ci.low, ci.high, ci.excludes_zero)
 
 
-def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple[_State, dict, list[str]]:
+def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple[_State, _StabilityInfo, list[str]]:
     """Stage "stability": every effect the loop accepted is re-examined against the final
     model under OLS weights (1) and under WLS weights (``1/sigma_j`` of the final residual): it is *named*
     under a weighting when it is selected in most time-blocked folds (> :data:`MIN_SELECTION_FREQUENCY`)
@@ -1405,7 +1409,7 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
     e = Y - A @ np.linalg.lstsq(A, Y, rcond=None)[0]
     w_wls = 1.0 / _joint_sigma(e, J, n, A.shape[1])[J]
     level = max(CI_LEVEL, 1.0 - cfg.significance)
-    info: dict[tuple, dict[str, _Stability]] = {}
+    info: _StabilityInfo = {}
     named: dict[str, list[tuple]] = {"OLS": [], "WLS": []}
     for k, ad in enumerate(state.added):
         st = {"OLS": _effect_stability(data, F, state.added, k, None, level),
@@ -1419,7 +1423,7 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
         for ad in state.added}
     agr = ols_wls_agreement(named["OLS"], named["WLS"], describe=lambda key: labels[key])
     keep = set(agr.common)
-    msgs = []
+    msgs: list[str] = []
     if agr.message:
         msgs.append(agr.message)
     gone = [ad for ad in state.added if ad.family.key not in keep]
@@ -1512,7 +1516,7 @@ def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
 
 
 def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSettings, data0: _Data | None = None,
-                  stab: dict | None = None, stab_msgs: Sequence[str] = ()) -> ResidualReport:
+                  stab: _StabilityInfo | None = None, stab_msgs: Sequence[str] = ()) -> ResidualReport:
     """Stage 5-6 (re-identify, report): the final model identified with every effect, its errors on
     both metrics, the effects with their physical reading, residual structure, warnings."""
     n = data.n
@@ -1577,7 +1581,8 @@ def _final_fit(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSetting
     return state, res, names, A, Av
 
 
-def _loop_effects(state: _State, res: IdentificationResult, cfg: DiagnoseSettings, stab: dict) -> list[Effect]:
+def _loop_effects(state: _State, res: IdentificationResult, cfg: DiagnoseSettings,
+                  stab: _StabilityInfo) -> list[Effect]:
     """The effects the loop added, read on the final fit ``res`` (with their stability when examined)."""
     effects = []
     final_value = {ad.family.key: ad.value for ad in state.added}
@@ -1734,7 +1739,8 @@ def diagnose(model: IdentificationModel, trajectories, settings: DiagnoseSetting
     data, laws = _stage_friction(data0, cfg) if cfg.friction_laws else (data0, ())
     base = _stage_baseline(data0, data, laws, cfg)
     state = _stage_loop(data, base, cfg, rng)
-    stab, msgs = {}, []
+    stab: _StabilityInfo = {}
+    msgs: list[str] = []
     if cfg.stability:
         state, stab, msgs = _stage_stability(data, state, cfg)
     return _stage_report(data, base, state, cfg, data0=data0, stab=stab, stab_msgs=msgs)

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from ..atomic import PARQUET_MARK, check_replaceable
 from ..errors import DataFileError, Problem, SymoroError
 from ..preprocessing.readers import LogFormat, read_recording
 from ..preprocessing.readers.parquet import is_parquet, parquet_rows
@@ -206,13 +207,24 @@ def read_log(path: str, n_joints: int, *, loaded: bool = False, start: int = 0, 
     return tr
 
 
-def write_parquet(path: str | os.PathLike, recording: Trajectory, *, row_group_size: int = 100_000) -> None:
+def write_parquet(path: str | os.PathLike, recording: Trajectory, *, row_group_size: int = 100_000,
+                  force: bool = False) -> None:
     """Write a recording as a Parquet log ``t, q1..qn, tau1..taun`` (read back by :func:`read_log`).
 
-    Written to a temporary name and renamed, so a reader never sees half a file.
+    Written to a temporary name and renamed, so a reader never sees half a file. The file is marked
+    (schema metadata :data:`~symoro_gen.atomic.PARQUET_MARK`): an existing file is replaced only when it
+    carries that mark (a log written here), otherwise only with ``force`` -- a log is an input of other
+    commands (:func:`~symoro_gen.atomic.check_replaceable`).
+
+    Raises
+    ------
+    OutputError
+        ``path`` exists, was not written by symoro-gen and ``force`` is false (nothing written).
     """
     pq = require_pyarrow()
     import pyarrow as pa
+
+    check_replaceable(path, force, label="Parquet log")
 
     n = recording.q.shape[1]
     cols = {"t": recording.t}
@@ -221,8 +233,8 @@ def write_parquet(path: str | os.PathLike, recording: Trajectory, *, row_group_s
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp")
-    pq.write_table(pa.table({k: np.ascontiguousarray(v, float) for k, v in cols.items()}), tmp,
-                   row_group_size=row_group_size)
+    table = pa.table({k: np.ascontiguousarray(v, float) for k, v in cols.items()}).replace_schema_metadata(PARQUET_MARK)
+    pq.write_table(table, tmp, row_group_size=row_group_size)
     os.replace(tmp, out)
 
 

@@ -22,10 +22,11 @@ from ..loader import load_model
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
 from ..preprocessing.filtering import blas_threads
+from . import fused
 from .files import LogFile, read_experiments
-from .fused import ColumnMap, column_map, fold_trajectories
+from .fused import ColumnMap, fold_trajectories
 
-__all__ = ["Partial", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
+__all__ = ["Partial", "column_map", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,11 +54,11 @@ class Partial:
 _CMAPS: dict[int, tuple[IdentificationModel, ColumnMap]] = {}
 
 
-def _column_map(model: IdentificationModel) -> ColumnMap:
+def column_map(model: IdentificationModel) -> ColumnMap:
     """The model's :func:`~symoro_gen.fleet.fused.column_map`, once per model object and process."""
     hit = _CMAPS.get(id(model))
     if hit is None or hit[0] is not model:
-        hit = _CMAPS[id(model)] = (model, column_map(model, int(model.N_JOINTS), len(model.BASE_NAMES)))
+        hit = _CMAPS[id(model)] = (model, fused.column_map(model, int(model.N_JOINTS), len(model.BASE_NAMES)))
     return hit[1]
 
 
@@ -67,7 +68,7 @@ def resolve_model(ref) -> IdentificationModel:
     A name or path goes through :func:`~symoro_gen.loader.load_model` on every call: its import is kept
     per process under the package's path *and content hash* (0.35 ms when cached), so a worker that lives
     on while ``generated/<robot>/`` is regenerated picks up the new model instead of a stale one; the
-    column map follows the module object (:func:`_column_map`).
+    column map follows the module object (:func:`column_map`).
     """
     if isinstance(ref, (str, os.PathLike)):
         return load_model(os.fspath(ref))
@@ -136,7 +137,7 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     try:
         trajs = read_experiments(log.path, int(model.N_JOINTS), start=log.start, stop=log.stop, **(load_kw or {}))
-        acc = fold_trajectories(model, trajs, opts, cmap=_column_map(model))
+        acc = fold_trajectories(model, trajs, opts, cmap=column_map(model))
     except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         if log.path not in msg:

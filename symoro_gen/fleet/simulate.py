@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import check_replaceable
 from ..loader import model_for
 from ..simulate import (
     fourier_trajectory,
@@ -55,7 +56,7 @@ class FleetTruth:
 def simulate_fleet(root, robot: str = "scara", *, n_robots: int = 6, n_days: int = 5, duration: float = 20.0,
                    fs: float = 1000.0, drifts: tuple[Drift, ...] | None = None, friction_scatter: float = 0.03,
                    inertia_scatter: float = 0.01, noise_tau: float = 0.02, noise_q: float = 1e-5,
-                   seed: int = 0) -> FleetTruth:
+                   seed: int = 0, force: bool = False) -> FleetTruth:
     """Write one Parquet log per robot and day and return the truth.
 
     Parameters
@@ -76,10 +77,18 @@ def simulate_fleet(root, robot: str = "scara", *, n_robots: int = 6, n_days: int
     noise_tau, noise_q : float
         White noise on the logged torques [N m] and positions [rad].
     seed : int
+    force : bool
+        Replace existing logs symoro-gen did not write (a log it wrote is replaced without it: see
+        :func:`~symoro_gen.fleet.write_parquet`).
 
     Returns
     -------
     FleetTruth
+
+    Raises
+    ------
+    OutputError
+        A log exists that symoro-gen did not write and ``force`` is false (checked before any is written).
     """
     desc, model = model_for(robot)
     n = int(model.N_JOINTS)
@@ -94,6 +103,9 @@ def simulate_fleet(root, robot: str = "scara", *, n_robots: int = 6, n_days: int
                        if d.robot in robots)
     chi, files = {}, []
     root = Path(root)
+    for r in robots:
+        for d in days:
+            check_replaceable(root / r / f"{d}.parquet", force, label="Parquet log")
     for r in robots:
         c = np.asarray(base, float).copy()
         c[drive] *= 1.0 + friction_scatter * rng.standard_normal(drive.sum())
@@ -112,7 +124,7 @@ def simulate_fleet(root, robot: str = "scara", *, n_robots: int = 6, n_days: int
             rec = simulate_recording(model, mo.t, mo.q, mo.dq, mo.ddq, cd, gains=gains, noise_q=noise_q,
                                      noise_tau=noise_tau, rng=rng, source=f"{r}/{d}")
             path = root / r / f"{d}.parquet"
-            write_parquet(path, rec)
+            write_parquet(path, rec, force=force)
             files.append(path)
     return FleetTruth(root=root, robots=robots, days=days, files=tuple(files), chi=chi, drifts=tuple(drifts),
                       standard_names=tuple(names))
