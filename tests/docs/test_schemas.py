@@ -176,6 +176,8 @@ GOOD_IDENTIFY = {"robot": "scara", "data": ["a.csv"], "method": "OLS",
     (lambda d: d.__setitem__("validation", {"rel_err": [0.1, 0.2]}), "missing required key 'rel_err_raw'"),
     (lambda d: d.__setitem__("rel_err_basis", {"rel_err": "x", "rel_err_raw": "y", "cutoff_hz": [0.0], "n_d": [1],
                                                "rows": 1, "samples": 1}), "$.rel_err_basis.cutoff_hz[0]"),
+    (lambda d: d.__setitem__("robot_id", "scara"), "$.robot_id"),
+    (lambda d: d.__setitem__("robot_id", "E4BBB72E57DF487C"), "$.robot_id"),
 ])
 def test_validator_catches_broken_identify(break_it, where):
     assert validate(GOOD_IDENTIFY, SCHEMAS["identify"]) == []
