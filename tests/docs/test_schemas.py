@@ -6,6 +6,8 @@ import json
 import numpy as np
 import pytest
 
+from symoro_gen.description import load_robot
+from symoro_gen.description.identity import robot_id
 from symoro_gen.simulate import write_recording_csv
 
 from .jsonschema_lite import KEYWORDS, validate
@@ -154,6 +156,9 @@ def test_diagnose_cli_output_matches_schema(scara_files, cli):
     out = d / "diag.json"
     cli("--quiet", "diagnose", "scara", files[0], "--validate", files[1], "--json", out, rc=0)
     check(strict_json(out), "diagnose")
+    doc = strict_json(out)
+    keys = list(doc)
+    assert keys[keys.index("robot") + 1] == "robot_id" and doc["robot_id"] == robot_id(load_robot("scara"))
 
 
 # ---------------------------------------------------------------------------------------------
