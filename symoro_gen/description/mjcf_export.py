@@ -17,6 +17,16 @@ Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
   ``-FV dq``), ``frictionloss`` = Coulomb ``FS`` (a soft friction constraint of MuJoCo: equal to
   ``FS sign(dq)`` only away from zero velocity); the torque offset ``OFF`` has no MuJoCo field and is
   written as a comment; one ``<motor>`` per joint (``gear 1``, unlimited) drives ``tau`` directly;
+* motors on the actuated joints only (``mu = 1``): a passive joint of a closed loop or a coupled joint has none;
+* a closed loop (``[[loops]]``, [KK1986]; [KD2002] sec. 7.3) stays cut in the body tree and is closed by
+  equality constraints between sites: the cut frame ``k`` (on body ``link<ant(k)>``, pose ``T(ant, k)`` at
+  ``q_k = 0``) and the closing frame ``c`` (on ``link<ant(c)>``) must coincide up to a rotation about their
+  common z axis, the cut joint being revolute. Two ``<connect site1 site2>`` hold it: sites ``cut<k>`` and
+  ``close<c>`` at the two frame origins, sites ``cut<k>_axis`` and ``close<c>_axis`` at ``LOOP_AXIS_POINT``
+  along their z axes (two points of the hinge axis held together leave exactly the rotation about it free,
+  five independent equations; a planar loop needs fewer and the others hold identically). MuJoCo has no
+  equality that leaves a sliding motion free (a ``connect`` holds a point, a ``weld`` a whole frame), so a
+  prismatic cut joint is refused (:class:`~symoro_gen.errors.ModelError` naming the loop);
 * a coupled joint (``mimic``, ``q_m = multiplier q_s + offset``) has no motor and a joint equality
   ``<joint joint1="joint<m>" joint2="joint<s>" polycoef="offset multiplier 0 0 0"/>`` (MuJoCo enforces it
   as a soft constraint, as it does every equality);
@@ -30,8 +40,9 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .mdh import joint_sign
-from .model import FIXED, REVOLUTE, RobotDescription
+from ..errors import ModelError
+from .mdh import joint_sign, row_transform
+from .model import FIXED, PRISMATIC, REVOLUTE, RobotDescription
 from .urdf_export import (
     constant_transform,
     inertial_of,
@@ -41,7 +52,10 @@ from .urdf_export import (
     xml_float,
 )
 
-__all__ = ["export_mjcf", "quat_from_matrix"]
+__all__ = ["LOOP_AXIS_POINT", "LOOP_SOLIMP", "export_mjcf", "loop_sites", "quat_from_matrix"]
+
+#: distance [m] along a loop's cut axis of the second pair of sites held together by a ``connect``
+LOOP_AXIS_POINT = 0.1
 
 
 def quat_from_matrix(R) -> tuple[float, float, float, float]:
@@ -71,8 +85,56 @@ def quat_from_matrix(R) -> tuple[float, float, float, float]:
     return float(u[0]), float(u[1]), float(u[2]), float(u[3])
 
 
+#: impedance of the loop-closure constraints: MuJoCo's equalities are soft, this is the stiffest it allows
+LOOP_SOLIMP = "0.9999 0.9999 0.001 0.5 2"
+
+
 def _v(xs) -> str:
     return " ".join(xml_float(x) for x in xs)
+
+
+def loop_sites(robot: RobotDescription) -> dict[int, list[tuple[str, np.ndarray]]]:
+    """``body (frame number, 0 the world) -> [(site name, position in the body frame)]`` of the closed loops.
+
+    Per loop, the cut frame ``k`` on its antecedent link and the closing frame ``c`` on its link give two sites
+    each: ``cut<k>``/``close<c>`` at the frame origin and ``cut<k>_axis``/``close<c>_axis`` at
+    :data:`LOOP_AXIS_POINT` along the frame's z axis (the cut joint's axis; its rotation ``q_k`` moves neither
+    point). A prismatic cut joint raises :class:`~symoro_gen.errors.ModelError`: MuJoCo has no equality
+    constraint that leaves a sliding motion free."""
+    subs = robot.geometry_subs()
+    out: dict[int, list[tuple[str, np.ndarray]]] = {}
+    for lp in robot.loops:
+        if lp.cut.sigma == PRISMATIC:
+            err = ModelError(
+                f"export-mjcf: {robot.name}: the loop cut at joint {lp.cut.j} (closed on frame {lp.close.j}) "
+                "has a prismatic cut joint: MuJoCo's equality constraints hold a point (connect) or a whole frame "
+                "(weld), none leaves a sliding motion free")
+            err.hint = ("export-urdf writes this loop as a <loop_joint> (docs/robot-file.md#closed-loops-from-urdf); "
+                        "cutting the loop at one of its revolute joints instead makes it exportable to MuJoCo")
+            raise err
+        for name, row in ((f"cut{lp.cut.j}", lp.cut), (f"close{lp.close.j}", lp.close)):
+            T = row_transform(row, subs, q=0.0)
+            out.setdefault(row.ant, []).extend([(name, T[:3, 3]), (f"{name}_axis", T[:3, 3] + LOOP_AXIS_POINT * T[:3, 2])])
+    return out
+
+
+def _equalities(robot: RobotDescription, timestep: float) -> list[str]:
+    """The ``<equality>`` element: two ``connect`` per closed loop (:func:`loop_sites`), one joint equality per
+    coupled joint (``q_m = offset + multiplier q_s``).
+
+    A loop's constraints are made as stiff as MuJoCo allows: time constant ``2 timestep`` (its smallest stable
+    one) and impedance :data:`LOOP_SOLIMP`; MuJoCo's default (0.02 s, 0.9-0.95) lets the palletizer's
+    parallelogram open by 0.7-1.7 mm under its own weight, these settings by 1e-8 to 4e-8 m."""
+    rows = []
+    solver = f'solref="{xml_float(2 * timestep)} 1" solimp="{LOOP_SOLIMP}"'
+    for lp in robot.loops:
+        k, c = lp.cut.j, lp.close.j
+        rows += [f'    <connect name="loop{k}" site1="cut{k}" site2="close{c}" {solver}/>',
+                 f'    <connect name="loop{k}_axis" site1="cut{k}_axis" site2="close{c}_axis" {solver}/>']
+    rows += [f'    <joint joint1="joint{c.joint}" joint2="joint{c.source}" '
+             f'polycoef="{xml_float(float(c.offset))} {xml_float(float(c.multiplier))} 0 0 0"/>'
+             for c in robot.couplings]
+    return ["  <equality>", *rows, "  </equality>"] if rows else []
 
 
 def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, notes=(), report: list | None = None,
@@ -110,6 +172,10 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
     for row in robot.rows:
         children.setdefault(row.ant, []).append(row)
     joints = []
+    sites = loop_sites(robot)
+
+    def site_lines(j, ind):
+        return [f'{ind}<site name="{name}" pos="{_v(p)}"/>' for name, p in sites.get(j, ())]
 
     def body(row, depth):
         j = row.j
@@ -140,21 +206,18 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
             off = vals.get(f"OFF{j}", 0.0)
             if off:
                 out.append(f"{ind}  <!-- torque offset OFF{j} = {xml_float(off)} (no MuJoCo field) -->")
-            if robot.coupling(j) is None:  # a coupled joint is passive: no motor
+            if row.mu == 1:  # a passive joint (of a closed loop, or coupled) has no motor
                 joints.append((j, lim))
+        out.extend(site_lines(j, ind + "  "))
         for ch in children.get(j, ()):
             body(ch, depth + 1)
         out.append(f"{ind}</body>")
 
+    out.extend(site_lines(0, "    "))
     for row in children.get(0, ()):
         body(row, 2)
     out.append("  </worldbody>")
-    if robot.couplings:  # coupled (mimic) joints: q_m = offset + multiplier q_s, MuJoCo's joint equality
-        out.append("  <equality>")
-        out += [f'    <joint joint1="joint{c.joint}" joint2="joint{c.source}" '
-                f'polycoef="{xml_float(float(c.offset))} {xml_float(float(c.multiplier))} 0 0 0"/>'
-                for c in robot.couplings]
-        out.append("  </equality>")
+    out += _equalities(robot, timestep)
     if motors and joints:
         out.append("  <actuator>")
         for j, lim in joints:

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from ..description.identity import robot_id
 from ..diagnostics.candidates import KINDS
 from ..diagnostics.core import HOLDOUT, MAX_EFFECTS, SIGNIFICANCE, DiagnoseSettings
 from ..diagnostics.core import diagnose as run_loop
@@ -143,7 +144,10 @@ class DiagnoseResults(Results):
     def to_dict(self) -> dict:
         """Exactly the JSON of ``symoro-gen diagnose --json`` (its ``generator`` mark first)."""
         out: dict[str, Any] = {"generator": "symoro-gen diagnose", "schema_version": SCHEMA_VERSION}
-        out.update(self.residual.to_dict())
+        for k, v in self.residual.to_dict().items():
+            out[k] = v
+            if k == "robot":  # the robot's identity beside its name
+                out["robot_id"] = robot_id(self.robot)
         out["data"] = [r.to_dict() for r in self.reports]  # per file: path, rows read, dropped, resampled
         out["validate"] = _names(self.validate)
         out["loaded"] = _names(self.loaded)

@@ -26,6 +26,7 @@ from typing import Any
 
 from ..atomic import json_output, write_output_text
 from ..description import load_robot
+from ..description.identity import check_result_robot
 from ..description.mjcf_export import export_mjcf as mjcf_text
 from ..description.model import RobotDescription
 from ..description.par import export_par as par_text
@@ -136,9 +137,11 @@ def _standard_set_from_result(*args: Any, **kwargs: Any) -> Any:
     return importlib.import_module("symoro_gen.identification.physical").standard_set_from_result(*args, **kwargs)
 
 
-def _values(robot: RobotDescription, result: ResultLike) -> _Values:
-    """The standard and payload values, header notes and sidecar of an export from an identification."""
+def _values(robot: RobotDescription, result: ResultLike, command: str) -> _Values:
+    """The standard and payload values, header notes and sidecar of an export from an identification (refused
+    when it is another robot's: :func:`~symoro_gen.description.identity.check_result_robot`)."""
     doc, src = _result_dict(result)
+    check_result_robot(doc, robot, option="--from", source=src, command=command)
     name = Path(src).name if isinstance(result, (str, os.PathLike)) else src
     _, model = model_for(robot)
     nominal = dict(zip(robot.standard_names, robot.nominal_vector() or ()))
@@ -173,12 +176,14 @@ def _finish(command: str, robot: RobotDescription, text: str, changed: list[str]
     return ExportResults(command, robot, text, tuple(changed), sidecar)
 
 
-def _identified_parameters(params: ResultLike) -> dict[str, float]:
+def _identified_parameters(params: ResultLike, robot: RobotDescription) -> dict[str, float]:
     """``name -> value`` of an identify result's ``parameters`` (a mapping without that key is taken as the
-    names and values themselves)."""
+    names and values themselves); a result of another robot is refused
+    (:func:`~symoro_gen.description.identity.check_result_robot`)."""
     if isinstance(params, Mapping) and "parameters" not in params:
         return {str(n): float(v) for n, v in params.items() if v is not None}
     doc, src = _result_dict(params)
+    check_result_robot(doc, robot, option="--params", source=src, command="export-urdf")
     try:
         p = doc["parameters"]
         return {n: v for n, v in zip(p["names"], p["values"]) if v is not None}
@@ -202,8 +207,8 @@ def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = N
     desc = _description(robot)
     if params is not None and from_result is not None:
         raise ModelError("export-urdf: give --from RESULT.json or --params RESULT.json, not both")
-    v = _values(desc, from_result) if from_result is not None else _Values()
-    named = _identified_parameters(params) if params is not None else None
+    v = _values(desc, from_result, "export-urdf") if from_result is not None else _Values()
+    named = _identified_parameters(params, desc) if params is not None else None
     changed: list[str] = []
     text = urdf_text(desc, v.chi, v.payload, params=named, notes=v.header, report=changed)
     return _finish("export-urdf", desc, text, changed, v)
@@ -213,7 +218,7 @@ def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.00
     """The robot as a MuJoCo MJCF model (``symoro-gen export-mjcf``); ``from_result`` as for :func:`export_urdf`,
     ``timestep`` MuJoCo's [s]."""
     desc = _description(robot)
-    v = _values(desc, from_result) if from_result is not None else _Values()
+    v = _values(desc, from_result, "export-mjcf") if from_result is not None else _Values()
     changed: list[str] = []
     text = mjcf_text(desc, v.chi, v.payload, notes=v.header, report=changed, timestep=timestep)
     return _finish("export-mjcf", desc, text, changed, v)

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from ..description.identity import robot_id
 from ..errors import IdentificationError, OptionError
 from ..identification import fit_with_known_payload, identify_with_drive_gains, sensor_gains
 from ..identification import identify as fit
@@ -153,7 +154,7 @@ class IdentifyResults(Results):
     def to_dict(self) -> dict:
         """Exactly the JSON of ``symoro-gen identify --json`` (its ``generator`` mark first)."""
         out: dict[str, Any] = {"generator": "symoro-gen identify", "schema_version": SCHEMA_VERSION,
-                               "robot": self.robot.name, "data": [],
+                               "robot": self.robot.name, "robot_id": robot_id(self.robot), "data": [],
                                "loaded": [str(p) for p in self.loaded]}
         if self.physical is not None:
             out["unconstrained"] = self.unconstrained.to_dict()

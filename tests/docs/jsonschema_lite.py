@@ -4,15 +4,18 @@ extra package.
 Supported keywords: ``type`` (a name or a list: object, array, string, number, integer, boolean,
 null), ``properties``, ``required``, ``additionalProperties`` (bool or schema), ``items``,
 ``minItems``, ``maxItems``, ``enum``, ``const``, ``minimum``, ``maximum``, ``exclusiveMinimum``,
-``anyOf``, ``allOf``, ``$ref`` to ``#/$defs/NAME``. Annotations (``title``, ``description``,
+``pattern`` (a string matched anywhere, ``re.search``, as the standard says; the schemas' patterns use the
+syntax Python and ECMA 262 share), ``anyOf``, ``allOf``, ``$ref`` to ``#/$defs/NAME``. Annotations (``title``, ``description``,
 ``$schema``, ``$id``, ``examples``, ``$comment``) are ignored. Any other keyword is an error, so a
 schema cannot silently rely on something this validator does not check.
 """
 from __future__ import annotations
 
+import re
+
 ANNOTATIONS = {"title", "description", "$schema", "$id", "examples", "$comment", "$defs", "default"}
 KEYWORDS = {"type", "properties", "required", "additionalProperties", "items", "minItems", "maxItems", "enum",
-            "const", "minimum", "maximum", "exclusiveMinimum", "anyOf", "allOf", "$ref"} | ANNOTATIONS
+            "const", "minimum", "maximum", "exclusiveMinimum", "pattern", "anyOf", "allOf", "$ref"} | ANNOTATIONS
 
 
 def _is_type(x, t: str) -> bool:
@@ -53,6 +56,8 @@ def validate(instance, schema: dict, root: dict | None = None, path: str = "$") 
         errs.append(f"{path}: {instance!r} not one of {schema['enum']}")
     if "const" in schema and instance != schema["const"]:
         errs.append(f"{path}: {instance!r} != {schema['const']!r}")
+    if isinstance(instance, str) and "pattern" in schema and not re.search(schema["pattern"], instance):
+        errs.append(f"{path}: {instance!r:.60} does not match pattern {schema['pattern']!r}")
     if isinstance(instance, (int, float)) and not isinstance(instance, bool):
         if "minimum" in schema and instance < schema["minimum"]:
             errs.append(f"{path}: {instance} < minimum {schema['minimum']}")

@@ -6,6 +6,8 @@ import json
 import numpy as np
 import pytest
 
+from symoro_gen.description import load_robot
+from symoro_gen.description.identity import robot_id
 from symoro_gen.simulate import write_recording_csv
 
 from .jsonschema_lite import KEYWORDS, validate
@@ -154,6 +156,9 @@ def test_diagnose_cli_output_matches_schema(scara_files, cli):
     out = d / "diag.json"
     cli("--quiet", "diagnose", "scara", files[0], "--validate", files[1], "--json", out, rc=0)
     check(strict_json(out), "diagnose")
+    doc = strict_json(out)
+    keys = list(doc)
+    assert keys[keys.index("robot") + 1] == "robot_id" and doc["robot_id"] == robot_id(load_robot("scara"))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -176,6 +181,8 @@ GOOD_IDENTIFY = {"robot": "scara", "data": ["a.csv"], "method": "OLS",
     (lambda d: d.__setitem__("validation", {"rel_err": [0.1, 0.2]}), "missing required key 'rel_err_raw'"),
     (lambda d: d.__setitem__("rel_err_basis", {"rel_err": "x", "rel_err_raw": "y", "cutoff_hz": [0.0], "n_d": [1],
                                                "rows": 1, "samples": 1}), "$.rel_err_basis.cutoff_hz[0]"),
+    (lambda d: d.__setitem__("robot_id", "scara"), "$.robot_id"),
+    (lambda d: d.__setitem__("robot_id", "E4BBB72E57DF487C"), "$.robot_id"),
 ])
 def test_validator_catches_broken_identify(break_it, where):
     assert validate(GOOD_IDENTIFY, SCHEMAS["identify"]) == []
