@@ -25,7 +25,7 @@ and the bound; it never changes the estimate.
       of three slabs ``lo_i <= x_i <= hi_i``; on a slab ``(x_i - lo_i)(hi_i - x_i) >= 0``, so a density
       supported in it satisfies ``int (x_i - lo_i)(hi_i - x_i) dm = tr(Q_i P) >= 0``, with ``P`` the
       pseudo-inertia ``[[Sigma, h], [h^T, m]]`` and ``Q_i`` the (degenerate) ellipsoid matrix of the slab:
-      the bounding-ellipsoid condition ``tr(Q P) >= 0`` of [WKS2017] (Sec. IV-B, density realisability)
+      the bounding-ellipsoid condition ``tr(Q P) >= 0`` of [WKS2017] (density realisability on an ellipsoid)
       applied to each slab, the cuboid bound of [SC2019] in pseudo-inertia form. Linear in the ten
       standard parameters (:func:`slab_rows`); with ``P >= 0`` it implies the centre of mass in the box.
       ``identify --physical --bounded-bodies`` imposes exactly these rows
