@@ -245,3 +245,21 @@ def test_real_lwr4_physical_link2_mass(shared_data):
         assert any(w.startswith("physical fit: link 2: mass") for w in res.to_dict()["warnings"])
     else:
         assert not named
+
+
+def test_rotor_inertia_against_its_nominal_value():
+    """IA2 alone in the base parameters (unconstrained fit) and IA6 of a standard set (--physical): a value
+    outside [1/3, 3] x a non-zero nominal IA is named by its joint; no nominal, no check."""
+    _, scara = model_for("scara")
+    names = list(scara.BASE_NAMES)
+    vals = np.ones(len(names))
+    vals[names.index("IA2")] = 0.5
+    (f,) = check_base(scara, names, vals, nominal={"IA2": 0.05})
+    assert (f.body, f.quantity, f.bound) == ("joint 2", "IA2", pytest.approx(0.15))
+    assert f.message == "joint 2: rotor inertia IA2 = 0.5 kg m^2, 10 x its nominal 0.05 (plausible: 0.333 to 3 x)"
+    assert check_base(scara, names, vals) == []
+    robot, _ = model_for("rx90")
+    _, truth = _truth(robot, 13)
+    found = check_standard(robot, dict(truth, IA6=0.5), nominal=dict(truth, IA6=0.01))
+    assert [(f.body, f.quantity) for f in found] == [("joint 6", "IA6")]
+    assert "50 x its nominal 0.01" in found[0].message
