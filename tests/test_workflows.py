@@ -23,7 +23,7 @@ from symoro_gen.workflows import SCHEMA_VERSION, IdentifyOptions
 from .golden.inputs import write_inputs
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
-NEW_KEYS = {"generator", "schema_version", "provenance", "robot_id"}
+NEW_KEYS = {"generator", "schema_version", "provenance", "robot_id", "plausibility", "bounded_bodies"}
 
 
 @pytest.fixture(scope="module")

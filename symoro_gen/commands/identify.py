@@ -24,7 +24,8 @@ def options_from_args(args) -> IdentifyOptions:
         decimate=args.decimate, min_velocity=args.min_velocity, drop_unexcited=args.drop_unexcited,
         reference=args.reference, kp=args.kp, kd=args.kd, ki=args.ki, bandwidth=args.bandwidth,
         max_iter=args.max_iter, start=args.start, physical=getattr(args, "physical", False),
-        nominal_tolerance=getattr(args, "nominal_tolerance", None), data_format=format_from_args(args))
+        nominal_tolerance=getattr(args, "nominal_tolerance", None),
+        bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args))
 
 
 def run(args) -> int:
@@ -90,6 +91,10 @@ def add_parser(sub) -> None:
     p.add_argument("--nominal-tolerance", type=float, metavar="TOL",
                    help="with --physical: also bound every standard parameter with a non-zero nominal value to "
                         "|chi - nominal| <= TOL |nominal|")
+    p.add_argument("--bounded-bodies", action="store_true",
+                   help="with --physical: keep each link's mass distribution inside the box of its frame origins and "
+                        "children (plus a margin; so its centre of mass too) and its mass within a factor 3 of a "
+                        "non-zero nominal mass (docs/plausibility.md)")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "

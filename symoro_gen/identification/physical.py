@@ -22,7 +22,13 @@ eq. 5 and Thm. 1; Sousa & Cortesao 2014 for the drive terms):
 * rotor inertias ``IA``, viscous ``FV`` and Coulomb ``FS`` friction coefficients are >= 0;
 * optional bounds ``|chi_i - nominal_i| <= tol |nominal_i|`` on every standard parameter with a
   non-zero nominal value (``nominal_tolerance``);
-* the payload (``PAYLOAD_NAMES``) is one more body, with known parameters (e.g. its mass) as equalities.
+* the payload (``PAYLOAD_NAMES``) is one more body, with known parameters (e.g. its mass) as equalities;
+* optional body bounds (``bounded_bodies``, ``identify --physical --bounded-bodies``): each link's mass
+  distribution inside the box of its MDH frame origins (:func:`symoro_gen.identification.plausibility.body_boxes`),
+  as the three linear slab conditions ``tr(Q_i P) >= 0`` ([WKS2017] bounding-ellipsoid condition applied to
+  the box's slabs, the cuboid bound of [SC2019]; they put the centre of mass in the box), and the mass
+  within ``[m0 / MASS_FACTOR, MASS_FACTOR m0]`` of a non-zero nominal mass ``m0``
+  (:mod:`symoro_gen.identification.plausibility`).
 
 Regularisation: the data only see ``K chi_st``; among the standard sets with the same base
 parameters the one closest to the nominal values (robot file; zero when absent) is chosen by adding
@@ -49,6 +55,7 @@ from ..errors import IdentificationError
 from ..model import IdentificationModel
 from ..observations.system import ObservationSystem
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, split_name
+from .plausibility import MASS_FACTOR, BodyBox, slab_rows
 from .result import IdentificationResult, json_float, per_joint_rel_err
 
 __all__ = [
@@ -60,6 +67,7 @@ __all__ = [
     "identify_physical",
     "standard_from_base",
     "standard_set_from_result",
+    "status_warnings",
 ]
 
 #: weight of the pull toward the nominal values (relative to the normalised LS cost)
@@ -189,6 +197,24 @@ def _nominal_vector(lay: _Layout, nominal) -> np.ndarray:
     return v
 
 
+def _box_constraints(cp, x, lay: _Layout, nominal: np.ndarray, boxes: Mapping[int, BodyBox]):
+    """The body bounds of the module docstring: slab rows ``A p >= 0`` per link with a box, and the mass
+    within a factor of its nominal value."""
+    cons: list = []
+    labels: list[tuple[str, str, tuple[int, ...] | int, float]] = []
+    for label, b in lay.bodies:
+        j = split_name(lay.names[b[9]])[1]
+        if j in boxes:
+            A, _ = slab_rows(boxes[j])
+            cons.append(A @ x[list(b)] >= 0)
+            labels.append(("box", label, b, float(j)))
+        m0 = nominal[b[9]]
+        if m0 > 0:
+            cons += [x[b[9]] >= m0 / MASS_FACTOR, x[b[9]] <= MASS_FACTOR * m0]
+            labels += [("lower", lay.names[b[9]], b[9], m0 / MASS_FACTOR), ("upper", lay.names[b[9]], b[9], MASS_FACTOR * m0)]
+    return cons, labels
+
+
 def _constraints(cp, x, lay: _Layout, s: np.ndarray, body_scale: np.ndarray, nominal: np.ndarray,
                  known: Mapping[str, float], nominal_tolerance: float | None):
     """cvxpy constraints on ``x`` (in SI units) with labels for the active-set report."""
@@ -220,7 +246,8 @@ def _constraints(cp, x, lay: _Layout, s: np.ndarray, body_scale: np.ndarray, nom
     return cons, labels
 
 
-def _active(labels, cons, x: np.ndarray, s: np.ndarray, pull: float) -> tuple[str, ...]:
+def _active(labels, cons, x: np.ndarray, s: np.ndarray, pull: float,
+            boxes: Mapping[int, BodyBox] | None = None) -> tuple[str, ...]:
     """Constraints at their bound. Each is said to be *set by the data* when its Lagrange multiplier,
     in the scaled variables, exceeds ``100 pull`` (the size of the regularisation's gradient), else
     *set by the pull toward nominal* (it costs the fit nothing: e.g. a body without nominal values)."""
@@ -238,6 +265,13 @@ def _active(labels, cons, x: np.ndarray, s: np.ndarray, pull: float) -> tuple[st
                 force = float(np.linalg.norm(s[list(where)] * (G.T @ np.asarray(dual).reshape(-1, order="F")))) \
                     if dual is not None else 0.0
                 out.append(f"{name}: pseudo-inertia singular (lambda_min {ev[0]:.3g}; {who(force)})")
+        elif kind == "box" and boxes is not None:
+            A, _ = slab_rows(boxes[int(ref)])
+            slack = A @ x[list(where)]
+            m = max(float(x[list(where)][9]), 1e-12)
+            if np.min(slack) <= 1e-5 * m * boxes[int(ref)].extent ** 2:
+                out.append(f"{name}: mass distribution at the boundary of its box along "
+                           f"{'xyz'[int(np.argmin(slack))]} (bounded bodies)")
         elif kind == "nonneg" and x[where] <= 1e-6 * ref:
             force = abs(float(dual)) * s[where] if dual is not None else 0.0
             out.append(f"{name} >= 0 ({who(force)})")
@@ -316,6 +350,10 @@ class PhysicalResult:
         Per body: mass, centre of mass, consistency, and how far it is from the nominal body.
     solver, status : str
     regularization : float
+    warnings : tuple of str
+        A solver status other than ``optimal`` (:func:`status_warnings`).
+    bounded : bool
+        The bodies were bounded (``boxes``).
     """
 
     names: tuple[str, ...]
@@ -337,6 +375,8 @@ class PhysicalResult:
     status: str
     regularization: float
     known: tuple[tuple[str, float], ...] = ()
+    warnings: tuple[str, ...] = ()
+    bounded: bool = False
 
     @property
     def residual_increase_pct(self) -> float:
@@ -390,7 +430,7 @@ class PhysicalResult:
         """Consistent base parameters beside the unconstrained ones, the cost of consistency and the
         active constraints."""
         lines = [(f"Physically consistent estimate ({self.solver}, {self.status}; regularisation toward nominal "
-                  f"{self.regularization:g})"),
+                  f"{self.regularization:g}" + ("; bodies bounded by their links' boxes" if self.bounded else "") + ")"),
                  f"{'Param.':<10}{'consistent':>13}{'unconstrained':>15}"]
         for n, v in zip(self.base_names + self.payload_names + self.other_names,
                         np.concatenate([self.base_values, self.payload_values, self.other_values])):
@@ -431,6 +471,8 @@ class PhysicalResult:
             "solver": self.solver,
             "status": self.status,
             "regularization": self.regularization,
+            "bounded_bodies": self.bounded,
+            "warnings": list(self.warnings),
         }
 
 
@@ -451,7 +493,8 @@ def _column_map(model: IdentificationModel, lay: _Layout, K: np.ndarray, names: 
 def identify_physical(model: IdentificationModel, system: ObservationSystem, *,
                       joint_sigma: Sequence[float] | None = None, known: Mapping[str, float] | None = None,
                       nominal=None, nominal_tolerance: float | None = None,
-                      regularization: float = DEFAULT_REGULARIZATION, solver: str | None = None) -> PhysicalResult:
+                      regularization: float = DEFAULT_REGULARIZATION, solver: str | None = None,
+                      boxes: Mapping[int, BodyBox] | None = None) -> PhysicalResult:
     """Physically consistent (weighted) least squares in the standard parameters.
 
     Minimises ``||w (Y - W_b K chi_st - W_L chi_L)||^2 / c_min + regularization ||(chi - chi_nom)/s||^2 / p``
@@ -476,6 +519,9 @@ def identify_physical(model: IdentificationModel, system: ObservationSystem, *,
     regularization : float
         See the module docstring.
     solver : {"CLARABEL", "SCS"}, optional
+    boxes : mapping of int to BodyBox, optional
+        Bound the bodies (the module docstring's last item): frame -> box, from
+        :func:`symoro_gen.identification.plausibility.body_boxes`.
 
     Returns
     -------
@@ -527,13 +573,21 @@ def identify_physical(model: IdentificationModel, system: ObservationSystem, *,
     u = cp.Variable(p)  # scaled variables: x = s * u
     x = cp.multiply(s, u)
     reg = regularization / p
-    obj = cp.sum_squares(R @ (u - u_ls)) / c_ref + reg * cp.sum_squares(u - nominal_v / s)
+    # the whole objective times 1/regularization (same minimiser): the pull toward nominal, which alone
+    # decides what the data do not see (e.g. the masses regrouped with others), is then of order 1 and
+    # the solver's absolute tolerances (1e-8) resolve it; unscaled, its ~1e-8 value ended as
+    # "optimal_inaccurate" with a standard set 100 x further from optimal in that term
+    k = 1.0 / regularization if regularization > 0 else 1.0
+    obj = k * (cp.sum_squares(R @ (u - u_ls)) / c_ref + reg * cp.sum_squares(u - nominal_v / s))
     cons, labels = _constraints(cp, x, lay, s, body_scale, nominal_v, known, nominal_tolerance)
+    if boxes is not None:
+        c2, l2 = _box_constraints(cp, x, lay, nominal_v, boxes)
+        cons, labels = cons + c2, labels + l2
     prob = cp.Problem(cp.Minimize(obj), cons)
     used = _solve(cp, prob, solver)
     if prob.status not in ("optimal", "optimal_inaccurate"):
         raise IdentificationError(f"identify --physical: the constraints cannot be met ({prob.status}); "
-                                  "check the known payload values and --nominal-tolerance")
+                                  "check the known payload values, --nominal-tolerance and --bounded-bodies")
     xv = np.asarray(s * u.value, float)
     for n, v in known.items():
         xv[idx[n]] = float(v)
@@ -548,11 +602,21 @@ def identify_physical(model: IdentificationModel, system: ObservationSystem, *,
         base_names=tuple(model.BASE_NAMES), base_values=_ro(K @ st_vals),
         other_names=lay.other, other_values=_ro(xv[nst + npay:]),
         unconstrained={n: float(v) for n, v in zip(names, theta_u) if n not in known},
-        active_constraints=_active(labels, cons, xv, s, 2 * reg), cost=cost, cost_unconstrained=cost_u,
+        active_constraints=_active(labels, cons, xv, s, 2 * reg * k, boxes), cost=cost, cost_unconstrained=cost_u,
         rel_err=_ro(per_joint_rel_err(rho, system.Y, system.joint, nj)),
         rel_err_unconstrained=_ro(per_joint_rel_err(rho_u, system.Y, system.joint, nj)),
         bodies=_body_reports(lay, xv, nominal_v), solver=used, status=str(prob.status),
-        regularization=float(regularization), known=tuple((k, float(v)) for k, v in known.items()))
+        regularization=float(regularization), known=tuple((k, float(v)) for k, v in known.items()),
+        warnings=status_warnings(used, str(prob.status)), bounded=boxes is not None)
+
+
+def status_warnings(solver: str, status: str) -> tuple[str, ...]:
+    """A solver status other than ``optimal`` as a warning (``optimal_inaccurate``: the solver stopped on
+    its iteration limit or a loss of accuracy; the constraints and the optimality hold only approximately)."""
+    if status == "optimal":
+        return ()
+    return (f"conic solver {solver} ended with status {status!r}, not 'optimal': the consistent estimate "
+            "may violate its constraints or not minimise the cost by more than the solver's tolerances",)
 
 
 def _ro(a) -> np.ndarray:
@@ -655,17 +719,19 @@ def standard_from_base(model: IdentificationModel, chi_b, nominal=None, *,
     bs = b / sb
     dev = cp.sum_squares(u - nominal_v / s) / p
     prob = cp.Problem(cp.Minimize(dev), cons + [Ks @ x == bs])
-    notes = []
+    notes: list[str] = []
     try:
-        _solve(cp, prob, solver)
+        used = _solve(cp, prob, solver)
         ok = prob.status in ("optimal", "optimal_inaccurate")
+        if ok:
+            notes += status_warnings(used, str(prob.status))
     except IdentificationError:
         ok = False
     xv = np.asarray(s * u.value, float) if ok and u.value is not None else None
     err = float(np.max(np.abs(Ks @ xv - bs))) if xv is not None else math.inf
     if xv is None or err > tol:
         prob2 = cp.Problem(cp.Minimize(cp.sum_squares(Ks @ x - bs) + 1e-8 * dev), cons)
-        _solve(cp, prob2, solver)
+        notes = list(status_warnings(_solve(cp, prob2, solver), str(prob2.status)))
         if prob2.status not in ("optimal", "optimal_inaccurate"):
             raise IdentificationError(f"standard_from_base: solver status {prob2.status}")
         xv = np.asarray(s * u.value, float)

@@ -29,6 +29,7 @@ from ..identification.estimators import drop_unexcited, with_unexcited
 from ..identification.iv import identify_iv
 from ..identification.payload import identify_payload
 from ..identification.physical import identify_physical
+from ..identification.plausibility import Plausibility, body_boxes, check_base, check_standard
 from ..identification.reference import compare_with_reference, format_comparison
 from ..identification.render import IdentificationBlocks
 from ..identification.result import basis_text, json_float
@@ -82,6 +83,9 @@ class IdentifyOptions(Options):
         Physically consistent estimate (cvxpy, Clarabel: the 'physical' extra).
     nominal_tolerance : float, optional
         With ``physical``: ``|chi - nominal| <= TOL |nominal|``.
+    bounded_bodies : bool
+        With ``physical``: each link's mass distribution inside its box and its mass within a factor of its
+        nominal one (:mod:`symoro_gen.identification.plausibility`, docs/plausibility.md).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
     """
@@ -106,6 +110,7 @@ class IdentifyOptions(Options):
     start: str = "ols"
     physical: bool = False
     nominal_tolerance: float | None = None
+    bounded_bodies: bool = False
     data_format: LogFormat = field(default_factory=LogFormat)
 
     def __post_init__(self) -> None:
@@ -120,6 +125,8 @@ class IdentifyOptions(Options):
                               "of each recording)")
         if self.nominal_tolerance is not None and not self.physical:
             raise IdentificationError("--nominal-tolerance bounds the --physical estimate: add --physical")
+        if self.bounded_bodies and not self.physical:
+            raise IdentificationError("--bounded-bodies bounds the --physical estimate: add --physical")
         object.__setattr__(self, "payload", dict(self.payload or {}))
         if self.data_format is None:
             object.__setattr__(self, "data_format", LogFormat())
@@ -149,6 +156,7 @@ class IdentifyResults(Results):
     reference_rows: tuple[Any, ...] | None = None
     held_back: tuple[str, ...] = ()
     inputs: tuple[Any, ...] = ()
+    plausibility: Plausibility | None = None
 
     # ---- the JSON ---------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -175,6 +183,9 @@ class IdentifyResults(Results):
             out["reference"] = [
                 {"expression": r.expression, "name": r.name, "ref": r.ref, "ref_rel_std_pct": r.ref_rel_std_pct,
                  "agree_2sigma": r.agree_2sigma} for r in self.reference_rows]
+        if self.plausibility is not None:
+            out["plausibility"] = self.plausibility.to_dict()
+            out["warnings"] = list(out["warnings"]) + list(self.plausibility.warnings)
         out["provenance"] = provenance(self.options, self.inputs)
         return out
 
@@ -199,6 +210,9 @@ class IdentifyResults(Results):
         if self.reference_rows is not None:
                 text += "\n\nBeside the reference table " + str(self.options.reference) + ":\n" + \
                 format_comparison(list(self.reference_rows))
+        if self.plausibility is not None and self.plausibility.warnings:
+            text += ("\n\nPlausibility of the bodies (nominal values, the links' boxes, signs; docs/plausibility.md):\n"
+                     + self.plausibility.summary())
         return text + "\n\n" + data_text(self.reports)
 
     # ---- report and figures -------------------------------------------------------------------------
@@ -215,6 +229,8 @@ class IdentifyResults(Results):
         valid = [("validation data" + (" (loaded)" if vl else ""), sys_v)] if sys_v is not None else []
         raw = [(valid[0][0], self.validation["rel_err_raw"])] if valid and self.validation is not None else []
         payload, notes = None, ["data " + r.summary() for r in self.reports]
+        if self.plausibility is not None:
+            notes += [f"warning: {w}" for w in self.plausibility.warnings]
         if sys_v is not None and vl and any(n in sys_v.names for n in model.PAYLOAD_NAMES):
             try:
                 payload = identify_payload(sys_v, res, payload_names=[n for n in model.PAYLOAD_NAMES if n in sys_v.names],
@@ -315,6 +331,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     phys = res_u = None
     if opts.physical:
         phys, res_u, res = _physical(opts, robot, model, res, sys_u, sys_l, known, asm_u, asm_l)
+    plaus = _plausibility(robot, model, res_u if phys is not None else res, phys)
     validation, sys_v, asm_v = _validate(opts, robot, model, res, res_u, validate, held_back, asm_opts,
                                          bool(loaded))
     if validation is not None:
@@ -328,7 +345,22 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
                            systems={"unloaded": sys_u, "loaded": sys_l, "validation": sys_v},
                            assemblies={"unloaded": asm_u, "loaded": asm_l, "validation": asm_v}, drive=dg,
                            closed=closed, physical=phys, unconstrained=res_u, validation=validation,
-                           reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs)
+                           reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs,
+                           plausibility=plaus)
+
+
+def _plausibility(robot, model: IdentificationModel, res, phys) -> Plausibility:
+    """The plausibility checks after the fit: sign rules (and nominal rotor inertias) of the unconstrained
+    base parameters; with ``physical`` the bodies of the consistent standard set against the nominal values
+    and the links' boxes, and the solver's status."""
+    nominal = dict(robot.nominal or {})
+    findings = check_base(model, res.names, res.values, res.std, payload=robot.payload, nominal=nominal)
+    boxes = body_boxes(robot)
+    notes: tuple[str, ...] = ()
+    if phys is not None:
+        findings += check_standard(robot, phys.standard_map(), nominal=nominal, boxes=boxes)
+        notes = tuple(phys.warnings)
+    return Plausibility(findings=tuple(findings), boxes=tuple(boxes.values()), notes=notes)
 
 
 def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_back, asm_opts, has_payload):
@@ -399,7 +431,8 @@ def _physical(opts: IdentifyOptions, robot, model: IdentificationModel, res, sys
     if robot.payload is not None and robot.nominal_payload() is not None:
         nominal.update(zip(robot.payload_names, robot.nominal_payload()))
     phys = identify_physical(model, system, joint_sigma=joint_sigma, known=known, nominal=nominal,
-                             nominal_tolerance=opts.nominal_tolerance)
+                             nominal_tolerance=opts.nominal_tolerance,
+                             boxes=body_boxes(robot) if opts.bounded_bodies else None)
     res_p = phys.as_identification_result(res).with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
     return phys, res, res_p
 
