@@ -14,6 +14,7 @@ import pytest
 
 import symoro_gen
 from symoro_gen.loader import model_for
+from symoro_gen.preprocessing.motion import noise_level_joints, saturation_mask
 from symoro_gen.preprocessing.readers import DataWarning
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording, write_recording_csv
 from symoro_gen.workflows.diagnose import DiagnoseOptions
@@ -190,3 +191,41 @@ def test_split_spec_time_and_dt(clean, cli, tmp_path):
                               "dt = 0.005 s is given (--dt, or dt=/fs= of a split spec): leave dt out to use the time "
                               "column, or give --dt-overrides-time to ignore it")
     cli("--quiet", "identify", "scara", f"q={q},tau={tau}", "--dt", "0.005")  # --dt: the period without t=
+
+
+# ---- the definitions ------------------------------------------------------------------------------------------
+def test_saturation_at_a_declared_limit_or_a_plateau():
+    rng = np.random.default_rng(3)
+    tau = rng.normal(0.0, 1.0, (400, 2))
+    tau[100:120, 0] = 2.5                                   # at the declared limit of joint 1
+    tau[200:204, 1] = tau[:, 1].max() + 1.0                 # 4 samples at the extreme: no plateau
+    m = saturation_mask(tau, (2.5, 100.0))
+    assert m[100:120, 0].all() and m[:, 0].sum() == 20 + int(np.sum(np.abs(np.delete(tau[:, 0], range(100, 120)))
+                                                                  >= 2.5 * (1 - 1e-6)))
+    assert not m[:, 1].any()
+    tau[300:306, 1] = tau[:, 1].min()                       # 6 samples at the minimum: a plateau
+    assert saturation_mask(tau)[300:306, 1].all() and saturation_mask(tau)[:, 1].sum() == 6
+
+
+def test_noise_level_joints():
+    rng = np.random.default_rng(4)
+    t = np.arange(2000) * 0.005
+    q = np.column_stack([0.3 + 1e-5 * rng.standard_normal(t.size),        # held still: encoder noise
+                         0.2 * np.sin(2 * np.pi * 0.5 * t) + 1e-5 * rng.standard_normal(t.size),
+                         np.round((0.1 + 5e-4 * rng.standard_normal(t.size)) / 1e-3) * 1e-3,  # quantised, flickers
+                         np.full(t.size, 1.0)])                            # exactly constant
+    assert noise_level_joints(q) == (0, 2, 3)
+
+
+# ---- diagnose -------------------------------------------------------------------------------------------------
+def test_diagnose_warns_on_saturation_and_refuses_a_joint_at_its_noise(saturated, stuck, cli, tmp_path):
+    files, _ = saturated
+    out = tmp_path / "d.json"
+    cli("--quiet", "diagnose", "scara", *files, "--candidates", "spring", "--max-effects", "0", "--drop-saturated",
+        "--json", out)
+    w = json.loads(out.read_text())["warnings"]
+    assert (f"{files[0]}: tau1 at its limit 30.0 % of the samples (plateaus of >= 5 samples): those rows are left "
+            "out (--drop-saturated)") in w
+    r = cli("diagnose", "scara", *stuck[0], rc=2)
+    assert r.err_lines[0].startswith(f"symoro-gen: error: {stuck[0][0]}, {stuck[0][1]}: joint 1 does not move (q1 "
+                                     "spans at most ")

@@ -86,7 +86,7 @@ def add_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the placebo candidates")
     p.add_argument("--drop-saturated", action="store_true",
                    help="leave out the rows of each joint whose torque is saturated: at the robot file's [limits] tau_max, or "
-                        "without it in plateaus of >= 5 samples at the column's extreme (docs/data-files.md)")
+                        "in plateaus of >= 5 samples at the column's extreme (docs/data-files.md)")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.md|OUT.html", help="write a report (tables and plots) here")
     p.add_argument("--plots", metavar="DIR", help="write the plots as PNG files in this folder")

@@ -71,7 +71,7 @@ def add_parser(sub) -> None:
                         "identified, instead of stopping")
     p.add_argument("--drop-saturated", action="store_true",
                    help="leave out the rows of each joint whose torque is saturated: at the robot file's [limits] tau_max, or "
-                        "without it in plateaus of >= 5 samples at the column's extreme (docs/data-files.md)")
+                        "in plateaus of >= 5 samples at the column's extreme (docs/data-files.md)")
     p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
     cl = p.add_argument_group("closed-loop estimators (--method iv|didim)")
     cl.add_argument("--kp", type=float, nargs="+", help="position gain(s) of the robot's PID controller, per joint")

@@ -744,7 +744,8 @@ def assemble(
 def _saturated_rows(trajs: Sequence[Trajectory], settings: Sequence[FilterSettings], E: np.ndarray, J: np.ndarray,
                     S: np.ndarray, opts: AssemblyOptions) -> np.ndarray:
     """Rows to remove with ``drop_saturated``: row r (experiment E, joint J, full-rate sample S) when more than
-    ``slow_weight_tol`` of its decimation filter's absolute weights fall on saturated samples of ``tau_J``."""
+    ``slow_weight_tol`` of its decimation filter's absolute weights fall on saturated samples of ``tau_J`` (of any
+    joint's torque with ``saturated_all_joints``)."""
     drop = np.zeros(E.size, bool)
     for ex, (traj, st) in enumerate(zip(trajs, settings)):
         sat = saturation_mask(traj.tau, opts.tau_limits)
@@ -754,10 +755,14 @@ def _saturated_rows(trajs: Sequence[Trajectory], settings: Sequence[FilterSettin
         if st.n_d > 1:
             h = np.abs(decimation_filter(st.n_d, ftype="fir", cutoff_ratio=st.cutoff_ratio))
             h = h / h.sum()
+        bad = np.zeros(sat.shape, bool)
         for j in np.flatnonzero(sat.any(axis=0)):
             expo = np.convolve(sat[:, j].astype(float), h)[(h.size - 1) // 2:][:traj.n_samples]
-            m = (ex == E) & (j == J)
-            drop[m] = expo[S[m]] > opts.slow_weight_tol
+            bad[:, j] = expo > opts.slow_weight_tol
+        if opts.saturated_all_joints:
+            bad[:] = bad.any(axis=1, keepdims=True)
+        m = ex == E
+        drop[m] = bad[S[m], J[m]]
     return drop
 
 

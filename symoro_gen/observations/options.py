@@ -92,9 +92,12 @@ class AssemblyOptions:
     #: slow samples (see ``min_velocity``).
     slow_weight_tol: float = 0.01
     #: Remove the rows of joint j that depend on saturated samples of ``tau_j``
-    #: (:func:`~symoro_gen.preprocessing.motion.saturation_mask`: at ``tau_limits``, else plateaus at the
+    #: (:func:`~symoro_gen.preprocessing.motion.saturation_mask`: at ``tau_limits`` or in plateaus at the
     #: column's extreme), with the weight rule of ``min_velocity`` (``slow_weight_tol``); :func:`assemble` only.
     drop_saturated: bool = False
+    #: With ``drop_saturated``: remove the rows of every joint at such samples (the diagnosis needs every joint
+    #: on every sample), not only those of the saturated joint.
+    saturated_all_joints: bool = False
     #: Torque limit per joint [N m or N] (the robot file's ``[limits] tau_max``) for ``drop_saturated``.
     tau_limits: tuple[float, ...] | None = None
     #: Use the trajectory's recorded ``dq``/``ddq`` (and the raw ``q``) instead of filtering ``q``.

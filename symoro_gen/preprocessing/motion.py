@@ -15,8 +15,8 @@ Two checks that the identification commands run on every recording before using 
   treated as still by ``--drop-unexcited`` (:func:`hold_still`: its position held at its median, so its
   velocity and acceleration are zero and the parameters of its own motion have zero columns).
 * **saturated torque** (:func:`saturation_mask`): samples of ``tau_j`` at the torque limit ``tau_max`` the
-  robot file's ``[limits]`` declares, or, without it, in a plateau of at least ``SATURATION_RUN`` (5)
-  consecutive samples at the column's maximum or minimum. A clipped torque is not the torque the model
+  robot file's ``[limits]`` declares, or in a plateau of at least ``SATURATION_RUN`` (5) consecutive samples
+  at the column's maximum or minimum (a drive's current limit below the declared one). A clipped torque is not the torque the model
   predicts: the identification is biased unless those rows are left out (``--drop-saturated``: the rows of
   joint j whose decimation filter puts more than 1 % of its weight on saturated samples of ``tau_j``; the
   other joints' rows of the same instants are kept, their torques are measured).
@@ -102,9 +102,9 @@ def _plateaus(x: np.ndarray, at: np.ndarray, run: int) -> np.ndarray:
 def saturation_mask(tau, tau_max: Sequence[float] | None = None, run: int = SATURATION_RUN) -> np.ndarray:
     """Boolean (N, n): the samples of ``tau`` (N, n) at a torque limit.
 
-    With ``tau_max`` (one per joint, the robot file's ``[limits]``): ``|tau_j| >= tau_max_j`` (to a relative
-    ``SATURATION_TOL``). Without it: the samples in runs of at least ``run`` consecutive samples at the
-    column's maximum or minimum (to ``SATURATION_TOL`` of its range)."""
+    The samples in runs of at least ``run`` consecutive samples at the column's maximum or minimum (to
+    ``SATURATION_TOL`` of its range), and with ``tau_max`` (one per joint, the robot file's ``[limits]``)
+    those with ``|tau_j| >= tau_max_j`` (to a relative ``SATURATION_TOL``)."""
     tau = np.asarray(tau, float)
     if tau.ndim == 1:
         tau = tau[:, None]
@@ -113,12 +113,11 @@ def saturation_mask(tau, tau_max: Sequence[float] | None = None, run: int = SATU
         x = tau[:, j]
         if tau_max is not None and j < len(tau_max) and np.isfinite(tau_max[j]) and tau_max[j] > 0:
             out[:, j] = np.abs(x) >= tau_max[j] * (1.0 - SATURATION_TOL)
-            continue
         lo, hi = float(x.min()), float(x.max())
         if hi - lo <= 0:
             continue
         tol = SATURATION_TOL * (hi - lo)
-        out[:, j] = _plateaus(x, x >= hi - tol, run) | _plateaus(x, x <= lo + tol, run)
+        out[:, j] |= _plateaus(x, x >= hi - tol, run) | _plateaus(x, x <= lo + tol, run)
     return out
 
 
@@ -156,7 +155,8 @@ def saturation_warnings(trajectories: Sequence[Trajectory], tau_max: Sequence[fl
         js = np.flatnonzero(share > 0)
         if not js.size:
             continue
-        how = "tau_max of the robot file" if tau_max is not None else f"plateaus of >= {SATURATION_RUN} samples"
+        how = (f"at tau_max of the robot file or in plateaus of >= {SATURATION_RUN} samples" if tau_max is not None
+               else f"plateaus of >= {SATURATION_RUN} samples")
         what = ", ".join(f"tau{j + 1} at its limit {100 * share[j]:.1f} % of the samples" for j in js)
         if dropped:
             out.append(f"{tr.source}: {what} ({how}): those rows are left out (--drop-saturated)")

@@ -80,7 +80,7 @@ class DiagnoseOptions(Options):
         Known payload parameters (``{"M8": 4.6136}``); needs ``loaded`` recordings.
     drop_saturated : bool
         Leave out the rows of each joint whose torque is at its limit (``[limits] tau_max`` of the robot file,
-        else plateaus at the column's extreme: :func:`~symoro_gen.preprocessing.motion.saturation_mask`).
+        or plateaus at the column's extreme: :func:`~symoro_gen.preprocessing.motion.saturation_mask`).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
     """
@@ -126,9 +126,10 @@ class DiagnoseOptions(Options):
 
     def assembly(self, tau_limits: tuple[float, ...] | None = None) -> AssemblyOptions:
         """The assembly's filter settings (``cutoff``, ``decimate``; the rest by the papers' rules) and row
-        selection (``drop_saturated`` with the robot's torque limits ``tau_limits``)."""
+        selection (``drop_saturated`` with the robot's torque limits ``tau_limits``: the samples where a torque is
+        saturated, every joint's rows, since the loop needs every joint on every sample)."""
         return AssemblyOptions(cutoff_hz=self.cutoff, n_d=self.decimate, drop_saturated=self.drop_saturated,
-                               tau_limits=tau_limits)
+                               saturated_all_joints=True, tau_limits=tau_limits)
 
 
 def _names(items: Sequence[Any]) -> list[str]:

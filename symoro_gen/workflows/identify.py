@@ -88,7 +88,7 @@ class IdentifyOptions(Options):
         noise level is held still first (its own parameters then have zero columns).
     drop_saturated : bool
         Leave out the rows of each joint whose torque is at its limit (``[limits] tau_max`` of the robot file,
-        else plateaus at the column's extreme: :func:`~symoro_gen.preprocessing.motion.saturation_mask`).
+        or plateaus at the column's extreme: :func:`~symoro_gen.preprocessing.motion.saturation_mask`).
     reference : path, optional
         Published base-parameter table (CSV) to compare with.
     kp, kd, ki, bandwidth, max_iter, start
