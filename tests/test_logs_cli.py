@@ -11,6 +11,14 @@ import pytest
 from symoro_gen.cli import main
 
 
+def _revolute_deg(q):
+    """Positions as a log in degrees has them: the revolute joints in degrees, the SCARA's prismatic joint 3 in m
+    (``--deg`` converts the revolute joints only)."""
+    out = np.array(q, float)
+    out[:, [0, 1, 3]] = np.rad2deg(out[:, [0, 1, 3]])
+    return out
+
+
 def _json(path):
     return json.loads(path.read_text())
 
@@ -170,7 +178,7 @@ def test_identify_currents_in_degrees_same_as_clean(tmp_path):
     np.savetxt(clean, np.column_stack([rec.t, rec.q, rec.tau]), delimiter=",", header=hdr, comments="")
     k = np.array([2.0, 0.5, 10.0, 0.25])
     raw = tmp_path / "raw.txt"  # headerless, degrees, currents, a status column first
-    np.savetxt(raw, np.column_stack([np.ones_like(rec.t), rec.t, np.degrees(rec.q), rec.tau / k]), fmt="%.12g")
+    np.savetxt(raw, np.column_stack([np.ones_like(rec.t), rec.t, _revolute_deg(rec.q), rec.tau / k]), fmt="%.12g")
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     assert main(["--quiet", "identify", "scara", str(clean), "--method", "ols", "--json", str(a)]) == 0
     assert main(["--quiet", "identify", "scara", str(raw), "--method", "ols", "--json", str(b),

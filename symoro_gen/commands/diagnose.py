@@ -35,6 +35,7 @@ def options_from_args(args) -> DiagnoseOptions:
         method=args.method, candidates=tuple(args.candidates) if args.candidates else None,
         significance=args.significance, max_effects=args.max_effects, holdout=args.holdout, cutoff=args.cutoff,
         decimate=args.decimate, seed=args.seed, payload=parse_payload(args.payload),
+        drop_saturated=args.drop_saturated,
         data_format=format_from_args(args))
 
 
@@ -83,6 +84,9 @@ def add_parser(sub) -> None:
     p.add_argument("--cutoff", type=float, help="low-pass cut-off of q [Hz] (default: the papers' rule)")
     p.add_argument("--decimate", type=int, help="decimation factor n_d (default: the papers' rule)")
     p.add_argument("--seed", type=int, default=0, help="seed of the placebo candidates")
+    p.add_argument("--drop-saturated", action="store_true",
+                   help="leave out the rows of each joint whose torque is saturated: at the robot file's [limits] tau_max, or "
+                        "in plateaus of >= 5 samples at the column's extreme (docs/data-files.md)")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.md|OUT.html", help="write a report (tables and plots) here")
     p.add_argument("--plots", metavar="DIR", help="write the plots as PNG files in this folder")

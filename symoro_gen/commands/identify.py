@@ -22,6 +22,7 @@ def options_from_args(args) -> IdentifyOptions:
         validate_fraction=getattr(args, "validate_fraction", None), payload=parse_payload(args.payload),
         gains=args.gains, essential=args.essential, r_sigma=args.r_sigma, cutoff=args.cutoff,
         decimate=args.decimate, min_velocity=args.min_velocity, drop_unexcited=args.drop_unexcited,
+        drop_saturated=args.drop_saturated,
         reference=args.reference, kp=args.kp, kd=args.kd, ki=args.ki, bandwidth=args.bandwidth,
         max_iter=args.max_iter, start=args.start, physical=getattr(args, "physical", False),
         nominal_tolerance=getattr(args, "nominal_tolerance", None),
@@ -67,7 +68,11 @@ def add_parser(sub) -> None:
                    "this [rad/s] (Coulomb friction is ill-defined near zero velocity); validation errors use every sample")
     p.add_argument("--drop-unexcited", action="store_true",
                    help="leave out the parameters the data do not excite (their columns of W are zero, e.g. a joint "
-                        "that stands still) and report them as not identified, instead of stopping")
+                        "that stands still, or moves at its noise level: held still) and report them as not "
+                        "identified, instead of stopping")
+    p.add_argument("--drop-saturated", action="store_true",
+                   help="leave out the rows of each joint whose torque is saturated: at the robot file's [limits] tau_max, or "
+                        "in plateaus of >= 5 samples at the column's extreme (docs/data-files.md)")
     p.add_argument("--reference", help="published base-parameter table (CSV: expression, estimate, rel.std%%) to compare with")
     cl = p.add_argument_group("closed-loop estimators (--method iv|didim)")
     cl.add_argument("--kp", type=float, nargs="+", help="position gain(s) of the robot's PID controller, per joint")

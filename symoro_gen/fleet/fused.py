@@ -61,6 +61,7 @@ from ..observations import AssemblyOptions, iter_chunks, observation_settings
 from ..preprocessing.filtering import (
     PAD_PERIODS,
     FilterSettings,
+    bandwidth_from_power,
     blas_threads,
     butterworth_settle_samples,
     choose_filter_settings,
@@ -69,7 +70,9 @@ from ..preprocessing.filtering import (
     estimate_dynamics_bandwidth,
     lowpass_positions,
     min_filter_samples,
+    still_note,
 )
+from ..preprocessing.motion import noise_level_joints
 from ..preprocessing.trajectory import Trajectory
 from ..runtime import GeneratedModel
 from ..runtime.ccompile import build_library, user_cache
@@ -319,16 +322,8 @@ def dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999, min_band
         np.multiply(X.imag, X.imag, out=im2)
         re2 += im2
         Pj += re2
-    P = Pj.T
-    best = 0.0
-    tot = P.sum(axis=0)
-    for j in range(n):
-        if tot[j] <= 0:
-            continue
-        c = np.cumsum(P[:, j]) / tot[j]
-        k = min(int(np.searchsorted(c, energy_fraction)), f.size - 1)
-        best = max(best, float(f[k]))
-    return float(min(max(best, min_bandwidth_hz), fs / 2.0))
+    return bandwidth_from_power(Pj.T, f, fs, energy_fraction=energy_fraction, min_bandwidth_hz=min_bandwidth_hz,
+                                skip=noise_level_joints(q))
 
 
 def filter_settings(traj: Trajectory, options: AssemblyOptions) -> FilterSettings:
@@ -344,7 +339,8 @@ def filter_settings(traj: Trajectory, options: AssemblyOptions) -> FilterSetting
     st = choose_filter_settings(fs, None, **{**kw, "dynamics_bandwidth_hz": f_dyn})
     # the note choose_filter_settings writes when it estimates f_dyn itself (tested equal)
     note = f"f_dyn: {100 * ef:g} % of the position energy lies below it (floor {fmin:g} Hz)"
-    return replace(st, bandwidth_estimated=True, notes=(note, *st.notes))
+    still = noise_level_joints(traj.q)
+    return replace(st, bandwidth_estimated=True, notes=(note, *((still_note(still),) if still else ()), *st.notes))
 
 
 @dataclass(frozen=True, eq=False)

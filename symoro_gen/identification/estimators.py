@@ -24,6 +24,7 @@ from typing import Any, TypedDict, cast
 import numpy as np
 
 from ..errors import IdentificationError
+from ..preprocessing.motion import noise_level_joints
 from .accumulate import Accumulator, check_finite, factor_system
 from .observation import ObservationSystem
 from .result import IdentificationResult, per_joint_rel_err, relative_std_pct
@@ -166,14 +167,16 @@ def drop_columns(system: ObservationSystem, names: Sequence[str]) -> Observation
 
 
 def still_joints(trajectories, span: float = STILL_SPAN) -> list[tuple[str, int, float]]:
-    """``(source, joint (1-based), span of q)`` for every joint whose position spans less than ``span``."""
+    """``(source, joint (1-based), span of q)`` for every joint whose position spans less than ``span`` or
+    moves at the noise level (:func:`~symoro_gen.preprocessing.motion.noise_level_joints`)."""
     out = []
     for tr in trajectories:
         q = np.asarray(tr.q, float)
         if q.size == 0:
             continue
         ptp = np.ptp(q, axis=0)
-        out += [(str(tr.source), int(j) + 1, float(ptp[j])) for j in np.flatnonzero(ptp < span)]
+        still = set(np.flatnonzero(ptp < span).tolist()) | set(noise_level_joints(q))
+        out += [(str(tr.source), int(j) + 1, float(ptp[j])) for j in sorted(still)]
     return out
 
 

@@ -75,6 +75,7 @@ from ..preprocessing.filtering import (
     fir_group_size,
     min_filter_samples,
 )
+from ..preprocessing.motion import saturation_mask
 from ..preprocessing.trajectory import Trajectory
 from ..progress import ProgressArg, ProgressCounter
 from .options import AssemblyOptions
@@ -112,6 +113,8 @@ class ExperimentReport:
         Rows kept per joint (after decimation and velocity removal).
     removed_low_velocity : tuple of int
         Rows removed per joint by ``min_velocity``.
+    removed_saturated : tuple of int
+        Rows removed per joint by ``drop_saturated`` (empty without it).
     """
 
     index: int
@@ -121,6 +124,7 @@ class ExperimentReport:
     settings: FilterSettings
     rows_per_joint: tuple[int, ...]
     removed_low_velocity: tuple[int, ...]
+    removed_saturated: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -415,6 +419,9 @@ class _ExperimentBlocks:
         if n != ev.n:
             raise ShapeError(f"{src}: trajectory has {n} joints, model {getattr(model, 'ROBOT', '?')} has {ev.n}")
         self.use_rec = opts.use_recorded_derivatives
+        # joints whose position is constant (held still): exactly zero velocity and acceleration, not the
+        # filter's rounding (whose sign would excite the Coulomb friction column)
+        self.const = np.flatnonzero(np.ptp(traj.q, axis=0) == 0) if traj.n_samples else np.zeros(0, int)
         if self.use_rec and (traj.dq is None or traj.ddq is None):
             raise DataFileError([Problem(src, "", "dq/ddq", "use_recorded_derivatives=True but the trajectory has "
                                          "no recorded velocities/accelerations")])
@@ -475,6 +482,10 @@ class _ExperimentBlocks:
         lo = max(0, lo_full - self.margin)
         hi = min(self.N, hi_full + self.margin)
         qf, dq, ddq = filter_and_differentiate(traj.q[lo:hi], st.fs, st.cutoff_hz, st.order, source=traj.source)
+        if self.const.size:
+            qf[:, self.const] = traj.q[0, self.const]
+            dq[:, self.const] = 0.0
+            ddq[:, self.const] = 0.0
         s = slice(lo_full - lo, hi_full - lo)
         return qf[s], dq[s], ddq[s]
 
@@ -619,6 +630,8 @@ def iter_chunks(
         (+ ``PAYLOAD_NAMES``).
     """
     opts = AssemblyOptions() if options is None else options
+    if opts.drop_saturated:
+        raise ValueError("AssemblyOptions.drop_saturated: rows are removed by assemble(), not by iter_chunks()")
     names, nb, npay = _names(model, opts.payload_columns)
     ev = None
     prog = _sample_progress(progress, trajectories)
@@ -706,19 +719,51 @@ def assemble(
     E = np.concatenate(Es)
     J = np.concatenate(Js)
     S = np.concatenate(Ss).astype(int)
-    system = ObservationSystem(W=np.concatenate(Ws, axis=0), Y=np.concatenate(Ys), names=names, joint=J)
+    Wall, Yall, Kall = np.concatenate(Ws, axis=0), np.concatenate(Ys), np.concatenate(Ks).astype(int)
+    sat_removed: list[tuple[int, ...]] = [()] * len(trajs)
+    if opts.drop_saturated:
+        drop = _saturated_rows(trajs, settings, E, J, S, opts)
+        sat_removed = [tuple(int(np.sum(drop & (ex == E) & (j == J))) for j in range(n)) for ex in range(len(trajs))]
+        Wall, Yall, Kall, E, J, S = (a[~drop] for a in (Wall, Yall, Kall, E, J, S))
+    system = ObservationSystem(W=Wall, Y=Yall, names=names, joint=J)
     reports = []
     for ex, traj in enumerate(trajs):
         rows = tuple(int(np.sum((ex == E) & (j == J))) for j in range(n))
         reports.append(ExperimentReport(index=ex, source=traj.source, loaded=traj.loaded, n_samples=traj.n_samples,
                                         settings=settings[ex], rows_per_joint=rows,
-                                        removed_low_velocity=tuple(int(x) for x in removed[ex])))
+                                        removed_low_velocity=tuple(int(x) for x in removed[ex]),
+                                        removed_saturated=sat_removed[ex]))
     row_time = np.empty(S.size)
     for ex, traj in enumerate(trajs):
         m = ex == E
         row_time[m] = np.asarray(traj.t, float)[S[m]]
     return Assembly(system=system, experiments=tuple(reports), row_experiment=E, row_time=row_time,
-                    row_sample=S, row_index=np.concatenate(Ks).astype(int), options=opts, signals=tuple(signals))
+                    row_sample=S, row_index=Kall, options=opts, signals=tuple(signals))
+
+
+def _saturated_rows(trajs: Sequence[Trajectory], settings: Sequence[FilterSettings], E: np.ndarray, J: np.ndarray,
+                    S: np.ndarray, opts: AssemblyOptions) -> np.ndarray:
+    """Rows to remove with ``drop_saturated``: row r (experiment E, joint J, full-rate sample S) when more than
+    ``slow_weight_tol`` of its decimation filter's absolute weights fall on saturated samples of ``tau_J`` (of any
+    joint's torque with ``saturated_all_joints``)."""
+    drop = np.zeros(E.size, bool)
+    for ex, (traj, st) in enumerate(zip(trajs, settings)):
+        sat = saturation_mask(traj.tau, opts.tau_limits)
+        if not sat.any():
+            continue
+        h = np.ones(1)
+        if st.n_d > 1:
+            h = np.abs(decimation_filter(st.n_d, ftype="fir", cutoff_ratio=st.cutoff_ratio))
+            h = h / h.sum()
+        bad = np.zeros(sat.shape, bool)
+        for j in np.flatnonzero(sat.any(axis=0)):
+            expo = np.convolve(sat[:, j].astype(float), h)[(h.size - 1) // 2:][:traj.n_samples]
+            bad[:, j] = expo > opts.slow_weight_tol
+        if opts.saturated_all_joints:
+            bad[:] = bad.any(axis=1, keepdims=True)
+        m = ex == E
+        drop[m] = bad[S[m], J[m]]
+    return drop
 
 
 def merge_metric_basis(assemblies: Iterable[Assembly]) -> dict[str, Any]:

@@ -91,6 +91,15 @@ class AssemblyOptions:
     #: A row is removed when more than this share of its decimation filter's absolute weights fall on
     #: slow samples (see ``min_velocity``).
     slow_weight_tol: float = 0.01
+    #: Remove the rows of joint j that depend on saturated samples of ``tau_j``
+    #: (:func:`~symoro_gen.preprocessing.motion.saturation_mask`: at ``tau_limits`` or in plateaus at the
+    #: column's extreme), with the weight rule of ``min_velocity`` (``slow_weight_tol``); :func:`assemble` only.
+    drop_saturated: bool = False
+    #: With ``drop_saturated``: remove the rows of every joint at such samples (the diagnosis needs every joint
+    #: on every sample), not only those of the saturated joint.
+    saturated_all_joints: bool = False
+    #: Torque limit per joint [N m or N] (the robot file's ``[limits] tau_max``) for ``drop_saturated``.
+    tau_limits: tuple[float, ...] | None = None
     #: Use the trajectory's recorded ``dq``/``ddq`` (and the raw ``q``) instead of filtering ``q``.
     use_recorded_derivatives: bool = False
     #: Keep, per experiment, the full-rate filtered ``q, dq, ddq``, the raw torque and the decimated
@@ -131,6 +140,11 @@ class AssemblyOptions:
         for name in ("n_d", "chunk_samples", "blas_threads", "edge_samples"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, int(getattr(self, name)))
+        if self.tau_limits is not None:
+            lim = tuple(float(x) for x in np.asarray(self.tau_limits, float).reshape(-1))
+            if not all(math.isfinite(x) and x > 0 for x in lim):
+                raise ValueError(f"AssemblyOptions.tau_limits must be positive and finite, got {self.tau_limits!r}")
+            object.__setattr__(self, "tau_limits", lim)
         object.__setattr__(self, "order", int(self.order))
         object.__setattr__(self, "regressor_batch", int(self.regressor_batch))
         object.__setattr__(self, "slow_weight_tol", float(self.slow_weight_tol))

@@ -18,7 +18,7 @@ __all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "d
 
 
 def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = False) -> None:
-    """Add ``--format --columns --dt --tau-scale --deg --resample --max-gap --drop-bad-rows`` (and,
+    """Add ``--format --columns --dt --dt-overrides-time --tau-scale --deg --resample --max-gap --drop-bad-rows`` (and,
     with ``validate_fraction``, ``--validate-fraction``) to a command's parser."""
     g = p.add_argument_group("reading the DATA files (docs/data-files.md)")
     g.add_argument("--format", metavar="FILE.toml", help="a log format file with the keys below (options given "
@@ -26,10 +26,14 @@ def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = Fa
     g.add_argument("--columns", metavar="SPEC", help="which columns are what: t=0,q=1:7,tau=13:19 (0-based, "
                    "Python slices) or q=q_0:q_6,tau=tau_0:tau_6 (header names, inclusive); optional dq=, ddq=, "
                    "q_link= (link-side position); in .npz/.mat array names, nested structs dotted (q=rec.pos)")
-    g.add_argument("--dt", type=float, metavar="SECONDS", help="sampling period when the file has no time column")
+    g.add_argument("--dt", type=float, metavar="SECONDS", help="sampling period when the file has no time column "
+                   "(a file with a time column and --dt is an error unless --dt-overrides-time)")
+    g.add_argument("--dt-overrides-time", action="store_true", default=None,
+                   help="with --dt: ignore the files' time column and use --dt as the time base")
     g.add_argument("--tau-scale", metavar="V[,V...]", help="factor(s) turning the logged torque signal into N m "
                    "(one per joint or one for all), e.g. current x torque constant x ratio")
-    g.add_argument("--deg", action="store_true", default=None, help="positions are logged in degrees")
+    g.add_argument("--deg", action="store_true", default=None, help="positions of the revolute joints are logged "
+                   "in degrees (converted to rad; prismatic joints stay in m, the robot file gives the joint types)")
     g.add_argument("--resample", action="store_true", default=None,
                    help="resample irregular time stamps on a uniform grid at the median step (cubic for q, linear "
                         "for the rest); steps longer than --max-gap split the file into experiments")
@@ -48,7 +52,8 @@ def format_from_args(args) -> LogFormat:
     return make_format(columns=getattr(args, "columns", None), dt=getattr(args, "dt", None),
                        tau_scale=getattr(args, "tau_scale", None), deg=getattr(args, "deg", None),
                        resample=getattr(args, "resample", None), max_gap=getattr(args, "max_gap", None),
-                       drop_bad_rows=getattr(args, "drop_bad_rows", None), format_file=getattr(args, "format", None))
+                       drop_bad_rows=getattr(args, "drop_bad_rows", None), format_file=getattr(args, "format", None),
+                       dt_overrides_time=getattr(args, "dt_overrides_time", None))
 
 
 def load_data(args, paths: Sequence, robot, *, loaded: bool = False

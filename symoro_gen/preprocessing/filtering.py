@@ -22,8 +22,11 @@ identification of robots with power model", ICRA) and the two papers of the proj
 
 ``f_dyn`` is given by the caller (``dynamics_bandwidth_hz``) or estimated from the data as the
 frequency below which ``energy_fraction`` (default 99.9 %) of the energy of the detrended joint
-positions lies, maximum over joints, floored at ``min_bandwidth_hz`` (default 1 Hz: closed-loop
-position bandwidths of robots are rarely lower). Every choice is overridable and reported in a
+positions lies, maximum over the joints that move, floored at ``min_bandwidth_hz`` (default 1 Hz:
+closed-loop position bandwidths of robots are rarely lower). A joint whose motion is at the noise
+level (:func:`~symoro_gen.preprocessing.motion.noise_level_joints`: position RMS below 30 x the noise
+estimated from its second differences) is left out: its spectrum is the noise's, flat up to the
+Nyquist frequency, and would set the cut-off there (no low-pass, no decimation) for every joint. Every choice is overridable and reported in a
 :class:`FilterSettings` (``summary()`` prints the rule and the numbers).
 
 Two decimation filters are offered (both zero-phase):
@@ -41,6 +44,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+from collections.abc import Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -49,11 +53,14 @@ from numpy.lib.stride_tricks import as_strided
 from scipy import signal
 
 from ..errors import DataFileError, Problem
+from .motion import noise_level_joints
 
 __all__ = [
     "FilterSettings",
     "choose_filter_settings",
     "estimate_dynamics_bandwidth",
+    "bandwidth_from_power",
+    "still_note",
     "lowpass_positions",
     "differentiate",
     "filter_and_differentiate",
@@ -139,8 +146,9 @@ class FilterSettings:
 # rules
 # ---------------------------------------------------------------------------------------------
 def estimate_dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999,
-                                min_bandwidth_hz: float = 1.0, max_segment: int = 2 ** 16) -> float:
-    """Frequency below which ``energy_fraction`` of the position energy lies (max over joints).
+                                min_bandwidth_hz: float = 1.0, max_segment: int = 2 ** 16,
+                                skip: Sequence[int] | None = None) -> float:
+    """Frequency below which ``energy_fraction`` of the position energy lies (max over the joints that move).
 
     Parameters
     ----------
@@ -154,6 +162,9 @@ def estimate_dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999,
         Floor of the result [Hz].
     max_segment : int
         Longer recordings are analysed by Welch's method with segments of this length.
+    skip : sequence of int, optional
+        0-based joints left out; default the joints whose motion is at the noise level
+        (:func:`~symoro_gen.preprocessing.motion.noise_level_joints`).
 
     Returns
     -------
@@ -186,15 +197,31 @@ def estimate_dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999,
             buf *= w
             X = np.fft.rfft(buf, axis=1)
             P += (X.real ** 2 + X.imag ** 2).T
+    left_out = noise_level_joints(q) if skip is None else tuple(skip)
+    return bandwidth_from_power(P, f, fs, energy_fraction=energy_fraction, min_bandwidth_hz=min_bandwidth_hz,
+                                skip=left_out)
+
+
+def bandwidth_from_power(P: np.ndarray, f: np.ndarray, fs: float, *, energy_fraction: float,
+                         min_bandwidth_hz: float, skip: Sequence[int] = ()) -> float:
+    """The rule's ``f_dyn`` from position power spectra ``P`` (frequencies ``f``, one column per joint): the
+    largest frequency below which ``energy_fraction`` of a joint's energy lies, over the joints not in
+    ``skip``, within ``[min_bandwidth_hz, fs / 2]``."""
     best = 0.0
     tot = P.sum(axis=0)
-    for j in range(q.shape[1]):
-        if tot[j] <= 0:
+    for j in range(P.shape[1]):
+        if tot[j] <= 0 or j in skip:
             continue
         c = np.cumsum(P[:, j]) / tot[j]
         k = min(int(np.searchsorted(c, energy_fraction)), f.size - 1)
         best = max(best, float(f[k]))
     return float(min(max(best, min_bandwidth_hz), fs / 2.0))
+
+
+def still_note(joints: Sequence[int]) -> str:
+    """The :class:`FilterSettings` note naming the joints (0-based) left out of ``f_dyn``."""
+    return (f"f_dyn: joint(s) {', '.join(str(j + 1) for j in joints)} left out: motion at the noise level "
+            "(position RMS below 30 x the noise of its second differences)")
 
 
 def butterworth_settle_samples(fs: float, cutoff_hz: float, order: int = 4, *, rel_tol: float = 1e-10) -> int:
@@ -272,11 +299,14 @@ def choose_filter_settings(
     estimated = False
     if dynamics_bandwidth_hz is None:
         if q is not None and (cutoff_hz is None or n_d is None):
+            still = noise_level_joints(q)
             f_dyn = estimate_dynamics_bandwidth(q, fs, energy_fraction=energy_fraction,
-                                                min_bandwidth_hz=min_bandwidth_hz)
+                                                min_bandwidth_hz=min_bandwidth_hz, skip=still)
             estimated = True
             notes.append(f"f_dyn: {100 * energy_fraction:g} % of the position energy lies below it "
                          f"(floor {min_bandwidth_hz:g} Hz)")
+            if still:
+                notes.append(still_note(still))
         elif cutoff_hz is not None:
             f_dyn = cutoff_hz / cutoff_factor
             notes.append("f_dyn taken as cutoff / cutoff_factor (no data to estimate it)")

@@ -19,6 +19,7 @@ import html
 import json
 import os
 import subprocess
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
@@ -31,12 +32,14 @@ from ..description.model import RobotDescription
 from ..errors import ModelError, OptionError, SymoroError
 from ..loader import REPO_ROOT, model_for
 from ..model import IdentificationModel
-from ..preprocessing.readers import LoadReport, LogFormat, read_recordings
+from ..preprocessing.motion import hold_still, noise_level_joints, saturation_warnings, still_warnings
+from ..preprocessing.readers import DataWarning, LoadReport, LogFormat, read_recordings
 from ..preprocessing.trajectory import Trajectory
 from ..report.plots import require_matplotlib
 
 __all__ = ["SCHEMA_VERSION", "DataLike", "Options", "Results", "as_trajectories", "check_option_names", "listed",
-           "file_sha256", "package_commit", "provenance", "resolve_robot"]
+           "file_sha256", "package_commit", "provenance", "resolve_robot", "recording_warnings", "held_still",
+           "torque_limits"]
 
 #: version of the JSON written by the commands and returned by ``Results.to_dict()`` (docs/json-output.md):
 #: 2 added ``schema_version`` and ``provenance``
@@ -224,6 +227,33 @@ def as_trajectories(data, fmt: LogFormat | None, robot, *, loaded: bool = False
             trajs.append(tr)
             reports.append(_in_memory_report(tr))
     return tuple(trajs), tuple(reports)
+
+
+def torque_limits(robot) -> tuple[float, ...] | None:
+    """The robot file's ``[limits] tau_max`` (one per joint of the model), or None."""
+    lim = getattr(robot, "limits", None)
+    tau_max = getattr(lim, "tau_max", None) if lim is not None else None
+    return tuple(float(x) for x in tau_max) if tau_max else None
+
+
+def recording_warnings(robot, trajectories: Sequence[Trajectory], *, held: bool, dropped: bool,
+                       unexcited_option: bool = True) -> tuple[str, ...]:
+    """The warnings on recordings a workflow identifies from: joints that move at the noise level and torques at
+    their limit (:mod:`symoro_gen.preprocessing.motion`), each naming the file, the joint and the option that
+    fixes it (``held``: ``--drop-unexcited`` given; ``dropped``: ``--drop-saturated`` given;
+    ``unexcited_option`` False: the command has no ``--drop-unexcited``). Each is also
+    issued as a :class:`~symoro_gen.preprocessing.readers.DataWarning` (printed by the command line)."""
+    msgs = (*still_warnings(trajectories, held=held, option=unexcited_option),
+            *saturation_warnings(trajectories, torque_limits(robot), dropped=dropped))
+    for m in msgs:
+        warnings.warn(m, DataWarning, stacklevel=3)
+    return msgs
+
+
+def held_still(trajectories: Sequence[Trajectory]) -> tuple[Trajectory, ...]:
+    """The recordings with every joint that moves at the noise level held still
+    (:func:`~symoro_gen.preprocessing.motion.hold_still`: ``--drop-unexcited``)."""
+    return tuple(hold_still(tr, noise_level_joints(tr.q)) for tr in trajectories)
 
 
 def _group(trajs: Sequence[Trajectory], reps: Sequence[LoadReport]) -> list[list[Trajectory]]:

@@ -33,7 +33,18 @@ from ..observations.options import AssemblyOptions
 from ..preprocessing.cli import data_notes, data_text
 from ..preprocessing.readers import LoadReport, LogFormat
 from ..report import Figure, require_matplotlib
-from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, listed, provenance, resolve_robot
+from .base import (
+    SCHEMA_VERSION,
+    DataLike,
+    Options,
+    Results,
+    as_trajectories,
+    listed,
+    provenance,
+    recording_warnings,
+    resolve_robot,
+    torque_limits,
+)
 from .identify import check_payload
 from .reporting import ReportContent, write_report
 
@@ -68,6 +79,9 @@ class DiagnoseOptions(Options):
         Seed of the placebo candidates.
     payload : mapping of str to float
         Known payload parameters (``{"M8": 4.6136}``); needs ``loaded`` recordings.
+    drop_saturated : bool
+        Leave out the rows of each joint whose torque is at its limit (``[limits] tau_max`` of the robot file,
+        or plateaus at the column's extreme: :func:`~symoro_gen.preprocessing.motion.saturation_mask`).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
     """
@@ -82,6 +96,7 @@ class DiagnoseOptions(Options):
     seed: int = 0
     payload: Mapping[str, float] = field(default_factory=dict)
     data_format: LogFormat = field(default_factory=LogFormat)
+    drop_saturated: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -110,9 +125,12 @@ class DiagnoseOptions(Options):
         return DiagnoseSettings(method=self.method, candidates=kinds, significance=self.significance,
                                 max_effects=self.max_effects, holdout=self.holdout)
 
-    def assembly(self) -> AssemblyOptions:
-        """The assembly's filter settings (``cutoff``, ``decimate``; the rest by the papers' rules)."""
-        return AssemblyOptions(cutoff_hz=self.cutoff, n_d=self.decimate)
+    def assembly(self, tau_limits: tuple[float, ...] | None = None) -> AssemblyOptions:
+        """The assembly's filter settings (``cutoff``, ``decimate``; the rest by the papers' rules) and row
+        selection (``drop_saturated`` with the robot's torque limits ``tau_limits``: the samples where a torque is
+        saturated, every joint's rows, since the loop needs every joint on every sample)."""
+        return AssemblyOptions(cutoff_hz=self.cutoff, n_d=self.decimate, drop_saturated=self.drop_saturated,
+                               saturated_all_joints=True, tau_limits=tau_limits)
 
 
 def _names(items: Sequence[Any]) -> list[str]:
@@ -253,11 +271,14 @@ def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> Diag
     if known and not loaded:
         raise IdentificationError("--payload needs recordings with the payload: give them with --loaded")
     refuse_still_joints(ident)
+    notes = recording_warnings(robot, (*ident, *loaded), held=False, dropped=opts.drop_saturated,
+                               unexcited_option=False)
     valid, rep_v = as_trajectories(list(validate), opts.data_format, robot) if validate else ((), ())
     reports += rep_v
     residual = run_loop(model, ident, opts.settings(), validation=valid if validate else None,
                         loaded=loaded if loaded_data else None, payload=known,
-                        rng=np.random.default_rng(opts.seed), assembly=opts.assembly())
+                        rng=np.random.default_rng(opts.seed), assembly=opts.assembly(torque_limits(robot)))
+    residual = replace(residual, warnings=(*notes, *residual.warnings))
     return DiagnoseResults(robot=robot, model=model, options=opts, residual=residual, data=data,
                            loaded=loaded_data, validate=validate, reports=tuple(reports),
                            inputs=(*data, *loaded_data, *validate))

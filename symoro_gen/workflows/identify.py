@@ -43,7 +43,19 @@ from ..preprocessing.cli import data_text
 from ..preprocessing.readers import LoadReport, LogFormat
 from ..preprocessing.trajectory import hold_back
 from ..simulate.closed_loop import PIDGains
-from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, listed, provenance, resolve_robot
+from .base import (
+    SCHEMA_VERSION,
+    DataLike,
+    Options,
+    Results,
+    as_trajectories,
+    held_still,
+    listed,
+    provenance,
+    recording_warnings,
+    resolve_robot,
+    torque_limits,
+)
 from .reporting import ReportContent, build_report, write_report
 
 __all__ = ["IdentifyOptions", "IdentifyResults", "check_payload", "identify"]
@@ -74,7 +86,11 @@ class IdentifyOptions(Options):
     min_velocity : float, optional
         Drop identification rows depending on samples slower than this [rad/s].
     drop_unexcited : bool
-        Leave out the parameters the data do not excite instead of stopping.
+        Leave out the parameters the data do not excite instead of stopping; a joint whose motion is at the
+        noise level is held still first (its own parameters then have zero columns).
+    drop_saturated : bool
+        Leave out the rows of each joint whose torque is at its limit (``[limits] tau_max`` of the robot file,
+        or plateaus at the column's extreme: :func:`~symoro_gen.preprocessing.motion.saturation_mask`).
     reference : path, optional
         Published base-parameter table (CSV) to compare with.
     kp, kd, ki, bandwidth, max_iter, start
@@ -101,6 +117,7 @@ class IdentifyOptions(Options):
     decimate: int | None = None
     min_velocity: float | None = None
     drop_unexcited: bool = False
+    drop_saturated: bool = False
     reference: str | os.PathLike[str] | None = None
     kp: Sequence[float] | None = None
     kd: Sequence[float] | None = None
@@ -304,8 +321,12 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     known = check_payload(opts.payload, model.PAYLOAD_NAMES)
     if (opts.gains or known) and not loaded:
         raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
+    notes = recording_warnings(robot, (*unloaded, *loaded), held=opts.drop_unexcited, dropped=opts.drop_saturated)
+    if opts.drop_unexcited:  # a joint moving at the noise level is still: its own columns become zero
+        unloaded, loaded = held_still(unloaded), held_still(loaded)
     # min_velocity (row selection) applies to the identification rows only; validation uses every sample
-    asm_opts = AssemblyOptions(cutoff_hz=opts.cutoff, n_d=opts.decimate, min_velocity=opts.min_velocity)
+    asm_opts = AssemblyOptions(cutoff_hz=opts.cutoff, n_d=opts.decimate, min_velocity=opts.min_velocity,
+                               drop_saturated=opts.drop_saturated, tau_limits=torque_limits(robot))
     asm_u = assemble(model, unloaded, replace(asm_opts, payload_columns=False))
     asm_l = assemble(model, loaded, replace(asm_opts, payload_columns=True)) if loaded else None
     # a joint that stands still leaves columns of W zero: an error naming the files, or drop_unexcited
@@ -328,6 +349,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     else:
         res = fit(sys_u, method=opts.method, essential=opts.essential, r_sigma=opts.r_sigma)
     res = with_unexcited(res, unexcited).with_raw_error(model, *[a for a in (asm_u, asm_l) if a is not None])
+    res = replace(res, warnings=(*notes, *res.warnings))
     phys = res_u = None
     if opts.physical:
         phys, res_u, res = _physical(opts, robot, model, res, sys_u, sys_l, known, asm_u, asm_l)

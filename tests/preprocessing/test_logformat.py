@@ -32,6 +32,14 @@ DT = 0.002
 FINE = 4  # simulation grid: DT / FINE, so jittered time stamps hit exact samples
 
 
+def _revolute_deg(q):
+    """Positions as a log in degrees has them: the revolute joints in degrees, the SCARA's prismatic joint 3 in m
+    (``--deg`` converts the revolute joints only)."""
+    out = np.array(q, float)
+    out[:, [0, 1, 3]] = np.rad2deg(out[:, [0, 1, 3]])
+    return out
+
+
 @pytest.fixture(scope="module")
 def truth():
     """SCARA, a 12 s exciting motion simulated on a fine grid (exact torques, sensor noise 1 % of the
@@ -117,7 +125,7 @@ def test_named_ranges_degrees_and_currents(truth, clean, tmp_path):
     """A 'currents' log: positions in degrees, tau logged as currents i = tau / k (k per joint)."""
     t, q, tau = _uniform(truth)
     k = np.array([2.5, 4.0, 0.5, 0.8])
-    path = _csv(tmp_path / "cur.csv", t, np.rad2deg(q), tau / k)
+    path = _csv(tmp_path / "cur.csv", t, _revolute_deg(q), tau / k)
     fmt = make_format(columns="t=t,q=q1:q4,tau=tau1:tau4", deg=True, tau_scale=",".join(map(str, k)))
     trajs, rep = load_log(path, fmt, robot=truth["robot"])
     np.testing.assert_allclose(trajs[0].tau, tau, rtol=1e-8, atol=1e-9)
@@ -178,7 +186,7 @@ def test_malformed_rows(truth, clean, tmp_path):
 def test_nested_mat_struct(truth, clean, tmp_path):
     t, q, tau = _uniform(truth)
     path = tmp_path / "rec.mat"
-    scipy.io.savemat(path, {"rec": {"time": t, "act": {"pos_deg": np.rad2deg(q).T}, "trq": tau}})
+    scipy.io.savemat(path, {"rec": {"time": t, "act": {"pos_deg": _revolute_deg(q).T}, "trq": tau}})
     fmt = make_format(columns="t=rec.time,q=rec.act.pos_deg,tau=rec.trq", deg=True)
     trajs, rep = load_log(str(path), fmt, robot=truth["robot"])
     _same(_fit(truth["model"], trajs), clean)

@@ -87,7 +87,8 @@ def _joint_types(robot) -> list[int] | None:
 
 def load_trajectory(path: PathOrSpec, *, n_joints: int | None = None, columns: Mapping | None = None,
                     dt: float | None = None, loaded: bool | None = None, drive_chain=None, robot=None,
-                    base_dir=None, checks: DataChecks = DEFAULT_CHECKS) -> Trajectory:
+                    base_dir=None, checks: DataChecks = DEFAULT_CHECKS, dt_overrides_time: bool = False
+                    ) -> Trajectory:
     """Read one experiment as it is (the plain reading; see the package docstring for formats and
     :mod:`.plain` for the checks).
 
@@ -102,7 +103,10 @@ def load_trajectory(path: PathOrSpec, *, n_joints: int | None = None, columns: M
         Role (``t q tau dq ddq``) -> column name template with ``{j}`` (the 1-based joint number, e.g.
         ``{"q": "pos_{j}"}``), list of ``n`` names, or for ``"t"`` one name (tables); array key (NPZ/MAT).
     dt : float, optional
-        Sampling period [s] when the data have no time; overrides a time column (with a warning).
+        Sampling period [s] when the data have no time; with a time column an error unless
+        ``dt_overrides_time``.
+    dt_overrides_time : bool
+        ``dt`` replaces the time column (ignored, with a warning).
     loaded : bool, optional
         Payload mounted during this experiment (default: the spec's ``loaded=``, else False).
     drive_chain : DriveChain, optional
@@ -135,7 +139,7 @@ def load_trajectory(path: PathOrSpec, *, n_joints: int | None = None, columns: M
     probs: list[Problem] = []
     raw = _read_columns(spec, n, mapping=columns, selectors=(), dt=dt, probs=probs, strict=True)
     return plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
-                            joint_types=_joint_types(robot), checks=checks)
+                            joint_types=_joint_types(robot), checks=checks, dt_overrides_time=dt_overrides_time)
 
 
 def load_trajectories(paths: Iterable, *, progress=None, **kwargs) -> tuple[Trajectory, ...]:
@@ -203,7 +207,8 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     if fmt.is_plain and stop < 0 and (spec.is_split or not is_parquet(spec.files["file"])):
         probs: list[Problem] = []
         raw = _read_columns(spec, n, mapping=None, selectors=(), dt=dt, probs=probs, strict=True)
-        tr = plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types)
+        tr = plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types,
+                              dt_overrides_time=fmt.dt_overrides_time)
         rep = LoadReport(file=tr.source, rows_read=tr.n_samples, step_from=tr.meta.get("dt_median"),
                          step_jitter=float(tr.meta.get("dt_max_rel_jitter", 0.0)), samples=(tr.n_samples,),
                          options=fmt.options())

@@ -242,6 +242,12 @@ def _lookup(path: str, kind: str, key: str, arrays: dict[str, np.ndarray] | None
 def _read_selected(path: str, kind: str, n: int, selectors: Sequence[tuple[str, str]], dt: float | None,
                    probs: list[Problem]) -> RawColumns:
     out = RawColumns(path, kind)
+    keys = [k for _, k in selectors]
+    for role, key in selectors:
+        if keys.count(key) > 1 and role == next(r for r, k in selectors if k == key):
+            both = [r for r, k in selectors if k == key]
+            probs.append(Problem(path, "", ", ".join(both), f"--columns gives the array {key!r} to "
+                                 f"{' and '.join(both)}: each array holds one signal"))
     if "t" not in dict(selectors) and dt is None:
         probs.append(Problem(path, "", "t", "no time array in --columns (t=...) and no --dt given"))
     N_t = None

@@ -22,9 +22,9 @@ from ...errors import DataFileError, Problem
 __all__ = [
     "ROLES", "JOINT_ROLES", "LOG_ROLES", "POSITION_ROLES", "DEFAULT_KEYS", "CSV_TEMPLATES", "ABSURD_VALUE",
     "MIN_SAMPLES", "BAD_VALUE_HINT", "TIME_HINT", "DROP_HINT", "RESAMPLE_HINT", "DataWarning", "DataChecks",
-    "DEFAULT_CHECKS", "Column", "Table", "RawColumns", "warn_data", "runs", "number_runs", "fmt_ranges",
+    "DEFAULT_CHECKS", "Column", "Table", "RawColumns", "time_conflict", "warn_data", "runs", "number_runs", "fmt_ranges",
     "fmt_names", "open_problem", "not_text_problem", "malformed_problems", "raise_malformed", "resolve_csv_columns",
-    "select_columns", "table_columns", "check_values", "bad_rows", "check_time", "step_regime_changes",
+    "select_columns", "shared_columns", "table_columns", "check_values", "bad_rows", "check_time", "step_regime_changes",
     "unit_checks",
 ]
 
@@ -54,7 +54,7 @@ BAD_VALUE_HINT = ("fix or remove these rows; the command line's --drop-bad-rows 
                   "output)")
 #: hint of the errors about the time column
 TIME_HINT = ("the command line's --resample puts irregular time stamps on a uniform grid (gaps longer than "
-             "--max-gap split the file); --dt SECONDS ignores the time column")
+             "--max-gap split the file); --dt SECONDS --dt-overrides-time ignores the time column")
 DROP_HINT = "give --drop-bad-rows to drop such rows (they are counted in the output)"
 RESAMPLE_HINT = ("give --resample to resample irregular time stamps on a uniform grid (gaps longer than "
                  "--max-gap split the file)")
@@ -64,6 +64,13 @@ REGIME_TOL = 0.2    #: largest accepted relative change of the local sampling pe
 
 class DataWarning(UserWarning):
     """A data value looks wrong (unit mix-up...) but is kept."""
+
+
+def time_conflict(file: str, column: str, dt: float) -> Problem:
+    """The problem of a time column and a sampling period both given (``--dt``, a split spec's ``dt=``/``fs=``)
+    without ``dt_overrides_time``."""
+    return Problem(file, "", column, f"the file has a time column and dt = {dt:g} s is given (--dt, or dt=/fs= of "
+                   "a split spec): leave dt out to use the time column, or give --dt-overrides-time to ignore it")
 
 
 def warn_data(msg: str) -> None:
@@ -392,6 +399,23 @@ def select_columns(table: Table, sel: str, role: str) -> list[int]:
     return list(range(pos[a], pos[b] + 1))
 
 
+def shared_columns(file: str, sel: Mapping[str, Sequence[int]], names: Sequence[str] | None,
+                   given: Mapping[str, str]) -> list[Problem]:
+    """One problem per pair of roles whose ``--columns`` selectors share columns (each column holds one
+    signal: ``q=1:5,tau=1:5`` would identify the positions against themselves)."""
+    out = []
+    roles = list(sel)
+    for i, a in enumerate(roles):
+        for b in roles[i + 1:]:
+            common = sorted(set(sel[a]) & set(sel[b]))
+            if not common:
+                continue
+            shown = ", ".join(names[c] if names else str(c) for c in common[:8]) + (" ..." if len(common) > 8 else "")
+            out.append(Problem(file, "", f"{a}, {b}", f"--columns {a}={given.get(a, '?')} and {b}={given.get(b, '?')} "
+                               f"share column(s) {shown}: each column holds one signal"))
+    return out
+
+
 def table_columns(tab: Table, fmt: str, n: int, *, mapping: Mapping | None, selectors: Sequence[tuple[str, str]],
                   dt: float | None, probs: list[Problem]) -> RawColumns:
     """The roles' columns of a table: by ``--columns`` selectors, else by the header (default names or a
@@ -399,6 +423,7 @@ def table_columns(tab: Table, fmt: str, n: int, *, mapping: Mapping | None, sele
     out = RawColumns(tab.file, fmt, bad_fields=tab.bad_fields)
     if selectors:
         sel = {role: select_columns(tab, s, role) for role, s in selectors}
+        probs += shared_columns(tab.file, sel, tab.names, dict(selectors))
         if "t" not in sel and dt is None:
             probs.append(Problem(tab.file, "", "t", "no time column in --columns (t=...) and no --dt given"))
     else:

@@ -2,7 +2,8 @@
 options), and the :class:`~.options.LoadReport` of what was done.
 
 Order of the operations (each one echoed in the report): rows with bad values dropped
-(``drop_bad_rows``), degrees -> radians, ``tau_scale``, resampling and splitting at gaps, the robot's
+(``drop_bad_rows``), degrees -> radians (``deg``: the revolute joints only, by the robot's joint types; with
+a drive chain every motor-side position, all angles), ``tau_scale``, resampling and splitting at gaps, the robot's
 drive chain (motor -> joint side), then ``q_link`` replaces ``q``.
 """
 from __future__ import annotations
@@ -30,6 +31,7 @@ from .common import (
     check_time,
     fmt_ranges,
     runs,
+    time_conflict,
     unit_checks,
     warn_data,
 )
@@ -49,12 +51,17 @@ def _drop_bad_rows(c: RawColumns, fmt: LogFormat) -> tuple[np.ndarray, tuple[str
     return ~drop, dropped
 
 
-def _convert_units(vals: dict[str, np.ndarray], fmt: LogFormat, n: int, source: str) -> None:
-    """``deg`` (positions to radians) and ``tau_scale`` (the logged signal to N m), in place."""
+def _convert_units(vals: dict[str, np.ndarray], fmt: LogFormat, n: int, source: str,
+                   angular: Sequence[int] | None = None) -> None:
+    """``deg`` (positions to radians: the joints ``angular``, 0-based, default every joint) and
+    ``tau_scale`` (the logged signal to N m), in place."""
     if fmt.deg:
+        js = list(range(n)) if angular is None else list(angular)
         for r in POSITION_ROLES:
-            if r in vals:
-                vals[r] = np.deg2rad(vals[r])
+            if r in vals and js:
+                v = np.array(vals[r], float)
+                v[:, js] = np.deg2rad(v[:, js])
+                vals[r] = v
     if fmt.tau_scale:
         s = np.asarray(fmt.tau_scale, float)
         if s.size not in (1, n):
@@ -87,9 +94,13 @@ def _checked_time(c: RawColumns, t: np.ndarray, keep: np.ndarray, fmt: LogFormat
 
 def _time_base(c: RawColumns, vals: dict[str, np.ndarray], keep: np.ndarray, dt: float | None,
                fmt: LogFormat) -> np.ndarray:
-    """The time of the kept rows: the time column (taken out of ``vals``), or ``dt`` (which overrides it)."""
+    """The time of the kept rows: the time column (taken out of ``vals``), or ``dt``; both given is an error
+    unless ``fmt.dt_overrides_time`` (then the time column is ignored, with a warning)."""
     if "t" in vals and dt is not None:
-        warn_data(f"{c.cols['t'].file}, column {c.cols['t'].names[0]}: ignored, the time base is dt = {dt:g} s")
+        if not fmt.dt_overrides_time:
+            raise DataFileError([time_conflict(c.cols["t"].file, c.cols["t"].names[0], dt)])
+        warn_data(f"{c.cols['t'].file}, column {c.cols['t'].names[0]}: ignored, the time base is dt = {dt:g} s "
+                  "(--dt-overrides-time)")
         vals.pop("t")
     if "t" in vals:
         t = vals.pop("t")[:, 0]
@@ -181,7 +192,10 @@ def log_trajectories(c: RawColumns, fmt: LogFormat, *, n: int, dt: float | None,
     N = c.n_rows
     keep, dropped = _drop_bad_rows(c, fmt)
     vals = {r: col.values[keep] for r, col in c.cols.items()}
-    _convert_units(vals, fmt, n, c.source)
+    # --deg converts angles: the revolute joints (the robot's joint types), or every motor-side position
+    angular = None if joint_types is None or drive_chain is not None else [j for j, sg in enumerate(joint_types)
+                                                                            if sg == 0]
+    _convert_units(vals, fmt, n, c.source, angular)
     t = _time_base(c, vals, keep, dt, fmt)
     d = np.diff(t)
     h = float(np.median(d)) if d.size else float("nan")

@@ -5,6 +5,7 @@ resampling, bad rows), as command-line options or a TOML file with the same keys
     columns = "t=0,q=1:7,tau=13:19"     # 0-based indices, Python slices (headerless files)
     # columns = "q=q_0:q_6,tau=tau_0:tau_6"   # header names; a name range spans the header inclusively
     dt = 0.01                           # sampling period [s] when there is no time column
+    dt_overrides_time = false           # dt replaces a time column (without it, both are an error)
     tau_scale = [0.5, 0.5, 0.3]         # logged signal -> N m (one per joint, or one for all)
     deg = false                         # positions (q, q_link, dq, ddq) logged in degrees
     resample = false                    # irregular time stamps -> uniform grid at the median step
@@ -37,7 +38,7 @@ __all__ = ["LogFormat", "LoadReport", "parse_columns", "read_format_file", "make
 
 #: default ``max_gap`` in median steps
 MAX_GAP_STEPS = 5
-FORMAT_KEYS = ("columns", "dt", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows")
+FORMAT_KEYS = ("columns", "dt", "dt_overrides_time", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows")
 
 
 @dataclass(frozen=True)
@@ -51,11 +52,15 @@ class LogFormat:
         :mod:`~symoro_gen.preprocessing.readers`).
     dt : float or None
         Sampling period [s] when the file has no time column.
+    dt_overrides_time : bool
+        ``dt`` replaces the file's time column (ignored, with a warning); without it a time column and ``dt``
+        both given are an error naming the file and the column.
     tau_scale : tuple of float or None
         Factor(s) turning the logged torque signal into N m (one for all joints, or one per joint);
         applied before the drive chain.
     deg : bool
-        Positions logged in degrees.
+        Revolute joints' positions (and velocities, accelerations) logged in degrees; prismatic joints'
+        stay in metres.
     resample : bool
         Resample irregular time stamps on a uniform grid at the median step (linear interpolation,
         cubic for positions); steps longer than ``max_gap`` split the file.
@@ -76,6 +81,7 @@ class LogFormat:
     max_gap: float | None = None
     drop_bad_rows: bool = False
     origin: str = ""
+    dt_overrides_time: bool = False
 
     @property
     def column_map(self) -> dict[str, str]:
@@ -93,7 +99,7 @@ class LogFormat:
         if self.columns:
             out.append("--columns " + ",".join(f"{k}={v}" for k, v in self.columns))
         if self.dt is not None:
-            out.append(f"--dt {self.dt:g}")
+            out.append(f"--dt {self.dt:g}" + (" --dt-overrides-time" if self.dt_overrides_time else ""))
         if self.tau_scale:
             out.append("--tau-scale " + ",".join(f"{v:g}" for v in self.tau_scale))
         if self.deg:
@@ -172,22 +178,25 @@ def read_format_file(path) -> dict:
         raise DataFileError([Problem(path, "", bad[0], f"unknown key (allowed: {', '.join(FORMAT_KEYS)})")])
     if isinstance(d.get("columns"), dict):
         d["columns"] = ",".join(f"{k}={v}" for k, v in d["columns"].items())
-    for k in ("deg", "resample", "drop_bad_rows"):
+    for k in ("deg", "resample", "drop_bad_rows", "dt_overrides_time"):
         if k in d and not isinstance(d[k], bool):
             raise DataFileError([Problem(path, "", k, f"{d[k]!r}: must be true or false")])
     return d
 
 
 def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=None, max_gap=None,
-                drop_bad_rows=None, format_file=None) -> LogFormat:
+                drop_bad_rows=None, format_file=None, dt_overrides_time=None) -> LogFormat:
     """A :class:`LogFormat` from options (None: not given) over a format file's keys."""
     base = read_format_file(format_file) if format_file else {}
     origin = str(format_file) if format_file else "command line"
     given = dict(columns=columns, dt=dt, tau_scale=tau_scale, deg=deg, resample=resample, max_gap=max_gap,
-                 drop_bad_rows=drop_bad_rows)
+                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time)
     where = {k: ("command line" if v is not None else origin) for k, v in given.items()}
     merged = {k: (v if v is not None else base.get(k)) for k, v in given.items()}
     cols = parse_columns(merged["columns"], where=f"{where['columns']}: columns") if merged["columns"] else ()
+    if merged["dt_overrides_time"] and merged["dt"] is None:
+        raise DataFileError([Problem(where["dt_overrides_time"], "", "dt_overrides_time",
+                                     "--dt-overrides-time replaces the time column by --dt: give --dt SECONDS")])
     return LogFormat(
         columns=cols,
         dt=_positive(merged["dt"], where["dt"], "dt") if merged["dt"] is not None else None,
@@ -198,6 +207,7 @@ def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=Non
         max_gap=_positive(merged["max_gap"], where["max_gap"], "max_gap") if merged["max_gap"] is not None else None,
         drop_bad_rows=bool(merged["drop_bad_rows"]),
         origin=str(format_file or ""),
+        dt_overrides_time=bool(merged["dt_overrides_time"]),
     )
 
 

@@ -26,6 +26,7 @@ from .common import (
     RawColumns,
     check_time,
     check_values,
+    time_conflict,
     unit_checks,
     warn_data,
 )
@@ -39,12 +40,16 @@ def _raise_bad_values(probs: list[Problem]) -> None:
         raise DataFileError(probs, hint=BAD_VALUE_HINT if bad_values else None)
 
 
-def _time_base(raw: RawColumns, dt: float | None, checks: DataChecks, probs: list[Problem]
-               ) -> tuple[np.ndarray, dict, bool]:
-    """(t, time statistics, t made from dt): the time column, checked, or ``dt`` (which overrides it)."""
+def _time_base(raw: RawColumns, dt: float | None, checks: DataChecks, probs: list[Problem],
+               dt_overrides_time: bool = False) -> tuple[np.ndarray, dict, bool]:
+    """(t, time statistics, t made from dt): the time column, checked, or ``dt``; both given is an error
+    unless ``dt_overrides_time`` (then the time column is ignored, with a warning)."""
     N = raw.n_rows
     if "t" in raw.cols and dt is not None:
-        warn_data(f"{raw.cols['t'].file}, column {raw.cols['t'].names[0]}: ignored, the time base is dt = {dt:g} s")
+        if not dt_overrides_time:
+            raise DataFileError([time_conflict(raw.cols["t"].file, raw.cols["t"].names[0], dt)])
+        warn_data(f"{raw.cols['t'].file}, column {raw.cols['t'].names[0]}: ignored, the time base is dt = {dt:g} s "
+                  "(--dt-overrides-time)")
         del raw.cols["t"]
     if "t" in raw.cols:
         t = raw.cols["t"].values[:, 0]
@@ -56,7 +61,7 @@ def _time_base(raw: RawColumns, dt: float | None, checks: DataChecks, probs: lis
 
 def plain_trajectory(raw: RawColumns, probs: list[Problem], *, n: int, dt: float | None, loaded: bool,
                      drive_chain=None, joint_types: Sequence[int] | None = None,
-                     checks: DataChecks = DEFAULT_CHECKS) -> Trajectory:
+                     checks: DataChecks = DEFAULT_CHECKS, dt_overrides_time: bool = False) -> Trajectory:
     """The trajectory of columns read by the plain reading (``probs``: the reader's problems so far).
 
     Raises
@@ -67,7 +72,7 @@ def plain_trajectory(raw: RawColumns, probs: list[Problem], *, n: int, dt: float
     check_values(raw, probs)
     _raise_bad_values(probs)
     N = raw.n_rows
-    t, tinfo, t_from_dt = _time_base(raw, dt, checks, probs)
+    t, tinfo, t_from_dt = _time_base(raw, dt, checks, probs, dt_overrides_time)
     time_probs = bool(probs)
     if checks.min_samples > N:
         probs.append(Problem(raw.source, f"rows 1-{N}", "", f"too short to filter: {N} samples, at least "
