@@ -55,7 +55,7 @@ class FleetTruth:
 
 def simulate_fleet(root, robot: str = "scara", *, n_robots: int = 6, n_days: int = 5, duration: float = 20.0,
                    fs: float = 1000.0, drifts: tuple[Drift, ...] | None = None, friction_scatter: float = 0.03,
-                   inertia_scatter: float = 0.01, noise_tau: float = 0.02, noise_q: float = 1e-5,
+                   inertia_scatter: float = 0.01, noise: tuple[float, float] = (0.02, 1e-5),
                    seed: int = 0, force: bool = False) -> FleetTruth:
     """Write one Parquet log per robot and day and return the truth.
 
@@ -74,8 +74,8 @@ def simulate_fleet(root, robot: str = "scara", *, n_robots: int = 6, n_days: int
     friction_scatter, inertia_scatter : float
         Relative standard deviation of the per-robot scatter of the drive (``IA FV FS OFF``) and link
         inertial parameters around the common set.
-    noise_tau, noise_q : float
-        White noise on the logged torques [N m] and positions [rad].
+    noise : (float, float)
+        Standard deviations of the white noise on the logged torques [N m] and positions [rad].
     seed : int
     force : bool
         Replace existing logs symoro-gen did not write (a log it wrote is replaced without it: see
@@ -121,8 +121,8 @@ def simulate_fleet(root, robot: str = "scara", *, n_robots: int = 6, n_days: int
                 else:
                     cd[names.index(dr.parameter)] *= 1.0 + dr.offset + dr.rate * di
             mo = fourier_trajectory(n, duration, 1.0 / fs, rng, vmax=1.5, amax=8.0)
-            rec = simulate_recording(model, mo.t, mo.q, mo.dq, mo.ddq, cd, gains=gains, noise_q=noise_q,
-                                     noise_tau=noise_tau, rng=rng, source=f"{r}/{d}")
+            rec = simulate_recording(model, mo.t, mo.q, mo.dq, mo.ddq, cd, gains=gains, noise_q=noise[1],
+                                     noise_tau=noise[0], rng=rng, source=f"{r}/{d}")
             path = root / r / f"{d}.parquet"
             write_parquet(path, rec, force=force)
             files.append(path)
