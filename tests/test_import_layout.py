@@ -128,7 +128,6 @@ PRIVATE_IMPORTS_OK: dict[tuple[str, str, str], str] = {
     ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_casadi"): "excite in rework",
     ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_casadi_regressor"): "excite in rework",
     ("symoro_gen.excite_relaxation", "symoro_gen.excite", "_sympy_casadi"): "excite in rework",
-    ("symoro_gen.fleet.worker", "symoro_gen.fleet.kernel", "_column_map"): "fleet in rework",
 }
 
 

@@ -66,7 +66,6 @@ from ..preprocessing.filtering import (
     FilterSettings,
     blas_threads,
     butterworth_settle_samples,
-    choose_filter_settings,
     decimation_filter,
     filter_and_differentiate,
     fir_buffer_length,
@@ -77,6 +76,7 @@ from ..preprocessing.filtering import (
 )
 from ..preprocessing.trajectory import Trajectory
 from ..progress import ProgressArg, ProgressCounter
+from .fused import decimated_rows, filter_settings, fused_applies, model_column_map
 from .options import AssemblyOptions
 from .system import ObservationSystem
 
@@ -276,10 +276,8 @@ def _blocks_with_progress(blocks: Iterable[_Block], n_samples: int, n_d: int,
 
 def observation_settings(trajectory: Trajectory, options: AssemblyOptions | None = None) -> FilterSettings:
     """The :class:`FilterSettings` the assembly uses for ``trajectory`` with ``options``
-    (Gautier's rules for the values left unset)."""
-    opts = AssemblyOptions() if options is None else options
-    fs = 1.0 / trajectory.dt
-    return choose_filter_settings(fs, trajectory.q, **opts.rule_keywords())
+    (Gautier's rules for the values left unset; :func:`~symoro_gen.observations.fused.filter_settings`)."""
+    return filter_settings(trajectory, AssemblyOptions() if options is None else options)
 
 
 def _names(model: IdentificationModel, payload_columns: bool) -> tuple[tuple[str, ...], int, int]:
@@ -397,8 +395,35 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
                        ev: _Evaluator, sink: _SignalSink | None = None) -> Iterator[_Block]:
     """Decimated blocks of one experiment (before velocity removal and regrouping); the filtered
     kinematics go to ``sink`` when given. A generator: the experiment is checked when the first block
-    is asked for."""
-    yield from _ExperimentBlocks(model, traj, st, opts, ev, sink).blocks()
+    is asked for. The engine (:func:`~symoro_gen.observations.fused.decimated_rows`) computes them
+    whenever it covers the experiment (:func:`~symoro_gen.observations.fused.fused_applies`), the blocked
+    path of :class:`_ExperimentBlocks` otherwise."""
+    if fused_applies(traj, st, opts):
+        yield from _fused_blocks(model, traj, st, opts, ev, sink)
+    else:
+        yield from _ExperimentBlocks(model, traj, st, opts, ev, sink).blocks()
+
+
+def _fused_blocks(model: IdentificationModel, traj: Trajectory, st: FilterSettings, opts: AssemblyOptions,
+                  ev: _Evaluator, sink: _SignalSink | None) -> Iterator[_Block]:
+    """The engine's compact rows (distinct columns of ``W``, then ``Y``) expanded into blocks: every
+    structurally non-zero entry of ``W`` is its distinct column times its factor (the columns of the
+    payload, for an experiment without it, stay zero as in the blocked path)."""
+    if traj.n_joints != ev.n:
+        raise ShapeError(f"{traj.source}: trajectory has {traj.n_joints} joints, model "
+                         f"{getattr(model, 'ROBOT', '?')} has {ev.n}")
+    cm = model_column_map(model, ev.n, ev.nb)
+    n, c, U = ev.n, ev.nb + ev.npay, cm.source.size
+    joint, col = np.divmod(cm.entry, cm.nb)
+    dst = joint * c + col                                    # flat (n, c) index of each entry
+    k0 = 0
+    for y in decimated_rows(model, traj, st, opts, cm, sink=None if sink is None else sink.write):
+        k = y.shape[0]
+        Wd = np.zeros((k, n * c))
+        Wd[:, dst] = y[:, cm.column] * cm.scale
+        idx = st.edge_samples + np.arange(k0, k0 + k) * st.n_d
+        k0 += k
+        yield _Block(Wd=Wd.reshape(k, n, c), Yd=np.ascontiguousarray(y[:, U:]), slow=None, idx=idx)
 
 
 class _ExperimentBlocks:
