@@ -248,7 +248,7 @@ def _zero_phase_rows(q: np.ndarray, fs: float, cutoff_hz: float, order: int, sou
     compiled sections filter the channels run together and in place (SciPy filters one channel at a
     time, each a chain of dependent multiply-adds)."""
     k = compiled_helpers()
-    q = np.asarray(q, float)
+    q = np.ascontiguousarray(q, dtype=float)    # the compiled filter reads C-ordered rows (a CSV's q is not)
     padlen = min(q.shape[0] - 1, int(math.ceil(PAD_PERIODS * fs / cutoff_hz)))
     if k is None or q.ndim != 2 or q.shape[0] < min_filter_samples(order) or padlen < 1:
         return np.ascontiguousarray(lowpass_positions(q, fs, cutoff_hz, order, source=source))
