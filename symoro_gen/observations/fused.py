@@ -47,6 +47,7 @@ import math
 import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from scipy import signal
@@ -202,18 +203,18 @@ void symoro_sosfilt_rows(long n, long nch, long nsec, const double *sos, double 
     }
 }
 """
-_KERNELS: list = []
+_KERNELS: list[dict[str, Callable[..., Any]] | None] = []
 _KERNELS_LOCK = threading.Lock()
 
 
-def compiled_helpers() -> dict[str, Callable] | None:
+def compiled_helpers() -> dict[str, Callable[..., Any]] | None:
     """The compiled helpers (:data:`_KERNELS_SOURCE`: the row gather and the multi-channel sections
     filter), built once per machine with the generated models' compiler settings
     (:mod:`symoro_gen.runtime.ccompile`), or None without a C compiler (then ``np.take`` and SciPy's
     ``sosfiltfilt``: the same numbers, slower)."""
     with _KERNELS_LOCK:
         if not _KERNELS:
-            fns: dict[str, Callable] | None = None
+            fns: dict[str, Callable[..., Any]] | None = None
             try:
                 if ctypes.sizeof(ctypes.c_long) != 8:
                     raise OSError("the helpers take 64-bit longs")
@@ -266,7 +267,7 @@ def _zero_phase_rows(q: np.ndarray, fs: float, cutoff_hz: float, order: int, sou
 WELCH_SEGMENT = 2 ** 16
 
 
-def dynamics_bandwidth(q, fs: float, *, energy_fraction: float = 0.999, min_bandwidth_hz: float = 1.0,
+def dynamics_bandwidth(q: np.ndarray, fs: float, *, energy_fraction: float = 0.999, min_bandwidth_hz: float = 1.0,
                        max_segment: int = WELCH_SEGMENT) -> float:
     """:func:`~symoro_gen.preprocessing.filtering.estimate_dynamics_bandwidth` (the filters' rule: the
     frequency below which ``energy_fraction`` of the position energy lies, Welch's average of linearly
@@ -452,7 +453,7 @@ _RAW_PROTO = ctypes.CFUNCTYPE(None, ctypes.c_long, ctypes.c_void_p, ctypes.c_voi
                               ctypes.c_void_p)
 
 
-def _raw_regressor(model: IdentificationModel) -> Callable | None:
+def _raw_regressor(model: IdentificationModel) -> Callable[..., Any] | None:
     """The generated C base regressor of a compiled model called by address (``fn(N, q, dq, ddq, out)``,
     C-ordered float64 buffers), or None (NumPy kernels, a model object of another kind): the kernel then
     goes through ``model.regressor``. The same function as ``model.regressor`` calls, without its
@@ -513,7 +514,7 @@ class _Rows:
         self.Wbuf = np.empty((self.R, n, nb))
         self.src = np.ascontiguousarray(cmap.source, dtype=np.int64)
         kernels = compiled_helpers()
-        self.kernels: dict[str, Callable] = {} if kernels is None else kernels
+        self.kernels: dict[str, Callable[..., Any]] = {} if kernels is None else kernels
         self.raw = _raw_regressor(model)
         self.k_next, self.s_base, self.zpos = 0, -(P - 1), P - 1   # next output; super-row of Z[0]; rows filled
         self.out: list[np.ndarray] = []          # outputs emitted since the last take()
@@ -550,7 +551,7 @@ class _Rows:
             self.Z[:P - 1] = self.Z[zp - (P - 1):zp]
             self.s_base += zp - (P - 1)
             self.zpos = P - 1
-        return self.zpos
+        return int(self.zpos)
 
     def _kinematics(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """Filtered q, dq, ddq around segment samples ``[a, b)`` (settling margins included) and the offset of

@@ -12,6 +12,9 @@ from symoro_gen import load_model
 from symoro_gen.description import load_robot
 from symoro_gen.fleet import Drift, FleetOptions, identify_fleet, open_client, read_log, simulate_fleet, write_parquet
 from symoro_gen.fleet.fused import fold_trajectory
+from symoro_gen.identification import fit_wls
+from symoro_gen.identification.accumulate import accumulate
+from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
 from symoro_gen.observations.fused import (
     WELCH_SEGMENT,
     column_map,
@@ -19,9 +22,6 @@ from symoro_gen.observations.fused import (
     filter_settings,
     fused_applies,
 )
-from symoro_gen.identification import fit_wls
-from symoro_gen.identification.accumulate import accumulate
-from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
 from symoro_gen.preprocessing.drive_chain import joint_to_motor
 from symoro_gen.preprocessing.filtering import choose_filter_settings, estimate_dynamics_bandwidth
 from symoro_gen.preprocessing.readers import make_format

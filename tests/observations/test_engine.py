@@ -133,7 +133,8 @@ def test_engine_rows_equal_an_independent_reference(robot, experiments, kw):
     acc = accumulate(iter_chunks(model, trs, opts, progress=False))
     assert acc.n_rows == Y.size
     for j in range(n):
-        A = np.column_stack([asm.system.W[J == j], Y[J == j]])
+        rows = asm.system.joint == j
+        A = np.column_stack([asm.system.W[rows], Y[rows]])
         G, Gr = acc.R[j].T @ acc.R[j], A.T @ A
         assert np.max(np.abs(G - Gr)) <= 1e-10 * np.max(np.abs(Gr))
 
