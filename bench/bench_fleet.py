@@ -1,6 +1,6 @@
 """Fleet benchmark.
 
-1. The per-chunk kernel (:mod:`symoro_gen.fleet.fused`: filter, evaluate the base regressor in cache,
+1. The per-chunk kernel (:mod:`symoro_gen.fleet.fused` over the engine :mod:`symoro_gen.observations.fused`: filter, evaluate the base regressor in cache,
    low-pass and decimate it with a polyphase FIR carried across batches, fold into the QR factors; the
    full-rate W never exists) on 1 h of 7-joint 1 kHz data (simulated LWR4) in one process, with its
    floors beside it (the generated regressor alone, the FIR's flops at the GEMM rate, reading the log at
@@ -104,9 +104,10 @@ def kernel(path: Path) -> None:
     figure), the filters' rule apart, the floors of that work, and the assembly's streaming accumulator on
     the same data as the reference (same rows: factors equal to 1e-12)."""
     from symoro_gen import load_model
-    from symoro_gen.fleet.fused import column_map, filter_settings, fold_trajectory
+    from symoro_gen.fleet.fused import fold_trajectory
     from symoro_gen.identification.accumulate import accumulate
     from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
+    from symoro_gen.observations.fused import column_map, filter_settings
     from symoro_gen.preprocessing.filtering import blas_threads
     from symoro_gen.preprocessing.trajectory import Trajectory
 
@@ -195,8 +196,9 @@ def throughput(tmp: Path) -> float:
         read_log,
         simulate_fleet,
     )
-    from symoro_gen.fleet.fused import column_map, fold_trajectory
+    from symoro_gen.fleet.fused import fold_trajectory
     from symoro_gen.observations import AssemblyOptions
+    from symoro_gen.observations.fused import column_map
 
     root = tmp / "tp"
     simulate_fleet(root, "lwr4", n_robots=4, n_days=2, duration=60.0, drifts=(), seed=1)

@@ -2,7 +2,7 @@
 
 One task reads one log, band-pass filters and decimates it block by block and folds every block of the
 base regressor into the per-joint QR factors of :class:`~symoro_gen.identification.accumulate.Accumulator`
-(:mod:`symoro_gen.fleet.fused`, the rows of :func:`~symoro_gen.observations.iter_chunks`: the full-rate
+(:mod:`symoro_gen.fleet.fused`, the assembly engine's rows, those of :func:`~symoro_gen.observations.iter_chunks`: the full-rate
 ``W`` of a whole log never exists; memory is the log's ``t, q, tau`` plus one Butterworth block of
 ``AssemblyOptions.chunk_samples`` or 64k samples, and ~2 MB of regressor buffers).
 Two partial results merge exactly: the factor of ``[R_a; R_b]`` is the factor of all the rows of both
@@ -21,12 +21,12 @@ from ..identification.accumulate import Accumulator
 from ..loader import load_model
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
+from ..observations.fused import model_column_map
 from ..preprocessing.filtering import blas_threads
-from . import fused
 from .files import LogFile, read_experiments
-from .fused import ColumnMap, fold_trajectories
+from .fused import fold_trajectories
 
-__all__ = ["Partial", "column_map", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
+__all__ = ["Partial", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,24 +51,13 @@ class Partial:
     skipped: tuple[tuple[str, str], ...] = ()
 
 
-_CMAPS: dict[int, tuple[IdentificationModel, ColumnMap]] = {}
-
-
-def column_map(model: IdentificationModel) -> ColumnMap:
-    """The model's :func:`~symoro_gen.fleet.fused.column_map`, once per model object and process."""
-    hit = _CMAPS.get(id(model))
-    if hit is None or hit[0] is not model:
-        hit = _CMAPS[id(model)] = (model, fused.column_map(model, int(model.N_JOINTS), len(model.BASE_NAMES)))
-    return hit[1]
-
-
 def resolve_model(ref) -> IdentificationModel:
     """A model from what a task received: a name or path, or the model.
 
     A name or path goes through :func:`~symoro_gen.loader.load_model` on every call: its import is kept
     per process under the package's path *and content hash* (0.35 ms when cached), so a worker that lives
     on while ``generated/<robot>/`` is regenerated picks up the new model instead of a stale one; the
-    column map follows the module object (:func:`column_map`).
+    column map follows the module object (:func:`~symoro_gen.observations.fused.model_column_map`).
     """
     if isinstance(ref, (str, os.PathLike)):
         return load_model(os.fspath(ref))
@@ -137,7 +126,7 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
     opts = AssemblyOptions(keep_signals=False) if options is None else options
     try:
         trajs = read_experiments(log.path, int(model.N_JOINTS), start=log.start, stop=log.stop, **(load_kw or {}))
-        acc = fold_trajectories(model, trajs, opts, cmap=column_map(model))
+        acc = fold_trajectories(model, trajs, opts, cmap=model_column_map(model))
     except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
         msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         if log.path not in msg:

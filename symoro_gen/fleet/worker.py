@@ -9,7 +9,8 @@ import ctypes
 import os
 import sys
 
-from .kernel import column_map, resolve_model
+from ..observations.fused import model_column_map
+from .kernel import resolve_model
 
 try:  # the fleet extra; without it identify_fleet raises MissingDependencyError before any plugin is made
     from distributed.diagnostics.plugin import WorkerPlugin as _WorkerPlugin
@@ -69,7 +70,7 @@ class FleetWorkerSetup(_WorkerPlugin):
             self.malloc_tuned = tune_malloc()
         if isinstance(self.model_ref, (str, os.PathLike)):
             try:
-                column_map(resolve_model(self.model_ref))
+                model_column_map(resolve_model(self.model_ref))
                 self.preloaded = True
             except Exception:  # noqa: BLE001 - a model missing on this worker is reported by each task
                 pass

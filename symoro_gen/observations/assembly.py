@@ -35,20 +35,26 @@ experiment (:class:`ExperimentSignals`) that the later stages need (diagnosis, r
 never filter again.
 
 :func:`iter_chunks` is the streaming variant: it processes each experiment in blocks of
-samples with overlapping margins (the Butterworth transient, ~10 periods of the cut-off, and the
-FIR half-length ``10 n_d``), so memory stays bounded whatever the recording length, and yields
-:class:`ObservationSystem` chunks (rows grouped per joint within each chunk). With the default FIR
-decimation the rows it yields are those of :func:`assemble` (to ~1e-10 relative at block
-borders, from the truncated Butterworth transient). :func:`assemble` is the concatenation of
-those chunks, regrouped per joint. ``ftype="iir"`` (SciPy's/Matlab's default ``decimate``) needs a
-whole experiment in memory at once.
+samples with overlapping margins (the Butterworth transient, ~10 periods of the cut-off), so memory
+stays bounded whatever the recording length, and yields :class:`ObservationSystem` chunks (rows
+grouped per joint within each chunk). The rows of both come from one engine,
+:func:`~symoro_gen.observations.fused.decimated_rows` (RX-90 paper eq. 14-16: polyphase FIR with state
+across blocks, only the distinct columns of ``W`` filtered, the generated C regressor called in cache; the
+fleet folds the same rows into QR factors), whenever it covers the experiment
+(:func:`~symoro_gen.observations.fused.fused_applies`); the rows are those of one pass over the whole
+experiment to ~1e-10 relative at block borders (the truncated Butterworth transient). What the engine
+does not cover -- ``ftype="iir"`` (SciPy's/Matlab's default ``decimate``, a whole experiment in memory at
+once), ``n_d = 1``, ``min_velocity`` (the rows' exposure to slow samples), recorded derivatives, the
+payload regressor of a loaded experiment -- this module computes by its blocked path (zero-padded
+overlapping buffers with the FIR half-length ``10 n_d`` as margin, dense FIR products, the structurally
+zero columns of ``W`` neither copied nor filtered). :func:`assemble` is the concatenation of the chunks,
+regrouped per joint.
 
-Cost: the columns of ``W`` that are structurally zero (found once per model from random states;
-about half of them, since joint j's row only depends on the links j..n) are neither copied nor
-filtered; the FIR decimation runs as dense matrix products with one OpenBLAS thread by default
-(``blas_threads``). Measured on the shared 2-core machine: one hour of simulated 7-joint data at
-1 kHz (LWR4, 3.6 M samples, 64 base + 10 payload columns, ``n_d = 80``) is assembled in ~18 s
-(~7 s of it in the generated regressor) with ~110 MB above the trajectory itself.
+Cost, measured on the shared 2-core machine (``bench/bench_engine_assembly.py``, load ~8): one hour of
+simulated 7-joint data at 1 kHz (LWR4, 3.6 M samples, 64 base columns, ``n_d = 80``) is assembled by
+:func:`assemble` as ``identify`` calls it (filters' rule, full-rate signals kept) in 8.8 s CPU (12.4 s with
+the blocked path), 1.7x the fleet's kernel on the same log in the same run; streamed
+(:func:`iter_chunks` into an accumulator, bounded memory) in 6.2 s (9.0 s), 1.2x the fleet's kernel.
 """
 from __future__ import annotations
 
@@ -66,7 +72,6 @@ from ..preprocessing.filtering import (
     FilterSettings,
     blas_threads,
     butterworth_settle_samples,
-    choose_filter_settings,
     decimation_filter,
     filter_and_differentiate,
     fir_buffer_length,
@@ -78,6 +83,7 @@ from ..preprocessing.filtering import (
 from ..preprocessing.motion import saturation_mask
 from ..preprocessing.trajectory import Trajectory
 from ..progress import ProgressArg, ProgressCounter
+from .fused import decimated_rows, filter_settings, fused_applies, model_column_map
 from .options import AssemblyOptions
 from .system import ObservationSystem
 
@@ -280,10 +286,8 @@ def _blocks_with_progress(blocks: Iterable[_Block], n_samples: int, n_d: int,
 
 def observation_settings(trajectory: Trajectory, options: AssemblyOptions | None = None) -> FilterSettings:
     """The :class:`FilterSettings` the assembly uses for ``trajectory`` with ``options``
-    (Gautier's rules for the values left unset)."""
-    opts = AssemblyOptions() if options is None else options
-    fs = 1.0 / trajectory.dt
-    return choose_filter_settings(fs, trajectory.q, **opts.rule_keywords())
+    (Gautier's rules for the values left unset; :func:`~symoro_gen.observations.fused.filter_settings`)."""
+    return filter_settings(trajectory, AssemblyOptions() if options is None else options)
 
 
 def _names(model: IdentificationModel, payload_columns: bool) -> tuple[tuple[str, ...], int, int]:
@@ -401,8 +405,35 @@ def _experiment_blocks(model: IdentificationModel, traj: Trajectory, st: FilterS
                        ev: _Evaluator, sink: _SignalSink | None = None) -> Iterator[_Block]:
     """Decimated blocks of one experiment (before velocity removal and regrouping); the filtered
     kinematics go to ``sink`` when given. A generator: the experiment is checked when the first block
-    is asked for."""
-    yield from _ExperimentBlocks(model, traj, st, opts, ev, sink).blocks()
+    is asked for. The engine (:func:`~symoro_gen.observations.fused.decimated_rows`) computes them
+    whenever it covers the experiment (:func:`~symoro_gen.observations.fused.fused_applies`), the blocked
+    path of :class:`_ExperimentBlocks` otherwise."""
+    if fused_applies(traj, st, opts):
+        yield from _fused_blocks(model, traj, st, opts, ev, sink)
+    else:
+        yield from _ExperimentBlocks(model, traj, st, opts, ev, sink).blocks()
+
+
+def _fused_blocks(model: IdentificationModel, traj: Trajectory, st: FilterSettings, opts: AssemblyOptions,
+                  ev: _Evaluator, sink: _SignalSink | None) -> Iterator[_Block]:
+    """The engine's compact rows (distinct columns of ``W``, then ``Y``) expanded into blocks: every
+    structurally non-zero entry of ``W`` is its distinct column times its factor (the columns of the
+    payload, for an experiment without it, stay zero as in the blocked path)."""
+    if traj.n_joints != ev.n:
+        raise ShapeError(f"{traj.source}: trajectory has {traj.n_joints} joints, model "
+                         f"{getattr(model, 'ROBOT', '?')} has {ev.n}")
+    cm = model_column_map(model, ev.n, ev.nb)
+    n, c, U = ev.n, ev.nb + ev.npay, cm.source.size
+    joint, col = np.divmod(cm.entry, cm.nb)
+    dst = joint * c + col                                    # flat (n, c) index of each entry
+    k0 = 0
+    for y in decimated_rows(model, traj, st, opts, cm, sink=None if sink is None else sink.write):
+        k = y.shape[0]
+        Wd = np.zeros((k, n * c))
+        Wd[:, dst] = y[:, cm.column] * cm.scale
+        idx = st.edge_samples + np.arange(k0, k0 + k) * st.n_d
+        k0 += k
+        yield _Block(Wd=Wd.reshape(k, n, c), Yd=np.ascontiguousarray(y[:, U:]), slow=None, idx=idx)
 
 
 class _ExperimentBlocks:

@@ -516,8 +516,9 @@ def test_worker_setup_once_per_worker_process(small_fleet, threads_client):
 def test_worker_model_cache_follows_a_regenerated_package(tmp_path):
     """The per-process model cache is keyed by the package's content: a long-lived worker whose
     generated model is rewritten in place uses the new one (and its own column map), never a stale one."""
-    from symoro_gen.fleet.kernel import column_map, resolve_model
+    from symoro_gen.fleet.kernel import resolve_model
     from symoro_gen.loader import generated_dir
+    from symoro_gen.observations.fused import model_column_map
 
     pkg = tmp_path / "scara"
     shutil.copytree(generated_dir() / "scara", pkg, ignore=shutil.ignore_patterns("__pycache__"))
@@ -526,7 +527,7 @@ def test_worker_model_cache_follows_a_regenerated_package(tmp_path):
     init = pkg / "__init__.py"
     init.write_text(init.read_text() + "\n# regenerated\n")
     m2 = resolve_model(str(pkg))
-    assert m2 is not m1 and column_map(m2) is not column_map(m1)
+    assert m2 is not m1 and model_column_map(m2) is not model_column_map(m1)
     assert resolve_model(str(pkg)) is m2
 
 

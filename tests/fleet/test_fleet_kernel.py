@@ -11,19 +11,19 @@ import pytest
 from symoro_gen import load_model
 from symoro_gen.description import load_robot
 from symoro_gen.fleet import Drift, FleetOptions, identify_fleet, open_client, read_log, simulate_fleet, write_parquet
-from symoro_gen.fleet.fused import (
+from symoro_gen.fleet.fused import fold_trajectory
+from symoro_gen.identification import fit_wls
+from symoro_gen.identification.accumulate import accumulate
+from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
+from symoro_gen.observations.fused import (
     WELCH_SEGMENT,
     column_map,
     dynamics_bandwidth,
     filter_settings,
-    fold_trajectory,
     fused_applies,
 )
-from symoro_gen.identification import fit_wls
-from symoro_gen.identification.accumulate import accumulate
-from symoro_gen.observations import AssemblyOptions, iter_chunks, observation_settings
 from symoro_gen.preprocessing.drive_chain import joint_to_motor
-from symoro_gen.preprocessing.filtering import estimate_dynamics_bandwidth
+from symoro_gen.preprocessing.filtering import choose_filter_settings, estimate_dynamics_bandwidth
 from symoro_gen.preprocessing.readers import make_format
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
@@ -77,10 +77,10 @@ def test_compiled_helpers_and_numpy_scipy_give_identical_factors(monkeypatch):
     together) and their fallbacks without a C compiler (``np.take``, SciPy's ``sosfiltfilt``) give the
     same numbers: bit-identical filtered positions and factors; and an accumulator given to fold into gets
     the merge of its rows and the new ones (same Gram matrix as both experiments folded at once)."""
-    from symoro_gen.fleet import fused
+    from symoro_gen.observations import fused
     from symoro_gen.preprocessing.filtering import lowpass_positions
 
-    if fused._c_kernels() is None:
+    if fused.compiled_helpers() is None:
         pytest.skip("no C compiler here: only the NumPy/SciPy fallbacks can run")
     model = load_model("lwr4")
     tr = _recording("lwr4", 4.1, seed=3)
@@ -116,8 +116,9 @@ def test_filters_rule_on_long_logs_is_the_assemblys(monkeypatch):
     """The fleet's f_dyn (Welch's periodogram with per-half-segment sums, :func:`dynamics_bandwidth`; its
     compiled segment passes and their NumPy fallback) is ``estimate_dynamics_bandwidth``'s on a long
     simulated log (4 energy fractions, f_dyn above the resolution), and the filter settings are
-    ``observation_settings``' (cut-off, n_d, notes)."""
-    from symoro_gen.fleet import fused
+    ``observation_settings``' (cut-off, n_d, notes), which are those of ``choose_filter_settings`` estimating
+    f_dyn itself."""
+    from symoro_gen.observations import fused
 
     rng = np.random.default_rng(5)
     mo = fourier_trajectory(7, 20.0, 1e-3, rng, vmax=1.5, amax=30.0)
@@ -132,6 +133,7 @@ def test_filters_rule_on_long_logs_is_the_assemblys(monkeypatch):
                  AssemblyOptions(keep_signals=False, cutoff_hz=8.0)):
         st = filter_settings(tr, opts)
         assert st == observation_settings(tr, opts) and st.bandwidth_estimated
+        assert st == choose_filter_settings(1.0 / tr.dt, tr.q, **opts.rule_keywords())
 
 
 def test_filters_rule_on_a_long_real_log(shared_data):
@@ -283,3 +285,17 @@ def test_every_qr_fold_and_merge_runs_on_one_blas_thread(monkeypatch):
     finally:
         set_(before)
     assert len(seen) >= 2 and set(seen) == {1}, seen
+
+
+def test_positions_not_c_ordered_give_the_same_factors():
+    """A log whose positions are not C-ordered (a CSV read column by column) gives the factors of the same
+    log C-ordered: the compiled Butterworth sections read rows (before the engine they read the Fortran-ordered
+    buffer as rows and the estimates were hundreds of sigma off)."""
+    model = load_model("scara")
+    tr = _recording("scara", 4.0, seed=21)
+    trF = Trajectory(t=tr.t, q=np.asfortranarray(tr.q), tau=np.asfortranarray(tr.tau), source="F")
+    assert not trF.q.flags.c_contiguous
+    a = fold_trajectory(model, tr, AssemblyOptions(keep_signals=False))
+    b = fold_trajectory(model, trF, AssemblyOptions(keep_signals=False))
+    for Ra, Rb in zip(a.R, b.R):
+        assert np.array_equal(Ra, Rb)
