@@ -13,10 +13,10 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 endif
 
-.PHONY: help install robot robots check-generated test lint bench demo clean
+.PHONY: help install robot robots check-generated test test-slow lint bench demo clean
 
 help:
-	@echo "make demo | make test | make lint | make robot ROBOT=<name> (generate + build) | make robots | make check-generated | make bench"
+	@echo "make demo | make test | make test-slow | make lint | make robot ROBOT=<name> (generate + build) | make robots | make check-generated | make bench"
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -41,8 +41,13 @@ robots: $(STAMP)
 check-generated: $(STAMP)
 	$(PY) -m symoro_gen.emit.check
 
+# the suite without the tests marked slow (many-seed simulations, the loop on real recordings): under 10 min
 test: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto --maxprocesses 4
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto --maxprocesses 4 -m "not slow"
+
+# the tests marked slow (CI runs them after `make test`)
+test-slow: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n auto --maxprocesses 4 -m slow
 
 # ruff (style and likely bugs) and mypy (strict on the core packages), configured in pyproject.toml
 lint: $(STAMP)

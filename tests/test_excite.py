@@ -1,6 +1,7 @@
 """Excitation design: robot-file limits, the trajectory bases, the optimiser
 against random trajectories, limits at every sample of a dense resampling, and the CLI contract
 (CSV readable, and identifying simulated data on it recovers the truth)."""
+import importlib
 import itertools
 import json
 import math
@@ -877,7 +878,8 @@ def test_cli_spline(cli, tmp_path, scara):
 def test_cli_refinement_without_cvxpy(cli, tmp_path, monkeypatch):
     """cvxpy is an extra: without it the default skips the refinement with a note, an explicit --refine is a
     one-line error naming the option, and nothing is written."""
-    import symoro_gen.workflows.excite as ex  # the workflow looks has_cvxpy up there
+    ex = importlib.import_module("symoro_gen.workflows.excite")  # the workflow looks has_cvxpy up there (the
+    # module: `import symoro_gen.workflows.excite as ex` binds the function of the same name)
 
     monkeypatch.setattr(ex, "has_cvxpy", lambda: False)
     csv, js = tmp_path / "t.csv", tmp_path / "t.json"
@@ -892,7 +894,7 @@ def test_cli_refinement_without_cvxpy(cli, tmp_path, monkeypatch):
 def test_cli_plot_without_matplotlib_fails_before_optimising(cli, tmp_path, monkeypatch):
     """matplotlib is an extra: --plot or --report without it is a one-line error naming the extra, said
     before the optimisation (which would run for minutes), with nothing written."""
-    import symoro_gen.workflows.excite as ex  # the workflow looks optimise_excitation up there
+    ex = importlib.import_module("symoro_gen.workflows.excite")  # the workflow looks optimise_excitation up there
 
     def never(*a, **k):
         raise AssertionError("the optimisation ran")
@@ -998,7 +1000,7 @@ def test_the_command_runs_the_quick_effort_unless_told_and_options_override_it(m
     """Without options the command runs ``--effort quick``; ``--effort thorough`` is what the command ran before
     (4 starts, the best of 40 random designs, IPOPT with p = 8 then 64 at most 200 iterations each, 20 SDPs);
     ``--starts``, ``--pool``, ``--max-iter`` and ``--refine`` override the effort's value."""
-    import symoro_gen.workflows.excite as excite_workflow
+    excite_workflow = importlib.import_module("symoro_gen.workflows.excite")
     from symoro_gen.commands.excite import options_from_args
     from symoro_gen.excite import EFFORTS, ExciteSettings
 

@@ -118,6 +118,7 @@ def test_scara_offset_regroups_with_gravity_symbol_onto_inertial_parameters():
     suppress_health_check=[HealthCheck.too_slow],
     phases=(Phase.explicit, Phase.reuse, Phase.generate),
 )
+@pytest.mark.slow
 @given(text=mdh_robots(2, 6, random_gravity=True), seed=st.integers(0, 2**32 - 1))
 def test_random_robot_relations_are_exact_symbolic_and_keep_inertial_parameters(text, seed):
     robot = parse_robot_text(text, file="random.toml")

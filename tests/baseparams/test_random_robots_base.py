@@ -5,6 +5,7 @@ parameters == standard regressor x standard parameters (with the closed-form rel
 number of base parameters == numeric rank of the standard regressor.
 """
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 
 from symoro_gen.baseparams.regroup import numeric_rank
@@ -21,6 +22,7 @@ def _states(rng, n, N):
     return random_states(rng, N, n)
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=mdh_robots(2, 7))
 def test_pipeline_identities_on_random_robots(text):

@@ -56,6 +56,7 @@ def _effects(d, tau):
     }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["viscous x |tau|", "ripple x |dq|", "constant x step", "coulomb x time",
                                   "inertia x q_other"])
 def test_each_modulated_family_is_found_on_its_joint_with_its_signal(name):
@@ -165,6 +166,7 @@ def test_benjamini_hochberg_matches_the_step_up_definition():
     np.testing.assert_allclose(benjamini_hochberg([0.01, np.nan, 0.04]), [0.02, np.nan, 0.04])
 
 
+@pytest.mark.slow
 def test_selection_frequency_over_time_blocked_folds():
     """A real modulated effect is named in every fold; on clean data nothing is named in any fold."""
     d, sig, y, tau = setup(12, duration=20.0, dt=0.02)

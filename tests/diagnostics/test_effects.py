@@ -54,6 +54,7 @@ def _id(c):
     return f"{c[1]}-{c[0]}-j{'all' if c[2] is None else c[2] + 1}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[_id(c) for c in CASES])
 def test_injected_effect_found_first(case):
     name, kind, joint, params, seed, check = case

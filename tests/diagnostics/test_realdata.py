@@ -34,6 +34,7 @@ def lwr4_report(shared_data):
     return diagnose(symoro_gen.load_model("lwr4"), [tr[0], tr[2]], DiagnoseSettings(method="ols"), validation=[tr[1]])
 
 
+@pytest.mark.slow
 def test_lwr4_loop_runs_and_names_what_it_adds(lwr4_report):
     rep = lwr4_report
     from symoro_gen.diagnostics import KINDS
@@ -79,6 +80,7 @@ def test_tx40_finds_the_coupled_wrist(shared_data):
     assert rep.after_validation_rel_err[5] < rep.before_validation_rel_err[5]
 
 
+@pytest.mark.slow
 def test_lwr4_ten_effects_are_physically_possible(shared_data):
     """With ``max_effects = 10`` the loop used to report a gain of joint 5 of scale -1.10 and a joint-5 delay of
     -0.41 s (a torque-scaling column and the delay's first-order column fitted jointly, far outside the

@@ -395,6 +395,7 @@ def _trend_flags(y, sd, robust):
     return adjust(np.stack([other, pt]), 0.01)[0][1]
 
 
+@pytest.mark.slow
 def test_a_wildly_scattering_robot_no_longer_masks_a_drift():
     """10 robots x 6 days x 20 parameters whose days scatter 1.5x their sigmas. Robot 0's days on parameter 3
     scatter 30x (a faulty log series), robot 1 drifts there by 3 sigmas a day. Pooled over all robots, robot

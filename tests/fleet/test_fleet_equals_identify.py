@@ -125,6 +125,7 @@ def test_the_drifting_unit_of_an_lwr4_fleet_is_flagged(tmp_path, threads_client)
         assert abs(est.values[k] - model.base_parameters(chi)[k]) <= 3 * est.std[k], d
 
 
+@pytest.mark.slow
 def test_no_unit_flagged_in_twenty_clean_fleets(tmp_path, threads_client):
     """No drift, per-unit scatter of a few %: twenty fleets of 4 units x 4 days, none flagged (Holm, 1 %)."""
     flagged = []

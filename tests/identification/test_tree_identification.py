@@ -84,6 +84,7 @@ def test_toy_tree_recording_identified_within_3_sigma():
     assert np.mean(z < 3) > 0.95, f"{np.mean(z < 3):.3f} within 3 sigma: {np.round(z, 1)}"
 
 
+@pytest.mark.slow
 def test_toy_tree_diagnosis_clean_and_with_effects_on_the_branch():
     robot, m, chi, (t, q, dq, ddq), rng = _toy_recording(7, duration=40.0, dt=0.002)
     tau = m.torque(q, dq, ddq, chi)
