@@ -640,6 +640,7 @@ def test_random_designs_are_scaled_into_passive_ranges(basis):
         assert np.all(q[:, 1] - q[:, 0] + 0.1 >= 0.2 - 1e-9) and np.all(q[:, 1] - q[:, 0] + 0.1 <= 0.9 + 1e-9)
 
 
+@pytest.mark.slow
 def test_closed_loop_design_keeps_the_passive_joints_within_their_limits(palletizer):
     """The shipped palletizer's [limits] passive_q_min/passive_q_max (joint 3 in [20, 160] deg, joint 6 in
     [-160, -20]) reach the design through the linear closure: every output sample and a 10x resampling keep
@@ -740,6 +741,7 @@ def test_workspace_heights_and_their_casadi_jacobian_against_the_numeric_transfo
         np.testing.assert_allclose(J[:, :, j], (ws.heights(q + dq) - ws.heights(q - dq)) / 2e-6, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_a_design_keeps_every_frame_origin_above_the_floor(lwr4):
     """A floor at the LWR4's shoulder (z = 0 of its base frame): every output sample and the 10x resampling keep
     every frame origin above it (the independent transforms), through IPOPT, the refinement and the starts;

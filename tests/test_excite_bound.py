@@ -717,6 +717,7 @@ def test_random_cuts_hold_on_designs_sampled_at_100_hz_within_the_bench_toleranc
         assert np.abs(F.numpy(q, dq, ddq).mean(0) / F.scale).max() < tol
 
 
+@pytest.mark.slow
 def test_bench_saves_continues_and_reverifies_a_cut_run(tmp_path):
     """The commands docs/excitation.md gives for the cut runs: ``--save`` writes the cuts and the trajectory atoms,
     ``--start`` continues with the cuts held from round 0, ``--reverify`` re-prices the saved lower-end duals on a

@@ -334,6 +334,7 @@ def test_newton_euler_direct_products_equal_sympy_flatten(monkeypatch, which):
     assert n_direct >= (20 if which == "general" else 1)
 
 
+@pytest.mark.slow
 def test_direct_monomial_products_equal_sympy_mul():
     """Every product of two monomials (numbers incl. 0, 1, -1, 1.0 and floats; symbols with and without
     assumptions; products of up to three factors; non-monomials for the fallback) built by ``_mul`` is

@@ -57,6 +57,7 @@ def test_lwr4_loop_runs_and_names_what_it_adds(lwr4_report):
     assert [e["kind"] for e in d["effects"]] == [e.kind for e in rep.effects]
 
 
+@pytest.mark.slow
 def test_tx40_finds_the_coupled_wrist(shared_data):
     from symoro_gen.diagnostics import DiagnoseSettings, diagnose
     from symoro_gen.loader import model_for

@@ -135,6 +135,7 @@ def test_segments_are_tasks_of_bounded_memory_and_exact(small_fleet, threads_cli
     assert res.days["r00"]["d00"].samples == 4001
 
 
+@pytest.mark.slow
 def test_lost_worker_is_retried_and_result_unchanged(small_fleet, threads_client, tmp_path):
     root, _ = small_fleet
     base = identify_fleet("scara", [root], BY, client=threads_client)
@@ -482,6 +483,7 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
 def test_tune_malloc_stops_page_faults_under_dasks_trim_setting():
     """Under the environment a Dask nanny gives its workers (MALLOC_TRIM_THRESHOLD_=65536), every 4 MB array
