@@ -73,11 +73,12 @@ def check_duration(duration: float, n_joints: int = 7, available: int | None = N
     if need > available:
         longest = max(int(available / demo_memory(1.0, n_joints)), 0)
         raise OptionError(f"--duration {duration:g}: the demo's {N_RECORDINGS} recordings at {1 / DT:.0f} Hz would need "
-                          f"about {_size(need)} of memory, {_size(available)} is available; use --duration {longest} "
+                          f"about {size_text(need)} of memory, {size_text(available)} is available; use --duration {longest} "
                           "or less")
 
 
-def _size(b: float) -> str:
+def size_text(b: float) -> str:
+    """A number of bytes in KiB, MiB, GiB or TiB (3 significant digits)."""
     for unit, k in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
         if b >= k:
             return f"{b / k:.3g} {unit}"

@@ -165,3 +165,22 @@ def test_excite_in_memory_then_written(tmp_path):
         figs = res.plot()
         assert len(figs) == 1 and hasattr(figs[0], "savefig")
         assert "Predicted precision" in res.report(tmp_path / "e.html").read_text()
+
+
+def test_a_design_too_large_for_memory_is_refused_before_any_work(cli, tmp_path):
+    """``--duration 1e7`` or ``--rate 1e9`` would allocate terabytes: a one-line error naming both options, the
+    memory needed and available and the longest duration that fits, before the optimisation, nothing written."""
+    from symoro_gen.workflows.excite import check_size
+
+    for args, words in ((("--duration", "1e7"), "--duration 1e+07 at --rate 100 Hz"),
+                        (("--rate", "1e9"), "--duration 10 at --rate 1e+09 Hz")):
+        r = cli("excite", "scara", "-o", tmp_path / "t.csv", *args, rc=2)
+        assert words in r.err and "of memory" in r.err and "use --duration" in r.err, r.err
+        assert not list(tmp_path.iterdir())
+    opts = symoro_gen.ExciteOptions(duration=10, rate=100)
+    check_size(opts, 4, 20, available=10**12)                 # 1,001 samples: a few MB
+    # 1,001 samples x 4 joints x (20 regressor columns x 8 B + 264 B of q, dq, ddq and the 10x check) = 1.62 MiB;
+    # 1000 KiB hold 602 samples: 6.028 s at 100 Hz
+    with pytest.raises(ExcitationError, match=r"1001 output samples would need about 1\.62 MiB of memory, 1e\+03 KiB "
+                                              r"is available; use --duration 6\.028 or less at this rate"):
+        check_size(opts, 4, 20, available=1000 * 1024)

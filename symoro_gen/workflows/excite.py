@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ..demo import available_memory, size_text
 from ..errors import OptionError
 from ..excite.bases import FourierBasis, PointToPointBasis, SplineBasis
 from ..excite.criterion import predicted_sigma
@@ -39,7 +40,7 @@ from ..model import IdentificationModel
 from ..report.document import write_report_files
 from .base import SCHEMA_VERSION, Options, Results, provenance, resolve_robot
 
-__all__ = ["ExciteOptions", "ExciteResults", "excite"]
+__all__ = ["ExciteOptions", "ExciteResults", "check_size", "excite"]
 
 KINDS = ("fourier", "p2p", "spline")
 
@@ -265,6 +266,24 @@ class ExciteResults(Results):
                                   title=f"{self.model.ROBOT}: {self.basis.kind} excitation, cond = {self.cond:.4g}")]
 
 
+#: bytes per output sample and joint beyond the base regressor's row: q, dq, ddq and the limits' 10x denser check
+BYTES_PER_SAMPLE_JOINT = 8 * 3 * 11
+
+
+def check_size(opts: ExciteOptions, n_joints: int, n_base: int, available: int | None = None) -> None:
+    """Refuse, before any work, a design whose output samples would not fit in memory: the stacked base
+    regressor (``n_joints`` rows of ``n_base`` per sample, for cond and the predicted sigma) and the samples'
+    ``q, dq, ddq`` with the limits checked on a 10x denser resampling."""
+    samples = opts.duration * opts.rate + 1
+    need = samples * n_joints * (8 * n_base + BYTES_PER_SAMPLE_JOINT)
+    available = available_memory() if available is None else available
+    if available is not None and need > available:
+        longest = max(available / (n_joints * (8 * n_base + BYTES_PER_SAMPLE_JOINT)) - 1, 0) / opts.rate
+        raise ExcitationError(f"--duration {opts.duration:g} at --rate {opts.rate:g} Hz: {samples:.4g} output samples "
+                              f"would need about {size_text(need)} of memory, {size_text(available)} is available; "
+                              f"use --duration {longest:.4g} or less at this rate")
+
+
 def _robot_file(desc) -> tuple[str, ...]:
     """The robot file a design was made for (an input of the provenance block), when it came from a file."""
     f = getattr(desc, "file", "")
@@ -299,6 +318,7 @@ def excite(robot, *, output: str | os.PathLike[str] | None = None, force: bool =
         opts = options
     cfg, note = opts.settings()  # every option checked before the model is loaded
     desc, model = resolve_robot(robot)
+    check_size(opts, int(model.N_JOINTS), len(model.BASE_NAMES))
     lim = limits_of(desc, model.N_JOINTS, model)
     if opts.z_min is not None:
         lim = with_floor(lim, desc, model, opts.z_min)
