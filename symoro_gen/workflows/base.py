@@ -91,6 +91,16 @@ class Options:
         check_option_names(given, cls.option_names(), what)
         return cls(**given)
 
+    @classmethod
+    def resolve(cls, what: str, options: Options | None, given: Mapping[str, Any]):
+        """A workflow's options: ``options`` as given, or made from the keywords ``given`` (:meth:`create`);
+        both at once is an :class:`OptionError`."""
+        if options is None:
+            return cls.create(what, **given)
+        if given:
+            raise OptionError(f"{what}: give the options either as options= or by name, not both")
+        return options
+
     def as_dict(self) -> dict:
         """Every option, JSON-ready (the provenance block's ``options``)."""
         return {f.name: _jsonable(getattr(self, f.name)) for f in dataclasses.fields(self)}

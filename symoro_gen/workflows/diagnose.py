@@ -249,12 +249,9 @@ def diagnose(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
     -------
     DiagnoseResults
     """
-    if options is None:
-        opts = DiagnoseOptions.create("diagnose", method=method, **kwargs)
-    else:
-        if kwargs:
-            raise OptionError("diagnose: give the options either as options= or by name, not both")
-        opts = options if method == "ols" or method == options.method else replace(options, method=method)
+    opts = DiagnoseOptions.resolve("diagnose", options, dict(kwargs, method=method) if options is None else kwargs)
+    if options is not None and method not in ("ols", options.method):
+        opts = replace(options, method=method)
     return _run(robot, data, validate, loaded, opts)
 
 

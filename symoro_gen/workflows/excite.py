@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 
 from ..demo import available_memory, size_text
-from ..errors import OptionError
 from ..excite.bases import FourierBasis, PointToPointBasis, SplineBasis
 from ..excite.criterion import predicted_sigma
 from ..excite.limits import ExcitationError, Limits, limits_of, with_floor
@@ -310,12 +309,7 @@ def excite(robot, *, output: str | os.PathLike[str] | None = None, force: bool =
     -------
     ExciteResults
     """
-    if options is None:
-        opts = ExciteOptions.create("excite", **kwargs)
-    elif kwargs:
-        raise OptionError("excite: give the options either as options= or by name, not both")
-    else:
-        opts = options
+    opts = ExciteOptions.resolve("excite", options, kwargs)
     cfg, note = opts.settings()  # every option checked before the model is loaded
     desc, model = resolve_robot(robot)
     check_size(opts, int(model.N_JOINTS), len(model.BASE_NAMES))

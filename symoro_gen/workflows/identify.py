@@ -297,12 +297,9 @@ def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
     -------
     IdentifyResults
     """
-    if options is None:
-        opts = IdentifyOptions.create("identify", method=method, **kwargs)
-    else:
-        if kwargs:
-            raise OptionError("identify: give the options either as options= or by name, not both")
-        opts = options if method == "wls" or method == options.method else replace(options, method=method)
+    opts = IdentifyOptions.resolve("identify", options, dict(kwargs, method=method) if options is None else kwargs)
+    if options is not None and method not in ("wls", options.method):
+        opts = replace(options, method=method)
     return _run(robot, data, validate, loaded, opts)
 
 

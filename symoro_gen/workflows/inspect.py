@@ -108,12 +108,7 @@ def inspect(robot, data: DataLike, *, options: InspectOptions | None = None, **k
     InspectResults
         ``usable`` is False (and ``inspection.errors`` says why) when the data cannot identify the robot.
     """
-    if options is None:
-        opts = InspectOptions.create("inspect", **kwargs)
-    elif kwargs:
-        raise OptionError("inspect: give the options either as options= or by name, not both")
-    else:
-        opts = options
+    opts = InspectOptions.resolve("inspect", options, kwargs)
     desc, model = resolve_robot(robot)
     items = listed(data)
     if not items:
