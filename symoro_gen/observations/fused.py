@@ -334,7 +334,7 @@ def filter_settings(traj: Trajectory, options: AssemblyOptions) -> FilterSetting
     rule = kw["dynamics_bandwidth_hz"] is None and (kw["cutoff_hz"] is None or kw["n_d"] is None)
     if not rule or traj.n_samples <= WELCH_SEGMENT or traj.q.ndim != 2:
         return choose_filter_settings(fs, traj.q, **kw)
-    ef, fmin = kw["energy_fraction"], kw["min_bandwidth_hz"]
+    ef, fmin = kw["rule"].energy_fraction, kw["rule"].min_bandwidth_hz
     f_dyn = dynamics_bandwidth(traj.q, fs, energy_fraction=ef, min_bandwidth_hz=fmin)
     st = choose_filter_settings(fs, None, **{**kw, "dynamics_bandwidth_hz": f_dyn})
     # the note choose_filter_settings writes when it estimates f_dyn itself (tested equal)

@@ -18,13 +18,16 @@ from ..preprocessing.filtering import (
     CUTOFF_FACTOR,
     DECIMATION_CUTOFF_RATIO,
     DECIMATION_MARGIN,
+    FilterRule,
 )
 
-__all__ = ["RULE_FIELDS", "AssemblyOptions"]
+__all__ = ["RULE_FIELDS", "RULE_CONSTANTS", "AssemblyOptions"]
 
 #: fields passed to :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings` as they are
-RULE_FIELDS = ("dynamics_bandwidth_hz", "cutoff_hz", "n_d", "order", "ftype", "edge_samples", "cutoff_factor",
-               "decimation_margin", "cutoff_ratio", "energy_fraction", "min_bandwidth_hz", "max_cutoff_fraction")
+RULE_FIELDS = ("dynamics_bandwidth_hz", "cutoff_hz", "n_d", "order", "ftype", "edge_samples")
+#: fields passed to it as its ``rule`` (:class:`~symoro_gen.preprocessing.filtering.FilterRule`)
+RULE_CONSTANTS = ("cutoff_factor", "decimation_margin", "cutoff_ratio", "energy_fraction", "min_bandwidth_hz",
+                  "max_cutoff_fraction")
 
 
 def _positive(name: str, x: object, *, allow_none: bool = True, integer: bool = False, zero: bool = False) -> None:
@@ -162,7 +165,8 @@ class AssemblyOptions:
 
     def rule_keywords(self) -> dict[str, Any]:
         """The keywords of :func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`."""
-        return {k: getattr(self, k) for k in RULE_FIELDS}
+        rule = FilterRule(**{k: getattr(self, k) for k in RULE_CONSTANTS})
+        return {**{k: getattr(self, k) for k in RULE_FIELDS}, "rule": rule}
 
     def velocity_threshold(self, n_joints: int) -> np.ndarray | None:
         """``min_velocity`` per joint, shape (n_joints,), or None."""

@@ -244,6 +244,35 @@ def min_filter_samples(order: int = 4, n_d: int = 1, ftype: str = "fir") -> int:
     return max(need, 3)
 
 
+@dataclass(frozen=True)
+class FilterRule:
+    """The constants of Gautier's rules for choosing the filters (module docstring; [G1997] for the cut-off,
+    [GB-gains] eq. 14-16 for the decimation factor).
+
+    Attributes
+    ----------
+    cutoff_factor : float
+        Butterworth cut-off = ``cutoff_factor * f_dyn`` (>= 10, [G1997]).
+    decimation_margin : float
+        Decimated Nyquist frequency >= ``decimation_margin * f_dyn``.
+    cutoff_ratio : float
+        Pass band of the decimation low-pass as a share of the decimated Nyquist frequency.
+    energy_fraction : float
+        ``f_dyn``: the frequency below which this share of the position energy lies.
+    min_bandwidth_hz : float
+        Floor of the estimated ``f_dyn`` [Hz].
+    max_cutoff_fraction : float
+        The cut-off is clipped to this share of the Nyquist frequency.
+    """
+
+    cutoff_factor: float = CUTOFF_FACTOR
+    decimation_margin: float = DECIMATION_MARGIN
+    cutoff_ratio: float = DECIMATION_CUTOFF_RATIO
+    energy_fraction: float = 0.999
+    min_bandwidth_hz: float = 1.0
+    max_cutoff_fraction: float = 0.8
+
+
 def choose_filter_settings(
     fs: float,
     q=None,
@@ -253,13 +282,8 @@ def choose_filter_settings(
     n_d: int | None = None,
     order: int = 4,
     ftype: str = "fir",
-    cutoff_factor: float = CUTOFF_FACTOR,
-    decimation_margin: float = DECIMATION_MARGIN,
-    cutoff_ratio: float = DECIMATION_CUTOFF_RATIO,
-    energy_fraction: float = 0.999,
-    min_bandwidth_hz: float = 1.0,
-    max_cutoff_fraction: float = 0.8,
     edge_samples: int | None = None,
+    rule: FilterRule | None = None,
 ) -> FilterSettings:
     """Apply Gautier's rules (see the module docstring); any value given is kept as is.
 
@@ -286,11 +310,17 @@ def choose_filter_settings(
         Samples dropped at each end; default ``ceil(4 fs / cutoff_hz)`` (four periods of the cut-off:
         with the odd-extension padding over three periods, the acceleration error left there is
         ~1e-5 of its peak for smooth motions).
+    rule : FilterRule, optional
+        The constants of Gautier's rules (default :class:`FilterRule`'s: [G1997], [GB-gains] eq. 14-16).
 
     Returns
     -------
     FilterSettings
     """
+    rule = FilterRule() if rule is None else rule
+    cutoff_factor, decimation_margin, cutoff_ratio = rule.cutoff_factor, rule.decimation_margin, rule.cutoff_ratio
+    energy_fraction, min_bandwidth_hz = rule.energy_fraction, rule.min_bandwidth_hz
+    max_cutoff_fraction = rule.max_cutoff_fraction
     if not (fs > 0 and np.isfinite(fs)):
         raise ValueError(f"sampling frequency must be positive, got {fs!r}")
     if ftype not in ("fir", "iir"):
