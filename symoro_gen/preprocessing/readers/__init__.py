@@ -3,7 +3,9 @@ recording, = one experiment, unless resampling splits it at gaps), for every for
 
 Formats, one module each: delimited text (:mod:`.text`: ``.csv .txt .tsv .dat``), arrays
 (:mod:`.arrays`: ``.npz``, MATLAB ``.mat``), Parquet (:mod:`.parquet`, read by segment of row groups for
-the fleet), split recordings (:mod:`.split`: a spec string ``q=pos.csv,tau=cur.csv,dt=0.0002``). What
+the fleet), ROS bags (:mod:`.bag`: ``.mcap .db3 .bag`` or a rosbag2 folder, ``sensor_msgs/JointState``
+topics, joints matched by name), split recordings (:mod:`.split`: a spec string
+``q=pos.csv,tau=cur.csv,dt=0.0002``). What
 they share (roles, column resolution, problems named by rows and lines, checks of values, time and
 units) is in :mod:`.common`.
 
@@ -21,6 +23,7 @@ torques are mapped to the joint side by :func:`~symoro_gen.preprocessing.drive_c
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -30,6 +33,7 @@ from ...errors import DataFileError, Problem
 from ...progress import progress_updates
 from ..trajectory import Trajectory
 from .arrays import ARRAY_SUFFIXES, read_array_file
+from .bag import BAG_SUFFIXES, is_bag, read_bag
 from .common import ABSURD_VALUE, DEFAULT_CHECKS, LOG_ROLES, DataChecks, DataWarning, RawColumns, step_regime_changes
 from .logs import log_trajectories
 from .options import LoadReport, LogFormat, make_format, parse_columns, read_format_file
@@ -42,7 +46,7 @@ __all__ = [
     "read_recording", "read_recordings", "load_trajectory", "load_trajectories",
     "LogFormat", "LoadReport", "make_format", "parse_columns", "read_format_file",
     "DataSpec", "parse_data_spec", "DataChecks", "DataWarning", "step_regime_changes",
-    "ABSURD_VALUE", "LOG_ROLES", "PARQUET_SUFFIXES",
+    "ABSURD_VALUE", "LOG_ROLES", "PARQUET_SUFFIXES", "BAG_SUFFIXES", "is_bag",
 ]
 
 PathOrSpec = str | os.PathLike | DataSpec
@@ -70,7 +74,8 @@ def _read_columns(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors:
     if suffix in ARRAY_SUFFIXES:
         return read_array_file(file, suffix[1:], n, mapping=mapping, selectors=selectors, dt=dt, probs=probs)
     raise DataFileError([Problem(file, "", "", f"unknown data format {suffix!r} "
-                                 "(expected .csv, .txt, .npz, .mat, .parquet or a q=...,tau=... spec)")])
+                                 "(expected .csv, .txt, .npz, .mat, .parquet, a ROS bag .mcap/.db3/.bag or a "
+                                 "q=...,tau=... spec)")])
 
 
 def _joint_count(robot, n_joints: int | None) -> int:
@@ -166,7 +171,9 @@ def load_trajectories(paths: Iterable, *, progress=None, **kwargs) -> tuple[Traj
 
 
 def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None, n_joints: int | None = None,
-                   drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None
+                   drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None,
+                   topic: str | None = None, stamp: str | None = None, prefix: str | None = None,
+                   joint_names: Sequence[str] | None = None, reference_topic: str | None = None
                    ) -> tuple[tuple[Trajectory, ...], LoadReport]:
     """Read one DATA file (or split-file spec) with a :class:`LogFormat`.
 
@@ -183,6 +190,8 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     start, stop : int
         Only the samples ``[start, stop)`` of a Parquet log (``stop < 0``: the whole file), read row
         group by row group; the experiment is named ``path[start:stop]``.
+    topic, stamp, prefix, joint_names, reference_topic
+        ROS bags (:mod:`.bag`): override the fields of the same names of ``fmt``.
 
     Returns
     -------
@@ -195,10 +204,19 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
         One line per problem, naming the file, rows (and file lines) and column.
     """
     fmt = fmt or LogFormat()
+    bag_opts = {k: v for k, v in dict(topic=topic, stamp=stamp, prefix=prefix, reference_topic=reference_topic,
+                                      joint_names=joint_names).items() if v is not None}
+    if bag_opts:
+        fmt = _with_bag_options(fmt, bag_opts)
     if robot is None and n_joints is None:
         raise TypeError("read_recording: give n_joints or robot")
     n = _joint_count(robot, n_joints)
     spec = parse_data_spec(path, base_dir=base_dir)
+    if not spec.is_split and is_bag(spec.files["file"]):
+        if stop >= 0:
+            raise ValueError(f"{spec.text}: only Parquet logs are read by segment (start, stop)")
+        return read_bag(spec.files["file"], fmt, n=n, robot=robot, dt=fmt.dt, loaded=loaded,
+                        drive_chain=drive_chain, joint_types=_joint_types(robot))
     if spec.dt is not None and fmt.dt is not None and not math.isclose(spec.dt, fmt.dt, rel_tol=1e-12):
         raise DataFileError([Problem(spec.text, "", "dt", f"the spec says dt = {spec.dt:g} s, --dt {fmt.dt:g}: "
                                      "give the sampling period once")])
@@ -222,6 +240,12 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     if probs:
         raise DataFileError(probs)
     return log_trajectories(raw, fmt, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types)
+
+
+def _with_bag_options(fmt: LogFormat, opts: Mapping) -> LogFormat:
+    """``fmt`` with the bag options given to :func:`read_recording` (checked as on the command line)."""
+    checked = make_format(**{k: v for k, v in opts.items()})
+    return dataclasses.replace(fmt, **{k: getattr(checked, k) for k in opts})
 
 
 def read_recordings(paths: Iterable, fmt: LogFormat | None = None, *, progress=None, **kwargs
