@@ -72,16 +72,13 @@ def is_bag(path: str | os.PathLike) -> bool:
     return p.suffix.lower() in BAG_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
 
 
-def _rosbags(path: str) -> Any:
-    """The ``rosbags`` modules, or a clear error naming the extra."""
+def _rosbags(path: str) -> None:
+    """Check that the ``rosbags`` library is installed, or fail naming the extra."""
     try:
-        import rosbags.highlevel  # noqa: F401
-        import rosbags.typesys  # noqa: F401
+        import rosbags.highlevel  # noqa: F401 - only whether it is installed
     except ImportError:
         raise DataFileError([Problem(path, "", "", f"ROS bags are read with the rosbags library: {BAGS_EXTRA}")]
                             ) from None
-    import rosbags
-    return rosbags
 
 
 def _typestore(ros1: bool) -> Any:
@@ -93,14 +90,14 @@ def _typestore(ros1: bool) -> Any:
 def _open(path: str) -> Iterator[Any]:
     """An open ``AnyReader`` (bags without type definitions: the ROS 2 Humble / ROS 1 Noetic types)."""
     _rosbags(path)
-    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.highlevel import AnyReader
     p = Path(path)
     if not p.exists():
         raise DataFileError([Problem(path, "", "", "file not found")])
     try:
         reader = AnyReader([p], default_typestore=_typestore(p.suffix.lower() == ".bag"))
         reader.open()
-    except (AnyReaderError, Exception) as exc:  # noqa: BLE001 - rosbags raises several types on a damaged bag
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types on a damaged bag
         raise DataFileError([Problem(path, "", "", f"cannot read as a ROS bag ({type(exc).__name__}: {exc})")]
                             ) from None
     try:
@@ -296,7 +293,7 @@ def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topi
     row = {s: r for r, s in enumerate(stamps)}
     N, n = len(stamps), len(names)
     q = np.full((N, n), np.nan)
-    dq = np.full((N, n), np.nan)
+    v = np.full((N, n), np.nan)
     tau = np.full((N, n), np.nan)
     has_v = np.zeros(n, bool)
     has_e = np.zeros(n, bool)
@@ -315,7 +312,7 @@ def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topi
                 continue
             q[r, j] = m.position[k]
             if m.velocity.size:
-                dq[r, j] = m.velocity[k]
+                v[r, j] = m.velocity[k]
                 has_v[j] = True
             if m.effort.size:
                 tau[r, j] = m.effort[k]
@@ -327,8 +324,8 @@ def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topi
         raise DataFileError([Problem(path, f"topic {topics}", "effort", f"empty in every message for joint(s) "
                                      f"{fmt_names(no_e)}: the torque is needed (effort, or a current with "
                                      "--tau-scale)")])
-    if not has_v.all():
-        dq = None
+    dq = v if has_v.all() else None
+    if dq is None:
         notes.append("velocity empty in the messages: velocities computed from the positions")
     return _complete(_Samples(np.asarray(stamps, np.int64), q, dq, tau, src, notes), names, fmt, path)
 
