@@ -382,3 +382,13 @@ def test_cli_errors_name_file_message_field_and_option(rec, cli):
     assert "--joint-names a,b,c (and --prefix) say which joints are the robot's" in err
     out = cli("inspect", "scara", p, "--joint-names", "shoulder,elbow,lift,wrist2", rc=0).out
     assert "--joint-names shoulder,elbow,lift,wrist2" in out
+
+
+@pytest.mark.slow  # closed-loop IV iterations
+def test_reference_topic_is_the_iv_reference(rec, cli):
+    """--reference-topic: IV's recorded reference (without it IV uses the filtered measured positions), the
+    held-back part keeping its share of it."""
+    p = write_bag(rec["tr"], rec["dir"] / "iv_ref.mcap", NAMES, reference=rec["tr"].q, reference_topic="/commanded")
+    out = cli("identify", "scara", p, "--method", "iv", "--joint-names", ",".join(NAMES), "--reference-topic",
+              "/commanded", "--validate-fraction", "0.3").out
+    assert "reference: recorded" in out
