@@ -282,8 +282,13 @@ def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topi
     present = {nm for m in msgs for nm in m.names}
     missing = [nm for nm in names if nm not in present]
     if missing:
-        raise DataFileError([Problem(path, f"topic {topics}", "name", f"joint {nm!r} is in no message (joints "
-                                     f"published: {fmt_names(sorted(present))})") for nm in missing],
+        what = f"joint {missing[0]!r} is" if len(missing) == 1 else f"joints {fmt_names(missing)} are"
+        bare = missing[0][len(fmt.prefix):] if missing[0].startswith(fmt.prefix) else missing[0]
+        prefixes = sorted({x[:-len(bare)] for x in present if x.endswith(bare) and x != bare})
+        tip = (f"; --prefix {' or --prefix '.join(prefixes)} would match {bare!r}" if prefixes and not fmt.prefix
+               else "")
+        raise DataFileError([Problem(path, f"topic {topics}", "name", f"{what} in no message (joints published: "
+                                     f"{fmt_names(sorted(present))}){tip}")],
                             hint=TOPIC_HINT + "; --joint-names a,b,c (and --prefix) say which joints are the robot's")
     extra = sorted(present - set(names))
     if extra:
@@ -437,8 +442,9 @@ def read_bag(path: str | os.PathLike, fmt: LogFormat | None = None, *, n: int, r
         names, how = _wanted_names(msgs, n, fmt, robot, path, topics)
         if not fmt.topic:  # only the topics that carry the robot's joints
             mine = {m.topic for m in msgs if set(m.names) & set(names)}
-            msgs = [m for m in msgs if m.topic in mine]
-            topics = ",".join(sorted(mine)) or topics
+            if mine:  # else every topic, to name the joints they publish
+                msgs = [m for m in msgs if m.topic in mine]
+                topics = ",".join(sorted(mine))
             _check_topics(msgs, names, path)
         s = _samples(msgs, names, fmt, path, topics)
         ref = _reference(reader, path, fmt, names)
