@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 from ..errors import OptionError
 from .readers import ABSURD_VALUE, LoadReport, LogFormat, make_format, read_recordings
+from .readers.options import BAG_KEYS
 from .trajectory import Trajectory, hold_back
 
 __all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "data_text", "data_notes",
@@ -65,10 +66,8 @@ def format_from_args(args) -> LogFormat:
                        tau_scale=getattr(args, "tau_scale", None), deg=getattr(args, "deg", None),
                        resample=getattr(args, "resample", None), max_gap=getattr(args, "max_gap", None),
                        drop_bad_rows=getattr(args, "drop_bad_rows", None), format_file=getattr(args, "format", None),
-                       dt_overrides_time=getattr(args, "dt_overrides_time", None), topic=getattr(args, "topic", None),
-                       stamp=getattr(args, "stamp", None), prefix=getattr(args, "prefix", None),
-                       joint_names=getattr(args, "joint_names", None),
-                       reference_topic=getattr(args, "reference_topic", None))
+                       dt_overrides_time=getattr(args, "dt_overrides_time", None),
+                       bag={k: getattr(args, k, None) for k in BAG_KEYS})
 
 
 def load_data(args, paths: Sequence, robot, *, loaded: bool = False

@@ -159,7 +159,9 @@ def test_two_robots_in_one_bag_by_prefix(rec):
     np.testing.assert_array_equal(r.tau, right.tau)
     assert any("joints ignored (not the robot's): left_elbow" in n for n in rep.notes)
     assert "--prefix right_" in rep.options
-    (lft,), _ = read_recording(p, robot=rec["robot"], prefix="left_")
+    import symoro_gen
+
+    (lft,), _ = symoro_gen.read_recording(p, robot=rec["robot"], prefix="left_")  # the package-level front door
     np.testing.assert_array_equal(lft.q, left.q)
     with pytest.raises(DataFileError) as e:
         read_recording(p, robot=rec["robot"])
@@ -395,3 +397,39 @@ def test_reference_topic_is_the_iv_reference(rec, cli):
     out = cli("identify", "scara", p, "--method", "iv", "--joint-names", ",".join(NAMES), "--reference-topic",
               "/commanded", "--validate-fraction", "0.3").out
     assert "reference: recorded" in out
+
+
+def test_fleet_finds_bag_files_and_rosbag2_folders(rec, tmp_path):
+    """A rosbag2 folder found in a folder is one log (its metadata.yaml and storage file are not logs)."""
+    from symoro_gen.fleet.files import discover, read_experiments
+
+    tr = rec["tr"]
+    short = replace(tr, t=tr.t[:50], q=tr.q[:50], tau=tr.tau[:50], dq=tr.dq[:50])
+    write_bag(short, tmp_path / "arm1" / "day1", NAMES, storage="sqlite3")   # a rosbag2 folder
+    write_bag(short, tmp_path / "arm2" / "day1.mcap", NAMES)
+    write_bag(short, tmp_path / "arm3" / "day2.bag", NAMES)
+    logs = discover([tmp_path], "{robot}/{day}")
+    assert [(f.robot, f.day) for f in logs] == [("arm1", "day1"), ("arm2", "day1.mcap"), ("arm3", "day2.bag")]
+    assert Path(logs[0].path).is_dir()
+    assert [(f.robot, f.day) for f in discover([tmp_path / "arm1" / "day1"], "{robot}/{day}")] == [("arm1", "day1")]
+    for lf in logs:
+        (got,) = read_experiments(lf.path, 4, fmt=LogFormat(joint_names=NAMES))
+        np.testing.assert_array_equal(got.q, short.q)
+
+
+def test_bag_options_checked_and_in_a_format_file(rec, tmp_path):
+    f = tmp_path / "cell.toml"
+    f.write_text('prefix = "right_"\njoint_names = ["shoulder", "elbow", "lift", "wrist"]\nstamp = "log"\n')
+    from symoro_gen.preprocessing.readers import make_format
+
+    fmt = make_format(format_file=f)
+    assert (fmt.prefix, fmt.joint_names, fmt.stamp) == ("right_", NAMES, "log")
+    assert fmt.options() == ("--stamp log", "--prefix right_", "--joint-names shoulder,elbow,lift,wrist")
+    with pytest.raises(DataFileError, match="field 'stamp': 'arrival': expected header or log"):
+        make_format(bag={"stamp": "arrival"})
+    tr = rec["tr"]
+    p = write_bag(replace(tr, t=tr.t[:40], q=tr.q[:40], tau=tr.tau[:40], dq=tr.dq[:40]), tmp_path / "o.mcap", NAMES)
+    with pytest.raises(TypeError, match="unknown ROS bag option"):
+        read_recording(p, robot=rec["robot"], topics="/joint_states")
+    with pytest.raises(DataFileError, match="a ROS bag has no columns"):
+        read_recording(p, LogFormat(columns=(("q", "1:5"), ("tau", "5:9"))), robot=rec["robot"])

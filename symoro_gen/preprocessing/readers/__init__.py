@@ -28,6 +28,7 @@ import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from ...errors import DataFileError, Problem
 from ...progress import progress_updates
@@ -172,9 +173,7 @@ def load_trajectories(paths: Iterable, *, progress=None, **kwargs) -> tuple[Traj
 
 def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None, n_joints: int | None = None,
                    drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None,
-                   topic: str | None = None, stamp: str | None = None, prefix: str | None = None,
-                   joint_names: Sequence[str] | None = None, reference_topic: str | None = None
-                   ) -> tuple[tuple[Trajectory, ...], LoadReport]:
+                   **bag: Any) -> tuple[tuple[Trajectory, ...], LoadReport]:
     """Read one DATA file (or split-file spec) with a :class:`LogFormat`.
 
     Parameters
@@ -190,8 +189,9 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     start, stop : int
         Only the samples ``[start, stop)`` of a Parquet log (``stop < 0``: the whole file), read row
         group by row group; the experiment is named ``path[start:stop]``.
-    topic, stamp, prefix, joint_names, reference_topic
-        ROS bags (:mod:`.bag`): override the fields of the same names of ``fmt``.
+    **bag
+        ROS bags (:mod:`.bag`): ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic`` override the
+        fields of the same names of ``fmt`` (None: not given).
 
     Returns
     -------
@@ -204,10 +204,8 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
         One line per problem, naming the file, rows (and file lines) and column.
     """
     fmt = fmt or LogFormat()
-    bag_opts = {k: v for k, v in dict(topic=topic, stamp=stamp, prefix=prefix, reference_topic=reference_topic,
-                                      joint_names=joint_names).items() if v is not None}
-    if bag_opts:
-        fmt = _with_bag_options(fmt, bag_opts)
+    if bag:
+        fmt = _with_bag_options(fmt, bag)
     if robot is None and n_joints is None:
         raise TypeError("read_recording: give n_joints or robot")
     n = _joint_count(robot, n_joints)
@@ -244,8 +242,9 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
 
 def _with_bag_options(fmt: LogFormat, opts: Mapping) -> LogFormat:
     """``fmt`` with the bag options given to :func:`read_recording` (checked as on the command line)."""
-    checked = make_format(**{k: v for k, v in opts.items()})
-    return dataclasses.replace(fmt, **{k: getattr(checked, k) for k in opts})
+    given = {k: v for k, v in opts.items() if v is not None}
+    checked = make_format(bag=opts)  # unknown keys: a TypeError naming them; values checked as on the command line
+    return dataclasses.replace(fmt, **{k: getattr(checked, k) for k in given})
 
 
 def read_recordings(paths: Iterable, fmt: LogFormat | None = None, *, progress=None, **kwargs

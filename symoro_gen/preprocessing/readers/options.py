@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 if sys.version_info >= (3, 11):
@@ -227,14 +228,18 @@ def _names(v, where, key) -> tuple[str, ...]:
 
 
 def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=None, max_gap=None,
-                drop_bad_rows=None, format_file=None, dt_overrides_time=None, topic=None, stamp=None, prefix=None,
-                joint_names=None, reference_topic=None) -> LogFormat:
-    """A :class:`LogFormat` from options (None: not given) over a format file's keys."""
+                drop_bad_rows=None, format_file=None, dt_overrides_time=None, bag: Mapping | None = None) -> LogFormat:
+    """A :class:`LogFormat` from options (None: not given) over a format file's keys; ``bag``: the ROS bag
+    options by key (:data:`BAG_KEYS`: ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``)."""
+    bag = dict(bag or {})
+    unknown = [k for k in bag if k not in BAG_KEYS]
+    if unknown:
+        raise TypeError(f"unknown ROS bag option(s) {', '.join(unknown)} (allowed: {', '.join(BAG_KEYS)})")
     base = read_format_file(format_file) if format_file else {}
     origin = str(format_file) if format_file else "command line"
     given = dict(columns=columns, dt=dt, tau_scale=tau_scale, deg=deg, resample=resample, max_gap=max_gap,
-                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time, topic=topic, stamp=stamp,
-                 prefix=prefix, joint_names=joint_names, reference_topic=reference_topic)
+                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time,
+                 **{k: bag.get(k) for k in BAG_KEYS})
     where = {k: ("command line" if v is not None else origin) for k, v in given.items()}
     merged = {k: (v if v is not None else base.get(k)) for k, v in given.items()}
     cols = parse_columns(merged["columns"], where=f"{where['columns']}: columns") if merged["columns"] else ()
