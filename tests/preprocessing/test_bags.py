@@ -433,3 +433,13 @@ def test_bag_options_checked_and_in_a_format_file(rec, tmp_path):
         read_recording(p, robot=rec["robot"], topics="/joint_states")
     with pytest.raises(DataFileError, match="a ROS bag has no columns"):
         read_recording(p, LogFormat(columns=(("q", "1:5"), ("tau", "5:9"))), robot=rec["robot"])
+
+
+def test_load_trajectory_reads_a_bag(rec, tmp_path):
+    from symoro_gen.preprocessing.readers import load_trajectory
+
+    tr = rec["tr"]
+    p = write_bag(tr, tmp_path / "plain.bag", NAMES)
+    got = load_trajectory(p, robot=rec["robot"])
+    np.testing.assert_array_equal(got.q, tr.q)
+    np.testing.assert_array_equal(got.tau, tr.tau)

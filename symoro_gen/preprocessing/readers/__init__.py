@@ -142,6 +142,10 @@ def load_trajectory(path: PathOrSpec, *, n_joints: int | None = None, columns: M
         loaded = bool(spec.loaded) if spec.loaded is not None else False
     if spec.is_split and columns:
         raise ValueError("columns cannot be used with a split-file spec (each file holds one role)")
+    if not spec.is_split and is_bag(spec.files["file"]):  # a ROS bag: its joints by name, one experiment
+        (tr,), _ = read_bag(spec.files["file"], LogFormat(dt=dt, dt_overrides_time=dt_overrides_time), n=n,
+                            robot=robot, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=_joint_types(robot))
+        return tr
     probs: list[Problem] = []
     raw = _read_columns(spec, n, mapping=columns, selectors=(), dt=dt, probs=probs, strict=True)
     return plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
