@@ -443,3 +443,25 @@ def test_load_trajectory_reads_a_bag(rec, tmp_path):
     got = load_trajectory(p, robot=rec["robot"])
     np.testing.assert_array_equal(got.q, tr.q)
     np.testing.assert_array_equal(got.tau, tr.tau)
+
+
+def test_bad_values_and_malformed_messages_named_by_message(rec, tmp_path):
+    tr = rec["tr"]
+    msgs = _msgs(tr)
+    m = msgs[20]
+    msgs[20] = replace(m, effort=(m.effort[0], float("nan")) + m.effort[2:])
+    p = write_messages(tmp_path / "nan.mcap", {"/joint_states": msgs})
+    with pytest.raises(DataFileError) as e:
+        read_recording(p, robot=rec["robot"])
+    assert (f"{p}, topic /joint_states, message 21 (t = {tr.t[20] - tr.t[0]:.6g} s), joint elbow, field 'effort': "
+            "nan: not a finite value") in str(e.value)
+    assert "--drop-bad-rows" in e.value.hint
+    (got,), rep = _read(p, rec["robot"], drop_bad_rows=True, resample=True)
+    assert rep.rows_dropped == 1 and rep.resampled and tr.n_samples - 1 <= got.n_samples <= tr.n_samples
+    np.testing.assert_allclose(got.q[20], tr.q[20], atol=1e-4)  # the dropped time, interpolated back
+    msgs[20] = replace(m, velocity=m.velocity[:3])  # 3 velocities for 4 names
+    p = write_messages(tmp_path / "short.mcap", {"/joint_states": msgs})
+    with pytest.raises(DataFileError) as e:
+        read_recording(p, robot=rec["robot"])
+    assert (f"{p}, topic /joint_states, message 21 (logged {tr.t[20] - tr.t[0]:.6g} s into the bag), field "
+            "'velocity': 3 values for 4 joint names") in str(e.value)

@@ -31,6 +31,7 @@ simulators), never over an existing file unless ``force`` (:func:`~symoro_gen.at
 """
 from __future__ import annotations
 
+import math
 import os
 import re
 import shutil
@@ -46,7 +47,7 @@ import numpy as np
 from ...atomic import check_replaceable
 from ...errors import DataFileError, Problem
 from ..trajectory import Trajectory
-from .common import Column, RawColumns, fmt_names
+from .common import ABSURD_VALUE, DROP_HINT, Column, RawColumns, fmt_names
 from .logs import log_trajectories
 from .options import LoadReport, LogFormat
 
@@ -192,18 +193,18 @@ def _messages(reader, conns, path: str) -> list[_Msg]:
     out: list[_Msg] = []
     count: dict[str, int] = {}
     probs: list[Problem] = []
+    start = int(reader.start_time)
     for conn, log_ns, raw in reader.messages(connections=conns):
         k = count[conn.topic] = count.get(conn.topic, 0) + 1
+        where = f"topic {conn.topic}, message {k} (logged {(log_ns - start) * 1e-9:.6g} s into the bag)"
         msg = reader.deserialize(raw, conn.msgtype)
         names = [str(x) for x in msg.name]
         arrs = {f: np.asarray(getattr(msg, f), float).ravel() for f in ("position", "velocity", "effort")}
         for f, a in arrs.items():
             if a.size not in (0, len(names)):
-                probs.append(Problem(path, f"topic {conn.topic}, message {k} (log time {log_ns * 1e-9:.9f} s)", f,
-                                     f"{a.size} values for {len(names)} joint names"))
+                probs.append(Problem(path, where, f, f"{a.size} values for {len(names)} joint names"))
         if arrs["position"].size == 0 and names:
-            probs.append(Problem(path, f"topic {conn.topic}, message {k} (log time {log_ns * 1e-9:.9f} s)",
-                                 "position", "empty: every message must give the joints' positions"))
+            probs.append(Problem(path, where, "position", "empty: every message must give the joints' positions"))
         out.append(_Msg(conn.topic, k, int(log_ns), _stamp_ns(msg), names, arrs["position"], arrs["velocity"],
                         arrs["effort"]))
     if probs:
@@ -304,6 +305,7 @@ def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topi
     has_e = np.zeros(n, bool)
     src = [""] * N
     dup = 0
+    bad: list[Problem] = []
     for i in order:
         m = msgs[i]
         r = row[times[i]]
@@ -315,13 +317,20 @@ def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topi
             if not np.isnan(q[r, j]):
                 dup += 1
                 continue
-            q[r, j] = m.position[k]
-            if m.velocity.size:
-                v[r, j] = m.velocity[k]
-                has_v[j] = True
-            if m.effort.size:
-                tau[r, j] = m.effort[k]
-                has_e[j] = True
+            for fld, arr, dest, has in (("position", m.position, q, None), ("velocity", m.velocity, v, has_v),
+                                        ("effort", m.effort, tau, has_e)):
+                if not arr.size:
+                    continue
+                x = float(arr[k])
+                if not (math.isfinite(x) and abs(x) <= ABSURD_VALUE):
+                    bad.append(Problem(path, f"topic {m.topic}, message {m.index} (t = {(times[i] - times[order[0]]) * 1e-9:.6g} s), "
+                                       f"joint {nm}", fld, f"{x:g}: not a finite value of at most {ABSURD_VALUE:g}"))
+                    x = math.nan  # dropped with --drop-bad-rows (the time is incomplete)
+                dest[r, j] = x
+                if has is not None:
+                    has[j] = True
+    if bad and not fmt.drop_bad_rows:
+        raise DataFileError(bad[:20], hint=DROP_HINT)
     if dup:
         notes.append(f"{dup} joint sample(s) published twice at the same time: the first kept")
     no_e = [names[j] for j in range(n) if not has_e[j]]
