@@ -10,7 +10,8 @@ SciPy)::
 
 ``symoro_gen.fleet`` is the fleet package (``symoro_gen.fleet.simulate_fleet``...), callable as the ``fleet``
 workflow: ``symoro_gen.fleet("scara", ["logs"], by="{robot}/{day}.parquet")``; ``symoro_gen.excite`` likewise is
-the excitation package, callable as the ``excite`` workflow.
+the excitation package, callable as the ``excite`` workflow. ``symoro_gen.read_recording`` is the readers' front
+door (:func:`symoro_gen.preprocessing.readers.read_recording`: every format, ROS bags with ``topic=``, ``stamp=``...).
 """
 import importlib
 
@@ -22,16 +23,18 @@ _WORKFLOWS = ("identify", "IdentifyOptions", "IdentifyResults", "diagnose", "Dia
               "inspect", "InspectOptions", "InspectResults", "excite", "ExciteOptions", "ExciteResults",
               "fleet", "FleetOptions", "FleetResults", "export_urdf", "export_mjcf", "export_par", "ExportResults")
 
-__all__ = ["load_model", "__version__", *_WORKFLOWS]
+__all__ = ["load_model", "read_recording", "__version__", *_WORKFLOWS]
 
 
 def __getattr__(name: str):
     if name in ("fleet", "excite"):  # the packages, callable as the workflows (their __init__)
         return importlib.import_module(f"symoro_gen.{name}")
+    if name == "read_recording":
+        return importlib.import_module("symoro_gen.preprocessing.readers").read_recording
     if name in _WORKFLOWS:
         return getattr(importlib.import_module("symoro_gen.workflows"), name)
     raise AttributeError(f"module 'symoro_gen' has no attribute {name!r}")
 
 
 def __dir__() -> list[str]:
-    return sorted(list(globals()) + list(_WORKFLOWS))
+    return sorted(list(globals()) + list(_WORKFLOWS) + ["read_recording"])

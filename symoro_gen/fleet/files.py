@@ -1,7 +1,8 @@
 """A fleet's log files: expansion of files and globs, robot and day from each path (``--by``), long Parquet
 logs cut into segments, and each log read through the front door of the readers,
-:func:`~symoro_gen.preprocessing.readers.read_recording` (CSV, NPZ, MAT, Parquet; with the data options of
-the command line, every format), motor-side data mapped by the robot's drive chain.
+:func:`~symoro_gen.preprocessing.readers.read_recording` (CSV, NPZ, MAT, Parquet, ROS bags: ``.mcap``, ``.db3``,
+``.bag`` files and rosbag2 folders, one log each; with the data options of the command line, every format),
+motor-side data mapped by the robot's drive chain.
 
 Parquet logs hold one experiment per file; read as they are, with the columns of the CSV format: ``t,
 q1..qn, tau1..taun`` (``dq1..``, ``ddq1..`` optional), as :func:`write_parquet` writes them; any other
@@ -22,7 +23,7 @@ import numpy as np
 
 from ..atomic import PARQUET_MARK, check_replaceable
 from ..errors import DataFileError, Problem, SymoroError
-from ..preprocessing.readers import LogFormat, read_recording
+from ..preprocessing.readers import LogFormat, is_bag, read_recording
 from ..preprocessing.readers.parquet import is_parquet, parquet_rows
 from ..preprocessing.trajectory import Trajectory
 from ..report.plots import MissingDependencyError
@@ -76,6 +77,17 @@ def compile_pattern(pattern: str) -> re.Pattern:
     return re.compile("(?:^|[/\\\\])" + "".join(out) + "$")
 
 
+def _in_folder_logs(folder: str) -> list[str]:
+    """The logs in a folder, recursively: its files, a rosbag2 folder (``metadata.yaml`` inside) as one log."""
+    out: list[str] = []
+    for root, dirs, names in os.walk(folder):
+        bags = sorted(d for d in dirs if is_bag(os.path.join(root, d)))
+        out += [os.path.join(root, d) for d in bags]
+        dirs[:] = sorted(d for d in dirs if d not in bags)
+        out += [p for p in (os.path.join(root, nm) for nm in names) if os.path.isfile(p)]
+    return sorted(out)
+
+
 def _expand(logs: Iterable) -> list[str]:
     files: list[str] = []
     for item in logs:
@@ -84,10 +96,10 @@ def _expand(logs: Iterable) -> list[str]:
             hits = sorted(glob.glob(s, recursive=True))
             if not hits:
                 raise DataFileError([Problem(s, "", "", "no file matches this glob")])
-            files += [h for h in hits if os.path.isfile(h)]
-        elif os.path.isdir(s):
-            files += sorted(str(p) for p in Path(s).rglob("*") if p.is_file())
-        elif os.path.isfile(s):
+            files += [h for h in hits if os.path.isfile(h) or is_bag(h)]
+        elif os.path.isdir(s) and not is_bag(s):
+            files += _in_folder_logs(s)
+        elif os.path.isfile(s) or (os.path.isdir(s) and is_bag(s)):
             files.append(s)
         else:
             raise DataFileError([Problem(s, "", "", "no such file")])

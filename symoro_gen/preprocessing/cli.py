@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 from ..errors import OptionError
 from .readers import ABSURD_VALUE, LoadReport, LogFormat, make_format, read_recordings
+from .readers.options import BAG_KEYS
 from .trajectory import Trajectory, hold_back
 
 __all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "data_text", "data_notes",
@@ -18,7 +19,8 @@ __all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "d
 
 
 def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = False) -> None:
-    """Add ``--format --columns --dt --dt-overrides-time --tau-scale --deg --resample --max-gap --drop-bad-rows`` (and,
+    """Add ``--format --columns --dt --dt-overrides-time --tau-scale --deg --resample --max-gap --drop-bad-rows``, the
+    ROS bag options ``--topic --stamp --prefix --joint-names --reference-topic`` (and,
     with ``validate_fraction``, ``--validate-fraction``) to a command's parser."""
     g = p.add_argument_group("reading the DATA files (docs/data-files.md)")
     g.add_argument("--format", metavar="FILE.toml", help="a log format file with the keys below (options given "
@@ -42,6 +44,17 @@ def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = Fa
     g.add_argument("--drop-bad-rows", action="store_true", default=None,
                    help=f"drop rows with a wrong field count, unparsable/non-finite numbers or |value| > "
                         f"{ABSURD_VALUE:g} (counted in the output) instead of stopping")
+    b = p.add_argument_group("reading ROS bags (.mcap, .db3, .bag, rosbag2 folders; docs/data-files.md)")
+    b.add_argument("--topic", metavar="TOPIC[,TOPIC...]", help="the sensor_msgs/JointState topic(s) (default: every "
+                   "JointState topic carrying the robot's joints)")
+    b.add_argument("--stamp", choices=("header", "log"), default=None, help="time of a message: its header stamp "
+                   "(default; the bag's log times when every header stamp is zero) or the bag's log time")
+    b.add_argument("--prefix", metavar="TEXT", help="the robot's joints are named TEXT + name in the bag "
+                   "(several robots in one bag: left_, right_)")
+    b.add_argument("--joint-names", metavar="A,B,C", help="the bag's names of the robot's joints, in the robot's "
+                   "order (default: the URDF joint names kept in the robot file, else the order of the messages)")
+    b.add_argument("--reference-topic", metavar="TOPIC", help="commanded positions (JointState, or a controller "
+                   "state with joint_names and reference/desired): the recorded reference of --method iv/didim")
     if validate_fraction:
         g.add_argument("--validate-fraction", type=float, metavar="F",
                        help="hold back the last F (0 < F < 1) of each DATA file for validation")
@@ -53,7 +66,8 @@ def format_from_args(args) -> LogFormat:
                        tau_scale=getattr(args, "tau_scale", None), deg=getattr(args, "deg", None),
                        resample=getattr(args, "resample", None), max_gap=getattr(args, "max_gap", None),
                        drop_bad_rows=getattr(args, "drop_bad_rows", None), format_file=getattr(args, "format", None),
-                       dt_overrides_time=getattr(args, "dt_overrides_time", None))
+                       dt_overrides_time=getattr(args, "dt_overrides_time", None),
+                       bag={k: getattr(args, k, None) for k in BAG_KEYS})
 
 
 def load_data(args, paths: Sequence, robot, *, loaded: bool = False

@@ -98,7 +98,10 @@ def hold_back(trajectories: Sequence[Trajectory], fraction: float
         def part(a, b, tag, tr=tr):
             cut = {f: (getattr(tr, f)[a:b] if getattr(tr, f) is not None else None)
                    for f in ("t", "q", "tau", "dq", "ddq", "deflection")}
-            return replace(tr, **cut, source=f"{tr.source} [{tag}]", meta={**tr.meta, "part": tag})
+            meta = {**tr.meta, "part": tag}
+            if meta.get("q_ref") is not None and len(meta["q_ref"]) == tr.n_samples:  # a recorded reference
+                meta["q_ref"] = meta["q_ref"][a:b]
+            return replace(tr, **cut, source=f"{tr.source} [{tag}]", meta=meta)
 
         ident.append(part(0, k, f"first {100 * (1 - fraction):.3g} %"))
         valid.append(part(k, tr.n_samples, f"last {100 * fraction:.3g} %"))

@@ -3,7 +3,9 @@ recording, = one experiment, unless resampling splits it at gaps), for every for
 
 Formats, one module each: delimited text (:mod:`.text`: ``.csv .txt .tsv .dat``), arrays
 (:mod:`.arrays`: ``.npz``, MATLAB ``.mat``), Parquet (:mod:`.parquet`, read by segment of row groups for
-the fleet), split recordings (:mod:`.split`: a spec string ``q=pos.csv,tau=cur.csv,dt=0.0002``). What
+the fleet), ROS bags (:mod:`.bag`: ``.mcap .db3 .bag`` or a rosbag2 folder, ``sensor_msgs/JointState``
+topics, joints matched by name), split recordings (:mod:`.split`: a spec string
+``q=pos.csv,tau=cur.csv,dt=0.0002``). What
 they share (roles, column resolution, problems named by rows and lines, checks of values, time and
 units) is in :mod:`.common`.
 
@@ -21,15 +23,18 @@ torques are mapped to the joint side by :func:`~symoro_gen.preprocessing.drive_c
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from ...errors import DataFileError, Problem
 from ...progress import progress_updates
 from ..trajectory import Trajectory
 from .arrays import ARRAY_SUFFIXES, read_array_file
+from .bag import BAG_SUFFIXES, is_bag, read_bag
 from .common import ABSURD_VALUE, DEFAULT_CHECKS, LOG_ROLES, DataChecks, DataWarning, RawColumns, step_regime_changes
 from .logs import log_trajectories
 from .options import LoadReport, LogFormat, make_format, parse_columns, read_format_file
@@ -42,7 +47,7 @@ __all__ = [
     "read_recording", "read_recordings", "load_trajectory", "load_trajectories",
     "LogFormat", "LoadReport", "make_format", "parse_columns", "read_format_file",
     "DataSpec", "parse_data_spec", "DataChecks", "DataWarning", "step_regime_changes",
-    "ABSURD_VALUE", "LOG_ROLES", "PARQUET_SUFFIXES",
+    "ABSURD_VALUE", "LOG_ROLES", "PARQUET_SUFFIXES", "BAG_SUFFIXES", "is_bag",
 ]
 
 PathOrSpec = str | os.PathLike | DataSpec
@@ -70,7 +75,8 @@ def _read_columns(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors:
     if suffix in ARRAY_SUFFIXES:
         return read_array_file(file, suffix[1:], n, mapping=mapping, selectors=selectors, dt=dt, probs=probs)
     raise DataFileError([Problem(file, "", "", f"unknown data format {suffix!r} "
-                                 "(expected .csv, .txt, .npz, .mat, .parquet or a q=...,tau=... spec)")])
+                                 "(expected .csv, .txt, .npz, .mat, .parquet, a ROS bag .mcap/.db3/.bag or a "
+                                 "q=...,tau=... spec)")])
 
 
 def _joint_count(robot, n_joints: int | None) -> int:
@@ -136,6 +142,10 @@ def load_trajectory(path: PathOrSpec, *, n_joints: int | None = None, columns: M
         loaded = bool(spec.loaded) if spec.loaded is not None else False
     if spec.is_split and columns:
         raise ValueError("columns cannot be used with a split-file spec (each file holds one role)")
+    if not spec.is_split and is_bag(spec.files["file"]):  # a ROS bag: its joints by name, one experiment
+        (tr,), _ = read_bag(spec.files["file"], LogFormat(dt=dt, dt_overrides_time=dt_overrides_time), n=n,
+                            robot=robot, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=_joint_types(robot))
+        return tr
     probs: list[Problem] = []
     raw = _read_columns(spec, n, mapping=columns, selectors=(), dt=dt, probs=probs, strict=True)
     return plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
@@ -166,8 +176,8 @@ def load_trajectories(paths: Iterable, *, progress=None, **kwargs) -> tuple[Traj
 
 
 def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None, n_joints: int | None = None,
-                   drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None
-                   ) -> tuple[tuple[Trajectory, ...], LoadReport]:
+                   drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None,
+                   **bag: Any) -> tuple[tuple[Trajectory, ...], LoadReport]:
     """Read one DATA file (or split-file spec) with a :class:`LogFormat`.
 
     Parameters
@@ -183,6 +193,9 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     start, stop : int
         Only the samples ``[start, stop)`` of a Parquet log (``stop < 0``: the whole file), read row
         group by row group; the experiment is named ``path[start:stop]``.
+    **bag
+        ROS bags (:mod:`.bag`): ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic`` override the
+        fields of the same names of ``fmt`` (None: not given).
 
     Returns
     -------
@@ -195,10 +208,17 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
         One line per problem, naming the file, rows (and file lines) and column.
     """
     fmt = fmt or LogFormat()
+    if bag:
+        fmt = _with_bag_options(fmt, bag)
     if robot is None and n_joints is None:
         raise TypeError("read_recording: give n_joints or robot")
     n = _joint_count(robot, n_joints)
     spec = parse_data_spec(path, base_dir=base_dir)
+    if not spec.is_split and is_bag(spec.files["file"]):
+        if stop >= 0:
+            raise ValueError(f"{spec.text}: only Parquet logs are read by segment (start, stop)")
+        return read_bag(spec.files["file"], fmt, n=n, robot=robot, dt=fmt.dt, loaded=loaded,
+                        drive_chain=drive_chain, joint_types=_joint_types(robot))
     if spec.dt is not None and fmt.dt is not None and not math.isclose(spec.dt, fmt.dt, rel_tol=1e-12):
         raise DataFileError([Problem(spec.text, "", "dt", f"the spec says dt = {spec.dt:g} s, --dt {fmt.dt:g}: "
                                      "give the sampling period once")])
@@ -222,6 +242,13 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     if probs:
         raise DataFileError(probs)
     return log_trajectories(raw, fmt, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types)
+
+
+def _with_bag_options(fmt: LogFormat, opts: Mapping) -> LogFormat:
+    """``fmt`` with the bag options given to :func:`read_recording` (checked as on the command line)."""
+    given = {k: v for k, v in opts.items() if v is not None}
+    checked = make_format(bag=opts)  # unknown keys: a TypeError naming them; values checked as on the command line
+    return dataclasses.replace(fmt, **{k: getattr(checked, k) for k in given})
 
 
 def read_recordings(paths: Iterable, fmt: LogFormat | None = None, *, progress=None, **kwargs

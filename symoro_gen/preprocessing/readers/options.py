@@ -11,6 +11,11 @@ resampling, bad rows), as command-line options or a TOML file with the same keys
     resample = false                    # irregular time stamps -> uniform grid at the median step
     max_gap = 0.05                      # [s] longer steps split the file (default 5 median steps)
     drop_bad_rows = false               # drop malformed / non-finite / absurd rows, counted
+    topic = "/joint_states"             # ROS bags: the JointState topic(s) (default: found by type)
+    stamp = "header"                    # ROS bags: time from the header stamps or the bag's "log" times
+    prefix = "left_"                    # ROS bags: the robot's joints are named prefix + name
+    joint_names = ["shoulder", "elbow"] # ROS bags: the bag's names of the robot's joints, in order
+    reference_topic = "/reference"      # ROS bags: commanded positions (IV/DIDIM reference)
 
 and the :class:`LoadReport` that says what reading one file did.
 
@@ -23,6 +28,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 if sys.version_info >= (3, 11):
@@ -34,11 +40,15 @@ from ...errors import DataFileError, Problem
 from .common import LOG_ROLES
 
 __all__ = ["LogFormat", "LoadReport", "parse_columns", "read_format_file", "make_format", "FORMAT_KEYS",
-           "MAX_GAP_STEPS"]
+           "BAG_KEYS", "STAMPS", "MAX_GAP_STEPS"]
 
 #: default ``max_gap`` in median steps
 MAX_GAP_STEPS = 5
-FORMAT_KEYS = ("columns", "dt", "dt_overrides_time", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows")
+FORMAT_KEYS = ("columns", "dt", "dt_overrides_time", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows",
+               "topic", "stamp", "prefix", "joint_names", "reference_topic")
+#: the keys that only ROS bags use (:mod:`.bag`)
+BAG_KEYS = ("topic", "stamp", "prefix", "joint_names", "reference_topic")
+STAMPS = ("header", "log")
 
 
 @dataclass(frozen=True)
@@ -71,6 +81,16 @@ class LogFormat:
         ABSURD_VALUE`` (outside the time column); without it such rows are an error naming them.
     origin : str
         Where the format came from (a TOML file), for messages.
+    topic : str
+        ROS bags: the ``JointState`` topic(s), separated by commas ("": every one carrying the robot's joints).
+    stamp : {"header", "log"}
+        ROS bags: the time of a message, its header stamp or the bag's log time.
+    prefix : str
+        ROS bags: the robot's joints are named ``prefix + name`` (several robots in one bag).
+    joint_names : tuple of str
+        ROS bags: the bag's names of the robot's joints, in the robot's order (default: the robot file's).
+    reference_topic : str
+        ROS bags: commanded positions, kept as ``Trajectory.meta['q_ref']`` (IV/DIDIM reference).
     """
 
     columns: tuple[tuple[str, str], ...] = ()
@@ -82,6 +102,11 @@ class LogFormat:
     drop_bad_rows: bool = False
     origin: str = ""
     dt_overrides_time: bool = False
+    topic: str = ""
+    stamp: str = "header"
+    prefix: str = ""
+    joint_names: tuple[str, ...] = ()
+    reference_topic: str = ""
 
     @property
     def column_map(self) -> dict[str, str]:
@@ -108,6 +133,16 @@ class LogFormat:
             out.append("--resample" + (f" --max-gap {self.max_gap:g}" if self.max_gap is not None else ""))
         if self.drop_bad_rows:
             out.append("--drop-bad-rows")
+        if self.topic:
+            out.append(f"--topic {self.topic}")
+        if self.stamp != "header":
+            out.append(f"--stamp {self.stamp}")
+        if self.prefix:
+            out.append(f"--prefix {self.prefix}")
+        if self.joint_names:
+            out.append("--joint-names " + ",".join(self.joint_names))
+        if self.reference_topic:
+            out.append(f"--reference-topic {self.reference_topic}")
         return tuple(out)
 
 
@@ -184,19 +219,36 @@ def read_format_file(path) -> dict:
     return d
 
 
+def _names(v, where, key) -> tuple[str, ...]:
+    items = v if isinstance(v, (list, tuple)) else str(v).split(",")
+    out = tuple(str(x).strip() for x in items)
+    if not out or not all(out) or len(set(out)) != len(out):
+        raise DataFileError([Problem(where, "", key, f"{v!r}: expected distinct names separated by commas")])
+    return out
+
+
 def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=None, max_gap=None,
-                drop_bad_rows=None, format_file=None, dt_overrides_time=None) -> LogFormat:
-    """A :class:`LogFormat` from options (None: not given) over a format file's keys."""
+                drop_bad_rows=None, format_file=None, dt_overrides_time=None, bag: Mapping | None = None) -> LogFormat:
+    """A :class:`LogFormat` from options (None: not given) over a format file's keys; ``bag``: the ROS bag
+    options by key (:data:`BAG_KEYS`: ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``)."""
+    bag = dict(bag or {})
+    unknown = [k for k in bag if k not in BAG_KEYS]
+    if unknown:
+        raise TypeError(f"unknown ROS bag option(s) {', '.join(unknown)} (allowed: {', '.join(BAG_KEYS)})")
     base = read_format_file(format_file) if format_file else {}
     origin = str(format_file) if format_file else "command line"
     given = dict(columns=columns, dt=dt, tau_scale=tau_scale, deg=deg, resample=resample, max_gap=max_gap,
-                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time)
+                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time,
+                 **{k: bag.get(k) for k in BAG_KEYS})
     where = {k: ("command line" if v is not None else origin) for k, v in given.items()}
     merged = {k: (v if v is not None else base.get(k)) for k, v in given.items()}
     cols = parse_columns(merged["columns"], where=f"{where['columns']}: columns") if merged["columns"] else ()
     if merged["dt_overrides_time"] and merged["dt"] is None:
         raise DataFileError([Problem(where["dt_overrides_time"], "", "dt_overrides_time",
                                      "--dt-overrides-time replaces the time column by --dt: give --dt SECONDS")])
+    st = str(merged["stamp"]) if merged["stamp"] is not None else "header"
+    if st not in STAMPS:
+        raise DataFileError([Problem(where["stamp"], "", "stamp", f"{st!r}: expected header or log")])
     return LogFormat(
         columns=cols,
         dt=_positive(merged["dt"], where["dt"], "dt") if merged["dt"] is not None else None,
@@ -208,6 +260,12 @@ def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=Non
         drop_bad_rows=bool(merged["drop_bad_rows"]),
         origin=str(format_file or ""),
         dt_overrides_time=bool(merged["dt_overrides_time"]),
+        topic=str(merged["topic"] or ""),
+        stamp=st,
+        prefix=str(merged["prefix"] or ""),
+        joint_names=(_names(merged["joint_names"], where["joint_names"], "joint_names") if merged["joint_names"]
+                     else ()),
+        reference_topic=str(merged["reference_topic"] or ""),
     )
 
 

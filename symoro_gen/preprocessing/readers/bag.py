@@ -1,0 +1,697 @@
+"""ROS bags (``rosbags`` library, pure Python, no ROS; the ``bags`` extra): ROS 2 bags (a ``.mcap`` or
+sqlite3 ``.db3`` file, or a rosbag2 folder with ``metadata.yaml``) and ROS 1 ``.bag`` files.
+
+The joints come from ``sensor_msgs/JointState`` messages (``name``, ``position``, ``velocity``,
+``effort``; REP 103 units: rad, m, rad/s, N m, N). The messages are read as they were published:
+
+* the topics: those named by ``--topic`` (several separated by commas), else every ``JointState`` topic that
+  carries one of the robot's joints (a joint published on two topics is an error: name one with ``--topic``);
+* the joints, matched by name to the robot's (``--joint-names``, else the URDF joint names the robot file's
+  ``[[frames]]`` comments keep from ``import-urdf``, else by order of the first message -- said in the
+  report), with ``--prefix`` (``left_``: several robots in one bag) before each name; other joints
+  (gripper fingers) are ignored and listed in the report;
+* the time: the header stamps (``--stamp header``, the default; the bag's log times when every header
+  stamp is zero, said in the report) or the log times (``--stamp log``), relative to the first one;
+* each message's own joint order; several publishers each giving some joints, merged by stamp; messages
+  out of order, sorted by stamp (counted in the report); ``velocity``/``effort`` arrays left empty (no
+  velocity: computed by the filter; no effort: an error, the torque is needed);
+* ``effort`` is the torque (``--tau-scale`` turns a logged current into N m).
+
+Problems name the file, the topic, the message (index in its topic, 1-based) or its time, and the field.
+The samples then go through the data options like any other format (:mod:`.logs`).
+
+Optionally the commanded positions of ``--reference-topic`` (a ``JointState``, or a controller state /
+trajectory point with ``joint_names`` and ``reference``/``desired``/``positions``) are interpolated on the
+samples' times as ``Trajectory.meta['q_ref']``: the recorded reference IV and DIDIM use
+(:mod:`symoro_gen.identification.iv`, :mod:`symoro_gen.identification.didim`).
+
+:func:`read_imu` and :func:`read_wrench` read ``sensor_msgs/Imu`` and ``geometry_msgs/WrenchStamped``
+topics into arrays (for a floating base); :func:`write_bag` writes a recording as a bag (tests,
+simulators), never over an existing file unless ``force`` (:func:`~symoro_gen.atomic.check_replaceable`).
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...atomic import check_replaceable
+from ...errors import DataFileError, Problem
+from ..trajectory import Trajectory
+from .common import ABSURD_VALUE, DROP_HINT, Column, RawColumns, fmt_names
+from .logs import log_trajectories
+from .options import LoadReport, LogFormat
+
+__all__ = ["BAG_SUFFIXES", "BAGS_EXTRA", "JOINT_STATE", "is_bag", "robot_joint_names", "read_bag", "read_imu",
+           "read_wrench", "JointStateMessage", "joint_state_messages", "write_bag", "write_messages",
+           "ImuMessage", "WrenchMessage"]
+
+BAG_SUFFIXES = (".mcap", ".db3", ".bag")
+BAGS_EXTRA = "pip install 'symoro_gen[bags]'"
+JOINT_STATE = "sensor_msgs/msg/JointState"
+IMU = "sensor_msgs/msg/Imu"
+WRENCH = "geometry_msgs/msg/WrenchStamped"
+#: epoch of the stamps written by :func:`write_bag` (a plausible wall-clock time, 2023-11-14) [ns]
+EPOCH_NS = 1_700_000_000 * 10**9
+STAMP_HINT = "give --stamp log to use the bag's log times (when each message was recorded)"
+TOPIC_HINT = "name the joint-state topic(s) with --topic (several separated by commas)"
+SHOWN = 3
+
+
+def is_bag(path: str | os.PathLike) -> bool:
+    """A ``.mcap``/``.db3``/``.bag`` file or a rosbag2 folder (``metadata.yaml`` inside)."""
+    p = Path(path)
+    return p.suffix.lower() in BAG_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
+
+
+def _rosbags(path: str) -> None:
+    """Check that the ``rosbags`` library is installed, or fail naming the extra."""
+    try:
+        import rosbags.highlevel  # noqa: F401 - only whether it is installed
+    except ImportError:
+        raise DataFileError([Problem(path, "", "", f"ROS bags are read with the rosbags library: {BAGS_EXTRA}")]
+                            ) from None
+
+
+def _typestore(ros1: bool) -> Any:
+    from rosbags.typesys import Stores, get_typestore
+    return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+
+
+@contextmanager
+def _open(path: str) -> Iterator[Any]:
+    """An open ``AnyReader`` (bags without type definitions: the ROS 2 Humble / ROS 1 Noetic types)."""
+    _rosbags(path)
+    from rosbags.highlevel import AnyReader
+    p = Path(path)
+    if not p.exists():
+        raise DataFileError([Problem(path, "", "", "file not found")])
+    try:
+        reader = AnyReader([p], default_typestore=_typestore(p.suffix.lower() == ".bag"))
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types on a damaged bag
+        raise DataFileError([Problem(path, "", "", f"cannot read as a ROS bag ({type(exc).__name__}: {exc})")]
+                            ) from None
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# joint names
+# ---------------------------------------------------------------------------------------------
+_URDF_FRAME = re.compile(r"^\[\[frames\]\]\s*#\s*URDF joint (\S+) \((\w+)\)")
+_J = re.compile(r"^\s*j\s*=\s*(\d+)")
+
+
+def robot_joint_names(robot) -> tuple[str, ...] | None:
+    """The names of the robot's model joints: the URDF joint names ``import-urdf`` keeps in the robot
+    file's ``[[frames]]`` comments (``# URDF joint NAME (type), link ...``); None when the file has none."""
+    if robot is None:
+        return None
+    path = Path(getattr(robot, "file", "") or "")
+    if not path.is_file():
+        return None
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    by_frame: dict[int, str] = {}
+    pending = None
+    for line in text.splitlines():
+        m = _URDF_FRAME.match(line.strip())
+        if m:
+            pending = m.group(1)
+            continue
+        mj = _J.match(line)
+        if mj and pending is not None:
+            by_frame[int(mj.group(1))] = pending
+            pending = None
+    names = [by_frame.get(r.j) for r in robot.model_joints]
+    if not names or any(n is None for n in names):
+        return None
+    return tuple(str(n) for n in names)
+
+
+# ---------------------------------------------------------------------------------------------
+# reading joint states
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class _Msg:
+    topic: str
+    index: int          # 1-based, in its topic
+    log_ns: int
+    stamp_ns: int
+    names: list[str]
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
+
+def _stamp_ns(msg) -> int:
+    st = msg.header.stamp
+    return int(st.sec) * 10**9 + int(getattr(st, "nanosec", getattr(st, "nsec", 0)))
+
+
+def _joint_topics(reader, path: str, fmt: LogFormat) -> list[Any]:
+    """The connections of the joint-state topics (``fmt.topic`` or every ``JointState`` topic but the reference)."""
+    conns = list(reader.connections)
+    if fmt.topic:
+        want = [t.strip() for t in fmt.topic.split(",") if t.strip()]
+        known = sorted({c.topic for c in conns})
+        out = []
+        for t in want:
+            cs = [c for c in conns if c.topic == t]
+            if not cs:
+                raise DataFileError([Problem(path, f"topic {t}", "--topic", f"no such topic in the bag (topics: "
+                                             f"{fmt_names(known)})")])
+            bad = [c for c in cs if c.msgtype != JOINT_STATE]
+            if bad:
+                raise DataFileError([Problem(path, f"topic {t}", "--topic", f"a {bad[0].msgtype} topic, not "
+                                             f"{JOINT_STATE}")])
+            out += cs
+        return out
+    out = [c for c in conns if c.msgtype == JOINT_STATE and c.topic != fmt.reference_topic]
+    if not out:
+        types = sorted({f"{c.topic} ({c.msgtype})" for c in conns})
+        raise DataFileError([Problem(path, "", "--topic", f"no {JOINT_STATE} topic in the bag (topics: "
+                                     f"{', '.join(types) or 'none'})")])
+    return out
+
+
+def _messages(reader, conns, path: str) -> list[_Msg]:
+    out: list[_Msg] = []
+    count: dict[str, int] = {}
+    probs: list[Problem] = []
+    start = int(reader.start_time)
+    for conn, log_ns, raw in reader.messages(connections=conns):
+        k = count[conn.topic] = count.get(conn.topic, 0) + 1
+        where = f"topic {conn.topic}, message {k} (logged {(log_ns - start) * 1e-9:.6g} s into the bag)"
+        msg = reader.deserialize(raw, conn.msgtype)
+        names = [str(x) for x in msg.name]
+        arrs = {f: np.asarray(getattr(msg, f), float).ravel() for f in ("position", "velocity", "effort")}
+        for f, a in arrs.items():
+            if a.size not in (0, len(names)):
+                probs.append(Problem(path, where, f, f"{a.size} values for {len(names)} joint names"))
+        if arrs["position"].size == 0 and names:
+            probs.append(Problem(path, where, "position", "empty: every message must give the joints' positions"))
+        out.append(_Msg(conn.topic, k, int(log_ns), _stamp_ns(msg), names, arrs["position"], arrs["velocity"],
+                        arrs["effort"]))
+    if probs:
+        raise DataFileError(probs[:20])
+    return out
+
+
+def _wanted_names(msgs: list[_Msg], n: int, fmt: LogFormat, robot, path: str, topics: str
+                  ) -> tuple[list[str], str]:
+    """The bag's names of the robot's joints (prefix included) and how they were matched."""
+    pre = fmt.prefix or ""
+    if fmt.joint_names:
+        names = list(fmt.joint_names)
+        if len(names) != n:
+            raise DataFileError([Problem(path, "", "--joint-names", f"{len(names)} names given, the robot has {n} "
+                                         "joints")])
+        return [pre + x for x in names], "by the names of --joint-names"
+    rn = robot_joint_names(robot)
+    if rn is not None:
+        return [pre + x for x in rn], "by the URDF joint names of the robot file"
+    first: list[str] = []
+    for m in msgs:
+        first += [x for x in m.names if x.startswith(pre) and x not in first]
+        if len(first) >= n:
+            break
+    if len(first) < n:
+        raise DataFileError([Problem(path, f"topic {topics}", "name", f"the robot has {n} joints and no joint names; "
+                                     f"the messages name only {len(first)} joint(s){' starting with ' + repr(pre) if pre else ''}"
+                                     f" ({fmt_names(first)}): give the bag's names with --joint-names a,b,c")])
+    return first[:n], (f"by order (the robot file names no joints): the first {n} joint names of the messages "
+                       f"{fmt_names(first[:n])}; --joint-names a,b,c gives them")
+
+
+@dataclass
+class _Samples:
+    t_ns: np.ndarray                     # (N,) stamps, sorted
+    q: np.ndarray
+    dq: np.ndarray | None
+    tau: np.ndarray
+    first_msg: list[str]                 # where each sample comes from (topic, message)
+    notes: list[str] = field(default_factory=list)
+    dropped: list[str] = field(default_factory=list)
+    n_dropped: int = 0                   # times dropped (a joint missing, --drop-bad-rows)
+
+
+def _times(msgs: list[_Msg], fmt: LogFormat, path: str, topics: str, notes: list[str]) -> list[int]:
+    """Each message's time [ns]: the header stamp or the log time (``fmt.stamp``)."""
+    if fmt.stamp == "log":
+        return [m.log_ns for m in msgs]
+    zero = [m for m in msgs if m.stamp_ns == 0]
+    if zero and len(zero) == len(msgs):
+        notes.append(f"every header stamp of {topics} is zero: the bag's log times are used (--stamp log)")
+        return [m.log_ns for m in msgs]
+    if zero:
+        where = ", ".join(f"{m.topic} message {m.index}" for m in zero[:SHOWN]) + (", ..." if len(zero) > SHOWN else "")
+        raise DataFileError([Problem(path, f"{len(zero)} message(s): {where}", "header.stamp",
+                                     "zero while other messages are stamped")], hint=STAMP_HINT)
+    return [m.stamp_ns for m in msgs]
+
+
+def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topics: str) -> _Samples:
+    """Per-stamp samples of the wanted joints (messages of several publishers merged by stamp)."""
+    notes: list[str] = []
+    times = _times(msgs, fmt, path, topics, notes)
+    want = {nm: j for j, nm in enumerate(names)}
+    # messages out of order (per topic: each publisher's own sequence)
+    back = 0
+    last: dict[str, int] = {}
+    for m, tn in zip(msgs, times):
+        if m.topic in last and tn < last[m.topic]:
+            back += 1
+        last[m.topic] = max(tn, last.get(m.topic, tn))
+    if back:
+        notes.append(f"{back} message(s) out of order in the bag: sorted by "
+                     f"{'log time' if fmt.stamp == 'log' else 'stamp'}")
+    present = {nm for m in msgs for nm in m.names}
+    missing = [nm for nm in names if nm not in present]
+    if missing:
+        what = f"joint {missing[0]!r} is" if len(missing) == 1 else f"joints {fmt_names(missing)} are"
+        bare = missing[0][len(fmt.prefix):] if missing[0].startswith(fmt.prefix) else missing[0]
+        prefixes = sorted({x[:-len(bare)] for x in present if x.endswith(bare) and x != bare})
+        tip = (f"; --prefix {' or --prefix '.join(prefixes)} would match {bare!r}" if prefixes and not fmt.prefix
+               else "")
+        raise DataFileError([Problem(path, f"topic {topics}", "name", f"{what} in no message (joints published: "
+                                     f"{fmt_names(sorted(present))}){tip}")],
+                            hint=TOPIC_HINT + "; --joint-names a,b,c (and --prefix) say which joints are the robot's")
+    extra = sorted(present - set(names))
+    if extra:
+        notes.append(f"joints ignored (not the robot's): {fmt_names(extra)}")
+    order = sorted(range(len(msgs)), key=lambda i: (times[i], i))
+    stamps = sorted(set(times))
+    row = {s: r for r, s in enumerate(stamps)}
+    N, n = len(stamps), len(names)
+    q = np.full((N, n), np.nan)
+    v = np.full((N, n), np.nan)
+    tau = np.full((N, n), np.nan)
+    has_v = np.zeros(n, bool)
+    has_e = np.zeros(n, bool)
+    src = [""] * N
+    dup = 0
+    bad: list[Problem] = []
+    for i in order:
+        m = msgs[i]
+        r = row[times[i]]
+        src[r] = src[r] or f"{m.topic} message {m.index}"
+        for k, nm in enumerate(m.names):
+            j = want.get(nm)
+            if j is None:
+                continue
+            if not np.isnan(q[r, j]):
+                dup += 1
+                continue
+            for fld, arr, dest, has in (("position", m.position, q, None), ("velocity", m.velocity, v, has_v),
+                                        ("effort", m.effort, tau, has_e)):
+                if not arr.size:
+                    continue
+                x = float(arr[k])
+                if not (math.isfinite(x) and abs(x) <= ABSURD_VALUE):
+                    bad.append(Problem(path, f"topic {m.topic}, message {m.index} (t = {(times[i] - times[order[0]]) * 1e-9:.6g} s), "
+                                       f"joint {nm}", fld, f"{x:g}: not a finite value of at most {ABSURD_VALUE:g}"))
+                    x = math.nan  # dropped with --drop-bad-rows (the time is incomplete)
+                dest[r, j] = x
+                if has is not None:
+                    has[j] = True
+    if bad and not fmt.drop_bad_rows:
+        raise DataFileError(bad[:20], hint=DROP_HINT)
+    if dup:
+        notes.append(f"{dup} joint sample(s) published twice at the same time: the first kept")
+    no_e = [names[j] for j in range(n) if not has_e[j]]
+    if no_e:
+        raise DataFileError([Problem(path, f"topic {topics}", "effort", f"empty in every message for joint(s) "
+                                     f"{fmt_names(no_e)}: the torque is needed (effort, or a current with "
+                                     "--tau-scale)")])
+    dq = v if has_v.all() else None
+    if dq is None:
+        notes.append("velocity empty in the messages: velocities computed from the positions")
+    return _complete(_Samples(np.asarray(stamps, np.int64), q, dq, tau, src, notes), names, fmt, path)
+
+
+def _complete(s: _Samples, names: list[str], fmt: LogFormat, path: str) -> _Samples:
+    """Stamps where a joint has no position or effort: an error naming them, or dropped (``--drop-bad-rows``)."""
+    hole = np.isnan(s.q) | np.isnan(s.tau)
+    if s.dq is not None:
+        hole |= np.isnan(s.dq) & ~np.isnan(s.q)
+    bad = hole.any(axis=1)
+    if not bad.any():
+        return s
+    t0 = s.t_ns[0]
+    probs = []
+    for j in np.flatnonzero(hole.any(axis=0)):
+        rows = np.flatnonzero(hole[:, j])
+        field_ = "position" if np.isnan(s.q[rows, j]).any() else "effort" if np.isnan(s.tau[rows, j]).any() else "velocity"
+        at = ", ".join(f"{(s.t_ns[r] - t0) * 1e-9:.6g} s ({s.first_msg[r]})" for r in rows[:SHOWN])
+        probs.append(Problem(path, f"joint {names[j]}", field_, f"missing at {rows.size} of {len(bad)} time(s): {at}"
+                             f"{', ...' if rows.size > SHOWN else ''} (joints published at other times are not "
+                             "interpolated)"))
+    if not fmt.drop_bad_rows:
+        raise DataFileError(probs, hint="give --drop-bad-rows to drop these times (counted in the output); "
+                            "publishers of some joints each are merged by equal stamps")
+    keep = ~bad
+    if keep.sum() < 2:
+        raise DataFileError([Problem(path, "", "", "no time has every joint")])
+    dropped = [f"{p.where}, {p.field}: {p.message}" for p in probs]
+    return _Samples(s.t_ns[keep], s.q[keep], None if s.dq is None else s.dq[keep], s.tau[keep],
+                    [x for x, k in zip(s.first_msg, keep) if k], s.notes, dropped, int(bad.sum()))
+
+
+def _reference(reader, path: str, fmt: LogFormat, names: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(t_ns, q_ref)`` of ``--reference-topic``: a JointState's positions, or a message with ``joint_names``
+    and ``reference``/``desired`` (a controller state) or ``positions`` (a trajectory point)."""
+    if not fmt.reference_topic:
+        return None
+    conns = [c for c in reader.connections if c.topic == fmt.reference_topic]
+    if not conns:
+        raise DataFileError([Problem(path, f"topic {fmt.reference_topic}", "--reference-topic", "no such topic in "
+                                     f"the bag (topics: {fmt_names(sorted({c.topic for c in reader.connections}))})")])
+    ts, rows = [], []
+    for k, (conn, log_ns, raw) in enumerate(reader.messages(connections=conns), 1):
+        msg = reader.deserialize(raw, conn.msgtype)
+        if hasattr(msg, "name") and hasattr(msg, "position"):
+            jn, pos = list(msg.name), np.asarray(msg.position, float)
+        else:
+            point = next((getattr(msg, a) for a in ("reference", "desired") if hasattr(msg, a)), msg)
+            jn = list(getattr(msg, "joint_names", []))
+            pos = np.asarray(getattr(point, "positions", []), float)
+        if not jn or pos.size != len(jn):
+            raise DataFileError([Problem(path, f"topic {fmt.reference_topic}, message {k}", "positions",
+                                         f"a {conn.msgtype} with {len(jn)} joint names and {pos.size} positions: not a "
+                                         "reference (a JointState, or joint_names with reference/desired positions)")])
+        idx = {x: i for i, x in enumerate(jn)}
+        miss = [x for x in names if x not in idx]
+        if miss:
+            raise DataFileError([Problem(path, f"topic {fmt.reference_topic}, message {k}", "joint_names",
+                                         f"joint(s) {fmt_names(miss)} missing")])
+        stamp = _stamp_ns(msg) if hasattr(msg, "header") and fmt.stamp != "log" else 0
+        ts.append(stamp or int(log_ns))
+        rows.append(pos[[idx[x] for x in names]])
+    if len(ts) < 2:
+        raise DataFileError([Problem(path, f"topic {fmt.reference_topic}", "", "fewer than 2 messages")])
+    o = np.argsort(np.asarray(ts), kind="stable")
+    return np.asarray(ts, np.int64)[o], np.asarray(rows)[o]
+
+
+def _topics_label(conns) -> str:
+    return ",".join(sorted({c.topic for c in conns}))
+
+
+def _check_topics(msgs: list[_Msg], names: list[str], path: str) -> None:
+    """A joint published on two topics: the topics must be told apart with ``--topic``."""
+    where: dict[str, set[str]] = {}
+    wanted = set(names)
+    for m in msgs:
+        for nm in m.names:
+            if nm in wanted:
+                where.setdefault(nm, set()).add(m.topic)
+    both = {nm: ts for nm, ts in where.items() if len(ts) > 1}
+    if both:
+        nm, ts = next(iter(both.items()))
+        raise DataFileError([Problem(path, f"topics {', '.join(sorted(ts))}", "name", f"joint {nm!r} is published "
+                                     "on several JointState topics")], hint=TOPIC_HINT)
+
+
+def read_bag(path: str | os.PathLike, fmt: LogFormat | None = None, *, n: int, robot=None, dt: float | None = None,
+             loaded: bool = False, drive_chain=None, joint_types=None
+             ) -> tuple[tuple[Trajectory, ...], LoadReport]:
+    """The experiments of a ROS bag (see the module docstring), read with the data options ``fmt``.
+
+    Raises
+    ------
+    DataFileError
+        Naming the file, the topic, the message (index or time), the joint and the field.
+    """
+    fmt = fmt or LogFormat()
+    path = os.fspath(path)
+    if fmt.columns:
+        raise DataFileError([Problem(path, "", "--columns", "a ROS bag has no columns: its joints are matched by "
+                                     "name (--joint-names, --prefix, --topic)")])
+    with _open(path) as reader:
+        conns = _joint_topics(reader, path, fmt)
+        msgs = _messages(reader, conns, path)
+        topics = _topics_label(conns)
+        if not msgs:
+            raise DataFileError([Problem(path, f"topic {topics}", "", "no message")])
+        names, how = _wanted_names(msgs, n, fmt, robot, path, topics)
+        if not fmt.topic:  # only the topics that carry the robot's joints
+            mine = {m.topic for m in msgs if set(m.names) & set(names)}
+            if mine:  # else every topic, to name the joints they publish
+                msgs = [m for m in msgs if m.topic in mine]
+                topics = ",".join(sorted(mine))
+            _check_topics(msgs, names, path)
+        s = _samples(msgs, names, fmt, path, topics)
+        ref = _reference(reader, path, fmt, names)
+    t0 = int(s.t_ns[0])
+    t = (s.t_ns - t0) * 1e-9
+    cols = {"t": Column(path, ["stamp"], t[:, None], None), "q": Column(path, [f"{x}.position" for x in names], s.q, None),
+            "tau": Column(path, [f"{x}.effort" for x in names], s.tau, None)}
+    if s.dq is not None:
+        cols["dq"] = Column(path, [f"{x}.velocity" for x in names], s.dq, None)
+    raw = RawColumns(path, "bag", cols)
+    trajs, rep = log_trajectories(raw, fmt, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
+                                  joint_types=joint_types)
+    for tr in trajs:
+        tr.meta.update({"topics": topics.split(","), "joint_names": names, "t0_ns": t0})
+        if ref is not None:
+            tr.meta["q_ref"] = np.column_stack([np.interp(tr.t, (ref[0] - t0) * 1e-9, ref[1][:, j])
+                                                for j in range(n)])
+            tr.meta["q_ref_topic"] = fmt.reference_topic
+    notes = [f"topic(s) {topics}: {len(msgs)} messages, {s.t_ns.size} times; joints matched {how}"] + s.notes
+    if ref is not None:
+        notes.append(f"reference positions from {fmt.reference_topic} ({ref[0].size} messages), interpolated on "
+                     "the samples")
+    rep = replace(rep, rows_read=len(msgs), rows_dropped=rep.rows_dropped + s.n_dropped,
+                  dropped=tuple(s.dropped) + rep.dropped, notes=tuple(notes) + rep.notes)
+    return trajs, rep
+
+
+# ---------------------------------------------------------------------------------------------
+# IMU and wrench topics (floating base: read, not used by the commands yet)
+# ---------------------------------------------------------------------------------------------
+def _topic_arrays(path: str | os.PathLike, topic: str | None, msgtype: str, fields: Mapping[str, tuple[str, ...]],
+                  stamp: str = "header") -> dict[str, np.ndarray]:
+    path = os.fspath(path)
+    with _open(path) as reader:
+        conns = [c for c in reader.connections if c.msgtype == msgtype and (topic is None or c.topic == topic)]
+        if not conns:
+            raise DataFileError([Problem(path, f"topic {topic}" if topic else "", "topic", f"no {msgtype} topic "
+                                         f"(topics: {fmt_names(sorted({c.topic for c in reader.connections}))})")])
+        if topic is None and len({c.topic for c in conns}) > 1:
+            raise DataFileError([Problem(path, "", "topic", f"several {msgtype} topics "
+                                         f"({fmt_names(sorted({c.topic for c in conns}))}): name one")])
+        ts: list[int] = []
+        out: dict[str, list] = {k: [] for k in fields}
+        for conn, log_ns, raw in reader.messages(connections=conns):
+            msg = reader.deserialize(raw, conn.msgtype)
+            ts.append(_stamp_ns(msg) if stamp == "header" and _stamp_ns(msg) else int(log_ns))
+            for k, attrs in fields.items():
+                obj = msg
+                for a in attrs[:-1]:
+                    obj = getattr(obj, a)
+                last = attrs[-1]
+                if last == "xyzw":
+                    out[k].append([obj.x, obj.y, obj.z, obj.w])
+                elif last == "xyz":
+                    out[k].append([obj.x, obj.y, obj.z])
+                else:
+                    out[k].append(np.asarray(getattr(obj, last), float).ravel())
+    o = np.argsort(np.asarray(ts, np.int64), kind="stable")
+    tn = np.asarray(ts, np.int64)[o]
+    res = {"t": (tn - tn[0]) * 1e-9 if tn.size else np.zeros(0), "t0_ns": np.asarray(tn[0] if tn.size else 0)}
+    res.update({k: np.asarray(v, float)[o] for k, v in out.items()})
+    return res
+
+
+def read_imu(path: str | os.PathLike, topic: str | None = None, *, stamp: str = "header") -> dict[str, np.ndarray]:
+    """A ``sensor_msgs/Imu`` topic as arrays: ``t`` [s, from the first message], ``orientation`` (N, 4) quaternion
+    x y z w, ``angular_velocity`` (N, 3) [rad/s], ``linear_acceleration`` (N, 3) [m/s^2] (REP 103/145)."""
+    return _topic_arrays(path, topic, IMU, {"orientation": ("orientation", "xyzw"),
+                                            "angular_velocity": ("angular_velocity", "xyz"),
+                                            "linear_acceleration": ("linear_acceleration", "xyz")}, stamp)
+
+
+def read_wrench(path: str | os.PathLike, topic: str | None = None, *, stamp: str = "header") -> dict[str, np.ndarray]:
+    """A ``geometry_msgs/WrenchStamped`` topic as arrays: ``t`` [s], ``force`` (N, 3) [N], ``torque`` (N, 3) [N m]."""
+    return _topic_arrays(path, topic, WRENCH, {"force": ("wrench", "force", "xyz"),
+                                               "torque": ("wrench", "torque", "xyz")}, stamp)
+
+
+# ---------------------------------------------------------------------------------------------
+# writing
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class JointStateMessage:
+    """One ``JointState`` to write: ``stamp`` [s] (header; ``zero_stamp``: a zero header stamp, as drivers that do
+    not stamp write), ``log_time`` [s] (default the stamp), joint ``names`` and their ``position``, ``velocity``,
+    ``effort`` (empty: an empty array)."""
+
+    stamp: float
+    names: tuple[str, ...]
+    position: tuple[float, ...]
+    velocity: tuple[float, ...] = ()
+    effort: tuple[float, ...] = ()
+    log_time: float | None = None
+    zero_stamp: bool = False
+
+
+@dataclass(frozen=True)
+class ImuMessage:
+    stamp: float
+    orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    angular_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    linear_acceleration: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class WrenchMessage:
+    stamp: float
+    force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    torque: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+BagMessage = JointStateMessage | ImuMessage | WrenchMessage
+
+
+def joint_state_messages(trajectory: Trajectory, joint_names: Sequence[str], *, velocity: bool = True,
+                         effort: bool = True, positions=None) -> list[JointStateMessage]:
+    """One ``JointState`` per sample of ``trajectory`` (``positions``: other positions, e.g. a reference)."""
+    q = np.asarray(trajectory.q if positions is None else positions, float)
+    if q.shape[1] != len(joint_names):
+        raise ValueError(f"{len(joint_names)} joint names for {q.shape[1]} joints")
+    dq = trajectory.dq if velocity else None
+    out = []
+    for i, t in enumerate(np.asarray(trajectory.t, float)):
+        out.append(JointStateMessage(float(t), tuple(joint_names), tuple(map(float, q[i])),
+                                     tuple(map(float, dq[i])) if dq is not None else (),
+                                     tuple(map(float, trajectory.tau[i])) if effort else ()))
+    return out
+
+
+def _ns(t: float) -> int:
+    return EPOCH_NS + int(round(float(t) * 1e9))
+
+
+def _ros_message(ts: Any, m: BagMessage, ros1: bool) -> tuple[str, Any, int]:
+    """(msgtype, message, log time ns)."""
+    T = ts.types
+    stamp = T["builtin_interfaces/msg/Time"](sec=0, nanosec=0)
+    if not getattr(m, "zero_stamp", False):
+        ns = _ns(m.stamp)
+        stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+    header = (T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id="") if ros1
+              else T["std_msgs/msg/Header"](stamp=stamp, frame_id=""))
+    log = _ns(m.log_time if isinstance(m, JointStateMessage) and m.log_time is not None else m.stamp)
+    if isinstance(m, JointStateMessage):
+        msg = T[JOINT_STATE](header=header, name=list(m.names), position=np.asarray(m.position, float),
+                             velocity=np.asarray(m.velocity, float), effort=np.asarray(m.effort, float))
+        return JOINT_STATE, msg, log
+    V3, Q = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    if isinstance(m, ImuMessage):
+        x, y, z, w = m.orientation
+        cov = np.zeros(9)
+        msg = T[IMU](header=header, orientation=Q(x=x, y=y, z=z, w=w), orientation_covariance=cov,
+                     angular_velocity=V3(*m.angular_velocity), angular_velocity_covariance=cov,
+                     linear_acceleration=V3(*m.linear_acceleration), linear_acceleration_covariance=cov)
+        return IMU, msg, log
+    wr = T["geometry_msgs/msg/Wrench"](force=V3(*m.force), torque=V3(*m.torque))
+    return WRENCH, T[WRENCH](header=header, wrench=wr), log
+
+
+def _write_into(tmp: Path, kind: str, topics: Mapping[str, Sequence[BagMessage]]) -> None:
+    """Write a new bag at ``tmp`` (``kind``: ``ros1``, ``mcap`` or ``sqlite3``: a rosbag2 folder)."""
+    ros1 = kind == "ros1"
+    ts = _typestore(ros1)
+    items = []
+    for topic, msgs in topics.items():
+        for i, m in enumerate(msgs):
+            items.append((topic, i, *_ros_message(ts, m, ros1)))
+    if ros1:
+        from rosbags.rosbag1 import Writer as Writer1
+        with Writer1(tmp) as w1:
+            conns1 = {tp: w1.add_connection(tp, next(x[2] for x in items if x[0] == tp), typestore=ts)
+                      for tp in topics if topics[tp]}
+            for tp, _i, typ, msg, log in items:  # written in the given order (out-of-order messages stay so)
+                w1.write(conns1[tp], log, ts.serialize_ros1(msg, typ))
+        return
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
+    with Writer(tmp, version=9, storage_plugin=plugin) as w:
+        conns = {tp: w.add_connection(tp, next(x[2] for x in items if x[0] == tp), typestore=ts)
+                 for tp in topics if topics[tp]}
+        for tp, _i, typ, msg, log in items:
+            w.write(conns[tp], log, ts.serialize_cdr(msg, typ))
+
+
+def write_messages(path: str | os.PathLike, topics: Mapping[str, Sequence[BagMessage]], *, force: bool = False,
+                   storage: str = "mcap") -> Path:
+    """Write messages as a bag: ``.bag`` a ROS 1 bag, ``.mcap``/``.db3`` a ROS 2 storage file, any other path a
+    rosbag2 folder (``storage``: ``mcap`` or ``sqlite3``). Messages are written in the order given (each
+    topic's list, topics one after the other), with their log times.
+
+    Written to a temporary sibling and renamed. An existing file or folder is never replaced unless ``force``
+    (a bag is a recording, an input of other commands: :func:`~symoro_gen.atomic.check_replaceable`).
+
+    Raises
+    ------
+    OutputError
+        ``path`` exists and ``force`` is false (nothing written).
+    DataFileError
+        The ``rosbags`` library is missing (the ``bags`` extra).
+    """
+    out = Path(path)
+    check_replaceable(out, force, owner="never", label="bag")
+    _rosbags(str(out))
+    suffix = out.suffix.lower()
+    kind = {".bag": "ros1", ".mcap": "mcap", ".db3": "sqlite3"}.get(suffix, storage)
+    if kind not in ("ros1", "mcap", "sqlite3"):
+        raise ValueError(f"storage {storage!r}: expected 'mcap' or 'sqlite3'")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        if kind == "ros1":
+            made = work / out.name
+            _write_into(made, kind, topics)
+        else:
+            folder = work / "bag"
+            _write_into(folder, kind, topics)
+            made = folder
+            if suffix in (".mcap", ".db3"):  # the storage file alone (read without metadata.yaml)
+                made = next(folder.glob(f"*{suffix}"))
+        if out.is_dir() and not out.is_symlink():
+            shutil.rmtree(out)
+        elif out.exists() or out.is_symlink():
+            out.unlink()
+        os.replace(made, out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return out
+
+
+def write_bag(trajectory: Trajectory, path: str | os.PathLike, joint_names: Sequence[str], *,
+              topic: str = "/joint_states", force: bool = False, velocity: bool = True, effort: bool = True,
+              reference=None, reference_topic: str = "/reference", storage: str = "mcap") -> Path:
+    """Write a recording as a bag of ``sensor_msgs/JointState`` messages on ``topic`` (one per sample,
+    stamped ``t``), read back by :func:`read_bag`; ``reference`` (N, n) positions as JointStates on
+    ``reference_topic``. Format by suffix, no-clobber rule and errors: :func:`write_messages`."""
+    topics: dict[str, Sequence[BagMessage]] = {topic: joint_state_messages(trajectory, joint_names,
+                                                                           velocity=velocity, effort=effort)}
+    if reference is not None:
+        topics[reference_topic] = joint_state_messages(trajectory, joint_names, velocity=False, effort=False,
+                                                       positions=reference)
+    return write_messages(path, topics, force=force, storage=storage)
