@@ -37,15 +37,22 @@ import numpy as np
 
 __all__ = ["PLAUSIBLE", "CLOSE_ALTERNATIVE", "ALTERNATIVE_EXPLAINS", "VERDICTS", "Plausibility", "ArmScales",
            "band_factor", "effect_plausibility", "law_plausibility", "verdict", "alternatives_of",
-           "fits_like", "rate_effects", "law_alternatives", "DELAY_TYPICAL_S", "DELAY_TYPICAL_PERIODS", "GAIN_TOLERANCE", "STRIBECK_BAND", "VELOCITY_RESOLUTION",
+           "fits_like", "rate_effects", "remaining_error", "own_candidate", "CLOSE_REMAINING", "law_alternatives", "DELAY_TYPICAL_S", "DELAY_TYPICAL_PERIODS", "GAIN_TOLERANCE", "STRIBECK_BAND", "VELOCITY_RESOLUTION",
            "POWER_BAND", "DEFLECTION_BAND"]
 
 #: an effect (or law) rated below this is not called a cause
 PLAUSIBLE = 0.5
-#: an eligible alternative of the same round whose score reaches this share of the effect's makes it doubtful
+#: an eligible alternative of the same round makes the effect doubtful when it leaves at most this factor of
+#: the effect's squared validation error on the effect's joints (it "fits almost as well": what it misses
+#: is within 10 % of what the effect leaves); without the errors, when its score reaches this share of the
+#: effect's
 CLOSE_ALTERNATIVE = 0.9
-#: an implausible effect is rejected when an eligible alternative reaches this share of its score
+CLOSE_REMAINING = 1.1
+#: an implausible effect is rejected when an eligible alternative explains the same residual: leaves at most
+#: EXPLAINS_REMAINING times the effect's squared validation error on its joints (without the errors: reaches
+#: ALTERNATIVE_EXPLAINS of its score)
 ALTERNATIVE_EXPLAINS = 0.5
+EXPLAINS_REMAINING = 1.5
 VERDICTS = ("cause", "doubtful", "rejected")
 #: alternatives listed per effect
 N_ALTERNATIVES = 3
@@ -330,20 +337,32 @@ def law_plausibility(choice, scales: ArmScales) -> Plausibility:
     return r.done()
 
 
+def _close(a: Mapping, s: float | None, remaining: float | None, factor: float = CLOSE_REMAINING,
+           share: float = CLOSE_ALTERNATIVE) -> bool:
+    """An eligible alternative ``a`` fits almost as well as the effect (score ``s``, validation error
+    ``remaining`` left on its joints): it leaves at most ``factor`` times the effect's squared error, or
+    (errors not recorded) reaches ``share`` of its score (:data:`CLOSE_REMAINING`, :data:`EXPLAINS_REMAINING`)."""
+    if not a.get("eligible") or a.get("score") is None:
+        return False
+    ra = a.get("remaining")
+    if remaining is not None and remaining > 0 and ra is not None and math.isfinite(float(ra)):
+        return float(ra) ** 2 <= factor * remaining ** 2
+    return s is not None and float(a["score"]) >= share * s
+
+
 def verdict(plaus: Plausibility, score: float | None, alternatives: Sequence[Mapping], *,
-            impossible: str | None = None) -> tuple[str, str]:
-    """``(verdict, why)`` of an effect from its plausibility, its score and its round's alternatives (dicts with
-    ``score`` and ``eligible``; see :func:`alternatives_of`)."""
+            impossible: str | None = None, remaining: float | None = None) -> tuple[str, str]:
+    """``(verdict, why)`` of an effect from its plausibility, its score, the validation error it leaves on its
+    joints (``remaining``, RMS of the per-joint relative error norms) and its round's alternatives (dicts with
+    ``score``, ``eligible`` and ``remaining``; see :func:`alternatives_of`)."""
     if impossible:
         return "rejected", f"its parameters are physically impossible ({impossible})"
     s = float(score) if score is not None and math.isfinite(float(score)) else None
-    best = max((float(a["score"]) for a in alternatives if a.get("eligible") and a.get("score") is not None),
-               default=None)
     if plaus.score < PLAUSIBLE:
-        if s is not None and best is not None and best >= ALTERNATIVE_EXPLAINS * s:
+        if any(_close(a, s, remaining, EXPLAINS_REMAINING, ALTERNATIVE_EXPLAINS) for a in alternatives):
             return "rejected", "it is implausible and an alternative explains the same residual"
         return "doubtful", "it is implausible"
-    if s is not None and best is not None and best >= CLOSE_ALTERNATIVE * s:
+    if any(_close(a, s, remaining) for a in alternatives):
         return "doubtful", "an alternative fits almost as well"
     return "cause", "fits, beats its alternatives, plausible"
 
@@ -356,11 +375,27 @@ def _overlap(kind_joint: int | None, partner: int | None, other_joint: int | Non
     return bool(a & b)
 
 
+def remaining_error(c, joint: int | None, partner: int | None) -> float | None:
+    """RMS over the joints of an effect (all for ``joint`` None) of the validation relative error norms a candidate
+    (:class:`.report.CandidateScore`) leaves (None when not recorded)."""
+    after = np.asarray(getattr(c, "val_rel_err_after", ()) or (), float)
+    if after.size == 0:
+        return None
+    js = list(range(after.size)) if joint is None else [j for j in (joint, partner) if j is not None and j < after.size]
+    return float(np.sqrt(np.mean(after[js] ** 2))) if js else None
+
+
+def own_candidate(label: str, variant: str, tried: Sequence, round: int):
+    """The effect's own entry among the candidates of its round (None when not found)."""
+    return next((c for c in tried if c.round == round and c.label == label and c.variant == variant), None)
+
+
 def alternatives_of(effect_label: str, effect_variant: str, joint: int | None, partner: int | None,
-                    score: float | None, tried: Sequence, round: int, k: int = N_ALTERNATIVES) -> list[dict]:
+                    score: float | None, tried: Sequence, round: int, k: int | None = N_ALTERNATIVES) -> list[dict]:
     """The next candidates of round ``round`` (``tried``: :class:`.report.CandidateScore`) on the effect's joints,
     best score first, without the effect itself and without a candidate tying its score (the same fit under
-    another name, e.g. a composed torque-modulated constant that is the gain column)."""
+    another name, e.g. a composed torque-modulated constant that is the gain column); ``remaining``: the
+    validation error each leaves on the effect's joints (:func:`remaining_error`). ``k``: at most so many."""
     out = []
     for c in tried:
         if c.round != round or c.score is None or not math.isfinite(float(c.score)):
@@ -376,7 +411,8 @@ def alternatives_of(effect_label: str, effect_variant: str, joint: int | None, p
     out.sort(key=lambda c: -float(c.score))
     return [{"label": c.label + (f" {c.variant}" if c.variant and c.kind != "coupling" else ""), "kind": c.kind,
              "joint": None if c.joint is None else int(c.joint) + 1, "score": float(c.score),
-             "eligible": bool(c.eligible), "search": dict(c.search)} for c in out[:k]]
+             "eligible": bool(c.eligible), "search": dict(c.search),
+             "remaining": remaining_error(c, joint, partner)} for c in (out if k is None else out[:k])]
 
 
 def fits_like(kind: str, joint: int | None, physical: Mapping[str, float], description: str, *,
@@ -417,8 +453,11 @@ def rate_effects(effects: Sequence, scales: ArmScales, tried: Sequence, *,
             short = {nm.split(".")[-1]: float(v) for nm, v in zip(e.names, e.values)}
             pl = effect_plausibility(e.kind, e.joint, short, e.physical or {}, scales, variant=e.variant,
                                      modulation=e.modulation, delay_joints=delay_joints)
-            alts = alternatives_of(e.label, e.variant, e.joint, e.partner, e.score, tried, e.round)
-        v, why = verdict(pl, e.score, alts, impossible=impossible.get(e.label))
+            alts = alternatives_of(e.label, e.variant, e.joint, e.partner, e.score, tried, e.round, k=None)
+        own = own_candidate(e.label, e.variant, tried, e.round)
+        rem = None if own is None else remaining_error(own, e.joint, e.partner)
+        v, why = verdict(pl, e.score, alts, impossible=impossible.get(e.label), remaining=rem)
+        alts = alts[:N_ALTERNATIVES]
         one = (e.kind == "time_delay" and e.joint is not None and scales.n_joints > 1
                and not any(x is None or x != e.joint for x in delay_joints))
         like = fits_like(e.kind, e.joint, e.physical or {}, e.description, one_joint_delay=one)

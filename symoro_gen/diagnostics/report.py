@@ -178,7 +178,7 @@ class Effect:
                 "verdict_reason": self.verdict_reason or None,
                 "plausibility": None if self.plausibility is None else {
                     "score": _f(self.plausibility.score), "reasons": list(self.plausibility.reasons)},
-                "alternatives": [{**a, "score": _f(a.get("score")),
+                "alternatives": [{**a, "score": _f(a.get("score")), "remaining": _f(a.get("remaining")),
                                   "search": {k: _f(v) for k, v in dict(a.get("search") or {}).items()}}
                                  for a in self.alternatives]}
 

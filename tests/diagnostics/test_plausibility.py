@@ -108,6 +108,9 @@ def test_verdict_rules():
     assert verdict(bad, 1.0, [])[0] == "doubtful"
     assert verdict(bad, 1.0, [{"score": 0.6, "eligible": True}])[0] == "rejected"
     assert verdict(good, 1.0, [], impossible="gain scale 3")[0] == "rejected"
+    # with the validation errors left: "almost as well" is judged on what is left, not on what is removed
+    assert verdict(good, 1.0, [{"score": 0.95, "eligible": True, "remaining": 0.05}], remaining=0.02)[0] == "cause"
+    assert verdict(good, 1.0, [{"score": 0.5, "eligible": True, "remaining": 0.0205}], remaining=0.02)[0] == "doubtful"
 
 
 def _cs(label, kind, joint, score, eligible=True, rnd=1, variant=""):
@@ -151,9 +154,9 @@ def _first(rep, kind, joint):
 @pytest.mark.slow
 @pytest.mark.parametrize("g, want", [(1.03, "cause"), (1.35, "doubtful")])
 def test_gain_verdict_follows_the_injected_truth(g, want):
-    model, tr = recording("lwr4", 11, "gain", 3, g=g, duration=20.0)
+    model, tr = recording("lwr4", 11, "gain", 4, g=g, duration=20.0)
     rep = diagnose(model, tr)
-    e = _first(rep, "gain", 3)
+    e = _first(rep, "gain", 4)
     assert e.physical["g"] == pytest.approx(g, rel=0.02)
     assert e.verdict == want, (e.verdict, e.verdict_reason)
     assert rep.to_dict()["effects"][rep.effects.index(e)]["verdict"] == want
