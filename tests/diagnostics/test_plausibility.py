@@ -184,3 +184,29 @@ def test_a_real_40_ms_delay_on_one_joint_is_still_found_rated_and_explained():
     assert "joint 7 only" in e.verdict_reason and "not named the cause" in e.verdict_reason
     assert any("effect" in w and "time_delay7" in w for w in rep.warnings)
     assert "[doubtful]" in rep.summary() or "[rejected]" in rep.summary()
+
+
+@pytest.mark.slow
+def test_an_implausible_friction_law_is_not_applied_but_reported(monkeypatch):
+    """A Stribeck dip at vs = 0.1 rad/s on SCARA joint 2 is chosen by the friction-law stage (see
+    test_effects); with a prior that puts the usual Stribeck velocities at 0.5-1 rad/s the same law is
+    implausible: not applied before the loop, reported as a doubtful alternative (round 0 of
+    ``implausible``, a warning), and the loop still finds the dip - without calling it the cause."""
+    from symoro_gen.diagnostics import plausibility
+
+    model, tr = recording("scara", 11, "stribeck", 1, Fst=1.0, vs=0.1, duration=20.0)
+    rep = diagnose(model, tr)
+    law = _first(rep, "friction_law", 1)
+    assert law.variant.startswith("stribeck") and law.verdict == "cause", law.verdict_reason
+    assert not [d for d in rep.implausible if d["round"] == 0]
+
+    monkeypatch.setattr(plausibility, "STRIBECK_BAND", (0.5, 1.0))
+    rep = diagnose(model, tr)
+    assert not [e for e in rep.effects if e.kind == "friction_law" and e.joint == 1]
+    (d,) = [d for d in rep.implausible if d["round"] == 0]
+    assert d["candidate"] == "friction_law2" and "Stribeck" in d["law"]
+    assert d["plausibility"]["score"] < PLAUSIBLE and any("Stribeck velocity" in r for r in d["reasons"])
+    assert any(w.startswith("friction-law stage: joint 2") and "not applied" in w for w in rep.warnings)
+    e = _first(rep, "stribeck", 1)
+    assert e.physical["vs"] == pytest.approx(0.1, rel=0.3)
+    assert e.verdict != "cause" and "not named the cause" in e.verdict_reason
