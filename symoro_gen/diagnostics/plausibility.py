@@ -342,7 +342,7 @@ def _close(a: Mapping, s: float | None, remaining: float | None, factor: float =
     """An eligible alternative ``a`` fits almost as well as the effect (score ``s``, validation error
     ``remaining`` left on its joints): it leaves at most ``factor`` times the effect's squared error, or
     (errors not recorded) reaches ``share`` of its score (:data:`CLOSE_REMAINING`, :data:`EXPLAINS_REMAINING`)."""
-    if not a.get("eligible") or a.get("score") is None:
+    if not a.get("eligible") or a.get("score") is None or a.get("same_effect"):
         return False
     ra = a.get("remaining")
     if remaining is not None and remaining > 0 and ra is not None and math.isfinite(float(ra)):
@@ -385,22 +385,37 @@ def remaining_error(c, joint: int | None, partner: int | None) -> float | None:
     return float(np.sqrt(np.mean(after[js] ** 2))) if js else None
 
 
-def own_candidate(label: str, variant: str, tried: Sequence, round: int):
-    """The effect's own entry among the candidates of its round (None when not found)."""
-    return next((c for c in tried if c.round == round and c.label == label and c.variant == variant), None)
+#: one physical effect under two names of the library: a composed candidate whose columns are a plain kind's
+#: (``sign(dq_j) |tau_hat_j|`` is the load-dependent friction, a constant changing with ``tau_hat_j`` the gain
+#: column); as alternatives of each other they are the same explanation, not a competing one
+SYNONYMS = (frozenset({("coulomb", "abs_tau"), ("load_friction", "")}), frozenset({("constant", "tau"), ("gain", "")}))
 
 
-def alternatives_of(effect_label: str, effect_variant: str, joint: int | None, partner: int | None,
+def _same_effect(kind: str, variant: str, other_kind: str, other_variant: str) -> bool:
+    a, b = (kind, variant if kind not in ("load_friction", "gain") else ""), (
+        other_kind, other_variant if other_kind not in ("load_friction", "gain") else "")
+    return any(a in g and b in g for g in SYNONYMS)
+
+
+def own_candidate(kind: str, joint: int | None, partner: int | None, variant: str, tried: Sequence, round: int):
+    """The effect's own entry among the candidates of its round (same kind, joints and variant; None when not
+    found)."""
+    return next((c for c in tried if c.round == round and c.kind == kind and c.joint == joint
+                 and c.partner == partner and c.variant == variant), None)
+
+
+def alternatives_of(kind: str, effect_variant: str, joint: int | None, partner: int | None,
                     score: float | None, tried: Sequence, round: int, k: int | None = N_ALTERNATIVES) -> list[dict]:
-    """The next candidates of round ``round`` (``tried``: :class:`.report.CandidateScore`) on the effect's joints,
-    best score first, without the effect itself and without a candidate tying its score (the same fit under
-    another name, e.g. a composed torque-modulated constant that is the gain column); ``remaining``: the
-    validation error each leaves on the effect's joints (:func:`remaining_error`). ``k``: at most so many."""
+    """The next candidates of round ``round`` (``tried``: :class:`.report.CandidateScore`) on the joints of an
+    effect of kind ``kind``, best score first, without the effect itself and without a candidate tying its
+    score (the same fit under another name); ``remaining``: the validation error each leaves on the effect's
+    joints (:func:`remaining_error`); ``same_effect``: the same physical effect under another name of the
+    library (:data:`SYNONYMS`, not a competing explanation). ``k``: at most so many."""
     out = []
     for c in tried:
         if c.round != round or c.score is None or not math.isfinite(float(c.score)):
             continue
-        if c.label == effect_label and c.variant == effect_variant:
+        if c.kind == kind and c.joint == joint and c.partner == partner and c.variant == effect_variant:
             continue
         if not _overlap(joint, partner, c.joint, c.partner):
             continue
@@ -412,7 +427,9 @@ def alternatives_of(effect_label: str, effect_variant: str, joint: int | None, p
     return [{"label": c.label + (f" {c.variant}" if c.variant and c.kind != "coupling" else ""), "kind": c.kind,
              "joint": None if c.joint is None else int(c.joint) + 1, "score": float(c.score),
              "eligible": bool(c.eligible), "search": dict(c.search),
-             "remaining": remaining_error(c, joint, partner)} for c in (out if k is None else out[:k])]
+             "remaining": remaining_error(c, joint, partner),
+             "same_effect": _same_effect(kind, effect_variant, c.kind, c.variant)}
+            for c in (out if k is None else out[:k])]
 
 
 def fits_like(kind: str, joint: int | None, physical: Mapping[str, float], description: str, *,
@@ -453,8 +470,8 @@ def rate_effects(effects: Sequence, scales: ArmScales, tried: Sequence, *,
             short = {nm.split(".")[-1]: float(v) for nm, v in zip(e.names, e.values)}
             pl = effect_plausibility(e.kind, e.joint, short, e.physical or {}, scales, variant=e.variant,
                                      modulation=e.modulation, delay_joints=delay_joints)
-            alts = alternatives_of(e.label, e.variant, e.joint, e.partner, e.score, tried, e.round, k=None)
-        own = own_candidate(e.label, e.variant, tried, e.round)
+            alts = alternatives_of(e.kind, e.variant, e.joint, e.partner, e.score, tried, e.round, k=None)
+        own = own_candidate(e.kind, e.joint, e.partner, e.variant, tried, e.round)
         rem = None if own is None else remaining_error(own, e.joint, e.partner)
         v, why = verdict(pl, e.score, alts, impossible=impossible.get(e.label), remaining=rem)
         alts = alts[:N_ALTERNATIVES]

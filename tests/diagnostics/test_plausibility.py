@@ -113,24 +113,40 @@ def test_verdict_rules():
     assert verdict(good, 1.0, [{"score": 0.5, "eligible": True, "remaining": 0.0205}], remaining=0.02)[0] == "doubtful"
 
 
-def _cs(label, kind, joint, score, eligible=True, rnd=1, variant=""):
-    return CandidateScore(rnd, kind, label, joint, None, variant, score, 1e-9, 10.0, 1e-4, 1.0, eligible, "")
+def _cs(label, kind, joint, score, eligible=True, rnd=1, variant="", after=()):
+    return CandidateScore(rnd, kind, label, joint, None, variant, score, 1e-9, 10.0, 1e-4, 1.0, eligible, "",
+                          val_rel_err_after=after)
 
 
 def test_alternatives_are_the_round_on_the_effects_joints():
     tried = [_cs("time_delay7", "time_delay", 6, 1.0), _cs("time_delay", "time_delay", None, 0.5, variant="all"),
              _cs("gain7", "gain", 6, 0.4), _cs("gain3", "gain", 2, 0.9), _cs("gain7", "gain", 6, 0.8, rnd=2),
              _cs("constant x tau7", "constant", 6, 1.0)]   # the same fit under another name (ties the score)
-    alts = alternatives_of("time_delay7", "", 6, None, 1.0, tried, 1)
+    alts = alternatives_of("time_delay", "", 6, None, 1.0, tried, 1)
     assert [a["label"] for a in alts] == ["time_delay all", "gain7"]
 
 
-def _effect(kind, joint, names, values, physical, score=1.0, rnd=1, variant=""):
+def _effect(kind, joint, names, values, physical, score=1.0, rnd=1, variant="", modulation=None):
     label = f"{kind}{'' if joint is None else joint + 1}"
     return Effect(kind=kind, label=label, variant=variant, joint=joint, partner=None, names=names,
                   values=np.asarray(values, float), std=np.zeros(len(values)), rel_std_pct=np.zeros(len(values)),
                   physical=physical, score=score, p_value=1e-20, z_validation=20.0, round=rnd, reveal="t",
-                  reveal_joint=joint, description=label)
+                  reveal_joint=joint, description=label, modulation=modulation)
+
+
+def test_one_effect_under_two_names_is_not_its_own_rival():
+    """A composed Coulomb friction growing with |tau_hat_2| is the load-dependent friction of joint 2: as its
+    alternative it does not make it doubtful; a different effect leaving as little does."""
+    after_own, after_same, after_other = (0.1, 0.0200, 0.1), (0.1, 0.0201, 0.1), (0.1, 0.0205, 0.1)
+    e = _effect("coulomb", 1, ("coulomb2.F*abs_tau",), [2.0], {}, score=6.63, variant="abs_tau", modulation="abs_tau")
+    own = _cs("Coulomb friction of joint 2 growing with |tau_hat2|", "coulomb", 1, 6.63, variant="abs_tau",
+              after=after_own)
+    same = _cs("load_friction2", "load_friction", 1, 6.62, after=after_same)
+    (r,) = rate_effects([e], _scales(n=3), [own, same])
+    assert r.verdict == "cause" and r.alternatives[0]["same_effect"], r.verdict_reason
+    other = _cs("gain2", "gain", 1, 6.0, after=after_other)
+    (r,) = rate_effects([e], _scales(n=3), [own, same, other])
+    assert r.verdict == "doubtful" and "almost as well" in r.verdict_reason
 
 
 def test_a_doubtful_effect_is_never_called_the_cause():
