@@ -93,6 +93,9 @@ POWER_WIDTH = math.log(1.5)
 #: friction magnitudes against the joint's 98th-percentile torque: dry friction of a geared joint is
 #: 2-30 % of its torque range (LWR4 paper, Table II; RX-90 paper, Table 3), above half of it it is unusual
 FRICTION_SHARE = 0.5
+#: ... and the Coulomb coefficient of a friction law at most the torque range itself (a friction-dominated
+#: wrist joint has most of its torque in friction)
+COULOMB_SHARE = 1.0
 #: load-dependent friction ``mu |tau|``: 0-0.3 (harmonic-drive efficiency 70-90 %, HD catalogues)
 LOAD_FRICTION_BAND = (0.0, 0.3)
 #: a torque (offset, drift over the recording, ripple amplitude, spring at the range's end) against the
@@ -332,7 +335,7 @@ def law_plausibility(choice, scales: ArmScales) -> Plausibility:
         if float(fc) < 0:
             r.factor(NEGATIVE_FRICTION_FACTOR, f"a negative Coulomb friction ({float(fc):.3g} N m)")
         else:
-            r.factor(band_factor(float(fc) / tau, 0.0, FRICTION_SHARE, SHARE_WIDTH),
+            r.factor(band_factor(float(fc) / tau, 0.0, COULOMB_SHARE, SHARE_WIDTH),
                      f"a Coulomb friction of {float(fc):.3g} N m is large against the torque range {tau:.3g} N m")
     return r.done()
 
@@ -482,7 +485,7 @@ def rate_effects(effects: Sequence, scales: ArmScales, tried: Sequence, *,
             text = f"{like}; {why}"
         else:
             text = f"fits like {like}, but {why}"
-            if pl.reasons:
+            if pl.reasons and pl.score < 1.0:   # the priors it contradicts (not a note that there is none)
                 text += ": " + "; ".join(pl.reasons)
             if pl.check:
                 text += f"; check {pl.check}"
