@@ -685,7 +685,11 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
     only when it lowers that error by ``friction.MIN_GAIN``). The expert model's ``tanh`` law is one of
     the candidates, so the loop starts at least as good as the expert in cross-validation. A joint
     declared without friction gets the chosen laws and an offset (the expert's terms). The selection
-    uses unit row weights whatever ``cfg.method`` (the choice does not depend on the estimator).
+    uses unit row weights whatever ``cfg.method`` (the choice does not depend on the estimator). A
+    replacement that passes its tests but is implausible (:func:`.plausibility.law_plausibility` below
+    :data:`.plausibility.PLAUSIBLE`: a Stribeck velocity below the velocity resolution, a viscous exponent
+    far from 1) is not applied - it would absorb a delay or a load-dependent friction before the loop tries
+    them - and is kept in ``doubtful_laws`` (reported in ``implausible``, round 0, and the warnings).
 
     Returns the data with the new columns (model :class:`.friction.LawModel`) and what was chosen."""
     F = data.F

@@ -235,7 +235,8 @@ class ResidualReport:
     implausible : tuple of dict
         Eligible candidates the loop did not add because the re-identified model with them had an effect
         with physically impossible parameters (:func:`.candidates.implausible`): ``candidate``, ``round``,
-        ``reasons``.
+        ``reasons``; and (``round`` 0) the friction-law replacements not applied because implausible
+        (:mod:`.plausibility`), with ``law`` and ``plausibility``.
     """
 
     robot: str
