@@ -12,11 +12,14 @@ the round, into a *verdict*:
 ``cause``
     fits, beats its alternatives, plausible (score >= :data:`PLAUSIBLE`);
 ``doubtful``
-    fits but implausible, or an alternative of its round fits almost as well
-    (:data:`CLOSE_ALTERNATIVE` of its score);
+    fits but implausible, or an eligible alternative of its round on its joints fits almost as well (leaves
+    at most :data:`CLOSE_REMAINING` times its squared validation error there);
 ``rejected``
-    implausible and an eligible alternative explains a good part of the same residual
-    (:data:`ALTERNATIVE_EXPLAINS` of its score), or physically impossible.
+    implausible and an eligible alternative explains the same residual (leaves at most
+    :data:`EXPLAINS_REMAINING` times its squared validation error), or physically impossible.
+
+An alternative that is the same physical effect under another name of the library (:data:`SYNONYMS`) is
+no rival.
 
 Scores
 ------
@@ -35,10 +38,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["PLAUSIBLE", "CLOSE_ALTERNATIVE", "ALTERNATIVE_EXPLAINS", "VERDICTS", "Plausibility", "ArmScales",
-           "band_factor", "effect_plausibility", "law_plausibility", "verdict", "alternatives_of",
-           "fits_like", "rate_effects", "remaining_error", "own_candidate", "CLOSE_REMAINING", "law_alternatives", "DELAY_TYPICAL_S", "DELAY_TYPICAL_PERIODS", "GAIN_TOLERANCE", "STRIBECK_BAND", "VELOCITY_RESOLUTION",
-           "POWER_BAND", "DEFLECTION_BAND"]
+__all__ = [
+    "ALTERNATIVE_EXPLAINS", "CLOSE_ALTERNATIVE", "CLOSE_REMAINING", "DEFLECTION_BAND", "DELAY_TYPICAL_PERIODS",
+    "DELAY_TYPICAL_S", "EXPLAINS_REMAINING", "GAIN_TOLERANCE", "PLAUSIBLE", "POWER_BAND", "STRIBECK_BAND", "SYNONYMS",
+    "VELOCITY_RESOLUTION", "VERDICTS", "ArmScales", "Plausibility", "alternatives_of", "band_factor",
+    "effect_plausibility", "fits_like", "law_alternatives", "law_plausibility", "own_candidate", "rate_effects",
+    "remaining_error", "verdict",
+]
 
 #: an effect (or law) rated below this is not called a cause
 PLAUSIBLE = 0.5
