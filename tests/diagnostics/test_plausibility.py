@@ -199,7 +199,13 @@ def test_a_real_40_ms_delay_on_one_joint_is_still_found_rated_and_explained():
     assert e.verdict in ("doubtful", "rejected") and e.plausibility.score < PLAUSIBLE
     assert "joint 7 only" in e.verdict_reason and "not named the cause" in e.verdict_reason
     assert any("effect" in w and "time_delay7" in w for w in rep.warnings)
-    assert "[doubtful]" in rep.summary() or "[rejected]" in rep.summary()
+    assert f"[{e.verdict}]" in rep.summary() and f"verdict **{e.verdict}**" in rep.to_markdown()
+    from symoro_gen.diagnostics.render import diagnosis_html
+
+    html = diagnosis_html(rep)
+    assert "<th>Verdict</th>" in html and "joint 7 only" in html
+    d = rep.to_dict()["effects"][rep.effects.index(e)]
+    assert d["verdict"] == e.verdict and d["plausibility"]["score"] < PLAUSIBLE and d["plausibility"]["reasons"]
 
 
 @pytest.mark.slow
