@@ -97,6 +97,7 @@ from .friction import (
     velocity_grid,
     viscous_columns,
 )
+from .plausibility import PLAUSIBLE, ArmScales, law_alternatives, law_plausibility, rate_effects
 from .report import CandidateScore, Effect, ResidualReport
 from .stability import (
     N_FOLDS,
@@ -504,6 +505,7 @@ class _Data:
     fdyn: float
     held_out: bool
     fixed: tuple[tuple[str, float], ...] = ()   # known payload parameters (moved to Y)
+    doubtful_laws: tuple[dict, ...] = ()   # friction-law replacements that fit but are implausible: not applied
 
     @property
     def n(self) -> int:
@@ -683,7 +685,11 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
     only when it lowers that error by ``friction.MIN_GAIN``). The expert model's ``tanh`` law is one of
     the candidates, so the loop starts at least as good as the expert in cross-validation. A joint
     declared without friction gets the chosen laws and an offset (the expert's terms). The selection
-    uses unit row weights whatever ``cfg.method`` (the choice does not depend on the estimator).
+    uses unit row weights whatever ``cfg.method`` (the choice does not depend on the estimator). A
+    replacement that passes its tests but is implausible (:func:`.plausibility.law_plausibility` below
+    :data:`.plausibility.PLAUSIBLE`: a Stribeck velocity below the velocity resolution, a viscous exponent
+    far from 1) is not applied - it would absorb a delay or a load-dependent friction before the loop tries
+    them - and is kept in ``doubtful_laws`` (reported in ``implausible``, round 0, and the warnings).
 
     Returns the data with the new columns (model :class:`.friction.LawModel`) and what was chosen."""
     F = data.F
@@ -694,6 +700,8 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
     names = list(data.decl)
     W = F.system.W
     recs: list[_LawRecord] = []
+    doubtful: list[dict] = []
+    scales = ArmScales.of_frame(F)
     for j in range(n):
         jf = _joint_friction(F, W, names, j, float(dq_noise[j]))
         try:
@@ -703,6 +711,16 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
             continue   # the joint does not move: nothing to choose
         if ch.replaced or jf.missing:
             rec, X = _law_replacement(jf, ch, F, blocks, cfg.significance / n)
+            pl = law_plausibility(ch, scales)
+            if rec is not None and not (jf.missing or rec.smoothing) and pl.score < PLAUSIBLE:
+                # a law that fits but no drive has (a Stribeck velocity below the velocity resolution, an
+                # exponent far from 1: a delay or a load-dependent friction seen through the friction
+                # columns) must not take first place before the loop tries the real causes: not applied,
+                # reported as a doubtful alternative (docs/loop-plausibility.md)
+                doubtful.append({"candidate": f"friction_law{j + 1}", "round": 0, "law": ch.describe(),
+                                 "reasons": list(pl.reasons),
+                                 "plausibility": {"score": float(pl.score), "reasons": list(pl.reasons)}})
+                rec = None
             if rec is not None:
                 recs.append(rec)
                 W = np.hstack([jf.A, X])
@@ -713,13 +731,13 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
             recs.append(kr[0])
             W, names = kr[1], kr[2]
     if not recs:
-        return data, ()
+        return replace(data, doubtful_laws=tuple(doubtful)), ()
     law_model = LawModel(data.model, [r.choice for r in recs], [r.choice.joint for r in recs if r.offset])
     pay = tuple(nm for nm in data.decl if nm not in set(data.model.BASE_NAMES))
     new_names = tuple(law_model.BASE_NAMES) + pay
     F2 = replace(F, system=_with_friction_laws(F, F.system, recs, new_names))
     Vs = _with_friction_laws(data.V, data.Vs, recs, new_names)
-    return replace(data, model=law_model, F=F2, Vs=Vs, decl=new_names), tuple(recs)
+    return replace(data, model=law_model, F=F2, Vs=Vs, decl=new_names, doubtful_laws=tuple(doubtful)), tuple(recs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1530,13 +1548,21 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     effects = [_law_effect(r, res) for r in base.laws if not r.smoothing]
     effects += _loop_effects(state, res, cfg, stab or {})
     final_bad = _implausible_effects(data, state.added, res)
+    # every effect rated against the physical priors and its round's alternatives (cause / doubtful / rejected)
+    scales = ArmScales.of_frame(data.F)
+    impossible = {ad.family.label: why for ad in state.added if (why := implausible(
+        ad.family, [res.value(nm) for nm in ad.family.names()], f_dyn=data.fdyn))}
+    effects = rate_effects(effects, scales, state.tried, impossible=impossible,
+                           law_ratings={r.choice.joint: (law_plausibility(r.choice, scales), law_alternatives(r.choice))
+                                        for r in base.laws if not r.smoothing})
     F = state.F
     final_resid = Y - A @ np.array([res.value(nm) for nm in names])
     unexpl = _unexplained(F, final_resid) if cfg.unexplained else ()
     s_before = residual_structure(F, _residual_of(base.res0), significance=cfg.significance) if cfg.structure else ()
     s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
                                  significance=cfg.significance) if cfg.structure else ()
-    warnings = _report_warnings(state, res, cfg, stab_msgs, final_bad, unexpl, s_after)
+    warnings = _report_warnings(state, res, cfg, stab_msgs, final_bad, unexpl, s_after, effects=effects,
+                                doubtful_laws=data.doubtful_laws)
     Vs = data.Vs
     # the plotted residuals are those of the errors reported: "before" is the declared model fitted with the
     # user's estimator (the loop's own rounds run on SELECT_METHOD's fit), "after" the final refit
@@ -1558,7 +1584,7 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                           plot_data=plot_data, before_validation_rel_err_raw=np.asarray(val0_raw),
                           after_validation_rel_err_raw=np.asarray(val1_raw), unexplained=unexpl,
                           estimator_dependent=tuple(state.estimator_dependent),
-                          implausible=tuple(state.implausible))
+                          implausible=tuple(data.doubtful_laws) + tuple(state.implausible))
 
 
 def _final_fit(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSettings
@@ -1612,10 +1638,18 @@ def _loop_effects(state: _State, res: IdentificationResult, cfg: DiagnoseSetting
 
 
 def _report_warnings(state: _State, res: IdentificationResult, cfg: DiagnoseSettings, stab_msgs: Sequence[str],
-                     final_bad: Sequence[str], unexpl: tuple, s_after: tuple) -> tuple[str, ...]:
-    """The report's warnings: the stability stage's messages, the loop's stops, the candidates left out
-    as implausible, the final fit's impossible effects, placebos that passed, and structure left."""
+                     final_bad: Sequence[str], unexpl: tuple, s_after: tuple, *, effects: Sequence[Effect] = (),
+                     doubtful_laws: Sequence[dict] = ()) -> tuple[str, ...]:
+    """The report's warnings: the stability stage's messages, the loop's stops, the friction laws not applied
+    and the effects not named the cause (:mod:`.plausibility`), the candidates left out as implausible, the
+    final fit's impossible effects, placebos that passed, and structure left."""
     warnings: list[str] = list(stab_msgs)
+    for d in doubtful_laws:
+        warnings.append(f"friction-law stage: {d['law']} fits but is implausible ({'; '.join(d['reasons'])}): not "
+                        "applied, the loop tried the other causes first")
+    for i, e in enumerate(effects, 1):
+        if e.verdict in ("doubtful", "rejected"):
+            warnings.append(f"effect {i} ({e.label}) {e.verdict}: {e.verdict_reason}")
     if state.stopped_at_max:
         warnings.append(f"stopped at max_effects = {cfg.max_effects}: more effects may be significant")
     if state.implausible:

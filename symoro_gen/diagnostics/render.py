@@ -103,12 +103,20 @@ def diagnosis_blocks(diag, notes: list, *, plots: bool = True, max_points: int =
             params = "; ".join(f"{nm} = {fmt_value(v)} (%σ {fmt_pct(p)})"
                                for nm, v, p in zip(e.names, e.values, e.rel_std_pct))
             phys = ", ".join(f"{k} = {fmt_value(v)}" for k, v in (e.physical or {}).items())
+            pl = getattr(e, "plausibility", None)
             rows.append((str(i), e.kind, _effect_who(e), params, phys, fmt_value(e.score), f"{e.p_value:.2e}",
-                         fmt_value(e.z_validation)))
+                         fmt_value(e.z_validation), getattr(e, "verdict", "") or "-",
+                         "-" if pl is None else f"{float(pl.score):.2f}"))
         B.append(Table(("#", "Effect", "Where", "Parameters (value, %σ)", "Physical reading", "Score", "p",
-                        "z_val"), tuple(rows), "Effects added, in order",
-                       numeric=(True, False, False, False, False, True, True, True),
-                       row_classes=("added",) * len(rows)))
+                        "z_val", "Verdict", "Plausibility"), tuple(rows), "Effects added, in order",
+                       numeric=(True, False, False, False, False, True, True, True, False, True),
+                       row_classes=tuple("added" if getattr(e, "verdict", "cause") in ("cause", "") else ""
+                                         for e in diag.effects)))
+        # the verdict of each effect in words: a doubtful or rejected effect is never called the cause
+        for i, e in enumerate(diag.effects, 1):
+            lines = e.verdict_lines() if hasattr(e, "verdict_lines") else []
+            if lines:
+                B.append(Paragraph(f"Effect {i} ({e.kind} on {_effect_who(e)}): " + " — ".join(lines)))
     else:
         B.append(Paragraph("No effect added: no candidate was significant on the identification data and better "
                            "than noise on the validation data."))

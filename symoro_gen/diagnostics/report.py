@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..identification.result import IdentificationResult
+from .plausibility import Plausibility
 from .plots import write_plots
 from .render import diagnosis_html
 
@@ -126,6 +127,15 @@ class Effect:
         Confidence interval ``[low, high]`` of each coefficient (HAC, level ``ci_level``).
     description : str
         The effect in words.
+    verdict : str
+        ``cause``, ``doubtful`` or ``rejected`` (:func:`.plausibility.verdict`); empty when not rated.
+    plausibility : Plausibility or None
+        Its rating against the physical priors (:mod:`.plausibility`): ``score`` in [0, 1] and ``reasons``.
+    alternatives : tuple of dict
+        The next candidates of its round on its joints (``label``, ``kind``, ``joint``, ``score``,
+        ``eligible``, ``search``), best first.
+    verdict_reason : str
+        Why that verdict, in words (with what it fits like and what to check).
     """
 
     kind: str
@@ -149,6 +159,10 @@ class Effect:
     ci: dict = field(default_factory=dict)
     description: str = ""
     ci_level: float | None = None
+    verdict: str = ""
+    plausibility: Plausibility | None = None
+    alternatives: tuple = ()
+    verdict_reason: str = ""
 
     def to_dict(self) -> dict:
         return {"kind": self.kind, "joint": _j(self.joint), "partner": _j(self.partner), "variant": self.variant,
@@ -160,7 +174,26 @@ class Effect:
                 "rel_std_pct": {n: _f(v) for n, v in zip(self.names, self.rel_std_pct)},
                 "physical": {k: _f(v) for k, v in self.physical.items()},
                 "score": _f(self.score), "p_value": _f(self.p_value), "z_validation": _f(self.z_validation),
-                "round": self.round}
+                "round": self.round, "verdict": self.verdict or None,
+                "verdict_reason": self.verdict_reason or None,
+                "plausibility": None if self.plausibility is None else {
+                    "score": _f(self.plausibility.score), "reasons": list(self.plausibility.reasons)},
+                "alternatives": [{**a, "score": _f(a.get("score")), "remaining": _f(a.get("remaining")),
+                                  "search": {k: _f(v) for k, v in dict(a.get("search") or {}).items()}}
+                                 for a in self.alternatives]}
+
+    def verdict_lines(self) -> list[str]:
+        """The verdict in words: ``"doubtful (plausibility 0.07): fits like a 48 ms delay on joint 7 only; ..."``
+        and the alternatives of its round (empty when not rated)."""
+        if not self.verdict:
+            return []
+        pl = "" if self.plausibility is None else f" (plausibility {float(self.plausibility.score):.2f})"
+        out = [f"{self.verdict}{pl}: {self.verdict_reason}"]
+        if self.alternatives:
+            out.append("alternatives: " + ", ".join(
+                f"{a['label']} (score {_num(a.get('score'))}{', eligible' if a.get('eligible') else ''})"
+                for a in self.alternatives))
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,7 +235,8 @@ class ResidualReport:
     implausible : tuple of dict
         Eligible candidates the loop did not add because the re-identified model with them had an effect
         with physically impossible parameters (:func:`.candidates.implausible`): ``candidate``, ``round``,
-        ``reasons``.
+        ``reasons``; and (``round`` 0) the friction-law replacements not applied because implausible
+        (:mod:`.plausibility`), with ``law`` and ``plausibility``.
     """
 
     robot: str
@@ -337,9 +371,11 @@ class ResidualReport:
                     f"z_val = {e.z_validation:.1f}" if _f(e.z_validation) is not None else "",
                     f"selected in {100 * e.selection_frequency:.0f} % of the folds"
                     if e.selection_frequency is not None else "") if x)
-                L.append(f" {i}. {e.kind} on {who}" + (f" ({e.modulation})" if e.modulation else "") + f": {ev}")
+                tag = f" [{e.verdict}]" if e.verdict else ""
+                L.append(f" {i}. {e.kind} on {who}" + (f" ({e.modulation})" if e.modulation else "") + f"{tag}: {ev}")
                 if e.description:
                     L.append(f"      {e.description}")
+                L += [f"      {x}" for x in e.verdict_lines()]
                 for n, v, p in zip(e.names, e.values, e.rel_std_pct):
                     L.append(f"      {n:<28}{v:>12.4g}  %sigma {p:8.2f}")
                 if e.physical:
@@ -421,7 +457,9 @@ class ResidualReport:
                 who += f" ({e.variant} with joint {e.partner + 1})"
             L.append(f"{i}. **{e.kind}** on {who}" + (f" (modulated by {e.modulation})" if e.modulation else "")
                      + f" - {e.description or e.label}; score {_num(_f(e.score))}, p = {_num(_f(e.p_value))}, "
-                     f"z_val = {_num(_f(e.z_validation))}, selection frequency {_num(e.selection_frequency)}")
+                     f"z_val = {_num(_f(e.z_validation))}, selection frequency {_num(e.selection_frequency)}"
+                     + (f"; verdict **{e.verdict}**" if e.verdict else ""))
+            L += [f"   - {x}" for x in e.verdict_lines()]
             for nme, v, p in zip(e.names, e.values, e.rel_std_pct):
                 L.append(f"   - `{nme}` = {v:.4g} (%sigma {p:.2f})")
             for k, v in e.physical.items():
