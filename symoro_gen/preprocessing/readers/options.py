@@ -11,6 +11,8 @@ resampling, bad rows), as command-line options or a TOML file with the same keys
     resample = false                    # irregular time stamps -> uniform grid at the median step
     max_gap = 0.05                      # [s] longer steps split the file (default 5 median steps)
     drop_bad_rows = false               # drop malformed / non-finite / absurd rows, counted
+    skip_rows = 0                       # data rows skipped at the start of each file (garbage rows)
+    reshape = "sample-major"            # one value per line: the order of the values (or "joint-major")
 
 and the :class:`LoadReport` that says what reading one file did.
 
@@ -31,14 +33,18 @@ else:  # Python 3.10
     import tomli as tomllib
 
 from ...errors import DataFileError, Problem
-from .common import LOG_ROLES
+from .common import LOG_ROLES, StepStats
 
 __all__ = ["LogFormat", "LoadReport", "parse_columns", "read_format_file", "make_format", "FORMAT_KEYS",
-           "MAX_GAP_STEPS"]
+           "MAX_GAP_STEPS", "RESHAPE_ORDERS"]
 
 #: default ``max_gap`` in median steps
 MAX_GAP_STEPS = 5
-FORMAT_KEYS = ("columns", "dt", "dt_overrides_time", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows")
+FORMAT_KEYS = ("columns", "dt", "dt_overrides_time", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows",
+               "skip_rows", "reshape")
+#: orders of the values of a one-value-per-line file (``--reshape``): the n joints of sample 1, then of sample
+#: 2 ... (``sample-major``), or every sample of joint 1, then of joint 2 ... (``joint-major``, MATLAB's ``M(:)``)
+RESHAPE_ORDERS = ("sample-major", "joint-major")
 
 
 @dataclass(frozen=True)
@@ -71,6 +77,12 @@ class LogFormat:
         ABSURD_VALUE`` (outside the time column); without it such rows are an error naming them.
     origin : str
         Where the format came from (a TOML file), for messages.
+    skip_rows : int
+        Data rows skipped at the start of every file (below the header): garbage a logger writes before the
+        recording starts.
+    reshape : str or None
+        A file with one value per line holds ``n`` values per sample in this order (``RESHAPE_ORDERS``); None:
+        found from the data when exactly one order gives smooth signals (see :func:`.split.one_per_line`).
     """
 
     columns: tuple[tuple[str, str], ...] = ()
@@ -82,6 +94,8 @@ class LogFormat:
     drop_bad_rows: bool = False
     origin: str = ""
     dt_overrides_time: bool = False
+    skip_rows: int = 0
+    reshape: str | None = None
 
     @property
     def column_map(self) -> dict[str, str]:
@@ -91,7 +105,8 @@ class LogFormat:
     def is_plain(self) -> bool:
         """Nothing beyond ``dt``: the plain reading (:func:`~symoro_gen.preprocessing.readers.load_trajectory`)
         reads the file as is."""
-        return not (self.columns or self.tau_scale or self.deg or self.resample or self.drop_bad_rows)
+        return not (self.columns or self.tau_scale or self.deg or self.resample or self.drop_bad_rows
+                    or self.skip_rows or self.reshape)
 
     def options(self) -> tuple[str, ...]:
         """The options that change data, as command-line text (echoed in outputs)."""
@@ -108,6 +123,10 @@ class LogFormat:
             out.append("--resample" + (f" --max-gap {self.max_gap:g}" if self.max_gap is not None else ""))
         if self.drop_bad_rows:
             out.append("--drop-bad-rows")
+        if self.skip_rows:
+            out.append(f"--skip-rows {self.skip_rows}")
+        if self.reshape:
+            out.append(f"--reshape {self.reshape}")
         return tuple(out)
 
 
@@ -162,6 +181,18 @@ def _positive(v, where, key) -> float:
     return x
 
 
+def _skip_rows(v, where) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, str)) or not str(v).strip().isdigit():
+        raise DataFileError([Problem(where, "", "skip_rows", f"{v!r}: must be a whole number of rows (0 or more)")])
+    return int(v)
+
+
+def _reshape(v, where) -> str:
+    if v not in RESHAPE_ORDERS:
+        raise DataFileError([Problem(where, "", "reshape", f"{v!r}: must be one of {', '.join(RESHAPE_ORDERS)}")])
+    return str(v)
+
+
 def read_format_file(path) -> dict:
     """Read a ``--format FILE.toml``: the keys of :class:`LogFormat` (``columns`` as a string or a
     table role -> selector). Unknown keys are an error naming the file and the key."""
@@ -185,12 +216,14 @@ def read_format_file(path) -> dict:
 
 
 def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=None, max_gap=None,
-                drop_bad_rows=None, format_file=None, dt_overrides_time=None) -> LogFormat:
+                drop_bad_rows=None, format_file=None, dt_overrides_time=None, skip_rows=None, reshape=None
+                ) -> LogFormat:
     """A :class:`LogFormat` from options (None: not given) over a format file's keys."""
     base = read_format_file(format_file) if format_file else {}
     origin = str(format_file) if format_file else "command line"
     given = dict(columns=columns, dt=dt, tau_scale=tau_scale, deg=deg, resample=resample, max_gap=max_gap,
-                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time)
+                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time, skip_rows=skip_rows,
+                 reshape=reshape)
     where = {k: ("command line" if v is not None else origin) for k, v in given.items()}
     merged = {k: (v if v is not None else base.get(k)) for k, v in given.items()}
     cols = parse_columns(merged["columns"], where=f"{where['columns']}: columns") if merged["columns"] else ()
@@ -208,6 +241,8 @@ def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=Non
         drop_bad_rows=bool(merged["drop_bad_rows"]),
         origin=str(format_file or ""),
         dt_overrides_time=bool(merged["dt_overrides_time"]),
+        skip_rows=_skip_rows(merged["skip_rows"], where["skip_rows"]) if merged["skip_rows"] is not None else 0,
+        reshape=_reshape(merged["reshape"], where["reshape"]) if merged["reshape"] is not None else None,
     )
 
 
@@ -238,6 +273,11 @@ class LoadReport:
         Samples per experiment.
     options : tuple of str
         Every option that changed data.
+    notes : tuple of str
+        What else reading did (rows skipped, a one-value-per-line file reshaped, why the file was split).
+    steps : StepStats or None
+        The time steps as logged (percentiles, outliers by row, what ``--max-gap`` does with them): shown by
+        ``inspect``, not in the ``data`` block of the other commands.
     """
 
     file: str
@@ -253,6 +293,7 @@ class LoadReport:
     samples: tuple[int, ...] = ()
     options: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    steps: StepStats | None = None
 
     def to_dict(self) -> dict:
         return {"file": self.file, "rows_read": self.rows_read, "rows_dropped": self.rows_dropped,
