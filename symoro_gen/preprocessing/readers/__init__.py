@@ -41,7 +41,7 @@ from .common import (
     step_regime_changes,
     step_stats,
 )
-from .logs import log_trajectories
+from .logs import log_trajectories, time_order_hint
 from .options import LoadReport, LogFormat, make_format, parse_columns, read_format_file
 from .parquet import PARQUET_SUFFIXES, is_parquet, read_parquet_file
 from .plain import plain_trajectory
@@ -252,8 +252,13 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
         raw = _read_columns(spec, n, mapping=None, selectors=(), dt=dt, probs=probs, strict=True)
         t_raw = raw.cols["t"].values[:, 0] if "t" in raw.cols and not fmt.dt_overrides_time else None
         t_lines = raw.cols["t"].lines if t_raw is not None else None
-        tr = plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types,
-                              dt_overrides_time=fmt.dt_overrides_time)
+        try:
+            tr = plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
+                                  joint_types=joint_types, dt_overrides_time=fmt.dt_overrides_time)
+        except DataFileError as exc:  # time out of order: the option that fixes it (--skip-rows ...)
+            if t_raw is None or not any("not strictly increasing" in p.message for p in exc.problems):
+                raise
+            raise DataFileError(exc.problems, hint=time_order_hint(t_raw)) from None
         rep = LoadReport(file=tr.source, rows_read=tr.n_samples, step_from=tr.meta.get("dt_median"),
                          step_jitter=float(tr.meta.get("dt_max_rel_jitter", 0.0)), samples=(tr.n_samples,),
                          options=fmt.options(), notes=tuple(raw.notes),

@@ -565,6 +565,8 @@ class StepStats:
         Steps longer than ``max_gap``: where ``--resample`` splits the file.
     tol : float
         Relative deviation from the median above which a step is an outlier.
+    jitter : float
+        Largest relative deviation from the median of the other steps (the jitter of the clock, outliers aside).
     """
 
     p50: float
@@ -576,9 +578,11 @@ class StepStats:
     max_gap_given: bool
     over_gap: int
     tol: float
+    jitter: float = 0.0
 
     def to_dict(self) -> dict:
-        return {"p50": self.p50, "p99": self.p99, "max": self.max, "n_outliers": self.n_outliers,
+        return {"p50": self.p50, "p99": self.p99, "max": self.max, "jitter": self.jitter,
+                "n_outliers": self.n_outliers,
                 "outliers": [{"row": r, "line": ln, "step": h} for r, ln, h in self.outliers],
                 "max_gap": self.max_gap, "max_gap_given": self.max_gap_given, "over_gap": self.over_gap}
 
@@ -604,12 +608,14 @@ def step_stats(t: np.ndarray, lines: np.ndarray | None, max_gap: float | None, t
         return None
     med = float(np.median(d))
     gap = float(max_gap) if max_gap is not None else 5 * med
-    out = np.flatnonzero(np.abs(d - med) > tol * med)
+    dev = np.abs(d - med) / med
+    out = np.flatnonzero(dev > tol)
+    inl = dev[dev <= tol]
     shown = tuple((int(k) + 2, int(lines[k + 1]) if lines is not None else None, float(d[k]))
                   for k in out[:OUTLIERS_SHOWN])
     return StepStats(p50=med, p99=float(np.percentile(d, 99)), max=float(d.max()), outliers=shown,
                      n_outliers=int(out.size), max_gap=gap, max_gap_given=max_gap is not None,
-                     over_gap=int((d > gap).sum()), tol=tol)
+                     over_gap=int((d > gap).sum()), tol=tol, jitter=float(inl.max()) if inl.size else 0.0)
 
 
 def out_of_order_rows(t: np.ndarray) -> np.ndarray:

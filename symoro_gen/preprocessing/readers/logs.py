@@ -119,11 +119,14 @@ def _drop_out_of_order(c: RawColumns, keep: np.ndarray, fmt: LogFormat, dt: floa
     if kind not in ("leading", "isolated"):
         return keep, ()
     tcol = c.cols["t"]
+    if kind == "leading":  # garbage before the recording: every row up to the last one out of order
+        bad = np.arange(rows.size) <= np.flatnonzero(bad)[-1]
     mask = np.zeros(c.n_rows, bool)
     mask[rows[bad]] = True
     keep = keep & ~mask
-    what = (f"{tcol.names[0]}: {int(bad.sum())} row(s) whose time is out of order (the rest increases)"
-            + (f"; {SKIP_HINT.format(k=int(rows[np.flatnonzero(bad)[-1]]) + 1)}" if kind == "leading" else ""))
+    what = (f"{tcol.names[0]}: {int(bad.sum())} row(s) whose time is out of order (the rest increases)" if kind ==
+            "isolated" else f"{tcol.names[0]}: {int(bad.sum())} leading row(s) whose time is out of order "
+            f"(garbage before the recording; --skip-rows {int(rows[np.flatnonzero(bad)[-1]]) + 1} skips them)")
     return keep, (f"{fmt_ranges(runs(mask), tcol.lines)}, {what}",)
 
 
@@ -131,8 +134,8 @@ def _resets(t: np.ndarray) -> np.ndarray:
     """Steps (indices into ``diff(t)``) where the clock restarts: time goes back, and every stretch between
     two such steps is long enough to filter; empty when a stretch is shorter (then the time is garbage)."""
     back = np.flatnonzero(np.diff(t) <= 0)
-    if back.size == 0:
-        return back
+    if back.size == 0 or _order_problem(t)[1] != "reset":
+        return np.zeros(0, int)
     bounds = np.r_[0, back + 1, t.size]
     if np.min(np.diff(bounds)) < MIN_SAMPLES:
         return np.zeros(0, int)
