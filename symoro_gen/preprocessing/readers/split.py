@@ -228,7 +228,7 @@ def _reshaped(role: str, path: str, a, names, lines, unp, fields, n: int, order:
     take = slice(None, None, n) if got == "sample-major" else slice(0, N)
     lines2 = lines[take] if lines is not None else None
     unp2 = _order(unp[:, 0], n, got)
-    fields2 = _order(fields, n, got).any(axis=1) if fields is not None else None
+    fields2 = np.asarray(_order(fields, n, got).any(axis=1), bool) if fields is not None else None
     why = f"{how}" if how else (f"found from the data: roughness {r[got]:.2g} in this order, "
                                 f"{r[next(o for o in r if o != got)]:.2g} in the other")
     note = f"{path} ({role}): one value per line, {M} rows reshaped to {N} samples x {n} joints, {got} ({why})"
@@ -272,8 +272,8 @@ def read_split(spec: DataSpec, n: int, dt: float | None, probs: list[Problem], *
             a, names, lines, unp, fields, note, orders[role] = got
             out.notes.append(note)
         if role == "t" and orders and a.shape[1] == 1:
-            lens = {c.values.shape[0] for c in out.cols.values()}
-            if len(lens) == 1 and a.shape[0] == n * lens.pop():
+            sizes = {c.values.shape[0] for c in out.cols.values()}
+            if len(sizes) == 1 and a.shape[0] == n * sizes.pop():
                 order = next(iter(orders.values()))
                 x = _order(a[:, 0], n, order)
                 spread = float(np.nanmax(np.abs(x - x[:, :1]))) if x.size else 0.0
@@ -286,7 +286,7 @@ def read_split(spec: DataSpec, n: int, dt: float | None, probs: list[Problem], *
                 take = slice(None, None, n) if order == "sample-major" else slice(0, a.shape[0] // n)
                 lines = lines[take] if lines is not None else None
                 unp = _order(unp[:, 0], n, order)[:, :1]
-                fields = _order(fields, n, order).any(axis=1) if fields is not None else None
+                fields = np.asarray(_order(fields, n, order).any(axis=1), bool) if fields is not None else None
                 a = x[:, :1]
                 out.notes.append(f"{path} (t): one value per line, the stamp of each sample repeated for the {n} "
                                  f"joints ({order}, as the other files)")
