@@ -66,6 +66,10 @@ def test_one_value_per_line_reshaped_in_the_smooth_order(cli, tmp_path, order):
     (tr2,), rep = read_recording(f"q={qf},tau={tf},t={tt}", n_joints=N_JOINTS)
     np.testing.assert_allclose(tr2.t, t, atol=1e-12)
     assert any("stamp of each sample repeated" in x for x in rep.notes)
+    stamps = t[:, None] + 1e-4 * np.arange(N_JOINTS)  # one stamp per value: not a stamp per sample
+    bad = _one_per_line(tmp_path / "tj.txt", stamps, order)
+    r = cli("inspect", "scara", f"q={qf},tau={tf},t={bad}", rc=2)
+    assert f"{bad}, rows 1-{t.size * N_JOINTS}, field 't'" in r.err and "stamps of a sample differ" in r.err
 
 
 def test_roughness_tells_the_orders_apart():
