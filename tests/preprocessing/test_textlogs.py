@@ -87,6 +87,13 @@ def test_roughness_tells_the_orders_apart():
         assert got == order and np.array_equal(x, q)
         other = next(o for o in r if o != order)
         assert r[other] > 10 * r[order]
+    # two or three joints: joint-major read sample-major is only about n^2 times rougher, still told apart
+    for n in (2, 3):
+        m = q[:, :n]
+        for order in ("sample-major", "joint-major"):
+            v = m.reshape(-1) if order == "sample-major" else m.T.reshape(-1)
+            x, got, r = one_per_line(v, n, None)
+            assert got == order and np.array_equal(x, m), (n, order, r)
 
 
 def test_one_value_per_line_refused_when_the_order_is_unclear(cli, tmp_path):
@@ -267,3 +274,17 @@ def test_inspect_step_statistics(cli, tmp_path):
     (st,) = _json(out)["steps"]
     assert st["n_outliers"] == 14 and len(st["outliers"]) == 10 and "and 4 more" in r.out
     assert st["over_gap"] == 0 and "bridges them all" in st["max_gap_effect"]
+
+
+def test_a_noisy_file_takes_the_order_of_the_others(tmp_path):
+    """Torques noisier than smooth in either order (roughness above SMOOTH_MAX both ways) follow the order the
+    positions of the same logger show; the report says so."""
+    t, q, tau = _signals(seed=3)
+    noisy = tau + 2.0 * np.random.default_rng(4).normal(size=tau.shape)
+    qf = _one_per_line(tmp_path / "q.txt", q, "joint-major")
+    tf = _one_per_line(tmp_path / "tau.txt", noisy, "joint-major")
+    _, got, r = one_per_line(np.loadtxt(tf), N_JOINTS, None)
+    assert got is None and min(r.values()) > SMOOTH_MAX
+    (tr,), rep = read_recording(f"q={qf},tau={tf},dt={DT}", n_joints=N_JOINTS)
+    np.testing.assert_allclose(tr.tau, noisy, rtol=1e-10, atol=1e-11)
+    assert any(f"{tf} (tau)" in x and "joint-major (as q=: its own data do not tell)" in x for x in rep.notes)

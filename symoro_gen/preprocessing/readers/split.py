@@ -192,8 +192,9 @@ def one_per_line(v: np.ndarray, n: int, order: str | None) -> tuple[np.ndarray |
     """Reshape ``n x N`` values (one per line) to ``(N, n)``.
 
     ``order`` given: that order. Else the order whose :func:`roughness` is at most ``SMOOTH_MAX`` while the
-    other's is at least ``ORDER_CONTRAST`` times larger; none (None, None, roughness by order) when neither
-    or both orders are smooth.
+    other's is at least ``min(ORDER_CONTRAST, n^2 / 2)`` times larger (joint-major values read sample-major
+    are about ``n^2`` times rougher: with 2 or 3 joints the contrast cannot reach 10); none (None, None,
+    roughness by order) when neither or both orders are smooth.
     """
     from .options import RESHAPE_ORDERS
     v = np.asarray(v, float).reshape(-1)
@@ -201,7 +202,7 @@ def one_per_line(v: np.ndarray, n: int, order: str | None) -> tuple[np.ndarray |
         return _order(v, n, order), order, {}
     r = {o: roughness(_order(v, n, o)) for o in RESHAPE_ORDERS}
     best, other = sorted(RESHAPE_ORDERS, key=lambda o: r[o])
-    if r[best] <= SMOOTH_MAX and r[other] >= ORDER_CONTRAST * r[best]:
+    if r[best] <= SMOOTH_MAX and r[other] >= min(ORDER_CONTRAST, n * n / 2) * r[best]:
         return _order(v, n, best), best, r
     return None, None, r
 
