@@ -263,6 +263,15 @@ def inspection_report(insp: Inspection, trajectories: Sequence[Trajectory], robo
                           tuple((r.file, str(r.rows_read), str(r.rows_dropped), "yes" if r.resampled else "no",
                                  f"{r.step_from:.6g}", f"{100 * r.step_jitter:.3g}", str(r.gaps), str(r.experiments))
                                 for r in insp.files), caption="How each file was read")]
+    odd = [r for r in insp.files if r.steps is not None and r.steps.n_outliers]
+    if odd:
+        blocks.append(Table(("file", "p50 step [s]", "p99 step [s]", "max step [s]", "outlier steps (row: step)",
+                             "--max-gap"),
+                            tuple((r.file, f"{r.steps.p50:.6g}", f"{r.steps.p99:.6g}", f"{r.steps.max:.6g}",
+                                   f"{r.steps.n_outliers}: " + ", ".join(f"{row}: {h:.6g}" for row, _, h
+                                                                        in r.steps.outliers),
+                                   r.steps.max_gap_effect(r.resampled)) for r in odd if r.steps is not None),
+                            caption="Time steps as logged, where some are more than 50 % off the median"))
     for e in insp.experiments:
         blocks.append(Table(("joint", "standstill [%]", "q at bound [%]", "tau at bound [%]", "q range", "|tau| max"),
                             tuple((str(j.joint), f"{100 * j.standstill:.1f}", f"{100 * j.q_saturated:.1f}",

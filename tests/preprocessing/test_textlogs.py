@@ -288,3 +288,14 @@ def test_a_noisy_file_takes_the_order_of_the_others(tmp_path):
     (tr,), rep = read_recording(f"q={qf},tau={tf},dt={DT}", n_joints=N_JOINTS)
     np.testing.assert_allclose(tr.tau, noisy, rtol=1e-10, atol=1e-11)
     assert any(f"{tf} (tau)" in x and "joint-major (as q=: its own data do not tell)" in x for x in rep.notes)
+
+
+@pytest.mark.slow
+def test_inspect_report_lists_the_outlier_steps(cli, tmp_path):
+    """The HTML report of inspect has the same table (one plot per experiment and joint: slow)."""
+    pytest.importorskip("matplotlib")
+    f, _ = _gappy(tmp_path)
+    html = tmp_path / "i.html"
+    cli("--quiet", "inspect", "scara", f, "--resample", "--report", html)
+    page = html.read_text()
+    assert "Time steps as logged" in page and "4: 601: 0.0088, 1201: 0.0088" in page and "splits the file" in page
