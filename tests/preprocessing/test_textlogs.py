@@ -149,6 +149,25 @@ def test_garbage_leading_rows_skip_rows_and_drop_bad_rows(cli, tmp_path):
     assert "skip_rows" in r.err
 
 
+def test_malformed_leading_rows_name_skip_rows(cli, tmp_path):
+    """Rows a logger writes before the recording that are not numbers (a banner, a short row): the hint
+    names --skip-rows, in the plain reading and with the data options."""
+    t, q, tau = _signals(600)
+    f = _table(tmp_path / "b.csv", t, q, tau)
+    path = tmp_path / "b.csv"
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join([lines[0], "logging started", "0.5,1"] + lines[1:]) + "\n")
+    r = cli("inspect", "scara", f, rc=2)
+    assert f"{f}, lines 2-3" in r.err and "wrong number of fields" in r.err
+    assert r.err_lines[-1] == "hint: the bad rows are at the start of the file: --skip-rows 2 skips them (also " \
+                              "skip_rows in a --format file)"
+    r = cli("inspect", "scara", f, "--resample", rc=2)
+    assert f"{f}, rows 1-2 (lines 2-3)" in r.err and "--skip-rows 2" in r.err_lines[-1]
+    assert "--drop-bad-rows" in r.err_lines[-1]
+    (tr,), _ = read_recording(f, LogFormat(skip_rows=2), n_joints=N_JOINTS)
+    np.testing.assert_allclose(tr.t, t, atol=1e-12)
+
+
 def test_isolated_rows_out_of_order_dropped_a_reset_splits(cli, tmp_path):
     t, q, tau = _signals()
     ts = t.copy()

@@ -27,6 +27,7 @@ __all__ = [
     "fmt_names", "open_problem", "not_text_problem", "malformed_problems", "raise_malformed", "resolve_csv_columns",
     "select_columns", "shared_columns", "table_columns", "check_values", "bad_rows", "check_time", "step_regime_changes",
     "unit_checks", "StepStats", "step_stats", "out_of_order_rows", "SKIP_HINT",
+    "LEADING_ROWS", "leading_rows_hint",
 ]
 
 #: roles of the plain reading (a ``columns`` mapping, array keys)
@@ -62,6 +63,8 @@ RESAMPLE_HINT = ("give --resample to resample irregular time stamps on a uniform
 SKIP_HINT = "the bad rows are at the start of the file: --skip-rows {k} skips them (also skip_rows in a --format file)"
 #: most steps listed by row in :class:`StepStats`
 OUTLIERS_SHOWN = 10
+#: bad rows all within this many first data rows: garbage before the recording (``--skip-rows``)
+LEADING_ROWS = 20
 REGIME_WINDOW = 20  #: steps averaged to find the local sampling period
 REGIME_TOL = 0.2    #: largest accepted relative change of the local sampling period
 
@@ -252,7 +255,17 @@ def raise_malformed(tab: Table) -> None:
     """The plain reading: malformed rows are an error at once (see :func:`malformed_problems`)."""
     probs = malformed_problems(tab)
     if probs:
-        raise DataFileError(probs)
+        bad = tab.bad_fields | tab.unparsable.any(axis=1)
+        raise DataFileError(probs, hint=leading_rows_hint(bad))
+
+
+def leading_rows_hint(bad: np.ndarray) -> str | None:
+    """``--skip-rows K`` when every bad row (a mask of the data rows) lies among the first ``LEADING_ROWS``:
+    the garbage a logger writes before the recording; else None."""
+    idx = np.flatnonzero(bad)
+    if idx.size == 0 or idx[-1] >= LEADING_ROWS:
+        return None
+    return SKIP_HINT.format(k=int(idx[-1]) + 1)
 
 
 # ---------------------------------------------------------------------------------------------

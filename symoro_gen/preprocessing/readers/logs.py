@@ -23,6 +23,7 @@ from ..trajectory import Trajectory
 from .common import (
     DEFAULT_CHECKS,
     DROP_HINT,
+    LEADING_ROWS,
     MIN_SAMPLES,
     POSITION_ROLES,
     RESAMPLE_HINT,
@@ -32,6 +33,7 @@ from .common import (
     bad_rows,
     check_time,
     fmt_ranges,
+    leading_rows_hint,
     out_of_order_rows,
     runs,
     step_stats,
@@ -46,8 +48,6 @@ __all__ = ["log_trajectories", "resample", "time_order_hint", "ISOLATED_MAX", "L
 #: most rows out of time order called isolated (a logger's stray stamps, dropped by ``--drop-bad-rows``); more
 #: is a reset of the clock (the file splits there with ``--resample``)
 ISOLATED_MAX = 10
-#: out-of-order rows all within this many first rows: garbage before the recording (``--skip-rows``)
-LEADING_ROWS = 20
 
 
 def _order_problem(t: np.ndarray) -> tuple[np.ndarray, str]:
@@ -81,7 +81,8 @@ def _drop_bad_rows(c: RawColumns, fmt: LogFormat) -> tuple[np.ndarray, tuple[str
     """(rows kept, what was dropped and why); bad rows are an error without ``drop_bad_rows``."""
     drop, bad = bad_rows(c)
     if bad and not fmt.drop_bad_rows:
-        raise DataFileError(bad, hint=DROP_HINT)
+        lead = leading_rows_hint(drop)
+        raise DataFileError(bad, hint=f"{lead}; or {DROP_HINT}" if lead else DROP_HINT)
     dropped = tuple(f"{p.where}{', ' + p.field if p.field else ''}: {p.message}" for p in bad)
     if drop.all():
         raise DataFileError([Problem(c.source, f"rows 1-{c.n_rows}", "", "every row is bad")])
