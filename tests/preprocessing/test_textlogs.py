@@ -180,6 +180,14 @@ def test_isolated_rows_out_of_order_dropped_a_reset_splits(cli, tmp_path):
     assert rep.rows_dropped == 2 and rep.experiments == 1
     assert any("rows 1001, 2001 (lines 1002, 2002), t: 2 row(s) whose time is out of order" in x for x in rep.dropped)
     np.testing.assert_allclose(tr.q, q[:tr.n_samples], atol=1e-6)  # resampled on the same 1 ms grid
+    # a stray stamp among the first rows is not garbage before the recording: only that row is dropped
+    ts = t.copy()
+    ts[9] = 5.0
+    f3 = _table(tmp_path / "early.csv", ts, q, tau)
+    r = cli("inspect", "scara", f3, rc=2)
+    assert "1 isolated row(s)" in r.err_lines[-1] and "--skip-rows" not in r.err_lines[-1]
+    (tr,), rep = read_recording(f3, LogFormat(drop_bad_rows=True, resample=True), n_joints=N_JOINTS)
+    assert rep.rows_dropped == 1 and tr.t[0] == 0.0 and any("rows 10 (lines 11), t" in x for x in rep.dropped)
     # the clock restarts half-way: a reset, split with --resample (not dropped as isolated rows)
     half = t.size // 2
     f2 = _table(tmp_path / "reset.csv", np.r_[t[:half], t[:half]], q, tau)

@@ -51,16 +51,25 @@ ISOLATED_MAX = 10
 
 
 def _order_problem(t: np.ndarray) -> tuple[np.ndarray, str]:
-    """(rows out of order, what they are: ``"leading"``, ``"isolated"``, ``"reset"`` or ``""``: in order)."""
+    """(rows to drop, what they are): ``"leading"`` (garbage before the recording: every row up to the last
+    one out of order, or up to a gap of more than ``MAX_GAP_STEPS`` median steps after which the rest is in
+    order, within the first ``LEADING_ROWS``), ``"isolated"`` (at most ``ISOLATED_MAX`` rows out of order, the
+    rest increasing), ``"reset"`` (more: the clock restarts) or ``""`` (in order)."""
     bad = out_of_order_rows(t)
     if not bad.any():
         return bad, ""
-    idx = np.flatnonzero(bad)
-    if idx.size <= ISOLATED_MAX and idx[-1] < LEADING_ROWS:
-        return bad, "leading"
-    if idx.size <= ISOLATED_MAX:
-        return bad, "isolated"
-    return bad, "reset"
+    if bad.sum() > ISOLATED_MAX:
+        return bad, "reset"
+    good = np.flatnonzero(~bad)
+    d = np.diff(t[good])
+    lead = int(np.argmin(bad)) if not bad.all() else bad.size  # rows out of order from the first one on
+    if d.size:
+        big = np.flatnonzero(d[:LEADING_ROWS] > MAX_GAP_STEPS * float(np.median(d)))
+        if big.size:
+            lead = max(lead, int(good[big[-1] + 1]))
+    if 0 < lead <= LEADING_ROWS and not bad[lead:].any():
+        return np.arange(bad.size) < lead, "leading"
+    return bad, "isolated"
 
 
 def time_order_hint(t: np.ndarray) -> str:
@@ -69,7 +78,7 @@ def time_order_hint(t: np.ndarray) -> str:
     that restarts."""
     bad, kind = _order_problem(np.asarray(t, float))
     if kind == "leading":
-        return SKIP_HINT.format(k=int(np.flatnonzero(bad)[-1]) + 1)
+        return SKIP_HINT.format(k=int(bad.sum()))
     if kind == "isolated":
         return (f"{int(bad.sum())} isolated row(s) out of time order: --drop-bad-rows drops them (counted in the "
                 "output)")
@@ -120,8 +129,6 @@ def _drop_out_of_order(c: RawColumns, keep: np.ndarray, fmt: LogFormat, dt: floa
     if kind not in ("leading", "isolated"):
         return keep, ()
     tcol = c.cols["t"]
-    if kind == "leading":  # garbage before the recording: every row up to the last one out of order
-        bad = np.arange(rows.size) <= np.flatnonzero(bad)[-1]
     mask = np.zeros(c.n_rows, bool)
     mask[rows[bad]] = True
     keep = keep & ~mask
