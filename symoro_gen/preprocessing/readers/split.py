@@ -27,6 +27,7 @@ import numpy as np
 from ...errors import DataFileError, Problem
 from .arrays import load_npy
 from .common import Column, RawColumns, fmt_names, raise_malformed
+from .options import RESHAPE_ORDERS
 from .text import read_table
 
 __all__ = ["DataSpec", "parse_data_spec", "read_split", "one_per_line", "roughness", "SMOOTH_MAX",
@@ -196,7 +197,6 @@ def one_per_line(v: np.ndarray, n: int, order: str | None) -> tuple[np.ndarray |
     are about ``n^2`` times rougher: with 2 or 3 joints the contrast cannot reach 10); none (None, None,
     roughness by order) when neither or both orders are smooth.
     """
-    from .options import RESHAPE_ORDERS
     v = np.asarray(v, float).reshape(-1)
     if order is not None:
         return _order(v, n, order), order, {}
