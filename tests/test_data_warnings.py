@@ -187,9 +187,9 @@ def test_split_spec_time_and_dt(clean, cli, tmp_path):
         np.savetxt(tmp_path / f"{name}.csv", a[:, cols], delimiter=",", fmt="%.17g")
     t, q, tau = (str(tmp_path / f"{k}.csv") for k in ("t", "q", "tau"))
     r = cli("identify", "scara", f"q={q},tau={tau},t={t},dt=0.005", rc=2)
-    assert r.err_lines[0] == (f"symoro-gen: error: {t}, field 'column 1': the file has a time column and "
-                              "dt = 0.005 s is given (--dt, or dt=/fs= of a split spec): leave dt out to use the time "
-                              "column, or give --dt-overrides-time to ignore it")
+    assert r.err_lines[0] == (f"symoro-gen: error: {t}, field 't': the t= file of the split recording gives the "
+                              "time and the spec's dt= gives a sampling period (0.005 s): leave dt= out to use the "
+                              "t= file, or give --dt-overrides-time to ignore the t= file")
     cli("--quiet", "identify", "scara", f"q={q},tau={tau}", "--dt", "0.005")  # --dt: the period without t=
 
 

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 from ..errors import OptionError
 from .readers import ABSURD_VALUE, LoadReport, LogFormat, make_format, read_recordings
-from .readers.options import BAG_KEYS
+from .readers.options import BAG_KEYS, RESHAPE_ORDERS
 from .trajectory import Trajectory, hold_back
 
 __all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "data_text", "data_notes",
@@ -19,8 +19,8 @@ __all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "d
 
 
 def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = False) -> None:
-    """Add ``--format --columns --dt --dt-overrides-time --tau-scale --deg --resample --max-gap --drop-bad-rows``, the
-    ROS bag options ``--topic --stamp --prefix --joint-names --reference-topic`` (and,
+    """Add ``--format --columns --dt --dt-overrides-time --tau-scale --deg --resample --max-gap --drop-bad-rows
+    --skip-rows --reshape``, the ROS bag options ``--topic --stamp --prefix --joint-names --reference-topic`` (and,
     with ``validate_fraction``, ``--validate-fraction``) to a command's parser."""
     g = p.add_argument_group("reading the DATA files (docs/data-files.md)")
     g.add_argument("--format", metavar="FILE.toml", help="a log format file with the keys below (options given "
@@ -29,7 +29,8 @@ def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = Fa
                    "Python slices) or q=q_0:q_6,tau=tau_0:tau_6 (header names, inclusive); optional dq=, ddq=, "
                    "q_link= (link-side position); in .npz/.mat array names, nested structs dotted (q=rec.pos)")
     g.add_argument("--dt", type=float, metavar="SECONDS", help="sampling period when the file has no time column "
-                   "(a file with a time column and --dt is an error unless --dt-overrides-time)")
+                   "(a single file, or a split recording without t=); a time column or t= file and --dt is an error "
+                   "unless --dt-overrides-time")
     g.add_argument("--dt-overrides-time", action="store_true", default=None,
                    help="with --dt: ignore the files' time column and use --dt as the time base")
     g.add_argument("--tau-scale", metavar="V[,V...]", help="factor(s) turning the logged torque signal into N m "
@@ -43,7 +44,14 @@ def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = Fa
                    "(default 5 median steps)")
     g.add_argument("--drop-bad-rows", action="store_true", default=None,
                    help=f"drop rows with a wrong field count, unparsable/non-finite numbers or |value| > "
-                        f"{ABSURD_VALUE:g} (counted in the output) instead of stopping")
+                        f"{ABSURD_VALUE:g}, and a few isolated rows whose time is out of order (counted in the "
+                        "output) instead of stopping")
+    g.add_argument("--skip-rows", type=int, metavar="N", help="skip the first N data rows of every file (below the "
+                   "header): garbage a logger writes before the recording starts")
+    g.add_argument("--reshape", choices=RESHAPE_ORDERS, help="files of a split recording with one value per "
+                   "line hold the n joint values of each sample in this order: sample-major (the n joints of "
+                   "sample 1, then sample 2 ...) or joint-major (every sample of joint 1, then joint 2 ...: "
+                   "MATLAB's M(:)); default: the one order in which the signals are smooth")
     b = p.add_argument_group("reading ROS bags (.mcap, .db3, .bag, rosbag2 folders; docs/data-files.md)")
     b.add_argument("--topic", metavar="TOPIC[,TOPIC...]", help="the sensor_msgs/JointState topic(s) (default: every "
                    "JointState topic carrying the robot's joints)")
@@ -57,7 +65,8 @@ def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = Fa
                    "state with joint_names and reference/desired): the recorded reference of --method iv/didim")
     if validate_fraction:
         g.add_argument("--validate-fraction", type=float, metavar="F",
-                       help="hold back the last F (0 < F < 1) of each DATA file for validation")
+                       help="hold back the last F (0 < F < 1) of each DATA file for validation (of the whole file "
+                            "when --resample splits it into experiments)")
 
 
 def format_from_args(args) -> LogFormat:
@@ -67,6 +76,7 @@ def format_from_args(args) -> LogFormat:
                        resample=getattr(args, "resample", None), max_gap=getattr(args, "max_gap", None),
                        drop_bad_rows=getattr(args, "drop_bad_rows", None), format_file=getattr(args, "format", None),
                        dt_overrides_time=getattr(args, "dt_overrides_time", None),
+                       skip_rows=getattr(args, "skip_rows", None), reshape=getattr(args, "reshape", None),
                        bag={k: getattr(args, k, None) for k in BAG_KEYS})
 
 

@@ -1,6 +1,7 @@
 """What a recording can and cannot give, before identifying (the ``inspect`` workflow's computation).
 
-Per file: sampling rate and jitter, gaps, dropped rows (from :class:`LoadReport`); per experiment and
+Per file: sampling rate and jitter, gaps, dropped rows (from :class:`LoadReport`); the time steps as logged
+(percentiles, the outlier steps by row, what ``--max-gap`` does with them: :class:`~.readers.StepStats`); per experiment and
 joint: standstill fraction, saturation (samples stuck at the column's bound), the low-pass cut-off and
 decimation factor the papers' rules choose (:func:`~symoro_gen.preprocessing.filtering.choose_filter_settings`);
 for all experiments: the condition number of ``W`` assembled by the identification code
@@ -95,6 +96,8 @@ class Inspection:
         return {
             "usable": self.usable, "errors": list(self.errors), "warnings": list(self.warnings),
             "data": data_block(self.files),
+            "steps": [{"file": r.file, **r.steps.to_dict(), "max_gap_effect": r.steps.max_gap_effect(r.resampled)}
+                      for r in self.files if r.steps is not None],
             "experiments": [{"source": e.source, "n_samples": e.n_samples, "fs": e.fs, "duration": e.duration,
                              "cutoff_hz": e.cutoff_hz, "n_d": e.n_d,
                              "joints": [{"joint": j.joint, "standstill": j.standstill, "q_saturated": j.q_saturated,
@@ -109,8 +112,22 @@ class Inspection:
         lines = [data_text(self.files), ""]
         for r in self.files:
             assert r.step_from is not None  # every file read has a time step
-            lines.append(f"{r.file}: step {r.step_from:.6g} s ({1 / r.step_from:.5g} Hz), jitter "
-                         f"{100 * r.step_jitter:.3g} % of the step, {r.gaps} gap(s) split, {r.rows_dropped} row(s) dropped")
+            st = r.steps
+            if st is None or not st.n_outliers:
+                lines.append(f"{r.file}: step {r.step_from:.6g} s ({1 / r.step_from:.5g} Hz), jitter "
+                             f"{100 * r.step_jitter:.3g} % of the step, {r.gaps} gap(s) split, {r.rows_dropped} row(s) "
+                             "dropped")
+                continue
+            lines.append(f"{r.file}: step {r.step_from:.6g} s ({1 / r.step_from:.5g} Hz), jitter {100 * st.jitter:.3g} "
+                         f"% of the step but for {st.n_outliers} outlier step(s), {r.gaps} gap(s) split, "
+                         f"{r.rows_dropped} row(s) dropped")
+            lines.append(f"  steps: p50 {st.p50:.6g} s, p99 {st.p99:.6g} s, max {st.max:.6g} s")
+            shown = ", ".join(f"row {row}" + (f" (line {ln})" if ln is not None else "") + f": {h:.6g} s"
+                              for row, ln, h in st.outliers)
+            more = f" and {st.n_outliers - len(st.outliers)} more" if st.n_outliers > len(st.outliers) else ""
+            lines.append(f"  {st.n_outliers} outlier step(s) (more than {100 * st.tol:g} % off the median): {shown}"
+                         f"{more}")
+            lines.append(f"  {st.max_gap_effect(r.resampled)}")
         for e in self.experiments:
             lines.append(f"{e.source}: {e.n_samples} samples, {e.duration:.4g} s at {e.fs:.5g} Hz; the papers' rule "
                          f"chooses a cut-off of {e.cutoff_hz:.3g} Hz and decimation n_d = {e.n_d}")
@@ -246,6 +263,15 @@ def inspection_report(insp: Inspection, trajectories: Sequence[Trajectory], robo
                           tuple((r.file, str(r.rows_read), str(r.rows_dropped), "yes" if r.resampled else "no",
                                  f"{r.step_from:.6g}", f"{100 * r.step_jitter:.3g}", str(r.gaps), str(r.experiments))
                                 for r in insp.files), caption="How each file was read")]
+    odd = [r for r in insp.files if r.steps is not None and r.steps.n_outliers]
+    if odd:
+        blocks.append(Table(("file", "p50 step [s]", "p99 step [s]", "max step [s]", "outlier steps (row: step)",
+                             "--max-gap"),
+                            tuple((r.file, f"{r.steps.p50:.6g}", f"{r.steps.p99:.6g}", f"{r.steps.max:.6g}",
+                                   f"{r.steps.n_outliers}: " + ", ".join(f"{row}: {h:.6g}" for row, _, h
+                                                                        in r.steps.outliers),
+                                   r.steps.max_gap_effect(r.resampled)) for r in odd if r.steps is not None),
+                            caption="Time steps as logged, where some are more than 50 % off the median"))
     for e in insp.experiments:
         blocks.append(Table(("joint", "standstill [%]", "q at bound [%]", "tau at bound [%]", "q range", "|tau| max"),
                             tuple((str(j.joint), f"{100 * j.standstill:.1f}", f"{100 * j.q_saturated:.1f}",

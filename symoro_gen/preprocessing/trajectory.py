@@ -85,24 +85,65 @@ class Trajectory:
         return float(np.median(np.diff(self.t)))
 
 
+#: fewest samples of a part :func:`hold_back` cuts from a piece of a file split in several (shorter: the whole
+#: piece goes to the other side); the fewest samples filtering takes (``readers.common.MIN_SAMPLES``)
+MIN_PART = 32
+
+
+def _recording(tr: Trajectory, k: int) -> str:
+    """The file (or split-file spec) an experiment was read from with the data options: experiments of one
+    file share it; any other experiment (the plain reading, arrays) is a recording of its own."""
+    rec = tr.meta.get("recording")
+    return f"file {rec}" if rec is not None else f"experiment {k}"
+
+
 def hold_back(trajectories: Sequence[Trajectory], fraction: float
               ) -> tuple[tuple[Trajectory, ...], tuple[Trajectory, ...]]:
-    """Split each experiment in time: the first ``1 - fraction`` for identification, the last
-    ``fraction`` for validation (a held-back part of the same recording)."""
+    """Hold back the last ``fraction`` of each recording FILE for validation, the first ``1 - fraction`` for
+    identification.
+
+    A file that reading split into several experiments (gaps longer than ``--max-gap``, resets of the clock:
+    the experiments share ``meta["recording"]``) is held back as a whole: the cut lies at ``1 - fraction`` of
+    its samples counted in file order (of its recorded duration: the pieces are on one uniform grid),
+    experiments entirely after the cut go to validation, those before it to identification, and the one
+    spanning it is cut (a part shorter than ``MIN_PART`` samples goes with the rest of its piece). A file read
+    as one experiment is cut at ``round(N (1 - fraction))``.
+    """
     if not 0 < fraction < 1:
         raise ValueError(f"the held-back fraction must lie between 0 and 1, got {fraction:g}")
+    groups: dict[str, list[Trajectory]] = {}
+    for k, tr in enumerate(trajectories):
+        groups.setdefault(_recording(tr, k), []).append(tr)
+    first, last = f"first {100 * (1 - fraction):.3g} %", f"last {100 * fraction:.3g} %"
     ident, valid = [], []
-    for tr in trajectories:
-        k = int(round(tr.n_samples * (1 - fraction)))
 
-        def part(a, b, tag, tr=tr):
-            cut = {f: (getattr(tr, f)[a:b] if getattr(tr, f) is not None else None)
-                   for f in ("t", "q", "tau", "dq", "ddq", "deflection")}
-            meta = {**tr.meta, "part": tag}
-            if meta.get("q_ref") is not None and len(meta["q_ref"]) == tr.n_samples:  # a recorded reference
-                meta["q_ref"] = meta["q_ref"][a:b]
-            return replace(tr, **cut, source=f"{tr.source} [{tag}]", meta=meta)
+    def part(tr, a, b, tag):
+        cut = {f: (getattr(tr, f)[a:b] if getattr(tr, f) is not None else None)
+               for f in ("t", "q", "tau", "dq", "ddq", "deflection")}
+        meta = {**tr.meta, "part": tag}
+        if meta.get("q_ref") is not None and len(meta["q_ref"]) == tr.n_samples:  # a recorded reference
+            meta["q_ref"] = meta["q_ref"][a:b]
+        return replace(tr, **cut, source=f"{tr.source} [{tag}]", meta=meta)
 
-        ident.append(part(0, k, f"first {100 * (1 - fraction):.3g} %"))
-        valid.append(part(k, tr.n_samples, f"last {100 * fraction:.3g} %"))
+    for pieces in groups.values():
+        if len(pieces) == 1:
+            tr = pieces[0]
+            k = int(round(tr.n_samples * (1 - fraction)))
+            ident.append(part(tr, 0, k, first))
+            valid.append(part(tr, k, tr.n_samples, last))
+            continue
+        total = sum(tr.n_samples for tr in pieces)
+        cut = int(round(total * (1 - fraction)))
+        start = 0
+        tag_i, tag_v = f"{first} of the file", f"{last} of the file"
+        for tr in pieces:
+            k = cut - start  # samples of this piece before the cut
+            start += tr.n_samples
+            if k >= tr.n_samples or (k >= tr.n_samples - MIN_PART and k >= MIN_PART):
+                ident.append(part(tr, 0, tr.n_samples, tag_i))
+            elif k <= 0 or k < MIN_PART:
+                valid.append(part(tr, 0, tr.n_samples, tag_v))
+            else:
+                ident.append(part(tr, 0, k, tag_i))
+                valid.append(part(tr, k, tr.n_samples, tag_v))
     return tuple(ident), tuple(valid)

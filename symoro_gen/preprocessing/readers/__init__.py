@@ -35,8 +35,18 @@ from ...progress import progress_updates
 from ..trajectory import Trajectory
 from .arrays import ARRAY_SUFFIXES, read_array_file
 from .bag import BAG_SUFFIXES, is_bag, read_bag
-from .common import ABSURD_VALUE, DEFAULT_CHECKS, LOG_ROLES, DataChecks, DataWarning, RawColumns, step_regime_changes
-from .logs import log_trajectories
+from .common import (
+    ABSURD_VALUE,
+    DEFAULT_CHECKS,
+    LOG_ROLES,
+    DataChecks,
+    DataWarning,
+    RawColumns,
+    StepStats,
+    step_regime_changes,
+    step_stats,
+)
+from .logs import log_trajectories, time_order_hint
 from .options import LoadReport, LogFormat, make_format, parse_columns, read_format_file
 from .parquet import PARQUET_SUFFIXES, is_parquet, read_parquet_file
 from .plain import plain_trajectory
@@ -47,20 +57,45 @@ __all__ = [
     "read_recording", "read_recordings", "load_trajectory", "load_trajectories",
     "LogFormat", "LoadReport", "make_format", "parse_columns", "read_format_file",
     "DataSpec", "parse_data_spec", "DataChecks", "DataWarning", "step_regime_changes",
-    "ABSURD_VALUE", "LOG_ROLES", "PARQUET_SUFFIXES", "BAG_SUFFIXES", "is_bag",
+    "ABSURD_VALUE", "LOG_ROLES", "PARQUET_SUFFIXES", "BAG_SUFFIXES", "is_bag", "StepStats",
 ]
 
 PathOrSpec = str | os.PathLike | DataSpec
 
 
 def _read_columns(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors: Sequence[tuple[str, str]],
-                  dt: float | None, probs: list[Problem], strict: bool, start: int = 0, stop: int = -1
-                  ) -> RawColumns:
-    """The columns of each role, by the reader of the file's format (``strict``: the plain reading)."""
+                  dt: float | None, probs: list[Problem], strict: bool, start: int = 0, stop: int = -1,
+                  skip_rows: int = 0, reshape: str | None = None) -> RawColumns:
+    """The columns of each role, by the reader of the file's format (``strict``: the plain reading;
+    ``skip_rows``, ``reshape``: as :class:`LogFormat`)."""
     if spec.is_split:
         if stop >= 0:
             raise ValueError(f"{spec.text}: only Parquet logs are read by segment (start, stop)")
-        return read_split(spec, n, dt, probs, strict=strict)
+        return read_split(spec, n, dt, probs, strict=strict, skip_rows=skip_rows, reshape=reshape)
+    if reshape is not None:
+        raise DataFileError([Problem(spec.text, "", "reshape", "--reshape reads the one-value-per-line files of a "
+                                     "split recording (q=FILE,tau=FILE,...): a single file holds several roles")])
+    raw = _read_file(spec, n, mapping=mapping, selectors=selectors, dt=dt, probs=probs, strict=strict, start=start,
+                     stop=stop, skip_rows=skip_rows)
+    if skip_rows and raw.fmt != "csv":  # text tables skip while reading (file lines kept)
+        if skip_rows >= raw.n_rows:
+            raise DataFileError([Problem(spec.text, "", "skip_rows", f"--skip-rows {skip_rows}: the file has only "
+                                         f"{raw.n_rows} rows")])
+        for role, col in raw.cols.items():
+            col.values = col.values[skip_rows:]
+            col.lines = col.lines[skip_rows:] if col.lines is not None else None
+            if role in raw.unparsable:
+                raw.unparsable[role] = raw.unparsable[role][skip_rows:]
+        if raw.bad_fields is not None:
+            raw.bad_fields = raw.bad_fields[skip_rows:]
+        raw.notes.append(f"rows 1-{skip_rows} skipped (--skip-rows {skip_rows})")
+    return raw
+
+
+def _read_file(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors: Sequence[tuple[str, str]],
+               dt: float | None, probs: list[Problem], strict: bool, start: int, stop: int, skip_rows: int
+               ) -> RawColumns:
+    """One file's columns, by the reader of its format."""
     file = spec.files["file"]
     if not Path(file).exists():
         raise DataFileError([Problem(file, "", "", "file not found")])
@@ -71,7 +106,8 @@ def _read_columns(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors:
         raise ValueError(f"{file}: only Parquet logs are read by segment (start, stop)")
     suffix = Path(file).suffix.lower()
     if suffix in TEXT_SUFFIXES:
-        return read_text_file(file, n, mapping=mapping, selectors=selectors, dt=dt, probs=probs, strict=strict)
+        return read_text_file(file, n, mapping=mapping, selectors=selectors, dt=dt, probs=probs, strict=strict,
+                              skip_rows=skip_rows)
     if suffix in ARRAY_SUFFIXES:
         return read_array_file(file, suffix[1:], n, mapping=mapping, selectors=selectors, dt=dt, probs=probs)
     raise DataFileError([Problem(file, "", "", f"unknown data format {suffix!r} "
@@ -223,22 +259,37 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
         raise DataFileError([Problem(spec.text, "", "dt", f"the spec says dt = {spec.dt:g} s, --dt {fmt.dt:g}: "
                                      "give the sampling period once")])
     dt = fmt.dt if fmt.dt is not None else spec.dt
+    if spec.is_split and "t" in spec.files and dt is not None and not fmt.dt_overrides_time:
+        key = "--dt" if fmt.dt is not None else ("dt=" if "dt=" in spec.text else "fs=")
+        given = "--dt" if fmt.dt is not None else f"the spec's {key}"
+        raise DataFileError([Problem(spec.files["t"], "", "t", f"the t= file of the split recording gives the time "
+                                     f"and {given} gives a sampling period ({dt:g} s): leave {key} out to use the "
+                                     "t= file, or give --dt-overrides-time to ignore the t= file")],
+                            hint="--dt is the sampling period of files without time stamps")
     joint_types = _joint_types(robot)
     if fmt.is_plain and stop < 0 and (spec.is_split or not is_parquet(spec.files["file"])):
         probs: list[Problem] = []
         raw = _read_columns(spec, n, mapping=None, selectors=(), dt=dt, probs=probs, strict=True)
-        tr = plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types,
-                              dt_overrides_time=fmt.dt_overrides_time)
+        t_raw = raw.cols["t"].values[:, 0] if "t" in raw.cols and not fmt.dt_overrides_time else None
+        t_lines = raw.cols["t"].lines if t_raw is not None else None
+        try:
+            tr = plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
+                                  joint_types=joint_types, dt_overrides_time=fmt.dt_overrides_time)
+        except DataFileError as exc:  # time out of order: the option that fixes it (--skip-rows ...)
+            if t_raw is None or not any("not strictly increasing" in p.message for p in exc.problems):
+                raise
+            raise DataFileError(exc.problems, hint=time_order_hint(t_raw)) from None
         rep = LoadReport(file=tr.source, rows_read=tr.n_samples, step_from=tr.meta.get("dt_median"),
                          step_jitter=float(tr.meta.get("dt_max_rel_jitter", 0.0)), samples=(tr.n_samples,),
-                         options=fmt.options())
+                         options=fmt.options(), notes=tuple(raw.notes),
+                         steps=step_stats(t_raw if t_raw is not None else tr.t, t_lines, fmt.max_gap))
         return (tr,), rep
     if spec.is_split and fmt.columns:
         raise DataFileError([Problem(spec.text, "", "columns", "--columns cannot be used with a split-file "
                                      "spec (each file holds one role)")])
     probs = []
     raw = _read_columns(spec, n, mapping=None, selectors=fmt.columns, dt=dt, probs=probs, strict=False,
-                        start=start, stop=stop)
+                        start=start, stop=stop, skip_rows=fmt.skip_rows, reshape=fmt.reshape)
     if probs:
         raise DataFileError(probs)
     return log_trajectories(raw, fmt, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types)

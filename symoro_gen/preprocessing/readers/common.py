@@ -8,6 +8,7 @@ of the file).
 """
 from __future__ import annotations
 
+import bisect
 import math
 import re
 import warnings
@@ -25,7 +26,8 @@ __all__ = [
     "DEFAULT_CHECKS", "Column", "Table", "RawColumns", "time_conflict", "warn_data", "runs", "number_runs", "fmt_ranges",
     "fmt_names", "open_problem", "not_text_problem", "malformed_problems", "raise_malformed", "resolve_csv_columns",
     "select_columns", "shared_columns", "table_columns", "check_values", "bad_rows", "check_time", "step_regime_changes",
-    "unit_checks",
+    "unit_checks", "StepStats", "step_stats", "out_of_order_rows", "SKIP_HINT",
+    "LEADING_ROWS", "leading_rows_hint",
 ]
 
 #: roles of the plain reading (a ``columns`` mapping, array keys)
@@ -58,6 +60,11 @@ TIME_HINT = ("the command line's --resample puts irregular time stamps on a unif
 DROP_HINT = "give --drop-bad-rows to drop such rows (they are counted in the output)"
 RESAMPLE_HINT = ("give --resample to resample irregular time stamps on a uniform grid (gaps longer than "
                  "--max-gap split the file)")
+SKIP_HINT = "the bad rows are at the start of the file: --skip-rows {k} skips them (also skip_rows in a --format file)"
+#: most steps listed by row in :class:`StepStats`
+OUTLIERS_SHOWN = 10
+#: bad rows all within this many first data rows: garbage before the recording (``--skip-rows``)
+LEADING_ROWS = 20
 REGIME_WINDOW = 20  #: steps averaged to find the local sampling period
 REGIME_TOL = 0.2    #: largest accepted relative change of the local sampling period
 
@@ -135,6 +142,7 @@ class Table:
     unparsable: np.ndarray      # (N, k) bool
     bad_text: dict[int, list[str]] = field(default_factory=dict)
     first_line: int = 1         # line of the header (or of the first row when there is none)
+    notes: list[str] = field(default_factory=list)  # rows skipped (``skip_rows``)
 
 
 @dataclass
@@ -148,6 +156,7 @@ class RawColumns:
     bad_fields: np.ndarray | None = None      # (N,) wrong number of fields
     unparsable: dict[str, np.ndarray] = field(default_factory=dict)  # role -> (N, k) bool
     rows: tuple[int, int] | None = None       # the samples [start, stop) of a Parquet log read by segment
+    notes: list[str] = field(default_factory=list)  # what reading did that the load report says (a reshape...)
 
     @property
     def n_rows(self) -> int:
@@ -246,7 +255,17 @@ def raise_malformed(tab: Table) -> None:
     """The plain reading: malformed rows are an error at once (see :func:`malformed_problems`)."""
     probs = malformed_problems(tab)
     if probs:
-        raise DataFileError(probs)
+        bad = tab.bad_fields | tab.unparsable.any(axis=1)
+        raise DataFileError(probs, hint=leading_rows_hint(bad))
+
+
+def leading_rows_hint(bad: np.ndarray) -> str | None:
+    """``--skip-rows K`` when every bad row (a mask of the data rows) lies among the first ``LEADING_ROWS``:
+    the garbage a logger writes before the recording; else None."""
+    idx = np.flatnonzero(bad)
+    if idx.size == 0 or idx[-1] >= LEADING_ROWS:
+        return None
+    return SKIP_HINT.format(k=int(idx[-1]) + 1)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -536,6 +555,107 @@ def check_time(t: np.ndarray, col: Column, jitter_tol: float, probs: list[Proble
                              f"{other:.6g} s elsewhere; a recording must keep one period: resample it (--resample) "
                              "or split it into separate files"))
     return info
+
+
+@dataclass(frozen=True)
+class StepStats:
+    """The time steps of a file as logged (before resampling): what ``inspect`` shows of them.
+
+    Attributes
+    ----------
+    p50, p99, max : float
+        Median, 99th percentile and largest step [s].
+    outliers : tuple of (row, line, step)
+        The first ``OUTLIERS_SHOWN`` steps deviating more than ``tol`` from the median: the 1-based row of the
+        later sample, its file line (None for binary files) and the step [s].
+    n_outliers : int
+        How many steps deviate so.
+    max_gap : float
+        The ``--max-gap`` in force [s] (the option, else ``MAX_GAP_STEPS`` median steps).
+    max_gap_given : bool
+        ``--max-gap`` was given (else the default).
+    over_gap : int
+        Steps longer than ``max_gap``: where ``--resample`` splits the file.
+    tol : float
+        Relative deviation from the median above which a step is an outlier.
+    jitter : float
+        Largest relative deviation from the median of the other steps (the jitter of the clock, outliers aside).
+    """
+
+    p50: float
+    p99: float
+    max: float
+    outliers: tuple[tuple[int, int | None, float], ...]
+    n_outliers: int
+    max_gap: float
+    max_gap_given: bool
+    over_gap: int
+    tol: float
+    jitter: float = 0.0
+
+    def to_dict(self) -> dict:
+        return {"p50": self.p50, "p99": self.p99, "max": self.max, "jitter": self.jitter,
+                "n_outliers": self.n_outliers,
+                "outliers": [{"row": r, "line": ln, "step": h} for r, ln, h in self.outliers],
+                "max_gap": self.max_gap, "max_gap_given": self.max_gap_given, "over_gap": self.over_gap}
+
+    def max_gap_effect(self, resampled: bool) -> str:
+        """What ``--max-gap`` does (or would do with ``--resample``) with the outlier steps."""
+        if not self.n_outliers:
+            return "no outlier step"
+        what = f"--max-gap {self.max_gap:.6g} s" + ("" if self.max_gap_given else " (the default, 5 median steps)")
+        if not self.over_gap:
+            return f"{what} bridges them all (interpolated{'' if resampled else ' with --resample'})"
+        verb = "splits" if resampled else "would split (with --resample)"
+        return (f"{what} {verb} the file at the {self.over_gap} step(s) longer than it into {self.over_gap + 1} "
+                f"experiments; --max-gap {1.01 * self.max:.3g} would bridge them all")
+
+
+def step_stats(t: np.ndarray, lines: np.ndarray | None, max_gap: float | None, tol: float = 0.5) -> StepStats | None:
+    """The :class:`StepStats` of a time column (None with fewer than two samples or time not increasing).
+
+    ``max_gap`` None: ``MAX_GAP_STEPS`` (5) median steps, the default of ``--max-gap``."""
+    t = np.asarray(t, float)
+    d = np.diff(t)
+    if d.size < 1 or not (d > 0).all():
+        return None
+    med = float(np.median(d))
+    gap = float(max_gap) if max_gap is not None else 5 * med
+    dev = np.abs(d - med) / med
+    out = np.flatnonzero(dev > tol)
+    inl = dev[dev <= tol]
+    shown = tuple((int(k) + 2, int(lines[k + 1]) if lines is not None else None, float(d[k]))
+                  for k in out[:OUTLIERS_SHOWN])
+    return StepStats(p50=med, p99=float(np.percentile(d, 99)), max=float(d.max()), outliers=shown,
+                     n_outliers=int(out.size), max_gap=gap, max_gap_given=max_gap is not None,
+                     over_gap=int((d > gap).sum()), tol=tol, jitter=float(inl.max()) if inl.size else 0.0)
+
+
+def out_of_order_rows(t: np.ndarray) -> np.ndarray:
+    """Rows whose time breaks the order: the complement of the longest strictly increasing subsequence of
+    ``t`` (patience sorting, O(N log N)). A few isolated rows (a logger's stray stamps) leave the rest
+    increasing; a reset of the clock leaves a whole stretch out."""
+    t = np.asarray(t, float)
+    N = t.size
+    tails: list[float] = []
+    tail_idx: list[int] = []
+    prev = np.full(N, -1, int)
+
+    for i, x in enumerate(t):
+        k = bisect.bisect_left(tails, x)
+        if k == len(tails):
+            tails.append(x)
+            tail_idx.append(i)
+        else:
+            tails[k] = x
+            tail_idx[k] = i
+        prev[i] = tail_idx[k - 1] if k > 0 else -1
+    keep = np.zeros(N, bool)
+    i = tail_idx[-1] if tail_idx else -1
+    while i >= 0:
+        keep[i] = True
+        i = prev[i]
+    return ~keep
 
 
 def step_regime_changes(t, irregular=None, *, window: int = REGIME_WINDOW, tol: float = REGIME_TOL

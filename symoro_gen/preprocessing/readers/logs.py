@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -22,29 +23,75 @@ from ..trajectory import Trajectory
 from .common import (
     DEFAULT_CHECKS,
     DROP_HINT,
+    LEADING_ROWS,
     MIN_SAMPLES,
     POSITION_ROLES,
     RESAMPLE_HINT,
+    SKIP_HINT,
     Column,
     RawColumns,
     bad_rows,
     check_time,
     fmt_ranges,
+    leading_rows_hint,
+    out_of_order_rows,
     runs,
+    step_stats,
     time_conflict,
     unit_checks,
     warn_data,
 )
 from .options import MAX_GAP_STEPS, LoadReport, LogFormat
 
-__all__ = ["log_trajectories", "resample"]
+__all__ = ["log_trajectories", "resample", "time_order_hint", "ISOLATED_MAX", "LEADING_ROWS"]
+
+#: most rows out of time order called isolated (a logger's stray stamps, dropped by ``--drop-bad-rows``); more
+#: is a reset of the clock (the file splits there with ``--resample``)
+ISOLATED_MAX = 10
+
+
+def _order_problem(t: np.ndarray) -> tuple[np.ndarray, str]:
+    """(rows to drop, what they are): ``"leading"`` (garbage before the recording: every row up to the last
+    one out of order, or up to a gap of more than ``MAX_GAP_STEPS`` median steps after which the rest is in
+    order, within the first ``LEADING_ROWS``), ``"isolated"`` (at most ``ISOLATED_MAX`` rows out of order, the
+    rest increasing), ``"reset"`` (more: the clock restarts) or ``""`` (in order)."""
+    bad = out_of_order_rows(t)
+    if not bad.any():
+        return bad, ""
+    if bad.sum() > ISOLATED_MAX:
+        return bad, "reset"
+    good = np.flatnonzero(~bad)
+    d = np.diff(t[good])
+    lead = int(np.argmin(bad)) if not bad.all() else bad.size  # rows out of order from the first one on
+    if d.size:
+        big = np.flatnonzero(d[:LEADING_ROWS] > MAX_GAP_STEPS * float(np.median(d)))
+        if big.size:
+            lead = max(lead, int(good[big[-1] + 1]))
+    if 0 < lead <= LEADING_ROWS and not bad[lead:].any():
+        return np.arange(bad.size) < lead, "leading"
+    return bad, "isolated"
+
+
+def time_order_hint(t: np.ndarray) -> str:
+    """The option that fixes a time column that is not strictly increasing: ``--skip-rows`` for garbage rows at
+    the start, ``--drop-bad-rows`` for a few isolated ones, ``--resample`` (splits at the reset) for a clock
+    that restarts."""
+    bad, kind = _order_problem(np.asarray(t, float))
+    if kind == "leading":
+        return SKIP_HINT.format(k=int(bad.sum()))
+    if kind == "isolated":
+        return (f"{int(bad.sum())} isolated row(s) out of time order: --drop-bad-rows drops them (counted in the "
+                "output)")
+    return ("the clock restarts (time goes back and increases again): --resample splits the file there into "
+            "experiments; or split it into separate files")
 
 
 def _drop_bad_rows(c: RawColumns, fmt: LogFormat) -> tuple[np.ndarray, tuple[str, ...]]:
     """(rows kept, what was dropped and why); bad rows are an error without ``drop_bad_rows``."""
     drop, bad = bad_rows(c)
     if bad and not fmt.drop_bad_rows:
-        raise DataFileError(bad, hint=DROP_HINT)
+        lead = leading_rows_hint(drop)
+        raise DataFileError(bad, hint=f"{lead}; or {DROP_HINT}" if lead else DROP_HINT)
     dropped = tuple(f"{p.where}{', ' + p.field if p.field else ''}: {p.message}" for p in bad)
     if drop.all():
         raise DataFileError([Problem(c.source, f"rows 1-{c.n_rows}", "", "every row is bad")])
@@ -70,17 +117,52 @@ def _convert_units(vals: dict[str, np.ndarray], fmt: LogFormat, n: int, source: 
         vals["tau"] = vals["tau"] * s
 
 
+def _drop_out_of_order(c: RawColumns, keep: np.ndarray, fmt: LogFormat, dt: float | None
+                       ) -> tuple[np.ndarray, tuple[str, ...]]:
+    """``drop_bad_rows``: the rows whose time is out of order, when they are a few isolated ones (the rest
+    increasing; see :func:`~.common.out_of_order_rows`), dropped; a reset of the clock is left to
+    :func:`_checked_time`."""
+    if not fmt.drop_bad_rows or "t" not in c.cols or dt is not None:
+        return keep, ()
+    rows = np.flatnonzero(keep)
+    bad, kind = _order_problem(c.cols["t"].values[rows, 0])
+    if kind not in ("leading", "isolated"):
+        return keep, ()
+    tcol = c.cols["t"]
+    mask = np.zeros(c.n_rows, bool)
+    mask[rows[bad]] = True
+    keep = keep & ~mask
+    what = (f"{tcol.names[0]}: {int(bad.sum())} row(s) whose time is out of order (the rest increases)" if kind ==
+            "isolated" else f"{tcol.names[0]}: {int(bad.sum())} leading row(s) whose time is out of order "
+            f"(garbage before the recording; --skip-rows {int(rows[np.flatnonzero(bad)[-1]]) + 1} skips them)")
+    return keep, (f"{fmt_ranges(runs(mask), tcol.lines)}, {what}",)
+
+
+def _resets(t: np.ndarray) -> np.ndarray:
+    """Steps (indices into ``diff(t)``) where the clock restarts: time goes back, and every stretch between
+    two such steps is long enough to filter; empty when a stretch is shorter (then the time is garbage)."""
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size == 0 or _order_problem(t)[1] != "reset":
+        return np.zeros(0, int)
+    bounds = np.r_[0, back + 1, t.size]
+    if np.min(np.diff(bounds)) < MIN_SAMPLES:
+        return np.zeros(0, int)
+    return back
+
+
 def _checked_time(c: RawColumns, t: np.ndarray, keep: np.ndarray, fmt: LogFormat) -> None:
-    """The time column of the kept rows: strictly increasing (with ``resample``), else regular."""
+    """The time column of the kept rows: strictly increasing but for resets of the clock (with ``resample``,
+    which splits there), else regular."""
     tcol = c.cols["t"]
     rows = np.flatnonzero(keep)
     d = np.diff(t)
     if fmt.resample:
-        if (d <= 0).any():
-            back = np.flatnonzero(d <= 0)
+        back = np.flatnonzero(d <= 0)
+        if back.size and _resets(t).size != back.size:
             where = fmt_ranges(runs(np.isin(np.arange(c.n_rows), rows[back + 1])), tcol.lines)
             raise DataFileError([Problem(tcol.file, where, tcol.names[0], f"time is not strictly increasing "
-                                         f"({back.size} step(s) <= 0): resampling cannot order it")])
+                                         f"({back.size} step(s) <= 0): resampling cannot order it")],
+                                hint=_shifted_hint(time_order_hint(t), rows))
         return
     shifted = not keep.all()  # rows then count the kept rows: say so, give no file lines
     col = Column(tcol.file, tcol.names, t[:, None], None if shifted else tcol.lines)
@@ -89,7 +171,17 @@ def _checked_time(c: RawColumns, t: np.ndarray, keep: np.ndarray, fmt: LogFormat
     if tprobs:
         if shifted:
             tprobs = [Problem(p.file, f"{p.where} of the {rows.size} rows kept", p.field, p.message) for p in tprobs]
-        raise DataFileError(tprobs, hint=RESAMPLE_HINT)
+        hint = _shifted_hint(time_order_hint(t), rows) if (d <= 0).any() else RESAMPLE_HINT
+        raise DataFileError(tprobs, hint=hint)
+
+
+def _shifted_hint(hint: str, rows: np.ndarray) -> str:
+    """A ``--skip-rows K`` hint counted in the kept rows, counted in the file's rows."""
+    m = re.search(r"--skip-rows (\d+)", hint)
+    if m and rows.size:
+        k = int(m.group(1))
+        hint = hint.replace(m.group(0), f"--skip-rows {int(rows[k - 1]) + 1}")
+    return hint
 
 
 def _time_base(c: RawColumns, vals: dict[str, np.ndarray], keep: np.ndarray, dt: float | None,
@@ -112,10 +204,10 @@ def _time_base(c: RawColumns, vals: dict[str, np.ndarray], keep: np.ndarray, dt:
 
 def resample(t: np.ndarray, arrays: dict[str, np.ndarray], h: float, max_gap: float
              ) -> tuple[list[tuple[np.ndarray, dict[str, np.ndarray]]], int]:
-    """Split at steps > max_gap, put each piece on a uniform grid of step ``h``: cubic (positions) or
+    """Split at steps > max_gap (and where the clock restarts), put each piece on a uniform grid of step ``h``: cubic (positions) or
     linear (the rest) interpolation (:mod:`scipy.interpolate`)."""
     d = np.diff(t)
-    cuts = np.flatnonzero(d > max_gap)
+    cuts = np.flatnonzero((d > max_gap) | (d <= 0))  # gaps, and resets of the clock (see _checked_time)
     bounds = np.r_[0, cuts + 1, t.size]
     out = []
     for a, b in itertools.pairwise(bounds):
@@ -133,7 +225,7 @@ def resample(t: np.ndarray, arrays: dict[str, np.ndarray], h: float, max_gap: fl
             else:
                 seg[role] = scipy.interpolate.interp1d(ts, x, axis=0, assume_sorted=True)(grid)
         out.append((grid, seg))
-    return out, int(cuts.size)
+    return out, int((d > max_gap).sum())
 
 
 Piece = tuple[np.ndarray, dict[str, np.ndarray]]
@@ -178,6 +270,31 @@ def _experiments(kept: list[Piece], c: RawColumns, *, n: int, loaded: bool, driv
     return trajs
 
 
+def _split_notes(d: np.ndarray, resets: np.ndarray, max_gap: float, given: bool, rows: np.ndarray,
+                 lines: np.ndarray | None, experiments: int, resampled: bool) -> list[str]:
+    """Why a file became several experiments: the steps longer than ``--max-gap`` and the resets of the clock,
+    by row (and file line)."""
+    if not resampled:
+        return []
+    out = []
+    gaps = np.flatnonzero(d > max_gap)
+
+    def where(ks) -> str:
+        shown = [f"row {int(rows[k + 1])}" + (f" (line {int(lines[k + 1])})" if lines is not None else "")
+                 + f": {d[k]:.6g} s" for k in ks[:5]]
+        return "; ".join(shown) + (f"; and {len(ks) - 5} more" if len(ks) > 5 else "")
+
+    if gaps.size:
+        what = f"--max-gap {max_gap:.6g} s" + ("" if given else " (the default, 5 median steps)")
+        out.append(f"{gaps.size} step(s) longer than {what} split the file ({where(gaps)}); a --max-gap above "
+                   f"{d[gaps].max():.6g} s would bridge them (interpolated)")
+    if resets.size:
+        out.append(f"the clock restarts {resets.size} time(s): the file is split there ({where(resets)})")
+    if out:
+        out.append(f"{experiments} experiment(s) made of this file")
+    return out
+
+
 def log_trajectories(c: RawColumns, fmt: LogFormat, *, n: int, dt: float | None, loaded: bool = False,
                      drive_chain=None, joint_types: Sequence[int] | None = None
                      ) -> tuple[tuple[Trajectory, ...], LoadReport]:
@@ -191,6 +308,8 @@ def log_trajectories(c: RawColumns, fmt: LogFormat, *, n: int, dt: float | None,
     """
     N = c.n_rows
     keep, dropped = _drop_bad_rows(c, fmt)
+    keep, more = _drop_out_of_order(c, keep, fmt, dt)
+    dropped += more
     vals = {r: col.values[keep] for r, col in c.cols.items()}
     # --deg converts angles: the revolute joints (the robot's joint types), or every motor-side position
     angular = None if joint_types is None or drive_chain is not None else [j for j, sg in enumerate(joint_types)
@@ -198,25 +317,33 @@ def log_trajectories(c: RawColumns, fmt: LogFormat, *, n: int, dt: float | None,
     _convert_units(vals, fmt, n, c.source, angular)
     t = _time_base(c, vals, keep, dt, fmt)
     d = np.diff(t)
-    h = float(np.median(d)) if d.size else float("nan")
-    jitter = float(np.abs(d - h).max() / h) if d.size else 0.0
+    resets = _resets(t) if fmt.resample else np.zeros(0, int)
+    fwd = np.delete(d, resets)
+    h = float(np.median(fwd)) if fwd.size else float("nan")
+    jitter = float(np.abs(fwd - h).max() / h) if fwd.size else 0.0
     pieces: list[Piece] = [(t, vals)]
     gaps = 0
     resampled = False
-    if fmt.resample and d.size and (jitter > 1e-6):
-        pieces, gaps = resample(t, vals, h, fmt.max_gap if fmt.max_gap is not None else MAX_GAP_STEPS * h)
+    max_gap = fmt.max_gap if fmt.max_gap is not None else MAX_GAP_STEPS * h
+    t_lines = c.cols["t"].lines[keep] if "t" in c.cols and c.cols["t"].lines is not None else None
+    rows = np.flatnonzero(keep) + 1
+    if fmt.resample and d.size and (jitter > 1e-6 or resets.size):
+        pieces, gaps = resample(t, vals, h, max_gap)
         resampled = True
     kept, notes = _long_pieces(pieces, c.source, N)
+    notes = list(c.notes) + _split_notes(d, resets, max_gap, fmt.max_gap is not None, rows, t_lines, len(kept),
+                                         resampled) + notes
+    steps = step_stats(np.split(t, resets + 1)[0] if resets.size else t, t_lines, fmt.max_gap)
     opts = fmt.options()
     meta = {"format": c.fmt, "files": {r: col.file for r, col in c.cols.items()},
             "columns": {r: list(col.names) for r, col in c.cols.items()}, "drive_chain": drive_chain is not None,
             "t_from_dt": "t" not in c.cols or dt is not None, "dt_median": h, "dt_max_rel_jitter": jitter,
-            "options": opts}
+            "options": opts, "recording": c.source}
     if c.rows is not None:
         meta["rows"] = c.rows
     trajs = _experiments(kept, c, n=n, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types, meta=meta)
     rep = LoadReport(file=c.source, rows_read=N, rows_dropped=int((~keep).sum()), dropped=dropped,
                      resampled=resampled, step_from=h, step_to=h if resampled else None, step_jitter=jitter, gaps=gaps,
                      experiments=len(trajs), samples=tuple(tr.n_samples for tr in trajs), options=opts,
-                     notes=tuple(notes))
+                     notes=tuple(notes), steps=steps)
     return tuple(trajs), rep

@@ -11,6 +11,8 @@ resampling, bad rows), as command-line options or a TOML file with the same keys
     resample = false                    # irregular time stamps -> uniform grid at the median step
     max_gap = 0.05                      # [s] longer steps split the file (default 5 median steps)
     drop_bad_rows = false               # drop malformed / non-finite / absurd rows, counted
+    skip_rows = 0                       # data rows skipped at the start of each file (garbage rows)
+    reshape = "sample-major"            # one value per line: the order of the values (or "joint-major")
     topic = "/joint_states"             # ROS bags: the JointState topic(s) (default: found by type)
     stamp = "header"                    # ROS bags: time from the header stamps or the bag's "log" times
     prefix = "left_"                    # ROS bags: the robot's joints are named prefix + name
@@ -37,18 +39,21 @@ else:  # Python 3.10
     import tomli as tomllib
 
 from ...errors import DataFileError, Problem
-from .common import LOG_ROLES
+from .common import LOG_ROLES, StepStats
 
 __all__ = ["LogFormat", "LoadReport", "parse_columns", "read_format_file", "make_format", "FORMAT_KEYS",
-           "BAG_KEYS", "STAMPS", "MAX_GAP_STEPS"]
+           "BAG_KEYS", "STAMPS", "MAX_GAP_STEPS", "RESHAPE_ORDERS"]
 
 #: default ``max_gap`` in median steps
 MAX_GAP_STEPS = 5
 FORMAT_KEYS = ("columns", "dt", "dt_overrides_time", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows",
-               "topic", "stamp", "prefix", "joint_names", "reference_topic")
+               "skip_rows", "reshape", "topic", "stamp", "prefix", "joint_names", "reference_topic")
 #: the keys that only ROS bags use (:mod:`.bag`)
 BAG_KEYS = ("topic", "stamp", "prefix", "joint_names", "reference_topic")
 STAMPS = ("header", "log")
+#: orders of the values of a one-value-per-line file (``--reshape``): the n joints of sample 1, then of sample
+#: 2 ... (``sample-major``), or every sample of joint 1, then of joint 2 ... (``joint-major``, MATLAB's ``M(:)``)
+RESHAPE_ORDERS = ("sample-major", "joint-major")
 
 
 @dataclass(frozen=True)
@@ -91,6 +96,12 @@ class LogFormat:
         ROS bags: the bag's names of the robot's joints, in the robot's order (default: the robot file's).
     reference_topic : str
         ROS bags: commanded positions, kept as ``Trajectory.meta['q_ref']`` (IV/DIDIM reference).
+    skip_rows : int
+        Data rows skipped at the start of every file (below the header): garbage a logger writes before the
+        recording starts.
+    reshape : str or None
+        A file with one value per line holds ``n`` values per sample in this order (``RESHAPE_ORDERS``); None:
+        found from the data when exactly one order gives smooth signals (see :func:`.split.one_per_line`).
     """
 
     columns: tuple[tuple[str, str], ...] = ()
@@ -107,6 +118,8 @@ class LogFormat:
     prefix: str = ""
     joint_names: tuple[str, ...] = ()
     reference_topic: str = ""
+    skip_rows: int = 0
+    reshape: str | None = None
 
     @property
     def column_map(self) -> dict[str, str]:
@@ -116,7 +129,8 @@ class LogFormat:
     def is_plain(self) -> bool:
         """Nothing beyond ``dt``: the plain reading (:func:`~symoro_gen.preprocessing.readers.load_trajectory`)
         reads the file as is."""
-        return not (self.columns or self.tau_scale or self.deg or self.resample or self.drop_bad_rows)
+        return not (self.columns or self.tau_scale or self.deg or self.resample or self.drop_bad_rows
+                    or self.skip_rows or self.reshape)
 
     def options(self) -> tuple[str, ...]:
         """The options that change data, as command-line text (echoed in outputs)."""
@@ -143,6 +157,10 @@ class LogFormat:
             out.append("--joint-names " + ",".join(self.joint_names))
         if self.reference_topic:
             out.append(f"--reference-topic {self.reference_topic}")
+        if self.skip_rows:
+            out.append(f"--skip-rows {self.skip_rows}")
+        if self.reshape:
+            out.append(f"--reshape {self.reshape}")
         return tuple(out)
 
 
@@ -197,6 +215,18 @@ def _positive(v, where, key) -> float:
     return x
 
 
+def _skip_rows(v, where) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, str)) or not str(v).strip().isdigit():
+        raise DataFileError([Problem(where, "", "skip_rows", f"{v!r}: must be a whole number of rows (0 or more)")])
+    return int(v)
+
+
+def _reshape(v, where) -> str:
+    if v not in RESHAPE_ORDERS:
+        raise DataFileError([Problem(where, "", "reshape", f"{v!r}: must be one of {', '.join(RESHAPE_ORDERS)}")])
+    return str(v)
+
+
 def read_format_file(path) -> dict:
     """Read a ``--format FILE.toml``: the keys of :class:`LogFormat` (``columns`` as a string or a
     table role -> selector). Unknown keys are an error naming the file and the key."""
@@ -228,7 +258,8 @@ def _names(v, where, key) -> tuple[str, ...]:
 
 
 def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=None, max_gap=None,
-                drop_bad_rows=None, format_file=None, dt_overrides_time=None, bag: Mapping | None = None) -> LogFormat:
+                drop_bad_rows=None, format_file=None, dt_overrides_time=None, skip_rows=None, reshape=None,
+                bag: Mapping | None = None) -> LogFormat:
     """A :class:`LogFormat` from options (None: not given) over a format file's keys; ``bag``: the ROS bag
     options by key (:data:`BAG_KEYS`: ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``)."""
     bag = dict(bag or {})
@@ -238,8 +269,8 @@ def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=Non
     base = read_format_file(format_file) if format_file else {}
     origin = str(format_file) if format_file else "command line"
     given = dict(columns=columns, dt=dt, tau_scale=tau_scale, deg=deg, resample=resample, max_gap=max_gap,
-                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time,
-                 **{k: bag.get(k) for k in BAG_KEYS})
+                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time, skip_rows=skip_rows,
+                 reshape=reshape, **{k: bag.get(k) for k in BAG_KEYS})
     where = {k: ("command line" if v is not None else origin) for k, v in given.items()}
     merged = {k: (v if v is not None else base.get(k)) for k, v in given.items()}
     cols = parse_columns(merged["columns"], where=f"{where['columns']}: columns") if merged["columns"] else ()
@@ -266,6 +297,8 @@ def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=Non
         joint_names=(_names(merged["joint_names"], where["joint_names"], "joint_names") if merged["joint_names"]
                      else ()),
         reference_topic=str(merged["reference_topic"] or ""),
+        skip_rows=_skip_rows(merged["skip_rows"], where["skip_rows"]) if merged["skip_rows"] is not None else 0,
+        reshape=_reshape(merged["reshape"], where["reshape"]) if merged["reshape"] is not None else None,
     )
 
 
@@ -296,6 +329,11 @@ class LoadReport:
         Samples per experiment.
     options : tuple of str
         Every option that changed data.
+    notes : tuple of str
+        What else reading did (rows skipped, a one-value-per-line file reshaped, why the file was split).
+    steps : StepStats or None
+        The time steps as logged (percentiles, outliers by row, what ``--max-gap`` does with them): shown by
+        ``inspect``, not in the ``data`` block of the other commands.
     """
 
     file: str
@@ -311,6 +349,7 @@ class LoadReport:
     samples: tuple[int, ...] = ()
     options: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    steps: StepStats | None = None
 
     def to_dict(self) -> dict:
         return {"file": self.file, "rows_read": self.rows_read, "rows_dropped": self.rows_dropped,

@@ -64,11 +64,13 @@ def _parse_rows(tab: Table, body: list[str], split) -> None:
                 tab.data[r, c] = x
 
 
-def read_table(path: str) -> Table:
+def read_table(path: str, skip_rows: int = 0) -> Table:
     """Read a delimited numeric text table, keeping every row (bad ones marked, by file line).
 
-    The header (a first line with a non-numeric field) is optional. Fast path: :func:`numpy.loadtxt`;
-    when it fails, field by field so that every bad row can be named.
+    The header (a first line with a non-numeric field) is optional. ``skip_rows``: data rows left out at the
+    start (below the header; the garbage some loggers write before the recording starts), said in
+    ``Table.notes``. Fast path: :func:`numpy.loadtxt`; when it fails, field by field so that every bad row can
+    be named.
     """
     lines = _read_lines(path)
     first_i = next((i for i, ln in enumerate(lines) if ln.strip()), None)
@@ -85,10 +87,22 @@ def read_table(path: str) -> Table:
     start = first_i + 1 if has_header else first_i
     rows = [(i + 1, ln) for i, ln in enumerate(lines[start:], start=start)
             if ln.strip() and not ln.lstrip().startswith("#")]
+    notes = []
+    if skip_rows:
+        if skip_rows >= len(rows):
+            raise DataFileError([Problem(path, "", "skip_rows", f"--skip-rows {skip_rows}: the file has only "
+                                         f"{len(rows)} data row(s)")])
+        a, b = rows[0][0], rows[skip_rows - 1][0]
+        notes.append(f"rows 1-{skip_rows} (lines {a}-{b}) skipped (--skip-rows {skip_rows})" if skip_rows > 1 else
+                     f"row 1 (line {a}) skipped (--skip-rows 1)")
+        rows = rows[skip_rows:]
+        if not has_header:  # the skipped rows do not set the number of fields
+            ncol = len(split(rows[0][1]))
     N = len(rows)
     body = [ln for _, ln in rows]
     tab = Table(path, head if has_header else None, np.full((N, ncol), np.nan), np.array([i for i, _ in rows], int),
-                np.zeros(N, bool), np.zeros((N, ncol), bool), first_line=first_i + 1)
+                np.zeros(N, bool), np.zeros((N, ncol), bool), first_line=first_i + 1 if has_header or not N
+                else int(rows[0][0]), notes=notes)
     if not N:
         return tab
     try:
@@ -105,14 +119,14 @@ def read_table(path: str) -> Table:
 
 
 def read_text_file(path: str, n: int, *, mapping: Mapping | None, selectors: Sequence[tuple[str, str]],
-                   dt: float | None, probs: list[Problem], strict: bool) -> RawColumns:
+                   dt: float | None, probs: list[Problem], strict: bool, skip_rows: int = 0) -> RawColumns:
     """One experiment in a text table: the columns of its roles.
 
     ``strict`` (the plain reading): the header must name the columns (``t, q1..qn, tau1..taun`` or a
     ``columns`` mapping) and a malformed row is an error at once; otherwise bad rows are marked for the
     caller, and a file without a header is read by ``--columns`` indices.
     """
-    tab = read_table(path)
+    tab = read_table(path, skip_rows)
     if strict:
         if tab.names is None:
             raise DataFileError([Problem(path, "line 1", "", "no header line: the columns must be named "
@@ -121,4 +135,6 @@ def read_text_file(path: str, n: int, *, mapping: Mapping | None, selectors: Seq
     elif tab.names is None and not selectors:
         raise DataFileError([Problem(path, "line 1", "", "no header line: say which columns are what with "
                                      "--columns, e.g. t=0,q=1:7,tau=7:13 (0-based indices)")])
-    return table_columns(tab, "csv", n, mapping=mapping, selectors=selectors, dt=dt, probs=probs)
+    out = table_columns(tab, "csv", n, mapping=mapping, selectors=selectors, dt=dt, probs=probs)
+    out.notes += tab.notes
+    return out
