@@ -50,11 +50,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-import symoro_gen  # noqa: E402
-from symoro_gen.description import load_robot  # noqa: E402
-from symoro_gen.diagnostics import DiagnoseSettings, diagnose  # noqa: E402
-from symoro_gen.observations import AssemblyOptions  # noqa: E402
-from truthsim import Rigid, Truth, drive_values, nominal_parameters, pauses_for, record, sum_of_sines  # noqa: E402
+from truthsim import Rigid, Truth, drive_values, nominal_parameters, pauses_for, record, sum_of_sines
+
+import symoro_gen
+from symoro_gen.description import load_robot
+from symoro_gen.diagnostics import DiagnoseSettings, diagnose
+from symoro_gen.observations import AssemblyOptions
 
 #: validation recording length, as a share of the identification one
 VALID_SHARE = 0.5
@@ -106,8 +107,8 @@ def cases() -> list[Case]:
              lambda e: _j(e) == 1 and (_kind(e) == "load_friction" or (_kind(e) == "coulomb" and "tau" in _mod(e)))),
         Case(3, "viscous drift j1", "FV1 (1 + t/T) dq1: viscous friction of joint 1 doubling over the recording", 0,
              add("viscous_growth", 0, 1.0),
-             lambda e: _j(e) == 0 and _kind(e) == "viscous" and _mod(e) in ("time", "temperature")
-             or _j(e) == 0 and _kind(e) == "viscous" and _mod(e).startswith("step")),
+             lambda e: _j(e) == 0 and _kind(e) == "viscous"
+             and (_mod(e) in ("time", "temperature") or _mod(e).startswith("step"))),
         Case(4, "cross-talk j2 -> j3", "tau_meas,3 += 0.03 tau_2 (3 % of joint 2's torque in joint 3's channel)", 2,
              add("crosstalk", 1, (0.03, 2)), lambda e: _j(e) == 2, named=False),
         Case(5, "Stribeck j4", "+ 0.8 exp(-(dq4/0.07)^2) sign(dq4) N m (Stribeck, vs = 0.07 rad/s)", 3,

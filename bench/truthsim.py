@@ -31,10 +31,10 @@ for _p in (ROOT, ROOT / "tests"):
     if str(_p) not in sys.path:
         sys.path.insert(0, str(_p))
 
-from oracles.pinocchio_model import build_pinocchio_model, random_parameters  # noqa: E402
+from oracles.pinocchio_model import build_pinocchio_model, random_parameters
 
-from symoro_gen.description.model import RobotDescription  # noqa: E402
-from symoro_gen.preprocessing.trajectory import Trajectory  # noqa: E402
+from symoro_gen.description.model import RobotDescription
+from symoro_gen.preprocessing.trajectory import Trajectory
 
 #: share of each limit the excitation may use (position half-range, velocity, acceleration)
 LIMIT_SHARE = 0.8
@@ -87,7 +87,7 @@ class SumOfSines:
         s = t.copy()
         for a, b in self.pauses:
             # time lost by t: the integral of (1 - s') up to t
-            for lo, hi, down in ((a - self.ramp, a, True), (b, b + self.ramp, False)):
+            for lo, _hi, down in ((a - self.ramp, a, True), (b, b + self.ramp, False)):
                 x = np.clip((t - lo) / self.ramp, 0.0, 1.0)
                 # integral over [lo, t] of (1 - w): down ramp 1 - w = (1 - cos)/2, up ramp (1 + cos)/2
                 lost = self.ramp * (0.5 * x - 0.5 * np.sin(np.pi * x) / np.pi) if down else \
