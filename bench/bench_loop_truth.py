@@ -229,8 +229,9 @@ def run_cobot(a) -> dict:
     model = symoro_gen.load_model("rx90")
     chi, _ = nominal_parameters(robot, rng)
     rigid = Rigid(robot, chi)
+    kt = np.broadcast_to(np.asarray(a.cobot_kt, float), (robot.n_joints,)).copy()
     truth = Truth(FV=drive_values(robot, chi, "FV"), FS=drive_values(robot, chi, "FS"),
-                  OFF=drive_values(robot, chi, "OFF"), coulomb_v=0.03, k_t=COBOT_KT, sigma_tau=0.05)
+                  OFF=drive_values(robot, chi, "OFF"), coulomb_v=0.03, k_t=kt, sigma_tau=0.05)
     rate = 100.0
     seconds = a.cobot_seconds
     files, shares = [], []
@@ -257,7 +258,7 @@ def run_cobot(a) -> dict:
     ok_f, d_f, se_f = no_worse(rep.plot_data["valid_filtered"], ex_filt, n)
     ok_r, d_r, se_r = no_worse(rep.plot_data["valid_raw"], ex_raw, n)
     return dict(case=12, title="cobot reproducer (RX-90 geometry, currents, pauses)", seed=seed,
-                truth=f"tau/k_t with k_t = {COBOT_KT.tolist()} N m/A; Fc tanh(dq/0.03) + Fv dq + offset; "
+                truth=f"tau/k_t with k_t = {kt.tolist()} N m/A; Fc tanh(dq/0.03) + Fv dq + offset; "
                       f"3 files of {seconds:g} s at 100 Hz; identify on files 1-2, validate on file 3",
                 rest_share=shares,
                 effects=[dict(kind=_kind(e), joint=None if _j(e) is None else _j(e) + 1, label=str(getattr(e, "label", "")),
@@ -333,6 +334,9 @@ def main(argv=None) -> int:
                     help="identification recording [s] (validation: half as long); default 30")
     ap.add_argument("--rate", type=float, default=500.0, help="sampling rate [Hz] of cases 1-11 (default 500)")
     ap.add_argument("--cobot-seconds", type=float, default=50.0, help="length of each cobot file [s] (case 12)")
+    ap.add_argument("--cobot-kt", default=",".join(f"{x:g}" for x in COBOT_KT),
+                    help="torque constants [N m/A] of case 12, one per joint or one for all (default "
+                         + ",".join(f"{x:g}" for x in COBOT_KT) + ")")
     ap.add_argument("--sigma-tau", type=float, default=0.05, help="torque noise [N m] (default 0.05)")
     ap.add_argument("--seed", type=int, default=0, help="base seed (case k uses 1000 seed + k)")
     ap.add_argument("--json", default=None, help="write the results to this JSON file")
@@ -342,6 +346,12 @@ def main(argv=None) -> int:
         print(f"{a.json} exists: not overwritten (use --force)", file=sys.stderr)
         return 2
     wanted = parse_cases(a.cases)
+    try:
+        a.cobot_kt = [float(x) for x in str(a.cobot_kt).split(",")]
+    except ValueError:
+        raise SystemExit(f"--cobot-kt: expected numbers separated by commas, got {a.cobot_kt!r}") from None
+    if len(a.cobot_kt) not in (1, 6) or min(a.cobot_kt) <= 0:
+        raise SystemExit(f"--cobot-kt: give 1 or 6 positive torque constants (joints 1-6), got {a.cobot_kt}")
     T0 = time.perf_counter()
     robot = load_robot("lwr4")
     model = symoro_gen.load_model("lwr4")

@@ -120,7 +120,7 @@ def test_effects_follow_their_closed_forms(lwr4):
 
 
 def _args(**kw):
-    base = dict(seconds=12.0, rate=250.0, sigma_tau=0.05, seed=0, cobot_seconds=30.0)
+    base = dict(seconds=12.0, rate=250.0, sigma_tau=0.05, seed=0, cobot_seconds=30.0, cobot_kt=[5.0])
     base.update(kw)
     return argparse.Namespace(**base)
 
