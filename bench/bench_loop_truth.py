@@ -231,7 +231,10 @@ def run_cobot(a) -> dict:
     rigid = Rigid(robot, chi)
     kt = np.broadcast_to(np.asarray(a.cobot_kt, float), (robot.n_joints,)).copy()
     truth = Truth(FV=drive_values(robot, chi, "FV"), FS=drive_values(robot, chi, "FS"),
-                  OFF=drive_values(robot, chi, "OFF"), coulomb_v=0.03, k_t=kt, sigma_tau=0.05)
+                  OFF=drive_values(robot, chi, "OFF"), coulomb_v=0.03, k_t=kt, sigma_tau=0.05,
+                  lugre_sigma0=1e4 if a.cobot_friction == "lugre" else None)
+    law = ("LuGre Coulomb (sigma0 = 1e4 N m/rad: the friction holds at rest)" if a.cobot_friction == "lugre"
+           else "Fc tanh(dq/0.03)")
     rate = 100.0
     seconds = a.cobot_seconds
     files, shares = [], []
@@ -258,7 +261,7 @@ def run_cobot(a) -> dict:
     ok_f, d_f, se_f = no_worse(rep.plot_data["valid_filtered"], ex_filt, n)
     ok_r, d_r, se_r = no_worse(rep.plot_data["valid_raw"], ex_raw, n)
     return dict(case=12, title="cobot reproducer (RX-90 geometry, currents, pauses)", seed=seed,
-                truth=f"tau/k_t with k_t = {kt.tolist()} N m/A; Fc tanh(dq/0.03) + Fv dq + offset; "
+                truth=f"tau/k_t with k_t = {kt.tolist()} N m/A; {law} + Fv dq + offset; "
                       f"3 files of {seconds:g} s at 100 Hz; identify on files 1-2, validate on file 3",
                 rest_share=shares,
                 effects=[dict(kind=_kind(e), joint=None if _j(e) is None else _j(e) + 1, label=str(getattr(e, "label", "")),
@@ -337,6 +340,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cobot-kt", default=",".join(f"{x:g}" for x in COBOT_KT),
                     help="torque constants [N m/A] of case 12, one per joint or one for all (default "
                          + ",".join(f"{x:g}" for x in COBOT_KT) + ")")
+    ap.add_argument("--cobot-friction", choices=("tanh", "lugre"), default="tanh",
+                    help="Coulomb law of case 12: tanh(dq/0.03) (0 at rest) or LuGre bristles (holds at rest)")
     ap.add_argument("--sigma-tau", type=float, default=0.05, help="torque noise [N m] (default 0.05)")
     ap.add_argument("--seed", type=int, default=0, help="base seed (case k uses 1000 seed + k)")
     ap.add_argument("--json", default=None, help="write the results to this JSON file")

@@ -195,6 +195,7 @@ class Truth:
     gain: dict = field(default_factory=dict)              # j -> g
     stiffness: dict = field(default_factory=dict)         # j -> K [N m/rad] (motor-side encoder)
     q_offset: dict = field(default_factory=dict)          # j -> offset [rad] (encoder reads q - offset)
+    lugre_sigma0: float | None = None                     # bristle stiffness [N m/rad]: Coulomb part by LuGre
     k_t: np.ndarray | None = None                         # recorded value tau / k_t per joint
     sigma_q: float = 1e-5
     sigma_tau: float = 0.05
@@ -202,9 +203,29 @@ class Truth:
     def sgn(self, v: np.ndarray) -> np.ndarray:
         return np.sign(v) if self.coulomb_v is None else np.tanh(v / self.coulomb_v)
 
+    def bristles(self, t: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """Coulomb part of the LuGre model (Canudas de Wit, Olsson, Astrom & Lischinsky 1995, "A new model
+        for control of systems with friction", eq. 1-3, without Stribeck and bristle damping):
+        ``dz/dt = v - sigma0 |v| z / Fc``, friction ``sigma0 z``. Integrated exactly for a velocity constant
+        over each sample interval (``z`` relaxes to ``Fc sign(v) / sigma0`` at the rate
+        ``sigma0 |v| / Fc``); at rest ``z`` holds, so the friction keeps the value of the last sliding
+        direction (static friction of a stopped drive, sec. 2 of the same paper)."""
+        s0 = float(self.lugre_sigma0)
+        fc = np.maximum(self.FS, 1e-9)
+        z = np.zeros(dq.shape)
+        zk = fc * np.sign(dq[0]) / s0
+        dt = np.diff(t, prepend=t[0])
+        for k in range(dq.shape[0]):
+            v = dq[k]
+            target = fc * np.sign(v) / s0
+            zk = target + (zk - target) * np.exp(-s0 * np.abs(v) * dt[k] / fc)
+            z[k] = zk
+        return s0 * z
+
     def friction(self, t: np.ndarray, dq: np.ndarray, tau_r: np.ndarray, T: float) -> np.ndarray:
         s = self.sgn(dq)
-        f = self.FS[None] * s + self.FV[None] * dq + self.OFF[None]
+        coulomb = self.FS[None] * s if self.lugre_sigma0 is None else self.bristles(t, dq)
+        f = coulomb + self.FV[None] * dq + self.OFF[None]
         for j, g in self.viscous_growth.items():
             f[:, j] += self.FV[j] * g * (t / T) * dq[:, j]
         for j, (dfs, vs) in self.stribeck.items():

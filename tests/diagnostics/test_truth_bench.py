@@ -144,3 +144,17 @@ def test_bench_small_cases(lwr4):
         # the declared model misses the effect: the validation error of its joint is above the clean one
         j = by_number[k].joint
         assert r["before_valid"][j] > clean["before_valid"][j]
+
+
+def test_lugre_bristles_slide_hold_and_reverse():
+    """The LuGre Coulomb part (Canudas de Wit et al. 1995, eq. 1-3 without Stribeck): Fc sign(v) while
+    sliding, the last sliding value held at rest, the opposite one after a reversal; the transient takes
+    a displacement of the order of Fc/sigma0 (here 5e-5 rad: one sample at 0.2 rad/s and 100 Hz)."""
+    fc, s0 = 0.5, 1e4
+    t = np.arange(0.0, 4.0, 0.01)
+    dq = np.where(t < 1, 0.2, np.where(t < 2, 0.0, -0.2))[:, None]
+    tr = ts.Truth(FV=np.zeros(1), FS=np.array([fc]), OFF=np.zeros(1), lugre_sigma0=s0)
+    f = tr.bristles(t, dq)[:, 0]
+    np.testing.assert_allclose(f[(t > 0.05) & (t < 1)], fc, rtol=1e-9)
+    np.testing.assert_allclose(f[(t >= 1) & (t < 2)], f[99], rtol=0, atol=0)
+    np.testing.assert_allclose(f[t > 2.05], -fc, rtol=1e-9)
