@@ -24,14 +24,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
+import pinocchio as pin  # type: ignore[import-untyped]
 
 ROOT = Path(__file__).resolve().parents[1]
 for _p in (ROOT, ROOT / "tests"):
     if str(_p) not in sys.path:
         sys.path.insert(0, str(_p))
 
-from oracles.pinocchio_model import build_pinocchio_model, random_parameters
+from oracles.pinocchio_model import build_pinocchio_model, random_parameters  # type: ignore[import-not-found]
 
 from symoro_gen.description.model import RobotDescription
 from symoro_gen.preprocessing.trajectory import Trajectory
@@ -210,6 +210,8 @@ class Truth:
         over each sample interval (``z`` relaxes to ``Fc sign(v) / sigma0`` at the rate
         ``sigma0 |v| / Fc``); at rest ``z`` holds, so the friction keeps the value of the last sliding
         direction (static friction of a stopped drive, sec. 2 of the same paper)."""
+        if self.lugre_sigma0 is None:
+            raise ValueError("Truth.bristles needs lugre_sigma0 (the bristle stiffness) [N m/rad]")
         s0 = float(self.lugre_sigma0)
         fc = np.maximum(self.FS, 1e-9)
         z = np.zeros(dq.shape)
