@@ -9,6 +9,7 @@ started by dask-jobqueue or on Kubernetes; the workers need symoro_gen and the g
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import logging
 import math
@@ -32,8 +33,9 @@ from ..identification.estimators import fit_wls
 from ..loader import model_for
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
+from ..preprocessing.readers import DataWarning
 from ..report.plots import MissingDependencyError
-from ..workflows.base import SCHEMA_VERSION, Results, provenance
+from ..workflows.base import SCHEMA_VERSION, Results, provenance, torque_limits
 from .files import FleetError, LogFile, discover, group_by, plain_format, read_experiments, segments
 from .kernel import Partial, merge_partials, process_file, resolve_model
 from .options import DEFAULT_ALPHA, FleetOptions
@@ -134,6 +136,7 @@ class FleetResult(Results):
     diagnoses: dict = field(default_factory=dict)                # robot -> closed-loop diagnosis (``diagnose=True``)
     options: FleetOptions = field(default_factory=FleetOptions, repr=False)
     inputs: tuple[str, ...] = ()                                 # the log files read
+    warnings: tuple[str, ...] = ()                               # on the logs: robot, day, log, joint, what to do
 
     @property
     def robot_names(self) -> list[str]:
@@ -154,7 +157,8 @@ class FleetResult(Results):
         """Exactly the JSON of ``symoro-gen fleet --json``: ``generator``, ``schema_version``, ``model``,
         ``robots`` {robot: {``days``: {day: {names, values, std}}, ``estimate``, ``z``, ``z_trend``,
         ``slope_per_day``}}, ``fleet`` {names, values, std, between_robot_std}, ``flagged`` [{robot, parameter, z,
-        days, ...}], ``skipped`` [{file, error}], ``settings``, ``timing``, with ``diagnose`` ``diagnoses``
+        days, ...}], ``skipped`` [{file, error}], ``warnings`` (on the logs used, as ``identify`` gives them: a joint
+        at its noise level, a saturated torque; each naming the robot, the day and the log), ``settings``, ``timing``, with ``diagnose`` ``diagnoses``
         {robot: {day, files, summary, report} or {day, files, error}}, and ``provenance`` (options, every log
         file with its sha256, computed once)."""
         rob = {}
@@ -171,7 +175,7 @@ class FleetResult(Results):
         fleet["between_robot_std"] = _floats(tau) if tau is not None else None
         out = {"generator": f"symoro-gen {self.command}", "schema_version": SCHEMA_VERSION, "model": self.model,
                "robots": rob, "fleet": fleet, "flagged": self.flagged, "skipped": self.skipped,
-               "settings": self.settings, "timing": self.timing}
+               "warnings": list(self.warnings), "settings": self.settings, "timing": self.timing}
         if self.settings.get("diagnose"):
             out["diagnoses"] = self.diagnoses
         out["provenance"] = self._provenance
@@ -198,6 +202,8 @@ class FleetResult(Results):
                   f"{self.fleet.samples} samples, {len(self.skipped)} log(s) skipped")]
         for s in self.skipped:
             lines.append(f"  skipped {s['file']}: {s['error']}")
+        for w in self.warnings:
+            lines.append(f"  warning: {w}")
         if not self.flagged:
             lines.append("no robot drifts away from the fleet")
         for f in self.flagged:
@@ -318,6 +324,8 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
     fo = FleetOptions() if options is None else options
     opts = fo.assembly() if assembly is None else assembly
     ref, mdl, robot = _model_ref(model)
+    if opts.tau_limits is None and robot is not None:
+        opts = dataclasses.replace(opts, tau_limits=torque_limits(robot))
     load_kw = {"fmt": fo.data_format, **(load_kw or {})}
     if "drive_chain" not in load_kw:
         load_kw["drive_chain"] = robot.drive_chain if robot is not None else _drive_chain(mdl)
@@ -331,6 +339,8 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
         day_p, robot_p, fleet_p, n_workers = _reduce(cl, ref, groups, opts, load_kw, kernel, fo.retries)
     t_run = time.perf_counter() - t0 - t_start
     skipped = [{"file": f, "error": e} for f, e in fleet_p.skipped]
+    for w in fleet_p.warnings:
+        warnings.warn(w, DataWarning, stacklevel=2)
     names, fleet, days, robots = _estimates(day_p, robot_p, fleet_p, groups, skipped)
     result = _judge(mdl, names, days, robots, fleet, skipped, fo.alpha, fo.correction)
     fmt = load_kw.get("fmt")
@@ -353,7 +363,7 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
                        level=result["level"], trend=result["trend"], flagged=result["flagged"], skipped=skipped,
                        settings=settings, timing=timing,
                        partials={"days": day_p, "robots": robot_p, "fleet": fleet_p}, diagnoses=diagnoses,
-                       options=fo, inputs=tuple(dict.fromkeys(f.path for f in files)))
+                       options=fo, inputs=tuple(dict.fromkeys(f.path for f in files)), warnings=fleet_p.warnings)
 
 
 def _reduce(cl, ref, groups: dict, opts: AssemblyOptions, load_kw: dict, kernel: Callable[..., Partial],
