@@ -202,10 +202,10 @@ def inspect_recordings(model: IdentificationModel, trajectories: Sequence[Trajec
                 warn.append(f"{e.source}: joint {j + 1} never moves")
     for tr in trajectories:  # moving at the noise level (preprocessing.motion; a constant joint is named above)
         q = np.asarray(tr.q, float)
-        m, s = motion_rms(q), noise_sigma(q)
+        rms, sig = motion_rms(q), noise_sigma(q)
         for j in noise_level_joints(q):
             if np.ptp(q[:, j]) > 0:
-                warn.append(f"{tr.source}: joint {j + 1} (position RMS {m[j]:.2g}, noise {s[j]:.2g}) does not move "
+                warn.append(f"{tr.source}: joint {j + 1} (position RMS {rms[j]:.2g}, noise {sig[j]:.2g}) does not move "
                             "beyond its noise: identify and diagnose would fit the parameters of its own motion "
                             "(rotor inertia, friction...) to noise: give --drop-unexcited to treat it as still")
     cond = cond_s = None
