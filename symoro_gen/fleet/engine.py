@@ -36,7 +36,7 @@ from ..preprocessing.readers import DataWarning
 from ..report.plots import MissingDependencyError
 from ..workflows.base import SCHEMA_VERSION, Results, provenance, torque_limits
 from .files import FleetError, LogFile, discover, group_by, plain_format, read_experiments, segments
-from .kernel import Partial, merge_partials, process_file, resolve_model
+from .kernel import Partial, error_line, merge_partials, process_file, resolve_model
 from .options import DEFAULT_ALPHA, LOCAL_SCHEDULER, SCHEDULER_FORMS, FleetOptions, check_scheduler
 from .report import flag_figures, write_fleet_report
 from .stats import adjust, dersimonian_laird, hampel_outliers, level_z, line_fit, pooled_dispersion, trend_test
@@ -434,7 +434,11 @@ def _estimates(day_p: dict, robot_p: dict, fleet_p: Partial, groups: dict, skipp
     """``(names, fleet, days, robots)``: IDIM-WLS on the fleet's, each robot's and each robot-day's factors (a
     robot or day that does not identify the model is added to ``skipped``)."""
     if fleet_p.acc is None:
-        raise FleetError("fleet: no log could be used; " + "; ".join(s["error"] for s in skipped[:3]))
+        err = FleetError("fleet: no log could be used; " + "; ".join(s["error"] for s in skipped[:3])
+                         + (f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""))
+        err.hint = ("each log needs the columns t, q1..qn, tau1..taun of the robot (or --columns / --format to say "
+                    "which are what); see docs/data-files.md")
+        raise err
     names = tuple(fleet_p.acc.names)
     fleet = _fit(fleet_p, names)
     if fleet is None:
@@ -489,7 +493,7 @@ def _diagnose_flagged(model, flagged: list[dict], groups: dict[str, dict[str, li
             to_json = getattr(rep, "to_json", None) or rep.to_dict
             entry.update(summary=rep.summary(), report=to_json())
         except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is reported, the fleet result stands
-            entry["error"] = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            entry["error"] = error_line(exc)
         out[r] = entry
     return out
 

@@ -27,7 +27,7 @@ from ..preprocessing.motion import saturation_text, still_text
 from .files import LogFile, read_experiments
 from .fused import fold_trajectories
 
-__all__ = ["Partial", "log_warnings", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
+__all__ = ["Partial", "error_line", "log_warnings", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +78,15 @@ def log_warnings(log: LogFile, trajs, tau_max=None) -> tuple[str, ...]:
                        "rows out: leave the log out, or identify it with `symoro-gen identify ROBOT LOG "
                        "--drop-saturated`")
     return tuple(out)
+
+
+def error_line(exc: BaseException) -> str:
+    """One line for an error: its problems joined (a :class:`~symoro_gen.errors.DataFileError` is ``N problems in
+    data:`` and the problems on the lines below), else its first line."""
+    problems = getattr(exc, "problems", None)
+    if problems:
+        return "; ".join(str(p) for p in problems)
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
 
 
 def resolve_model(ref) -> IdentificationModel:
@@ -160,7 +169,7 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
         acc = fold_trajectories(model, trajs, opts, cmap=model_column_map(model))
         notes = log_warnings(log, trajs, opts.tau_limits)
     except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
-        msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        msg = error_line(exc)
         if log.path not in msg:
             msg = f"{log.label}: {msg}"
         return Partial(files=(), acc=None, samples=0, skipped=((log.label, msg),))

@@ -62,3 +62,16 @@ def test_a_closed_stream_at_the_workers_setup_is_a_dead_worker_not_a_file(tmp_pa
                            client=client)
     assert str(err.value).startswith("--scheduler local:2: a Dask worker died at start-up (CommClosedError: ")
     assert not isinstance(err.value, OSError) and "--scheduler threads:2" in err.value.hint
+
+
+def test_no_usable_log_names_each_problem_not_only_their_count(cli, tmp_path):
+    """A log the reader refuses with a list of problems (``1 problem in data:`` and the problem on the next line):
+    the fleet's error and its ``skipped`` give the problem itself (file, field), not the bare count."""
+    (tmp_path / "r1").mkdir()
+    log = tmp_path / "r1" / "d1.csv"
+    log.write_text("t,q1,q2,q3,q4\n" + "".join(f"{k * 0.001},0,0,0,0\n" for k in range(50)))
+    r = cli("fleet", "scara", tmp_path, "--by", "{robot}/{day}.csv", "--scheduler", "threads:1", rc=2)
+    line = r.err_lines[0]
+    assert line.startswith(f"symoro-gen: error: fleet: no log could be used; {log}") and "problem in data" not in line
+    assert "tau" in line, line
+    assert r.err_lines[1].startswith("hint: each log needs the columns t, q1..qn, tau1..taun")
