@@ -18,6 +18,7 @@ from __future__ import annotations
 import html
 import importlib
 import json
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -32,7 +33,7 @@ from ..description.model import RobotDescription
 from ..description.par import export_par as par_text
 from ..description.urdf_export import drive_terms, link_values
 from ..description.urdf_export import export_urdf as urdf_text
-from ..errors import ModelError
+from ..errors import ModelError, OptionError
 from ..loader import model_for
 
 __all__ = ["ExportResults", "export_mjcf", "export_par", "export_urdf"]
@@ -217,6 +218,8 @@ def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = N
 def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.001) -> ExportResults:
     """The robot as a MuJoCo MJCF model (``symoro-gen export-mjcf``); ``from_result`` as for :func:`export_urdf`,
     ``timestep`` MuJoCo's [s]."""
+    if not (math.isfinite(timestep) and timestep > 0):
+        raise OptionError(f"export_mjcf: timestep {timestep!r}: must be a positive number of seconds (MuJoCo's step)")
     desc = _description(robot)
     v = _values(desc, from_result, "export-mjcf") if from_result is not None else _Values()
     changed: list[str] = []

@@ -1,0 +1,75 @@
+"""Messages that used to be unclear or missing, each now naming the file or option, the field and what to do:
+a URDF given where a robot file is expected, absurd numbers in a robot file or an option (1e300, inf, nan),
+a non-positive MuJoCo time step."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+import symoro_gen
+from symoro_gen.description import load_robot
+from symoro_gen.errors import OptionError, RobotFileError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_urdf_given_as_the_robot_says_to_import_it_first(tmp_path, cli):
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text('<?xml version="1.0"?>\n<robot name="arm"><link name="base"/></robot>\n')
+    for argv in (("identify", urdf, tmp_path / "log.csv"), ("generate", urdf)):
+        r = cli(*argv, rc=2)
+        assert r.err_lines == [f"symoro-gen: error: {urdf}: a URDF (XML), not a robot file (TOML)",
+                               f"hint: convert it first: `symoro-gen import-urdf {urdf} -o {tmp_path / 'arm.toml'}` "
+                               "writes the robot file; then give that file"]
+    # the conversion it proposes works on a real URDF and gives a robot file the command takes
+    (tmp_path / "tree.urdf").write_text(_branch_urdf())
+    cli("import-urdf", tmp_path / "tree.urdf", "-o", tmp_path / "tree.toml")
+    assert load_robot(str(tmp_path / "tree.toml")).n_joints == 3
+
+
+def _branch_urdf() -> str:
+    inertial = ('<inertial><mass value="1"/><origin xyz="0.01 0.02 0.03"/><inertia ixx="0.1" iyy="0.1" izz="0.1" '
+                'ixy="0" ixz="0" iyz="0"/></inertial>')
+    links = "".join(f'<link name="{n}">{inertial}</link>' for n in ("base", "a", "b", "c"))
+    joint = ('<joint name="{0}" type="revolute"><origin xyz="{1}"/><axis xyz="{2}"/><parent link="{3}"/>'
+             '<child link="{4}"/><limit effort="1" lower="-1" upper="1" velocity="1"/></joint>')
+    return ('<robot name="tree">' + links + joint.format("j1", "0 0 0.3", "0 0 1", "base", "a")
+            + joint.format("j2", "0 0.2 0", "0 1 0", "a", "b") + joint.format("j3", "0 -0.2 0", "1 0 0", "a", "c")
+            + "</robot>")
+
+
+@pytest.mark.parametrize("edit, where, field", [
+    (("D2 = 0.35", "D2 = 1e300"), "[values]", "D2"),
+    (("gravity = [0, 0, -9.81]", "gravity = [0, 0, -1e300]"), "top level", "gravity"),
+    (("d = \"D3\"", "d = 1e300"), "frame 3", "d"),
+])
+def test_absurd_numbers_in_a_robot_file_are_refused_naming_the_field(edit, where, field, tmp_path):
+    text = (ROOT / "robots" / "scara.toml").read_text()
+    assert edit[0] in text
+    f = tmp_path / "scara.toml"
+    f.write_text(text.replace(edit[0], edit[1], 1))
+    with pytest.raises(RobotFileError) as err:
+        load_robot(str(f))
+    msg = [str(p) for p in err.value.problems]
+    assert len(msg) == 1 and msg[0].startswith(f"{f}, {where}, field '{field}': "), msg
+    assert "|x| <= 1e+12" in msg[0]
+
+
+@pytest.mark.parametrize("argv, flag, value", [
+    (("excite", "scara", "-o", "x.csv", "--duration", "1e300"), "--duration", "1e+300"),
+    (("identify", "scara", "x.csv", "--cutoff", "nan"), "--cutoff", "nan"),
+    (("export-mjcf", "scara", "--timestep", "inf"), "--timestep", "inf"),
+])
+def test_non_finite_or_absurd_option_values_are_refused_naming_the_option(argv, flag, value, cli, tmp_path):
+    r = cli(*argv, rc=2)
+    assert r.err_lines[0] == f"symoro-gen: error: {flag} {value}: not a usable number (finite, |value| <= 1e+12)"
+
+
+def test_timestep_must_be_positive(cli):
+    r = cli("export-mjcf", "scara", "--timestep", "-1", rc=2)
+    assert r.err_lines[0] == "symoro-gen: error: --timestep -1: must be a positive number of seconds (MuJoCo's step)"
+    assert cli("export-mjcf", "scara", "--timestep", "0", rc=2).err_lines[0].startswith("symoro-gen: error: --timestep 0:")
+    with pytest.raises(OptionError, match=re.escape("export_mjcf: timestep -1.0: must be a positive number")):
+        symoro_gen.export_mjcf("scara", timestep=-1.0)
