@@ -108,7 +108,7 @@ def _refuse_other_formats(p: Path, text: str) -> None:
 #: comes near it (1e300 was accepted, and its squares overflow in the regressor)
 MAX_MAGNITUDE = 1e12
 #: how a number of a robot file must be, in the messages
-_FINITE = f"finite, |x| <= {MAX_MAGNITUDE:g}"
+_FINITE = f"|x| <= {MAX_MAGNITUDE:g}"
 
 
 def _is_number(v) -> bool:
@@ -233,7 +233,7 @@ def _read_header(doc: dict, file: str, bad: Callable[[str, str, str], None]
         source = ""
     gravity = doc.get("gravity", [0.0, 0.0, -9.81])
     if not (isinstance(gravity, list) and len(gravity) == 3 and all(_is_number(g) for g in gravity)):
-        bad("top level", "gravity", f"must be a list of 3 numbers ({_FINITE}), got {gravity!r}")
+        bad("top level", "gravity", f"must be a list of 3 numbers (finite, {_FINITE}), got {gravity!r}")
         gravity = [0.0, 0.0, -9.81]
     return name, source, (float(gravity[0]), float(gravity[1]), float(gravity[2]))
 
@@ -251,7 +251,7 @@ def _read_values(doc: dict, bad: Callable[[str, str, str], None]) -> _Values:
             bad("[values]", k, "reserved or invalid symbol name")
             reported.add(k)
         elif not _is_number(v):
-            bad("[values]", k, f"value must be a number ({_FINITE}), got {v!r}")
+            bad("[values]", k, f"value must be a finite number ({_FINITE}), got {v!r}")
             reported.add(k)
         else:
             values[k] = float(v)
@@ -385,9 +385,9 @@ def _check_finite_geometry(frames: list, rows: list[MdhRow], values: dict[str, f
             if val.is_finite is not True:
                 what = "infinite (division by zero)" if val.has(sp.zoo, sp.oo) else "undefined"
                 bad(f"frame {r.j}", k, f"{fr.get(k)!r} is {what} with the [values] given")
-            elif val.is_number and abs(float(val)) > MAX_MAGNITUDE:
+            elif val.is_number and val.is_real is True and abs(float(val)) > MAX_MAGNITUDE:
                 bad(f"frame {r.j}", k, f"{fr.get(k)!r} is {float(val):g} with the [values] given: not a length or "
-                                       f"angle of a robot ({_FINITE})")
+                                       f"angle of a robot (finite, {_FINITE})")
 
 
 def _check_frame_order(rows: list[MdhRow], bad_sigma: set[int], bad: Callable[[str, str, str], None]) -> None:
@@ -453,7 +453,7 @@ def _read_nominal(doc: dict, rows: list[MdhRow], payload: int | None, bad_sigma:
         if k not in allowed:
             probs.bad("[nominal]", k, "not a standard parameter of this robot")
         elif not _is_number(v):
-            probs.bad("[nominal]", k, f"value must be a number ({_FINITE}), got {v!r}")
+            probs.bad("[nominal]", k, f"value must be a finite number ({_FINITE}), got {v!r}")
         elif v < 0 and k.rstrip("0123456789") in _NON_NEGATIVE:
             probs.bad("[nominal]", k, f"{_NON_NEGATIVE[k.rstrip('0123456789')]} cannot be negative, got {v!r}")
         else:
@@ -523,7 +523,7 @@ def _parse_chain(raw, n, bad) -> DriveChain | None:
         nonlocal ok
         v = raw.get(key, default)
         if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
-            bad(where, key, f"must be a list of {n} numbers ({_FINITE}), got {v!r}")
+            bad(where, key, f"must be a list of {n} numbers (finite, {_FINITE}), got {v!r}")
             ok = False
             return default
         return [float(x) for x in v]
@@ -542,7 +542,7 @@ def _parse_chain(raw, n, bad) -> DriveChain | None:
     if not (isinstance(coupling, list) and len(coupling) == n and all(
         isinstance(row, list) and len(row) == n and all(_is_number(x) for x in row) for row in coupling
     )):
-        bad(where, "coupling", f"must be a {n}x{n} matrix (list of {n} lists of {n} numbers, {_FINITE})")
+        bad(where, "coupling", f"must be a {n}x{n} matrix (list of {n} lists of {n} finite numbers, {_FINITE})")
         ok = False
         coupling = eye
     else:
@@ -596,7 +596,7 @@ def _parse_limits(raw, rows, bad, passive=()) -> JointLimits | None:
         vals = []
         for i, (x, r) in enumerate(zip(v, moving), start=1):
             if not _is_number(x):
-                bad(f"{where} joint {i}", key, f"must be a number ({_FINITE}), got {x!r}")
+                bad(f"{where} joint {i}", key, f"must be a finite number ({_FINITE}), got {x!r}")
                 ok = False
                 x = 0.0
             elif key != "q_min" and key != "q_max" and x <= 0:
@@ -647,7 +647,7 @@ def _parse_passive_limits(raw, passive: list[MdhRow], unit: str, bad) -> dict | 
         vals = []
         for x, r in zip(v, passive):
             if not _is_number(x):
-                bad(f"{where} passive joint {r.j}", key, f"must be a number ({_FINITE}), got {x!r}")
+                bad(f"{where} passive joint {r.j}", key, f"must be a finite number ({_FINITE}), got {x!r}")
                 ok = False
                 continue
             vals.append(float(x) * (math.pi / 180.0 if (unit == "deg" and r.sigma == REVOLUTE) else 1.0))
