@@ -73,3 +73,24 @@ def test_timestep_must_be_positive(cli):
     assert cli("export-mjcf", "scara", "--timestep", "0", rc=2).err_lines[0].startswith("symoro-gen: error: --timestep 0:")
     with pytest.raises(OptionError, match=re.escape("export_mjcf: timestep -1.0: must be a positive number")):
         symoro_gen.export_mjcf("scara", timestep=-1.0)
+
+
+def test_the_readme_install_routes_carry_what_the_commands_need():
+    """``pip install -e '.[test]'`` (and ``.[all]``, the README's route by hand) bring every optional dependency the
+    commands use: ``--report`` needs matplotlib, which the test route lacked."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+
+    def names(reqs):
+        return {re.split(r"[<>=\[ ]", r, maxsplit=1)[0].lower() for r in reqs}
+
+    needed = set().union(*(names(v) for k, v in extras.items() if k not in ("test", "all")))
+    assert "matplotlib" in needed
+    assert needed <= names(extras["all"]) and needed <= names(extras["test"])
+    head = (ROOT / "README.md").read_text().split("## ", 1)[0]
+    assert "pip install -e '.[all]'" in head
+    assert '".[test,plots]"' in (ROOT / "Makefile").read_text() or '".[test]"' in (ROOT / "Makefile").read_text()
