@@ -94,3 +94,20 @@ def test_the_readme_install_routes_carry_what_the_commands_need():
     head = (ROOT / "README.md").read_text().split("## ", 1)[0]
     assert "pip install -e '.[all]'" in head
     assert '".[test,plots]"' in (ROOT / "Makefile").read_text() or '".[test]"' in (ROOT / "Makefile").read_text()
+
+
+@pytest.mark.parametrize("extra, named", [
+    (("--kp", "100", "--kd", "10"), "--kp, --kd"),
+    (("--bandwidth", "5"), "--bandwidth"),
+    (("--start", "nominal"), "--start"),
+])
+def test_closed_loop_options_without_their_method_are_refused(extra, named, cli, tmp_path):
+    """The controller's gains, bandwidth, iterations and start only act in the closed-loop simulation of IDIM-IV and
+    DIDIM: with OLS or WLS they were silently ignored."""
+    r = cli("identify", "scara", tmp_path / "log.csv", "--method", "ols", *extra, rc=2)
+    it = "them" if "," in named else "it"
+    assert r.err_lines[0] == (f"symoro-gen: error: {named}: only act with --method iv or didim (the closed-loop "
+                              f"simulation), not with --method ols: add --method iv or didim, or leave {it} out")
+    with pytest.raises(OptionError, match="only act with --method iv or didim"):
+        symoro_gen.IdentifyOptions(method="wls", kp=[1.0])
+    assert symoro_gen.IdentifyOptions(method="didim", kp=[1.0], kd=[1.0]).kp == [1.0]
