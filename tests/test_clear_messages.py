@@ -3,6 +3,7 @@ a URDF given where a robot file is expected, absurd numbers in a robot file or a
 a non-positive MuJoCo time step."""
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -111,3 +112,20 @@ def test_closed_loop_options_without_their_method_are_refused(extra, named, cli,
     with pytest.raises(OptionError, match="only act with --method iv or didim"):
         symoro_gen.IdentifyOptions(method="wls", kp=[1.0])
     assert symoro_gen.IdentifyOptions(method="didim", kp=[1.0], kd=[1.0]).kp == [1.0]
+
+
+@pytest.mark.slow
+def test_an_excitation_design_with_no_room_to_move_is_degenerate_not_ok(tmp_path, cli):
+    """Limits of 1e-9 leave the joints no motion: the design respects them (limits_ok) but its regressor has lost
+    its rank (cond ~1e20): the summary says DEGENERATE with the bound, the JSON has ``degenerate``, exit status 3."""
+    robot = tmp_path / "tiny.toml"
+    robot.write_text((ROOT / "robots" / "scara.toml").read_text() + "\n[limits]\n"
+                     + "".join(f"{k} = [{', '.join(['1e-9'] * 4)}]\n" for k in ("q_max", "dq_max", "ddq_max"))
+                     + f"q_min = [{', '.join(['-1e-9'] * 4)}]\n")
+    r = cli("excite", robot, "-o", tmp_path / "x.csv", "--duration", "2", "--rate", "50", "--refine", "0",
+            "--json", tmp_path / "x.json", rc=3)
+    doc = json.loads((tmp_path / "x.json").read_text())
+    assert doc["limits_ok"] is True and doc["degenerate"] is True and doc["cond"] > doc["cond_degenerate"] == 1e10
+    line = next(ln for ln in r.out.splitlines() if ln.startswith("DEGENERATE"))
+    assert line.startswith(f"DEGENERATE design: cond = {doc['cond']:.3g} is above 1e+10: its regressor is "
+                           "numerically rank-deficient") and "widen them" in line

@@ -24,7 +24,8 @@ from symoro_gen.workflows import SCHEMA_VERSION, IdentifyOptions
 from .golden.inputs import write_inputs
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
-NEW_KEYS = {"generator", "schema_version", "provenance", "robot_id", "plausibility", "bounded_bodies"}
+NEW_KEYS = {"generator", "schema_version", "provenance", "robot_id", "plausibility", "bounded_bodies", "degenerate",
+            "cond_degenerate"}
 
 
 @pytest.fixture(scope="module")
