@@ -129,3 +129,24 @@ def test_an_excitation_design_with_no_room_to_move_is_degenerate_not_ok(tmp_path
     line = next(ln for ln in r.out.splitlines() if ln.startswith("DEGENERATE"))
     assert line.startswith(f"DEGENERATE design: cond = {doc['cond']:.3g} is above 1e+10: its regressor is "
                            "numerically rank-deficient") and "widen them" in line
+
+
+def test_a_full_disk_names_the_file_being_written(tmp_path, cli, monkeypatch):
+    """ENOSPC surfaces when the written bytes reach the disk (``fsync``) and carries no file name: the error names
+    the output the command was writing (and leaves neither it nor a temporary file)."""
+    import errno
+    import os
+
+    import symoro_gen.atomic as atomic
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(atomic.os, "fsync", full)
+    out = tmp_path / "scara.urdf"
+    r = cli("export-urdf", "scara", "-o", out, rc=2)
+    assert r.err_lines[0] == f"symoro-gen: error: cannot write {out}: No space left on device"
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(OSError) as err:
+        atomic.write_text_atomic(tmp_path / "x.json", "{}")
+    assert err.value.errno == errno.ENOSPC and err.value.filename == str(tmp_path / "x.json")
