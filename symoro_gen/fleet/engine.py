@@ -216,6 +216,7 @@ class FleetResult(Results):
     def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """The fleet report (flags, skipped logs, the fleet estimate, every flagged parameter over the days):
         ``.html`` self-contained or ``.md`` with its images beside it (plots: the 'plots' extra)."""
+        self.check_output(path, force=force, label="report", report=True)
         return write_fleet_report(path, self, force=force)
 
     def figures(self) -> list:

@@ -211,6 +211,7 @@ class ExciteResults(Results):
     def write_csv(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """The trajectory CSV (header ``t,q1..qn,dq1..dqn,ddq1..ddqn``) the controller runs."""
         r = self.result
+        self.check_output(path, force=force, label="csv")
         write_trajectory_csv(path, r.t, r.q, r.dq, r.ddq, force=force)
         return Path(path)
 
@@ -272,11 +273,13 @@ class ExciteResults(Results):
 
     def write_plot(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """PNG of every joint's ``q, dq, ddq`` against its limits (``--plot``)."""
+        self.check_output(path, force=force, label="plot")
         plot_trajectory(self.result, path, robot=self.model.ROBOT, joints=joint_numbers(self.model), force=force)
         return Path(path)
 
     def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """The trajectories against the limits, cond, limit usage, predicted %sigma (``.html`` or ``.md``)."""
+        self.check_output(path, force=force, label="report", report=True)
         write_report_files(excitation_report(self.result, self.model, noise=self.options.noise, chi_b=self.chi_b),
                            path, force=force)
         return Path(path)

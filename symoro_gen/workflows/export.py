@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..atomic import json_output, write_output_text
+from ..atomic import check_outputs, json_output, write_output_text
 from ..description import load_robot
 from ..description.identity import check_result_robot
 from ..description.mjcf_export import export_mjcf as mjcf_text
@@ -67,6 +67,7 @@ class ExportResults:
     text: str
     notes: tuple[str, ...] = ()
     sidecar: Mapping[str, Any] | None = field(default=None, repr=False)
+    inputs: tuple[Any, ...] = ()             # the files read besides the robot file (an identification result)
 
     def summary(self) -> str:
         """The text (what the command prints without ``-o``)."""
@@ -91,7 +92,14 @@ class ExportResults:
 
     def write(self, path: str | os.PathLike[str], *, force: bool = False) -> list[Path]:
         """Write the text to ``path`` and, with a sidecar, ``PATH.json``; an existing file symoro-gen did not
-        write is replaced only with ``force``. Returns the paths written."""
+        write is replaced only with ``force``; the robot file, or the identification result the export was made
+        from, never (resolved: a symlink to one is one). Returns the paths written."""
+        outs = {"-o/--output": Path(path)}
+        if self.sidecar is not None:
+            outs["-o/--output (its .json)"] = Path(str(path) + ".json")
+        robot_file = getattr(self.robot, "file", None)
+        inputs = [("input", x) for x in self.inputs if isinstance(x, (str, os.PathLike))]
+        check_outputs(outs, [*inputs, *([("robot file", robot_file)] if robot_file else [])], force=force)
         write_output_text(Path(path), self.text, force=force, label="-o/--output")
         out = [Path(path)]
         if self.sidecar is not None:
@@ -169,12 +177,13 @@ def _values(robot: RobotDescription, result: ResultLike, command: str) -> _Value
     return _Values(chi, pay, tuple(notes), sidecar)
 
 
-def _finish(command: str, robot: RobotDescription, text: str, changed: list[str], v: _Values) -> ExportResults:
+def _finish(command: str, robot: RobotDescription, text: str, changed: list[str], v: _Values,
+            inputs: tuple[Any, ...] = ()) -> ExportResults:
     sidecar = None
     if v.sidecar is not None:
         sidecar = dict(v.sidecar, drive=drive_terms(robot, link_values(robot, v.chi, v.payload)),
                        drive_note=DRIVE_NOTE, changed_links=list(changed))
-    return ExportResults(command, robot, text, tuple(changed), sidecar)
+    return ExportResults(command, robot, text, tuple(changed), sidecar, inputs=inputs)
 
 
 def _identified_parameters(params: ResultLike, robot: RobotDescription) -> dict[str, float]:
@@ -212,7 +221,7 @@ def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = N
     named = _identified_parameters(params, desc) if params is not None else None
     changed: list[str] = []
     text = urdf_text(desc, v.chi, v.payload, params=named, notes=v.header, report=changed)
-    return _finish("export-urdf", desc, text, changed, v)
+    return _finish("export-urdf", desc, text, changed, v, inputs=(from_result, params))
 
 
 def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.001) -> ExportResults:
@@ -224,7 +233,7 @@ def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.00
     v = _values(desc, from_result, "export-mjcf") if from_result is not None else _Values()
     changed: list[str] = []
     text = mjcf_text(desc, v.chi, v.payload, notes=v.header, report=changed, timestep=timestep)
-    return _finish("export-mjcf", desc, text, changed, v)
+    return _finish("export-mjcf", desc, text, changed, v, inputs=(from_result,))
 
 
 def export_par(robot) -> ExportResults:

@@ -274,6 +274,7 @@ class IdentifyResults(Results):
     def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """Tables and plots ([GB-gains] and [LWR4-TLS] tables, measured vs reconstructed torques, singular values;
         with loaded validation data the payload re-identified with the robot known), ``.html`` or ``.md``."""
+        self.check_output(path, force=force, label="report", report=True)
         return write_report(path, self.result, content=self.report_content(), force=force)
 
     def figures(self) -> list:
