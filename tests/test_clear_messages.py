@@ -150,3 +150,22 @@ def test_a_full_disk_names_the_file_being_written(tmp_path, cli, monkeypatch):
     with pytest.raises(OSError) as err:
         atomic.write_text_atomic(tmp_path / "x.json", "{}")
     assert err.value.errno == errno.ENOSPC and err.value.filename == str(tmp_path / "x.json")
+
+
+def test_an_over_actuated_four_bar_is_refused_when_its_file_is_read(tmp_path, cli):
+    """A four-bar (one degree of freedom) with two actuated joints: refused by ``generate`` (and any load of the
+    file), naming the loop, its joints and the actuated ones, instead of a closure failure in ``load_model``."""
+    from tests.closedloop.test_fourbar_lagrangian import fourbar_text
+
+    text = fourbar_text()
+    over = text.replace("j = 2\nant = 1\nsigma = 0\nmu = 0\n", "j = 2\nant = 1\nsigma = 0\n", 1)
+    assert over != text
+    f = tmp_path / "fourbar.toml"
+    f.write_text(over)
+    r = cli("generate", f, "--out", tmp_path / "gen", rc=2)
+    assert r.err_lines[0] == (f"symoro-gen: error: {f}, loop 1, field 'mu': over-actuated: the loop through joints "
+                              "1, 2, 3 and its cut joint 4 is planar (3 closure equations) and has 1 degree(s) of "
+                              "freedom, but its actuated joints are 1, 2: make all but 1 of them passive (mu = 0)")
+    assert not (tmp_path / "gen").exists()
+    f.write_text(text)  # the four-bar as it is (one actuated joint) is read
+    assert [r.mu for r in load_robot(str(f)).rows if r.is_moving] == [1, 0, 0]

@@ -29,7 +29,7 @@ from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from ..paths import robots_dir
 from .expr import ExprError, parse_expression
 from .inertia import check_physical_consistency
-from .loops import check_passive, parse_couplings, parse_loops
+from .loops import check_actuation, check_passive, parse_couplings, parse_loops
 from .model import (
     FIXED,
     PRISMATIC,
@@ -199,6 +199,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         couplings = parse_couplings(fr.entries, rows, bad)
     if not bad_sigma:
         check_passive(rows, loops, couplings, bad, mimic_frames)
+    if loops and not probs.found:
+        check_actuation(rows, loops, vals.values, bad)
 
     if probs.found:
         raise RobotFileError(probs.found)
