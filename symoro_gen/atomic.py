@@ -27,6 +27,7 @@ trajectory CSV its header ``t,q1..qn,dq1..dqn,ddq1..ddqn``. A folder replaced wh
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
@@ -81,10 +82,13 @@ def write_bytes_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: 
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+        except OSError as exc:  # a full disk (ENOSPC), a quota...: name the file being written, not a temporary one
+            raise _naming(exc, path) from exc
         os.chmod(tmp, ordinary_mode())
         if overwrite:
             os.replace(tmp, path)
@@ -100,6 +104,13 @@ def write_bytes_atomic(path: str | os.PathLike[str], data: bytes, *, overwrite: 
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def _naming(exc: OSError, path: Path) -> OSError:
+    """``exc`` with ``path`` as its file name (the write errors of a file object, ENOSPC among them, carry none;
+    those on the temporary sibling name a file the user never sees)."""
+    return type(exc)(exc.errno, exc.strerror or str(exc), str(path)) if exc.errno else OSError(
+        errno.EIO, str(exc), str(path))
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str, *, overwrite: bool = True) -> None:
@@ -128,7 +139,10 @@ def replace_folder_atomic(folder: str | os.PathLike[str], files: Mapping[str, by
     try:
         os.chmod(tmp, ordinary_mode(is_dir=True))  # mkdtemp makes it private
         for name, data in files.items():
-            (tmp / name).write_bytes(data.encode("utf-8") if isinstance(data, str) else data)
+            try:
+                (tmp / name).write_bytes(data.encode("utf-8") if isinstance(data, str) else data)
+            except OSError as exc:  # name the file of the folder being written, not the temporary one
+                raise _naming(exc, folder / name) from exc
         if folder.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".old", dir=folder.parent))
             old.rmdir()

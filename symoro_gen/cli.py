@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
 import os
 import sys
 import traceback
@@ -90,6 +91,11 @@ def _command_of(argv) -> str | None:
     return None
 
 
+#: the largest magnitude of a number given as an option: no time, rate, frequency, gain, torque or length of a
+#: robot comes near it, and beyond it the products and squares the commands form leave double precision
+MAX_OPTION_MAGNITUDE = 1e12
+
+
 def _check_options(args) -> None:
     """Option values the commands cannot use, caught before any work (one error per option)."""
     checks = (
@@ -97,7 +103,13 @@ def _check_options(args) -> None:
         ("decimate", "--decimate", lambda v: v >= 1, "must be an integer >= 1"),
         ("r_sigma", "--r-sigma", lambda v: v > 1, "must be > 1 (the ratio max %sigma / min %sigma)"),
         ("duration", "--duration", lambda v: v > 0, "must be a positive number of seconds"),
+        ("timestep", "--timestep", lambda v: v > 0, "must be a positive number of seconds (MuJoCo's step)"),
     )
+    for attr, v in sorted(vars(args).items()):  # every number given: finite and of a magnitude a quantity can have
+        for x in (v if isinstance(v, (list, tuple)) else [v]):
+            if isinstance(x, float) and not (math.isfinite(x) and abs(x) <= MAX_OPTION_MAGNITUDE):
+                raise OptionError(f"--{attr.replace('_', '-')} {x:g}: not a usable number (finite, |value| <= "
+                                  f"{MAX_OPTION_MAGNITUDE:g})")
     for attr, flag, ok, what in checks:
         v = getattr(args, attr, None)
         if v is not None and not ok(v):

@@ -229,3 +229,17 @@ def test_diagnose_warns_on_saturation_and_refuses_a_joint_at_its_noise(saturated
     r = cli("diagnose", "scara", *stuck[0], rc=2)
     assert r.err_lines[0].startswith(f"symoro-gen: error: {stuck[0][0]}, {stuck[0][1]}: joint 1 does not move (q1 "
                                      "spans at most ")
+
+
+def test_inspect_names_the_joint_at_its_noise_and_the_option(stuck, clean, cli):
+    """``inspect`` names the joint held at its encoder noise (each recording, its motion and noise) and the option
+    that treats it as still; on the clean recordings it names none."""
+    r = cli("inspect", "scara", *stuck[0])
+    rx = (r"warning: {file}: joint 1 \(position RMS [0-9.e+-]+, noise [0-9.e+-]+\) does not move beyond its noise: "
+          r"identify and diagnose would fit the parameters of its own motion \(rotor inertia, friction\.\.\.\) to "
+          r"noise: give --drop-unexcited to treat it as still")
+    lines = r.out.splitlines()
+    for f in stuck[0]:
+        assert any(re.fullmatch(rx.format(file=re.escape(f)), ln) for ln in lines), r.out
+    assert not any("joint 2 (position RMS" in ln or "joint 3 (position RMS" in ln for ln in lines), r.out
+    assert "does not move beyond its noise" not in cli("inspect", "scara", *clean[0]).out

@@ -49,7 +49,7 @@ def run(args) -> int:
         res.report(args.report, force=force)
     if not args.quiet:
         print(res.summary())
-    return 0 if res.limits_ok else 3
+    return 0 if res.ok else 3
 
 
 def add_parser(sub) -> None:

@@ -53,8 +53,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="how a path names its robot and day, matched against its end, e.g. '{robot}/{day}.parquet' "
                         "('*' matches any part of one path element)")
     p.add_argument("--scheduler", metavar="ADDRESS|local:N|threads:N",
-                   help="Dask scheduler address (tcp://host:8786), or local:N worker processes (default "
-                        "local with min(2, cpus)), or threads:N in this process")
+                   help="Dask scheduler address (tcp://host:8786), or local:N (or processes:N) worker processes "
+                        "(default local with min(2, cpus)), or threads:N in this process; N >= 1")
     p.add_argument("--json", metavar="OUT.json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md", help="write a report with the plot of every flagged "
                    "parameter over the days (plots need matplotlib: the 'plots' extra)")

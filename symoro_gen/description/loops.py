@@ -43,12 +43,14 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
+import numpy as np
 import sympy as sp
 
 from .expr import ExprError, parse_expression
+from .mdh import row_transform
 from .model import FIXED, PRISMATIC, REVOLUTE, Coupling, LoopClosure, MdhRow, q_symbol
 
-__all__ = ["parse_loops", "parse_couplings", "check_passive"]
+__all__ = ["parse_loops", "parse_couplings", "check_passive", "check_actuation"]
 
 _CUT_KEYS = ("j", "ant", "sigma", "mu", "gamma", "b", "alpha", "d", "theta", "r")
 _GEOM = ("gamma", "b", "alpha", "d", "theta", "r")
@@ -260,3 +262,53 @@ def check_passive(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopClos
         if r.is_moving and r.mu == 0 and r.j not in on_loop:
             bad(f"frame {r.j}", "mu", "a passive joint (mu = 0) must lie on a closed loop ([[loops]]) or follow "
                                       "another joint (mimic)")
+
+
+def check_actuation(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopClosure, ...],
+                    values: Mapping[str, float], bad: Callable[[str, str, str], None], tol: float = 1e-9) -> None:
+    """A planar loop (at q = 0 its revolute axes parallel, its prismatic axes orthogonal to them) has three
+    independent closure equations (the planar case of [KD2002] sec. 7.3): it needs at least three passive
+    variables, its passive tree joints (``mu = 0``) and its cut joint. With fewer, its actuated joints cannot all
+    move freely: the robot is over-actuated, refused here naming the loop and the actuated joints (``load_model``
+    would only fail to close the loop). A loop that is not planar is left to the model's closure check."""
+    if not loops:
+        return
+    subs = {sp.Symbol(k, real=True): v for k, v in values.items()}
+    by_j = {r.j: r for r in rows}
+    poses: dict[int, np.ndarray] = {0: np.eye(4)}
+
+    def pose(j: int) -> np.ndarray:
+        if j not in poses:
+            r = by_j[j]
+            poses[j] = pose(r.ant) @ row_transform(r, subs, 0.0)
+        return poses[j]
+
+    def chain(f: int) -> set[int]:
+        out = set()
+        while f:
+            out.add(f)
+            f = by_j[f].ant
+        return out
+
+    for k, lp in enumerate(loops, start=1):
+        try:
+            moving = [by_j[j] for j in sorted(chain(lp.cut.ant) ^ chain(lp.close.ant)) if by_j[j].is_moving]
+            axes = [(pose(r.j)[:3, 2], r.sigma) for r in moving]
+            axes.append(((pose(lp.cut.ant) @ row_transform(lp.cut, subs, 0.0))[:3, 2], lp.cut.sigma))
+        except (KeyError, TypeError, ValueError):  # a geometry reported elsewhere
+            continue
+        revolute = [z for z, sg in axes if sg == REVOLUTE]
+        if not revolute:
+            continue
+        n0 = revolute[0]
+        planar = (all(np.linalg.norm(np.cross(n0, z)) < tol for z in revolute)
+                  and all(abs(float(n0 @ z)) < tol for z, sg in axes if sg == PRISMATIC))
+        passive = [r.j for r in moving if r.mu == 0]
+        if not planar or len(passive) + 1 >= 3:
+            continue
+        actuated = [r.j for r in moving if r.mu != 0]
+        dof = len(moving) + 1 - 3
+        bad(f"loop {k}", "mu", (
+            f"over-actuated: the loop through joints {', '.join(map(str, [r.j for r in moving]))} and its cut joint "
+            f"{lp.cut.j} is planar (3 closure equations) and has {dof} degree(s) of freedom, but its actuated joints "
+            f"are {', '.join(map(str, actuated))}: make all but {dof} of them passive (mu = 0)"))

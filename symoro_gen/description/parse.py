@@ -29,7 +29,7 @@ from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from ..paths import robots_dir
 from .expr import ExprError, parse_expression
 from .inertia import check_physical_consistency
-from .loops import check_passive, parse_couplings, parse_loops
+from .loops import check_actuation, check_passive, parse_couplings, parse_loops
 from .model import (
     FIXED,
     PRISMATIC,
@@ -85,12 +85,36 @@ def parse_robot(path: str | os.PathLike) -> RobotDescription:
                                       "a robot file is TOML text")]) from None
     except OSError as exc:  # a folder, no permission...
         raise RobotFileError([Problem(str(p), "", "", f"cannot read: {exc.strerror or exc}")]) from None
+    _refuse_other_formats(p, text)
     return parse_robot_text(text, file=str(p))
 
 
+def _refuse_other_formats(p: Path, text: str) -> None:
+    """A URDF or a SYMORO ``.par`` file given where a robot file is expected: say what it is and which command
+    turns it into a robot file (instead of a TOML syntax error)."""
+    head = text.lstrip("\ufeff \t\r\n")[:4096]
+    suffix = p.suffix.lower()
+    if suffix in (".urdf", ".xacro") or (head.startswith("<") and "<robot" in head):
+        raise RobotFileError([Problem(str(p), "", "", "a URDF (XML), not a robot file (TOML)")],
+                             hint=f"convert it first: `symoro-gen import-urdf {p} -o {p.with_suffix('.toml')}` writes "
+                                  "the robot file; then give that file")
+    if suffix == ".par":
+        raise RobotFileError([Problem(str(p), "", "", "a SYMORO+ .par file, not a robot file (TOML)")],
+                             hint=f"convert it first: `symoro-gen import-par {p} -o {p.with_suffix('.toml')}` writes "
+                                  "the robot file; then give that file")
+
+
+#: the largest magnitude of a number of a robot file: no length, mass, inertia, friction, gain or limit of a robot
+#: comes near it (1e300 was accepted, and its squares overflow in the regressor)
+MAX_MAGNITUDE = 1e12
+#: how a number of a robot file must be, in the messages
+_FINITE = f"|x| <= {MAX_MAGNITUDE:g}"
+
+
 def _is_number(v) -> bool:
-    """A finite int or float (TOML booleans, inf and nan excluded)."""
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    """A finite int or float of magnitude at most :data:`MAX_MAGNITUDE` (TOML booleans, inf and nan excluded)."""
+    return (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            and abs(v) <= MAX_MAGNITUDE)
 
 
 class _Problems:
@@ -175,6 +199,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         couplings = parse_couplings(fr.entries, rows, bad)
     if not bad_sigma:
         check_passive(rows, loops, couplings, bad, mimic_frames)
+    if loops and not probs.found:
+        check_actuation(rows, loops, vals.values, bad)
 
     if probs.found:
         raise RobotFileError(probs.found)
@@ -209,7 +235,7 @@ def _read_header(doc: dict, file: str, bad: Callable[[str, str, str], None]
         source = ""
     gravity = doc.get("gravity", [0.0, 0.0, -9.81])
     if not (isinstance(gravity, list) and len(gravity) == 3 and all(_is_number(g) for g in gravity)):
-        bad("top level", "gravity", f"must be a list of 3 numbers, got {gravity!r}")
+        bad("top level", "gravity", f"must be a list of 3 numbers (finite, {_FINITE}), got {gravity!r}")
         gravity = [0.0, 0.0, -9.81]
     return name, source, (float(gravity[0]), float(gravity[1]), float(gravity[2]))
 
@@ -227,7 +253,7 @@ def _read_values(doc: dict, bad: Callable[[str, str, str], None]) -> _Values:
             bad("[values]", k, "reserved or invalid symbol name")
             reported.add(k)
         elif not _is_number(v):
-            bad("[values]", k, f"value must be a finite number, got {v!r}")
+            bad("[values]", k, f"value must be a finite number ({_FINITE}), got {v!r}")
             reported.add(k)
         else:
             values[k] = float(v)
@@ -352,7 +378,8 @@ def _check_joint_variable(fr: dict, where: str, sigma: int, q: sp.Symbol, ex: di
 
 def _check_finite_geometry(frames: list, rows: list[MdhRow], values: dict[str, float],
                            bad: Callable[[str, str, str], None]) -> None:
-    """Every geometric field is finite with the ``[values]`` given (``d = "1/L3"`` with ``L3 = 0`` is not)."""
+    """Every geometric field is finite with the ``[values]`` given (``d = "1/L3"`` with ``L3 = 0`` is not) and at
+    most :data:`MAX_MAGNITUDE` at q = 0."""
     vsubs = {sp.Symbol(k, real=True): sp.Rational(v) for k, v in values.items()}
     for fr, r in zip(frames, rows):
         for k in ("gamma", "b", "alpha", "d", "theta", "r"):
@@ -360,6 +387,9 @@ def _check_finite_geometry(frames: list, rows: list[MdhRow], values: dict[str, f
             if val.is_finite is not True:
                 what = "infinite (division by zero)" if val.has(sp.zoo, sp.oo) else "undefined"
                 bad(f"frame {r.j}", k, f"{fr.get(k)!r} is {what} with the [values] given")
+            elif val.is_number and val.is_real is True and abs(float(val)) > MAX_MAGNITUDE:
+                bad(f"frame {r.j}", k, f"{fr.get(k)!r} is {float(val):g} with the [values] given: not a length or "
+                                       f"angle of a robot (finite, {_FINITE})")
 
 
 def _check_frame_order(rows: list[MdhRow], bad_sigma: set[int], bad: Callable[[str, str, str], None]) -> None:
@@ -425,7 +455,7 @@ def _read_nominal(doc: dict, rows: list[MdhRow], payload: int | None, bad_sigma:
         if k not in allowed:
             probs.bad("[nominal]", k, "not a standard parameter of this robot")
         elif not _is_number(v):
-            probs.bad("[nominal]", k, f"value must be a number, got {v!r}")
+            probs.bad("[nominal]", k, f"value must be a finite number ({_FINITE}), got {v!r}")
         elif v < 0 and k.rstrip("0123456789") in _NON_NEGATIVE:
             probs.bad("[nominal]", k, f"{_NON_NEGATIVE[k.rstrip('0123456789')]} cannot be negative, got {v!r}")
         else:
@@ -495,7 +525,7 @@ def _parse_chain(raw, n, bad) -> DriveChain | None:
         nonlocal ok
         v = raw.get(key, default)
         if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
-            bad(where, key, f"must be a list of {n} numbers, got {v!r}")
+            bad(where, key, f"must be a list of {n} numbers (finite, {_FINITE}), got {v!r}")
             ok = False
             return default
         return [float(x) for x in v]
@@ -514,7 +544,7 @@ def _parse_chain(raw, n, bad) -> DriveChain | None:
     if not (isinstance(coupling, list) and len(coupling) == n and all(
         isinstance(row, list) and len(row) == n and all(_is_number(x) for x in row) for row in coupling
     )):
-        bad(where, "coupling", f"must be a {n}x{n} matrix (list of {n} lists of {n} numbers)")
+        bad(where, "coupling", f"must be a {n}x{n} matrix (list of {n} lists of {n} finite numbers, {_FINITE})")
         ok = False
         coupling = eye
     else:
@@ -568,7 +598,7 @@ def _parse_limits(raw, rows, bad, passive=()) -> JointLimits | None:
         vals = []
         for i, (x, r) in enumerate(zip(v, moving), start=1):
             if not _is_number(x):
-                bad(f"{where} joint {i}", key, f"must be a finite number, got {x!r}")
+                bad(f"{where} joint {i}", key, f"must be a finite number ({_FINITE}), got {x!r}")
                 ok = False
                 x = 0.0
             elif key != "q_min" and key != "q_max" and x <= 0:
@@ -619,7 +649,7 @@ def _parse_passive_limits(raw, passive: list[MdhRow], unit: str, bad) -> dict | 
         vals = []
         for x, r in zip(v, passive):
             if not _is_number(x):
-                bad(f"{where} passive joint {r.j}", key, f"must be a finite number, got {x!r}")
+                bad(f"{where} passive joint {r.j}", key, f"must be a finite number ({_FINITE}), got {x!r}")
                 ok = False
                 continue
             vals.append(float(x) * (math.pi / 180.0 if (unit == "deg" and r.sigma == REVOLUTE) else 1.0))

@@ -648,8 +648,11 @@ def _kk_frames(points, axes, base_frame: str, tol: float, parents=None):
         else:
             anchor = pk + ((O - pk) @ zk) * zk
         ref = _perp(x, zk)
-        ref = _unit(ref) if np.linalg.norm(ref) > tol else _unit(_perp(np.cross(zk, x), zk))
-        return anchor, ref
+        if np.linalg.norm(ref) <= tol:
+            # x of the parent frame along z_k (z_k meets z at a right angle, on x): the common normal
+            # z x z_k, orthogonal to z_k and non-zero since x is orthogonal to z (``cross(z_k, x)`` is 0)
+            ref = np.cross(z, zk)
+        return anchor, _unit(ref)
 
     # anchor A_1 and reference direction for x_1
     p1, z1 = points[first_root], zs[first_root]

@@ -9,11 +9,11 @@ started by dask-jobqueue or on Kubernetes; the workers need symoro_gen and the g
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import logging
 import math
 import os
-import re
 import time
 import uuid
 import warnings
@@ -32,16 +32,17 @@ from ..identification.estimators import fit_wls
 from ..loader import model_for
 from ..model import IdentificationModel
 from ..observations import AssemblyOptions
+from ..preprocessing.readers import DataWarning
 from ..report.plots import MissingDependencyError
-from ..workflows.base import SCHEMA_VERSION, Results, provenance
+from ..workflows.base import SCHEMA_VERSION, Results, provenance, torque_limits
 from .files import FleetError, LogFile, discover, group_by, plain_format, read_experiments, segments
-from .kernel import Partial, merge_partials, process_file, resolve_model
-from .options import DEFAULT_ALPHA, FleetOptions
+from .kernel import Partial, error_line, merge_partials, process_file, resolve_model
+from .options import DEFAULT_ALPHA, LOCAL_SCHEDULER, SCHEDULER_FORMS, FleetOptions, check_scheduler
 from .report import flag_figures, write_fleet_report
 from .stats import adjust, dersimonian_laird, hampel_outliers, level_z, line_fit, pooled_dispersion, trend_test
 from .worker import FleetWorkerSetup, tune_malloc
 
-__all__ = ["DEFAULT_ALPHA", "Z_DAY", "Estimate", "FleetOptions", "FleetResult", "FleetWorkerSetup", "identify_fleet",
+__all__ = ["DEFAULT_ALPHA", "SCHEDULER_FORMS", "Z_DAY", "check_scheduler", "Estimate", "FleetOptions", "FleetResult", "FleetWorkerSetup", "identify_fleet",
            "open_client", "tune_malloc"]
 
 #: a day is listed in a flag when its own distance to the fleet exceeds this
@@ -56,32 +57,61 @@ def _require_distributed():
     return distributed
 
 
+def _worker_died(s: str, exc: BaseException, when: str) -> FleetError:
+    """The error of a Dask worker that died (``Stream is closed``, ``Nanny failed to start``, a killed worker)."""
+    what = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    if len(what) > 160:
+        what = what[:157] + "..."
+    err = FleetError(f"--scheduler {s}: a Dask worker died {when} ({type(exc).__name__}: {what})")
+    m = LOCAL_SCHEDULER.fullmatch(s)
+    if m and m.group(1) != "threads":
+        fewer = ", or fewer workers (--scheduler local:1)" if m.group(2) is None or int(m.group(2)) > 1 else ""
+        err.hint = ("a worker process that dies at once is most often out of memory (each one imports the model and "
+                    f"reads a log): try --scheduler threads:2 (threads of this process, no worker process){fewer}, "
+                    "or --segment-samples / --chunk-samples to bound a task")
+    else:
+        err.hint = ("check the memory of the workers (a worker that dies at once is most often out of memory), or "
+                    "run in this process with --scheduler threads:2")
+    return err
+
+
+def _dask_failure(exc: BaseException) -> bool:
+    """A failure of the Dask cluster itself (a closed connection, a worker or nanny that died), not of a log."""
+    mod = type(exc).__module__ or ""
+    return mod.startswith(("distributed", "tornado")) or type(exc).__name__ in ("KilledWorker", "CommClosedError")
+
+
 @contextlib.contextmanager
 def open_client(scheduler: str | None = None):
     """A ``distributed.Client`` for ``scheduler``, closed (with its cluster) on exit.
 
     ``None`` or ``"local"``: a ``LocalCluster`` of ``min(2, cpus)`` single-threaded worker processes;
-    ``"local:N"``: N worker processes; ``"threads:N"``: one in-process worker with N threads (no
-    pickling, quick to start: tests, notebooks); anything else: the address of a running scheduler
-    (``tcp://host:8786``).
+    ``"local:N"`` (or ``"processes:N"``): N worker processes; ``"threads:N"``: one in-process worker with N
+    threads (no pickling, quick to start: tests, notebooks); ``tcp://host:port``: the address of a running
+    scheduler. Anything else is refused at once (:func:`check_scheduler`); a worker that dies at start-up is a
+    :class:`FleetError` saying so (memory?), not a ``Stream is closed`` on some file.
     """
     distributed = _require_distributed()
     cluster = None
     s = (scheduler or "local").strip()
-    m = re.fullmatch(r"(local|threads)(?::(\d+))?", s)
+    check_scheduler(s)
+    m = LOCAL_SCHEDULER.fullmatch(s)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # Dask's port/dashboard notices
         if m:
             n = int(m.group(2)) if m.group(2) else min(2, os.cpu_count() or 1)
-            if n < 1:
-                raise FleetError(f"--scheduler {s}: the number of workers must be >= 1")
-            if m.group(1) == "local":
-                cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                   dashboard_address=None, silence_logs=logging.ERROR)
-            else:
-                cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=n, processes=False,
-                                                   dashboard_address=None, silence_logs=logging.ERROR)
-            client = distributed.Client(cluster)
+            try:
+                if m.group(1) != "threads":
+                    cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                       dashboard_address=None, silence_logs=logging.ERROR)
+                else:
+                    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=n, processes=False,
+                                                       dashboard_address=None, silence_logs=logging.ERROR)
+                client = distributed.Client(cluster)
+            except (RuntimeError, OSError, TimeoutError) as exc:
+                if cluster is not None:
+                    cluster.close()
+                raise _worker_died(s, exc, "at start-up") from None
         else:
             try:
                 client = distributed.Client(s, timeout="20s")
@@ -134,6 +164,7 @@ class FleetResult(Results):
     diagnoses: dict = field(default_factory=dict)                # robot -> closed-loop diagnosis (``diagnose=True``)
     options: FleetOptions = field(default_factory=FleetOptions, repr=False)
     inputs: tuple[str, ...] = ()                                 # the log files read
+    warnings: tuple[str, ...] = ()                               # on the logs: robot, day, log, joint, what to do
 
     @property
     def robot_names(self) -> list[str]:
@@ -154,7 +185,8 @@ class FleetResult(Results):
         """Exactly the JSON of ``symoro-gen fleet --json``: ``generator``, ``schema_version``, ``model``,
         ``robots`` {robot: {``days``: {day: {names, values, std}}, ``estimate``, ``z``, ``z_trend``,
         ``slope_per_day``}}, ``fleet`` {names, values, std, between_robot_std}, ``flagged`` [{robot, parameter, z,
-        days, ...}], ``skipped`` [{file, error}], ``settings``, ``timing``, with ``diagnose`` ``diagnoses``
+        days, ...}], ``skipped`` [{file, error}], ``warnings`` (on the logs used, as ``identify`` gives them: a joint
+        at its noise level, a saturated torque; each naming the robot, the day and the log), ``settings``, ``timing``, with ``diagnose`` ``diagnoses``
         {robot: {day, files, summary, report} or {day, files, error}}, and ``provenance`` (options, every log
         file with its sha256, computed once)."""
         rob = {}
@@ -171,7 +203,7 @@ class FleetResult(Results):
         fleet["between_robot_std"] = _floats(tau) if tau is not None else None
         out = {"generator": f"symoro-gen {self.command}", "schema_version": SCHEMA_VERSION, "model": self.model,
                "robots": rob, "fleet": fleet, "flagged": self.flagged, "skipped": self.skipped,
-               "settings": self.settings, "timing": self.timing}
+               "warnings": list(self.warnings), "settings": self.settings, "timing": self.timing}
         if self.settings.get("diagnose"):
             out["diagnoses"] = self.diagnoses
         out["provenance"] = self._provenance
@@ -184,6 +216,7 @@ class FleetResult(Results):
     def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """The fleet report (flags, skipped logs, the fleet estimate, every flagged parameter over the days):
         ``.html`` self-contained or ``.md`` with its images beside it (plots: the 'plots' extra)."""
+        self.check_output(path, force=force, label="report", report=True)
         return write_fleet_report(path, self, force=force)
 
     def figures(self) -> list:
@@ -198,6 +231,8 @@ class FleetResult(Results):
                   f"{self.fleet.samples} samples, {len(self.skipped)} log(s) skipped")]
         for s in self.skipped:
             lines.append(f"  skipped {s['file']}: {s['error']}")
+        for w in self.warnings:
+            lines.append(f"  warning: {w}")
         if not self.flagged:
             lines.append("no robot drifts away from the fleet")
         for f in self.flagged:
@@ -318,6 +353,8 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
     fo = FleetOptions() if options is None else options
     opts = fo.assembly() if assembly is None else assembly
     ref, mdl, robot = _model_ref(model)
+    if opts.tau_limits is None and robot is not None:
+        opts = dataclasses.replace(opts, tau_limits=torque_limits(robot))
     load_kw = {"fmt": fo.data_format, **(load_kw or {})}
     if "drive_chain" not in load_kw:
         load_kw["drive_chain"] = robot.drive_chain if robot is not None else _drive_chain(mdl)
@@ -328,9 +365,24 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
     with ctx as cl:
         t_start = time.perf_counter() - t0
         groups = group_by(files)
-        day_p, robot_p, fleet_p, n_workers = _reduce(cl, ref, groups, opts, load_kw, kernel, fo.retries)
+        # malloc settings and the model once per worker (name per model: idempotent on a shared cluster)
+        where = fo.scheduler or ("client" if client is not None else "local")
+        try:
+            cl.register_plugin(FleetWorkerSetup(ref, os.getpid()), name=f"symoro-fleet-setup-{_ref_name(ref)}")
+        except Exception as exc:
+            if not _dask_failure(exc):
+                raise
+            raise _worker_died(where, exc, "at start-up") from None
+        try:
+            day_p, robot_p, fleet_p, n_workers = _reduce(cl, groups, ref, opts, load_kw, kernel, fo.retries)
+        except Exception as exc:
+            if not _dask_failure(exc):
+                raise
+            raise _worker_died(where, exc, "during the run") from None
     t_run = time.perf_counter() - t0 - t_start
     skipped = [{"file": f, "error": e} for f, e in fleet_p.skipped]
+    for w in fleet_p.warnings:
+        warnings.warn(w, DataWarning, stacklevel=2)
     names, fleet, days, robots = _estimates(day_p, robot_p, fleet_p, groups, skipped)
     result = _judge(mdl, names, days, robots, fleet, skipped, fo.alpha, fo.correction)
     fmt = load_kw.get("fmt")
@@ -353,18 +405,17 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
                        level=result["level"], trend=result["trend"], flagged=result["flagged"], skipped=skipped,
                        settings=settings, timing=timing,
                        partials={"days": day_p, "robots": robot_p, "fleet": fleet_p}, diagnoses=diagnoses,
-                       options=fo, inputs=tuple(dict.fromkeys(f.path for f in files)))
+                       options=fo, inputs=tuple(dict.fromkeys(f.path for f in files)), warnings=fleet_p.warnings)
 
 
-def _reduce(cl, ref, groups: dict, opts: AssemblyOptions, load_kw: dict, kernel: Callable[..., Partial],
+def _reduce(cl, groups: dict, ref, opts: AssemblyOptions, load_kw: dict, kernel: Callable[..., Partial],
             retries: int) -> tuple[dict, dict, Partial, int]:
     """One task per log and the TSQR trees per robot-day, robot and fleet on the cluster: the merged
-    partials ``(per (robot, day), per robot, fleet)`` and the number of workers."""
+    partials ``(per (robot, day), per robot, fleet)`` and the number of workers (the workers' setup, malloc
+    settings and the model once per worker, is registered before: :func:`identify_fleet`)."""
     # task keys unique to this run: a scheduler keeps results by key, and another run on the same
     # client (other files, other options, same robot and day names) must never reuse them
     run = f"fleet-{uuid.uuid4().hex[:12]}"
-    # malloc settings and the model once per worker (name per model: idempotent on a shared cluster)
-    cl.register_plugin(FleetWorkerSetup(ref, os.getpid()), name=f"symoro-fleet-setup-{_ref_name(ref)}")
     day_f, robot_f = {}, {}
     for r, days in groups.items():
         for d, logs_rd in days.items():
@@ -384,7 +435,11 @@ def _estimates(day_p: dict, robot_p: dict, fleet_p: Partial, groups: dict, skipp
     """``(names, fleet, days, robots)``: IDIM-WLS on the fleet's, each robot's and each robot-day's factors (a
     robot or day that does not identify the model is added to ``skipped``)."""
     if fleet_p.acc is None:
-        raise FleetError("fleet: no log could be used; " + "; ".join(s["error"] for s in skipped[:3]))
+        err = FleetError("fleet: no log could be used; " + "; ".join(s["error"] for s in skipped[:3])
+                         + (f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""))
+        err.hint = ("each log needs the columns t, q1..qn, tau1..taun of the robot (or --columns / --format to say "
+                    "which are what); see docs/data-files.md")
+        raise err
     names = tuple(fleet_p.acc.names)
     fleet = _fit(fleet_p, names)
     if fleet is None:
@@ -439,7 +494,7 @@ def _diagnose_flagged(model, flagged: list[dict], groups: dict[str, dict[str, li
             to_json = getattr(rep, "to_json", None) or rep.to_dict
             entry.update(summary=rep.summary(), report=to_json())
         except Exception as exc:  # noqa: BLE001 - a diagnosis that fails is reported, the fleet result stands
-            entry["error"] = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            entry["error"] = error_line(exc)
         out[r] = entry
     return out
 

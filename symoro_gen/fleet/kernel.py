@@ -23,10 +23,11 @@ from ..model import IdentificationModel
 from ..observations import AssemblyOptions
 from ..observations.fused import model_column_map
 from ..preprocessing.filtering import blas_threads
+from ..preprocessing.motion import saturation_text, still_text
 from .files import LogFile, read_experiments
 from .fused import fold_trajectories
 
-__all__ = ["Partial", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
+__all__ = ["Partial", "error_line", "log_warnings", "merge_accumulators", "merge_partials", "process_file", "resolve_model"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,12 +44,49 @@ class Partial:
         Full-rate samples read.
     skipped : tuple of (str, str)
         ``(file, reason)`` of the logs that could not be used.
+    warnings : tuple of str
+        The warnings on the logs folded in (:func:`log_warnings`: a joint at its noise level, a saturated torque),
+        each naming the robot, the day and the log.
     """
 
     files: tuple[str, ...]
     acc: Accumulator | None
     samples: int = 0
     skipped: tuple[tuple[str, str], ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+def log_warnings(log: LogFile, trajs, tau_max=None) -> tuple[str, ...]:
+    """The warnings ``identify`` and ``diagnose`` give on a recording (:mod:`symoro_gen.preprocessing.motion`: a
+    joint that does not move beyond its encoder noise, a torque at its limit), for one log of a fleet: each names
+    the robot, the day, the log and the joints. ``fleet`` has neither ``--drop-unexcited`` nor ``--drop-saturated``:
+    the advice is to identify that log alone with the option, or to leave it out."""
+    out = []
+    for tr in trajs:
+        head = f"robot {log.robot}, day {log.day}: {log.label}"
+        if len(trajs) > 1 and tr.source and tr.source != log.path:
+            head += f" ({tr.source})"
+        what = still_text(tr.q)
+        if what is not None:
+            out.append(f"{head}: {what} does not move beyond its noise: the parameters of its own motion (rotor "
+                       "inertia, friction...) in this robot-day's estimate are fitted to noise; fleet cannot hold it "
+                       "still: leave the log out, or identify it with `symoro-gen identify ROBOT LOG "
+                       "--drop-unexcited`")
+        what = saturation_text(tr.tau, tau_max)
+        if what is not None:
+            out.append(f"{head}: {what}: a clipped torque biases this robot-day's estimate; fleet cannot leave those "
+                       "rows out: leave the log out, or identify it with `symoro-gen identify ROBOT LOG "
+                       "--drop-saturated`")
+    return tuple(out)
+
+
+def error_line(exc: BaseException) -> str:
+    """One line for an error: its problems joined (a :class:`~symoro_gen.errors.DataFileError` is ``N problems in
+    data:`` and the problems on the lines below), else its first line."""
+    problems = getattr(exc, "problems", None)
+    if problems:
+        return "; ".join(str(p) for p in problems)
+    return (str(exc).strip().splitlines() or [type(exc).__name__])[0]
 
 
 def resolve_model(ref) -> IdentificationModel:
@@ -98,7 +136,8 @@ def merge_partials(*parts: Partial) -> Partial:
             if p.acc is not None:
                 acc = p.acc if acc is None else merge_accumulators(acc, p.acc)
     return Partial(files=tuple(f for p in parts for f in p.files), acc=acc,
-                   samples=sum(p.samples for p in parts), skipped=tuple(s for p in parts for s in p.skipped))
+                   samples=sum(p.samples for p in parts), skipped=tuple(s for p in parts for s in p.skipped),
+                   warnings=tuple(w for p in parts for w in p.warnings))
 
 
 def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None, load_kw: dict | None = None
@@ -116,7 +155,8 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
         Robot name / package folder (loaded once per worker) or a model object.
     log : LogFile
     options : AssemblyOptions, optional
-        Filters and block size (``keep_signals`` is ignored).
+        Filters and block size (``keep_signals`` is ignored); ``tau_limits``: the robot file's torque limits, for
+        the saturation warnings (:func:`log_warnings`).
     load_kw : dict, optional
         Keywords of :func:`~symoro_gen.fleet.files.read_experiments`: ``fmt`` (a
         :class:`~symoro_gen.preprocessing.readers.LogFormat`, the command line's data options, for every
@@ -127,9 +167,10 @@ def process_file(model_ref, log: LogFile, options: AssemblyOptions | None = None
     try:
         trajs = read_experiments(log.path, int(model.N_JOINTS), start=log.start, stop=log.stop, **(load_kw or {}))
         acc = fold_trajectories(model, trajs, opts, cmap=model_column_map(model))
+        notes = log_warnings(log, trajs, opts.tau_limits)
     except Exception as exc:  # noqa: BLE001 - any failure of one log is reported, never fatal to the fleet
-        msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        msg = error_line(exc)
         if log.path not in msg:
             msg = f"{log.label}: {msg}"
         return Partial(files=(), acc=None, samples=0, skipped=((log.label, msg),))
-    return Partial(files=(log.label,), acc=acc, samples=int(sum(t.n_samples for t in trajs)))
+    return Partial(files=(log.label,), acc=acc, samples=int(sum(t.n_samples for t in trajs)), warnings=notes)

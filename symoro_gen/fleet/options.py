@@ -4,6 +4,7 @@ dashes. They live beside the engine, which takes them, and below the workflow, w
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 from ..errors import OptionError
@@ -12,12 +13,37 @@ from ..preprocessing.readers import LogFormat
 from ..workflows.base import Options
 from .files import FleetError
 
-__all__ = ["CORRECTIONS", "DEFAULT_ALPHA", "DIAGNOSE_METHODS", "FleetOptions"]
+__all__ = ["CORRECTIONS", "DEFAULT_ALPHA", "DIAGNOSE_METHODS", "SCHEDULER_FORMS", "FleetOptions", "check_scheduler"]
 
 #: family-wise error rate of the flags (Holm) or false-discovery rate (BH)
 DEFAULT_ALPHA = 0.01
 CORRECTIONS = ("holm", "bh")
 DIAGNOSE_METHODS = ("ols", "wls", "tls")
+
+#: the schedulers of :func:`~symoro_gen.fleet.engine.open_client` other than an address
+LOCAL_SCHEDULER = re.compile(r"(local|processes|threads)(?::([+-]?\d+))?")
+#: the address of a running scheduler: ``tcp://host:port`` (or tls, ucx), ``inproc://...``, or a bare
+#: ``host:port`` whose host is ``localhost``, dotted (``10.0.0.2``, ``sched.lan``) or a bracketed IPv6 address
+SCHEDULER_ADDRESS = re.compile(r"(tcp|tls|ucx)://[A-Za-z0-9._\[\]:-]*[A-Za-z0-9\]]:\d{1,5}/?|inproc://\S+"
+                               r"|(localhost|[A-Za-z0-9-]+(\.[A-Za-z0-9-]+)+|\[[0-9A-Fa-f:]+\]):\d{1,5}")
+SCHEDULER_FORMS = "local:N or processes:N (N >= 1 worker processes), threads:N (N >= 1 threads of this process) " \
+                  "or the address of a running scheduler, tcp://host:port"
+
+
+def check_scheduler(scheduler: str | None) -> None:
+    """Refuse a ``--scheduler`` that is none of :data:`SCHEDULER_FORMS` before anything starts (a mistyped one, such
+    as ``threads:-3``, would be tried as an address for 20 s)."""
+    if scheduler is None:
+        return
+    s = scheduler.strip()
+    m = LOCAL_SCHEDULER.fullmatch(s)
+    if m:
+        if m.group(2) is not None and int(m.group(2)) < 1:
+            raise FleetError(f"--scheduler {s}: {m.group(1)}:N needs N >= 1 (the number of workers), "
+                             f"got {m.group(2)}")
+        return
+    if not SCHEDULER_ADDRESS.fullmatch(s):
+        raise FleetError(f"--scheduler {s}: not a scheduler: give {SCHEDULER_FORMS}")
 
 
 @dataclass(frozen=True)
@@ -27,8 +53,9 @@ class FleetOptions(Options):
     Attributes
     ----------
     scheduler : str, optional
-        Dask scheduler address (``tcp://host:8786``), ``"local:N"`` worker processes or ``"threads:N"`` in this
-        process (default: a local cluster of ``min(2, cpus)`` processes; :func:`~symoro_gen.fleet.open_client`).
+        Dask scheduler address (``tcp://host:8786``), ``"local:N"`` (or ``"processes:N"``) worker processes or
+        ``"threads:N"`` in this process, N >= 1 (anything else is refused: :func:`check_scheduler`; default: a
+        local cluster of ``min(2, cpus)`` processes; :func:`~symoro_gen.fleet.open_client`).
     alpha : float
         Level of the flags after the multiple-testing correction (0 < alpha < 1).
     correction : {"holm", "bh"}
@@ -63,6 +90,7 @@ class FleetOptions(Options):
     data_format: LogFormat = field(default_factory=LogFormat)
 
     def __post_init__(self) -> None:
+        check_scheduler(self.scheduler)
         if not 0 < self.alpha < 1:
             raise FleetError(f"alpha must be in (0, 1), got {self.alpha!r}")
         if self.correction not in CORRECTIONS:

@@ -30,6 +30,7 @@ from ..model import IdentificationModel
 from ..report import Figure, Heading, ItemList, Preformatted, Report, Table, require_matplotlib
 from .cli import data_block, data_text
 from .filtering import choose_filter_settings, filter_and_differentiate
+from .motion import motion_rms, noise_level_joints, noise_sigma
 from .readers import LoadReport
 from .trajectory import Trajectory
 
@@ -216,6 +217,14 @@ def inspect_recordings(model: IdentificationModel, trajectories: Sequence[Trajec
         for e in exps:
             if j < len(e.joints) and e.joints[j].q_range == 0:
                 warn.append(f"{e.source}: joint {j + 1} never moves")
+    for tr in trajectories:  # moving at the noise level (preprocessing.motion; a constant joint is named above)
+        q = np.asarray(tr.q, float)
+        rms, sig = motion_rms(q), noise_sigma(q)
+        for j in noise_level_joints(q):
+            if np.ptp(q[:, j]) > 0:
+                warn.append(f"{tr.source}: joint {j + 1} (position RMS {rms[j]:.2g}, noise {sig[j]:.2g}) does not move "
+                            "beyond its noise: identify and diagnose would fit the parameters of its own motion "
+                            "(rotor inertia, friction...) to noise: give --drop-unexcited to treat it as still")
     cond = cond_s = None
     names: tuple[str, ...] = ()
     pct: tuple[float, ...] = ()

@@ -31,7 +31,7 @@ import numpy as np
 from .trajectory import Trajectory
 
 __all__ = ["NOISE_MOTION_FACTOR", "SATURATION_RUN", "noise_sigma", "motion_rms", "noise_level_joints",
-           "hold_still", "saturation_mask", "still_warnings", "saturation_warnings"]
+           "hold_still", "saturation_mask", "still_warnings", "saturation_warnings", "still_text", "saturation_text"]
 
 #: a joint whose position RMS is below this factor x its noise moves at the noise level
 NOISE_MOTION_FACTOR = 30.0
@@ -121,17 +121,38 @@ def saturation_mask(tau, tau_max: Sequence[float] | None = None, run: int = SATU
     return out
 
 
+def still_text(q) -> str | None:
+    """The joints of ``q`` (N, n) that move at the noise level (:func:`noise_level_joints`) with their motion and
+    noise, ``"joint 2 (position RMS 1e-05, noise 1e-05)"``, or None when every joint moves."""
+    js = noise_level_joints(q)
+    if not js:
+        return None
+    m, s = motion_rms(q), noise_sigma(q)
+    return ", ".join(f"joint {j + 1} (position RMS {m[j]:.2g}, noise {s[j]:.2g})" for j in js)
+
+
+def saturation_text(tau, tau_max: Sequence[float] | None = None) -> str | None:
+    """The torques of ``tau`` (N, n) with saturated samples (:func:`saturation_mask`), their share of the samples
+    and how they were found, or None when no sample is at a limit."""
+    share = saturation_mask(tau, tau_max).mean(axis=0)
+    js = np.flatnonzero(share > 0)
+    if not js.size:
+        return None
+    how = (f"at tau_max of the robot file or in plateaus of >= {SATURATION_RUN} samples" if tau_max is not None
+           else f"plateaus of >= {SATURATION_RUN} samples")
+    what = ", ".join(f"tau{j + 1} at its limit {100 * share[j]:.1f} % of the samples" for j in js)
+    return f"{what} ({how})"
+
+
 def still_warnings(trajectories: Sequence[Trajectory], *, held: bool = False, option: bool = True) -> list[str]:
     """One warning per recording with joints that move at the noise level (:func:`noise_level_joints`),
     naming the file, the joints and the option (``held``: ``--drop-unexcited`` was given; ``option`` False: the
     command has no such option, e.g. ``diagnose``, which refuses a joint still in every recording)."""
     out = []
     for tr in trajectories:
-        js = noise_level_joints(tr.q)
-        if not js:
+        what = still_text(tr.q)
+        if what is None:
             continue
-        m, s = motion_rms(tr.q), noise_sigma(tr.q)
-        what = ", ".join(f"joint {j + 1} (position RMS {m[j]:.2g}, noise {s[j]:.2g})" for j in js)
         if not option:
             out.append(f"{tr.source}: {what} does not move beyond its noise in this recording: left out of the "
                        "filters' rule; its own parameters are identified from the other recordings")
@@ -151,16 +172,12 @@ def saturation_warnings(trajectories: Sequence[Trajectory], tau_max: Sequence[fl
     joints with their share of samples and the option (``dropped``: ``--drop-saturated`` was given)."""
     out = []
     for tr in trajectories:
-        share = saturation_mask(tr.tau, tau_max).mean(axis=0)
-        js = np.flatnonzero(share > 0)
-        if not js.size:
+        what = saturation_text(tr.tau, tau_max)
+        if what is None:
             continue
-        how = (f"at tau_max of the robot file or in plateaus of >= {SATURATION_RUN} samples" if tau_max is not None
-               else f"plateaus of >= {SATURATION_RUN} samples")
-        what = ", ".join(f"tau{j + 1} at its limit {100 * share[j]:.1f} % of the samples" for j in js)
         if dropped:
-            out.append(f"{tr.source}: {what} ({how}): those rows are left out (--drop-saturated)")
+            out.append(f"{tr.source}: {what}: those rows are left out (--drop-saturated)")
         else:
-            out.append(f"{tr.source}: {what} ({how}): a clipped torque biases the identification: give "
+            out.append(f"{tr.source}: {what}: a clipped torque biases the identification: give "
                        "--drop-saturated to leave those rows out")
     return out

@@ -6,8 +6,9 @@ package when that folder is writable, else in the user cache
 (``$XDG_CACHE_HOME/symoro_gen/build``, default ``~/.cache/symoro_gen/build``).
 
 Compilation happens in a private temporary folder; the finished library is renamed into place,
-so a failure, a timeout or an interrupt never leaves a partial or 0-byte library. On timeout the
-compiler (its whole process group) is killed. Large sources (above :data:`LARGE_SOURCE` bytes)
+so a failure, a timeout or an interrupt never leaves a partial or 0-byte library, nor the folders the
+build created (an empty ``_build/``). On timeout the compiler (its whole process group) is killed; the
+error then says how to retry with more time, and the package evaluates with its NumPy kernels meanwhile. Large sources (above :data:`LARGE_SOURCE` bytes)
 are compiled at ``-O1`` so that they finish (a 4 MB source at ``-O3`` took more than 300 s).
 """
 from __future__ import annotations
@@ -158,7 +159,9 @@ def build_library(c_path: str | os.PathLike[str], *, timeout: float | None = Non
     if timeout is None:
         timeout = float(os.environ.get("SYMORO_CC_TIMEOUT", TIMEOUT_S))
     for d in build_dirs(c_path):
+        created = _missing_dirs(d)
         if not _writable_dir(d):
+            _remove_empty(created)
             continue
         tmp = Path(tempfile.mkdtemp(prefix=".compiling-", dir=d))
         try:
@@ -166,10 +169,39 @@ def build_library(c_path: str | os.PathLike[str], *, timeout: float | None = Non
             _run_compiler([cc, *compile_flags(len(source)), "-o", str(lib), str(c_path), "-lm"], timeout)
             os.chmod(lib, ordinary_mode(is_dir=True))  # rwx like an executable
             os.replace(lib, d / name)
-        finally:
+        except CBuildError as exc:
             shutil.rmtree(tmp, ignore_errors=True)
+            _remove_empty(created)
+            err = CBuildError(f"{c_path}: {exc}; nothing was left behind")
+            err.hint = (f"retry with more time: `symoro-gen build {c_path.parent} --timeout {2 * timeout:g}` (or "
+                        "$SYMORO_CC_TIMEOUT)" if "did not finish" in str(exc) else
+                        f"`symoro-gen build {c_path.parent}` retries and shows the compiler's error")
+            raise err from None
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            _remove_empty(created)
+            raise
+        shutil.rmtree(tmp, ignore_errors=True)
         return BuildResult(d / name, True)
     raise CBuildError(f"no writable folder for the compiled library (tried {', '.join(map(str, build_dirs(c_path)))})")
+
+
+def _missing_dirs(d: Path) -> list[Path]:
+    """``d`` and its parents that do not exist yet, deepest first (those a build would create)."""
+    out = []
+    while not d.exists() and d != d.parent:
+        out.append(d)
+        d = d.parent
+    return out
+
+
+def _remove_empty(dirs: Sequence[Path]) -> None:
+    """Remove the folders a failed build created (deepest first), each only when it is empty."""
+    for d in dirs:
+        try:
+            d.rmdir()
+        except OSError:
+            return
 
 
 def load_functions(lib_path: Path, names: Sequence[str]) -> dict[str, Any]:

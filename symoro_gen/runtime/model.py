@@ -138,10 +138,11 @@ class GeneratedModel:
                     key = (self.ROBOT, str(self.c_path))
                     if key not in _WARNED:
                         _WARNED.add(key)
+                        retry = getattr(exc, "hint", None) or (f"`symoro-gen build {self.package_dir}` shows the "
+                                                                   "compiler's error")
                         warnings.warn(
-                            f"{self.ROBOT}: C kernels unavailable ({exc}); using the NumPy kernels (slower). "
-                            f"To fix: `symoro-gen build {self.package_dir}` shows the compiler's error; "
-                            "set SYMORO_BACKEND=numpy to silence this.",
+                            f"{self.ROBOT}: C kernels unavailable ({exc}); using the NumPy kernels (same results, "
+                            f"slower). To fix: {retry}; set SYMORO_BACKEND=numpy to silence this.",
                             CBackendWarning, stacklevel=4)
             self._resolved = True
             return self._c

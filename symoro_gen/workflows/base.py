@@ -27,7 +27,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .. import __version__
-from ..atomic import json_output, write_output_text
+from ..atomic import check_outputs, json_output, write_output_text
 from ..description.model import RobotDescription
 from ..errors import ModelError, OptionError, SymoroError
 from ..loader import REPO_ROOT, model_for
@@ -129,8 +129,35 @@ class Results:
         """The JSON the command writes (``to_dict()``, its ``generator`` mark first)."""
         return json_output(self.to_dict(), self.command)
 
+    def input_files(self) -> tuple[tuple[str, str | os.PathLike[str]], ...]:
+        """``(label, path)`` of the files this result was computed from (its data, its robot file): never an
+        output of its writers, even with ``force``."""
+        out: list[tuple[str, str | os.PathLike[str]]] = [
+            ("input", x) for x in (getattr(self, "inputs", ()) or ()) if _is_path(x)]
+        robot = getattr(self, "robot", None)
+        f = getattr(robot, "file", None) if robot is not None and not _is_path(robot) else robot
+        if f and os.path.isfile(f):
+            out.append(("robot file", f))
+        return tuple(out)
+
+    def check_output(self, path: str | os.PathLike[str], *, force: bool = False, label: str = "output",
+                     report: bool = False) -> None:
+        """The rule of the command line's outputs (:func:`~symoro_gen.atomic.check_outputs`) for a writer of this
+        result: ``path`` (with ``report``, a report's image folder too) is not one of :meth:`input_files`
+        (resolved: a symlink to one is one), and an existing file symoro-gen did not write is replaced only with
+        ``force``."""
+        if report:
+            from ..report.document import report_targets
+
+            outs: dict = dict(report_targets(label, path))
+        else:
+            outs = {label: path}
+        check_outputs(outs, self.input_files(), force=force)
+
     def write_json(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
-        """Write :meth:`json_text` to ``path`` (an existing file symoro-gen did not write only with ``force``)."""
+        """Write :meth:`json_text` to ``path`` (an existing file symoro-gen did not write only with ``force``; an
+        input of the result never)."""
+        self.check_output(path, force=force, label="json")
         write_output_text(path, self.json_text(), force=force)
         return Path(path)
 

@@ -187,6 +187,7 @@ class DiagnoseResults(Results):
                    "validation data": _names(self.validate)}
         content = ReportContent(robot=self.robot.name, sources=sources, text=self.residual.summary(),
                                 notes=data_notes(self.reports))
+        self.check_output(path, force=force, label="report", report=True)
         return write_report(path, diagnosis=self.residual, content=content, force=force)
 
     def figures(self) -> list:

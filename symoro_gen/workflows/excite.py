@@ -12,6 +12,7 @@ sequential SDP on the true cond (:mod:`symoro_gen.excite`; Swevers et al. 1997 f
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +43,11 @@ from .base import SCHEMA_VERSION, Options, Results, provenance, resolve_robot
 __all__ = ["ExciteOptions", "ExciteResults", "check_size", "excite"]
 
 KINDS = ("fourier", "p2p", "spline")
+#: cond of the base regressor above which a design is degenerate: beyond ~1e10 the smallest singular value is
+#: within a relative 1e-10 of the largest, where the rounding of the regressor's evaluation (~1e-16 x its
+#: magnitude, times the growth of the Newton-Euler recursion) decides it: the rank is numerically lost (Golub &
+#: Van Loan, Matrix Computations, 4th ed., sec. 5.4.1 on numerical rank). Good designs are below 1e3.
+COND_DEGENERATE = 1e10
 
 _NO_CVXPY_NOTE = ("note: cvxpy is not installed, the SDP refinement of the true cond was skipped "
                   "(pip install 'symoro-gen[physical]')")
@@ -191,9 +197,21 @@ class ExciteResults(Results):
     def limits_ok(self) -> bool:
         return bool(self.result.limits_ok)
 
+    @property
+    def degenerate(self) -> bool:
+        """The design's cond is above :data:`COND_DEGENERATE` (or not finite): its regressor is numerically
+        rank-deficient, whatever its limits say."""
+        return not (math.isfinite(float(self.result.cond)) and float(self.result.cond) <= COND_DEGENERATE)
+
+    @property
+    def ok(self) -> bool:
+        """Limits respected and the design not degenerate (the command's exit status 0)."""
+        return self.limits_ok and not self.degenerate
+
     def write_csv(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """The trajectory CSV (header ``t,q1..qn,dq1..dqn,ddq1..ddqn``) the controller runs."""
         r = self.result
+        self.check_output(path, force=force, label="csv")
         write_trajectory_csv(path, r.t, r.q, r.dq, r.ddq, force=force)
         return Path(path)
 
@@ -205,7 +223,8 @@ class ExciteResults(Results):
         return {
             "generator": "symoro-gen excite", "schema_version": SCHEMA_VERSION,
             "robot": model.ROBOT, "kind": self.basis.kind, "criterion": res.criterion, "cond": res.cond,
-            "limits_ok": res.limits_ok, "duration": o.duration, "rate": o.rate, "samples": len(res.t),
+            "limits_ok": res.limits_ok, "degenerate": self.degenerate, "cond_degenerate": COND_DEGENERATE,
+            "duration": o.duration, "rate": o.rate, "samples": len(res.t),
             "seed": o.seed, "effort": o.effort, "settings": {k: list(v) if isinstance(v, tuple) else v
                                                                for k, v in dataclasses.asdict(self.settings).items()},
             "limits": lim.as_dict(), "usage": res.usage,
@@ -231,6 +250,10 @@ class ExciteResults(Results):
                  f"cond = {res.cond:.6g} (base regressor, unscaled; random starts: "
                  f"{', '.join(format(s['cond_start'], '.4g') for s in res.starts)}); limits_ok = {res.limits_ok} "
                  f"(peak usage {worst:.3f}); {res.wall_time:.1f} s"]
+        if self.degenerate:
+            lines.append(f"DEGENERATE design: cond = {res.cond:.3g} is above {COND_DEGENERATE:g}: its regressor is "
+                         "numerically rank-deficient and identifies nothing, limits respected or not; the joints' "
+                         "[limits] (q_min/q_max, dq_max, ddq_max) leave them (almost) no motion: widen them")
         refined = [st for st in res.starts if "refine_sdps" in st]
         if refined:
             lines.append("SDP refinement of the true cond: " + "; ".join(
@@ -250,11 +273,13 @@ class ExciteResults(Results):
 
     def write_plot(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """PNG of every joint's ``q, dq, ddq`` against its limits (``--plot``)."""
+        self.check_output(path, force=force, label="plot")
         plot_trajectory(self.result, path, robot=self.model.ROBOT, joints=joint_numbers(self.model), force=force)
         return Path(path)
 
     def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """The trajectories against the limits, cond, limit usage, predicted %sigma (``.html`` or ``.md``)."""
+        self.check_output(path, force=force, label="report", report=True)
         write_report_files(excitation_report(self.result, self.model, noise=self.options.noise, chi_b=self.chi_b),
                            path, force=force)
         return Path(path)

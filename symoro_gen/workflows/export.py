@@ -18,13 +18,14 @@ from __future__ import annotations
 import html
 import importlib
 import json
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..atomic import json_output, write_output_text
+from ..atomic import check_outputs, json_output, write_output_text
 from ..description import load_robot
 from ..description.identity import check_result_robot
 from ..description.mjcf_export import export_mjcf as mjcf_text
@@ -32,7 +33,7 @@ from ..description.model import RobotDescription
 from ..description.par import export_par as par_text
 from ..description.urdf_export import drive_terms, link_values
 from ..description.urdf_export import export_urdf as urdf_text
-from ..errors import ModelError
+from ..errors import ModelError, OptionError
 from ..loader import model_for
 
 __all__ = ["ExportResults", "export_mjcf", "export_par", "export_urdf"]
@@ -66,6 +67,7 @@ class ExportResults:
     text: str
     notes: tuple[str, ...] = ()
     sidecar: Mapping[str, Any] | None = field(default=None, repr=False)
+    inputs: tuple[Any, ...] = ()             # the files read besides the robot file (an identification result)
 
     def summary(self) -> str:
         """The text (what the command prints without ``-o``)."""
@@ -90,7 +92,14 @@ class ExportResults:
 
     def write(self, path: str | os.PathLike[str], *, force: bool = False) -> list[Path]:
         """Write the text to ``path`` and, with a sidecar, ``PATH.json``; an existing file symoro-gen did not
-        write is replaced only with ``force``. Returns the paths written."""
+        write is replaced only with ``force``; the robot file, or the identification result the export was made
+        from, never (resolved: a symlink to one is one). Returns the paths written."""
+        outs = {"-o/--output": Path(path)}
+        if self.sidecar is not None:
+            outs["-o/--output (its .json)"] = Path(str(path) + ".json")
+        robot_file = getattr(self.robot, "file", None)
+        inputs = [("input", x) for x in self.inputs if isinstance(x, (str, os.PathLike))]
+        check_outputs(outs, [*inputs, *([("robot file", robot_file)] if robot_file else [])], force=force)
         write_output_text(Path(path), self.text, force=force, label="-o/--output")
         out = [Path(path)]
         if self.sidecar is not None:
@@ -168,12 +177,13 @@ def _values(robot: RobotDescription, result: ResultLike, command: str) -> _Value
     return _Values(chi, pay, tuple(notes), sidecar)
 
 
-def _finish(command: str, robot: RobotDescription, text: str, changed: list[str], v: _Values) -> ExportResults:
+def _finish(command: str, robot: RobotDescription, text: str, changed: list[str], v: _Values,
+            inputs: tuple[Any, ...] = ()) -> ExportResults:
     sidecar = None
     if v.sidecar is not None:
         sidecar = dict(v.sidecar, drive=drive_terms(robot, link_values(robot, v.chi, v.payload)),
                        drive_note=DRIVE_NOTE, changed_links=list(changed))
-    return ExportResults(command, robot, text, tuple(changed), sidecar)
+    return ExportResults(command, robot, text, tuple(changed), sidecar, inputs=inputs)
 
 
 def _identified_parameters(params: ResultLike, robot: RobotDescription) -> dict[str, float]:
@@ -211,17 +221,19 @@ def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = N
     named = _identified_parameters(params, desc) if params is not None else None
     changed: list[str] = []
     text = urdf_text(desc, v.chi, v.payload, params=named, notes=v.header, report=changed)
-    return _finish("export-urdf", desc, text, changed, v)
+    return _finish("export-urdf", desc, text, changed, v, inputs=(from_result, params))
 
 
 def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.001) -> ExportResults:
     """The robot as a MuJoCo MJCF model (``symoro-gen export-mjcf``); ``from_result`` as for :func:`export_urdf`,
     ``timestep`` MuJoCo's [s]."""
+    if not (math.isfinite(timestep) and timestep > 0):
+        raise OptionError(f"export_mjcf: timestep {timestep!r}: must be a positive number of seconds (MuJoCo's step)")
     desc = _description(robot)
     v = _values(desc, from_result, "export-mjcf") if from_result is not None else _Values()
     changed: list[str] = []
     text = mjcf_text(desc, v.chi, v.payload, notes=v.header, report=changed, timestep=timestep)
-    return _finish("export-mjcf", desc, text, changed, v)
+    return _finish("export-mjcf", desc, text, changed, v, inputs=(from_result,))
 
 
 def export_par(robot) -> ExportResults:

@@ -144,6 +144,15 @@ class IdentifyOptions(Options):
             raise IdentificationError("--nominal-tolerance bounds the --physical estimate: add --physical")
         if self.bounded_bodies and not self.physical:
             raise IdentificationError("--bounded-bodies bounds the --physical estimate: add --physical")
+        if self.method not in ("iv", "didim"):
+            # options of the closed-loop simulation (IDIM-IV, DIDIM): with any other method they would do nothing
+            given = [flag for flag, v in (("--kp", self.kp), ("--kd", self.kd), ("--ki", self.ki),
+                                          ("--bandwidth", self.bandwidth), ("--max-iter", self.max_iter != 20 or None),
+                                          ("--start", self.start != "ols" or None)) if v]
+            if given:
+                raise OptionError(f"{', '.join(given)}: only act with --method iv or didim (the closed-loop "
+                                  f"simulation), not with --method {self.method}: add --method iv or didim, or "
+                                  f"leave {'them' if len(given) > 1 else 'it'} out")
         object.__setattr__(self, "payload", dict(self.payload or {}))
         if self.data_format is None:
             object.__setattr__(self, "data_format", LogFormat())
@@ -265,6 +274,7 @@ class IdentifyResults(Results):
     def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """Tables and plots ([GB-gains] and [LWR4-TLS] tables, measured vs reconstructed torques, singular values;
         with loaded validation data the payload re-identified with the robot known), ``.html`` or ``.md``."""
+        self.check_output(path, force=force, label="report", report=True)
         return write_report(path, self.result, content=self.report_content(), force=force)
 
     def figures(self) -> list:

@@ -82,6 +82,7 @@ class InspectResults(Results):
 
     def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
         """The tables and one plot per joint (q and tau against t), ``.html`` or ``.md``."""
+        self.check_output(path, force=force, label="report", report=True)
         write_report_files(inspection_report(self.inspection, self.trajectories, self.robot.name), path, force=force)
         return Path(path)
 

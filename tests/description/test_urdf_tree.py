@@ -192,3 +192,36 @@ def test_import_urdf_command_writes_the_tree(tmp_path):
         assert robot.n_joints == 5 and any(r.ant != r.j - 1 for r in robot.rows)
         assert main(["--quiet", "generate", str(tmp_path / "tree.toml"), "--out", str(tmp_path / "gen")]) == 0
     assert (tmp_path / "gen" / robot.name / "base_parameters.md").is_file()
+
+
+def _two_branch_urdf(main_origin: str, main_axis: str, branch_origin: str, branch_axis: str) -> str:
+    """A vertical waist carrying two one-joint branches (the first child is the main chain)."""
+    inertial = ('<inertial><mass value="1.3"/><origin xyz="0.01 0.02 0.03"/><inertia ixx="0.1" iyy="0.12" '
+                'izz="0.13" ixy="0.001" ixz="0" iyz="0"/></inertial>')
+    links = "".join(f'<link name="{n}">{inertial}</link>' for n in ("base", "waist", "main", "side"))
+
+    def joint(name, origin, axis, parent, child):
+        return (f'<joint name="{name}" type="revolute"><origin xyz="{origin}"/><axis xyz="{axis}"/>'
+                f'<parent link="{parent}"/><child link="{child}"/>'
+                '<limit effort="10" lower="-3" upper="3" velocity="2"/></joint>')
+
+    return ('<robot name="meeting-branch">' + links + joint("waist_j", "0 0 0.3", "0 0 1", "base", "waist")
+            + joint("main_j", main_origin, main_axis, "waist", "main")
+            + joint("side_j", branch_origin, branch_axis, "waist", "side") + "</robot>")
+
+
+@pytest.mark.parametrize("base_frame", ["joint", "link"])
+@pytest.mark.parametrize("main, branch", [
+    # main axis on the waist's axis (its x arbitrary), branch axis along that x: used to give a NaN
+    (("0 0 0", "0 0 1"), ("0 0 0", "1 0 0")),
+    (("0 0 0.1", "0 0 1"), ("0 0.2 0.1", "1 0 0")),
+    (("0 0 0", "1 0 0"), ("0 0 0.1", "0 1 0")),
+    # branch axis parallel to (and on) its parent's axis, and crossing it
+    (("0 0.2 0.1", "0 1 0"), ("0 0 0.1", "0 0 1")),
+    (("0.1 0 0", "0 1 0"), ("0 0 0", "0 1 0")),
+])
+def test_branch_axis_meeting_its_parents_axis_imports_equal_to_pinocchio(main, branch, base_frame):
+    """A branch whose axis intersects, or is parallel to, its parent's axis (its parent's x axis then
+    possibly along the branch axis): the import's torques equal Pinocchio's RNEA on the URDF (1e-9)."""
+    robot, names, _ = check_tree(_two_branch_urdf(*main, *branch), np.random.default_rng(8), base_frame=base_frame)
+    assert [r.ant for r in robot.joints] == [0, 1, 1] and names == ["waist_j", "main_j", "side_j"]

@@ -113,9 +113,15 @@ def test_failure_falls_back_to_numpy_with_one_warning(pkg, tmp_path, monkeypatch
     assert why in msgs[0] and "symoro-gen build" in msgs[0] and "SYMORO_BACKEND=numpy" in msgs[0]
     assert m.BACKEND == "numpy"
     assert np.max(np.abs(Ws[0] - _reference(m, q, dq, ddq))) <= 1e-9 * max(1, np.abs(Ws[0]).max())
-    assert not [p for p in _products(pkg, tmp_path) if p.endswith(".so") or ".compiling-" in p], \
-        "no partial or 0-byte library, no temporary folder"
+    assert "using the NumPy kernels (same results, slower)" in msgs[0]
+    assert _products(pkg, tmp_path) == [] and not (pkg / "_build").exists() and not (tmp_path / "cache").exists(), \
+        "no partial or 0-byte library, no temporary folder, not even an empty _build/ or cache folder"
+    if case != "no compiler":
+        assert f"{pkg.resolve() / 'regressor_scara.c'}: " in msgs[0] and "nothing was left behind" in msgs[0]
+    if case == "compile error":
+        assert f"To fix: `symoro-gen build {pkg.resolve()}` retries and shows the compiler's error" in msgs[0]
     if case == "timeout":
+        assert f"To fix: retry with more time: `symoro-gen build {pkg.resolve()} --timeout 2`" in msgs[0]
         pid = int(pidfile.read_text())
         assert not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().split()[2], \
             "the compiler was killed"
@@ -179,6 +185,8 @@ def test_build_command_reports_a_compile_error(pkg, tmp_path, monkeypatch, capsy
     assert main(["build", str(pkg)]) == 2
     err = capsys.readouterr().err
     assert "error: boom" in err and len(err.strip().splitlines()) == 2  # message + hint
+    assert err.splitlines()[1] == f"hint: `symoro-gen build {pkg.resolve()}` retries and shows the compiler's error"
+    assert not (pkg / "_build").exists()
 
 
 def test_every_model_satisfies_the_contract():

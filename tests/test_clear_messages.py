@@ -1,0 +1,171 @@
+"""Messages that used to be unclear or missing, each now naming the file or option, the field and what to do:
+a URDF given where a robot file is expected, absurd numbers in a robot file or an option (1e300, inf, nan),
+a non-positive MuJoCo time step."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+import symoro_gen
+from symoro_gen.description import load_robot
+from symoro_gen.errors import OptionError, RobotFileError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_urdf_given_as_the_robot_says_to_import_it_first(tmp_path, cli):
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text('<?xml version="1.0"?>\n<robot name="arm"><link name="base"/></robot>\n')
+    for argv in (("identify", urdf, tmp_path / "log.csv"), ("generate", urdf)):
+        r = cli(*argv, rc=2)
+        assert r.err_lines == [f"symoro-gen: error: {urdf}: a URDF (XML), not a robot file (TOML)",
+                               f"hint: convert it first: `symoro-gen import-urdf {urdf} -o {tmp_path / 'arm.toml'}` "
+                               "writes the robot file; then give that file"]
+    # the conversion it proposes works on a real URDF and gives a robot file the command takes
+    (tmp_path / "tree.urdf").write_text(_branch_urdf())
+    cli("import-urdf", tmp_path / "tree.urdf", "-o", tmp_path / "tree.toml")
+    assert load_robot(str(tmp_path / "tree.toml")).n_joints == 3
+
+
+def _branch_urdf() -> str:
+    inertial = ('<inertial><mass value="1"/><origin xyz="0.01 0.02 0.03"/><inertia ixx="0.1" iyy="0.1" izz="0.1" '
+                'ixy="0" ixz="0" iyz="0"/></inertial>')
+    links = "".join(f'<link name="{n}">{inertial}</link>' for n in ("base", "a", "b", "c"))
+    joint = ('<joint name="{0}" type="revolute"><origin xyz="{1}"/><axis xyz="{2}"/><parent link="{3}"/>'
+             '<child link="{4}"/><limit effort="1" lower="-1" upper="1" velocity="1"/></joint>')
+    return ('<robot name="tree">' + links + joint.format("j1", "0 0 0.3", "0 0 1", "base", "a")
+            + joint.format("j2", "0 0.2 0", "0 1 0", "a", "b") + joint.format("j3", "0 -0.2 0", "1 0 0", "a", "c")
+            + "</robot>")
+
+
+@pytest.mark.parametrize("edit, where, field", [
+    (("D2 = 0.35", "D2 = 1e300"), "[values]", "D2"),
+    (("gravity = [0, 0, -9.81]", "gravity = [0, 0, -1e300]"), "top level", "gravity"),
+    (("d = \"D3\"", "d = 1e300"), "frame 3", "d"),
+])
+def test_absurd_numbers_in_a_robot_file_are_refused_naming_the_field(edit, where, field, tmp_path):
+    text = (ROOT / "robots" / "scara.toml").read_text()
+    assert edit[0] in text
+    f = tmp_path / "scara.toml"
+    f.write_text(text.replace(edit[0], edit[1], 1))
+    with pytest.raises(RobotFileError) as err:
+        load_robot(str(f))
+    msg = [str(p) for p in err.value.problems]
+    assert len(msg) == 1 and msg[0].startswith(f"{f}, {where}, field '{field}': "), msg
+    assert "|x| <= 1e+12" in msg[0]
+
+
+@pytest.mark.parametrize("argv, flag, value", [
+    (("excite", "scara", "-o", "x.csv", "--duration", "1e300"), "--duration", "1e+300"),
+    (("identify", "scara", "x.csv", "--cutoff", "nan"), "--cutoff", "nan"),
+    (("export-mjcf", "scara", "--timestep", "inf"), "--timestep", "inf"),
+])
+def test_non_finite_or_absurd_option_values_are_refused_naming_the_option(argv, flag, value, cli, tmp_path):
+    r = cli(*argv, rc=2)
+    assert r.err_lines[0] == f"symoro-gen: error: {flag} {value}: not a usable number (finite, |value| <= 1e+12)"
+
+
+def test_timestep_must_be_positive(cli):
+    r = cli("export-mjcf", "scara", "--timestep", "-1", rc=2)
+    assert r.err_lines[0] == "symoro-gen: error: --timestep -1: must be a positive number of seconds (MuJoCo's step)"
+    assert cli("export-mjcf", "scara", "--timestep", "0", rc=2).err_lines[0].startswith("symoro-gen: error: --timestep 0:")
+    with pytest.raises(OptionError, match=re.escape("export_mjcf: timestep -1.0: must be a positive number")):
+        symoro_gen.export_mjcf("scara", timestep=-1.0)
+
+
+def test_the_readme_install_routes_carry_what_the_commands_need():
+    """``pip install -e '.[test]'`` (and ``.[all]``, the README's route by hand) bring every optional dependency the
+    commands use: ``--report`` needs matplotlib, which the test route lacked."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+
+    def names(reqs):
+        return {re.split(r"[<>=\[ ]", r, maxsplit=1)[0].lower() for r in reqs}
+
+    needed = set().union(*(names(v) for k, v in extras.items() if k not in ("test", "all")))
+    assert "matplotlib" in needed
+    assert needed <= names(extras["all"]) and needed <= names(extras["test"])
+    head = (ROOT / "README.md").read_text().split("## ", 1)[0]
+    assert "pip install -e '.[all]'" in head
+    assert '".[test,plots]"' in (ROOT / "Makefile").read_text() or '".[test]"' in (ROOT / "Makefile").read_text()
+
+
+@pytest.mark.parametrize("extra, named", [
+    (("--kp", "100", "--kd", "10"), "--kp, --kd"),
+    (("--bandwidth", "5"), "--bandwidth"),
+    (("--start", "nominal"), "--start"),
+])
+def test_closed_loop_options_without_their_method_are_refused(extra, named, cli, tmp_path):
+    """The controller's gains, bandwidth, iterations and start only act in the closed-loop simulation of IDIM-IV and
+    DIDIM: with OLS or WLS they were silently ignored."""
+    r = cli("identify", "scara", tmp_path / "log.csv", "--method", "ols", *extra, rc=2)
+    it = "them" if "," in named else "it"
+    assert r.err_lines[0] == (f"symoro-gen: error: {named}: only act with --method iv or didim (the closed-loop "
+                              f"simulation), not with --method ols: add --method iv or didim, or leave {it} out")
+    with pytest.raises(OptionError, match="only act with --method iv or didim"):
+        symoro_gen.IdentifyOptions(method="wls", kp=[1.0])
+    assert symoro_gen.IdentifyOptions(method="didim", kp=[1.0], kd=[1.0]).kp == [1.0]
+
+
+@pytest.mark.slow
+def test_an_excitation_design_with_no_room_to_move_is_degenerate_not_ok(tmp_path, cli):
+    """Limits of 1e-9 leave the joints no motion: the design respects them (limits_ok) but its regressor has lost
+    its rank (cond ~1e20): the summary says DEGENERATE with the bound, the JSON has ``degenerate``, exit status 3."""
+    robot = tmp_path / "tiny.toml"
+    robot.write_text((ROOT / "robots" / "scara.toml").read_text() + "\n[limits]\n"
+                     + "".join(f"{k} = [{', '.join(['1e-9'] * 4)}]\n" for k in ("q_max", "dq_max", "ddq_max"))
+                     + f"q_min = [{', '.join(['-1e-9'] * 4)}]\n")
+    r = cli("excite", robot, "-o", tmp_path / "x.csv", "--duration", "2", "--rate", "50", "--refine", "0",
+            "--json", tmp_path / "x.json", rc=3)
+    doc = json.loads((tmp_path / "x.json").read_text())
+    assert doc["limits_ok"] is True and doc["degenerate"] is True and doc["cond"] > doc["cond_degenerate"] == 1e10
+    line = next(ln for ln in r.out.splitlines() if ln.startswith("DEGENERATE"))
+    assert line.startswith(f"DEGENERATE design: cond = {doc['cond']:.3g} is above 1e+10: its regressor is "
+                           "numerically rank-deficient") and "widen them" in line
+
+
+def test_a_full_disk_names_the_file_being_written(tmp_path, cli, monkeypatch):
+    """ENOSPC surfaces when the written bytes reach the disk (``fsync``) and carries no file name: the error names
+    the output the command was writing (and leaves neither it nor a temporary file)."""
+    import errno
+    import os
+
+    import symoro_gen.atomic as atomic
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(atomic.os, "fsync", full)
+    out = tmp_path / "scara.urdf"
+    r = cli("export-urdf", "scara", "-o", out, rc=2)
+    assert r.err_lines[0] == f"symoro-gen: error: cannot write {out}: No space left on device"
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(OSError) as err:
+        atomic.write_text_atomic(tmp_path / "x.json", "{}")
+    assert err.value.errno == errno.ENOSPC and err.value.filename == str(tmp_path / "x.json")
+
+
+def test_an_over_actuated_four_bar_is_refused_when_its_file_is_read(tmp_path, cli):
+    """A four-bar (one degree of freedom) with two actuated joints: refused by ``generate`` (and any load of the
+    file), naming the loop, its joints and the actuated ones, instead of a closure failure in ``load_model``."""
+    from tests.closedloop.test_fourbar_lagrangian import fourbar_text
+
+    text = fourbar_text()
+    over = text.replace("j = 2\nant = 1\nsigma = 0\nmu = 0\n", "j = 2\nant = 1\nsigma = 0\n", 1)
+    assert over != text
+    f = tmp_path / "fourbar.toml"
+    f.write_text(over)
+    r = cli("generate", f, "--out", tmp_path / "gen", rc=2)
+    assert r.err_lines[0] == (f"symoro-gen: error: {f}, loop 1, field 'mu': over-actuated: the loop through joints "
+                              "1, 2, 3 and its cut joint 4 is planar (3 closure equations) and has 1 degree(s) of "
+                              "freedom, but its actuated joints are 1, 2: make all but 1 of them passive (mu = 0)")
+    assert not (tmp_path / "gen").exists()
+    f.write_text(text)  # the four-bar as it is (one actuated joint) is read
+    assert [r.mu for r in load_robot(str(f)).rows if r.is_moving] == [1, 0, 0]
