@@ -1068,7 +1068,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
                 if ev.z <= zcrit:
                     reason.append(f"z_val {ev.z:.1f} <= {zcrit:.1f}")
                 if gain < cfg.min_rel_improvement:
-                    reason.append(f"validation gain {100 * gain:.2f} % < {100 * cfg.min_rel_improvement:g} %")
+                    reason.append(f"acceptance gain {100 * gain:.2f} % < {100 * cfg.min_rel_improvement:g} %")
                 pp, pz = placebo_bounds(own)
                 if not reason and (ev.p_value >= pp or ev.z <= pz):
                     reason.append("not better than a placebo")
@@ -1242,7 +1242,7 @@ def _score_composed_round(data: _Data, base: _Baseline, state: _State, D: _Desig
         if ev.z <= zcrit:
             reason.append(f"z_val {ev.z:.1f} <= {zcrit:.1f}")
         if gain < cfg.min_rel_improvement:
-            reason.append(f"validation gain {100 * gain:.2f} % < {100 * cfg.min_rel_improvement:g} %")
+            reason.append(f"acceptance gain {100 * gain:.2f} % < {100 * cfg.min_rel_improvement:g} %")
         _, pz = placebo_bounds(own)
         if not reason and ev.z <= pz:
             reason.append("not better than a placebo")

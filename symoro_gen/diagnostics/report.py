@@ -368,7 +368,7 @@ class ResidualReport:
                     L.append("      " + ", ".join(f"{k} = {v:.4g}" for k, v in e.physical.items()))
         else:
             L.append("No effect added: no candidate was significant on the identification data and "
-                     "better than noise on the validation data.")
+                     "better than noise on the held-out acceptance data (the end of each identification experiment).")
         for key in ("sign_smoothing", "static_at_rest"):
             for line in (self.settings.get(key) or []) if isinstance(self.settings, dict) else []:
                 L.append(f"Note: {line}")
