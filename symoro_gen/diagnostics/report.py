@@ -261,6 +261,9 @@ class ResidualReport:
     unexplained: tuple = ()
     estimator_dependent: tuple = ()
     implausible: tuple = ()
+    acceptance: dict = field(default_factory=dict)
+    before_validation_rel_err_band: np.ndarray | None = None
+    after_validation_rel_err_band: np.ndarray | None = None
 
     @property
     def unexplained_flagged(self) -> tuple:
@@ -291,8 +294,10 @@ class ResidualReport:
             "method": self.method,
             "n_joints": self.n_joints,
             "before": self._errors(self.before_rel_err, self.before_validation_rel_err,
-                                   self.before_validation_rel_err_raw),
-            "after": self._errors(self.after_rel_err, self.after_validation_rel_err, self.after_validation_rel_err_raw),
+                                   self.before_validation_rel_err_raw, self.before_validation_rel_err_band),
+            "after": self._errors(self.after_rel_err, self.after_validation_rel_err, self.after_validation_rel_err_raw,
+                                  self.after_validation_rel_err_band),
+            "acceptance": dict(self.acceptance),
             "error_basis": self.error_basis(),
             "effects": [e.to_dict() for e in self.effects],
             "unexplained": [u.to_dict() for u in self.unexplained_flagged],
@@ -320,10 +325,12 @@ class ResidualReport:
         return rows
 
     @staticmethod
-    def _errors(ident, valid, valid_raw) -> dict:
+    def _errors(ident, valid, valid_raw, band=None) -> dict:
         out = {"rel_err": _fl(ident), "validation_rel_err": _fl(valid)}
         if valid_raw is not None:
             out["validation_rel_err_raw"] = _fl(valid_raw)
+        if band is not None:
+            out["validation_rel_err_band"] = [_fl(b) for b in np.asarray(band)]
         return out
 
     def best_tried(self, round: int = 1, k: int = 10) -> list[CandidateScore]:
@@ -342,6 +349,21 @@ class ResidualReport:
                       ("raw after", self.after_validation_rel_err_raw)]
         for lab, a in table:
             rows.append(f"{lab:<12}" + "".join(f"{x:>10.4f}" for x in a))
+        b0 = self.before_validation_rel_err_band
+        if b0 is not None:
+            lvl = 100 * float(self.acceptance.get("band_level", 0.95))
+            rows.append(f"validation per joint, before -> after [{lvl:.0f} % block-bootstrap band of before]:")
+            for j in range(n):
+                a, b = self.before_validation_rel_err[j], self.after_validation_rel_err[j]
+                flag = "  WORSE beyond the band" if np.isfinite(b0[j, 1]) and b > b0[j, 1] else ""
+                rows.append(f"  joint {j + 1}: {a:.4f} -> {b:.4f}  [{b0[j, 0]:.4f}, {b0[j, 1]:.4f}]{flag}")
+        acc = self.acceptance
+        if acc:
+            rows.append(f"acceptance ({acc.get('data', '?')}; the validation data are not read by it), per joint "
+                        "declared -> final [band of declared]:")
+            for j, (a, b, bd) in enumerate(zip(acc.get("declared_rel_err", []), acc.get("final_rel_err", []),
+                                               acc.get("declared_rel_err_band", []))):
+                rows.append(f"  joint {j + 1}: {a:.4f} -> {b:.4f}  [{bd[0]:.4f}, {bd[1]:.4f}]")
         return rows
 
     def _repr_html_(self) -> str:
@@ -382,7 +404,7 @@ class ResidualReport:
                     L.append("      " + ", ".join(f"{k} = {v:.4g}" for k, v in e.physical.items()))
         else:
             L.append("No effect added: no candidate was significant on the identification data and "
-                     "better than noise on the validation data.")
+                     "better than noise on the held-out acceptance data (the end of each identification experiment).")
         for key in ("sign_smoothing", "static_at_rest"):
             for line in (self.settings.get(key) or []) if isinstance(self.settings, dict) else []:
                 L.append(f"Note: {line}")

@@ -50,8 +50,8 @@ def test_clean_report_keeps_errors_and_tries_every_kind():
     rep = diagnose(model, tr)
     assf = rep.to_dict()
     assert assf["effects"] == []
-    # nothing added; the only change allowed is sign(dq) smoothed at the velocity-noise floor where CV prefers
-    # it (settings.sign_smoothing): it may not make any joint worse on validation data
+    # nothing added (a smoothing of sign(dq) would be tested on the acceptance data and listed as an effect);
+    # no joint may be worse on validation data
     import numpy as np
 
     b, a = np.array(assf["before"]["validation_rel_err"]), np.array(assf["after"]["validation_rel_err"])
@@ -60,7 +60,11 @@ def test_clean_report_keeps_errors_and_tries_every_kind():
     # every plain kind was tried, and the composed families (effect x modulating signal) besides them
     from symoro_gen.diagnostics.compose import EFFECTS
 
-    assert {c["kind"] for c in assf["tried"]} == set(KINDS) | set(EFFECTS)
+    # (the report keeps the N_COMPOSED_REPORTED best non-significant composed candidates of a round: which
+    # composed effects are among them depends on the data the loop fits on - the leading part of the
+    # identification data - so some, not necessarily all five, are listed)
+    kinds = {c["kind"] for c in assf["tried"]}
+    assert set(KINDS) <= kinds and kinds - set(KINDS) and kinds <= set(KINDS) | set(EFFECTS), kinds
     # declared-model terms already present are recognised as such
     reasons = {c.kind: c.reason for c in rep.tried if c.kind in ("offset", "rotor_inertia") and c.joint == 1}
     assert all("already in the model" in r for r in reasons.values()), reasons

@@ -29,8 +29,13 @@ def test_clean_data_nothing_added_nothing_flagged_over_30_seeds(seeds):
         model, tr = recording("scara", seed, duration=10.0, dt=0.01)
         rep = diagnose(model, tr, DiagnoseSettings(structure=False))
         d = rep.to_dict()
-        if d["effects"]:
-            added[seed] = [(e["kind"], e["joint"], e["modulation"]) for e in d["effects"]]
+        # a smoothing of sign(dq) at the velocity noise floor that passes the acceptance test is listed as an
+        # effect (it changes the model), but it is a processing matter, not a physical effect the clean truth
+        # lacks: allowed, as long as no joint ends worse on the validation data beyond its band
+        physical = [e for e in d["effects"] if e["kind"] != "sign_smoothing"]
+        if physical:
+            added[seed] = [(e["kind"], e["joint"], e["modulation"]) for e in physical]
+        assert d["acceptance"]["validation_worse"] == [], (seed, d["acceptance"])
         if d["unexplained"]:
             flagged[seed] = d["unexplained"]
     assert sum(len(c) for c in CHUNKS) >= 30

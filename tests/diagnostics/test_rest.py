@@ -51,8 +51,10 @@ def clock(t: np.ndarray, t_go: float, move: float, rest: float, ramp: float) -> 
 
 
 def stop_and_go(seed: int, duration: float = 36.0, t_go: float = 20.0, move: float = 2.0, rest: float = 2.0,
-                ramp: float = 0.4):
-    """(model, moving part, stop-and-go part, rest mask of the stop-and-go part, FS of each joint)."""
+                ramp: float = 0.4, at_rest: str = "random"):
+    """(model, moving part, stop-and-go part, rest mask of the stop-and-go part, FS of each joint).
+
+    ``at_rest``: ``"random"`` a static torque drawn in ``[-FS/2, FS/2]`` per rest and joint, ``"zero"`` none."""
     robot, model = load_robot("scara"), symoro_gen.load_model("scara")
     rng = np.random.default_rng(seed)
     amp = np.array([1.0, 1.0, 0.1, 1.0])
@@ -69,7 +71,8 @@ def stop_and_go(seed: int, duration: float = 36.0, t_go: float = 20.0, move: flo
     # static friction at rest: one constant in [-FS/2, FS/2] per rest and joint (sign(0) = 0 above)
     edges = np.diff(np.r_[0, off.astype(int), 0])
     for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-        tau[a:b] += rng.uniform(-0.5, 0.5, 4) * fs
+        draw = rng.uniform(-0.5, 0.5, 4) * fs
+        tau[a:b] += draw if at_rest == "random" else 0.0
     qm = q + NOISE_Q * rng.standard_normal(q.shape)
     taum = tau + NOISE_TAU * rng.standard_normal(q.shape)
     k = int(round(t_go / DT))
@@ -155,23 +158,85 @@ def _run(model, ident, valid):
     return diagnose(model, ident, cfg, validation=valid, assembly=AssemblyOptions(dynamics_bandwidth_hz=1.0))
 
 
+def _following_the_velocity_sign(model, tr: Trajectory, fs: np.ndarray) -> Trajectory:
+    """``tr`` whose torque at rest (in the segments the detector finds) is ``FS sign(dq)`` of the assembly's
+    band-pass velocity - the declared law's own prediction there - instead of 0: a robot on which "static
+    (0) at rest" is wrong by ``FS`` at every rest sample."""
+    F = build_frame(model, [tr], dynamics_bandwidth_hz=1.0)
+    (ex,) = F.experiments
+    idx = np.rint(ex.t / DT).astype(int)   # samples of the experiment (times from its start, edges dropped)
+    rest = rest_mask(ex)
+    tau = tr.tau.copy()
+    for j in range(tau.shape[1]):
+        m = rest[:, j]
+        tau[idx[m], j] += fs[j] * np.sign(ex.dq[m, j])
+    return Trajectory(t=tr.t, q=tr.q, tau=tau, source=tr.source + " (friction at rest = FS sign(dq))")
+
+
+def test_a_note_without_evidence_in_the_identification_data_is_not_applied(monkeypatch):
+    """Identification data without a rest (the moving part), validation data that stop and go and whose
+    torque at rest follows the declared law (``FS sign(dq)``): making the sliding friction static (0) at rest
+    would make every Coulomb joint worse there. The acceptance data (the end of the identification
+    experiment) hold no rest, so the change has no evidence: it is tested, not accepted, not an effect, and
+    the model is the one the loop builds with the rest detector switched off. No joint's final validation
+    error exceeds the declared model's 95 % band."""
+    model, ident, valid, off, _, fs = stop_and_go(2, at_rest="zero")
+    valid = _following_the_velocity_sign(model, valid, fs)
+    rep = _run(model, ident, valid)
+    # the final model (the declared law at rest) predicts the torque at rest within the noise, where
+    # "static (0)" would miss it by FS on every Coulomb joint
+    raw = rep.plot_data["valid_raw"]
+    e, jj, ridx = raw["e"], raw["joint"], raw["index"]
+    (ex,) = rep.plot_data["vframe"].experiments
+    rest = rest_mask(ex)
+    coulomb = [j for j in range(4) if fs[j] > 0.05]
+    assert coulomb
+    for j in coulomb:
+        m = (jj == j) & rest[ridx, j]
+        assert m.sum() > 1000
+        assert float(np.sqrt(np.mean(e[m] ** 2))) < 0.5 * fs[j], (j, fs[j])
+
+    monkeypatch.setattr(friction, "rest_segments", _no_rest)
+    off_rule = _run(model, ident, valid)
+    assert not [e for e in rep.effects if e.kind == "static_friction_at_rest"], rep.summary()
+    assert not rep.settings["static_at_rest"]
+    np.testing.assert_allclose(rep.after_validation_rel_err_raw, off_rule.after_validation_rel_err_raw, rtol=1e-9)
+    band = rep.before_validation_rel_err_band
+    assert np.all(rep.after_validation_rel_err <= band[:, 1]), (rep.after_validation_rel_err, band)
+    assert rep.acceptance["validation_worse"] == [] and rep.acceptance["worse"] == []
+    for note in rep.acceptance["notes"]:
+        assert not note["accepted"] and note["rest_share_fit"] == 0 and note["rest_share_acceptance"] == 0, note
+
+
 def test_static_at_rest_cuts_the_validation_error_where_the_robot_rests(monkeypatch):
-    """Identification data without a rest (the moving part), validation data that stop and go: with the
-    rule the loop's Coulomb columns are 0 at rest, where the truth is an unknown static torque; without it
-    sign(dq) of the velocity noise switches between +-FS there. The rule leaves the identification - which
-    has no rest - and the declared model untouched, and lowers the raw validation error of every joint
-    with Coulomb friction; at rest the loop's friction prediction is exactly 0."""
-    model, ident, valid, off, _, fs = stop_and_go(2)
+    """Identification data that stop and go too (a moving part, then rests: the acceptance data at the end
+    of each experiment hold rests), validation data that stop and go: with the rule the loop's Coulomb
+    columns are 0 at rest, where the truth is an unknown static torque; without it sign(dq) of the
+    velocity noise switches between +-FS there. The rule passes the acceptance test on (most of) the joints
+    with Coulomb friction, is listed as an effect there, and lowers the raw validation error of those
+    joints; at rest the loop's friction prediction is 0 on them."""
+    model, moving, sg, off, _, fs = stop_and_go(2, duration=110.0)
+    k = int(round(60.0 / DT))
+    ident = [moving, Trajectory(t=sg.t[:k], q=sg.q[:k], tau=sg.tau[:k], source=sg.source + " first 60 s")]
+    valid = Trajectory(t=sg.t[k:], q=sg.q[k:], tau=sg.tau[k:], source=sg.source + " after 60 s")
+    off = off[k:]
     with_rule = _run(model, ident, valid)
     monkeypatch.setattr(friction, "rest_segments", _no_rest)
     without = _run(model, ident, valid)
-    assert [e.label for e in with_rule.effects] == [e.label for e in without.effects]
-    np.testing.assert_allclose(with_rule.result_after.values, without.result_after.values, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(with_rule.before_validation_rel_err_raw, without.before_validation_rel_err_raw)
     a, b = with_rule.after_validation_rel_err_raw, without.after_validation_rel_err_raw
-    for j in range(4):
-        if fs[j] > 0.05:   # a Coulomb torque that the velocity noise can flip (N m)
-            assert a[j] < 0.9 * b[j], (j, a, b)
+    named = {e.joint for e in with_rule.effects if e.kind == "static_friction_at_rest"}
+    coulomb = [j for j in range(4) if fs[j] > 0.05]   # a Coulomb torque that the velocity noise can flip (N m)
+    # about 4 rests in each joint's acceptance window: the held-out z of a joint can fall just short of the
+    # critical value (2.8), so most - not necessarily all - Coulomb joints pass; each that does is better
+    assert len(named & set(coulomb)) >= len(coulomb) - 1, with_rule.summary()
+    # against the declared model (the detector switched off, the smoothing of sign(dq) that is then tested
+    # alone takes most of the same gain: tanh of the velocity noise is near 0 at rest too)
+    before = with_rule.before_validation_rel_err_raw
+    for j in named:
+        assert a[j] < 0.9 * before[j], (j, a, before)
+        assert a[j] < 1.05 * b[j], (j, a, b)
+    assert not [e for e in without.effects if e.kind == "static_friction_at_rest"]
     assert with_rule.settings["static_at_rest"], with_rule.settings
     assert "validation samples" in with_rule.settings["static_at_rest"][0]
     # the user sees the rule in the text and Markdown reports; a run without rests says nothing of it
@@ -179,13 +244,13 @@ def test_static_at_rest_cuts_the_validation_error_where_the_robot_rests(monkeypa
         assert "Note: " + with_rule.settings["static_at_rest"][0] in text
     assert not without.settings["static_at_rest"]
     assert "rest segments" not in without.summary()
-    # the residual at rest is the static friction torque and the noise, nothing the laws added: its RMS
-    # stays below that of the truth's static torque (<= FS/2) plus the torque noise
+    # on the joints named, the residual at rest is the static friction torque and the noise, nothing the laws
+    # added: its RMS stays below that of the truth's static torque (<= FS/2) plus the torque noise
     raw = with_rule.plot_data["valid_raw"]
     e, jj, idx = raw["e"], raw["joint"], raw["index"]
     (ex,) = with_rule.plot_data["vframe"].experiments
     rest = rest_mask(ex)
-    for j in range(4):
+    for j in named:   # the joints whose law is static at rest
         m = (jj == j) & rest[idx, j]
         assert m.sum() > 1000
         rms = float(np.sqrt(np.mean(e[m] ** 2)))
