@@ -109,7 +109,7 @@ from .stability import (
 )
 from .stats import bonferroni, hac_covariance, hac_lag, segments_of, single_threaded_blas, wald_test
 from .structure import residual_structure
-from .unexplained import rows_to_samples, signal_matrix, unexplained_structure
+from .unexplained import signal_matrix, unexplained_by_joint
 
 __all__ = ["diagnose", "DiagnoseSettings", "SIGNIFICANCE", "MAX_EFFECTS", "HOLDOUT", "MIN_REL_IMPROVEMENT", "IDENTIFIABILITY_TOL"]
 
@@ -452,7 +452,15 @@ class DiagnoseSettings:
         Composed candidates (effect x modulating signal, :mod:`.compose`) in each round; default (None):
         with the default ``candidates`` or when they name ``"composed"``.
     unexplained : bool
-        Stage "unexplained" (:mod:`.unexplained`, needs scikit-learn).
+        Stage "unexplained" (:mod:`.unexplained`, needs scikit-learn): structure left in the final residual
+        that no candidate explains, tested per joint (out-of-fold boosted trees on that joint's residual,
+        null = the same residual block-permuted in time, which keeps its autocorrelation). The stacked
+        fit spreads a joint's missing torque over the joints it is coupled to; each joint is therefore
+        tested on the residual of the fit that the joints found to carry structure do not move
+        (:func:`.unexplained.unexplained_by_joint`), so only the carriers are flagged. Tested in
+        ``tests/diagnostics/test_unexplained.py``: a torque ``sin(3.7 q_j) dq_k^2`` (in no candidate
+        family) on one SCARA joint is flagged on that joint only (three seeds and joints), a backlash
+        hysteresis likewise, and a clean arm flags no joint in at least 19 of 20 seeds.
     stability : bool
         Stage "stability" (:func:`_stage_stability`).
     """
@@ -1479,15 +1487,19 @@ def _stage_stability(data: _Data, state: _State, cfg: DiagnoseSettings) -> tuple
             info, msgs)
 
 
-def _unexplained(F: Frame, resid: np.ndarray, seed: int = 0) -> tuple:
+def _unexplained(F: Frame, resid: np.ndarray, A: np.ndarray, seed: int = 0) -> tuple:
     """Stage "unexplained": out-of-fold boosted trees on the final identification residual
-    of each joint from every joint's q, dq, ddq, tau_hat and t (:func:`.unexplained.unexplained_structure`;
-    threshold ``max(MIN_SHARE, max null share + NULL_MARGIN)``, null = block-permuted residual)."""
+    of each joint from every joint's q, dq, ddq, tau_hat and t, made specific to the joints that carry
+    the structure (:func:`.unexplained.unexplained_by_joint`: a joint is tested on the residual of the fit
+    that the rows of the joints found to carry structure do not move, so the spread of one joint's missing
+    torque over the shared parameters is not flagged on the others; threshold
+    ``max(MIN_SHARE, max null share + NULL_MARGIN)``, null = that joint's block-permuted residual)."""
 
-    E, e_exp, e_idx = rows_to_samples(resid, F.system.joint, F.row_experiment, F.row_index)
     S = F.samples()
     X, names = signal_matrix(S["q"], S["dq"], S["ddq"], S.get("tau_hat"), S["t"])
-    return tuple(unexplained_structure(E, X, names, experiment=e_exp, order=e_idx, seed=seed))
+    res, _carriers = unexplained_by_joint(resid, A, F.system.joint, F.row_experiment, F.row_index, X, names,
+                                          seed=seed)
+    return tuple(res)
 
 
 def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
@@ -1532,7 +1544,7 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     final_bad = _implausible_effects(data, state.added, res)
     F = state.F
     final_resid = Y - A @ np.array([res.value(nm) for nm in names])
-    unexpl = _unexplained(F, final_resid) if cfg.unexplained else ()
+    unexpl = _unexplained(F, final_resid, A) if cfg.unexplained else ()
     s_before = residual_structure(F, _residual_of(base.res0), significance=cfg.significance) if cfg.structure else ()
     s_after = residual_structure(F, Y - A @ np.array([res.value(nm) for nm in names]),
                                  significance=cfg.significance) if cfg.structure else ()
