@@ -1629,7 +1629,11 @@ def _report_warnings(state: _State, res: IdentificationResult, cfg: DiagnoseSett
     as implausible, the final fit's impossible effects, placebos that passed, and structure left."""
     warnings: list[str] = list(stab_msgs)
     if state.stopped_at_max:
-        warnings.append(f"stopped at max_effects = {cfg.max_effects}: more effects may be significant")
+        # max_effects bounds the loop's rounds; the friction-law stage's choices come on top of it (and the
+        # stability stage may drop loop effects afterwards): say which count the bound is about
+        warnings.append(f"stopped at max_effects = {cfg.max_effects} effects added by the loop (friction-law "
+                        f"choices are not counted; {len(state.added)} loop effect(s) kept after the stability stage): "
+                        "more effects may be significant")
     if state.implausible:
         last: dict = {}
         for d in state.implausible:

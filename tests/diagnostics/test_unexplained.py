@@ -35,6 +35,7 @@ def play_operator(x: np.ndarray, half_width: float) -> np.ndarray:
     return out
 
 
+@pytest.mark.slow
 def test_hysteresis_outside_the_library_is_flagged_on_its_joint():
     d = scara_rows(41, duration=24.0, dt=0.02)
     W, J, q = d["W"], d["J"], d["q"]
