@@ -57,6 +57,10 @@ MAX_BLOCK_SHARE = 0.05
 IMPORTANCE_SHARE = 0.1
 #: most signals listed
 MAX_SIGNALS = 3
+#: most samples the trees see per joint: a longer residual is thinned to every k-th sample (it is
+#: low-passed at the decimation cut-off, so neighbouring samples carry little new information; the trees'
+#: cost grows with the samples, the information with the band-limited residual's length in time)
+MAX_TREE_SAMPLES = 4000
 #: gradient-boosting settings (small: the residual has a few thousand rows per joint)
 HGB_PARAMS = {"max_iter": 60, "learning_rate": 0.15, "max_leaf_nodes": 15, "min_samples_leaf": 40,
               "l2_regularization": 1.0, "early_stopping": False}
@@ -239,8 +243,8 @@ def _block_permute(e, experiment, rng):
 def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Sequence[str], *,
                           experiment: np.ndarray | None = None, order: np.ndarray | None = None,
                           n_folds: int = N_FOLDS, n_null: int = N_NULL, min_share: float = MIN_SHARE,
-                          null_margin: float = NULL_MARGIN, seed: int = 0, joints: Sequence[int] | None = None
-                          ) -> list[Unexplained]:
+                          null_margin: float = NULL_MARGIN, seed: int = 0, joints: Sequence[int] | None = None,
+                          signals: bool = True, max_samples: int = MAX_TREE_SAMPLES) -> list[Unexplained]:
     """Share of each joint's residual that the signals predict out of fold, with a noise-calibrated threshold.
 
     Parameters
@@ -265,6 +269,11 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         Seeds the shifts, the permutations and the trees.
     joints : sequence of int, optional
         0-based joints to analyse (default all).
+    signals : bool
+        Compute the signals a flagged joint depends on (permutation importance; False: ``signals`` empty).
+    max_samples : int
+        Samples are thinned to every ``ceil(s / max_samples)``-th one (in time order within each
+        experiment) before the trees see them.
 
     Returns
     -------
@@ -280,6 +289,11 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         raise ValueError(f"unexplained_structure: residual {E.shape}, features {X.shape} and {len(names)} names disagree")
     experiment = np.zeros(s, int) if experiment is None else np.asarray(experiment)
     order = np.arange(s) if order is None else np.asarray(order)
+    stride = -(-s // max(int(max_samples), 1))
+    if stride > 1:
+        keep = np.concatenate([np.flatnonzero(experiment == x)[np.argsort(order[experiment == x], kind="stable")][::stride]
+                               for x in np.unique(experiment)])
+        E, X, experiment, order = E[keep], X[keep], experiment[keep], order[keep]
     folds = blocked_folds(time_blocks(experiment, order, n_folds))
     rng = np.random.default_rng(seed)
     out = []
@@ -293,9 +307,10 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         thr = max(min_share, (max(null) if null else 0.0) + null_margin)
         flagged = share > thr
         sigs: tuple = ()
-        if flagged:
+        if flagged and signals:
             base = _r2(e, pred)
             imp = np.zeros(X.shape[1])
+            rng_imp = np.random.default_rng([seed, int(j)])   # the null draws do not depend on ``signals``
             from threadpoolctl import threadpool_limits
 
             with threadpool_limits(limits=1, user_api="openmp"):
@@ -303,7 +318,7 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
                     p2 = np.empty_like(e)
                     for (_tr, te), m in zip(folds, models):
                         Xt = X[te].copy()
-                        Xt[:, c] = rng.permutation(Xt[:, c])
+                        Xt[:, c] = rng_imp.permutation(Xt[:, c])
                         p2[te] = m.predict(Xt)
                     imp[c] = max(base - _r2(e, p2), 0.0)
             tot = imp.sum()
@@ -353,10 +368,17 @@ def unexplained_by_joint(resid: np.ndarray, A: np.ndarray, joint: np.ndarray, ex
         r = refit_without(resid, A, joint, carriers)
         E, e_exp, e_idx = rows_to_samples(r, joint, experiment, index)
         others = [j for j in range(n) if j not in carriers]
-        res = unexplained_structure(E, features, names, experiment=e_exp, order=e_idx, seed=seed, joints=others, **kw)
+        res = unexplained_structure(E, features, names, experiment=e_exp, order=e_idx, seed=seed, joints=others,
+                                    signals=False, **kw)
         found.update({u.joint - 1: u for u in res})
         new = [u for u in res if u.flagged]
         if not new or len(others) == 1:
+            # the joints outside the carriers: flagged ones only when no carrier can be added (the signals
+            # they depend on are computed then)
+            if new:
+                found.update({u.joint - 1: u for u in unexplained_structure(
+                    E, features, names, experiment=e_exp, order=e_idx, seed=seed, joints=[u.joint - 1 for u in new],
+                    **kw)})
             break
         carriers.append(max(new, key=lambda u: u.share).joint - 1)
     if carriers:
