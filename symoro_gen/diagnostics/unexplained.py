@@ -22,6 +22,18 @@ the motion's phase. What the trees "predict" then is chance. A joint is flagged 
 ``max(MIN_SHARE, max(null R^2) + NULL_MARGIN)``; white-noise residuals give a share ~0 and are not
 flagged.
 
+Specific to the joints that carry it
+------------------------------------
+The final residual comes from one least-squares fit of all joints' rows: a torque missing on joint ``c``
+moves the parameters ``c`` shares with the joints coupled to it, and leaves ``-A_k delta`` - a smooth
+function of the motion the trees predict well - in the residual of every such joint ``k``. Tested on
+that residual, every joint was flagged. :func:`unexplained_by_joint` tests each joint on the residual of
+a fit that the joints found to carry structure do not move (:func:`refit_without`, a leave-the-group-out
+refit): greedily, the joint with the largest flagged share joins the carriers and the others are tested
+again; the carriers are tested last, on a residual that keeps their whole missing torque. Each test has
+its own null (that joint's residual block-permuted). A residual longer than ``MAX_TREE_SAMPLES`` samples
+is thinned in time before the trees see it.
+
 Which signals
 -------------
 For a flagged joint, the permutation importance of each signal (Breiman 2001; each column permuted
