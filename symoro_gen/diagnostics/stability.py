@@ -157,7 +157,8 @@ def _digest(x: np.ndarray) -> str:
     import hashlib
 
     x = np.ascontiguousarray(x)
-    return hashlib.blake2b(x.view(np.uint8).reshape(-1) if x.size else b"", digest_size=20).hexdigest() + str(x.dtype)
+    data = x.data.cast("B") if x.size else memoryview(b"")
+    return hashlib.blake2b(data, digest_size=20).hexdigest() + str(x.dtype)
 
 
 def _fingerprint(x: np.ndarray) -> tuple:
