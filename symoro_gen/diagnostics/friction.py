@@ -476,6 +476,38 @@ def _velocity_search_grid(dq_rows: np.ndarray, search: LawSearch) -> np.ndarray:
     return grid
 
 
+#: law columns of the last ``columns`` hook (:func:`_law_columns`): hook, {law arguments: (rows, values)}
+_LAW_COLUMNS: dict = {}
+#: bytes of law columns kept
+LAW_COLUMNS_BYTES = 32 * 2 ** 20
+
+
+def _law_columns(columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray], args: tuple,
+                 p: int) -> np.ndarray:
+    """``columns`` of the law ``args = (claw, cpar, vlaw, vpar, smooth)``, kept for the same hook: the
+    columns depend on the law and the velocities only, not on ``y``, and the simulated-noise placebo
+    re-runs the same selection (the same grid) on many ``y``; the hook builds them at full rate and
+    decimates them, which costs more than the fit. Only the non-zero rows are kept (one joint's)."""
+    claw, cpar, vlaw, vpar, smooth = args
+    memo = _LAW_COLUMNS.get("memo") if _LAW_COLUMNS.get("hook") is columns else None
+    if memo is None:
+        _LAW_COLUMNS.clear()
+        memo = _LAW_COLUMNS["memo"] = {}
+        _LAW_COLUMNS["hook"] = columns
+    hit = memo.get(args)
+    if hit is not None:
+        X = np.zeros((hit[2], p))
+        X[hit[0]] = hit[1]
+        return X
+    X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]), p)
+    rows = np.flatnonzero(np.any(X != 0.0, axis=1))
+    size = rows.nbytes + rows.size * p * 8
+    if _LAW_COLUMNS.get("bytes", 0) + size <= LAW_COLUMNS_BYTES:     # the first selection's grid stays
+        memo[args] = (rows, X[rows].copy(), X.shape[0])
+        _LAW_COLUMNS["bytes"] = _LAW_COLUMNS.get("bytes", 0) + size
+    return X
+
+
 class _LawSelection:
     """The coordinate descent of :func:`select_friction` on one joint: out-of-fold errors of law
     combinations, the one-standard-error rule between two laws, every law tried (``tried``)."""
@@ -491,8 +523,7 @@ class _LawSelection:
 
     def oof(self, claw, cpar, vlaw="linear", vpar=None, smooth=None) -> np.ndarray:
         pc = 2 if claw == "stribeck" else 1
-        X = self.columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth),
-                                              viscous_columns(vlaw, v, vpar)]), pc + 1)
+        X = _law_columns(self.columns, (claw, cpar, vlaw, vpar, smooth), pc + 1)
         return self.cv.oof_residual(X)[self.rows]
 
     def err(self, *a, **k) -> float:

@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from scipy import special as ssp
@@ -124,13 +125,23 @@ def wls_basis(Aw: np.ndarray):
     return U, (Vt.T / s) @ U.T, rank
 
 
+def _wls_factors(Aw: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`wls_basis` with ``V / s`` (k, rank) in place of the pseudo-inverse (``pinv = (V / s) U^T``):
+    half the memory of a fold (the pseudo-inverse is as large as ``U``)."""
+    if Aw.shape[1] == 0:
+        return np.zeros((Aw.shape[0], 0)), np.zeros((0, 0)), 0
+    U, s, Vt = np.linalg.svd(Aw, full_matrices=False)
+    rank = int(np.sum(s > RANK_TOL * s[0])) if s.size and s[0] > 0 else 0
+    return U[:, :rank], Vt[:rank].T / s[:rank], rank
+
+
 @dataclass(frozen=True, eq=False)
 class _Fold:
     train: np.ndarray
     test: np.ndarray
     w: np.ndarray          # weights of the training rows
     U: np.ndarray          # orthonormal basis of A_train * w
-    pinv: np.ndarray       # (k, r_train)
+    VS: np.ndarray         # (k, rank): V / s, the pseudo-inverse is VS @ U.T
     e0: np.ndarray         # weighted training residual of y on A
     pred0: np.ndarray      # test prediction of A alone
     rank: int = 0          # rank of A_train * w
@@ -140,9 +151,112 @@ class _Fold:
 _FOLD_CACHE: dict = {}
 
 
+def _digest(x: np.ndarray) -> str:
+    """BLAKE2b digest of an array's bytes (its contents, for the fold cache: equal digests mean equal
+    arrays for any practical purpose)."""
+    import hashlib
+
+    x = np.ascontiguousarray(x)
+    data = x.data.cast("B") if x.size else memoryview(b"")
+    return hashlib.blake2b(data, digest_size=20).hexdigest() + str(x.dtype)
+
+
 def _fingerprint(x: np.ndarray) -> tuple:
     x = np.asarray(x)
     return (x.shape, float(np.sum(x)), float(np.sum(x[::97] ** 2)) if x.size else 0.0)
+
+
+#: largest condition number of the added columns' Gram matrix (after projection) solved by the normal
+#: equations of :class:`_ColumnFactors`; above it the rank-revealing solve is used
+MAX_GRAM_COND = 1e8
+#: bytes of column factors kept per fold set (:class:`_ColumnCache`)
+COLUMN_CACHE_BYTES = 64 * 2 ** 20
+
+
+@dataclass(frozen=True, eq=False)
+class _ColumnFactors:
+    """What one fold needs to fit added columns ``X`` to any ``y``: ``X`` is zero outside a few rows
+    (a candidate of one joint touches that joint's rows only), so the projection of ``X`` out of the
+    span of ``A`` is computed there and its remainder through the fold's basis.
+
+    With ``U`` the fold's orthonormal basis of ``A_train w``, ``S`` the training rows where ``X`` is
+    not zero (``S'`` the others), ``Xw = X w`` and ``c = U_S^T Xw_S``: the projected columns are
+    ``Xp_S = Xw_S - U_S c`` on ``S`` and ``-U_S' c`` elsewhere, so
+    ``Xp^T Xp = Xp_S^T Xp_S + c^T (U_S'^T U_S') c`` (two positive semi-definite terms, no cancellation),
+    and ``Xp^T e0 = Xw_S^T e0_S`` because ``U^T e0 = 0`` (Frisch-Waugh-Lovell; the Gram-matrix update
+    of an added block, Golub & Van Loan 2013, sec. 6.5). The test prediction
+    ``X_te b - A_te pinv (Xw b)`` is ``D b`` with ``D`` kept."""
+
+    local: np.ndarray      # positions of S within the fold's training rows
+    Xw_S: np.ndarray       # (|S|, p)
+    Ginv: np.ndarray       # (p, p) inverse of Xp^T Xp
+    D: np.ndarray          # (r_test, p)
+
+    @property
+    def nbytes(self) -> int:
+        return self.local.nbytes + self.Xw_S.nbytes + self.Ginv.nbytes + self.D.nbytes
+
+    @staticmethod
+    def build(A: np.ndarray, X: np.ndarray, nonzero: np.ndarray, f: _Fold,
+              outside: Callable[[np.ndarray], np.ndarray]) -> _ColumnFactors | None:
+        """``outside(nz)``: ``U_S'^T U_S'`` of the training rows outside the mask ``nz`` (kept per support);
+        ``nonzero``: the rows where ``X`` is not zero. ``pinv_S Xw_S = VS c`` (``pinv = VS U^T``)."""
+        tr_idx = np.flatnonzero(f.train)
+        nz = nonzero[tr_idx]
+        local = np.flatnonzero(nz)
+        Xw_S = X[tr_idx[local]] * f.w[local][:, None]
+        U_S = f.U[local]
+        c = U_S.T @ Xw_S
+        Xp_S = Xw_S - U_S @ c
+        G = Xp_S.T @ Xp_S + c.T @ outside(nz) @ c
+        d = np.sqrt(np.diag(G))
+        if not np.all(d > 0):
+            return None
+        Gs = G / np.outer(d, d)
+        if np.linalg.cond(Gs) > MAX_GRAM_COND:
+            return None
+        Ginv = np.linalg.inv(Gs) / np.outer(d, d)
+        D = X[f.test] - A[f.test] @ (f.VS @ c)
+        return _ColumnFactors(local, Xw_S, Ginv, D)
+
+
+class _ColumnCache:
+    """Column factors of one fold set, by the content of ``X`` (checked exactly on a hit), oldest
+    dropped beyond :data:`COLUMN_CACHE_BYTES`."""
+
+    def __init__(self) -> None:
+        self._d: dict = {}
+        self._bytes = 0
+        self._outside: dict = {}
+
+    def outside(self, k: int, f: _Fold, nz: np.ndarray) -> np.ndarray:
+        """``U_S'^T U_S'`` of fold ``k`` for the training rows outside ``nz`` (a candidate of one joint
+        has the rows of that joint: a few supports per fold set)."""
+        key = (k, _fingerprint(nz.astype(float)))
+        hit = self._outside.get(key)
+        if hit is not None and np.array_equal(hit[0], nz):
+            return hit[1]
+        U_o = f.U[~nz]
+        M = U_o.T @ U_o
+        if len(self._outside) > 64:
+            self._outside.clear()
+        self._outside[key] = (nz.copy(), M)
+        return M
+
+
+    def get(self, X: np.ndarray) -> list | None:
+        hit = self._d.get(_fingerprint(X))
+        return hit[1] if hit is not None and np.array_equal(hit[0], X) else None
+
+    def put(self, X: np.ndarray, facs: list) -> None:
+        size = X.nbytes + sum(fc.nbytes for fc in facs if fc is not None)
+        if size > COLUMN_CACHE_BYTES:
+            return
+        while self._d and self._bytes + size > COLUMN_CACHE_BYTES:
+            old = self._d.pop(next(iter(self._d)))
+            self._bytes -= old[2]
+        self._d[_fingerprint(X)] = (X.copy(), facs, size)
+        self._bytes += size
 
 
 class BlockedLS:
@@ -172,37 +286,72 @@ class BlockedLS:
         # the fold bases depend on A, the weights and the blocks only: reused for equal ones (the
         # friction-law stage builds the same folds several times per joint, and its simulated-noise
         # placebo refits them on many y), the y-dependent parts are recomputed
-        key = (A.shape, _fingerprint(A), _fingerprint(w), _fingerprint(np.asarray(blocks, float)))
+        # keyed by a digest of the contents (no copy of A kept: it is the largest array of a diagnosis)
+        key = (A.shape, _digest(A), _digest(w), _digest(np.asarray(blocks)))
         hit = _FOLD_CACHE.get(key)
-        if hit is not None and np.array_equal(hit[0], A) and np.array_equal(hit[1], w) \
-                and np.array_equal(hit[2], blocks):
+        if hit is not None:
             bases = hit[3]
         else:
             bases = []
             for tr, te in blocked_folds(blocks):
                 wt = w[tr]
-                U, pinv, rank = wls_basis(A[tr] * wt[:, None])
-                bases.append((tr, te, wt, U, pinv, rank))
+                U, VS, rank = _wls_factors(A[tr] * wt[:, None])
+                bases.append((tr, te, wt, U, VS, rank))
             _FOLD_CACHE.clear()
-            _FOLD_CACHE[key] = (A.copy(), w.copy(), np.array(blocks, copy=True), bases)
+            _FOLD_CACHE[key] = (None, None, None, bases, _ColumnCache())
+            hit = _FOLD_CACHE[key]
+        self._columns: _ColumnCache = hit[4]
         self.folds: list[_Fold] = []
-        for tr, te, wt, U, pinv, rank in bases:
+        for tr, te, wt, U, VS, rank in bases:
             yw = y[tr] * wt
-            th = pinv @ yw
-            self.folds.append(_Fold(tr, te, wt, U, pinv, yw - U @ (U.T @ yw), A[te] @ th, rank))
+            c = U.T @ yw
+            self.folds.append(_Fold(tr, te, wt, U, VS, yw - U @ c, A[te] @ (VS @ c), rank))
 
     def oof_residual(self, X: np.ndarray | None = None) -> np.ndarray:
         """Out-of-fold residual ``y - prediction`` of every row (each row predicted by the fold that
-        holds it out), with the columns ``X`` (r, p) added to ``A``."""
+        holds it out), with the columns ``X`` (r, p) added to ``A``.
+
+        Equal to :meth:`oof_residual_direct` (to rounding): the fold's factors of ``X`` that do not
+        depend on ``y`` (:class:`_ColumnFactors`) are computed on the rows where ``X`` is not zero and
+        kept for the next ``y`` fitted with the same ``A``, weights, blocks and ``X`` (the friction-law
+        search and its simulated-noise placebo evaluate the same columns on many ``y``)."""
+        if X is None or not X.shape[1]:
+            return self.oof_residual_direct(X)
+        X = np.asarray(X, float)
+        facs = self._columns.get(X)
+        if facs is None:
+            cc = self._columns
+            nonzero = X[:, 0] != 0.0
+            for i in range(1, X.shape[1]):
+                nonzero |= X[:, i] != 0.0
+            facs = [_ColumnFactors.build(self.A, X, nonzero, f, partial(cc.outside, k, f))
+                    for k, f in enumerate(self.folds)]
+            self._columns.put(X, facs)
+        out = np.empty(self.y.size)
+        for f, fc in zip(self.folds, facs):
+            if fc is None:     # ill-conditioned added columns: the rank-revealing solve
+                out[f.test] = self.y[f.test] - self._fold_prediction(f, X)
+                continue
+            b = fc.Ginv @ (fc.Xw_S.T @ f.e0[fc.local])
+            out[f.test] = self.y[f.test] - (f.pred0 + fc.D @ b)
+        return out
+
+    def _fold_prediction(self, f: _Fold, X: np.ndarray | None) -> np.ndarray:
+        pred = f.pred0
+        if X is not None and X.shape[1]:
+            Xw = X[f.train] * f.w[:, None]
+            Xp = Xw - f.U @ (f.U.T @ Xw)
+            b = np.linalg.lstsq(Xp, f.e0, rcond=None)[0]
+            pred = pred + X[f.test] @ b - self.A[f.test] @ (f.VS @ (f.U.T @ (Xw @ b)))
+        return pred
+
+    def oof_residual_direct(self, X: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`oof_residual` by the straightforward solve: ``X`` projected out of the span of ``A``
+        on all training rows of each fold and fitted to the fold's residual by a rank-revealing least
+        squares (Frisch-Waugh-Lovell)."""
         out = np.empty(self.y.size)
         for f in self.folds:
-            pred = f.pred0
-            if X is not None and X.shape[1]:
-                Xw = X[f.train] * f.w[:, None]
-                Xp = Xw - f.U @ (f.U.T @ Xw)
-                b = np.linalg.lstsq(Xp, f.e0, rcond=None)[0]
-                pred = pred + X[f.test] @ b - self.A[f.test] @ (f.pinv @ (Xw @ b))
-            out[f.test] = self.y[f.test] - pred
+            out[f.test] = self.y[f.test] - self._fold_prediction(f, X)
         return out
 
     def rel_err(self, X: np.ndarray | None, rows: np.ndarray) -> float:
@@ -295,7 +444,7 @@ def coefficient_ci(A: np.ndarray, X: np.ndarray, y: np.ndarray, *, weights: np.n
         raise ValueError(f"coefficient_ci: level must lie in (0, 1), got {level!r}")
     X = np.asarray(X, float).reshape(len(y), -1)
     w = np.ones(len(y)) if weights is None else np.asarray(weights, float)
-    U, rank = basis if basis is not None else wls_basis(np.asarray(A, float) * w[:, None])[::2]
+    U, rank = basis if basis is not None else _wls_factors(np.asarray(A, float) * w[:, None])[::2]
     Xw = X * w[:, None]
     Xp = Xw - U @ (U.T @ Xw)
     yw = np.asarray(y, float) * w

@@ -22,6 +22,18 @@ the motion's phase. What the trees "predict" then is chance. A joint is flagged 
 ``max(MIN_SHARE, max(null R^2) + NULL_MARGIN)``; white-noise residuals give a share ~0 and are not
 flagged.
 
+Specific to the joints that carry it
+------------------------------------
+The final residual comes from one least-squares fit of all joints' rows: a torque missing on joint ``c``
+moves the parameters ``c`` shares with the joints coupled to it, and leaves ``-A_k delta`` - a smooth
+function of the motion the trees predict well - in the residual of every such joint ``k``. Tested on
+that residual, every joint was flagged. :func:`unexplained_by_joint` tests each joint on the residual of
+a fit that the joints found to carry structure do not move (:func:`refit_without`, a leave-the-group-out
+refit): greedily, the joint with the largest flagged share joins the carriers and the others are tested
+again; the carriers are tested last, on a residual that keeps their whole missing torque. Each test has
+its own null (that joint's residual block-permuted). A residual longer than ``MAX_TREE_SAMPLES`` samples
+is thinned in time before the trees see it.
+
 Which signals
 -------------
 For a flagged joint, the permutation importance of each signal (Breiman 2001; each column permuted
@@ -42,7 +54,8 @@ import numpy as np
 
 from .stability import N_FOLDS, blocked_folds, time_blocks
 
-__all__ = ["MIN_SHARE", "NULL_MARGIN", "Unexplained", "rows_to_samples", "signal_matrix", "unexplained_structure"]
+__all__ = ["MIN_SHARE", "NULL_MARGIN", "Unexplained", "refit_without", "rows_to_samples", "signal_matrix", "unexplained_by_joint",
+           "unexplained_structure"]
 
 #: smallest share of residual variance ever flagged
 MIN_SHARE = 0.05
@@ -56,6 +69,10 @@ MAX_BLOCK_SHARE = 0.05
 IMPORTANCE_SHARE = 0.1
 #: most signals listed
 MAX_SIGNALS = 3
+#: most samples the trees see per joint: a longer residual is thinned to every k-th sample (it is
+#: low-passed at the decimation cut-off, so neighbouring samples carry little new information; the trees'
+#: cost grows with the samples, the information with the band-limited residual's length in time)
+MAX_TREE_SAMPLES = 4000
 #: gradient-boosting settings (small: the residual has a few thousand rows per joint)
 HGB_PARAMS = {"max_iter": 60, "learning_rate": 0.15, "max_leaf_nodes": 15, "min_samples_leaf": 40,
               "l2_regularization": 1.0, "early_stopping": False}
@@ -137,6 +154,57 @@ def rows_to_samples(values: np.ndarray, joint: np.ndarray, experiment: np.ndarra
     return out, keys[:, 0], keys[:, 1]
 
 
+def refit_without(resid: np.ndarray, A: np.ndarray, joint: np.ndarray, carriers: Sequence[int],
+                  rcond: float = 1e-10) -> np.ndarray:
+    """The residual of the fit in which the rows of the ``carriers`` joints do not move the parameters the
+    other joints determine.
+
+    The stacked least-squares fit spreads an effect missing on joint ``c`` over every joint coupled to it:
+    the shared parameters move by ``delta`` and leave ``-A_k delta`` (a smooth function of the motion) in
+    the residual of each joint ``k``. Re-fitted on the rows of the other joints only (the parameters they
+    leave undetermined, such as ``c``'s own friction, fitted on ``c``'s rows within that null space), the
+    other joints' residuals lose the spread and ``c``'s residual keeps the whole missing torque (a
+    leave-one-group-out fit; the least-squares limit of weight 0 on ``c``'s rows, Bjoerck 1996, sec. 5.1).
+
+    Parameters
+    ----------
+    resid : ndarray, shape (r,)
+        Stacked residual ``Y - A theta`` of the fit over all rows.
+    A : ndarray, shape (r, p)
+        Design it was fitted with.
+    joint : ndarray of int, shape (r,)
+        Joint (0-based) of each row.
+    carriers : sequence of int
+        0-based joints whose rows are left out of the shared parameters (none: ``resid`` unchanged).
+    rcond : float
+        Relative singular-value cut-off that defines the null space of the other joints' rows.
+
+    Returns
+    -------
+    ndarray, shape (r,)
+        ``resid - A gamma`` (the refit starts from ``theta``: the correction ``gamma`` is linear in ``resid``).
+    """
+    resid = np.asarray(resid, float)
+    A = np.asarray(A, float)
+    joint = np.asarray(joint)
+    if A.shape[0] != resid.shape[0] or joint.shape[0] != resid.shape[0]:
+        raise ValueError(f"refit_without: residual ({resid.shape[0]} rows), design {A.shape} and joint "
+                         f"({joint.shape[0]} rows) disagree")
+    inC = np.isin(joint, np.asarray(list(carriers), int))
+    if not inC.any():
+        return resid.copy()
+    Ao, Ac = A[~inC], A[inC]
+    _, sv, Vt = np.linalg.svd(Ao, full_matrices=False) if Ao.shape[0] else (None, np.zeros(0), np.zeros((0, A.shape[1])))
+    keep = sv > rcond * sv[0] if sv.size and sv[0] > 0 else np.zeros(sv.size, bool)
+    V1 = Vt[keep].T
+    # the other joints' parameters: min-norm least squares on their rows (in the row space V1 of Ao)
+    g1 = V1 @ np.linalg.lstsq(Ao @ V1, resid[~inC], rcond=None)[0] if V1.shape[1] else np.zeros(A.shape[1])
+    # what they leave undetermined (the null space N of Ao) is fitted on the carriers' rows
+    N = np.linalg.svd(V1.T, full_matrices=True)[2][V1.shape[1]:].T if V1.shape[1] else np.eye(A.shape[1])
+    g2 = N @ np.linalg.lstsq(Ac @ N, resid[inC] - Ac @ g1, rcond=None)[0] if N.shape[1] else 0.0
+    return resid - A @ (g1 + g2)
+
+
 def _oof(X, e, folds, seed):
     from sklearn.ensemble import HistGradientBoostingRegressor
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
@@ -187,8 +255,8 @@ def _block_permute(e, experiment, rng):
 def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Sequence[str], *,
                           experiment: np.ndarray | None = None, order: np.ndarray | None = None,
                           n_folds: int = N_FOLDS, n_null: int = N_NULL, min_share: float = MIN_SHARE,
-                          null_margin: float = NULL_MARGIN, seed: int = 0, joints: Sequence[int] | None = None
-                          ) -> list[Unexplained]:
+                          null_margin: float = NULL_MARGIN, seed: int = 0, joints: Sequence[int] | None = None,
+                          signals: bool = True, max_samples: int = MAX_TREE_SAMPLES) -> list[Unexplained]:
     """Share of each joint's residual that the signals predict out of fold, with a noise-calibrated threshold.
 
     Parameters
@@ -213,6 +281,11 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         Seeds the shifts, the permutations and the trees.
     joints : sequence of int, optional
         0-based joints to analyse (default all).
+    signals : bool
+        Compute the signals a flagged joint depends on (permutation importance; False: ``signals`` empty).
+    max_samples : int
+        Samples are thinned to every ``ceil(s / max_samples)``-th one (in time order within each
+        experiment) before the trees see them.
 
     Returns
     -------
@@ -228,6 +301,11 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         raise ValueError(f"unexplained_structure: residual {E.shape}, features {X.shape} and {len(names)} names disagree")
     experiment = np.zeros(s, int) if experiment is None else np.asarray(experiment)
     order = np.arange(s) if order is None else np.asarray(order)
+    stride = -(-s // max(int(max_samples), 1))
+    if stride > 1:
+        keep = np.concatenate([np.flatnonzero(experiment == x)[np.argsort(order[experiment == x], kind="stable")][::stride]
+                               for x in np.unique(experiment)])
+        E, X, experiment, order = E[keep], X[keep], experiment[keep], order[keep]
     folds = blocked_folds(time_blocks(experiment, order, n_folds))
     rng = np.random.default_rng(seed)
     out = []
@@ -241,9 +319,10 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         thr = max(min_share, (max(null) if null else 0.0) + null_margin)
         flagged = share > thr
         sigs: tuple = ()
-        if flagged:
+        if flagged and signals:
             base = _r2(e, pred)
             imp = np.zeros(X.shape[1])
+            rng_imp = np.random.default_rng([seed, int(j)])   # the null draws do not depend on ``signals``
             from threadpoolctl import threadpool_limits
 
             with threadpool_limits(limits=1, user_api="openmp"):
@@ -251,7 +330,7 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
                     p2 = np.empty_like(e)
                     for (_tr, te), m in zip(folds, models):
                         Xt = X[te].copy()
-                        Xt[:, c] = rng.permutation(Xt[:, c])
+                        Xt[:, c] = rng_imp.permutation(Xt[:, c])
                         p2[te] = m.predict(Xt)
                     imp[c] = max(base - _r2(e, p2), 0.0)
             tot = imp.sum()
@@ -260,3 +339,61 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
                 sigs = tuple(names[c] for c in ordr[:MAX_SIGNALS] if imp[c] >= IMPORTANCE_SHARE * tot)
         out.append(Unexplained(int(j) + 1, share, float(thr), bool(flagged), sigs))
     return out
+
+
+def unexplained_by_joint(resid: np.ndarray, A: np.ndarray, joint: np.ndarray, experiment: np.ndarray,
+                         index: np.ndarray, features: np.ndarray, names: Sequence[str], *, seed: int = 0,
+                         **kw) -> tuple[list[Unexplained], tuple[int, ...]]:
+    """:func:`unexplained_structure` made specific to the joints that carry the structure.
+
+    A joint is tested on its residual from a fit that the joints found to carry structure do not move
+    (:func:`refit_without`), found greedily: every joint is tested on the stacked fit's residual; while
+    a joint outside the carriers is flagged, the one with the largest share joins them, the fit is redone
+    without their rows and the joints outside are tested again. The carriers are tested last on the final
+    residual, which keeps their whole missing torque (a joint wrongly taken as a carrier is then not flagged).
+    Each test keeps its own noise calibration (block-permuted residual of that joint).
+
+    Parameters
+    ----------
+    resid, A, joint, experiment, index : ndarray
+        Stacked residual (r,), the design (r, p) it was fitted with, and the joint (0-based), experiment
+        and sample index of each row (joint-major, as the observation systems).
+    features, names :
+        Signals per sample (:func:`signal_matrix`, samples ordered by experiment then index).
+    seed : int
+        Seeds every test.
+    **kw :
+        Passed to :func:`unexplained_structure`.
+
+    Returns
+    -------
+    results : list of Unexplained
+        One per joint, in joint order.
+    carriers : tuple of int
+        0-based joints whose rows were left out of the final fit.
+    """
+    joint = np.asarray(joint)
+    n = int(joint.max()) + 1
+    carriers: list[int] = []
+    found: dict[int, Unexplained] = {}
+    while True:
+        r = refit_without(resid, A, joint, carriers)
+        E, e_exp, e_idx = rows_to_samples(r, joint, experiment, index)
+        others = [j for j in range(n) if j not in carriers]
+        res = unexplained_structure(E, features, names, experiment=e_exp, order=e_idx, seed=seed, joints=others,
+                                    signals=False, **kw)
+        found.update({u.joint - 1: u for u in res})
+        new = [u for u in res if u.flagged]
+        if not new or len(others) == 1:
+            # the joints outside the carriers: flagged ones only when no carrier can be added (the signals
+            # they depend on are computed then)
+            if new:
+                found.update({u.joint - 1: u for u in unexplained_structure(
+                    E, features, names, experiment=e_exp, order=e_idx, seed=seed, joints=[u.joint - 1 for u in new],
+                    **kw)})
+            break
+        carriers.append(max(new, key=lambda u: u.share).joint - 1)
+    if carriers:
+        found.update({u.joint - 1: u for u in unexplained_structure(E, features, names, experiment=e_exp,
+                                                                     order=e_idx, seed=seed, joints=carriers, **kw)})
+    return [found[j] for j in range(n)], tuple(sorted(carriers))

@@ -138,3 +138,84 @@ def test_blas_is_single_threaded_inside_diagnose_only():
         inside = single_threaded_blas(blas_threads)()
         assert inside and all(n == 1 for n in inside)
         assert blas_threads() == outside
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_blocked_ls_column_factors_equal_the_straightforward_solve(seed):
+    """The out-of-fold fit of added columns from factors kept per (folds, X) - computed on the rows where
+    X is not zero and reused for every y - equals the rank-revealing solve on all training rows (and an
+    independent refit of each fold), for columns on one joint's rows, on all rows, nearly collinear
+    columns (which take the rank-revealing path) and a y changed under kept factors."""
+    rng = np.random.default_rng(seed)
+    n, s, k = 4, 250, 12
+    r = n * s
+    joint = np.repeat(np.arange(n), s)
+    A = rng.standard_normal((r, k))
+    A[joint == 3, 9:] = 0.0                      # parameters absent from a joint's rows
+    w = rng.uniform(0.5, 2.0, r)
+    blocks = stability.time_blocks(np.zeros(r, int), np.tile(np.arange(s), n), 5)
+    one = np.zeros((r, 2))
+    one[joint == 1] = rng.standard_normal((s, 2))
+    dense = rng.standard_normal((r, 3))
+    z = rng.standard_normal(s)
+    collinear = np.zeros((r, 2))
+    collinear[joint == 2] = np.column_stack([z, z + 1e-9 * rng.standard_normal(s)])
+    stability._FOLD_CACHE.clear()
+    for X in (one, dense, collinear, one):      # the last: factors kept, new y
+        y = A @ rng.standard_normal(k) + X @ rng.standard_normal(X.shape[1]) + rng.standard_normal(r)
+        cv = stability.BlockedLS(A, y, blocks, w)
+        got = cv.oof_residual(X)
+        direct = cv.oof_residual_direct(X)
+        scale = float(np.max(np.abs(direct)))
+        np.testing.assert_allclose(got, direct, rtol=0, atol=1e-10 * scale)
+        if X is collinear:
+            continue
+        ref = np.empty(r)
+        M = np.hstack([A, X])
+        for tr, te in stability.blocked_folds(blocks):
+            th = np.linalg.lstsq(M[tr] * w[tr, None], y[tr] * w[tr], rcond=None)[0]
+            ref[te] = y[te] - M[te] @ th
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * scale)
+
+
+def test_friction_law_selection_with_kept_columns_equals_a_fresh_one(monkeypatch):
+    """The friction-law selection re-run on another y with the same columns hook (as its simulated-noise
+    placebo does) - law columns and column factors kept from the first run - chooses and scores exactly
+    what a run that keeps nothing gives."""
+    from symoro_gen.diagnostics import friction
+    from symoro_gen.diagnostics.friction import select_friction
+
+    rng = np.random.default_rng(11)
+    n, s = 3, 600
+    J = np.repeat(np.arange(n), s)
+    t = np.arange(s) * 0.01
+    dq = np.column_stack([np.sin(2 * np.pi * 0.3 * t + k) * (1 + 0.2 * k) for k in range(n)])
+    dq_rows = dq.T.reshape(-1)
+    A = rng.standard_normal((n * s, 6))
+    A[J == 1, 4:] = 0.0
+    blocks = stability.time_blocks(np.zeros(n * s, int), np.tile(np.arange(s), n), 5)
+
+    def hook(f, p):
+        X = np.zeros((n * s, p))
+        X[J == 1] = np.asarray(f(dq_rows[J == 1]), float).reshape(-1, p)
+        return X
+
+    def run(y):
+        ch = select_friction(A, y, J, 1, dq_rows, blocks, columns=hook)
+        return ch.coulomb, ch.viscous, [(c.law, c.param, c.cv_rel_err) for c in ch.candidates]
+
+    base = A @ rng.standard_normal(6)
+    tanh = np.where(J == 1, 0.8 * np.tanh(dq_rows / 0.1) + 0.3 * dq_rows, 0.0)
+    ys = [base + tanh + 0.05 * rng.standard_normal(n * s) for _ in range(3)]
+    kept = [run(y) for y in ys]                     # the 2nd and 3rd hit the kept columns and factors
+    monkeypatch.setattr(friction, "LAW_COLUMNS_BYTES", 0)
+    monkeypatch.setattr(stability, "COLUMN_CACHE_BYTES", 0)
+    for y, (c, v, tried) in zip(ys, kept):
+        friction._LAW_COLUMNS.clear()
+        stability._FOLD_CACHE.clear()
+        c0, v0, tried0 = run(y)
+        assert (c.law, v.law) == (c0.law, v0.law)
+        assert [x[0] for x in tried] == [x[0] for x in tried0]
+        np.testing.assert_allclose([x[2] for x in tried], [x[2] for x in tried0], rtol=1e-10)
+        np.testing.assert_allclose([x[1] for x in tried if x[1] is not None],
+                                   [x[1] for x in tried0 if x[1] is not None], rtol=1e-6)

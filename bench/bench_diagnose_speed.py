@@ -1,0 +1,139 @@
+"""Benchmark: ``diagnose`` against ``identify`` on the same data (target: diagnose <= 10x identify's wall
+time, peak RSS of diagnose <= 0.5 GB).
+
+Two simulated recordings (as in ``bench/bench_diagnose.py``: random physical parameters, Fourier excitation,
+noise on q and torque, effects the declared model lacks injected with :func:`symoro_gen.diagnostics.inject_effect`):
+
+* ``rx90``: 150 s of 6-joint data at 100 Hz, Stribeck friction on joint 2 and a 10 ms torque lag on joint 1;
+* ``lwr4``: 120 s of 7-joint data at 1 kHz (LWR-like friction), Stribeck friction on joint 2, a 10 ms torque
+  lag on joint 1 and a position ripple on joint 6.
+
+Each run (``identify`` with OLS, then ``diagnose`` with its defaults: every stage) is a fresh subprocess
+that loads the recording from a temporary ``.npz``; its wall and CPU time are printed by the child and its
+peak resident memory is read by the parent from ``resource.getrusage(RUSAGE_CHILDREN).ru_maxrss`` (one
+intermediate process per run, so the figure is that run's own).
+
+    PYTHONPATH=. python bench/bench_diagnose_speed.py [--case rx90 lwr4] [--scale 1.0]
+
+``--scale`` shortens the recordings (e.g. 0.2 for a quick look).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+TARGET_RATIO = 10.0
+TARGET_RSS_GB = 0.5
+CASES = {
+    # robot, seconds, rate [Hz], effects (kind, 0-based joint, parameters)
+    "rx90": ("rx90", 150.0, 100.0, [("stribeck", 1, dict(Fst=0.5, vs=0.05)), ("time_delay", 0, dict(delay=0.01))]),
+    "lwr4": ("lwr4", 120.0, 1000.0, [("stribeck", 1, dict(Fst=0.5, vs=0.05)), ("time_delay", 0, dict(delay=0.01)),
+                                     ("position_ripple", 5, dict(amplitude=0.2, k=8))]),
+}
+
+
+def simulate(case: str, scale: float, path: Path, seed: int = 1) -> str:
+    """Write the case's recording (t, q, tau) to ``path``; return a one-line description."""
+    import symoro_gen
+    from symoro_gen.description import load_robot
+    from symoro_gen.diagnostics import inject_effect
+    from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
+
+    name, seconds, rate, effects = CASES[case]
+    seconds *= scale
+    rng = np.random.default_rng(seed)
+    model, robot = symoro_gen.load_model(name), load_robot(name)
+    n = model.N_JOINTS
+    t, q, dq, ddq = fourier_trajectory(n, seconds, 1.0 / rate, rng, base_frequency_hz=0.1)
+    kw = dict(fs_range=(0.1, 0.5), fv_range=(0.1, 1.0)) if name == "lwr4" else {}
+    chi = np.asarray(random_physical_parameters(robot, rng, **kw))
+    tau = true_torques(model, q, dq, ddq, chi)
+    for kind, j, params in effects:    # torque effects (the measured q stays the true one)
+        _, tau = inject_effect(kind, t, q, dq, ddq, tau, joint=j, **params)
+    qm = q + 1e-5 * rng.standard_normal(q.shape)
+    tau = tau + 0.05 * rng.standard_normal(q.shape)
+    np.savez(path, t=t, q=qm, tau=tau, name=name)
+    return (f"{name}: {t.size} samples x {n} joints at {rate:g} Hz ({seconds:g} s), injected "
+            + ", ".join(f"{k} joint {j + 1}" for k, j, _ in effects))
+
+
+def worker(command: str, path: str) -> None:
+    """Run ``identify`` or ``diagnose`` on the recording; print a JSON line with the times."""
+    import symoro_gen
+    from symoro_gen.preprocessing.trajectory import Trajectory
+
+    d = np.load(path)
+    model = symoro_gen.load_model(str(d["name"]))
+    tr = Trajectory(t=d["t"], q=d["q"], tau=d["tau"], source=f"simulated {d['name']}")
+    w0, c0 = time.perf_counter(), time.process_time()
+    info: dict = {}
+    if command == "identify":
+        symoro_gen.identify(model, tr, method="ols")
+    else:
+        rep = symoro_gen.diagnose(model, tr).residual
+        info["effects"] = [e.label for e in rep.effects]
+        info["unexplained"] = [u.joint for u in rep.unexplained if u.flagged]
+    info.update(wall=time.perf_counter() - w0, cpu=time.process_time() - c0)
+    print("RESULT " + json.dumps(info))
+
+
+def measured(command: str, path: str) -> dict:
+    """``command`` in a child of a fresh intermediate process, which reports the child's peak RSS."""
+    code = ("import resource, subprocess, sys, json\n"
+            f"p = subprocess.run([sys.executable, {str(Path(__file__).resolve())!r}, '--worker', {command!r}, "
+            f"{path!r}], capture_output=True, text=True)\n"
+            "line = [x for x in p.stdout.splitlines() if x.startswith('RESULT ')]\n"
+            "if p.returncode or not line:\n"
+            "    sys.stderr.write(p.stderr); sys.exit(1)\n"
+            "out = json.loads(line[-1][7:])\n"
+            "out['maxrss_kb'] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss\n"
+            "print(json.dumps(out))\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=str(ROOT),
+                       env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    if p.returncode:
+        raise RuntimeError(f"{command} failed:\n{p.stderr[-3000:]}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--case", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--scale", type=float, default=1.0)
+    ap.add_argument("--worker", nargs=2, metavar=("COMMAND", "NPZ"), help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.worker:
+        worker(*a.worker)
+        return 0
+    ok = True
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in a.case:
+            path = Path(tmp) / f"{case}.npz"
+            print(simulate(case, a.scale, path), flush=True)
+            ident = measured("identify", str(path))
+            diag = measured("diagnose", str(path))
+            ratio = diag["wall"] / ident["wall"]
+            rss = diag["maxrss_kb"] / 2 ** 20
+            good = ratio <= TARGET_RATIO and rss <= TARGET_RSS_GB
+            ok &= good
+            print(f"  identify (ols): {ident['wall']:.1f} s wall, {ident['cpu']:.1f} s CPU, peak RSS "
+                  f"{ident['maxrss_kb'] / 2 ** 20:.2f} GB")
+            print(f"  diagnose:       {diag['wall']:.1f} s wall, {diag['cpu']:.1f} s CPU, peak RSS {rss:.2f} GB; "
+                  f"effects {', '.join(diag['effects']) or 'none'}; unexplained joints {diag['unexplained'] or 'none'}")
+            print(f"  ratio diagnose/identify (wall) {ratio:.1f} (target <= {TARGET_RATIO:g}), CPU ratio "
+                  f"{diag['cpu'] / max(ident['cpu'], 1e-9):.1f}; peak RSS {rss:.2f} GB (target <= {TARGET_RSS_GB:g}) "
+                  f"{'OK' if good else 'MISSED'}", flush=True)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
