@@ -1225,7 +1225,7 @@ def _few_acceptance_rows(V: Frame, joints) -> str:
     if not few:
         return ""
     j, k = few[0]
-    return f"{k} acceptance rows on joint {j + 1} < {MIN_ACCEPTANCE_ROWS} (recording too short to accept on)"
+    return f"{k} acceptance rows on joint {j + 1} < {MIN_ACCEPTANCE_ROWS}"
 
 
 def _score_composed_round(data: _Data, base: _Baseline, state: _State, D: _Design, ctx: FitContext, scorer: _Scorer,
