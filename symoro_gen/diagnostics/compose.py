@@ -8,6 +8,9 @@ Effects (columns on joint ``j``'s rows)
     ``ripple``   ``sin(k q_j), cos(k q_j)`` with the order ``k`` searched over :data:`RIPPLE_ORDERS` (the
                  orders with ``k range(q_j) >= pi``: over a smaller range it is a constant or a spring);
     ``constant`` ``1`` (a gravity-like constant torque or an offset); ``inertia`` ``ddq_j``.
+A composed candidate that is a plain candidate of the loop (:mod:`.candidates`) is not in the library:
+``constant`` by a position (``spring``), by ``time`` (``drift``), ``ripple`` by its own joint's position
+(a function of ``q_j`` alone: ``spring`` and ``position_ripple``).
 Modulating signals (the documented set)
     ``time``     time since the start of each experiment;
     ``q_own``    the joint's own position ``q_j``; ``q_other`` the position ``q_i`` of every other joint
@@ -351,6 +354,13 @@ def library(sig: RowSignals, *, joints: Sequence[int] | None = None, effects: Se
                     continue
                 if eff == "constant" and s in ("q_own", "q_other"):
                     continue       # position-dependent torques: the spring/ripple candidates of the loop
+                if eff == "ripple" and s == "q_own":
+                    # a function of q_j alone: q_j sin(k q_j) is a smooth position-dependent torque plus ripples
+                    # of neighbouring orders, the loop's spring and position_ripple candidates (over a small range
+                    # it fits a missing spring as well as the spring does)
+                    continue
+                if eff == "constant" and s == "time":
+                    continue       # a torque changing linearly in time: the loop's drift candidate (t/T, (t/T)^2)
                 sources = [i for i in range(n) if i != j] if s == "q_other" else [None]
                 steps = _step_times(sig.t[rows], n_step_times) if s == "step" else (None,)
                 for src in sources:

@@ -109,15 +109,17 @@ def test_clean_data_name_nothing(seed):
 def test_library_counts_and_words():
     _, sig, _, _ = setup(31, duration=10.0, dt=0.05)
     fams = library(sig)
-    # per joint: 5 effects x 7 signals (no temperature), q_other for 3 other joints, constant x q skipped
+    # per joint: 5 effects x 7 signals (no temperature), q_other for 3 other joints; the plain candidates of
+    # the loop skipped: constant x q (own and 3 others: spring), constant x time (drift), ripple x own q
     # (ripple only on joints that move over half a period of at least one order: k range(q_j) >= pi)
     import math
 
     from symoro_gen.diagnostics.compose import RIPPLE_ORDERS
 
-    per_joint = 5 * (6 + 3) - (1 + 3)
+    per_joint = 5 * (6 + 3) - (1 + 3) - 1 - 1
     orders = [[k for k in RIPPLE_ORDERS if k * float(np.ptp(sig.q[sig.joint == j, j])) >= math.pi] for j in range(4)]
-    assert len(fams) == 4 * per_joint - (6 + 3) * sum(not o for o in orders)
+    assert len(fams) == 4 * per_joint - (6 + 3 - 1) * sum(not o for o in orders)
+    assert not [f for f in fams if (f[0].effect, f[0].signal) in (("constant", "time"), ("ripple", "q_own"))]
     ripple_step = [f for f in fams if f[0].effect == "ripple" and f[0].signal == "step"]
     assert ripple_step and all(len(f) == len(orders[f[0].joint]) * len({c.step_time for c in f}) for f in ripple_step)
     sig_t = RowSignals(sig.joint, sig.t, sig.q, sig.dq, sig.ddq, None, np.linspace(20, 40, sig.n_rows))

@@ -17,7 +17,8 @@ from .simdata import recording
 
 pytest.importorskip("sklearn", reason="scikit-learn (extra 'diagnose') is needed for the unexplained stage")
 
-DURATION = 12.0
+#: long enough for core.MIN_ACCEPTANCE_ROWS acceptance rows per joint (12 s keeps 22: the loop then names nothing)
+DURATION = 16.0
 DT = 0.004
 
 
