@@ -657,6 +657,24 @@ def _context(data: _Data, F: Frame, V: Frame, names: Sequence[str], theta: np.nd
                       predictions={id(F): F.system.W @ td, id(V): data.Vs.W @ td})
 
 
+def _refit(data: _Data, F: Frame, V: Frame, added: Sequence[_Added]
+           ) -> tuple[Frame, Frame, tuple[_Added, ...], IdentificationResult, tuple[str, ...], np.ndarray, np.ndarray]:
+    """The model with the effects ``added`` re-identified with :data:`SELECT_METHOD` on ``F``, the effects that
+    depend on the fit re-linearised around it (fixed point, :data:`RELINEARISE_PASSES`), the model torque of the
+    new fit attached to both frames; returns the frames, effects, fit, names and columns."""
+    Y, J = F.system.Y, F.system.joint
+    names, A, Av = _augmented(data, added)
+    res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
+    passes = RELINEARISE_PASSES if any(ad.family.depends_on_fit for ad in added) else 0
+    for _ in range(passes):
+        F, V, added = _relinearise(data, F, V, added, res)
+        names, A, Av = _augmented(data, added)
+        res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
+    if not passes:
+        F, V, added = _relinearise(data, F, V, added, res)   # model torque of the new fit for the next round
+    return F, V, tuple(added), res, names, A, Av
+
+
 def _relinearise(data: _Data, F: Frame, V: Frame, added: Sequence[_Added], result: IdentificationResult
                  ) -> tuple[Frame, Frame, tuple[_Added, ...]]:
     """Model torque of ``result`` on both frames; the effects that depend on the fit rebuilt around it."""
@@ -1316,7 +1334,7 @@ def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: Dia
     loop's path must not depend on the estimator) and re-linearise the effects that depend on the fit
     (fixed point, :data:`RELINEARISE_PASSES`)."""
     F, V = state.F, state.V
-    Y, J = F.system.Y, F.system.joint
+    Y = F.system.Y
     _, fam, ev, X, Xv, _cs = scored.eligible[pick]
     value = fam.grid[ev.member] if fam.grid else None
     if fam.build_at is not None:
@@ -1324,15 +1342,7 @@ def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: Dia
         X, Xv = fam.build_at(F, scored.ctx, value), fam.build_at(V, scored.ctx, value)
     added = state.added + (_Added(fam, value, X, Xv),)
     meta = dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd)
-    names, A, Av = _augmented(data, added)
-    res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
-    passes = RELINEARISE_PASSES if any(ad.family.depends_on_fit for ad in added) else 0
-    for _ in range(passes):
-        F, V, added = _relinearise(data, F, V, added, res)
-        names, A, Av = _augmented(data, added)
-        res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
-    if not passes:
-        F, V, added = _relinearise(data, F, V, added, res)   # model torque of the new fit for the next round
+    F, V, added, res, names, A, Av = _refit(data, F, V, added)
     th = np.array([res.value(nm) for nm in names])
     return replace(state, F=F, V=V, added=added, res=res, effects_meta=state.effects_meta + (meta,),
                    round_resid=state.round_resid + ((Y - A @ th, data.Vs.Y - Av @ th),))
@@ -1982,7 +1992,7 @@ def _transfer(full: _Data, state: _State) -> _State:
     """The loop's model on the report's data: every effect rebuilt on all identification data and on the
     validation data (searched parameters kept), refitted (:data:`SELECT_METHOD`) on all identification
     data and re-linearised (fixed point); the per-round residuals recomputed there."""
-    Y, J = full.F.system.Y, full.F.system.joint
+    Y = full.F.system.Y
     names, _, _ = _augmented(full, ())
     names += tuple(nm for ad in state.added for nm in ad.family.names())
     res = state.res
@@ -1993,15 +2003,7 @@ def _transfer(full: _Data, state: _State) -> _State:
     clear_elasticity_cache()
     added = tuple(_Added(ad.family, ad.value, _build_one(ad.family, F, ctx, ad.value),
                          _build_one(ad.family, V, ctx, ad.value)) for ad in state.added)
-    names, A, Av = _augmented(full, added)
-    res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
-    passes = RELINEARISE_PASSES if any(ad.family.depends_on_fit for ad in added) else 0
-    for _ in range(passes):
-        F, V, added = _relinearise(full, F, V, added, res)
-        names, A, Av = _augmented(full, added)
-        res = _fit(ObservationSystem(A, Y, names, J), SELECT_METHOD)
-    if not passes:
-        F, V, added = _relinearise(full, F, V, added, res)
+    F, V, added, res, names, A, Av = _refit(full, F, V, added)
     rounds = []
     for k in range(len(added) + 1):
         _, Ak, Avk = _augmented(full, added[:k])

@@ -256,7 +256,7 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
                           experiment: np.ndarray | None = None, order: np.ndarray | None = None,
                           n_folds: int = N_FOLDS, n_null: int = N_NULL, min_share: float = MIN_SHARE,
                           null_margin: float = NULL_MARGIN, seed: int = 0, joints: Sequence[int] | None = None,
-                          signals: bool = True, max_samples: int = MAX_TREE_SAMPLES) -> list[Unexplained]:
+                          signals: bool = True) -> list[Unexplained]:
     """Share of each joint's residual that the signals predict out of fold, with a noise-calibrated threshold.
 
     Parameters
@@ -283,9 +283,6 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         0-based joints to analyse (default all).
     signals : bool
         Compute the signals a flagged joint depends on (permutation importance; False: ``signals`` empty).
-    max_samples : int
-        Samples are thinned to every ``ceil(s / max_samples)``-th one (in time order within each
-        experiment) before the trees see them.
 
     Returns
     -------
@@ -301,7 +298,9 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         raise ValueError(f"unexplained_structure: residual {E.shape}, features {X.shape} and {len(names)} names disagree")
     experiment = np.zeros(s, int) if experiment is None else np.asarray(experiment)
     order = np.arange(s) if order is None else np.asarray(order)
-    stride = -(-s // max(int(max_samples), 1))
+    # samples thinned to every ceil(s / MAX_TREE_SAMPLES)-th one (in time order within each experiment)
+    # before the trees see them
+    stride = -(-s // MAX_TREE_SAMPLES)
     if stride > 1:
         keep = np.concatenate([np.flatnonzero(experiment == x)[np.argsort(order[experiment == x], kind="stable")][::stride]
                                for x in np.unique(experiment)])

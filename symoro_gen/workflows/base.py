@@ -35,6 +35,7 @@ from ..model import IdentificationModel
 from ..preprocessing.motion import hold_still, noise_level_joints, saturation_warnings, still_warnings
 from ..preprocessing.readers import DataWarning, LoadReport, LogFormat, read_recordings
 from ..preprocessing.trajectory import Trajectory
+from ..report.document import report_targets
 from ..report.plots import require_matplotlib
 
 __all__ = ["SCHEMA_VERSION", "DataLike", "Options", "Results", "as_trajectories", "check_option_names", "listed",
@@ -147,8 +148,6 @@ class Results:
         (resolved: a symlink to one is one), and an existing file symoro-gen did not write is replaced only with
         ``force``."""
         if report:
-            from ..report.document import report_targets
-
             outs: dict = dict(report_targets(label, path))
         else:
             outs = {label: path}
