@@ -467,11 +467,15 @@ def test_cli_import_par(tmp_path, cli):
     assert "bad.par" in err and "line 7" in err and "Type" in err and not (tmp_path / "bad.toml").exists()
 
 
-def test_huge_float_angle_is_kept():
-    # found by tests/fuzz: snapping gamma = 1e308 to a multiple of pi/12 overflowed round()
+def test_huge_float_angle_is_refused_with_its_field():
+    # found by tests/fuzz: snapping gamma = 1e308 to a multiple of pi/12 overflowed round(); such a value is
+    # not an angle of a robot: refused, naming the frame and the field (robot numbers are finite, |x| <= 1e12)
     from symoro_gen.description import load_robot as _load
     from symoro_gen.description.par import export_par, import_par_text
+    from symoro_gen.errors import RobotFileError
 
     text = export_par(_load("scara")).replace("gamma = {0,0,0,0}", "gamma = {1e308,0,0,0}")
-    robot = parse_robot_text(import_par_text(text))
-    assert float(robot.row(1).gamma) == 1e308
+    with pytest.raises(RobotFileError) as err:
+        parse_robot_text(import_par_text(text))
+    msg = str(err.value)
+    assert "frame 1" in msg and "'gamma'" in msg and "1e+12" in msg

@@ -78,8 +78,10 @@ def diagnosis():
     p = random_physical_parameters(robot, rng)
     chi = getattr(p, "chi_std", p)
     trs = []
-    for k in range(2):
-        t, q, dq, ddq = fourier_trajectory(robot.n_joints, 8.0, 0.002, rng)
+    # 16 s to identify (the loop accepts a change on the trailing 30 % of it: at least MIN_ACCEPTANCE_ROWS
+    # decimated rows per joint), 8 s to validate
+    for k, seconds in enumerate((16.0, 8.0)):
+        t, q, dq, ddq = fourier_trajectory(robot.n_joints, seconds, 0.002, rng)
         tau = true_torques(model, q, dq, ddq, chi)
         qm, tm = dg.inject_effect("stribeck", t, q, dq, ddq, tau, joint=1, Fst=3.0, vs=0.1)
         trs.append(Trajectory(t, qm + rng.normal(0, 1e-5, q.shape), tm + rng.normal(0, 0.05, tau.shape),
