@@ -15,9 +15,6 @@ from typing import Any
 import numpy as np
 
 from ..preprocessing.filtering import (
-    CUTOFF_FACTOR,
-    DECIMATION_CUTOFF_RATIO,
-    DECIMATION_MARGIN,
     FilterRule,
 )
 
@@ -73,18 +70,19 @@ class AssemblyOptions:
     ftype: str = "fir"
     #: Samples dropped at both ends of each experiment (filter edge effects); default from the filters.
     edge_samples: int | None = None
-    #: Gautier's rule: Butterworth cut-off = ``cutoff_factor * f_dyn`` (>= 10).
-    cutoff_factor: float = CUTOFF_FACTOR
+    #: Gautier's rule: Butterworth cut-off = ``cutoff_factor * f_dyn`` (>= 10). These six default to
+    #: :class:`~symoro_gen.preprocessing.filtering.FilterRule`'s (passed to the filters as one, ``rule_keywords``).
+    cutoff_factor: float = FilterRule.cutoff_factor
     #: Decimated Nyquist frequency >= ``decimation_margin * f_dyn``.
-    decimation_margin: float = DECIMATION_MARGIN
+    decimation_margin: float = FilterRule.decimation_margin
     #: Decimation cut-off relative to the decimated Nyquist frequency (0.8 as Matlab's ``decimate``).
-    cutoff_ratio: float = DECIMATION_CUTOFF_RATIO
+    cutoff_ratio: float = FilterRule.cutoff_ratio
     #: Share of the position energy below ``f_dyn`` when ``f_dyn`` is estimated.
-    energy_fraction: float = 0.999
+    energy_fraction: float = FilterRule.energy_fraction
     #: Floor of the estimated ``f_dyn`` [Hz].
-    min_bandwidth_hz: float = 1.0
+    min_bandwidth_hz: float = FilterRule.min_bandwidth_hz
     #: The cut-off never exceeds this share of the Nyquist frequency.
-    max_cutoff_fraction: float = 0.8
+    max_cutoff_fraction: float = FilterRule.max_cutoff_fraction
     #: Append the payload regressor's columns (zeros for experiments without the payload, LWR4 paper eq. 7).
     payload_columns: bool = False
     #: Remove the rows of joint j that depend on samples with ``|dq_j| < min_velocity[j]`` [rad/s or m/s]
