@@ -31,10 +31,10 @@ simulators), never over an existing file unless ``force`` (:func:`~symoro_gen.at
 """
 from __future__ import annotations
 
-import math
 import os
 import re
 import shutil
+import struct
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -144,18 +144,119 @@ def robot_joint_names(robot) -> tuple[str, ...] | None:
 
 
 # ---------------------------------------------------------------------------------------------
-# reading joint states
+# reading joint states, column-wise
 # ---------------------------------------------------------------------------------------------
+#: the fields of a JointState's arrays, in the order of the message definition (sensor_msgs/msg/JointState)
+ARRAYS = ("position", "velocity", "effort")
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where the fields lie in the serialized messages sharing a byte length and a header-and-names prefix:
+    joint names, and for each array its (byte offset, count); ``dtype`` the float64 of the encoding."""
+
+    names: tuple[str, ...]
+    arrays: tuple[tuple[int, int], ...]
+    prefix_end: int
+    dtype: str
+    counts: tuple[int, ...]              # byte offsets of the arrays' element counts
+
+    def key(self, raw: bytes) -> tuple[int, bytes]:
+        """What messages of this layout share: the length, the frame id and names, the arrays' counts."""
+        return len(raw), bytes(raw[12:self.prefix_end]) + b"".join(raw[c:c + 4] for c in self.counts)
+
+
+def _decode_layout(raw: bytes, ros1: bool) -> _Layout:
+    """The layout of one serialized ``sensor_msgs/JointState``: ROS 1 (little endian, no alignment; header seq,
+    stamp, frame_id) or ROS 2 CDR (4-byte encapsulation header, then fields aligned to their size counted from
+    byte 4; OMG CDR 1.0 as rosbags' ``serde.cdr``). Raises ValueError on a message that does not parse."""
+    view = memoryview(raw)
+    if ros1:
+        base, le = 0, True
+    else:
+        if len(raw) < 4 or raw[1] not in (0, 1):
+            raise ValueError("not a CDR encapsulation header")
+        base, le = 4, raw[1] == 1
+    u32 = struct.Struct("<I" if le else ">I")
+
+    def align(p: int, k: int) -> int:
+        return p if ros1 else base + ((p - base + k - 1) & -k)
+
+    def u(p: int) -> int:
+        if p + 4 > len(raw):
+            raise ValueError("truncated")
+        return u32.unpack_from(view, p)[0]
+
+    pos = 12 if ros1 else base + 8       # ROS 1: seq, sec, nsec; ROS 2: sec, nanosec
+    nul = 0 if ros1 else 1               # CDR strings count their NUL byte
+    pos += 4 + u(pos)                    # frame_id
+    pos = align(pos, 4)
+    count = u(pos)
+    pos += 4
+    if count > len(raw):
+        raise ValueError("name count larger than the message")
+    names = []
+    for _ in range(count):
+        pos = align(pos, 4)
+        k = u(pos)
+        if k < nul or pos + 4 + k > len(raw):
+            raise ValueError("bad name")
+        names.append(bytes(view[pos + 4:pos + 4 + k - nul]).decode())
+        pos += 4 + k
+    prefix_end = pos
+    arrays, counts = [], []
+    for _ in ARRAYS:
+        pos = align(pos, 4)
+        counts.append(pos)
+        k = u(pos)
+        pos += 4
+        if k:
+            pos = align(pos, 8)
+        if pos + 8 * k > len(raw):
+            raise ValueError("truncated array")
+        arrays.append((pos, k))
+        pos += 8 * k
+    return _Layout(tuple(names), tuple(arrays), prefix_end, "<f8" if le else ">f8", tuple(counts))
+
+
 @dataclass
-class _Msg:
-    topic: str
-    index: int          # 1-based, in its topic
-    log_ns: int
-    stamp_ns: int
-    names: list[str]
-    position: np.ndarray
-    velocity: np.ndarray
-    effort: np.ndarray
+class _Msgs:
+    """The messages of the joint topics, one entry per message in the bag's order: ``topic`` (code into
+    ``topics``), ``index`` (1-based, in its topic), ``log_ns``, ``stamp_ns``, ``layout`` (code into
+    ``names``/``arrays``: messages with the same joint names and array sizes) and ``row`` (the message's row in
+    its layout's arrays ``arrays[layout][field]``, (messages, joints), empty arrays of zero columns)."""
+
+    topics: list[str]
+    topic: np.ndarray
+    index: np.ndarray
+    log_ns: np.ndarray
+    stamp_ns: np.ndarray
+    layout: np.ndarray
+    row: np.ndarray
+    names: list[tuple[str, ...]]
+    arrays: list[dict[str, np.ndarray]]
+
+    @property
+    def size(self) -> int:
+        return int(self.topic.size)
+
+    def take(self, keep: np.ndarray) -> _Msgs:
+        return replace(self, topic=self.topic[keep], index=self.index[keep], log_ns=self.log_ns[keep],
+                       stamp_ns=self.stamp_ns[keep], layout=self.layout[keep], row=self.row[keep])
+
+    def label(self, i: int) -> str:
+        return f"{self.topics[int(self.topic[i])]} message {int(self.index[i])}"
+
+    def topic_names(self) -> set[str]:
+        return {self.topics[int(c)] for c in np.unique(self.topic)}
+
+    def layouts_used(self) -> list[int]:
+        """The layouts of the messages, in the order they first appear."""
+        codes, first = np.unique(self.layout, return_index=True)
+        return [int(c) for c in codes[np.argsort(first)]]
+
+    def published(self) -> set[str]:
+        return {nm for k in self.layouts_used() for nm in self.names[k]}
 
 
 def _stamp_ns(msg) -> int:
@@ -189,31 +290,115 @@ def _joint_topics(reader, path: str, fmt: LogFormat) -> list[Any]:
     return out
 
 
-def _messages(reader, conns, path: str) -> list[_Msg]:
-    out: list[_Msg] = []
-    count: dict[str, int] = {}
+def _checked_layout(reader, raw: bytes, ros1: bool) -> _Layout | None:
+    """The layout of a message, checked against the library's deserialization of it (a bag whose JointState
+    definition is not the standard one reads through the library); None when it does not agree."""
+    try:
+        lay = _decode_layout(raw, ros1)
+    except (ValueError, UnicodeDecodeError, struct.error):
+        return None
+    try:
+        msg = reader.deserialize(raw, JOINT_STATE)
+    except Exception:  # noqa: BLE001 - the library's own errors on a malformed message
+        return None
+    if tuple(str(x) for x in msg.name) != lay.names:
+        return None
+    for f, (off, k) in zip(ARRAYS, lay.arrays):
+        a = np.asarray(getattr(msg, f), float).ravel()
+        b = np.frombuffer(raw, lay.dtype, count=k, offset=off)
+        if a.size != k or not np.array_equal(a, b, equal_nan=True):
+            return None
+    return lay
+
+
+def _read_messages(reader, conns, path: str) -> _Msgs:
+    """Every message of ``conns``, column-wise. Messages are grouped by layout (byte length and the bytes of
+    the frame id and joint names): the stamps and arrays of a group are read at fixed offsets from one buffer
+    (one numpy view per field instead of a Python call per message); a message in no known layout is decoded
+    once (:func:`_decode_layout`, checked against the library), or deserialized by the library."""
+    ros1 = not getattr(reader, "is2", Path(path).suffix.lower() != ".bag")
+    topics = sorted({c.topic for c in conns})
+    code = {t: k for k, t in enumerate(topics)}
+    layouts: list[_Layout | None] = []           # None: a message deserialized by the library
+    keys: dict[tuple[int, bytes], int] = {}
+    raws: list[list[bytes]] = []
+    lib: dict[int, tuple[tuple[str, ...], dict[str, np.ndarray], int]] = {}
+    topic, index, log, layout, row = [], [], [], [], []
+    count = [0] * len(topics)
     probs: list[Problem] = []
     start = int(reader.start_time)
+    last: tuple[_Layout, int, tuple[int, bytes]] | None = None
     for conn, log_ns, raw in reader.messages(connections=conns):
-        k = count[conn.topic] = count.get(conn.topic, 0) + 1
-        where = f"topic {conn.topic}, message {k} (logged {(log_ns - start) * 1e-9:.6g} s into the bag)"
-        msg = reader.deserialize(raw, conn.msgtype)
-        names = [str(x) for x in msg.name]
-        arrs = {f: np.asarray(getattr(msg, f), float).ravel() for f in ("position", "velocity", "effort")}
+        c = code[conn.topic]
+        count[c] += 1
+        if last is not None and len(raw) == last[2][0] and last[0].key(raw) == last[2]:
+            k = last[1]
+        else:
+            lay = _checked_layout(reader, raw, ros1)
+            if lay is not None:
+                key = lay.key(raw)
+                k = keys.get(key, -1)
+                if k < 0:
+                    k = keys[key] = len(layouts)
+                    layouts.append(lay)
+                    raws.append([])
+                last = (lay, k, key)
+            else:
+                try:
+                    msg = reader.deserialize(raw, conn.msgtype)
+                except Exception as exc:  # noqa: BLE001 - the library's errors on a malformed message
+                    probs.append(Problem(path, f"topic {conn.topic}, message {count[c]} (logged "
+                                         f"{(log_ns - start) * 1e-9:.6g} s into the bag)", "",
+                                         f"cannot deserialize ({type(exc).__name__}: {exc})"))
+                    continue
+                k = len(layouts)
+                layouts.append(None)
+                raws.append([])
+                lib[k] = (tuple(str(x) for x in msg.name),
+                          {f: np.asarray(getattr(msg, f), float).ravel()[None, :] for f in ARRAYS}, _stamp_ns(msg))
+        topic.append(c)
+        index.append(count[c])
+        log.append(int(log_ns))
+        layout.append(k)
+        row.append(len(raws[k]))
+        if layouts[k] is not None:
+            raws[k].append(raw)
+    names: list[tuple[str, ...]] = []
+    arrays: list[dict[str, np.ndarray]] = []
+    stamp = np.zeros(len(topic), np.int64)
+    lay_arr = np.asarray(layout, np.int64)
+    for k, lay in enumerate(layouts):
+        mine = np.flatnonzero(lay_arr == k)
+        if lay is None:
+            nm, arrs, stamp[mine] = lib[k]
+        else:
+            nm = lay.names
+            buf = np.frombuffer(b"".join(raws[k]), np.uint8).reshape(len(raws[k]), -1)
+            i32 = "<i4" if lay.dtype[0] == "<" else ">i4"
+            u32 = "<u4" if lay.dtype[0] == "<" else ">u4"
+            sec = np.ascontiguousarray(buf[:, 4:8]).view(u32 if ros1 else i32)[:, 0].astype(np.int64)
+            nsec = np.ascontiguousarray(buf[:, 8:12]).view(u32)[:, 0].astype(np.int64)
+            stamp[mine] = sec * 10**9 + nsec
+            arrs = {f: np.ascontiguousarray(buf[:, off:off + 8 * cnt]).view(lay.dtype).astype(float)
+                    for f, (off, cnt) in zip(ARRAYS, lay.arrays)}
+        i = int(mine[0])
+        where = f"topic {topics[topic[i]]}, message {index[i]} (logged {(log[i] - start) * 1e-9:.6g} s into the bag)"
+        names.append(nm)
+        arrays.append(arrs)
         for f, a in arrs.items():
-            if a.size not in (0, len(names)):
-                probs.append(Problem(path, where, f, f"{a.size} values for {len(names)} joint names"))
-        if arrs["position"].size == 0 and names:
+            size = a.shape[-1]
+            if size not in (0, len(nm)):
+                probs.append(Problem(path, where, f, f"{size} values for {len(nm)} joint names"
+                                     + (f" (and {mine.size - 1} more message(s) alike)" if mine.size > 1 else "")))
+        if arrs["position"].shape[-1] == 0 and nm:
             probs.append(Problem(path, where, "position", "empty: every message must give the joints' positions"))
-        out.append(_Msg(conn.topic, k, int(log_ns), _stamp_ns(msg), names, arrs["position"], arrs["velocity"],
-                        arrs["effort"]))
     if probs:
         raise DataFileError(probs[:20])
-    return out
+    return _Msgs(topics, np.asarray(topic, np.int64), np.asarray(index, np.int64), np.asarray(log, np.int64),
+                 stamp, lay_arr, np.asarray(row, np.int64), names, arrays)
 
 
-def _wanted_names(msgs: list[_Msg], n: int, fmt: LogFormat, robot, path: str, topics: str
-                  ) -> tuple[list[str], str]:
+def _wanted_names(msgs: _Msgs, n: int, fmt: LogFormat, robot, path: str, topics: str) -> tuple[list[str], str]:
     """The bag's names of the robot's joints (prefix included) and how they were matched."""
     pre = fmt.prefix or ""
     if fmt.joint_names:
@@ -226,8 +411,8 @@ def _wanted_names(msgs: list[_Msg], n: int, fmt: LogFormat, robot, path: str, to
     if rn is not None:
         return [pre + x for x in rn], "by the URDF joint names of the robot file"
     first: list[str] = []
-    for m in msgs:
-        first += [x for x in m.names if x.startswith(pre) and x not in first]
+    for k in msgs.layouts_used():
+        first += [x for x in msgs.names[k] if x.startswith(pre) and x not in first]
         if len(first) >= n:
             break
     if len(first) < n:
@@ -244,43 +429,48 @@ class _Samples:
     q: np.ndarray
     dq: np.ndarray | None
     tau: np.ndarray
-    first_msg: list[str]                 # where each sample comes from (topic, message)
+    first_msg: np.ndarray                # (N,) the first message at each time (index into the messages)
     notes: list[str] = field(default_factory=list)
     dropped: list[str] = field(default_factory=list)
     n_dropped: int = 0                   # times dropped (a joint missing, --drop-bad-rows)
 
 
-def _times(msgs: list[_Msg], fmt: LogFormat, path: str, topics: str, notes: list[str]) -> list[int]:
+def _times(msgs: _Msgs, fmt: LogFormat, path: str, topics: str, notes: list[str]) -> np.ndarray:
     """Each message's time [ns]: the header stamp or the log time (``fmt.stamp``)."""
     if fmt.stamp == "log":
-        return [m.log_ns for m in msgs]
-    zero = [m for m in msgs if m.stamp_ns == 0]
-    if zero and len(zero) == len(msgs):
+        return msgs.log_ns
+    zero = np.flatnonzero(msgs.stamp_ns == 0)
+    if zero.size and zero.size == msgs.size:
         notes.append(f"every header stamp of {topics} is zero: the bag's log times are used (--stamp log)")
-        return [m.log_ns for m in msgs]
-    if zero:
-        where = ", ".join(f"{m.topic} message {m.index}" for m in zero[:SHOWN]) + (", ..." if len(zero) > SHOWN else "")
-        raise DataFileError([Problem(path, f"{len(zero)} message(s): {where}", "header.stamp",
+        return msgs.log_ns
+    if zero.size:
+        where = ", ".join(msgs.label(i) for i in zero[:SHOWN]) + (", ..." if zero.size > SHOWN else "")
+        raise DataFileError([Problem(path, f"{zero.size} message(s): {where}", "header.stamp",
                                      "zero while other messages are stamped")], hint=STAMP_HINT)
-    return [m.stamp_ns for m in msgs]
+    return msgs.stamp_ns
 
 
-def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topics: str) -> _Samples:
-    """Per-stamp samples of the wanted joints (messages of several publishers merged by stamp)."""
+def _out_of_order(msgs: _Msgs, times: np.ndarray) -> int:
+    """Messages earlier than one before them in their topic (each publisher's own sequence)."""
+    back = 0
+    for c in np.unique(msgs.topic):
+        tt = times[msgs.topic == c]
+        if tt.size > 1:
+            back += int((tt[1:] < np.maximum.accumulate(tt)[:-1]).sum())
+    return back
+
+
+def _samples(msgs: _Msgs, names: list[str], fmt: LogFormat, path: str, topics: str) -> _Samples:
+    """Per-stamp samples of the wanted joints (messages of several publishers merged by stamp), column-wise:
+    every (message, joint) value in one array, sorted by (time, message), the first of each (time, joint) kept."""
     notes: list[str] = []
     times = _times(msgs, fmt, path, topics, notes)
     want = {nm: j for j, nm in enumerate(names)}
-    # messages out of order (per topic: each publisher's own sequence)
-    back = 0
-    last: dict[str, int] = {}
-    for m, tn in zip(msgs, times):
-        if m.topic in last and tn < last[m.topic]:
-            back += 1
-        last[m.topic] = max(tn, last.get(m.topic, tn))
+    back = _out_of_order(msgs, times)
     if back:
         notes.append(f"{back} message(s) out of order in the bag: sorted by "
                      f"{'log time' if fmt.stamp == 'log' else 'stamp'}")
-    present = {nm for m in msgs for nm in m.names}
+    present = msgs.published()
     missing = [nm for nm in names if nm not in present]
     if missing:
         what = f"joint {missing[0]!r} is" if len(missing) == 1 else f"joints {fmt_names(missing)} are"
@@ -294,57 +484,89 @@ def _samples(msgs: list[_Msg], names: list[str], fmt: LogFormat, path: str, topi
     extra = sorted(present - set(names))
     if extra:
         notes.append(f"joints ignored (not the robot's): {fmt_names(extra)}")
-    order = sorted(range(len(msgs)), key=lambda i: (times[i], i))
-    stamps = sorted(set(times))
-    row = {s: r for r, s in enumerate(stamps)}
-    N, n = len(stamps), len(names)
-    q = np.full((N, n), np.nan)
-    v = np.full((N, n), np.nan)
-    tau = np.full((N, n), np.nan)
-    has_v = np.zeros(n, bool)
-    has_e = np.zeros(n, bool)
-    src = [""] * N
-    dup = 0
+    stamps, row_of = np.unique(times, return_inverse=True)
+    N, n = stamps.size, len(names)
+    # every value of a wanted joint: (message, joint, q, dq, tau), NaN where the message's array is empty
+    e_msg: list[np.ndarray] = []
+    e_j: list[np.ndarray] = []
+    e_q: list[np.ndarray] = []
+    e_v: list[np.ndarray] = []
+    e_e: list[np.ndarray] = []
+    for k in msgs.layouts_used():
+        cols = [(c, want[nm]) for c, nm in enumerate(msgs.names[k]) if nm in want]
+        if not cols:
+            continue
+        mine = np.flatnonzero(msgs.layout == k)
+        rows = msgs.row[mine]
+        c_idx = np.array([c for c, _ in cols])
+        arr = msgs.arrays[k]
+        e_msg.append(np.repeat(mine, len(cols)))
+        e_j.append(np.tile([j for _, j in cols], mine.size))
+        for f, acc in (("position", e_q), ("velocity", e_v), ("effort", e_e)):
+            a = arr[f]
+            acc.append(a[rows][:, c_idx].ravel() if a.shape[1] else np.full(mine.size * len(cols), np.nan))
+    m_all, j_all = np.concatenate(e_msg), np.concatenate(e_j)
+    vals = {"position": np.concatenate(e_q), "velocity": np.concatenate(e_v), "effort": np.concatenate(e_e)}
+    empty = {f: _empty_mask(msgs, m_all, f) for f in ARRAYS}  # NaN from an empty array, not a bad value
+    o = np.lexsort((m_all, times[m_all]))              # by time, then bag order: the first published kept
+    key = row_of[m_all[o]] * n + j_all[o]
+    uniq, first = np.unique(key, return_index=True)
+    dup = o.size - uniq.size
+    keep = o[first]
+    r, j = row_of[m_all[keep]], j_all[keep]
+    t_first = times.min()
     bad: list[Problem] = []
-    for i in order:
-        m = msgs[i]
-        r = row[times[i]]
-        src[r] = src[r] or f"{m.topic} message {m.index}"
-        for k, nm in enumerate(m.names):
-            j = want.get(nm)
-            if j is None:
-                continue
-            if not np.isnan(q[r, j]):
-                dup += 1
-                continue
-            for fld, arr, dest, has in (("position", m.position, q, None), ("velocity", m.velocity, v, has_v),
-                                        ("effort", m.effort, tau, has_e)):
-                if not arr.size:
-                    continue
-                x = float(arr[k])
-                if not (math.isfinite(x) and abs(x) <= ABSURD_VALUE):
-                    bad.append(Problem(path, f"topic {m.topic}, message {m.index} (t = {(times[i] - times[order[0]]) * 1e-9:.6g} s), "
-                                       f"joint {nm}", fld, f"{x:g}: not a finite value of at most {ABSURD_VALUE:g}"))
-                    x = math.nan  # dropped with --drop-bad-rows (the time is incomplete)
-                dest[r, j] = x
-                if has is not None:
-                    has[j] = True
+    out: dict[str, np.ndarray] = {}
+    for f in ARRAYS:
+        x = vals[f][keep].copy()
+        ok = empty[f][keep] | (np.isfinite(x) & (np.abs(x) <= ABSURD_VALUE))
+        for i in np.flatnonzero(~ok)[:max(0, 20 - len(bad))]:
+            mi = int(m_all[keep[i]])
+            bad.append(Problem(path, f"topic {msgs.topics[int(msgs.topic[mi])]}, message {int(msgs.index[mi])} "
+                               f"(t = {(times[mi] - t_first) * 1e-9:.6g} s), joint {names[int(j[i])]}", f,
+                               f"{x[i]:g}: not a finite value of at most {ABSURD_VALUE:g}"))
+        x[~ok] = np.nan  # dropped with --drop-bad-rows (the time is incomplete)
+        grid = np.full((N, n), np.nan)
+        grid[r, j] = x
+        out[f] = grid
+        if f != "position":
+            has = np.zeros((N, n), bool)
+            has[r, j] = ~empty[f][keep]
+            out[f + "_has"] = has
     if bad and not fmt.drop_bad_rows:
         raise DataFileError(bad[:20], hint=DROP_HINT)
     if dup:
         notes.append(f"{dup} joint sample(s) published twice at the same time: the first kept")
-    no_e = [names[j] for j in range(n) if not has_e[j]]
+    has_e = np.asarray(out["effort_has"].any(axis=0), bool)
+    no_e = [names[jj] for jj in range(n) if not has_e[jj]]
     if no_e:
         raise DataFileError([Problem(path, f"topic {topics}", "effort", f"empty in every message for joint(s) "
                                      f"{fmt_names(no_e)}: the torque is needed (effort, or a current with "
                                      "--tau-scale)")])
-    dq = v if has_v.all() else None
-    if dq is None:
+    got_q = ~np.isnan(out["position"])
+    has_v = out["velocity_has"]
+    dq: np.ndarray | None = out["velocity"]
+    if not has_v.any():
+        dq = None
         notes.append("velocity empty in the messages: velocities computed from the positions")
-    return _complete(_Samples(np.asarray(stamps, np.int64), q, dq, tau, src, notes), names, fmt, path)
+    elif not has_v[got_q].all():
+        dq = None
+        no_v = np.unique(m_all[keep][empty["velocity"][keep]])
+        notes.append(f"velocity empty in {no_v.size} of {msgs.size} messages (the first: {msgs.label(int(no_v[0]))}): "
+                     "velocities computed from the positions")
+    o_msg = np.lexsort((np.arange(msgs.size), times))
+    _, first_row = np.unique(row_of[o_msg], return_index=True)
+    return _complete(_Samples(stamps.astype(np.int64), out["position"], dq, out["effort"], o_msg[first_row], notes),
+                     names, fmt, path, msgs)
 
 
-def _complete(s: _Samples, names: list[str], fmt: LogFormat, path: str) -> _Samples:
+def _empty_mask(msgs: _Msgs, m_all: np.ndarray, f: str) -> np.ndarray:
+    """Entries whose message has an empty ``f`` array."""
+    empty_layout = np.array([msgs.arrays[k][f].shape[1] == 0 for k in range(len(msgs.names))], bool)
+    return empty_layout[msgs.layout[m_all]]
+
+
+def _complete(s: _Samples, names: list[str], fmt: LogFormat, path: str, msgs: _Msgs) -> _Samples:
     """Stamps where a joint has no position or effort: an error naming them, or dropped (``--drop-bad-rows``)."""
     hole = np.isnan(s.q) | np.isnan(s.tau)
     if s.dq is not None:
@@ -357,7 +579,7 @@ def _complete(s: _Samples, names: list[str], fmt: LogFormat, path: str) -> _Samp
     for j in np.flatnonzero(hole.any(axis=0)):
         rows = np.flatnonzero(hole[:, j])
         field_ = "position" if np.isnan(s.q[rows, j]).any() else "effort" if np.isnan(s.tau[rows, j]).any() else "velocity"
-        at = ", ".join(f"{(s.t_ns[r] - t0) * 1e-9:.6g} s ({s.first_msg[r]})" for r in rows[:SHOWN])
+        at = ", ".join(f"{(s.t_ns[r] - t0) * 1e-9:.6g} s ({msgs.label(int(s.first_msg[r]))})" for r in rows[:SHOWN])
         probs.append(Problem(path, f"joint {names[j]}", field_, f"missing at {rows.size} of {len(bad)} time(s): {at}"
                              f"{', ...' if rows.size > SHOWN else ''} (joints published at other times are not "
                              "interpolated)"))
@@ -369,57 +591,111 @@ def _complete(s: _Samples, names: list[str], fmt: LogFormat, path: str) -> _Samp
         raise DataFileError([Problem(path, "", "", "no time has every joint")])
     dropped = [f"{p.where}, {p.field}: {p.message}" for p in probs]
     return _Samples(s.t_ns[keep], s.q[keep], None if s.dq is None else s.dq[keep], s.tau[keep],
-                    [x for x, k in zip(s.first_msg, keep) if k], s.notes, dropped, int(bad.sum()))
+                    s.first_msg[keep], s.notes, dropped, int(bad.sum()))
 
 
-def _reference(reader, path: str, fmt: LogFormat, names: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(t_ns, q_ref)`` of ``--reference-topic``: a JointState's positions, or a message with ``joint_names``
-    and ``reference``/``desired`` (a controller state) or ``positions`` (a trajectory point)."""
+def _duration_ns(d) -> int:
+    return int(d.sec) * 10**9 + int(getattr(d, "nanosec", getattr(d, "nsec", 0)))
+
+
+def _reference(reader, path: str, fmt: LogFormat, names: list[str]) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """``(t_ns, q_ref, what)`` of ``--reference-topic``: a ``JointState``'s positions; a
+    ``trajectory_msgs/JointTrajectory`` (every point at the header stamp, or the log time when it is zero, plus
+    its ``time_from_start``; a later message replaces the points of earlier ones from its first point on, as a
+    ``joint_trajectory_controller`` does); or a message with ``joint_names`` and ``reference``/``desired`` (a
+    controller state) or ``positions`` (a trajectory point)."""
     if not fmt.reference_topic:
         return None
     conns = [c for c in reader.connections if c.topic == fmt.reference_topic]
     if not conns:
         raise DataFileError([Problem(path, f"topic {fmt.reference_topic}", "--reference-topic", "no such topic in "
                                      f"the bag (topics: {fmt_names(sorted({c.topic for c in reader.connections}))})")])
-    ts, rows = [], []
+    if all(c.msgtype == JOINT_STATE for c in conns):
+        msgs = _read_messages(reader, conns, path)
+        times = msgs.log_ns if fmt.stamp == "log" else np.where(msgs.stamp_ns != 0, msgs.stamp_ns, msgs.log_ns)
+        q = np.full((msgs.size, len(names)), np.nan)
+        for k in msgs.layouts_used():
+            idx = {x: i for i, x in enumerate(msgs.names[k])}
+            mine = np.flatnonzero(msgs.layout == k)
+            miss = [x for x in names if x not in idx]
+            pos = msgs.arrays[k]["position"]
+            if miss or pos.shape[1] == 0:
+                raise DataFileError([Problem(path, f"topic {fmt.reference_topic}, message {int(msgs.index[mine[0]])}",
+                                             "name" if miss else "position", f"joint(s) {fmt_names(miss)} missing"
+                                             if miss else "empty: a reference needs positions")])
+            q[mine] = pos[msgs.row[mine]][:, [idx[x] for x in names]]
+        return _sorted_reference(path, fmt, times, q, f"{msgs.size} messages")
+    segments: list[tuple[np.ndarray, np.ndarray]] = []
+    n_msgs = 0
     for k, (conn, log_ns, raw) in enumerate(reader.messages(connections=conns), 1):
+        n_msgs = k
         msg = reader.deserialize(raw, conn.msgtype)
-        if hasattr(msg, "name") and hasattr(msg, "position"):
-            jn, pos = list(msg.name), np.asarray(msg.position, float)
+        where = f"topic {fmt.reference_topic}, message {k}"
+        stamp = _stamp_ns(msg) if hasattr(msg, "header") and fmt.stamp != "log" else 0
+        t_msg = stamp or int(log_ns)
+        jn = [str(x) for x in getattr(msg, "joint_names", [])]
+        if hasattr(msg, "points"):  # trajectory_msgs/JointTrajectory: several points
+            pts = list(msg.points)
+            if not pts:
+                continue
+            pts_q = [np.asarray(p.positions, float) for p in pts]
+            wrong = [i for i, p in enumerate(pts_q) if p.size != len(jn)]
+            if not jn or wrong:
+                i = wrong[0] if wrong else 0
+                raise DataFileError([Problem(path, f"{where}, point {i + 1}", "positions",
+                                             f"{pts_q[i].size} positions for {len(jn)} joint names")])
+            ts = t_msg + np.array([_duration_ns(p.time_from_start) for p in pts], np.int64)
+            if np.any(np.diff(ts) <= 0):
+                raise DataFileError([Problem(path, where, "points.time_from_start", "not strictly increasing")])
+            rows = np.vstack(pts_q)
+        elif hasattr(msg, "name") and hasattr(msg, "position"):
+            jn, rows = [str(x) for x in msg.name], np.asarray(msg.position, float)[None, :]
+            ts = np.array([t_msg], np.int64)
         else:
             point = next((getattr(msg, a) for a in ("reference", "desired") if hasattr(msg, a)), msg)
-            jn = list(getattr(msg, "joint_names", []))
-            pos = np.asarray(getattr(point, "positions", []), float)
-        if not jn or pos.size != len(jn):
-            raise DataFileError([Problem(path, f"topic {fmt.reference_topic}, message {k}", "positions",
-                                         f"a {conn.msgtype} with {len(jn)} joint names and {pos.size} positions: not a "
-                                         "reference (a JointState, or joint_names with reference/desired positions)")])
+            rows = np.asarray(getattr(point, "positions", []), float)[None, :]
+            ts = np.array([t_msg], np.int64)
+        if not jn or rows.shape[1] != len(jn):
+            raise DataFileError([Problem(path, where, "positions", f"a {conn.msgtype} with {len(jn)} joint names and "
+                                         f"{rows.shape[1]} positions: not a reference (a JointState, a "
+                                         "JointTrajectory, or joint_names with reference/desired positions)")])
         idx = {x: i for i, x in enumerate(jn)}
         miss = [x for x in names if x not in idx]
         if miss:
-            raise DataFileError([Problem(path, f"topic {fmt.reference_topic}, message {k}", "joint_names",
-                                         f"joint(s) {fmt_names(miss)} missing")])
-        stamp = _stamp_ns(msg) if hasattr(msg, "header") and fmt.stamp != "log" else 0
-        ts.append(stamp or int(log_ns))
-        rows.append(pos[[idx[x] for x in names]])
-    if len(ts) < 2:
-        raise DataFileError([Problem(path, f"topic {fmt.reference_topic}", "", "fewer than 2 messages")])
-    o = np.argsort(np.asarray(ts), kind="stable")
-    return np.asarray(ts, np.int64)[o], np.asarray(rows)[o]
+            raise DataFileError([Problem(path, where, "joint_names", f"joint(s) {fmt_names(miss)} missing")])
+        segments.append((ts, rows[:, [idx[x] for x in names]]))
+    multi = any(s[0].size > 1 for s in segments)
+    if multi:  # each trajectory replaces the earlier ones from its first point on
+        segments.sort(key=lambda s: int(s[0][0]))
+        cut = [s[0][0] for s in segments[1:]] + [np.iinfo(np.int64).max]
+        segments = [(ts[ts < c], q[ts < c]) for (ts, q), c in zip(segments, cut)]
+    times = np.concatenate([s[0] for s in segments]) if segments else np.zeros(0, np.int64)
+    q = np.vstack([s[1] for s in segments]) if segments else np.zeros((0, len(names)))
+    what = f"{n_msgs} messages" + (f", {times.size} trajectory points" if multi else "")
+    return _sorted_reference(path, fmt, times, q, what)
+
+
+def _sorted_reference(path: str, fmt: LogFormat, times: np.ndarray, q: np.ndarray, what: str
+                      ) -> tuple[np.ndarray, np.ndarray, str]:
+    if times.size < 2:
+        raise DataFileError([Problem(path, f"topic {fmt.reference_topic}", "", "fewer than 2 reference points")])
+    o = np.argsort(times, kind="stable")
+    return np.asarray(times, np.int64)[o], np.asarray(q, float)[o], what
 
 
 def _topics_label(conns) -> str:
     return ",".join(sorted({c.topic for c in conns}))
 
 
-def _check_topics(msgs: list[_Msg], names: list[str], path: str) -> None:
+def _check_topics(msgs: _Msgs, names: list[str], path: str) -> None:
     """A joint published on two topics: the topics must be told apart with ``--topic``."""
     where: dict[str, set[str]] = {}
     wanted = set(names)
-    for m in msgs:
-        for nm in m.names:
+    pairs = np.unique(np.column_stack([msgs.layout, msgs.topic]), axis=0)
+    for k, c in pairs:
+        for nm in msgs.names[int(k)]:
             if nm in wanted:
-                where.setdefault(nm, set()).add(m.topic)
+                where.setdefault(nm, set()).add(msgs.topics[int(c)])
     both = {nm: ts for nm, ts in where.items() if len(ts) > 1}
     if both:
         nm, ts = next(iter(both.items()))
@@ -444,16 +720,18 @@ def read_bag(path: str | os.PathLike, fmt: LogFormat | None = None, *, n: int, r
                                      "name (--joint-names, --prefix, --topic)")])
     with _open(path) as reader:
         conns = _joint_topics(reader, path, fmt)
-        msgs = _messages(reader, conns, path)
+        msgs = _read_messages(reader, conns, path)
         topics = _topics_label(conns)
-        if not msgs:
+        if not msgs.size:
             raise DataFileError([Problem(path, f"topic {topics}", "", "no message")])
         names, how = _wanted_names(msgs, n, fmt, robot, path, topics)
         if not fmt.topic:  # only the topics that carry the robot's joints
-            mine = {m.topic for m in msgs if set(m.names) & set(names)}
-            if mine:  # else every topic, to name the joints they publish
-                msgs = [m for m in msgs if m.topic in mine]
-                topics = ",".join(sorted(mine))
+            wanted = set(names)
+            lay_mine = np.array([bool(set(nm) & wanted) for nm in msgs.names], bool)
+            mine = np.unique(msgs.topic[lay_mine[msgs.layout]])
+            if mine.size:  # else every topic, to name the joints they publish
+                msgs = msgs.take(np.isin(msgs.topic, mine))
+                topics = ",".join(sorted(msgs.topic_names()))
             _check_topics(msgs, names, path)
         s = _samples(msgs, names, fmt, path, topics)
         ref = _reference(reader, path, fmt, names)
@@ -472,11 +750,10 @@ def read_bag(path: str | os.PathLike, fmt: LogFormat | None = None, *, n: int, r
             tr.meta["q_ref"] = np.column_stack([np.interp(tr.t, (ref[0] - t0) * 1e-9, ref[1][:, j])
                                                 for j in range(n)])
             tr.meta["q_ref_topic"] = fmt.reference_topic
-    notes = [f"topic(s) {topics}: {len(msgs)} messages, {s.t_ns.size} times; joints matched {how}"] + s.notes
+    notes = [f"topic(s) {topics}: {msgs.size} messages, {s.t_ns.size} times; joints matched {how}"] + s.notes
     if ref is not None:
-        notes.append(f"reference positions from {fmt.reference_topic} ({ref[0].size} messages), interpolated on "
-                     "the samples")
-    rep = replace(rep, rows_read=len(msgs), rows_dropped=rep.rows_dropped + s.n_dropped,
+        notes.append(f"reference positions from {fmt.reference_topic} ({ref[2]}), interpolated on the samples")
+    rep = replace(rep, rows_read=msgs.size, rows_dropped=rep.rows_dropped + s.n_dropped,
                   dropped=tuple(s.dropped) + rep.dropped, notes=tuple(notes) + rep.notes)
     return trajs, rep
 
