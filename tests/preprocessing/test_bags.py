@@ -20,6 +20,7 @@ from symoro_gen.preprocessing.readers import LogFormat, read_recording
 from symoro_gen.preprocessing.readers.bag import (
     ImuMessage,
     JointStateMessage,
+    JointTrajectoryMessage,
     WrenchMessage,
     joint_state_messages,
     read_imu,
@@ -465,3 +466,146 @@ def test_bad_values_and_malformed_messages_named_by_message(rec, tmp_path):
         read_recording(p, robot=rec["robot"])
     assert (f"{p}, topic /joint_states, message 21 (logged {tr.t[20] - tr.t[0]:.6g} s into the bag), field "
             "'velocity': 3 values for 4 joint names") in str(e.value)
+
+
+# --- commanded trajectories, partial velocities, the library's own reading -----------------------------------
+def _commanded(t):
+    """The commanded positions of the trajectory tests (a smooth function of time, one phase per joint)."""
+    return 0.3 * np.sin(2 * np.pi * 0.7 * np.asarray(t)[:, None] + np.arange(4))
+
+
+def _trajectory_messages(t_end, period=0.1, step=0.01, span=0.25):
+    """A JointTrajectory every ``period`` with points every ``step`` over ``span``: each overlaps the next one,
+    whose start replaces it; the replaced points (after the next start) carry a 1 rad offset that must not
+    show."""
+    starts = np.arange(0.0, t_end, period)
+    out = []
+    for k, s0 in enumerate(starts):
+        tf = np.arange(0.0, span, step)
+        pos = _commanded(s0 + tf)
+        if k + 1 < starts.size:
+            pos[s0 + tf > starts[k + 1] + step / 2] += 1.0
+        out.append(JointTrajectoryMessage(float(s0), NAMES, tuple(map(float, tf)), tuple(map(tuple, pos))))
+    return out, np.arange(0.0, starts[-1] + span - step / 2, step)
+
+
+@pytest.mark.parametrize("name", ["traj.mcap", "traj.bag"])
+def test_joint_trajectory_reference_multi_point(rec, name):
+    """A trajectory_msgs/JointTrajectory topic as the reference: every point at stamp + time_from_start, a later
+    trajectory replacing the rest of the earlier one; the reference is the commanded function's samples
+    interpolated on the recording's times."""
+    tr = rec["tr"]
+    traj, grid = _trajectory_messages(float(tr.t[-1]))
+    p = write_messages(rec["dir"] / name, {"/joint_states": _msgs(tr), "/arm_controller/joint_trajectory": traj})
+    (got,), rep = read_recording(p, robot=rec["robot"], reference_topic="/arm_controller/joint_trajectory")
+    want = np.column_stack([np.interp(tr.t, grid, _commanded(grid)[:, j]) for j in range(4)])
+    np.testing.assert_allclose(got.meta["q_ref"], want, atol=1e-9)
+    assert np.abs(got.meta["q_ref"] - _commanded(tr.t)).max() < 1e-4  # no replaced point (1 rad off) kept
+    np.testing.assert_array_equal(got.q, tr.q)
+    assert (f"reference positions from /arm_controller/joint_trajectory ({len(traj)} messages, {grid.size} "
+            "trajectory points), interpolated on the samples") in rep.notes
+
+
+def test_joint_trajectory_reference_errors_name_message_and_point(rec, tmp_path):
+    tr = rec["tr"]
+    traj, _ = _trajectory_messages(float(tr.t[-1]))
+    m = traj[2]
+    traj[2] = replace(m, positions=m.positions[:4] + (m.positions[4][:3],) + m.positions[5:])
+    p = write_messages(tmp_path / "badtraj.mcap", {"/joint_states": _msgs(tr), "/traj": traj})
+    with pytest.raises(DataFileError) as e:
+        read_recording(p, robot=rec["robot"], reference_topic="/traj")
+    assert f"{p}, topic /traj, message 3, point 5, field 'positions': 3 positions for 4 joint names" in str(e.value)
+    traj, _ = _trajectory_messages(float(tr.t[-1]))
+    traj = [replace(m, joint_names=("shoulder", "elbow", "lift", "wrist_roll")) for m in traj]
+    p = write_messages(tmp_path / "namestraj.bag", {"/joint_states": _msgs(tr), "/traj": traj})
+    with pytest.raises(DataFileError) as e:
+        read_recording(p, robot=rec["robot"], reference_topic="/traj")
+    assert f"{p}, topic /traj, message 1, field 'joint_names': joint(s) wrist missing" in str(e.value)
+
+
+def test_velocity_empty_in_some_messages(rec):
+    """A publisher that leaves velocity empty in a few messages (or one of two publishers that never fills it):
+    every velocity is computed from the positions, said with the count and the first message."""
+    tr = rec["tr"]
+    msgs = _msgs(tr)
+    for i in range(5, 10):
+        msgs[i] = replace(msgs[i], velocity=())
+    p = write_messages(rec["dir"] / "somevel.mcap", {"/joint_states": msgs})
+    (got,), rep = read_recording(p, robot=rec["robot"])
+    assert got.dq is None
+    np.testing.assert_array_equal(got.q, tr.q)
+    assert (f"velocity empty in 5 of {tr.n_samples} messages (the first: /joint_states message 6): velocities "
+            "computed from the positions") in rep.notes
+    a, b = _split(_msgs(tr))
+    b = [replace(m, velocity=()) for m in b]  # the wrist driver publishes no velocity
+    p = write_messages(rec["dir"] / "wristnovel.db3", {"/arm/joint_states": a, "/wrist/joint_states": b})
+    (got,), rep = read_recording(p, robot=rec["robot"])
+    assert got.dq is None and any(n.startswith(f"velocity empty in {tr.n_samples} of {2 * tr.n_samples} messages")
+                                  for n in rep.notes)
+    np.testing.assert_array_equal(got.tau, tr.tau)
+
+
+@pytest.mark.parametrize("name", ["lib.mcap", "lib.db3", "lib.bag"])
+def test_column_wise_reading_equals_the_librarys(rec, name, monkeypatch):
+    """The fields read at fixed offsets equal rosbags' own deserialization of every message (the reader's
+    fallback, forced here), with per-message joint orders, extra joints and empty arrays mixed."""
+    from symoro_gen.preprocessing.readers import bag
+
+    tr = rec["tr"]
+    rng = np.random.default_rng(3)
+    msgs = []
+    for i, m in enumerate(_msgs(tr)):
+        names = m.names + (("finger",) if i % 3 else ())
+        pos, vel, eff = (x + ((0.01,) if i % 3 else ()) for x in (m.position, m.velocity, m.effort))
+        o = rng.permutation(len(names)) if i % 2 else np.arange(len(names))
+        msgs.append(JointStateMessage(m.stamp, tuple(names[k] for k in o), tuple(pos[k] for k in o),
+                                      tuple(vel[k] for k in o) if i % 5 else (), tuple(eff[k] for k in o)))
+    p = write_messages(rec["dir"] / name, {"/joint_states": msgs})
+    (fast,), rep_f = read_recording(p, robot=rec["robot"])
+
+    def refuse(raw, ros1):
+        raise ValueError("forced")
+
+    monkeypatch.setattr(bag, "_decode_layout", refuse)
+    (slow,), rep_s = read_recording(p, robot=rec["robot"])
+    for f in ("t", "q", "tau"):
+        np.testing.assert_array_equal(getattr(fast, f), getattr(slow, f))
+    np.testing.assert_array_equal(fast.q, tr.q)
+    assert fast.dq is None and slow.dq is None and rep_f.notes == rep_s.notes
+
+
+def test_cli_bag_problems_named_with_the_option(rec, cli, tmp_path):
+    """From the command line: what each bag problem prints (file, topic/joint, message, field, option)."""
+    tr = rec["tr"]
+    jn = ("--joint-names", ",".join(NAMES))
+    msgs = _msgs(tr)
+    msgs[10], msgs[11] = msgs[11], msgs[10]
+    msgs = [replace(m, log_time=float(tr.t[i])) for i, m in enumerate(msgs)]  # logged in order, stamps not
+    p = write_messages(tmp_path / "ooo.mcap", {"/joint_states": msgs})
+    assert "note: 1 message(s) out of order in the bag: sorted by stamp" in cli("inspect", "scara", p, *jn).out
+    fingers = [JointStateMessage(m.stamp, m.names + ("finger",), m.position + (0.0,), m.velocity + (0.0,),
+                                 m.effort + (0.0,)) for m in _msgs(tr)]
+    p = write_messages(tmp_path / "fingers.bag", {"/joint_states": fingers})
+    assert "note: joints ignored (not the robot's): finger" in cli("inspect", "scara", p, *jn).out
+    a, b = _split(_msgs(tr))
+    p = write_messages(tmp_path / "hole.db3", {"/arm": a, "/wrist": b[:30] + b[31:]})
+    r = cli("inspect", "scara", p, *jn, rc=2)
+    assert f"{p}, joint lift, field 'position': missing at 1 of {tr.n_samples} time(s): " in r.err
+    assert "(/arm message 31)" in r.err and "hint: give --drop-bad-rows to drop these times" in r.err
+    assert f"{tr.n_samples} rows read, 1 dropped" not in r.out
+    r = cli("inspect", "scara", p, *jn, "--drop-bad-rows", rc=2)  # a time dropped mid-file: a step of 2 dt
+    assert f"{p}, rows 31, field 'stamp': irregular sampling" in r.err and "hint: give --resample" in r.err
+    out = cli("inspect", "scara", p, *jn, "--drop-bad-rows", "--resample").out
+    assert f"{2 * tr.n_samples - 1} rows read, 1 dropped, resampled" in out
+    assert "dropped joint lift, position: missing at 1" in out
+    p = write_bag(tr, tmp_path / "noeff.mcap", NAMES, effort=False)
+    r = cli("inspect", "scara", p, *jn, rc=2)
+    assert (f"{p}, topic /joint_states, field 'effort': empty in every message for joint(s) shoulder, elbow, lift, "
+            "wrist: the torque is needed (effort, or a current with --tau-scale)") in r.err
+    traj, grid = _trajectory_messages(float(tr.t[-1]))
+    p = write_messages(tmp_path / "cmd.mcap", {"/joint_states": _msgs(tr), "/cmd": traj})
+    out = cli("inspect", "scara", p, *jn, "--reference-topic", "/cmd").out
+    assert f"note: reference positions from /cmd ({len(traj)} messages, {grid.size} trajectory points)" in out
+    r = cli("inspect", "scara", p, *jn, "--reference-topic", "/command", rc=2)
+    assert f"{p}, topic /command, field '--reference-topic': no such topic in the bag (topics: /cmd, /joint_states)" \
+        in r.err

@@ -14,15 +14,23 @@ The joints come from ``sensor_msgs/JointState`` messages (``name``, ``position``
   stamp is zero, said in the report) or the log times (``--stamp log``), relative to the first one;
 * each message's own joint order; several publishers each giving some joints, merged by stamp; messages
   out of order, sorted by stamp (counted in the report); ``velocity``/``effort`` arrays left empty (no
-  velocity: computed by the filter; no effort: an error, the torque is needed);
+  velocity in some or all messages: every velocity computed by the filter, said in the report; no effort:
+  an error, the torque is needed);
 * ``effort`` is the torque (``--tau-scale`` turns a logged current into N m).
+
+The messages are read column-wise: those sharing a layout (byte length, frame id, joint names, array
+sizes) have their stamps and arrays at the same byte offsets (ROS 1 serialization, or the OMG CDR 1.0 of
+ROS 2 as rosbags' ``serde`` reads it), read as numpy views of one buffer; each layout is checked once against
+the library's own deserialization (a message it does not match is deserialized by the library).
+``bench/bench_bag_speed.py`` measures the speed against the same data as CSV.
 
 Problems name the file, the topic, the message (index in its topic, 1-based) or its time, and the field.
 The samples then go through the data options like any other format (:mod:`.logs`).
 
-Optionally the commanded positions of ``--reference-topic`` (a ``JointState``, or a controller state /
-trajectory point with ``joint_names`` and ``reference``/``desired``/``positions``) are interpolated on the
-samples' times as ``Trajectory.meta['q_ref']``: the recorded reference IV and DIDIM use
+Optionally the commanded positions of ``--reference-topic`` (a ``JointState``; a
+``trajectory_msgs/JointTrajectory``, its points at the header stamp plus their ``time_from_start``, a later
+trajectory replacing the rest of an earlier one; or a controller state / trajectory point with
+``joint_names`` and ``reference``/``desired``/``positions``) are interpolated on the samples' times as ``Trajectory.meta['q_ref']``: the recorded reference IV and DIDIM use
 (:mod:`symoro_gen.identification.iv`, :mod:`symoro_gen.identification.didim`).
 
 :func:`read_imu` and :func:`read_wrench` read ``sensor_msgs/Imu`` and ``geometry_msgs/WrenchStamped``
@@ -53,13 +61,15 @@ from .options import LoadReport, LogFormat
 
 __all__ = ["BAG_SUFFIXES", "BAGS_EXTRA", "JOINT_STATE", "is_bag", "robot_joint_names", "read_bag", "read_imu",
            "read_wrench", "JointStateMessage", "joint_state_messages", "write_bag", "write_messages",
-           "ImuMessage", "WrenchMessage"]
+           "ImuMessage", "WrenchMessage", "JointTrajectoryMessage"]
 
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")
 BAGS_EXTRA = "pip install 'symoro_gen[bags]'"
 JOINT_STATE = "sensor_msgs/msg/JointState"
 IMU = "sensor_msgs/msg/Imu"
 WRENCH = "geometry_msgs/msg/WrenchStamped"
+TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
+TRAJECTORY_POINT = "trajectory_msgs/msg/JointTrajectoryPoint"
 #: epoch of the stamps written by :func:`write_bag` (a plausible wall-clock time, 2023-11-14) [ns]
 EPOCH_NS = 1_700_000_000 * 10**9
 STAMP_HINT = "give --stamp log to use the bag's log times (when each message was recorded)"
@@ -842,7 +852,18 @@ class WrenchMessage:
     torque: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
-BagMessage = JointStateMessage | ImuMessage | WrenchMessage
+@dataclass(frozen=True)
+class JointTrajectoryMessage:
+    """One ``trajectory_msgs/JointTrajectory`` (a commanded trajectory): header ``stamp`` [s], ``joint_names``,
+    the points' ``times`` from the stamp [s] and their ``positions`` (one tuple per point)."""
+
+    stamp: float
+    joint_names: tuple[str, ...]
+    times: tuple[float, ...]
+    positions: tuple[tuple[float, ...], ...]
+
+
+BagMessage = JointStateMessage | ImuMessage | WrenchMessage | JointTrajectoryMessage
 
 
 def joint_state_messages(trajectory: Trajectory, joint_names: Sequence[str], *, velocity: bool = True,
@@ -878,6 +899,13 @@ def _ros_message(ts: Any, m: BagMessage, ros1: bool) -> tuple[str, Any, int]:
         msg = T[JOINT_STATE](header=header, name=list(m.names), position=np.asarray(m.position, float),
                              velocity=np.asarray(m.velocity, float), effort=np.asarray(m.effort, float))
         return JOINT_STATE, msg, log
+    if isinstance(m, JointTrajectoryMessage):
+        D, P = T["builtin_interfaces/msg/Duration"], T[TRAJECTORY_POINT]
+        empty = np.zeros(0)
+        pts = [P(positions=np.asarray(p, float), velocities=empty, accelerations=empty, effort=empty,
+                 time_from_start=D(sec=int(round(tf * 1e9)) // 10**9, nanosec=int(round(tf * 1e9)) % 10**9))
+               for tf, p in zip(m.times, m.positions)]
+        return TRAJECTORY, T[TRAJECTORY](header=header, joint_names=list(m.joint_names), points=pts), log
     V3, Q = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
     if isinstance(m, ImuMessage):
         x, y, z, w = m.orientation
