@@ -23,11 +23,12 @@ from .readers import (
     read_recording,
     read_recordings,
 )
-from .trajectory import Trajectory, hold_back
+from .trajectory import Trajectory, hold_back, note_hold_back
 
 __all__ = [
     "Trajectory", "load_trajectory", "load_trajectories", "parse_data_spec", "DataSpec", "DataWarning",
     "motor_to_joint", "joint_to_motor", "FilterSettings", "choose_filter_settings", "estimate_dynamics_bandwidth",
     "lowpass_positions", "differentiate", "filter_and_differentiate", "decimate", "parallel_decimate",
     "LogFormat", "LoadReport", "make_format", "read_recording", "read_recordings", "hold_back",
+    "note_hold_back",
 ]

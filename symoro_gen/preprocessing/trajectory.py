@@ -120,7 +120,7 @@ def hold_back(trajectories: Sequence[Trajectory], fraction: float
     def part(tr, a, b, tag):
         cut = {f: (getattr(tr, f)[a:b] if getattr(tr, f) is not None else None)
                for f in ("t", "q", "tau", "dq", "ddq", "deflection")}
-        meta = {**tr.meta, "part": tag}
+        meta = {**tr.meta, "part": tag, "held_from": tr.source}
         if meta.get("q_ref") is not None and len(meta["q_ref"]) == tr.n_samples:  # a recorded reference
             meta["q_ref"] = meta["q_ref"][a:b]
         return replace(tr, **cut, source=f"{tr.source} [{tag}]", meta=meta)
@@ -147,3 +147,43 @@ def hold_back(trajectories: Sequence[Trajectory], fraction: float
                 ident.append(part(tr, 0, k, tag_i))
                 valid.append(part(tr, k, tr.n_samples, tag_v))
     return tuple(ident), tuple(valid)
+
+
+def note_hold_back(reports: Sequence, identification: Sequence[Trajectory], validation: Sequence[Trajectory],
+                   fraction: float) -> tuple:
+    """The load reports (:class:`~symoro_gen.preprocessing.readers.LoadReport`) with a note of what
+    :func:`hold_back` did with each file: how many experiments went to validation and to identification, and
+    why (the last ``fraction`` of the file's duration, whatever the experiments reading split it into)."""
+    pct = f"{100 * fraction:.3g} %"
+    out = []
+    for r in reports:
+        iv = [tr for tr in identification if _held_file(tr) == r.file]
+        vv = [tr for tr in validation if _held_file(tr) == r.file]
+        if not vv:
+            out.append(r)
+            continue
+        sv, si = sum(tr.n_samples for tr in vv), sum(tr.n_samples for tr in iv)
+        start = min(float(tr.t[0]) for tr in vv)
+        if r.experiments <= 1:
+            note = (f"--validate-fraction {fraction:g}: the last {pct} of the file held back for validation ({sv} of "
+                    f"{sv + si} samples, from t = {start:.6g} s)")
+        else:
+            labels = ", ".join(_part_label(tr, r.samples, r.experiments) for tr in vv)
+            note = (f"--validate-fraction {fraction:g}: the last {pct} of the file's duration held back for "
+                    f"validation, not {pct} of each of the {r.experiments} experiments the file was split into: "
+                    f"{len(vv)} validation experiment(s) (experiment {labels}; {sv} samples from t = {start:.6g} s), "
+                    f"{len(iv)} identification experiment(s) ({si} samples)")
+        out.append(replace(r, notes=(*r.notes, note)))
+    return tuple(out)
+
+
+def _held_file(tr: Trajectory):
+    """The file a part cut by :func:`hold_back` comes from (the load report's ``file``)."""
+    return tr.meta.get("recording", tr.meta.get("held_from"))
+
+
+def _part_label(tr: Trajectory, samples: Sequence[int], experiments: int) -> str:
+    """``4/5 (its last 499 samples)``: the experiment a part comes from, and how much of it."""
+    e = int(tr.meta.get("experiment", 0))
+    whole = samples[e - 1] if 0 < e <= len(samples) else tr.n_samples
+    return f"{e}/{experiments}" + (f" (its last {tr.n_samples} samples)" if tr.n_samples < whole else "")

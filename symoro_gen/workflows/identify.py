@@ -41,7 +41,7 @@ from ..observations.system import ObservationSystem
 from ..params import check_payload
 from ..preprocessing.cli import data_text
 from ..preprocessing.readers import LoadReport, LogFormat
-from ..preprocessing.trajectory import hold_back
+from ..preprocessing.trajectory import hold_back, note_hold_back
 from ..simulate.closed_loop import PIDGains
 from .base import (
     SCHEMA_VERSION,
@@ -322,6 +322,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     held_back: tuple = ()
     if opts.validate_fraction is not None:
         unloaded, held_back = hold_back(unloaded, opts.validate_fraction)
+        reports = note_hold_back(reports, unloaded, held_back, opts.validate_fraction)
     loaded, rep_l = (as_trajectories(list(loaded_data), opts.data_format, robot, loaded=True)
                      if loaded_data else ((), ()))
     reports += rep_l

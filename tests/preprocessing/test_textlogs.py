@@ -12,7 +12,7 @@ import pytest
 
 from symoro_gen.preprocessing.readers import DataWarning, LogFormat, read_recording
 from symoro_gen.preprocessing.readers.split import SMOOTH_MAX, one_per_line, roughness
-from symoro_gen.preprocessing.trajectory import hold_back
+from symoro_gen.preprocessing.trajectory import hold_back, note_hold_back
 
 N_JOINTS = 4  # the SCARA
 DT = 0.001
@@ -247,9 +247,18 @@ def test_hold_back_the_last_fraction_of_each_file(tmp_path):
     assert [tr.source.split(" [")[1] for tr in valid] == ["experiment 4/5]", "experiment 5/5]"]
     # two files: each held back on its own
     f2 = _table(tmp_path / "b.csv", *_signals(2000))
-    tr2, _ = read_recording(f2, LogFormat(resample=True), n_joints=N_JOINTS)
+    tr2, rep2 = read_recording(f2, LogFormat(resample=True), n_joints=N_JOINTS)
     ident, valid = hold_back((*trs, *tr2), 0.3)
     assert valid[-1].n_samples == pytest.approx(0.3 * tr2[0].n_samples, abs=1)
+    # the load reports say what the hold-back made of each file, and why
+    a, b = note_hold_back((rep, rep2), ident, valid, 0.3)
+    n_v = sum(tr.n_samples for tr in valid[:-1])
+    assert a.notes[-1] == (f"--validate-fraction 0.3: the last 30 % of the file's duration held back for validation, "
+                           f"not 30 % of each of the 5 experiments the file was split into: 2 validation "
+                           f"experiment(s) (experiment 4/5 (its last {valid[0].n_samples} samples), 5/5; {n_v} samples "
+                           f"from t = {valid[0].t[0]:.6g} s), 4 identification experiment(s) ({total - n_v} samples)")
+    assert b.notes[-1] == (f"--validate-fraction 0.3: the last 30 % of the file held back for validation "
+                           f"({valid[-1].n_samples} of 2000 samples, from t = {valid[-1].t[0]:.6g} s)")
 
 
 def test_validate_fraction_from_the_command_line_holds_back_the_end_of_the_file(cli, tmp_path):
@@ -273,6 +282,14 @@ def test_validate_fraction_from_the_command_line_holds_back_the_end_of_the_file(
     assert d["data"][0]["experiments"] == 5
     assert [s.rsplit("[", 1)[1] for s in d["validation"]["data"]] == ["last 30 % of the file]"] * 2
     assert "5 experiment(s) made of this file" in r.out
+    total = sum(d["data"][0]["samples"])
+    n_valid = total - int(round(0.7 * total))
+    assert ("note: --validate-fraction 0.3: the last 30 % of the file's duration held back for validation, not 30 % of "
+            "each of the 5 experiments the file was split into: 2 validation experiment(s) (experiment 4/5 (its last "
+            in r.out)
+    assert f"; {n_valid} samples from t = " in r.out and f"4 identification experiment(s) ({total - n_valid} samples)" \
+        in r.out
+    assert d["data"][0]["notes"][-1].startswith("--validate-fraction 0.3: ")
 
 
 # ---- inspect: the time steps -------------------------------------------------------------------------------
