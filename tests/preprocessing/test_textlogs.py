@@ -180,6 +180,14 @@ def test_isolated_rows_out_of_order_dropped_a_reset_splits(cli, tmp_path):
     assert rep.rows_dropped == 2 and rep.experiments == 1
     assert any("rows 1001, 2001 (lines 1002, 2002), t: 2 row(s) whose time is out of order" in x for x in rep.dropped)
     np.testing.assert_allclose(tr.q, q[:tr.n_samples], atol=1e-6)  # resampled on the same 1 ms grid
+    # the same rule from a --format file
+    fmt = tmp_path / "stray.toml"
+    fmt.write_text("drop_bad_rows = true\nresample = true\n")
+    out = tmp_path / "iso.json"
+    cli("--quiet", "inspect", "scara", f, "--format", fmt, "--json", out)
+    (blk,) = _json(out)["data"]
+    assert blk["rows_dropped"] == 2 and blk["experiments"] == 1 and "--drop-bad-rows" in blk["options"]
+    assert any("2 row(s) whose time is out of order" in x for x in blk["dropped"])
     # a stray stamp among the first rows is not garbage before the recording: only that row is dropped
     ts = t.copy()
     ts[9] = 5.0
