@@ -609,3 +609,44 @@ def test_cli_bag_problems_named_with_the_option(rec, cli, tmp_path):
     r = cli("inspect", "scara", p, *jn, "--reference-topic", "/command", rc=2)
     assert f"{p}, topic /command, field '--reference-topic': no such topic in the bag (topics: /cmd, /joint_states)" \
         in r.err
+
+
+def _sines(t):
+    """Known smooth joint signals (positions, velocities, torques) of the four joints at times ``t``."""
+    f = np.array([0.4, 0.7, 1.1, 0.9])
+    w = 2 * np.pi * f
+    ph = np.arange(4.0)
+    return (0.5 * np.sin(w * t[:, None] + ph), 0.5 * w * np.cos(w * t[:, None] + ph),
+            10.0 * np.cos(w * t[:, None] + 2 * ph))
+
+
+def test_publishers_on_their_own_clocks_interpolated_with_resample(rec, cli, tmp_path):
+    """An arm driver (shoulder, elbow) and a wrist driver (lift, wrist) each stamping its own times (0.7 ms
+    apart): refused naming the joints and --resample; with it, the wrist's own samples interpolated on the
+    arm's times, equal to the known signals at those times."""
+    t_arm = np.arange(500) * 0.002
+    t_wr = t_arm + 0.0007
+    qa, va, ea = _sines(t_arm)
+    qw, vw, ew = _sines(t_wr)
+    arm = [JointStateMessage(float(t), NAMES[:2], tuple(qa[i, :2]), tuple(va[i, :2]), tuple(ea[i, :2]))
+           for i, t in enumerate(t_arm)]
+    wrist = [JointStateMessage(float(t), NAMES[2:], tuple(qw[i, 2:]), tuple(vw[i, 2:]), tuple(ew[i, 2:]))
+             for i, t in enumerate(t_wr)]
+    p = write_messages(tmp_path / "clocks.mcap", {"/arm/joint_states": arm, "/wrist/joint_states": wrist})
+    jn = ("--joint-names", ",".join(NAMES))
+    r = cli("inspect", "scara", p, *jn, rc=2)
+    assert (f"{p}, joint lift, field 'header.stamp': joint(s) lift, wrist published at other times than shoulder, "
+            "elbow (at 0 of their 500 times): publishers on their own clocks are not merged by stamp") in r.err
+    assert "hint: give --resample to interpolate them on the times of shoulder" in r.err
+    (got,), rep = read_recording(p, LogFormat(resample=True, joint_names=NAMES), n_joints=4)
+    # the arm's times but the first (before the wrist's first sample), the wrist interpolated on them
+    assert got.n_samples == 499
+    np.testing.assert_allclose(got.t, t_arm[1:] - t_arm[1], atol=1e-12)
+    q, v, e = _sines(t_arm[1:])
+    np.testing.assert_array_equal(got.q[:, :2], qa[1:, :2])
+    np.testing.assert_allclose(got.q[:, 2:], q[:, 2:], atol=1e-7)        # cubic spline, 2 ms steps
+    np.testing.assert_allclose(got.tau[:, 2:], e[:, 2:], atol=2e-3)      # linear: |e''| h^2 / 8
+    np.testing.assert_allclose(got.dq[:, 2:], v[:, 2:], atol=1e-3)
+    assert ("joint(s) lift, wrist published at other times than shoulder, elbow (at 0 of their 500 times): "
+            "interpolated on the 499 times of shoulder (--resample); 1 time(s) before or after their own left out"
+            in rep.notes)

@@ -51,6 +51,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy.interpolate
 
 from ...atomic import check_replaceable
 from ...errors import DataFileError, Problem
@@ -576,8 +577,65 @@ def _empty_mask(msgs: _Msgs, m_all: np.ndarray, f: str) -> np.ndarray:
     return empty_layout[msgs.layout[m_all]]
 
 
+#: a joint published at fewer than this share of the times of the joint published most is on another
+#: publisher's clock (interpolated with ``--resample``), not from a publisher that missed a few times
+SHARED_MIN = 0.5
+
+
+def _other_clocks(s: _Samples, names: list[str], fmt: LogFormat, path: str) -> _Samples:
+    """Joints whose publisher stamps other times than the joint published most (two drivers on their own
+    clocks): an error naming them and ``--resample``; with it, each such joint's own samples interpolated on
+    the times of the other (positions by a cubic spline, velocities and torques linearly, as
+    :func:`.logs.resample`), the times outside its own first and last left out."""
+    has = ~np.isnan(s.q) & ~np.isnan(s.tau)
+    if has.all():
+        return s
+    j0 = int(np.argmax(has.sum(axis=0)))
+    base = has[:, j0]
+    shared = (has & base[:, None]).sum(axis=0) / base.sum()
+    other = np.flatnonzero(shared < SHARED_MIN)
+    if not other.size:
+        return s
+    ref = [names[j] for j in range(len(names)) if shared[j] >= SHARED_MIN]
+    what = (f"joint(s) {fmt_names([names[j] for j in other])} published at other times than {fmt_names(ref)} "
+            f"(at {int(round(shared[other].min() * base.sum()))} of their {int(base.sum())} times)")
+    if not fmt.resample:
+        raise DataFileError([Problem(path, f"joint {names[other[0]]}", "header.stamp", f"{what}: publishers on their "
+                                     "own clocks are not merged by stamp")],
+                            hint=f"give --resample to interpolate them on the times of {ref[0]} (then on a uniform "
+                                 "grid)")
+    tt = (s.t_ns - s.t_ns[0]) * 1e-9
+    rows = np.flatnonzero(base)
+    inside = np.ones(rows.size, bool)
+    q, tau = s.q.copy(), s.tau.copy()
+    dq = None if s.dq is None else s.dq.copy()
+    for j in other:
+        own = has[:, j]
+        tj = tt[own]
+        if tj.size < 2:
+            raise DataFileError([Problem(path, f"joint {names[j]}", "position", f"published at {tj.size} time(s)")])
+        inside &= (tt[rows] >= tj[0]) & (tt[rows] <= tj[-1])
+        at = np.clip(tt[rows], tj[0], tj[-1])
+        q[rows, j] = (scipy.interpolate.CubicSpline(tj, q[own, j])(at) if tj.size >= 4 else np.interp(at, tj, q[own, j]))
+        tau[rows, j] = np.interp(at, tj, tau[own, j])
+        if dq is not None:
+            ok = own & ~np.isnan(dq[:, j])
+            dq[rows, j] = np.interp(at, tt[ok], dq[ok, j]) if ok.sum() >= 2 else np.nan
+    keep = rows[inside]
+    if keep.size < 2:
+        raise DataFileError([Problem(path, f"joint {names[other[0]]}", "header.stamp", f"{what}: their times do not "
+                                     "overlap")])
+    left = rows.size - keep.size
+    note = (f"{what}: interpolated on the {keep.size} times of {ref[0]} (--resample)"
+            + (f"; {left} time(s) before or after their own left out" if left else ""))
+    return _Samples(s.t_ns[keep], q[keep], None if dq is None else dq[keep], tau[keep], s.first_msg[keep],
+                    [*s.notes, note], s.dropped, s.n_dropped)
+
+
 def _complete(s: _Samples, names: list[str], fmt: LogFormat, path: str, msgs: _Msgs) -> _Samples:
-    """Stamps where a joint has no position or effort: an error naming them, or dropped (``--drop-bad-rows``)."""
+    """Stamps where a joint has no position or effort: joints on another publisher's clock interpolated
+    (:func:`_other_clocks`), else an error naming them, or dropped (``--drop-bad-rows``)."""
+    s = _other_clocks(s, names, fmt, path)
     hole = np.isnan(s.q) | np.isnan(s.tau)
     if s.dq is not None:
         hole |= np.isnan(s.dq) & ~np.isnan(s.q)
