@@ -12,7 +12,8 @@ The joints come from ``sensor_msgs/JointState`` messages (``name``, ``position``
   (gripper fingers) are ignored and listed in the report;
 * the time: the header stamps (``--stamp header``, the default; the bag's log times when every header
   stamp is zero, said in the report) or the log times (``--stamp log``), relative to the first one;
-* each message's own joint order; several publishers each giving some joints, merged by stamp; messages
+* each message's own joint order; several publishers each giving some joints, merged by stamp (publishers
+  on their own clocks: interpolated on the times of the joint published most with ``--resample``); messages
   out of order, sorted by stamp (counted in the report); ``velocity``/``effort`` arrays left empty (no
   velocity in some or all messages: every velocity computed by the filter, said in the report; no effort:
   an error, the torque is needed);
