@@ -545,10 +545,12 @@ def test_velocity_empty_in_some_messages(rec):
     np.testing.assert_array_equal(got.tau, tr.tau)
 
 
-@pytest.mark.parametrize("name", ["lib.mcap", "lib.db3", "lib.bag"])
-def test_column_wise_reading_equals_the_librarys(rec, name, monkeypatch):
+@pytest.mark.parametrize("name,forced", [("lib.mcap", "_decode_layout"), ("lib.db3", "_agrees"),
+                                         ("lib.bag", "_decode_layout"), ("lib2.bag", "_agrees")])
+def test_column_wise_reading_equals_the_librarys(rec, name, forced, monkeypatch):
     """The fields read at fixed offsets equal rosbags' own deserialization of every message (the reader's
-    fallback, forced here), with per-message joint orders, extra joints and empty arrays mixed."""
+    fallback, forced here: a message that does not parse, or a layout the library reads otherwise), with
+    per-message joint orders, extra joints and empty arrays mixed."""
     from symoro_gen.preprocessing.readers import bag
 
     tr = rec["tr"]
@@ -563,10 +565,12 @@ def test_column_wise_reading_equals_the_librarys(rec, name, monkeypatch):
     p = write_messages(rec["dir"] / name, {"/joint_states": msgs})
     (fast,), rep_f = read_recording(p, robot=rec["robot"])
 
-    def refuse(raw, ros1):
+    def refuse(*args):
+        if forced == "_agrees":
+            return False
         raise ValueError("forced")
 
-    monkeypatch.setattr(bag, "_decode_layout", refuse)
+    monkeypatch.setattr(bag, forced, refuse)
     (slow,), rep_s = read_recording(p, robot=rec["robot"])
     for f in ("t", "q", "tau"):
         np.testing.assert_array_equal(getattr(fast, f), getattr(slow, f))
@@ -598,6 +602,10 @@ def test_cli_bag_problems_named_with_the_option(rec, cli, tmp_path):
     out = cli("inspect", "scara", p, *jn, "--drop-bad-rows", "--resample").out
     assert f"{2 * tr.n_samples - 1} rows read, 1 dropped, resampled" in out
     assert "dropped joint lift, position: missing at 1" in out
+    somevel = [replace(m, velocity=()) if i in (7, 8) else m for i, m in enumerate(_msgs(tr))]
+    p = write_messages(tmp_path / "somevel.bag", {"/joint_states": somevel})
+    assert (f"note: velocity empty in 2 of {tr.n_samples} messages (the first: /joint_states message 8): velocities "
+            "computed from the positions") in cli("inspect", "scara", p, *jn).out
     p = write_bag(tr, tmp_path / "noeff.mcap", NAMES, effort=False)
     r = cli("inspect", "scara", p, *jn, rc=2)
     assert (f"{p}, topic /joint_states, field 'effort': empty in every message for joint(s) shoulder, elbow, lift, "

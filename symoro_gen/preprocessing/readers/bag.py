@@ -302,25 +302,29 @@ def _joint_topics(reader, path: str, fmt: LogFormat) -> list[Any]:
     return out
 
 
-def _checked_layout(reader, raw: bytes, ros1: bool) -> _Layout | None:
-    """The layout of a message, checked against the library's deserialization of it (a bag whose JointState
-    definition is not the standard one reads through the library); None when it does not agree."""
+def _layout(raw: bytes, ros1: bool) -> _Layout | None:
+    """:func:`_decode_layout`, None when the message does not parse."""
     try:
-        lay = _decode_layout(raw, ros1)
+        return _decode_layout(raw, ros1)
     except (ValueError, UnicodeDecodeError, struct.error):
         return None
+
+
+def _agrees(reader, raw: bytes, lay: _Layout) -> bool:
+    """The layout decoded from a message gives what the library's deserialization of it gives (a bag whose
+    JointState definition is not the standard one reads through the library)."""
     try:
         msg = reader.deserialize(raw, JOINT_STATE)
     except Exception:  # noqa: BLE001 - the library's own errors on a malformed message
-        return None
+        return False
     if tuple(str(x) for x in msg.name) != lay.names:
-        return None
+        return False
     for f, (off, k) in zip(ARRAYS, lay.arrays):
         a = np.asarray(getattr(msg, f), float).ravel()
         b = np.frombuffer(raw, lay.dtype, count=k, offset=off)
         if a.size != k or not np.array_equal(a, b, equal_nan=True):
-            return None
-    return lay
+            return False
+    return True
 
 
 def _read_messages(reader, conns, path: str) -> _Msgs:
@@ -333,6 +337,7 @@ def _read_messages(reader, conns, path: str) -> _Msgs:
     code = {t: k for k, t in enumerate(topics)}
     layouts: list[_Layout | None] = []           # None: a message deserialized by the library
     keys: dict[tuple[int, bytes], int] = {}
+    rejected: set[tuple[int, bytes]] = set()     # layouts the library reads otherwise
     raws: list[list[bytes]] = []
     lib: dict[int, tuple[tuple[str, ...], dict[str, np.ndarray], int]] = {}
     topic, index, log, layout, row = [], [], [], [], []
@@ -346,14 +351,18 @@ def _read_messages(reader, conns, path: str) -> _Msgs:
         if last is not None and len(raw) == last[2][0] and last[0].key(raw) == last[2]:
             k = last[1]
         else:
-            lay = _checked_layout(reader, raw, ros1)
-            if lay is not None:
-                key = lay.key(raw)
-                k = keys.get(key, -1)
-                if k < 0:
+            lay = _layout(raw, ros1)
+            key = lay.key(raw) if lay is not None else (0, b"")
+            k = keys.get(key, -1) if lay is not None else -1
+            if lay is not None and k < 0:  # a new layout: checked once against the library
+                if key not in rejected and _agrees(reader, raw, lay):
                     k = keys[key] = len(layouts)
                     layouts.append(lay)
                     raws.append([])
+                else:
+                    rejected.add(key)
+                    lay = None
+            if lay is not None:
                 last = (lay, k, key)
             else:
                 try:
