@@ -61,8 +61,9 @@ def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = Fa
                    "(several robots in one bag: left_, right_)")
     b.add_argument("--joint-names", metavar="A,B,C", help="the bag's names of the robot's joints, in the robot's "
                    "order (default: the URDF joint names kept in the robot file, else the order of the messages)")
-    b.add_argument("--reference-topic", metavar="TOPIC", help="commanded positions (JointState, or a controller "
-                   "state with joint_names and reference/desired): the recorded reference of --method iv/didim")
+    b.add_argument("--reference-topic", metavar="TOPIC", help="commanded positions (JointState, trajectory_msgs/"
+                   "JointTrajectory, or a controller state with joint_names and reference/desired): the recorded "
+                   "reference of --method iv/didim")
     if validate_fraction:
         g.add_argument("--validate-fraction", type=float, metavar="F",
                        help="hold back the last F (0 < F < 1) of each DATA file for validation (of the whole file "
