@@ -658,3 +658,17 @@ def test_publishers_on_their_own_clocks_interpolated_with_resample(rec, cli, tmp
     assert ("joint(s) lift, wrist published at other times than shoulder, elbow (at 0 of their 500 times): "
             "interpolated on the 499 times of shoulder (--resample); 1 time(s) before or after their own left out"
             in rep.notes)
+
+
+@pytest.mark.parametrize("name", ["swap.mcap", "swap.bag"])
+def test_layouts_of_equal_length_told_apart(rec, name):
+    """Messages of one length and joint names whose velocity and effort sizes are swapped (velocity without
+    effort, then effort without velocity): two layouts, so the effort is missing at every other time (an error
+    naming it), never read from the velocity's bytes."""
+    tr = rec["tr"]
+    msgs = [replace(m, effort=()) if i % 2 else replace(m, velocity=()) for i, m in enumerate(_msgs(tr))]
+    p = write_messages(rec["dir"] / name, {"/joint_states": msgs})
+    with pytest.raises(DataFileError) as e:
+        read_recording(p, robot=rec["robot"])
+    assert f"{p}, joint shoulder, field 'effort': missing at {tr.n_samples // 2} of {tr.n_samples} time(s)" \
+        in str(e.value)

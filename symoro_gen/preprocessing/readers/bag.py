@@ -173,9 +173,10 @@ class _Layout:
     dtype: str
     counts: tuple[int, ...]              # byte offsets of the arrays' element counts
 
-    def key(self, raw: bytes) -> tuple[int, bytes]:
-        """What messages of this layout share: the length, the frame id and names, the arrays' counts."""
-        return len(raw), bytes(raw[12:self.prefix_end]) + b"".join(raw[c:c + 4] for c in self.counts)
+    def key(self, raw: bytes) -> tuple[int, bytes, bytes]:
+        """What messages of this layout share: the length; the frame id, names and position count (one slice);
+        the velocity count (the length then fixes the effort count)."""
+        return len(raw), bytes(raw[12:self.counts[0] + 4]), bytes(raw[self.counts[1]:self.counts[1] + 4])
 
 
 def _decode_layout(raw: bytes, ros1: bool) -> _Layout:
@@ -336,23 +337,25 @@ def _read_messages(reader, conns, path: str) -> _Msgs:
     topics = sorted({c.topic for c in conns})
     code = {t: k for k, t in enumerate(topics)}
     layouts: list[_Layout | None] = []           # None: a message deserialized by the library
-    keys: dict[tuple[int, bytes], int] = {}
-    rejected: set[tuple[int, bytes]] = set()     # layouts the library reads otherwise
+    keys: dict[tuple[int, bytes, bytes], int] = {}
+    rejected: set[tuple[int, bytes, bytes]] = set()     # layouts the library reads otherwise
     raws: list[list[bytes]] = []
     lib: dict[int, tuple[tuple[str, ...], dict[str, np.ndarray], int]] = {}
     topic, index, log, layout, row = [], [], [], [], []
     count = [0] * len(topics)
     probs: list[Problem] = []
     start = int(reader.start_time)
-    last: tuple[_Layout, int, tuple[int, bytes]] | None = None
+    last_key: tuple[int, bytes, bytes] = (-1, b"", b"")
+    head = vel = 0                               # the slices of the last layout's key
+    last_k = -1
     for conn, log_ns, raw in reader.messages(connections=conns):
         c = code[conn.topic]
         count[c] += 1
-        if last is not None and len(raw) == last[2][0] and last[0].key(raw) == last[2]:
-            k = last[1]
+        if len(raw) == last_key[0] and raw[12:head] == last_key[1] and raw[vel:vel + 4] == last_key[2]:
+            k = last_k
         else:
             lay = _layout(raw, ros1)
-            key = lay.key(raw) if lay is not None else (0, b"")
+            key = lay.key(raw) if lay is not None else (0, b"", b"")
             k = keys.get(key, -1) if lay is not None else -1
             if lay is not None and k < 0:  # a new layout: checked once against the library
                 if key not in rejected and _agrees(reader, raw, lay):
@@ -363,7 +366,7 @@ def _read_messages(reader, conns, path: str) -> _Msgs:
                     rejected.add(key)
                     lay = None
             if lay is not None:
-                last = (lay, k, key)
+                last_key, last_k, head, vel = key, k, lay.counts[0] + 4, lay.counts[1]
             else:
                 try:
                     msg = reader.deserialize(raw, conn.msgtype)
