@@ -329,10 +329,12 @@ def _agrees(reader, raw: bytes, lay: _Layout) -> bool:
 
 
 def _read_messages(reader, conns, path: str) -> _Msgs:
-    """Every message of ``conns``, column-wise. Messages are grouped by layout (byte length and the bytes of
-    the frame id and joint names): the stamps and arrays of a group are read at fixed offsets from one buffer
-    (one numpy view per field instead of a Python call per message); a message in no known layout is decoded
-    once (:func:`_decode_layout`, checked against the library), or deserialized by the library."""
+    """Every message of ``conns``, column-wise. Messages are grouped by layout (:meth:`_Layout.key`: byte
+    length, frame id, joint names, array sizes): the stamps and arrays of a group are read at fixed offsets
+    from one buffer (one numpy view per field instead of a Python object per message); a message that does
+    not match the last layout is decoded (:func:`_decode_layout`) and looked up, a new layout checked once
+    against the library's deserialization (:func:`_agrees`); a message the decoder cannot read, or of a
+    layout the library reads otherwise, is deserialized by the library."""
     ros1 = not getattr(reader, "is2", Path(path).suffix.lower() != ".bag")
     topics = sorted({c.topic for c in conns})
     code = {t: k for k, t in enumerate(topics)}
