@@ -672,3 +672,18 @@ def test_layouts_of_equal_length_told_apart(rec, name):
         read_recording(p, robot=rec["robot"])
     assert f"{p}, joint shoulder, field 'effort': missing at {tr.n_samples // 2} of {tr.n_samples} time(s)" \
         in str(e.value)
+
+
+def test_options_of_the_other_kind_of_file_said_not_used(rec, cli, tmp_path):
+    """A command's data options apply to all its files: a bag option on a CSV, a text option on a bag, is
+    said to be unused for that file (not silently dropped)."""
+    tr = rec["tr"]
+    p = write_bag(tr, tmp_path / "opts.mcap", NAMES)
+    out = cli("inspect", "scara", p, rec["csv"], "--joint-names", ",".join(NAMES), "--topic", "/joint_states",
+              "--skip-rows", "2").out
+    assert ("note: --skip-rows: options of text and array files, not used for a ROS bag (read by message, its "
+            "joints by name)") in out
+    assert "note: --topic, --joint-names: options of ROS bags, not used for this file" in out
+    (got,), rep = read_recording(rec["csv"], LogFormat(skip_rows=2, prefix="left_"), robot=rec["robot"])
+    np.testing.assert_array_equal(got.q, tr.q[2:])
+    assert rep.notes[-1] == "--prefix: options of ROS bags, not used for this file"

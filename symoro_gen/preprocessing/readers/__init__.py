@@ -283,7 +283,7 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
                          step_jitter=float(tr.meta.get("dt_max_rel_jitter", 0.0)), samples=(tr.n_samples,),
                          options=fmt.options(), notes=tuple(raw.notes),
                          steps=step_stats(t_raw if t_raw is not None else tr.t, t_lines, fmt.max_gap))
-        return (tr,), rep
+        return (tr,), _ignored_bag_options(rep, fmt)
     if spec.is_split and fmt.columns:
         raise DataFileError([Problem(spec.text, "", "columns", "--columns cannot be used with a split-file "
                                      "spec (each file holds one role)")])
@@ -292,7 +292,20 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
                         start=start, stop=stop, skip_rows=fmt.skip_rows, reshape=fmt.reshape)
     if probs:
         raise DataFileError(probs)
-    return log_trajectories(raw, fmt, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain, joint_types=joint_types)
+    trajs, rep = log_trajectories(raw, fmt, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
+                                  joint_types=joint_types)
+    return trajs, _ignored_bag_options(rep, fmt)
+
+
+def _ignored_bag_options(rep: LoadReport, fmt: LogFormat) -> LoadReport:
+    """A file that is not a ROS bag read with bag options (a command's options apply to all its files): the
+    report says they were not used for it."""
+    given = [o for o in fmt.options() if o.split()[0] in ("--topic", "--stamp", "--prefix", "--joint-names",
+                                                         "--reference-topic")]
+    if not given:
+        return rep
+    return dataclasses.replace(rep, notes=(*rep.notes, f"{', '.join(o.split()[0] for o in given)}: options of ROS "
+                                                       "bags, not used for this file"))
 
 
 def _with_bag_options(fmt: LogFormat, opts: Mapping) -> LogFormat:

@@ -834,6 +834,10 @@ def read_bag(path: str | os.PathLike, fmt: LogFormat | None = None, *, n: int, r
                                                 for j in range(n)])
             tr.meta["q_ref_topic"] = fmt.reference_topic
     notes = [f"topic(s) {topics}: {msgs.size} messages, {s.t_ns.size} times; joints matched {how}"] + s.notes
+    text_only = [o for o, on in (("--skip-rows", fmt.skip_rows), ("--reshape", fmt.reshape)) if on]
+    if text_only:  # a command's options apply to all its files
+        notes.append(f"{', '.join(text_only)}: options of text and array files, not used for a ROS bag (read by "
+                     "message, its joints by name)")
     if ref is not None:
         notes.append(f"reference positions from {fmt.reference_topic} ({ref[2]}), interpolated on the samples")
     rep = replace(rep, rows_read=msgs.size, rows_dropped=rep.rows_dropped + s.n_dropped,
