@@ -687,3 +687,38 @@ def test_options_of_the_other_kind_of_file_said_not_used(rec, cli, tmp_path):
     (got,), rep = read_recording(rec["csv"], LogFormat(skip_rows=2, prefix="left_"), robot=rec["robot"])
     np.testing.assert_array_equal(got.q, tr.q[2:])
     assert rep.notes[-1] == "--prefix: options of ROS bags, not used for this file"
+
+
+@pytest.mark.slow  # two identifications from the command line
+@pytest.mark.parametrize("name", ["messy.db3", "messy.bag"])
+def test_messy_bag_identified_like_the_csv(rec, cli, name):
+    """A cell as recorded (ROS 2 sqlite3, ROS 1): two arms by prefix, gripper fingers, each arm's joints from
+    two publishers on one topic in their own joint order, messages received out of order. The right arm
+    identified from it equals the same recording identified from its CSV."""
+    left, right = _recording(11), rec["tr"]
+    msgs = []
+    for a, b in zip(_msgs(left, [f"left_{x}" for x in NAMES]), _msgs(right, [f"right_{x}" for x in NAMES])):
+        arm = JointStateMessage(a.stamp, a.names[:2] + b.names[:2], a.position[:2] + b.position[:2],
+                                a.velocity[:2] + b.velocity[:2], a.effort[:2] + b.effort[:2])
+        wrist = JointStateMessage(a.stamp, b.names[2:][::-1] + a.names[2:] + ("finger",),
+                                  b.position[2:][::-1] + a.position[2:] + (0.01,),
+                                  b.velocity[2:][::-1] + a.velocity[2:] + (0.0,),
+                                  b.effort[2:][::-1] + a.effort[2:] + (2.0,))
+        msgs += [arm, wrist]
+    for i in (40, 400, 801):
+        msgs[i], msgs[i + 2] = msgs[i + 2], msgs[i]
+    log = np.repeat(right.t, 2)
+    msgs = [replace(m, log_time=float(log[i])) for i, m in enumerate(msgs)]
+    p = write_messages(rec["dir"] / name, {"/joint_states": msgs})
+    outs = []
+    for data, extra in ((p, ("--prefix", "right_")), (rec["csv"], ())):
+        out = rec["dir"] / f"messy_{Path(str(data)).suffix[1:]}.json"
+        cli("--quiet", "identify", rec["robot_file"], data, *extra, "--method", "ols", "--json", out, rc=0)
+        outs.append(json.loads(out.read_text()))
+    a, b = (np.array(d["parameters"]["values"]) for d in outs)
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+    notes = outs[0]["data"][0]["notes"]
+    stamps = [m.stamp for m in msgs]
+    late = sum(s < max(stamps[:i]) for i, s in enumerate(stamps) if i)  # stamped before one received earlier
+    assert late >= 3 and f"{late} message(s) out of order in the bag: sorted by stamp" in notes
+    assert any(n.startswith("joints ignored (not the robot's): finger, left_elbow") for n in notes)
