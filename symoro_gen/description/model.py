@@ -57,6 +57,8 @@ class MdhRow:
     theta: sp.Expr
     r: sp.Expr
     drive: tuple[str, ...] = DRIVE_KINDS
+    #: the joint's name in the robot's logs and URDF (``name`` of the ``[[frames]]`` entry), or None
+    name: str | None = None
 
     @property
     def is_moving(self) -> bool:
@@ -185,6 +187,13 @@ class RobotDescription:
         actuated ones of a closed-loop robot (``[[loops]]``) or of one with coupled joints (``mimic``):
         its passive joints are solved, not logged."""
         return self.actuated if self.constrained else self.joints
+
+    @property
+    def joint_names(self) -> tuple[str, ...] | None:
+        """The names of the model joints (``name`` of their ``[[frames]]`` entries), or None unless
+        every model joint has one."""
+        names = [r.name for r in self.model_joints]
+        return None if not names or any(n is None for n in names) else tuple(str(n) for n in names)
 
     @property
     def constrained(self) -> bool:

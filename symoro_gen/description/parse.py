@@ -46,7 +46,7 @@ from .model import (
 TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits",
             "loops", "loop_reference"}
 FRAME_REQUIRED = ("j", "ant", "sigma", "alpha", "d", "theta", "r")
-FRAME_OPTIONAL = ("mu", "gamma", "b", "drive", "mimic")
+FRAME_OPTIONAL = ("mu", "gamma", "b", "drive", "mimic", "name")
 CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _RESERVED = {"q", "pi", "sin", "cos", "tan", "sqrt", "atan2"}
@@ -304,7 +304,23 @@ def _read_frame(idx: int, fr: dict, where: str, default_drive: tuple[str, ...], 
     ex = _frame_geometry(fr, where, q, vals, out.used_symbols, bad)
     if sigma_ok:
         _check_joint_variable(fr, where, sigma, q, ex, missing, probs)
-    return MdhRow(j=j, ant=ant, sigma=sigma, mu=mu, drive=tuple(drive), **ex)
+    return MdhRow(j=j, ant=ant, sigma=sigma, mu=mu, drive=tuple(drive), **ex, name=_frame_name(fr, where, out, bad))
+
+
+def _frame_name(fr: dict, where: str, out: _Frames, bad: Callable[[str, str, str], None]) -> str | None:
+    """The frame's optional ``name`` (the joint's name in the robot's logs and URDF: ROS bags are matched
+    by it): a non-empty string without spaces, unique in the file."""
+    name = fr.get("name")
+    if name is None:
+        return None
+    if not isinstance(name, str) or not name or any(ch.isspace() for ch in name):
+        bad(where, "name", f"must be a non-empty string without spaces (the joint's name in its logs), got {name!r}")
+        return None
+    other = next((r.j for r in out.rows if r.name == name), None)
+    if other is not None:
+        bad(where, "name", f"{name!r} is already the name of frame {other}")
+        return None
+    return name
 
 
 def _frame_joint(fr: dict, where: str, j: int, sigma: int, default_drive: tuple[str, ...],

@@ -1087,6 +1087,8 @@ class _UrdfText:
         lines = ["[[frames]]  # " + (f"URDF joint {jt.name} ({jt.type}), link {jt.child}" if jt
                                      else f"fixed frame of the tip link {tip}"),
                  f"j = {j}", f"ant = {ant}", f"sigma = {sigma}"]
+        if jt is not None and jt.name and not any(ch.isspace() for ch in jt.name):
+            lines.append(f"name = {json.dumps(jt.name)}")   # ROS bags' joints are matched by it
         if jt is not None and jt.name in self.coupled:
             src, k_, c_ = self.coupled[jt.name]
             off = _angle_str(c_, tol) if sigma == 0 else repr(_snap(c_, tol))

@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("rosbags")
 
 from symoro_gen.description import load_robot
-from symoro_gen.errors import DataFileError, OutputError
+from symoro_gen.errors import DataFileError, OutputError, RobotFileError
 from symoro_gen.loader import model_for
 from symoro_gen.preprocessing.readers import LogFormat, read_recording
 from symoro_gen.preprocessing.readers.bag import (
@@ -722,3 +722,38 @@ def test_messy_bag_identified_like_the_csv(rec, cli, name):
     late = sum(s < max(stamps[:i]) for i, s in enumerate(stamps) if i)  # stamped before one received earlier
     assert late >= 3 and f"{late} message(s) out of order in the bag: sorted by stamp" in notes
     assert any(n.startswith("joints ignored (not the robot's): finger, left_elbow") for n in notes)
+
+
+def _frame_named_robot_file(path: Path, names=NAMES) -> Path:
+    """robots/scara.toml whose frames carry a ``name`` field (no URDF comments)."""
+    text = (ROOT / "robots" / "scara.toml").read_text()
+    for j, nm in enumerate(names, 1):
+        text = text.replace(f"[[frames]]\nj = {j}\n", f'[[frames]]\nj = {j}\nname = "{nm}"\n', 1)
+    path.write_text(text)
+    return path
+
+
+def test_frame_names_match_the_bag_joints(rec, tmp_path):
+    """A robot file naming its joints with the frames' ``name`` field reads the bag like the URDF-comment file:
+    the same samples, matched by name."""
+    robot = load_robot(str(_frame_named_robot_file(tmp_path / "named.toml")))
+    assert robot.joint_names == NAMES
+    assert robot_joint_names(robot) == NAMES
+    bag = write_bag(rec["tr"], tmp_path / "frame_names.mcap", NAMES)
+    (by_field,), rep = read_recording(bag, robot=robot)
+    (by_comment,), _ = read_recording(bag, robot=rec["robot"])
+    np.testing.assert_array_equal(by_field.q, by_comment.q)
+    np.testing.assert_array_equal(by_field.tau, rec["tr"].tau)
+    assert any("joint names of the robot file (the name of its frames)" in n for n in rep.notes)
+
+
+@pytest.mark.parametrize("bad, message", [('"two words"', "without spaces"), ("3", "without spaces"),
+                                          ('"shoulder"', "already the name of frame 1")])
+def test_bad_frame_name_is_named(tmp_path, bad, message):
+    p = _frame_named_robot_file(tmp_path / "bad.toml")
+    text = p.read_text().replace('name = "elbow"', f"name = {bad}", 1)
+    p.write_text(text)
+    with pytest.raises(RobotFileError) as ei:
+        load_robot(str(p))
+    msg = str(ei.value)
+    assert "bad.toml" in msg and "frame 2" in msg and "name" in msg and message in msg

@@ -127,10 +127,14 @@ _J = re.compile(r"^\s*j\s*=\s*(\d+)")
 
 
 def robot_joint_names(robot) -> tuple[str, ...] | None:
-    """The names of the robot's model joints: the URDF joint names ``import-urdf`` keeps in the robot
-    file's ``[[frames]]`` comments (``# URDF joint NAME (type), link ...``); None when the file has none."""
+    """The names of the robot's model joints: the ``name`` of their ``[[frames]]`` entries (written by
+    ``import-urdf``), else the URDF joint names older ``import-urdf`` files keep in the frames' comments
+    (``# URDF joint NAME (type), link ...``); None when the file has neither."""
     if robot is None:
         return None
+    named = getattr(robot, "joint_names", None)
+    if named:
+        return tuple(named)
     path = Path(getattr(robot, "file", "") or "")
     if not path.is_file():
         return None
@@ -433,6 +437,9 @@ def _wanted_names(msgs: _Msgs, n: int, fmt: LogFormat, robot, path: str, topics:
             raise DataFileError([Problem(path, "", "--joint-names", f"{len(names)} names given, the robot has {n} "
                                          "joints")])
         return [pre + x for x in names], "by the names of --joint-names"
+    named = getattr(robot, "joint_names", None)
+    if named:
+        return [pre + x for x in named], "by the joint names of the robot file (the name of its frames)"
     rn = robot_joint_names(robot)
     if rn is not None:
         return [pre + x for x in rn], "by the URDF joint names of the robot file"
