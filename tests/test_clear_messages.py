@@ -115,20 +115,44 @@ def test_closed_loop_options_without_their_method_are_refused(extra, named, cli,
 
 
 @pytest.mark.slow
-def test_an_excitation_design_with_no_room_to_move_is_degenerate_not_ok(tmp_path, cli):
+@pytest.mark.parametrize("refine", [("--refine", "0"), ()], ids=["ipopt-only", "with-sdp-refinement"])
+def test_an_excitation_design_with_no_room_to_move_is_degenerate_not_ok(refine, tmp_path, cli):
     """Limits of 1e-9 leave the joints no motion: the design respects them (limits_ok) but its regressor has lost
-    its rank (cond ~1e20): the summary says DEGENERATE with the bound, the JSON has ``degenerate``, exit status 3."""
+    its rank (cond ~1e20): the summary says DEGENERATE with the bound, the JSON has ``degenerate``, exit status 3.
+    The SDP refinement (on by default when cvxpy is installed) is not run on it, and says so, instead of failing
+    inside cvxpy on the empty eigenspace of a singular information matrix."""
+    from symoro_gen.excite.refine import has_cvxpy
+
     robot = tmp_path / "tiny.toml"
     robot.write_text((ROOT / "robots" / "scara.toml").read_text() + "\n[limits]\n"
                      + "".join(f"{k} = [{', '.join(['1e-9'] * 4)}]\n" for k in ("q_max", "dq_max", "ddq_max"))
                      + f"q_min = [{', '.join(['-1e-9'] * 4)}]\n")
-    r = cli("excite", robot, "-o", tmp_path / "x.csv", "--duration", "2", "--rate", "50", "--refine", "0",
+    r = cli("excite", robot, "-o", tmp_path / "x.csv", "--duration", "2", "--rate", "50", *refine,
             "--json", tmp_path / "x.json", rc=3)
     doc = json.loads((tmp_path / "x.json").read_text())
     assert doc["limits_ok"] is True and doc["degenerate"] is True and doc["cond"] > doc["cond_degenerate"] == 1e10
+    # independent of the design's own figure: the stacked regressor of the written trajectory has lost its rank
+    assert _written_design_cond(tmp_path / "x.csv") > 1e10
     line = next(ln for ln in r.out.splitlines() if ln.startswith("DEGENERATE"))
     assert line.startswith(f"DEGENERATE design: cond = {doc['cond']:.3g} is above 1e+10: its regressor is "
                            "numerically rank-deficient") and "widen them" in line
+    sdp = [ln for ln in r.out.splitlines() if ln.startswith("SDP refinement")]
+    if refine or not has_cvxpy():
+        assert sdp == []
+    else:
+        assert sdp == ["SDP refinement of the true cond: not run (degenerate design: cond above 1e+10)"]
+
+
+def _written_design_cond(csv) -> float:
+    """cond of the SCARA's base regressor stacked over the samples of an excitation CSV (t, q, dq, ddq)."""
+    import numpy as np
+
+    a = np.loadtxt(csv, delimiter=",", skiprows=1)
+    n = (a.shape[1] - 1) // 3
+    model = symoro_gen.load_model("scara")
+    W = np.asarray(model.regressor(a[:, 1:1 + n], a[:, 1 + n:1 + 2 * n], a[:, 1 + 2 * n:])).reshape(
+        -1, len(model.BASE_NAMES))
+    return float(np.linalg.cond(W))
 
 
 def test_a_full_disk_names_the_file_being_written(tmp_path, cli, monkeypatch):
