@@ -193,3 +193,48 @@ def test_an_over_actuated_four_bar_is_refused_when_its_file_is_read(tmp_path, cl
     assert not (tmp_path / "gen").exists()
     f.write_text(text)  # the four-bar as it is (one actuated joint) is read
     assert [r.mu for r in load_robot(str(f)).rows if r.is_moving] == [1, 0, 0]
+
+
+def _spherical_fourbar(actuated: tuple[int, ...]) -> str:
+    """A spherical four-bar: four revolute joints whose axes all pass through the base origin (every MDH frame
+    at the origin, d = r = 0; twist angles 60, 90, 45 degrees), so that only the orientation closes the loop:
+    3 closure equations, 4 - 3 = 1 degree of freedom (Chiang, "Kinematics of spherical mechanisms", 1988).
+    The closing frame is placed where the cut frame is at the reference configuration (q1..q4 = 0.3, 0.5,
+    -0.4, 0.7), by the Z-X-Z angles of the rotation between them: the loop is assembled there by construction."""
+    import numpy as np
+
+    def rz(a):
+        return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+
+    def rx(a):
+        return np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+
+    a2, a3, a4 = np.pi / 3, np.pi / 2, np.pi / 4
+    q = {1: 0.3, 2: 0.5, 3: -0.4, 4: 0.7}
+    r_cut = rz(q[1]) @ rx(a2) @ rz(q[2]) @ rx(a4) @ rz(q[4])
+    rel = (rx(a3) @ rz(q[3])).T @ r_cut                  # frame 3 -> cut frame: Rz(gamma) Rx(alpha) Rz(theta)
+    al = float(np.arccos(np.clip(rel[2, 2], -1, 1)))
+    ga, th = float(np.arctan2(rel[0, 2], -rel[1, 2])), float(np.arctan2(rel[2, 0], rel[2, 1]))
+    assert np.allclose(rz(ga) @ rx(al) @ rz(th), rel)
+    frames = "".join(f"[[frames]]\nj = {j}\nant = {ant}\nsigma = 0\nmu = {int(j in actuated)}\nalpha = {al_j!r}\n"
+                     "d = 0\ntheta = \"q\"\nr = 0\n" for j, ant, al_j in ((1, 0, 0.0), (2, 1, a2), (3, 0, a3)))
+    return (f'name = "sphere4"\ngravity = [0, 0, -9.81]\n{frames}'
+            f'[[loops]]\ncut = {{ ant = 2, sigma = 0, alpha = {a4!r}, d = 0, theta = "q", r = 0 }}\n'
+            f"close = {{ ant = 3, sigma = 2, gamma = {ga!r}, alpha = {al!r}, d = 0, theta = {th!r}, r = 0 }}\n"
+            "[loop_reference]\n" + "".join(f"q{j} = {v}\n" for j, v in q.items()))
+
+
+def test_an_over_actuated_spatial_loop_is_refused_when_its_file_is_read(tmp_path, cli):
+    """A loop that is not planar (a spherical four-bar: 3 closure equations, one degree of freedom) with two
+    actuated joints: refused when the file is read (``generate``, ``check``, any load), naming the loop, its joints,
+    the number of closure equations at its reference assembly and the actuated joints; with one it is read."""
+    f = tmp_path / "sphere4.toml"
+    f.write_text(_spherical_fourbar(actuated=(1, 2)))
+    r = cli("generate", f, "--out", tmp_path / "gen", rc=2)
+    assert r.err_lines[0] == (f"symoro-gen: error: {f}, loop 1, field 'mu': over-actuated: the loop through joints "
+                              "1, 2, 3 and its cut joint 4 is not planar (3 independent closure equations at its "
+                              "reference assembly) and has 1 degree(s) of freedom, but its actuated joints are 1, 2: "
+                              "make all but 1 of them passive (mu = 0)")
+    assert not (tmp_path / "gen").exists()
+    f.write_text(_spherical_fourbar(actuated=(1,)))
+    assert [r.mu for r in load_robot(str(f)).rows if r.is_moving] == [1, 0, 0]
