@@ -238,3 +238,33 @@ def test_an_over_actuated_spatial_loop_is_refused_when_its_file_is_read(tmp_path
     assert not (tmp_path / "gen").exists()
     f.write_text(_spherical_fourbar(actuated=(1,)))
     assert [r.mu for r in load_robot(str(f)).rows if r.is_moving] == [1, 0, 0]
+
+
+@pytest.mark.parametrize("option, value, words", [
+    ("--starts", "0", "--starts 0: at least one start is needed"),
+    ("--refine", "-2", "--refine -2: must be a number of iterations >= 0"),
+])
+def test_excite_counts_below_their_minimum_are_refused_naming_the_option(option, value, words, cli, tmp_path):
+    """``excite --starts 0`` ended in an AssertionError deep in the optimiser: refused before any work (no output
+    written), naming the option."""
+    out = tmp_path / "x.csv"
+    r = cli("excite", "scara", "-o", out, option, value, rc=2)
+    assert r.err_lines[0] == f"symoro-gen: error: {words}"
+    assert not out.exists()
+
+
+def test_the_reliability_table_cites_tests_that_exist():
+    """docs/reliability.md maps each bad input to its behaviour and its test: every ``file.py::test_name`` it cites
+    (a bare ``::test_name`` is in the file cited before it on the row) is a test function of that file."""
+    doc = (ROOT / "docs" / "reliability.md").read_text()
+    cited = 0
+    for line in doc.splitlines():
+        if not line.startswith("|"):
+            continue
+        current = None
+        for m in re.finditer(r"`([\w/]+\.py)?::(test_\w+)`", line):
+            current = m.group(1) or current
+            assert current is not None, line
+            assert f"def {m.group(2)}(" in (ROOT / "tests" / current).read_text(), (current, m.group(2))
+            cited += 1
+    assert cited >= 30
