@@ -8,6 +8,7 @@ started by dask-jobqueue or on Kubernetes; the workers need symoro_gen and the g
 """
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import dataclasses
 import functools
@@ -120,7 +121,7 @@ def _await(cl, futures: list, labels: dict[str, str], retries: int, where: str) 
         try:
             distributed.wait(futures, timeout=WATCH_S)
             break
-        except TimeoutError:
+        except (TimeoutError, asyncio.TimeoutError):  # the same class from Python 3.11 on, not on 3.10
             pass
         try:
             counts = cl.run_on_scheduler(deaths)
