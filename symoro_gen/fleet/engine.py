@@ -110,11 +110,9 @@ def _await(cl, futures: list, labels: dict[str, str], retries: int, where: str) 
     naming the log; so does a cluster left with no worker for :data:`WORKERLESS_S` seconds after workers died
     (a nanny stops restarting a worker that keeps dying; Dask would then wait for a worker forever)."""
     distributed = _require_distributed()
-    keys = list(labels)
 
     def deaths(dask_scheduler=None):  # runs in the scheduler (a closure: pickled by value, any scheduler runs it)
-        tasks = dask_scheduler.tasks
-        return {k: int(tasks[k].suspicious) for k in keys if k in tasks and tasks[k].suspicious}
+        return {k: int(ts.suspicious) for k, ts in dask_scheduler.tasks.items() if ts.suspicious}
 
     seen_workers, workerless_since = False, None
     while True:
@@ -123,8 +121,8 @@ def _await(cl, futures: list, labels: dict[str, str], retries: int, where: str) 
             break
         except (TimeoutError, asyncio.TimeoutError):  # the same class from Python 3.11 on, not on 3.10
             pass
-        try:
-            counts = cl.run_on_scheduler(deaths)
+        try:  # this run's per-log tasks only (a shared scheduler holds other runs' tasks too)
+            counts = {k: n for k, n in cl.run_on_scheduler(deaths).items() if k in labels}
         except Exception:  # noqa: BLE001 - a scheduler that refuses to run code: only the workerless bound holds
             counts = {}
         if counts and max(counts.values()) > retries:
