@@ -115,20 +115,44 @@ def test_closed_loop_options_without_their_method_are_refused(extra, named, cli,
 
 
 @pytest.mark.slow
-def test_an_excitation_design_with_no_room_to_move_is_degenerate_not_ok(tmp_path, cli):
+@pytest.mark.parametrize("refine", [("--refine", "0"), ()], ids=["ipopt-only", "with-sdp-refinement"])
+def test_an_excitation_design_with_no_room_to_move_is_degenerate_not_ok(refine, tmp_path, cli):
     """Limits of 1e-9 leave the joints no motion: the design respects them (limits_ok) but its regressor has lost
-    its rank (cond ~1e20): the summary says DEGENERATE with the bound, the JSON has ``degenerate``, exit status 3."""
+    its rank (cond ~1e20): the summary says DEGENERATE with the bound, the JSON has ``degenerate``, exit status 3.
+    The SDP refinement (on by default when cvxpy is installed) is not run on it, and says so, instead of failing
+    inside cvxpy on the empty eigenspace of a singular information matrix."""
+    from symoro_gen.excite.refine import has_cvxpy
+
     robot = tmp_path / "tiny.toml"
     robot.write_text((ROOT / "robots" / "scara.toml").read_text() + "\n[limits]\n"
                      + "".join(f"{k} = [{', '.join(['1e-9'] * 4)}]\n" for k in ("q_max", "dq_max", "ddq_max"))
                      + f"q_min = [{', '.join(['-1e-9'] * 4)}]\n")
-    r = cli("excite", robot, "-o", tmp_path / "x.csv", "--duration", "2", "--rate", "50", "--refine", "0",
+    r = cli("excite", robot, "-o", tmp_path / "x.csv", "--duration", "2", "--rate", "50", *refine,
             "--json", tmp_path / "x.json", rc=3)
     doc = json.loads((tmp_path / "x.json").read_text())
     assert doc["limits_ok"] is True and doc["degenerate"] is True and doc["cond"] > doc["cond_degenerate"] == 1e10
+    # independent of the design's own figure: the stacked regressor of the written trajectory has lost its rank
+    assert _written_design_cond(tmp_path / "x.csv") > 1e10
     line = next(ln for ln in r.out.splitlines() if ln.startswith("DEGENERATE"))
     assert line.startswith(f"DEGENERATE design: cond = {doc['cond']:.3g} is above 1e+10: its regressor is "
                            "numerically rank-deficient") and "widen them" in line
+    sdp = [ln for ln in r.out.splitlines() if ln.startswith("SDP refinement")]
+    if refine or not has_cvxpy():
+        assert sdp == []
+    else:
+        assert sdp == ["SDP refinement of the true cond: not run (degenerate design: cond above 1e+10)"]
+
+
+def _written_design_cond(csv) -> float:
+    """cond of the SCARA's base regressor stacked over the samples of an excitation CSV (t, q, dq, ddq)."""
+    import numpy as np
+
+    a = np.loadtxt(csv, delimiter=",", skiprows=1)
+    n = (a.shape[1] - 1) // 3
+    model = symoro_gen.load_model("scara")
+    W = np.asarray(model.regressor(a[:, 1:1 + n], a[:, 1 + n:1 + 2 * n], a[:, 1 + 2 * n:])).reshape(
+        -1, len(model.BASE_NAMES))
+    return float(np.linalg.cond(W))
 
 
 def test_a_full_disk_names_the_file_being_written(tmp_path, cli, monkeypatch):
@@ -169,3 +193,78 @@ def test_an_over_actuated_four_bar_is_refused_when_its_file_is_read(tmp_path, cl
     assert not (tmp_path / "gen").exists()
     f.write_text(text)  # the four-bar as it is (one actuated joint) is read
     assert [r.mu for r in load_robot(str(f)).rows if r.is_moving] == [1, 0, 0]
+
+
+def _spherical_fourbar(actuated: tuple[int, ...]) -> str:
+    """A spherical four-bar: four revolute joints whose axes all pass through the base origin (every MDH frame
+    at the origin, d = r = 0; twist angles 60, 90, 45 degrees), so that only the orientation closes the loop:
+    3 closure equations, 4 - 3 = 1 degree of freedom (Chiang, "Kinematics of spherical mechanisms", 1988).
+    The closing frame is placed where the cut frame is at the reference configuration (q1..q4 = 0.3, 0.5,
+    -0.4, 0.7), by the Z-X-Z angles of the rotation between them: the loop is assembled there by construction."""
+    import numpy as np
+
+    def rz(a):
+        return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+
+    def rx(a):
+        return np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+
+    a2, a3, a4 = np.pi / 3, np.pi / 2, np.pi / 4
+    q = {1: 0.3, 2: 0.5, 3: -0.4, 4: 0.7}
+    r_cut = rz(q[1]) @ rx(a2) @ rz(q[2]) @ rx(a4) @ rz(q[4])
+    rel = (rx(a3) @ rz(q[3])).T @ r_cut                  # frame 3 -> cut frame: Rz(gamma) Rx(alpha) Rz(theta)
+    al = float(np.arccos(np.clip(rel[2, 2], -1, 1)))
+    ga, th = float(np.arctan2(rel[0, 2], -rel[1, 2])), float(np.arctan2(rel[2, 0], rel[2, 1]))
+    assert np.allclose(rz(ga) @ rx(al) @ rz(th), rel)
+    frames = "".join(f"[[frames]]\nj = {j}\nant = {ant}\nsigma = 0\nmu = {int(j in actuated)}\nalpha = {al_j!r}\n"
+                     "d = 0\ntheta = \"q\"\nr = 0\n" for j, ant, al_j in ((1, 0, 0.0), (2, 1, a2), (3, 0, a3)))
+    return (f'name = "sphere4"\ngravity = [0, 0, -9.81]\n{frames}'
+            f'[[loops]]\ncut = {{ ant = 2, sigma = 0, alpha = {a4!r}, d = 0, theta = "q", r = 0 }}\n'
+            f"close = {{ ant = 3, sigma = 2, gamma = {ga!r}, alpha = {al!r}, d = 0, theta = {th!r}, r = 0 }}\n"
+            "[loop_reference]\n" + "".join(f"q{j} = {v}\n" for j, v in q.items()))
+
+
+def test_an_over_actuated_spatial_loop_is_refused_when_its_file_is_read(tmp_path, cli):
+    """A loop that is not planar (a spherical four-bar: 3 closure equations, one degree of freedom) with two
+    actuated joints: refused when the file is read (``generate``, ``check``, any load), naming the loop, its joints,
+    the number of closure equations at its reference assembly and the actuated joints; with one it is read."""
+    f = tmp_path / "sphere4.toml"
+    f.write_text(_spherical_fourbar(actuated=(1, 2)))
+    r = cli("generate", f, "--out", tmp_path / "gen", rc=2)
+    assert r.err_lines[0] == (f"symoro-gen: error: {f}, loop 1, field 'mu': over-actuated: the loop through joints "
+                              "1, 2, 3 and its cut joint 4 is not planar (3 independent closure equations at its "
+                              "reference assembly) and has 1 degree(s) of freedom, but its actuated joints are 1, 2: "
+                              "make all but 1 of them passive (mu = 0)")
+    assert not (tmp_path / "gen").exists()
+    f.write_text(_spherical_fourbar(actuated=(1,)))
+    assert [r.mu for r in load_robot(str(f)).rows if r.is_moving] == [1, 0, 0]
+
+
+@pytest.mark.parametrize("option, value, words", [
+    ("--starts", "0", "--starts 0: at least one start is needed"),
+    ("--refine", "-2", "--refine -2: must be a number of iterations >= 0"),
+])
+def test_excite_counts_below_their_minimum_are_refused_naming_the_option(option, value, words, cli, tmp_path):
+    """``excite --starts 0`` ended in an AssertionError deep in the optimiser: refused before any work (no output
+    written), naming the option."""
+    out = tmp_path / "x.csv"
+    r = cli("excite", "scara", "-o", out, option, value, rc=2)
+    assert r.err_lines[0] == f"symoro-gen: error: {words}"
+    assert not out.exists()
+
+
+def test_the_reliability_table_cites_tests_that_exist():
+    """docs/reliability.md maps each bad input to its behaviour and its test: every ``file.py::test_name`` it cites
+    (a bare ``::test_name`` is in the file cited before it on the row) is a test function of that file."""
+    doc = (ROOT / "docs" / "reliability.md").read_text()
+    cited = 0
+    for line in doc.splitlines():
+        if not line.startswith("|"):
+            continue
+        current = None
+        for m in re.finditer(r"`([\w/]+\.py)?::(test_\w+)`", line):
+            current = m.group(1) or current
+            assert current is not None, line
+            assert f"def {m.group(2)}(" in (ROOT / "tests" / current).read_text(), (current, m.group(2))
+            cited += 1
+    assert cited >= 30

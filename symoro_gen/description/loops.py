@@ -265,23 +265,39 @@ def check_passive(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopClos
 
 
 def check_actuation(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopClosure, ...],
-                    values: Mapping[str, float], bad: Callable[[str, str, str], None], tol: float = 1e-9) -> None:
-    """A planar loop (at q = 0 its revolute axes parallel, its prismatic axes orthogonal to them) has three
-    independent closure equations (the planar case of [KD2002] sec. 7.3): it needs at least three passive
-    variables, its passive tree joints (``mu = 0``) and its cut joint. With fewer, its actuated joints cannot all
-    move freely: the robot is over-actuated, refused here naming the loop and the actuated joints (``load_model``
-    would only fail to close the loop). A loop that is not planar is left to the model's closure check."""
+                    values: Mapping[str, float], bad: Callable[[str, str, str], None], tol: float = 1e-9,
+                    reference: Mapping[str, float] | None = None) -> None:
+    """Refuse an over-actuated loop, naming the loop, its joints and the actuated ones (``load_model`` would only
+    fail to close it). A loop of ``k`` joint variables (its moving tree joints and its cut joint) with ``c``
+    independent closure equations has ``k - c`` degrees of freedom (the mobility of a single loop, [KD2002]
+    sec. 7.3): more actuated joints than that cannot all move freely.
+
+    * A planar loop (at q = 0 its revolute axes parallel, its prismatic axes orthogonal to them: a property of
+      the geometry, kept by every joint motion) has ``c = 3`` (the planar case of [KD2002] sec. 7.3).
+    * Any other loop: ``c`` is the rank of its joints' twists (screws, in one frame) at its reference assembly
+      (``[loop_reference]``, missing values 0: a closed, non-singular configuration), the rank of the closure
+      equations' Jacobian there (3 for a spherical loop, 6 for a general spatial one). When the loop does not
+      close at that configuration (not an assembly: the rank of an open chain says nothing of the closed loop's)
+      it is left to the model's closure check."""
     if not loops:
         return
+    ref = dict(reference or {})
     subs = {sp.Symbol(k, real=True): v for k, v in values.items()}
     by_j = {r.j: r for r in rows}
     poses: dict[int, np.ndarray] = {0: np.eye(4)}
+    at_ref: dict[int, np.ndarray] = {0: np.eye(4)}
 
-    def pose(j: int) -> np.ndarray:
-        if j not in poses:
+    def pose(j: int, cache: dict[int, np.ndarray], q: Callable[[int], float]) -> np.ndarray:
+        if j not in cache:
             r = by_j[j]
-            poses[j] = pose(r.ant) @ row_transform(r, subs, 0.0)
-        return poses[j]
+            cache[j] = pose(r.ant, cache, q) @ row_transform(r, subs, q(r.j) if r.is_moving else 0.0)
+        return cache[j]
+
+    def zero(j: int) -> float:
+        return 0.0
+
+    def reference_q(j: int) -> float:
+        return float(ref.get(f"q{j}", 0.0))
 
     def chain(f: int) -> set[int]:
         out = set()
@@ -293,8 +309,8 @@ def check_actuation(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopCl
     for k, lp in enumerate(loops, start=1):
         try:
             moving = [by_j[j] for j in sorted(chain(lp.cut.ant) ^ chain(lp.close.ant)) if by_j[j].is_moving]
-            axes = [(pose(r.j)[:3, 2], r.sigma) for r in moving]
-            axes.append(((pose(lp.cut.ant) @ row_transform(lp.cut, subs, 0.0))[:3, 2], lp.cut.sigma))
+            axes = [(pose(r.j, poses, zero)[:3, 2], r.sigma) for r in moving]
+            axes.append(((pose(lp.cut.ant, poses, zero) @ row_transform(lp.cut, subs, 0.0))[:3, 2], lp.cut.sigma))
         except (KeyError, TypeError, ValueError):  # a geometry reported elsewhere
             continue
         revolute = [z for z, sg in axes if sg == REVOLUTE]
@@ -303,12 +319,39 @@ def check_actuation(rows: tuple[MdhRow, ...] | list[MdhRow], loops: tuple[LoopCl
         n0 = revolute[0]
         planar = (all(np.linalg.norm(np.cross(n0, z)) < tol for z in revolute)
                   and all(abs(float(n0 @ z)) < tol for z, sg in axes if sg == PRISMATIC))
-        passive = [r.j for r in moving if r.mu == 0]
-        if not planar or len(passive) + 1 >= 3:
-            continue
         actuated = [r.j for r in moving if r.mu != 0]
-        dof = len(moving) + 1 - 3
+        joints = ", ".join(map(str, [r.j for r in moving]))
+        if planar:
+            equations, kind = 3, "is planar (3 closure equations)"
+        else:
+            try:
+                rank = _closure_rank(moving, lp, subs, lambda j: pose(j, at_ref, reference_q), reference_q)
+            except (KeyError, TypeError, ValueError):
+                continue
+            if rank is None:
+                continue
+            equations, kind = rank, f"is not planar ({rank} independent closure equations at its reference assembly)"
+        dof = len(moving) + 1 - equations
+        if len(actuated) <= max(dof, 0):
+            continue
         bad(f"loop {k}", "mu", (
-            f"over-actuated: the loop through joints {', '.join(map(str, [r.j for r in moving]))} and its cut joint "
-            f"{lp.cut.j} is planar (3 closure equations) and has {dof} degree(s) of freedom, but its actuated joints "
-            f"are {', '.join(map(str, actuated))}: make all but {dof} of them passive (mu = 0)"))
+            f"over-actuated: the loop through joints {joints} and its cut joint {lp.cut.j} {kind} and has {dof} "
+            f"degree(s) of freedom, but its actuated joints are {', '.join(map(str, actuated))}: make all but "
+            f"{max(dof, 0)} of them passive (mu = 0)"))
+
+
+def _closure_rank(moving: list[MdhRow], lp: LoopClosure, subs: Mapping[Any, Any],
+                  pose: Callable[[int], np.ndarray], q: Callable[[int], float]) -> int | None:
+    """The number of independent closure equations of a loop at its reference assembly: the rank of the twists
+    ``(z, p x z)`` (revolute) or ``(0, z)`` (prismatic) of its joints, axis ``z`` and a point ``p`` of it (the
+    origin of the joint's MDH frame) in the base frame ([KD2002] sec. 7.3; Murray, Li & Sastry 1994, ch. 3); None
+    when the loop does not close there (cut frame and closing frame apart by more than 1e-6)."""
+    cut = pose(lp.cut.ant) @ row_transform(lp.cut, subs, q(lp.cut.j))
+    close = pose(lp.close.ant) @ row_transform(lp.close, subs, 0.0)
+    if not np.allclose(cut, close, atol=1e-6):
+        return None
+    frames = [(pose(r.j), r.sigma) for r in moving] + [(cut, lp.cut.sigma)]
+    twists = np.array([np.r_[T[:3, 2], np.cross(T[:3, 3], T[:3, 2])] if sg == REVOLUTE else np.r_[np.zeros(3), T[:3, 2]]
+                       for T, sg in frames]).T
+    sv = np.linalg.svd(twists, compute_uv=False)
+    return int(np.sum(sv > 1e-8 * max(sv[0], 1.0)))

@@ -200,7 +200,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     if not bad_sigma:
         check_passive(rows, loops, couplings, bad, mimic_frames)
     if loops and not probs.found:
-        check_actuation(rows, loops, vals.values, bad)
+        check_actuation(rows, loops, vals.values, bad, reference=loop_reference)
 
     if probs.found:
         raise RobotFileError(probs.found)

@@ -15,6 +15,7 @@ from ..model import IdentificationModel
 from .limits import ExcitationError, Limits, load_casadi
 
 __all__ = [
+    "COND_DEGENERATE",
     "COND_POWER",
     "COND_POWERS",
     "CondBound",
@@ -27,6 +28,11 @@ __all__ = [
     "stacked_cond",
 ]
 
+#: cond of the base regressor above which a design is degenerate: beyond ~1e10 the smallest singular value is
+#: within a relative 1e-10 of the largest, where the rounding of the regressor's evaluation (~1e-16 x its
+#: magnitude, times the growth of the Newton-Euler recursion) decides it: the rank is numerically lost (Golub &
+#: Van Loan, Matrix Computations, 4th ed., sec. 5.4.1 on numerical rank). Good designs are below 1e3.
+COND_DEGENERATE = 1e10
 #: power p of the smooth cond criterion (a power of 2): exp(criterion) is within nb^(2/p) of cond^2
 COND_POWER = 8
 #: continuation of the cond criterion: IPOPT runs with each power in turn, each stage warm-started

@@ -338,6 +338,8 @@ class _Start:
                    refine_accepted=sum(1 for h in hist if h.get("accepted")),
                    refine_conds=[h["cond"] for h in hist],
                    refine_time=time.perf_counter() - tr)
+        if "skipped" in hist[-1]:
+            rec["refine_skipped"] = hist[-1]["skipped"]
         return (c_r, X_r) if c_r < c else (c, X)
 
     def _ipopt_iteration(self, describe, power: int, calls: int) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..model import IdentificationModel
 from .bases import basis_eval, dense_times
-from .criterion import casadi_regressor, stacked_cond
+from .criterion import COND_DEGENERATE, casadi_regressor, stacked_cond
 from .designs import inside_limits
 from .limits import ExcitationError, Limits, check_limits, floor_linearisation, load_casadi
 
@@ -256,6 +256,9 @@ class _SdpStep:
         bot = np.flatnonzero(w <= 2.0 * w[0])[:block]
         ku, kv = len(top), len(bot)
         rec["block"] = [ku, kv]
+        if not (ku and kv and w[0] > 0):  # a singular M(X): no lambda_min block, nothing the SDP can scale by
+            rec["status"] = "singular information matrix"
+            return None, 0.0
         BU, BV = self.compress(dM, Q[:, top]) / w[-1], self.compress(dM, Q[:, bot]) / w[0]
         d = cp.Variable(m * n)
         smax, smin = cp.Variable(), cp.Variable()
@@ -311,7 +314,9 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
     on ``t_out`` decreases and every limit holds on ``t_out`` and on ``check_times`` (default: 10x denser
     than ``t_out``, and the knots: :func:`dense_times`); the radius follows the usual trust-region rule on the ratio of actual to predicted
     decrease (Conn, Gould & Toint 2000, "Trust-region methods", alg. 6.1.1). Stops after ``iterations``
-    SDPs, when ``delta < delta_min`` or when the SDP predicts no decrease. ``progress(record)`` is called
+    SDPs, when ``delta < delta_min`` or when the SDP predicts no decrease; not started on a degenerate design
+    (cond above :data:`COND_DEGENERATE`: its smallest eigenvalues are rounding noise, their eigenspace undefined),
+    whose final record says ``skipped``. ``progress(record)`` is called
     after each SDP (with the iteration's record).
 
     ``settings`` (:class:`RefineSettings`: ``iterations``, ``margin``, ``delta``, ``delta_min``, ``delta_max``,
@@ -338,6 +343,13 @@ def refine_excitation(model: IdentificationModel, basis, limits: Limits, X: np.n
     delta = cfg.delta
     lin_at_X = sdp.lin(X)
     c2 = _cond2(lin_at_X[0])
+    if int(cfg.iterations) > 0 and not c2 <= COND_DEGENERATE ** 2:
+        # a numerically rank-deficient information matrix (e.g. limits that leave the joints no motion): its
+        # smallest eigenvalues are rounding noise, so neither their eigenspace (the SDP's lambda_min block) nor the
+        # ratio is defined; the design is returned as it is and reported degenerate by the caller
+        history.append({"iteration": 0, "cond": math.sqrt(c2), "delta": delta, "final": True,
+                        "skipped": f"degenerate design: cond above {COND_DEGENERATE:g}"})
+        return X, history
     for it in range(int(cfg.iterations)):
         if delta < cfg.delta_min:
             break

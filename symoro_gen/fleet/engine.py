@@ -8,6 +8,7 @@ started by dask-jobqueue or on Kubernetes; the workers need symoro_gen and the g
 """
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import dataclasses
 import functools
@@ -73,6 +74,78 @@ def _worker_died(s: str, exc: BaseException, when: str) -> FleetError:
         err.hint = ("check the memory of the workers (a worker that dies at once is most often out of memory), or "
                     "run in this process with --scheduler threads:2")
     return err
+
+
+#: seconds between two looks at a running fleet (its lost workers) while its results are awaited
+WATCH_S = 1.0
+#: seconds a run whose workers all died (and were not replaced) waits for a new one before it is stopped
+WORKERLESS_S = 60.0
+
+
+def _deaths_text(n: int) -> str:
+    return "once" if n == 1 else "twice" if n == 2 else f"{n} times"
+
+
+def _lost_log(counts: dict[str, int], labels: dict[str, str], retries: int) -> FleetError:
+    """The error of a run stopped because the worker running a log's task died more than ``retries`` times:
+    ``counts`` the deaths per task key (Dask's ``suspicious`` count: every task a dying worker was running),
+    ``labels`` the log of each per-log task key. Names the log, or the logs that were running together each time
+    (a worker runs more than one task: the one that killed it cannot be told apart)."""
+    n = max(counts.values())
+    worst = sorted(labels[k] for k, c in counts.items() if c == n and k in labels)
+    which = worst[0] if len(worst) == 1 else "one of " + ", ".join(worst[:5]) + (
+        f" and {len(worst) - 5} more" if len(worst) > 5 else "")
+    err = FleetError(f"fleet: {which}: the Dask worker reading it died {_deaths_text(n)} (--retries {retries}): "
+                     "the run is stopped instead of re-running it without end")
+    err.hint = ("a worker that dies on one log is most often out of memory: bound a task with --segment-samples / "
+                "--chunk-samples, run in this process (--scheduler threads:2), or move that log out of the folder "
+                "to run without it")
+    return err
+
+
+def _await(cl, futures: list, labels: dict[str, str], retries: int, where: str) -> list:
+    """``cl.gather(futures)``, with the run watched every :data:`WATCH_S` seconds so that a log whose worker keeps
+    dying cannot hang it: a per-log task that killed its worker more than ``retries`` times (Dask's own count of
+    the workers that died running a task, the scheduler's ``suspicious``) stops the run with a :class:`FleetError`
+    naming the log; so does a cluster left with no worker for :data:`WORKERLESS_S` seconds after workers died
+    (a nanny stops restarting a worker that keeps dying; Dask would then wait for a worker forever)."""
+    distributed = _require_distributed()
+
+    def deaths(dask_scheduler=None):  # runs in the scheduler (a closure: pickled by value, any scheduler runs it)
+        return {k: int(ts.suspicious) for k, ts in dask_scheduler.tasks.items() if ts.suspicious}
+
+    seen_workers, workerless_since = False, None
+    while True:
+        try:
+            distributed.wait(futures, timeout=WATCH_S)
+            break
+        except (TimeoutError, asyncio.TimeoutError):  # the same class from Python 3.11 on, not on 3.10
+            pass
+        try:  # this run's per-log tasks only (a shared scheduler holds other runs' tasks too)
+            counts = {k: n for k, n in cl.run_on_scheduler(deaths).items() if k in labels}
+        except Exception:  # noqa: BLE001 - a scheduler that refuses to run code: only the workerless bound holds
+            counts = {}
+        if counts and max(counts.values()) > retries:
+            raise _lost_log(counts, labels, retries)
+        n_workers = len(cl.scheduler_info().get("workers", {}))
+        seen_workers = seen_workers or n_workers > 0
+        if n_workers or not seen_workers:
+            workerless_since = None
+            continue
+        workerless_since = workerless_since or time.monotonic()
+        if time.monotonic() - workerless_since > WORKERLESS_S:
+            err = _worker_died(where, RuntimeError(f"no worker left for {WORKERLESS_S:g} s"), "during the run")
+            if counts:
+                err = _lost_log(counts, labels, retries)
+                err.args = (f"{err.args[0]}; no worker was left for {WORKERLESS_S:g} s",)
+            raise err
+    try:
+        return cl.gather(futures)
+    except Exception as exc:
+        key = getattr(exc, "task", None) or next((a for a in getattr(exc, "args", ()) if a in labels), None)
+        if type(exc).__name__ == "KilledWorker" and key in labels:  # Dask's own bound (allowed-failures)
+            raise _lost_log({key: int(getattr(exc, "allowed_failures", 0) or 0) + 1}, labels, retries) from None
+        raise
 
 
 def _dask_failure(exc: BaseException) -> bool:
@@ -374,7 +447,7 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
                 raise
             raise _worker_died(where, exc, "at start-up") from None
         try:
-            day_p, robot_p, fleet_p, n_workers = _reduce(cl, groups, ref, opts, load_kw, kernel, fo.retries)
+            day_p, robot_p, fleet_p, n_workers = _reduce(cl, groups, ref, opts, load_kw, kernel, fo.retries, where)
         except Exception as exc:
             if not _dask_failure(exc):
                 raise
@@ -409,24 +482,27 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
 
 
 def _reduce(cl, groups: dict, ref, opts: AssemblyOptions, load_kw: dict, kernel: Callable[..., Partial],
-            retries: int) -> tuple[dict, dict, Partial, int]:
+            retries: int, where: str = "local") -> tuple[dict, dict, Partial, int]:
     """One task per log and the TSQR trees per robot-day, robot and fleet on the cluster: the merged
     partials ``(per (robot, day), per robot, fleet)`` and the number of workers (the workers' setup, malloc
-    settings and the model once per worker, is registered before: :func:`identify_fleet`)."""
+    settings and the model once per worker, is registered before: :func:`identify_fleet`). A log whose worker
+    keeps dying stops the run, named (:func:`_await`)."""
     # task keys unique to this run: a scheduler keeps results by key, and another run on the same
     # client (other files, other options, same robot and day names) must never reuse them
     run = f"fleet-{uuid.uuid4().hex[:12]}"
     day_f, robot_f = {}, {}
+    labels: dict[str, str] = {}
     for r, days in groups.items():
         for d, logs_rd in days.items():
-            parts = [cl.submit(kernel, ref, lf, opts, load_kw,
-                               key=f"{run}-file-{r}-{d}-{i}-{os.path.basename(lf.label)}",
-                               retries=retries, pure=False) for i, lf in enumerate(logs_rd)]
+            file_keys = [f"{run}-file-{r}-{d}-{i}-{os.path.basename(lf.label)}" for i, lf in enumerate(logs_rd)]
+            labels.update(zip(file_keys, (lf.label for lf in logs_rd)))
+            parts = [cl.submit(kernel, ref, lf, opts, load_kw, key=k, retries=retries, pure=False)
+                     for k, lf in zip(file_keys, logs_rd)]
             day_f[r, d] = _tree(cl, parts, f"{run}-day-{r}-{d}", retries)
         robot_f[r] = _tree(cl, [day_f[r, d] for d in days], f"{run}-robot-{r}", retries)
     fleet_f = _tree(cl, list(robot_f.values()), f"{run}-fleet", retries)
     keys = list(day_f)
-    got = cl.gather([day_f[k] for k in keys] + [robot_f[r] for r in groups] + [fleet_f])
+    got = _await(cl, [day_f[k] for k in keys] + [robot_f[r] for r in groups] + [fleet_f], labels, retries, where)
     n_workers = len(cl.scheduler_info().get("workers", {}))
     return dict(zip(keys, got[:len(keys)])), dict(zip(groups, got[len(keys):-1])), got[-1], n_workers
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..demo import available_memory, size_text
 from ..excite.bases import FourierBasis, PointToPointBasis, SplineBasis
-from ..excite.criterion import predicted_sigma
+from ..excite.criterion import COND_DEGENERATE, predicted_sigma
 from ..excite.limits import ExcitationError, Limits, limits_of, with_floor
 from ..excite.optimise import EFFORTS, ExcitationResult, ExciteSettings, optimise_excitation
 from ..excite.output import (
@@ -43,11 +43,6 @@ from .base import SCHEMA_VERSION, Options, Results, provenance, resolve_robot
 __all__ = ["ExciteOptions", "ExciteResults", "check_size", "excite"]
 
 KINDS = ("fourier", "p2p", "spline")
-#: cond of the base regressor above which a design is degenerate: beyond ~1e10 the smallest singular value is
-#: within a relative 1e-10 of the largest, where the rounding of the regressor's evaluation (~1e-16 x its
-#: magnitude, times the growth of the Newton-Euler recursion) decides it: the rank is numerically lost (Golub &
-#: Van Loan, Matrix Computations, 4th ed., sec. 5.4.1 on numerical rank). Good designs are below 1e3.
-COND_DEGENERATE = 1e10
 
 _NO_CVXPY_NOTE = ("note: cvxpy is not installed, the SDP refinement of the true cond was skipped "
                   "(pip install 'symoro-gen[physical]')")
@@ -257,6 +252,7 @@ class ExciteResults(Results):
         refined = [st for st in res.starts if "refine_sdps" in st]
         if refined:
             lines.append("SDP refinement of the true cond: " + "; ".join(
+                f"not run ({st['refine_skipped']})" if "refine_skipped" in st else
                 f"{st['cond_ipopt']:.4g} -> {st['cond']:.4g} ({st['refine_accepted']} of {st['refine_sdps']} steps)"
                 for st in refined))
         if self.note:

@@ -129,12 +129,14 @@ def test_simulation_holding_the_actuated_joints_keeps_the_loop_closed(exported):
 
 def test_prismatic_cut_joint_refused(tmp_path, cli):
     """MuJoCo has no equality constraint that leaves a sliding motion free: a prismatic cut joint is refused,
-    the loop named."""
+    the loop named. The slider lies in the plane of the loop (alpha = pi/2: its axis orthogonal to the revolute
+    ones), so that the loop keeps its two degrees of freedom; along the revolute axes it would be held by the
+    closure and the loop, with joints 2 and 5 actuated, over-actuated (refused when the file is read)."""
     text = Path(load_robot("palletizer").file).read_text()
     line = 'cut = { ant = 6, sigma = 0, alpha = 0, d = "D3", theta = "q + pi/2", r = 0 }'
     assert line in text
     f = tmp_path / "slider.toml"
-    f.write_text(text.replace(line, 'cut = { ant = 6, sigma = 1, alpha = 0, d = "D3", theta = "pi/2", r = "q" }'))
+    f.write_text(text.replace(line, 'cut = { ant = 6, sigma = 1, alpha = "pi/2", d = "D3", theta = "pi/2", r = "q" }'))
     r = cli("export-mjcf", f, "-o", tmp_path / "s.xml", rc=2)
     assert r.err_lines == [
         "symoro-gen: error: export-mjcf: palletizer: the loop cut at joint 7 (closed on frame 8) has a prismatic cut "

@@ -14,3 +14,19 @@ def kill_once(model_ref, log, options=None, load_kw=None, *, marker: str):
         return process_file(model_ref, log, options, load_kw)
     os.close(fd)
     os._exit(1)
+
+
+def kill_on(model_ref, log, options=None, load_kw=None, *, name: str):
+    """``process_file``, except on the log whose path ends with ``name``: that one ends its worker process every
+    time (a log a worker always runs out of memory on)."""
+    if log.path.endswith(name):
+        os._exit(1)
+    return process_file(model_ref, log, options, load_kw)
+
+
+def slow(model_ref, log, options=None, load_kw=None, *, seconds: float):
+    """``process_file`` after ``seconds`` of sleep (a task still running while the run is watched)."""
+    import time
+
+    time.sleep(seconds)
+    return process_file(model_ref, log, options, load_kw)

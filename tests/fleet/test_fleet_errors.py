@@ -75,3 +75,85 @@ def test_no_usable_log_names_each_problem_not_only_their_count(cli, tmp_path):
     assert line.startswith(f"symoro-gen: error: fleet: no log could be used; {log}") and "problem in data" not in line
     assert "tau" in line, line
     assert r.err_lines[1].startswith("hint: each log needs the columns t, q1..qn, tau1..taun")
+
+
+@pytest.mark.slow
+def test_a_log_that_kills_its_worker_every_time_stops_the_run_naming_it(tmp_path):
+    """A worker process that dies on every attempt at one log (a stand-in for a log it always runs out of memory
+    on): Dask re-queues the task after each death and, once the nanny stops restarting the worker, waits for a
+    worker forever. The run stops after --retries re-runs (here 1: two deaths) with the log named."""
+    import functools
+    import time
+
+    from symoro_gen.fleet import FleetError, identify_fleet
+
+    from .killer import kill_on
+
+    simulate_fleet(tmp_path, "scara", n_robots=1, n_days=1, duration=1.0, drifts=(), seed=1)
+    log = tmp_path / "r00" / "d00.parquet"
+    assert log.is_file()
+    t0 = time.monotonic()
+    with pytest.raises(FleetError) as err:
+        identify_fleet("scara", [str(tmp_path)], "{robot}/{day}.parquet", FleetOptions(scheduler="local:1", retries=1),
+                       kernel=functools.partial(kill_on, name="r00/d00.parquet"))
+    assert str(err.value) == (f"fleet: {log}: the Dask worker reading it died twice (--retries 1): the run is "
+                              "stopped instead of re-running it without end")
+    assert "--segment-samples" in err.value.hint and "--scheduler threads:2" in err.value.hint
+    assert time.monotonic() - t0 < 200
+
+
+def test_the_watch_of_a_run_stops_it_on_a_log_whose_workers_died(tmp_path, monkeypatch):
+    """The watch itself, on an in-process cluster whose scheduler is made to report the deaths Dask counts per
+    task (``suspicious``): more than --retries deaths on one log's task stop the run naming that log; a cluster
+    left without workers after they died stops it after WORKERLESS_S."""
+    import functools
+
+    import symoro_gen.fleet.engine as engine
+    from symoro_gen.fleet import FleetError, identify_fleet, open_client
+
+    from .killer import slow
+
+    simulate_fleet(tmp_path, "scara", n_robots=2, n_days=1, duration=1.0, drifts=(), seed=1)
+    monkeypatch.setattr(engine, "WATCH_S", 0.05)
+    kernel = functools.partial(slow, seconds=0.6)
+    with open_client("threads:2") as client:
+        on_scheduler, info = client.run_on_scheduler, client.scheduler_info
+
+        fake = {"-file-r01-": 3}
+
+        def deaths(fn):
+            tasks = on_scheduler(lambda dask_scheduler: list(dask_scheduler.tasks))
+            return {k: n for k in tasks for part, n in fake.items() if part in k}
+
+        monkeypatch.setattr(client, "run_on_scheduler", deaths)
+        with pytest.raises(FleetError) as err:
+            identify_fleet("scara", [str(tmp_path)], "{robot}/{day}.parquet", FleetOptions(retries=2),
+                           client=client, kernel=kernel)
+        assert str(err.value).startswith(f"fleet: {tmp_path / 'r01' / 'd00.parquet'}: the Dask worker reading it "
+                                         "died 3 times (--retries 2): the run is stopped")
+        # two logs whose tasks were running on the same dying worker each time: both named, as candidates
+        fake = {"-file-r01-": 1, "-file-r00-": 1}
+        with pytest.raises(FleetError) as err:
+            identify_fleet("scara", [str(tmp_path)], "{robot}/{day}.parquet", FleetOptions(retries=0),
+                           client=client, kernel=kernel)
+        assert str(err.value).startswith(f"fleet: one of {tmp_path / 'r00' / 'd00.parquet'}, "
+                                         f"{tmp_path / 'r01' / 'd00.parquet'}: the Dask worker reading it died once "
+                                         "(--retries 0)")
+        # the same deaths within --retries: the run goes on
+        monkeypatch.setattr(client, "run_on_scheduler", lambda fn: {})
+        res = identify_fleet("scara", [str(tmp_path)], "{robot}/{day}.parquet", FleetOptions(retries=3),
+                             client=client, kernel=kernel)
+        assert sorted(res.days) == ["r00", "r01"]
+        # workers seen, then none left (a nanny that stopped restarting them): stopped after WORKERLESS_S
+        monkeypatch.setattr(engine, "WORKERLESS_S", 0.2)
+        looks = []
+
+        def workers_gone(**kw):
+            looks.append(1)
+            return info(**kw) if len(looks) == 1 else {"workers": {}}
+
+        monkeypatch.setattr(client, "scheduler_info", workers_gone)
+        with pytest.raises(FleetError) as err:
+            identify_fleet("scara", [str(tmp_path)], "{robot}/{day}.parquet", client=client, kernel=kernel)
+        assert str(err.value) == ("--scheduler client: a Dask worker died during the run (RuntimeError: no worker "
+                                  "left for 0.2 s)")
