@@ -25,6 +25,7 @@ def _false_positives(name, seeds):
     return found
 
 
+@pytest.mark.slow
 def test_no_false_positive_scara():
     found = _false_positives("scara", SCARA_SEEDS)
     assert not found, f"false positives on clean data: {found}"

@@ -9,7 +9,10 @@ import pytest
 from .jsonschema_lite import validate
 from .runner import DOCS, ROOT, Workspace, match_output, parse_blocks, parse_console, run_doc, strict_json
 
+#: pages whose commands take minutes (the loop on long simulated recordings): run with the slow tests
+SLOW_PAGES = {"tutorial-diagnosis.md"}
 PAGES = sorted(p.name for p in DOCS.glob("*.md"))
+PAGE_PARAMS = [pytest.param(p, marks=pytest.mark.slow) if p in SLOW_PAGES else p for p in PAGES]
 
 
 def _validate_json(path, schema_name, where):
@@ -20,7 +23,7 @@ def _validate_json(path, schema_name, where):
     assert not errs, f"{where}: {path.name} does not match schemas/{schema_name}.schema.json:\n" + "\n".join(errs[:20])
 
 
-@pytest.mark.parametrize("page", PAGES)
+@pytest.mark.parametrize("page", PAGE_PARAMS)
 def test_page_runs(page, tmp_path):
     ws = Workspace(tmp_path)
     t0 = time.perf_counter()
