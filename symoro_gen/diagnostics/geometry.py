@@ -1,0 +1,155 @@
+"""Joint zero offsets: their torque column, and which of them torque data can see.
+
+An encoder whose zero is off by ``q0_j`` reads ``q_j = q_true,j - q0_j``; the torque the arm transmits is
+that of the true angle, ``tau_true = tau(q + q0_j e_j, dq, ddq)`` (the velocity and acceleration, derivatives of
+the angle, are unchanged). To first order in ``q0_j``
+
+    ``tau_true = tau(q) + q0_j d tau / d q_j``,
+
+linear in ``q0_j`` with the column ``d tau / d q_j`` evaluated with the current fit of the dynamic parameters
+(Hollerbach & Wampler 1996, "The calibration index and taxonomy for robot kinematic calibration methods",
+sec. 3: joint offsets are the first kinematic parameters of every calibration model; Khalil & Dombre 2002,
+*Modeling, Identification and Control of Robots*, ch. 11, the geometric calibration model linearised in the
+parameter errors). The base-parameter regrouping of a revolute joint does not depend on the joint angle
+(Khalil & Dombre, ch. 12), so ``d W_b / d q_j chi`` is the exact derivative of the model torque; for a
+prismatic joint ``q0_j`` is a zero error of a length and the same holds.
+
+A zero offset is seen only through the configuration-dependent torque (gravity, inertial coupling): the
+first joint of an arm whose axis 1 is vertical changes nothing (its column is 0), the last joint of a chain
+only rotates its link's inertial parameters (its column is in the span of the regressor, absorbed by the
+base parameters). :func:`joint_zero_visibility` measures this on the generated model.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ..model import IdentificationModel
+from ..observations.raw import full_rate_torque
+
+__all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
+           "joint_zero_visibility", "revolute_joints", "visible_zero_joints", "zero_summary"]
+
+#: step [rad or m] of the central difference of the torque in the joint angle
+JOINT_ZERO_STEP = 1e-6
+#: a joint zero is invisible when the share of its column's norm outside the span of the regressor (on random
+#: configurations and random parameters) is below this
+VISIBILITY_TOL = 1e-6
+
+
+def _torque(model: IdentificationModel, theta: Mapping[str, float], q, dq, ddq, loaded) -> np.ndarray:
+    """Model torque of the fit ``theta`` (Coulomb terms left out: they do not depend on the angle), the loaded
+    samples (boolean mask or None) with the payload columns."""
+    out = full_rate_torque(model, theta, q, dq, ddq, False, skip_prefix=("FS",))
+    if loaded is not None and np.any(loaded):
+        out[loaded] = full_rate_torque(model, theta, q[loaded], dq[loaded], ddq[loaded], True, skip_prefix=("FS",))
+    return out
+
+
+def joint_zero_secant(model: IdentificationModel, theta: Mapping[str, float], q, dq, ddq, j: int, c: float,
+                      loaded=None) -> np.ndarray:
+    """``(tau(q + c e_j) - tau(q)) / c`` of the model of ``theta`` on every joint (shape (N, n)): the torque error of
+    a zero offset ``c`` of joint j per unit offset; ``c = 0`` gives the tangent ``d tau / d q_j`` (central
+    difference, step :data:`JOINT_ZERO_STEP`). With the coefficient equal to ``c`` (the loop's fixed point) the
+    column times the coefficient is the exact torque change ``tau(q + c e_j) - tau(q)``."""
+    q = np.asarray(q, float)
+    dq, ddq = np.asarray(dq, float), np.asarray(ddq, float)
+
+    def shifted(s: float) -> np.ndarray:
+        a = q.copy()
+        a[:, j] += s
+        return _torque(model, theta, a, dq, ddq, loaded)
+
+    if c == 0.0:
+        h = JOINT_ZERO_STEP
+        return (shifted(h) - shifted(-h)) / (2 * h)
+    return (shifted(c) - _torque(model, theta, q, dq, ddq, loaded)) / c
+
+
+def joint_zero_column(model: IdentificationModel, theta: Mapping[str, float], q, dq, ddq, j: int,
+                      loaded=None) -> np.ndarray:
+    """The tangent ``d tau / d q0_j`` (shape (N, n), every joint's torque): see :func:`joint_zero_secant`."""
+    return joint_zero_secant(model, theta, q, dq, ddq, j, 0.0, loaded)
+
+
+def _random_motion(n: int, m: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    q = rng.uniform(-np.pi, np.pi, size=(m, n))
+    return q, rng.standard_normal((m, n)), rng.standard_normal((m, n))
+
+
+def revolute_joints(model: IdentificationModel, *, rng: np.random.Generator | None = None,
+                    n_samples: int = 8) -> np.ndarray:
+    """Per joint, whether its variable is an angle: the regressor is ``2 pi``-periodic in it (a prismatic joint's
+    length enters it polynomially). A joint the regressor does not depend on counts as revolute."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    n = int(model.N_JOINTS)
+    q, dq, ddq = _random_motion(n, n_samples, rng)
+    W0 = np.asarray(model.regressor(q, dq, ddq), float)
+    scale = max(float(np.abs(W0).max()), 1e-300)
+    out = np.ones(n, bool)
+    for j in range(n):
+        a = q.copy()
+        a[:, j] += 2 * np.pi
+        out[j] = float(np.abs(np.asarray(model.regressor(a, dq, ddq), float) - W0).max()) <= 1e-8 * scale
+    return out
+
+
+def joint_zero_visibility(model: IdentificationModel, *, rng: np.random.Generator | None = None,
+                          n_samples: int = 40, n_theta: int = 3) -> np.ndarray:
+    """Per joint, the share of the joint zero column's norm that no base-parameter change can produce: the
+    relative norm of its residual after projection on the span of the base regressor, over ``n_samples`` random
+    configurations (angles in [-pi, pi], standard normal velocities and accelerations), the smallest over
+    ``n_theta`` random base-parameter vectors (a column identically 0 counts 0). 0 (below
+    :data:`VISIBILITY_TOL`): torque data cannot see the zero of this joint whatever the parameters (the first
+    joint about a vertical axis, the last joint of a chain: its offset rotates only its own link's inertia, which
+    the base parameters absorb)."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    n = int(model.N_JOINTS)
+    names = tuple(model.BASE_NAMES)
+    q, dq, ddq = _random_motion(n, n_samples, rng)
+    W = np.asarray(model.regressor(q, dq, ddq), float).reshape(n_samples * n, len(names))
+    U, s, _ = np.linalg.svd(W, full_matrices=False)
+    U = U[:, s > s[0] * 1e-10] if s.size and s[0] > 0 else U[:, :0]
+    thetas = [dict(zip(names, rng.standard_normal(len(names)))) for _ in range(n_theta)]
+    out = np.zeros(n)
+    for j in range(n):
+        shares = []
+        for th in thetas:
+            col = joint_zero_column(model, th, q, dq, ddq, j).reshape(-1)
+            ref = float(np.linalg.norm(full_rate_torque(model, th, q, dq, ddq, False, skip_prefix=("FS",))))
+            nc = float(np.linalg.norm(col))
+            if nc <= 1e-9 * max(ref, 1e-300):
+                shares.append(0.0)
+                continue
+            r = col - U @ (U.T @ col)
+            shares.append(float(np.linalg.norm(r)) / nc)
+        out[j] = min(shares)
+    return out
+
+
+def visible_zero_joints(model: IdentificationModel, *, tol: float = VISIBILITY_TOL,
+                        rng: np.random.Generator | None = None) -> tuple[int, ...]:
+    """0-based joints whose zero offset torque data can see (:func:`joint_zero_visibility` above ``tol``)."""
+    share = joint_zero_visibility(model, rng=rng)
+    return tuple(int(j) for j in np.flatnonzero(share > tol))
+
+
+def describe_zero(value: float, std: float, revolute: bool) -> dict:
+    """Physical reading of a joint zero offset (``rad``/``m`` and, for a revolute joint, degrees)."""
+    if revolute:
+        return {"offset_rad": float(value), "offset_deg": float(np.degrees(value)),
+                "offset_deg_std": float(np.degrees(std))}
+    return {"offset_m": float(value), "offset_m_std": float(std)}
+
+
+def zero_summary(model: IdentificationModel, joints: Sequence[int] | None = None) -> list[str]:
+    """One line per joint: whether torque data can see its zero offset (for the report)."""
+    share = joint_zero_visibility(model)
+    rev = revolute_joints(model)
+    out = []
+    for j in range(int(model.N_JOINTS)) if joints is None else joints:
+        kind = "angle" if rev[j] else "length"
+        seen = "visible" if share[j] > VISIBILITY_TOL else "invisible (absorbed by the base parameters or no torque)"
+        out.append(f"joint {j + 1} zero ({kind}): {seen}, share outside the regressor span {share[j]:.2g}")
+    return out
