@@ -53,7 +53,7 @@ from scipy.special import erf
 
 from ..model import IdentificationModel
 from .frame import Experiment, Frame, model_torque
-from .geometry import describe_zero, joint_zero_secant, revolute_joints, visible_zero_joints
+from .geometry import describe_zero, regressor_secant, revolute_joints, visible_zero_joints
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
            "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "MAX_ZERO_OFFSET_DEG",
@@ -383,15 +383,40 @@ def _joint_zero_families(n: int, ks: set[str], model: IdentificationModel | None
 
 
 def _joint_zero_build(frame: Frame, ctx: FitContext, m: int, c: float) -> np.ndarray:
-    """Joint m's zero-offset column (:func:`.geometry.joint_zero_secant` at ``c``, 0: the tangent) on the rows of
-    every joint, evaluated on the decimated signals with the declared model of the current fit."""
-    S = frame.samples()
-    loaded = np.array([frame.experiments[e].loaded for e in S["experiment"]], bool)
-    J = joint_zero_secant(ctx.model, ctx.theta, S["q"], S["dq"], S["ddq"], m, c, loaded)
-    X = np.zeros((frame.n_rows, 1))
-    for j in range(frame.n_joints):
-        X[_rows_by_sample(frame, j), 0] = J[:, j]
-    return X
+    """Joint m's zero-offset column on the rows of every joint: the secant ``(W(q + c e_m) - W(q)) / c`` of the
+    declared regressor (``c = 0``: the tangent, :func:`.geometry.regressor_secant`) evaluated at full rate and
+    decimated in parallel with ``W`` (so that it shares W's filter edges: on the decimated signals the edge
+    rows differ and the part of the column outside W's span is concentrated there), times the declared
+    parameters of the current fit. The decimated matrix does not depend on the fit and is kept per frame."""
+    names = tuple(ctx.model.BASE_NAMES) + tuple(getattr(ctx.model, "PAYLOAD_NAMES", ()))
+    D = _zero_matrix(frame, ctx.model, m, c, len(names))
+    th = np.array([float(ctx.theta.get(nm, 0.0)) for nm in names])
+    # the Coulomb columns sign(dq) do not depend on q: their derivative is 0 whatever the fit
+    return (D @ th).reshape(-1, 1)
+
+
+#: decimated regressor secants kept (per frame, joint and offset): every joint of the identification,
+#: validation and report frames, and the offsets of the fixed point
+_ZERO_CACHE_SIZE = 48
+_ZERO_CACHE: list = []   # [(frame arrays, joint, c, matrix)], most recent last
+
+
+def _zero_matrix(frame: Frame, model: IdentificationModel, m: int, c: float, p: int) -> np.ndarray:
+    key = _frame_key(frame)
+    for arrs, jj, cc, D in _ZERO_CACHE:
+        if jj == m and cc == c and len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
+            return D
+    def f(ex: Experiment) -> dict[int, np.ndarray]:
+        dW = regressor_secant(model, ex.q, ex.dq, ex.ddq, m, c, loaded=ex.loaded)
+        out = np.zeros((ex.n_samples, ex.q.shape[1], p))
+        out[:, :, :dW.shape[2]] = dW   # (payload columns 0 on an unloaded experiment)
+        return {k: out[:, k, :] for k in range(ex.q.shape[1])}
+
+    D = frame.full_rate_columns(f, p)
+    D.setflags(write=False)
+    _ZERO_CACHE.append((key, m, c, D))
+    del _ZERO_CACHE[:-_ZERO_CACHE_SIZE]
+    return D
 
 
 def _all_joint_families(n: int, ks: set[str]) -> list[Family]:
@@ -621,7 +646,7 @@ GAIN_SCALE_RANGE = (0.5, 2.0)
 #: whatever ``-dtau/dt`` correlates with, not a lag
 MAX_DELAY_PHASE = 1.0
 #: a ``joint_zero`` offset must be at most this many degrees: encoder zero errors of an arm are of the order of a
-#: degree (Hollerbach & Wampler 1996, sec. 3; Khalil & Dombre 2002, ch. 11); tens of degrees are a wrong joint
+#: degree (Hollerbach & Wampler 1996; Khalil & Dombre 2002, ch. 11); tens of degrees are a wrong joint
 #: convention of the robot file (its MDH theta offset), and far from the tangent the column linearises
 MAX_ZERO_OFFSET_DEG = 20.0
 

@@ -8,7 +8,7 @@ the angle, are unchanged). To first order in ``q0_j``
 
 linear in ``q0_j`` with the column ``d tau / d q_j`` evaluated with the current fit of the dynamic parameters
 (Hollerbach & Wampler 1996, "The calibration index and taxonomy for robot kinematic calibration methods",
-sec. 3: joint offsets are the first kinematic parameters of every calibration model; Khalil & Dombre 2002,
+IJRR 15(6): joint offsets are among the parameters of every kinematic calibration model; Khalil & Dombre 2002,
 *Modeling, Identification and Control of Robots*, ch. 11, the geometric calibration model linearised in the
 parameter errors). The base-parameter regrouping of a revolute joint does not depend on the joint angle
 (Khalil & Dombre, ch. 12), so ``d W_b / d q_j chi`` is the exact derivative of the model torque; for a
@@ -29,7 +29,7 @@ from ..model import IdentificationModel
 from ..observations.raw import full_rate_torque
 
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
-           "joint_zero_visibility", "revolute_joints", "visible_zero_joints", "zero_summary"]
+           "joint_zero_visibility", "regressor_secant", "revolute_joints", "visible_zero_joints", "zero_summary"]
 
 #: step [rad or m] of the central difference of the torque in the joint angle
 JOINT_ZERO_STEP = 1e-6
@@ -71,6 +71,27 @@ def joint_zero_column(model: IdentificationModel, theta: Mapping[str, float], q,
                       loaded=None) -> np.ndarray:
     """The tangent ``d tau / d q0_j`` (shape (N, n), every joint's torque): see :func:`joint_zero_secant`."""
     return joint_zero_secant(model, theta, q, dq, ddq, j, 0.0, loaded)
+
+
+def regressor_secant(model: IdentificationModel, q, dq, ddq, j: int, c: float, loaded: bool = False) -> np.ndarray:
+    """``(W(q + c e_j) - W(q)) / c`` of the base regressor (with the payload columns after the base ones when
+    ``loaded``), shape (N, n, p); ``c = 0``: the tangent ``d W / d q_j`` (central difference, step
+    :data:`JOINT_ZERO_STEP`). Independent of the parameters: the joint zero column of a fit ``chi`` is this
+    times ``chi`` (the regrouping of the base parameters does not depend on the angle)."""
+    q = np.asarray(q, float)
+
+    def reg(s: float) -> np.ndarray:
+        a = q.copy()
+        a[:, j] += s
+        W = np.asarray(model.regressor(a, dq, ddq), float)
+        if loaded and tuple(getattr(model, "PAYLOAD_NAMES", ())):
+            W = np.concatenate([W, np.asarray(model.payload_regressor(a, dq, ddq), float)], axis=2)
+        return W
+
+    if c == 0.0:
+        h = JOINT_ZERO_STEP
+        return (reg(h) - reg(-h)) / (2 * h)
+    return (reg(c) - reg(0.0)) / c
 
 
 def _random_motion(n: int, m: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -110,8 +110,8 @@ TORQUE_SHARE = 0.3
 SHARE_WIDTH = math.log(2.0)
 NEGATIVE_FRICTION_FACTOR = 0.2
 #: encoder zero offset of a calibrated arm: typically below 1-2 deg (Hollerbach & Wampler 1996, the calibration
-#: index and taxonomy, sec. 3: joint offsets are the dominant kinematic errors, of the order of a degree before
-#: calibration and hundredths after; Khalil & Dombre 2002, ch. 11, the identified offsets of calibrated arms);
+#: index and taxonomy for robot kinematic calibration methods, IJRR 15(6): joint offsets are the dominant
+#: kinematic errors; Khalil & Dombre 2002, ch. 11, geometric calibration: the identified offsets of arms);
 #: with ZERO_OFFSET_WIDTH = ln 2, 4 deg gives 0.61, 5 deg 0.42 (doubtful); beyond
 #: :data:`.candidates.MAX_ZERO_OFFSET_DEG` (20 deg) the offset is rejected as impossible for a zero error
 #: (a wrong MDH theta convention of the robot file, rather)
