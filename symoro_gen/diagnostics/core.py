@@ -126,6 +126,7 @@ from .friction import (
     velocity_grid,
     viscous_columns,
 )
+from .geometry import invisible_zero_note
 from .plausibility import PLAUSIBLE, ArmScales, law_alternatives, law_plausibility, rate_effects
 from .report import CandidateScore, Effect, ResidualReport
 from .stability import (
@@ -1827,6 +1828,7 @@ def _report_settings(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseS
                            f"friction law)" for r in base.laws
                            if r.smoothing and (r.choice.coulomb.param or r.choice.coulomb.smooth)],
         "static_at_rest": _static_at_rest(data, state.V, base.laws),
+        "joint_zero": invisible_zero_note(data.model) if "joint_zero" in cfg.candidates else [],
     }
 
 

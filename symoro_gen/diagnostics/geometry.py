@@ -29,7 +29,7 @@ from ..model import IdentificationModel
 from ..observations.raw import full_rate_torque
 
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
-           "joint_zero_visibility", "regressor_secant", "revolute_joints", "visible_zero_joints", "zero_summary"]
+           "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "revolute_joints", "visible_zero_joints", "zero_summary"]
 
 #: step [rad or m] of the central difference of the torque in the joint angle
 JOINT_ZERO_STEP = 1e-6
@@ -149,11 +149,34 @@ def joint_zero_visibility(model: IdentificationModel, *, rng: np.random.Generato
     return out
 
 
+_VISIBILITY: dict = {}   # id(model) -> (model, shares): the default measure of a generated model, computed once
+
+
 def visible_zero_joints(model: IdentificationModel, *, tol: float = VISIBILITY_TOL,
                         rng: np.random.Generator | None = None) -> tuple[int, ...]:
     """0-based joints whose zero offset torque data can see (:func:`joint_zero_visibility` above ``tol``)."""
-    share = joint_zero_visibility(model, rng=rng)
+    if rng is None:
+        got = _VISIBILITY.get(id(model))
+        if got is None or got[0] is not model:
+            got = (model, joint_zero_visibility(model))
+            _VISIBILITY[id(model)] = got
+        share = got[1]
+    else:
+        share = joint_zero_visibility(model, rng=rng)
     return tuple(int(j) for j in np.flatnonzero(share > tol))
+
+
+def invisible_zero_note(model: IdentificationModel) -> list[str]:
+    """One sentence naming the joints whose zero offset torque data cannot see (empty when every joint's can):
+    the loop tries no ``joint_zero`` candidate there."""
+    seen = set(visible_zero_joints(model))
+    hidden = [j + 1 for j in range(int(model.N_JOINTS)) if j not in seen]
+    if not hidden:
+        return []
+    which = ", ".join(str(j) for j in hidden)
+    return [f"the zero offset of joint{'s' if len(hidden) > 1 else ''} {which} is invisible to torque data (no "
+            "configuration-dependent torque changes with it, or the base parameters absorb it: a first joint about "
+            "a vertical axis, the last joint of a chain): no joint_zero candidate there"]
 
 
 def describe_zero(value: float, std: float, revolute: bool) -> dict:

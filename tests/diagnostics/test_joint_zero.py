@@ -145,7 +145,7 @@ def _diagnose_offset(j: int, deg: float, seed: int, seconds: float = 20.0, rate:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("j,deg", [(1, 1.5), (3, -0.8)])
+@pytest.mark.parametrize("j,deg", [(1, 1.5), (2, 1.0)])
 def test_loop_names_the_offset(j, deg):
     """An encoder zero offset of joint j (truth simulator, gravity at the true angle) is the loop's first
     effect, ``joint_zero`` on joint j, a cause, with its offset within 3 sigma of the truth."""
