@@ -53,7 +53,7 @@ from scipy.special import erf
 
 from ..model import IdentificationModel
 from .frame import Experiment, Frame, model_torque
-from .geometry import describe_zero, regressor_secant, revolute_joints, visible_zero_joints
+from .geometry import decimated_zero_matrix, describe_zero, revolute_joints, visible_zero_joints
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
            "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "MAX_ZERO_OFFSET_DEG",
@@ -389,32 +389,29 @@ def _joint_zero_build(frame: Frame, ctx: FitContext, m: int, c: float) -> np.nda
     rows differ and the part of the column outside W's span is concentrated there), times the declared
     parameters of the current fit. The decimated matrix does not depend on the fit and is kept per frame."""
     names = tuple(ctx.model.BASE_NAMES) + tuple(getattr(ctx.model, "PAYLOAD_NAMES", ()))
-    D = _zero_matrix(frame, ctx.model, m, c, len(names))
+    D = _zero_matrix(frame, ctx.model, m, c)
     th = np.array([float(ctx.theta.get(nm, 0.0)) for nm in names])
     # the Coulomb columns sign(dq) do not depend on q: their derivative is 0 whatever the fit
     return (D @ th).reshape(-1, 1)
 
 
-#: decimated regressor secants kept (per frame, joint and offset): every joint of the identification,
-#: validation and report frames, and the offsets of the fixed point
-_ZERO_CACHE_SIZE = 48
-_ZERO_CACHE: list = []   # [(frame arrays, joint, c, matrix)], most recent last
+#: decimated regressor tangents kept (per frame and joint; each the size of ``W``): the joints of the
+#: identification and acceptance frames of a 7-joint arm, and one more; the secants of the fixed point (an
+#: accepted effect's, a few per round) are recomputed
+_ZERO_CACHE_SIZE = 15
+_ZERO_CACHE: list = []   # [(frame arrays, joint, matrix)], most recent last
 
 
-def _zero_matrix(frame: Frame, model: IdentificationModel, m: int, c: float, p: int) -> np.ndarray:
+def _zero_matrix(frame: Frame, model: IdentificationModel, m: int, c: float) -> np.ndarray:
+    if c != 0.0:
+        return decimated_zero_matrix(frame, model, m, c)
     key = _frame_key(frame)
-    for arrs, jj, cc, D in _ZERO_CACHE:
-        if jj == m and cc == c and len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
+    for arrs, jj, D in _ZERO_CACHE:
+        if jj == m and len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
             return D
-    def f(ex: Experiment) -> dict[int, np.ndarray]:
-        dW = regressor_secant(model, ex.q, ex.dq, ex.ddq, m, c, loaded=ex.loaded)
-        out = np.zeros((ex.n_samples, ex.q.shape[1], p))
-        out[:, :, :dW.shape[2]] = dW   # (payload columns 0 on an unloaded experiment)
-        return {k: out[:, k, :] for k in range(ex.q.shape[1])}
-
-    D = frame.full_rate_columns(f, p)
+    D = decimated_zero_matrix(frame, model, m, c)
     D.setflags(write=False)
-    _ZERO_CACHE.append((key, m, c, D))
+    _ZERO_CACHE.append((key, m, D))
     del _ZERO_CACHE[:-_ZERO_CACHE_SIZE]
     return D
 

@@ -22,6 +22,7 @@ base parameters). :func:`joint_zero_visibility` measures this on the generated m
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -29,7 +30,8 @@ from ..model import IdentificationModel
 from ..observations.raw import full_rate_torque
 
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
-           "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "revolute_joints", "visible_zero_joints", "zero_summary"]
+           "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "JointZeroFit",
+           "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints", "zero_summary"]
 
 #: step [rad or m] of the central difference of the torque in the joint angle
 JOINT_ZERO_STEP = 1e-6
@@ -197,3 +199,126 @@ def zero_summary(model: IdentificationModel, joints: Sequence[int] | None = None
         seen = "visible" if share[j] > VISIBILITY_TOL else "invisible (absorbed by the base parameters or no torque)"
         out.append(f"joint {j + 1} zero ({kind}): {seen}, share outside the regressor span {share[j]:.2g}")
     return out
+
+
+# ------------------------------------------------------------------------------------------------
+# joint zeros fitted with the dynamic parameters (Gauss-Newton)
+# ------------------------------------------------------------------------------------------------
+def decimated_zero_matrix(frame, model: IdentificationModel, j: int, c: float = 0.0) -> np.ndarray:
+    """``(W(q + c e_j) - W(q)) / c`` (``c = 0``: ``d W / d q_j``) of the frame's columns (base, then payload on
+    the loaded experiments), evaluated at full rate on each experiment's signals and decimated in parallel
+    with the frame's ``W`` (a :class:`.frame.Frame`), shape (r, len(BASE_NAMES) + len(PAYLOAD_NAMES))."""
+    p = len(tuple(model.BASE_NAMES)) + len(tuple(getattr(model, "PAYLOAD_NAMES", ())))
+
+    def f(ex) -> dict[int, np.ndarray]:
+        dW = regressor_secant(model, ex.q, ex.dq, ex.ddq, j, c, loaded=ex.loaded)
+        out = np.zeros((ex.n_samples, ex.q.shape[1], p))
+        out[:, :, :dW.shape[2]] = dW   # (payload columns 0 on an unloaded experiment)
+        return {k: out[:, k, :] for k in range(ex.q.shape[1])}
+
+    return frame.full_rate_columns(f, p)
+
+
+@dataclass(frozen=True)
+class JointZeroFit:
+    """Joint zero offsets identified with the dynamic parameters.
+
+    Attributes
+    ----------
+    joints : tuple of int
+        0-based joints whose zero was fitted.
+    offsets, std : ndarray
+        Offsets ``q0`` [rad or m] (``q_true = q_measured + q0``) and their standard deviations (OLS).
+    theta : dict
+        The frame's parameters (base, payload) fitted at those offsets; ``theta_std`` their standard deviations.
+    iterations : int
+    converged : bool
+    rel_err : ndarray
+        Per joint relative error norm of the final fit.
+    """
+
+    joints: tuple[int, ...]
+    offsets: np.ndarray
+    std: np.ndarray
+    theta: dict
+    theta_std: dict
+    iterations: int
+    converged: bool
+    rel_err: np.ndarray
+
+    def describe(self, revolute: Sequence[bool] | None = None) -> list[str]:
+        out = []
+        for k, j in enumerate(self.joints):
+            rev = True if revolute is None else bool(revolute[j])
+            v, s = float(self.offsets[k]), float(self.std[k])
+            out.append(f"joint {j + 1} zero offset: {np.degrees(v):.4g} deg (sigma {np.degrees(s):.2g} deg)" if rev
+                       else f"joint {j + 1} zero offset: {1e3 * v:.4g} mm (sigma {1e3 * s:.2g} mm)")
+        return out
+
+
+def fit_joint_zeros(model: IdentificationModel, trajectories, joints: Sequence[int] | None = None, *,
+                    max_iterations: int = 20, tol: float = 1e-9, dynamics_bandwidth_hz: float | None = None,
+                    **filter_kw) -> JointZeroFit:
+    """Identify joint zero offsets together with the base parameters by Gauss-Newton on the IDIM equations
+    ``Y = W(q + q0) chi``: at each step the observation system is assembled at the corrected angles and
+    ``[W, (d W/d q_j) chi]`` is solved for the parameter and offset corrections (the model is linear in ``chi``,
+    the offset enters through the joint angle; Khalil & Dombre 2002, ch. 11-12, a calibration model
+    linearised in the parameter errors). ``joints`` (0-based): default, those whose zero torque data can see
+    (:func:`visible_zero_joints`); an invisible joint is refused."""
+    from dataclasses import replace as dc_replace
+
+    from .frame import build_frame, common_bandwidth
+
+    trajs = list(trajectories)
+    if max_iterations < 1:
+        raise ValueError(f"joint_zero: max_iterations must be at least 1, got {max_iterations}")
+    n = int(model.N_JOINTS)
+    seen = visible_zero_joints(model)
+    js = tuple(seen) if joints is None else tuple(int(j) for j in joints)
+    bad = [j + 1 for j in js if not 0 <= j < n]
+    if bad:
+        raise ValueError(f"joint_zero: joint(s) {bad} outside 1..{n} of {model.ROBOT}")
+    hidden = [j + 1 for j in js if j not in seen]
+    if hidden:
+        raise ValueError(f"joint_zero: the zero offset of joint(s) {hidden} of {model.ROBOT} is invisible to torque "
+                         "data (absorbed by the base parameters or no configuration-dependent torque)")
+    fdyn = dynamics_bandwidth_hz if dynamics_bandwidth_hz is not None else common_bandwidth(trajs)
+    q0 = np.zeros(len(js))
+    converged = False
+    n_iter = 0
+    while n_iter < max_iterations:
+        n_iter += 1
+        shifted = []
+        for tr in trajs:
+            q = np.array(tr.q, float, copy=True)
+            for k, j in enumerate(js):
+                q[:, j] += q0[k]
+            shifted.append(dc_replace(tr, q=q))
+        F = build_frame(model, shifted, dynamics_bandwidth_hz=fdyn, **filter_kw)
+        W, Y = F.system.W, F.system.Y
+        names = tuple(F.system.names)
+        chi = np.linalg.lstsq(W, Y, rcond=None)[0]
+        full = tuple(model.BASE_NAMES) + tuple(getattr(model, "PAYLOAD_NAMES", ()))
+        th_full = np.array([dict(zip(names, chi)).get(nm, 0.0) for nm in full])
+        D = np.stack([decimated_zero_matrix(F, model, j) @ th_full for j in js], axis=1)
+        A = np.hstack([W, D])
+        sol = np.linalg.lstsq(A, Y - W @ chi, rcond=None)[0]
+        step = sol[W.shape[1]:]
+        q0 = q0 + step
+        if np.all(np.abs(step) <= tol * max(1.0, float(np.abs(q0).max()))):
+            converged = True
+            break
+    # statistics of the last linearisation (OLS, Gautier 1990: sigma^2 (A^T A)^-1)
+    r, p = A.shape
+    e = Y - W @ chi - A @ sol
+    s2 = float(e @ e) / max(r - p, 1)
+    cov = s2 * np.linalg.pinv(A.T @ A)
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    chi_new = chi + sol[:W.shape[1]]
+    J = F.system.joint
+    num = np.bincount(J, weights=e ** 2, minlength=n)
+    den = np.bincount(J, weights=Y ** 2, minlength=n)
+    rel = np.sqrt(num / np.maximum(den, 1e-300))
+    return JointZeroFit(joints=js, offsets=q0, std=sd[W.shape[1]:], theta=dict(zip(names, chi_new)),
+                        theta_std=dict(zip(names, sd[:W.shape[1]])), iterations=n_iter, converged=converged,
+                        rel_err=rel)
