@@ -176,8 +176,10 @@ def invisible_zero_note(model: IdentificationModel) -> list[str]:
     if not hidden:
         return []
     which = ", ".join(str(j) for j in hidden)
-    return [f"the zero offset of joint{'s' if len(hidden) > 1 else ''} {which} is invisible to torque data (no "
-            "configuration-dependent torque changes with it, or the base parameters absorb it: a first joint about "
+    many = len(hidden) > 1
+    return [f"the zero offset{'s' if many else ''} of joint{'s' if many else ''} {which} {'are' if many else 'is'} "
+            "invisible to torque data (no "
+            "configuration-dependent torque changes with the angle, or the base parameters absorb the change: a first joint about "
             "a vertical axis, the last joint of a chain): no joint_zero candidate there"]
 
 
