@@ -220,3 +220,16 @@ def test_fit_joint_zeros_with_the_dynamic_parameters():
             assert fit.std[k] < math.radians(0.2)
     with pytest.raises(ValueError, match=r"joint\(s\) \[1\]"):
         fit_joint_zeros(model, [tr], joints=(0,))
+
+
+def test_an_offset_of_tens_of_degrees_is_impossible():
+    """Beyond 20 deg a revolute joint's zero offset is refused as a zero error (a wrong theta convention of the
+    robot file), naming the joint; a few degrees are possible; a prismatic joint's length has no such bound."""
+    from symoro_gen.diagnostics.candidates import MAX_ZERO_OFFSET_DEG, Family, implausible
+
+    fam = Family("joint_zero", 1, ("q0",), lambda fr, ctx: [], info=(("revolute", True),))
+    why = implausible(fam, [math.radians(MAX_ZERO_OFFSET_DEG + 5)], f_dyn=5.0)
+    assert why is not None and "joint 2" in why and "theta" in why
+    assert implausible(fam, [math.radians(-3.0)], f_dyn=5.0) is None
+    lin = Family("joint_zero", 2, ("q0",), lambda fr, ctx: [], info=(("revolute", False),))
+    assert implausible(lin, [1.0], f_dyn=5.0) is None
