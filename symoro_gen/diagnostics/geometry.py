@@ -31,7 +31,7 @@ from ..observations.raw import full_rate_torque
 
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
            "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "JointZeroFit",
-           "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints", "zero_summary"]
+           "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints"]
 
 #: step [rad or m] of the central difference of the torque in the joint angle
 JOINT_ZERO_STEP = 1e-6
@@ -189,18 +189,6 @@ def describe_zero(value: float, std: float, revolute: bool) -> dict:
         return {"offset_rad": float(value), "offset_deg": float(np.degrees(value)),
                 "offset_deg_std": float(np.degrees(std))}
     return {"offset_m": float(value), "offset_m_std": float(std)}
-
-
-def zero_summary(model: IdentificationModel, joints: Sequence[int] | None = None) -> list[str]:
-    """One line per joint: whether torque data can see its zero offset (for the report)."""
-    share = joint_zero_visibility(model)
-    rev = revolute_joints(model)
-    out = []
-    for j in range(int(model.N_JOINTS)) if joints is None else joints:
-        kind = "angle" if rev[j] else "length"
-        seen = "visible" if share[j] > VISIBILITY_TOL else "invisible (absorbed by the base parameters or no torque)"
-        out.append(f"joint {j + 1} zero ({kind}): {seen}, share outside the regressor span {share[j]:.2g}")
-    return out
 
 
 # ------------------------------------------------------------------------------------------------
