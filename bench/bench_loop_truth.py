@@ -26,7 +26,7 @@ recording and validates on another (a different excitation and noise):
 
 For each case it prints the truth, the effects in the order reported (kind, joint, label, modulation,
 ``verdict`` when the report has one), whether the right cause - or, for a kind the loop has no name for
-(cross-talk, an encoder offset), the right joint - is the FIRST effect, and the joints whose residual
+(cross-talk), the right joint - is the FIRST effect, and the joints whose residual
 holds unexplained structure. The score line counts the single-effect cases (1-10) whose first effect is
 right, and those whose first effect with verdict ``cause`` is right (when the report has verdicts).
 
@@ -123,7 +123,7 @@ def cases() -> list[Case]:
         Case(8, "elastic j4 (motor encoder)", "q_meas,4 = q_link,4 + tau_4/K, K = 3000 N m/rad (motor-side encoder)", 3,
              add("stiffness", 3, 3000.0), lambda e: _kind(e) == "elasticity" and _j(e) in (3, None)),
         Case(9, "encoder offset j2", "q_meas,2 = q_2 - 1.5 deg (zero offset; gravity at the true angle)", 1,
-             add("q_offset", 1, math.radians(1.5)), lambda e: _j(e) == 1, named=False),
+             add("q_offset", 1, math.radians(1.5)), lambda e: _j(e) == 1 and _kind(e) == "joint_zero"),
         Case(10, "delay 40 ms j5 only", "tau_meas,5(t) = tau_5(t - 40 ms), the other joints on time", 4,
              add("delay", 4, 0.040), lambda e: _kind(e) == "time_delay" and _j(e) == 4),
         Case(11, "clean control", "friction = the declared Coulomb + viscous law, white noise only", None,

@@ -34,6 +34,12 @@ since the start of the recording):
                     rows of j *and* k
 ``rotor_inertia``   ``ddq_j``
 ``offset``          ``1``
+``joint_zero``      ``(tau_hat(q + c e_j) - tau_hat(q)) / c`` on *every* joint's rows (declared model at the
+                    current fit, Coulomb terms left out): the torque error of an encoder zero offset
+                    ``q_measured,j = q_true,j - c`` (see :mod:`.geometry`); scored as the tangent
+                    ``d tau_hat / d q_j`` (``c = 0``), then rebuilt at the fitted offset (fixed point); one
+                    family per joint whose zero the torque can see (:func:`.geometry.visible_zero_joints`,
+                    all joints when the model is not given)
 ==================  =====================================================================================
 """
 from __future__ import annotations
@@ -47,18 +53,20 @@ from scipy.special import erf
 
 from ..model import IdentificationModel
 from .frame import Experiment, Frame, model_torque
+from .geometry import decimated_zero_matrix, describe_zero, revolute_joints, visible_zero_joints
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
-           "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "clear_elasticity_cache"]
+           "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "MAX_ZERO_OFFSET_DEG",
+           "clear_elasticity_cache"]
 
 KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity", "time_delay", "gain",
-         "drift", "coupling", "rotor_inertia", "offset")
+         "drift", "coupling", "rotor_inertia", "offset", "joint_zero")
 ALL = KINDS
 
 #: signal against which each kind is best seen (plots and the structure table)
 REVEAL = {"stribeck": "dq", "load_friction": "tau_hat", "position_ripple": "q", "spring": "q",
           "elasticity": "tau_hat", "time_delay": "dtau_hat", "gain": "tau_hat", "drift": "t", "coupling": "ddq",
-          "rotor_inertia": "ddq", "offset": "t", "placebo": "t"}
+          "rotor_inertia": "ddq", "offset": "t", "placebo": "t", "joint_zero": "q"}
 
 #: Stribeck velocity grid: ``n`` points from ``lo`` to ``hi`` times the 98th percentile of |dq_j|
 STRIBECK_GRID = (0.01, 0.5, 8)
@@ -193,7 +201,7 @@ def _stats(frame: Frame):
 
 
 def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Sequence[int] = RIPPLE_ORDERS,
-                  stribeck_grid=STRIBECK_GRID) -> list[Family]:
+                  stribeck_grid=STRIBECK_GRID, model: IdentificationModel | None = None) -> list[Family]:
     """Candidate families for the joints of ``frame`` (the identification frame fixes the search
     grids and scalings, reused unchanged on validation data).
 
@@ -203,6 +211,10 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
         Identification data.
     kinds : sequence of str
         Subset of :data:`KINDS`.
+    model : IdentificationModel, optional
+        The generated model: ``joint_zero`` families only for the joints whose zero the torque can see
+        (:func:`.geometry.visible_zero_joints`) and with the joint's kind (angle or length); without it, on
+        every joint, read as angles.
     """
     bad = [k for k in kinds if k not in KINDS]
     if bad:
@@ -216,6 +228,7 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
         out += _position_families(j, ks, st, ripple_orders)
         out += _model_torque_families(j, ks, st)
         out += _signal_families(j, ks, st)
+    out += _joint_zero_families(n, ks, model)
     out += _all_joint_families(n, ks)
     # columns that do not depend on the fit are the same in every round (the frames keep their q, dq,
     # ddq, t arrays when the model torque is re-attached): build them once per frame
@@ -348,6 +361,59 @@ def _signal_families(j: int, ks: set[str], st: _FrameScales) -> list[Family]:
         out.append(Family("offset", j, ("OFF",), lambda fr, ctx, j=j: [fr.full_rate_columns(
             lambda ex: {j: np.ones((ex.n_samples, 1))}, 1)], reveal="t"))
     return out
+
+
+def _joint_zero_families(n: int, ks: set[str], model: IdentificationModel | None) -> list[Family]:
+    """Encoder zero offset of each joint whose zero the torque can see (:mod:`.geometry`)."""
+    if "joint_zero" not in ks:
+        return []
+    joints = tuple(range(n)) if model is None else visible_zero_joints(model)
+    rev = np.ones(n, bool) if model is None else revolute_joints(model)
+    out = []
+    for j in joints:
+        def b_zero(fr, ctx, j=j):
+            return [_joint_zero_build(fr, ctx, j, 0.0)]
+
+        def b_zero_at(fr, ctx, c, j=j):
+            return _joint_zero_build(fr, ctx, j, float(c))
+
+        out.append(Family("joint_zero", j, ("q0",), b_zero, reveal="q", depends_on_fit=True, build_at=b_zero_at,
+                          self_consistent=True, info=(("revolute", bool(rev[j])),)))
+    return out
+
+
+def _joint_zero_build(frame: Frame, ctx: FitContext, m: int, c: float) -> np.ndarray:
+    """Joint m's zero-offset column on the rows of every joint: the secant ``(W(q + c e_m) - W(q)) / c`` of the
+    declared regressor (``c = 0``: the tangent, :func:`.geometry.regressor_secant`) evaluated at full rate and
+    decimated in parallel with ``W`` (so that it shares W's filter edges: on the decimated signals the edge
+    rows differ and the part of the column outside W's span is concentrated there), times the declared
+    parameters of the current fit. The decimated matrix does not depend on the fit and is kept per frame."""
+    names = tuple(ctx.model.BASE_NAMES) + tuple(getattr(ctx.model, "PAYLOAD_NAMES", ()))
+    D = _zero_matrix(frame, ctx.model, m, c)
+    th = np.array([float(ctx.theta.get(nm, 0.0)) for nm in names])
+    # the Coulomb columns sign(dq) do not depend on q: their derivative is 0 whatever the fit
+    return (D @ th).reshape(-1, 1)
+
+
+#: decimated regressor tangents kept (per frame and joint; each the size of ``W``): the joints of the
+#: identification and acceptance frames of a 7-joint arm, and one more; the secants of the fixed point (an
+#: accepted effect's, a few per round) are recomputed
+_ZERO_CACHE_SIZE = 15
+_ZERO_CACHE: list = []   # [(frame arrays, joint, matrix)], most recent last
+
+
+def _zero_matrix(frame: Frame, model: IdentificationModel, m: int, c: float) -> np.ndarray:
+    if c != 0.0:
+        return decimated_zero_matrix(frame, model, m, c)
+    key = _frame_key(frame)
+    for arrs, jj, D in _ZERO_CACHE:
+        if jj == m and len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
+            return D
+    D = decimated_zero_matrix(frame, model, m, c)
+    D.setflags(write=False)
+    _ZERO_CACHE.append((key, m, D))
+    del _ZERO_CACHE[:-_ZERO_CACHE_SIZE]
+    return D
 
 
 def _all_joint_families(n: int, ks: set[str]) -> list[Family]:
@@ -576,12 +642,17 @@ GAIN_SCALE_RANGE = (0.5, 2.0)
 #: ``f_dyn`` is ``(2 pi f_dyn d)^2 / 2`` of the torque (50 % at 1 rad): beyond it the fitted "delay" is
 #: whatever ``-dtau/dt`` correlates with, not a lag
 MAX_DELAY_PHASE = 1.0
+#: a ``joint_zero`` offset must be at most this many degrees: encoder zero errors of an arm are of the order of a
+#: degree (Hollerbach & Wampler 1996; Khalil & Dombre 2002, ch. 11); tens of degrees are a wrong joint
+#: convention of the robot file (its MDH theta offset), and far from the tangent the column linearises
+MAX_ZERO_OFFSET_DEG = 20.0
 
 
 def implausible(family: Family, values, *, f_dyn: float) -> str | None:
     """Why an effect's identified parameters are physically impossible for the effect it names (None when
     they are not): a ``gain`` scale outside :data:`GAIN_SCALE_RANGE`, a ``time_delay`` beyond the validity
-    of its first-order column (:data:`MAX_DELAY_PHASE` at the dynamics bandwidth ``f_dyn`` [Hz]), a
+    of its first-order column (:data:`MAX_DELAY_PHASE` at the dynamics bandwidth ``f_dyn`` [Hz]), a revolute
+    ``joint_zero`` offset beyond :data:`MAX_ZERO_OFFSET_DEG`, a
     negative viscous or Coulomb coefficient of a shared motor (``coupling``, variant ``shared``: the
     motor's friction, absent from the declared model, dissipates). The loop does not add a candidate
     that makes any effect implausible (:mod:`.core`)."""
@@ -599,6 +670,11 @@ def implausible(family: Family, values, *, f_dyn: float) -> str | None:
         if abs(v[0]) > d_max:
             return (f"delay {v[0]:.3g} s beyond the first-order column's validity |d| <= {d_max:.3g} s "
                     f"(1 rad at the dynamics bandwidth {float(f_dyn):.3g} Hz)")
+    elif k == "joint_zero" and bool(dict(family.info).get("revolute", True)):
+        if abs(math.degrees(v[0])) > MAX_ZERO_OFFSET_DEG:
+            return (f"zero offset {math.degrees(v[0]):.3g} deg of joint {(family.joint or 0) + 1} beyond "
+                    f"{MAX_ZERO_OFFSET_DEG:g} deg (a wrong theta convention of its row in the robot file, not an "
+                    "encoder zero error)")
     elif k == "coupling" and family.variant == "shared":
         bad = [f"{p} = {x:.3g}" for p, x in zip(family.params, v) if p in ("FVm", "FSm") and x < 0]
         if bad:
@@ -634,4 +710,7 @@ def describe_params(family: Family, value, values: np.ndarray, std: np.ndarray) 
         info = dict(family.info)
         out.update(info)
         out["dtau_dq_at_center"] = v[0] / info.get("half_range", 1.0)
+    elif k == "joint_zero":
+        out.update(describe_zero(v[0], float(np.asarray(std, float).reshape(-1)[0]),
+                                 bool(dict(family.info).get("revolute", True))))
     return out

@@ -126,6 +126,7 @@ from .friction import (
     velocity_grid,
     viscous_columns,
 )
+from .geometry import invisible_zero_note
 from .plausibility import PLAUSIBLE, ArmScales, law_alternatives, law_plausibility, rate_effects
 from .report import CandidateScore, Effect, ResidualReport
 from .stability import (
@@ -1031,7 +1032,7 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     # the loop starts from the selection estimator's fit (the named effects do not depend on cfg.method)
     # (on the loop's own data: the leading part of the identification experiments)
     res_start = _fit(data.F.system, SELECT_METHOD)
-    families = make_families(data.F, cfg.candidates)
+    families = make_families(data.F, cfg.candidates, model=data.model)
     # a joint whose friction-law stage chose a Stribeck law already has the Stribeck column: the loop's
     # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
     # coefficients then split the effect between them with opposite signs)
@@ -1337,7 +1338,7 @@ def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: Dia
     Y = F.system.Y
     _, fam, ev, X, Xv, _cs = scored.eligible[pick]
     value = fam.grid[ev.member] if fam.grid else None
-    if fam.build_at is not None:
+    if fam.build_at is not None and fam.grid:   # (a secant without a grid, joint_zero: its fixed point only)
         value = _refine(fam, ev.member, F, scored.ctx, scored.scorer)
         X, Xv = fam.build_at(F, scored.ctx, value), fam.build_at(V, scored.ctx, value)
     added = state.added + (_Added(fam, value, X, Xv),)
@@ -1827,6 +1828,7 @@ def _report_settings(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseS
                            f"friction law)" for r in base.laws
                            if r.smoothing and (r.choice.coulomb.param or r.choice.coulomb.smooth)],
         "static_at_rest": _static_at_rest(data, state.V, base.laws),
+        "joint_zero": invisible_zero_note(data.model) if "joint_zero" in cfg.candidates else [],
     }
 
 

@@ -30,6 +30,7 @@ EFFECT_PARAMETERS = {
     "coupling": ("partner [0-based joint]", "ia [kg m^2]", "fv [N m s/rad]", "fs [N m]", "shared [bool]"),
     "rotor_inertia": ("ia [kg m^2]",),
     "offset": ("offset [N m]",),
+    "joint_zero": ("q0 [rad or m] encoder zero offset (the recorded position is q - q0)",),
 }
 
 
@@ -106,6 +107,9 @@ def inject_effect(kind: str, t, q, dq, ddq, tau, *, joint: int | None, **p):
     elif kind == "offset":
         for j in js:
             out_tau[:, j] += p["offset"]
+    elif kind == "joint_zero":
+        for j in js:   # the torque is that of the true angle; the encoder reads it q0 short
+            out_q[:, j] = q[:, j] - p["q0"]
     else:
         raise ValueError(f"unknown effect kind {kind!r}; known: {', '.join(EFFECT_PARAMETERS)}")
     return out_q, out_tau

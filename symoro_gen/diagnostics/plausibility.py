@@ -41,7 +41,7 @@ import numpy as np
 __all__ = [
     "ALTERNATIVE_EXPLAINS", "CLOSE_ALTERNATIVE", "CLOSE_REMAINING", "DEFLECTION_BAND", "DELAY_TYPICAL_PERIODS",
     "DELAY_TYPICAL_S", "EXPLAINS_REMAINING", "GAIN_TOLERANCE", "PLAUSIBLE", "POWER_BAND", "STRIBECK_BAND", "SYNONYMS",
-    "VELOCITY_RESOLUTION", "VERDICTS", "ArmScales", "Plausibility", "alternatives_of", "band_factor",
+    "VELOCITY_RESOLUTION", "VERDICTS", "ZERO_OFFSET_TYPICAL_DEG", "ZERO_OFFSET_WIDTH", "ArmScales", "Plausibility", "alternatives_of", "band_factor",
     "effect_plausibility", "fits_like", "law_alternatives", "law_plausibility", "own_candidate", "rate_effects",
     "remaining_error", "verdict",
 ]
@@ -109,6 +109,14 @@ LOAD_FRICTION_BAND = (0.0, 0.3)
 TORQUE_SHARE = 0.3
 SHARE_WIDTH = math.log(2.0)
 NEGATIVE_FRICTION_FACTOR = 0.2
+#: encoder zero offset of a calibrated arm: typically below 1-2 deg (Hollerbach & Wampler 1996, the calibration
+#: index and taxonomy for robot kinematic calibration methods, IJRR 15(6): joint offsets are the dominant
+#: kinematic errors; Khalil & Dombre 2002, ch. 11, geometric calibration: the identified offsets of arms);
+#: with ZERO_OFFSET_WIDTH = ln 2, 4 deg gives 0.61, 5 deg 0.42 (doubtful); beyond
+#: :data:`.candidates.MAX_ZERO_OFFSET_DEG` (20 deg) the offset is rejected as impossible for a zero error
+#: (a wrong MDH theta convention of the robot file, rather)
+ZERO_OFFSET_TYPICAL_DEG = 2.0
+ZERO_OFFSET_WIDTH = math.log(2.0)
 
 
 @dataclass(frozen=True)
@@ -300,6 +308,16 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
         if ia < 0:
             r.factor(0.5, f"a negative rotor inertia ({ia:.3g}) corrects a declared inertia, it is no rotor",
                      "the declared rotor inertia")
+    elif kind == "joint_zero":
+        if "offset_deg" in physical:
+            deg = float(physical["offset_deg"])
+            r.factor(band_factor(deg, 0.0, ZERO_OFFSET_TYPICAL_DEG, ZERO_OFFSET_WIDTH),
+                     f"a zero offset of {deg:.3g} deg on {_who(j)} is large for a calibrated arm (typical: below "
+                     f"{ZERO_OFFSET_TYPICAL_DEG:g} deg)",
+                     f"the encoder zero / reference position of {_who(j)}, the theta offset of its row in the robot "
+                     "file")
+        else:
+            return r.done("zero offset of a prismatic joint (a length): no prior on its magnitude")
     elif kind == "coupling" and variant == "shared":
         for nm in ("FVm", "FSm"):
             if float(params.get(nm, 0.0)) < 0:
@@ -453,6 +471,10 @@ def fits_like(kind: str, joint: int | None, physical: Mapping[str, float], descr
         return f"a stiffness of {float(physical['K_Nm_per_rad']):.3g} N m/rad of {who}"
     if kind == "stribeck" and "vs" in physical:
         return f"Stribeck friction with vs = {float(physical['vs']):.3g} rad/s on {who}"
+    if kind == "joint_zero" and "offset_deg" in physical:
+        return f"an encoder zero offset of {float(physical['offset_deg']):.3g} deg on {who}"
+    if kind == "joint_zero" and "offset_m" in physical:
+        return f"an encoder zero offset of {1e3 * float(physical['offset_m']):.3g} mm on {who}"
     if kind == "position_ripple" and "k" in physical:
         return f"a ripple of order {float(physical['k']):g} ({float(physical.get('amplitude', math.nan)):.3g} N m) on {who}"
     return description or f"{kind} on {who}"

@@ -405,7 +405,7 @@ class ResidualReport:
         else:
             L.append("No effect added: no candidate was significant on the identification data and "
                      "better than noise on the held-out acceptance data (the end of each identification experiment).")
-        for key in ("sign_smoothing", "static_at_rest"):
+        for key in ("sign_smoothing", "static_at_rest", "joint_zero"):
             for line in (self.settings.get(key) or []) if isinstance(self.settings, dict) else []:
                 L.append(f"Note: {line}")
         rounds = sorted({c.round for c in self.tried})
@@ -486,7 +486,7 @@ class ResidualReport:
                 L.append(f"   - `{nme}` = {v:.4g} (%sigma {p:.2f})")
             for k, v in e.physical.items():
                 L.append(f"   - {k} = {v:.4g}")
-        notes = [line for key in ("sign_smoothing", "static_at_rest")
+        notes = [line for key in ("sign_smoothing", "static_at_rest", "joint_zero")
                  for line in ((self.settings.get(key) or []) if isinstance(self.settings, dict) else [])]
         if notes:
             L.append("")

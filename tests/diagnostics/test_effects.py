@@ -41,6 +41,8 @@ CASES = [
     ("scara_bare", "rotor_inertia", 3, dict(ia=0.05), 12, lambda e: (e.values[0], 0.05, 0.2)),
     ("scara_bare", "offset", 3, dict(offset=0.3), 11, lambda e: (e.values[0], 0.3, 0.05)),
     ("scara_bare", "offset", 0, dict(offset=-0.5), 12, lambda e: (e.values[0], -0.5, 0.05)),
+    ("lwr4", "joint_zero", 1, dict(q0=0.026), 11, lambda e: (e.values[0], 0.026, 0.05)),
+    ("lwr4", "joint_zero", 2, dict(q0=-0.015), 12, lambda e: (e.values[0], -0.015, 0.05)),
 ]
 
 
