@@ -11,6 +11,8 @@ rounding (:mod:`.accumulate`):
 * IDIM-WLS (RX-90 eq. 22, Gautier's per-joint weighting): ``sigma_j`` from the joint-j OLS on ``R_j`` alone
   (its residual norm ``||Y_j||^2 - ||Q_j' Y_j||^2`` is the last diagonal entry of ``R_j``), then the stack of
   ``R_j / sigma_j``;
+* IDIM-TLS (LWR4 paper eq. 12-16): the SVD of ``[W  -Y]`` is that of the stacked factors with the last
+  column negated;
 * the singular values of ``W`` (condition numbers) are those of the stacked factors; the per-joint error
   norms ``||Y_j - W_j chi|| = ||R_j [chi; -1]||``;
 * a partly known payload (LWR4 paper eq. 7): the known columns moved to the right-hand side is a linear map

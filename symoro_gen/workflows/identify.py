@@ -256,6 +256,10 @@ class IdentifyResults(Results):
         valid = [("validation data" + (" (loaded)" if vl else ""), sys_v)] if sys_v is not None else []
         raw = [(valid[0][0], self.validation["rel_err_raw"])] if valid and self.validation is not None else []
         payload, notes = None, ["data " + r.summary() for r in self.reports]
+        thinned = [a for a in self.assemblies.values() if isinstance(a, StreamedAssembly) and a.stride > 1]
+        if thinned:
+            notes.append(f"identified in bounded memory: the figures and the tables computed on rows use every "
+                         f"{max(a.stride for a in thinned)}-th row of each joint; the result's error norms use them all")
         if self.plausibility is not None:
             notes += [f"warning: {w}" for w in self.plausibility.warnings]
         if sys_v is not None and vl and any(n in sys_v.names for n in model.PAYLOAD_NAMES):
@@ -386,11 +390,12 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
 
 def streams(opts: IdentifyOptions) -> bool:
     """Whether ``identify`` runs in bounded memory (:mod:`symoro_gen.identification.streaming`: the system
-    folded into per-joint QR factors, the full-rate signals never kept): IDIM-OLS and IDIM-WLS, with or
-    without a known payload, essential parameters, ``min_velocity``, ``drop_unexcited``, validation. The
-    rows themselves are kept (in memory) for identified gains, the physically consistent estimate and
-    ``drop_saturated``; IDIM-IV and DIDIM simulate the robot on the whole recordings."""
-    return (opts.method in ("ols", "wls") and opts.gains is None and not opts.physical
+    folded into per-joint QR factors, the full-rate signals never kept): IDIM-OLS, -WLS and -TLS (the SVD
+    of ``[W  -Y]`` is that of the stacked factors, LWR4 paper eq. 12-16), with or without a known payload,
+    essential parameters, ``min_velocity``, ``drop_unexcited``, validation. The rows themselves are kept
+    (in memory) for identified gains, the physically consistent estimate and ``drop_saturated``; IDIM-IV
+    and DIDIM simulate the robot on the whole recordings."""
+    return (opts.method in ("ols", "wls", "tls") and opts.gains is None and not opts.physical
             and not opts.drop_saturated)
 
 

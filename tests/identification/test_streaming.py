@@ -1,7 +1,7 @@
 """``identify`` in bounded memory: the observation system folded into per-joint QR factors block after block
 (:mod:`symoro_gen.identification.streaming`) gives the estimates, statistics, error norms and raw-torque errors
 of the whole system in memory (the reference: the same workflow with the streaming turned off) to 1e-9
-relative, on simulated LWR4 recordings (OLS, WLS, a known payload, essential parameters) and on the real LWR4
+relative, on simulated LWR4 recordings (OLS, WLS, TLS, a known payload, essential parameters) and on the real LWR4
 recordings when present; the factor operations match the same operations on the rows."""
 from __future__ import annotations
 
@@ -169,11 +169,11 @@ def test_kinematics_blocks_are_the_assembly_signals(lwr4_recordings):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", ["ols", "wls", "payload", "essential"])
+@pytest.mark.parametrize("case", ["ols", "wls", "tls", "payload", "essential"])
 def test_streamed_identify_equals_the_in_memory_one(lwr4_recordings, monkeypatch, case):
     _, rec = lwr4_recordings
-    kw: dict = {"method": "ols" if case == "ols" else "wls"}
-    if case in ("ols", "wls"):
+    kw: dict = {"method": case if case in ("ols", "tls") else "wls"}
+    if case in ("ols", "wls", "tls"):
         kw["validate"] = [rec["valid"]]
     if case == "payload":
         kw.update(loaded=[rec["loaded"]], payload={"M8": 4.6})
