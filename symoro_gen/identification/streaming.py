@@ -44,10 +44,15 @@ from ..preprocessing.trajectory import Trajectory
 from ..progress import ProgressArg
 from .accumulate import Accumulator
 
-__all__ = ["SAMPLE_ROWS", "StreamedAssembly", "fix_known", "pad_columns", "stack_factors", "stream_assembly"]
+__all__ = ["RAW_BATCH", "SAMPLE_ROWS", "STREAM_CHUNK_MB", "StreamedAssembly", "fix_known", "pad_columns", "stack_factors", "stream_assembly"]
 
 #: rows per joint kept (every ``stride``-th one) for the figures of a streamed identification
-SAMPLE_ROWS = 4096
+SAMPLE_ROWS = 1024
+#: ``AssemblyOptions.max_chunk_mb`` of a streamed identification: the engine's smallest Butterworth blocks
+#: (``OUTER_SAMPLES``), so that what ``identify`` holds besides the recording is a few MB per joint
+STREAM_CHUNK_MB = 8.0
+#: samples per regressor call of the raw-torque pass (a (batch, n, nb) buffer)
+RAW_BATCH = 2048
 
 
 class _Thinner:
@@ -137,7 +142,7 @@ class StreamedAssembly:
         """Per joint ``sum (g_j tau_j - tau_hat_j)^2`` and ``sum (g_j tau_j)^2`` over every full-rate sample
         (:func:`symoro_gen.observations.raw.raw_error_sums`, computed block after block)."""
         return raw_error_sums_streamed(model, theta, self.trajectories, self.options,
-                                       [e.settings for e in self.experiments], gains=gains)
+                                       [e.settings for e in self.experiments], gains=gains, batch=RAW_BATCH)
 
 
 def stream_assembly(model: IdentificationModel, trajectories: Trajectory | Iterable[Trajectory],

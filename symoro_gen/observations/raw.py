@@ -105,8 +105,8 @@ def raw_error_sums(model: IdentificationModel, theta: Mapping[str, float], assem
 
 def raw_error_sums_streamed(model: IdentificationModel, theta: Mapping[str, float],
                             trajectories: Iterable[Trajectory], options: AssemblyOptions,
-                            settings: Iterable[FilterSettings], *, gains: ArrayLike | None = None
-                            ) -> tuple[np.ndarray, np.ndarray]:
+                            settings: Iterable[FilterSettings], *, gains: ArrayLike | None = None,
+                            batch: int = REGRESSOR_BATCH) -> tuple[np.ndarray, np.ndarray]:
     """:func:`raw_error_sums` without the full-rate signals: the experiments are filtered again block after
     block (:func:`~symoro_gen.observations.assembly.iter_kinematics`, the assembly's blocks) and each block's
     model torque compared with its raw measured torque, so memory stays bounded whatever the length.
@@ -119,6 +119,8 @@ def raw_error_sums_streamed(model: IdentificationModel, theta: Mapping[str, floa
         The assembly's options (payload columns count on loaded experiments when set).
     settings : iterable of FilterSettings
         Each experiment's filters (``ExperimentReport.settings``), not chosen again.
+    batch : int
+        Samples per regressor call.
 
     Returns
     -------
@@ -132,7 +134,8 @@ def raw_error_sums_streamed(model: IdentificationModel, theta: Mapping[str, floa
         g = np.ones(n) if gains is None else np.asarray(gains, float).reshape(-1)[:n]
         e = st.edge_samples
         for a, b, q, dq, ddq in iter_kinematics(model, traj, options, st):
-            pred = full_rate_torque(model, theta, q, dq, ddq, loaded=traj.loaded and options.payload_columns)
+            pred = full_rate_torque(model, theta, q, dq, ddq, loaded=traj.loaded and options.payload_columns,
+                                    batch=batch)
             y = np.asarray(traj.tau[e + a:e + b], float) * g
             rho2 += np.sum((y - pred) ** 2, axis=0)
             y2 += np.sum(y ** 2, axis=0)

@@ -33,7 +33,7 @@ from ..identification.plausibility import Plausibility, body_boxes, check_base, 
 from ..identification.reference import compare_with_reference, format_comparison
 from ..identification.render import IdentificationBlocks
 from ..identification.result import basis_text, json_float
-from ..identification.streaming import StreamedAssembly, stream_assembly
+from ..identification.streaming import STREAM_CHUNK_MB, StreamedAssembly, stream_assembly
 from ..identification.systems import stack_systems
 from ..model import IdentificationModel
 from ..observations.assembly import Assembly, assemble
@@ -403,7 +403,8 @@ def _assemble(model: IdentificationModel, trajectories, options: AssemblyOptions
               ) -> Assembly | StreamedAssembly:
     """The recordings' assembly: streamed into QR factors, or whole (:func:`streams`)."""
     if streamed:
-        return stream_assembly(model, trajectories, replace(options, keep_signals=False))
+        return stream_assembly(model, trajectories, replace(options, keep_signals=False,
+                                                            max_chunk_mb=min(options.max_chunk_mb, STREAM_CHUNK_MB)))
     return assemble(model, trajectories, options)
 
 
