@@ -166,6 +166,14 @@ def test_kinematics_blocks_are_the_assembly_signals(lwr4_recordings):
     assert streamed.accumulator.n_rows == asm.system.Y.size
     assert streamed.metric_basis() == asm.metric_basis()
     assert 0 < streamed.sample.Y.size <= 2 * SAMPLE_ROWS * 7
+    # the thinned copy for figures: every stride-th row of each joint of the whole system
+    thin = stream_assembly(model, tr, AssemblyOptions(), sample_rows=50)
+    assert thin.stride > 1
+    for j in range(7):
+        whole = asm.system.W[asm.system.joint == j]
+        got = thin.sample.W[thin.sample.joint == j]
+        ref = whole[::thin.stride]
+        assert got.shape == ref.shape and np.allclose(got, ref, rtol=1e-9, atol=1e-12 * np.abs(whole).max())
 
 
 @pytest.mark.slow
