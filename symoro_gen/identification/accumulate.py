@@ -177,6 +177,26 @@ class Accumulator:
             yy[j] += float(Mj[:, -1] @ Mj[:, -1])
         return Accumulator(self.names, tuple(R), tuple(rows), tuple(yy), self.weighted)
 
+    def column_sq_norms(self) -> np.ndarray:
+        """Squared norm of every column of ``W`` over all joints, shape (c,): column ``i`` of ``W_j`` has the
+        norm of column ``i`` of ``R_j`` (``W_j = Q_j R_j``, ``Q_j`` orthonormal)."""
+        out = np.zeros(self.n_params)
+        for R in self.R:
+            out += np.einsum("ij,ij->j", R[:, :-1], R[:, :-1])
+        return out
+
+    def without(self, names: Sequence[str]) -> Accumulator:
+        """The factors of ``[W  Y]`` without the columns ``names`` (those it lacks are ignored; the factors
+        are re-triangularised)."""
+        gone = set(names)
+        keep = [i for i, nm in enumerate(self.names) if nm not in gone]
+        if len(keep) == self.n_params:
+            return self
+        cols = keep + [self.n_params]
+        return Accumulator(tuple(self.names[i] for i in keep),
+                           tuple(_triangular_factor(R[:, cols], len(cols)) for R in self.R),
+                           self.rows, self.yy, self.weighted)
+
     def factor(self, j: int, columns: Sequence[int] | None = None) -> np.ndarray:
         """Square-root data of ``[W_j[:, columns]  Y_j]``: a matrix M with the same Gram matrix.
 

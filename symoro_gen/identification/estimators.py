@@ -140,7 +140,7 @@ def _check_zero_columns(norms: np.ndarray, names: Sequence[str], opts: Options, 
 STILL_SPAN = 1e-3
 
 
-def unexcited_columns(systems: Sequence[ObservationSystem], *, zero_col_tol: float = ZERO_COL_TOL
+def unexcited_columns(systems: Sequence[ObservationSystem | Accumulator], *, zero_col_tol: float = ZERO_COL_TOL
                       ) -> tuple[str, ...]:
     """Columns that are zero in every system (norm <= ``zero_col_tol`` x the largest column norm), in order.
 
@@ -150,7 +150,8 @@ def unexcited_columns(systems: Sequence[ObservationSystem], *, zero_col_tol: flo
     """
     norm2: dict[str, float] = {}
     for sys_ in systems:
-        for name, v in zip(sys_.names, np.einsum("ij,ij->j", sys_.W, sys_.W)):
+        sq = sys_.column_sq_norms() if isinstance(sys_, Accumulator) else np.einsum("ij,ij->j", sys_.W, sys_.W)
+        for name, v in zip(sys_.names, sq):
             norm2[name] = norm2.get(name, 0.0) + float(v)
     if not norm2:
         return ()
@@ -158,8 +159,10 @@ def unexcited_columns(systems: Sequence[ObservationSystem], *, zero_col_tol: flo
     return tuple(n for n, v in norm2.items() if math.sqrt(v) <= zero_col_tol * top)
 
 
-def drop_columns(system: ObservationSystem, names: Sequence[str]) -> ObservationSystem:
-    """``system`` without the columns ``names`` (those it lacks are ignored)."""
+def drop_columns(system: ObservationSystem | Accumulator, names: Sequence[str]) -> ObservationSystem | Accumulator:
+    """``system`` without the columns ``names`` (those it lacks are ignored; an accumulator's factors too)."""
+    if isinstance(system, Accumulator):
+        return system.without(names)
     gone = set(names)
     keep = [i for i, n in enumerate(system.names) if n not in gone]
     return ObservationSystem(system.W[:, keep], system.Y, tuple(system.names[i] for i in keep), system.joint,
@@ -180,15 +183,15 @@ def still_joints(trajectories, span: float = STILL_SPAN) -> list[tuple[str, int,
     return out
 
 
-def drop_unexcited(systems: Sequence[ObservationSystem | None], trajectories=(), *, drop: bool = True,
+def drop_unexcited(systems: Sequence[ObservationSystem | Accumulator | None], trajectories=(), *, drop: bool = True,
                    zero_col_tol: float = ZERO_COL_TOL, option: str = "--drop-unexcited"
-                   ) -> tuple[list[ObservationSystem | None], tuple[str, ...]]:
+                   ) -> tuple[list[Any], tuple[str, ...]]:
     """Leave out the parameters no recording excites (a joint that stands still), or say which and why.
 
     Parameters
     ----------
-    systems : sequence of ObservationSystem or None
-        The systems identified together (None entries are passed through).
+    systems : sequence of ObservationSystem, Accumulator or None
+        The systems identified together (None entries are passed through; streamed data as their factors).
     trajectories : sequence of Trajectory
         The recordings behind them: named in the error, with the joints that do not move in each.
     drop : bool
@@ -370,7 +373,8 @@ def _tls_core(M: np.ndarray, r: int, names: Sequence[str], opts: Options, what: 
 
 
 def _joint_ols_sigma(Mj: np.ndarray, rows: int, opts: Options) -> tuple[float, int]:
-    """sigma_j of the OLS solution of the joint-j equations alone (eq. 22) and its dof.
+    """sigma_j of the OLS solution of the joint-j equations alone (eq. 22) and its dof (the residual computed
+    as a vector, accurate to rounding whatever the fit: the difference of squared norms is not).
 
     Columns that are zero for joint j are ignored; rank is taken on unit-norm columns.
     """
@@ -382,8 +386,9 @@ def _joint_ols_sigma(Mj: np.ndarray, rows: int, opts: Options) -> tuple[float, i
         Ws = W[:, keep] / norms[keep]
         U, s, Vt = np.linalg.svd(Ws, full_matrices=False)
         rank = int(np.sum(s > opts.rank_tol * s[0]))
-        Uy = U[:, :rank].T @ y
-        res2 = float(y @ y - Uy @ Uy)
+        Ur = U[:, :rank]
+        r = y - Ur @ (Ur.T @ y)          # the residual itself: y'y - ||U'y||^2 would lose eps ||y||^2 / ||r||^2
+        res2 = float(r @ r)
     else:
         rank, res2 = 0, float(y @ y)
     return math.sqrt(max(res2, 0.0) / max(rows - rank, 1)), rows - rank

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -16,10 +17,12 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import IdentificationError
+from .accumulate import Accumulator
 from .estimators import COND_WARN, RANK_TOL, REL_STD_WARN_PCT, ZERO_COL_TOL, Tolerances, tolerance_keywords
 from .method import identify
 from .observation import ObservationSystem
 from .result import IdentificationResult, per_joint_rel_err
+from .streaming import fix_known, pad_columns, stack_factors
 from .systems import apply_gains, fix_parameters, select_rows, stack_systems
 
 if TYPE_CHECKING:
@@ -132,6 +135,38 @@ def fit_with_known_payload(unloaded: ObservationSystem, loaded: ObservationSyste
     # same residual; error norms relative to the measured torques, not to Y - W_kl chi_kl
     assert res.residual is not None  # identify() on a system keeps its residual
     rel_err = per_joint_rel_err(res.residual, full.Y, full.joint, res.rel_err.size)
+    return dataclasses.replace(res, fixed=tuple((k, float(v)) for k, v in known.items()), rel_err=rel_err)
+
+
+def fit_with_known_payload_factors(unloaded: Accumulator, loaded: Accumulator, known: Mapping[str, float],
+                                   method: str = "wls", *, essential: bool = False, r_sigma: float = 30.0,
+                                   **tolerances: Unpack[Tolerances]) -> IdentificationResult:
+    """:func:`fit_with_known_payload` on streamed data (LWR4 paper eq. 7): the per-joint QR factors of the
+    unloaded recordings (robot columns) and of the loaded ones (robot + payload columns), e.g.
+    :func:`~.streaming.stream_assembly`'s. The same estimate: the unloaded factors get zero payload columns,
+    both are stacked (:func:`~.streaming.stack_factors`), the known columns moved to the right-hand side
+    (:func:`~.streaming.fix_known`); the error norms are relative to the measured torques."""
+    tol_kw = tolerance_keywords("fit_with_known_payload_factors", dict(tolerances))
+    pay = tuple(n for n in loaded.names if n not in unloaded.names)
+    missing = [n for n in unloaded.names if n not in loaded.names]
+    if missing:
+        raise IdentificationError(f"the loaded data lack robot columns {missing} of the unloaded ones; both must "
+                                  "come from the same model")
+    if not pay:
+        raise IdentificationError("the loaded data have no payload column: assemble them with the payload regressor")
+    bad = [k for k in known if k not in pay]
+    if bad:
+        raise IdentificationError(f"known parameters {bad} are not payload columns {pay}")
+    full = stack_factors(pad_columns(unloaded, loaded.names), loaded)
+    res = identify(fix_known(full, known), method=method, essential=essential, r_sigma=r_sigma, **tol_kw)
+    x = np.array([res.parameter_map().get(n, 0.0) for n in full.names] + [-1.0])
+    for k, v in known.items():
+        x[full.names.index(k)] = float(v)
+    rel_err = np.full(full.n_joints, np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for j in range(full.n_joints):
+            if full.rows[j] > 0:
+                rel_err[j] = np.linalg.norm(full.R[j] @ x) / math.sqrt(full.yy[j])
     return dataclasses.replace(res, fixed=tuple((k, float(v)) for k, v in known.items()), rel_err=rel_err)
 
 

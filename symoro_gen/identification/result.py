@@ -24,7 +24,9 @@ from ..model import IdentificationModel
 from ..observations.assembly import Assembly, basis_text, merge_metric_basis
 from ..observations.raw import raw_error_sums
 from ..observations.system import ObservationSystem
+from .accumulate import Accumulator
 from .render import gains_html, method_label, result_html
+from .streaming import StreamedAssembly
 
 #: summary() lists the known (fixed) parameters one per line up to this many
 MAX_FIXED_LISTED = 12
@@ -304,16 +306,35 @@ class IdentificationResult:
         g = self.gains.as_vector(max(system.n_joints, self.n_joints))
         return system.Y * g[system.joint]
 
-    def rel_err_on(self, system: ObservationSystem) -> np.ndarray:
+    def rel_err_on(self, system: ObservationSystem | Accumulator) -> np.ndarray:
         """Relative error norms ``||rho_j|| / ||Y_j||`` per joint on (validation) data, shape (n_joints,).
 
-        ``Y`` is scaled by the identified gains when there are any (LWR4 paper Sec. IV-C).
+        ``Y`` is scaled by the identified gains when there are any (LWR4 paper Sec. IV-C). Streamed data
+        (an :class:`~.accumulate.Accumulator`): ``||g_j Y_j - W_j chi|| = ||R_j [chi; -g_j]||``.
         """
+        if isinstance(system, Accumulator):
+            return self._rel_err_on_factors(system)
         y = self.scaled_measurements(system)
         rho = y - self.predict(system)
         return per_joint_rel_err(rho, y, system.joint, system.n_joints)
 
-    def rel_err_raw_on(self, model: IdentificationModel, *assemblies: Assembly) -> np.ndarray:
+    def _rel_err_on_factors(self, acc: Accumulator) -> np.ndarray:
+        pm = self.parameter_map()
+        unknown = [n for n in acc.names if n not in pm]
+        if unknown:
+            raise IdentificationError(f"system has columns {unknown} that this {self.method} result does not know; "
+                                      f"its parameters are {tuple(pm)}")
+        x = np.array([pm[n] for n in acc.names], float)
+        nj = acc.n_joints
+        g = self.gains.as_vector(max(nj, self.n_joints)) if self.gains is not None else np.ones(nj)
+        out = np.full(nj, np.nan)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for j in range(nj):
+                if acc.rows[j] > 0:
+                    out[j] = np.linalg.norm(acc.R[j] @ np.r_[x, -g[j]]) / (abs(g[j]) * math.sqrt(acc.yy[j]))
+        return out
+
+    def rel_err_raw_on(self, model: IdentificationModel, *assemblies: Assembly | StreamedAssembly) -> np.ndarray:
         """Raw-torque relative error norms per joint on the full-rate samples of ``assemblies``.
 
         The identified model ``IDM(q, dq, ddq) chi`` is evaluated at every full-rate sample on the
@@ -327,18 +348,21 @@ class IdentificationResult:
         """
         if not assemblies:
             raise IdentificationError("rel_err_raw_on: no assembly given")
-        n = assemblies[0].signals[0].q.shape[1] if assemblies[0].signals else self.n_joints
+        first = assemblies[0]
+        n = first.signals[0].q.shape[1] if isinstance(first, Assembly) and first.signals else self.n_joints
         g = self.gains.as_vector(max(n, self.n_joints))[:n] if self.gains is not None else None
         theta = self.parameter_map()
         rho2, y2 = np.zeros(n), np.zeros(n)
         for a in assemblies:
-            r, y = raw_error_sums(model, theta, a, gains=g)
+            r, y = (a.raw_error_sums(model, theta, gains=g) if isinstance(a, StreamedAssembly)
+                    else raw_error_sums(model, theta, a, gains=g))
             rho2 += r
             y2 += y
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.sqrt(rho2 / y2)
 
-    def with_raw_error(self, model: IdentificationModel, *assemblies: Assembly) -> IdentificationResult:
+    def with_raw_error(self, model: IdentificationModel, *assemblies: Assembly | StreamedAssembly
+                       ) -> IdentificationResult:
         """A copy with ``rel_err_raw`` on the identification ``assemblies`` and ``rel_err_basis`` (what
         each norm is computed on)."""
         basis = merge_metric_basis(assemblies)

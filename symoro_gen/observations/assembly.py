@@ -83,7 +83,14 @@ from ..preprocessing.filtering import (
 from ..preprocessing.motion import saturation_mask
 from ..preprocessing.trajectory import Trajectory
 from ..progress import ProgressArg, ProgressCounter
-from .fused import decimated_rows, filter_settings, fused_applies, model_column_map
+from .fused import (
+    decimated_rows,
+    filter_settings,
+    fused_applies,
+    model_column_map,
+    outer_super_rows,
+    zero_phase_kinematics,
+)
 from .options import AssemblyOptions
 from .system import ObservationSystem
 
@@ -94,6 +101,7 @@ __all__ = [
     "assemble",
     "basis_text",
     "iter_chunks",
+    "iter_kinematics",
     "merge_metric_basis",
     "observation_settings",
 ]
@@ -597,6 +605,40 @@ class _ExperimentBlocks:
         return [signal.sosfiltfilt(sos, x, axis=0)[::nd] for x in bufs], slow
 
 
+def iter_kinematics(model: IdentificationModel, traj: Trajectory, options: AssemblyOptions | None = None,
+                    settings: FilterSettings | None = None
+                    ) -> Iterator[tuple[int, int, np.ndarray, np.ndarray, np.ndarray]]:
+    """The filtered kinematics of one experiment, block after block, as the assembly evaluates ``W`` on them
+    (:attr:`ExperimentSignals.q`, ``dq``, ``ddq`` without keeping them: bounded memory).
+
+    Yields
+    ------
+    (a, b, q, dq, ddq)
+        Segment samples ``[a, b)`` (counted from ``settings.edge_samples``; the blocks follow each other and
+        cover the segment once) and their band-pass ``q, dq, ddq`` (or the recorded derivatives). The blocks
+        are the engine's Butterworth blocks (:func:`~symoro_gen.observations.fused.outer_super_rows`), so the
+        numbers are those of ``keep_signals``; on the blocked path they equal them to the Butterworth
+        transient's ~1e-10 relative at block borders.
+    """
+    opts = AssemblyOptions() if options is None else options
+    st = observation_settings(traj, opts) if settings is None else settings
+    _, nb, npay = _names(model, opts.payload_columns)
+    n = traj.n_joints
+    nseg = traj.n_samples - 2 * st.edge_samples
+    if fused_applies(traj, st, opts):
+        step = outer_super_rows(st, opts, n) * st.n_d
+        for a in range(0, nseg, step):
+            b = min(nseg, a + step)
+            yield (a, b, *zero_phase_kinematics(traj, st, a, b))
+        return
+    ev = _Evaluator(model, n, nb, npay, opts.regressor_batch)
+    blk = _ExperimentBlocks(model, traj, st, opts, ev, None)
+    step = blk.Nseg if blk.iir else max(1, blk.per_block * blk.nd)
+    for a in range(0, blk.Nseg, step):
+        b = min(blk.Nseg, a + step)
+        yield (a, b, *blk.kinematics(a, b))
+
+
 def _stack_per_joint(blocks: list[tuple[_Block, int]], n: int, tol: float, removed: np.ndarray
                      ) -> tuple[list[np.ndarray], ...]:
     """Stack blocks (each tagged with its experiment) per joint, removing low-velocity rows.
@@ -797,9 +839,9 @@ def _saturated_rows(trajs: Sequence[Trajectory], settings: Sequence[FilterSettin
     return drop
 
 
-def merge_metric_basis(assemblies: Iterable[Assembly]) -> dict[str, Any]:
-    """One ``rel_err_basis`` for several assemblies (cut-offs and decimation factors of every experiment,
-    rows and samples summed)."""
+def merge_metric_basis(assemblies: Iterable[Any]) -> dict[str, Any]:
+    """One ``rel_err_basis`` for several assemblies (anything with :meth:`Assembly.metric_basis`: cut-offs
+    and decimation factors of every experiment, rows and samples summed)."""
     parts = [a.metric_basis() for a in assemblies]
     if not parts:
         return {}

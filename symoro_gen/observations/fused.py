@@ -77,7 +77,7 @@ from .options import AssemblyOptions
 
 __all__ = ["BATCH_SUPER_ROWS", "OUTER_SAMPLES", "REGRESSOR_ROWS", "WELCH_SEGMENT", "ColumnMap", "column_map",
            "compiled_helpers", "decimated_rows", "dynamics_bandwidth", "filter_settings", "fused_applies",
-           "model_column_map"]
+           "model_column_map", "outer_super_rows", "zero_phase_kinematics"]
 
 #: super-rows (``n_d`` samples each) per matrix product: the batch's inputs (16 x 80 x 208 doubles at
 #: n_d = 80, 2 MB) and products stay in the L2/L3 caches
@@ -425,6 +425,39 @@ def fused_applies(traj: Trajectory, st: FilterSettings, opts: AssemblyOptions) -
     return min_filter_samples(st.order) <= N and nseg >= max(min_filter_samples(st.order, st.n_d, st.ftype), st.n_d)
 
 
+def outer_super_rows(st: FilterSettings, options: AssemblyOptions, n_joints: int,
+                     batch_super_rows: int = BATCH_SUPER_ROWS, outer_samples: int = OUTER_SAMPLES) -> int:
+    """Super-rows (``n_d`` samples each) per Butterworth block of :func:`decimated_rows`: block ``i`` holds the
+    segment samples ``[i S n_d, (i + 1) S n_d)``. ``options.chunk_samples``, else the larger of
+    ``outer_samples`` and ``max_chunk_mb``'s share, rounded down to whole batches."""
+    nd, B = st.n_d, max(1, int(batch_super_rows))
+    if options.chunk_samples is not None:
+        outer = max(1, int(options.chunk_samples) // nd)
+    else:
+        outer = max(1, max(int(outer_samples), int(options.max_chunk_mb * 1e6 / (8.0 * 4 * n_joints))) // nd)
+    return max(B, outer // B * B)
+
+
+def zero_phase_kinematics(traj: Trajectory, st: FilterSettings, a: int, b: int
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The filtered ``q, dq, ddq`` of segment samples ``[a, b)`` (``a`` counted from ``st.edge_samples``) as
+    :func:`decimated_rows` computes them for a Butterworth block ``[a, b)``: the zero-phase filter on the block
+    with its settling margins, then central differences (the same numbers for the same block)."""
+    e, N = st.edge_samples, traj.n_samples
+    margin = butterworth_settle_samples(st.fs, st.cutoff_hz, st.order) + 2
+    lo, hi = max(0, e + a - margin), min(N, e + b + margin)
+    qf = _zero_phase_rows(traj.q[lo:hi], st.fs, st.cutoff_hz, st.order, traj.source)
+    kernels = compiled_helpers()
+    differences = None if kernels is None else kernels.get("differences")
+    if differences is not None and qf.shape[0] >= 3 and qf.flags.c_contiguous:
+        dq, ddq = np.empty_like(qf), np.empty_like(qf)
+        differences(qf.shape[0], qf.shape[1], qf.ctypes.data, 1.0 / st.fs, dq.ctypes.data, ddq.ctypes.data)
+    else:
+        dq, ddq = differentiate(qf, 1.0 / st.fs), differentiate(qf, 1.0 / st.fs, second=True)
+    off = e + a - lo
+    return qf[off:off + b - a], dq[off:off + b - a], ddq[off:off + b - a]
+
+
 def _polyphase(st: FilterSettings) -> np.ndarray:
     """``H[p, r] = h[p n_d + r]`` (21 x n_d, zero beyond the last tap) of the decimation FIR."""
     h = decimation_filter(st.n_d, ftype="fir", cutoff_ratio=st.cutoff_ratio)
@@ -500,11 +533,7 @@ class _Rows:
         C = self.C = U + n                       # filtered columns: the distinct ones of W, then the torques
         B = self.B = max(1, int(batch_super_rows))
         self.margin = butterworth_settle_samples(st.fs, st.cutoff_hz, st.order) + 2
-        if opts.chunk_samples is not None:
-            outer = max(1, int(opts.chunk_samples) // nd)
-        else:
-            outer = max(1, max(int(outer_samples), int(opts.max_chunk_mb * 1e6 / (8.0 * 4 * n))) // nd)
-        self.outer = max(B, outer // B * B)      # super-rows per Butterworth block
+        self.outer = outer_super_rows(st, opts, n, B, outer_samples)   # super-rows per Butterworth block
         self.X = np.zeros((B, nd, C))            # super-row b, sample r of the batch: X[b, r] (W columns, then tau)
         self.X2 = self.X.reshape(B * nd, C)
         G = max(1, -(-RING_SUPER_ROWS // B))

@@ -17,9 +17,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..model import IdentificationModel
-from .assembly import Assembly, ExperimentSignals
+from ..preprocessing.filtering import FilterSettings
+from ..preprocessing.trajectory import Trajectory
+from .assembly import Assembly, ExperimentSignals, iter_kinematics
+from .options import AssemblyOptions
 
-__all__ = ["REGRESSOR_BATCH", "full_rate_torque", "raw_error_sums", "rel_err_raw"]
+__all__ = ["REGRESSOR_BATCH", "full_rate_torque", "raw_error_sums", "raw_error_sums_streamed", "rel_err_raw"]
 
 #: samples per call of the model's regressor
 REGRESSOR_BATCH = 8192
@@ -97,6 +100,47 @@ def raw_error_sums(model: IdentificationModel, theta: Mapping[str, float], assem
         y = sg.tau_raw * g
         rho2 += np.sum((y - pred) ** 2, axis=0)
         y2 += np.sum(y ** 2, axis=0)
+    return rho2, y2
+
+
+def raw_error_sums_streamed(model: IdentificationModel, theta: Mapping[str, float],
+                            trajectories: Iterable[Trajectory], options: AssemblyOptions,
+                            settings: Iterable[FilterSettings], *, gains: ArrayLike | None = None,
+                            batch: int = REGRESSOR_BATCH) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`raw_error_sums` without the full-rate signals: the experiments are filtered again block after
+    block (:func:`~symoro_gen.observations.assembly.iter_kinematics`, the assembly's blocks) and each block's
+    model torque compared with its raw measured torque, so memory stays bounded whatever the length.
+
+    Parameters
+    ----------
+    trajectories : iterable of Trajectory
+        The assembled experiments, in order.
+    options : AssemblyOptions
+        The assembly's options (payload columns count on loaded experiments when set).
+    settings : iterable of FilterSettings
+        Each experiment's filters (``ExperimentReport.settings``), not chosen again.
+    batch : int
+        Samples per regressor call.
+
+    Returns
+    -------
+    rho2, y2 : ndarray, shape (n,)
+    """
+    rho2 = y2 = None
+    for traj, st in zip(trajectories, settings):
+        n = traj.n_joints
+        if rho2 is None or y2 is None:
+            rho2, y2 = np.zeros(n), np.zeros(n)
+        g = np.ones(n) if gains is None else np.asarray(gains, float).reshape(-1)[:n]
+        e = st.edge_samples
+        for a, b, q, dq, ddq in iter_kinematics(model, traj, options, st):
+            pred = full_rate_torque(model, theta, q, dq, ddq, loaded=traj.loaded and options.payload_columns,
+                                    batch=batch)
+            y = np.asarray(traj.tau[e + a:e + b], float) * g
+            rho2 += np.sum((y - pred) ** 2, axis=0)
+            y2 += np.sum(y ** 2, axis=0)
+    if rho2 is None or y2 is None:
+        raise ValueError("raw_error_sums_streamed: no experiment given")
     return rho2, y2
 
 

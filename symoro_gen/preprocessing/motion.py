@@ -49,10 +49,13 @@ def noise_sigma(q) -> np.ndarray:
         q = q[:, None]
     if q.shape[0] < 4:
         return np.zeros(q.shape[1])
-    d2 = np.abs(np.diff(q, n=2, axis=0))
-    sig = np.median(d2, axis=0) / (0.6745 * np.sqrt(6.0))
-    d1 = np.abs(np.diff(q, axis=0))
-    step = np.array([float(c[c > 0].min()) if np.any(c > 0) else 0.0 for c in d1.T])
+    sig, step = np.empty(q.shape[1]), np.zeros(q.shape[1])
+    for j in range(q.shape[1]):          # one joint at a time: temporaries of one column, not of the recording
+        c = np.ascontiguousarray(q[:, j])
+        sig[j] = np.median(np.abs(np.diff(c, n=2))) / (0.6745 * np.sqrt(6.0))
+        d1 = np.abs(np.diff(c))
+        pos = d1[d1 > 0]
+        step[j] = float(pos.min()) if pos.size else 0.0
     return np.maximum(sig, step / np.sqrt(12.0))
 
 
@@ -61,7 +64,7 @@ def motion_rms(q) -> np.ndarray:
     q = np.asarray(q, float)
     if q.ndim == 1:
         q = q[:, None]
-    return np.asarray(q.std(axis=0), float)
+    return np.array([float(np.ascontiguousarray(q[:, j]).std()) for j in range(q.shape[1])])   # one column at a time
 
 
 def noise_level_joints(q, factor: float = NOISE_MOTION_FACTOR) -> tuple[int, ...]:

@@ -27,12 +27,13 @@ from ..identification import identify as fit
 from ..identification.didim import identify_didim
 from ..identification.estimators import drop_unexcited, with_unexcited
 from ..identification.iv import identify_iv
-from ..identification.payload import identify_payload
+from ..identification.payload import fit_with_known_payload_factors, identify_payload
 from ..identification.physical import identify_physical
 from ..identification.plausibility import Plausibility, body_boxes, check_base, check_standard
 from ..identification.reference import compare_with_reference, format_comparison
 from ..identification.render import IdentificationBlocks
 from ..identification.result import basis_text, json_float
+from ..identification.streaming import STREAM_CHUNK_MB, StreamedAssembly, stream_assembly
 from ..identification.systems import stack_systems
 from ..model import IdentificationModel
 from ..observations.assembly import Assembly, assemble
@@ -172,8 +173,8 @@ class IdentifyResults(Results):
     loaded: tuple[Any, ...]
     validate: tuple[Any, ...]
     reports: tuple[LoadReport, ...]
-    systems: Mapping[str, ObservationSystem | None]
-    assemblies: Mapping[str, Assembly | None]
+    systems: Mapping[str, ObservationSystem | None]      # a streamed identification: a thinned copy of the rows
+    assemblies: Mapping[str, Assembly | StreamedAssembly | None]
     drive: Any = None
     closed: Any = None
     physical: Any = None
@@ -255,6 +256,10 @@ class IdentifyResults(Results):
         valid = [("validation data" + (" (loaded)" if vl else ""), sys_v)] if sys_v is not None else []
         raw = [(valid[0][0], self.validation["rel_err_raw"])] if valid and self.validation is not None else []
         payload, notes = None, ["data " + r.summary() for r in self.reports]
+        thinned = [a for a in self.assemblies.values() if isinstance(a, StreamedAssembly) and a.stride > 1]
+        if thinned:
+            notes.append(f"identified in bounded memory: the figures and the tables computed on rows use every "
+                         f"{max(a.stride for a in thinned)}-th row of each joint; the result's error norms use them all")
         if self.plausibility is not None:
             notes += [f"warning: {w}" for w in self.plausibility.warnings]
         if sys_v is not None and vl and any(n in sys_v.names for n in model.PAYLOAD_NAMES):
@@ -335,8 +340,9 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     # min_velocity (row selection) applies to the identification rows only; validation uses every sample
     asm_opts = AssemblyOptions(cutoff_hz=opts.cutoff, n_d=opts.decimate, min_velocity=opts.min_velocity,
                                drop_saturated=opts.drop_saturated, tau_limits=torque_limits(robot))
-    asm_u = assemble(model, unloaded, replace(asm_opts, payload_columns=False))
-    asm_l = assemble(model, loaded, replace(asm_opts, payload_columns=True)) if loaded else None
+    streamed = streams(opts)
+    asm_u = _assemble(model, unloaded, replace(asm_opts, payload_columns=False), streamed)
+    asm_l = _assemble(model, loaded, replace(asm_opts, payload_columns=True), streamed) if loaded else None
     # a joint that stands still leaves columns of W zero: an error naming the files, or drop_unexcited
     (sys_u, sys_l), unexcited = drop_unexcited([asm_u.system, asm_l.system if asm_l is not None else None],
                                                (*unloaded, *loaded), drop=opts.drop_unexcited)
@@ -351,6 +357,9 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
         res = sensor_gains(sys_u, sys_l, known, essential=opts.essential, r_sigma=opts.r_sigma)
     elif opts.gains == "drive":
         res, dg = identify_with_drive_gains(sys_u, sys_l, known, method=opts.method)
+    elif loaded and streamed:
+        res = fit_with_known_payload_factors(sys_u, sys_l, known, method=opts.method, essential=opts.essential,
+                                             r_sigma=opts.r_sigma)
     elif loaded:
         res = fit_with_known_payload(sys_u, sys_l, known, method=opts.method, essential=opts.essential,
                                      r_sigma=opts.r_sigma)
@@ -363,7 +372,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
         phys, res_u, res = _physical(opts, robot, model, res, sys_u, sys_l, known, asm_u, asm_l)
     plaus = _plausibility(robot, model, res_u if phys is not None else res, phys)
     validation, sys_v, asm_v = _validate(opts, robot, model, res, res_u, validate, held_back, asm_opts,
-                                         bool(loaded))
+                                         bool(loaded), streamed)
     if validation is not None:
         reports += validation.pop("reports")
     rows = None
@@ -372,11 +381,39 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     inputs = (*data, *loaded_data, *validate) + ((opts.reference,) if opts.reference else ())
     return IdentifyResults(robot=robot, model=model, options=opts, result=res, data=data, loaded=loaded_data,
                            validate=validate, reports=tuple(reports),
-                           systems={"unloaded": sys_u, "loaded": sys_l, "validation": sys_v},
+                           systems={"unloaded": _rows(sys_u, asm_u), "loaded": _rows(sys_l, asm_l),
+                                    "validation": _rows(sys_v, asm_v)},
                            assemblies={"unloaded": asm_u, "loaded": asm_l, "validation": asm_v}, drive=dg,
                            closed=closed, physical=phys, unconstrained=res_u, validation=validation,
                            reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs,
                            plausibility=plaus)
+
+
+def streams(opts: IdentifyOptions) -> bool:
+    """Whether ``identify`` runs in bounded memory (:mod:`symoro_gen.identification.streaming`: the system
+    folded into per-joint QR factors, the full-rate signals never kept): IDIM-OLS, -WLS and -TLS (the SVD
+    of ``[W  -Y]`` is that of the stacked factors, LWR4 paper eq. 12-16), with or without a known payload,
+    essential parameters, ``min_velocity``, ``drop_unexcited``, validation. The rows themselves are kept
+    (in memory) for identified gains, the physically consistent estimate and ``drop_saturated``; IDIM-IV
+    and DIDIM simulate the robot on the whole recordings."""
+    return (opts.method in ("ols", "wls", "tls") and opts.gains is None and not opts.physical
+            and not opts.drop_saturated)
+
+
+def _assemble(model: IdentificationModel, trajectories, options: AssemblyOptions, streamed: bool
+              ) -> Assembly | StreamedAssembly:
+    """The recordings' assembly: streamed into QR factors, or whole (:func:`streams`)."""
+    if streamed:
+        return stream_assembly(model, trajectories, replace(options, keep_signals=False,
+                                                            max_chunk_mb=min(options.max_chunk_mb, STREAM_CHUNK_MB)))
+    return assemble(model, trajectories, options)
+
+
+def _rows(system, assembly) -> ObservationSystem | None:
+    """The rows a report shows: the system, or a streamed assembly's thinned copy (every k-th row per joint)."""
+    if isinstance(assembly, StreamedAssembly):
+        return assembly.sample
+    return system
 
 
 def _plausibility(robot, model: IdentificationModel, res, phys) -> Plausibility:
@@ -393,15 +430,16 @@ def _plausibility(robot, model: IdentificationModel, res, phys) -> Plausibility:
     return Plausibility(findings=tuple(findings), boxes=tuple(boxes.values()), notes=notes)
 
 
-def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_back, asm_opts, has_payload):
+def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_back, asm_opts, has_payload,
+              streamed: bool = False):
     """Relative errors on the validation recordings and the held-back parts (None without either)."""
     if not (validate or held_back):
         return None, None, None
     vtr, rep_v = (as_trajectories(list(validate), opts.data_format, robot, loaded=opts.validate_loaded)
                   if validate else ((), ()))
     vtr = tuple(held_back) + tuple(vtr)
-    asm_v = assemble(model, vtr, replace(asm_opts, min_velocity=None,
-                                         payload_columns=bool(opts.validate_loaded) or has_payload))
+    asm_v = _assemble(model, vtr, replace(asm_opts, min_velocity=None,
+                                          payload_columns=bool(opts.validate_loaded) or has_payload), streamed)
     sys_v = asm_v.system
     out: dict[str, Any] = {"data": [tr.source for tr in held_back] + [str(p) if isinstance(p, (str, os.PathLike))
                                                                        else getattr(p, "source", "<array>")
