@@ -455,10 +455,19 @@ def remaining_error(c, joint: int | None, partner: int | None) -> float | None:
 SYNONYMS = (frozenset({("coulomb", "abs_tau"), ("load_friction", "")}), frozenset({("constant", "tau"), ("gain", "")}))
 
 
+def _named(kind: str, variant: str) -> tuple[str, str]:
+    """The physical effect a (kind, variant) of the library stands for: a friction-law replacement whose Coulomb
+    law is Stribeck's is the Stribeck effect of its joint (the loop's ``stribeck`` kind at another ``vs``)."""
+    if kind in ("load_friction", "gain", "stribeck"):
+        return kind, ""
+    if kind == "friction_law" and variant.startswith("stribeck"):
+        return "stribeck", ""
+    return kind, variant
+
+
 def _same_effect(kind: str, variant: str, other_kind: str, other_variant: str) -> bool:
-    a, b = (kind, variant if kind not in ("load_friction", "gain") else ""), (
-        other_kind, other_variant if other_kind not in ("load_friction", "gain") else "")
-    return any(a in g and b in g for g in SYNONYMS)
+    a, b = _named(kind, variant), _named(other_kind, other_variant)
+    return (a == b and a[0] == "stribeck") or any(a in g and b in g for g in SYNONYMS)
 
 
 def own_candidate(kind: str, joint: int | None, partner: int | None, variant: str, tried: Sequence, round: int):
@@ -521,7 +530,8 @@ def rate_effects(effects: Sequence, scales: ArmScales, tried: Sequence, *,
 
     ``tried``: every candidate of every round (the alternatives of an effect are those of its round);
     ``impossible``: label -> why its final parameters are impossible (:func:`.candidates.implausible`);
-    ``law_ratings``: joint -> (rating, alternatives) of the friction-law stage's replacements (round 0).
+    ``law_ratings``: joint -> (rating, alternatives) of the friction-law stage's replacements (a law that won a
+    round of the loop has that round's candidates as alternatives too).
     """
     impossible = dict(impossible or {})
     law_ratings = dict(law_ratings or {})

@@ -150,6 +150,20 @@ def test_one_effect_under_two_names_is_not_its_own_rival():
     assert r.verdict == "doubtful" and "almost as well" in r.verdict_reason
 
 
+def test_a_stribeck_law_and_the_stribeck_candidate_are_one_effect():
+    """The friction-law stage's Stribeck law of joint 4 competing in the round of the loop's Stribeck candidate of
+    the same joint (another vs) is the same physical effect: no rival; a gain of the joint leaving as little is."""
+    e = _effect("stribeck", 3, ("stribeck4.Fst",), [0.8], {"vs": 0.07})
+    own = _cs("stribeck4", "stribeck", 3, 1.0, after=(0.1, 0.1, 0.1, 0.0200))
+    law = _cs("friction_law4", "friction_law", 3, 0.99, variant="stribeck(vs=0.0698)+linear",
+              after=(0.1, 0.1, 0.1, 0.0201))
+    (r,) = rate_effects([e], _scales(n=4), [own, law])
+    assert r.verdict == "cause" and r.alternatives[0]["same_effect"], r.verdict_reason
+    tanh = _cs("friction_law4", "friction_law", 3, 0.99, variant="tanh(v=0.05)+linear", after=(0.1, 0.1, 0.1, 0.0201))
+    (r,) = rate_effects([e], _scales(n=4), [own, tanh])
+    assert r.verdict == "doubtful" and "almost as well" in r.verdict_reason
+
+
 def test_a_doubtful_effect_is_never_called_the_cause():
     e = _effect("time_delay", 6, ("time_delay7.d",), [0.048], {"delay_s": 0.048})
     tried = [_cs("time_delay7", "time_delay", 6, 1.0), _cs("gain7", "gain", 6, 0.3)]
