@@ -1814,7 +1814,7 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                           implausible=tuple(data.doubtful_laws) + tuple(state.implausible) + tuple(
                               {"candidate": d["candidate"], "round": d["round"], "law": d["law"],
                                "reasons": [f"no longer passes its cross-validation tests once {', '.join(d['after'])} "
-                                           "was added (it absorbed part of that effect): not applied"]}
+                                           "was added (that effect explains what it explained): not applied"]}
                               for d in state.laws_retired))
 
 
