@@ -96,7 +96,7 @@ STRIBECK_WIDTH = math.log(3.0)
 #: a Stribeck dip lives at low speed: a ``vs`` above this share of the joint's 98th-percentile speed spans the
 #: motion itself - the law is then a reshaped Coulomb law, not a Stribeck effect (Armstrong-Helouvry et al.
 #: 1994, sec. 2: the Stribeck curve falls to the Coulomb level within a small fraction of the operating speeds)
-STRIBECK_SPEED_SHARE = 0.1
+STRIBECK_SPEED_SHARE = 0.3
 STRIBECK_SPEED_WIDTH = math.log(2.0)
 #: static excess ``Fs - Fc`` of a Stribeck law against the joint's 98th-percentile torque: the static friction
 #: of geared joints exceeds the Coulomb level by 10-50 % of it, i.e. by about 1-15 % of the torque range (LWR4

@@ -212,7 +212,7 @@ def test_stribeck_law_needs_evidence_of_friction():
     assert law_plausibility(_stribeck(0.07, 1.0, 1.8, 0.0127, 0.0008), sc).score == 1.0
     delay = law_plausibility(_stribeck(0.40, 1.0, 1.3, 0.009226, 0.009063), sc)
     assert delay.score < PLAUSIBLE and len(delay.reasons) >= 3
-    fast = law_plausibility(_stribeck(0.09, 1.0, 1.8, 0.0127, 0.0008), replace(sc, v98=np.full(7, 0.3)))
+    fast = law_plausibility(_stribeck(0.09, 1.0, 1.8, 0.0127, 0.0008), replace(sc, v98=np.full(7, 0.1)))
     assert fast.score < PLAUSIBLE and "typical speed" in fast.reasons[0]
     tiny = law_plausibility(_stribeck(0.05, 1.0, 1.02, 0.0127, 0.0008), sc)   # 0.02 N m on a 20 N m joint
     assert tiny.score < PLAUSIBLE and "tiny" in tiny.reasons[0]
