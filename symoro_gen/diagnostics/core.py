@@ -2168,8 +2168,9 @@ def _with_acceptance(report: ResidualReport, full0: _Data, data0: _Data, notes: 
             + " got worse beyond the declared model's noise band")
     accepted = [t for t in notes if t.accepted]
     effects = list(report.effects)
-    k0 = sum(1 for e in effects if e.round == 0)
-    effects[k0:k0] = [_note_effect(t, res) for t in accepted]
+    # the notes (friction static at rest, sign smoothing: processing matters of the declared law, applied before
+    # the loop) after the effects, whose order is the order the loop named them (a friction law in its round)
+    effects += [_note_effect(t, res) for t in accepted]
     acc = {"share": cfg.acceptance, "data": data0.vdesc,
            "rows_fit": int(data0.F.n_rows), "rows_acceptance": int(data0.V.n_rows),
            "band_level": BAND_LEVEL, "band_method": "circular block bootstrap (Politis & Romano 1992), block length "
