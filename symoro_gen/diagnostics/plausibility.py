@@ -16,7 +16,8 @@ the round, into a *verdict*:
     at most :data:`CLOSE_REMAINING` times its squared validation error there);
 ``rejected``
     implausible and an eligible alternative explains the same residual (leaves at most
-    :data:`EXPLAINS_REMAINING` times its squared validation error), or physically impossible.
+    :data:`EXPLAINS_REMAINING` times its squared validation error), or physically impossible; a time delay
+    only when impossible or absurd (:func:`delay_is_absurd`), otherwise at worst ``doubtful``.
 
 An alternative that is the same physical effect under another name of the library (:data:`SYNONYMS`) is
 no rival.
