@@ -588,6 +588,7 @@ class _LawRecord:
     frequency: float
     p_value: float
     smoothing: bool = False   # a tanh at a scale below MIN_LAW_SCALE: sign(dq) smoothed, not reported as an effect
+    round: int = 0   # the loop's round the replacement won (0: applied before the loop, a joint without friction)
 
 
 @dataclass(frozen=True, eq=False)
@@ -623,6 +624,8 @@ class _State:
     stopped_joints: frozenset = frozenset()   # joints where a placebo passed: the loop stopped there
     estimator_dependent: tuple[dict, ...] = ()   # effects named under one weighting only (dropped)
     implausible: tuple[dict, ...] = ()   # eligible candidates not added: they made an effect implausible
+    pending: tuple[_LawRecord, ...] = ()   # friction-law replacements competing in the rounds, not applied yet
+    laws_retired: tuple[dict, ...] = ()   # pending laws that no longer pass their tests after an effect was added
 
 
 @dataclass(frozen=True, eq=False)
@@ -762,7 +765,8 @@ def _stage_assemble(model: IdentificationModel, trajectories, validation, holdou
                  fdyn=float(fdyn), held_out=True, fixed=tuple(sorted(fixed.items())), full=full)
 
 
-def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_LawRecord, ...]]:
+def _stage_friction(data: _Data, cfg: DiagnoseSettings
+                    ) -> tuple[_Data, tuple[_LawRecord, ...], tuple[_LawRecord, ...]]:
     """Stage "friction law": for each joint in turn, choose the Coulomb law (sign, tanh
     with searched ``v``, Stribeck) and the viscous law (linear, ``|dq|^delta``) by time-blocked
     cross-validation on the *identification* rows (:func:`.friction.select_friction`: the whole model
@@ -776,7 +780,14 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
     far from 1) is not applied - it would absorb a delay or a load-dependent friction before the loop tries
     them - and is kept in ``doubtful_laws`` (reported in ``implausible``, round 0, and the warnings).
 
-    Returns the data with the new columns (model :class:`.friction.LawModel`) and what was chosen."""
+    A plausible replacement of a declared law is not applied here either: it is *pending*, a candidate of the
+    loop's rounds (:func:`_law_family`), scored on the acceptance data with every other family and applied
+    when it wins a round - a law that only reshapes what a delay or a gain error leaves at the velocity
+    reversals then loses to that effect. Applied here: a joint declared without friction getting its laws,
+    and the sign smoothing of the declared law (tested as a note, :func:`_accept_notes`).
+
+    Returns the data with the new columns (model :class:`.friction.LawModel`), what was applied and the
+    pending replacements."""
     F = data.F
     n = data.n
     Y, J = F.system.Y, F.system.joint
@@ -785,6 +796,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
     names = list(data.decl)
     W = F.system.W
     recs: list[_LawRecord] = []
+    pending: list[_LawRecord] = []
     doubtful: list[dict] = []
     scales = ArmScales.of_frame(F)
     for j in range(n):
@@ -796,7 +808,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
             continue   # the joint does not move: nothing to choose
         if ch.replaced or jf.missing:
             rec, X = _law_replacement(jf, ch, F, blocks, cfg.significance / n)
-            pl = law_plausibility(ch, scales)
+            pl = law_plausibility(ch, scales, priors_only=True)
             if rec is not None and not (jf.missing or rec.smoothing) and pl.score < PLAUSIBLE:
                 # a law that fits but no drive has (a Stribeck velocity below the velocity resolution, an
                 # exponent far from 1: a delay or a load-dependent friction seen through the friction
@@ -806,18 +818,20 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings) -> tuple[_Data, tuple[_L
                                  "reasons": list(pl.reasons),
                                  "plausibility": {"score": float(pl.score), "reasons": list(pl.reasons)}})
                 rec = None
-            if rec is not None:
+            if rec is not None and (jf.missing or rec.smoothing):
                 recs.append(rec)
                 W = np.hstack([jf.A, X])
                 names = jf.an + list(ch.names())
                 continue
+            if rec is not None:   # competes in the loop's rounds; meanwhile the joint keeps its declared law
+                pending.append(rec)
         kr = _declared_law_kept(jf, ch, Y, J, blocks)
         if kr is not None:
             recs.append(kr[0])
             W, names = kr[1], kr[2]
     if not recs:
-        return replace(data, doubtful_laws=tuple(doubtful)), ()
-    return replace(_apply_laws(data, recs), doubtful_laws=tuple(doubtful)), tuple(recs)
+        return replace(data, doubtful_laws=tuple(doubtful)), (), tuple(pending)
+    return replace(_apply_laws(data, recs), doubtful_laws=tuple(doubtful)), tuple(recs), tuple(pending)
 
 
 def _apply_laws(data: _Data, recs: Sequence[_LawRecord]) -> _Data:
@@ -909,10 +923,11 @@ def _rounds_sign_off(ch: FrictionChoice, dq_all: np.ndarray) -> bool:
             and float(ch.coulomb.param) < MIN_LAW_SCALE * p95)
 
 
-def _law_replacement(jf: _JointFriction, ch: FrictionChoice, F: Frame, blocks: np.ndarray, alpha: float
-                     ) -> tuple[_LawRecord | None, np.ndarray]:
+def _law_replacement(jf: _JointFriction, ch: FrictionChoice, F: Frame, blocks: np.ndarray, alpha: float,
+                     placebo: bool = True) -> tuple[_LawRecord | None, np.ndarray]:
     """The record of the law ``ch`` chose for the joint and its columns, or None when it does not pass the
-    tests against the declared law (``alpha``: the significance level of the joint)."""
+    tests against the declared law (``alpha``: the significance level of the joint; ``placebo``: with the
+    simulated-noise placebo, the expensive part - off when a pending law is re-tested on a new design)."""
     Y, J = F.system.Y, F.system.joint
     # a rounding of sign(dq) is applied when it passes the tests below, but as a smoothing of the declared
     # sign, not as an effect
@@ -935,7 +950,7 @@ def _law_replacement(jf: _JointFriction, ch: FrictionChoice, F: Frame, blocks: n
     sd = float(np.std(d, ddof=1)) if d.size > 1 else 0.0
     p_law = float(sst.t.sf(float(np.mean(d)) / (sd / math.sqrt(d.size)), d.size - 1)) if sd > 0 else 1.0
     passed = float(np.mean(wins)) > MIN_SELECTION_FREQUENCY and p_law < alpha
-    if passed and not (jf.missing or smoothing):
+    if passed and placebo and not (jf.missing or smoothing):
         # simulated-noise placebo (stability.simulated_noise_placebo): v, vs, delta and the law were
         # chosen on the folds that judge them; the whole selection re-run on the declared law's fit
         # plus its own residual shifted in time must never claim the observed gain (clean data, seed 510)
@@ -1023,6 +1038,69 @@ def _static_at_rest(data: _Data, V: Frame, laws: Sequence[_LawRecord]) -> list[s
     return out
 
 
+#: kind of the loop's candidates that are pending friction-law replacements (:func:`_law_family`)
+LAW_KIND = "friction_law"
+
+
+def _law_columns(ch: FrictionChoice) -> tuple[list[int], tuple[str, ...]]:
+    """The columns of the law ``ch`` (indices into :meth:`.friction.FrictionChoice.columns`) that are not the
+    declared law's, with their short names: the tanh column, the Stribeck dip ``exp(-(dq/vs)^2) sign(dq)``, the
+    power viscous column. Added beside the declared ``sign(dq)`` and ``dq`` columns they span the
+    replacement (the Stribeck law's own ``sign(dq)`` is the declared column, smoothed alike)."""
+    idx: list[int] = []
+    params: list[str] = []
+    if ch.coulomb.law == "tanh":
+        idx.append(0)
+        params.append("FSt")
+    elif ch.coulomb.law == "stribeck":
+        idx.append(1)
+        params.append("FSS")
+    if ch.viscous.law == "power":
+        idx.append(len(ch.names()) - 1)
+        params.append("FVp")
+    return idx, tuple(params)
+
+
+def _law_family(rec: _LawRecord) -> Family:
+    """A pending friction-law replacement as a candidate family of the loop's rounds (kind :data:`LAW_KIND`,
+    one member, fixed columns :func:`_law_columns` on the sliding velocity at full rate): scored by the same
+    :class:`_Scorer` on the same acceptance data as every other family, ranked with them by :func:`_rank`."""
+    ch = rec.choice
+    idx, params = _law_columns(ch)
+    p = len(ch.names())
+
+    def build(fr, ctx, ch=ch, idx=idx, p=p):
+        return [fr.full_rate_columns(_sliding_law_columns(ch), p)[:, idx]]
+    return Family(LAW_KIND, ch.joint, params, build, variant=f"{ch.coulomb.label}+{ch.viscous.label}", reveal="dq",
+                  reveal_joint=ch.joint, info=((LAW_KIND, ch.joint),))
+
+
+def _retest_pending(data: _Data, state: _State, cfg: DiagnoseSettings
+                    ) -> tuple[tuple[_LawRecord, ...], tuple[dict, ...]]:
+    """The pending laws that still pass the tests of :func:`_law_replacement` (time-blocked CV folds won, paired
+    t test over sub-blocks, Bonferroni over the joints) against the current design - the declared model, the
+    laws applied and the effects added, on the loop's fit data - and those that no longer do (a law that only
+    absorbed a delay or a gain error). The simulated-noise placebo, run when the law was chosen, is not
+    re-run (its cost is a full re-selection per null draw)."""
+    if not state.pending:
+        return (), ()
+    F = data.F
+    names, A, _ = _augmented(data, state.added)
+    blocks = time_blocks(F.row_experiment, F.row_index, N_FOLDS)
+    dq_noise = np.max([ex.dq_noise for ex in F.experiments], axis=0)
+    keep, out = [], []
+    for rec in state.pending:
+        j = rec.choice.joint
+        jf = _joint_friction(F, A, list(names), j, float(dq_noise[j]))
+        new, _ = _law_replacement(jf, rec.choice, F, blocks, cfg.significance / data.n, placebo=False)
+        if new is None:
+            out.append({"candidate": f"{LAW_KIND}{j + 1}", "law": rec.choice.describe(),
+                        "after": [ad.family.label for ad in state.added]})
+        else:
+            keep.append(rec)
+    return tuple(keep), tuple(out)
+
+
 def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg: DiagnoseSettings) -> _Baseline:
     """Stage 2: identify the declared model (``cfg.method``) and its validation error ("before", on
     ``data0``), the model with the friction laws chosen (the loop's start, on ``data``), the candidate
@@ -1052,10 +1130,12 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
 
 
 def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: DiagnoseSettings,
-                 rng: np.random.Generator) -> _Round:
-    """Stage 3: score every candidate family not yet added, and the placebos, against the current
-    design (:class:`_Scorer`); decide which candidates are eligible (p-value, validation z, validation
-    gain of their own joints, better than every placebo of their joints)."""
+                 rng: np.random.Generator, laws_only: bool = False) -> _Round:
+    """Stage 3: score every candidate family not yet added, the pending friction laws (:func:`_law_family`)
+    and the placebos, against the current design (:class:`_Scorer`); decide which candidates are eligible
+    (p-value, validation z, validation gain of their own joints, better than every placebo of their joints).
+    ``laws_only``: the loop's effects reached ``max_effects``, only the pending laws compete (they come on
+    top of it, as when the friction-law stage applied them before the loop)."""
     n = data.n
     F, V = state.F, state.V
     Y, J = F.system.Y, F.system.joint
@@ -1067,7 +1147,9 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
     scorer = _Scorer(D, F, V, n, cfg.identifiability_tol, max(MIN_SUPPORT_ROWS, MIN_SUPPORT_SHARE * F.n_rows / n))
     done = {ad.family.key for ad in state.added}
     stopped = state.stopped_joints
-    fams = [f for f in base.families if f.key not in done and not (set(_own(f, n)) & stopped and f.joint is not None)]
+    fams = [] if laws_only else [f for f in base.families
+                                 if f.key not in done and not (set(_own(f, n)) & stopped and f.joint is not None)]
+    fams += [_law_family(r) for r in state.pending if r.choice.joint not in stopped]
     plac = placebo_families(F, rng, cfg.n_placebo) if cfg.n_placebo > 0 else []
     evals = []
     bar = progress_bar(len(fams) + len(plac), f"diagnose: round {rnd}", unit="candidate")
@@ -1141,7 +1223,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
         if (fam.placebo and ev is not None and ev.p_value < thr and ev.z > zcrit
                 and gain_of(ev, _own(fam, n)) >= cfg.min_rel_improvement):
             hits.append((fam.joint, rnd, fam.variant, ev.score))
-    if cfg.composed:
+    if cfg.composed and not laws_only:
         c_tried, c_elig = _score_composed_round(data, base, state, D, ctx, scorer, rnd, cfg, placebo_bounds, gain_of)
         tried += c_tried
         eligible += c_elig
@@ -1349,24 +1431,39 @@ def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: Dia
                    round_resid=state.round_resid + ((Y - A @ th, data.Vs.Y - Av @ th),))
 
 
-def _stage_loop(data: _Data, base: _Baseline, cfg: DiagnoseSettings, rng: np.random.Generator) -> _State:
-    """Stages 3-4 repeated: score, accept the best, re-identify, until nothing is eligible or
-    ``max_effects``."""
+def _stage_loop(data0: _Data, data: _Data, base: _Baseline, cfg: DiagnoseSettings, rng: np.random.Generator,
+                pending: Sequence[_LawRecord] = ()) -> tuple[_Data, _Baseline, _State]:
+    """Stages 3-4 repeated: score, accept the best, re-identify, until nothing is eligible or ``max_effects``.
+
+    The friction-law stage's pending replacements (``pending``) compete in every round with the other
+    candidates; when one wins, it is applied (:func:`_apply_laws` on ``data0``, the loop's data without any
+    law) and the loop goes on from the re-identified model; after any other effect is added the pending laws
+    are re-tested on the new design (:func:`_retest_pending`). The rounds a law wins do not count against
+    ``max_effects``. Returns the data and baseline with the laws applied, and the loop's state."""
     F, V, added = _relinearise(data, data.F, data.V, (), base.res_start)
-    state = _State(F=F, V=V, added=added, res=base.res_start,
+    state = _State(F=F, V=V, added=added, res=base.res_start, pending=tuple(pending),
                    round_resid=((_residual_of(base.res_start), data.Vs.Y - base.res_start.predict(data.Vs)),))
-    for rnd in range(1, cfg.max_effects + 1):
-        scored = _stage_score(data, base, state, rnd, cfg, rng)
+    n_eff = 0
+    for rnd in range(1, cfg.max_effects + len(pending) + 1):
+        laws_only = n_eff >= cfg.max_effects
+        if laws_only and not state.pending:
+            break
+        scored = _stage_score(data, base, state, rnd, cfg, rng, laws_only=laws_only)
         state = replace(state, tried=state.tried + scored.tried, placebos=state.placebos + scored.placebos,
                         placebo_hits=state.placebo_hits + scored.placebo_hits,
                         stopped_joints=state.stopped_joints | scored.stopped)
         if not scored.eligible:
-            return state
+            return data, base, replace(state, stopped_at_max=n_eff >= cfg.max_effects)
+        if scored.eligible[0][1].kind == LAW_KIND:
+            data, base, state = _accept_law(data0, data, base, state, scored.eligible[0][1].joint, rnd)
+            continue
         # the best eligible candidate whose re-identified model leaves every effect physically possible
         # (candidates.implausible: e.g. a gain and a delay of one joint fitted jointly into a negative
         # scale and a 0.4 s lead); the ones passed over are reported
         new, rejected = None, []
         for pick in range(min(len(scored.eligible), MAX_IMPLAUSIBLE_TRIES)):
+            if scored.eligible[pick][1].kind == LAW_KIND:
+                continue
             trial = _stage_accept(data, state, scored, rnd, cfg, pick=pick)
             why = _implausible_effects(data, trial.added, trial.res)
             if not why:
@@ -1376,8 +1473,31 @@ def _stage_loop(data: _Data, base: _Baseline, cfg: DiagnoseSettings, rng: np.ran
         state = replace(state if new is None else new,
                         implausible=state.implausible + tuple(rejected))
         if new is None:
-            return state
-    return replace(state, stopped_at_max=True)
+            return data, base, state
+        n_eff += 1
+        keep, retired = _retest_pending(data, state, cfg)
+        state = replace(state, pending=keep, laws_retired=state.laws_retired + tuple(
+            dict(d, round=rnd) for d in retired))
+    return data, base, replace(state, stopped_at_max=n_eff >= cfg.max_effects)
+
+
+def _accept_law(data0: _Data, data: _Data, base: _Baseline, state: _State, joint: int, rnd: int
+                ) -> tuple[_Data, _Baseline, _State]:
+    """The pending friction law of ``joint`` applied after it won round ``rnd`` (in place of the joint's
+    declared law or its sign smoothing): the data with the law's columns, the baseline's laws (and no loop
+    Stribeck candidate on a joint whose law is Stribeck: the same column at a neighbouring vs), the model
+    re-identified with the effects added so far."""
+    rec = next(r for r in state.pending if r.choice.joint == joint)
+    rec = replace(rec, round=rnd)
+    laws = tuple(r for r in base.laws if r.choice.joint != joint) + (rec,)
+    data = replace(_apply_laws(data0, laws), doubtful_laws=data.doubtful_laws)
+    fams = base.families
+    if rec.choice.coulomb.law == "stribeck":
+        fams = tuple(f for f in fams if not (f.kind == "stribeck" and f.joint == joint))
+    base = replace(base, laws=laws, families=fams)
+    F, V, added, res, _, _, _ = _refit(data, data.F, data.V, state.added)   # frames with the new columns
+    return data, base, replace(state, F=F, V=V, added=added, res=res,
+                               pending=tuple(r for r in state.pending if r.choice.joint != joint))
 
 
 #: eligible candidates tried per round before the loop stops when each makes an effect implausible
@@ -1636,8 +1756,8 @@ def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
     return Effect(kind="friction_law", label=f"friction_law{ch.joint + 1}", variant=f"{ch.coulomb.label}+{ch.viscous.label}",
                   joint=ch.joint, partner=None, names=names, values=res.values[idx], std=res.std[idx],
                   rel_std_pct=res.rel_std_pct[idx], physical=phys, score=float(gain), p_value=rec.p_value,
-                  z_validation=math.nan, round=0, reveal="dq", reveal_joint=ch.joint, modulation=None,
-                  selection_frequency=rec.frequency, ci={}, description=desc)
+                  z_validation=math.nan, reveal="dq", reveal_joint=ch.joint, modulation=None,
+                  selection_frequency=rec.frequency, ci={}, description=desc, round=rec.round)
 
 
 def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSettings, data0: _Data | None = None,
@@ -1654,9 +1774,10 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     val1_raw = _validation_rel_err_raw(data, state.V, res, state.added, keep=raw_keep)
     effects = [_law_effect(r, res) for r in base.laws if not r.smoothing]
     effects += _loop_effects(state, res, cfg, stab or {})
+    effects.sort(key=lambda e: e.round)   # in the order added (a friction law in the round it won)
     final_bad = _implausible_effects(data, state.added, res)
     # every effect rated against the physical priors and its round's alternatives (cause / doubtful / rejected)
-    scales = ArmScales.of_frame(data.F)
+    scales = replace(ArmScales.of_frame(data.F), f_max=data.fdyn)
     impossible = {ad.family.label: why for ad in state.added if (why := implausible(
         ad.family, [res.value(nm) for nm in ad.family.names()], f_dyn=data.fdyn))}
     effects = rate_effects(effects, scales, state.tried, impossible=impossible,
@@ -1691,7 +1812,11 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
                           plot_data=plot_data, before_validation_rel_err_raw=np.asarray(val0_raw),
                           after_validation_rel_err_raw=np.asarray(val1_raw), unexplained=unexpl,
                           estimator_dependent=tuple(state.estimator_dependent),
-                          implausible=tuple(data.doubtful_laws) + tuple(state.implausible))
+                          implausible=tuple(data.doubtful_laws) + tuple(state.implausible) + tuple(
+                              {"candidate": d["candidate"], "round": d["round"], "law": d["law"],
+                               "reasons": [f"no longer passes its cross-validation tests once {', '.join(d['after'])} "
+                                           "was added (that effect explains what it explained): not applied"]}
+                              for d in state.laws_retired))
 
 
 def _final_fit(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSettings
@@ -2045,8 +2170,9 @@ def _with_acceptance(report: ResidualReport, full0: _Data, data0: _Data, notes: 
             + " got worse beyond the declared model's noise band")
     accepted = [t for t in notes if t.accepted]
     effects = list(report.effects)
-    k0 = sum(1 for e in effects if e.round == 0)
-    effects[k0:k0] = [_note_effect(t, res) for t in accepted]
+    # the notes (friction static at rest, sign smoothing: processing matters of the declared law, applied before
+    # the loop) after the effects, whose order is the order the loop named them (a friction law in its round)
+    effects += [_note_effect(t, res) for t in accepted]
     acc = {"share": cfg.acceptance, "data": data0.vdesc,
            "rows_fit": int(data0.F.n_rows), "rows_acceptance": int(data0.V.n_rows),
            "band_level": BAND_LEVEL, "band_method": "circular block bootstrap (Politis & Romano 1992), block length "
@@ -2116,11 +2242,13 @@ def diagnose(model: IdentificationModel, trajectories, settings: DiagnoseSetting
     # the friction laws are chosen by their own time-blocked cross-validation on all identification data
     # (never the validation data); the notes they bring pass the acceptance test below
     # (a replacement that fits but is implausible is not applied: kept in doubtful_laws for the report)
-    chosen, laws = _stage_friction(full0, cfg) if cfg.friction_laws else (full0, ())
+    # (a plausible replacement of a declared law is pending: it competes in the loop's rounds)
+    chosen, laws, pending = _stage_friction(full0, cfg) if cfg.friction_laws else (full0, (), ())
     laws, notes = _accept_notes(data0, laws, cfg)
     data = _apply_laws(data0, laws)
     base = _stage_baseline(full0, data, laws, cfg)
-    state = _stage_loop(data, base, cfg, rng)
+    data, base, state = _stage_loop(data0, data, base, cfg, rng, pending)
+    laws = base.laws
     stab: _StabilityInfo = {}
     msgs: list[str] = []
     if cfg.stability:

@@ -23,11 +23,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from dataclasses import replace as dc_replace
 
 import numpy as np
 
 from ..model import IdentificationModel
 from ..observations.raw import full_rate_torque
+from .frame import build_frame, common_bandwidth
 
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
            "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "JointZeroFit",
@@ -255,10 +257,6 @@ def fit_joint_zeros(model: IdentificationModel, trajectories, joints: Sequence[i
     the offset enters through the joint angle; Khalil & Dombre 2002, ch. 11-12, a calibration model
     linearised in the parameter errors). ``joints`` (0-based): default, those whose zero torque data can see
     (:func:`visible_zero_joints`); an invisible joint is refused."""
-    from dataclasses import replace as dc_replace
-
-    from .frame import build_frame, common_bandwidth
-
     trajs = list(trajectories)
     if max_iterations < 1:
         raise ValueError(f"joint_zero: max_iterations must be at least 1, got {max_iterations}")

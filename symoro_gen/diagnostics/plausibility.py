@@ -16,7 +16,8 @@ the round, into a *verdict*:
     at most :data:`CLOSE_REMAINING` times its squared validation error there);
 ``rejected``
     implausible and an eligible alternative explains the same residual (leaves at most
-    :data:`EXPLAINS_REMAINING` times its squared validation error), or physically impossible.
+    :data:`EXPLAINS_REMAINING` times its squared validation error), or physically impossible; a time delay
+    only when impossible or absurd (:func:`delay_is_absurd`), otherwise at worst ``doubtful``.
 
 An alternative that is the same physical effect under another name of the library (:data:`SYNONYMS`) is
 no rival.
@@ -39,11 +40,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 __all__ = [
-    "ALTERNATIVE_EXPLAINS", "CLOSE_ALTERNATIVE", "CLOSE_REMAINING", "DEFLECTION_BAND", "DELAY_TYPICAL_PERIODS",
-    "DELAY_TYPICAL_S", "EXPLAINS_REMAINING", "GAIN_TOLERANCE", "PLAUSIBLE", "POWER_BAND", "STRIBECK_BAND", "SYNONYMS",
-    "VELOCITY_RESOLUTION", "VERDICTS", "ZERO_OFFSET_TYPICAL_DEG", "ZERO_OFFSET_WIDTH", "ArmScales", "Plausibility", "alternatives_of", "band_factor",
-    "effect_plausibility", "fits_like", "law_alternatives", "law_plausibility", "own_candidate", "rate_effects",
-    "remaining_error", "verdict",
+    "ALTERNATIVE_EXPLAINS", "CLOSE_ALTERNATIVE", "CLOSE_REMAINING", "DEFLECTION_BAND", "DELAY_ABSURD_PERIOD_SHARE",
+    "DELAY_TYPICAL_PERIODS", "DELAY_TYPICAL_S", "EXPLAINS_REMAINING", "GAIN_TOLERANCE", "LAW_GAIN_MIN", "PLAUSIBLE",
+    "POWER_BAND", "STRIBECK_BAND", "STRIBECK_EXCESS_SHARE", "STRIBECK_SPEED_SHARE", "SYNONYMS", "VELOCITY_RESOLUTION",
+    "VERDICTS", "ZERO_OFFSET_TYPICAL_DEG", "ZERO_OFFSET_WIDTH", "ArmScales", "Plausibility", "alternatives_of",
+    "band_factor", "delay_is_absurd", "effect_plausibility", "fits_like", "law_alternatives", "law_plausibility",
+    "own_candidate", "rate_effects", "remaining_error", "verdict",
 ]
 
 #: an effect (or law) rated below this is not called a cause
@@ -72,6 +74,11 @@ DELAY_TYPICAL_PERIODS = 4.0
 DELAY_WIDTH = math.log(2.0)
 #: a delay on one joint only (the others none): a bus or drive delay is common to the joints of the bus
 ONE_JOINT_DELAY_FACTOR = 0.4
+#: a delay longer than this share of the excitation's shortest period (``1 / f_max``) is absurd as a transport
+#: delay: the torque is then shifted by a quarter cycle of the fastest motion (90 degrees of phase), what no
+#: bus or drive does; shorter delays found on one joint are doubtful, not rejected (an elastic joint, a
+#: filter on that torque channel or its own time stamping look the same)
+DELAY_ABSURD_PERIOD_SHARE = 0.25
 #: a negative delay (the torque leads the motion) longer than a sampling period: not a transport delay
 LEAD_FACTOR = 0.3
 #: relative tolerance of a declared torque gain (torque constant, sensor calibration): a few per cent
@@ -84,10 +91,25 @@ GAIN_WIDTH = math.log(1.1)
 DEFLECTION_BAND = (1e-4, 0.02)
 DEFLECTION_WIDTH = math.log(3.0)
 NEGATIVE_STIFFNESS_FACTOR = 0.1
-#: Stribeck velocity [rad/s]: typically 0.01-0.2 rad/s at the joint (Armstrong-Helouvry, Dupont & Canudas
-#: de Wit 1994, sec. 2; Olsson et al. 1998, Table 1 gives 0.001-0.1 m/s for sliding contacts)
-STRIBECK_BAND = (0.01, 0.2)
+#: Stribeck velocity [rad/s]: 0.001-0.1 rad/s at the joint of a drive (Armstrong-Helouvry, Dupont & Canudas
+#: de Wit 1994, sec. 2 and Table 2; Olsson et al. 1998, sec. 2 and Table 1: 0.001-0.1 for sliding contacts)
+STRIBECK_BAND = (0.001, 0.1)
 STRIBECK_WIDTH = math.log(3.0)
+#: a Stribeck dip lives at low speed: a ``vs`` above this share of the joint's 98th-percentile speed spans the
+#: motion itself - the law is then a reshaped Coulomb law, not a Stribeck effect (Armstrong-Helouvry et al.
+#: 1994, sec. 2: the Stribeck curve falls to the Coulomb level within a small fraction of the operating speeds)
+STRIBECK_SPEED_SHARE = 0.3
+STRIBECK_SPEED_WIDTH = math.log(2.0)
+#: static excess ``Fs - Fc`` of a Stribeck law against the joint's 98th-percentile torque: the static friction
+#: of geared joints exceeds the Coulomb level by 10-50 % of it, i.e. by about 1-15 % of the torque range (LWR4
+#: paper, Table II; Armstrong-Helouvry et al. 1994, sec. 2); below 0.5 % it is within the noise of the fit
+STRIBECK_EXCESS_SHARE = 0.005
+STRIBECK_EXCESS_WIDTH = math.log(2.0)
+#: a shape law (Stribeck, power viscous) must lower the out-of-fold error norm of its joint by at least this
+#: share to be named a cause: a gain of a few % is what a delay or a gain error seen through the friction
+#: columns leaves (engineering choice, docs/loop-plausibility.md)
+LAW_GAIN_MIN = 0.05
+LAW_GAIN_WIDTH = math.log(2.0)
 #: velocity resolution [rad/s] of a differentiated encoder at 1 kHz: a 19-bit encoder step (1.2e-5 rad) per
 #: period is 0.012 rad/s raw; filtered over ~10 periods, ~1e-3 rad/s. Below it a velocity scale is noise
 VELOCITY_RESOLUTION = 1e-3
@@ -145,6 +167,8 @@ class ArmScales:
     n_joints : int
     gear_ratios : mapping joint -> ratio, optional
         Known gear ratios (ripple orders are compared with them).
+    f_max : float, optional
+        Highest frequency of the excitation [Hz] (a delay beyond a quarter of its period is absurd).
     """
 
     dt: float
@@ -153,6 +177,7 @@ class ArmScales:
     dq_noise: np.ndarray
     n_joints: int
     gear_ratios: Mapping[int, float] = field(default_factory=dict)
+    f_max: float | None = None   # highest frequency of the excitation [Hz] (the assembly's f_dyn), when known
 
     @classmethod
     def of_frame(cls, frame, gear_ratios: Mapping[int, float] | None = None) -> ArmScales:
@@ -238,8 +263,9 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
         if j is not None and scales.n_joints > 1 and not any(x is None or x != j for x in delay_joints):
             r.factor(ONE_JOINT_DELAY_FACTOR, f"a delay on joint {j + 1} only is unusual: a drive or bus delay "
                      "shows on every joint of the bus",
-                     f"joint {j + 1}'s own time stamping, its drive's current/torque filter, a torque computed from "
-                     "a delayed current")
+                     f"what else looks like it: an elastic joint {j + 1} (a motor-side encoder), a filter on joint "
+                     f"{j + 1}'s torque channel (its drive's current/torque filter), its own time stamping, a torque "
+                     "computed from a delayed current")
     elif kind == "gain":
         s = float(physical.get("scale", 1.0 + params.get("gamma", 0.0)))
         if s > 0:
@@ -336,11 +362,19 @@ def _velocity_scale(r: _Rating, v: float, res: float, what: str) -> None:
                  f"{what} = {v:.3g} rad/s is outside the usual {lo:g}-{hi:g} rad/s")
 
 
-def law_plausibility(choice, scales: ArmScales) -> Plausibility:
+def law_plausibility(choice, scales: ArmScales, *, priors_only: bool = False) -> Plausibility:
     """The plausibility of a friction-law replacement (a :class:`.friction.FrictionChoice`: its joint, its laws
     with their shape parameters, its coefficients ``Fc``, ``Fs``, ``Fv``). The declared law (``sign`` +
     ``linear``) and a ``tanh`` rounding of the sign carry no shape prior: only the Stribeck velocity, the
-    exponent of a power viscous law and the Coulomb coefficient are rated."""
+    exponent of a power viscous law and the Coulomb coefficient are rated.
+
+    Besides these priors, three factors weigh the *evidence* that a shape law is friction and not another
+    effect seen through the friction columns (a delay or a gain error leaves its largest residual at the
+    velocity reversals): a Stribeck velocity above :data:`STRIBECK_SPEED_SHARE` of the joint's typical
+    speed (a reshaped Coulomb law), a static excess ``Fs - Fc`` below :data:`STRIBECK_EXCESS_SHARE` of the
+    torque range, an out-of-fold gain below :data:`LAW_GAIN_MIN`. ``priors_only`` leaves them out (the
+    friction-law stage applies no law that contradicts the priors; one that only lacks the evidence competes
+    in the loop's rounds and is rated with them)."""
     j = int(choice.joint)
     coulomb, coulomb_param = choice.coulomb.law, choice.coulomb.param
     viscous, viscous_param = choice.viscous.law, choice.viscous.param
@@ -348,7 +382,30 @@ def law_plausibility(choice, scales: ArmScales) -> Plausibility:
     r = _Rating()
     tau = float(scales.tau98[j]) if float(scales.tau98[j]) > 0 else 1.0
     if coulomb == "stribeck" and coulomb_param is not None:
-        _velocity_scale(r, float(coulomb_param), scales.velocity_resolution(j), "Stribeck velocity vs")
+        vs = float(coulomb_param)
+        _velocity_scale(r, vs, scales.velocity_resolution(j), "Stribeck velocity vs")
+        v98 = float(scales.v98[j])
+        if v98 > 0 and vs >= scales.velocity_resolution(j) and not priors_only:
+            r.factor(band_factor(vs / v98, 0.0, STRIBECK_SPEED_SHARE, STRIBECK_SPEED_WIDTH),
+                     f"vs = {vs:.3g} rad/s is {100 * vs / v98:.0f} % of the joint's typical speed ({v98:.3g} rad/s): "
+                     "the dip spans the motion, a reshaped Coulomb law rather than a Stribeck effect",
+                     "a time delay or a gain error of the joint, seen through the friction columns")
+        fs = coefficients.get("Fs")
+        fc0 = coefficients.get("Fc")
+        if fs is not None and fc0 is not None and math.isfinite(float(fs) - float(fc0)) and not priors_only:
+            ex = float(fs) - float(fc0)
+            if ex > 0:
+                r.factor(band_factor(ex / tau, STRIBECK_EXCESS_SHARE, math.inf, STRIBECK_EXCESS_WIDTH),
+                         f"a static excess Fs - Fc of {ex:.3g} N m is tiny against the torque range {tau:.3g} N m",
+                         "the velocity filter's phase at reversals")
+    if (coulomb == "stribeck" or viscous == "power") and not priors_only:
+        d0, d1 = getattr(choice, "declared_cv_rel_err", None), getattr(choice, "cv_rel_err", None)
+        if d0 is not None and d1 is not None and float(d0) > 0 and math.isfinite(float(d1)):
+            g = 1.0 - float(d1) / float(d0)
+            r.factor(band_factor(max(g, 1e-12), LAW_GAIN_MIN, math.inf, LAW_GAIN_WIDTH),
+                     f"the law lowers the joint's cross-validated error by {100 * g:.1f} % only (a shape law "
+                     f"is named with {100 * LAW_GAIN_MIN:g} % or more)",
+                     "a time delay or a gain error of the joint")
     if viscous == "power" and viscous_param is not None:
         lo, hi = POWER_BAND
         r.factor(band_factor(float(viscous_param), lo, hi, POWER_WIDTH),
@@ -418,10 +475,19 @@ def remaining_error(c, joint: int | None, partner: int | None) -> float | None:
 SYNONYMS = (frozenset({("coulomb", "abs_tau"), ("load_friction", "")}), frozenset({("constant", "tau"), ("gain", "")}))
 
 
+def _named(kind: str, variant: str) -> tuple[str, str]:
+    """The physical effect a (kind, variant) of the library stands for: a friction-law replacement whose Coulomb
+    law is Stribeck's is the Stribeck effect of its joint (the loop's ``stribeck`` kind at another ``vs``)."""
+    if kind in ("load_friction", "gain", "stribeck"):
+        return kind, ""
+    if kind == "friction_law" and variant.startswith("stribeck"):
+        return "stribeck", ""
+    return kind, variant
+
+
 def _same_effect(kind: str, variant: str, other_kind: str, other_variant: str) -> bool:
-    a, b = (kind, variant if kind not in ("load_friction", "gain") else ""), (
-        other_kind, other_variant if other_kind not in ("load_friction", "gain") else "")
-    return any(a in g and b in g for g in SYNONYMS)
+    a, b = _named(kind, variant), _named(other_kind, other_variant)
+    return (a == b and a[0] == "stribeck") or any(a in g and b in g for g in SYNONYMS)
 
 
 def own_candidate(kind: str, joint: int | None, partner: int | None, variant: str, tried: Sequence, round: int):
@@ -488,7 +554,8 @@ def rate_effects(effects: Sequence, scales: ArmScales, tried: Sequence, *,
 
     ``tried``: every candidate of every round (the alternatives of an effect are those of its round);
     ``impossible``: label -> why its final parameters are impossible (:func:`.candidates.implausible`);
-    ``law_ratings``: joint -> (rating, alternatives) of the friction-law stage's replacements (round 0).
+    ``law_ratings``: joint -> (rating, alternatives) of the friction-law stage's replacements (a law that won a
+    round of the loop has that round's candidates as alternatives too).
     """
     impossible = dict(impossible or {})
     law_ratings = dict(law_ratings or {})
@@ -497,6 +564,8 @@ def rate_effects(effects: Sequence, scales: ArmScales, tried: Sequence, *,
     for e in effects:
         if e.kind == "friction_law":
             pl, alts = law_ratings.get(e.joint, (Plausibility(1.0), []))
+            if e.round > 0:   # a law that won a round of the loop: its rivals are that round's candidates too
+                alts = alternatives_of(e.kind, e.variant, e.joint, e.partner, None, tried, e.round, k=None) + list(alts)
         else:
             short = {nm.split(".")[-1]: float(v) for nm, v in zip(e.names, e.values)}
             pl = effect_plausibility(e.kind, e.joint, short, e.physical or {}, scales, variant=e.variant,
@@ -505,6 +574,8 @@ def rate_effects(effects: Sequence, scales: ArmScales, tried: Sequence, *,
         own = own_candidate(e.kind, e.joint, e.partner, e.variant, tried, e.round)
         rem = None if own is None else remaining_error(own, e.joint, e.partner)
         v, why = verdict(pl, e.score, alts, impossible=impossible.get(e.label), remaining=rem)
+        if e.kind == "time_delay" and e.modulation is None and not impossible.get(e.label):
+            v, why = _delay_verdict(v, why, e, scales)
         alts = alts[:N_ALTERNATIVES]
         one = (e.kind == "time_delay" and e.joint is not None and scales.n_joints > 1
                and not any(x is None or x != e.joint for x in delay_joints))
@@ -520,6 +591,27 @@ def rate_effects(effects: Sequence, scales: ArmScales, tried: Sequence, *,
             text += "; not named the cause"
         out.append(replace(e, verdict=v, plausibility=pl, alternatives=tuple(alts), verdict_reason=text))
     return out
+
+
+def delay_is_absurd(delay_s: float, scales: ArmScales) -> bool:
+    """A delay longer than :data:`DELAY_ABSURD_PERIOD_SHARE` of the excitation's shortest period (``scales.f_max``;
+    never absurd when unknown)."""
+    f = scales.f_max
+    return bool(f is not None and f > 0 and abs(float(delay_s)) > DELAY_ABSURD_PERIOD_SHARE / float(f))
+
+
+def _delay_verdict(v: str, why: str, e, scales: ArmScales) -> tuple[str, str]:
+    """The verdict of a delay effect: *rejected* only when absurd (:func:`delay_is_absurd`); an implausible delay
+    that fits (on one joint only, or long for the bus) is *doubtful*, even when an alternative explains part of
+    the same residual - it was found, and an elastic joint or a filter on the channel can look the same."""
+    d = float((e.physical or {}).get("delay_s", e.values[0] if len(e.values) else 0.0))
+    if delay_is_absurd(d, scales):
+        f = float(scales.f_max or 0.0)
+        return "rejected", (f"a {1e3 * abs(d):.3g} ms delay is longer than a quarter of the excitation's shortest "
+                            f"period ({1e3 * DELAY_ABSURD_PERIOD_SHARE / f:.3g} ms at {f:.3g} Hz): no transport delay")
+    if v == "rejected":
+        return "doubtful", "it is implausible, and an alternative explains part of the same residual"
+    return v, why
 
 
 def law_alternatives(choice, k: int = N_ALTERNATIVES) -> list[dict]:

@@ -56,13 +56,9 @@ def _id(c):
     return f"{c[1]}-{c[0]}-j{'all' if c[2] is None else c[2] + 1}"
 
 
-#: known regressions of the acceptance split (measured, see the reason)
-XFAIL = {
-    "spring-scara-j1": "the spring is named first, but its slope is -4.59 (want -5 +- 5 %): a third-round composed "
-                       "position ripple of order 4 on joint 1 modulated by q4 (acceptance z = 6.0, gain 13 %) is "
-                       "added and biases it; with max_effects=2 the slope is -4.995. Accepted on the trailing 30 % "
-                       "of the identification data only (before the acceptance split: -4.989, no such ripple)",
-}
+#: known regressions (measured, with the reason); the spring of SCARA joint 1 (slope -4.59 after a third-round
+#: composed ripple under the acceptance split) passes since the friction-law stage competes in the loop's rounds
+XFAIL: dict[str, str] = {}
 
 
 @pytest.mark.slow

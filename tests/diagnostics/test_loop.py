@@ -88,17 +88,22 @@ def test_effect_outside_the_library_is_reported_as_unexplained():
 
 
 def test_json_contract_and_friction_law_replacement():
-    """A smooth Coulomb law tanh(dq/v) on joint 1 where the model declares sign(dq): the friction-law stage
-    replaces it (an effect of kind ``friction_law``, round 0, first) and says so in words."""
+    """A smooth Coulomb law tanh(dq/v) on joint 1 where the model declares sign(dq): the friction-law stage's
+    replacement competes in the loop's first round (here against a delay, a gain and an offset, which cannot
+    take that shape), wins it and is applied: an effect of kind ``friction_law`` of round 1, first, said in
+    words. (With every kind, the loop's own Stribeck and composed friction candidates compete as well.)"""
     def extra(t, q, dq, ddq, tau):
         out = np.zeros_like(q)
         out[:, 0] = 1.5 * (np.tanh(dq[:, 0] / 0.3) - np.sign(dq[:, 0]))
         return out
     model, tr = recording("scara", 13, duration=DURATION, dt=DT, extra=extra)
-    rep = diagnose(model, tr, DiagnoseSettings(unexplained=False, max_effects=1))
+    rep = diagnose(model, tr, DiagnoseSettings(unexplained=False, max_effects=1, composed=False,
+                                               candidates=("friction_law", "time_delay", "gain", "offset")))
     d = rep.to_dict()
     first = d["effects"][0]
-    assert (first["kind"], first["joint"]) == ("friction_law", 1), rep.summary()
+    assert (first["kind"], first["joint"], first["round"]) == ("friction_law", 1, 1), rep.summary()
+    law = next(c for c in rep.tried if c.kind == "friction_law" and c.round == 1)
+    assert law.eligible and law.score == max(c.score for c in rep.tried if c.round == 1 and c.score is not None)
     assert "Coulomb \u2192" in first["description"]
     for e in d["effects"]:
         assert {"kind", "joint", "modulation", "selection_frequency", "params", "ci"} <= set(e)

@@ -1,13 +1,14 @@
 """Plausibility of the effects the loop finds and the verdict on each (docs/loop-plausibility.md).
 
 The fast tests check the priors against the bands the page documents (independent numbers: a delay of a
-few bus cycles, a gain within a few %, a Stribeck velocity of 0.01-0.2 rad/s and above the velocity
+few bus cycles, a gain within a few %, a Stribeck velocity of 0.001-0.1 rad/s and above the velocity
 resolution); the slow ones inject a known truth into a simulated arm and move it from plausible to
 implausible values: the effect is still found, but its verdict changes.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -149,6 +150,20 @@ def test_one_effect_under_two_names_is_not_its_own_rival():
     assert r.verdict == "doubtful" and "almost as well" in r.verdict_reason
 
 
+def test_a_stribeck_law_and_the_stribeck_candidate_are_one_effect():
+    """The friction-law stage's Stribeck law of joint 4 competing in the round of the loop's Stribeck candidate of
+    the same joint (another vs) is the same physical effect: no rival; a gain of the joint leaving as little is."""
+    e = _effect("stribeck", 3, ("stribeck4.Fst",), [0.8], {"vs": 0.07})
+    own = _cs("stribeck4", "stribeck", 3, 1.0, after=(0.1, 0.1, 0.1, 0.0200))
+    law = _cs("friction_law4", "friction_law", 3, 0.99, variant="stribeck(vs=0.0698)+linear",
+              after=(0.1, 0.1, 0.1, 0.0201))
+    (r,) = rate_effects([e], _scales(n=4), [own, law])
+    assert r.verdict == "cause" and r.alternatives[0]["same_effect"], r.verdict_reason
+    tanh = _cs("friction_law4", "friction_law", 3, 0.99, variant="tanh(v=0.05)+linear", after=(0.1, 0.1, 0.1, 0.0201))
+    (r,) = rate_effects([e], _scales(n=4), [own, tanh])
+    assert r.verdict == "doubtful" and "almost as well" in r.verdict_reason
+
+
 def test_a_doubtful_effect_is_never_called_the_cause():
     e = _effect("time_delay", 6, ("time_delay7.d",), [0.048], {"delay_s": 0.048})
     tried = [_cs("time_delay7", "time_delay", 6, 1.0), _cs("gain7", "gain", 6, 0.3)]
@@ -158,6 +173,53 @@ def test_a_doubtful_effect_is_never_called_the_cause():
     assert "48 ms delay on joint 7 only" in text and "not named the cause" in text and "gain7" in text
     d = r.to_dict()
     assert d["verdict"] == "doubtful" and d["plausibility"]["reasons"] and d["alternatives"][0]["label"] == "gain7"
+
+
+def test_a_one_joint_delay_is_doubtful_unless_absurd():
+    """A 40 ms delay on joint 7 only, with an eligible alternative (a gain of the same joint) that leaves almost
+    as little: found, doubtful - not rejected - and the message names what else looks like a delay on one joint
+    (an elastic joint, a filter on that channel). Beyond a quarter of the excitation's shortest period (0.5 Hz:
+    500 ms) the same effect is absurd as a transport delay: rejected."""
+    tried = [_cs("time_delay7", "time_delay", 6, 1.0, after=(0.1,) * 6 + (0.020,)),
+             _cs("gain7", "gain", 6, 0.9, after=(0.1,) * 6 + (0.022,))]
+    sc = replace(_scales(dt=0.002), f_max=0.5)
+    (r,) = rate_effects([_effect("time_delay", 6, ("time_delay7.d",), [0.04], {"delay_s": 0.04})], sc, tried)
+    assert r.verdict == "doubtful" and r.plausibility.score < PLAUSIBLE, r.verdict_reason
+    assert "40 ms delay on joint 7 only" in r.verdict_reason
+    assert "elastic joint 7" in r.verdict_reason and "filter on joint 7's torque channel" in r.verdict_reason
+    (r,) = rate_effects([_effect("time_delay", 6, ("time_delay7.d",), [0.6], {"delay_s": 0.6})], sc, tried)
+    assert r.verdict == "rejected" and "quarter of the excitation's shortest period" in r.verdict_reason
+    # without a known excitation frequency nothing is absurd: doubtful
+    (r,) = rate_effects([_effect("time_delay", 6, ("time_delay7.d",), [0.6], {"delay_s": 0.6})], _scales(), tried)
+    assert r.verdict == "doubtful"
+
+
+def _stribeck(vs, fc, fs, cv0, cv1, j=2):
+    law = SimpleNamespace
+    return SimpleNamespace(joint=j, coulomb=law(law="stribeck", param=vs, label="stribeck"),
+                           viscous=law(law="linear", param=None, label="linear"),
+                           coefficients={"Fc": fc, "Fs": fs, "Fv": 0.1}, declared_cv_rel_err=cv0, cv_rel_err=cv1,
+                           candidates=())
+
+
+def test_stribeck_law_needs_evidence_of_friction():
+    """A Stribeck law is named a cause only with a velocity well below the joint's speeds, a static excess
+    above the noise of the fit and a clear cross-validated gain (the priors of docs/loop-plausibility.md):
+    the truth bench's Stribeck (vs = 0.07 rad/s, 0.8 N m excess on a 20 N m joint, CV error 0.0127 -> 0.0008)
+    is plausible; the law a 10 ms delay produced (vs = 0.40 rad/s at 1 rad/s speeds, 1.8 % gain) is not, nor is
+    each of its three signs alone."""
+    sc = _scales(noise=1e-5)
+    assert law_plausibility(_stribeck(0.07, 1.0, 1.8, 0.0127, 0.0008), sc).score == 1.0
+    delay = law_plausibility(_stribeck(0.40, 1.0, 1.3, 0.009226, 0.009063), sc)
+    assert delay.score < PLAUSIBLE and len(delay.reasons) >= 3
+    fast = law_plausibility(_stribeck(0.09, 1.0, 1.8, 0.0127, 0.0008), replace(sc, v98=np.full(7, 0.1)))
+    assert fast.score < PLAUSIBLE and "typical speed" in fast.reasons[0]
+    tiny = law_plausibility(_stribeck(0.05, 1.0, 1.02, 0.0127, 0.0008), sc)   # 0.02 N m on a 20 N m joint
+    assert tiny.score < PLAUSIBLE and "tiny" in tiny.reasons[0]
+    marginal = law_plausibility(_stribeck(0.05, 1.0, 1.8, 0.0100, 0.0098), sc)   # 2 % gain
+    assert marginal.score < PLAUSIBLE and "2.0 %" in marginal.reasons[0]
+    # the priors alone (the friction-law stage's gate) do not weigh that evidence
+    assert law_plausibility(_stribeck(0.05, 1.0, 1.8, 0.0100, 0.0098), sc, priors_only=True).score == 1.0
 
 
 # ---- simulated arms: the truth moves from plausible to implausible ---------------------------------------
