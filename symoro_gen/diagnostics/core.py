@@ -1582,7 +1582,7 @@ def _plausible_pick(data: _Data, state: _State, scored: _Round, rnd: int, cfg: D
             continue
         why = (f"fits like {like0}, implausible ({'; '.join(pl0.reasons)}); {like} explains the same residual "
                f"and is plausible: added instead")
-        return k, {"candidate": fam0.label, "round": rnd, "reasons": [why]}, trials
+        return k, {"candidate": fam0.label, "round": rnd, "reasons": [why], "plausibility": pl0.to_dict()}, trials
     return 0, None, trials
 
 
@@ -1970,12 +1970,18 @@ def _report_warnings(state: _State, res: IdentificationResult, cfg: DiagnoseSett
         warnings.append(f"stopped at max_effects = {cfg.max_effects} effects added by the loop (friction-law "
                         f"choices are not counted; {len(state.added)} loop effect(s) kept after the stability stage): "
                         "more effects may be significant")
-    if state.implausible:
+    # passed over: physically impossible once re-identified, or implausible with a plausible alternative of its
+    # round explaining the same residual (_plausible_pick; those carry their plausibility)
+    for plaus, head in ((False, "not added, the re-identified model with them physically impossible: "),
+                        (True, "not added, implausible and a plausible alternative of the round explains the same "
+                               "residual: ")):
         last: dict = {}
         for d in state.implausible:
-            last[d["candidate"]] = d
-        warnings.append("not added, the re-identified model with them physically impossible: " + "; ".join(
-            f"{c} (round {d['round']}: {'; '.join(d['reasons'])})" for c, d in last.items()))
+            if ("plausibility" in d) == plaus:
+                last[d["candidate"]] = d
+        if last:
+            warnings.append(head + "; ".join(f"{c} (round {d['round']}: {'; '.join(d['reasons'])})"
+                                             for c, d in last.items()))
     if final_bad:
         warnings.append(f"under {cfg.method.upper()} the final fit has physically impossible effect parameters: "
                         + "; ".join(final_bad))
