@@ -399,19 +399,19 @@ def _joint_zero_build(frame: Frame, ctx: FitContext, m: int, c: float) -> np.nda
 #: identification and acceptance frames of a 7-joint arm, and one more; the secants of the fixed point (an
 #: accepted effect's, a few per round) are recomputed
 _ZERO_CACHE_SIZE = 15
-_ZERO_CACHE: list = []   # [(frame arrays, joint, matrix)], most recent last
+_ZERO_CACHE: list = []   # [(frame arrays, joint, model, matrix)], most recent last
 
 
 def _zero_matrix(frame: Frame, model: IdentificationModel, m: int, c: float) -> np.ndarray:
     if c != 0.0:
         return decimated_zero_matrix(frame, model, m, c)
     key = _frame_key(frame)
-    for arrs, jj, D in _ZERO_CACHE:
-        if jj == m and len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
+    for arrs, jj, mod, D in _ZERO_CACHE:   # per model too: a friction law applied changes its columns
+        if jj == m and mod is model and len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
             return D
     D = decimated_zero_matrix(frame, model, m, c)
     D.setflags(write=False)
-    _ZERO_CACHE.append((key, m, D))
+    _ZERO_CACHE.append((key, m, model, D))
     del _ZERO_CACHE[:-_ZERO_CACHE_SIZE]
     return D
 
