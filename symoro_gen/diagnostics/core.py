@@ -127,7 +127,18 @@ from .friction import (
     viscous_columns,
 )
 from .geometry import invisible_zero_note
-from .plausibility import PLAUSIBLE, ArmScales, law_alternatives, law_plausibility, rate_effects
+from .plausibility import (
+    PLAUSIBLE,
+    ArmScales,
+    Plausibility,
+    delay_is_absurd,
+    effect_plausibility,
+    explains_same,
+    fits_like,
+    law_alternatives,
+    law_plausibility,
+    rate_effects,
+)
 from .report import CandidateScore, Effect, ResidualReport
 from .stability import (
     N_FOLDS,
@@ -1444,6 +1455,7 @@ def _stage_loop(data0: _Data, data: _Data, base: _Baseline, cfg: DiagnoseSetting
     state = _State(F=F, V=V, added=added, res=base.res_start, pending=tuple(pending),
                    round_resid=((_residual_of(base.res_start), data.Vs.Y - base.res_start.predict(data.Vs)),))
     n_eff = 0
+    scales = replace(ArmScales.of_frame(data.F), f_max=data.fdyn)
     for rnd in range(1, cfg.max_effects + len(pending) + 1):
         laws_only = n_eff >= cfg.max_effects
         if laws_only and not state.pending:
@@ -1454,17 +1466,22 @@ def _stage_loop(data0: _Data, data: _Data, base: _Baseline, cfg: DiagnoseSetting
                         stopped_joints=state.stopped_joints | scored.stopped)
         if not scored.eligible:
             return data, base, replace(state, stopped_at_max=n_eff >= cfg.max_effects)
-        if scored.eligible[0][1].kind == LAW_KIND:
-            data, base, state = _accept_law(data0, data, base, state, scored.eligible[0][1].joint, rnd)
+        # an implausible best candidate gives way to a plausible one that explains the same residual
+        first, passed, trials = _plausible_pick(data, state, scored, rnd, cfg, scales)
+        if passed is not None:
+            state = replace(state, implausible=state.implausible + (passed,))
+        if scored.eligible[first][1].kind == LAW_KIND:
+            data, base, state = _accept_law(data0, data, base, state, scored.eligible[first][1].joint, rnd)
             continue
         # the best eligible candidate whose re-identified model leaves every effect physically possible
         # (candidates.implausible: e.g. a gain and a delay of one joint fitted jointly into a negative
         # scale and a 0.4 s lead); the ones passed over are reported
         new, rejected = None, []
-        for pick in range(min(len(scored.eligible), MAX_IMPLAUSIBLE_TRIES)):
+        order = [first] + [k for k in range(min(len(scored.eligible), MAX_IMPLAUSIBLE_TRIES)) if k != first]
+        for pick in order:
             if scored.eligible[pick][1].kind == LAW_KIND:
                 continue
-            trial = _stage_accept(data, state, scored, rnd, cfg, pick=pick)
+            trial = trials.get(pick) or _stage_accept(data, state, scored, rnd, cfg, pick=pick)
             why = _implausible_effects(data, trial.added, trial.res)
             if not why:
                 new = trial
@@ -1502,6 +1519,71 @@ def _accept_law(data0: _Data, data: _Data, base: _Baseline, state: _State, joint
 
 #: eligible candidates tried per round before the loop stops when each makes an effect implausible
 MAX_IMPLAUSIBLE_TRIES = 5
+
+
+def _candidate_rating(data: _Data, state: _State, scored: _Round, rnd: int, cfg: DiagnoseSettings, k: int,
+                      scales: ArmScales) -> tuple[Plausibility | None, str, _State | None]:
+    """The plausibility of the eligible candidate ``k`` of a round as :func:`.plausibility.rate_effects` would
+    rate it once added, its reading in words (:func:`.plausibility.fits_like`) and its trial state (the model
+    re-identified with it; None for a pending friction law). A friction law is rated on its choice
+    (:func:`.plausibility.law_plausibility`), any other effect on its parameters in the re-identified model
+    (:func:`.plausibility.effect_plausibility`); the rating is None when the trial leaves an effect physically
+    impossible (:func:`_implausible_effects`: the loop's own fallback passes it over)."""
+    fam = scored.eligible[k][1]
+    if fam.kind == LAW_KIND:
+        ch = next(r.choice for r in state.pending if r.choice.joint == fam.joint)
+        return law_plausibility(ch, scales), f"joint {fam.joint + 1}'s friction law ({ch.describe()})", None
+    trial = _stage_accept(data, state, scored, rnd, cfg, pick=k)
+    if _implausible_effects(data, trial.added, trial.res):
+        return None, fam.label, trial
+    comp = dict(fam.info).get("composed")
+    if comp is not None:   # a composed effect: no prior on its magnitude (effect_plausibility rates it 1)
+        return Plausibility(1.0), fam.label, trial
+    ad = trial.added[-1]
+    vals = np.array([trial.res.value(nm) for nm in fam.names()])
+    std = np.array([trial.res.std[trial.res.index(nm)] for nm in fam.names()])
+    phys = describe_params(fam, ad.value, vals, std)
+    delays = [a.family.joint for a in trial.added if a.family.kind == "time_delay"
+              and dict(a.family.info).get("composed") is None]
+    pl = effect_plausibility(fam.kind, fam.joint, dict(zip(fam.params, (float(v) for v in vals))), phys, scales,
+                             variant=fam.variant, delay_joints=delays)
+    if fam.kind == "time_delay" and not delay_is_absurd(float(phys.get("delay_s", 0.0)), scales):
+        # a delay is at worst doubtful unless absurd (plausibility._delay_verdict): never passed over here
+        pl = Plausibility(max(pl.score, PLAUSIBLE), pl.reasons, pl.check)
+    one = fam.kind == "time_delay" and fam.joint is not None and data.n > 1 and all(x == fam.joint for x in delays)
+    return pl, fits_like(fam.kind, fam.joint, phys, fam.label, one_joint_delay=one), trial
+
+
+def _plausible_pick(data: _Data, state: _State, scored: _Round, rnd: int, cfg: DiagnoseSettings,
+                    scales: ArmScales) -> tuple[int, dict | None, dict[int, _State]]:
+    """The eligible candidate of a round to add first: the best, unless it would be rated implausible
+    (plausibility below :data:`.plausibility.PLAUSIBLE`, :func:`_candidate_rating`) and an eligible plausible
+    candidate on its joints explains the same residual (:func:`.plausibility.explains_same`, the rule by which
+    :func:`.plausibility.verdict` rejects an effect): then that one - an effect is named as a cause only when
+    it is physically plausible and beats its alternatives on held-out data, a smaller true answer beats a
+    larger curve fit (``docs/loop-plausibility.md``). An implausible best with no plausible alternative is still
+    added first (and rated doubtful). Returns the index, the passed-over candidate's record for
+    ``implausible`` (None when the best is kept) and the trial states computed (index -> state)."""
+    trials: dict[int, _State] = {}
+    _, fam0, _, _, _, cs0 = scored.eligible[0]
+    pl0, like0, trial0 = _candidate_rating(data, state, scored, rnd, cfg, 0, scales)
+    if trial0 is not None:
+        trials[0] = trial0
+    if pl0 is None or pl0.score >= PLAUSIBLE:
+        return 0, None, trials
+    for k in range(1, min(len(scored.eligible), MAX_IMPLAUSIBLE_TRIES)):
+        cs = scored.eligible[k][5]
+        if not explains_same(fam0.kind, fam0.variant, fam0.joint, fam0.partner, cs0.score, cs0, cs, rnd):
+            continue
+        pl, like, trial = _candidate_rating(data, state, scored, rnd, cfg, k, scales)
+        if trial is not None:
+            trials[k] = trial
+        if pl is None or pl.score < PLAUSIBLE:
+            continue
+        why = (f"fits like {like0}, implausible ({'; '.join(pl0.reasons)}); {like} explains the same residual "
+               f"and is plausible: added instead")
+        return k, {"candidate": fam0.label, "round": rnd, "reasons": [why], "plausibility": pl0.to_dict()}, trials
+    return 0, None, trials
 
 
 def _implausible_effects(data: _Data, added: Sequence[_Added], res: IdentificationResult) -> list[str]:
@@ -1888,12 +1970,18 @@ def _report_warnings(state: _State, res: IdentificationResult, cfg: DiagnoseSett
         warnings.append(f"stopped at max_effects = {cfg.max_effects} effects added by the loop (friction-law "
                         f"choices are not counted; {len(state.added)} loop effect(s) kept after the stability stage): "
                         "more effects may be significant")
-    if state.implausible:
+    # passed over: physically impossible once re-identified, or implausible with a plausible alternative of its
+    # round explaining the same residual (_plausible_pick; those carry their plausibility)
+    for plaus, head in ((False, "not added, the re-identified model with them physically impossible: "),
+                        (True, "not added, implausible and a plausible alternative of the round explains the same "
+                               "residual: ")):
         last: dict = {}
         for d in state.implausible:
-            last[d["candidate"]] = d
-        warnings.append("not added, the re-identified model with them physically impossible: " + "; ".join(
-            f"{c} (round {d['round']}: {'; '.join(d['reasons'])})" for c, d in last.items()))
+            if ("plausibility" in d) == plaus:
+                last[d["candidate"]] = d
+        if last:
+            warnings.append(head + "; ".join(f"{c} (round {d['round']}: {'; '.join(d['reasons'])})"
+                                             for c, d in last.items()))
     if final_bad:
         warnings.append(f"under {cfg.method.upper()} the final fit has physically impossible effect parameters: "
                         + "; ".join(final_bad))

@@ -44,7 +44,7 @@ __all__ = [
     "DELAY_TYPICAL_PERIODS", "DELAY_TYPICAL_S", "EXPLAINS_REMAINING", "GAIN_TOLERANCE", "LAW_GAIN_MIN", "PLAUSIBLE",
     "POWER_BAND", "STRIBECK_BAND", "STRIBECK_EXCESS_SHARE", "STRIBECK_SPEED_SHARE", "SYNONYMS", "VELOCITY_RESOLUTION",
     "VERDICTS", "ZERO_OFFSET_TYPICAL_DEG", "ZERO_OFFSET_WIDTH", "ArmScales", "Plausibility", "alternatives_of",
-    "band_factor", "delay_is_absurd", "effect_plausibility", "fits_like", "law_alternatives", "law_plausibility",
+    "band_factor", "delay_is_absurd", "effect_plausibility", "explains_same", "fits_like", "law_alternatives", "law_plausibility",
     "own_candidate", "rate_effects", "remaining_error", "verdict",
 ]
 
@@ -449,6 +449,19 @@ def verdict(plaus: Plausibility, score: float | None, alternatives: Sequence[Map
     if any(_close(a, s, remaining) for a in alternatives):
         return "doubtful", "an alternative fits almost as well"
     return "cause", "fits, beats its alternatives, plausible"
+
+
+def explains_same(kind: str, variant: str, joint: int | None, partner: int | None, score: float | None, own,
+                  other, round: int) -> bool:
+    """An eligible candidate ``other`` (:class:`.report.CandidateScore`) of round ``round`` explains the same
+    residual as the effect of kind ``kind`` whose own candidate is ``own``: it overlaps the effect's joints, is
+    not the same physical effect under another name (:data:`SYNONYMS`) and leaves at most
+    :data:`EXPLAINS_REMAINING` times the effect's squared validation error on its joints - the rule by which
+    :func:`verdict` rejects an implausible effect, applied before the effect is added."""
+    rem = None if own is None else remaining_error(own, joint, partner)
+    s = float(score) if score is not None and math.isfinite(float(score)) else None
+    return any(_close(a, s, rem, EXPLAINS_REMAINING, ALTERNATIVE_EXPLAINS)
+               for a in alternatives_of(kind, variant, joint, partner, score, [other], round, k=None))
 
 
 def _overlap(kind_joint: int | None, partner: int | None, other_joint: int | None, other_partner: int | None) -> bool:

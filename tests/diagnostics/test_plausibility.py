@@ -294,3 +294,54 @@ def test_an_implausible_friction_law_is_not_applied_but_reported(monkeypatch):
     e = _first(rep, "stribeck", 1)
     assert e.physical["vs"] == pytest.approx(0.1, rel=0.3)
     assert e.verdict != "cause" and "not named the cause" in e.verdict_reason
+
+
+def _round_of(*cands):
+    """A fake scored round: eligible (score, family, ...) tuples, best first."""
+    from symoro_gen.diagnostics.candidates import Family
+
+    out = []
+    for cs in cands:
+        fam = Family(cs.kind, cs.joint, ("x",), lambda fr, ctx: [], variant=cs.variant)
+        out.append((cs.score, fam, None, None, None, cs))
+    return SimpleNamespace(eligible=tuple(out))
+
+
+@pytest.mark.parametrize("vs, law_after, law_joint, delta, picked", [
+    (0.89, 0.21, 0, 0.8, 1),    # a Stribeck dip at 0.89 rad/s; joint 1's power-viscous law leaves about as much
+    (0.89, 0.30, 0, 0.8, 0),    # ... the law leaves 2.25x its squared error: it does not explain the same
+    (0.89, 0.21, 1, 0.8, 0),    # ... the law is another joint's
+    (0.89, 0.21, 0, 0.2, 0),    # ... the law is implausible too (|dq|^0.2)
+    (0.05, 0.21, 0, 0.8, 0),    # a plausible Stribeck velocity: the best is kept
+])
+def test_an_implausible_best_gives_way_to_a_plausible_alternative(monkeypatch, vs, law_after, law_joint, delta,
+                                                                  picked):
+    """The loop's pick rule (core._plausible_pick): the best eligible candidate of a round gives way only when it
+    would be rated implausible and an eligible plausible candidate on its joints explains the same residual
+    (verdict's rejection rule); the candidate passed over is reported with what it fitted like."""
+    from symoro_gen.diagnostics import core
+
+    sc = _scales(n=2, noise=1e-5)
+    strib = _cs("stribeck1", "stribeck", 0, 0.30, after=(0.20, 0.5))
+    after = (law_after, 0.5) if law_joint == 0 else (0.5, law_after)
+    law = _cs(f"friction_law{law_joint + 1}", "friction_law", law_joint, 0.25, variant="sign+power", after=after)
+    choice = _choice(coulomb="sign", vs=None, viscous="power", delta=delta, j=law_joint)
+    choice.describe = lambda: "sign Coulomb + power viscous"
+    state = SimpleNamespace(pending=(SimpleNamespace(choice=choice),))
+    real = core._candidate_rating
+
+    def rating(data, state, scored, rnd, cfg, k, scales):
+        fam = scored.eligible[k][1]
+        if fam.kind != "stribeck":
+            return real(data, state, scored, rnd, cfg, k, scales)
+        pl = effect_plausibility("stribeck", 0, {"Fst": 1.0}, {"vs": vs}, scales)
+        return pl, f"Stribeck friction with vs = {vs:.3g} rad/s on joint 1", SimpleNamespace()
+
+    monkeypatch.setattr(core, "_candidate_rating", rating)
+    k, passed, _ = core._plausible_pick(None, state, _round_of(strib, law), 1, None, sc)
+    assert k == picked
+    if picked:
+        assert passed["candidate"] == "stribeck1" and passed["round"] == 1
+        assert "0.89 rad/s" in passed["reasons"][0] and "joint 1's friction law" in passed["reasons"][0]
+    else:
+        assert passed is None
