@@ -1470,6 +1470,8 @@ def _stage_loop(data0: _Data, data: _Data, base: _Baseline, cfg: DiagnoseSetting
         first, passed, trials = _plausible_pick(data, state, scored, rnd, cfg, scales)
         if passed is not None:
             state = replace(state, implausible=state.implausible + (passed,))
+        if first is None:
+            return data, base, replace(state, stopped_at_max=n_eff >= cfg.max_effects)
         if scored.eligible[first][1].kind == LAW_KIND:
             data, base, state = _accept_law(data0, data, base, state, scored.eligible[first][1].joint, rnd)
             continue
@@ -1555,14 +1557,15 @@ def _candidate_rating(data: _Data, state: _State, scored: _Round, rnd: int, cfg:
 
 
 def _plausible_pick(data: _Data, state: _State, scored: _Round, rnd: int, cfg: DiagnoseSettings,
-                    scales: ArmScales) -> tuple[int, dict | None, dict[int, _State]]:
+                    scales: ArmScales) -> tuple[int | None, dict | None, dict[int, _State]]:
     """The eligible candidate of a round to add first: the best, unless it would be rated implausible
     (plausibility below :data:`.plausibility.PLAUSIBLE`, :func:`_candidate_rating`) and an eligible plausible
     candidate on its joints explains the same residual (:func:`.plausibility.explains_same`, the rule by which
     :func:`.plausibility.verdict` rejects an effect): then that one - an effect is named as a cause only when
     it is physically plausible and beats its alternatives on held-out data, a smaller true answer beats a
     larger curve fit (``docs/loop-plausibility.md``). An implausible best with no plausible alternative is still
-    added first (and rated doubtful). Returns the index, the passed-over candidate's record for
+    added first (and rated doubtful), unless its kind is in :data:`NOT_ADDED_WHEN_IMPLAUSIBLE` (then the next
+    candidate, None when there is none). Returns the index, the passed-over candidate's record for
     ``implausible`` (None when the best is kept) and the trial states computed (index -> state)."""
     trials: dict[int, _State] = {}
     _, fam0, _, _, _, cs0 = scored.eligible[0]
@@ -1583,7 +1586,18 @@ def _plausible_pick(data: _Data, state: _State, scored: _Round, rnd: int, cfg: D
         why = (f"fits like {like0}, implausible ({'; '.join(pl0.reasons)}); {like} explains the same residual "
                f"and is plausible: added instead")
         return k, {"candidate": fam0.label, "round": rnd, "reasons": [why], "plausibility": pl0.to_dict()}, trials
+    if fam0.kind in NOT_ADDED_WHEN_IMPLAUSIBLE:
+        why = (f"fits like {like0}, implausible ({'; '.join(pl0.reasons)}): not added, as a friction law with "
+               "constants no drive has is not applied")
+        rec = {"candidate": fam0.label, "round": rnd, "reasons": [why], "plausibility": pl0.to_dict()}
+        return (1 if len(scored.eligible) > 1 else None), rec, trials
     return 0, None, trials
+
+
+#: candidate kinds never added with an implausible rating, with or without a plausible rival: a Stribeck dip
+#: at a speed no drive has is a friction law's reshaping of whatever the residual holds at reversals (the
+#: friction-law stage does not apply such a law either; docs/loop-plausibility.md)
+NOT_ADDED_WHEN_IMPLAUSIBLE = frozenset({"stribeck"})
 
 
 def _implausible_effects(data: _Data, added: Sequence[_Added], res: IdentificationResult) -> list[str]:
