@@ -307,18 +307,20 @@ def _round_of(*cands):
     return SimpleNamespace(eligible=tuple(out))
 
 
-@pytest.mark.parametrize("vs, law_after, law_joint, delta, picked", [
-    (0.89, 0.21, 0, 0.8, 1),    # a Stribeck dip at 0.89 rad/s; joint 1's power-viscous law leaves about as much
-    (0.89, 0.30, 0, 0.8, 0),    # ... the law leaves 2.25x its squared error: it does not explain the same
-    (0.89, 0.21, 1, 0.8, 0),    # ... the law is another joint's
-    (0.89, 0.21, 0, 0.2, 0),    # ... the law is implausible too (|dq|^0.2)
-    (0.05, 0.21, 0, 0.8, 0),    # a plausible Stribeck velocity: the best is kept
+@pytest.mark.parametrize("vs, law_after, law_joint, delta, passed_over", [
+    (0.89, 0.21, 0, 0.8, "rival"),   # a Stribeck dip at 0.89 rad/s; joint 1's power-viscous law leaves about as much
+    (0.89, 0.30, 0, 0.8, "alone"),   # ... the law leaves 2.25x its squared error: it does not explain the same
+    (0.89, 0.21, 1, 0.8, "alone"),   # ... the law is another joint's
+    (0.89, 0.21, 0, 0.2, "alone"),   # ... the law is implausible too (|dq|^0.2)
+    (0.05, 0.21, 0, 0.8, None),      # a plausible Stribeck velocity: the best is kept
 ])
 def test_an_implausible_best_gives_way_to_a_plausible_alternative(monkeypatch, vs, law_after, law_joint, delta,
-                                                                  picked):
-    """The loop's pick rule (core._plausible_pick): the best eligible candidate of a round gives way only when it
+                                                                  passed_over):
+    """The loop's pick rule (core._plausible_pick): the best eligible candidate of a round gives way when it
     would be rated implausible and an eligible plausible candidate on its joints explains the same residual
-    (verdict's rejection rule); the candidate passed over is reported with what it fitted like."""
+    (verdict's rejection rule); an implausible Stribeck term is not added even without such a rival (as an
+    implausible Stribeck law is not applied): the next candidate is tried. The candidate passed over is
+    reported with what it fitted like."""
     from symoro_gen.diagnostics import core
 
     sc = _scales(n=2, noise=1e-5)
@@ -339,9 +341,15 @@ def test_an_implausible_best_gives_way_to_a_plausible_alternative(monkeypatch, v
 
     monkeypatch.setattr(core, "_candidate_rating", rating)
     k, passed, _ = core._plausible_pick(None, state, _round_of(strib, law), 1, None, sc)
-    assert k == picked
-    if picked:
-        assert passed["candidate"] == "stribeck1" and passed["round"] == 1
-        assert "0.89 rad/s" in passed["reasons"][0] and "joint 1's friction law" in passed["reasons"][0]
-    else:
+    assert k == (0 if passed_over is None else 1)
+    if passed_over is None:
         assert passed is None
+        return
+    assert passed["candidate"] == "stribeck1" and passed["round"] == 1 and "0.89 rad/s" in passed["reasons"][0]
+    if passed_over == "rival":
+        assert "joint 1's friction law" in passed["reasons"][0] and "explains the same" in passed["reasons"][0]
+    else:
+        assert "not added" in passed["reasons"][0]
+    # alone in its round, an implausible Stribeck term leaves nothing to add
+    k1, passed1, _ = core._plausible_pick(None, state, _round_of(strib), 1, None, sc)
+    assert k1 is None and passed1["candidate"] == "stribeck1"
