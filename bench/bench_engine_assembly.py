@@ -30,7 +30,7 @@ import tarfile
 import tempfile
 from pathlib import Path
 
-import numpy as np
+from benchlog import simulate_lwr4_log
 
 ROOT = Path(__file__).resolve().parents[1]
 FS = 1000.0
@@ -91,25 +91,9 @@ with np.load(path, mmap_mode="r") as f:
 
 
 def simulate_hour(path: Path) -> None:
-    """HOURS of simulated LWR4 data at 1 kHz, written block by block as an uncompressed .npz (the log of
+    """HOURS of simulated LWR4 data at 1 kHz (:func:`benchlog.simulate_lwr4_log`, the log of
     ``bench/bench_fleet.py``)."""
-    sys.path.insert(0, str(ROOT))
-    from symoro_gen import load_model
-    from symoro_gen.simulate.recording import true_torques
-    from symoro_gen.simulate.trajectories import fourier_trajectory
-
-    m = load_model("lwr4")
-    rng = np.random.default_rng(0)
-    N = int(HOURS * 3600 * FS)
-    series = fourier_trajectory(7, 10.0, 1 / FS, rng, vmax=1.5, amax=6.0).series
-    t = np.arange(N) / FS
-    q, tau = np.empty((N, 7)), np.empty((N, 7))
-    for s in range(0, N, 200_000):
-        e = min(N, s + 200_000)
-        mo = series.evaluate(t[s:e])
-        q[s:e] = mo.q + rng.normal(0, 1e-5, mo.q.shape)
-        tau[s:e] = true_torques(m, mo.q, mo.dq, mo.ddq, m.nominal_parameters()) + rng.normal(0, 0.05, mo.q.shape)
-    np.savez(path, times=t, positions=q, torques=tau)
+    simulate_lwr4_log(path, HOURS * 3600, FS)
 
 
 def _export(ref: str, dest: Path) -> Path:

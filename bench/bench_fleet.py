@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from benchlog import simulate_lwr4_log
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -44,23 +45,8 @@ RUNS = int(os.environ.get("SYMORO_BENCH_KERNEL_RUNS", "3"))
 
 
 def simulate_hour(path: Path) -> None:
-    """1 h (HOURS) of simulated LWR4 data, written block by block as an uncompressed .npz."""
-    from symoro_gen import load_model
-    from symoro_gen.simulate.recording import true_torques
-    from symoro_gen.simulate.trajectories import fourier_trajectory
-
-    m = load_model("lwr4")
-    rng = np.random.default_rng(0)
-    N = int(HOURS * 3600 * FS)
-    series = fourier_trajectory(7, 10.0, 1 / FS, rng, vmax=1.5, amax=6.0).series
-    t = np.arange(N) / FS
-    q, tau = np.empty((N, 7)), np.empty((N, 7))
-    for s in range(0, N, 200_000):
-        e = min(N, s + 200_000)
-        mo = series.evaluate(t[s:e])
-        q[s:e] = mo.q + rng.normal(0, 1e-5, mo.q.shape)
-        tau[s:e] = true_torques(m, mo.q, mo.dq, mo.ddq, m.nominal_parameters()) + rng.normal(0, 0.05, mo.q.shape)
-    np.savez(path, times=t, positions=q, torques=tau)
+    """1 h (HOURS) of simulated LWR4 data (:func:`benchlog.simulate_lwr4_log`)."""
+    simulate_lwr4_log(path, HOURS * 3600, FS)
 
 
 def peak_rss_mb() -> float:

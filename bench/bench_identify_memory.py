@@ -28,6 +28,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from benchlog import simulate_lwr4_log
 
 ROOT = Path(__file__).resolve().parents[1]
 FS = 1000.0
@@ -85,24 +86,9 @@ print(json.dumps({"anchor_mb": anchor, "traced_mb": peak / 2 ** 20, "rss_mb": rs
 
 
 def simulate(path: Path, minutes: float) -> None:
-    """``minutes`` of simulated LWR4 data at 1 kHz (the motion of ``bench/bench_engine_assembly.py``)."""
-    sys.path.insert(0, str(ROOT))
-    from symoro_gen import load_model
-    from symoro_gen.simulate.recording import true_torques
-    from symoro_gen.simulate.trajectories import fourier_trajectory
-
-    m = load_model("lwr4")
-    rng = np.random.default_rng(0)
-    N = int(minutes * 60 * FS)
-    series = fourier_trajectory(7, 10.0, 1 / FS, rng, vmax=1.5, amax=6.0).series
-    t = np.arange(N) / FS
-    q, tau = np.empty((N, 7)), np.empty((N, 7))
-    for s in range(0, N, 200_000):
-        e = min(N, s + 200_000)
-        mo = series.evaluate(t[s:e])
-        q[s:e] = mo.q + rng.normal(0, 1e-5, mo.q.shape)
-        tau[s:e] = true_torques(m, mo.q, mo.dq, mo.ddq, m.nominal_parameters()) + rng.normal(0, 0.05, mo.q.shape)
-    np.savez(path, times=t, positions=q, torques=tau)
+    """``minutes`` of simulated LWR4 data at 1 kHz (:func:`benchlog.simulate_lwr4_log`, the motion of
+    ``bench/bench_engine_assembly.py``)."""
+    simulate_lwr4_log(path, minutes * 60, FS)
 
 
 def measure(log: Path, method: str, streamed: bool) -> dict:

@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike
 
 from ..errors import IdentificationError
 from ..model import IdentificationModel
-from ..observations.assembly import ExperimentReport, iter_chunks
+from ..observations.assembly import ExperimentReport, iter_chunks, metric_basis
 from ..observations.options import AssemblyOptions
 from ..observations.raw import raw_error_sums_streamed
 from ..observations.system import ObservationSystem
@@ -125,17 +125,8 @@ class StreamedAssembly:
 
     def metric_basis(self) -> dict[str, Any]:
         """:meth:`symoro_gen.observations.Assembly.metric_basis` (the JSON ``rel_err_basis``), same keys."""
-        st = [e.settings for e in self.experiments]
-        return {
-            "rel_err": "||Y_j - W_j chi|| / ||Y_j|| on the filtered, decimated observation system",
-            "rel_err_raw": "||tau_j - IDM_j(q, dq, ddq) chi|| / ||tau_j||: the model at full rate on the "
-                           "filtered states against the raw measured torque",
-            "cutoff_hz": [float(s.cutoff_hz) for s in st],
-            "n_d": [int(s.n_d) for s in st],
-            "min_velocity": self.options.min_velocity,
-            "rows": int(self.accumulator.n_rows),
-            "samples": int(sum(e.n_samples - 2 * e.settings.edge_samples for e in self.experiments)),
-        }
+        return metric_basis([e.settings for e in self.experiments], self.options, int(self.accumulator.n_rows),
+                            int(sum(e.n_samples - 2 * e.settings.edge_samples for e in self.experiments)))
 
     def raw_error_sums(self, model: IdentificationModel, theta: Mapping[str, float], *,
                        gains: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -103,6 +103,7 @@ __all__ = [
     "iter_chunks",
     "iter_kinematics",
     "merge_metric_basis",
+    "metric_basis",
     "observation_settings",
 ]
 
@@ -139,6 +140,22 @@ class ExperimentReport:
     rows_per_joint: tuple[int, ...]
     removed_low_velocity: tuple[int, ...]
     removed_saturated: tuple[int, ...] = ()
+
+
+def metric_basis(settings: Sequence[FilterSettings], options: AssemblyOptions, rows: int, samples: int) -> dict[str, Any]:
+    """The JSON ``rel_err_basis``: what ``rel_err`` and ``rel_err_raw`` are computed on (the experiments'
+    filter ``settings``, the assembly ``options``, the rows of the observation system and the full-rate
+    samples of the raw error)."""
+    return {
+        "rel_err": "||Y_j - W_j chi|| / ||Y_j|| on the filtered, decimated observation system",
+        "rel_err_raw": "||tau_j - IDM_j(q, dq, ddq) chi|| / ||tau_j||: the model at full rate on the "
+                       "filtered states against the raw measured torque",
+        "cutoff_hz": [float(s.cutoff_hz) for s in settings],
+        "n_d": [int(s.n_d) for s in settings],
+        "min_velocity": options.min_velocity,
+        "rows": int(rows),
+        "samples": int(samples),
+    }
 
 
 @dataclass(frozen=True, eq=False)
@@ -236,17 +253,8 @@ class Assembly:
     def metric_basis(self) -> dict[str, Any]:
         """What ``rel_err`` on this system is computed on: filter cut-off(s), decimation factor(s),
         rows, and the full-rate samples the raw error uses (the JSON ``rel_err_basis``)."""
-        st = [e.settings for e in self.experiments]
-        return {
-            "rel_err": "||Y_j - W_j chi|| / ||Y_j|| on the filtered, decimated observation system",
-            "rel_err_raw": "||tau_j - IDM_j(q, dq, ddq) chi|| / ||tau_j||: the model at full rate on the "
-                           "filtered states against the raw measured torque",
-            "cutoff_hz": [float(s.cutoff_hz) for s in st],
-            "n_d": [int(s.n_d) for s in st],
-            "min_velocity": self.options.min_velocity,
-            "rows": int(self.system.Y.size),
-            "samples": int(sum(s.n_samples for s in self.signals)),
-        }
+        return metric_basis([e.settings for e in self.experiments], self.options, int(self.system.Y.size),
+                            int(sum(s.n_samples for s in self.signals)))
 
     def summary(self) -> str:
         s = self.system
