@@ -116,7 +116,7 @@ def _check_options(args) -> None:
             raise OptionError(f"{flag} {v:g}: {what}")
 
 
-_OUTPUT_OPTIONS = ("output", "out", "json", "report", "plot", "plots")
+_OUTPUT_OPTIONS = ("output", "out", "json", "report", "plot", "plots", "robot_out")
 
 #: the output options of the commands (attribute -> spelling), checked by :func:`check_command_outputs`
 _OUTPUT_FLAGS = {"output": "-o/--output", "json": "--json", "report": "--report", "plot": "--plot"}
@@ -190,6 +190,8 @@ def command_outputs(args) -> dict[str, str | os.PathLike[str] | Target | None]:
             outputs[flag] = Target(Path(v), owner="never")
         else:
             outputs[flag] = v
+    if getattr(args, "robot_out", None):  # identify --geometry: a robot file, never replaced without --force
+        outputs["-o/--robot-out"] = Target(Path(args.robot_out), owner="never")
     if cmd in ("export-urdf", "export-mjcf") and getattr(args, "output", None) and getattr(args, "from_result", None):
         outputs["-o/--output (its .json)"] = str(args.output) + ".json"
     if getattr(args, "plots", None):  # diagnose --plots DIR: written into; its diagnosis-*.png replaced or removed

@@ -7,6 +7,7 @@ A leaf: the arguments become :class:`~symoro_gen.workflows.identify.IdentifyOpti
 from __future__ import annotations
 
 from ..atomic import FORCE_HELP
+from ..errors import OptionError
 from ..preprocessing.cli import add_data_options, format_from_args
 from ..report import check_report_path, require_matplotlib
 from ..workflows.identify import IdentifyOptions, IdentifyResults, identify
@@ -26,7 +27,8 @@ def options_from_args(args) -> IdentifyOptions:
         reference=args.reference, kp=args.kp, kd=args.kd, ki=args.ki, bandwidth=args.bandwidth,
         max_iter=args.max_iter, start=args.start, physical=getattr(args, "physical", False),
         nominal_tolerance=getattr(args, "nominal_tolerance", None),
-        bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args))
+        bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args),
+        geometry=getattr(args, "geometry", None))
 
 
 def run(args) -> int:
@@ -35,9 +37,15 @@ def run(args) -> int:
         check_report_path(args.report)
         require_matplotlib()
     opts = options_from_args(args)
+    robot_out = getattr(args, "robot_out", None)
+    if robot_out and not opts.geometry:
+        raise OptionError("-o/--robot-out writes the robot file corrected by --geometry joint_zero: add "
+                          "--geometry joint_zero")
     res: IdentifyResults = identify(args.robot, list(args.data), validate=args.validate, loaded=args.loaded,
                                     options=opts)
     force = bool(getattr(args, "force", False))
+    if robot_out:  # first: the JSON records the file written
+        res = res.write_robot(robot_out, force=force)
     if args.json:
         res.write_json(args.json, force=force)
     if args.report:
@@ -100,6 +108,13 @@ def add_parser(sub) -> None:
                    help="with --physical: keep each link's mass distribution inside the box of its frame origins and "
                         "children (plus a margin; so its centre of mass too) and its mass within a factor 3 of a "
                         "non-zero nominal mass (docs/plausibility.md)")
+    p.add_argument("--geometry", choices=("joint_zero",),
+                   help="also identify geometric parameters: joint_zero = the encoder zeros of the joints torque "
+                        "data can see (Gauss-Newton alternating with the linear fit; the others are reported as not "
+                        "identifiable); everything after runs at the corrected angles")
+    p.add_argument("-o", "--robot-out", metavar="PATH",
+                   help="with --geometry: write the robot file with the identified zeros added to the frames' theta "
+                        "(r) here (never over the input robot file; an existing file only with --force)")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "

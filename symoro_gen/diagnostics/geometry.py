@@ -17,158 +17,34 @@ prismatic joint ``q0_j`` is a zero error of a length and the same holds.
 A zero offset is seen only through the configuration-dependent torque (gravity, inertial coupling): the
 first joint of an arm whose axis 1 is vertical changes nothing (its column is 0), the last joint of a chain
 only rotates its link's inertial parameters (its column is in the span of the regressor, absorbed by the
-base parameters). :func:`joint_zero_visibility` measures this on the generated model.
+base parameters). :func:`joint_zero_visibility` measures this on the generated model. The model-level functions (the column,
+the secants, the visibility) live in :mod:`symoro_gen.identification.geometry`, shared with
+``identify --geometry joint_zero``; they are re-exported here.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from dataclasses import replace as dc_replace
 
 import numpy as np
 
+from ..identification.geometry import (
+    JOINT_ZERO_STEP,
+    VISIBILITY_TOL,
+    joint_zero_column,
+    joint_zero_secant,
+    joint_zero_visibility,
+    regressor_secant,
+    revolute_joints,
+    visible_zero_joints,
+)
 from ..model import IdentificationModel
-from ..observations.raw import full_rate_torque
 from .frame import build_frame, common_bandwidth
 
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
            "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "JointZeroFit",
            "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints"]
-
-#: step [rad or m] of the central difference of the torque in the joint angle
-JOINT_ZERO_STEP = 1e-6
-#: a joint zero is invisible when the share of its column's norm outside the span of the regressor (on random
-#: configurations and random parameters) is below this
-VISIBILITY_TOL = 1e-6
-
-
-def _torque(model: IdentificationModel, theta: Mapping[str, float], q, dq, ddq, loaded) -> np.ndarray:
-    """Model torque of the fit ``theta`` (Coulomb terms left out: they do not depend on the angle), the loaded
-    samples (boolean mask or None) with the payload columns."""
-    out = full_rate_torque(model, theta, q, dq, ddq, False, skip_prefix=("FS",))
-    if loaded is not None and np.any(loaded):
-        out[loaded] = full_rate_torque(model, theta, q[loaded], dq[loaded], ddq[loaded], True, skip_prefix=("FS",))
-    return out
-
-
-def joint_zero_secant(model: IdentificationModel, theta: Mapping[str, float], q, dq, ddq, j: int, c: float,
-                      loaded=None) -> np.ndarray:
-    """``(tau(q + c e_j) - tau(q)) / c`` of the model of ``theta`` on every joint (shape (N, n)): the torque error of
-    a zero offset ``c`` of joint j per unit offset; ``c = 0`` gives the tangent ``d tau / d q_j`` (central
-    difference, step :data:`JOINT_ZERO_STEP`). With the coefficient equal to ``c`` (the loop's fixed point) the
-    column times the coefficient is the exact torque change ``tau(q + c e_j) - tau(q)``."""
-    q = np.asarray(q, float)
-    dq, ddq = np.asarray(dq, float), np.asarray(ddq, float)
-
-    def shifted(s: float) -> np.ndarray:
-        a = q.copy()
-        a[:, j] += s
-        return _torque(model, theta, a, dq, ddq, loaded)
-
-    if c == 0.0:
-        h = JOINT_ZERO_STEP
-        return (shifted(h) - shifted(-h)) / (2 * h)
-    return (shifted(c) - _torque(model, theta, q, dq, ddq, loaded)) / c
-
-
-def joint_zero_column(model: IdentificationModel, theta: Mapping[str, float], q, dq, ddq, j: int,
-                      loaded=None) -> np.ndarray:
-    """The tangent ``d tau / d q0_j`` (shape (N, n), every joint's torque): see :func:`joint_zero_secant`."""
-    return joint_zero_secant(model, theta, q, dq, ddq, j, 0.0, loaded)
-
-
-def regressor_secant(model: IdentificationModel, q, dq, ddq, j: int, c: float, loaded: bool = False) -> np.ndarray:
-    """``(W(q + c e_j) - W(q)) / c`` of the base regressor (with the payload columns after the base ones when
-    ``loaded``), shape (N, n, p); ``c = 0``: the tangent ``d W / d q_j`` (central difference, step
-    :data:`JOINT_ZERO_STEP`). Independent of the parameters: the joint zero column of a fit ``chi`` is this
-    times ``chi`` (the regrouping of the base parameters does not depend on the angle)."""
-    q = np.asarray(q, float)
-
-    def reg(s: float) -> np.ndarray:
-        a = q.copy()
-        a[:, j] += s
-        W = np.asarray(model.regressor(a, dq, ddq), float)
-        if loaded and tuple(getattr(model, "PAYLOAD_NAMES", ())):
-            W = np.concatenate([W, np.asarray(model.payload_regressor(a, dq, ddq), float)], axis=2)
-        return W
-
-    if c == 0.0:
-        h = JOINT_ZERO_STEP
-        return (reg(h) - reg(-h)) / (2 * h)
-    return (reg(c) - reg(0.0)) / c
-
-
-def _random_motion(n: int, m: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    q = rng.uniform(-np.pi, np.pi, size=(m, n))
-    return q, rng.standard_normal((m, n)), rng.standard_normal((m, n))
-
-
-def revolute_joints(model: IdentificationModel, *, rng: np.random.Generator | None = None,
-                    n_samples: int = 8) -> np.ndarray:
-    """Per joint, whether its variable is an angle: the regressor is ``2 pi``-periodic in it (a prismatic joint's
-    length enters it polynomially). A joint the regressor does not depend on counts as revolute."""
-    rng = np.random.default_rng(0) if rng is None else rng
-    n = int(model.N_JOINTS)
-    q, dq, ddq = _random_motion(n, n_samples, rng)
-    W0 = np.asarray(model.regressor(q, dq, ddq), float)
-    scale = max(float(np.abs(W0).max()), 1e-300)
-    out = np.ones(n, bool)
-    for j in range(n):
-        a = q.copy()
-        a[:, j] += 2 * np.pi
-        out[j] = float(np.abs(np.asarray(model.regressor(a, dq, ddq), float) - W0).max()) <= 1e-8 * scale
-    return out
-
-
-def joint_zero_visibility(model: IdentificationModel, *, rng: np.random.Generator | None = None,
-                          n_samples: int = 40, n_theta: int = 3) -> np.ndarray:
-    """Per joint, the share of the joint zero column's norm that no base-parameter change can produce: the
-    relative norm of its residual after projection on the span of the base regressor, over ``n_samples`` random
-    configurations (angles in [-pi, pi], standard normal velocities and accelerations), the smallest over
-    ``n_theta`` random base-parameter vectors (a column identically 0 counts 0). 0 (below
-    :data:`VISIBILITY_TOL`): torque data cannot see the zero of this joint whatever the parameters (the first
-    joint about a vertical axis, the last joint of a chain: its offset rotates only its own link's inertia, which
-    the base parameters absorb)."""
-    rng = np.random.default_rng(0) if rng is None else rng
-    n = int(model.N_JOINTS)
-    names = tuple(model.BASE_NAMES)
-    q, dq, ddq = _random_motion(n, n_samples, rng)
-    W = np.asarray(model.regressor(q, dq, ddq), float).reshape(n_samples * n, len(names))
-    U, s, _ = np.linalg.svd(W, full_matrices=False)
-    U = U[:, s > s[0] * 1e-10] if s.size and s[0] > 0 else U[:, :0]
-    thetas = [dict(zip(names, rng.standard_normal(len(names)))) for _ in range(n_theta)]
-    out = np.zeros(n)
-    for j in range(n):
-        shares = []
-        for th in thetas:
-            col = joint_zero_column(model, th, q, dq, ddq, j).reshape(-1)
-            ref = float(np.linalg.norm(full_rate_torque(model, th, q, dq, ddq, False, skip_prefix=("FS",))))
-            nc = float(np.linalg.norm(col))
-            if nc <= 1e-9 * max(ref, 1e-300):
-                shares.append(0.0)
-                continue
-            r = col - U @ (U.T @ col)
-            shares.append(float(np.linalg.norm(r)) / nc)
-        out[j] = min(shares)
-    return out
-
-
-_VISIBILITY: dict = {}   # id(model) -> (model, shares): the default measure of a generated model, computed once
-
-
-def visible_zero_joints(model: IdentificationModel, *, tol: float = VISIBILITY_TOL,
-                        rng: np.random.Generator | None = None) -> tuple[int, ...]:
-    """0-based joints whose zero offset torque data can see (:func:`joint_zero_visibility` above ``tol``)."""
-    if rng is None:
-        got = _VISIBILITY.get(id(model))
-        if got is None or got[0] is not model:
-            got = (model, joint_zero_visibility(model))
-            _VISIBILITY[id(model)] = got
-        share = got[1]
-    else:
-        share = joint_zero_visibility(model, rng=rng)
-    return tuple(int(j) for j in np.flatnonzero(share > tol))
-
 
 def invisible_zero_note(model: IdentificationModel) -> list[str]:
     """One sentence naming the joints whose zero offset torque data cannot see (empty when every joint's can):

@@ -20,12 +20,22 @@ from typing import Any
 
 import numpy as np
 
+from ..atomic import Target, check_outputs
 from ..description.identity import robot_id
+from ..description.par import write_robot_toml
 from ..errors import IdentificationError, OptionError
 from ..identification import fit_with_known_payload, identify_with_drive_gains, sensor_gains
 from ..identification import identify as fit
 from ..identification.didim import identify_didim
 from ..identification.estimators import drop_unexcited, with_unexcited
+from ..identification.geometry import (
+    GEOMETRY_KINDS,
+    GeometryFit,
+    corrected_robot_text,
+    fit_zeros,
+    shift_zeros,
+    visible_zero_joints,
+)
 from ..identification.iv import identify_iv
 from ..identification.payload import fit_with_known_payload_factors, identify_payload
 from ..identification.physical import identify_physical
@@ -105,6 +115,10 @@ class IdentifyOptions(Options):
         nominal one (:mod:`symoro_gen.identification.plausibility`, docs/plausibility.md).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
+    geometry : {"joint_zero"}, optional
+        Also identify geometric parameters: the zeros of the joints torque data can see, by Gauss-Newton
+        alternating with the linear fit (:mod:`symoro_gen.identification.geometry`); the fit, the validation
+        and everything after use the corrected angles. OLS, WLS or TLS, without gains.
     """
 
     method: str = "wls"
@@ -130,8 +144,14 @@ class IdentifyOptions(Options):
     nominal_tolerance: float | None = None
     bounded_bodies: bool = False
     data_format: LogFormat = field(default_factory=LogFormat)
+    geometry: str | None = None
 
     def __post_init__(self) -> None:
+        if self.geometry is not None and self.geometry not in GEOMETRY_KINDS:
+            raise OptionError(f"--geometry {self.geometry!r}: one of {', '.join(GEOMETRY_KINDS)}")
+        if self.geometry is not None and (self.method in ("iv", "didim") or self.gains):
+            raise OptionError(f"--geometry {self.geometry} is fitted with IDIM-OLS, -WLS or -TLS without gains: "
+                              f"not with {'--gains ' + str(self.gains) if self.gains else '--method ' + self.method}")
         if self.method not in METHODS:
             raise OptionError(f"method {self.method!r}: one of {', '.join(METHODS)}")
         if self.gains not in (None, "sensor", "drive"):
@@ -184,6 +204,7 @@ class IdentifyResults(Results):
     held_back: tuple[str, ...] = ()
     inputs: tuple[Any, ...] = ()
     plausibility: Plausibility | None = None
+    geometry: GeometryFit | None = None
 
     # ---- the JSON ---------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -213,6 +234,8 @@ class IdentifyResults(Results):
         if self.plausibility is not None:
             out["plausibility"] = self.plausibility.to_dict()
             out["warnings"] = list(out["warnings"]) + list(self.plausibility.warnings)
+        if self.geometry is not None:
+            out["geometry"] = self.geometry.to_dict()
         out["provenance"] = provenance(self.options, self.inputs)
         return out
 
@@ -220,6 +243,8 @@ class IdentifyResults(Results):
     def summary(self) -> str:
         """Exactly the text ``symoro-gen identify`` prints."""
         text = self.result.summary()
+        if self.geometry is not None:
+            text = self.geometry.summary(self.robot.name) + "\n\n" + text
         if self.closed is not None:
             text = self.closed.summary() + "\n\n" + text
         v = self.validation
@@ -241,6 +266,22 @@ class IdentifyResults(Results):
             text += ("\n\nPlausibility of the bodies (nominal values, the links' boxes, signs; docs/plausibility.md):\n"
                      + self.plausibility.summary())
         return text + "\n\n" + data_text(self.reports)
+
+    # ---- the corrected robot file ----------------------------------------------------------------------
+    def write_robot(self, path: str | os.PathLike[str], *, force: bool = False) -> IdentifyResults:
+        """Write the robot file with the identified joint zeros added to the frames' ``theta`` (``r``) offsets
+        (``--geometry joint_zero``, ``-o/--robot-out``): never over the input robot file or another input, an
+        existing file only with ``force``. Returns these results with the written path recorded (JSON
+        ``geometry.robot_out``)."""
+        if self.geometry is None:
+            raise OptionError("-o/--robot-out writes the robot file corrected by --geometry joint_zero: add "
+                              "--geometry joint_zero")
+        check_outputs({"-o/--robot-out": Target(Path(path), owner="never")}, self.input_files(), force=force)
+        note = ("zeros from: " + ", ".join(str(getattr(x, "source", x)) for x in self.data)
+                + f" (method {self.options.method})")
+        text = corrected_robot_text(self.robot, self.geometry.offset_map(), note=note)
+        write_robot_toml(text, path, overwrite=force)
+        return replace(self, geometry=replace(self.geometry, robot_out=str(path)))
 
     # ---- report and figures -------------------------------------------------------------------------
     def report_content(self) -> ReportContent:
@@ -340,6 +381,10 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     # min_velocity (row selection) applies to the identification rows only; validation uses every sample
     asm_opts = AssemblyOptions(cutoff_hz=opts.cutoff, n_d=opts.decimate, min_velocity=opts.min_velocity,
                                drop_saturated=opts.drop_saturated, tau_limits=torque_limits(robot))
+    geo = None
+    if opts.geometry:  # the joint zeros first: everything after runs at the corrected angles
+        geo = _fit_geometry(opts, robot, model, unloaded, loaded, asm_opts, known)
+        unloaded, loaded, held_back = (shift_zeros(x, geo.joints, geo.offsets) for x in (unloaded, loaded, held_back))
     streamed = streams(opts)
     asm_u = _assemble(model, unloaded, replace(asm_opts, payload_columns=False), streamed)
     asm_l = _assemble(model, loaded, replace(asm_opts, payload_columns=True), streamed) if loaded else None
@@ -372,7 +417,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
         phys, res_u, res = _physical(opts, robot, model, res, sys_u, sys_l, known, asm_u, asm_l)
     plaus = _plausibility(robot, model, res_u if phys is not None else res, phys)
     validation, sys_v, asm_v = _validate(opts, robot, model, res, res_u, validate, held_back, asm_opts,
-                                         bool(loaded), streamed)
+                                         bool(loaded), streamed, geo)
     if validation is not None:
         reports += validation.pop("reports")
     rows = None
@@ -386,7 +431,30 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
                            assemblies={"unloaded": asm_u, "loaded": asm_l, "validation": asm_v}, drive=dg,
                            closed=closed, physical=phys, unconstrained=res_u, validation=validation,
                            reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs,
-                           plausibility=plaus)
+                           plausibility=plaus, geometry=geo)
+
+
+def _fit_geometry(opts: IdentifyOptions, robot, model: IdentificationModel, unloaded, loaded, asm_opts,
+                  known) -> GeometryFit:
+    """``geometry="joint_zero"``: the zeros of the visible joints by Gauss-Newton alternating with the linear
+    fit of the same estimator on the same rows (in memory)."""
+    js = visible_zero_joints(model)
+    trajs = (*unloaded, *loaded)
+
+    def systems_at(q0):
+        su = assemble(model, shift_zeros(unloaded, js, q0), replace(asm_opts, payload_columns=False)).system
+        sl = (assemble(model, shift_zeros(loaded, js, q0), replace(asm_opts, payload_columns=True)).system
+              if loaded else None)
+        return su, sl
+
+    def fit_at(su, sl):
+        (su, sl), _ = drop_unexcited([su, sl], trajs, drop=opts.drop_unexcited)
+        if sl is not None:
+            return fit_with_known_payload(su, sl, known, method=opts.method)
+        return fit(su, method=opts.method)
+
+    g = fit_zeros(model, systems_at, fit_at, joints=js)
+    return replace(g, robot_file=str(robot.file))
 
 
 def streams(opts: IdentifyOptions) -> bool:
@@ -431,12 +499,15 @@ def _plausibility(robot, model: IdentificationModel, res, phys) -> Plausibility:
 
 
 def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_back, asm_opts, has_payload,
-              streamed: bool = False):
-    """Relative errors on the validation recordings and the held-back parts (None without either)."""
+              streamed: bool = False, geometry: GeometryFit | None = None):
+    """Relative errors on the validation recordings and the held-back parts (None without either); with
+    ``geometry`` the validation recordings at the corrected angles (the held-back parts already are)."""
     if not (validate or held_back):
         return None, None, None
     vtr, rep_v = (as_trajectories(list(validate), opts.data_format, robot, loaded=opts.validate_loaded)
                   if validate else ((), ()))
+    if geometry is not None:
+        vtr = shift_zeros(vtr, geometry.joints, geometry.offsets)
     vtr = tuple(held_back) + tuple(vtr)
     asm_v = _assemble(model, vtr, replace(asm_opts, min_velocity=None,
                                           payload_columns=bool(opts.validate_loaded) or has_payload), streamed)
