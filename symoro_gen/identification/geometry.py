@@ -46,6 +46,9 @@ __all__ = ["GEOMETRY_KINDS", "JOINT_ZERO_STEP", "STEP_FRACTION", "VISIBILITY_TOL
 
 #: the geometric parameters ``identify --geometry`` can fit
 GEOMETRY_KINDS = ("joint_zero",)
+#: beyond this a fitted zero is no encoder zero error (the loop's prior, ``diagnostics/plausibility.py``: an
+#: offset of a few degrees is typical, tens of degrees impossible): reported as implausible
+MAX_ZERO_DEG = 20.0
 #: the Gauss-Newton iterations stop when every zero's step is below this fraction of its standard deviation
 STEP_FRACTION = 0.01
 #: step [rad or m] of the central difference of the assembled prediction in a joint zero (the assembly's filters
@@ -319,7 +322,8 @@ class GeometryFit:
             v, s = float(self.offsets[k]), float(self.std[k])
             row: dict[str, Any] = {"joint": j + 1}
             if self.revolute[k]:
-                row.update(offset_rad=v, offset_rad_std=s, offset_deg=math.degrees(v), offset_deg_std=math.degrees(s))
+                row.update(offset_rad=v, offset_rad_std=s, offset_deg=math.degrees(v), offset_deg_std=math.degrees(s),
+                           plausible=abs(math.degrees(v)) <= MAX_ZERO_DEG)
             else:
                 row.update(offset_m=v, offset_m_std=s)
             zeros.append(row)
@@ -339,7 +343,9 @@ class GeometryFit:
             v, s = float(self.offsets[k]), float(self.std[k])
             if self.revolute[k]:
                 lines.append(f"  joint {j + 1} zero offset {math.degrees(v):+.4f} deg (sigma {math.degrees(s):.4f} deg"
-                             f"{', ' + f'{abs(v) / s:.1f}' + ' sigma from 0' if s > 0 else ''})")
+                             f"{', ' + f'{abs(v) / s:.1f}' + ' sigma from 0' if s > 0 else ''})"
+                             + (f"  IMPLAUSIBLE: beyond {MAX_ZERO_DEG:g} deg, no encoder zero error (the data do not "
+                                "determine it: a poor excitation?)" if abs(math.degrees(v)) > MAX_ZERO_DEG else ""))
             else:
                 lines.append(f"  joint {j + 1} zero offset {1e3 * v:+.4f} mm (sigma {1e3 * s:.4f} mm)")
         lines.append(identifiability_text(self.identifiability, robot or "the robot"))
