@@ -28,7 +28,7 @@ def options_from_args(args) -> IdentifyOptions:
         max_iter=args.max_iter, start=args.start, physical=getattr(args, "physical", False),
         nominal_tolerance=getattr(args, "nominal_tolerance", None),
         bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args),
-        geometry=getattr(args, "geometry", None))
+        geometry=getattr(args, "geometry", None), geometry_joints=getattr(args, "geometry_joints", None))
 
 
 def run(args) -> int:
@@ -112,6 +112,9 @@ def add_parser(sub) -> None:
                    help="also identify geometric parameters: joint_zero = the encoder zeros of the joints torque "
                         "data can see (Gauss-Newton alternating with the linear fit; the others are reported as not "
                         "identifiable); everything after runs at the corrected angles")
+    p.add_argument("--geometry-joints", type=int, nargs="+", metavar="J",
+                   help="with --geometry joint_zero: the joints (1-based) whose zero is fitted (default: every joint "
+                        "whose zero torque data can see)")
     p.add_argument("-o", "--robot-out", metavar="PATH",
                    help="with --geometry: write the robot file with the identified zeros added to the frames' theta "
                         "(r) here (never over the input robot file; an existing file only with --force)")

@@ -119,6 +119,9 @@ class IdentifyOptions(Options):
         Also identify geometric parameters: the zeros of the joints torque data can see, by Gauss-Newton
         alternating with the linear fit (:mod:`symoro_gen.identification.geometry`); the fit, the validation
         and everything after use the corrected angles. OLS, WLS or TLS, without gains.
+    geometry_joints : sequence of int, optional
+        With ``geometry``: the joints (1-based) whose zero is fitted (default: every visible one); a joint whose
+        zero torque data cannot see is refused.
     """
 
     method: str = "wls"
@@ -145,8 +148,11 @@ class IdentifyOptions(Options):
     bounded_bodies: bool = False
     data_format: LogFormat = field(default_factory=LogFormat)
     geometry: str | None = None
+    geometry_joints: Sequence[int] | None = None
 
     def __post_init__(self) -> None:
+        if self.geometry_joints is not None and self.geometry is None:
+            raise OptionError("--geometry-joints chooses the joints of --geometry joint_zero: add --geometry joint_zero")
         if self.geometry is not None and self.geometry not in GEOMETRY_KINDS:
             raise OptionError(f"--geometry {self.geometry!r}: one of {', '.join(GEOMETRY_KINDS)}")
         if self.geometry is not None and (self.method in ("iv", "didim") or self.gains):
@@ -277,6 +283,12 @@ class IdentifyResults(Results):
             raise OptionError("-o/--robot-out writes the robot file corrected by --geometry joint_zero: add "
                               "--geometry joint_zero")
         check_outputs({"-o/--robot-out": Target(Path(path), owner="never")}, self.input_files(), force=force)
+        bad = [z for z in self.geometry.to_dict()["zeros"] if not z.get("plausible", True)]
+        if bad:
+            raise IdentificationError(
+                "-o/--robot-out: " + ", ".join(f"joint {z['joint']} zero {z['offset_deg']:+.1f} deg" for z in bad)
+                + " is beyond 20 deg, no encoder zero error (the data or the model explain it otherwise): not "
+                "written into a robot file; fit the other joints only (--geometry-joints)")
         note = ("zeros from: " + ", ".join(str(getattr(x, "source", x)) for x in self.data)
                 + f" (method {self.options.method})")
         text = corrected_robot_text(self.robot, self.geometry.offset_map(), note=note)
@@ -438,7 +450,8 @@ def _fit_geometry(opts: IdentifyOptions, robot, model: IdentificationModel, unlo
                   known) -> GeometryFit:
     """``geometry="joint_zero"``: the zeros of the visible joints by Gauss-Newton alternating with the linear
     fit of the same estimator on the same rows (in memory)."""
-    js = visible_zero_joints(model)
+    js = (visible_zero_joints(model) if opts.geometry_joints is None
+          else tuple(int(j) - 1 for j in opts.geometry_joints))
     trajs = (*unloaded, *loaded)
 
     def systems_at(q0):

@@ -6,6 +6,7 @@ table, gravity at the true angle ``q_measured + q0``); the identifiability is ch
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -18,7 +19,7 @@ import pytest
 import symoro_gen
 from symoro_gen.cli import main
 from symoro_gen.description import load_robot
-from symoro_gen.errors import OptionError, OutputError
+from symoro_gen.errors import IdentificationError, OptionError, OutputError
 from symoro_gen.identification.geometry import corrected_robot_text, zero_identifiability
 from symoro_gen.workflows.identify import identify
 
@@ -185,10 +186,19 @@ def test_robot_out_needs_geometry_and_refuses_inputs(tmp_path):
     res = identify("lwr4", [tr], method="ols")
     with pytest.raises(OptionError, match="--geometry"):
         res.write_robot(tmp_path / "x.toml")
-    res = identify("lwr4", [tr], method="ols", geometry="joint_zero")
+    res = identify("lwr4", [tr], method="ols", geometry="joint_zero", geometry_joints=[2])
+    assert res.geometry.joints == (1,)
     with pytest.raises(OutputError, match="input"):
         res.write_robot(ROOT / "robots" / "lwr4.toml", force=True)
     written = res.write_robot(tmp_path / "x.toml")
     assert written.geometry.robot_out == str(tmp_path / "x.toml")
     with pytest.raises(OutputError, match="exists"):
         res.write_robot(tmp_path / "x.toml")
+    # a zero beyond 20 deg is no encoder zero error: never written into a robot file
+    wild = dataclasses.replace(res, geometry=dataclasses.replace(res.geometry, offsets=res.geometry.offsets + 0.5))
+    with pytest.raises(IdentificationError, match=r"joint 2 zero .* beyond 20 deg"):
+        wild.write_robot(tmp_path / "y.toml")
+    assert not (tmp_path / "y.toml").exists()
+    # the joints chosen: an invisible one is refused naming it
+    with pytest.raises(IdentificationError, match=r"joint\(s\) \[1\]"):
+        identify("lwr4", [tr], method="ols", geometry="joint_zero", geometry_joints=[1, 2])
