@@ -192,6 +192,16 @@ def test_robot_out_needs_geometry_and_refuses_inputs(tmp_path):
         res.write_robot(ROOT / "robots" / "lwr4.toml", force=True)
     written = res.write_robot(tmp_path / "x.toml")
     assert written.geometry.robot_out == str(tmp_path / "x.toml")
+    # the JSON with its geometry block validates against docs/schemas/identify.schema.json
+    from tests.docs.jsonschema_lite import validate
+
+    schema = json.loads((ROOT / "docs" / "schemas" / "identify.schema.json").read_text())
+    d = json.loads(json.dumps(written.to_dict()))
+    assert d["geometry"]["robot_out"] == str(tmp_path / "x.toml")
+    assert validate(d, schema) == []
+    bad = json.loads(json.dumps(d))
+    bad["geometry"]["zeros"][0]["joint"] = "two"
+    assert validate(bad, schema)
     with pytest.raises(OutputError, match="exists"):
         res.write_robot(tmp_path / "x.toml")
     # a zero beyond 20 deg is no encoder zero error: never written into a robot file
