@@ -39,7 +39,7 @@ from ..observations.raw import full_rate_torque
 from ..observations.system import ObservationSystem
 from .systems import stack_systems
 
-__all__ = ["GEOMETRY_KINDS", "JOINT_ZERO_STEP", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
+__all__ = ["GEOMETRY_KINDS", "JOINT_ZERO_STEP", "LENGTH_FIELDS", "length_sensitivity", "length_visibility", "perturbed_robot", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
            "corrected_robot_text", "fit_zeros", "joint_zero_column", "joint_zero_secant", "joint_zero_visibility",
            "regressor_secant", "revolute_joints", "shift_zeros", "visible_zero_joints", "zero_identifiability",
            "zero_shares"]
@@ -521,3 +521,67 @@ def corrected_robot_text(robot, offsets: Mapping[int, float], *, note: str = "")
     if note:
         head.append(f"# {note}\n")
     return "".join(head) + "".join(lines)
+
+
+# ------------------------------------------------------------------------------------------------
+# link lengths (d, r of a frame): sensitivities by finite differences of the numeric Newton-Euler model
+# ------------------------------------------------------------------------------------------------
+#: the MDH lengths whose errors :func:`length_sensitivity` differentiates
+LENGTH_FIELDS = ("d", "r")
+
+
+def perturbed_robot(robot, frame: int, fld: str, delta: float):
+    """``robot`` with ``delta`` [m] added to the MDH length ``fld`` (``d`` or ``r``) of frame ``frame`` (its
+    ``j``); for a prismatic joint's ``r`` it is a zero error of the joint variable."""
+    import sympy as sp
+
+    if fld not in LENGTH_FIELDS:
+        raise IdentificationError(f"length error of frame {frame}: field {fld!r}, one of {', '.join(LENGTH_FIELDS)}")
+    rows = list(robot.rows)
+    hit = [k for k, r in enumerate(rows) if int(r.j) == int(frame)]
+    if not hit:
+        raise IdentificationError(f"length error: {robot.file}: no frame j = {frame}")
+    k = hit[0]
+    rows[k] = dc_replace(rows[k], **{fld: sp.sympify(getattr(rows[k], fld)) + sp.Float(delta)})
+    return dc_replace(robot, rows=tuple(rows))
+
+
+def length_sensitivity(robot, chi_std, q, dq, ddq, frame: int, fld: str, *, h: float = 1e-6,
+                       chi_payload=None) -> np.ndarray:
+    """``d tau / d L`` (shape (N, n)) of the MDH length ``L`` = ``fld`` (``d`` or ``r``) of frame ``frame``, at
+    the standard parameters ``chi_std``: a central difference (step ``h`` [m]) of the numeric Newton-Euler
+    torque (:func:`symoro_gen.dynamics.numeric.inverse_dynamics`) at the perturbed geometry. The generated
+    models do not emit ``d Y / d g`` (their regressor is symbolic in the joint variables only, the geometry
+    substituted), so a length error is differentiated on the standard parameters, not the base ones: the
+    base-parameter regrouping itself depends on the lengths (Khalil & Dombre 2002, ch. 12)."""
+    from ..dynamics.numeric import inverse_dynamics
+
+    plus = inverse_dynamics(perturbed_robot(robot, frame, fld, h), q, dq, ddq, chi_std, chi_payload)
+    minus = inverse_dynamics(perturbed_robot(robot, frame, fld, -h), q, dq, ddq, chi_std, chi_payload)
+    return (np.asarray(plus) - np.asarray(minus)) / (2 * h)
+
+
+def length_visibility(robot, frame: int, fld: str, *, rng: np.random.Generator | None = None,
+                      n_samples: int = 30, n_theta: int = 3) -> float:
+    """Share of the length sensitivity's norm outside the span of the standard regressor at the nominal
+    geometry (random configurations, random standard parameters; the smallest over ``n_theta``): 0 when the
+    inertial parameters absorb the length error (torque data cannot see it), as :func:`zero_shares` for zeros."""
+    from ..dynamics.numeric import numeric_regressor
+
+    rng = np.random.default_rng(0) if rng is None else rng
+    n = robot.n_joints
+    q, dq, ddq = _random_motion(n, n_samples, rng)
+    W, _ = numeric_regressor(robot, q, dq, ddq)
+    W = W.reshape(n_samples * n, -1)
+    U, s, _ = np.linalg.svd(W, full_matrices=False)
+    U = U[:, s > s[0] * 1e-10] if s.size and s[0] > 0 else U[:, :0]
+    shares = []
+    for _ in range(n_theta):
+        chi = rng.standard_normal(W.shape[1])
+        col = length_sensitivity(robot, chi, q, dq, ddq, frame, fld).reshape(-1)
+        nc = float(np.linalg.norm(col))
+        if nc <= 1e-9 * max(float(np.linalg.norm(W @ chi)), 1e-300):
+            shares.append(0.0)
+            continue
+        shares.append(float(np.linalg.norm(col - U @ (U.T @ col))) / nc)
+    return min(shares)

@@ -212,3 +212,41 @@ def test_robot_out_needs_geometry_and_refuses_inputs(tmp_path):
     # the joints chosen: an invisible one is refused naming it
     with pytest.raises(IdentificationError, match=r"joint\(s\) \[1\]"):
         identify("lwr4", [tr], method="ols", geometry="joint_zero", geometry_joints=[1, 2])
+
+
+@pytest.mark.parametrize("name,frame,fld", [("lwr4", 3, "r"), ("rx90", 3, "d")])
+def test_length_sensitivity_is_pinocchios_at_the_perturbed_geometry(name, frame, fld):
+    """The link-length sensitivity (central difference of the numeric Newton-Euler torque in the MDH length)
+    equals Pinocchio's central difference, each model built at the perturbed geometry; and at a finite
+    perturbation (1 cm) the numeric torque is Pinocchio's (the perturbed robot is a different arm: its torque
+    changes)."""
+    from symoro_gen.dynamics.numeric import inverse_dynamics
+    from symoro_gen.identification.geometry import length_sensitivity, perturbed_robot
+
+    robot = load_robot(name)
+    rng = np.random.default_rng(5)
+    chi, _ = random_parameters(robot, rng)
+    n = robot.n_joints
+    q, dq, ddq = rng.uniform(-math.pi, math.pi, (5, n)), rng.standard_normal((5, n)), rng.standard_normal((5, n))
+    S = length_sensitivity(robot, chi, q, dq, ddq, frame, fld)
+    h = 1e-5
+    ref = (pin_torque(perturbed_robot(robot, frame, fld, h), q, dq, ddq, chi)
+           - pin_torque(perturbed_robot(robot, frame, fld, -h), q, dq, ddq, chi)) / (2 * h)
+    assert np.abs(ref).max() > 1.0
+    np.testing.assert_allclose(S, ref, atol=1e-6 * np.abs(ref).max())
+    moved = perturbed_robot(robot, frame, fld, 0.01)
+    tau_moved = pin_torque(moved, q, dq, ddq, chi)
+    np.testing.assert_allclose(inverse_dynamics(moved, q, dq, ddq, chi), tau_moved, atol=1e-9 * np.abs(tau_moved).max())
+    assert np.abs(tau_moved - pin_torque(robot, q, dq, ddq, chi)).max() > 1e-3 * np.abs(tau_moved).max()
+
+
+@pytest.mark.slow
+def test_length_visibility():
+    """A translation of the whole LWR4 along its base axes (d, r of frame 1) changes no torque under uniform
+    gravity: invisible (share 0); the length of link 3 (r of frame 3) is visible."""
+    from symoro_gen.identification.geometry import length_visibility
+
+    robot = load_robot("lwr4")
+    assert length_visibility(robot, 1, "r") == 0.0
+    assert length_visibility(robot, 1, "d") == 0.0
+    assert length_visibility(robot, 3, "r") > 0.05
