@@ -315,6 +315,8 @@ class IdentifyResults(Results):
                          f"{max(a.stride for a in thinned)}-th row of each joint; the result's error norms use them all")
         if self.plausibility is not None:
             notes += [f"warning: {w}" for w in self.plausibility.warnings]
+        if self.geometry is not None:
+            notes += [line.strip() for line in self.geometry.summary(self.robot.name).splitlines()]
         if sys_v is not None and vl and any(n in sys_v.names for n in model.PAYLOAD_NAMES):
             try:
                 payload = identify_payload(sys_v, res, payload_names=[n for n in model.PAYLOAD_NAMES if n in sys_v.names],

@@ -188,6 +188,7 @@ def test_robot_out_needs_geometry_and_refuses_inputs(tmp_path):
         res.write_robot(tmp_path / "x.toml")
     res = identify("lwr4", [tr], method="ols", geometry="joint_zero", geometry_joints=[2])
     assert res.geometry.joints == (1,)
+    assert any(n.startswith("joint 2 zero offset") for n in res.report_content().notes)
     with pytest.raises(OutputError, match="input"):
         res.write_robot(ROOT / "robots" / "lwr4.toml", force=True)
     written = res.write_robot(tmp_path / "x.toml")
