@@ -51,6 +51,8 @@ GEOMETRY_KINDS = ("joint_zero",)
 MAX_ZERO_DEG = 20.0
 #: the Gauss-Newton iterations stop when every zero's step is below this fraction of its standard deviation
 STEP_FRACTION = 0.01
+#: halvings of a Gauss-Newton step that does not lower the weighted residual before the iterations stop
+MAX_HALVINGS = 5
 #: step [rad or m] of the central difference of the assembled prediction in a joint zero (the assembly's filters
 #: pass a constant shift of q unchanged, so the difference is that of the regressor at the filtered angles)
 ASSEMBLY_STEP = 1e-5
@@ -402,10 +404,14 @@ def fit_zeros(model: IdentificationModel, systems_at: SystemsAt, fit_at: FitAt, 
     if k == 0:
         return GeometryFit(joints=(), offsets=q0, std=np.zeros(0), revolute=(), iterations=0, converged=True,
                            steps=(), identifiability=vis)
+    cached = None
     while it < max_iterations:
         it += 1
-        su, sl = systems_at(q0)
-        res = fit_at(su, sl)
+        if cached is None:
+            su, sl = systems_at(q0)
+            res = fit_at(su, sl)
+        else:
+            su, sl, res = cached
         S = _stacked(su, sl)
         y = res.scaled_measurements(S)
         pred = res.predict(S)
@@ -431,12 +437,28 @@ def fit_zeros(model: IdentificationModel, systems_at: SystemsAt, fit_at: FitAt, 
         cov = float(e_res @ e_res) / dof * np.linalg.pinv(A.T @ A)
         sd = np.sqrt(np.maximum(np.diag(cov)[-k:], 0.0))
         step = sol[-k:]
-        q0 = q0 + step
         ratio = float(np.max(np.abs(step) / np.maximum(sd, 1e-300)))
         steps.append(ratio)
         if ratio <= step_fraction:
+            q0 = q0 + step
             converged = True
             break
+        # a step is taken only when the weighted residual of the linear fit at the new zeros decreases (halved
+        # up to MAX_HALVINGS times otherwise: Gauss-Newton with step halving, Dennis & Schnabel 1983, ch. 6)
+        rss = float(r @ r)
+        cached = None
+        for _ in range(MAX_HALVINGS + 1):
+            su2, sl2 = systems_at(q0 + step)
+            res2 = fit_at(su2, sl2)
+            S2 = _stacked(su2, sl2)
+            r2 = (res2.scaled_measurements(S2) - res2.predict(S2)) * w
+            if float(r2 @ r2) <= rss:
+                cached = (su2, sl2, res2)
+                break
+            step = step / 2
+        if cached is None:   # no descent along the Gauss-Newton direction: the zeros stay where they are
+            break
+        q0 = q0 + step
     return GeometryFit(joints=js, offsets=q0, std=sd, revolute=tuple(bool(rev[j]) for j in js), iterations=it,
                        converged=converged, steps=tuple(steps), identifiability=vis)
 

@@ -80,7 +80,6 @@ def test_identify_recovers_the_zeros(offset_data):
     assert res.validation["rel_err"][1] < 0.8 * plain.validation["rel_err"][1]
 
 
-@pytest.mark.slow
 def test_invisible_joints_are_not_fitted():
     """A short clean recording: the visible zeros only (LWR4 2-6) are fitted, each within 3 sigma of 0; the JSON
     names joints 1 and 7 as not identifiable with their reason (no torque change / absorbed by the base
