@@ -346,8 +346,8 @@ class GeometryFit:
             if self.revolute[k]:
                 lines.append(f"  joint {j + 1} zero offset {math.degrees(v):+.4f} deg (sigma {math.degrees(s):.4f} deg"
                              f"{', ' + f'{abs(v) / s:.1f}' + ' sigma from 0' if s > 0 else ''})"
-                             + (f"  IMPLAUSIBLE: beyond {MAX_ZERO_DEG:g} deg, no encoder zero error (the data do not "
-                                "determine it: a poor excitation?)" if abs(math.degrees(v)) > MAX_ZERO_DEG else ""))
+                             + (f"  IMPLAUSIBLE: beyond {MAX_ZERO_DEG:g} deg, no encoder zero error (it stands for another "
+                                "model error, a frame or sign convention, or the excitation does not determine it)" if abs(math.degrees(v)) > MAX_ZERO_DEG else ""))
             else:
                 lines.append(f"  joint {j + 1} zero offset {1e3 * v:+.4f} mm (sigma {1e3 * s:.4f} mm)")
         lines.append(identifiability_text(self.identifiability, robot or "the robot"))
