@@ -25,6 +25,7 @@ from ..errors import IdentificationError, OptionError
 from ..identification import fit_with_known_payload, identify_with_drive_gains, sensor_gains
 from ..identification import identify as fit
 from ..identification.didim import identify_didim
+from ..identification.elastic import POSITION_SIDES, link_side
 from ..identification.estimators import drop_unexcited, with_unexcited
 from ..identification.iv import identify_iv
 from ..identification.payload import fit_with_known_payload_factors, identify_payload
@@ -105,6 +106,9 @@ class IdentifyOptions(Options):
         nominal one (:mod:`symoro_gen.identification.plausibility`, docs/plausibility.md).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
+    positions : {"link", "motor"}
+        The logged positions are link-side (default) or motor-side ``q_m / N``: then the declared elastic
+        joints' link positions are ``positions - tau / K`` (:func:`symoro_gen.identification.elastic.link_side`).
     """
 
     method: str = "wls"
@@ -130,8 +134,11 @@ class IdentifyOptions(Options):
     nominal_tolerance: float | None = None
     bounded_bodies: bool = False
     data_format: LogFormat = field(default_factory=LogFormat)
+    positions: str = "link"
 
     def __post_init__(self) -> None:
+        if self.positions not in POSITION_SIDES:
+            raise OptionError(f"positions {self.positions!r}: one of {', '.join(POSITION_SIDES)}")
         if self.method not in METHODS:
             raise OptionError(f"method {self.method!r}: one of {', '.join(METHODS)}")
         if self.gains not in (None, "sensor", "drive"):
@@ -324,6 +331,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     if not data:
         raise OptionError("identify: no identification data given")
     unloaded, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
+    unloaded = _positions(opts, robot, unloaded)
     held_back: tuple = ()
     if opts.validate_fraction is not None:
         unloaded, held_back = hold_back(unloaded, opts.validate_fraction)
@@ -331,6 +339,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     loaded, rep_l = (as_trajectories(list(loaded_data), opts.data_format, robot, loaded=True)
                      if loaded_data else ((), ()))
     reports += rep_l
+    loaded = _positions(opts, robot, loaded)
     known = check_payload(opts.payload, model.PAYLOAD_NAMES)
     if (opts.gains or known) and not loaded:
         raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
@@ -389,6 +398,14 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
                            plausibility=plaus)
 
 
+def _positions(opts: IdentifyOptions, robot, trajectories) -> tuple:
+    """The recordings with link-side positions: as read, or (``positions="motor"``) corrected by ``tau / K`` on
+    the declared elastic joints ([LWR4-TLS] eq. 17)."""
+    if opts.positions == "motor" and trajectories:
+        return link_side(robot, trajectories)
+    return tuple(trajectories)
+
+
 def streams(opts: IdentifyOptions) -> bool:
     """Whether ``identify`` runs in bounded memory (:mod:`symoro_gen.identification.streaming`: the system
     folded into per-joint QR factors, the full-rate signals never kept): IDIM-OLS, -WLS and -TLS (the SVD
@@ -437,7 +454,7 @@ def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_ba
         return None, None, None
     vtr, rep_v = (as_trajectories(list(validate), opts.data_format, robot, loaded=opts.validate_loaded)
                   if validate else ((), ()))
-    vtr = tuple(held_back) + tuple(vtr)
+    vtr = tuple(held_back) + tuple(_positions(opts, robot, vtr))
     asm_v = _assemble(model, vtr, replace(asm_opts, min_velocity=None,
                                           payload_columns=bool(opts.validate_loaded) or has_payload), streamed)
     sys_v = asm_v.system
