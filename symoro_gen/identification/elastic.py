@@ -25,6 +25,7 @@ from ..description.model import RobotDescription
 from ..errors import OptionError
 from ..preprocessing.filtering import lowpass_positions
 from ..preprocessing.trajectory import Trajectory
+from .result import json_float
 
 __all__ = ["POSITION_SIDES", "StiffnessEstimate", "elastic_columns", "estimate_stiffness", "link_side"]
 
@@ -56,6 +57,10 @@ def link_side(robot: RobotDescription, trajectories: Sequence[Trajectory]) -> tu
     cols = _require_elastic(robot, "--positions motor")
     out = []
     for tr in trajectories:
+        if tr.deflection is not None:
+            raise OptionError(f"--positions motor: {tr.source} has a link-side position (q_link column): the model "
+                              "already uses it, leave --positions motor out (K and D are then estimated from the "
+                              "two encoders)")
         q = np.array(tr.q, float)
         for i, e in cols:
             q[:, i] = tr.q[:, i] - e.deflection(tr.tau[:, i])
@@ -85,7 +90,7 @@ class StiffnessEstimate:
         return {"method": "ols: tau = K delta + D d(delta)/dt + offset, delta = q_motor/N - q_link",
                 "samples": self.samples,
                 "joints": [{"joint": j, "K": k, "K_std": ks, "D": d, "D_std": ds, "offset": c,
-                            "declared_K": dk, "declared_D": dd, "rel_err": r}
+                            "declared_K": dk, "declared_D": dd, "rel_err": json_float(r)}
                            for j, k, ks, d, ds, c, dk, dd, r in zip(self.joints, self.K, self.K_std, self.D,
                                                                      self.D_std, self.offset, self.declared_K,
                                                                      self.declared_D, self.rel_err)]}

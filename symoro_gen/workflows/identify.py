@@ -25,7 +25,7 @@ from ..errors import IdentificationError, OptionError
 from ..identification import fit_with_known_payload, identify_with_drive_gains, sensor_gains
 from ..identification import identify as fit
 from ..identification.didim import identify_didim
-from ..identification.elastic import POSITION_SIDES, link_side
+from ..identification.elastic import POSITION_SIDES, StiffnessEstimate, estimate_stiffness, link_side
 from ..identification.estimators import drop_unexcited, with_unexcited
 from ..identification.iv import identify_iv
 from ..identification.payload import fit_with_known_payload_factors, identify_payload
@@ -191,6 +191,7 @@ class IdentifyResults(Results):
     held_back: tuple[str, ...] = ()
     inputs: tuple[Any, ...] = ()
     plausibility: Plausibility | None = None
+    elasticity: StiffnessEstimate | None = None
 
     # ---- the JSON ---------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -220,6 +221,8 @@ class IdentifyResults(Results):
         if self.plausibility is not None:
             out["plausibility"] = self.plausibility.to_dict()
             out["warnings"] = list(out["warnings"]) + list(self.plausibility.warnings)
+        if self.elasticity is not None:
+            out["elasticity"] = self.elasticity.to_dict()
         out["provenance"] = provenance(self.options, self.inputs)
         return out
 
@@ -247,6 +250,8 @@ class IdentifyResults(Results):
         if self.plausibility is not None and self.plausibility.warnings:
             text += ("\n\nPlausibility of the bodies (nominal values, the links' boxes, signs; docs/plausibility.md):\n"
                      + self.plausibility.summary())
+        if self.elasticity is not None:
+            text += "\n\n" + self.elasticity.summary()
         return text + "\n\n" + data_text(self.reports)
 
     # ---- report and figures -------------------------------------------------------------------------
@@ -341,6 +346,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     reports += rep_l
     loaded = _positions(opts, robot, loaded)
     known = check_payload(opts.payload, model.PAYLOAD_NAMES)
+    elasticity = _elasticity(opts, robot, (*unloaded, *loaded))
     if (opts.gains or known) and not loaded:
         raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
     notes = recording_warnings(robot, (*unloaded, *loaded), held=opts.drop_unexcited, dropped=opts.drop_saturated)
@@ -395,7 +401,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
                            assemblies={"unloaded": asm_u, "loaded": asm_l, "validation": asm_v}, drive=dg,
                            closed=closed, physical=phys, unconstrained=res_u, validation=validation,
                            reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs,
-                           plausibility=plaus)
+                           plausibility=plaus, elasticity=elasticity)
 
 
 def _positions(opts: IdentifyOptions, robot, trajectories) -> tuple:
@@ -404,6 +410,14 @@ def _positions(opts: IdentifyOptions, robot, trajectories) -> tuple:
     if opts.positions == "motor" and trajectories:
         return link_side(robot, trajectories)
     return tuple(trajectories)
+
+
+def _elasticity(opts: IdentifyOptions, robot, trajectories) -> StiffnessEstimate | None:
+    """``K``, ``D`` of the declared elastic joints from the recordings with two encoders (a measured deflection),
+    None when the robot declares no elastic joint or no recording has a link-side position."""
+    if not robot.elastic or not any(tr.deflection is not None for tr in trajectories):
+        return None
+    return estimate_stiffness(robot, trajectories, cutoff_hz=opts.cutoff)
 
 
 def streams(opts: IdentifyOptions) -> bool:
