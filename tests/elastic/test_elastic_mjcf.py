@@ -71,3 +71,28 @@ def test_deflection_at_rest_under_gravity_is_tau_over_k(seed):
     # a deflection 1 % off (or of the other sign) does not hold the arm
     assert np.max(np.abs(acc(1.01 * defl))) > 100 * np.max(np.abs(still))
     assert np.max(np.abs(acc(-defl)[0])) > 1.0
+
+
+def test_motor_side_pd_settles_with_the_link_at_its_target():
+    """A PD on the rotor with gravity compensation, the rotor target ahead of the link target by tau/K (the
+    regulator of elastic-joint robots: Tomei, IEEE TAC 36(10), 1991): the link settles at its target only if the
+    exported transmission passes K (theta - q) to it."""
+    robot, chi = _robot_and_chi()
+    text = lwr4_elastic_text().replace("elastic = {K = 10000}", "elastic = {K = 10000, D = 30}")
+    robot = parse_robot_text(text.replace("elastic = {K = 7500}", "elastic = {K = 7500, D = 10}"))
+    m = _model(robot, chi)
+    d = mujoco.MjData(m)
+    q_d = np.array([0.3, 0.8, -0.4, -1.0, 0.5, 0.6, -0.2])
+    tau = true_torques(robot, q_d[None], np.zeros((1, 7)), np.zeros((1, 7)), chi, robot.nominal_payload())[0]
+    tau -= chi[[robot.standard_names.index(f"OFF{j}") for j in range(1, 8)]]
+    link, rot = _ids(m, "joint", 7), _ids(m, "rotor", 7)
+    rot_dof = [m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"rotor{j}")] for j in range(1, 8)]
+    theta_d = q_d + tau / np.array(LWR4_K)
+    d.qpos[link] = q_d - 0.05
+    d.qpos[rot] = q_d - 0.05
+    kp, kd = 2000.0, 60.0
+    for _ in range(4000):
+        d.ctrl[:] = tau + kp * (theta_d - d.qpos[rot]) - kd * d.qvel[rot_dof]
+        mujoco.mj_step(m, d)
+    np.testing.assert_allclose(d.qpos[link], q_d, atol=1e-5)
+    np.testing.assert_allclose(d.qpos[rot] - d.qpos[link], tau / np.array(LWR4_K), rtol=0.01, atol=1e-6)
