@@ -28,7 +28,8 @@ def options_from_args(args) -> IdentifyOptions:
         max_iter=args.max_iter, start=args.start, physical=getattr(args, "physical", False),
         nominal_tolerance=getattr(args, "nominal_tolerance", None),
         bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args),
-        geometry=getattr(args, "geometry", None), geometry_joints=getattr(args, "geometry_joints", None))
+        geometry=getattr(args, "geometry", None), geometry_joints=getattr(args, "geometry_joints", None),
+        positions=getattr(args, "positions", "link"))
 
 
 def run(args) -> int:
@@ -118,6 +119,10 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--robot-out", metavar="PATH",
                    help="with --geometry: write the robot file with the identified zeros added to the frames' theta "
                         "(r) here (never over the input robot file; an existing file only with --force)")
+    p.add_argument("--positions", choices=("link", "motor"), default="link",
+                   help="side of the logged positions: link (default) or motor (q_m/N, e.g. the LWR4's): then the "
+                        "declared elastic joints' link positions are q = positions - tau/K (robot file: elastic = "
+                        "{K = ...}; LWR4 paper eq. 17), velocities and accelerations from them")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "

@@ -4,10 +4,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, param_name
+
+if TYPE_CHECKING:
+    from .elastic import ElasticJoint
 
 REVOLUTE, PRISMATIC, FIXED = 0, 1, 2
 
@@ -164,6 +168,8 @@ class RobotDescription:
     loops: tuple[LoopClosure, ...] = ()
     loop_reference: Mapping[str, float] = field(default_factory=dict)
     couplings: tuple[Coupling, ...] = ()
+    #: the declared elastic joints (``elastic`` tables; :mod:`symoro_gen.description.elastic`), joint order
+    elastic: tuple[ElasticJoint, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "values", MappingProxyType(dict(self.values)))
@@ -200,6 +206,10 @@ class RobotDescription:
         """True for a robot whose model is its tree's projected on the actuated joints: closed loops
         (``[[loops]]``) or coupled joints (``mimic``), see :mod:`symoro_gen.closedloop`."""
         return bool(self.loops or self.couplings)
+
+    def elastic_joint(self, j: int) -> ElasticJoint | None:
+        """The declared elasticity of joint ``j`` (an ``elastic`` table), or None for a rigid joint."""
+        return next((e for e in self.elastic if e.joint == j), None)
 
     def coupling(self, j: int) -> Coupling | None:
         """The coupling of frame ``j`` (a mimic joint), or None."""
