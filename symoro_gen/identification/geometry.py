@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from ..dynamics.numeric import inverse_dynamics, numeric_regressor
 from ..errors import IdentificationError, Problem, RobotFileError
 from ..model import IdentificationModel
 from ..observations.raw import full_rate_torque
@@ -576,8 +577,6 @@ def length_sensitivity(robot, chi_std, q, dq, ddq, frame: int, fld: str, *, h: f
     models do not emit ``d Y / d g`` (their regressor is symbolic in the joint variables only, the geometry
     substituted), so a length error is differentiated on the standard parameters, not the base ones: the
     base-parameter regrouping itself depends on the lengths (Khalil & Dombre 2002, ch. 12)."""
-    from ..dynamics.numeric import inverse_dynamics
-
     plus = inverse_dynamics(perturbed_robot(robot, frame, fld, h), q, dq, ddq, chi_std, chi_payload)
     minus = inverse_dynamics(perturbed_robot(robot, frame, fld, -h), q, dq, ddq, chi_std, chi_payload)
     return (np.asarray(plus) - np.asarray(minus)) / (2 * h)
@@ -588,8 +587,6 @@ def length_visibility(robot, frame: int, fld: str, *, rng: np.random.Generator |
     """Share of the length sensitivity's norm outside the span of the standard regressor at the nominal
     geometry (random configurations, random standard parameters; the smallest over ``n_theta``): 0 when the
     inertial parameters absorb the length error (torque data cannot see it), as :func:`zero_shares` for zeros."""
-    from ..dynamics.numeric import numeric_regressor
-
     rng = np.random.default_rng(0) if rng is None else rng
     n = robot.n_joints
     q, dq, ddq = _random_motion(n, n_samples, rng)
