@@ -27,7 +27,7 @@ from ..diagnostics.core import diagnose as run_loop
 from ..diagnostics.render import diagnosis_blocks, diagnosis_html
 from ..diagnostics.report import ResidualReport
 from ..errors import IdentificationError, OptionError
-from ..identification.elastic import elastic_columns
+from ..identification.elastic import POSITION_SIDES, elastic_columns, link_side
 from ..identification.estimators import still_joints
 from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
@@ -85,6 +85,11 @@ class DiagnoseOptions(Options):
         or plateaus at the column's extreme: :func:`~symoro_gen.preprocessing.motion.saturation_mask`).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
+    positions : {"link", "motor"}
+        The logged positions are link-side (default) or motor-side ``q_m / N``: then the declared elastic
+        joints' link positions are ``positions - tau / K`` ([LWR4-TLS] eq. 17), as in ``identify --positions``
+        (:func:`symoro_gen.identification.elastic.link_side`), in every recording (identification, loaded,
+        validation).
     """
 
     method: str = "ols"
@@ -98,10 +103,13 @@ class DiagnoseOptions(Options):
     payload: Mapping[str, float] = field(default_factory=dict)
     data_format: LogFormat = field(default_factory=LogFormat)
     drop_saturated: bool = False
+    positions: str = "link"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise OptionError(f"method {self.method!r}: one of {', '.join(METHODS)}")
+        if self.positions not in POSITION_SIDES:
+            raise OptionError(f"--positions {self.positions!r}: one of {', '.join(POSITION_SIDES)}")
         if self.candidates is not None:
             object.__setattr__(self, "candidates", tuple(self.candidates))
             for k in self.candidates:
@@ -274,6 +282,8 @@ def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> Diag
                                unexcited_option=False)
     valid, rep_v = as_trajectories(list(validate), opts.data_format, robot) if validate else ((), ())
     reports += rep_v
+    if opts.positions == "motor":  # motor-side positions: the link side of the declared elastic joints
+        ident, loaded, valid = (link_side(robot, trs) if trs else tuple(trs) for trs in (ident, loaded, valid))
     settings = replace(opts.settings(), declared_elastic=tuple(i for i, _ in elastic_columns(robot)))
     residual = run_loop(model, ident, settings, validation=valid if validate else None,
                         loaded=loaded if loaded_data else None, payload=known,
