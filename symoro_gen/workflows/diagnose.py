@@ -27,7 +27,13 @@ from ..diagnostics.core import diagnose as run_loop
 from ..diagnostics.render import diagnosis_blocks, diagnosis_html
 from ..diagnostics.report import ResidualReport
 from ..errors import IdentificationError, OptionError
-from ..identification.elastic import POSITION_SIDES, elastic_columns, link_side
+from ..identification.elastic import (
+    POSITION_SIDES,
+    ElasticDeclaration,
+    elastic_columns,
+    elastic_declarations,
+    link_side,
+)
 from ..identification.estimators import still_joints
 from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
@@ -178,12 +184,25 @@ class DiagnoseResults(Results):
         out["data"] = [r.to_dict() for r in self.reports]  # per file: path, rows read, dropped, resampled
         out["validate"] = _names(self.validate)
         out["loaded"] = _names(self.loaded)
+        out["robot_file"] = [d.to_dict() for d in self.declarations()]
         out["provenance"] = provenance(self.options, self.inputs, seeds={"seed": self.options.seed})
         return out
 
+    def declarations(self) -> list[ElasticDeclaration]:
+        """The robot-file lines that declare what the loop found as a property of the robot: the stiffness of
+        each ``elasticity`` effect (``elastic = {K = ...}`` on its joint's frame,
+        :func:`~symoro_gen.identification.elastic.elastic_declarations`)."""
+        return elastic_declarations(self.robot, self.residual.effects)
+
     def summary(self) -> str:
         """Exactly the text ``symoro-gen diagnose`` prints."""
-        return self.residual.summary() + "\n\n" + data_text(self.reports)
+        decl = self.declarations()
+        block = ""
+        if decl:
+            block = ("To the robot file (declared, the joint is modelled as elastic and its elasticity candidate is "
+                     "no longer offered; with one motor-side encoder run with --positions motor, "
+                     "docs/robot-file.md#elastic-joints):\n" + "\n".join(f"  {d.text()}" for d in decl) + "\n\n")
+        return self.residual.summary() + "\n\n" + block + data_text(self.reports)
 
     def _repr_html_(self) -> str:
         """The diagnosis' tables (Jupyter)."""

@@ -6,7 +6,8 @@ dynamics ``M(q) ddq + c(q, dq) + g(q) + f(dq) = tau_J`` (here Pinocchio's RNEA a
 trajectory, plus the truth bench's Coulomb + viscous joint friction), the transmitted (joint-sensor) torque
 is ``tau_J = K (theta - q) + D (dtheta - dq)``, ``theta`` the motor position on the joint side. So the
 deflection ``delta = theta - q`` obeys ``D ddelta/dt + K delta = tau_J``: integrated here exactly for a torque
-linear between samples (``scipy.signal.lsim``), from the static deflection ``tau_J(0) / K``.
+linear between samples (``scipy.signal.lsim``), from the static deflection ``tau_J(0) / K`` (``D = 0``: the
+static deflection ``tau_J / K`` throughout).
 
 A *two-encoder* log has the motor position ``theta``, the link position ``q`` and ``tau_J``; the *one-encoder*
 log (case 8 of the truth bench: the LWR4's own ``positions``) has ``theta`` and ``tau_J`` only.
@@ -71,9 +72,12 @@ def elastic_log(seed: int, seconds: float = 20.0, rate: float = 250.0, *, K: flo
     tau = tau_r + truth.friction(t, dq, tau_r, float(t[-1]))
     delta = np.zeros_like(q)
     tj = tau[:, joint]
-    sys_ = signal.StateSpace([[-K / D]], [[1.0 / D]], [[1.0]], [[0.0]])
-    _, y, _ = signal.lsim(sys_, tj, t, X0=[tj[0] / K])
-    delta[:, joint] = y
+    if D > 0:
+        sys_ = signal.StateSpace([[-K / D]], [[1.0 / D]], [[1.0]], [[0.0]])
+        _, y, _ = signal.lsim(sys_, tj, t, X0=[tj[0] / K])
+        delta[:, joint] = y
+    else:   # no damping: the static deflection
+        delta[:, joint] = tj / K
     theta = q + delta + SIGMA_Q * rng.standard_normal(q.shape)
     q_link = q + SIGMA_Q * rng.standard_normal(q.shape)
     tau_meas = tau + SIGMA_TAU * rng.standard_normal(tau.shape)
