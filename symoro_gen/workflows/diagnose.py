@@ -194,15 +194,19 @@ class DiagnoseResults(Results):
         :func:`~symoro_gen.identification.elastic.elastic_declarations`)."""
         return elastic_declarations(self.robot, self.residual.effects)
 
+    def declaration_text(self) -> str:
+        """The text block of :meth:`declarations` (empty when there is none)."""
+        decl = self.declarations()
+        if not decl:
+            return ""
+        return ("To the robot file (declared, the joint is modelled as elastic and its elasticity candidate is no "
+                "longer offered; with one motor-side encoder run with --positions motor, "
+                "docs/robot-file.md#elastic-joints):\n" + "\n".join(f"  {d.text()}" for d in decl))
+
     def summary(self) -> str:
         """Exactly the text ``symoro-gen diagnose`` prints."""
-        decl = self.declarations()
-        block = ""
-        if decl:
-            block = ("To the robot file (declared, the joint is modelled as elastic and its elasticity candidate is "
-                     "no longer offered; with one motor-side encoder run with --positions motor, "
-                     "docs/robot-file.md#elastic-joints):\n" + "\n".join(f"  {d.text()}" for d in decl) + "\n\n")
-        return self.residual.summary() + "\n\n" + block + data_text(self.reports)
+        block = self.declaration_text()
+        return self.residual.summary() + "\n\n" + (block + "\n\n" if block else "") + data_text(self.reports)
 
     def _repr_html_(self) -> str:
         """The diagnosis' tables (Jupyter)."""
@@ -213,7 +217,9 @@ class DiagnoseResults(Results):
         before and after each effect against the signal that revealed it; ``.html`` or ``.md``."""
         sources = {"identification data": _names(self.data), "loaded": _names(self.loaded),
                    "validation data": _names(self.validate)}
-        content = ReportContent(robot=self.robot.name, sources=sources, text=self.residual.summary(),
+        block = self.declaration_text()
+        content = ReportContent(robot=self.robot.name, sources=sources,
+                                text=self.residual.summary() + ("\n\n" + block if block else ""),
                                 notes=data_notes(self.reports))
         self.check_output(path, force=force, label="report", report=True)
         return write_report(path, diagnosis=self.residual, content=content, force=force)

@@ -69,6 +69,7 @@ def test_found_elasticity_is_declared_and_then_replaces_the_candidate(tmp_path):
     check(out, "diagnose")
     assert out["robot_file"] == [d.to_dict()] and out["robot_file"][0]["line"] == d.line
     assert d.line in first.summary() and "--positions motor" in first.summary()
+    assert d.line in first.report(tmp_path / "first.md").read_text()
 
     # the line, added to frame 4 of the robot file, declares the joint with that stiffness
     text = (robots_dir() / "lwr4.toml").read_text().replace('name = "lwr4"', 'name = "lwr4_found"', 1)
