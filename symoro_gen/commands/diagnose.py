@@ -1,7 +1,7 @@
 """``symoro-gen diagnose``: identify, find what the residual says the model misses, add it, re-identify.
 
     symoro-gen diagnose ROBOT DATA... [--loaded DATA... [--payload NAME=VALUE...]] [--validate DATA...]
-                        [--method ols|wls|tls] [--json OUT]
+                        [--method ols|wls|tls] [--positions link|motor] [--json OUT]
                         [--report OUT.md|OUT.html] [--plots DIR]
 
 A leaf: the arguments become :class:`~symoro_gen.workflows.diagnose.DiagnoseOptions`, the workflow
@@ -35,7 +35,7 @@ def options_from_args(args) -> DiagnoseOptions:
         method=args.method, candidates=tuple(args.candidates) if args.candidates else None,
         significance=args.significance, max_effects=args.max_effects, holdout=args.holdout, cutoff=args.cutoff,
         decimate=args.decimate, seed=args.seed, payload=parse_payload(args.payload),
-        drop_saturated=args.drop_saturated,
+        drop_saturated=args.drop_saturated, positions=getattr(args, "positions", "link"),
         data_format=format_from_args(args))
 
 
@@ -87,6 +87,10 @@ def add_parser(sub) -> None:
     p.add_argument("--drop-saturated", action="store_true",
                    help="leave out the rows of each joint whose torque is saturated: at the robot file's [limits] tau_max, or "
                         "in plateaus of >= 5 samples at the column's extreme (docs/data-files.md)")
+    p.add_argument("--positions", choices=("link", "motor"), default="link",
+                   help="side of the logged positions: link (default) or motor (q_m/N, e.g. the LWR4's): then the "
+                        "declared elastic joints' link positions are q = positions - tau/K, as in identify "
+                        "(robot file: elastic = {K = ...}, docs/robot-file.md#elastic-joints)")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.md|OUT.html", help="write a report (tables and plots) here")
     p.add_argument("--plots", metavar="DIR", help="write the plots as PNG files in this folder")

@@ -42,6 +42,14 @@ class ElasticJoint:
         number)."""
         return tau / self.K
 
+    def declaration(self, digits: int = 3) -> str:
+        """The robot-file line that declares this joint elastic (on its frame ``j = joint``), ``K`` and ``D`` to
+        ``digits`` significant digits, ``D`` left out when 0 (its default): ``elastic = {K = 2820}``."""
+        def num(x: float) -> str:
+            return f"{float(f'{x:.{digits}g}'):g}"
+
+        return "elastic = {K = " + num(self.K) + (f", D = {num(self.D)}" if self.D > 0 else "") + "}"
+
 
 def _number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and abs(v) <= _MAX

@@ -12,11 +12,16 @@ Spong's flexible-joint model ([Spong1987]): the transmission of an elastic joint
   of each declared elastic joint by linear least squares of the transmitted torque ``tau`` on the deflection
   ``delta = q_m / N - q_link`` and its rate, ``tau = K delta + D ddelta + c`` (``c``: a torque offset), with the
   OLS standard deviations from the residual ([GB-gains] eq. 17-21).
+* :func:`elastic_declarations` (``diagnose``): when the loop finds ``elasticity`` on a joint read by one encoder
+  (the recorded position is ``q + c tau``, ``K = 1/c``), the robot-file line that declares it
+  (``elastic = {K = ...}`` on the joint's frame): declared, the joint is modelled as elastic and the candidate is
+  no longer offered (with ``--positions motor`` the positions are corrected by ``tau/K``).
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +32,8 @@ from ..preprocessing.filtering import lowpass_positions
 from ..preprocessing.trajectory import Trajectory
 from .result import json_float
 
-__all__ = ["POSITION_SIDES", "StiffnessEstimate", "elastic_columns", "estimate_stiffness", "link_side"]
+__all__ = ["POSITION_SIDES", "ElasticDeclaration", "StiffnessEstimate", "elastic_columns", "elastic_declarations",
+           "estimate_stiffness", "link_side"]
 
 #: the values of ``identify --positions``: the logged positions are link-side (default) or motor-side
 POSITION_SIDES = ("link", "motor")
@@ -160,3 +166,51 @@ def estimate_stiffness(robot: RobotDescription, trajectories: Sequence[Trajector
                              D=tuple(out["D"]), D_std=tuple(out["D_std"]), offset=tuple(out["c"]),
                              declared_K=tuple(e.K for _, e in cols), declared_D=tuple(e.D for _, e in cols),
                              rel_err=tuple(out["r"]), samples=n_rows)
+
+
+@dataclass(frozen=True)
+class ElasticDeclaration:
+    """The robot-file declaration of a stiffness the loop found: frame ``frame`` (the joint's ``j``), column
+    ``joint`` (0-based), ``K`` with its standard deviation ``K_std`` (``sigma_c / c^2``: the first-order
+    propagation of the loop's standard deviation of the compliance ``c = 1/K``), the effect's ``verdict`` and
+    ``label``, and the ``line`` to add to the frame (:meth:`ElasticJoint.declaration`)."""
+
+    frame: int
+    joint: int
+    K: float
+    K_std: float
+    verdict: str
+    label: str
+    line: str
+
+    def to_dict(self) -> dict:
+        """One entry of ``robot_file`` in diagnose's JSON (docs/json-output.md); ``joint`` 1-based."""
+        return {"kind": "elastic", "frame": self.frame, "joint": self.joint + 1, "line": self.line,
+                "K": json_float(self.K), "K_std": json_float(self.K_std), "verdict": self.verdict or None,
+                "effect": self.label}
+
+    def text(self) -> str:
+        """``frame 4: elastic = {K = 2820}   (K = 2818 +- 178 N m/rad; effect elasticity4, doubtful)``."""
+        v = f", {self.verdict}" if self.verdict else ""
+        return (f"frame {self.frame} (joint {self.joint + 1}): {self.line}   (K = {self.K:.4g} +- {self.K_std:.2g} "
+                f"N m/rad; effect {self.label}{v})")
+
+
+def elastic_declarations(robot: RobotDescription, effects: Sequence[Any]) -> list[ElasticDeclaration]:
+    """The robot-file lines declaring the stiffnesses of the loop's plain ``elasticity`` effects (``effects``:
+    :class:`symoro_gen.diagnostics.report.Effect`; one joint, no modulation, a positive finite ``K = 1/c``).
+    The loop's model of a motor-side encoder is static (``q_recorded = q + c tau``): no damping is proposed
+    (``D`` stays at its default 0)."""
+    joints = robot.model_joints
+    out = []
+    for e in effects:
+        if e.kind != "elasticity" or e.joint is None or e.modulation is not None or not len(e.values):
+            continue
+        c, sc = float(e.values[0]), float(e.std[0]) if len(e.std) else float("nan")
+        if not (np.isfinite(c) and c > 0) or not 0 <= e.joint < len(joints):
+            continue
+        K = 1.0 / c
+        decl = ElasticJoint(joints[e.joint].j, K)
+        out.append(ElasticDeclaration(frame=decl.joint, joint=int(e.joint), K=K, K_std=sc / c ** 2,
+                                      verdict=str(e.verdict or ""), label=str(e.label), line=decl.declaration()))
+    return out

@@ -27,7 +27,13 @@ from ..diagnostics.core import diagnose as run_loop
 from ..diagnostics.render import diagnosis_blocks, diagnosis_html
 from ..diagnostics.report import ResidualReport
 from ..errors import IdentificationError, OptionError
-from ..identification.elastic import elastic_columns
+from ..identification.elastic import (
+    POSITION_SIDES,
+    ElasticDeclaration,
+    elastic_columns,
+    elastic_declarations,
+    link_side,
+)
 from ..identification.estimators import still_joints
 from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
@@ -85,6 +91,11 @@ class DiagnoseOptions(Options):
         or plateaus at the column's extreme: :func:`~symoro_gen.preprocessing.motion.saturation_mask`).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
+    positions : {"link", "motor"}
+        The logged positions are link-side (default) or motor-side ``q_m / N``: then the declared elastic
+        joints' link positions are ``positions - tau / K`` ([LWR4-TLS] eq. 17), as in ``identify --positions``
+        (:func:`symoro_gen.identification.elastic.link_side`), in every recording (identification, loaded,
+        validation).
     """
 
     method: str = "ols"
@@ -98,10 +109,13 @@ class DiagnoseOptions(Options):
     payload: Mapping[str, float] = field(default_factory=dict)
     data_format: LogFormat = field(default_factory=LogFormat)
     drop_saturated: bool = False
+    positions: str = "link"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise OptionError(f"method {self.method!r}: one of {', '.join(METHODS)}")
+        if self.positions not in POSITION_SIDES:
+            raise OptionError(f"--positions {self.positions!r}: one of {', '.join(POSITION_SIDES)}")
         if self.candidates is not None:
             object.__setattr__(self, "candidates", tuple(self.candidates))
             for k in self.candidates:
@@ -170,12 +184,29 @@ class DiagnoseResults(Results):
         out["data"] = [r.to_dict() for r in self.reports]  # per file: path, rows read, dropped, resampled
         out["validate"] = _names(self.validate)
         out["loaded"] = _names(self.loaded)
+        out["robot_file"] = [d.to_dict() for d in self.declarations()]
         out["provenance"] = provenance(self.options, self.inputs, seeds={"seed": self.options.seed})
         return out
 
+    def declarations(self) -> list[ElasticDeclaration]:
+        """The robot-file lines that declare what the loop found as a property of the robot: the stiffness of
+        each ``elasticity`` effect (``elastic = {K = ...}`` on its joint's frame,
+        :func:`~symoro_gen.identification.elastic.elastic_declarations`)."""
+        return elastic_declarations(self.robot, self.residual.effects)
+
+    def declaration_text(self) -> str:
+        """The text block of :meth:`declarations` (empty when there is none)."""
+        decl = self.declarations()
+        if not decl:
+            return ""
+        return ("To the robot file (declared, the joint is modelled as elastic and its elasticity candidate is no "
+                "longer offered; with one motor-side encoder run with --positions motor, "
+                "docs/robot-file.md#elastic-joints):\n" + "\n".join(f"  {d.text()}" for d in decl))
+
     def summary(self) -> str:
         """Exactly the text ``symoro-gen diagnose`` prints."""
-        return self.residual.summary() + "\n\n" + data_text(self.reports)
+        block = self.declaration_text()
+        return self.residual.summary() + "\n\n" + (block + "\n\n" if block else "") + data_text(self.reports)
 
     def _repr_html_(self) -> str:
         """The diagnosis' tables (Jupyter)."""
@@ -186,7 +217,9 @@ class DiagnoseResults(Results):
         before and after each effect against the signal that revealed it; ``.html`` or ``.md``."""
         sources = {"identification data": _names(self.data), "loaded": _names(self.loaded),
                    "validation data": _names(self.validate)}
-        content = ReportContent(robot=self.robot.name, sources=sources, text=self.residual.summary(),
+        block = self.declaration_text()
+        content = ReportContent(robot=self.robot.name, sources=sources,
+                                text=self.residual.summary() + ("\n\n" + block if block else ""),
                                 notes=data_notes(self.reports))
         self.check_output(path, force=force, label="report", report=True)
         return write_report(path, diagnosis=self.residual, content=content, force=force)
@@ -274,6 +307,8 @@ def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> Diag
                                unexcited_option=False)
     valid, rep_v = as_trajectories(list(validate), opts.data_format, robot) if validate else ((), ())
     reports += rep_v
+    if opts.positions == "motor":  # motor-side positions: the link side of the declared elastic joints
+        ident, loaded, valid = (link_side(robot, trs) if trs else tuple(trs) for trs in (ident, loaded, valid))
     settings = replace(opts.settings(), declared_elastic=tuple(i for i, _ in elastic_columns(robot)))
     residual = run_loop(model, ident, settings, validation=valid if validate else None,
                         loaded=loaded if loaded_data else None, payload=known,
