@@ -8,6 +8,7 @@ from types import MappingProxyType
 import sympy as sp
 
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, param_name
+from .friction_law import FrictionLaw
 
 REVOLUTE, PRISMATIC, FIXED = 0, 1, 2
 
@@ -164,6 +165,8 @@ class RobotDescription:
     loops: tuple[LoopClosure, ...] = ()
     loop_reference: Mapping[str, float] = field(default_factory=dict)
     couplings: tuple[Coupling, ...] = ()
+    #: declared friction laws by frame number (``friction_law`` field, :mod:`.friction_law`)
+    friction_laws: Mapping[int, FrictionLaw] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "values", MappingProxyType(dict(self.values)))
