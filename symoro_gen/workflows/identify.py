@@ -26,6 +26,7 @@ from ..identification import fit_with_known_payload, identify_with_drive_gains, 
 from ..identification import identify as fit
 from ..identification.didim import identify_didim
 from ..identification.estimators import drop_unexcited, with_unexcited
+from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_laws, refine_scales
 from ..identification.iv import identify_iv
 from ..identification.payload import fit_with_known_payload_factors, identify_payload
 from ..identification.physical import identify_physical
@@ -184,6 +185,7 @@ class IdentifyResults(Results):
     held_back: tuple[str, ...] = ()
     inputs: tuple[Any, ...] = ()
     plausibility: Plausibility | None = None
+    friction_laws: tuple[ScaleFit, ...] = ()
 
     # ---- the JSON ---------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -213,6 +215,8 @@ class IdentifyResults(Results):
         if self.plausibility is not None:
             out["plausibility"] = self.plausibility.to_dict()
             out["warnings"] = list(out["warnings"]) + list(self.plausibility.warnings)
+        if self.friction_laws:
+            out["friction_laws"] = [f.to_dict() for f in self.friction_laws]
         out["provenance"] = provenance(self.options, self.inputs)
         return out
 
@@ -220,6 +224,10 @@ class IdentifyResults(Results):
     def summary(self) -> str:
         """Exactly the text ``symoro-gen identify`` prints."""
         text = self.result.summary()
+        if self.friction_laws:
+            text += ("\n\nDeclared friction laws (scale refined by Gauss-Newton on the identification data; the "
+                     "magnitudes' standard deviations with the scale free):\n"
+                     + "\n".join(f.summary() for f in self.friction_laws))
         if self.closed is not None:
             text = self.closed.summary() + "\n\n" + text
         v = self.validation
@@ -341,6 +349,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     asm_opts = AssemblyOptions(cutoff_hz=opts.cutoff, n_d=opts.decimate, min_velocity=opts.min_velocity,
                                drop_saturated=opts.drop_saturated, tau_limits=torque_limits(robot))
     streamed = streams(opts)
+    model, law_fits = _declared_friction(robot, model, unloaded, replace(asm_opts, payload_columns=False), opts)
     asm_u = _assemble(model, unloaded, replace(asm_opts, payload_columns=False), streamed)
     asm_l = _assemble(model, loaded, replace(asm_opts, payload_columns=True), streamed) if loaded else None
     # a joint that stands still leaves columns of W zero: an error naming the files, or drop_unexcited
@@ -386,7 +395,22 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
                            assemblies={"unloaded": asm_u, "loaded": asm_l, "validation": asm_v}, drive=dg,
                            closed=closed, physical=phys, unconstrained=res_u, validation=validation,
                            reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs,
-                           plausibility=plaus)
+                           plausibility=plaus, friction_laws=law_fits)
+
+
+def _declared_friction(robot, model: IdentificationModel, trajectories, options: AssemblyOptions,
+                       opts: IdentifyOptions) -> tuple[IdentificationModel, tuple[ScaleFit, ...]]:
+    """The model with the robot file's declared friction laws (``friction_law``) in place of their joints'
+    ``FS``/``FV`` columns, at the scales refined on the identification recordings
+    (:func:`~symoro_gen.identification.friction_law.refine_scales`); the model itself without any."""
+    laws = declared_laws(robot, model)
+    if not laws:
+        return model, ()
+    if opts.method in ("iv", "didim"):
+        raise OptionError(f"--method {opts.method}: the declared friction laws of {robot.file} are identified with "
+                          "--method ols, wls or tls")
+    fits = refine_scales(model, laws, trajectories, options)
+    return LawDeclaredModel(model, laws, [f.scale for f in fits]), fits
 
 
 def streams(opts: IdentifyOptions) -> bool:
