@@ -28,6 +28,7 @@ import numpy as np
 __all__ = [
     "COULOMB_LAWS",
     "DECLARED_KINDS",
+    "DYNAMIC_KINDS",
     "SCALE_BOUNDS",
     "SCALE_NAME",
     "VISCOUS_LAWS",
@@ -41,9 +42,16 @@ __all__ = [
 COULOMB_LAWS = ("sign", "tanh", "stribeck")
 VISCOUS_LAWS = ("linear", "power")
 
-#: the kinds of a robot file's ``friction_law`` and the name of their scale (the loop's names)
-SCALE_NAME = {"stribeck": "vs", "tanh": "v", "power": "delta"}
+#: the kinds of a robot file's ``friction_law`` and the name of their scale (the loop's names); the
+#: dynamic laws (Dahl, LuGre) are identified by their sliding part: Dahl's is Coulomb + viscous (no
+#: scale), LuGre's the Stribeck law
+SCALE_NAME: dict[str, str | None] = {"stribeck": "vs", "tanh": "v", "power": "delta", "lugre": "vs", "dahl": None}
 DECLARED_KINDS = tuple(SCALE_NAME)
+#: the dynamic laws and their optional pre-sliding constants (bristle stiffness sigma0 [N m/rad or N/m],
+#: LuGre's bristle damping sigma1 [N m s/rad]): carried, not identified by ``identify`` (docs/friction-dynamic.md)
+DYNAMIC_KINDS = {"lugre": ("sigma0", "sigma1"), "dahl": ("sigma0",)}
+#: range of the pre-sliding constants
+PRESLIDING_BOUNDS = {"sigma0": (0.0, 1e9), "sigma1": (0.0, 1e6)}
 #: the open-closed range of each scale: velocity scales [rad/s or m/s] up to 100 (no drive has a
 #: Stribeck or smoothing velocity near it); exponents of the power law in (0, 3] (the loop searches 0.2-2)
 SCALE_BOUNDS = {"vs": (0.0, 100.0), "v": (0.0, 100.0), "delta": (0.0, 3.0)}
@@ -89,23 +97,32 @@ class FrictionLaw:
     ----------
     frame : int
         Frame number ``j`` of the ``[[frames]]`` entry.
-    kind : {"stribeck", "tanh", "power"}
-    scale : float
-        ``vs`` (Stribeck), ``v`` (tanh) [rad/s or m/s] or ``delta`` (power).
+    kind : {"stribeck", "tanh", "power", "lugre", "dahl"}
+    scale : float or None
+        ``vs`` (Stribeck, LuGre), ``v`` (tanh) [rad/s or m/s] or ``delta`` (power); None for Dahl.
+    presliding : mapping str -> float
+        ``sigma0`` (and LuGre's ``sigma1``) when declared (dynamic laws only).
     """
 
     frame: int
     kind: str
-    scale: float
+    scale: float | None
+    presliding: tuple[tuple[str, float], ...] = ()
 
     @property
-    def scale_name(self) -> str:
+    def scale_name(self) -> str | None:
         return SCALE_NAME[self.kind]
 
     @property
+    def dynamic(self) -> bool:
+        """Dahl or LuGre: a state law, identified by its sliding part."""
+        return self.kind in DYNAMIC_KINDS
+
+    @property
     def coulomb(self) -> str:
-        """The Coulomb law of :func:`coulomb_columns` (``sign`` for the power law)."""
-        return self.kind if self.kind in ("stribeck", "tanh") else "sign"
+        """The Coulomb law of :func:`coulomb_columns` (``sign`` for the power and Dahl laws; the sliding
+        part of LuGre is the Stribeck law)."""
+        return {"stribeck": "stribeck", "tanh": "tanh", "lugre": "stribeck"}.get(self.kind, "sign")
 
     @property
     def viscous(self) -> str:
@@ -114,16 +131,18 @@ class FrictionLaw:
     def names(self) -> tuple[str, ...]:
         """Names of the magnitudes of :meth:`columns`: ``FS<j>`` (and ``FSS<j>`` = Fs - Fc), ``FV<j>``."""
         j = self.frame
-        return (f"FS{j}", f"FSS{j}", f"FV{j}") if self.kind == "stribeck" else (f"FS{j}", f"FV{j}")
+        return (f"FS{j}", f"FSS{j}", f"FV{j}") if self.coulomb == "stribeck" else (f"FS{j}", f"FV{j}")
 
     def columns(self, dq: np.ndarray, scale: float | None = None) -> np.ndarray:
-        """Columns (N, 2 or 3) of the law at velocities ``dq`` (N,), at ``scale`` (default: the declared one)."""
+        """Columns (N, 2 or 3) of the law (of its sliding part for Dahl and LuGre) at velocities ``dq`` (N,),
+        at ``scale`` (default: the declared one)."""
         s = self.scale if scale is None else float(scale)
         return np.hstack([coulomb_columns(self.coulomb, dq, s if self.coulomb != "sign" else None),
                           viscous_columns(self.viscous, dq, s if self.viscous == "power" else None)])
 
     def label(self, scale: float | None = None) -> str:
-        return f"{self.kind}({self.scale_name}={self.scale if scale is None else scale:.4g})"
+        s = self.scale if scale is None else scale
+        return self.kind if self.scale_name is None or s is None else f"{self.kind}({self.scale_name}={s:.4g})"
 
 
 def read_friction_laws(frames: list, rows: list, bad: Callable[[str, str, str], None]) -> dict[int, FrictionLaw]:
@@ -145,7 +164,7 @@ def read_friction_laws(frames: list, rows: list, bad: Callable[[str, str, str], 
 
 def _read_one(raw, row, where: str, bad: Callable[[str, str, str], None]) -> FrictionLaw | None:
     fld = "friction_law"
-    kinds = ", ".join(f'{{kind = "{k}", {v} = ...}}' for k, v in SCALE_NAME.items())
+    kinds = ", ".join(f'{{kind = "{k}"' + (f", {v} = ...}}" if v else "}") for k, v in SCALE_NAME.items())
     if not isinstance(raw, dict):
         bad(where, fld, f"must be an inline table, one of {kinds}; got {raw!r}")
         return None
@@ -154,10 +173,17 @@ def _read_one(raw, row, where: str, bad: Callable[[str, str, str], None]) -> Fri
         bad(where, f"{fld}.kind", f"must be one of {', '.join(map(repr, DECLARED_KINDS))}, got {kind!r}")
         return None
     name = SCALE_NAME[kind]
+    extra = DYNAMIC_KINDS.get(kind, ())
+    allowed = ("kind",) + ((name,) if name else ()) + extra
     ok = True
-    for k in sorted(set(raw) - {"kind", name}):
-        bad(where, f"{fld}.{k}", f"unknown field of a {kind!r} law (its fields: kind, {name})")
+    for k in sorted(set(raw) - set(allowed)):
+        bad(where, f"{fld}.{k}", f"unknown field of a {kind!r} law (its fields: {', '.join(allowed)})")
         ok = False
+    pres = _presliding(raw, extra, where, bad)
+    if pres is None:
+        ok = False
+    if name is None:
+        return _on_joint(FrictionLaw(row.j, kind, None, pres or ()), row, where, bad) if ok else None
     lo, hi = SCALE_BOUNDS[name]
     x = raw.get(name)
     if x is None:
@@ -166,6 +192,28 @@ def _read_one(raw, row, where: str, bad: Callable[[str, str, str], None]) -> Fri
     if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or not lo < x <= hi:
         bad(where, f"{fld}.{name}", f"must be a number in ({lo:g}, {hi:g}], got {x!r}")
         return None
+    return _on_joint(FrictionLaw(row.j, kind, float(x), pres or ()), row, where, bad) if ok else None
+
+
+def _presliding(raw: dict, keys: tuple[str, ...], where: str, bad: Callable[[str, str, str], None]
+                ) -> tuple[tuple[str, float], ...] | None:
+    """The optional pre-sliding constants of a dynamic law; None after a reported problem."""
+    out = []
+    for k in keys:
+        if k not in raw:
+            continue
+        x = raw[k]
+        lo, hi = PRESLIDING_BOUNDS[k]
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or not lo < x <= hi:
+            bad(where, f"friction_law.{k}", f"must be a number in ({lo:g}, {hi:g}], got {x!r}")
+            return None
+        out.append((k, float(x)))
+    return tuple(out)
+
+
+def _on_joint(law: FrictionLaw, row, where: str, bad: Callable[[str, str, str], None]) -> FrictionLaw | None:
+    """``law`` if frame ``row`` can carry it: an actuated moving joint with FS and FV drive terms."""
+    fld = "friction_law"
     if not row.is_moving or row.mu == 0:
         bad(where, fld, "only an actuated moving joint carries a friction law")
         return None
@@ -173,4 +221,4 @@ def _read_one(raw, row, where: str, bad: Callable[[str, str, str], None]) -> Fri
     if missing:
         bad(where, fld, f"the law replaces the joint's FS and FV terms: add {' and '.join(missing)} to its drive")
         return None
-    return FrictionLaw(row.j, kind, float(x)) if ok else None
+    return law

@@ -156,12 +156,18 @@ def friction_law_terms(robot: RobotDescription, j: int, vals) -> tuple[dict[str,
     fs, fv = float(vals.get(f"FS{j}", 0.0)), float(vals.get(f"FV{j}", 0.0))
     if law.kind == "power":
         vmax = joint_limits(robot, j).get("dq_max", 1.0)
-        b = 3.0 * fv * vmax ** (law.scale - 1.0) / (law.scale + 2.0)
+        delta = float(law.scale or 1.0)
+        b = 3.0 * fv * vmax ** (delta - 1.0) / (delta + 2.0)
         return {"FV": b}, (f"friction law {law.label()}: MuJoCo has no power law of the speed; damping = "
                            f"{xml_float(b)}, the least-squares linear fit of FV{j} |dq|^delta over |dq| <= "
                            f"{xml_float(vmax)}; frictionloss = FS{j} (Coulomb)")
+    if law.dynamic:      # Dahl, LuGre: their sliding part; MuJoCo has no pre-sliding state
+        hump = ", the pre-sliding state (sigma0) left out" + (f", the Stribeck hump FSS{j} below vs too"
+                                                               if law.coulomb == "stribeck" else "")
+        return {"FS": fs, "FV": fv}, (f"friction law {law.label()}: MuJoCo has no {law.kind} law; frictionloss = "
+                                      f"FS{j} (the sliding Coulomb level Fc){hump}; damping = FV{j}")
     hump = (f", the Stribeck hump FSS{j} = {xml_float(float(vals.get(f'FSS{j}', 0.0)))} below vs left out"
-            if law.kind == "stribeck" else ", the smoothing below v left out (MuJoCo's soft constraint smooths)")
+            if law.coulomb == "stribeck" else ", the smoothing below v left out (MuJoCo's soft constraint smooths)")
     return {"FS": fs, "FV": fv}, (f"friction law {law.label()}: MuJoCo has no {law.kind} law; frictionloss = "
                                   f"FS{j} (the sliding Coulomb level Fc){hump}; damping = FV{j}")
 

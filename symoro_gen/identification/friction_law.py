@@ -40,7 +40,10 @@ __all__ = ["MAX_REL_STD", "LawDeclaredModel", "ScaleFit", "declared_laws", "refi
 #: a scale whose relative standard deviation exceeds this is "not determined by the data"
 MAX_REL_STD = 0.5
 #: the magnitude that carries each law's scale: its scale is seen only if this magnitude is significant
-SCALED_MAGNITUDE = {"stribeck": "FSS", "tanh": "FS", "power": "FV"}
+SCALED_MAGNITUDE = {"stribeck": "FSS", "tanh": "FS", "power": "FV", "lugre": "FSS"}
+#: what a dynamic law's entry says: the rows cannot see its pre-sliding regime
+SLIDING_NOTE = ("sliding part only: the pre-sliding regime (sigma0) lasts milliseconds after each reversal and "
+                "the filtered, decimated rows (100-200 Hz) do not resolve it (docs/friction-dynamic.md)")
 #: ... by this many standard deviations
 MIN_T = 3.0
 #: relative step of the finite-difference derivative in the scale
@@ -61,7 +64,8 @@ class ScaleFit:
     joint : int
         0-based model joint.
     scale, std : float
-        Identified scale and its standard deviation (``std`` is NaN when the scale was not fitted).
+        Identified scale and its standard deviation (``std`` is NaN when the scale was not fitted; both
+        NaN for a law without scale, Dahl).
     fitted : bool
         False when the data cannot see the law (``note`` says why): ``scale`` is then the declared value.
     magnitudes, magnitude_std : mapping str -> float
@@ -85,6 +89,7 @@ class ScaleFit:
             return float(x) if math.isfinite(x) else None
         return {"frame": self.law.frame, "joint": self.joint + 1, "kind": self.law.kind,
                 "scale_name": self.law.scale_name, "declared": self.law.scale, "scale": num(self.scale),
+                "presliding": dict(self.law.presliding), "sliding_part_only": self.law.dynamic,
                 "std": num(self.std), "fitted": self.fitted, "iterations": self.iterations,
                 "magnitudes": {k: num(v) for k, v in self.magnitudes.items()},
                 "magnitude_std": {k: num(v) for k, v in self.magnitude_std.items()}, "note": self.note}
@@ -92,6 +97,10 @@ class ScaleFit:
     def summary(self) -> str:
         nm = self.law.scale_name
         head = f"  joint {self.joint + 1} (frame {self.law.frame}): {self.law.kind}, "
+        if nm is None:
+            mags = ", ".join(f"{k} = {v:.4g} \u00b1 {self.magnitude_std.get(k, math.nan):.2g}"
+                             for k, v in self.magnitudes.items())
+            return head + f"{mags}; {self.note}"
         if not self.fitted:
             return head + f"{nm} = {self.scale:.4g} as declared, not fitted: {self.note}"
         mags = ", ".join(f"{k} = {v:.4g} \u00b1 {self.magnitude_std.get(k, math.nan):.2g}"
@@ -112,7 +121,8 @@ class LawDeclaredModel:
                  scales: Sequence[float] | None = None) -> None:
         self._model = model
         self.laws = tuple(laws)
-        self.scales = tuple(float(x) for x in (scales if scales is not None else [lw.scale for _, lw in self.laws]))
+        given = scales if scales is not None else [lw.scale for _, lw in self.laws]
+        self.scales = tuple(math.nan if x is None else float(x) for x in given)
         names = tuple(model.BASE_NAMES)
         drop = set()
         for _, lw in self.laws:
@@ -188,8 +198,8 @@ def refine_scales(model: IdentificationModel, laws: Sequence[tuple[int, Friction
         return ()
     base = LawDeclaredModel(model, laws)
     s = np.array(base.scales)
-    lo = np.array([SCALE_BOUNDS[lw.scale_name][0] for _, lw in laws])
-    hi = np.array([SCALE_BOUNDS[lw.scale_name][1] for _, lw in laws])
+    lo = np.array([SCALE_BOUNDS[lw.scale_name][0] if lw.scale_name else 0.0 for _, lw in laws])
+    hi = np.array([SCALE_BOUNDS[lw.scale_name][1] if lw.scale_name else 1.0 for _, lw in laws])
     sys0 = _system(base, trajectories, options)
     W, Y, joint = sys0.W, sys0.Y, sys0.joint
     theta = _lstsq(W, Y)
@@ -199,7 +209,7 @@ def refine_scales(model: IdentificationModel, laws: Sequence[tuple[int, Friction
     w = 1.0 / np.where(sig > 0, sig, 1.0)[joint]
     cols = {nm: i for i, nm in enumerate(sys0.names)}
     moving = [bool(np.any(W[:, [cols[nm] for nm in lw.names()]] != 0.0)) for _, lw in laws]
-    free = np.array(moving)
+    free = np.array(moving) & np.array([lw.scale_name is not None for _, lw in laws])
 
     def cost(W_, th):
         r = (Y - W_ @ th) * w
@@ -255,24 +265,30 @@ def refine_scales(model: IdentificationModel, laws: Sequence[tuple[int, Friction
         names = lw.names()
         mags = {nm: float(theta[cols[nm]]) for nm in names}
         mstd = {nm: float(std[cols[nm]]) for nm in names}
+        tail = f"; {SLIDING_NOTE}" if lw.dynamic else ""
         if not moving[i]:
-            out.append(ScaleFit(lw, j, lw.scale, math.nan, False, mags, mstd, 0,
-                                "the joint does not move in the identification data (its law columns are 0)"))
+            out.append(ScaleFit(lw, j, math.nan if lw.scale is None else lw.scale, math.nan, False, mags, mstd, 0,
+                                "the joint does not move in the identification data (its law columns are 0)" + tail))
             continue
+        if lw.scale_name is None:
+            out.append(ScaleFit(lw, j, math.nan, math.nan, False, mags, mstd, 0,
+                                "no scale: its sliding part is the Coulomb + viscous law" + tail))
+            continue
+        assert lw.scale is not None
         pos = k + int(np.count_nonzero(free[:i]))
         s_std = float(s[i] * std[pos])
         key = f"{SCALED_MAGNITUDE[lw.kind]}{lw.frame}"
         if not abs(mags[key]) > MIN_T * mstd[key]:
             out.append(ScaleFit(lw, j, lw.scale, math.nan, False, mags, mstd, it,
                                 f"{key} = {mags[key]:.3g} \u00b1 {mstd[key]:.2g} is not significant ({MIN_T:g} "
-                                f"sigma): the data do not determine {lw.scale_name}, the declared value is kept"))
+                                f"sigma): the data do not determine {lw.scale_name}, the declared value is kept" + tail))
             continue
         if not s_std <= MAX_REL_STD * s[i]:
             out.append(ScaleFit(lw, j, lw.scale, math.nan, False, mags, mstd, it,
                                 f"the data do not determine {lw.scale_name} (relative standard deviation "
-                                f"{s_std / s[i]:.2g} > {MAX_REL_STD:g} at {s[i]:.4g}): the declared value is kept"))
+                                f"{s_std / s[i]:.2g} > {MAX_REL_STD:g} at {s[i]:.4g}): the declared value is kept" + tail))
             continue
-        out.append(ScaleFit(lw, j, float(s[i]), s_std, True, mags, mstd, it))
+        out.append(ScaleFit(lw, j, float(s[i]), s_std, True, mags, mstd, it, tail.lstrip("; ")))
     return tuple(out)
 
 

@@ -80,3 +80,19 @@ def test_columns_are_the_loops_laws():
     np.testing.assert_allclose(tau, (Fc + dF * np.exp(-(dq / vs) ** 2)) * np.sign(dq) + Fv * dq)
     np.testing.assert_allclose(coulomb_columns("tanh", dq, 0.02)[:, 0], np.tanh(dq / 0.02))
     np.testing.assert_allclose(viscous_columns("power", dq, 0.5)[:, 0], np.sqrt(np.abs(dq)) * np.sign(dq))
+
+
+def test_dynamic_laws_are_read_with_optional_presliding_constants(tmp_path):
+    robot, _ = parse(tmp_path, with_law('{kind = "lugre", vs = 0.05, sigma0 = 1e4}'))
+    law = robot.friction_laws[2]
+    assert (law.kind, law.scale, dict(law.presliding), law.dynamic, law.names()) == \
+        ("lugre", 0.05, {"sigma0": 1e4}, True, ("FS2", "FSS2", "FV2"))
+    robot, _ = parse(tmp_path, with_law('{kind = "dahl"}'))
+    law = robot.friction_laws[2]
+    assert (law.kind, law.scale, law.presliding, law.names()) == ("dahl", None, (), ("FS2", "FV2"))
+    with pytest.raises(RobotFileError) as info:
+        parse(tmp_path, with_law('{kind = "dahl", sigma0 = -3}'))
+    assert any(p.where == "frame 2" and p.field == "friction_law.sigma0" for p in info.value.problems), str(info.value)
+    with pytest.raises(RobotFileError) as info:
+        parse(tmp_path, with_law('{kind = "dahl", vs = 0.1}'))
+    assert any(p.field == "friction_law.vs" and "unknown" in p.message for p in info.value.problems), str(info.value)
