@@ -20,8 +20,8 @@ is the only non-linear one (``identify`` refines it, :mod:`symoro_gen.identifica
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,6 +37,7 @@ __all__ = [
     "law_parameter",
     "read_friction_laws",
     "viscous_columns",
+    "with_identified_laws",
 ]
 
 COULOMB_LAWS = ("sign", "tanh", "stribeck")
@@ -143,6 +144,18 @@ class FrictionLaw:
     def label(self, scale: float | None = None) -> str:
         s = self.scale if scale is None else scale
         return self.kind if self.scale_name is None or s is None else f"{self.kind}({self.scale_name}={s:.4g})"
+
+
+def with_identified_laws(robot, doc: Mapping):
+    """``robot`` with the scales of its declared friction laws replaced by those an identify result (its JSON
+    ``doc``) fitted (``friction_laws`` entries with ``fitted`` true), for the exports; unchanged without any."""
+    laws = dict(getattr(robot, "friction_laws", {}) or {})
+    new = dict(laws)
+    for e in doc.get("friction_laws", ()) or ():
+        lw = laws.get(e.get("frame"))
+        if lw is not None and e.get("fitted") and e.get("kind") == lw.kind and e.get("scale") is not None:
+            new[lw.frame] = replace(lw, scale=float(e["scale"]))
+    return robot if new == laws else replace(robot, friction_laws=new)
 
 
 def read_friction_laws(frames: list, rows: list, bad: Callable[[str, str, str], None]) -> dict[int, FrictionLaw]:

@@ -166,7 +166,8 @@ def friction_law_terms(robot: RobotDescription, j: int, vals) -> tuple[dict[str,
                                                                if law.coulomb == "stribeck" else "")
         return {"FS": fs, "FV": fv}, (f"friction law {law.label()}: MuJoCo has no {law.kind} law; frictionloss = "
                                       f"FS{j} (the sliding Coulomb level Fc){hump}; damping = FV{j}")
-    hump = (f", the Stribeck hump FSS{j} = {xml_float(float(vals.get(f'FSS{j}', 0.0)))} below vs left out"
+    fss = f" = {xml_float(float(vals[f'FSS{j}']))}" if f"FSS{j}" in vals else ""
+    hump = (f", the Stribeck hump FSS{j}{fss} below vs left out"
             if law.coulomb == "stribeck" else ", the smoothing below v left out (MuJoCo's soft constraint smooths)")
     return {"FS": fs, "FV": fv}, (f"friction law {law.label()}: MuJoCo has no {law.kind} law; frictionloss = "
                                   f"FS{j} (the sliding Coulomb level Fc){hump}; damping = FV{j}")

@@ -225,8 +225,8 @@ class IdentifyResults(Results):
         """Exactly the text ``symoro-gen identify`` prints."""
         text = self.result.summary()
         if self.friction_laws:
-            text += ("\n\nDeclared friction laws (scale refined by Gauss-Newton on the identification data; the "
-                     "magnitudes' standard deviations with the scale free):\n"
+            text += ("\n\nDeclared friction laws (scale refined by Gauss-Newton on the identification data; \u00b1 one "
+                     "standard deviation, the magnitudes' with the scale free):\n"
                      + "\n".join(f.summary() for f in self.friction_laws))
         if self.closed is not None:
             text = self.closed.summary() + "\n\n" + text

@@ -44,3 +44,20 @@ def test_power_law_damping_is_the_least_squares_linear_fit():
     assert m.dof_damping[1] == pytest.approx(slope, rel=1e-4)
     assert m.dof_frictionloss[1] == pytest.approx(vals["FS2"], rel=1e-9)
     assert "no power law of the speed" in text
+
+
+def test_export_takes_the_identified_scale_from_a_result():
+    """``with_identified_laws``: the scales an identify result fitted replace the declared ones (a law the
+    result did not fit keeps its declared scale), and the MJCF comment names the identified one."""
+    from symoro_gen.description.friction_law import with_identified_laws
+
+    robot, _ = model_for("scara")
+    robot = dataclasses.replace(robot, friction_laws={2: FrictionLaw(2, "stribeck", 0.08),
+                                                      4: FrictionLaw(4, "tanh", 0.01)})
+    doc = {"friction_laws": [{"frame": 2, "kind": "stribeck", "scale": 0.0499, "fitted": True},
+                             {"frame": 4, "kind": "tanh", "scale": None, "fitted": False}]}
+    new = with_identified_laws(robot, doc)
+    assert new.friction_laws[2].scale == 0.0499 and new.friction_laws[4].scale == 0.01
+    assert with_identified_laws(robot, {}) is robot
+    chi = np.asarray(random_physical_parameters(robot, np.random.default_rng(3)))
+    assert "stribeck(vs=0.0499)" in export_mjcf(new, chi)
