@@ -406,9 +406,11 @@ def _declared_friction(robot, model: IdentificationModel, trajectories, options:
     laws = declared_laws(robot, model)
     if not laws:
         return model, ()
-    if opts.method in ("iv", "didim"):
-        raise OptionError(f"--method {opts.method}: the declared friction laws of {robot.file} are identified with "
-                          "--method ols, wls or tls")
+    if opts.method in ("iv", "didim") or opts.physical:
+        given = "--physical" if opts.physical else f"--method {opts.method}"
+        raise OptionError(f"{given}: the declared friction laws (friction_law) of {robot.file} are identified with "
+                          "--method ols, wls or tls without --physical (the consistent standard set has no "
+                          "parameters for their columns); leave the option out, or the laws")
     fits = refine_scales(model, laws, trajectories, options)
     return LawDeclaredModel(model, laws, [f.scale for f in fits]), fits
 

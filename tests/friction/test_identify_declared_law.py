@@ -144,3 +144,12 @@ def test_dynamic_law_is_identified_by_its_sliding_part(kind):
         assert not fit.fitted and fit.to_dict()["scale"] is None
     out = json.loads(json.dumps(res.to_dict(), allow_nan=False))
     assert validate(out, SCHEMA) == [] and out["friction_laws"][0]["presliding"] == {"sigma0": 1e6}
+
+
+def test_options_that_cannot_take_a_declared_law_are_refused_by_name():
+    from symoro_gen.errors import OptionError
+
+    model, tr, _ = simulate(FrictionLaw(2, "tanh", 0.03), {"FS2": 1.2, "FV2": 0.5}, seed=2, duration=5.0)
+    for kw, flag in ((dict(physical=True), "--physical"), (dict(method="iv"), "--method iv")):
+        with pytest.raises(OptionError, match=flag):
+            symoro_gen.identify(model, [tr], **kw)
