@@ -26,7 +26,8 @@ def options_from_args(args) -> IdentifyOptions:
         reference=args.reference, kp=args.kp, kd=args.kd, ki=args.ki, bandwidth=args.bandwidth,
         max_iter=args.max_iter, start=args.start, physical=getattr(args, "physical", False),
         nominal_tolerance=getattr(args, "nominal_tolerance", None),
-        bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args))
+        bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args),
+        positions=getattr(args, "positions", "link"))
 
 
 def run(args) -> int:
@@ -100,6 +101,10 @@ def add_parser(sub) -> None:
                    help="with --physical: keep each link's mass distribution inside the box of its frame origins and "
                         "children (plus a margin; so its centre of mass too) and its mass within a factor 3 of a "
                         "non-zero nominal mass (docs/plausibility.md)")
+    p.add_argument("--positions", choices=("link", "motor"), default="link",
+                   help="side of the logged positions: link (default) or motor (q_m/N, e.g. the LWR4's): then the "
+                        "declared elastic joints' link positions are q = positions - tau/K (robot file: elastic = "
+                        "{K = ...}; LWR4 paper eq. 17), velocities and accelerations from them")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "

@@ -37,6 +37,15 @@ Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
 * a coupled joint (``mimic``, ``q_m = multiplier q_s + offset``) has no motor and a joint equality
   ``<joint joint1="joint<m>" joint2="joint<s>" polycoef="offset multiplier 0 0 0"/>`` (MuJoCo enforces it
   as a soft constraint, as it does every equality);
+* an elastic joint (the robot file's ``elastic = {K, D}``; Spong's flexible-joint model [Spong1987]) is two
+  joints: the link joint ``joint<j>`` as above, without drive terms, and a rotor: a body ``rotor<j>`` at the same
+  pose in the same parent, of negligible mass, with a hinge (slide) ``rotor<j>`` on the same axis carrying the
+  drive terms (``armature`` = ``IA``, ``damping`` = ``FV``, ``frictionloss`` = ``FS``: the motor side's). A fixed
+  tendon ``transmission<j>`` of length ``theta_j - q_j`` (``coef`` 1 on the rotor, -1 on the link), ``stiffness`` =
+  ``K``, ``damping`` = ``D``, ``springlength`` 0, passes ``K (theta - q) + D (dtheta - dq)`` to the link and its
+  opposite to the rotor; the motor drives the rotor. Without a declared ``IA`` the rotor gets the armature
+  :func:`rotor_armature` (the spring's natural frequency ``1 / (20 timestep)``, said in a comment), so that the
+  integrator resolves it. At rest under gravity the deflection is ``tau / K`` ([LWR4-TLS] eq. 17);
 * joint ``range`` from the robot file's ``[limits]`` (``q_min``, ``q_max``; a passive joint's
   ``passive_q_min``, ``passive_q_max``) when present, ``gravity`` from the robot file; ``integrator="RK4"``,
   ``timestep`` 1 ms (options).
@@ -59,7 +68,7 @@ from .urdf_export import (
     xml_float,
 )
 
-__all__ = ["LOOP_AXIS_POINT", "LOOP_SOLIMP", "export_mjcf", "loop_sites", "quat_from_matrix"]
+__all__ = ["LOOP_AXIS_POINT", "LOOP_SOLIMP", "export_mjcf", "loop_sites", "quat_from_matrix", "rotor_armature"]
 
 #: distance [m] along a loop's cut axis of the second pair of sites held together by a ``connect``
 LOOP_AXIS_POINT = 0.1
@@ -123,6 +132,21 @@ def loop_sites(robot: RobotDescription) -> dict[int, list[tuple[str, np.ndarray]
             T = row_transform(row, subs, q=0.0)
             out.setdefault(row.ant, []).extend([(name, T[:3, 3]), (f"{name}_axis", T[:3, 3] + LOOP_AXIS_POINT * T[:3, 2])])
     return out
+
+
+def rotor_armature(K: float, timestep: float) -> float:
+    """The rotor inertia written for an elastic joint without a declared ``IA``: the one that puts the natural
+    frequency ``sqrt(K / I) / (2 pi)`` of the rotor on its spring at ``1 / (20 timestep)`` (twenty steps per period,
+    which the RK4 integrator follows)."""
+    return float(K) * (20.0 * timestep / (2.0 * np.pi)) ** 2
+
+
+def _tendons(robot: RobotDescription) -> list[str]:
+    """The ``<tendon>`` element: one fixed tendon ``theta_j - q_j`` per elastic joint, stiffness ``K``, damping ``D``."""
+    rows = [f'    <fixed name="transmission{e.joint}" stiffness="{xml_float(e.K)}" damping="{xml_float(e.D)}" '
+            f'springlength="0">\n      <joint joint="rotor{e.joint}" coef="1"/>\n'
+            f'      <joint joint="joint{e.joint}" coef="-1"/>\n    </fixed>' for e in robot.elastic]
+    return ["  <tendon>", *rows, "  </tendon>"] if rows else []
 
 
 def _equalities(robot: RobotDescription, timestep: float) -> list[str]:
@@ -213,10 +237,35 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
     def site_lines(j, ind):
         return [f'{ind}<site name="{name}" pos="{_v(p)}"/>' for name, p in sites.get(j, ())]
 
+    def rotor(row, depth, T):
+        """The rotor body of an elastic joint (before its link's body, same parent and pose); the drive terms."""
+        j, ind = row.j, "  " * depth
+        e = robot.elastic_joint(j)
+        assert e is not None
+        out.append(f'{ind}<body name="rotor{j}" pos="{_v(T[:3, 3])}" quat="{_v(quat_from_matrix(T[:3, :3]))}">')
+        out.append(f'{ind}  <inertial pos="0 0 0" mass="1e-09" diaginertia="1e-12 1e-12 1e-12"/>')
+        attrs = [f'name="rotor{j}"', f'type="{"hinge" if row.sigma == REVOLUTE else "slide"}"', 'pos="0 0 0"',
+                 f'axis="0 0 {joint_sign(row)}"']
+        ia = vals.get(f"IA{j}", 0.0)
+        if ia <= 0:
+            ia = rotor_armature(e.K, timestep)
+            out.append(f"{ind}  <!-- rotor {j}: no IA{j} declared: armature {xml_float(ia)} (spring period = 20 "
+                       "time steps) -->")
+        attrs.append(f'armature="{xml_float(ia)}"')
+        for key, attr in (("FV", "damping"), ("FS", "frictionloss")):
+            v = vals.get(f"{key}{j}", 0.0)
+            if v:
+                attrs.append(f'{attr}="{xml_float(max(v, 0.0))}"')
+        out.append(f"{ind}  <joint {' '.join(attrs)}/>")
+        out.append(f"{ind}</body>")
+
     def body(row, depth):
         j = row.j
         ind = "  " * depth
         T = constant_transform(robot, j)
+        elastic = row.sigma != FIXED and robot.elastic_joint(j) is not None
+        if elastic:
+            rotor(row, depth, T)
         out.append(f'{ind}<body name="link{j}" pos="{_v(T[:3, 3])}" quat="{_v(quat_from_matrix(T[:3, :3]))}">')
         inert = inertial_of(vals, j, report, "export-mjcf")
         if inert is None and row.sigma != FIXED:
@@ -234,7 +283,7 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
             law_vals, law_note = friction_law_terms(robot, j, vals)
             for key, attr in (("IA", "armature"), ("FV", "damping"), ("FS", "frictionloss")):
                 v = law_vals.get(key, vals.get(f"{key}{j}", 0.0))
-                if v:
+                if v and not elastic:  # an elastic joint's drive terms are on its rotor
                     attrs.append(f'{attr}="{xml_float(max(v, 0.0))}"')
             lim = joint_limits(robot, j)
             if "q_min" in lim and "q_max" in lim:
@@ -256,12 +305,14 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
     for row in children.get(0, ()):
         body(row, 2)
     out.append("  </worldbody>")
+    out += _tendons(robot)
     out += _equalities(robot, timestep)
     if motors and joints:
         out.append("  <actuator>")
         for j, lim in joints:
             rng = f' ctrlrange="{xml_float(-lim["tau_max"])} {xml_float(lim["tau_max"])}"' if "tau_max" in lim else ""
-            out.append(f'    <motor name="motor{j}" joint="joint{j}" gear="1"{rng}/>')
+            driven = "rotor" if robot.elastic_joint(j) is not None else "joint"  # an elastic joint: its rotor
+            out.append(f'    <motor name="motor{j}" joint="{driven}{j}" gear="1"{rng}/>')
         out.append("  </actuator>")
     out.append("</mujoco>")
     return "\n".join(out) + "\n"

@@ -4,11 +4,15 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, param_name
 from .friction_law import FrictionLaw
+
+if TYPE_CHECKING:
+    from .elastic import ElasticJoint
 
 REVOLUTE, PRISMATIC, FIXED = 0, 1, 2
 
@@ -167,6 +171,8 @@ class RobotDescription:
     couplings: tuple[Coupling, ...] = ()
     #: declared friction laws by frame number (``friction_law`` field, :mod:`.friction_law`)
     friction_laws: Mapping[int, FrictionLaw] = field(default_factory=dict)
+    #: the declared elastic joints (``elastic`` tables; :mod:`symoro_gen.description.elastic`), joint order
+    elastic: tuple[ElasticJoint, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "values", MappingProxyType(dict(self.values)))
@@ -203,6 +209,10 @@ class RobotDescription:
         """True for a robot whose model is its tree's projected on the actuated joints: closed loops
         (``[[loops]]``) or coupled joints (``mimic``), see :mod:`symoro_gen.closedloop`."""
         return bool(self.loops or self.couplings)
+
+    def elastic_joint(self, j: int) -> ElasticJoint | None:
+        """The declared elasticity of joint ``j`` (an ``elastic`` table), or None for a rigid joint."""
+        return next((e for e in self.elastic if e.joint == j), None)
 
     def coupling(self, j: int) -> Coupling | None:
         """The coupling of frame ``j`` (a mimic joint), or None."""

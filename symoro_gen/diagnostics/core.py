@@ -518,6 +518,9 @@ class DiagnoseSettings:
         hysteresis likewise, and a clean arm flags no joint in at least 19 of 20 seeds.
     stability : bool
         Stage "stability" (:func:`_stage_stability`).
+    declared_elastic : tuple of int
+        Joints (0-based columns) the robot file declares elastic (``elastic = {K, D}``): their positions are
+        link-side or corrected already, so the loop's ``elasticity`` candidate is not offered for them.
     """
 
     method: str = "ols"
@@ -534,6 +537,7 @@ class DiagnoseSettings:
     composed: bool | None = None
     unexplained: bool = True
     stability: bool = True
+    declared_elastic: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         if self.method.lower() not in ("ols", "wls", "tls"):
@@ -1099,6 +1103,8 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     # coefficients then split the effect between them with opposite signs)
     stribeck_law = {r.choice.joint for r in laws if not r.smoothing and r.choice.coulomb.law == "stribeck"}
     families = [f for f in families if not (f.kind == "stribeck" and f.joint in stribeck_law)]
+    # a joint declared elastic in the robot file is modelled as such: no elasticity candidate for it
+    families = [f for f in families if not (f.kind == "elasticity" and f.joint in cfg.declared_elastic)]
     # sliding-friction candidates are static (0) in the rest segments, like the friction laws
     # and so is the shared motor's Coulomb friction sign(dq_j + dq_k) of a coupled pair: built on the
     # sliding velocities, it is 0 where both joints rest (was the sign of their velocity noise there)

@@ -27,6 +27,7 @@ from ..diagnostics.core import diagnose as run_loop
 from ..diagnostics.render import diagnosis_blocks, diagnosis_html
 from ..diagnostics.report import ResidualReport
 from ..errors import IdentificationError, OptionError
+from ..identification.elastic import elastic_columns
 from ..identification.estimators import still_joints
 from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
@@ -273,7 +274,8 @@ def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> Diag
                                unexcited_option=False)
     valid, rep_v = as_trajectories(list(validate), opts.data_format, robot) if validate else ((), ())
     reports += rep_v
-    residual = run_loop(model, ident, opts.settings(), validation=valid if validate else None,
+    settings = replace(opts.settings(), declared_elastic=tuple(i for i, _ in elastic_columns(robot)))
+    residual = run_loop(model, ident, settings, validation=valid if validate else None,
                         loaded=loaded if loaded_data else None, payload=known,
                         rng=np.random.default_rng(opts.seed), assembly=opts.assembly(torque_limits(robot)))
     residual = replace(residual, warnings=(*notes, *residual.warnings))

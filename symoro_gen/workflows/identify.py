@@ -25,6 +25,7 @@ from ..errors import IdentificationError, OptionError
 from ..identification import fit_with_known_payload, identify_with_drive_gains, sensor_gains
 from ..identification import identify as fit
 from ..identification.didim import identify_didim
+from ..identification.elastic import POSITION_SIDES, StiffnessEstimate, estimate_stiffness, link_side
 from ..identification.estimators import drop_unexcited, with_unexcited
 from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_laws, refine_scales
 from ..identification.iv import identify_iv
@@ -106,6 +107,9 @@ class IdentifyOptions(Options):
         nominal one (:mod:`symoro_gen.identification.plausibility`, docs/plausibility.md).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
+    positions : {"link", "motor"}
+        The logged positions are link-side (default) or motor-side ``q_m / N``: then the declared elastic
+        joints' link positions are ``positions - tau / K`` (:func:`symoro_gen.identification.elastic.link_side`).
     """
 
     method: str = "wls"
@@ -131,8 +135,11 @@ class IdentifyOptions(Options):
     nominal_tolerance: float | None = None
     bounded_bodies: bool = False
     data_format: LogFormat = field(default_factory=LogFormat)
+    positions: str = "link"
 
     def __post_init__(self) -> None:
+        if self.positions not in POSITION_SIDES:
+            raise OptionError(f"positions {self.positions!r}: one of {', '.join(POSITION_SIDES)}")
         if self.method not in METHODS:
             raise OptionError(f"method {self.method!r}: one of {', '.join(METHODS)}")
         if self.gains not in (None, "sensor", "drive"):
@@ -186,6 +193,7 @@ class IdentifyResults(Results):
     inputs: tuple[Any, ...] = ()
     plausibility: Plausibility | None = None
     friction_laws: tuple[ScaleFit, ...] = ()
+    elasticity: StiffnessEstimate | None = None
 
     # ---- the JSON ---------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -217,6 +225,8 @@ class IdentifyResults(Results):
             out["warnings"] = list(out["warnings"]) + list(self.plausibility.warnings)
         if self.friction_laws:
             out["friction_laws"] = [f.to_dict() for f in self.friction_laws]
+        if self.elasticity is not None:
+            out["elasticity"] = self.elasticity.to_dict()
         out["provenance"] = provenance(self.options, self.inputs)
         return out
 
@@ -248,6 +258,8 @@ class IdentifyResults(Results):
         if self.plausibility is not None and self.plausibility.warnings:
             text += ("\n\nPlausibility of the bodies (nominal values, the links' boxes, signs; docs/plausibility.md):\n"
                      + self.plausibility.summary())
+        if self.elasticity is not None:
+            text += "\n\n" + self.elasticity.summary()
         return text + "\n\n" + data_text(self.reports)
 
     # ---- report and figures -------------------------------------------------------------------------
@@ -332,6 +344,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     if not data:
         raise OptionError("identify: no identification data given")
     unloaded, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
+    unloaded = _positions(opts, robot, unloaded)
     held_back: tuple = ()
     if opts.validate_fraction is not None:
         unloaded, held_back = hold_back(unloaded, opts.validate_fraction)
@@ -339,7 +352,9 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     loaded, rep_l = (as_trajectories(list(loaded_data), opts.data_format, robot, loaded=True)
                      if loaded_data else ((), ()))
     reports += rep_l
+    loaded = _positions(opts, robot, loaded)
     known = check_payload(opts.payload, model.PAYLOAD_NAMES)
+    elasticity = _elasticity(opts, robot, (*unloaded, *loaded))
     if (opts.gains or known) and not loaded:
         raise IdentificationError("--gains and --payload need recordings with the payload: give them with --loaded")
     notes = recording_warnings(robot, (*unloaded, *loaded), held=opts.drop_unexcited, dropped=opts.drop_saturated)
@@ -395,7 +410,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
                            assemblies={"unloaded": asm_u, "loaded": asm_l, "validation": asm_v}, drive=dg,
                            closed=closed, physical=phys, unconstrained=res_u, validation=validation,
                            reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs,
-                           plausibility=plaus, friction_laws=law_fits)
+                           plausibility=plaus, friction_laws=law_fits, elasticity=elasticity)
 
 
 def _declared_friction(robot, model: IdentificationModel, trajectories, options: AssemblyOptions,
@@ -413,6 +428,22 @@ def _declared_friction(robot, model: IdentificationModel, trajectories, options:
                           "parameters for their columns); leave the option out, or the laws")
     fits = refine_scales(model, laws, trajectories, options)
     return LawDeclaredModel(model, laws, [f.scale for f in fits]), fits
+
+
+def _positions(opts: IdentifyOptions, robot, trajectories) -> tuple:
+    """The recordings with link-side positions: as read, or (``positions="motor"``) corrected by ``tau / K`` on
+    the declared elastic joints ([LWR4-TLS] eq. 17)."""
+    if opts.positions == "motor" and trajectories:
+        return link_side(robot, trajectories)
+    return tuple(trajectories)
+
+
+def _elasticity(opts: IdentifyOptions, robot, trajectories) -> StiffnessEstimate | None:
+    """``K``, ``D`` of the declared elastic joints from the recordings with two encoders (a measured deflection),
+    None when the robot declares no elastic joint or no recording has a link-side position."""
+    if not robot.elastic or not any(tr.deflection is not None for tr in trajectories):
+        return None
+    return estimate_stiffness(robot, trajectories, cutoff_hz=opts.cutoff)
 
 
 def streams(opts: IdentifyOptions) -> bool:
@@ -463,7 +494,7 @@ def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_ba
         return None, None, None
     vtr, rep_v = (as_trajectories(list(validate), opts.data_format, robot, loaded=opts.validate_loaded)
                   if validate else ((), ()))
-    vtr = tuple(held_back) + tuple(vtr)
+    vtr = tuple(held_back) + tuple(_positions(opts, robot, vtr))
     asm_v = _assemble(model, vtr, replace(asm_opts, min_velocity=None,
                                           payload_columns=bool(opts.validate_loaded) or has_payload), streamed)
     sys_v = asm_v.system
