@@ -104,7 +104,8 @@ def test_scale_the_data_cannot_see_is_reported():
     """A Stribeck law declared on a joint whose torques have no dry friction at all (Fc = Fs = 0, viscous
     only): the dip's magnitude is not significant, so its scale is not determined; it is reported with the
     declared value, not fitted silently."""
-    model, tr, _ = simulate(FrictionLaw(2, "stribeck", 0.05), {"FS2": 0.0, "FSS2": 0.0, "FV2": 0.7}, seed=8)
+    model, tr, _ = simulate(FrictionLaw(2, "stribeck", 0.05), {"FS2": 0.0, "FSS2": 0.0, "FV2": 0.7}, seed=8,
+                             duration=10.0)
     res = symoro_gen.identify(model, [tr], method="wls")
     (fit,) = res.friction_laws
     assert not fit.fitted and fit.scale == 0.05 and "do not determine" in fit.note, fit
