@@ -17,6 +17,13 @@ Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
   ``-FV dq``), ``frictionloss`` = Coulomb ``FS`` (a soft friction constraint of MuJoCo: equal to
   ``FS sign(dq)`` only away from zero velocity); the torque offset ``OFF`` has no MuJoCo field and is
   written as a comment; one ``<motor>`` per joint (``gear 1``, unlimited) drives ``tau`` directly;
+* a joint with a declared friction law (the robot file's ``friction_law``): MuJoCo has no Stribeck, tanh
+  or power law of the speed, so the export is an approximation, stated in a comment on the joint
+  (:func:`friction_law_terms`): ``frictionloss`` = the Coulomb (sliding) level ``FS`` = ``Fc`` (the
+  Stribeck hump ``Fs - Fc`` below ``vs`` and the tanh smoothing below ``v`` are left out: MuJoCo's soft
+  friction constraint is its own smoothing), ``damping`` = ``FV`` for the Stribeck and tanh laws; for
+  the power law ``FV |dq|^delta sign(dq)`` the linear damping closest to it in least squares over
+  ``|dq| <= dq_max`` (``[limits] dq_max``, else 1 rad/s or m/s): ``FV 3 dq_max^(delta - 1) / (delta + 2)``;
 * motors on the actuated joints only (``mu = 1``): a passive joint of a closed loop or a coupled joint has none;
 * a closed loop (``[[loops]]``, [KK1986]; [KD2002] sec. 7.3) stays cut in the body tree and is closed by
   equality constraints between sites: the cut frame ``k`` (on body ``link<ant(k)>``, pose ``T(ant, k)`` at
@@ -161,6 +168,35 @@ def _equalities(robot: RobotDescription, timestep: float) -> list[str]:
     return ["  <equality>", *rows, "  </equality>"] if rows else []
 
 
+def friction_law_terms(robot: RobotDescription, j: int, vals) -> tuple[dict[str, float], str]:
+    """MuJoCo's ``frictionloss`` (``FS``) and ``damping`` (``FV``) for frame ``j`` with a declared friction law,
+    and the comment stating the approximation (module docstring); ``({}, "")`` without a law.
+
+    The power law's damping ``b`` minimises ``int_0^V (b v - FV v^delta)^2 dv``: ``b = 3 FV V^(delta-1) /
+    (delta + 2)`` with ``V`` the joint's ``dq_max`` (``[limits]``), else 1."""
+    law = (robot.friction_laws or {}).get(j)
+    if law is None:
+        return {}, ""
+    fs, fv = float(vals.get(f"FS{j}", 0.0)), float(vals.get(f"FV{j}", 0.0))
+    if law.kind == "power":
+        vmax = joint_limits(robot, j).get("dq_max", 1.0)
+        delta = float(law.scale or 1.0)
+        b = 3.0 * fv * vmax ** (delta - 1.0) / (delta + 2.0)
+        return {"FV": b}, (f"friction law {law.label()}: MuJoCo has no power law of the speed; damping = "
+                           f"{xml_float(b)}, the least-squares linear fit of FV{j} |dq|^delta over |dq| <= "
+                           f"{xml_float(vmax)}; frictionloss = FS{j} (Coulomb)")
+    if law.dynamic:      # Dahl, LuGre: their sliding part; MuJoCo has no pre-sliding state
+        hump = ", the pre-sliding state (sigma0) left out" + (f", the Stribeck hump FSS{j} below vs too"
+                                                               if law.coulomb == "stribeck" else "")
+        return {"FS": fs, "FV": fv}, (f"friction law {law.label()}: MuJoCo has no {law.kind} law; frictionloss = "
+                                      f"FS{j} (the sliding Coulomb level Fc){hump}; damping = FV{j}")
+    fss = f" = {xml_float(float(vals[f'FSS{j}']))}" if f"FSS{j}" in vals else ""
+    hump = (f", the Stribeck hump FSS{j}{fss} below vs left out"
+            if law.coulomb == "stribeck" else ", the smoothing below v left out (MuJoCo's soft constraint smooths)")
+    return {"FS": fs, "FV": fv}, (f"friction law {law.label()}: MuJoCo has no {law.kind} law; frictionloss = "
+                                  f"FS{j} (the sliding Coulomb level Fc){hump}; damping = FV{j}")
+
+
 def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, notes=(), report: list | None = None,
                 timestep: float = 0.001, integrator: str = "RK4", motors: bool = True) -> str:
     """MJCF text of ``robot`` (conventions in the module docstring).
@@ -244,13 +280,16 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
             s = joint_sign(row)
             attrs = [f'name="joint{j}"', f'type="{"hinge" if row.sigma == REVOLUTE else "slide"}"', 'pos="0 0 0"',
                      f'axis="0 0 {s}"']
+            law_vals, law_note = friction_law_terms(robot, j, vals)
             for key, attr in (("IA", "armature"), ("FV", "damping"), ("FS", "frictionloss")):
-                v = vals.get(f"{key}{j}", 0.0)
+                v = law_vals.get(key, vals.get(f"{key}{j}", 0.0))
                 if v and not elastic:  # an elastic joint's drive terms are on its rotor
                     attrs.append(f'{attr}="{xml_float(max(v, 0.0))}"')
             lim = joint_limits(robot, j)
             if "q_min" in lim and "q_max" in lim:
                 attrs.append(f'range="{xml_float(lim["q_min"])} {xml_float(lim["q_max"])}"')
+            if law_note:
+                out.append(f"{ind}  <!-- {xml_comment(law_note)} -->")
             out.append(f"{ind}  <joint {' '.join(attrs)}/>")
             off = vals.get(f"OFF{j}", 0.0)
             if off:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import sympy as sp
 
 from ..params import DRIVE_KINDS, INERTIAL_KINDS, param_name
+from .friction_law import FrictionLaw
 
 if TYPE_CHECKING:
     from .elastic import ElasticJoint
@@ -168,6 +169,8 @@ class RobotDescription:
     loops: tuple[LoopClosure, ...] = ()
     loop_reference: Mapping[str, float] = field(default_factory=dict)
     couplings: tuple[Coupling, ...] = ()
+    #: declared friction laws by frame number (``friction_law`` field, :mod:`.friction_law`)
+    friction_laws: Mapping[int, FrictionLaw] = field(default_factory=dict)
     #: the declared elastic joints (``elastic`` tables; :mod:`symoro_gen.description.elastic`), joint order
     elastic: tuple[ElasticJoint, ...] = ()
 

@@ -29,6 +29,7 @@ from ..params import DRIVE_KINDS, INERTIAL_KINDS
 from ..paths import robots_dir
 from .elastic import ElasticJoint, parse_elastic
 from .expr import ExprError, parse_expression
+from .friction_law import read_friction_laws
 from .inertia import check_physical_consistency
 from .loops import check_actuation, check_passive, parse_couplings, parse_loops
 from .model import (
@@ -47,7 +48,7 @@ from .model import (
 TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits",
             "loops", "loop_reference", "elastic"}
 FRAME_REQUIRED = ("j", "ant", "sigma", "alpha", "d", "theta", "r")
-FRAME_OPTIONAL = ("mu", "gamma", "b", "drive", "mimic", "name", "elastic")
+FRAME_OPTIONAL = ("mu", "gamma", "b", "drive", "mimic", "name", "elastic", "friction_law")
 CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
 _NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _RESERVED = {"q", "pi", "sin", "cos", "tan", "sqrt", "atan2"}
@@ -202,6 +203,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         check_passive(rows, loops, couplings, bad, mimic_frames)
     if loops and not probs.found:
         check_actuation(rows, loops, vals.values, bad, reference=loop_reference)
+    friction_laws = read_friction_laws(fr.entries, rows, bad) if not bad_sigma else {}
     elastic: tuple[ElasticJoint, ...] = ()
     if not bad_sigma:
         elastic = parse_elastic(doc.get("elastic"), fr.entries, rows, bad)
@@ -223,6 +225,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         loops=loops,
         loop_reference=loop_reference,
         couplings=couplings,
+        friction_laws=friction_laws,
         elastic=elastic,
     )
 

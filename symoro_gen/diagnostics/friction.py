@@ -61,6 +61,7 @@ from functools import partial
 import numpy as np
 from scipy import optimize
 
+from ..description.friction_law import COULOMB_LAWS, VISCOUS_LAWS, coulomb_columns, viscous_columns
 from ..errors import IdentificationError
 from ..model import IdentificationModel
 from .stability import N_FOLDS, BlockedLS, wls_basis
@@ -88,8 +89,6 @@ __all__ = [
     "viscous_columns",
 ]
 
-COULOMB_LAWS = ("sign", "tanh", "stribeck")
-VISCOUS_LAWS = ("linear", "power")
 #: a more complex law must lower the CV relative error of its joint by this fraction
 MIN_GAIN = 0.01
 #: exponents of the non-linear viscous law searched
@@ -188,39 +187,6 @@ def sliding_velocity(ex, j: int | None = None) -> np.ndarray:
     if j is None:
         return np.where(m, 0.0, ex.dq)
     return np.where(m[:, j], 0.0, ex.dq[:, j])
-
-
-def coulomb_columns(law: str, dq: np.ndarray, param: float | None = None, smooth: float | None = None) -> np.ndarray:
-    """Columns of a Coulomb law at velocities ``dq`` (N,): (N, 1) for ``sign``/``tanh``, (N, 2) for
-    ``stribeck`` (coefficients ``Fc`` and ``Fs - Fc``; its ``sign(dq)`` replaced by ``tanh(dq/smooth)``
-    when ``smooth`` is given)."""
-    dq = np.asarray(dq, float)
-    if law == "sign":
-        return (np.sign(dq) if smooth is None else np.tanh(dq / float(smooth)))[:, None]
-    if law == "tanh":
-        return np.tanh(dq / _law_parameter(law, param))[:, None]
-    if law == "stribeck":
-        s = np.sign(dq) if smooth is None else np.tanh(dq / float(smooth))
-        return np.column_stack([s, np.exp(-(dq / _law_parameter(law, param)) ** 2) * s])
-    raise ValueError(f"unknown Coulomb law {law!r}; use one of {COULOMB_LAWS}")
-
-
-def viscous_columns(law: str, dq: np.ndarray, param: float | None = None) -> np.ndarray:
-    """Column of a viscous law: ``dq`` (``linear``) or ``|dq|^delta sign(dq)`` (``power``), shape (N, 1)."""
-    dq = np.asarray(dq, float)
-    if law == "linear":
-        return dq[:, None]
-    if law == "power":
-        return (np.abs(dq) ** _law_parameter(law, param) * np.sign(dq))[:, None]
-    raise ValueError(f"unknown viscous law {law!r}; use one of {VISCOUS_LAWS}")
-
-
-def _law_parameter(law: str, param: float | None) -> float:
-    """The shape parameter a ``tanh``, ``stribeck`` or ``power`` law needs (a TypeError without it, as
-    ``float(None)``)."""
-    if param is None:
-        raise TypeError(f"the {law!r} friction law needs its shape parameter")
-    return float(param)
 
 
 @dataclass(frozen=True)

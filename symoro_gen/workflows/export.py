@@ -27,6 +27,7 @@ from typing import Any
 
 from ..atomic import check_outputs, json_output, write_output_text
 from ..description import load_robot
+from ..description.friction_law import with_identified_laws
 from ..description.identity import check_result_robot
 from ..description.mjcf_export import export_mjcf as mjcf_text
 from ..description.model import RobotDescription
@@ -231,6 +232,8 @@ def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.00
         raise OptionError(f"export_mjcf: timestep {timestep!r}: must be a positive number of seconds (MuJoCo's step)")
     desc = _description(robot)
     v = _values(desc, from_result, "export-mjcf") if from_result is not None else _Values()
+    if from_result is not None:     # the friction-law scales the identification fitted
+        desc = with_identified_laws(desc, _result_dict(from_result)[0])
     changed: list[str] = []
     text = mjcf_text(desc, v.chi, v.payload, notes=v.header, report=changed, timestep=timestep)
     return _finish("export-mjcf", desc, text, changed, v, inputs=(from_result,))

@@ -37,6 +37,7 @@ from ..identification.geometry import (
     shift_zeros,
     visible_zero_joints,
 )
+from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_laws, refine_scales
 from ..identification.iv import identify_iv
 from ..identification.payload import fit_with_known_payload_factors, identify_payload
 from ..identification.physical import identify_physical
@@ -218,6 +219,7 @@ class IdentifyResults(Results):
     inputs: tuple[Any, ...] = ()
     plausibility: Plausibility | None = None
     geometry: GeometryFit | None = None
+    friction_laws: tuple[ScaleFit, ...] = ()
     elasticity: StiffnessEstimate | None = None
 
     # ---- the JSON ---------------------------------------------------------------------------------
@@ -250,6 +252,8 @@ class IdentifyResults(Results):
             out["warnings"] = list(out["warnings"]) + list(self.plausibility.warnings)
         if self.geometry is not None:
             out["geometry"] = self.geometry.to_dict()
+        if self.friction_laws:
+            out["friction_laws"] = [f.to_dict() for f in self.friction_laws]
         if self.elasticity is not None:
             out["elasticity"] = self.elasticity.to_dict()
         out["provenance"] = provenance(self.options, self.inputs)
@@ -261,6 +265,10 @@ class IdentifyResults(Results):
         text = self.result.summary()
         if self.geometry is not None:
             text = self.geometry.summary(self.robot.name) + "\n\n" + text
+        if self.friction_laws:
+            text += ("\n\nDeclared friction laws (scale refined by Gauss-Newton on the identification data; \u00b1 one "
+                     "standard deviation, the magnitudes' with the scale free):\n"
+                     + "\n".join(f.summary() for f in self.friction_laws))
         if self.closed is not None:
             text = self.closed.summary() + "\n\n" + text
         v = self.validation
@@ -415,6 +423,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
         geo = _fit_geometry(opts, robot, model, unloaded, loaded, asm_opts, known)
         unloaded, loaded, held_back = (shift_zeros(x, geo.joints, geo.offsets) for x in (unloaded, loaded, held_back))
     streamed = streams(opts)
+    model, law_fits = _declared_friction(robot, model, unloaded, replace(asm_opts, payload_columns=False), opts)
     asm_u = _assemble(model, unloaded, replace(asm_opts, payload_columns=False), streamed)
     asm_l = _assemble(model, loaded, replace(asm_opts, payload_columns=True), streamed) if loaded else None
     # a joint that stands still leaves columns of W zero: an error naming the files, or drop_unexcited
@@ -460,7 +469,8 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
                            assemblies={"unloaded": asm_u, "loaded": asm_l, "validation": asm_v}, drive=dg,
                            closed=closed, physical=phys, unconstrained=res_u, validation=validation,
                            reference_rows=rows, held_back=tuple(tr.source for tr in held_back), inputs=inputs,
-                           plausibility=plaus, geometry=geo, elasticity=elasticity)
+                           plausibility=plaus, geometry=geo, friction_laws=law_fits,
+                           elasticity=elasticity)
 
 
 def _fit_geometry(opts: IdentifyOptions, robot, model: IdentificationModel, unloaded, loaded, asm_opts,
@@ -485,6 +495,23 @@ def _fit_geometry(opts: IdentifyOptions, robot, model: IdentificationModel, unlo
 
     g = fit_zeros(model, systems_at, fit_at, joints=js)
     return replace(g, robot_file=str(robot.file))
+
+
+def _declared_friction(robot, model: IdentificationModel, trajectories, options: AssemblyOptions,
+                       opts: IdentifyOptions) -> tuple[IdentificationModel, tuple[ScaleFit, ...]]:
+    """The model with the robot file's declared friction laws (``friction_law``) in place of their joints'
+    ``FS``/``FV`` columns, at the scales refined on the identification recordings
+    (:func:`~symoro_gen.identification.friction_law.refine_scales`); the model itself without any."""
+    laws = declared_laws(robot, model)
+    if not laws:
+        return model, ()
+    if opts.method in ("iv", "didim") or opts.physical:
+        given = "--physical" if opts.physical else f"--method {opts.method}"
+        raise OptionError(f"{given}: the declared friction laws (friction_law) of {robot.file} are identified with "
+                          "--method ols, wls or tls without --physical (the consistent standard set has no "
+                          "parameters for their columns); leave the option out, or the laws")
+    fits = refine_scales(model, laws, trajectories, options)
+    return LawDeclaredModel(model, laws, [f.scale for f in fits]), fits
 
 
 def _positions(opts: IdentifyOptions, robot, trajectories) -> tuple:
