@@ -29,6 +29,7 @@ from ..identification import identify as fit
 from ..identification.didim import identify_didim
 from ..identification.elastic import POSITION_SIDES, StiffnessEstimate, estimate_stiffness, link_side
 from ..identification.estimators import drop_unexcited, with_unexcited
+from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_laws, refine_scales
 from ..identification.geometry import (
     GEOMETRY_KINDS,
     GeometryFit,
@@ -37,7 +38,6 @@ from ..identification.geometry import (
     shift_zeros,
     visible_zero_joints,
 )
-from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_laws, refine_scales
 from ..identification.iv import identify_iv
 from ..identification.payload import fit_with_known_payload_factors, identify_payload
 from ..identification.physical import identify_physical
