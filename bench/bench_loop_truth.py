@@ -10,7 +10,7 @@ recording and validates on another (a different excitation and noise):
  1. torque delay of 10 ms on every joint (bus delay: ``tau_meas(t) = tau(t - 0.01)``)
  2. load-dependent friction on joint 2 (``mu |tau_rigid| sign(dq)``, mu = 0.04)
  3. viscous friction of joint 1 growing linearly over the recording (x2 after ``--seconds``)
- 4. cross-talk: 3 % of joint 2's torque read in joint 3's torque
+ 4. cross-talk: 3 % of joint 2's torque read in joint 3's torque (the loop's ``crosstalk`` kind, from joint 2)
  5. Stribeck friction on joint 4 (extra static friction 0.8 N m, vs = 0.07 rad/s)
  6. torque gain error on joint 3 (x1.15)
  7. cogging on joint 6 (0.3 N m, 10 periods per revolution)
@@ -110,7 +110,8 @@ def cases() -> list[Case]:
              lambda e: _j(e) == 0 and _kind(e) == "viscous"
              and (_mod(e) in ("time", "temperature") or _mod(e).startswith("step"))),
         Case(4, "cross-talk j2 -> j3", "tau_meas,3 += 0.03 tau_2 (3 % of joint 2's torque in joint 3's channel)", 2,
-             add("crosstalk", 1, (0.03, 2)), lambda e: _j(e) == 2, named=False),
+             add("crosstalk", 1, (0.03, 2)),
+             lambda e: _kind(e) == "crosstalk" and _j(e) == 2 and getattr(e, "partner", None) == 1),
         Case(5, "Stribeck j4", "+ 0.8 exp(-(dq4/0.07)^2) sign(dq4) N m (Stribeck, vs = 0.07 rad/s)", 3,
              add("stribeck", 3, (0.8, 0.07)),
              lambda e: _j(e) == 3 and (_kind(e) == "stribeck"
@@ -129,6 +130,12 @@ def cases() -> list[Case]:
         Case(11, "clean control", "friction = the declared Coulomb + viscous law, white noise only", None,
              lambda tr: None, lambda e: False),
     ]
+
+
+def _physical(e) -> dict:
+    """The effect's physical reading (K, delay, share...), floats only."""
+    return {str(k): float(v) for k, v in (getattr(e, "physical", None) or {}).items()
+            if isinstance(v, (int, float)) and not isinstance(v, bool)}
 
 
 def verdict_of(e):
@@ -178,7 +185,7 @@ def run_case(case: Case, model, robot, chi, rigid: Rigid, a) -> dict:
                 joint=None if case.joint is None else case.joint + 1,
                 effects=[dict(kind=_kind(e), joint=None if _j(e) is None else _j(e) + 1, label=str(getattr(e, "label", "")),
                               modulation=_mod(e) or None, variant=str(getattr(e, "variant", "")), verdict=verdict_of(e),
-                              description=str(getattr(e, "description", "")))
+                              description=str(getattr(e, "description", "")), physical=_physical(e))
                          for e in effects],
                 first=None if first is None else describe_effect(first), right_first=right_first,
                 right_first_cause=right_cause, right_at=anywhere, unexplained=unexpl,
@@ -194,8 +201,9 @@ def print_case(r: dict) -> None:
         for i, e in enumerate(r["effects"], 1):
             mod = f" [{e['modulation']}]" if e["modulation"] else ""
             v = f"  verdict={e['verdict']}" if e["verdict"] is not None else ""
+            phys = ", ".join(f"{k} = {x:.4g}" for k, x in (e.get("physical") or {}).items())
             print(f"   {i}. {e['kind']} j{e['joint'] or '-'}{mod} ({e['label']}, {e['variant']}){v}: "
-                  f"{e['description'][:160]}")
+                  f"{e['description'][:160]}" + (f" [{phys}]" if phys else ""))
     else:
         print("   (no effect named)")
     what = "right cause" if r["named_kind"] else f"right joint (j{r['joint']}; no kind for it)"

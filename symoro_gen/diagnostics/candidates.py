@@ -40,6 +40,10 @@ since the start of the recording):
                     ``d tau_hat / d q_j`` (``c = 0``), then rebuilt at the fitted offset (fixed point); one
                     family per joint whose zero the torque can see (:func:`.geometry.visible_zero_joints`,
                     all joints when the model is not given)
+``crosstalk``       ``tau_hat,i`` on the rows of joint j, one family per ordered pair of neighbouring joints
+                    ``i = j +- 1`` (partner i): joint j's torque channel reads ``c`` times joint i's torque
+                    (``tau_meas,j = tau_j + c tau_i``, the cross-sensitivity of a strain-gauge joint torque
+                    sensor or a shared current-sense path; :func:`_crosstalk_column`)
 ==================  =====================================================================================
 """
 from __future__ import annotations
@@ -57,16 +61,18 @@ from .geometry import decimated_zero_matrix, describe_zero, revolute_joints, vis
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
            "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "MAX_ZERO_OFFSET_DEG",
+           "MAX_CROSSTALK",
            "clear_elasticity_cache"]
 
 KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity", "time_delay", "gain",
-         "drift", "coupling", "rotor_inertia", "offset", "joint_zero")
+         "drift", "coupling", "rotor_inertia", "offset", "joint_zero", "crosstalk")
 ALL = KINDS
 
 #: signal against which each kind is best seen (plots and the structure table)
 REVEAL = {"stribeck": "dq", "load_friction": "tau_hat", "position_ripple": "q", "spring": "q",
           "elasticity": "tau_hat", "time_delay": "dtau_hat", "gain": "tau_hat", "drift": "t", "coupling": "ddq",
-          "rotor_inertia": "ddq", "offset": "t", "placebo": "t", "joint_zero": "q"}
+          "rotor_inertia": "ddq", "offset": "t", "placebo": "t", "joint_zero": "q",
+          "crosstalk": "tau_hat"}
 
 #: Stribeck velocity grid: ``n`` points from ``lo`` to ``hi`` times the 98th percentile of |dq_j|
 STRIBECK_GRID = (0.01, 0.5, 8)
@@ -176,6 +182,8 @@ class Family:
             assert self.joint is not None and self.partner is not None  # a coupling names both joints
             a, b = self.joint + 1, self.partner + 1
             return f"coupling{a}{'<' if self.variant == 'one-way' else '+'}{b}"
+        if self.kind == "crosstalk" and self.joint is not None and self.partner is not None:
+            return f"crosstalk{self.partner + 1}>{self.joint + 1}"   # source joint > channel it is read in
         return f"{self.kind}{'' if self.joint is None else self.joint + 1}"
 
     def names(self) -> tuple[str, ...]:
@@ -229,6 +237,7 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
         out += _model_torque_families(j, ks, st)
         out += _signal_families(j, ks, st)
     out += _joint_zero_families(n, ks, model)
+    out += _crosstalk_families(n, ks)
     out += _all_joint_families(n, ks)
     # columns that do not depend on the fit are the same in every round (the frames keep their q, dq,
     # ddq, t arrays when the model torque is re-attached): build them once per frame
@@ -380,6 +389,30 @@ def _joint_zero_families(n: int, ks: set[str], model: IdentificationModel | None
         out.append(Family("joint_zero", j, ("q0",), b_zero, reveal="q", depends_on_fit=True, build_at=b_zero_at,
                           self_consistent=True, info=(("revolute", bool(rev[j])),)))
     return out
+
+
+def _crosstalk_families(n: int, ks: set[str]) -> list[Family]:
+    """Cross-talk into joint j's torque channel from each neighbouring joint ``i = j +- 1`` (the neighbours only:
+    their cables and drives sit side by side; a pair further apart would need a reason of its own, and every
+    family more raises the round's Bonferroni factor)."""
+    if "crosstalk" not in ks:
+        return []
+    out = []
+    for j in range(n):
+        for i in (j - 1, j + 1):
+            if 0 <= i < n:
+                out.append(Family("crosstalk", j, ("c",), lambda fr, ctx, j=j, i=i: [_crosstalk_column(fr, j, i)],
+                                  partner=i, reveal="tau_hat", reveal_joint=i, depends_on_fit=True))
+    return out
+
+
+def _crosstalk_column(frame: Frame, j: int, i: int) -> np.ndarray:
+    """Joint i's model torque (the smoothed ``tau_hat``, as the ``gain`` column) on the rows of joint j: the
+    torque of joint i read, times ``c``, in joint j's channel."""
+    X = np.zeros((frame.n_rows, 1))
+    rows = frame.rows_of(j)
+    X[rows, 0] = frame.sig["tau_hat"][rows, i]
+    return X
 
 
 def _joint_zero_build(frame: Frame, ctx: FitContext, m: int, c: float) -> np.ndarray:
@@ -649,6 +682,9 @@ MAX_DELAY_PHASE = 1.0
 #: degree (Hollerbach & Wampler 1996; Khalil & Dombre 2002, ch. 11); tens of degrees are a wrong joint
 #: convention of the robot file (its MDH theta offset), and far from the tangent the column linearises
 MAX_ZERO_OFFSET_DEG = 20.0
+#: a ``crosstalk`` share ``|c|`` must be at most this: half of another joint's torque in a channel is a swapped or
+#: mixed-up channel of the data (a wiring or conversion error), not the cross-sensitivity of a sensor
+MAX_CROSSTALK = 0.5
 
 
 def implausible(family: Family, values, *, f_dyn: float) -> str | None:
@@ -656,6 +692,7 @@ def implausible(family: Family, values, *, f_dyn: float) -> str | None:
     they are not): a ``gain`` scale outside :data:`GAIN_SCALE_RANGE`, a ``time_delay`` beyond the validity
     of its first-order column (:data:`MAX_DELAY_PHASE` at the dynamics bandwidth ``f_dyn`` [Hz]), a revolute
     ``joint_zero`` offset beyond :data:`MAX_ZERO_OFFSET_DEG`, a
+    ``crosstalk`` share beyond :data:`MAX_CROSSTALK`, a
     negative viscous or Coulomb coefficient of a shared motor (``coupling``, variant ``shared``: the
     motor's friction, absent from the declared model, dissipates). The loop does not add a candidate
     that makes any effect implausible (:mod:`.core`)."""
@@ -678,6 +715,10 @@ def implausible(family: Family, values, *, f_dyn: float) -> str | None:
             return (f"zero offset {math.degrees(v[0]):.3g} deg of joint {(family.joint or 0) + 1} beyond "
                     f"{MAX_ZERO_OFFSET_DEG:g} deg (a wrong theta convention of its row in the robot file, not an "
                     "encoder zero error)")
+    elif k == "crosstalk" and abs(v[0]) > MAX_CROSSTALK:
+        return (f"cross-talk of {100 * v[0]:.3g} % of joint {(family.partner or 0) + 1}'s torque in joint "
+                f"{(family.joint or 0) + 1}'s channel beyond {100 * MAX_CROSSTALK:g} % (channels swapped or mixed in the "
+                "data, not a sensor's cross-sensitivity)")
     elif k == "coupling" and family.variant == "shared":
         bad = [f"{p} = {x:.3g}" for p, x in zip(family.params, v) if p in ("FVm", "FSm") and x < 0]
         if bad:
@@ -713,6 +754,11 @@ def describe_params(family: Family, value, values: np.ndarray, std: np.ndarray) 
         info = dict(family.info)
         out.update(info)
         out["dtau_dq_at_center"] = v[0] / info.get("half_range", 1.0)
+    elif k == "crosstalk":
+        out["share"] = v[0]
+        out["percent"] = 100.0 * v[0]
+        if family.partner is not None:
+            out["from_joint"] = float(family.partner + 1)   # 1-based, as in the text
     elif k == "joint_zero":
         out.update(describe_zero(v[0], float(np.asarray(std, float).reshape(-1)[0]),
                                  bool(dict(family.info).get("revolute", True))))
