@@ -350,6 +350,11 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
                      "file")
         else:
             return r.done("zero offset of a prismatic joint (a length): no prior on its magnitude")
+    elif kind == "held_friction":
+        fh = float(params.get("Fh", 0.0))
+        r.factor(band_factor(fh / tau, 0.0, FRICTION_SHARE, SHARE_WIDTH),
+                 f"a held friction of {fh:.3g} N m is large against the torque range {tau:.3g} N m",
+                 f"a load held by {_who(j)}'s brake, a gravity term missing at the rest poses")
     elif kind == "crosstalk":
         c = float(physical.get("share", params.get("c", 0.0)))
         src = "another joint" if j is None else "a neighbouring joint"
@@ -563,6 +568,8 @@ def fits_like(kind: str, joint: int | None, physical: Mapping[str, float], descr
         return f"a stiffness of {float(physical['K_Nm_per_rad']):.3g} N m/rad of {who}"
     if kind == "stribeck" and "vs" in physical:
         return f"Stribeck friction with vs = {float(physical['vs']):.3g} rad/s on {who}"
+    if kind == "held_friction" and "Fh_Nm" in physical:
+        return f"a friction of {float(physical['Fh_Nm']):.3g} N m held at rest on {who} (the last sliding direction's)"
     if kind == "crosstalk" and "percent" in physical:
         fj = physical.get("from_joint")
         src = "a neighbouring joint" if fj is None else f"joint {int(fj)}"
