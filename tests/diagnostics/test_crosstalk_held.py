@@ -149,8 +149,9 @@ def test_loop_names_the_crosstalk_into_joint_3():
 @pytest.mark.slow
 def test_elastic_joint_at_500_hz_is_found():
     """The motor-side encoder of an elastic joint 4 (K = 3000 N m/rad) at 500 Hz: the elasticity of joint 4 is the
-    first effect, its stiffness within 10 % (the smoothed-sign nuisance columns spread over too few rows are left
-    out of the scoring design; with them the candidate predicted joint 3's acceptance data worse)."""
+    first effect, its stiffness within 10 % (a smoothed-sign nuisance column whose coefficient is beyond ten torque
+    ranges of its joint is left out of the scoring design; with it the candidate predicted joint 3's acceptance
+    data worse)."""
     model, ident, valid = _lwr4_case(8, 30.0, 500.0)
     rep = diagnose(model, [ident], DiagnoseSettings(candidates=("elasticity", "gain", "time_delay")),
                    validation=[valid], rng=np.random.default_rng(8))
