@@ -26,7 +26,7 @@ recording and validates on another (a different excitation and noise):
 
 For each case it prints the truth, the effects in the order reported (kind, joint, label, modulation,
 ``verdict`` when the report has one), whether the right cause - or, for a kind the loop has no name for
-(cross-talk), the right joint - is the FIRST effect, and the joints whose residual
+(none since cross-talk got its `crosstalk` kind), the right joint - is the FIRST effect, and the joints whose residual
 holds unexplained structure. The score line counts the single-effect cases (1-10) whose first effect is
 right, and those whose first effect with verdict ``cause`` is right (when the report has verdicts).
 
