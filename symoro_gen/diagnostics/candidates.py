@@ -21,7 +21,8 @@ since the start of the recording):
                     and the Coulomb term of joint j by its own secant): the torque error of a position
                     measured on the motor side, ``q_link = q_motor - tau/K`` (LWR4 paper eq. 17), as a
                     secant in ``c_j = 1/K_j`` [rad/(N m)] searched on a signed log grid and refined, on
-                    *every* joint's rows
+                    *every* joint's rows; ``tau_j`` is the link-side model torque (the drive terms left
+                    out, :func:`_link_torque`: motor-side friction does not pass through the spring)
 ``time_delay``      ``-d tau_hat,j / dt`` (``tau_meas(t) = tau(t - d)`` to first order in the lag d [s]);
                     one family per joint and one for all joints (same lag)
 ``gain``            ``tau_hat_j`` (model torque of joint j): ``Y_j = tau_j / g_j`` gives
