@@ -10,7 +10,7 @@ recording and validates on another (a different excitation and noise):
  1. torque delay of 10 ms on every joint (bus delay: ``tau_meas(t) = tau(t - 0.01)``)
  2. load-dependent friction on joint 2 (``mu |tau_rigid| sign(dq)``, mu = 0.04)
  3. viscous friction of joint 1 growing linearly over the recording (x2 after ``--seconds``)
- 4. cross-talk: 3 % of joint 2's torque read in joint 3's torque
+ 4. cross-talk: 3 % of joint 2's torque read in joint 3's torque (the loop's ``crosstalk`` kind, from joint 2)
  5. Stribeck friction on joint 4 (extra static friction 0.8 N m, vs = 0.07 rad/s)
  6. torque gain error on joint 3 (x1.15)
  7. cogging on joint 6 (0.3 N m, 10 periods per revolution)
@@ -26,12 +26,18 @@ recording and validates on another (a different excitation and noise):
 
 For each case it prints the truth, the effects in the order reported (kind, joint, label, modulation,
 ``verdict`` when the report has one), whether the right cause - or, for a kind the loop has no name for
-(cross-talk), the right joint - is the FIRST effect, and the joints whose residual
+(none since cross-talk got its `crosstalk` kind), the right joint - is the FIRST effect, and the joints whose residual
 holds unexplained structure. The score line counts the single-effect cases (1-10) whose first effect is
 right, and those whose first effect with verdict ``cause`` is right (when the report has verdicts).
 
     PYTHONPATH=. python bench/bench_loop_truth.py [--cases 1,2,...] [--seconds 30] [--rate 500] [--seed 0]
                                                   [--json out.json [--force]]
+
+``--clean-seeds N`` runs, instead of the cases, the clean control (case 11: friction = the declared law, noise
+only) on N seeds (``--seed`` .. ``--seed + N - 1``; each its own excitations and noise) and prints how many
+seeds named anything, and what: the false-positive rate of the loop on data its declared model explains.
+
+    PYTHONPATH=. python bench/bench_loop_truth.py --clean-seeds 30 --seconds 15 --rate 250
 """
 from __future__ import annotations
 
@@ -110,7 +116,8 @@ def cases() -> list[Case]:
              lambda e: _j(e) == 0 and _kind(e) == "viscous"
              and (_mod(e) in ("time", "temperature") or _mod(e).startswith("step"))),
         Case(4, "cross-talk j2 -> j3", "tau_meas,3 += 0.03 tau_2 (3 % of joint 2's torque in joint 3's channel)", 2,
-             add("crosstalk", 1, (0.03, 2)), lambda e: _j(e) == 2, named=False),
+             add("crosstalk", 1, (0.03, 2)),
+             lambda e: _kind(e) == "crosstalk" and _j(e) == 2 and getattr(e, "partner", None) == 1),
         Case(5, "Stribeck j4", "+ 0.8 exp(-(dq4/0.07)^2) sign(dq4) N m (Stribeck, vs = 0.07 rad/s)", 3,
              add("stribeck", 3, (0.8, 0.07)),
              lambda e: _j(e) == 3 and (_kind(e) == "stribeck"
@@ -129,6 +136,12 @@ def cases() -> list[Case]:
         Case(11, "clean control", "friction = the declared Coulomb + viscous law, white noise only", None,
              lambda tr: None, lambda e: False),
     ]
+
+
+def _physical(e) -> dict:
+    """The effect's physical reading (K, delay, share...), floats only."""
+    return {str(k): float(v) for k, v in (getattr(e, "physical", None) or {}).items()
+            if isinstance(v, (int, float)) and not isinstance(v, bool)}
 
 
 def verdict_of(e):
@@ -178,7 +191,7 @@ def run_case(case: Case, model, robot, chi, rigid: Rigid, a) -> dict:
                 joint=None if case.joint is None else case.joint + 1,
                 effects=[dict(kind=_kind(e), joint=None if _j(e) is None else _j(e) + 1, label=str(getattr(e, "label", "")),
                               modulation=_mod(e) or None, variant=str(getattr(e, "variant", "")), verdict=verdict_of(e),
-                              description=str(getattr(e, "description", "")))
+                              description=str(getattr(e, "description", "")), physical=_physical(e))
                          for e in effects],
                 first=None if first is None else describe_effect(first), right_first=right_first,
                 right_first_cause=right_cause, right_at=anywhere, unexplained=unexpl,
@@ -194,8 +207,9 @@ def print_case(r: dict) -> None:
         for i, e in enumerate(r["effects"], 1):
             mod = f" [{e['modulation']}]" if e["modulation"] else ""
             v = f"  verdict={e['verdict']}" if e["verdict"] is not None else ""
+            phys = ", ".join(f"{k} = {x:.4g}" for k, x in (e.get("physical") or {}).items())
             print(f"   {i}. {e['kind']} j{e['joint'] or '-'}{mod} ({e['label']}, {e['variant']}){v}: "
-                  f"{e['description'][:160]}")
+                  f"{e['description'][:160]}" + (f" [{phys}]" if phys else ""))
     else:
         print("   (no effect named)")
     what = "right cause" if r["named_kind"] else f"right joint (j{r['joint']}; no kind for it)"
@@ -266,7 +280,9 @@ def run_cobot(a) -> dict:
                 rest_share=shares,
                 effects=[dict(kind=_kind(e), joint=None if _j(e) is None else _j(e) + 1, label=str(getattr(e, "label", "")),
                               modulation=_mod(e) or None, variant=str(getattr(e, "variant", "")), verdict=verdict_of(e),
-                              description=str(getattr(e, "description", ""))) for e in rep.effects],
+                              description=str(getattr(e, "description", "")), physical=_physical(e))
+                         for e in rep.effects],
+                held_truth=[float(x) for x in truth.FS / kt],
                 expert_v=[float(v) for v in ex.v],
                 declared_filt=[float(x) for x in rep.before_validation_rel_err],
                 expert_filt=[float(x) for x in e_f], loop_filt=[float(x) for x in rep.after_validation_rel_err],
@@ -290,7 +306,11 @@ def print_cobot(r: dict) -> None:
     for i, e in enumerate(r["effects"], 1):
         mod = f" [{e['modulation']}]" if e["modulation"] else ""
         v = f"  verdict={e['verdict']}" if e["verdict"] is not None else ""
-        print(f"   {i}. {e['kind']} j{e['joint'] or '-'}{mod} ({e['label']}, {e['variant']}){v}: {e['description'][:160]}")
+        phys = ", ".join(f"{k} = {x:.4g}" for k, x in (e.get("physical") or {}).items())
+        held = (f" (truth Fc/k_t = {r['held_truth'][e['joint'] - 1]:.4g})"
+                if e["kind"] == "held_friction" and e["joint"] else "")
+        print(f"   {i}. {e['kind']} j{e['joint'] or '-'}{mod} ({e['label']}, {e['variant']}){v}: {e['description'][:160]}"
+              + (f" [{phys}]" if phys else "") + held)
     if not r["effects"]:
         print("   (no effect named)")
     for line in r["static_at_rest"]:
@@ -313,6 +333,35 @@ def print_cobot(r: dict) -> None:
 
 
 # ------------------------------------------------------------------------------------------------
+# the clean bench: the clean control on many seeds
+# ------------------------------------------------------------------------------------------------
+def run_clean_seeds(a, model, robot, chi, rigid: Rigid) -> dict:
+    """Case 11 on seeds ``a.seed`` .. ``a.seed + a.clean_seeds - 1``: what each seed names (nothing is right)."""
+    clean = next(c for c in cases() if c.number == 11)
+    rows = []
+    base_seed = a.seed
+    try:
+        for k in range(a.clean_seeds):
+            a.seed = base_seed + k
+            r = run_case(clean, model, robot, chi, rigid, a)
+            named = [f"{e['kind']} j{e['joint'] or '-'}" + (f" [{e['modulation']}]" if e["modulation"] else "")
+                     + (f" ({e['verdict']})" if e["verdict"] else "") for e in r["effects"]]
+            print(f"   seed {a.seed:3d} (rng seed {r['seed']}): " + ("; ".join(named) if named else "nothing named")
+                  + f"   [diagnose {r['seconds_loop']:.1f} s]")
+            sys.stdout.flush()
+            rows.append(dict(seed=a.seed, rng_seed=r["seed"], named=named, unexplained=r["unexplained"],
+                             causes=[x for x in named if x.endswith("(cause)")]))
+    finally:
+        a.seed = base_seed
+    kinds: dict[str, int] = {}
+    for row in rows:
+        for x in row["named"]:
+            key = x.split(" [")[0].split(" (")[0]
+            kinds[key] = kinds.get(key, 0) + 1
+    return dict(seeds=rows, n=len(rows), n_named=sum(bool(r["named"]) for r in rows),
+                n_cause=sum(bool(r["causes"]) for r in rows), named_counts=kinds)
+
+
 def parse_cases(text: str) -> list[int]:
     out = []
     for part in text.split(","):
@@ -344,6 +393,8 @@ def main(argv=None) -> int:
                     help="Coulomb law of case 12: tanh(dq/0.03) (0 at rest) or LuGre bristles (holds at rest)")
     ap.add_argument("--sigma-tau", type=float, default=0.05, help="torque noise [N m] (default 0.05)")
     ap.add_argument("--seed", type=int, default=0, help="base seed (case k uses 1000 seed + k)")
+    ap.add_argument("--clean-seeds", type=int, default=0,
+                    help="run only the clean control (case 11) on this many seeds and count what is named")
     ap.add_argument("--json", default=None, help="write the results to this JSON file")
     ap.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     a = ap.parse_args(argv)
@@ -364,6 +415,17 @@ def main(argv=None) -> int:
     rigid = Rigid(robot, chi)
     print(f"loop truth bench: LWR4 nominal parameters (unloaded), identification {a.seconds:g} s + validation "
           f"{VALID_SHARE * a.seconds:g} s at {a.rate:g} Hz, torque noise {a.sigma_tau:g} N m, q noise 1e-5 rad")
+    if a.clean_seeds > 0:
+        print(f"clean bench: case 11 on {a.clean_seeds} seeds ({a.seed} .. {a.seed + a.clean_seeds - 1})")
+        cb = run_clean_seeds(a, model, robot, chi, rigid)
+        wall = time.perf_counter() - T0
+        print(f"\nclean bench: {cb['n_named']}/{cb['n']} seeds named anything ({cb['n_cause']} with verdict cause); "
+              + ("named: " + ", ".join(f"{k} x{v}" for k, v in sorted(cb["named_counts"].items()))
+                 if cb["named_counts"] else "nothing named on any seed"))
+        print(f"wall time {wall:.0f} s")
+        if a.json:
+            Path(a.json).write_text(json.dumps(dict(args=vars(a), clean_bench=cb, wall_s=wall), indent=1))
+        return 0
     results = []
     for c in cases():
         if c.number in wanted:

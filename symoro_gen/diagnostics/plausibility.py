@@ -40,7 +40,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 __all__ = [
-    "ALTERNATIVE_EXPLAINS", "CLOSE_ALTERNATIVE", "CLOSE_REMAINING", "DEFLECTION_BAND", "DELAY_ABSURD_PERIOD_SHARE",
+    "ALTERNATIVE_EXPLAINS", "CLOSE_ALTERNATIVE", "CLOSE_REMAINING", "CROSSTALK_TYPICAL", "DEFLECTION_BAND",
+    "DELAY_ABSURD_PERIOD_SHARE",
     "DELAY_TYPICAL_PERIODS", "DELAY_TYPICAL_S", "EXPLAINS_REMAINING", "GAIN_TOLERANCE", "LAW_GAIN_MIN", "PLAUSIBLE",
     "POWER_BAND", "STRIBECK_BAND", "STRIBECK_EXCESS_SHARE", "STRIBECK_SPEED_SHARE", "SYNONYMS", "VELOCITY_RESOLUTION",
     "VERDICTS", "ZERO_OFFSET_TYPICAL_DEG", "ZERO_OFFSET_WIDTH", "ArmScales", "Plausibility", "alternatives_of",
@@ -139,6 +140,11 @@ NEGATIVE_FRICTION_FACTOR = 0.2
 #: (a wrong MDH theta convention of the robot file, rather)
 ZERO_OFFSET_TYPICAL_DEG = 2.0
 ZERO_OFFSET_WIDTH = math.log(2.0)
+#: cross-talk into a joint's torque channel: strain-gauge joint torque sensors' datasheets specify a
+#: cross-sensitivity (cross-talk) of about 1-3 % of the reading; up to 10 % of a neighbouring joint's torque
+#: is plausible, beyond it the factor falls (20 %: 0.61) - a larger share is a mixed channel, not cross-talk
+CROSSTALK_TYPICAL = 0.10
+CROSSTALK_WIDTH = math.log(2.0)
 
 
 @dataclass(frozen=True)
@@ -344,6 +350,18 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
                      "file")
         else:
             return r.done("zero offset of a prismatic joint (a length): no prior on its magnitude")
+    elif kind == "held_friction":
+        fh = float(params.get("Fh", 0.0))
+        r.factor(band_factor(fh / tau, 0.0, FRICTION_SHARE, SHARE_WIDTH),
+                 f"a held friction of {fh:.3g} N m is large against the torque range {tau:.3g} N m",
+                 f"a load held by {_who(j)}'s brake, a gravity term missing at the rest poses")
+    elif kind == "crosstalk":
+        c = float(physical.get("share", params.get("c", 0.0)))
+        src = "another joint" if j is None else "a neighbouring joint"
+        r.factor(band_factor(c, 0.0, CROSSTALK_TYPICAL, CROSSTALK_WIDTH),
+                 f"{100 * abs(c):.3g} % of {src}'s torque in {_who(j)}'s channel is large for the cross-sensitivity "
+                 f"of a torque sensor (datasheets: 1-3 %; plausible up to {100 * CROSSTALK_TYPICAL:g} %)",
+                 f"the wiring and the channel assignment of {_who(j)}'s torque in the data conversion")
     elif kind == "coupling" and variant == "shared":
         for nm in ("FVm", "FSm"):
             if float(params.get(nm, 0.0)) < 0:
@@ -550,6 +568,12 @@ def fits_like(kind: str, joint: int | None, physical: Mapping[str, float], descr
         return f"a stiffness of {float(physical['K_Nm_per_rad']):.3g} N m/rad of {who}"
     if kind == "stribeck" and "vs" in physical:
         return f"Stribeck friction with vs = {float(physical['vs']):.3g} rad/s on {who}"
+    if kind == "held_friction" and "Fh_Nm" in physical:
+        return f"a friction of {float(physical['Fh_Nm']):.3g} N m held at rest on {who} (the last sliding direction's)"
+    if kind == "crosstalk" and "percent" in physical:
+        fj = physical.get("from_joint")
+        src = "a neighbouring joint" if fj is None else f"joint {int(fj)}"
+        return f"cross-talk: {float(physical['percent']):.3g} % of {src}'s torque read in {who}'s torque channel"
     if kind == "joint_zero" and "offset_deg" in physical:
         return f"an encoder zero offset of {float(physical['offset_deg']):.3g} deg on {who}"
     if kind == "joint_zero" and "offset_m" in physical:

@@ -46,10 +46,16 @@ CASES = [
 ]
 
 
+#: kinds whose end-to-end tests run on the independent simulator of the truth bench instead (bench/truthsim.py:
+#: a neighbour's torque in a channel; a LuGre friction that holds at rest, which needs recordings with pauses)
+COVERED_ELSEWHERE = {"crosstalk": "test_crosstalk_held.py", "held_friction": "test_crosstalk_held.py"}
+
+
 def test_every_kind_is_covered():
-    assert {c[1] for c in CASES} == set(KINDS)
+    assert {c[1] for c in CASES} | set(COVERED_ELSEWHERE) == set(KINDS)
     for k in KINDS:
-        assert sum(c[1] == k for c in CASES) >= 2, k
+        if k not in COVERED_ELSEWHERE:
+            assert sum(c[1] == k for c in CASES) >= 2, k
 
 
 def _id(c):
