@@ -60,7 +60,7 @@ import numpy as np
 
 from ..errors import IdentificationError
 from .stability import wls_basis
-from .stats import hac_covariance, hac_lag, holm, segments_of, single_threaded_blas, wald_test
+from .stats import hac_covariance, hac_lag, holm, segments_of, single_threaded_blas, span_product, wald_test
 
 __all__ = [
     "EFFECTS",
@@ -441,7 +441,7 @@ class _Tester:
     def __call__(self, X, j, P=None, base=None):
         U, e0, lev0, rank, rss_joint = self.with_plain(P) if base is None else base
         Xw = X * self.w[:, None]
-        Xp = Xw - U @ (U.T @ Xw)
+        Xp = Xw - U @ span_product(U, Xw)
         G = Xp.T @ Xp
         # a column (almost) in the span of the model is "already in the model" (as IDENTIFIABILITY_TOL of .core)
         if not np.all(np.diag(G) > IDENTIFIABILITY_TOL ** 2 * np.maximum(np.einsum("ij,ij->j", Xw, Xw), 1e-300)):

@@ -1189,7 +1189,12 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
                 best = one
         if best is not None:
             best.p_value = bonferroni(best.p_value, fam.n_members)
-        evals.append((fam, best, reasons[0] if reasons and best is None else "", Xs, Xvs))
+        # only the best member's columns are kept for the round (an eligible candidate's design): the
+        # other members of a grid, and the placebos', are dropped as soon as scored
+        m = best.member if best is not None and not fam.placebo else None
+        evals.append((fam, best, reasons[0] if reasons and best is None else "",
+                      None if m is None else Xs[m], None if m is None else Xvs[m]))
+        del Xs, Xvs
     bar.close()
     tested = [e for e in evals if e[1] is not None and not e[0].placebo]
     thr = cfg.significance / max(len(tested), 1)
@@ -1210,7 +1215,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
     tried: list[CandidateScore] = []
     placebos: list[CandidateScore] = []
     hits: list[tuple[int | None, int, str, float]] = []
-    for fam, ev, why, Xs, Xvs in evals:
+    for fam, ev, why, X_best, Xv_best in evals:
         search = {fam.grid_label: fam.grid[ev.member]} if (ev is not None and fam.grid) else {}
         if ev is None:
             cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, None, None, None,
@@ -1237,7 +1242,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
                                 "; ".join(reason), search, tuple(float(x) for x in ev.rel_before),
                                 tuple(float(x) for x in ev.rel_after))
             if cs.eligible:
-                eligible.append((ev.score, fam, ev, Xs[ev.member], Xvs[ev.member], cs))
+                eligible.append((ev.score, fam, ev, X_best, Xv_best, cs))
         (placebos if fam.placebo else tried).append(cs)
         if (fam.placebo and ev is not None and ev.p_value < thr and ev.z > zcrit
                 and gain_of(ev, _own(fam, n)) >= cfg.min_rel_improvement):

@@ -39,7 +39,10 @@ from ..preprocessing.filtering import (
     decimation_filter,
     estimate_dynamics_bandwidth,
     filter_and_differentiate,
+    fir_buffer_length,
     fir_decimate,
+    fir_decimate_padded,
+    fir_group_size,
 )
 from ..preprocessing.trajectory import Trajectory
 
@@ -50,6 +53,9 @@ def _fir_taps(n_d: int, cutoff_ratio: float) -> np.ndarray:
     h.setflags(write=False)
     return h
 
+
+#: bytes of the full-rate columns of one stretch of samples (:meth:`Frame.full_rate_columns_batched`)
+FULL_RATE_BATCH_BYTES = 16 * 2 ** 20
 
 __all__ = ["Experiment", "Frame", "build_frame", "frame_from_assembly", "attach_model_torque", "model_torque",
            "split_holdout", "common_bandwidth", "noise_gains", "T_ORIGIN_KEY"]
@@ -187,6 +193,64 @@ class Frame:
                 m = (self.row_experiment == e) & (self.system.joint == j)
                 X[m] = dec[self.row_index[m], i * p:(i + 1) * p]
         return X
+
+    def full_rate_columns_batched(self, fn: Callable[[Experiment, int, int], np.ndarray], p: int, *,
+                                  batch_bytes: int = FULL_RATE_BATCH_BYTES) -> np.ndarray:
+        """:meth:`full_rate_columns` of columns on the rows of *every* joint, evaluated at full rate over
+        bounded stretches of samples instead of the whole recording.
+
+        The FIR decimation (:func:`symoro_gen.preprocessing.filtering.fir_decimate`) is a sum over a window
+        of ``L`` full-rate samples per kept sample (RX-90 paper sec. 4, parallel decimation), so the kept
+        samples of a stretch need the full-rate columns of that stretch and of ``L - 1`` samples around it
+        only: the result equals :meth:`full_rate_columns` to rounding while the full-rate array (``n p``
+        columns at every sample, e.g. the regressor's tangent) never exists whole.
+
+        Parameters
+        ----------
+        fn : callable
+            ``fn(experiment, a, b) -> array (b - a, n, p)``: the columns of samples ``a:b`` on each
+            joint's rows.
+        p : int
+            Number of columns.
+        batch_bytes : int
+            Size of the full-rate array of one stretch (at least the filter window).
+
+        Returns
+        -------
+        ndarray, shape (r, p)
+        """
+        X = np.zeros((self.n_rows, p))
+        for e, ex in enumerate(self.experiments):
+            st = ex.settings
+            n = ex.q.shape[1]
+            if not (st.ftype == "fir" and st.n_d > 1):
+                dec = ex.decimate(np.asarray(fn(ex, 0, ex.n_samples), float).reshape(ex.n_samples, n * p))
+                self._scatter(X, e, dec, n, p)
+                continue
+            h = _fir_taps(st.n_d, st.cutoff_ratio)
+            n_d, L, N = st.n_d, h.size, ex.n_samples
+            half, group = (L - 1) // 2, fir_group_size(st.n_d)
+            n_out = -(-N // n_d)
+            # outputs per stretch: a multiple of the FIR group, with its samples within batch_bytes
+            per = max(group, (max(batch_bytes // (8 * n * p), L) // n_d) // group * group)
+            dec = np.empty((n_out, n * p))
+            for k0 in range(0, n_out, per):
+                k1 = min(n_out, k0 + per)
+                rows = fir_buffer_length(k1 - k0, n_d, L, group)
+                lo = k0 * n_d - half                # sample of the first buffer row
+                a, b = max(lo, 0), min(lo + rows, N)
+                buf = np.zeros((rows, n * p))
+                if b > a:
+                    buf[a - lo:b - lo] = np.asarray(fn(ex, a, b), float).reshape(b - a, n * p)
+                dec[k0:k1] = fir_decimate_padded(buf, h, n_d, k1 - k0, group)
+            self._scatter(X, e, dec, n, p)
+        return X
+
+    def _scatter(self, X: np.ndarray, e: int, dec: np.ndarray, n: int, p: int) -> None:
+        """Rows of experiment ``e`` of every joint ``j`` from the decimated columns ``dec[:, j p:(j + 1) p]``."""
+        for j in range(n):
+            m = (self.row_experiment == e) & (self.system.joint == j)
+            X[m] = dec[self.row_index[m], j * p:(j + 1) * p]
 
     def row_columns(self, fn: Callable[[int, np.ndarray], np.ndarray], p: int) -> np.ndarray:
         """Columns computed from the decimated row signals: ``fn(j, rows) -> (len(rows), p)`` per joint."""

@@ -45,7 +45,7 @@ from functools import partial
 import numpy as np
 from scipy import special as ssp
 
-from .stats import f_sf, hac_covariance, hac_lag, segments_of
+from .stats import contiguous_runs, f_sf, hac_covariance, hac_lag, rows_times, segments_of
 
 __all__ = [
     "MIN_SELECTION_FREQUENCY",
@@ -205,9 +205,15 @@ class _ColumnFactors:
         nz = nonzero[tr_idx]
         local = np.flatnonzero(nz)
         Xw_S = X[tr_idx[local]] * f.w[local][:, None]
-        U_S = f.U[local]
-        c = U_S.T @ Xw_S
-        Xp_S = Xw_S - U_S @ c
+        # U_S = U[local] by its contiguous runs (one joint's training rows: one or two runs), not copied
+        runs = contiguous_runs(local)
+        if runs is None:
+            U_S = f.U[local]
+            c = U_S.T @ Xw_S
+            Xp_S = Xw_S - U_S @ c
+        else:
+            c = sum((f.U[a:b].T @ Xw_S[i:i + b - a] for i, a, b in runs), np.zeros((f.U.shape[1], X.shape[1])))
+            Xp_S = np.concatenate([Xw_S[i:i + b - a] - f.U[a:b] @ c for i, a, b in runs]) if runs else Xw_S
         G = Xp_S.T @ Xp_S + c.T @ outside(nz) @ c
         d = np.sqrt(np.diag(G))
         if not np.all(d > 0):
@@ -216,8 +222,9 @@ class _ColumnFactors:
         if np.linalg.cond(Gs) > MAX_GRAM_COND:
             return None
         Ginv = np.linalg.inv(Gs) / np.outer(d, d)
-        D = X[f.test] - A[f.test] @ (f.VS @ c)
+        D = X[f.test] - rows_times(A, f.test, f.VS @ c)
         return _ColumnFactors(local, Xw_S, Ginv, D)
+
 
 
 class _ColumnCache:

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special as ssp
 
-__all__ = ["single_threaded_blas", "f_sf", "long_run_factor", "segments_of", "hac_covariance", "hac_lag", "wald_test", "nested_f_test", "binned_anova", "fisher_g_test", "bonferroni", "AnovaResult"]
+__all__ = ["single_threaded_blas", "contiguous_runs", "rows_times", "span_product", "f_sf", "long_run_factor", "segments_of", "hac_covariance", "hac_lag", "wald_test", "nested_f_test", "binned_anova", "fisher_g_test", "bonferroni", "AnovaResult"]
 
 #: the long-run factor is floored at 1 (never makes a test less conservative than the white-noise one)
 MIN_LONG_RUN = 1.0
@@ -62,6 +62,49 @@ def single_threaded_blas(fn):
         with ctx:
             return fn(*args, **kwargs)
     return run
+
+
+#: most contiguous runs an index set is handled by (:func:`contiguous_runs`); more are gathered by fancy indexing
+MAX_RUNS = 64
+
+
+def contiguous_runs(idx: np.ndarray) -> list[tuple[int, int, int]] | None:
+    """Contiguous runs of the sorted indices ``idx`` as ``(position in idx, first, stop)``; None when there
+    are more than :data:`MAX_RUNS`. The rows of a time-blocked fold, or those a candidate of one joint
+    touches, are a few runs (rows are joint-major, blocks contiguous in time): products on slices of the
+    large factors avoid copying their rows."""
+    if idx.size == 0:
+        return []
+    cut = np.flatnonzero(np.diff(idx) != 1) + 1
+    if cut.size >= MAX_RUNS:
+        return None
+    starts = np.r_[0, cut]
+    stops = np.r_[cut, idx.size]
+    return [(int(i), int(idx[i]), int(idx[k - 1]) + 1) for i, k in zip(starts, stops)]
+
+
+def rows_times(A: np.ndarray, rows: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``A[rows] @ v`` for a boolean mask ``rows``, the product taken on contiguous slices of ``A``."""
+    runs = contiguous_runs(np.flatnonzero(rows))
+    if runs is None:
+        return A[rows] @ v
+    out = np.empty((int(np.count_nonzero(rows)),) + v.shape[1:])
+    for i, a, b in runs:
+        out[i:i + b - a] = A[a:b] @ v
+    return out
+
+
+def span_product(U: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``U.T @ X`` summed over the rows where ``X`` is not zero only (a candidate of one joint is zero on
+    the other joints' rows: a sixth to a seventh of the passes over ``U``); equal to rounding."""
+    nz = np.flatnonzero(np.any(X != 0.0, axis=1))
+    runs = contiguous_runs(nz)
+    if runs is None or 2 * nz.size > X.shape[0]:
+        return U.T @ X
+    out = np.zeros((U.shape[1], X.shape[1]))
+    for _, a, b in runs:
+        out += U[a:b].T @ X[a:b]
+    return out
 
 
 def _segments(groups: np.ndarray | None, n: int):

@@ -55,3 +55,30 @@ def test_holdout_keeps_the_time_origin():
     assert a[0].meta[T_ORIGIN_KEY] == b[0].meta[T_ORIGIN_KEY] == tr.t[0]
     with pytest.raises(ValueError):
         split_holdout([tr], 1.0)
+
+
+def test_batched_full_rate_columns_equal_the_whole_recording_ones(scara_frame):
+    """Columns on every joint's rows evaluated over short stretches of samples (each with its filter window)
+    and decimated equal the same columns evaluated and decimated over the whole recording, and so do the
+    joint-zero tangents built that way against the tangent of the whole recording's regressor."""
+    from symoro_gen.diagnostics.geometry import decimated_zero_matrix, regressor_secant
+
+    model, _, F = scara_frame
+    ex = F.experiments[0]
+    assert ex.settings.ftype == "fir" and ex.settings.n_d > 1
+    n, p = F.n_joints, 3
+
+    def cols(e, a, b):
+        x = np.stack([np.sin(e.q[a:b] * (i + 1)) + e.dq[a:b] ** i for i in range(p)], axis=2)
+        return x * (1.0 + np.arange(n))[None, :, None]
+
+    ref = F.full_rate_columns(lambda e: {k: cols(e, 0, e.n_samples)[:, k, :] for k in range(n)}, p)
+    for batch in (1, 8 * n * p * 3 * ex.settings.n_d * 16 + 5, 2 ** 30):    # window-sized, odd, whole
+        got = F.full_rate_columns_batched(cols, p, batch_bytes=batch)
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    D = decimated_zero_matrix(F, model, 1)
+    whole = regressor_secant(model, ex.q, ex.dq, ex.ddq, 1, 0.0)
+    P = whole.shape[2]
+    ref = F.full_rate_columns(lambda e: {k: whole[:, k, :] for k in range(n)}, P)
+    np.testing.assert_allclose(D[:, :P], ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    assert np.abs(ref).max() > 0

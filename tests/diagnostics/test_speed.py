@@ -219,3 +219,25 @@ def test_friction_law_selection_with_kept_columns_equals_a_fresh_one(monkeypatch
         np.testing.assert_allclose([x[2] for x in tried], [x[2] for x in tried0], rtol=1e-10)
         np.testing.assert_allclose([x[1] for x in tried if x[1] is not None],
                                    [x[1] for x in tried0 if x[1] is not None], rtol=1e-6)
+
+
+def test_products_on_contiguous_row_runs_equal_the_gathered_products():
+    """Products taken on the contiguous runs of a row set (a joint's rows of a fold) equal those on the
+    gathered rows, with few runs and with more than MAX_RUNS (the gathered fallback)."""
+    from symoro_gen.diagnostics.stats import MAX_RUNS, contiguous_runs, rows_times, span_product
+
+    rng = np.random.default_rng(5)
+    r = 900
+    U = rng.standard_normal((r, 7))
+    v = rng.standard_normal((7, 2))
+    for rows in (np.zeros(r, bool), (np.arange(r) // 50) % 4 == 1, rng.random(r) < 0.3):
+        idx = np.flatnonzero(rows)
+        runs = contiguous_runs(idx)
+        if runs is not None:
+            assert np.array_equal(np.concatenate([np.arange(a, b) for _, a, b in runs] or [np.zeros(0, int)]), idx)
+            assert all(idx[i] == a for i, a, _ in runs)
+        else:
+            assert np.count_nonzero(np.diff(idx) != 1) >= MAX_RUNS
+        np.testing.assert_allclose(rows_times(U, rows, v), U[rows] @ v, rtol=1e-13, atol=1e-13)
+        X = np.where(rows[:, None], rng.standard_normal((r, 2)), 0.0)
+        np.testing.assert_allclose(span_product(U, X), U.T @ X, rtol=1e-12, atol=1e-12)
