@@ -257,21 +257,7 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
     if modulation is not None:
         return r.done("composed effect: no prior on its magnitude, rated on its evidence only")
     if kind == "time_delay":
-        d = float(physical.get("delay_s", params.get("d", 0.0)))
-        hi = max(DELAY_TYPICAL_S, DELAY_TYPICAL_PERIODS * scales.dt)
-        r.factor(band_factor(d, 0.0, hi, DELAY_WIDTH),
-                 f"a {1e3 * abs(d):.3g} ms delay is long for a torque-controlled arm (typical: up to "
-                 f"{1e3 * hi:.3g} ms, a few {1e3 * scales.dt:.3g} ms sampling periods)",
-                 "the time stamps of the torque against the positions, the drive's torque filter")
-        if d < -scales.dt:
-            r.factor(LEAD_FACTOR, f"the torque leads the motion by {1e3 * -d:.3g} ms: not a transport delay",
-                     "the sign convention of the time stamps, a velocity feed-forward in the torque")
-        if j is not None and scales.n_joints > 1 and not any(x is None or x != j for x in delay_joints):
-            r.factor(ONE_JOINT_DELAY_FACTOR, f"a delay on joint {j + 1} only is unusual: a drive or bus delay "
-                     "shows on every joint of the bus",
-                     f"what else looks like it: an elastic joint {j + 1} (a motor-side encoder), a filter on joint "
-                     f"{j + 1}'s torque channel (its drive's current/torque filter), its own time stamping, a torque "
-                     "computed from a delayed current")
+        _rate_delay(r, j, physical, params, scales, delay_joints)
     elif kind == "gain":
         s = float(physical.get("scale", 1.0 + params.get("gamma", 0.0)))
         if s > 0:
@@ -281,17 +267,7 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
                      f"the torque constant / gear ratio of {_who(j)} in the data conversion, a payload or inertia "
                      "error of the links it carries")
     elif kind == "elasticity":
-        K = float(physical.get("K_Nm_per_rad", math.inf))
-        if K < 0:
-            r.factor(NEGATIVE_STIFFNESS_FACTOR, f"a negative stiffness ({K:.3g} N m/rad) is not a compliance",
-                     "a position offset or a delay correlated with the torque")
-        elif math.isfinite(K) and K > 0:
-            defl = tau / K
-            lo, hi = DEFLECTION_BAND
-            r.factor(band_factor(defl, lo, hi, DEFLECTION_WIDTH),
-                     f"K = {K:.3g} N m/rad deflects {_who(j)} by {1e3 * defl:.3g} mrad at its torque range "
-                     f"({tau:.3g} N m); harmonic drives: {1e3 * lo:g}-{1e3 * hi:g} mrad",
-                     "the gear's catalogue stiffness")
+        _rate_stiffness(r, j, physical, tau)
     elif kind == "stribeck":
         vs = physical.get("vs")
         if vs is not None and j is not None:
@@ -367,6 +343,41 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
             if float(params.get(nm, 0.0)) < 0:
                 r.factor(NEGATIVE_FRICTION_FACTOR, f"negative friction of the shared motor ({nm})")
     return r.done()
+
+
+def _rate_delay(r: _Rating, j: int | None, physical: Mapping[str, float], params: Mapping[str, float],
+                scales: ArmScales, delay_joints: Sequence[int | None]) -> None:
+    """The ``time_delay`` prior: against a few sampling periods, a lead, and a delay on one joint only."""
+    d = float(physical.get("delay_s", params.get("d", 0.0)))
+    hi = max(DELAY_TYPICAL_S, DELAY_TYPICAL_PERIODS * scales.dt)
+    r.factor(band_factor(d, 0.0, hi, DELAY_WIDTH),
+             f"a {1e3 * abs(d):.3g} ms delay is long for a torque-controlled arm (typical: up to "
+             f"{1e3 * hi:.3g} ms, a few {1e3 * scales.dt:.3g} ms sampling periods)",
+             "the time stamps of the torque against the positions, the drive's torque filter")
+    if d < -scales.dt:
+        r.factor(LEAD_FACTOR, f"the torque leads the motion by {1e3 * -d:.3g} ms: not a transport delay",
+                 "the sign convention of the time stamps, a velocity feed-forward in the torque")
+    if j is not None and scales.n_joints > 1 and not any(x is None or x != j for x in delay_joints):
+        r.factor(ONE_JOINT_DELAY_FACTOR, f"a delay on joint {j + 1} only is unusual: a drive or bus delay "
+                 "shows on every joint of the bus",
+                 f"what else looks like it: an elastic joint {j + 1} (a motor-side encoder), a filter on joint "
+                 f"{j + 1}'s torque channel (its drive's current/torque filter), its own time stamping, a torque "
+                 "computed from a delayed current")
+
+
+def _rate_stiffness(r: _Rating, j: int | None, physical: Mapping[str, float], tau: float) -> None:
+    """The ``elasticity`` prior: the deflection at the joint's torque range against harmonic drives'."""
+    K = float(physical.get("K_Nm_per_rad", math.inf))
+    if K < 0:
+        r.factor(NEGATIVE_STIFFNESS_FACTOR, f"a negative stiffness ({K:.3g} N m/rad) is not a compliance",
+                 "a position offset or a delay correlated with the torque")
+    elif math.isfinite(K) and K > 0:
+        defl = tau / K
+        lo, hi = DEFLECTION_BAND
+        r.factor(band_factor(defl, lo, hi, DEFLECTION_WIDTH),
+                 f"K = {K:.3g} N m/rad deflects {_who(j)} by {1e3 * defl:.3g} mrad at its torque range "
+                 f"({tau:.3g} N m); harmonic drives: {1e3 * lo:g}-{1e3 * hi:g} mrad",
+                 "the gear's catalogue stiffness")
 
 
 def _velocity_scale(r: _Rating, v: float, res: float, what: str) -> None:
