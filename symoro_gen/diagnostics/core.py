@@ -521,6 +521,13 @@ class DiagnoseSettings:
     declared_elastic : tuple of int
         Joints (0-based columns) the robot file declares elastic (``elastic = {K, D}``): their positions are
         link-side or corrected already, so the loop's ``elasticity`` candidate is not offered for them.
+    declared_laws : tuple of int
+        Joints (0-based columns) whose friction law the robot file declares (``friction_law``; the model is
+        then :class:`~symoro_gen.identification.friction_law.LawDeclaredModel` at the scales refined on the
+        identification data): the friction-law stage leaves them as declared (no replacement of any kind
+        is offered, :func:`_stage_friction`), and the loop's Stribeck candidate is not offered on a joint
+        whose declared law has the Stribeck term already (its ``FSS<j>`` column). The loop's other
+        candidates still compete there in the rounds (docs/loop-plausibility.md, "Declared friction laws").
     """
 
     method: str = "ols"
@@ -538,6 +545,7 @@ class DiagnoseSettings:
     unexplained: bool = True
     stability: bool = True
     declared_elastic: tuple[int, ...] = ()
+    declared_laws: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         if self.method.lower() not in ("ols", "wls", "tls"):
@@ -800,6 +808,10 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
     reversals then loses to that effect. Applied here: a joint declared without friction getting its laws,
     and the sign smoothing of the declared law (tested as a note, :func:`_accept_notes`).
 
+    A joint whose law the robot file declares (``cfg.declared_laws``) is skipped: its law is the user's
+    statement, identified with its scale refined on the identification data; the stage's replacements
+    are measured against ``sign(dq)`` + ``dq``, not against that law, so none is offered there.
+
     Returns the data with the new columns (model :class:`.friction.LawModel`), what was applied and the
     pending replacements."""
     F = data.F
@@ -814,6 +826,8 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
     doubtful: list[dict] = []
     scales = ArmScales.of_frame(F)
     for j in range(n):
+        if j in cfg.declared_laws:
+            continue   # the robot file declares this joint's law: kept as declared (scales refined already)
         jf = _joint_friction(F, W, names, j, float(dq_noise[j]))
         try:
             ch = select_friction(jf.A, Y, J, j, np.zeros(Y.size), blocks, columns=jf.cols,
@@ -1102,6 +1116,8 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
     # coefficients then split the effect between them with opposite signs)
     stribeck_law = {r.choice.joint for r in laws if not r.smoothing and r.choice.coulomb.law == "stribeck"}
+    # ... and so has a joint whose declared law (robot file: stribeck, lugre) carries FSS<j>
+    stribeck_law |= {j for j in cfg.declared_laws if f"FSS{j + 1}" in data.decl}
     families = [f for f in families if not (f.kind == "stribeck" and f.joint in stribeck_law)]
     # a joint declared elastic in the robot file is modelled as such: no elasticity candidate for it
     families = [f for f in families if not (f.kind == "elasticity" and f.joint in cfg.declared_elastic)]

@@ -49,6 +49,15 @@ Static at rest
     :func:`sliding_velocity`, ``dq`` with its rest segments set to 0 (every law here is 0 at ``dq = 0``) -
     in identification and validation alike: the model predicts no friction torque it cannot know, where
     ``sign(dq)`` would switch between ``+Fc`` and ``-Fc`` on the velocity's wander at standstill.
+
+Declaring what the loop found
+    A law the loop names as a cause (an effect of kind ``friction_law``, or the loop's ``stribeck``
+    candidate: a dip ``exp(-(dq/vs)^2) sign(dq)`` beside the declared ``sign(dq)`` and ``dq``, the Stribeck
+    law) is a property of the drive: :func:`law_declarations` gives the robot-file line that declares it
+    (``friction_law = {kind = "stribeck", vs = 0.05}``, docs/robot-file.md "Friction laws"). Declared,
+    ``diagnose`` starts from it (its scale refined on the identification data) and no longer offers it. A
+    combination no single kind declares (a Stribeck or tanh Coulomb law *and* a power viscous law) gets
+    no line.
 """
 from __future__ import annotations
 
@@ -61,7 +70,13 @@ from functools import partial
 import numpy as np
 from scipy import optimize
 
-from ..description.friction_law import COULOMB_LAWS, VISCOUS_LAWS, coulomb_columns, viscous_columns
+from ..description.friction_law import (
+    COULOMB_LAWS,
+    SCALE_BOUNDS,
+    VISCOUS_LAWS,
+    coulomb_columns,
+    viscous_columns,
+)
 from ..errors import IdentificationError
 from ..model import IdentificationModel
 from .stability import N_FOLDS, BlockedLS, wls_basis
@@ -74,10 +89,12 @@ __all__ = [
     "REST_NOISE_MULTIPLE",
     "VISCOUS_LAWS",
     "FrictionChoice",
+    "LawDeclaration",
     "LawFit",
     "LawSearch",
     "coulomb_columns",
     "friction_column_indices",
+    "law_declarations",
     "law_errors",
     "replaced_friction_columns",
     "rest_mask",
@@ -681,3 +698,91 @@ def sliding_frame(frame):
         _REST_CACHE[new] = m
         exps.append(new)
     return replace(frame, experiments=tuple(exps))
+
+
+#: significant digits of a scale in a robot-file line
+DECLARATION_DIGITS = 3
+
+
+@dataclass(frozen=True)
+class LawDeclaration:
+    """The robot-file declaration of a friction law the loop found on one joint.
+
+    Attributes
+    ----------
+    frame : int
+        The joint's frame ``j`` in the robot file.
+    joint : int
+        0-based model column.
+    law : str
+        ``stribeck``, ``tanh`` or ``power`` (a kind of the robot file's ``friction_law``).
+    scale_name : str
+        ``vs``, ``v`` or ``delta``.
+    scale : float
+        The loop's value (rounded to :data:`DECLARATION_DIGITS` significant digits in ``line``).
+    verdict, label : str
+        The effect's verdict and label.
+    line : str
+        ``friction_law = {kind = "stribeck", vs = 0.05}``, to add to the frame.
+    """
+
+    frame: int
+    joint: int
+    law: str
+    scale_name: str
+    scale: float
+    verdict: str
+    label: str
+    line: str
+
+    def to_dict(self) -> dict:
+        """One entry of ``robot_file`` in diagnose's JSON (docs/json-output.md); ``joint`` 1-based."""
+        return {"kind": "friction_law", "frame": self.frame, "joint": self.joint + 1, "line": self.line,
+                "law": self.law, "scale_name": self.scale_name, "scale": float(self.scale),
+                "verdict": self.verdict or None, "effect": self.label}
+
+    def text(self) -> str:
+        """``frame 2 (joint 2): friction_law = {kind = "stribeck", vs = 0.1}   (vs = 0.1002 rad/s; ...)``."""
+        v = f", {self.verdict}" if self.verdict else ""
+        unit = "" if self.scale_name == "delta" else " (rad/s or m/s)"
+        return (f"frame {self.frame} (joint {self.joint + 1}): {self.line}   ({self.scale_name} = {self.scale:.4g}"
+                f"{unit}; effect {self.label}{v})")
+
+
+def _declared_kind(kind: str, values: Mapping[str, float]) -> tuple[str, str] | None:
+    """``(law, scale name)`` a friction effect declares as one robot-file ``friction_law``, or None."""
+    has = {k for k in ("v", "vs", "delta") if k in values and math.isfinite(float(values[k]))}
+    if kind == "stribeck":
+        return ("stribeck", "vs") if "vs" in has else None
+    if kind != "friction_law" or len(has) != 1:
+        return None
+    (name,) = has
+    return {"vs": ("stribeck", "vs"), "v": ("tanh", "v"), "delta": ("power", "delta")}[name]
+
+
+def law_declarations(robot, effects: Sequence) -> list[LawDeclaration]:
+    """The robot-file lines declaring the friction laws the loop named (``effects``:
+    :class:`symoro_gen.diagnostics.report.Effect`; module docstring, "Declaring what the loop found"). An
+    effect on a joint that already declares a law, a joint declared without friction (the law came with
+    an offset ``OFF<j>``), a modulated effect and a scale outside the robot file's range get no line."""
+    joints = robot.model_joints
+    declared = set(dict(getattr(robot, "friction_laws", {}) or {}))
+    out = []
+    for e in effects:
+        if e.joint is None or getattr(e, "modulation", None) is not None or not 0 <= e.joint < len(joints):
+            continue
+        values = {**dict(getattr(e, "search", {}) or {}), **dict(e.physical or {})}
+        kind = _declared_kind(str(e.kind), values)
+        if kind is None or any(str(nm).startswith("OFF") for nm in e.names):
+            continue
+        frame = joints[e.joint].j
+        law, name = kind
+        scale = float(values[name])
+        lo, hi = SCALE_BOUNDS[name]
+        if frame in declared or not lo < scale <= hi:
+            continue
+        shown = float(f"{scale:.{DECLARATION_DIGITS}g}")
+        line = f'friction_law = {{kind = "{law}", {name} = {shown:g}}}'
+        out.append(LawDeclaration(frame=frame, joint=int(e.joint), law=law, scale_name=name, scale=scale,
+                                  verdict=str(getattr(e, "verdict", "") or ""), label=str(e.label), line=line))
+    return out
