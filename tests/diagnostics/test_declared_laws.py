@@ -48,8 +48,7 @@ class _WithRobot:
         return self._model.regressor(*a, **k)
 
 
-@pytest.fixture(scope="module")
-def stribeck_case():
+def simulate_stribeck():
     """(model, robot without declared law, recording): 40 s of a Fourier trajectory, joint 2 with the Stribeck
     law in place of its Coulomb + viscous terms."""
     robot, model = robot_and_model("scara")
@@ -68,6 +67,11 @@ def stribeck_case():
     tr = Trajectory(t=t, q=q + NOISE_Q * rng.standard_normal(q.shape),
                     tau=tau + NOISE_TAU * rng.standard_normal(q.shape), source="scara stribeck joint 2")
     return model, dataclasses.replace(robot, friction_laws={}), tr
+
+
+@pytest.fixture(scope="module")
+def stribeck_case():
+    return simulate_stribeck()
 
 
 def _with_line(line: str, frame: int) -> str:
