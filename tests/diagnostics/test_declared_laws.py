@@ -17,7 +17,10 @@ import pytest
 import symoro_gen
 from symoro_gen.description.friction_law import FrictionLaw
 from symoro_gen.description.parse import parse_robot_text
+from symoro_gen.diagnostics import DiagnoseSettings
+from symoro_gen.diagnostics import diagnose as loop
 from symoro_gen.diagnostics.friction import LawDeclaration, law_declarations
+from symoro_gen.identification.friction_law import LawDeclaredModel
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
 from tests.diagnostics.simdata import robot_and_model
@@ -174,3 +177,25 @@ def test_no_declaration_line_on_a_joint_that_declares_a_law():
     robot, _ = robot_and_model("scara")
     declared = dataclasses.replace(robot, friction_laws={2: FrictionLaw(2, "tanh", 0.02)})
     assert law_declarations(declared, [_effect("stribeck", 1, {"vs": 0.05})]) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind, scale, stribeck_offered", [("tanh", 0.02, True), ("stribeck", 0.1, False),
+                                                           ("lugre", 0.1, False)])
+def test_what_the_loop_offers_on_a_declared_joint(stribeck_case, kind, scale, stribeck_offered):
+    """On a joint whose law is declared, the friction-law stage offers no replacement (no ``friction_law``
+    candidate); the loop's Stribeck dip is still a candidate unless the declared law has the Stribeck term
+    (Stribeck, LuGre), and the other candidates stay (docs/loop-plausibility.md, "Declared friction laws")."""
+    model, _, tr = stribeck_case
+    short = Trajectory(t=tr.t[:7501], q=tr.q[:7501], tau=tr.tau[:7501], source="first 15 s")
+    kw = dict(candidates=("stribeck", "gain"), friction_laws=True, composed=False, structure=False,
+              unexplained=False, stability=False, max_effects=1)
+    free = loop(model, short, DiagnoseSettings(**kw))
+    # undeclared, the stage offers the Stribeck law of the simulated drive on joint 2
+    assert ("friction_law", 1) in {(c.kind, c.joint) for c in free.tried} | {(e.kind, e.joint) for e in free.effects}
+    declared = LawDeclaredModel(model, [(1, FrictionLaw(2, kind, scale))])
+    rep = loop(declared, short, DiagnoseSettings(**kw, declared_laws=(1,)))
+    tried = {(c.kind, c.joint) for c in rep.tried}
+    assert ("friction_law", 1) not in tried
+    assert (("stribeck", 1) in tried) is stribeck_offered, sorted(tried)
+    assert ("gain", 1) in tried and ("stribeck", 0) in tried
