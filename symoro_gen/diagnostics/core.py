@@ -113,6 +113,9 @@ from .compose import Composed, RowSignals, score_composed
 from .compose import library as composed_library
 from .frame import Experiment, Frame, attach_model_torque, build_frame, common_bandwidth, model_torque, split_holdout
 from .friction import (
+    COULOMB_LAWS,
+    PRESLIDING_LAWS,
+    VISCOUS_LAWS,
     FrictionChoice,
     LawFit,
     LawModel,
@@ -830,8 +833,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
             continue   # the robot file declares this joint's law: kept as declared (scales refined already)
         jf = _joint_friction(F, W, names, j, float(dq_noise[j]))
         try:
-            ch = select_friction(jf.A, Y, J, j, np.zeros(Y.size), blocks, columns=jf.cols,
-                                 search=LawSearch(v_grid=velocity_grid(jf.dq_all), v_floor=jf.vf))
+            ch = select_friction(jf.A, Y, J, j, np.zeros(Y.size), blocks, columns=jf.cols, search=_law_search(F, jf))
         except IdentificationError:
             continue   # the joint does not move: nothing to choose
         if ch.replaced or jf.missing:
@@ -942,6 +944,15 @@ def _declared_law_kept(jf: _JointFriction, ch: FrictionChoice, Y: np.ndarray, J:
             jf.an + list(k.names()))
 
 
+def _law_search(F: Frame, jf: _JointFriction) -> LawSearch:
+    """The laws the friction-law stage tries on joint ``jf.j``: every static law, and the pre-sliding Dahl law
+    when every experiment is sampled at one rate of :data:`.friction.DAHL_MIN_RATE_HZ` or more
+    (:mod:`.friction`: below it the pre-sliding regime is not resolved)."""
+    rates = {float(ex.settings.fs) for ex in F.experiments}
+    return LawSearch(laws=COULOMB_LAWS + VISCOUS_LAWS + PRESLIDING_LAWS, v_grid=velocity_grid(jf.dq_all),
+                     v_floor=jf.vf, rate_hz=rates.pop() if len(rates) == 1 else None)
+
+
 def _rounds_sign_off(ch: FrictionChoice, dq_all: np.ndarray) -> bool:
     """A tanh scale below MIN_LAW_SCALE of the joint's speeds (with the linear viscous law) only rounds
     sign(dq) off where the band-pass velocity misses the true reversal or chatters at standstill (seen on
@@ -981,7 +992,7 @@ def _law_replacement(jf: _JointFriction, ch: FrictionChoice, F: Frame, blocks: n
         # simulated-noise placebo (stability.simulated_noise_placebo): v, vs, delta and the law were
         # chosen on the folds that judge them; the whole selection re-run on the declared law's fit
         # plus its own residual shifted in time must never claim the observed gain (clean data, seed 510)
-        passed = _law_beats_noise(ch, jf.A, Y, J, blocks, jf.cols, jf.dq_all, jf.vf, F)[0]
+        passed = _law_beats_noise(ch, jf, Y, J, blocks, F)[0]
     if not passed:
         return None, X
     return _LawRecord(ch, jf.missing, jf.off, float(np.mean(wins)), p_law, smoothing), X
@@ -1015,19 +1026,19 @@ def _law_gain(ch: FrictionChoice, dq_all: np.ndarray) -> float:
     return 1.0 - (ch.cv_rel_err / ch.declared_cv_rel_err) ** 2
 
 
-def _law_beats_noise(ch: FrictionChoice, A, Y, J, blocks, cols, dq_all, vf, F: Frame) -> tuple[bool, list]:
+def _law_beats_noise(ch: FrictionChoice, jf: _JointFriction, Y, J, blocks, F: Frame) -> tuple[bool, list]:
     """Simulated-noise placebo of a friction-law replacement on joint ``j`` (:func:`.stability.
     simulated_noise_placebo`): the declared law (sign smoothed at ``vf``) fitted on all rows, its residual
     shifted in time, the selection ``ch`` came from re-run; its gain must exceed every null one."""
     j = ch.joint
-    Xd = cols(_smoothed_declared_law(vf), 2)
+    A, cols, dq_all = jf.A, jf.cols, jf.dq_all
+    Xd = cols(_smoothed_declared_law(jf.vf), 2)
     M = np.hstack([A, Xd])
     fitted = M @ np.linalg.lstsq(M, Y, rcond=None)[0]
-    v_grid = velocity_grid(dq_all)
+    search = _law_search(F, jf)
 
     def gain(y):
-        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols,
-                                         search=LawSearch(v_grid=v_grid, v_floor=vf)), dq_all)
+        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols, search=search), dq_all)
     return simulated_noise_placebo(gain, fitted, Y - fitted, J * 100000 + F.row_experiment, F.row_experiment,
                                    _law_gain(ch, dq_all), rng=np.random.default_rng(7919 + j))
 
@@ -1082,6 +1093,9 @@ def _law_columns(ch: FrictionChoice) -> tuple[list[int], tuple[str, ...]]:
     elif ch.coulomb.law == "stribeck":
         idx.append(1)
         params.append("FSS")
+    elif ch.coulomb.law == "dahl":
+        idx.append(0)
+        params.append("FSd")
     if ch.viscous.law == "power":
         idx.append(len(ch.names()) - 1)
         params.append("FVp")
@@ -1836,6 +1850,10 @@ def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
         phys["v_sign"] = float(ch.coulomb.smooth)
     if ch.viscous.law == "power" and ch.viscous.param is not None:
         phys["delta"] = float(ch.viscous.param)
+    x0 = ch.x0
+    if x0 is not None and x0 > 0:   # Dahl: pre-sliding displacement and stiffness sigma0 = Fc / x0
+        phys["x0"] = x0
+        phys["sigma0"] = abs(float(res.value(ch.names()[0]))) / x0
     desc = ch.describe()
     if rec.added:
         desc = (f"joint {ch.joint + 1} declared without friction: added {ch.coulomb.label} Coulomb + "

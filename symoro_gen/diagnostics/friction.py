@@ -14,6 +14,16 @@ Coulomb laws (coefficients linear, shape parameter searched)
       (Armstrong-Helouvry, Dupont & Canudas de Wit 1994, eq. 5); when ``tanh`` is tried too, the
       ``sign(dq)`` is smoothed by ``tanh(dq/v)`` at the ``v`` the tanh search found (at the bottom of
       the grid this is ``sign``; otherwise the Stribeck law does not chatter at standstill either);
+Pre-sliding (offered on data sampled at :data:`DAHL_MIN_RATE_HZ` or more only, ``LawSearch.rate_hz``)
+    * ``dahl``      ``Fc phi(t)``, the Dahl state ([D1968]; docs/friction-dynamic.md) normalised to the
+      sliding level: ``dphi/dx = (sign(dq) - phi) / x0`` along the displacement ``x``, ``x0 = Fc / sigma0`` the
+      pre-sliding displacement; integrated exactly for the velocity held over each full-rate sample at the
+      mean of its two ends (as :mod:`symoro_gen.simulate.friction_state`), so the column is a function of the
+      ordered velocity series of one experiment and its rate ``fs``. Searched in ``vp = x0 fs`` (a velocity:
+      one sample's displacement at ``vp`` is ``x0``) on a log grid of ``x0`` (:data:`DAHL_X0_GRID`); at small
+      ``x0`` the law is ``sign(dq)``. Below 1 kHz the pre-sliding regime (milliseconds after each reversal)
+      is not resolved and a fitted ``sigma0`` is not identifiable (docs/friction-dynamic.md, the study at
+      reversals): the law is not offered there;
 Viscous laws
     * ``linear``    ``Fv dq`` (declared);
     * ``power``     ``Fv |dq|^delta sign(dq)``, ``delta`` on a grid then refined.
@@ -72,6 +82,7 @@ from scipy import optimize
 
 from ..description.friction_law import (
     COULOMB_LAWS,
+    PRESLIDING_BOUNDS,
     SCALE_BOUNDS,
     VISCOUS_LAWS,
     coulomb_columns,
@@ -83,8 +94,11 @@ from .stability import N_FOLDS, BlockedLS, wls_basis
 
 __all__ = [
     "COULOMB_LAWS",
+    "DAHL_MIN_RATE_HZ",
+    "DAHL_X0_GRID",
     "DELTA_GRID",
     "MIN_GAIN",
+    "PRESLIDING_LAWS",
     "REST_MIN_PERIODS",
     "REST_NOISE_MULTIPLE",
     "VISCOUS_LAWS",
@@ -93,6 +107,7 @@ __all__ = [
     "LawFit",
     "LawSearch",
     "coulomb_columns",
+    "dahl_column",
     "friction_column_indices",
     "law_declarations",
     "law_errors",
@@ -106,6 +121,12 @@ __all__ = [
     "viscous_columns",
 ]
 
+#: the pre-sliding laws the stage can offer (at DAHL_MIN_RATE_HZ or more)
+PRESLIDING_LAWS = ("dahl",)
+#: sampling rate from which the Dahl law is offered (``fit_presliding``'s rule, docs/friction-dynamic.md)
+DAHL_MIN_RATE_HZ = 1000.0
+#: pre-sliding displacements x0 = Fc / sigma0 searched [rad or m] (sigma0 from 1e2 to 1e6 times Fc)
+DAHL_X0_GRID = tuple(float(x) for x in np.geomspace(1e-6, 1e-2, 13))
 #: a more complex law must lower the CV relative error of its joint by this fraction
 MIN_GAIN = 0.01
 #: exponents of the non-linear viscous law searched
@@ -235,6 +256,8 @@ class LawFit:
             return f"stribeck(vs={self.param:.3g})"
         if self.law == "power":
             return f"power(delta={self.param:.3g})"
+        if self.law == "dahl":
+            return f"dahl(vp={self.param:.3g})"
         return self.law
 
 
@@ -265,6 +288,14 @@ class FrictionChoice:
     coefficients: Mapping[str, float] = field(default_factory=dict)
     n_folds: int = N_FOLDS
     unit: str = "rad/s"
+    rate_hz: float | None = None
+
+    @property
+    def x0(self) -> float | None:
+        """Dahl law: the pre-sliding displacement ``x0 = vp / fs`` [rad or m] (None otherwise)."""
+        if self.coulomb.law != "dahl" or self.coulomb.param is None or not self.rate_hz:
+            return None
+        return float(self.coulomb.param) / float(self.rate_hz)
 
     @property
     def declared_cv_rel_err(self) -> float:
@@ -281,7 +312,7 @@ class FrictionChoice:
 
     def columns(self, dq: np.ndarray) -> np.ndarray:
         """Columns of the chosen laws at velocities ``dq``: Coulomb column(s) then the viscous one."""
-        return np.hstack([coulomb_columns(self.coulomb.law, dq, self.coulomb.param, self.coulomb.smooth),
+        return np.hstack([_coulomb(self.coulomb.law, dq, self.coulomb.param, self.coulomb.smooth),
                           viscous_columns(self.viscous.law, dq, self.viscous.param)])
 
     def names(self) -> tuple[str, ...]:
@@ -299,6 +330,10 @@ class FrictionChoice:
             parts.append(f"Coulomb \u2192 Stribeck, vs = {self.coulomb.param:.3g} {self.unit}"
                          + (f" (sign smoothed by tanh, v = {self.coulomb.smooth:.3g} {self.unit})"
                             if self.coulomb.smooth is not None else ""))
+        elif self.coulomb.law == "dahl" and self.x0 is not None:
+            fc = self.coefficients.get("Fc")
+            s0 = f", sigma0 = {abs(fc) / self.x0:.3g}" if fc is not None and self.x0 > 0 else ""
+            parts.append(f"Coulomb \u2192 Dahl (pre-sliding), x0 = {self.x0:.3g}{s0}")
         if self.viscous.law == "power":
             parts.append(f"viscous \u2192 |dq|^\u03b4, \u03b4 = {self.viscous.param:.3g}")
         if not parts:
@@ -326,6 +361,39 @@ def velocity_grid(dq: np.ndarray, n: int = N_VELOCITY_GRID) -> np.ndarray:
     if not s > 0:
         raise IdentificationError("friction: the joint does not move (95th percentile of |dq| is 0)")
     return s * np.geomspace(1e-3, 0.5, n)
+
+
+def dahl_column(dq: np.ndarray, vp: float) -> np.ndarray:
+    """The Dahl state ``phi`` (N,) normalised to the sliding level along the ordered full-rate velocity ``dq``
+    of one experiment (module docstring): ``phi_{k+1} = s + (phi_k - s) exp(-|v| / vp)``, ``v`` the mean of
+    ``dq_k`` and ``dq_{k+1}``, ``s = sign(v)``, ``vp = x0 fs``; ``phi_0 = 0`` (the state of
+    :func:`symoro_gen.simulate.friction_state.dahl_friction` with ``z0 = 0``). At rest (``v = 0``) the state
+    holds."""
+    v = np.asarray(dq, float)
+    if not vp > 0:
+        raise ValueError(f"dahl_column: vp must be > 0, got {vp!r}")
+    out = np.zeros(v.size)
+    if v.size < 2:
+        return out
+    vm = 0.5 * (v[1:] + v[:-1])
+    a = np.exp(-np.abs(vm) / float(vp)).tolist()
+    sg = np.sign(vm).tolist()
+    w = 0.0
+    vals = [0.0]
+    for ak, sk in zip(a, sg):
+        w = sk + (w - sk) * ak
+        vals.append(w)
+    out[:] = vals
+    return out
+
+
+def _coulomb(law: str, dq: np.ndarray, param: float | None, smooth: float | None) -> np.ndarray:
+    """:func:`coulomb_columns`, and the pre-sliding ``dahl`` law (:func:`dahl_column`)."""
+    if law == "dahl":
+        if param is None:
+            raise TypeError("the 'dahl' friction law needs its scale vp")
+        return dahl_column(dq, float(param))[:, None]
+    return coulomb_columns(law, dq, param, smooth)
 
 
 def _search(err: Callable[[float], float], grid: np.ndarray, refine: bool, log: bool = True):
@@ -364,6 +432,9 @@ class LawSearch:
         velocity noise: ``sign(dq)`` becomes ``tanh(dq / v_floor)`` (so the declared law does not chatter
         on noise at standstill, where identification data without rest phases give no evidence either
         way), and the tanh search starts there. Default: none (a true ``sign``).
+    rate_hz : float, optional
+        The full rate ``fs`` of every experiment (one value): the ``dahl`` law is tried only when ``laws``
+        names it and ``rate_hz >= DAHL_MIN_RATE_HZ``.
     """
 
     laws: Sequence[str] = COULOMB_LAWS + VISCOUS_LAWS
@@ -372,6 +443,12 @@ class LawSearch:
     delta_grid: Sequence[float] = DELTA_GRID
     refine: bool = True
     v_floor: float | None = None
+    rate_hz: float | None = None
+
+    @property
+    def dahl(self) -> bool:
+        # (a rate from time stamps is within rounding of 1000 Hz)
+        return "dahl" in self.laws and self.rate_hz is not None and self.rate_hz >= DAHL_MIN_RATE_HZ * (1 - 1e-6)
 
 
 def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq: np.ndarray, blocks: np.ndarray, *,
@@ -423,17 +500,17 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
     rows = joint == j
     if not rows.any():
         raise IdentificationError(f"friction: joint {j + 1} has no rows")
-    bad = [x for x in search.laws if x not in COULOMB_LAWS + VISCOUS_LAWS]
+    bad = [x for x in search.laws if x not in COULOMB_LAWS + VISCOUS_LAWS + PRESLIDING_LAWS]
     if bad:
-        raise ValueError(f"select_friction: unknown laws {bad}; use {COULOMB_LAWS + VISCOUS_LAWS}")
+        raise ValueError(f"select_friction: unknown laws {bad}; use {COULOMB_LAWS + VISCOUS_LAWS + PRESLIDING_LAWS}")
     cols = _row_columns(dq, rows) if columns is None else columns
     grid = _velocity_search_grid(dq[rows], search)
     sel = _LawSelection(BlockedLS(A, y, blocks, weights), y, rows, np.asarray(blocks)[rows], cols, search, grid)
     best_c, best_v = sel.coordinate_descent()
     n_folds = len(sel.cv.folds)
-    choice = FrictionChoice(j, best_c, best_v, tuple(sel.tried), {}, n_folds, unit)
+    choice = FrictionChoice(j, best_c, best_v, tuple(sel.tried), {}, n_folds, unit, search.rate_hz)
     coef = _law_coefficients(A, y, weights, cols, choice)
-    return FrictionChoice(j, best_c, best_v, tuple(sel.tried), coef, n_folds, unit)
+    return FrictionChoice(j, best_c, best_v, tuple(sel.tried), coef, n_folds, unit, search.rate_hz)
 
 
 def _row_columns(dq: np.ndarray, rows: np.ndarray) -> Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray]:
@@ -482,7 +559,7 @@ def _law_columns(columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np
         X = np.zeros((hit[2], p))
         X[hit[0]] = hit[1]
         return X
-    X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]), p)
+    X = columns(lambda v: np.hstack([_coulomb(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]), p)
     rows = np.flatnonzero(np.any(X != 0.0, axis=1))
     size = rows.nbytes + rows.size * p * 8
     if _LAW_COLUMNS.get("bytes", 0) + size <= LAW_COLUMNS_BYTES:     # the first selection's grid stays
@@ -534,10 +611,11 @@ class _LawSelection:
         best_args: tuple = ("sign", None, vlaw, vpar, v_floor)
         self.tried.append(best)
         smooth = v_floor
-        for law in ("tanh", "stribeck"):
-            if law not in self.search.laws:
+        for law in ("tanh", "dahl", "stribeck"):
+            if law not in self.search.laws or (law == "dahl" and not self.search.dahl):
                 continue
-            p, e = _search(partial(self._coulomb_error, law, vlaw=vlaw, vpar=vpar, smooth=smooth), self.grid,
+            grid = self.grid if law != "dahl" else float(self.search.rate_hz or 0.0) * np.asarray(DAHL_X0_GRID)
+            p, e = _search(partial(self._coulomb_error, law, vlaw=vlaw, vpar=vpar, smooth=smooth), grid,
                            self.search.refine)
             fit = LawFit(law, p, e, smooth if law == "stribeck" else None)
             args = (law, p, vlaw, vpar, smooth if law == "stribeck" else None)
@@ -744,20 +822,20 @@ class LawDeclaration:
     def text(self) -> str:
         """``frame 2 (joint 2): friction_law = {kind = "stribeck", vs = 0.1}   (vs = 0.1002 rad/s; ...)``."""
         v = f", {self.verdict}" if self.verdict else ""
-        unit = "" if self.scale_name == "delta" else " (rad/s or m/s)"
+        unit = {"delta": "", "sigma0": " (N m/rad or N/m)"}.get(self.scale_name, " (rad/s or m/s)")
         return (f"frame {self.frame} (joint {self.joint + 1}): {self.line}   ({self.scale_name} = {self.scale:.4g}"
                 f"{unit}; effect {self.label}{v})")
 
 
 def _declared_kind(kind: str, values: Mapping[str, float]) -> tuple[str, str] | None:
     """``(law, scale name)`` a friction effect declares as one robot-file ``friction_law``, or None."""
-    has = {k for k in ("v", "vs", "delta") if k in values and math.isfinite(float(values[k]))}
+    has = {k for k in ("v", "vs", "delta", "sigma0") if k in values and math.isfinite(float(values[k]))}
     if kind == "stribeck":
         return ("stribeck", "vs") if "vs" in has else None
     if kind != "friction_law" or len(has) != 1:
         return None
     (name,) = has
-    return {"vs": ("stribeck", "vs"), "v": ("tanh", "v"), "delta": ("power", "delta")}[name]
+    return {"vs": ("stribeck", "vs"), "v": ("tanh", "v"), "delta": ("power", "delta"), "sigma0": ("dahl", "sigma0")}[name]
 
 
 def law_declarations(robot, effects: Sequence) -> list[LawDeclaration]:
@@ -778,7 +856,7 @@ def law_declarations(robot, effects: Sequence) -> list[LawDeclaration]:
         frame = joints[e.joint].j
         law, name = kind
         scale = float(values[name])
-        lo, hi = SCALE_BOUNDS[name]
+        lo, hi = SCALE_BOUNDS[name] if name in SCALE_BOUNDS else PRESLIDING_BOUNDS[name]
         if frame in declared or not lo < scale <= hi:
             continue
         shown = float(f"{scale:.{DECLARATION_DIGITS}g}")

@@ -38,7 +38,7 @@ TRUTH = {"FS2": 1.5, "FSS2": 3.0, "FV2": 0.7}
 NOISE_Q, NOISE_TAU = 1e-5, 0.05
 
 
-class _WithRobot:
+class WithRobot:
     """The SCARA model carrying a robot description (``diagnose`` reads the declared laws from it)."""
 
     def __init__(self, model, robot):
@@ -77,7 +77,7 @@ def stribeck_case():
     return simulate_stribeck()
 
 
-def _with_line(line: str, frame: int) -> str:
+def with_line(line: str, frame: int) -> str:
     """The SCARA robot file with ``line`` added to the ``[[frames]]`` entry ``j = frame``."""
     text = SCARA_FILE.read_text()
     key = f"[[frames]]\nj = {frame}\n"
@@ -96,7 +96,7 @@ def test_found_law_declared_is_not_proposed_again(stribeck_case, monkeypatch):
     within 3 sigma of the truth, on the identification part only), names nothing on joint 2, and its
     validation error there is at least as good."""
     model, robot, tr = stribeck_case
-    found = symoro_gen.diagnose(_WithRobot(model, robot), [tr], max_effects=2)
+    found = symoro_gen.diagnose(WithRobot(model, robot), [tr], max_effects=2)
     kinds = {e.kind for e in _joint_effects(found, 1)}
     assert kinds & {"friction_law", "stribeck"}, [e.label for e in found.residual.effects]
     decl = [d for d in found.declarations() if isinstance(d, LawDeclaration)]
@@ -109,7 +109,7 @@ def test_found_law_declared_is_not_proposed_again(stribeck_case, monkeypatch):
     assert [r["line"] for r in doc["robot_file"] if r["kind"] == "friction_law"] == [decl[0].line]
 
     # the line through the robot-file parser
-    parsed = parse_robot_text(_with_line(decl[0].line, 2), "scara.toml")
+    parsed = parse_robot_text(with_line(decl[0].line, 2), "scara.toml")
     assert parsed.friction_laws[2].kind == "stribeck"
     assert math.isclose(parsed.friction_laws[2].scale, decl[0].scale, rel_tol=5e-3)
 
@@ -121,7 +121,7 @@ def test_found_law_declared_is_not_proposed_again(stribeck_case, monkeypatch):
         return refine(model_, laws, trajectories, options)
     monkeypatch.setattr(diagnose_workflow, "refine_scales", recording_refine)
     declared_robot = dataclasses.replace(robot, friction_laws=dict(parsed.friction_laws))
-    again = symoro_gen.diagnose(_WithRobot(model, declared_robot), [tr], max_effects=2)
+    again = symoro_gen.diagnose(WithRobot(model, declared_robot), [tr], max_effects=2)
     # refined on the leading 70 % the loop identifies on, never the held-out validation share
     assert seen and sum(seen) <= round(0.7 * tr.n_samples) + 1, (seen, tr.n_samples)
     (fit,) = again.friction_laws
@@ -156,7 +156,7 @@ def test_declaration_line_parses_back_to_the_law(effect, law):
     robot, _ = robot_and_model("scara")
     (d,) = law_declarations(dataclasses.replace(robot, friction_laws={}), [effect])
     assert (d.frame, d.joint, d.law) == (law.frame, effect.joint, law.kind)
-    got = parse_robot_text(_with_line(d.line, d.frame), "scara.toml").friction_laws[law.frame]
+    got = parse_robot_text(with_line(d.line, d.frame), "scara.toml").friction_laws[law.frame]
     assert got.kind == law.kind and math.isclose(got.scale, law.scale, rel_tol=5e-3), (d.line, got)
     assert d.line in d.text() and d.to_dict()["joint"] == effect.joint + 1
 
