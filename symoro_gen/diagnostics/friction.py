@@ -376,14 +376,17 @@ def dahl_column(dq: np.ndarray, vp: float) -> np.ndarray:
     if v.size < 2:
         return out
     vm = 0.5 * (v[1:] + v[:-1])
-    a = np.exp(-np.abs(vm) / float(vp)).tolist()
-    sg = np.sign(vm).tolist()
+    sg = np.sign(vm)
+    # within a run of one sign s the recursion is phi_k = s + (phi_start - s) exp(-(X_k - X_start) / vp), X the
+    # travelled distance |v| summed: one vectorised step per run (a reversal starts the next run)
+    X = np.concatenate([[0.0], np.cumsum(np.abs(vm))])
+    starts = np.flatnonzero(np.r_[True, sg[1:] != sg[:-1]])
+    ends = np.r_[starts[1:], sg.size]
     w = 0.0
-    vals = [0.0]
-    for ak, sk in zip(a, sg):
-        w = sk + (w - sk) * ak
-        vals.append(w)
-    out[:] = vals
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        sk = float(sg[a])
+        out[a + 1:b + 1] = sk + (w - sk) * np.exp(-(X[a + 1:b + 1] - X[a]) / float(vp))
+        w = float(out[b])
     return out
 
 
