@@ -531,6 +531,11 @@ class DiagnoseSettings:
         is offered, :func:`_stage_friction`), and the loop's Stribeck candidate is not offered on a joint
         whose declared law has the Stribeck term already (its ``FSS<j>`` column). The loop's other
         candidates still compete there in the rounds (docs/loop-plausibility.md, "Declared friction laws").
+    presliding_law : bool
+        The friction-law stage also tries the pre-sliding Dahl law (:func:`.friction.dahl_column`) on data
+        sampled at :data:`.friction.DAHL_MIN_RATE_HZ` or more. Off by default: on the TX40 recording (5 kHz)
+        it displaced the joint-1 friction law the loop names without it (the README run: joint-1 validation
+        error 0.179 with the Dahl law tried; docs/loop-plausibility.md reports 0.080 with the static law).
     """
 
     method: str = "ols"
@@ -549,6 +554,7 @@ class DiagnoseSettings:
     stability: bool = True
     declared_elastic: tuple[int, ...] = ()
     declared_laws: tuple[int, ...] = ()
+    presliding_law: bool = False
 
     def __post_init__(self) -> None:
         if self.method.lower() not in ("ols", "wls", "tls"):
@@ -831,7 +837,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
     for j in range(n):
         if j in cfg.declared_laws:
             continue   # the robot file declares this joint's law: kept as declared (scales refined already)
-        jf = _joint_friction(F, W, names, j, float(dq_noise[j]))
+        jf = replace(_joint_friction(F, W, names, j, float(dq_noise[j])), presliding=cfg.presliding_law)
         try:
             ch = select_friction(jf.A, Y, J, j, np.zeros(Y.size), blocks, columns=jf.cols, search=_law_search(F, jf))
         except IdentificationError:
@@ -891,6 +897,7 @@ class _JointFriction:
     cols: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray]
     dq_all: np.ndarray
     vf: float
+    presliding: bool = False   # the Dahl law is tried (DiagnoseSettings.presliding_law)
 
 
 def _joint_friction(F: Frame, W: np.ndarray, names: list[str], j: int, dq_noise: float) -> _JointFriction:
@@ -945,11 +952,12 @@ def _declared_law_kept(jf: _JointFriction, ch: FrictionChoice, Y: np.ndarray, J:
 
 
 def _law_search(F: Frame, jf: _JointFriction) -> LawSearch:
-    """The laws the friction-law stage tries on joint ``jf.j``: every static law, and the pre-sliding Dahl law
-    when every experiment is sampled at one rate of :data:`.friction.DAHL_MIN_RATE_HZ` or more
-    (:mod:`.friction`: below it the pre-sliding regime is not resolved)."""
+    """The laws the friction-law stage tries on joint ``jf.j``: every static law, and (``jf.presliding``) the
+    pre-sliding Dahl law when every experiment is sampled at one rate of :data:`.friction.DAHL_MIN_RATE_HZ` or
+    more (:mod:`.friction`: below it the pre-sliding regime is not resolved)."""
     rates = {float(ex.settings.fs) for ex in F.experiments}
-    return LawSearch(laws=COULOMB_LAWS + VISCOUS_LAWS + PRESLIDING_LAWS, v_grid=velocity_grid(jf.dq_all),
+    laws = COULOMB_LAWS + VISCOUS_LAWS + (PRESLIDING_LAWS if jf.presliding else ())
+    return LawSearch(laws=laws, v_grid=velocity_grid(jf.dq_all),
                      v_floor=jf.vf, rate_hz=rates.pop() if len(rates) == 1 else None)
 
 

@@ -9,14 +9,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-import symoro_gen
 from symoro_gen.description.parse import parse_robot_text
-from symoro_gen.diagnostics.friction import DAHL_MIN_RATE_HZ, LawDeclaration, LawSearch, dahl_column
+from symoro_gen.diagnostics import DiagnoseSettings, diagnose
+from symoro_gen.diagnostics.friction import DAHL_MIN_RATE_HZ, LawSearch, dahl_column, law_declarations
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
 from symoro_gen.simulate.friction_state import dahl_friction
 from tests.diagnostics.simdata import robot_and_model
-from tests.diagnostics.test_declared_laws import WithRobot, with_line
+from tests.diagnostics.test_declared_laws import with_line
 
 FC, SIGMA0 = 1.5, 2e3
 
@@ -53,27 +53,30 @@ def _dahl_recording(fs: float, duration: float = 40.0, seed: int = 5):
     tau[:, 1] += dahl_friction(t, dq[:, 1], fc=FC, sigma0=SIGMA0)
     tr = Trajectory(t=t, q=q + 1e-5 * rng.standard_normal(q.shape), tau=tau + 0.05 * rng.standard_normal(q.shape),
                     source=f"scara dahl joint 2 at {fs:g} Hz")
-    return WithRobot(model, dataclasses.replace(robot, friction_laws={})), tr
+    return model, dataclasses.replace(robot, friction_laws={}), tr
 
 
 @pytest.mark.slow
 def test_dahl_law_named_at_one_kilohertz_and_not_at_500_hz():
-    """At 1 kHz the loop names the Dahl law on joint 2 with ``sigma0`` within 10 % of the truth, its
-    validation error on the joint drops, and the robot-file line it prints parses back to a Dahl law; the
-    same motion at 500 Hz never offers it."""
-    model, tr = _dahl_recording(1000.0)
-    res = symoro_gen.diagnose(model, [tr], max_effects=2)
-    (law,) = [e for e in res.residual.effects if e.kind == "friction_law" and e.joint == 1]
+    """With the Dahl law enabled (``presliding_law``), at 1 kHz the loop names it on joint 2 with ``sigma0``
+    within 10 % of the truth, its validation error on the joint drops, and the robot-file line of the effect
+    parses back to a Dahl law; the same motion at 500 Hz never offers it; not enabled, it is not offered."""
+    settings = DiagnoseSettings(max_effects=2, presliding_law=True)
+    model, robot, tr = _dahl_recording(1000.0)
+    rep = diagnose(model, tr, settings)
+    (law,) = [e for e in rep.effects if e.kind == "friction_law" and e.joint == 1]
     assert law.variant.startswith("dahl"), law.variant
     assert abs(law.physical["sigma0"] - SIGMA0) < 0.1 * SIGMA0, law.physical
-    before = np.asarray(res.residual.before_validation_rel_err)
-    after = np.asarray(res.residual.after_validation_rel_err)
+    before = np.asarray(rep.before_validation_rel_err)
+    after = np.asarray(rep.after_validation_rel_err)
     assert after[1] < 0.5 * before[1], (before, after)
-    (decl,) = [d for d in res.declarations() if isinstance(d, LawDeclaration)]
+    (decl,) = law_declarations(robot, rep.effects)
     parsed = parse_robot_text(with_line(decl.line, 2), "scara.toml").friction_laws[2]
     assert parsed.kind == "dahl" and abs(dict(parsed.presliding)["sigma0"] - SIGMA0) < 0.1 * SIGMA0
 
-    model, tr = _dahl_recording(500.0)
-    res = symoro_gen.diagnose(model, [tr], max_effects=2)
-    assert not [e for e in res.residual.effects if "dahl" in e.variant]
-    assert not [c for c in res.residual.tried if "dahl" in (c.variant or "")]
+    off = diagnose(model, tr, DiagnoseSettings(max_effects=2))
+    assert not [c for c in off.tried if "dahl" in (c.variant or "")]
+    model, robot, tr = _dahl_recording(500.0)
+    rep = diagnose(model, tr, settings)
+    assert not [e for e in rep.effects if "dahl" in e.variant]
+    assert not [c for c in rep.tried if "dahl" in (c.variant or "")]
