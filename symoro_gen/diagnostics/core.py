@@ -114,6 +114,9 @@ from .compose import Composed, RowSignals, score_composed
 from .compose import library as composed_library
 from .frame import Experiment, Frame, attach_model_torque, build_frame, common_bandwidth, model_torque, split_holdout
 from .friction import (
+    COULOMB_LAWS,
+    PRESLIDING_LAWS,
+    VISCOUS_LAWS,
     FrictionChoice,
     LawFit,
     LawModel,
@@ -522,6 +525,18 @@ class DiagnoseSettings:
     declared_elastic : tuple of int
         Joints (0-based columns) the robot file declares elastic (``elastic = {K, D}``): their positions are
         link-side or corrected already, so the loop's ``elasticity`` candidate is not offered for them.
+    declared_laws : tuple of int
+        Joints (0-based columns) whose friction law the robot file declares (``friction_law``; the model is
+        then :class:`~symoro_gen.identification.friction_law.LawDeclaredModel` at the scales refined on the
+        identification data): the friction-law stage leaves them as declared (no replacement of any kind
+        is offered, :func:`_stage_friction`), and the loop's Stribeck candidate is not offered on a joint
+        whose declared law has the Stribeck term already (its ``FSS<j>`` column). The loop's other
+        candidates still compete there in the rounds (docs/loop-plausibility.md, "Declared friction laws").
+    presliding_law : bool
+        The friction-law stage also tries the pre-sliding Dahl law (:func:`.friction.dahl_column`) on data
+        sampled at :data:`.friction.DAHL_MIN_RATE_HZ` or more. Off by default: on the TX40 recording (5 kHz)
+        it displaced the joint-1 friction law the loop names without it (the README run: joint-1 validation
+        error 0.179 with the Dahl law tried; docs/loop-plausibility.md reports 0.080 with the static law).
     """
 
     method: str = "ols"
@@ -539,6 +554,8 @@ class DiagnoseSettings:
     unexplained: bool = True
     stability: bool = True
     declared_elastic: tuple[int, ...] = ()
+    declared_laws: tuple[int, ...] = ()
+    presliding_law: bool = False
 
     def __post_init__(self) -> None:
         if self.method.lower() not in ("ols", "wls", "tls"):
@@ -801,6 +818,10 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
     reversals then loses to that effect. Applied here: a joint declared without friction getting its laws,
     and the sign smoothing of the declared law (tested as a note, :func:`_accept_notes`).
 
+    A joint whose law the robot file declares (``cfg.declared_laws``) is skipped: its law is the user's
+    statement, identified with its scale refined on the identification data; the stage's replacements
+    are measured against ``sign(dq)`` + ``dq``, not against that law, so none is offered there.
+
     Returns the data with the new columns (model :class:`.friction.LawModel`), what was applied and the
     pending replacements."""
     F = data.F
@@ -815,10 +836,11 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
     doubtful: list[dict] = []
     scales = ArmScales.of_frame(F)
     for j in range(n):
-        jf = _joint_friction(F, W, names, j, float(dq_noise[j]))
+        if j in cfg.declared_laws:
+            continue   # the robot file declares this joint's law: kept as declared (scales refined already)
+        jf = replace(_joint_friction(F, W, names, j, float(dq_noise[j])), presliding=cfg.presliding_law)
         try:
-            ch = select_friction(jf.A, Y, J, j, np.zeros(Y.size), blocks, columns=jf.cols,
-                                 search=LawSearch(v_grid=velocity_grid(jf.dq_all), v_floor=jf.vf))
+            ch = select_friction(jf.A, Y, J, j, np.zeros(Y.size), blocks, columns=jf.cols, search=_law_search(F, jf))
         except IdentificationError:
             continue   # the joint does not move: nothing to choose
         if ch.replaced or jf.missing:
@@ -876,6 +898,7 @@ class _JointFriction:
     cols: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray]
     dq_all: np.ndarray
     vf: float
+    presliding: bool = False   # the Dahl law is tried (DiagnoseSettings.presliding_law)
 
 
 def _joint_friction(F: Frame, W: np.ndarray, names: list[str], j: int, dq_noise: float) -> _JointFriction:
@@ -929,6 +952,16 @@ def _declared_law_kept(jf: _JointFriction, ch: FrictionChoice, Y: np.ndarray, J:
             jf.an + list(k.names()))
 
 
+def _law_search(F: Frame, jf: _JointFriction) -> LawSearch:
+    """The laws the friction-law stage tries on joint ``jf.j``: every static law, and (``jf.presliding``) the
+    pre-sliding Dahl law when every experiment is sampled at one rate of :data:`.friction.DAHL_MIN_RATE_HZ` or
+    more (:mod:`.friction`: below it the pre-sliding regime is not resolved)."""
+    rates = {float(ex.settings.fs) for ex in F.experiments}
+    laws = COULOMB_LAWS + VISCOUS_LAWS + (PRESLIDING_LAWS if jf.presliding else ())
+    return LawSearch(laws=laws, v_grid=velocity_grid(jf.dq_all),
+                     v_floor=jf.vf, rate_hz=rates.pop() if len(rates) == 1 else None)
+
+
 def _rounds_sign_off(ch: FrictionChoice, dq_all: np.ndarray) -> bool:
     """A tanh scale below MIN_LAW_SCALE of the joint's speeds (with the linear viscous law) only rounds
     sign(dq) off where the band-pass velocity misses the true reversal or chatters at standstill (seen on
@@ -968,7 +1001,7 @@ def _law_replacement(jf: _JointFriction, ch: FrictionChoice, F: Frame, blocks: n
         # simulated-noise placebo (stability.simulated_noise_placebo): v, vs, delta and the law were
         # chosen on the folds that judge them; the whole selection re-run on the declared law's fit
         # plus its own residual shifted in time must never claim the observed gain (clean data, seed 510)
-        passed = _law_beats_noise(ch, jf.A, Y, J, blocks, jf.cols, jf.dq_all, jf.vf, F)[0]
+        passed = _law_beats_noise(ch, jf, Y, J, blocks, F)[0]
     if not passed:
         return None, X
     return _LawRecord(ch, jf.missing, jf.off, float(np.mean(wins)), p_law, smoothing), X
@@ -1002,19 +1035,19 @@ def _law_gain(ch: FrictionChoice, dq_all: np.ndarray) -> float:
     return 1.0 - (ch.cv_rel_err / ch.declared_cv_rel_err) ** 2
 
 
-def _law_beats_noise(ch: FrictionChoice, A, Y, J, blocks, cols, dq_all, vf, F: Frame) -> tuple[bool, list]:
+def _law_beats_noise(ch: FrictionChoice, jf: _JointFriction, Y, J, blocks, F: Frame) -> tuple[bool, list]:
     """Simulated-noise placebo of a friction-law replacement on joint ``j`` (:func:`.stability.
     simulated_noise_placebo`): the declared law (sign smoothed at ``vf``) fitted on all rows, its residual
     shifted in time, the selection ``ch`` came from re-run; its gain must exceed every null one."""
     j = ch.joint
-    Xd = cols(_smoothed_declared_law(vf), 2)
+    A, cols, dq_all = jf.A, jf.cols, jf.dq_all
+    Xd = cols(_smoothed_declared_law(jf.vf), 2)
     M = np.hstack([A, Xd])
     fitted = M @ np.linalg.lstsq(M, Y, rcond=None)[0]
-    v_grid = velocity_grid(dq_all)
+    search = _law_search(F, jf)
 
     def gain(y):
-        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols,
-                                         search=LawSearch(v_grid=v_grid, v_floor=vf)), dq_all)
+        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols, search=search), dq_all)
     return simulated_noise_placebo(gain, fitted, Y - fitted, J * 100000 + F.row_experiment, F.row_experiment,
                                    _law_gain(ch, dq_all), rng=np.random.default_rng(7919 + j))
 
@@ -1069,6 +1102,9 @@ def _law_columns(ch: FrictionChoice) -> tuple[list[int], tuple[str, ...]]:
     elif ch.coulomb.law == "stribeck":
         idx.append(1)
         params.append("FSS")
+    elif ch.coulomb.law == "dahl":
+        idx.append(0)
+        params.append("FSd")
     if ch.viscous.law == "power":
         idx.append(len(ch.names()) - 1)
         params.append("FVp")
@@ -1103,6 +1139,8 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
     # coefficients then split the effect between them with opposite signs)
     stribeck_law = {r.choice.joint for r in laws if not r.smoothing and r.choice.coulomb.law == "stribeck"}
+    # ... and so has a joint whose declared law (robot file: stribeck, lugre) carries FSS<j>
+    stribeck_law |= {j for j in cfg.declared_laws if f"FSS{j + 1}" in data.decl}
     families = [f for f in families if not (f.kind == "stribeck" and f.joint in stribeck_law)]
     # a joint declared elastic in the robot file is modelled as such: no elasticity candidate for it
     families = [f for f in families if not (f.kind == "elasticity" and f.joint in cfg.declared_elastic)]
@@ -1855,6 +1893,10 @@ def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
         phys["v_sign"] = float(ch.coulomb.smooth)
     if ch.viscous.law == "power" and ch.viscous.param is not None:
         phys["delta"] = float(ch.viscous.param)
+    x0 = ch.x0
+    if x0 is not None and x0 > 0:   # Dahl: pre-sliding displacement and stiffness sigma0 = Fc / x0
+        phys["x0"] = x0
+        phys["sigma0"] = abs(float(res.value(ch.names()[0]))) / x0
     desc = ch.describe()
     if rec.added:
         desc = (f"joint {ch.joint + 1} declared without friction: added {ch.coulomb.label} Coulomb + "

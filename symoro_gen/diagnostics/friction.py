@@ -14,6 +14,16 @@ Coulomb laws (coefficients linear, shape parameter searched)
       (Armstrong-Helouvry, Dupont & Canudas de Wit 1994, eq. 5); when ``tanh`` is tried too, the
       ``sign(dq)`` is smoothed by ``tanh(dq/v)`` at the ``v`` the tanh search found (at the bottom of
       the grid this is ``sign``; otherwise the Stribeck law does not chatter at standstill either);
+Pre-sliding (offered on data sampled at :data:`DAHL_MIN_RATE_HZ` or more only, ``LawSearch.rate_hz``)
+    * ``dahl``      ``Fc phi(t)``, the Dahl state ([D1968]; docs/friction-dynamic.md) normalised to the
+      sliding level: ``dphi/dx = (sign(dq) - phi) / x0`` along the displacement ``x``, ``x0 = Fc / sigma0`` the
+      pre-sliding displacement; integrated exactly for the velocity held over each full-rate sample at the
+      mean of its two ends (as :mod:`symoro_gen.simulate.friction_state`), so the column is a function of the
+      ordered velocity series of one experiment and its rate ``fs``. Searched in ``vp = x0 fs`` (a velocity:
+      one sample's displacement at ``vp`` is ``x0``) on a log grid of ``x0`` (:data:`DAHL_X0_GRID`); at small
+      ``x0`` the law is ``sign(dq)``. Below 1 kHz the pre-sliding regime (milliseconds after each reversal)
+      is not resolved and a fitted ``sigma0`` is not identifiable (docs/friction-dynamic.md, the study at
+      reversals): the law is not offered there;
 Viscous laws
     * ``linear``    ``Fv dq`` (declared);
     * ``power``     ``Fv |dq|^delta sign(dq)``, ``delta`` on a grid then refined.
@@ -49,6 +59,15 @@ Static at rest
     :func:`sliding_velocity`, ``dq`` with its rest segments set to 0 (every law here is 0 at ``dq = 0``) -
     in identification and validation alike: the model predicts no friction torque it cannot know, where
     ``sign(dq)`` would switch between ``+Fc`` and ``-Fc`` on the velocity's wander at standstill.
+
+Declaring what the loop found
+    A law the loop names as a cause (an effect of kind ``friction_law``, or the loop's ``stribeck``
+    candidate: a dip ``exp(-(dq/vs)^2) sign(dq)`` beside the declared ``sign(dq)`` and ``dq``, the Stribeck
+    law) is a property of the drive: :func:`law_declarations` gives the robot-file line that declares it
+    (``friction_law = {kind = "stribeck", vs = 0.05}``, docs/robot-file.md "Friction laws"). Declared,
+    ``diagnose`` starts from it (its scale refined on the identification data) and no longer offers it. A
+    combination no single kind declares (a Stribeck or tanh Coulomb law *and* a power viscous law) gets
+    no line.
 """
 from __future__ import annotations
 
@@ -61,23 +80,36 @@ from functools import partial
 import numpy as np
 from scipy import optimize
 
-from ..description.friction_law import COULOMB_LAWS, VISCOUS_LAWS, coulomb_columns, viscous_columns
+from ..description.friction_law import (
+    COULOMB_LAWS,
+    PRESLIDING_BOUNDS,
+    SCALE_BOUNDS,
+    VISCOUS_LAWS,
+    coulomb_columns,
+    viscous_columns,
+)
 from ..errors import IdentificationError
 from ..model import IdentificationModel
 from .stability import N_FOLDS, BlockedLS, wls_basis
 
 __all__ = [
     "COULOMB_LAWS",
+    "DAHL_MIN_RATE_HZ",
+    "DAHL_X0_GRID",
     "DELTA_GRID",
     "MIN_GAIN",
+    "PRESLIDING_LAWS",
     "REST_MIN_PERIODS",
     "REST_NOISE_MULTIPLE",
     "VISCOUS_LAWS",
     "FrictionChoice",
+    "LawDeclaration",
     "LawFit",
     "LawSearch",
     "coulomb_columns",
+    "dahl_column",
     "friction_column_indices",
+    "law_declarations",
     "law_errors",
     "replaced_friction_columns",
     "rest_mask",
@@ -89,6 +121,12 @@ __all__ = [
     "viscous_columns",
 ]
 
+#: the pre-sliding laws the stage can offer (at DAHL_MIN_RATE_HZ or more)
+PRESLIDING_LAWS = ("dahl",)
+#: sampling rate from which the Dahl law is offered (``fit_presliding``'s rule, docs/friction-dynamic.md)
+DAHL_MIN_RATE_HZ = 1000.0
+#: pre-sliding displacements x0 = Fc / sigma0 searched [rad or m] (sigma0 from 1e2 to 1e6 times Fc)
+DAHL_X0_GRID = tuple(float(x) for x in np.geomspace(1e-6, 1e-2, 13))
 #: a more complex law must lower the CV relative error of its joint by this fraction
 MIN_GAIN = 0.01
 #: exponents of the non-linear viscous law searched
@@ -218,6 +256,8 @@ class LawFit:
             return f"stribeck(vs={self.param:.3g})"
         if self.law == "power":
             return f"power(delta={self.param:.3g})"
+        if self.law == "dahl":
+            return f"dahl(vp={self.param:.3g})"
         return self.law
 
 
@@ -248,6 +288,14 @@ class FrictionChoice:
     coefficients: Mapping[str, float] = field(default_factory=dict)
     n_folds: int = N_FOLDS
     unit: str = "rad/s"
+    rate_hz: float | None = None
+
+    @property
+    def x0(self) -> float | None:
+        """Dahl law: the pre-sliding displacement ``x0 = vp / fs`` [rad or m] (None otherwise)."""
+        if self.coulomb.law != "dahl" or self.coulomb.param is None or not self.rate_hz:
+            return None
+        return float(self.coulomb.param) / float(self.rate_hz)
 
     @property
     def declared_cv_rel_err(self) -> float:
@@ -264,7 +312,7 @@ class FrictionChoice:
 
     def columns(self, dq: np.ndarray) -> np.ndarray:
         """Columns of the chosen laws at velocities ``dq``: Coulomb column(s) then the viscous one."""
-        return np.hstack([coulomb_columns(self.coulomb.law, dq, self.coulomb.param, self.coulomb.smooth),
+        return np.hstack([_coulomb(self.coulomb.law, dq, self.coulomb.param, self.coulomb.smooth),
                           viscous_columns(self.viscous.law, dq, self.viscous.param)])
 
     def names(self) -> tuple[str, ...]:
@@ -282,6 +330,10 @@ class FrictionChoice:
             parts.append(f"Coulomb \u2192 Stribeck, vs = {self.coulomb.param:.3g} {self.unit}"
                          + (f" (sign smoothed by tanh, v = {self.coulomb.smooth:.3g} {self.unit})"
                             if self.coulomb.smooth is not None else ""))
+        elif self.coulomb.law == "dahl" and self.x0 is not None:
+            fc = self.coefficients.get("Fc")
+            s0 = f", sigma0 = {abs(fc) / self.x0:.3g}" if fc is not None and self.x0 > 0 else ""
+            parts.append(f"Coulomb \u2192 Dahl (pre-sliding), x0 = {self.x0:.3g}{s0}")
         if self.viscous.law == "power":
             parts.append(f"viscous \u2192 |dq|^\u03b4, \u03b4 = {self.viscous.param:.3g}")
         if not parts:
@@ -309,6 +361,42 @@ def velocity_grid(dq: np.ndarray, n: int = N_VELOCITY_GRID) -> np.ndarray:
     if not s > 0:
         raise IdentificationError("friction: the joint does not move (95th percentile of |dq| is 0)")
     return s * np.geomspace(1e-3, 0.5, n)
+
+
+def dahl_column(dq: np.ndarray, vp: float) -> np.ndarray:
+    """The Dahl state ``phi`` (N,) normalised to the sliding level along the ordered full-rate velocity ``dq``
+    of one experiment (module docstring): ``phi_{k+1} = s + (phi_k - s) exp(-|v| / vp)``, ``v`` the mean of
+    ``dq_k`` and ``dq_{k+1}``, ``s = sign(v)``, ``vp = x0 fs``; ``phi_0 = 0`` (the state of
+    :func:`symoro_gen.simulate.friction_state.dahl_friction` with ``z0 = 0``). At rest (``v = 0``) the state
+    holds."""
+    v = np.asarray(dq, float)
+    if not vp > 0:
+        raise ValueError(f"dahl_column: vp must be > 0, got {vp!r}")
+    out = np.zeros(v.size)
+    if v.size < 2:
+        return out
+    vm = 0.5 * (v[1:] + v[:-1])
+    sg = np.sign(vm)
+    # within a run of one sign s the recursion is phi_k = s + (phi_start - s) exp(-(X_k - X_start) / vp), X the
+    # travelled distance |v| summed: one vectorised step per run (a reversal starts the next run)
+    X = np.concatenate([[0.0], np.cumsum(np.abs(vm))])
+    starts = np.flatnonzero(np.r_[True, sg[1:] != sg[:-1]])
+    ends = np.r_[starts[1:], sg.size]
+    w = 0.0
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        sk = float(sg[a])
+        out[a + 1:b + 1] = sk + (w - sk) * np.exp(-(X[a + 1:b + 1] - X[a]) / float(vp))
+        w = float(out[b])
+    return out
+
+
+def _coulomb(law: str, dq: np.ndarray, param: float | None, smooth: float | None) -> np.ndarray:
+    """:func:`coulomb_columns`, and the pre-sliding ``dahl`` law (:func:`dahl_column`)."""
+    if law == "dahl":
+        if param is None:
+            raise TypeError("the 'dahl' friction law needs its scale vp")
+        return dahl_column(dq, float(param))[:, None]
+    return coulomb_columns(law, dq, param, smooth)
 
 
 def _search(err: Callable[[float], float], grid: np.ndarray, refine: bool, log: bool = True):
@@ -347,6 +435,9 @@ class LawSearch:
         velocity noise: ``sign(dq)`` becomes ``tanh(dq / v_floor)`` (so the declared law does not chatter
         on noise at standstill, where identification data without rest phases give no evidence either
         way), and the tanh search starts there. Default: none (a true ``sign``).
+    rate_hz : float, optional
+        The full rate ``fs`` of every experiment (one value): the ``dahl`` law is tried only when ``laws``
+        names it and ``rate_hz >= DAHL_MIN_RATE_HZ``.
     """
 
     laws: Sequence[str] = COULOMB_LAWS + VISCOUS_LAWS
@@ -355,6 +446,12 @@ class LawSearch:
     delta_grid: Sequence[float] = DELTA_GRID
     refine: bool = True
     v_floor: float | None = None
+    rate_hz: float | None = None
+
+    @property
+    def dahl(self) -> bool:
+        # (a rate from time stamps is within rounding of 1000 Hz)
+        return "dahl" in self.laws and self.rate_hz is not None and self.rate_hz >= DAHL_MIN_RATE_HZ * (1 - 1e-6)
 
 
 def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq: np.ndarray, blocks: np.ndarray, *,
@@ -406,17 +503,17 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
     rows = joint == j
     if not rows.any():
         raise IdentificationError(f"friction: joint {j + 1} has no rows")
-    bad = [x for x in search.laws if x not in COULOMB_LAWS + VISCOUS_LAWS]
+    bad = [x for x in search.laws if x not in COULOMB_LAWS + VISCOUS_LAWS + PRESLIDING_LAWS]
     if bad:
-        raise ValueError(f"select_friction: unknown laws {bad}; use {COULOMB_LAWS + VISCOUS_LAWS}")
+        raise ValueError(f"select_friction: unknown laws {bad}; use {COULOMB_LAWS + VISCOUS_LAWS + PRESLIDING_LAWS}")
     cols = _row_columns(dq, rows) if columns is None else columns
     grid = _velocity_search_grid(dq[rows], search)
     sel = _LawSelection(BlockedLS(A, y, blocks, weights), y, rows, np.asarray(blocks)[rows], cols, search, grid)
     best_c, best_v = sel.coordinate_descent()
     n_folds = len(sel.cv.folds)
-    choice = FrictionChoice(j, best_c, best_v, tuple(sel.tried), {}, n_folds, unit)
+    choice = FrictionChoice(j, best_c, best_v, tuple(sel.tried), {}, n_folds, unit, search.rate_hz)
     coef = _law_coefficients(A, y, weights, cols, choice)
-    return FrictionChoice(j, best_c, best_v, tuple(sel.tried), coef, n_folds, unit)
+    return FrictionChoice(j, best_c, best_v, tuple(sel.tried), coef, n_folds, unit, search.rate_hz)
 
 
 def _row_columns(dq: np.ndarray, rows: np.ndarray) -> Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray]:
@@ -465,7 +562,7 @@ def _law_columns(columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np
         X = np.zeros((hit[2], p))
         X[hit[0]] = hit[1]
         return X
-    X = columns(lambda v: np.hstack([coulomb_columns(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]), p)
+    X = columns(lambda v: np.hstack([_coulomb(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]), p)
     rows = np.flatnonzero(np.any(X != 0.0, axis=1))
     size = rows.nbytes + rows.size * p * 8
     if _LAW_COLUMNS.get("bytes", 0) + size <= LAW_COLUMNS_BYTES:     # the first selection's grid stays
@@ -517,10 +614,11 @@ class _LawSelection:
         best_args: tuple = ("sign", None, vlaw, vpar, v_floor)
         self.tried.append(best)
         smooth = v_floor
-        for law in ("tanh", "stribeck"):
-            if law not in self.search.laws:
+        for law in ("tanh", "dahl", "stribeck"):
+            if law not in self.search.laws or (law == "dahl" and not self.search.dahl):
                 continue
-            p, e = _search(partial(self._coulomb_error, law, vlaw=vlaw, vpar=vpar, smooth=smooth), self.grid,
+            grid = self.grid if law != "dahl" else float(self.search.rate_hz or 0.0) * np.asarray(DAHL_X0_GRID)
+            p, e = _search(partial(self._coulomb_error, law, vlaw=vlaw, vpar=vpar, smooth=smooth), grid,
                            self.search.refine)
             fit = LawFit(law, p, e, smooth if law == "stribeck" else None)
             args = (law, p, vlaw, vpar, smooth if law == "stribeck" else None)
@@ -681,3 +779,91 @@ def sliding_frame(frame):
         _REST_CACHE[new] = m
         exps.append(new)
     return replace(frame, experiments=tuple(exps))
+
+
+#: significant digits of a scale in a robot-file line
+DECLARATION_DIGITS = 3
+
+
+@dataclass(frozen=True)
+class LawDeclaration:
+    """The robot-file declaration of a friction law the loop found on one joint.
+
+    Attributes
+    ----------
+    frame : int
+        The joint's frame ``j`` in the robot file.
+    joint : int
+        0-based model column.
+    law : str
+        ``stribeck``, ``tanh`` or ``power`` (a kind of the robot file's ``friction_law``).
+    scale_name : str
+        ``vs``, ``v`` or ``delta``.
+    scale : float
+        The loop's value (rounded to :data:`DECLARATION_DIGITS` significant digits in ``line``).
+    verdict, label : str
+        The effect's verdict and label.
+    line : str
+        ``friction_law = {kind = "stribeck", vs = 0.05}``, to add to the frame.
+    """
+
+    frame: int
+    joint: int
+    law: str
+    scale_name: str
+    scale: float
+    verdict: str
+    label: str
+    line: str
+
+    def to_dict(self) -> dict:
+        """One entry of ``robot_file`` in diagnose's JSON (docs/json-output.md); ``joint`` 1-based."""
+        return {"kind": "friction_law", "frame": self.frame, "joint": self.joint + 1, "line": self.line,
+                "law": self.law, "scale_name": self.scale_name, "scale": float(self.scale),
+                "verdict": self.verdict or None, "effect": self.label}
+
+    def text(self) -> str:
+        """``frame 2 (joint 2): friction_law = {kind = "stribeck", vs = 0.1}   (vs = 0.1002 rad/s; ...)``."""
+        v = f", {self.verdict}" if self.verdict else ""
+        unit = {"delta": "", "sigma0": " (N m/rad or N/m)"}.get(self.scale_name, " (rad/s or m/s)")
+        return (f"frame {self.frame} (joint {self.joint + 1}): {self.line}   ({self.scale_name} = {self.scale:.4g}"
+                f"{unit}; effect {self.label}{v})")
+
+
+def _declared_kind(kind: str, values: Mapping[str, float]) -> tuple[str, str] | None:
+    """``(law, scale name)`` a friction effect declares as one robot-file ``friction_law``, or None."""
+    has = {k for k in ("v", "vs", "delta", "sigma0") if k in values and math.isfinite(float(values[k]))}
+    if kind == "stribeck":
+        return ("stribeck", "vs") if "vs" in has else None
+    if kind != "friction_law" or len(has) != 1:
+        return None
+    (name,) = has
+    return {"vs": ("stribeck", "vs"), "v": ("tanh", "v"), "delta": ("power", "delta"), "sigma0": ("dahl", "sigma0")}[name]
+
+
+def law_declarations(robot, effects: Sequence) -> list[LawDeclaration]:
+    """The robot-file lines declaring the friction laws the loop named (``effects``:
+    :class:`symoro_gen.diagnostics.report.Effect`; module docstring, "Declaring what the loop found"). An
+    effect on a joint that already declares a law, a joint declared without friction (the law came with
+    an offset ``OFF<j>``), a modulated effect and a scale outside the robot file's range get no line."""
+    joints = robot.model_joints
+    declared = set(dict(getattr(robot, "friction_laws", {}) or {}))
+    out = []
+    for e in effects:
+        if e.joint is None or getattr(e, "modulation", None) is not None or not 0 <= e.joint < len(joints):
+            continue
+        values = {**dict(getattr(e, "search", {}) or {}), **dict(e.physical or {})}
+        kind = _declared_kind(str(e.kind), values)
+        if kind is None or any(str(nm).startswith("OFF") for nm in e.names):
+            continue
+        frame = joints[e.joint].j
+        law, name = kind
+        scale = float(values[name])
+        lo, hi = SCALE_BOUNDS[name] if name in SCALE_BOUNDS else PRESLIDING_BOUNDS[name]
+        if frame in declared or not lo < scale <= hi:
+            continue
+        shown = float(f"{scale:.{DECLARATION_DIGITS}g}")
+        line = f'friction_law = {{kind = "{law}", {name} = {shown:g}}}'
+        out.append(LawDeclaration(frame=frame, joint=int(e.joint), law=law, scale_name=name, scale=scale,
+                                  verdict=str(getattr(e, "verdict", "") or ""), label=str(e.label), line=line))
+    return out

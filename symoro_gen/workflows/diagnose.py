@@ -24,6 +24,8 @@ from ..description.identity import robot_id
 from ..diagnostics.candidates import KINDS
 from ..diagnostics.core import HOLDOUT, MAX_EFFECTS, SIGNIFICANCE, DiagnoseSettings
 from ..diagnostics.core import diagnose as run_loop
+from ..diagnostics.frame import split_holdout
+from ..diagnostics.friction import LawDeclaration, law_declarations
 from ..diagnostics.render import diagnosis_blocks, diagnosis_html
 from ..diagnostics.report import ResidualReport
 from ..errors import IdentificationError, OptionError
@@ -35,6 +37,7 @@ from ..identification.elastic import (
     link_side,
 )
 from ..identification.estimators import still_joints
+from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_laws, refine_scales
 from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
 from ..preprocessing.cli import data_notes, data_text
@@ -173,6 +176,7 @@ class DiagnoseResults(Results):
     validate: tuple[Any, ...]
     reports: tuple[LoadReport, ...]
     inputs: tuple[Any, ...] = ()
+    friction_laws: tuple[ScaleFit, ...] = ()
 
     def to_dict(self) -> dict:
         """Exactly the JSON of ``symoro-gen diagnose --json`` (its ``generator`` mark first)."""
@@ -185,23 +189,39 @@ class DiagnoseResults(Results):
         out["validate"] = _names(self.validate)
         out["loaded"] = _names(self.loaded)
         out["robot_file"] = [d.to_dict() for d in self.declarations()]
+        out["declared_friction_laws"] = [f.to_dict() for f in self.friction_laws]
         out["provenance"] = provenance(self.options, self.inputs, seeds={"seed": self.options.seed})
         return out
 
-    def declarations(self) -> list[ElasticDeclaration]:
+    def declarations(self) -> list[ElasticDeclaration | LawDeclaration]:
         """The robot-file lines that declare what the loop found as a property of the robot: the stiffness of
         each ``elasticity`` effect (``elastic = {K = ...}`` on its joint's frame,
-        :func:`~symoro_gen.identification.elastic.elastic_declarations`)."""
-        return elastic_declarations(self.robot, self.residual.effects)
+        :func:`~symoro_gen.identification.elastic.elastic_declarations`), then the friction law of each
+        friction-law or Stribeck effect (``friction_law = {kind = ..., vs = ...}``,
+        :func:`~symoro_gen.diagnostics.friction.law_declarations`)."""
+        return [*elastic_declarations(self.robot, self.residual.effects),
+                *law_declarations(self.robot, self.residual.effects)]
 
     def declaration_text(self) -> str:
-        """The text block of :meth:`declarations` (empty when there is none)."""
+        """The text blocks of the declared friction laws the loop started from and of :meth:`declarations`
+        (empty when there is none)."""
         decl = self.declarations()
-        if not decl:
-            return ""
-        return ("To the robot file (declared, the joint is modelled as elastic and its elasticity candidate is no "
-                "longer offered; with one motor-side encoder run with --positions motor, "
-                "docs/robot-file.md#elastic-joints):\n" + "\n".join(f"  {d.text()}" for d in decl))
+        elastic = [d for d in decl if isinstance(d, ElasticDeclaration)]
+        laws = [d for d in decl if isinstance(d, LawDeclaration)]
+        blocks = []
+        if self.friction_laws:
+            blocks.append("Declared friction laws (robot file): the loop starts from them, scales refined on the "
+                          "identification data (never the validation data); no friction-law replacement is "
+                          "offered on these joints:\n" + "\n".join(f.summary() for f in self.friction_laws))
+        if elastic:
+            blocks.append("To the robot file (declared, the joint is modelled as elastic and its elasticity candidate "
+                          "is no longer offered; with one motor-side encoder run with --positions motor, "
+                          "docs/robot-file.md#elastic-joints):\n" + "\n".join(f"  {d.text()}" for d in elastic))
+        if laws:
+            blocks.append("To the robot file (declared, diagnose starts from the law, its scale refined on the "
+                          "identification data, and no longer offers it; docs/robot-file.md#friction-laws):\n"
+                          + "\n".join(f"  {d.text()}" for d in laws))
+        return "\n\n".join(blocks)
 
     def summary(self) -> str:
         """Exactly the text ``symoro-gen diagnose`` prints."""
@@ -309,11 +329,29 @@ def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> Diag
     reports += rep_v
     if opts.positions == "motor":  # motor-side positions: the link side of the declared elastic joints
         ident, loaded, valid = (link_side(robot, trs) if trs else tuple(trs) for trs in (ident, loaded, valid))
-    settings = replace(opts.settings(), declared_elastic=tuple(i for i, _ in elastic_columns(robot)))
-    residual = run_loop(model, ident, settings, validation=valid if validate else None,
+    loop_model, law_fits = _declared_law_model(robot, model, ident, valid if validate else None, opts)
+    settings = replace(opts.settings(), declared_elastic=tuple(i for i, _ in elastic_columns(robot)),
+                       declared_laws=tuple(f.joint for f in law_fits))
+    residual = run_loop(loop_model, ident, settings, validation=valid if validate else None,
                         loaded=loaded if loaded_data else None, payload=known,
                         rng=np.random.default_rng(opts.seed), assembly=opts.assembly(torque_limits(robot)))
     residual = replace(residual, warnings=(*notes, *residual.warnings))
     return DiagnoseResults(robot=robot, model=model, options=opts, residual=residual, data=data,
                            loaded=loaded_data, validate=validate, reports=tuple(reports),
-                           inputs=(*data, *loaded_data, *validate))
+                           inputs=(*data, *loaded_data, *validate), friction_laws=law_fits)
+
+
+def _declared_law_model(robot, model: IdentificationModel, ident, valid, opts: DiagnoseOptions
+                        ) -> tuple[IdentificationModel, tuple[ScaleFit, ...]]:
+    """The loop's declared model: with the robot file's friction laws (``friction_law``) in place of their joints'
+    ``FS``/``FV`` columns (:class:`~symoro_gen.identification.friction_law.LawDeclaredModel`, as ``identify``),
+    their scales refined (:func:`~symoro_gen.identification.friction_law.refine_scales`) on the identification
+    recordings without payload only: without validation recordings, on the leading part the loop identifies on
+    (its held-out validation share, :func:`~symoro_gen.diagnostics.frame.split_holdout`, is never read). The
+    model itself without any declared law."""
+    laws = declared_laws(robot, model)
+    if not laws:
+        return model, ()
+    data = list(ident) if valid is not None else split_holdout(list(ident), opts.holdout)[0]
+    fits = refine_scales(model, laws, data, opts.assembly(torque_limits(robot)))
+    return LawDeclaredModel(model, laws, [f.scale for f in fits]), fits
