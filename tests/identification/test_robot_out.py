@@ -117,6 +117,9 @@ def test_elastic_k_d_written_and_read_back(tmp_path):
     d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
     assert d["robot_out"] == {"path": str(out), "robot_file": str(src), "written": {"elastic": [1, 2]}}
     assert validate(d, SCHEMA) == []
+    bad = json.loads(json.dumps(d))
+    bad["robot_out"]["written"]["nominal"] = [1]
+    assert validate(bad, SCHEMA)  # the schema names what can be written: never [nominal]
     again = symoro_gen.identify(str(out), [csv], method="ols", data_format=fmt).elasticity
     assert again.declared_K == tuple(e.K for e in written.elastic)
     for k2, kw, s in zip(again.K, again.declared_K, again.K_std):
