@@ -296,6 +296,12 @@ class IdentifyResults(Results):
                      + self.plausibility.summary())
         if self.elasticity is not None:
             text += "\n\n" + self.elasticity.summary()
+        if self.robot_out is not None:
+            names = {"joint_zero": "joint zeros of joints", "elastic": "elastic K, D of frames",
+                     "friction_law": "friction-law scales of frames"}
+            text += (f"\n\nRobot file written (-o): {self.robot_out['path']} (from {self.robot_out['robot_file']}): "
+                     + "; ".join(f"{names[k]} {', '.join(map(str, v))}" for k, v in self.robot_out["written"].items())
+                     + " ([nominal] not written)")
         return text + "\n\n" + data_text(self.reports)
 
     # ---- the corrected robot file ----------------------------------------------------------------------
@@ -422,7 +428,7 @@ def robot_out_refusal(robot, friction_laws: Sequence[ScaleFit] = ()) -> str:
     laws = [f"frame {f.law.frame} ({f.note})" for f in friction_laws if not f.fitted]
     return (f"-o/--robot-out writes the robot-file quantities identify identified, and this run identified none "
             f"for {robot.file}: no joint zeros (add --geometry joint_zero), no elastic K, D (needs elastic = {{K = "
-            "...}} on a frame and recordings with a q_link column: two encoders), no friction-law scale ("
+            "...} on a frame and recordings with a q_link column: two encoders), no friction-law scale ("
             + ("the declared laws were not fitted: " + "; ".join(laws) if laws
                else "needs friction_law = {kind = ..., vs|v|delta = ...} on a frame")
             + "); the [nominal] values are never written (the base parameters are not the standard ones)")

@@ -114,12 +114,18 @@ def test_elastic_k_d_written_and_read_back(tmp_path):
     assert written.nominal == load_robot(src).nominal
     text = out.read_text()
     assert str(src) in text.splitlines()[0] and "elastic K, D" in text and "[nominal] unchanged" in text
+    assert f"Robot file written (-o): {out}" in res.summary() and "elastic K, D of frames 1, 2" in res.summary()
     d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
     assert d["robot_out"] == {"path": str(out), "robot_file": str(src), "written": {"elastic": [1, 2]}}
     assert validate(d, SCHEMA) == []
     bad = json.loads(json.dumps(d))
     bad["robot_out"]["written"]["nominal"] = [1]
     assert validate(bad, SCHEMA)  # the schema names what can be written: never [nominal]
+    # the command (no --geometry: the robot file declares elastic joints) writes the same file
+    cli_out = tmp_path / "cli.toml"
+    assert main(["identify", str(src), str(csv), "--method", "ols", "--columns",
+                 "t=t,q=qm0:qm1,tau=tau0:tau1,q_link=ql0:ql1", "-o", str(cli_out), "--quiet"]) == 0
+    assert cli_out.read_text() == out.read_text()
     again = symoro_gen.identify(str(out), [csv], method="ols", data_format=fmt).elasticity
     assert again.declared_K == tuple(e.K for e in written.elastic)
     for k2, kw, s in zip(again.K, again.declared_K, again.K_std):
@@ -162,7 +168,7 @@ def test_refused_when_nothing_was_identified(tmp_path, capsys):
     assert main(["identify", "scara", "q=0,tau=0,dt=0.01", "-o", str(out), "--quiet"]) != 0
     err = capsys.readouterr().err
     assert "-o/--robot-out" in err and "scara.toml" in err and "--geometry joint_zero" in err
-    assert "elastic" in err and "friction_law" in err and "[nominal]" in err
+    assert "elastic = {K = ...} on a frame" in err and "friction_law" in err and "[nominal]" in err
     assert not out.exists()
     from symoro_gen.preprocessing.trajectory import Trajectory
     from tests.elastic.test_elastic_stiffness import ROBOT, _robot, two_encoder_log
