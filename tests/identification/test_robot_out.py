@@ -156,7 +156,9 @@ def test_friction_law_scale_written_and_read_back(tmp_path):
     assert src.read_bytes() == before
     law = load_robot(out).friction_laws[2]
     assert law.kind == "stribeck" and law.scale == pytest.approx(fit.scale, rel=1e-5)
-    assert res.to_dict()["robot_out"]["written"] == {"friction_law": [2]}
+    d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
+    assert d["robot_out"]["written"] == {"friction_law": [2]} and validate(d, SCHEMA) == []
+    assert "vs = " + repr(float(f"{fit.scale:.6g}")) in out.read_text()
     (refit,) = symoro_gen.identify(str(out), [tr], method="wls").friction_laws
     assert refit.law.scale == law.scale and abs(refit.scale - law.scale) <= refit.std
 
