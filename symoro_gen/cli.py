@@ -190,7 +190,7 @@ def command_outputs(args) -> dict[str, str | os.PathLike[str] | Target | None]:
             outputs[flag] = Target(Path(v), owner="never")
         else:
             outputs[flag] = v
-    if getattr(args, "robot_out", None):  # identify --geometry: a robot file, never replaced without --force
+    if getattr(args, "robot_out", None):  # identify -o: a robot file, never replaced without --force
         outputs["-o/--robot-out"] = Target(Path(args.robot_out), owner="never")
     if cmd in ("export-urdf", "export-mjcf") and getattr(args, "output", None) and getattr(args, "from_result", None):
         outputs["-o/--output (its .json)"] = str(args.output) + ".json"

@@ -7,10 +7,11 @@ A leaf: the arguments become :class:`~symoro_gen.workflows.identify.IdentifyOpti
 from __future__ import annotations
 
 from ..atomic import FORCE_HELP
+from ..description import load_robot
 from ..errors import OptionError
 from ..preprocessing.cli import add_data_options, format_from_args
 from ..report import check_report_path, require_matplotlib
-from ..workflows.identify import IdentifyOptions, IdentifyResults, identify
+from ..workflows.identify import IdentifyOptions, IdentifyResults, identify, robot_out_refusal
 from .common import parse_payload
 
 __all__ = ["add_parser", "options_from_args", "run"]
@@ -39,9 +40,10 @@ def run(args) -> int:
         require_matplotlib()
     opts = options_from_args(args)
     robot_out = getattr(args, "robot_out", None)
-    if robot_out and not opts.geometry:
-        raise OptionError("-o/--robot-out writes the robot file corrected by --geometry joint_zero: add "
-                          "--geometry joint_zero")
+    if robot_out and not opts.geometry:  # before the long computation: a robot file with nothing to identify
+        robot = load_robot(args.robot)
+        if not robot.elastic and not robot.friction_laws:
+            raise OptionError(robot_out_refusal(robot))
     res: IdentifyResults = identify(args.robot, list(args.data), validate=args.validate, loaded=args.loaded,
                                     options=opts)
     force = bool(getattr(args, "force", False))
@@ -117,8 +119,11 @@ def add_parser(sub) -> None:
                    help="with --geometry joint_zero: the joints (1-based) whose zero is fitted (default: every joint "
                         "whose zero torque data can see)")
     p.add_argument("-o", "--robot-out", metavar="PATH",
-                   help="with --geometry: write the robot file with the identified zeros added to the frames' theta "
-                        "(r) here (never over the input robot file; an existing file only with --force)")
+                   help="write the robot file with what this run identified here: the joint zeros (--geometry "
+                        "joint_zero) added to the frames' theta (r), K and D of the elastic joints the two-encoder fit "
+                        "estimated, the fitted friction-law scales; refused when none was identified. The [nominal] "
+                        "values are not written (the base parameters are not the standard ones). Never over the input "
+                        "robot file; an existing file only with --force")
     p.add_argument("--positions", choices=("link", "motor"), default="link",
                    help="side of the logged positions: link (default) or motor (q_m/N, e.g. the LWR4's): then the "
                         "declared elastic joints' link positions are q = positions - tau/K (robot file: elastic = "

@@ -29,19 +29,21 @@ import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from dataclasses import replace as dc_replace
+from functools import partial
 from typing import Any
 
 import numpy as np
 
+from ..description.rewrite import RobotText, format_number
 from ..dynamics.numeric import inverse_dynamics, numeric_regressor
-from ..errors import IdentificationError, Problem, RobotFileError
+from ..errors import IdentificationError
 from ..model import IdentificationModel
 from ..observations.raw import full_rate_torque
 from ..observations.system import ObservationSystem
 from .systems import stack_systems
 
 __all__ = ["GEOMETRY_KINDS", "JOINT_ZERO_STEP", "LENGTH_FIELDS", "length_sensitivity", "length_visibility", "perturbed_robot", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
-           "corrected_robot_text", "fit_zeros", "joint_zero_column", "joint_zero_secant", "joint_zero_visibility",
+           "add_zeros", "corrected_robot_text", "fit_zeros", "joint_zero_column", "joint_zero_secant", "joint_zero_visibility",
            "regressor_secant", "revolute_joints", "shift_zeros", "visible_zero_joints", "zero_identifiability",
            "zero_shares"]
 
@@ -467,12 +469,6 @@ def fit_zeros(model: IdentificationModel, systems_at: SystemsAt, fit_at: FitAt, 
 # ------------------------------------------------------------------------------------------------
 # the corrected robot file
 # ------------------------------------------------------------------------------------------------
-_FRAMES = re.compile(r"^\s*\[\[\s*frames\s*\]\]\s*(#.*)?$")
-_TABLE = re.compile(r"^\s*\[")
-
-
-def _number(v: float) -> str:
-    return repr(float(f"{v:.12g}"))
 
 
 def _shifted_expr(old: str, c: float) -> str:
@@ -480,70 +476,32 @@ def _shifted_expr(old: str, c: float) -> str:
     s = old.strip()
     sign = "-" if c < 0 else "+"
     if re.fullmatch(r"q(\s*[-+].*)?", s):   # q [+- const]: append the offset
-        return f"{s} {sign} {_number(abs(c))}"
-    return re.sub(r"\bq\b", f"(q {sign} {_number(abs(c))})", s)
+        return f"{s} {sign} {format_number(abs(c))}"
+    return re.sub(r"\bq\b", f"(q {sign} {format_number(abs(c))})", s)
+
+
+def add_zeros(text: RobotText, robot, offsets: Mapping[int, float]) -> str:
+    """Add the zeros ``offsets`` (model joint, 0-based -> ``q0``) of ``robot`` to the joint variable of their
+    ``[[frames]]`` entries in ``text``: ``theta = "q"`` -> ``theta = "q + q0"`` (``r`` for a prismatic joint).
+    Returns the zeros as text for a header comment (``joint 2 +0.5 deg``). A frame whose joint variable is not on
+    a ``theta = "..."`` / ``r = "..."`` line of its own is refused naming the file, the frame and the field."""
+    joints = robot.model_joints
+    for j, c in sorted(offsets.items()):
+        row = joints[j]
+        text.edit_string(int(row.j), "theta" if int(row.sigma) == 0 else "r", partial(_shifted_expr, c=float(c)))
+    return ", ".join(f"joint {j + 1} {math.degrees(c) if int(joints[j].sigma) == 0 else c:+.6g}"
+                     f"{' deg' if int(joints[j].sigma) == 0 else ' m'}" for j, c in sorted(offsets.items()))
 
 
 def corrected_robot_text(robot, offsets: Mapping[int, float], *, note: str = "") -> str:
     """The robot file of ``robot`` (its ``file``) with the zeros ``offsets`` (model joint, 0-based -> ``q0``)
-    added to the joint variable of their ``[[frames]]`` entries: ``theta = "q"`` -> ``theta = "q + q0"``
-    (``r`` for a prismatic joint), every other line unchanged, and header comments naming the source file
-    and ``note``. A frame whose joint variable is not on a ``theta = "..."`` / ``r = "..."`` line of its own
-    (an inline table) is refused naming the file, the frame and the field."""
-    from pathlib import Path
-
-    path = Path(str(robot.file))
-    if not path.is_file():
-        raise RobotFileError([Problem(str(robot.file), "", "", "the robot file is needed to write the corrected "
-                                      "one: load the robot from a file")])
-    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
-    joints = robot.model_joints
-    want: dict[int, tuple[str, float]] = {}
-    for j, c in offsets.items():
-        row = joints[j]
-        want[int(row.j)] = ("theta" if int(row.sigma) == 0 else "r", float(c))
-    # locate each [[frames]] block and its j
-    blocks: list[tuple[int, int]] = []
-    i = 0
-    while i < len(lines):
-        if _FRAMES.match(lines[i]):
-            b = i + 1
-            while b < len(lines) and not _TABLE.match(lines[b]):
-                b += 1
-            blocks.append((i, b))
-            i = b
-        else:
-            i += 1
-    done: set[int] = set()
-    for a, b in blocks:
-        fj = None
-        for t in range(a + 1, b):
-            m = re.match(r"^\s*j\s*=\s*(\d+)", lines[t])
-            if m:
-                fj = int(m.group(1))
-                break
-        if fj is None or fj not in want:
-            continue
-        key, c = want[fj]
-        for t in range(a + 1, b):
-            m = re.match(rf'^(\s*{key}\s*=\s*)"([^"]*)"(.*)$', lines[t].rstrip("\n"))
-            if m:
-                eol = "\n" if lines[t].endswith("\n") else ""
-                lines[t] = f'{m.group(1)}"{_shifted_expr(m.group(2), c)}"{m.group(3)}{eol}'
-                done.add(fj)
-                break
-    missing = sorted(set(want) - done)
-    if missing:
-        raise RobotFileError([Problem(str(path), f"frame j = {fj}", want[fj][0],
-                                      f'no {want[fj][0]} = "..." line of its own to add the identified zero to '
-                                      "(write the frame as a [[frames]] table)") for fj in missing])
-    zeros = ", ".join(f"joint {j + 1} {math.degrees(c) if int(joints[j].sigma) == 0 else c:+.6g}"
-                      f"{' deg' if int(joints[j].sigma) == 0 else ' m'}" for j, c in sorted(offsets.items()))
-    head = [f"# Corrected by symoro-gen identify --geometry joint_zero from the robot file {path}\n",
-            f"# identified joint zeros added to theta/r: {zeros or 'none'}\n"]
-    if note:
-        head.append(f"# {note}\n")
-    return "".join(head) + "".join(lines)
+    added to the joint variable of their ``[[frames]]`` entries (:func:`add_zeros`), every other line
+    unchanged, and header comments naming the source file and ``note``."""
+    text = RobotText(str(robot.file))
+    zeros = add_zeros(text, robot, offsets)
+    head = [f"Corrected by symoro-gen identify --geometry joint_zero from the robot file {text.path}",
+            f"identified joint zeros added to theta/r: {zeros or 'none'}"]
+    return text.text(head + ([note] if note else []))
 
 
 # ------------------------------------------------------------------------------------------------

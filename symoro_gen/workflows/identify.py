@@ -23,6 +23,7 @@ import numpy as np
 from ..atomic import Target, check_outputs
 from ..description.identity import robot_id
 from ..description.par import write_robot_toml
+from ..description.rewrite import RobotText, format_number
 from ..errors import IdentificationError, OptionError
 from ..identification import fit_with_known_payload, identify_with_drive_gains, sensor_gains
 from ..identification import identify as fit
@@ -33,7 +34,7 @@ from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_l
 from ..identification.geometry import (
     GEOMETRY_KINDS,
     GeometryFit,
-    corrected_robot_text,
+    add_zeros,
     fit_zeros,
     shift_zeros,
     visible_zero_joints,
@@ -71,7 +72,7 @@ from .base import (
 )
 from .reporting import ReportContent, build_report, write_report
 
-__all__ = ["IdentifyOptions", "IdentifyResults", "check_payload", "identify"]
+__all__ = ["IdentifyOptions", "IdentifyResults", "check_payload", "identify", "robot_out_refusal"]
 
 METHODS = ("ols", "wls", "tls", "iv", "didim")
 
@@ -221,6 +222,7 @@ class IdentifyResults(Results):
     geometry: GeometryFit | None = None
     friction_laws: tuple[ScaleFit, ...] = ()
     elasticity: StiffnessEstimate | None = None
+    robot_out: Mapping[str, Any] | None = None
 
     # ---- the JSON ---------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -256,6 +258,9 @@ class IdentifyResults(Results):
             out["friction_laws"] = [f.to_dict() for f in self.friction_laws]
         if self.elasticity is not None:
             out["elasticity"] = self.elasticity.to_dict()
+        if self.robot_out is not None:
+            out["robot_out"] = {"path": self.robot_out["path"], "robot_file": self.robot_out["robot_file"],
+                                "written": {k: list(v) for k, v in self.robot_out["written"].items()}}
         out["provenance"] = provenance(self.options, self.inputs)
         return out
 
@@ -291,29 +296,82 @@ class IdentifyResults(Results):
                      + self.plausibility.summary())
         if self.elasticity is not None:
             text += "\n\n" + self.elasticity.summary()
+        if self.robot_out is not None:
+            names = {"joint_zero": "joint zeros of joints", "elastic": "elastic K, D of frames",
+                     "friction_law": "friction-law scales of frames"}
+            text += (f"\n\nRobot file written (-o): {self.robot_out['path']} (from {self.robot_out['robot_file']}): "
+                     + "; ".join(f"{names[k]} {', '.join(map(str, v))}" for k, v in self.robot_out["written"].items())
+                     + " ([nominal] not written)")
         return text + "\n\n" + data_text(self.reports)
 
     # ---- the corrected robot file ----------------------------------------------------------------------
+    def written_quantities(self) -> dict[str, list[int]]:
+        """What ``-o/--robot-out`` writes into the robot file, each only when this run identified it:
+        ``joint_zero`` (1-based joints, ``--geometry joint_zero``), ``elastic`` (frames whose ``K``, ``D`` the
+        two-encoder fit estimated), ``friction_law`` (frames whose law's scale was fitted)."""
+        out: dict[str, list[int]] = {}
+        if self.geometry is not None and len(self.geometry.joints):
+            out["joint_zero"] = [j + 1 for j in self.geometry.joints]
+        if self.elasticity is not None and self.elasticity.joints:
+            out["elastic"] = list(self.elasticity.joints)
+        laws = [f.law.frame for f in self.friction_laws if f.fitted and f.law.scale_name is not None]
+        if laws:
+            out["friction_law"] = laws
+        return out
+
     def write_robot(self, path: str | os.PathLike[str], *, force: bool = False) -> IdentifyResults:
-        """Write the robot file with the identified joint zeros added to the frames' ``theta`` (``r``) offsets
-        (``--geometry joint_zero``, ``-o/--robot-out``): never over the input robot file or another input, an
-        existing file only with ``force``. Returns these results with the written path recorded (JSON
-        ``geometry.robot_out``)."""
-        if self.geometry is None:
-            raise OptionError("-o/--robot-out writes the robot file corrected by --geometry joint_zero: add "
-                              "--geometry joint_zero")
+        """Write the input robot file with every robot-file quantity this run identified (``-o/--robot-out``):
+        the joint zeros added to the frames' ``theta`` (``r``) (``--geometry joint_zero``), ``K`` and ``D`` of
+        the elastic joints the two-encoder fit estimated (``elastic = {K, D}``, Spong 1987), the scales of the
+        declared friction laws that were fitted (``friction_law = {kind, vs|v|delta}``). The ``[nominal]``
+        values are not written (the identified base parameters are not the standard ones). Every other line is
+        unchanged (:class:`~symoro_gen.description.rewrite.RobotText`); header comments name the source file,
+        what was written and from which data. Never over the input robot file or another input, an existing
+        file only with ``force``. Returns these results with the file recorded (JSON ``robot_out``, and
+        ``geometry.robot_out`` with zeros)."""
+        what = self.written_quantities()
+        if not what:
+            raise OptionError(robot_out_refusal(self.robot, self.friction_laws))
         check_outputs({"-o/--robot-out": Target(Path(path), owner="never")}, self.input_files(), force=force)
-        bad = [z for z in self.geometry.to_dict()["zeros"] if not z.get("plausible", True)]
-        if bad:
-            raise IdentificationError(
-                "-o/--robot-out: " + ", ".join(f"joint {z['joint']} zero {z['offset_deg']:+.1f} deg" for z in bad)
-                + " is beyond 20 deg, no encoder zero error (the data or the model explain it otherwise): not "
-                "written into a robot file; fit the other joints only (--geometry-joints)")
-        note = ("zeros from: " + ", ".join(str(getattr(x, "source", x)) for x in self.data)
-                + f" (method {self.options.method})")
-        text = corrected_robot_text(self.robot, self.geometry.offset_map(), note=note)
-        write_robot_toml(text, path, overwrite=force)
-        return replace(self, geometry=replace(self.geometry, robot_out=str(path)))
+        text = RobotText(str(self.robot.file))
+        data = ", ".join(str(getattr(x, "source", x)) for x in self.data)
+        head = [f"Written by symoro-gen identify -o from the robot file {text.path} (data: {data}; method "
+                f"{self.options.method}):"]
+        if "joint_zero" in what:
+            assert self.geometry is not None
+            bad = [z for z in self.geometry.to_dict()["zeros"] if not z.get("plausible", True)]
+            if bad:
+                raise IdentificationError(
+                    "-o/--robot-out: " + ", ".join(f"joint {z['joint']} zero {z['offset_deg']:+.1f} deg" for z in bad)
+                    + " is beyond 20 deg, no encoder zero error (the data or the model explain it otherwise): not "
+                    "written into a robot file; fit the other joints only (--geometry-joints)")
+            head.append("  joint zeros (--geometry joint_zero) added to theta/r: "
+                        + add_zeros(text, self.robot, self.geometry.offset_map()))
+        if "elastic" in what:
+            est = self.elasticity
+            assert est is not None
+            parts = []
+            for j, k, d, ds in zip(est.joints, est.K, est.D, est.D_std):
+                d_w = max(d, 0.0)   # D >= 0 in a robot file: a negative estimate is written as 0
+                text.set_inline(j, "elastic", {"K": format_number(k, 6), "D": format_number(d_w, 6)}, create=True)
+                parts.append(f"frame {j} K = {k:.6g}, D = {d_w:.6g}" + (f" (estimate {d:.3g} +- {ds:.2g} < 0)"
+                                                                        if d < 0 else ""))
+            head.append("  elastic K, D (two-encoder fit): " + "; ".join(parts))
+        if "friction_law" in what:
+            parts = []
+            for f in self.friction_laws:
+                if f.fitted and f.law.scale_name is not None:
+                    text.set_inline(f.law.frame, "friction_law", {f.law.scale_name: format_number(f.scale, 6)})
+                    parts.append(f"frame {f.law.frame} {f.law.kind} {f.law.scale_name} = {f.scale:.6g} +- "
+                                 f"{f.std:.2g} (declared {f.law.scale:.6g})")
+            head.append("  friction_law scales (refined by Gauss-Newton): " + "; ".join(parts))
+        head.append("  [nominal] unchanged: the identified base parameters are not the standard ones")
+        write_robot_toml(text.text(head), path, overwrite=force)
+        out = replace(self, robot_out={"path": str(path), "robot_file": str(text.path), "written": what})
+        if "joint_zero" in what:
+            assert self.geometry is not None
+            out = replace(out, geometry=replace(self.geometry, robot_out=str(path)))
+        return out
 
     # ---- report and figures -------------------------------------------------------------------------
     def report_content(self) -> ReportContent:
@@ -364,6 +422,18 @@ class IdentifyResults(Results):
 
 
 # ---- the workflow ---------------------------------------------------------------------------------------
+def robot_out_refusal(robot, friction_laws: Sequence[ScaleFit] = ()) -> str:
+    """The message refusing ``-o/--robot-out`` when nothing it writes was identified: what each quantity
+    needs, for this ``robot`` (its file)."""
+    laws = [f"frame {f.law.frame} ({f.note})" for f in friction_laws if not f.fitted]
+    return (f"-o/--robot-out writes the robot-file quantities identify identified, and this run identified none "
+            f"for {robot.file}: no joint zeros (add --geometry joint_zero), no elastic K, D (needs elastic = {{K = "
+            "...} on a frame and recordings with a q_link column: two encoders), no friction-law scale ("
+            + ("the declared laws were not fitted: " + "; ".join(laws) if laws
+               else "needs friction_law = {kind = ..., vs|v|delta = ...} on a frame")
+            + "); the [nominal] values are never written (the base parameters are not the standard ones)")
+
+
 def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLike = None,
              method: str = "wls", options: IdentifyOptions | None = None, **kwargs: Any) -> IdentifyResults:
     """Identify a robot's base parameters (and gains) from recordings; validate on others.

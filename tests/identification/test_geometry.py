@@ -160,10 +160,15 @@ def test_robot_out_round_trip(offset_data, tmp_path):
     write_recording_csv(data, tr)
     out = tmp_path / "lwr4_corrected.toml"
     js = tmp_path / "r.json"
+    source = (tmp_path / "lwr4.toml").read_bytes()
     assert main(["identify", str(tmp_path / "lwr4.toml"), str(data), "--geometry", "joint_zero", "-o", str(out),
                  "--json", str(js), "--quiet"]) == 0
-    first = json.loads(js.read_text())["geometry"]
+    assert (tmp_path / "lwr4.toml").read_bytes() == source
+    full = json.loads(js.read_text())
+    first = full["geometry"]
     assert first["robot_out"] == str(out) and Path(first["robot_file"]).name == "lwr4.toml"
+    assert full["robot_out"]["path"] == str(out)
+    assert full["robot_out"]["written"] == {"joint_zero": [z["joint"] for z in first["zeros"]]}
     assert load_robot(out).name == "lwr4"
     res = identify(out, [data], geometry="joint_zero")
     g = res.geometry
