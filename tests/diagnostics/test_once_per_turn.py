@@ -13,6 +13,7 @@ import pytest
 from symoro_gen.diagnostics import diagnose
 from symoro_gen.diagnostics.candidates import ONCE_PER_TURN_CONDITION, make_families
 from symoro_gen.diagnostics.frame import build_frame, common_bandwidth
+from symoro_gen.diagnostics.plausibility import ArmScales, effect_plausibility, fits_like
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
 
@@ -79,3 +80,19 @@ def test_once_per_turn_torque_is_named_on_its_joint_as_a_function_of_its_angle()
     ripple = [c for c in rep.tried if c.round == first.round and c.label == "position_ripple7"]
     assert ripple and ripple[0].score > 0.999 * best, (ripple, best)
     assert rep.after_validation_rel_err[6] < 0.2 * rep.before_validation_rel_err[6]
+
+
+def test_once_per_turn_prior_has_no_gear_ratio_factor_and_names_its_causes():
+    """Order 1 is once per turn of the joint's output, not a tooth order of its gear: a known gear ratio of
+    100 lowers an order-7 ripple (neither multiple nor divisor) but not order 1; both keep the amplitude
+    prior against the joint's torque range, and the description of order 1 names its possible causes."""
+    scales = ArmScales(dt=0.001, tau98=np.full(7, 2.0), v98=np.ones(7), dq_noise=np.full(7, 1e-4), n_joints=7,
+                       gear_ratios={6: 100.0})
+    small = {"amplitude": 0.43}
+    one = effect_plausibility("position_ripple", 6, {}, {**small, "k": 1.0}, scales)
+    seven = effect_plausibility("position_ripple", 6, {}, {**small, "k": 7.0}, scales)
+    assert one.score == pytest.approx(1.0) and seven.score < 0.99, (one, seven)
+    large = effect_plausibility("position_ripple", 6, {}, {"amplitude": 2.0, "k": 1.0}, scales)
+    assert large.score < 0.5, large                          # a once-per-turn torque as large as the joint's range
+    text = fits_like("position_ripple", 6, {"k": 1.0, "amplitude": 0.43}, "position_ripple7")
+    assert "once per turn" in text and "joint 7" in text and "cable" in text, text
