@@ -15,7 +15,7 @@ since the start of the recording):
 ==================  =====================================================================================
 ``stribeck``        ``sign(dq_j) exp(-(dq_j/v_s)^2)``, 1-D search over ``v_s`` (log grid 1-50 % of |dq_j|)
 ``load_friction``   ``|tau_hat,j| sign(dq_j)`` (dry friction growing with the transmitted torque)
-``position_ripple`` ``sin(k q_j), cos(k q_j)``, search over the order k >= 2 within the decimation band
+``position_ripple`` ``sin(k q_j), cos(k q_j)``, order k >= 1 searched within the decimation band
 ``spring``          ``s, s^2, s^3`` with ``s = (q_j - c_j) / h_j`` (mid-range, half-range of q_j)
 ``elasticity``      ``(tau_hat(q - c tau_j e_j) - tau_hat(q)) / c`` (with the derivatives of tau_j on dq, ddq,
                     and the Coulomb term of joint j by its own secant): the torque error of a position
@@ -90,8 +90,17 @@ STRIBECK_GRID = (0.01, 0.5, 8)
 #: band-pass velocity chatters at reversals and its Coulomb column is smoothed by the noise (an
 #: artefact of the processing, not friction)
 STRIBECK_NOISE_FLOOR = 5.0
-#: ripple orders tried (kept when ``k * |dq|_98 / (2 pi)`` lies below half the decimation cut-off)
-RIPPLE_ORDERS = (2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32)
+#: ripple orders tried (kept when ``k * |dq|_98 / (2 pi)`` lies below half the decimation cut-off); order 1 is
+#: a once-per-turn torque of the joint (see :data:`ONCE_PER_TURN_CONDITION`)
+RIPPLE_ORDERS = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32)
+#: order 1 (``sin q_j, cos q_j``) is tried when the condition number of the unit-length columns
+#: ``[1, sin q_j, cos q_j]`` over the joint's samples is at most this: a condition index above 30 marks
+#: strong collinearity (Belsley, Kuh & Welsch 1980, Regression Diagnostics, ch. 3). Over a small range
+#: ``cos q_j`` is a constant and ``sin q_j`` a line (an offset and the spring's linear term); about +-33 deg
+#: of a sinusoidal motion reach 30, +-73 deg give 5. Over less than half a turn the pair lies almost in the
+#: span of the spring's cubic (the sine's part outside ``[1, s, s^2, s^3]`` is 0.2 %, the cosine's 3.5 % at
+#: +-73 deg): the two compete as two- and three-parameter descriptions of the same shape
+ONCE_PER_TURN_CONDITION = 30.0
 #: relative step of the central differences of the elasticity linearisation
 ELASTIC_STEP = 1e-6
 #: compliance grid of the elasticity search: +-ELASTIC_GRID values per sign, log-spaced, the largest
@@ -268,6 +277,7 @@ class _FrameScales:
     dq_noise: np.ndarray
     T: float
     fdec: float
+    turn_cond: np.ndarray
 
     @classmethod
     def of(cls, frame: Frame) -> _FrameScales:
@@ -277,7 +287,20 @@ class _FrameScales:
         T = max(float(ex.t[-1]) for ex in frame.experiments)
         T = T if T > 0 else 1.0
         fdec = min(ex.settings.decimation_cutoff_hz for ex in frame.experiments)
-        return cls(v98, qmin, qmax, tau98, dq_noise, T, fdec)
+        return cls(v98, qmin, qmax, tau98, dq_noise, T, fdec, _turn_condition(np.asarray(frame.samples()["q"], float)))
+
+
+def _turn_condition(q: np.ndarray) -> np.ndarray:
+    """Per joint, the condition number of the unit-length columns ``[1, sin q_j, cos q_j]`` over the samples
+    ``q`` (N, n) (:data:`ONCE_PER_TURN_CONDITION`); inf for a joint that does not move."""
+    out = np.full(q.shape[1], np.inf)
+    for j in range(q.shape[1]):
+        A = np.stack([np.ones(q.shape[0]), np.sin(q[:, j]), np.cos(q[:, j])], 1)
+        nrm = np.linalg.norm(A, axis=0)
+        if q.shape[0] >= 3 and np.all(nrm > 0):
+            sv = np.linalg.svd(A / nrm, compute_uv=False)
+            out[j] = sv[0] / sv[-1] if sv[-1] > 0 else np.inf
+    return out
 
 
 def _friction_families(j: int, ks: set[str], st: _FrameScales, stribeck_grid) -> list[Family]:
@@ -337,14 +360,16 @@ def _held_sign(ex: Experiment, j: int) -> np.ndarray:
 
 def _position_families(j: int, ks: set[str], st: _FrameScales, ripple_orders: Sequence[int]
                         ) -> list[Family]:
-    """Position ripple and spring of joint j."""
+    """Position ripple and spring of joint j. Orders k >= 2 need half a period inside the joint's range
+    (``k * span >= pi``); order 1, a once-per-turn torque, needs ``sin q_j, cos q_j`` told apart from a
+    constant (:data:`ONCE_PER_TURN_CONDITION`)."""
     v98, qmin, qmax, fdec = st.v98, st.qmin, st.qmax, st.fdec
     out: list[Family] = []
     if "position_ripple" in ks:
         span = qmax[j] - qmin[j]
         orders = tuple(float(k) for k in ripple_orders
                        if (not math.isfinite(fdec) or k * v98[j] / (2 * math.pi) <= 0.5 * fdec)
-                       and k * span >= math.pi)
+                       and (st.turn_cond[j] <= ONCE_PER_TURN_CONDITION if k == 1 else k * span >= math.pi))
         if orders:
             def b_rip(fr, ctx, j=j, orders=orders):
                 X = fr.full_rate_columns(lambda ex: {j: np.concatenate(

@@ -66,7 +66,7 @@ Known limits
   the gravity parameters; stiffness estimates are biased low there. The Coulomb term of the deflection
   is left out of the column (it gave false positives on noisy data), so large Coulomb friction against
   a soft joint is picked up as ``time_delay`` or ``load_friction`` instead.
-* ``position_ripple`` is in the joint angle only, orders 2-32 within the decimated band; a ripple at
+* ``position_ripple`` is in the joint angle only, orders 1-32 within the decimated band; a ripple at
   the motor angle (gear ratio times faster) is filtered out by the decimation.
 * Hold-out acceptance on a repeated (periodic) excitation accepts deterministic processing
   artefacts as well as physical effects; the motion placebos guard against the coincidental ones.

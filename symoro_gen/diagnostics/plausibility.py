@@ -130,6 +130,13 @@ LOAD_FRICTION_BAND = (0.0, 0.3)
 #: a torque (offset, drift over the recording, ripple amplitude, spring at the range's end) against the
 #: 98th-percentile torque of its joint: above this share it is unusual for an unmodelled effect
 TORQUE_SHARE = 0.3
+#: a once-per-turn ripple (order 1): the misalignment torque of a strain-gauge torque sensor built into a
+#: harmonic drive, periodic in the rotation (Taghirad & Belanger 1998, "Torque ripple and misalignment torque
+#: compensation for the built-in torque sensor of harmonic drive systems", IEEE Trans. Instrum. Meas. 47(1)),
+#: the eccentricity of an output-side sensor or bearing, or a cable wound over the joint: a few % of the
+#: rated torque at most (engineering choice). The loop knows no rated torque: the amplitude is judged, as
+#: for the other orders, against TORQUE_SHARE of the joint's 98th-percentile torque, and no gear-ratio factor
+ONCE_PER_TURN_NOTE = "once per turn: a torque sensor's or output bearing's eccentricity, or a cable"
 SHARE_WIDTH = math.log(2.0)
 NEGATIVE_FRICTION_FACTOR = 0.2
 #: encoder zero offset of a calibrated arm: typically below 1-2 deg (Hollerbach & Wampler 1996, the calibration
@@ -293,7 +300,9 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
                  f"a ripple of {amp:.3g} N m is large against the torque range {tau:.3g} N m")
         k = physical.get("k")
         g = scales.gear_ratios.get(j) if j is not None else None
-        if k is not None and g:
+        # order 1 is once per turn of the joint's output: an eccentric or tilted torque sensor or output
+        # bearing, a cable (ONCE_PER_TURN_NOTE), not a tooth order of the gear - no gear-ratio factor
+        if k is not None and g and float(k) != 1.0:
             ok = any(abs(float(k) - m * g) < 0.5 or abs(float(k) * m - g) < 0.5 for m in (1, 2))
             r.factor(1.0 if ok else 0.7, f"order {float(k):g} is not a multiple or divisor of the gear ratio {g:g}")
     elif kind == "spring":
@@ -589,6 +598,9 @@ def fits_like(kind: str, joint: int | None, physical: Mapping[str, float], descr
         return f"an encoder zero offset of {float(physical['offset_deg']):.3g} deg on {who}"
     if kind == "joint_zero" and "offset_m" in physical:
         return f"an encoder zero offset of {1e3 * float(physical['offset_m']):.3g} mm on {who}"
+    if kind == "position_ripple" and float(physical.get("k", 0.0)) == 1.0:
+        return (f"a torque once per turn (order 1, {float(physical.get('amplitude', math.nan)):.3g} N m) on {who} "
+                f"({ONCE_PER_TURN_NOTE})")
     if kind == "position_ripple" and "k" in physical:
         return f"a ripple of order {float(physical['k']):g} ({float(physical.get('amplitude', math.nan)):.3g} N m) on {who}"
     return description or f"{kind} on {who}"
