@@ -64,7 +64,12 @@ def _id(c):
 
 #: known regressions (measured, with the reason); the spring of SCARA joint 1 (slope -4.59 after a third-round
 #: composed ripple under the acceptance split) passes since the friction-law stage competes in the loop's rounds
-XFAIL: dict[str, str] = {}
+XFAIL: dict[str, str] = {
+    "load_friction-lwr4-j2": "named first as the composed 'smooth Coulomb friction of joint 2 growing with |tau_hat2|' "
+                             "(verdict cause): the same law mu |tau_hat2| sign(dq2), but reported as kind 'coulomb' "
+                             "with its values in the composed parametrization, not as load_friction with mu (since "
+                             "the score's nuisance columns are bounded, 6935ea7)",
+}
 
 
 @pytest.mark.slow
