@@ -54,6 +54,7 @@ def canonical_description(robot: RobotDescription) -> dict[str, Any]:
             "ratios": [_num(x) for x in dc.ratios], "coupling": [[_num(x) for x in row] for row in dc.coupling],
             "offsets": [_num(x) for x in dc.offsets], "directions": [_num(x) for x in dc.directions]},
         "gravity": [_num(g) for g in robot.gravity],
+        **({"base": robot.base} if robot.floating else {}),  # fixed-base ids unchanged
     }
 
 

@@ -173,6 +173,9 @@ class RobotDescription:
     friction_laws: Mapping[int, FrictionLaw] = field(default_factory=dict)
     #: the declared elastic joints (``elastic`` tables; :mod:`symoro_gen.description.elastic`), joint order
     elastic: tuple[ElasticJoint, ...] = ()
+    #: ``"fixed"`` (frame 0 is the ground) or ``"floating"`` (frame 0 is a free body with 6 degrees of
+    #: freedom whose 10 inertial parameters are unknowns; :mod:`symoro_gen.dynamics.floating`)
+    base: str = "fixed"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "values", MappingProxyType(dict(self.values)))
@@ -185,6 +188,11 @@ class RobotDescription:
     def joints(self) -> tuple[MdhRow, ...]:
         """The moving frames (revolute or prismatic), in joint order."""
         return tuple(r for r in self.rows if r.is_moving)
+
+    @property
+    def floating(self) -> bool:
+        """True for a floating base (``base = "floating"``): frame 0 is a free body."""
+        return self.base == "floating"
 
     @property
     def n_joints(self) -> int:
@@ -240,8 +248,9 @@ class RobotDescription:
 
     @property
     def standard_names(self) -> tuple[str, ...]:
-        """Names of the robot's standard parameters (payload excluded), column order."""
-        names: list[str] = []
+        """Names of the robot's standard parameters (payload excluded), column order; a floating base's
+        link (frame 0) first, with its 10 inertial parameters (no drive terms)."""
+        names: list[str] = [param_name(k, 0) for k in INERTIAL_KINDS] if self.floating else []
         for r in self.joints:
             names += [param_name(k, r.j) for k in INERTIAL_KINDS]
             names += [param_name(k, r.j) for k in DRIVE_KINDS if k in r.drive]

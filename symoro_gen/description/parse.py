@@ -46,7 +46,7 @@ from .model import (
 )
 
 TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits",
-            "loops", "loop_reference", "elastic"}
+            "loops", "loop_reference", "elastic", "base"}
 FRAME_REQUIRED = ("j", "ant", "sigma", "alpha", "d", "theta", "r")
 FRAME_OPTIONAL = ("mu", "gamma", "b", "drive", "mimic", "name", "elastic", "friction_law")
 CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
@@ -168,6 +168,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     for k in sorted(set(doc) - TOP_KEYS):
         bad("top level", k, f"unknown field (allowed: {', '.join(sorted(TOP_KEYS))})")
     name, source, gravity = _read_header(doc, file, bad)
+    base = _read_base(doc, bad)
     default_drive = _check_drive(doc.get("drive", list(DRIVE_KINDS)), "top level", bad)
     if default_drive is None:  # reported; all four kinds, so that [nominal] drive terms are not reported again
         default_drive = DRIVE_KINDS
@@ -227,6 +228,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         couplings=couplings,
         friction_laws=friction_laws,
         elastic=elastic,
+        base=base,
     )
 
 
@@ -246,6 +248,27 @@ def _read_header(doc: dict, file: str, bad: Callable[[str, str, str], None]
         bad("top level", "gravity", f"must be a list of 3 numbers (finite, {_FINITE}), got {gravity!r}")
         gravity = [0.0, 0.0, -9.81]
     return name, source, (float(gravity[0]), float(gravity[1]), float(gravity[2]))
+
+
+#: the values of the top-level ``base`` field (docs/robot-file.md, "Floating base")
+BASE_KINDS = ("fixed", "floating")
+
+
+def _read_base(doc: dict, bad: Callable[[str, str, str], None]) -> str:
+    """The top-level ``base``: ``"fixed"`` (default: frame 0 is the ground) or ``"floating"`` (frame 0 is a
+    free body with 6 degrees of freedom whose velocity and acceleration are inputs of the Newton-Euler
+    recursion, [KD2002] ch. 9). A floating base takes a tree: closed loops and coupled joints are refused."""
+    base = doc.get("base", "fixed")
+    if base not in BASE_KINDS:
+        bad("top level", "base", f"must be one of {', '.join(repr(b) for b in BASE_KINDS)}, got {base!r}")
+        return "fixed"
+    frames = doc.get("frames")
+    mimic = isinstance(frames, list) and any(isinstance(f, dict) and "mimic" in f for f in frames)
+    unsupported = [k for k in ("loops", "loop_reference") if k in doc] + (["mimic"] if mimic else [])
+    if base == "floating" and unsupported:
+        bad("top level", "base", f"a floating base is not supported with {', '.join(unsupported)} "
+                                 "(closed loops and coupled joints)")
+    return str(base)
 
 
 def _read_values(doc: dict, bad: Callable[[str, str, str], None]) -> _Values:

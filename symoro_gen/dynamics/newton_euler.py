@@ -38,12 +38,35 @@ class SymbolicRegressor:
     standard_names: tuple[str, ...]
     payload_names: tuple[str, ...]
     joint_frames: tuple[int, ...]
+    #: rows before the joint rows: 6 for a floating base (its wrench: force then moment about the base
+    #: origin, in base axes; joint row ``i`` is then output row ``6 + i``), 0 for a fixed base
+    base_rows: int = 0
 
     def column(self, name: str) -> dict[int, sp.Expr]:
         return {i: e for (i, n), e in self.graph.outputs.items() if n == name}
 
 
 _ZERO = sp.S.Zero
+
+
+@dataclass(frozen=True)
+class BaseMotion:
+    """The motion of a floating base (frame 0) as inputs of the recursion ([KD2002] ch. 9: the base's
+    velocity and acceleration start the forward recursion instead of zero; gravity enters as an upward
+    acceleration of the base, as for a fixed base).
+
+    ``w``, ``wd``: angular velocity and acceleration of frame 0 in frame 0; ``vd``: the linear
+    acceleration of origin 0 minus gravity, in frame 0 (expressions of the input symbols, named in the
+    graph). ``q``, ``dq``, ``ddq``: the base's input symbols, put before the joints' in the graph's
+    inputs. Built by :func:`symoro_gen.dynamics.floating.base_motion`.
+    """
+
+    w: tuple[sp.Expr, sp.Expr, sp.Expr]
+    wd: tuple[sp.Expr, sp.Expr, sp.Expr]
+    vd: tuple[sp.Expr, sp.Expr, sp.Expr]
+    q: tuple[sp.Symbol, ...]
+    dq: tuple[sp.Symbol, ...]
+    ddq: tuple[sp.Symbol, ...]
 
 
 def _diff(x, y):
@@ -181,7 +204,7 @@ def gravity_symbols(robot: RobotDescription) -> dict[sp.Symbol, float]:
 
 
 def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity: bool = False,
-                    columns=None) -> SymbolicRegressor:
+                    columns=None, base: BaseMotion | None = None) -> SymbolicRegressor:
     """Symbolic standard + payload regressor of ``robot`` by customized Newton-Euler ([KK1987];
     [KD2002] ch. 9: ``Gamma = IDM_st(q, dq, ddq) chi_st``, IDM of [GB-gains] eq. 1-8).
 
@@ -196,33 +219,46 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
     columns : collection of str, optional
         Only these parameter columns (standard or payload names) are built; the others are left out of
         ``graph.outputs`` (the exact base-parameter solve needs a few columns, not the whole model).
+    base : BaseMotion, optional
+        The motion of a floating base (``robot.floating``; :mod:`symoro_gen.dynamics.floating` builds it):
+        the recursion starts from it, every wrench is carried to frame 0 and the 6 base-wrench rows come
+        before the joint rows.
 
     Returns
     -------
     SymbolicRegressor
     """
-    ne = _NewtonEuler(robot, symbolic_gravity)
+    if robot.floating != (base is not None):
+        raise ValueError(f"{robot.file}: base = {robot.base!r} needs "
+                         + ("its base motion (symoro_gen.dynamics.floating)" if robot.floating else "no base motion"))
+    if base is not None and symbolic_gravity:
+        raise ValueError(f"{robot.file}: a floating base takes gravity through its orientation, not as symbols")
+    ne = _NewtonEuler(robot, symbolic_gravity, base)
     ne.forward(progress)
     ne.backward(progress, columns)
     joint_frames = ne.joint_frames
-    inputs = tuple(q_symbol(f) for f in joint_frames) + tuple(dq_symbol(f) for f in joint_frames)
-    inputs += tuple(ddq_symbol(f) for f in joint_frames) + robot.geometry_symbols
+    bq, bdq, bddq = (base.q, base.dq, base.ddq) if base is not None else ((), (), ())
+    inputs = bq + tuple(q_symbol(f) for f in joint_frames) + bdq + tuple(dq_symbol(f) for f in joint_frames)
+    inputs += bddq + tuple(ddq_symbol(f) for f in joint_frames) + robot.geometry_symbols
     if symbolic_gravity:
         inputs += tuple(gravity_symbols(robot))
     graph = ExprGraph(inputs, tuple(ne.g.defs), ne.outputs)
-    return SymbolicRegressor(robot, graph, robot.standard_names, robot.payload_names, joint_frames)
+    return SymbolicRegressor(robot, graph, robot.standard_names, robot.payload_names, joint_frames,
+                             6 if base is not None else 0)
 
 
 class _NewtonEuler:
     """The customized Newton-Euler recursion of one robot, its intermediate variables named in the graph
     builder ``g`` in the order the recursion meets them (that order is the generated code's)."""
 
-    def __init__(self, robot: RobotDescription, symbolic_gravity: bool) -> None:
+    def __init__(self, robot: RobotDescription, symbolic_gravity: bool, base: BaseMotion | None = None) -> None:
         self.robot = robot
         self.g = GraphBuilder()
         self.rows = robot.rows
         self.joint_frames = tuple(r.j for r in robot.joints)
-        self.row_of = {f: i for i, f in enumerate(self.joint_frames)}
+        self.floating = base is not None
+        offset = 6 if self.floating else 0  # a floating base's wrench rows come first
+        self.row_of = {f: i + offset for i, f in enumerate(self.joint_frames)}
         self.R: dict[int, sp.Matrix] = {}  # ant_R_j (entries simplified: named sin/cos)
         self.P: dict[int, list] = {}  # ant_P_j
         self.frame_transforms()
@@ -237,6 +273,9 @@ class _NewtonEuler:
             self.vd: dict[int, list] = {0: [-gsym[i] if i in gsym else sp.Integer(0) for i in range(3)]}
         else:
             self.vd = {0: [sp.Integer(int(-x)) if float(x).is_integer() else sp.Float(-x) for x in robot.gravity]}
+        if base is not None:
+            self.w[0], self.wd[0] = list(base.w), list(base.wd)
+            self.vd[0] = self.g.vec(base.vd, "vd0")
         self.U: dict[int, sp.Matrix] = {}
         self.WW: dict[int, dict[str, sp.Expr]] = {}
         self.outputs: dict[tuple[int, str], sp.Expr] = {}
@@ -299,7 +338,7 @@ class _NewtonEuler:
             wa = g.vec(wa, f"wi{j}")
             wda = g.vec(_matTvec(Rm, wd[a]), f"wdi{j}")
             # acceleration of origin j in frame ant, then rotated
-            if a == 0:
+            if a == 0 and not self.floating:
                 acc_a = list(vd[0])
             else:
                 Ua = self.u_matrix(a)
@@ -332,6 +371,8 @@ class _NewtonEuler:
         """Project the wrench (f, n) of link k on joint k, then carry it to the base."""
         rows, sign, row_of = self.rows, self.sign, self.row_of
         j = k
+        if j == 0:  # the floating base's own link
+            self.add_base(name, f, n)
         while j != 0:
             row = rows[j - 1]
             if row.sigma == REVOLUTE:
@@ -339,26 +380,35 @@ class _NewtonEuler:
             elif row.sigma == PRISMATIC:
                 self.add(row_of[j], name, sign[j] * f[2])
             a = row.ant
-            if a == 0:
+            if a == 0 and not self.floating:
                 break
-            # is anything upstream a joint?  if not, stop.
-            if not any(rows[x - 1].is_moving for x in self.robot.ancestors(j)):
+            # is anything upstream a joint (or a floating base)?  if not, stop.
+            if not self.floating and not any(rows[x - 1].is_moving for x in self.robot.ancestors(j)):
                 break
             Rm = self.R[j]
             fa = self.g.vec(_matvec(Rm, f), f"F{name}_{a}")
             cr = _cross(self.P[j], fa)
             na = self.g.vec([_plus(x, y) for x, y in zip(_matvec(Rm, n), cr)], f"N{name}_{a}")
             f, n, j = fa, na, a
+            if j == 0:
+                self.add_base(name, f, n)
+
+    def add_base(self, name: str, f: list, n: list) -> None:
+        """A wrench in frame 0 (moment about origin 0) added to the 6 base-wrench rows of a floating base."""
+        for i in range(3):
+            self.add(i, name, f[i])
+            self.add(3 + i, name, n[i])
 
     def backward(self, progress, columns) -> None:
         """The elementary wrench of every standard (and payload) parameter on its link, carried back and
         projected on the joint axes; the drive-chain columns of every moving joint."""
         robot = self.robot
-        for row in self.rows:
-            is_payload = robot.payload is not None and row.j == robot.payload
-            if not row.is_moving and not is_payload:
+        links = [(0, False)] if self.floating else []  # a floating base's link: its 10 inertial parameters
+        links += [(row.j, row.is_moving) for row in self.rows]
+        for k, moving in links:
+            is_payload = robot.payload is not None and k == robot.payload
+            if k != 0 and not moving and not is_payload:
                 continue
-            k = row.j
             Uk = self.u_matrix(k)
             Wd, V = self.wd[k], self.vd[k]
             for kind in INERTIAL_KINDS:
@@ -377,7 +427,8 @@ class _NewtonEuler:
                     n_ = _cross(e, V)
                 n_ = self.g.vec(n_, f"n{name}_")
                 self.carry(k, name, f_, n_)
-            if row.is_moving:
+            if moving:
+                row = self.rows[k - 1]
                 i = self.row_of[k]
                 extra = {"IA": ddq_symbol(k), "FV": dq_symbol(k), "FS": sp.sign(dq_symbol(k)), "OFF": sp.Integer(1)}
                 for kind in row.drive:
