@@ -14,7 +14,8 @@ or ``load_model(robot_description)`` all return an :class:`~symoro_gen.model.Ide
 
 A closed-loop robot (``[[loops]]`` in its robot file) is generated as its tree (the package's
 ``manifest.json`` says ``closed_loops``) and returned wrapped in
-:class:`symoro_gen.closedloop.ClosedLoopModel` (the tree model projected on the actuated joints).
+:class:`symoro_gen.closedloop.ClosedLoopModel` (the tree model projected on the actuated joints); a floating-base
+robot (``base = "floating"``) gets a :class:`symoro_gen.runtime.floating.FloatingModel`, built in memory.
 """
 from __future__ import annotations
 
@@ -153,6 +154,10 @@ def _import_checked(folder: Path, robot: RobotDescription | None = None) -> Iden
 
 
 def _model_of_robot(robot: RobotDescription) -> IdentificationModel:
+    if robot.floating:  # first layer of floating bases: built in memory, no generated package yet
+        from .runtime.floating import FloatingModel  # sympy: only for floating-base robots
+
+        return check_model(FloatingModel(robot))
     repo = generated_dir() / robot.name
     if _is_package(repo) and _manifest_sha(repo) == robot.file_hash:
         return _import_checked(repo, robot)

@@ -27,7 +27,8 @@ LAZY_OK: dict[str, dict[str, str]] = {
     "cli.py": {"*": "lazy sub-command registration and generation stack (see the comment in cli.py)"},
     # `import symoro_gen` and every generated package stay free of sympy (test_light_entry_points)
     "loader.py": {"description": "sympy", "description.model": "sympy", "emit.package": "sympy",
-                  "closedloop": "sympy (closed-loop robots only)"},
+                  "closedloop": "sympy (closed-loop robots only)",
+                  "runtime.floating": "sympy (floating-base robots only)"},
 }
 
 
