@@ -17,7 +17,8 @@ def _write_robot_file(text: str, path, force: bool) -> None:
 def run(args) -> int:
     """Convert the URDF; 0 on success."""
     actuated = [a.strip() for a in args.actuated.split(",") if a.strip()] if args.actuated else None
-    text = import_urdf(args.file, base=args.base, tip=args.tip, name=args.name, actuated=actuated)
+    text = import_urdf(args.file, base=args.base, tip=args.tip, name=args.name, actuated=actuated,
+                       floating=args.floating)
     return emit_text(text, args, write=_write_robot_file)
 
 
@@ -32,6 +33,9 @@ def add_parser(sub) -> None:
     iu.add_argument("--actuated", metavar="J1,J2,...",
                     help="a URDF with <loop_joint> elements: the actuated joints (default: those named by its "
                          "<transmission> elements); the other moving joints are passive")
+    iu.add_argument("--floating", action="store_true", default=None,
+                    help="the base link (default: the root) is a free body, base = \"floating\" (default: only when a "
+                         "floating joint carries the root's only child, which becomes the base; docs/floating-base.md)")
     add_output_options(iu, "write the .toml here (default: stdout)",
                        "overwrite an existing robot file (never the input)")
     iu.set_defaults(func=run)

@@ -488,6 +488,9 @@ def _read_nominal(doc: dict, rows: list[MdhRow], payload: int | None, bad_sigma:
             allowed |= {f"{k}{r.j}" for k in r.drive}
     if payload is not None:
         allowed |= {f"{k}{payload}" for k in INERTIAL_KINDS}
+    floating = doc.get("base") == "floating"  # a floating base link (frame 0) has its 10 inertial parameters
+    if floating:
+        allowed |= {f"{k}0" for k in INERTIAL_KINDS}
     rejected_payload = set()
     payload_given = doc.get("payload")  # a bad payload is reported once, not again in [nominal]
     if payload is None and payload_given is not None:
@@ -507,7 +510,7 @@ def _read_nominal(doc: dict, rows: list[MdhRow], payload: int | None, bad_sigma:
             probs.bad("[nominal]", k, f"{_NON_NEGATIVE[k.rstrip('0123456789')]} cannot be negative, got {v!r}")
         else:
             nominal[k] = float(v)
-    _warn_inconsistent_inertia(nominal, rows, payload, probs.file)
+    _warn_inconsistent_inertia(nominal, rows, payload, probs.file, floating)
     return nominal
 
 
@@ -515,7 +518,7 @@ _NON_NEGATIVE = {"M": "a mass", "IA": "a rotor inertia", "FV": "a viscous fricti
                  "FS": "a Coulomb friction coefficient"}
 
 
-def _warn_inconsistent_inertia(nominal: dict, rows, payload, file: str) -> None:
+def _warn_inconsistent_inertia(nominal: dict, rows, payload, file: str, floating: bool = False) -> None:
     """Warn (:class:`RobotFileWarning`) about nominal links that are not a rigid body.
 
     Checked for every link whose nominal values give its mass and the three moments ``XX``,
@@ -526,7 +529,7 @@ def _warn_inconsistent_inertia(nominal: dict, rows, payload, file: str) -> None:
     A warning rather than an error: nominal values are priors and start values, and the
     identification itself does not need them to be consistent.
     """
-    links = [r.j for r in rows if r.is_moving] + ([payload] if payload is not None else [])
+    links = [0] * floating + [r.j for r in rows if r.is_moving] + ([payload] if payload is not None else [])
     for j in links:
         if not all(f"{k}{j}" in nominal for k in ("M", "XX", "YY", "ZZ")):
             continue

@@ -773,7 +773,7 @@ def import_urdf(path, base: str | None = None, tip: str | None = None, name: str
         Robot name (default: the URDF robot name made an identifier).
     **options
         See :func:`import_urdf_text` (``base_frame``, ``symbols``, ``gravity``, ``tol``,
-        ``snap_angles``, ``actuated``).
+        ``snap_angles``, ``actuated``, ``floating``).
 
     Returns
     -------
@@ -809,6 +809,7 @@ def import_urdf_text(
     tol: float = 1e-9,
     snap_angles: float = 0.0,
     actuated=None,
+    floating: bool | None = None,
 ) -> str:
     """URDF text -> robot-file text (see :func:`import_urdf`).
 
@@ -838,19 +839,20 @@ def import_urdf_text(
         A URDF with ``<loop_joint>`` elements: names of the actuated joints (default: the joints named
         by its ``<transmission>`` elements); every other moving joint is passive (``mu = 0``).
         Ignored without loop joints.
+    floating : bool, optional
+        A floating base (:func:`_floating_base`; default: when a ``floating`` joint carries the root's only child).
 
     Returns
     -------
     str
         TOML robot-file text.
     """
-    if base_frame not in ("joint", "link"):
-        raise ValueError(f"base_frame must be 'joint' or 'link', got {base_frame!r}")
     model = parse_urdf_text(text, file=file, snap_angles=snap_angles)
     f = model.file
+    base, floating, base_frame = _floating_base(model, base, floating, base_frame)
     base, chain, tree, tip = _imported_part(model, base, tip)
     pose = _link_poses(model, base)
-    g_base = _gravity_in_base(model, base, gravity)
+    g_base = np.asarray(gravity, float) if floating else _gravity_in_base(model, base, gravity)
     moving = [jt for jt in chain if jt.is_moving]
     n = len(moving)
     index = {jt.name: i for i, jt in enumerate(moving)}
@@ -876,6 +878,7 @@ def import_urdf_text(
         rows.append((n + 1, n, 2, _mdh_from_transform(T, tol), None))
 
     out = _UrdfText(tol, symbols, index, coupled, passive)
+    out.nominal += _base_link_parameters(model, owner, pose) if floating else []
     for j, ant, sigma, params, jt in rows:
         out.frame(j, ant, sigma, params, jt, signs[j - 1] if jt is not None else 1, tip)
         if jt is not None:
@@ -904,18 +907,61 @@ def import_urdf_text(
         head.append(f"# Frame {n + 1} is the tip link {tip} (fixed); its inertia is included in link {n}. "
                     f"Set payload = {n + 1} to identify a payload there.")
     robot_name = name if name is not None else _identifier(model.name or Path(file).stem or "robot")
-    frame_note = "frame 0 = frame 1 at q = 0" if base_frame == "joint" else f"frame 0 = link {base}"
-    what = f"tree below {base}" if tree else f"chain {base} -> {tip}"
-    source = (f"URDF {Path(file).name} (robot '{model.name}'), {what}, {frame_note}; "
-              "imported by symoro_gen.description.urdf.import_urdf; nominal values from the URDF inertials "
-              "(FV, FS from <dynamics damping friction>)")
+    source = _source_text(model, file, f"tree below {base}" if tree else f"chain {base} -> {tip}",
+                          "frame 0 = frame 1 at q = 0" if base_frame == "joint" else f"frame 0 = link {base}", floating)
     g0 = frames[0][:3, :3].T @ g_base
-    head += [f"name = {json.dumps(robot_name)}", f"source = {json.dumps(source)}",
+    head += [f"name = {json.dumps(robot_name)}", f"source = {json.dumps(source)}", *(['base = "floating"'] * floating),
              "gravity = [" + ", ".join(_num(_snap(x, tol)) for x in g0) + "]"]
     text_out = out.text(head, _limits_table([jt for jt in moving if jt.name not in passive],
                                             tuple(jt for jt in moving if jt.name in passive)))
     parse_robot_text(text_out, file=f"{file} (imported)")  # the output is a valid robot file, or say why
     return text_out
+
+
+def _source_text(model: UrdfModel, file: str, what: str, frame_note: str, floating: bool) -> str:
+    """The ``source`` line of an imported robot file."""
+    return (f"URDF {Path(file).name} (robot '{model.name}'), {what}, {frame_note}"
+            + (" (a floating base: the free body of Pinocchio's free-flyer root)" if floating else "")
+            + "; imported by symoro_gen.description.urdf.import_urdf; nominal values from the URDF inertials "
+            "(FV, FS from <dynamics damping friction>)")
+
+
+def _floating_base(model: UrdfModel, base: str | None, floating: bool | None, base_frame: str
+                   ) -> tuple[str | None, bool, str]:
+    """``(base link, floating, base_frame)`` of a URDF import.
+
+    A floating base (robot file ``base = "floating"``, docs/floating-base.md) is the free body of Pinocchio's
+    free-flyer root (``pinocchio.buildModelFromUrdf(file, JointModelFreeFlyer())``): frame 0 is the base
+    link's frame (``base_frame = "link"``) and gravity stays in the world (root) frame. ``floating=None``
+    (default) takes the child of a ``floating`` joint that is the root link's only joint (a ``world`` link, the
+    URDF habit) as the floating base; ``floating=True`` makes the base link (default: the root) a free body;
+    ``floating=False`` keeps a fixed base (a ``floating`` joint is then refused as before).
+    """
+    if base_frame not in ("joint", "link"):
+        raise ValueError(f"base_frame must be 'joint' or 'link', got {base_frame!r}")
+    if floating is False:
+        return base, False, base_frame
+    kids = model.child_joints(model.roots[0]) if len(model.roots) == 1 else []
+    if base is None and len(kids) == 1 and kids[0].type == "floating":
+        return kids[0].child, True, "link"
+    return base, bool(floating), "link" if floating else base_frame
+
+
+def _base_link_parameters(model: UrdfModel, owner: dict[str, int | None], pose: dict[str, np.ndarray]
+                          ) -> list[tuple[str, float]]:
+    """The floating base link's standard parameters ``XX0 .. M0`` (frame 0 = the base link's frame, at its
+    origin): the inertials of every URDF link fixed to it summed (none: no values, unknown)."""
+    J, ms, m, known = np.zeros((3, 3)), np.zeros(3), 0.0, False
+    for lk, i in owner.items():
+        ine = model.links[lk].inertial
+        if i is not None or ine is None:
+            continue
+        T = pose[lk] @ ine.origin
+        R, c = T[:3, :3], T[:3, 3]
+        J, ms, m, known = J + parallel_axis(R @ ine.inertia @ R.T, ine.mass, c), ms + ine.mass * c, m + ine.mass, True
+    if not known:
+        return []
+    return list(zip((f"{k}0" for k in INERTIAL_KINDS), [*six_from_matrix(J), *ms, m]))
 
 
 def _imported_part(model: UrdfModel, base: str | None, tip: str | None
