@@ -262,7 +262,9 @@ _OK_LINKS = '<link name="a"/><link name="b"/>'
         (f"<robot>{_OK_LINKS}<joint name='j' type='revolute'><parent link='a'/><child link='b'/><axis xyz='0 0 0'/></joint></robot>", "zero axis"),
         (f"<robot>{_OK_LINKS}<joint name='j' type='revolute'><origin xyz='1 2'/><parent link='a'/><child link='b'/></joint></robot>", "field 'origin'"),
         (f"<robot>{_OK_LINKS}<joint name='j' type='fixed'><parent link='a'/><child link='b'/></joint></robot>", "no moving joint"),
-        (f"<robot>{_OK_LINKS}<joint name='j' type='floating'><parent link='a'/><child link='b'/></joint></robot>", "floating joints cannot"),
+        # a floating joint inside the chain (under the root's only child it is a floating base: tests/floating)
+        (f"<robot>{_OK_LINKS}<link name='c'/><joint name='r' type='revolute'><parent link='a'/><child link='c'/></joint>"
+         "<joint name='j' type='floating'><parent link='c'/><child link='b'/></joint></robot>", "floating joints cannot"),
         ("<robot><link name='a'><inertial><mass value='-1'/><inertia ixx='1' ixy='0' ixz='0' iyy='1' iyz='0' izz='1'/></inertial></link></robot>", "negative mass"),
     ],
 )

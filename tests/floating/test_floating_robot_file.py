@@ -97,3 +97,14 @@ def test_floating_model_rows_and_inputs():
     assert names[:9] == ["PX0", "PY0", "PZ0", "QX0", "QY0", "QZ0", "QW0", "q1", "q2"]
     # the base link's own parameters reach the base rows only
     assert {i for i, n in reg.graph.outputs if n == "M0"} <= set(range(6))
+
+
+def test_nominal_base_link_values_only_on_a_floating_base(tmp_path):
+    nominal = "\n[nominal]\nM0 = 12.0\nXX0 = 0.3\nM1 = 1.0\n"
+    robot = parse_robot_text(ARM.format(base='base = "floating"') + nominal, "arm.toml")
+    assert robot.nominal_vector()[:10] == (0.3, 0, 0, 0, 0, 0, 0, 0, 0, 12.0)
+    path = tmp_path / "fixed.toml"
+    path.write_text(ARM.format(base="") + nominal, encoding="utf-8")
+    with pytest.raises(RobotFileError) as info:
+        parse_robot(path)
+    assert {p.field for p in info.value.problems} == {"M0", "XX0"}
