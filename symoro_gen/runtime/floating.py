@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..description.model import RobotDescription
 from ..dynamics.floating import build_floating_regressor
 from ..dynamics.graph import ExprGraph
+from ..emit.backends.casadi import casadi_function
 from ..emit.backends.numpy import kernel_source, load_kernel
 from ..emit.optimize import optimize
 from .batch import evaluate_kernel
@@ -136,9 +137,12 @@ class FloatingModel:
                   full.inputs[n_in[0] + n_in[1]:n_in[0] + 2 * n_in[1]])
         memo: dict[Any, Any] = {}
         self._kernels = {}
+        self._inputs = inputs
         for key, names in (("standard", self.STANDARD_NAMES), ("payload", self.PAYLOAD_NAMES)):
             g = optimize(full.pruned({k for k in full.outputs if k[1] in set(names)}), memo)
             self._kernels[key] = _kernel(g, self.N_ROWS, names, inputs, f"floating_{key}")
+            if key == "standard":
+                self._standard_graph = g
         self._base_from_samples(robot, n_samples, seed)
 
     def _base_from_samples(self, robot: RobotDescription, n_samples: int, seed: int) -> None:
@@ -179,6 +183,13 @@ class FloatingModel:
         """Base parameters of standard ones, ``K @ chi_std`` (:func:`numeric_base`)."""
         out: NDArray[np.float64] = self._K @ np.asarray(chi_std, float)
         return out
+
+    def casadi_regressor(self) -> Any:
+        """``casadi.Function regressor_<robot>(q, dq, ddq) -> Y``: the base regressor ``(6 + n) x nb`` of one
+        sample (``q`` of size ``7 + n``, ``dq`` and ``ddq`` of size ``6 + n``), built from the same graph."""
+        kept = [self.STANDARD_NAMES[c] for c in self._kept]
+        g = self._standard_graph.pruned({k for k in self._standard_graph.outputs if k[1] in set(kept)})
+        return casadi_function(g, self.N_ROWS, kept, f"regressor_{self.ROBOT}", *self._inputs)
 
     def torque(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike, chi_std: ArrayLike,
                chi_payload: ArrayLike | None = None) -> NDArray[np.float64]:

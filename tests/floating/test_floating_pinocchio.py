@@ -126,6 +126,18 @@ def test_floating_inputs_are_checked(quadruped):
     assert tuple(BASE_ROW_NAMES) == ("FX0", "FY0", "FZ0", "MX0", "MY0", "MZ0")
 
 
+def test_casadi_regressor_equals_the_numpy_kernels(quadruped):
+    pytest.importorskip("casadi")
+    robot, model = quadruped
+    f = model.casadi_regressor()
+    q, dq, ddq = random_floating_states(robot, 3, np.random.default_rng(7))
+    Y = model.regressor(q, dq, ddq)
+    for k in range(3):
+        Yc = np.asarray(f(q[k], dq[k], ddq[k]))
+        assert Yc.shape == (6 + robot.n_joints, len(model.BASE_NAMES))
+        assert np.allclose(Yc, Y[k], rtol=0, atol=1e-10 * np.abs(Y[k]).max())
+
+
 def test_load_model_of_a_floating_robot_file():
     model = symoro_gen.load_model(HERE / "quadruped.toml")
     assert model.FLOATING is True

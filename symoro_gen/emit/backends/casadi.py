@@ -75,8 +75,7 @@ def casadi_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], nam
     """``casadi.Function name(q, dq, ddq) -> Y`` (n_rows x len(col_names)) built from the graph."""
     import casadi as ca  # optional at run time: only needed for CasADi functions
 
-    n = len(q)
-    Q, DQ, DDQ = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("ddq", n)
+    Q, DQ, DDQ = ca.SX.sym("q", len(q)), ca.SX.sym("dq", len(dq)), ca.SX.sym("ddq", len(ddq))  # floating: 7+n, 6+n
     env: dict[sp.Symbol, Any] = {}
     for arr, syms in ((Q, q), (DQ, dq), (DDQ, ddq)):
         for i, s in enumerate(syms):
