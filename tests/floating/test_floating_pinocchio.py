@@ -77,6 +77,14 @@ def _check_base_parameters(robot, model, seed: int) -> None:
     assert numeric_rank(Wb) == rank  # the base regressor has full column rank on fresh states
     chi = random_floating_parameters(robot, rng)
     assert max_relative_error(Wb @ model.base_parameters(chi), W @ chi) < RTOL
+    # the relations of [GK1990] on a free base: M0R is the total mass (every link's M regroups down to the
+    # base link, which keeps it: coefficient 1), XXjR = XXj - YYj for every revolute joint j
+    std, base = list(robot.standard_names), list(model.BASE_NAMES)
+    unit = np.eye(len(std))
+    for r in robot.joints:
+        assert abs(model.base_parameters(unit[std.index(f"M{r.j}")])[base.index("M0R")] - 1.0) < 1e-9
+        yy = model.base_parameters(unit[std.index(f"YY{r.j}")])
+        assert abs(yy[base.index(f"XX{r.j}R")] + 1.0) < 1e-9
 
 
 def test_quadruped_matches_pinocchio_free_flyer(quadruped):
