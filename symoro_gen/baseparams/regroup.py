@@ -73,6 +73,7 @@ from sympy.core.evalf import evalf as _sympy_evalf
 from ..description.mdh import constant_rotation, position, rot_z
 from ..description.model import PRISMATIC, REVOLUTE, RobotDescription
 from ..dynamics.evaluate import EXACT, Arithmetic, evaluate_columns, evaluate_graph
+from ..dynamics.floating import BASE_DDQ_NAMES, BASE_DQ_NAMES, BASE_Q_NAMES
 from ..dynamics.graph import ExprGraph
 from ..dynamics.newton_euler import SymbolicRegressor, build_regressor, gravity_symbols
 from ..params import INERTIAL_KINDS, param_name, split_name
@@ -324,7 +325,7 @@ def _regroup_closed_form(reg: SymbolicRegressor, alg: _Algebra | None = None):
             for k in ("YY", "MZ", "M"):
                 eliminated.append(f"{k}{j}")
                 del cur[f"{k}{j}"]
-            if a == 0:
+            if a == 0 and not robot.floating:  # a floating base link keeps what regroups onto it
                 no_effect.append(f"YY{j}, MZ{j}, M{j} (regrouped onto the base)")
                 continue
             P = position(row)
@@ -346,7 +347,7 @@ def _regroup_closed_form(reg: SymbolicRegressor, alg: _Algebra | None = None):
             for k in _J_KINDS:
                 eliminated.append(f"{k}{j}")
                 del cur[f"{k}{j}"]
-            if a == 0:
+            if a == 0 and not robot.floating:
                 no_effect.append(f"XX{j}..ZZ{j} (rotation inertia of a link moving in translation from the base)")
                 continue
             Rj = constant_rotation(row) * rot_z(row.theta)
@@ -671,6 +672,13 @@ def _random_states(robot: RobotDescription, n_samples: int, rng: np.random.Gener
         values[robot.q[k]] = q[:, k]
         values[robot.dq[k]] = dq[:, k]
         values[robot.ddq[k]] = ddq[:, k]
+    if robot.floating:  # the base's inputs (dynamics.floating): a random unit quaternion, velocities, accelerations
+        quat = rng.normal(size=(n_samples, 4))
+        quat /= np.linalg.norm(quat, axis=1, keepdims=True)
+        base = np.hstack([rng.normal(size=(n_samples, 3)), quat, rng.normal(0, 2.0, (n_samples, 6)),
+                          rng.normal(0, 4.0, (n_samples, 6))])
+        for k, name in enumerate(BASE_Q_NAMES + BASE_DQ_NAMES + BASE_DDQ_NAMES):
+            values[_sym(name)] = base[:, k]
     return values
 
 
@@ -678,7 +686,7 @@ def _sample_columns(reg: SymbolicRegressor, names, n_samples: int, rng: np.rando
     """Numeric columns (n_samples*n, len(names)) of the standard regressor at random states."""
     robot = reg.robot
     values = {**_random_states(robot, n_samples, rng), **robot.geometry_subs()}
-    W = evaluate_columns(reg.graph, robot.n_joints, names, values, n_samples)
+    W = evaluate_columns(reg.graph, robot.n_joints + reg.base_rows, names, values, n_samples)
     return W.reshape(-1, len(names))
 
 
@@ -883,7 +891,7 @@ def _group(reg: SymbolicRegressor, alg: _Algebra, rng: np.random.Generator, n_sa
         beta = np.linalg.solve(Q.T @ W[:, accepted], Q.T @ c)
         support = [(sweep_order[kk], float(b)) for kk, b in zip(accepted, beta) if abs(b) > coefficient_tol]
         targets = [t for t, _ in support]
-        coefs = solver.solve(name, targets)
+        coefs = solver.solve(name, targets) if not robot.floating else None  # floating: numeric coefficients
         if coefs is not None:
             approx = np.array([float(e.xreplace(values)) for e in coefs])
             cols = [sweep_order.index(t) for t in targets]

@@ -8,11 +8,11 @@ unit quaternion ``x y z w`` at ``q[3:7]``, ``dq`` and ``ddq`` of size ``6 + n``,
 accelerations in base axes) and return ``6 + n`` rows per sample, the base wrench first (force, then
 moment about the base origin, in base axes). ``FLOATING`` is True.
 
-Base parameters are numeric in this first layer (no closed-form regrouping of a floating base yet): the
-independent columns of the standard regressor stacked over random states, found in ``STANDARD_NAMES``
-order by a QR decomposition (a column is kept when its component orthogonal to the columns before it is
-not negligible, [KD2002] ch. 12 / Gautier 1991, "Numerical calculation of the base inertial parameters of
-robots"), and the other columns' exact linear relations to them (least squares on the same samples).
+Base parameters: the closed-form rules of :func:`symoro_gen.baseparams.regroup.group_base_parameters`
+([GK1990]) on the floating tree, where what regroups onto frame 0 stays on the base link (``base_map``: the
+relations, with the geometry symbolic). :func:`numeric_base` is the independent numeric reference (the
+independent columns of the standard regressor stacked over random states, found in ``STANDARD_NAMES`` order
+by Gram-Schmidt, Gautier 1991, "Numerical calculation of the base inertial parameters of robots").
 """
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ import numpy as np
 import sympy as sp
 from numpy.typing import ArrayLike, NDArray
 
+from ..baseparams.regroup import BaseParameterMap, group_base_parameters
 from ..description.model import RobotDescription
 from ..dynamics.floating import build_floating_regressor
 from ..dynamics.graph import ExprGraph
@@ -109,6 +110,8 @@ class FloatingModel:
     Attributes
     ----------
     ROBOT : str
+    base_map : BaseParameterMap
+        The closed-form relations of the base parameters (geometry symbolic).
     FLOATING : bool
         True.
     N_JOINTS : int
@@ -116,13 +119,12 @@ class FloatingModel:
     N_ROWS : int
         ``6 + n``: rows per sample of every regressor (base wrench ``FX0 FY0 FZ0 MX0 MY0 MZ0``, then joints).
     STANDARD_NAMES, BASE_NAMES, PAYLOAD_NAMES : tuple of str
-        ``BASE_NAMES``: the kept standard columns (:func:`numeric_base`), suffixed ``R`` when others are
-        regrouped onto them.
+        ``BASE_NAMES``: the kept standard columns, suffixed ``R`` when others are regrouped onto them.
     """
 
     FLOATING = True
 
-    def __init__(self, robot: RobotDescription, *, n_samples: int = 40, seed: int = 0) -> None:
+    def __init__(self, robot: RobotDescription) -> None:
         if not robot.floating:
             raise ValueError(f"{robot.file}: base = {robot.base!r}; FloatingModel needs base = \"floating\"")
         reg = build_floating_regressor(robot)
@@ -143,22 +145,10 @@ class FloatingModel:
             self._kernels[key] = _kernel(g, self.N_ROWS, names, inputs, f"floating_{key}")
             if key == "standard":
                 self._standard_graph = g
-        self._base_from_samples(robot, n_samples, seed)
-
-    def _base_from_samples(self, robot: RobotDescription, n_samples: int, seed: int) -> None:
-        """The numeric base parameters from the standard regressor on random states (:func:`numeric_base`)."""
-        rng = np.random.default_rng(seed)
-        n = robot.n_joints
-        quat = rng.normal(size=(n_samples, 4))
-        quat /= np.linalg.norm(quat, axis=1, keepdims=True)
-        q = np.hstack([np.zeros((n_samples, 3)), quat, rng.uniform(-np.pi, np.pi, (n_samples, n))])
-        dq, ddq = rng.normal(size=(n_samples, 6 + n)), rng.normal(size=(n_samples, 6 + n))
-        W = self.standard_regressor(q, dq, ddq).reshape(-1, len(self.STANDARD_NAMES))
-        kept, K = numeric_base(W)
-        self._kept, self._K = kept, K
-        regrouped = (np.abs(K) > 0).sum(axis=1) > 1
-        self.BASE_NAMES: tuple[str, ...] = tuple(self.STANDARD_NAMES[c] + ("R" if g else "")
-                                                 for c, g in zip(kept, regrouped))
+        self.base_map: BaseParameterMap = group_base_parameters(reg)
+        self.BASE_NAMES: tuple[str, ...] = tuple(self.base_map.base_names)
+        self._kept = np.array([self.STANDARD_NAMES.index(k) for k in self.base_map.kept], dtype=np.intp)
+        self._K = self.base_map.matrix()
 
     def _eval(self, key: str, n_cols: int, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
         (qa, dqa, ddqa), one = floating_states(self.ROBOT, self.N_JOINTS, q, dq, ddq)
@@ -180,7 +170,7 @@ class FloatingModel:
         return out
 
     def base_parameters(self, chi_std: ArrayLike) -> NDArray[np.float64]:
-        """Base parameters of standard ones, ``K @ chi_std`` (:func:`numeric_base`)."""
+        """Base parameters of standard ones, ``K @ chi_std`` (the closed-form relations, ``base_map``)."""
         out: NDArray[np.float64] = self._K @ np.asarray(chi_std, float)
         return out
 

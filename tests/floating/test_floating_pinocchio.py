@@ -3,10 +3,11 @@ free-flyer root (:mod:`tests.floating.pinocchio_floating`), all ``6 + n`` rows, 
 unit quaternions; for a 12-joint quadruped-like tree and a 22-joint humanoid-like tree (with a fixed sole
 frame and a payload frame).
 
-Base parameters (numeric in this first layer): their number equals the numeric rank of the standard
-regressor stacked over fresh states, and equals the count of the closed-form rules of Gautier & Khalil
-[GK1990] for a floating base: nothing vanishes on a free base, so the base link keeps its 10 parameters and
-every revolute joint regroups exactly three of its link's (YY, MZ, M) and keeps its 4 drive terms.
+Base parameters (closed form, [GK1990] on a free base): their number equals the numeric rank of the standard
+regressor stacked over fresh states, and the count of the rules: nothing vanishes on a free base, so the base
+link keeps its 10 parameters and every revolute joint regroups exactly three of its link's (YY, MZ, M) and
+keeps its 4 drive terms. The relations equal those found numerically (Gram-Schmidt on sampled columns) and
+hold for other values of the geometry.
 """
 from __future__ import annotations
 
@@ -18,9 +19,9 @@ import pytest
 
 import symoro_gen
 from symoro_gen.baseparams.regroup import numeric_rank
-from symoro_gen.description import load_robot
+from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.dynamics.floating import BASE_ROW_NAMES
-from symoro_gen.runtime.floating import FloatingModel
+from symoro_gen.runtime.floating import FloatingModel, numeric_base
 from tests.oracles.pinocchio_model import max_relative_error, random_inertial
 
 from .pinocchio_floating import pin_floating_torque, random_floating_parameters, random_floating_states
@@ -85,6 +86,10 @@ def _check_base_parameters(robot, model, seed: int) -> None:
         assert abs(model.base_parameters(unit[std.index(f"M{r.j}")])[base.index("M0R")] - 1.0) < 1e-9
         yy = model.base_parameters(unit[std.index(f"YY{r.j}")])
         assert abs(yy[base.index(f"XX{r.j}R")] + 1.0) < 1e-9
+    # the closed-form relations are the numeric ones (independent columns in standard order, Gram-Schmidt)
+    kept, K = numeric_base(W)
+    assert tuple(std[c] for c in kept) == model.base_map.kept
+    assert np.allclose(K, model.base_map.matrix(), rtol=0, atol=1e-8)
 
 
 def test_quadruped_matches_pinocchio_free_flyer(quadruped):
@@ -96,6 +101,25 @@ def test_quadruped_matches_pinocchio_free_flyer(quadruped):
 
 def test_quadruped_base_parameters_count_is_the_numeric_rank(quadruped):
     _check_base_parameters(*quadruped, seed=2)
+
+
+def test_quadruped_relations_hold_for_other_geometry(quadruped):
+    """The relations keep the lengths symbolic: with every length of the quadruped changed (a new robot
+    file), the relations of the original model evaluated at the new lengths regroup the new model's columns."""
+    robot, model = quadruped
+    text = (HERE / "quadruped.toml").read_text()
+    for k, v in robot.values.items():
+        text = text.replace(f"{k} = {v}\n", f"{k} = {round(1.37 * v + 0.011, 4)}\n")
+    other = parse_robot_text(text, "other.toml")
+    assert all(other.values[k] != v for k, v in robot.values.items())
+    rng = np.random.default_rng(8)
+    q, dq, ddq = random_floating_states(other, 20, rng)
+    W = FloatingModel(other).standard_regressor(q, dq, ddq).reshape(-1, len(other.standard_names))
+    K = model.base_map.matrix(other.geometry_subs())
+    chi = random_floating_parameters(other, rng)
+    kept = [other.standard_names.index(k) for k in model.base_map.kept]
+    assert max_relative_error(W[:, kept] @ (K @ chi), W @ chi) < RTOL
+    assert max_relative_error(W[:, kept] @ (model.base_map.matrix() @ chi), W @ chi) > 1e-6  # lengths matter
 
 
 def test_quadruped_at_rest_the_base_carries_the_weight(quadruped):
