@@ -12,7 +12,7 @@ Base parameters: the closed-form rules of :func:`symoro_gen.baseparams.regroup.g
 ([GK1990]) on the floating tree, where what regroups onto frame 0 stays on the base link (``base_map``: the
 relations, with the geometry symbolic). :func:`numeric_base` is the independent numeric reference (the
 independent columns of the standard regressor stacked over random states, found in ``STANDARD_NAMES`` order
-by Gram-Schmidt, Gautier 1991, "Numerical calculation of the base inertial parameters of robots").
+by Gram-Schmidt, [G1991]).
 """
 from __future__ import annotations
 
