@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
 
 import symoro_gen
 from symoro_gen.baseparams.regroup import numeric_rank
@@ -23,6 +24,7 @@ from symoro_gen.description import load_robot, parse_robot_text
 from symoro_gen.dynamics.floating import BASE_ROW_NAMES
 from symoro_gen.runtime.floating import FloatingModel, numeric_base
 from tests.oracles.pinocchio_model import max_relative_error, random_inertial
+from tests.strategies import mdh_trees
 
 from .pinocchio_floating import pin_floating_torque, random_floating_parameters, random_floating_states
 
@@ -189,3 +191,22 @@ def test_humanoid_matches_pinocchio_and_generates_in_time():
     assert elapsed < 60.0
     _check_against_pinocchio(robot, model, seed=5, with_payload=True)
     _check_base_parameters(robot, model, seed=6)
+
+
+@pytest.mark.slow
+@settings(max_examples=12, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(text=mdh_trees(2, 8, random_gravity=True))
+def test_random_floating_trees_match_pinocchio(text):
+    """Random trees (revolute and prismatic joints, -q joints, branches anywhere, fixed payload frames, drive
+    subsets, any gravity) on a floating base: all 6 + n rows equal Pinocchio's free-flyer RNEA; the base
+    regressor reproduces them through the closed-form relations; base count == numeric rank."""
+    robot = parse_robot_text('base = "floating"\n' + text, "random_floating_tree.toml")
+    model = FloatingModel(robot)
+    rng = np.random.default_rng(0)
+    q, dq, ddq = random_floating_states(robot, 12, rng)
+    chi = random_floating_parameters(robot, rng)
+    pay = random_inertial(rng) if robot.payload is not None else None
+    ref = pin_floating_torque(robot, q, dq, ddq, chi, pay)
+    assert max_relative_error(model.torque(q, dq, ddq, chi, pay), ref) < RTOL
+    Ws = model.standard_regressor(q, dq, ddq).reshape(-1, len(robot.standard_names))
+    assert numeric_rank(Ws) == len(model.BASE_NAMES)
