@@ -1,4 +1,4 @@
-"""The run-time model of a floating-base robot (first layer: built in memory, NumPy kernels only).
+"""The run-time model of a floating-base robot (first layer: built in memory, NumPy kernels and a CasADi function).
 
 :class:`FloatingModel` evaluates the floating-base Newton-Euler model of :mod:`symoro_gen.dynamics.floating`
 through the same optimised graph and the same NumPy kernel printer as a fixed-base package
