@@ -14,6 +14,9 @@ torque(q, dq, ddq, chi_std[, chi_payload]) -> (N, n) joint torques
 nominal_parameters(), nominal_payload() -> nominal vectors of the robot file, or None
 casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base regressor (n x nb)
 build()                               -> compile the C kernels of regressor_sda10f.c now
+geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry (not generated for this robot: manifest.json, geometry_derivative.omitted)
+geometry_columns(q, dq, ddq, chi_std) -> (N, n, n_g) the columns (dY_std/dg) chi_std
+GEOMETRY_NAMES                        -> the geometric constants g (d<j>, r<j>, alpha<j>, theta<j>)
 BACKEND                               -> "c" or "numpy" (see symoro_gen.runtime.GeneratedModel.backend)
 
 Importing compiles nothing: the C kernels are compiled by `symoro-gen build sda10f` or by the
@@ -198,7 +201,11 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=None)
+GEOMETRY_NAMES = _MODEL.GEOMETRY_NAMES
+geometry_derivative = _MODEL.geometry_derivative
+geometry_columns = _MODEL.geometry_columns
+casadi_geometry_columns = _MODEL.casadi_geometry_columns
 regressor = _MODEL.regressor
 standard_regressor = _MODEL.standard_regressor
 payload_regressor = _MODEL.payload_regressor
