@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..description.model import RobotDescription
+from ..dynamics.graph import ExprGraph
 from ..dynamics.sensitivity import GeometrySensitivity, geometry_sensitivity
 from .backends.c import c_function
 from .backends.casadi import casadi_source
@@ -75,6 +76,9 @@ def geometry_files(robot: RobotDescription, header: str) -> tuple[dict[str, str]
     sens = geometry_sensitivity(robot)
     std = tuple(robot.standard_names)
     pairs = _pairs(sens, std)
+    cols = [f"{c}:{g}" for c, g in pairs]  # the kernels' column names
+    graph = ExprGraph(sens.graph.inputs, sens.graph.defs,
+                      {(i, f"{c}:{g}"): e for (i, (c, g)), e in sens.graph.outputs.items()})
     n = robot.n_joints
     qs = (robot.q, robot.dq, robot.ddq)
     col = {c: k for k, c in enumerate(std)}
@@ -82,8 +86,8 @@ def geometry_files(robot: RobotDescription, header: str) -> tuple[dict[str, str]
     files = {"_geometry.py": _PY_TEMPLATE.format(
         header=header, robot=robot.name, names=sens.names, frames=tuple(sens.frames[g] for g in sens.names),
         dropped=sens.dropped, pairs=tuple((col[c], gi[g]) for c, g in pairs),
-        kernel=kernel_source(sens.graph, n, pairs, "geometry_kernel", *qs).rstrip("\n"),
-        casadi=casadi_source(sens.graph, pairs, "geometry_casadi", *qs))}
+        kernel=kernel_source(graph, n, cols, "geometry_kernel", *qs).rstrip("\n"),
+        casadi=casadi_source(graph, cols, "geometry_casadi", *qs))}
     cname = geometry_c_function(robot.name)
     api = "\n".join([
         "/*", *(f" * {x}" if x else " *" for x in header.replace("# ", "").splitlines()), " *",
@@ -92,7 +96,7 @@ def geometry_files(robot: RobotDescription, header: str) -> tuple[dict[str, str]
         f" *   void {cname}(long N, const double* q, const double* dq, const double* ddq, double* out);",
         f" *       q, dq, ddq: (N, {n});  out: (N, {n}, {len(pairs)}), column k = pair k of GEOMETRY_PAIRS",
         " * float64, row-major, sample-major; every entry of `out` is written.", " */", ""])
-    files[geometry_c_file(robot.name)] = "\n".join([api, _C_PRELUDE, c_function(sens.graph, n, pairs, cname, *qs, simd=False)])
+    files[geometry_c_file(robot.name)] = "\n".join([api, _C_PRELUDE, c_function(graph, n, cols, cname, *qs, vector=False)])
     manifest = {"names": list(sens.names), "dropped": list(sens.dropped), "pairs": len(pairs),
                 "c_file": geometry_c_file(robot.name), "c_function": cname,
                 "definitions": len(sens.graph.defs)}

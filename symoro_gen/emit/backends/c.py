@@ -99,9 +99,9 @@ def _vector_defs(graph: ExprGraph, memo: dict[Any, str] | None = None) -> list[s
 
 def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str, q: Sequence[sp.Symbol],
                dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol], memo: dict[Any, str] | None = None, *,
-               simd: bool = True) -> str:
+               vector: bool = True) -> str:
     """C source of the batch function ``func_name`` (SIMD loop + scalar remainder; the scalar loop only when
-    ``simd`` is False); ``memo``: see :func:`~symoro_gen.emit.printing.print_expr`."""
+    ``vector`` is False); ``memo``: see :func:`~symoro_gen.emit.printing.print_expr`."""
     col = {n: k for k, n in enumerate(col_names)}
     nc = len(col_names)
     entries = {(i, col[nm]): e for (i, nm), e in graph.outputs.items()}
@@ -116,7 +116,7 @@ def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_nam
             e = entries.get((i, k))
             scalar.append(f"        o[{i * nc + k}] = {print_expr(e, C_SCALAR, memo) if e is not None else '0.0'};")
     scalar += ["    }", "}"]
-    if not simd:
+    if not vector:
         scalar[0] = f"void {func_name}{sig}"
         return "\n".join(scalar + [""])
 
