@@ -28,7 +28,7 @@ import numpy as _np
 
 from symoro_gen.runtime import GeneratedModel as _GeneratedModel
 
-from . import _casadi, _geometry, _kernels
+from . import _casadi, _kernels
 
 ROBOT = 'lwr4'
 N_JOINTS = 7
@@ -37,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'XX2R', 'XY2', 'XZ2', 'YZ2', 'ZZ2R',
 PAYLOAD_NAMES = ('XX8', 'XY8', 'XZ8', 'YY8', 'YZ8', 'ZZ8', 'MX8', 'MY8', 'MZ8', 'M8')
 GEOMETRY = {'RL3': 0.4, 'RL5': 0.39}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ('alpha1', 'd2', 'r2', 'alpha2', 'theta2', 'd3', 'r3', 'alpha3', 'theta3', 'd4', 'r4', 'alpha4', 'theta4', 'd5', 'r5', 'alpha5', 'theta5', 'd6', 'r6', 'alpha6', 'theta6', 'd7', 'r7', 'alpha7', 'theta7')
 ROBOT_FILE_SHA256 = '021108588a0ee9da6c44753bf30b6bff11a97744f242cc16e970d650bb47f67a'
 _NOMINAL = (0.041589675, 0.0, 0.0, 0.017469675, -0.011421, 0.02574, 0.0, -0.162, -0.19035, 2.7, 1.0, 0.5, 0.0, 0.0414, 0.0, 0.0, 0.02574, 0.01134, 0.01728, 0.0, 0.189, -0.162, 2.7, 1.2, 0.8, 0.0, 0.0414, 0.0, 0.0, 0.01728, 0.01134, 0.02574, 0.0, 0.162, -0.189, 2.7, 0.9, 0.4, 0.0, 0.0414, 0.0, 0.0, 0.02574, -0.01134, 0.01728, 0.0, -0.189, -0.162, 2.7, 0.8, 0.3, 0.0, 0.0181582666667, 0.0, 0.0, 0.0099552, 0.0, 0.00922306666667, 0.0, 0.0, -0.1122, 1.7, 0.5, 0.2, 0.0, 0.0104166666667, 0.0, 0.0, 0.00416666666667, 0.0, 0.0104166666667, 0.0, 0.1, 0.0, 1.6, 0.3, 0.1, 0.0, 0.0518252, 0.0, 0.0, 0.0518252, 0.0, 0.05, 0.0, 0.0, 0.0234, 0.3, 0.2, 0.05, 0.0)
 _NOMINAL_PAYLOAD = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 4.6136)
@@ -109,8 +111,8 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=_geometry)
-GEOMETRY_NAMES = _MODEL.GEOMETRY_NAMES
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=__name__ + "._geometry",
+                         geometry_names=GEOMETRY_NAMES)
 geometry_derivative = _MODEL.geometry_derivative
 geometry_columns = _MODEL.geometry_columns
 casadi_geometry_columns = _MODEL.casadi_geometry_columns

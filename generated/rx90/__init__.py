@@ -28,7 +28,7 @@ import numpy as _np
 
 from symoro_gen.runtime import GeneratedModel as _GeneratedModel
 
-from . import _casadi, _geometry, _kernels
+from . import _casadi, _kernels
 
 ROBOT = 'rx90'
 N_JOINTS = 6
@@ -37,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'XX2R', 'XY2', 'XZ2R', 'YZ2', 'ZZ2R'
 PAYLOAD_NAMES = ('XX7', 'XY7', 'XZ7', 'YY7', 'YZ7', 'ZZ7', 'MX7', 'MY7', 'MZ7', 'M7')
 GEOMETRY = {'D3': 0.45, 'RL4': 0.45}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ('alpha1', 'd2', 'r2', 'alpha2', 'theta2', 'd3', 'r3', 'alpha3', 'theta3', 'd4', 'r4', 'alpha4', 'theta4', 'd5', 'r5', 'alpha5', 'theta5', 'd6', 'r6', 'alpha6', 'theta6')
 ROBOT_FILE_SHA256 = '2c8a5ed2ac3e1d8ea81d7ea0df83db4852c0b193a11c8362dcbe7a9a7ba7bb70'
 _NOMINAL = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 _NOMINAL_PAYLOAD = (0.161, 0.0, 0.0, 0.161, 0.0, 0.035, 0.0, 0.0, 1.003, 7.025)
@@ -103,8 +105,8 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=_geometry)
-GEOMETRY_NAMES = _MODEL.GEOMETRY_NAMES
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=__name__ + "._geometry",
+                         geometry_names=GEOMETRY_NAMES)
 geometry_derivative = _MODEL.geometry_derivative
 geometry_columns = _MODEL.geometry_columns
 casadi_geometry_columns = _MODEL.casadi_geometry_columns

@@ -28,7 +28,7 @@ import numpy as _np
 
 from symoro_gen.runtime import GeneratedModel as _GeneratedModel
 
-from . import _casadi, _geometry, _kernels
+from . import _casadi, _kernels
 
 ROBOT = 'scara'
 N_JOINTS = 4
@@ -37,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'ZZ2R', 'MX2R', 'MY2R', 'IA2', 'FV2'
 PAYLOAD_NAMES = ()
 GEOMETRY = {'D2': 0.35, 'D3': 0.3}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ('alpha1', 'd2', 'alpha2', 'theta2', 'd3', 'alpha3', 'theta3', 'd4', 'alpha4', 'theta4')
 ROBOT_FILE_SHA256 = 'b700a3291203d37352a1bf02ebb3705c9a791ce50a34a2aa955aa34b2e1c5640'
 _NOMINAL = None
 _NOMINAL_PAYLOAD = None
@@ -67,8 +69,8 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=_geometry)
-GEOMETRY_NAMES = _MODEL.GEOMETRY_NAMES
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=__name__ + "._geometry",
+                         geometry_names=GEOMETRY_NAMES)
 geometry_derivative = _MODEL.geometry_derivative
 geometry_columns = _MODEL.geometry_columns
 casadi_geometry_columns = _MODEL.casadi_geometry_columns

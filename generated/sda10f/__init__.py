@@ -37,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'XX2R', 'XY2', 'XZ2', 'YZ2', 'ZZ2R',
 PAYLOAD_NAMES = ()
 GEOMETRY = {'D2': 0.09996, 'RL2': 0.253, 'RL3': -0.0123, 'RL4': 0.35, 'RL5': 0.007, 'RL6': -0.3486, 'RL7': -0.007}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ()
 ROBOT_FILE_SHA256 = 'd2380cfcd43f270cfd1b86d858465be8693842b563492fec5ecf753f9a2f0e35'
 _NOMINAL = None
 _NOMINAL_PAYLOAD = None
@@ -201,8 +203,8 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=None)
-GEOMETRY_NAMES = _MODEL.GEOMETRY_NAMES
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=None,
+                         geometry_names=GEOMETRY_NAMES)
 geometry_derivative = _MODEL.geometry_derivative
 geometry_columns = _MODEL.geometry_columns
 casadi_geometry_columns = _MODEL.casadi_geometry_columns

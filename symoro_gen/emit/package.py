@@ -191,7 +191,7 @@ import numpy as _np
 
 from symoro_gen.runtime import GeneratedModel as _GeneratedModel
 
-from . import {imports}
+from . import _casadi, _kernels
 
 ROBOT = {robot!r}
 N_JOINTS = {n}
@@ -200,6 +200,8 @@ BASE_NAMES = {base!r}
 PAYLOAD_NAMES = {payload!r}
 GEOMETRY = {geometry!r}
 GRAVITY = {gravity!r}
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = {geometry_names!r}
 ROBOT_FILE_SHA256 = {sha!r}
 _NOMINAL = {nominal!r}
 _NOMINAL_PAYLOAD = {nominal_payload!r}
@@ -207,8 +209,8 @@ _NOMINAL_PAYLOAD = {nominal_payload!r}
 {relations}
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry={geometry_module})
-GEOMETRY_NAMES = _MODEL.GEOMETRY_NAMES
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry={geometry_module},
+                         geometry_names=GEOMETRY_NAMES)
 geometry_derivative = _MODEL.geometry_derivative
 geometry_columns = _MODEL.geometry_columns
 casadi_geometry_columns = _MODEL.casadi_geometry_columns
@@ -343,8 +345,8 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: s
         nominal=robot.nominal_vector(),
         nominal_payload=robot.nominal_payload(),
         relations=_relations_code(rel, tuple(bp.base_names)),
-        imports="_casadi, _geometry, _kernels" if geo_files else "_casadi, _kernels",
-        geometry_module="_geometry" if geo_files else "None",
+        geometry_module='__name__ + "._geometry"' if geo_files else "None",
+        geometry_names=tuple(geo_manifest.get("names", ())),
         geometry_note=("GEOMETRY_NAMES" if geo_files else "not generated for this robot: manifest.json, "
                        "geometry_derivative.omitted"),
     )

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import ctypes
+import importlib
 import os
 import threading
 import warnings
@@ -58,9 +59,12 @@ class GeneratedModel:
         ``base_kernel``, ``standard_kernel``, ``payload_kernel`` (NumPy, emitted).
     construct_casadi : callable, optional
         ``base_casadi(ca, q, dq, ddq, out)`` of the package's ``_casadi.py``.
-    geometry : module, optional
+    geometry : module or str, optional
         The package's ``_geometry.py`` (derivative of the standard regressor w.r.t. the geometric
-        constants, :mod:`symoro_gen.emit.geometry`); None when the package has none.
+        constants, :mod:`symoro_gen.emit.geometry`), or its module name, imported on first use (it is
+        large); None when the package has none.
+    geometry_names : tuple of str
+        Its constants (``GEOMETRY_NAMES``).
 
     Notes
     -----
@@ -72,7 +76,7 @@ class GeneratedModel:
     def __init__(self, package_dir: str | os.PathLike[str], robot: str, n_joints: int, standard_names: Sequence[str],
                  base_names: Sequence[str], payload_names: Sequence[str], relations: Sequence[Any], kernels: ModuleType,
                  construct_casadi: Callable[..., Any] | None = None, *, c_file: str | None = None, numpy_only: bool = False,
-                 geometry: ModuleType | None = None):
+                 geometry: ModuleType | str | None = None, geometry_names: Sequence[str] = ()):
         self.package_dir = Path(package_dir)
         self.ROBOT = robot
         self.N_JOINTS = int(n_joints)
@@ -97,7 +101,7 @@ class GeneratedModel:
         self._reason = ""
         self._lock = threading.Lock()
         self._geometry = geometry
-        self.GEOMETRY_NAMES: tuple[str, ...] = tuple(geometry.GEOMETRY_NAMES) if geometry is not None else ()
+        self.GEOMETRY_NAMES: tuple[str, ...] = tuple(geometry_names)
         self._geo_c: Any = None
         self._geo_resolved = False
 
@@ -238,6 +242,8 @@ class GeneratedModel:
         if self._geometry is None:
             raise CBuildError(f"{self.ROBOT}: this package has no geometry derivative (manifest.json, "
                               "geometry_derivative.omitted, says why)")
+        if isinstance(self._geometry, str):
+            self._geometry = importlib.import_module(self._geometry)
         return self._geometry
 
     def _geometry_c_function(self) -> Any:

@@ -61,7 +61,7 @@ def test_columns_match_central_differences_of_numeric_newton_euler(name):
     every kept constant to 1e-6 relative; every dropped constant has no effect on the torque."""
     robot, q, dq, ddq, chi = _case(name)
     m = _numpy_model(name)
-    geo = import_package(ROOT / "generated" / name)._geometry
+    geo = m._geometry_module()
     G = m.geometry_columns(q, dq, ddq, chi)
     h = 1e-5
     scale = np.abs(inverse_dynamics(robot, q, dq, ddq, chi)).max()
@@ -85,7 +85,7 @@ def test_first_order_model_of_pinocchio_at_a_perturbed_geometry(name):
     and much smaller than the first-order change itself."""
     robot, q, dq, ddq, chi = _case(name, seed=3)
     m = _numpy_model(name)
-    geo = import_package(ROOT / "generated" / name)._geometry
+    geo = m._geometry_module()
     v = np.random.default_rng(7).normal(size=len(m.GEOMETRY_NAMES))
     v *= np.array([0.1 if f in ("d", "r") else 1.0 for _, f in geo.GEOMETRY_FRAMES])  # metres vs radians
     lin = m.geometry_columns(q, dq, ddq, chi) @ v
