@@ -105,8 +105,8 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry=__name__ + "._geometry",
-                         geometry_names=GEOMETRY_NAMES)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
+                         geometry=(__name__ + "._geometry", GEOMETRY_NAMES))
 geometry_derivative = _MODEL.geometry_derivative
 geometry_columns = _MODEL.geometry_columns
 casadi_geometry_columns = _MODEL.casadi_geometry_columns

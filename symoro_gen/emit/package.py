@@ -209,8 +209,8 @@ _NOMINAL_PAYLOAD = {nominal_payload!r}
 {relations}
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi, geometry={geometry_module},
-                         geometry_names=GEOMETRY_NAMES)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
+                         geometry={geometry_module})
 geometry_derivative = _MODEL.geometry_derivative
 geometry_columns = _MODEL.geometry_columns
 casadi_geometry_columns = _MODEL.casadi_geometry_columns
@@ -345,7 +345,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: s
         nominal=robot.nominal_vector(),
         nominal_payload=robot.nominal_payload(),
         relations=_relations_code(rel, tuple(bp.base_names)),
-        geometry_module='__name__ + "._geometry"' if geo_files else "None",
+        geometry_module='(__name__ + "._geometry", GEOMETRY_NAMES)' if geo_files else "None",
         geometry_names=tuple(geo_manifest.get("names", ())),
         geometry_note=("GEOMETRY_NAMES" if geo_files else "not generated for this robot: manifest.json, "
                        "geometry_derivative.omitted"),

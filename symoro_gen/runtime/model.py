@@ -59,12 +59,10 @@ class GeneratedModel:
         ``base_kernel``, ``standard_kernel``, ``payload_kernel`` (NumPy, emitted).
     construct_casadi : callable, optional
         ``base_casadi(ca, q, dq, ddq, out)`` of the package's ``_casadi.py``.
-    geometry : module or str, optional
+    geometry : (module or str, tuple of str), optional
         The package's ``_geometry.py`` (derivative of the standard regressor w.r.t. the geometric
         constants, :mod:`symoro_gen.emit.geometry`), or its module name, imported on first use (it is
-        large); None when the package has none.
-    geometry_names : tuple of str
-        Its constants (``GEOMETRY_NAMES``).
+        large), and its constants ``GEOMETRY_NAMES``; None when the package has none.
 
     Notes
     -----
@@ -76,7 +74,7 @@ class GeneratedModel:
     def __init__(self, package_dir: str | os.PathLike[str], robot: str, n_joints: int, standard_names: Sequence[str],
                  base_names: Sequence[str], payload_names: Sequence[str], relations: Sequence[Any], kernels: ModuleType,
                  construct_casadi: Callable[..., Any] | None = None, *, c_file: str | None = None, numpy_only: bool = False,
-                 geometry: ModuleType | str | None = None, geometry_names: Sequence[str] = ()):
+                 geometry: tuple[ModuleType | str, Sequence[str]] | None = None):
         self.package_dir = Path(package_dir)
         self.ROBOT = robot
         self.N_JOINTS = int(n_joints)
@@ -100,8 +98,8 @@ class GeneratedModel:
         self._resolved = False
         self._reason = ""
         self._lock = threading.Lock()
-        self._geometry = geometry
-        self.GEOMETRY_NAMES: tuple[str, ...] = tuple(geometry_names)
+        self._geometry: ModuleType | str | None = None if geometry is None else geometry[0]
+        self.GEOMETRY_NAMES: tuple[str, ...] = () if geometry is None else tuple(geometry[1])
         self._geo_c: Any = None
         self._geo_resolved = False
 
