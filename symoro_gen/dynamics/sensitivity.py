@@ -15,7 +15,9 @@ constant ``g_k`` at the current estimate ``chi_hat`` is the column ``(dY_std/dg_
    zero and the geometry to its nominal values after the differentiation, so that structural zeros of the
    nominal robot prune the tangents; a constant whose derivative is identically zero is dropped.
 
-The graph that results is optimised and printed like the regressors (:mod:`symoro_gen.emit`).
+The graph that results is printed like the regressors (:mod:`symoro_gen.emit.geometry`; without the
+rotation-pair and shared-product rewrites of :mod:`symoro_gen.emit.optimize`, which would double its
+generation time).
 """
 from __future__ import annotations
 
