@@ -14,6 +14,9 @@ torque(q, dq, ddq, chi_std[, chi_payload]) -> (N, n) joint torques
 nominal_parameters(), nominal_payload() -> nominal vectors of the robot file, or None
 casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base regressor (n x nb)
 build()                               -> compile the C kernels of regressor_lwr4.c now
+geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry (GEOMETRY_NAMES)
+geometry_columns(q, dq, ddq, chi_std) -> (N, n, n_g) the columns (dY_std/dg) chi_std
+GEOMETRY_NAMES                        -> the geometric constants g (d<j>, r<j>, alpha<j>, theta<j>)
 BACKEND                               -> "c" or "numpy" (see symoro_gen.runtime.GeneratedModel.backend)
 
 Importing compiles nothing: the C kernels are compiled by `symoro-gen build lwr4` or by the
@@ -34,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'XX2R', 'XY2', 'XZ2', 'YZ2', 'ZZ2R',
 PAYLOAD_NAMES = ('XX8', 'XY8', 'XZ8', 'YY8', 'YZ8', 'ZZ8', 'MX8', 'MY8', 'MZ8', 'M8')
 GEOMETRY = {'RL3': 0.4, 'RL5': 0.39}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ('alpha1', 'd2', 'r2', 'alpha2', 'theta2', 'd3', 'r3', 'alpha3', 'theta3', 'd4', 'r4', 'alpha4', 'theta4', 'd5', 'r5', 'alpha5', 'theta5', 'd6', 'r6', 'alpha6', 'theta6', 'd7', 'r7', 'alpha7', 'theta7')
 ROBOT_FILE_SHA256 = '021108588a0ee9da6c44753bf30b6bff11a97744f242cc16e970d650bb47f67a'
 _NOMINAL = (0.041589675, 0.0, 0.0, 0.017469675, -0.011421, 0.02574, 0.0, -0.162, -0.19035, 2.7, 1.0, 0.5, 0.0, 0.0414, 0.0, 0.0, 0.02574, 0.01134, 0.01728, 0.0, 0.189, -0.162, 2.7, 1.2, 0.8, 0.0, 0.0414, 0.0, 0.0, 0.01728, 0.01134, 0.02574, 0.0, 0.162, -0.189, 2.7, 0.9, 0.4, 0.0, 0.0414, 0.0, 0.0, 0.02574, -0.01134, 0.01728, 0.0, -0.189, -0.162, 2.7, 0.8, 0.3, 0.0, 0.0181582666667, 0.0, 0.0, 0.0099552, 0.0, 0.00922306666667, 0.0, 0.0, -0.1122, 1.7, 0.5, 0.2, 0.0, 0.0104166666667, 0.0, 0.0, 0.00416666666667, 0.0, 0.0104166666667, 0.0, 0.1, 0.0, 1.6, 0.3, 0.1, 0.0, 0.0518252, 0.0, 0.0, 0.0518252, 0.0, 0.05, 0.0, 0.0, 0.0234, 0.3, 0.2, 0.05, 0.0)
 _NOMINAL_PAYLOAD = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 4.6136)
@@ -106,7 +111,11 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
+                         geometry=(__name__ + "._geometry", GEOMETRY_NAMES))
+geometry_derivative = _MODEL.geometry_derivative
+geometry_columns = _MODEL.geometry_columns
+casadi_geometry_columns = _MODEL.casadi_geometry_columns
 regressor = _MODEL.regressor
 standard_regressor = _MODEL.standard_regressor
 payload_regressor = _MODEL.payload_regressor

@@ -14,6 +14,9 @@ torque(q, dq, ddq, chi_std[, chi_payload]) -> (N, n) joint torques
 nominal_parameters(), nominal_payload() -> nominal vectors of the robot file, or None
 casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base regressor (n x nb)
 build()                               -> compile the C kernels of regressor_palletizer.c now
+geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry (GEOMETRY_NAMES)
+geometry_columns(q, dq, ddq, chi_std) -> (N, n, n_g) the columns (dY_std/dg) chi_std
+GEOMETRY_NAMES                        -> the geometric constants g (d<j>, r<j>, alpha<j>, theta<j>)
 BACKEND                               -> "c" or "numpy" (see symoro_gen.runtime.GeneratedModel.backend)
 
 Importing compiles nothing: the C kernels are compiled by `symoro-gen build palletizer` or by the
@@ -34,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'XX2R', 'XY2', 'XZ2R', 'YZ2', 'ZZ2R'
 PAYLOAD_NAMES = ()
 GEOMETRY = {'D2': 0.3, 'D3': 1.1, 'D4': 1.2, 'L5': 0.35}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ('alpha1', 'd2', 'r2', 'alpha2', 'theta2', 'd3', 'r3', 'alpha3', 'theta3', 'd4', 'r4', 'alpha4', 'theta4', 'd5', 'r5', 'alpha5', 'theta5', 'd6', 'r6', 'alpha6', 'theta6')
 ROBOT_FILE_SHA256 = '24d98bc3670ea47974d6c00f2b81ba9d8371b64cb357248005006c91ec1ec009'
 _NOMINAL = (3.45, 0.0, 0.0, 3.45, 0.0, 1.0, 0.0, 0.0, 7.5, 25.0, 1.5, 8.0, 6.0, 0.0, 0.35, 0.0, -0.55, 8.1, 0.0, 8.05, 11.0, 0.0, 1.0, 20.0, 1.8, 9.0, 7.0, 0.0, 0.2735, 0.63, 0.0, 7.2, 0.0, 7.2735, 9.0, -1.05, 0.0, 15.0, 0.04, 0.0, 0.0, 0.04, 0.0, 0.05, 0.0, 0.0, 0.2, 4.0, 0.3, 2.0, 1.5, 0.0, 0.01, 0.0, 0.0, 0.1656, 0.0, 0.1656, 0.68, 0.0, 0.0, 4.0, 1.6, 8.5, 6.5, 0.0, 0.005, 0.0, 0.0, 1.2075, 0.0, 1.2075, 1.65, 0.0, 0.0, 3.0)
 _NOMINAL_PAYLOAD = None
@@ -91,7 +96,11 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
+                         geometry=(__name__ + "._geometry", GEOMETRY_NAMES))
+geometry_derivative = _MODEL.geometry_derivative
+geometry_columns = _MODEL.geometry_columns
+casadi_geometry_columns = _MODEL.casadi_geometry_columns
 regressor = _MODEL.regressor
 standard_regressor = _MODEL.standard_regressor
 payload_regressor = _MODEL.payload_regressor

@@ -14,6 +14,9 @@ torque(q, dq, ddq, chi_std[, chi_payload]) -> (N, n) joint torques
 nominal_parameters(), nominal_payload() -> nominal vectors of the robot file, or None
 casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base regressor (n x nb)
 build()                               -> compile the C kernels of regressor_scara.c now
+geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry (GEOMETRY_NAMES)
+geometry_columns(q, dq, ddq, chi_std) -> (N, n, n_g) the columns (dY_std/dg) chi_std
+GEOMETRY_NAMES                        -> the geometric constants g (d<j>, r<j>, alpha<j>, theta<j>)
 BACKEND                               -> "c" or "numpy" (see symoro_gen.runtime.GeneratedModel.backend)
 
 Importing compiles nothing: the C kernels are compiled by `symoro-gen build scara` or by the
@@ -34,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'ZZ2R', 'MX2R', 'MY2R', 'IA2', 'FV2'
 PAYLOAD_NAMES = ()
 GEOMETRY = {'D2': 0.35, 'D3': 0.3}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ('alpha1', 'd2', 'alpha2', 'theta2', 'd3', 'alpha3', 'theta3', 'd4', 'alpha4', 'theta4')
 ROBOT_FILE_SHA256 = 'b700a3291203d37352a1bf02ebb3705c9a791ce50a34a2aa955aa34b2e1c5640'
 _NOMINAL = None
 _NOMINAL_PAYLOAD = None
@@ -64,7 +69,11 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
+                         geometry=(__name__ + "._geometry", GEOMETRY_NAMES))
+geometry_derivative = _MODEL.geometry_derivative
+geometry_columns = _MODEL.geometry_columns
+casadi_geometry_columns = _MODEL.casadi_geometry_columns
 regressor = _MODEL.regressor
 standard_regressor = _MODEL.standard_regressor
 payload_regressor = _MODEL.payload_regressor

@@ -14,6 +14,9 @@ torque(q, dq, ddq, chi_std[, chi_payload]) -> (N, n) joint torques
 nominal_parameters(), nominal_payload() -> nominal vectors of the robot file, or None
 casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base regressor (n x nb)
 build()                               -> compile the C kernels of regressor_sda10f.c now
+geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry (not generated for this robot: manifest.json, geometry_derivative.omitted)
+geometry_columns(q, dq, ddq, chi_std) -> (N, n, n_g) the columns (dY_std/dg) chi_std
+GEOMETRY_NAMES                        -> the geometric constants g (d<j>, r<j>, alpha<j>, theta<j>)
 BACKEND                               -> "c" or "numpy" (see symoro_gen.runtime.GeneratedModel.backend)
 
 Importing compiles nothing: the C kernels are compiled by `symoro-gen build sda10f` or by the
@@ -34,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'XX2R', 'XY2', 'XZ2', 'YZ2', 'ZZ2R',
 PAYLOAD_NAMES = ()
 GEOMETRY = {'D2': 0.09996, 'RL2': 0.253, 'RL3': -0.0123, 'RL4': 0.35, 'RL5': 0.007, 'RL6': -0.3486, 'RL7': -0.007}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ()
 ROBOT_FILE_SHA256 = 'd2380cfcd43f270cfd1b86d858465be8693842b563492fec5ecf753f9a2f0e35'
 _NOMINAL = None
 _NOMINAL_PAYLOAD = None
@@ -198,7 +203,11 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
+                         geometry=None)
+geometry_derivative = _MODEL.geometry_derivative
+geometry_columns = _MODEL.geometry_columns
+casadi_geometry_columns = _MODEL.casadi_geometry_columns
 regressor = _MODEL.regressor
 standard_regressor = _MODEL.standard_regressor
 payload_regressor = _MODEL.payload_regressor

@@ -14,6 +14,9 @@ torque(q, dq, ddq, chi_std[, chi_payload]) -> (N, n) joint torques
 nominal_parameters(), nominal_payload() -> nominal vectors of the robot file, or None
 casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base regressor (n x nb)
 build()                               -> compile the C kernels of regressor_tx40.c now
+geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry (GEOMETRY_NAMES)
+geometry_columns(q, dq, ddq, chi_std) -> (N, n, n_g) the columns (dY_std/dg) chi_std
+GEOMETRY_NAMES                        -> the geometric constants g (d<j>, r<j>, alpha<j>, theta<j>)
 BACKEND                               -> "c" or "numpy" (see symoro_gen.runtime.GeneratedModel.backend)
 
 Importing compiles nothing: the C kernels are compiled by `symoro-gen build tx40` or by the
@@ -34,6 +37,8 @@ BASE_NAMES = ('ZZ1R', 'FV1', 'FS1', 'OFF1', 'XX2R', 'XY2', 'XZ2R', 'YZ2', 'ZZ2R'
 PAYLOAD_NAMES = ()
 GEOMETRY = {'D3': 0.225, 'R3': 0.035, 'RL4': 0.225}
 GRAVITY = (0.0, 0.0, -9.81)
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = ('alpha1', 'd2', 'r2', 'alpha2', 'theta2', 'd3', 'r3', 'alpha3', 'theta3', 'd4', 'r4', 'alpha4', 'theta4', 'd5', 'r5', 'alpha5', 'theta5', 'd6', 'r6', 'alpha6', 'theta6')
 ROBOT_FILE_SHA256 = '5ab015bd494ec4d67b76de18283a28316022734bf9dfe50e9371284280fbb12c'
 _NOMINAL = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.362, 8.05, 7.14, 0.392, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.362, 5.53, 8.26, 1.37, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0988, 1.97, 6.34, 0.326, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0313, 1.11, 2.48, -0.102, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0468, 1.86, 3.03, -0.0288, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0105, 0.65, 0.282, 0.127)
 _NOMINAL_PAYLOAD = None
@@ -100,7 +105,11 @@ _RELATIONS = (
 )
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
+                         geometry=(__name__ + "._geometry", GEOMETRY_NAMES))
+geometry_derivative = _MODEL.geometry_derivative
+geometry_columns = _MODEL.geometry_columns
+casadi_geometry_columns = _MODEL.casadi_geometry_columns
 regressor = _MODEL.regressor
 standard_regressor = _MODEL.standard_regressor
 payload_regressor = _MODEL.payload_regressor

@@ -49,6 +49,7 @@ from .backends.c import c_source
 from .backends.casadi import casadi_function, casadi_source
 from .backends.numpy import kernel_source, load_kernel
 from .closedloop import closed_loop_files
+from .geometry import geometry_files
 from .optimize import optimize
 from .printing import OpCount, graph_ops, relation_text
 
@@ -176,6 +177,9 @@ torque(q, dq, ddq, chi_std[, chi_payload]) -> (N, n) joint torques
 nominal_parameters(), nominal_payload() -> nominal vectors of the robot file, or None
 casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base regressor (n x nb)
 build()                               -> compile the C kernels of regressor_{robot}.c now
+geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry ({geometry_note})
+geometry_columns(q, dq, ddq, chi_std) -> (N, n, n_g) the columns (dY_std/dg) chi_std
+GEOMETRY_NAMES                        -> the geometric constants g (d<j>, r<j>, alpha<j>, theta<j>)
 BACKEND                               -> "c" or "numpy" (see symoro_gen.runtime.GeneratedModel.backend)
 
 Importing compiles nothing: the C kernels are compiled by `symoro-gen build {robot}` or by the
@@ -196,6 +200,8 @@ BASE_NAMES = {base!r}
 PAYLOAD_NAMES = {payload!r}
 GEOMETRY = {geometry!r}
 GRAVITY = {gravity!r}
+# geometric constants of geometry_derivative (imported from _geometry.py on first use)
+GEOMETRY_NAMES = {geometry_names!r}
 ROBOT_FILE_SHA256 = {sha!r}
 _NOMINAL = {nominal!r}
 _NOMINAL_PAYLOAD = {nominal_payload!r}
@@ -203,7 +209,11 @@ _NOMINAL_PAYLOAD = {nominal_payload!r}
 {relations}
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
-                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi)
+                         PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
+                         geometry={geometry_module})
+geometry_derivative = _MODEL.geometry_derivative
+geometry_columns = _MODEL.geometry_columns
+casadi_geometry_columns = _MODEL.casadi_geometry_columns
 regressor = _MODEL.regressor
 standard_regressor = _MODEL.standard_regressor
 payload_regressor = _MODEL.payload_regressor
@@ -319,6 +329,8 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: s
     files[f"regressor_{robot.name}.c"] = c_source(robot.name, n, graphs, names, *qs, header.replace("# ", ""))
     files["_casadi.py"] = _CASADI_TEMPLATE.format(
         header=header, robot=robot.name, kernel=casadi_source(graphs["base"], names["base"], "base_casadi", *qs))
+    geo_files, geo_manifest = geometry_files(robot, header)
+    files.update(geo_files)
     rel = _relations(bp, subs)
     files["__init__.py"] = _MODULE_TEMPLATE.format(
         header=header,
@@ -333,6 +345,10 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: s
         nominal=robot.nominal_vector(),
         nominal_payload=robot.nominal_payload(),
         relations=_relations_code(rel, tuple(bp.base_names)),
+        geometry_module='(__name__ + "._geometry", GEOMETRY_NAMES)' if geo_files else "None",
+        geometry_names=tuple(geo_manifest.get("names", ())),
+        geometry_note=("GEOMETRY_NAMES" if geo_files else "not generated for this robot: manifest.json, "
+                       "geometry_derivative.omitted"),
     )
     counted: dict[Any, OpCount] = {}  # each expression counted once across the three graphs
     all_ops = {k: graph_ops(graphs[k], counted) for k in ("base", "standard", "payload")}
@@ -359,6 +375,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: s
         "c_file": f"regressor_{robot.name}.c",
         "c_functions": {k: f"{robot.name}_{k}_regressor" for k in ("base", "standard", "payload")},
         "files": sorted(list(files) + ["manifest.json"]),
+        "geometry_derivative": geo_manifest,
     }
     if robot.loops:  # closed loops: this package is the tree model; symoro_gen.closedloop projects it
         manifest["closed_loops"] = len(robot.loops)

@@ -58,9 +58,12 @@ def compiler() -> str | None:
     return None
 
 
-def compile_flags(source_size: int) -> list[str]:
-    """-O3, or -O1 for sources above :data:`LARGE_SOURCE` bytes, plus the common flags."""
-    return ["-O1" if source_size > LARGE_SOURCE else "-O3", *_COMMON_FLAGS]
+def compile_flags(source_size: int, opt: str | None = None) -> list[str]:
+    """-O3, or -O1 for sources above :data:`LARGE_SOURCE` bytes (``opt``, e.g. ``"-O0"``, when given),
+    plus the common flags."""
+    if opt is None:
+        opt = "-O1" if source_size > LARGE_SOURCE else "-O3"
+    return [opt, *_COMMON_FLAGS]
 
 
 def _cpu_tag() -> str:
@@ -75,9 +78,9 @@ def _cpu_tag() -> str:
     return info
 
 
-def library_name(c_path: Path, source: bytes) -> str:
+def library_name(c_path: Path, source: bytes, opt: str | None = None) -> str:
     """File name of the library of one C source: ``<stem>_<sha256 of source, flags, CPU>.so``."""
-    flags = " ".join(compile_flags(len(source)))
+    flags = " ".join(compile_flags(len(source), opt))
     tag = hashlib.sha256(source + b"\0" + flags.encode() + b"\0" + _cpu_tag().encode()).hexdigest()[:16]
     return f"{c_path.stem}_{tag}.so"
 
@@ -92,9 +95,9 @@ def build_dirs(c_path: Path) -> list[Path]:
     return [c_path.parent / "_build", user_cache()]
 
 
-def find_library(c_path: Path) -> Path | None:
-    """An already-built library of this exact source, or None."""
-    name = library_name(c_path, c_path.read_bytes())
+def find_library(c_path: Path, opt: str | None = None) -> Path | None:
+    """An already-built library of this exact source (and optimisation level ``opt``), or None."""
+    name = library_name(c_path, c_path.read_bytes(), opt)
     for d in build_dirs(c_path):
         if (d / name).is_file() and (d / name).stat().st_size > 0:
             return d / name
@@ -129,7 +132,8 @@ def _run_compiler(cmd: list[str], timeout: float) -> None:
         raise CBuildError(f"the C compiler failed (exit {proc.returncode}): {first.strip()}")
 
 
-def build_library(c_path: str | os.PathLike[str], *, timeout: float | None = None, force: bool = False) -> BuildResult:
+def build_library(c_path: str | os.PathLike[str], *, timeout: float | None = None, force: bool = False,
+                  opt: str | None = None) -> BuildResult:
     """Find, or compile, the shared library of ``c_path``.
 
     Parameters
@@ -140,6 +144,9 @@ def build_library(c_path: str | os.PathLike[str], *, timeout: float | None = Non
         Seconds before the compiler is killed (default ``$SYMORO_CC_TIMEOUT`` or :data:`TIMEOUT_S`).
     force : bool
         Compile even when a library of this source exists.
+    opt : str, optional
+        Optimisation flag instead of the size rule of :func:`compile_flags` (the geometry derivative's
+        long straight-line function takes minutes at ``-O1`` with GCC: it is compiled at ``-O0``).
 
     Raises
     ------
@@ -148,14 +155,14 @@ def build_library(c_path: str | os.PathLike[str], *, timeout: float | None = Non
     """
     c_path = Path(c_path).resolve()
     if not force:
-        found = find_library(c_path)
+        found = find_library(c_path, opt)
         if found is not None:
             return BuildResult(found, False)
     cc = compiler()
     if cc is None:
         raise CBuildError("no C compiler found (set $CC, or install cc/gcc/clang)")
     source = c_path.read_bytes()
-    name = library_name(c_path, source)
+    name = library_name(c_path, source, opt)
     if timeout is None:
         timeout = float(os.environ.get("SYMORO_CC_TIMEOUT", TIMEOUT_S))
     for d in build_dirs(c_path):
@@ -166,7 +173,7 @@ def build_library(c_path: str | os.PathLike[str], *, timeout: float | None = Non
         tmp = Path(tempfile.mkdtemp(prefix=".compiling-", dir=d))
         try:
             lib = tmp / name
-            _run_compiler([cc, *compile_flags(len(source)), "-o", str(lib), str(c_path), "-lm"], timeout)
+            _run_compiler([cc, *compile_flags(len(source), opt), "-o", str(lib), str(c_path), "-lm"], timeout)
             os.chmod(lib, ordinary_mode(is_dir=True))  # rwx like an executable
             os.replace(lib, d / name)
         except CBuildError as exc:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import ctypes
+import importlib
 import os
 import threading
 import warnings
@@ -14,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .batch import evaluate_kernel
-from .casadi import build_function
+from .casadi import build_function, build_geometry_function
 from .ccompile import (
     BuildResult,
     CBuildError,
@@ -24,6 +25,9 @@ from .ccompile import (
     load_functions,
 )
 from .inputs import joint_states, output_array
+
+#: optimisation level of the geometry derivative's C file (its one long function: minutes at -O1 with GCC)
+GEOMETRY_OPT = "-O0"
 
 #: (robot, C file) pairs already warned about in this process: one fallback warning per model
 _WARNED: set[tuple[str, str]] = set()
@@ -55,6 +59,10 @@ class GeneratedModel:
         ``base_kernel``, ``standard_kernel``, ``payload_kernel`` (NumPy, emitted).
     construct_casadi : callable, optional
         ``base_casadi(ca, q, dq, ddq, out)`` of the package's ``_casadi.py``.
+    geometry : (module or str, tuple of str), optional
+        The package's ``_geometry.py`` (derivative of the standard regressor w.r.t. the geometric
+        constants, :mod:`symoro_gen.emit.geometry`), or its module name, imported on first use (it is
+        large), and its constants ``GEOMETRY_NAMES``; None when the package has none.
 
     Notes
     -----
@@ -65,7 +73,8 @@ class GeneratedModel:
 
     def __init__(self, package_dir: str | os.PathLike[str], robot: str, n_joints: int, standard_names: Sequence[str],
                  base_names: Sequence[str], payload_names: Sequence[str], relations: Sequence[Any], kernels: ModuleType,
-                 construct_casadi: Callable[..., Any] | None = None, *, c_file: str | None = None, numpy_only: bool = False):
+                 construct_casadi: Callable[..., Any] | None = None, *, c_file: str | None = None, numpy_only: bool = False,
+                 geometry: tuple[ModuleType | str, Sequence[str]] | None = None):
         self.package_dir = Path(package_dir)
         self.ROBOT = robot
         self.N_JOINTS = int(n_joints)
@@ -89,6 +98,10 @@ class GeneratedModel:
         self._resolved = False
         self._reason = ""
         self._lock = threading.Lock()
+        self._geometry: ModuleType | str | None = None if geometry is None else geometry[0]
+        self.GEOMETRY_NAMES: tuple[str, ...] = () if geometry is None else tuple(geometry[1])
+        self._geo_c: Any = None
+        self._geo_resolved = False
 
     # -- backend ---------------------------------------------------------------------------------
     @property
@@ -107,6 +120,7 @@ class GeneratedModel:
         m = object.__new__(GeneratedModel)
         m.__dict__.update(self.__dict__)
         m._numpy_only, m._c, m._resolved, m._lock = True, None, False, threading.Lock()
+        m._geo_c, m._geo_resolved = None, False
         return m
 
     def build(self, *, force: bool = False, timeout: float | None = None) -> BuildResult:
@@ -220,3 +234,78 @@ class GeneratedModel:
         if self._construct_casadi is None:
             raise CBuildError(f"{self.ROBOT}: this package has no CasADi construction")
         return build_function(self._construct_casadi, f"regressor_{self.ROBOT}", self.N_JOINTS, len(self.BASE_NAMES))
+
+    # -- geometry derivative ----------------------------------------------------------------------
+    def _geometry_module(self) -> ModuleType:
+        if self._geometry is None:
+            raise CBuildError(f"{self.ROBOT}: this package has no geometry derivative (manifest.json, "
+                              "geometry_derivative.omitted, says why)")
+        if isinstance(self._geometry, str):
+            self._geometry = importlib.import_module(self._geometry)
+        return self._geometry
+
+    def _geometry_c_function(self) -> Any:
+        """The C function of ``geometry_<robot>.c`` (compiled on first use), or None (NumPy kernel)."""
+        with self._lock:
+            if not self._geo_resolved:
+                self._geo_resolved = True
+                path = self.package_dir / f"geometry_{self.ROBOT}.c"
+                name = f"{self.ROBOT}_geometry_derivative"
+                if not (self._numpy_only or _numpy_forced()) and path.exists():
+                    try:
+                        self._geo_c = load_functions(build_library(path, opt=GEOMETRY_OPT).path, [name])[name]
+                    except (CBuildError, OSError) as exc:
+                        warnings.warn(f"{self.ROBOT}: C geometry kernel unavailable ({exc}); using the NumPy "
+                                      "kernel (same results, slower)", CBackendWarning, stacklevel=4)
+            return self._geo_c
+
+    def _geometry_compact(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike
+                          ) -> tuple[NDArray[np.float64], NDArray[np.int_], bool]:
+        """The kernel's output (N, n, n_pairs), the pairs (n_pairs, 2), and whether inputs were 1-D."""
+        geo = self._geometry_module()
+        (Q, DQ, DDQ), one = joint_states(self.ROBOT, self.N_JOINTS, q, dq, ddq)
+        N, n = Q.shape[0], self.N_JOINTS
+        pairs = np.asarray(geo.GEOMETRY_PAIRS, dtype=int).reshape(-1, 2)
+        compact = np.zeros((N, n, len(pairs)))
+        fn = self._geometry_c_function()
+        if fn is not None:
+            fn(N, np.ascontiguousarray(Q), np.ascontiguousarray(DQ), np.ascontiguousarray(DDQ), compact)
+        else:
+            evaluate_kernel(geo.geometry_kernel, n, len(pairs), Q, DQ, DDQ, compact)
+        return compact, pairs, one
+
+    def geometry_derivative(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
+        """``dY_std/dg`` at the nominal geometry: shape (N, n, len(STANDARD_NAMES), len(GEOMETRY_NAMES))
+        ((n, n_st, n_g) for 1-D inputs).
+
+        ``[s, i, k, m]`` is the derivative of the standard regressor's entry (row i, column k) with respect
+        to the geometric constant ``GEOMETRY_NAMES[m]`` (MDH ``d<j>``, ``r<j>`` [m], ``alpha<j>``,
+        ``theta<j>`` [rad]; ``theta<j>`` of a revolute joint, ``r<j>`` of a prismatic one is its joint zero).
+        With ``tau = Y_std(q, dq, ddq; g) chi_std``, ``d tau / d g = (dY_std/dg) chi_std``
+        (:meth:`geometry_columns`, cheaper).
+        """
+        compact, pairs, one = self._geometry_compact(q, dq, ddq)
+        N, n = compact.shape[:2]
+        res = np.zeros((N, n, len(self.STANDARD_NAMES), len(self.GEOMETRY_NAMES)))
+        res[:, :, pairs[:, 0], pairs[:, 1]] = compact
+        return res[0] if one else res
+
+    def geometry_columns(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike, chi_std: ArrayLike) -> NDArray[np.float64]:
+        """``d tau / d g = (dY_std/dg) chi_std``: shape (N, n, len(GEOMETRY_NAMES)) ((n, n_g) for 1-D inputs),
+        the sensitivity of the joint torques to each geometric constant at the parameters ``chi_std``."""
+        chi = np.asarray(chi_std, dtype=float)
+        if chi.shape != (len(self.STANDARD_NAMES),):
+            raise ValueError(f"{self.ROBOT}: chi_std must have shape ({len(self.STANDARD_NAMES)},) "
+                             f"(STANDARD_NAMES), got {chi.shape}")
+        compact, pairs, one = self._geometry_compact(q, dq, ddq)
+        M = np.zeros((len(pairs), len(self.GEOMETRY_NAMES)))
+        M[np.arange(len(pairs)), pairs[:, 1]] = chi[pairs[:, 0]]
+        out: NDArray[np.float64] = compact @ M
+        return out[0] if one else out
+
+    def casadi_geometry_columns(self) -> Any:
+        """``casadi.Function geometry_<robot>(q, dq, ddq, chi_std) -> G`` (n x n_g): :meth:`geometry_columns`
+        of one sample, from the package's CasADi construction of ``dY_std/dg``."""
+        geo = self._geometry_module()
+        return build_geometry_function(geo.geometry_casadi, f"geometry_{self.ROBOT}", self.N_JOINTS,
+                                       len(self.STANDARD_NAMES), len(self.GEOMETRY_NAMES), geo.GEOMETRY_PAIRS)

@@ -226,8 +226,10 @@ def test_generated_package_source_has_no_runtime_copies():
         names = sorted(p.name for p in pkg.iterdir() if p.name not in ("_build", "__pycache__"))
         loops = (["closed_loop_base_parameters.md", "_closed_loop.py"]  # a closed-loop robot with a linear closure
                  if "closed_loops" in json.loads((pkg / "manifest.json").read_text()) else [])
+        geo = ([] if "omitted" in json.loads((pkg / "manifest.json").read_text())["geometry_derivative"]
+               else ["_geometry.py", f"geometry_{pkg.name}.c"])  # the geometry derivative
         assert names == sorted(["__init__.py", "_casadi.py", "_kernels.py", "base_parameters.md", "manifest.json",
-                                f"regressor_{pkg.name}.c", *loops])
+                                f"regressor_{pkg.name}.c", *loops, *geo])
         init = (pkg / "__init__.py").read_text()
         assert "from symoro_gen.runtime import GeneratedModel" in init
         assert "def _evaluate" not in init and "ctypes" not in init and "subprocess" not in init

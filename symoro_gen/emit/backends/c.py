@@ -98,9 +98,10 @@ def _vector_defs(graph: ExprGraph, memo: dict[Any, str] | None = None) -> list[s
 
 
 def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str, q: Sequence[sp.Symbol],
-               dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol], memo: dict[Any, str] | None = None) -> str:
-    """C source of the batch function ``func_name`` (SIMD loop + scalar remainder); ``memo``: see
-    :func:`~symoro_gen.emit.printing.print_expr`."""
+               dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol], memo: dict[Any, str] | None = None, *,
+               vector: bool = True) -> str:
+    """C source of the batch function ``func_name`` (SIMD loop + scalar remainder; the scalar loop only when
+    ``vector`` is False); ``memo``: see :func:`~symoro_gen.emit.printing.print_expr`."""
     col = {n: k for k, n in enumerate(col_names)}
     nc = len(col_names)
     entries = {(i, col[nm]): e for (i, nm), e in graph.outputs.items()}
@@ -115,6 +116,9 @@ def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_nam
             e = entries.get((i, k))
             scalar.append(f"        o[{i * nc + k}] = {print_expr(e, C_SCALAR, memo) if e is not None else '0.0'};")
     scalar += ["    }", "}"]
+    if not vector:
+        scalar[0] = f"void {func_name}{sig}"
+        return "\n".join(scalar + [""])
 
     simd = [f"void {func_name}{sig}", "{", "    long s = 0;", "    for (; s + SYM_LANES <= N; s += SYM_LANES) {"]
     simd += _inputs(graph, q, dq, ddq, "sym_vd", lambda a, i: f"sym_vload({a} + s * {n_rows} + {i}, {n_rows})")
