@@ -8,8 +8,7 @@ the environment on the robot at frames ``c`` (force plates, F/T sensors), the eq
 
 ``J_c`` the ``6 x (6 + n)`` Jacobian of frame ``c`` in its own axes (Pinocchio's ``LOCAL``) and ``f_c``
 (force, then moment about the frame's origin) in the same axes. Their rows are of two kinds
-(Ayusawa, Venture & Nakamura 2014, "Identifiability and identification of inertial parameters using the
-underactuated base-link dynamics for legged multibody systems", IJRR 33(3), eq. 10-13):
+([AVN2014], the base-link equations of motion):
 
 * ``"base"``: the 6 base rows, ``Y_base chi = sum_c J_c,base^T f_c`` (the contact wrenches carried to the base
   origin, in base axes). No joint torque is needed; they identify every identifiable inertial parameter, and
@@ -25,7 +24,7 @@ in standard order (:func:`~symoro_gen.runtime.floating.numeric_base`, Gram-Schmi
 relations ``K`` of the others, so that the identified values estimate ``K @ chi_std``. Standard parameters
 whose column of ``K`` is zero are reported as not identifiable from those rows. The fit is the fixed-base
 estimators' (:func:`~symoro_gen.identification.estimators.fit_ols`, :func:`~.estimators.fit_wls`), with
-their statistics.
+their statistics ([GB-gains] eq. 17-22).
 
 Base accelerations from an IMU: the model takes Pinocchio's spatial acceleration of the base
 (``a - omega x v`` in base axes for a classical acceleration ``a`` of the base origin);
@@ -139,8 +138,7 @@ class FloatingIdentification:
 
 def spatial_base_acceleration(dq: ArrayLike, classical: ArrayLike) -> NDArray[np.float64]:
     """The base's spatial linear acceleration ``a - omega x v`` (base axes, rows ``(N, 3)``) of the classical
-    acceleration ``a`` of its origin, ``omega = dq[:, 3:6]`` and ``v = dq[:, 0:3]`` (Featherstone 2008,
-    Rigid Body Dynamics Algorithms, sec. 2.11)."""
+    acceleration ``a`` of its origin, ``omega = dq[:, 3:6]`` and ``v = dq[:, 0:3]`` ([F2008] sec. 2.11)."""
     d = np.atleast_2d(np.asarray(dq, float))
     a = np.atleast_2d(np.asarray(classical, float))
     out: NDArray[np.float64] = a - np.cross(d[:, 3:6], d[:, 0:3])
