@@ -63,15 +63,20 @@ class ContactWrench:
         The frame's name (reported in errors).
     wrench : array (N, 6)
         Force, then moment about the frame's origin, in the frame's axes.
-    jacobian : array (N, 6, 6 + n)
+    jacobian : array (N, 6, 6 + n), optional
         The frame's Jacobian in its own axes (Pinocchio ``LOCAL``: linear, then angular velocity of the frame
         from ``dq``). Its first 6 columns carry the wrench to the base (``J_c,base^T f_c``), the others to the
         joints.
+    transform : array (N, 4, 4), optional
+        In place of the Jacobian, for the base rows only: the frame's pose in base axes (``T_0c``, the
+        homogeneous transform from the frame to the base). ``J_c,base^T f_c = (R f, R m + p x R f)``, the
+        wrench carried to the base origin ([F2008] sec. 2.8).
     """
 
     frame: str
     wrench: ArrayLike
-    jacobian: ArrayLike
+    jacobian: ArrayLike | None = None
+    transform: ArrayLike | None = None
 
 
 @dataclass(frozen=True)
@@ -169,9 +174,26 @@ def measured_rows(model: FloatingModel, data: FloatingMeasurements, need_tau: bo
         raise IdentificationError(f"{robot}: the joint rows need joint torques (tau, shape ({N}, {n}))")
     for c in data.contacts:
         f = _array(robot, f"contact {c.frame!r}: wrench", c.wrench, (N, 6))
-        J = _array(robot, f"contact {c.frame!r}: jacobian", c.jacobian, (N, 6, 6 + n))
-        rows += np.einsum("kri,kr->ki", J, f)
+        if c.jacobian is not None:
+            J = _array(robot, f"contact {c.frame!r}: jacobian", c.jacobian, (N, 6, 6 + n))
+            rows += np.einsum("kri,kr->ki", J, f)
+        elif c.transform is not None and not need_tau:
+            rows[:, :6] += wrench_at_base(_array(robot, f"contact {c.frame!r}: transform", c.transform, (N, 4, 4)), f)
+        else:
+            raise IdentificationError(
+                f"{robot}: contact {c.frame!r}: give its jacobian (N, 6, {6 + n})"
+                + ("" if c.transform is None else "; a transform only carries the wrench to the base rows"))
     return rows
+
+
+def wrench_at_base(transform: NDArray[np.float64], wrench: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(N, 6)``: wrenches (force, moment about the frame's origin, frame axes) carried to the base origin in
+    base axes by the frames' poses ``T_0c`` (N, 4, 4): ``(R f, R m + p x R f)`` ([F2008] sec. 2.8)."""
+    R, p = transform[:, :3, :3], transform[:, :3, 3]
+    force = np.einsum("kij,kj->ki", R, wrench[:, :3])
+    moment = np.einsum("kij,kj->ki", R, wrench[:, 3:]) + np.cross(p, force)
+    out: NDArray[np.float64] = np.hstack([force, moment])
+    return out
 
 
 def floating_system(model: FloatingModel, data: FloatingMeasurements, kind: str = "base",

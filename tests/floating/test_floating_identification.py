@@ -23,6 +23,7 @@ from symoro_gen.identification.floating import (
     ContactWrench,
     FloatingMeasurements,
     identify_floating,
+    measured_rows,
     spatial_base_acceleration,
 )
 from symoro_gen.params import INERTIAL_KINDS
@@ -134,6 +135,28 @@ def test_recovered_within_3_sigma(quadruped, kind, weighting):
         by_kind = [np.sqrt(np.mean(expected[:6] ** 2)), np.sqrt(np.mean(expected[6:] ** 2))]
         print(f"kind sigmas {fit.result.joint_sigma}, expected from the noise {by_kind}")
         assert fit.result.joint_sigma == pytest.approx(by_kind, rel=0.15)
+
+
+def test_contact_transform_equals_jacobian_base_rows(quadruped):
+    """A contact given by its pose in base axes (Pinocchio's placements, base^-1 * frame) carries its wrench
+    to the base rows as its Jacobian's base columns do."""
+    robot, model = quadruped
+    data, chi = _simulate(robot, 6, seed=4, noisy=False)
+    pmodel, pdata = build_floating_pinocchio(robot, chi)
+    poses = {"foot_a": "joint3", "foot_b": "joint9"}
+    contacts = []
+    for c in data.contacts:
+        T = []
+        for k in range(data.q.shape[0]):
+            pin.forwardKinematics(pmodel, pdata, data.q[k])
+            T.append((pdata.oMi[1].inverse() * pdata.oMi[pmodel.getJointId(poses[c.frame])]).homogeneous)
+        contacts.append(ContactWrench(c.frame, c.wrench, transform=np.array(T)))
+    by_pose = measured_rows(model, FloatingMeasurements(data.q, data.dq, data.ddq, contacts=tuple(contacts)), False)
+    by_jacobian = measured_rows(model, data, True)
+    assert np.abs(by_pose[:, :6] - by_jacobian[:, :6]).max() < 1e-9 * np.abs(by_jacobian[:, :6]).max()
+    with pytest.raises(IdentificationError, match=r"foot_a.*jacobian"):
+        identify_floating(model, FloatingMeasurements(data.q, data.dq, data.ddq, tau=data.tau,
+                                                      contacts=tuple(contacts)), "both")
 
 
 def test_imu_acceleration_galilean(quadruped):
