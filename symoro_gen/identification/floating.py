@@ -1,0 +1,243 @@
+"""Identification of a floating-base robot from base wrenches and joint torques.
+
+The floating-base model (:class:`~symoro_gen.runtime.floating.FloatingModel`, Pinocchio's free-flyer
+conventions) has ``6 + n`` rows per sample, the base wrench first. With contact wrenches ``f_c`` exerted by
+the environment on the robot at frames ``c`` (force plates, F/T sensors), the equations of motion are
+
+    ``Y_std(q, dq, ddq) chi = S^T tau + sum_c J_c^T f_c``,    ``S = [0_{n x 6}  I_n]``,
+
+``J_c`` the ``6 x (6 + n)`` Jacobian of frame ``c`` in its own axes (Pinocchio's ``LOCAL``) and ``f_c``
+(force, then moment about the frame's origin) in the same axes. Their rows are of two kinds
+([AVN2014], the base-link equations of motion):
+
+* ``"base"``: the 6 base rows, ``Y_base chi = sum_c J_c,base^T f_c`` (the contact wrenches carried to the base
+  origin, in base axes). No joint torque is needed; they identify every identifiable inertial parameter, and
+  none of the drive terms (``IA FV FS OFF`` act on the joint rows only).
+* ``"joints"``: the ``n`` joint rows, ``Y_joints chi = tau + sum_c J_c,joints^T f_c``. The base link's
+  parameters do not appear there.
+* ``"both"``: all ``6 + n`` rows, each kind weighted by its own residual standard deviation with ``WLS``
+  (RX-90 paper eq. 22 with the kinds, or with ``weighting="row"`` each of the ``6 + n`` row positions, in
+  place of the joints).
+
+Each kind is reduced to its own numeric rank: the independent columns of its rows, stacked over the samples,
+in standard order (:func:`~symoro_gen.runtime.floating.numeric_base`, Gram-Schmidt [G1991]), and the
+relations ``K`` of the others, so that the identified values estimate ``K @ chi_std``. Standard parameters
+whose column of ``K`` is zero are reported as not identifiable from those rows. The fit is the fixed-base
+estimators' (:func:`~symoro_gen.identification.estimators.fit_ols`, :func:`~.estimators.fit_wls`), with
+their statistics ([GB-gains] eq. 17-22).
+
+Base accelerations from an IMU: the model takes Pinocchio's spatial acceleration of the base
+(``a - omega x v`` in base axes for a classical acceleration ``a`` of the base origin);
+:func:`spatial_base_acceleration` converts. The dynamics do not depend on the base's linear velocity
+(Galilean invariance), so with an IMU (no linear velocity) ``v = 0`` and the classical acceleration may be
+passed directly. Payload columns are not used yet.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import IdentificationError
+from ..runtime.floating import FloatingModel, floating_states, numeric_base
+from .estimators import fit_ols, fit_wls, tolerance_keywords
+from .observation import ObservationSystem
+from .result import IdentificationResult
+
+#: the row kinds of :func:`floating_system`
+KINDS = ("base", "joints", "both")
+#: row groups of the WLS weighting: one per kind, or one per row position (6 base rows, then each joint)
+WEIGHTINGS = ("kind", "row")
+
+
+@dataclass(frozen=True)
+class ContactWrench:
+    """A wrench exerted by the environment on the robot at a named frame, per sample.
+
+    Attributes
+    ----------
+    frame : str
+        The frame's name (reported in errors).
+    wrench : array (N, 6)
+        Force, then moment about the frame's origin, in the frame's axes.
+    jacobian : array (N, 6, 6 + n), optional
+        The frame's Jacobian in its own axes (Pinocchio ``LOCAL``: linear, then angular velocity of the frame
+        from ``dq``). Its first 6 columns carry the wrench to the base (``J_c,base^T f_c``), the others to the
+        joints.
+    transform : array (N, 4, 4), optional
+        In place of the Jacobian, for the base rows only: the frame's pose in base axes (``T_0c``, the
+        homogeneous transform from the frame to the base). ``J_c,base^T f_c = (R f, R m + p x R f)``, the
+        wrench carried to the base origin ([F2008] sec. 2.8).
+    """
+
+    frame: str
+    wrench: ArrayLike
+    jacobian: ArrayLike | None = None
+    transform: ArrayLike | None = None
+
+
+@dataclass(frozen=True)
+class FloatingMeasurements:
+    """Samples of a floating-base robot in Pinocchio's free-flyer conventions.
+
+    Attributes
+    ----------
+    q, dq, ddq : arrays (N, 7 + n), (N, 6 + n), (N, 6 + n)
+        As :meth:`FloatingModel.standard_regressor` takes them (base orientation and rates from an IMU or a
+        motion-capture pose).
+    base_wrench : array (N, 6), optional
+        An external wrench already carried to the base origin, in base axes (force, then moment).
+    tau : array (N, n), optional
+        Joint torques (needed for the ``"joints"`` and ``"both"`` kinds).
+    contacts : sequence of ContactWrench
+        Contact wrenches at named frames, added to both kinds of rows through their Jacobians.
+    """
+
+    q: ArrayLike
+    dq: ArrayLike
+    ddq: ArrayLike
+    base_wrench: ArrayLike | None = None
+    tau: ArrayLike | None = None
+    contacts: Sequence[ContactWrench] = field(default_factory=tuple)
+
+
+@dataclass(frozen=True, eq=False)
+class FloatingSystem:
+    """The system of one kind of rows, reduced to its own numeric rank.
+
+    Attributes
+    ----------
+    kind : str
+    system : ObservationSystem
+        Rows grouped by kind (group 0: base rows, 1: joint rows) or by row position (``weighting="row"``);
+        columns: the independent standard columns of those rows.
+    relations : array (n_identifiable, n_standard)
+        ``K``: the identified values estimate ``K @ chi_std``.
+    not_identifiable : tuple of str
+        Standard parameters whose column of ``K`` is zero (absent from every identifiable combination).
+    """
+
+    kind: str
+    system: ObservationSystem
+    relations: NDArray[np.float64]
+    not_identifiable: tuple[str, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class FloatingIdentification:
+    """An identification of one kind of rows: the fixed-base result and the reduction it was made on."""
+
+    kind: str
+    result: IdentificationResult
+    relations: NDArray[np.float64]
+    not_identifiable: tuple[str, ...]
+
+    def combinations(self, chi_std: ArrayLike) -> NDArray[np.float64]:
+        """``K @ chi_std``: what ``result.values`` estimates, for given standard parameters."""
+        out: NDArray[np.float64] = self.relations @ np.asarray(chi_std, float)
+        return out
+
+
+def spatial_base_acceleration(dq: ArrayLike, classical: ArrayLike) -> NDArray[np.float64]:
+    """The base's spatial linear acceleration ``a - omega x v`` (base axes, rows ``(N, 3)``) of the classical
+    acceleration ``a`` of its origin, ``omega = dq[:, 3:6]`` and ``v = dq[:, 0:3]`` ([F2008] sec. 2.11)."""
+    d = np.atleast_2d(np.asarray(dq, float))
+    a = np.atleast_2d(np.asarray(classical, float))
+    out: NDArray[np.float64] = a - np.cross(d[:, 3:6], d[:, 0:3])
+    return out
+
+
+def _array(robot: str, name: str, x: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    a = np.asarray(x, float)
+    if a.shape != shape:
+        raise IdentificationError(f"{robot}: {name} must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        bad = np.argwhere(~np.isfinite(a))[0]
+        raise IdentificationError(f"{robot}: {name} is not finite at sample {bad[0]}")
+    return a
+
+
+def measured_rows(model: FloatingModel, data: FloatingMeasurements, need_tau: bool) -> NDArray[np.float64]:
+    """``(N, 6 + n)``: the right-hand sides ``S^T tau + sum_c J_c^T f_c (+ base_wrench)`` (joint rows zero
+    without ``tau`` unless ``need_tau``, which makes a missing ``tau`` an error)."""
+    n, robot = model.N_JOINTS, model.ROBOT
+    N = np.atleast_2d(np.asarray(data.q, float)).shape[0]
+    rows = np.zeros((N, 6 + n))
+    if data.base_wrench is not None:
+        rows[:, :6] += _array(robot, "base_wrench", data.base_wrench, (N, 6))
+    if data.tau is not None:
+        rows[:, 6:] += _array(robot, "tau", data.tau, (N, n))
+    elif need_tau:
+        raise IdentificationError(f"{robot}: the joint rows need joint torques (tau, shape ({N}, {n}))")
+    for c in data.contacts:
+        f = _array(robot, f"contact {c.frame!r}: wrench", c.wrench, (N, 6))
+        if c.jacobian is not None:
+            J = _array(robot, f"contact {c.frame!r}: jacobian", c.jacobian, (N, 6, 6 + n))
+            rows += np.einsum("kri,kr->ki", J, f)
+        elif c.transform is not None and not need_tau:
+            rows[:, :6] += wrench_at_base(_array(robot, f"contact {c.frame!r}: transform", c.transform, (N, 4, 4)), f)
+        else:
+            raise IdentificationError(
+                f"{robot}: contact {c.frame!r}: give its jacobian (N, 6, {6 + n})"
+                + ("" if c.transform is None else "; a transform only carries the wrench to the base rows"))
+    return rows
+
+
+def wrench_at_base(transform: NDArray[np.float64], wrench: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(N, 6)``: wrenches (force, moment about the frame's origin, frame axes) carried to the base origin in
+    base axes by the frames' poses ``T_0c`` (N, 4, 4): ``(R f, R m + p x R f)`` ([F2008] sec. 2.8)."""
+    R, p = transform[:, :3, :3], transform[:, :3, 3]
+    force = np.einsum("kij,kj->ki", R, wrench[:, :3])
+    moment = np.einsum("kij,kj->ki", R, wrench[:, 3:]) + np.cross(p, force)
+    out: NDArray[np.float64] = np.hstack([force, moment])
+    return out
+
+
+def floating_system(model: FloatingModel, data: FloatingMeasurements, kind: str = "base",
+                    weighting: str = "kind") -> FloatingSystem:
+    """The stacked system of ``kind`` (``"base"``, ``"joints"`` or ``"both"``) reduced to its own numeric rank
+    (module docstring)."""
+    if kind not in KINDS:
+        raise IdentificationError(f"{model.ROBOT}: kind must be one of {KINDS}, got {kind!r}")
+    if weighting not in WEIGHTINGS:
+        raise IdentificationError(f"{model.ROBOT}: weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+    (q, dq, ddq), _ = floating_states(model.ROBOT, model.N_JOINTS, data.q, data.dq, data.ddq)
+    W = model.standard_regressor(q, dq, ddq)
+    Y = measured_rows(model, data, need_tau=kind != "base")
+    sel = {"base": slice(0, 6), "joints": slice(6, None), "both": slice(None)}[kind]
+    W, Y = W[:, sel, :], Y[:, sel]
+    position = np.arange(model.N_ROWS)[sel]
+    if weighting == "row":
+        group = position - position[0]
+    else:
+        group = (position >= 6).astype(int) - int(position[0] >= 6)
+    # rows grouped (all rows of group 0 first, ...), as ObservationSystem expects
+    order = np.argsort(group, kind="stable")
+    Wr = W[:, order, :].transpose(1, 0, 2).reshape(-1, W.shape[2])
+    Yr = Y[:, order].T.reshape(-1)
+    rows_group = np.repeat(group[order], W.shape[0])
+    kept, K = numeric_base(Wr)
+    if kept.size == 0:
+        raise IdentificationError(f"{model.ROBOT}: the {kind} rows identify no parameter")
+    names = tuple(model.STANDARD_NAMES[i] for i in kept)
+    absent = tuple(n for i, n in enumerate(model.STANDARD_NAMES) if not np.any(K[:, i]))
+    system = ObservationSystem(W=Wr[:, kept], Y=Yr, names=names, joint=rows_group)
+    return FloatingSystem(kind, system, K, absent)
+
+
+def identify_floating(model: FloatingModel, data: FloatingMeasurements, kind: str = "base", method: str = "wls",
+                      weighting: str = "kind", **tolerances: Any) -> FloatingIdentification:
+    """IDIM-OLS or -WLS of ``kind``'s rows alone (or of both kinds, each weighted by its own sigma with WLS)
+    on the system of :func:`floating_system`; ``tolerances``: those of the fixed-base estimators."""
+    tol = tolerance_keywords("identify_floating", tolerances)
+    fs = floating_system(model, data, kind, weighting)
+    if method == "ols":
+        res = fit_ols(fs.system, **tol)
+    elif method == "wls":
+        res = fit_wls(fs.system, **tol)
+    else:
+        raise IdentificationError(f"{model.ROBOT}: method must be 'ols' or 'wls', got {method!r}")
+    return FloatingIdentification(kind, res, fs.relations, fs.not_identifiable)
