@@ -247,7 +247,7 @@ class _Design:
     w: np.ndarray       # (r,) row weights 1/sigma_j
     wv: np.ndarray      # (rv,)
     U: np.ndarray       # (r, rank) orthonormal basis of A*w
-    pinv: np.ndarray    # (k, r) pseudo-inverse of A*w
+    VS: np.ndarray      # (k, rank) V S^-1: the pseudo-inverse of A*w is VS @ U.T (never formed: it is as large as A)
     theta: np.ndarray   # (k,) weighted LS estimate
     e_w: np.ndarray     # (r,) weighted residual
     e_v: np.ndarray     # (rv,) unweighted validation residual
@@ -264,14 +264,15 @@ def _design(names, A, Y, joint, Av, Yv, jv, n, rank_tol=1e-10, w_resid=None) -> 
     _, s, Vt = np.linalg.svd(R)
     rank = int(np.sum(s > rank_tol * s[0]))
     s, Vt = s[:rank], Vt[:rank]
-    U = Aw @ (Vt.T / s)
-    pinv = (Vt.T / s) @ U.T
-    theta = pinv @ (Y * w)
+    VS = Vt.T / s
+    U = Aw @ VS
+    theta = VS @ (U.T @ (Y * w))
     e_w = Y * w - Aw @ theta
+    del Aw
     e_v = Yv - Av @ theta
     sv = _joint_sigma(e_v, jv, n, 0)
     wv = 1.0 / sv[jv]
-    return _Design(tuple(names), A, Av, w, wv, U, pinv, theta, e_w, e_v, rank)
+    return _Design(tuple(names), A, Av, w, wv, U, VS, theta, e_w, e_v, rank)
 
 
 @dataclass
@@ -371,7 +372,7 @@ class _Scorer:
         pval = max(p_hac, p_iid)
         Cb = Cb if np.trace(Cb @ np.linalg.pinv(Ci)) >= p else Ci
         beta = b / norms                      # coefficients of X
-        dtheta = -D.pinv @ (Xw @ beta)        # change of the current model's coefficients
+        dtheta = -D.VS @ (C @ b)              # change of the current model's coefficients (pinv(Aw) Xw beta)
         dv = D.Av @ dtheta + Xv @ beta
         ev1 = D.e_v - dv
         rv1 = np.bincount(self.V.system.joint, weights=ev1 ** 2, minlength=self.n)
@@ -381,7 +382,7 @@ class _Scorer:
         wv = D.wv
         dec = float(np.sum((D.e_v ** 2 - ev1 ** 2) * wv ** 2))
         # prediction change on validation (weighted) per unit of the scaled coefficients b
-        Mv = (Xv * wv[:, None]) / norms - self.Avw @ (D.pinv @ Xs)
+        Mv = (Xv * wv[:, None]) / norms - self.Avw @ (D.VS @ C)
         m = float(np.einsum("ij,jk,ik->", Mv, Cb, Mv))
         Sv = hac_covariance(Mv * (ev1 * wv)[:, None], max_lag=self.lag_v, segments=self.gv)
         var = max(float(np.sum(Sv * Cb)), float(np.mean((ev1 * wv) ** 2)) * m)
@@ -1200,6 +1201,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
     resid_user = Y - A @ np.array([state.res.value(nm) for nm in names])
     D = _design(names + base.nuisance_names, np.hstack([A, base.N_id]), Y, J, np.hstack([Av, base.N_v]),
                 data.Vs.Y, data.Vs.joint, n, w_resid=resid_user)
+    del A, Av, resid_user   # D holds the design with the nuisance columns: no second copy while scoring
     ctx = _context(data, F, V, names, D.theta[:len(names)])
     scorer = _Scorer(D, F, V, n, cfg.identifiability_tol, max(MIN_SUPPORT_ROWS, MIN_SUPPORT_SHARE * F.n_rows / n))
     done = {ad.family.key for ad in state.added}
@@ -1420,8 +1422,7 @@ def _score_composed_round(data: _Data, base: _Baseline, state: _State, D: _Desig
     lib = [fam for fam in lib if fam and (fam[0].effect, fam[0].joint, None, _composed_variant(fam[0])) not in done]
     if not lib:
         return [], []
-    A = np.hstack([_augmented(data, state.added)[1], base.N_id])
-    results = score_composed(A, Y, sigF, weights=D.w, groups=J * 100000 + F.row_experiment, alpha=cfg.significance,
+    results = score_composed(D.A, Y, sigF, weights=D.w, groups=J * 100000 + F.row_experiment, alpha=cfg.significance,
                              families=lib)
     zcrit = float(sst.norm.isf(cfg.significance / max(len(lib), 1)))
     tried, eligible = [], []
