@@ -480,8 +480,8 @@ def _link_length_families(ks: set[str], model: IdentificationModel | None) -> li
         return []
     out = []
     for f, fld in visible_lengths(model):
-        def build(fr, ctx, f=f, fld=fld):
-            return [length_column(fr, ctx.model, ctx.theta, f, fld)]
+        def build(fr, ctx, f=f, fld=fld):   # the model checked by link_length_ready: its base names
+            return [length_column(fr, model, ctx.theta, f, fld)]
 
         out.append(Family("link_length", length_joint(model, f), (fld,), build, variant=fld, reveal="q",
                           depends_on_fit=True, info=(("frame", f), ("field", fld))))

@@ -834,6 +834,10 @@ def standard_from_fit(model: IdentificationModel, robot, theta: Mapping[str, flo
     regressor, which the linear part of the fit absorbs."""
     std_names = tuple(model.STANDARD_NAMES)
     K = np.asarray(model.base_parameters(np.eye(len(std_names))), float).T   # (base, standard)
+    if K.shape[0] != len(tuple(model.BASE_NAMES)):
+        raise IdentificationError(f"{model.ROBOT}: the base parameters of the model ({len(tuple(model.BASE_NAMES))}) "
+                                  f"are not its base_parameters map's ({K.shape[0]}): no standard parameters for "
+                                  "the length sensitivity (a declared friction law replaces base columns)")
     chi_b = np.array([float(theta.get(nm, 0.0)) for nm in model.BASE_NAMES])
     chi = np.linalg.pinv(K) @ chi_b
     by = dict(zip(std_names, chi))
