@@ -247,7 +247,7 @@ def visible_lengths(model: IdentificationModel) -> tuple[tuple[int, str], ...]:
     robot = description_of(model)
     if robot is None:
         return ()
-    return tuple((v.frame, v.field) for v in length_identifiability(robot) if v.visible)
+    return tuple((v.frame, v.field) for v in length_identifiability(robot, model=model) if v.visible)
 
 
 def length_joint(model: IdentificationModel, frame: int) -> int | None:

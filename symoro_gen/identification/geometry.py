@@ -42,6 +42,7 @@ from ..model import IdentificationModel
 from ..observations.assembly import iter_kinematics, observation_settings
 from ..observations.raw import full_rate_torque
 from ..observations.system import ObservationSystem
+from ..params import INERTIAL_KINDS, split_name
 from .systems import stack_systems
 
 __all__ = ["GEOMETRY_KINDS", "LENGTH_VISIBILITY_TOL", "MAX_LENGTH_M", "MAX_LENGTH_REACH", "GaussNewton",
@@ -730,27 +731,58 @@ _LENGTH_VISIBILITY: dict = {}   # id(robot) -> (robot, result): the default meas
 
 
 def length_identifiability(robot, *, tol: float = LENGTH_VISIBILITY_TOL, rng: np.random.Generator | None = None,
-                           n_samples: int = 30, n_theta: int = 3) -> tuple[LengthVisibility, ...]:
+                           n_samples: int = 30, n_theta: int = 2, model: IdentificationModel | None = None
+                           ) -> tuple[LengthVisibility, ...]:
     """Per frame and length (``d``, ``r``), whether torque data can see its error: the share of its sensitivity
     column (:func:`length_sensitivity`) outside the span of the standard regressor and of the columns of the
     visible lengths before it (frames in order, ``d`` before ``r``), the smallest over ``n_theta`` random
     standard parameter vectors, on ``n_samples`` random configurations (as :func:`zero_shares` for zeros; the
-    lengths one another can stand for are counted once)."""
+    lengths one another can stand for are counted once). The lengths of a frame on the base (a translation of
+    the whole arm) and of a frame that carries no inertial parameter are 0 without computing. ``model``: the
+    generated model of ``robot``, whose standard regressor spans the same space as the numeric one, faster."""
     if rng is None:
         got = _LENGTH_VISIBILITY.get(id(robot))
         if got is not None and got[0] is robot and (tol, n_samples, n_theta) == got[1]:
             return got[2]
-        out = _length_shares(robot, tol, np.random.default_rng(0), n_samples, n_theta)
+        out = _length_shares(robot, tol, np.random.default_rng(0), n_samples, n_theta, model)
         _LENGTH_VISIBILITY[id(robot)] = (robot, (tol, n_samples, n_theta), out)
         return out
-    return _length_shares(robot, tol, rng, n_samples, n_theta)
+    return _length_shares(robot, tol, rng, n_samples, n_theta, model)
 
 
-def _length_shares(robot, tol: float, rng: np.random.Generator, n_samples: int, n_theta: int
-                   ) -> tuple[LengthVisibility, ...]:
+def _standard_rows(robot, model: IdentificationModel | None, q, dq, ddq) -> np.ndarray:
+    """The standard regressor in ``robot.standard_names`` order: the generated model's when it has the same
+    names, else the numeric Newton-Euler one."""
+    names = tuple(robot.standard_names)
+    if model is not None and set(getattr(model, "STANDARD_NAMES", ())) == set(names):
+        W = np.asarray(model.standard_regressor(q, dq, ddq), float)
+        idx = [tuple(model.STANDARD_NAMES).index(nm) for nm in names]
+        return W[:, :, idx]
+    return numeric_regressor(robot, q, dq, ddq)[0]
+
+
+def _massless(robot, frame: int) -> bool:
+    """No inertial parameter on the frame or any frame it carries."""
+    sub, todo = set(), [int(frame)]
+    while todo:
+        f = todo.pop()
+        sub.add(f)
+        todo += [int(c) for c in robot.children(f)]
+    for nm in robot.standard_names:
+        try:
+            kind, f, _ = split_name(nm)
+        except ValueError:
+            continue
+        if kind in INERTIAL_KINDS and f in sub:
+            return False
+    return True
+
+
+def _length_shares(robot, tol: float, rng: np.random.Generator, n_samples: int, n_theta: int,
+                   model: IdentificationModel | None = None) -> tuple[LengthVisibility, ...]:
     n = robot.n_joints
     q, dq, ddq = _random_motion(n, n_samples, rng)
-    W, _ = numeric_regressor(robot, q, dq, ddq)
+    W = _standard_rows(robot, model, q, dq, ddq)
     W = W.reshape(n_samples * n, -1)
     U, s, _ = np.linalg.svd(W, full_matrices=False)
     U = U[:, s > s[0] * 1e-10] if s.size and s[0] > 0 else U[:, :0]
@@ -762,9 +794,14 @@ def _length_shares(robot, tol: float, rng: np.random.Generator, n_samples: int, 
         if fld == "r" and frame in prismatic:
             out.append(LengthVisibility(frame, fld, 0.0, False, LENGTH_PRISMATIC_REASON))
             continue
+        if int(robot.row(frame).ant) == 0 or _massless(robot, frame):
+            out.append(LengthVisibility(frame, fld, 0.0, False, LENGTH_ZERO_REASON))
+            continue
         shares, zero, cols = [], True, []
+        plus, minus = perturbed_robot(robot, frame, fld, 1e-6), perturbed_robot(robot, frame, fld, -1e-6)
         for chi, B in zip(chis, bases):
-            col = length_sensitivity(robot, chi, q, dq, ddq, frame, fld).reshape(-1)
+            col = ((inverse_dynamics(plus, q, dq, ddq, chi) - inverse_dynamics(minus, q, dq, ddq, chi))
+                   / 2e-6).reshape(-1)
             cols.append(col)
             nc = float(np.linalg.norm(col))
             if nc <= 1e-9 * max(float(np.linalg.norm(W @ chi)), 1e-300):
@@ -911,7 +948,7 @@ def fit_geometry(model: IdentificationModel, robot, problem: GeometryProblem, as
     fit (:func:`standard_from_fit`). ``assemble_at(unloaded, loaded)`` assembles the rows as ``identify`` does.
     Identifiability of the zeros and of the lengths recorded for the printout."""
     vis = zero_identifiability(model) if "joint_zero" in kinds else ()
-    lvis = length_identifiability(robot) if "length" in kinds else ()
+    lvis = length_identifiability(robot, model=model) if "length" in kinds else ()
     js, ls = problem.joints, problem.lengths
     labels = [f"the zero of joint {j + 1}" for j in js] + [f"frame {f} {fl}" for f, fl in ls]
     rev = revolute_joints(model) if js else np.ones(0, bool)

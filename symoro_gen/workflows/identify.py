@@ -588,7 +588,7 @@ def _fit_geometry(opts: IdentifyOptions, robot, model: IdentificationModel, unlo
     if "joint_zero" in kinds:
         js = check_zero_joints(model, zero_identifiability(model),
                                None if opts.geometry_joints is None else [int(j) - 1 for j in opts.geometry_joints])
-    ls = parse_lengths(opts.geometry_frames, robot, length_identifiability(robot)) if "length" in kinds else ()
+    ls = parse_lengths(opts.geometry_frames, robot, length_identifiability(robot, model=model)) if "length" in kinds else ()
     trajs = (*unloaded, *loaded)
     problem = GeometryProblem(unloaded=tuple(unloaded), loaded=tuple(loaded), options=asm_opts, joints=js, lengths=ls)
 
