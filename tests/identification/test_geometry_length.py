@@ -158,3 +158,28 @@ def test_identify_recovers_a_link_length(tmp_path):
     assert float(new.row(3).r.subs(new.geometry_subs())) == pytest.approx(0.40 + fitted, abs=1e-9)
     again = identify(out, [data], geometry="length", geometry_frames=["3r"])
     assert abs(again.geometry.length_values[0]) <= 3 * again.geometry.length_std[0]
+
+
+@pytest.mark.slow
+def test_zeros_and_lengths_together():
+    """``--geometry joint_zero,length``: a 1 deg zero of joint 2 and the 5 mm error of r3 on the same arm, both
+    within 3 sigma (joint 3's zero, not injected, within 3 sigma of 0), each injected one with sigma below a third
+    of it; the JSON names both kinds."""
+    import math
+
+    robot = load_robot("lwr4")
+    chi, _ = ts.nominal_parameters(robot)
+    rng = np.random.default_rng(3)
+    truth = blt.lwr4_truth(robot, chi, 0.05)
+    truth.q_offset[1] = math.radians(1.0)
+    moved = perturbed_robot(robot, FRAME, FIELD, ERROR)
+    tr, _ = ts.record(moved, ts.Rigid(moved, chi), ts.sum_of_sines(robot, rng), truth, 8.0, 250.0, rng, "combo")
+    res = identify("lwr4", [tr], geometry="joint_zero,length", geometry_joints=[2, 3], geometry_frames=["3r"])
+    g = res.geometry
+    assert g.converged and g.joints == (1, 2) and g.lengths == ((FRAME, FIELD),)
+    for want, v, s in ((math.radians(1.0), g.offsets[0], g.std[0]), (0.0, g.offsets[1], g.std[1]),
+                       (ERROR, g.length_values[0], g.length_std[0])):
+        assert abs(v - want) <= 3 * s, (want, v, s)
+        if want:
+            assert s < abs(want) / 3
+    assert res.to_dict()["geometry"]["parameters"] == "joint_zero,length"
