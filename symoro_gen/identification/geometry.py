@@ -1,4 +1,5 @@
-"""Geometric parameters identified with the dynamic ones: the joint zeros (``identify --geometry joint_zero``).
+"""Geometric parameters identified with the dynamic ones: the joint zeros (``identify --geometry joint_zero``)
+and the link lengths ``d``, ``r`` of the MDH table (``identify --geometry length``).
 
 An encoder whose zero is off by ``q0_j`` reads ``q_j = q_true,j - q0_j``; the torque the arm transmits is that of
 the true angle, ``tau = Y_std(q + q0, dq, ddq) chi`` (velocities and accelerations, derivatives of the angle,
@@ -17,6 +18,13 @@ configuration-dependent torque (gravity, inertial coupling). The first joint of 
 gravity changes nothing (its column is 0); the last joint of a chain only rotates its link's inertial
 parameters, which the base parameters absorb (its column is in the span of the base regressor). Those are
 reported as not identifiable, never fitted.
+
+A link-length error ``e`` (``L_true = L_file + e``) changes the torque to ``Y_std(q; L + e) chi``; the generated
+model's regressor has the file's geometry substituted, so its torque ``tau(L + e) - tau(L)`` (numeric
+Newton-Euler at the standard parameters of the current fit, :func:`standard_from_fit`) is taken out of the
+recordings (:func:`correct_lengths`) and the same Gauss-Newton (:func:`gauss_newton`, one unknown per zero and
+per length) fits ``e`` with the base parameters (:func:`fit_geometry`); which lengths torque data can see:
+:func:`length_identifiability`.
 
 The corrected robot file (:func:`corrected_robot_text`): the fitted zeros added to the constant part of the
 frames' ``theta`` (revolute) or ``r`` (prismatic): ``theta = "q"`` becomes ``theta = "q + q0"``, the rest of the
