@@ -18,6 +18,8 @@ recording and validates on another (a different excitation and noise):
  9. encoder zero offset of 1.5 deg on joint 2 (gravity evaluated at the true angle)
 10. a 40 ms torque delay on joint 5 only
 11. clean control (true friction = the declared law, noise only): nothing should be named
+13. link 3 is 5 mm longer than the robot file says (r of frame 3: Pinocchio's arm built with RL3 + 5 mm); right:
+    the ``link_length`` family of frame 3's r first, and its value within 3 sigma of 5 mm with sigma below 5/3 mm
 12. "cobot" reproducer: RX-90 geometry (6 joints, random physical parameters), 100 Hz, the recorded
     "torque" is the motor current ``tau / k_t`` (k_t per joint), smooth Coulomb friction
     ``Fc tanh(dq / 0.03)``, 11-18 % of every file at rest (pauses), three files of 50 s (identify on 1-2,
@@ -61,6 +63,7 @@ from truthsim import Rigid, Truth, drive_values, nominal_parameters, pauses_for,
 import symoro_gen
 from symoro_gen.description import load_robot
 from symoro_gen.diagnostics import DiagnoseSettings, diagnose
+from symoro_gen.identification.geometry import perturbed_robot
 from symoro_gen.observations import AssemblyOptions
 
 #: validation recording length, as a share of the identification one
@@ -80,6 +83,7 @@ class Case:
     set_up: Callable[[Truth], None]
     right: Callable[[object], bool]
     named: bool = True
+    geometry: tuple[int, str, float] | None = None   # (frame, field, error [m]): the simulated arm's length error
 
 
 def _kind(e) -> str:
@@ -135,6 +139,9 @@ def cases() -> list[Case]:
              add("delay", 4, 0.040), lambda e: _kind(e) == "time_delay" and _j(e) == 4),
         Case(11, "clean control", "friction = the declared Coulomb + viscous law, white noise only", None,
              lambda tr: None, lambda e: False),
+        Case(13, "link 3 length +5 mm", "r of frame 3 (RL3) 5 mm longer on the simulated arm than in the robot file",
+             2, lambda tr: None, lambda e: _kind(e) == "link_length" and str(getattr(e, "label", "")) == "link_length3r",
+             geometry=(3, "r", 0.005)),
     ]
 
 
@@ -171,10 +178,14 @@ def run_case(case: Case, model, robot, chi, rigid: Rigid, a) -> dict:
     rng = np.random.default_rng(seed)
     truth = lwr4_truth(robot, chi, a.sigma_tau)
     case.set_up(truth)
+    arm = robot
+    if case.geometry is not None:   # the simulated arm is built with the true (lengthened) geometry
+        arm = perturbed_robot(robot, *case.geometry)
+        rigid = Rigid(arm, chi)
     t0 = time.perf_counter()
-    ident, _ = record(robot, rigid, sum_of_sines(robot, rng), truth, a.seconds, a.rate, rng,
+    ident, _ = record(arm, rigid, sum_of_sines(robot, rng), truth, a.seconds, a.rate, rng,
                       f"case{case.number}-ident", growth_time=a.seconds)
-    valid, _ = record(robot, rigid, sum_of_sines(robot, rng), truth, VALID_SHARE * a.seconds, a.rate, rng,
+    valid, _ = record(arm, rigid, sum_of_sines(robot, rng), truth, VALID_SHARE * a.seconds, a.rate, rng,
                       f"case{case.number}-valid", growth_time=a.seconds)
     t_sim = time.perf_counter() - t0
     rep = diagnose(model, [ident], DiagnoseSettings(), validation=[valid], rng=np.random.default_rng(seed))
@@ -187,7 +198,12 @@ def run_case(case: Case, model, robot, chi, rigid: Rigid, a) -> dict:
     right_cause = bool(causes and case.right(causes[0])) if has_verdicts else None
     anywhere = [i + 1 for i, e in enumerate(effects) if case.right(e)]
     unexpl = [u.joint for u in rep.unexplained_flagged]
-    return dict(case=case.number, title=case.title, truth=case.truth, seed=seed, named_kind=case.named,
+    within = None
+    if case.geometry is not None and first is not None and case.right(first):
+        v, s = float(np.ravel(first.values)[0]), float(np.ravel(first.std)[0])
+        within = dict(value_mm=1e3 * v, sigma_mm=1e3 * s, within_3_sigma=bool(abs(v - case.geometry[2]) <= 3 * s),
+                      sigma_below_third=bool(s < abs(case.geometry[2]) / 3))
+    return dict(accuracy=within, case=case.number, title=case.title, truth=case.truth, seed=seed, named_kind=case.named,
                 joint=None if case.joint is None else case.joint + 1,
                 effects=[dict(kind=_kind(e), joint=None if _j(e) is None else _j(e) + 1, label=str(getattr(e, "label", "")),
                               modulation=_mod(e) or None, variant=str(getattr(e, "variant", "")), verdict=verdict_of(e),
@@ -219,6 +235,10 @@ def print_case(r: dict) -> None:
         extra = "" if r["right_first_cause"] is None else f"; first with verdict cause right: {r['right_first_cause']}"
         print(f"   {what} first: {'YES' if r['right_first'] else 'no'}{extra}"
               f" (right effect at position(s) {r['right_at'] or 'none'})")
+    if r.get("accuracy"):
+        acc = r["accuracy"]
+        print(f"   value {acc['value_mm']:+.3f} mm, sigma {acc['sigma_mm']:.3f} mm: within 3 sigma of the truth "
+              f"{'YES' if acc['within_3_sigma'] else 'no'}, sigma below a third {'YES' if acc['sigma_below_third'] else 'no'}")
     print(f"   unexplained joints: {r['unexplained'] or 'none'}")
     print("   validation rel. err. before: " + " ".join(f"{x:.4f}" for x in r["before_valid"]))
     print("   validation rel. err. after:  " + " ".join(f"{x:.4f}" for x in r["after_valid"]))
@@ -373,15 +393,15 @@ def parse_cases(text: str) -> list[int]:
             out += list(range(lo, hi + 1))
         else:
             out.append(int(part))
-    bad = [c for c in out if not 1 <= c <= 12]
+    bad = [c for c in out if not 1 <= c <= 13]
     if bad:
-        raise SystemExit(f"--cases: unknown case(s) {bad}; the cases are 1-12")
+        raise SystemExit(f"--cases: unknown case(s) {bad}; the cases are 1-13")
     return out
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", default="1-12", help="e.g. 1,2,5 or 1-11 (default all, 1-12)")
+    ap.add_argument("--cases", default="1-13", help="e.g. 1,2,5 or 1-11 (default all, 1-13)")
     ap.add_argument("--seconds", type=float, default=30.0,
                     help="identification recording [s] (validation: half as long); default 30")
     ap.add_argument("--rate", type=float, default=500.0, help="sampling rate [Hz] of cases 1-11 (default 500)")
@@ -437,7 +457,7 @@ def main(argv=None) -> int:
         r = run_cobot(a)
         print_cobot(r)
         results.append(r)
-    single = [r for r in results if 1 <= r["case"] <= 10]
+    single = [r for r in results if 1 <= r["case"] <= 10 or r["case"] == 13]
     x = sum(r["right_first"] for r in single)
     with_v = [r for r in single if r["right_first_cause"] is not None]
     y = f"{sum(r['right_first_cause'] for r in with_v)}/{len(single)}" if with_v else "n/a (no verdicts in the report)"
@@ -446,7 +466,7 @@ def main(argv=None) -> int:
     wall = time.perf_counter() - T0
     print("\n| case | truth | first effect | right? |\n| --- | --- | --- | --- |")
     for r in results:
-        if r["case"] <= 11:
+        if r["case"] <= 11 or r["case"] == 13:
             ok = ("yes" if not r["effects"] else "no") if r["case"] == 11 else ("yes" if r["right_first"] else "no")
             print(f"| {r['case']} | {r['title']} | {r['first'] or '(none)'} | {ok} |")
     print(f"\nright cause first: {x}/{len(single)} (with verdict cause: {y}); clean control: nothing named: {clean_s}")

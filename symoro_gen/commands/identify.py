@@ -30,6 +30,7 @@ def options_from_args(args) -> IdentifyOptions:
         nominal_tolerance=getattr(args, "nominal_tolerance", None),
         bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args),
         geometry=getattr(args, "geometry", None), geometry_joints=getattr(args, "geometry_joints", None),
+        geometry_frames=getattr(args, "geometry_frames", None),
         positions=getattr(args, "positions", "link"))
 
 
@@ -111,16 +112,21 @@ def add_parser(sub) -> None:
                    help="with --physical: keep each link's mass distribution inside the box of its frame origins and "
                         "children (plus a margin; so its centre of mass too) and its mass within a factor 3 of a "
                         "non-zero nominal mass (docs/plausibility.md)")
-    p.add_argument("--geometry", choices=("joint_zero",),
+    p.add_argument("--geometry", choices=("joint_zero", "length", "joint_zero,length", "length,joint_zero"),
                    help="also identify geometric parameters: joint_zero = the encoder zeros of the joints torque "
-                        "data can see (Gauss-Newton alternating with the linear fit; the others are reported as not "
-                        "identifiable); everything after runs at the corrected angles")
+                        "data can see, length = the MDH lengths d, r it can see (joint_zero,length: both; "
+                        "Gauss-Newton alternating with the linear fit; the others are reported as not "
+                        "identifiable); everything after runs at the corrected geometry")
     p.add_argument("--geometry-joints", type=int, nargs="+", metavar="J",
                    help="with --geometry joint_zero: the joints (1-based) whose zero is fitted (default: every joint "
                         "whose zero torque data can see)")
+    p.add_argument("--geometry-frames", nargs="+", metavar="FRAME[d|r]",
+                   help="with --geometry length: the lengths fitted, e.g. 3r 4d, or 3 for both of frame 3's visible "
+                        "ones (default: every length torque data can see)")
     p.add_argument("-o", "--robot-out", metavar="PATH",
                    help="write the robot file with what this run identified here: the joint zeros (--geometry "
-                        "joint_zero) added to the frames' theta (r), K and D of the elastic joints the two-encoder fit "
+                        "joint_zero) added to the frames' theta (r), the link-length errors (--geometry length) added "
+                        "to d/r, K and D of the elastic joints the two-encoder fit "
                         "estimated, the fitted friction-law scales; refused when none was identified. The [nominal] "
                         "values are not written (the base parameters are not the standard ones). Never over the input "
                         "robot file; an existing file only with --force")

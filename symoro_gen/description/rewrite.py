@@ -3,6 +3,7 @@ other line (comments, blank lines, the order of the keys, the other tables) unch
 
 Used by ``identify -o/--robot-out`` to write the quantities it identified into a copy of the input robot
 file (docs/robot-file.md): the joint zeros added to ``theta = "..."`` (``r`` of a prismatic joint), the
+link-length errors added to ``d``/``r``, the
 ``K`` and ``D`` of an ``elastic = {K = ..., D = ...}`` table, the scale of a
 ``friction_law = {kind = ..., vs|v|delta = ...}`` table. Inline tables are edited by key (a missing key
 is appended inside the braces); a frame without the table gets a line of its own at the end of its entry.
@@ -96,6 +97,24 @@ class RobotText:
         if t is None or m is None:
             raise self._refuse(frame, key, f'{key} = "..."')
         self._set(t, f'{m.group(1)}"{edit(m.group(2))}"{m.group(3)}')
+
+    def edit_value(self, frame: int, key: str, edit: Callable[[str], str]) -> None:
+        """Replace the value of ``key = ...`` (a number or a quoted string, as written) in frame ``frame``'s entry
+        by ``edit(old)`` (TOML text); a frame without the line gets ``key = edit("0")`` at the end of its entry
+        (an absent length is 0)."""
+        t, (a, b) = self._field_line(frame, key)
+        if t is None:
+            end = b
+            while end > a + 1 and _BLANK_OR_COMMENT.match(self.lines[end - 1]):
+                end -= 1
+            if end > 0 and not self.lines[end - 1].endswith(("\n", "\r")):
+                self.lines[end - 1] += self._newline
+            self.lines.insert(end, f"{key} = {edit('0')}{self._newline}")
+            return
+        m = re.match(rf'^(\s*{re.escape(key)}\s*=\s*)("[^"]*"|[-+0-9.eE_]+)(\s*(#.*)?)$', self.lines[t].rstrip("\r\n"))
+        if m is None:
+            raise self._refuse(frame, key, f"{key} = <number> or {key} = \"...\"")
+        self._set(t, f"{m.group(1)}{edit(m.group(2))}{m.group(3)}")
 
     def set_inline(self, frame: int, key: str, values: Mapping[str, str], *, create: bool = False) -> None:
         """Set the fields ``values`` (name -> TOML text) of the inline table ``key = {...}`` of frame ``frame``:

@@ -41,6 +41,11 @@ since the start of the recording):
                     ``d tau_hat / d q_j`` (``c = 0``), then rebuilt at the fitted offset (fixed point); one
                     family per joint whose zero the torque can see (:func:`.geometry.visible_zero_joints`,
                     all joints when the model is not given)
+``link_length``     ``(d tau / d L) chi`` on *every* joint's rows, ``L`` the MDH ``d`` or ``r`` of one frame: the
+                    numeric Newton-Euler torque's central difference at the standard parameters of the current
+                    fit (:func:`.geometry.length_column`); one family per length torque data can see
+                    (:func:`.geometry.visible_lengths`), only when the robot description is found; the
+                    coefficient is the length error ``L_true - L_file`` [m]
 ``crosstalk``       ``tau_hat,i`` on the rows of joint j, one family per ordered pair of neighbouring joints
                     ``i = j +- 1`` (partner i): joint j's torque channel reads ``c`` times joint i's torque
                     (``tau_meas,j = tau_j + c tau_i``, the cross-sensitivity of a strain-gauge joint torque
@@ -66,22 +71,33 @@ from ..model import IdentificationModel
 from ..params import DRIVE_KINDS, split_name
 from .frame import Experiment, Frame, attach_model_torque, model_torque
 from .friction import rest_mask
-from .geometry import decimated_zero_matrix, describe_zero, revolute_joints, visible_zero_joints
+from .geometry import (
+    decimated_zero_matrix,
+    describe_length,
+    describe_zero,
+    length_column,
+    length_joint,
+    link_length_ready,
+    revolute_joints,
+    visible_lengths,
+    visible_zero_joints,
+)
 
 __all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
            "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "MAX_ZERO_OFFSET_DEG",
+           "MAX_LINK_LENGTH_M",
            "MAX_CROSSTALK",
            "clear_elasticity_cache"]
 
 KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity", "time_delay", "gain",
          "drift", "coupling", "rotor_inertia", "offset", "joint_zero", "crosstalk",
-         "held_friction")
+         "held_friction", "link_length")
 ALL = KINDS
 
 #: signal against which each kind is best seen (plots and the structure table)
 REVEAL = {"stribeck": "dq", "load_friction": "tau_hat", "position_ripple": "q", "spring": "q",
           "elasticity": "tau_hat", "time_delay": "dtau_hat", "gain": "tau_hat", "drift": "t", "coupling": "ddq",
-          "rotor_inertia": "ddq", "offset": "t", "placebo": "t", "joint_zero": "q",
+          "rotor_inertia": "ddq", "offset": "t", "placebo": "t", "joint_zero": "q", "link_length": "q",
           "crosstalk": "tau_hat", "held_friction": "dq"}
 
 #: Stribeck velocity grid: ``n`` points from ``lo`` to ``hi`` times the 98th percentile of |dq_j|
@@ -201,6 +217,8 @@ class Family:
             assert self.joint is not None and self.partner is not None  # a coupling names both joints
             a, b = self.joint + 1, self.partner + 1
             return f"coupling{a}{'<' if self.variant == 'one-way' else '+'}{b}"
+        if self.kind == "link_length":
+            return f"link_length{dict(self.info).get('frame', '')}{self.variant}"   # link_length3r
         if self.kind == "crosstalk" and self.joint is not None and self.partner is not None:
             return f"crosstalk{self.partner + 1}>{self.joint + 1}"   # source joint > channel it is read in
         return f"{self.kind}{'' if self.joint is None else self.joint + 1}"
@@ -257,6 +275,7 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
         out += _model_torque_families(j, ks, st)
         out += _signal_families(j, ks, st)
     out += _joint_zero_families(n, ks, model)
+    out += _link_length_families(ks, model)
     out += _crosstalk_families(n, ks)
     out += _all_joint_families(n, ks)
     # columns that do not depend on the fit are the same in every round (the frames keep their q, dq,
@@ -451,6 +470,21 @@ def _joint_zero_families(n: int, ks: set[str], model: IdentificationModel | None
 
         out.append(Family("joint_zero", j, ("q0",), b_zero, reveal="q", depends_on_fit=True, build_at=b_zero_at,
                           self_consistent=True, info=(("revolute", bool(rev[j])),)))
+    return out
+
+
+def _link_length_families(ks: set[str], model: IdentificationModel | None) -> list[Family]:
+    """A length error of each MDH ``d``/``r`` torque data can see (:mod:`.geometry`; none without the model or
+    its robot description). ``joint`` is the joint of the frame (reveal: its angle), ``variant`` the field."""
+    if "link_length" not in ks or model is None or not link_length_ready(model):
+        return []
+    out = []
+    for f, fld in visible_lengths(model):
+        def build(fr, ctx, f=f, fld=fld):   # the model checked by link_length_ready: its base names
+            return [length_column(fr, model, ctx.theta, f, fld)]
+
+        out.append(Family("link_length", length_joint(model, f), (fld,), build, variant=fld, reveal="q",
+                          depends_on_fit=True, info=(("frame", f), ("field", fld))))
     return out
 
 
@@ -781,6 +815,11 @@ MAX_DELAY_PHASE = 1.0
 #: degree (Hollerbach & Wampler 1996; Khalil & Dombre 2002, ch. 11); tens of degrees are a wrong joint
 #: convention of the robot file (its MDH theta offset), and far from the tangent the column linearises
 MAX_ZERO_OFFSET_DEG = 20.0
+#: a ``link_length`` error must be at most this [m]: machining and assembly errors of a link are of the order of
+#: a millimetre (ISO 2768-1 general tolerances, "very coarse" class: +-4 mm for 400-1000 mm; Mooring, Roth &
+#: Driels 1991, *Fundamentals of Manipulator Calibration*, ch. 1: link-length errors of a few mm); 5 cm is a
+#: wrong robot file (another arm, a missing link), and the linearised column no longer holds
+MAX_LINK_LENGTH_M = 0.05
 #: a ``crosstalk`` share ``|c|`` must be at most this: half of another joint's torque in a channel is a swapped or
 #: mixed-up channel of the data (a wiring or conversion error), not the cross-sensitivity of a sensor
 MAX_CROSSTALK = 0.5
@@ -815,6 +854,10 @@ def implausible(family: Family, values, *, f_dyn: float) -> str | None:
             return (f"zero offset {math.degrees(v[0]):.3g} deg of joint {(family.joint or 0) + 1} beyond "
                     f"{MAX_ZERO_OFFSET_DEG:g} deg (a wrong theta convention of its row in the robot file, not an "
                     "encoder zero error)")
+    elif k == "link_length" and abs(v[0]) > MAX_LINK_LENGTH_M:
+        info = dict(family.info)
+        return (f"length error {1e3 * v[0]:+.3g} mm of frame {info.get('frame')} field {info.get('field')} beyond "
+                f"{1e3 * MAX_LINK_LENGTH_M:g} mm (a wrong robot file, not a machining or assembly error)")
     elif k == "crosstalk" and abs(v[0]) > MAX_CROSSTALK:
         return (f"cross-talk of {100 * v[0]:.3g} % of joint {(family.partner or 0) + 1}'s torque in joint "
                 f"{(family.joint or 0) + 1}'s channel beyond {100 * MAX_CROSSTALK:g} % (channels swapped or mixed in the "
@@ -864,6 +907,10 @@ def describe_params(family: Family, value, values: np.ndarray, std: np.ndarray) 
         out["percent"] = 100.0 * v[0]
         if family.partner is not None:
             out["from_joint"] = float(family.partner + 1)   # 1-based, as in the text
+    elif k == "link_length":
+        info = dict(family.info)
+        out.update(describe_length(int(info.get("frame", 0)), str(info.get("field", "")), v[0],
+                                   float(np.asarray(std, float).reshape(-1)[0])))
     elif k == "joint_zero":
         out.update(describe_zero(v[0], float(np.asarray(std, float).reshape(-1)[0]),
                                  bool(dict(family.info).get("revolute", True))))

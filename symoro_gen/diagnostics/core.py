@@ -405,8 +405,8 @@ def _affected(fam: Family, n: int) -> list[int]:
 
 def _own(fam: Family, n: int) -> list[int]:
     """Joints whose validation error must improve (the effect's own joints; elasticity of one joint
-    changes the torque of all)."""
-    if fam.joint is None or fam.kind == "elasticity":
+    changes the torque of all, and so does a link length: the torque of every joint it carries)."""
+    if fam.joint is None or fam.kind in ("elasticity", "link_length"):
         return list(range(n))
     out = [fam.joint]
     if fam.partner is not None and fam.variant == "shared":

@@ -1,4 +1,4 @@
-"""Joint zero offsets: their torque column, and which of them torque data can see.
+"""Joint zero offsets and link lengths: their torque columns, and which of them torque data can see.
 
 An encoder whose zero is off by ``q0_j`` reads ``q_j = q_true,j - q0_j``; the torque the arm transmits is
 that of the true angle, ``tau_true = tau(q + q0_j e_j, dq, ddq)`` (the velocity and acceleration, derivatives of
@@ -23,20 +23,28 @@ the secants, the visibility) live in :mod:`symoro_gen.identification.geometry`, 
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from dataclasses import replace as dc_replace
 
 import numpy as np
 
+from ..description import load_robot
+from ..description.model import RobotDescription
+from ..dynamics.numeric import inverse_dynamics
+from ..errors import SymoroError
 from ..identification.geometry import (
     JOINT_ZERO_STEP,
     VISIBILITY_TOL,
     joint_zero_column,
     joint_zero_secant,
     joint_zero_visibility,
+    length_identifiability,
+    perturbed_robot,
     regressor_secant,
     revolute_joints,
+    standard_from_fit,
     visible_zero_joints,
 )
 from ..model import IdentificationModel
@@ -44,7 +52,9 @@ from .frame import build_frame, common_bandwidth
 
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
            "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "JointZeroFit",
-           "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints"]
+           "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints", "LENGTH_STEP",
+           "describe_length", "description_of", "length_column", "length_joint", "link_length_ready",
+           "visible_lengths"]
 
 def invisible_zero_note(model: IdentificationModel) -> list[str]:
     """One sentence naming the joints whose zero offset torque data cannot see (empty when every joint's can):
@@ -189,3 +199,110 @@ def fit_joint_zeros(model: IdentificationModel, trajectories, joints: Sequence[i
     return JointZeroFit(joints=js, offsets=q0, std=sd[W.shape[1]:], theta=dict(zip(names, chi_new)),
                         theta_std=dict(zip(names, sd[:W.shape[1]])), iterations=n_iter, converged=converged,
                         rel_err=rel)
+
+
+# ------------------------------------------------------------------------------------------------
+# link lengths: the loop's ``link_length`` candidates
+# ------------------------------------------------------------------------------------------------
+_DESCRIPTIONS: dict = {}   # id(model) -> (model, robot description or None)
+
+
+def description_of(model: IdentificationModel):
+    """The robot description (MDH table) of a generated model, or None: the model's own ``robot`` /
+    ``description`` attribute, else the robot file of its name (``robots/<ROBOT>.toml``) when its geometry
+    values and standard parameters are the model's. Without it the loop tries no ``link_length`` candidate."""
+    got = _DESCRIPTIONS.get(id(model))
+    if got is not None and got[0] is model:
+        return got[1]
+    desc = getattr(model, "robot", None) or getattr(model, "description", None)
+    if not isinstance(desc, RobotDescription):
+        try:
+            desc = load_robot(str(model.ROBOT))
+        except SymoroError:
+            desc = None
+    if desc is not None:
+        same = (desc.n_joints == int(model.N_JOINTS) and set(desc.standard_names) == set(model.STANDARD_NAMES)
+                and all(abs(float(desc.values.get(k, math.nan)) - float(v)) <= 1e-12
+                        for k, v in dict(getattr(model, "GEOMETRY", {}) or {}).items()))
+        desc = desc if same else None
+    _DESCRIPTIONS[id(model)] = (model, desc)
+    return desc
+
+
+def link_length_ready(model: IdentificationModel) -> bool:
+    """Whether the loop can build ``link_length`` columns for this model: its robot description is found and
+    its base parameters are the generated model's (a declared friction law replaces some: no)."""
+    if description_of(model) is None:
+        return False
+    try:
+        K = np.asarray(model.base_parameters(np.eye(len(tuple(model.STANDARD_NAMES)))), float)
+    except (AttributeError, ValueError):
+        return False
+    return K.shape[-1] == len(tuple(model.BASE_NAMES))
+
+
+def visible_lengths(model: IdentificationModel) -> tuple[tuple[int, str], ...]:
+    """``(frame, field)`` of the MDH lengths torque data can see (:func:`length_identifiability`); empty
+    without a robot description."""
+    robot = description_of(model)
+    if robot is None:
+        return ()
+    return tuple((v.frame, v.field) for v in length_identifiability(robot, model=model) if v.visible)
+
+
+def length_joint(model: IdentificationModel, frame: int) -> int | None:
+    """0-based joint a frame's length belongs to: the frame's own joint, or the nearest moving antecedent of a
+    fixed frame (None: on the base)."""
+    robot = description_of(model)
+    if robot is None:
+        return None
+    cols = {int(r.j): k for k, r in enumerate(robot.joints)}
+    f = int(frame)
+    while f > 0:
+        if f in cols:
+            return cols[f]
+        f = int(robot.row(f).ant)
+    return None
+
+
+_PERTURBED: dict = {}   # (id(robot), frame, field) -> (robot, plus, minus)
+
+
+def _pair(robot, frame: int, fld: str):
+    key = (id(robot), int(frame), fld)
+    got = _PERTURBED.get(key)
+    if got is None or got[0] is not robot:
+        got = (robot, perturbed_robot(robot, frame, fld, LENGTH_STEP), perturbed_robot(robot, frame, fld, -LENGTH_STEP))
+        _PERTURBED[key] = got
+    return got[1], got[2]
+
+
+#: step [m] of the central difference of the torque in a link length
+LENGTH_STEP = 1e-6
+
+
+def length_column(frame, ctx_model: IdentificationModel, theta, f: int, fld: str) -> np.ndarray:
+    """``(d tau / d L) chi`` of the MDH length ``fld`` of frame ``f`` on the rows of every joint (shape (r, 1)):
+    the central difference of the numeric Newton-Euler torque at the standard parameters of the current fit
+    (:func:`standard_from_fit`), evaluated at full rate on the frame's signals and decimated in parallel with
+    ``W`` (a :class:`.frame.Frame`). A length error ``e`` adds ``e`` times this column (Khalil & Dombre 2002,
+    ch. 11: the calibration model linearised in the parameter errors)."""
+    robot = description_of(ctx_model)
+    assert robot is not None   # families exist only with a description (link_length_ready)
+    chi, pay = standard_from_fit(ctx_model, robot, theta)
+    plus, minus = _pair(robot, f, fld)
+
+    def fn(ex, a: int, b: int) -> np.ndarray:
+        p = pay if ex.loaded else None
+        q, dq, ddq = ex.q[a:b], ex.dq[a:b], ex.ddq[a:b]
+        d = (inverse_dynamics(plus, q, dq, ddq, chi, p) - inverse_dynamics(minus, q, dq, ddq, chi, p)) / (2 * LENGTH_STEP)
+        return d[:, :, None]
+
+    return frame.full_rate_columns_batched(fn, 1)
+
+
+def describe_length(frame: int, fld: str, value: float, std: float) -> dict:
+    """Physical reading of a link-length error: metres and millimetres, the frame and the field (0 ``d``,
+    1 ``r``)."""
+    return {"length_m": float(value), "length_mm": 1e3 * float(value), "length_mm_std": 1e3 * float(std),
+            "frame": float(frame), "field_r": float(fld == "r")}

@@ -147,6 +147,12 @@ NEGATIVE_FRICTION_FACTOR = 0.2
 #: (a wrong MDH theta convention of the robot file, rather)
 ZERO_OFFSET_TYPICAL_DEG = 2.0
 ZERO_OFFSET_WIDTH = math.log(2.0)
+#: link-length (MDH d, r) error of a machined and assembled arm: a few mm (ISO 2768-1 general tolerances:
+#: +-0.8 mm "medium", +-4 mm "very coarse" for 400-1000 mm; Mooring, Roth & Driels 1991, *Fundamentals of
+#: Manipulator Calibration*, ch. 1, link-length errors of a few mm); with LENGTH_ERROR_WIDTH = ln 2, 16 mm gives
+#: 0.61, 20 mm 0.42 (doubtful); beyond :data:`.candidates.MAX_LINK_LENGTH_M` (50 mm) it is rejected as impossible
+LENGTH_ERROR_TYPICAL_MM = 8.0
+LENGTH_ERROR_WIDTH = math.log(2.0)
 #: cross-talk into a joint's torque channel: strain-gauge joint torque sensors' datasheets specify a
 #: cross-sensitivity (cross-talk) of about 1-3 % of the reading; up to 10 % of a neighbouring joint's torque
 #: is plausible, beyond it the factor falls (20 %: 0.61) - a larger share is a mixed channel, not cross-talk
@@ -335,6 +341,11 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
                      "file")
         else:
             return r.done("zero offset of a prismatic joint (a length): no prior on its magnitude")
+    elif kind == "link_length" and "length_mm" in physical:
+        mm, frame = float(physical["length_mm"]), int(physical.get("frame", 0))
+        r.factor(band_factor(mm, 0.0, LENGTH_ERROR_TYPICAL_MM, LENGTH_ERROR_WIDTH),
+                 f"a length error of {mm:.3g} mm of link {frame} is large for a machined arm (typical: below "
+                 f"{LENGTH_ERROR_TYPICAL_MM:g} mm)", f"the d/r of frame {frame} in the robot file")
     elif kind == "held_friction":
         fh = float(params.get("Fh", 0.0))
         r.factor(band_factor(fh / tau, 0.0, FRICTION_SHARE, SHARE_WIDTH),
@@ -594,6 +605,9 @@ def fits_like(kind: str, joint: int | None, physical: Mapping[str, float], descr
         fj = physical.get("from_joint")
         src = "a neighbouring joint" if fj is None else f"joint {int(fj)}"
         return f"cross-talk: {float(physical['percent']):.3g} % of {src}'s torque read in {who}'s torque channel"
+    if kind == "link_length" and "length_mm" in physical:
+        frame, fld = int(physical.get("frame", 0)), "r" if physical.get("field_r") else "d"
+        return f"link {frame} length {float(physical['length_mm']):+.1f} mm ({fld}{frame})"
     if kind == "joint_zero" and "offset_deg" in physical:
         return f"an encoder zero offset of {float(physical['offset_deg']):.3g} deg on {who}"
     if kind == "joint_zero" and "offset_m" in physical:

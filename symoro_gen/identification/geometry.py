@@ -1,4 +1,5 @@
-"""Geometric parameters identified with the dynamic ones: the joint zeros (``identify --geometry joint_zero``).
+"""Geometric parameters identified with the dynamic ones: the joint zeros (``identify --geometry joint_zero``)
+and the link lengths ``d``, ``r`` of the MDH table (``identify --geometry length``).
 
 An encoder whose zero is off by ``q0_j`` reads ``q_j = q_true,j - q0_j``; the torque the arm transmits is that of
 the true angle, ``tau = Y_std(q + q0, dq, ddq) chi`` (velocities and accelerations, derivatives of the angle,
@@ -18,6 +19,13 @@ gravity changes nothing (its column is 0); the last joint of a chain only rotate
 parameters, which the base parameters absorb (its column is in the span of the base regressor). Those are
 reported as not identifiable, never fitted.
 
+A link-length error ``e`` (``L_true = L_file + e``) changes the torque to ``Y_std(q; L + e) chi``; the generated
+model's regressor has the file's geometry substituted, so its torque ``tau(L + e) - tau(L)`` (numeric
+Newton-Euler at the standard parameters of the current fit, :func:`standard_from_fit`) is taken out of the
+recordings (:func:`correct_lengths`) and the same Gauss-Newton (:func:`gauss_newton`, one unknown per zero and
+per length) fits ``e`` with the base parameters (:func:`fit_geometry`); which lengths torque data can see:
+:func:`length_identifiability`.
+
 The corrected robot file (:func:`corrected_robot_text`): the fitted zeros added to the constant part of the
 frames' ``theta`` (revolute) or ``r`` (prismatic): ``theta = "q"`` becomes ``theta = "q + q0"``, the rest of the
 file unchanged, with a header comment naming the file it came from.
@@ -34,21 +42,27 @@ from typing import Any
 
 import numpy as np
 
+from ..description.mdh import row_values
 from ..description.rewrite import RobotText, format_number
 from ..dynamics.numeric import inverse_dynamics, numeric_regressor
 from ..errors import IdentificationError
 from ..model import IdentificationModel
+from ..observations.assembly import iter_kinematics, observation_settings
 from ..observations.raw import full_rate_torque
 from ..observations.system import ObservationSystem
+from ..params import INERTIAL_KINDS, split_name
 from .systems import stack_systems
 
-__all__ = ["GEOMETRY_KINDS", "JOINT_ZERO_STEP", "LENGTH_FIELDS", "length_sensitivity", "length_visibility", "perturbed_robot", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
+__all__ = ["GEOMETRY_KINDS", "LENGTH_VISIBILITY_TOL", "MAX_LENGTH_M", "MAX_LENGTH_REACH", "GaussNewton",
+           "GeometryProblem", "check_zero_joints", "LengthVisibility", "add_lengths", "apply_geometry", "arm_reach", "correct_lengths",
+           "fit_geometry", "gauss_newton", "length_identifiability", "length_identifiability_text",
+           "length_plausible", "parse_lengths", "standard_from_fit", "JOINT_ZERO_STEP", "LENGTH_FIELDS", "length_sensitivity", "length_visibility", "perturbed_robot", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
            "add_zeros", "corrected_robot_text", "fit_zeros", "joint_zero_column", "joint_zero_secant", "joint_zero_visibility",
            "regressor_secant", "revolute_joints", "shift_zeros", "visible_zero_joints", "zero_identifiability",
            "zero_shares"]
 
 #: the geometric parameters ``identify --geometry`` can fit
-GEOMETRY_KINDS = ("joint_zero",)
+GEOMETRY_KINDS = ("joint_zero", "length")
 #: beyond this a fitted zero is no encoder zero error (the loop's prior, ``diagnostics/plausibility.py``: an
 #: offset of a few degrees is typical, tens of degrees impossible): reported as implausible
 MAX_ZERO_DEG = 20.0
@@ -299,6 +313,16 @@ class GeometryFit:
         Per iteration, the largest ``|step| / sigma``.
     identifiability : tuple of ZeroVisibility
         Every joint.
+    lengths : tuple of (int, str)
+        ``(frame j, "d" or "r")`` of each MDH length fitted (``--geometry length``); ``length_values``,
+        ``length_std`` their errors ``L_true - L_file`` [m] and standard deviations.
+    length_identifiability : tuple of LengthVisibility
+        Every length examined (:func:`length_identifiability`).
+    reach : float
+        Sum of the arm's nominal ``|d|`` and ``|r|`` [m] (the scale of :func:`length_plausible`).
+    chi_std, chi_payload : ndarray, optional
+        The standard parameters (``robot.standard_names`` order) and payload ones the length torque was
+        evaluated with at the last iteration (:func:`correct_lengths`).
     robot_file : str
         The robot file the geometry came from.
     robot_out : str, optional
@@ -316,6 +340,45 @@ class GeometryFit:
     robot_file: str = ""
     robot_out: str | None = None
     kind: str = field(default="joint_zero")
+    lengths: tuple[tuple[int, str], ...] = ()
+    length_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    length_std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    length_identifiability: tuple[LengthVisibility, ...] = ()
+    reach: float = 0.0
+    chi_std: np.ndarray | None = None
+    chi_payload: np.ndarray | None = None
+
+    def length_map(self) -> dict[tuple[int, str], float]:
+        """``(frame, field)`` -> fitted length error [m]."""
+        return {fl: float(v) for fl, v in zip(self.lengths, self.length_values)}
+
+    def implausible_lengths(self) -> list[tuple[int, str, float]]:
+        """The fitted lengths beyond :func:`length_plausible`: ``(frame, field, value)``."""
+        return [(f, fl, float(v)) for (f, fl), v in zip(self.lengths, self.length_values)
+                if not length_plausible(float(v), self.reach)]
+
+    def _length_dict(self) -> dict:
+        rows = [{"frame": f, "field": fl, "error_m": float(v), "error_m_std": float(s), "error_mm": 1e3 * float(v),
+                 "error_mm_std": 1e3 * float(s), "plausible": length_plausible(float(v), self.reach)}
+                for (f, fl), v, s in zip(self.lengths, self.length_values, self.length_std)]
+        return {"lengths": rows,
+                "lengths_not_identifiable": [{"frame": v.frame, "field": v.field, "reason": v.reason}
+                                             for v in self.length_identifiability if not v.visible],
+                "length_identifiability": [v.to_dict() for v in self.length_identifiability],
+                "reach_m": float(self.reach)}
+
+    def _length_lines(self, robot: str) -> list[str]:
+        lines = [f"Link lengths identified with the dynamic parameters (Gauss-Newton, {self.iterations} iteration"
+                 f"{'s' if self.iterations != 1 else ''}, {'converged' if self.converged else 'NOT converged'}; L_true = L_file + error; implausible beyond "
+                 f"{MAX_LENGTH_M * 1e3:g} mm or {100 * MAX_LENGTH_REACH:g} % of the reach {self.reach:.3f} m):"]
+        for (f, fl), v, s in zip(self.lengths, self.length_values, self.length_std):
+            lines.append(f"  frame {f} {fl} {1e3 * float(v):+.3f} mm (sigma {1e3 * float(s):.3f} mm"
+                         + (f", {abs(v) / s:.1f} sigma from 0" if s > 0 else "") + ")"
+                         + ("" if length_plausible(float(v), self.reach) else
+                            "  IMPLAUSIBLE: no machining or assembly error of a link (another model error, or the "
+                            "excitation does not determine it); not written into a robot file"))
+        lines.append(length_identifiability_text(self.length_identifiability, robot or "the robot"))
+        return lines
 
     def offset_map(self) -> dict[int, float]:
         """0-based joint -> fitted zero [rad or m]."""
@@ -332,7 +395,8 @@ class GeometryFit:
             else:
                 row.update(offset_m=v, offset_m_std=s)
             zeros.append(row)
-        return {"parameters": self.kind, "zeros": zeros,
+        extra = self._length_dict() if "length" in self.kind else {}
+        return {"parameters": self.kind, "zeros": zeros, **extra,
                 "not_identifiable": [{"joint": v.joint + 1, "reason": v.reason}
                                      for v in self.identifiability if not v.visible],
                 "identifiability": [v.to_dict() for v in self.identifiability],
@@ -341,6 +405,14 @@ class GeometryFit:
                 "robot_file": self.robot_file, "robot_out": self.robot_out}
 
     def summary(self, robot: str = "") -> str:
+        lines = self._zero_lines(robot) if "joint_zero" in self.kind else []
+        if "length" in self.kind:
+            lines += self._length_lines(robot)
+        if self.robot_out:
+            lines.append(f"Corrected robot file written: {self.robot_out} (from {self.robot_file})")
+        return "\n".join(lines)
+
+    def _zero_lines(self, robot: str) -> list[str]:
         lines = [f"Joint zeros identified with the dynamic parameters (Gauss-Newton, {self.iterations} iteration"
                  f"{'s' if self.iterations != 1 else ''}, {'converged' if self.converged else 'NOT converged'}; "
                  "q_true = q_measured + q0):"]
@@ -354,9 +426,7 @@ class GeometryFit:
             else:
                 lines.append(f"  joint {j + 1} zero offset {1e3 * v:+.4f} mm (sigma {1e3 * s:.4f} mm)")
         lines.append(identifiability_text(self.identifiability, robot or "the robot"))
-        if self.robot_out:
-            lines.append(f"Corrected robot file written: {self.robot_out} (from {self.robot_file})")
-        return "\n".join(lines)
+        return lines
 
 
 SystemsAt = Callable[[np.ndarray], tuple[ObservationSystem, ObservationSystem | None]]
@@ -367,25 +437,10 @@ def _stacked(su: ObservationSystem, sl: ObservationSystem | None) -> Observation
     return stack_systems(su, sl) if sl is not None else su
 
 
-def fit_zeros(model: IdentificationModel, systems_at: SystemsAt, fit_at: FitAt, *,
-              joints: Sequence[int] | None = None, max_iterations: int = 20, step_fraction: float = STEP_FRACTION,
-              h: float = ASSEMBLY_STEP) -> GeometryFit:
-    """Gauss-Newton on the zeros of ``joints`` (default: the visible ones), alternating with the linear fit.
-
-    Parameters
-    ----------
-    systems_at : callable
-        ``q0 -> (unloaded system, loaded system or None)``: the identification rows assembled from the
-        recordings at ``q + q0`` (``q0`` over ``joints``), filtered and decimated as ``identify`` does.
-    fit_at : callable
-        ``(unloaded, loaded) -> IdentificationResult``: the linear fit of ``chi`` (OLS/WLS, a known payload).
-
-    At each iteration: ``chi`` fitted at the current zeros; the sensitivity ``D_j = d (W chi)/d q0_j`` by a
-    central difference of the assembled prediction (step ``h``); ``[W, D]`` solved for the corrections on the
-    rows weighted as the fit weights them (WLS: ``1/sigma_j``); stop when every ``|step| <= step_fraction
-    sigma``.
-    """
-    vis = zero_identifiability(model)
+def check_zero_joints(model: IdentificationModel, vis: Sequence[ZeroVisibility],
+                       joints: Sequence[int] | None) -> tuple[int, ...]:
+    """The joints (0-based) whose zero is fitted: ``joints`` or the visible ones; refused outside the arm or
+    invisible."""
     seen = tuple(v.joint for v in vis if v.visible)
     n = int(model.N_JOINTS)
     js = seen if joints is None else tuple(int(j) for j in joints)
@@ -397,43 +452,83 @@ def fit_zeros(model: IdentificationModel, systems_at: SystemsAt, fit_at: FitAt, 
         raise IdentificationError(f"--geometry joint_zero: the zero of joint(s) {hidden} of {model.ROBOT} is not "
                                   "identifiable from torque data (absorbed by the base parameters or no "
                                   "configuration-dependent torque)")
-    rev = revolute_joints(model)
-    k = len(js)
-    q0 = np.zeros(k)
+    return js
+
+
+#: ``(g, fit) -> (unloaded system, loaded system or None)``: the identification rows at the geometric
+#: corrections ``g`` (the fit ``fit``, None at the start, gives the dynamic parameters a correction needs)
+GeneralSystemsAt = Callable[[np.ndarray, Any], tuple[ObservationSystem, ObservationSystem | None]]
+
+
+@dataclass(frozen=True)
+class GaussNewton:
+    """The outcome of :func:`gauss_newton`: corrections ``g``, their standard deviations, the iterations, the
+    last linear fit."""
+
+    g: np.ndarray
+    std: np.ndarray
+    iterations: int
+    converged: bool
+    steps: tuple[float, ...]
+    fit: Any
+
+
+def _weights(res: Any, S: ObservationSystem) -> np.ndarray:
+    w = np.ones(S.W.shape[0])
+    if getattr(res, "joint_sigma", None) is not None:
+        sig = np.asarray(res.joint_sigma, float)
+        w = 1.0 / np.where(sig[S.joint] > 0, sig[S.joint], 1.0)
+    return w
+
+
+def _jacobian(systems_at: GeneralSystemsAt, res: Any, g: np.ndarray, S: ObservationSystem, h: float,
+              labels: Sequence[str]) -> np.ndarray:
+    """``d (W chi - Y) / d g`` on the rows of ``S`` at the fit ``res``: central differences of the assembled
+    prediction minus the assembled measurement (a joint zero moves the angles, a length the torque)."""
+    D = np.zeros((S.W.shape[0], g.size))
+    for c in range(g.size):
+        e = np.zeros(g.size)
+        e[c] = h
+        Sp, Sm = _stacked(*systems_at(g + e, res)), _stacked(*systems_at(g - e, res))
+        if Sp.W.shape != S.W.shape or Sm.W.shape != S.W.shape or not np.array_equal(Sp.joint, S.joint):
+            raise IdentificationError(f"--geometry: the rows selected change with {labels[c]} "
+                                      "(row selection by angle?)")
+        D[:, c] = ((res.predict(Sp) - res.scaled_measurements(Sp))
+                   - (res.predict(Sm) - res.scaled_measurements(Sm))) / (2 * h)
+    return D
+
+
+def gauss_newton(systems_at: GeneralSystemsAt, fit_at: FitAt, labels: Sequence[str], *, max_iterations: int = 20,
+                 step_fraction: float = STEP_FRACTION, h: float = ASSEMBLY_STEP) -> GaussNewton:
+    """Gauss-Newton on geometric corrections ``g`` (one per label), alternating with the linear fit of ``chi``.
+
+    At each iteration: ``chi`` fitted at the current ``g``; the sensitivity ``D_c = d (W chi - Y)/d g_c`` by a
+    central difference of the assembled rows (step ``h``); ``[W, D]`` solved for the corrections on the rows
+    weighted as the fit weights them (WLS: ``1/sigma_j``); a step taken only when the weighted residual of the
+    linear fit at the new ``g`` does not rise (halved up to :data:`MAX_HALVINGS` times otherwise: Gauss-Newton
+    with step halving, Dennis & Schnabel 1983, ch. 6); stop when every ``|step| <= step_fraction sigma``.
+    Standard deviations from the last linearisation, ``sigma^2 (A^T A)^-1`` (Gautier 1990)."""
+    k = len(labels)
+    g = np.zeros(k)
     sd = np.full(k, np.inf)
     steps: list[float] = []
     converged = False
     it = 0
-    if k == 0:
-        return GeometryFit(joints=(), offsets=q0, std=np.zeros(0), revolute=(), iterations=0, converged=True,
-                           steps=(), identifiability=vis)
     cached = None
+    res = None
     while it < max_iterations:
         it += 1
         if cached is None:
-            su, sl = systems_at(q0)
+            su, sl = systems_at(g, res)
             res = fit_at(su, sl)
         else:
             su, sl, res = cached
         S = _stacked(su, sl)
-        y = res.scaled_measurements(S)
-        pred = res.predict(S)
-        D = np.zeros((S.W.shape[0], k))
-        for c in range(k):
-            e = np.zeros(k)
-            e[c] = h
-            Sp, Sm = _stacked(*systems_at(q0 + e)), _stacked(*systems_at(q0 - e))
-            if Sp.W.shape != S.W.shape or Sm.W.shape != S.W.shape or not np.array_equal(Sp.joint, S.joint):
-                raise IdentificationError("--geometry joint_zero: the rows selected change with the joint zero "
-                                          f"of joint {js[c] + 1} (row selection by angle?)")
-            D[:, c] = (res.predict(Sp) - res.predict(Sm)) / (2 * h)
-        w = np.ones(S.W.shape[0])
-        if getattr(res, "joint_sigma", None) is not None:
-            sig = np.asarray(res.joint_sigma, float)
-            w = 1.0 / np.where(sig[S.joint] > 0, sig[S.joint], 1.0)
+        D = _jacobian(systems_at, res, g, S, h, labels)
+        w = _weights(res, S)
         cols = np.flatnonzero(np.linalg.norm(S.W, axis=0) > 0)
         A = np.hstack([S.W[:, cols], D]) * w[:, None]
-        r = (y - pred) * w
+        r = (res.scaled_measurements(S) - res.predict(S)) * w
         sol, *_ = np.linalg.lstsq(A, r, rcond=None)
         e_res = r - A @ sol
         dof = max(A.shape[0] - A.shape[1], 1)
@@ -443,15 +538,13 @@ def fit_zeros(model: IdentificationModel, systems_at: SystemsAt, fit_at: FitAt, 
         ratio = float(np.max(np.abs(step) / np.maximum(sd, 1e-300)))
         steps.append(ratio)
         if ratio <= step_fraction:
-            q0 = q0 + step
+            g = g + step
             converged = True
             break
-        # a step is taken only when the weighted residual of the linear fit at the new zeros decreases (halved
-        # up to MAX_HALVINGS times otherwise: Gauss-Newton with step halving, Dennis & Schnabel 1983, ch. 6)
         rss = float(r @ r)
         cached = None
         for _ in range(MAX_HALVINGS + 1):
-            su2, sl2 = systems_at(q0 + step)
+            su2, sl2 = systems_at(g + step, res)
             res2 = fit_at(su2, sl2)
             S2 = _stacked(su2, sl2)
             r2 = (res2.scaled_measurements(S2) - res2.predict(S2)) * w
@@ -459,11 +552,36 @@ def fit_zeros(model: IdentificationModel, systems_at: SystemsAt, fit_at: FitAt, 
                 cached = (su2, sl2, res2)
                 break
             step = step / 2
-        if cached is None:   # no descent along the Gauss-Newton direction: the zeros stay where they are
+        if cached is None:   # no descent along the Gauss-Newton direction: g stays where it is
             break
-        q0 = q0 + step
-    return GeometryFit(joints=js, offsets=q0, std=sd, revolute=tuple(bool(rev[j]) for j in js), iterations=it,
-                       converged=converged, steps=tuple(steps), identifiability=vis)
+        g = g + step
+    return GaussNewton(g=g, std=sd, iterations=it, converged=converged, steps=tuple(steps), fit=res)
+
+
+def fit_zeros(model: IdentificationModel, systems_at: SystemsAt, fit_at: FitAt, *,
+              joints: Sequence[int] | None = None, max_iterations: int = 20, step_fraction: float = STEP_FRACTION,
+              h: float = ASSEMBLY_STEP) -> GeometryFit:
+    """Gauss-Newton on the zeros of ``joints`` (default: the visible ones), alternating with the linear fit
+    (:func:`gauss_newton`).
+
+    Parameters
+    ----------
+    systems_at : callable
+        ``q0 -> (unloaded system, loaded system or None)``: the identification rows assembled from the
+        recordings at ``q + q0`` (``q0`` over ``joints``), filtered and decimated as ``identify`` does.
+    fit_at : callable
+        ``(unloaded, loaded) -> IdentificationResult``: the linear fit of ``chi`` (OLS/WLS, a known payload).
+    """
+    vis = zero_identifiability(model)
+    js = check_zero_joints(model, vis, joints)
+    if not js:
+        return GeometryFit(joints=(), offsets=np.zeros(0), std=np.zeros(0), revolute=(), iterations=0, converged=True,
+                           steps=(), identifiability=vis)
+    rev = revolute_joints(model)
+    gn = gauss_newton(lambda g, _res: systems_at(g), fit_at, [f"the zero of joint {j + 1}" for j in js],
+                      max_iterations=max_iterations, step_fraction=step_fraction, h=h)
+    return GeometryFit(joints=js, offsets=gn.g, std=gn.std, revolute=tuple(bool(rev[j]) for j in js),
+                       iterations=gn.iterations, converged=gn.converged, steps=gn.steps, identifiability=vis)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -562,3 +680,329 @@ def length_visibility(robot, frame: int, fld: str, *, rng: np.random.Generator |
             continue
         shares.append(float(np.linalg.norm(col - U @ (U.T @ col))) / nc)
     return min(shares)
+
+
+# ------------------------------------------------------------------------------------------------
+# link lengths fitted with the dynamic parameters (``identify --geometry length``)
+# ------------------------------------------------------------------------------------------------
+#: a length share outside the span of the standard regressor (and of the lengths before it) below this: not
+#: identifiable (above the relative error of the central differences, ~1e-9)
+LENGTH_VISIBILITY_TOL = 1e-5
+#: beyond this [m] a fitted length error is no machining or assembly error of a link (the loop's prior,
+#: docs/plausibility.md: a few mm plausible, beyond 20 mm doubtful): flagged implausible, never written
+MAX_LENGTH_M = 0.05
+#: ... nor beyond this share of the arm's reach (sum of its nominal |d| and |r|)
+MAX_LENGTH_REACH = 0.10
+LENGTH_ZERO_REASON = ("no torque changes with it (a translation of the base under uniform gravity, or a frame no link "
+                      "mass is carried by)")
+LENGTH_ABSORBED_REASON = ("the base parameters absorb it (its sensitivity column lies in the span of the standard "
+                          "regressor: the first moments of the links beyond it take the change)")
+LENGTH_PRISMATIC_REASON = "r of a prismatic joint is its joint variable: a joint zero (--geometry joint_zero)"
+
+
+def length_plausible(value: float, reach: float) -> bool:
+    """A length error within :data:`MAX_LENGTH_M` and :data:`MAX_LENGTH_REACH` of the reach."""
+    lim = MAX_LENGTH_M if reach <= 0 else min(MAX_LENGTH_M, MAX_LENGTH_REACH * reach)
+    return abs(value) <= lim
+
+
+def arm_reach(robot) -> float:
+    """Sum of the nominal ``|d|`` and ``|r|`` of every frame [m] (joint variables at 0)."""
+    subs = robot.geometry_subs()
+    tot = 0.0
+    for row in robot.rows:
+        vals = row_values(row, subs)
+        tot += abs(float(vals[3])) + abs(float(np.asarray(vals[5]).ravel()[0]))
+    return tot
+
+
+@dataclass(frozen=True)
+class LengthVisibility:
+    """Whether torque data can see the error of one MDH length (``d`` or ``r`` of frame ``frame``)."""
+
+    frame: int
+    field: str
+    share: float
+    visible: bool
+    reason: str = ""
+
+    def to_dict(self) -> dict:
+        return {"frame": self.frame, "field": self.field, "share_outside_base": float(self.share),
+                "identifiable": self.visible, "reason": self.reason or None}
+
+
+def _candidate_lengths(robot) -> list[tuple[int, str]]:
+    return [(int(r.j), fld) for r in robot.rows for fld in LENGTH_FIELDS]
+
+
+_LENGTH_VISIBILITY: dict = {}   # id(robot) -> (robot, result): the default measure of a robot, computed once
+
+
+def length_identifiability(robot, *, tol: float = LENGTH_VISIBILITY_TOL, rng: np.random.Generator | None = None,
+                           n_samples: int = 30, n_theta: int = 2, model: IdentificationModel | None = None
+                           ) -> tuple[LengthVisibility, ...]:
+    """Per frame and length (``d``, ``r``), whether torque data can see its error: the share of its sensitivity
+    column (:func:`length_sensitivity`) outside the span of the standard regressor and of the columns of the
+    visible lengths before it (frames in order, ``d`` before ``r``), the smallest over ``n_theta`` random
+    standard parameter vectors, on ``n_samples`` random configurations (as :func:`zero_shares` for zeros; the
+    lengths one another can stand for are counted once). The lengths of a frame on the base (a translation of
+    the whole arm) and of a frame that carries no inertial parameter are 0 without computing. ``model``: the
+    generated model of ``robot``, whose standard regressor spans the same space as the numeric one, faster."""
+    if rng is None:
+        got = _LENGTH_VISIBILITY.get(id(robot))
+        if got is not None and got[0] is robot and (tol, n_samples, n_theta) == got[1]:
+            return got[2]
+        out = _length_shares(robot, tol, np.random.default_rng(0), n_samples, n_theta, model)
+        _LENGTH_VISIBILITY[id(robot)] = (robot, (tol, n_samples, n_theta), out)
+        return out
+    return _length_shares(robot, tol, rng, n_samples, n_theta, model)
+
+
+def _standard_rows(robot, model: IdentificationModel | None, q, dq, ddq) -> np.ndarray:
+    """The standard regressor in ``robot.standard_names`` order: the generated model's when it has the same
+    names, else the numeric Newton-Euler one."""
+    names = tuple(robot.standard_names)
+    if model is not None and set(getattr(model, "STANDARD_NAMES", ())) == set(names):
+        W = np.asarray(model.standard_regressor(q, dq, ddq), float)
+        idx = [tuple(model.STANDARD_NAMES).index(nm) for nm in names]
+        return W[:, :, idx]
+    return numeric_regressor(robot, q, dq, ddq)[0]
+
+
+def _massless(robot, frame: int) -> bool:
+    """No inertial parameter on the frame or any frame it carries."""
+    sub, todo = set(), [int(frame)]
+    while todo:
+        f = todo.pop()
+        sub.add(f)
+        todo += [int(c) for c in robot.children(f)]
+    for nm in robot.standard_names:
+        try:
+            kind, f, _ = split_name(nm)
+        except ValueError:
+            continue
+        if kind in INERTIAL_KINDS and f in sub:
+            return False
+    return True
+
+
+def _length_shares(robot, tol: float, rng: np.random.Generator, n_samples: int, n_theta: int,
+                   model: IdentificationModel | None = None) -> tuple[LengthVisibility, ...]:
+    n = robot.n_joints
+    q, dq, ddq = _random_motion(n, n_samples, rng)
+    W = _standard_rows(robot, model, q, dq, ddq)
+    W = W.reshape(n_samples * n, -1)
+    U, s, _ = np.linalg.svd(W, full_matrices=False)
+    U = U[:, s > s[0] * 1e-10] if s.size and s[0] > 0 else U[:, :0]
+    chis = [rng.standard_normal(W.shape[1]) for _ in range(n_theta)]
+    bases = [U for _ in chis]
+    out = []
+    prismatic = {int(r.j) for r in robot.joints if int(r.sigma) == 1}
+    for frame, fld in _candidate_lengths(robot):
+        if fld == "r" and frame in prismatic:
+            out.append(LengthVisibility(frame, fld, 0.0, False, LENGTH_PRISMATIC_REASON))
+            continue
+        if int(robot.row(frame).ant) == 0 or _massless(robot, frame):
+            out.append(LengthVisibility(frame, fld, 0.0, False, LENGTH_ZERO_REASON))
+            continue
+        shares, zero, cols = [], True, []
+        plus, minus = perturbed_robot(robot, frame, fld, 1e-6), perturbed_robot(robot, frame, fld, -1e-6)
+        for chi, B in zip(chis, bases):
+            col = ((inverse_dynamics(plus, q, dq, ddq, chi) - inverse_dynamics(minus, q, dq, ddq, chi))
+                   / 2e-6).reshape(-1)
+            cols.append(col)
+            nc = float(np.linalg.norm(col))
+            if nc <= 1e-9 * max(float(np.linalg.norm(W @ chi)), 1e-300):
+                shares.append(0.0)
+                continue
+            zero = False
+            shares.append(float(np.linalg.norm(col - B @ (B.T @ col))) / nc)
+        vis = min(shares) > tol
+        if vis:   # the next lengths are judged beyond this one
+            for t, (B, col) in enumerate(zip(bases, cols)):
+                r = col - B @ (B.T @ col)
+                bases[t] = np.hstack([B, (r / np.linalg.norm(r))[:, None]])
+        out.append(LengthVisibility(frame, fld, min(shares), vis,
+                                    "" if vis else (LENGTH_ZERO_REASON if zero else LENGTH_ABSORBED_REASON)))
+    return tuple(out)
+
+
+def length_identifiability_text(vis: Sequence[LengthVisibility], robot: str) -> str:
+    """The identifiability printout for the link lengths: which errors torque data can see, why not the others."""
+    seen = [f"frame {v.frame} {v.field}" for v in vis if v.visible]
+    lines = [f"Link lengths of {robot} seen by torque data (gravity and inertial effects): "
+             + (", ".join(seen) if seen else "none")]
+    for v in vis:
+        if not v.visible:
+            lines.append(f"  frame {v.frame} {v.field}: not identifiable, {v.reason}")
+    return "\n".join(lines)
+
+
+def parse_lengths(spec: Sequence[str] | None, robot, vis: Sequence[LengthVisibility]) -> tuple[tuple[int, str], ...]:
+    """The lengths ``--geometry-frames`` names (``3r``, ``4d``, or ``3`` for both of frame 3's visible ones;
+    default: every visible length). A frame the robot lacks, a field not ``d``/``r`` or an invisible length is
+    refused naming the robot file, the frame and the field."""
+    if spec is None:
+        return tuple((v.frame, v.field) for v in vis if v.visible)
+    frames = {int(r.j) for r in robot.rows}
+    by = {(v.frame, v.field): v for v in vis}
+    out: list[tuple[int, str]] = []
+    for item in spec:
+        m = re.fullmatch(r"\s*(\d+)\s*([a-zA-Z]*)\s*", str(item))
+        if m is None:
+            raise IdentificationError(f"--geometry-frames {item!r}: a frame number and a field (d or r), e.g. 3r")
+        f, fld = int(m.group(1)), m.group(2).lower()
+        if f not in frames:
+            raise IdentificationError(f"--geometry-frames {item!r}: {robot.file} has no frame j = {f} "
+                                      f"(frames {min(frames)}..{max(frames)})")
+        if fld and fld not in LENGTH_FIELDS:
+            raise IdentificationError(f"--geometry-frames {item!r}: frame {f} of {robot.file}: field {fld!r} is no "
+                                      "length; one of d, r")
+        for fl in ((fld,) if fld else LENGTH_FIELDS):
+            v = by.get((f, fl))
+            if v is None or not v.visible:
+                if not fld:
+                    continue
+                why = v.reason if v is not None else "not examined"
+                raise IdentificationError(f"--geometry-frames {item!r}: frame {f} field {fl} of {robot.file} is not "
+                                          f"identifiable from torque data: {why}")
+            if (f, fl) not in out:
+                out.append((f, fl))
+    return tuple(out)
+
+
+def standard_from_fit(model: IdentificationModel, robot, theta: Mapping[str, float]
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Standard parameters (``robot.standard_names`` order) whose base parameters are the fit's (minimum norm:
+    ``pinv(K) chi_b``, ``K`` the model's base-from-standard map) and the payload ones (``robot.payload_names``).
+    Any other choice differs by a null-space vector whose length sensitivity lies in the span of the
+    regressor, which the linear part of the fit absorbs."""
+    std_names = tuple(model.STANDARD_NAMES)
+    K = np.asarray(model.base_parameters(np.eye(len(std_names))), float).T   # (base, standard)
+    if K.shape[0] != len(tuple(model.BASE_NAMES)):
+        raise IdentificationError(f"{model.ROBOT}: the base parameters of the model ({len(tuple(model.BASE_NAMES))}) "
+                                  f"are not its base_parameters map's ({K.shape[0]}): no standard parameters for "
+                                  "the length sensitivity (a declared friction law replaces base columns)")
+    chi_b = np.array([float(theta.get(nm, 0.0)) for nm in model.BASE_NAMES])
+    chi = np.linalg.pinv(K) @ chi_b
+    by = dict(zip(std_names, chi))
+    chi_std = np.array([float(by.get(nm, 0.0)) for nm in robot.standard_names])
+    pay = tuple(robot.payload_names)
+    chi_pay = np.array([float(theta.get(nm, 0.0)) for nm in pay]) if pay else None
+    return chi_std, chi_pay
+
+
+def _lengthened(robot, lengths: Sequence[tuple[int, str]], values: Sequence[float] | np.ndarray):
+    out = robot
+    for (f, fld), v in zip(lengths, values):
+        out = perturbed_robot(out, f, fld, float(v))
+    return out
+
+
+def correct_lengths(model: IdentificationModel, robot, trajectories: Sequence[Any], options: Any,
+                    lengths: Sequence[tuple[int, str]], values: Sequence[float] | np.ndarray, chi_std: np.ndarray,
+                    chi_payload: np.ndarray | None = None) -> tuple[Any, ...]:
+    """The recordings with the torque of the length errors ``values`` taken out: ``tau - (tau(L + dL) - tau(L))``
+    (numeric Newton-Euler at the standard parameters ``chi_std``), evaluated on the band-pass kinematics the
+    assembly evaluates ``W`` on (:func:`~symoro_gen.observations.assembly.iter_kinematics` with ``options``), so
+    that the model of the file's geometry fits them. The secant is exact; the edge samples the assembly drops
+    are left as recorded."""
+    if not len(lengths) or not np.any(np.asarray(values) != 0):
+        return tuple(trajectories)
+    moved = _lengthened(robot, lengths, values)
+    out = []
+    for tr in trajectories:
+        st = observation_settings(tr, options)
+        tau = np.array(tr.tau, float, copy=True)
+        pay = chi_payload if tr.loaded else None
+        for a, b, q, dq, ddq in iter_kinematics(model, tr, options, st):
+            d = inverse_dynamics(moved, q, dq, ddq, chi_std, pay) - inverse_dynamics(robot, q, dq, ddq, chi_std, pay)
+            tau[st.edge_samples + a:st.edge_samples + b] -= d
+        out.append(dc_replace(tr, tau=tau))
+    return tuple(out)
+
+
+AssembleAt = Callable[[Sequence[Any], Sequence[Any]], tuple[ObservationSystem, ObservationSystem | None]]
+
+
+@dataclass(frozen=True)
+class GeometryProblem:
+    """What :func:`fit_geometry` corrects: the recordings, the assembly options the length torque is evaluated
+    with, the zeros (0-based joints) and the lengths ``(frame, field)`` fitted."""
+
+    unloaded: tuple[Any, ...]
+    loaded: tuple[Any, ...]
+    options: Any
+    joints: tuple[int, ...] = ()
+    lengths: tuple[tuple[int, str], ...] = ()
+
+    def corrected(self, model: IdentificationModel, robot, trajectories: Sequence[Any], g: np.ndarray,
+                  chi: tuple[np.ndarray, np.ndarray | None] | None) -> tuple[Any, ...]:
+        """``trajectories`` at the corrections ``g`` (zeros then lengths): angles shifted by the zeros, the
+        torque of the length errors taken out (with the standard parameters ``chi``; none without)."""
+        kz = len(self.joints)
+        out = shift_zeros(trajectories, self.joints, g[:kz]) if kz else tuple(trajectories)
+        if self.lengths and chi is not None:
+            out = correct_lengths(model, robot, out, self.options, self.lengths, g[kz:], chi[0], chi[1])
+        return out
+
+
+def fit_geometry(model: IdentificationModel, robot, problem: GeometryProblem, assemble_at: AssembleAt,
+                 fit_at: FitAt, *, kinds: Sequence[str], max_iterations: int = 20,
+                 step_fraction: float = STEP_FRACTION) -> GeometryFit:
+    """Joint zeros and link lengths fitted together with the dynamic parameters (:func:`gauss_newton`): a zero
+    moves the recorded angles (:func:`shift_zeros`), a length error adds the torque of the arm with that
+    length, taken out of the recordings (:func:`correct_lengths`) with the standard parameters of the current
+    fit (:func:`standard_from_fit`). ``assemble_at(unloaded, loaded)`` assembles the rows as ``identify`` does.
+    Identifiability of the zeros and of the lengths recorded for the printout."""
+    vis = zero_identifiability(model) if "joint_zero" in kinds else ()
+    lvis = length_identifiability(robot, model=model) if "length" in kinds else ()
+    js, ls = problem.joints, problem.lengths
+    labels = [f"the zero of joint {j + 1}" for j in js] + [f"frame {f} {fl}" for f, fl in ls]
+    rev = revolute_joints(model) if js else np.ones(0, bool)
+
+    def systems_at(g: np.ndarray, res: Any):
+        chi = standard_from_fit(model, robot, res.parameter_map()) if (ls and res is not None) else None
+        return assemble_at(problem.corrected(model, robot, problem.unloaded, g, chi),
+                           problem.corrected(model, robot, problem.loaded, g, chi))
+
+    if labels:
+        # the lengths are in metres, the zeros in radians: the same difference step suits both (ASSEMBLY_STEP)
+        gn = gauss_newton(systems_at, fit_at, labels, max_iterations=max_iterations, step_fraction=step_fraction)
+        g, sd, it, conv, steps = gn.g, gn.std, gn.iterations, gn.converged, gn.steps
+        chi = standard_from_fit(model, robot, gn.fit.parameter_map()) if ls else (None, None)
+    else:
+        g, sd, it, conv, steps, chi = np.zeros(0), np.zeros(0), 0, True, (), (None, None)
+    kz = len(js)
+    return GeometryFit(joints=js, offsets=g[:kz], std=sd[:kz], revolute=tuple(bool(rev[j]) for j in js),
+                       iterations=it, converged=conv, steps=steps, identifiability=tuple(vis),
+                       kind=",".join(kinds), lengths=ls, length_values=g[kz:], length_std=sd[kz:],
+                       length_identifiability=tuple(lvis), reach=arm_reach(robot), chi_std=chi[0], chi_payload=chi[1])
+
+
+def apply_geometry(model: IdentificationModel, robot, fit: GeometryFit, trajectories: Sequence[Any],
+                   options: Any) -> tuple[Any, ...]:
+    """The recordings corrected by a fitted geometry: the zeros added to the angles, the torque of the length
+    errors taken out (the standard parameters of the last iteration)."""
+    out = shift_zeros(trajectories, fit.joints, fit.offsets) if fit.joints else tuple(trajectories)
+    if fit.lengths and fit.chi_std is not None:
+        out = correct_lengths(model, robot, out, options, fit.lengths, fit.length_values, fit.chi_std, fit.chi_payload)
+    return out
+
+
+def add_lengths(text: RobotText, lengths: Mapping[tuple[int, str], float]) -> str:
+    """Add the length errors (``(frame, field)`` -> error [m]) to the ``d``/``r`` lines of their ``[[frames]]``
+    entries in ``text`` (a number gets the sum, an expression ``"RL3"`` becomes ``"RL3 + 0.004"``); returns them
+    as text for a header comment. A field not on a line of its own is refused naming the file, frame and field."""
+    for (f, fld), v in sorted(lengths.items()):
+        text.edit_value(f, fld, partial(_lengthened_value, c=float(v)))
+    return ", ".join(f"frame {f} {fld} {1e3 * v:+.4g} mm" for (f, fld), v in sorted(lengths.items()))
+
+
+def _lengthened_value(old: str, c: float) -> str:
+    """The TOML value ``old`` (a number, or a quoted expression) plus ``c``."""
+    s = old.strip()
+    if s.startswith('"'):
+        sign = "-" if c < 0 else "+"
+        return f'"{s[1:-1].strip()} {sign} {format_number(abs(c))}"'
+    return format_number(float(s) + c)

@@ -34,10 +34,15 @@ from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_l
 from ..identification.geometry import (
     GEOMETRY_KINDS,
     GeometryFit,
+    GeometryProblem,
+    add_lengths,
     add_zeros,
-    fit_zeros,
-    shift_zeros,
-    visible_zero_joints,
+    apply_geometry,
+    check_zero_joints,
+    fit_geometry,
+    length_identifiability,
+    parse_lengths,
+    zero_identifiability,
 )
 from ..identification.iv import identify_iv
 from ..identification.payload import fit_with_known_payload_factors, identify_payload
@@ -118,13 +123,18 @@ class IdentifyOptions(Options):
         nominal one (:mod:`symoro_gen.identification.plausibility`, docs/plausibility.md).
     data_format : LogFormat, optional
         How the files are read (columns, time base, units, resampling: docs/data-files.md).
-    geometry : {"joint_zero"}, optional
-        Also identify geometric parameters: the zeros of the joints torque data can see, by Gauss-Newton
-        alternating with the linear fit (:mod:`symoro_gen.identification.geometry`); the fit, the validation
-        and everything after use the corrected angles. OLS, WLS or TLS, without gains.
+    geometry : {"joint_zero", "length", "joint_zero,length"}, optional
+        Also identify geometric parameters: the zeros of the joints torque data can see and/or the MDH lengths
+        ``d``, ``r`` it can see, by Gauss-Newton alternating with the linear fit
+        (:mod:`symoro_gen.identification.geometry`); the fit, the validation and everything after use the
+        corrected angles and the torques with the length errors' torque taken out. OLS, WLS or TLS, without
+        gains.
     geometry_joints : sequence of int, optional
-        With ``geometry``: the joints (1-based) whose zero is fitted (default: every visible one); a joint whose
-        zero torque data cannot see is refused.
+        With ``geometry`` joint_zero: the joints (1-based) whose zero is fitted (default: every visible one); a
+        joint whose zero torque data cannot see is refused.
+    geometry_frames : sequence of str, optional
+        With ``geometry`` length: the lengths fitted, ``3r``, ``4d`` or ``3`` (both of frame 3's visible ones)
+        (default: every visible length); an invisible one is refused with the reason.
     positions : {"link", "motor"}
         The logged positions are link-side (default) or motor-side ``q_m / N``: then the declared elastic
         joints' link positions are ``positions - tau / K`` (:func:`symoro_gen.identification.elastic.link_side`).
@@ -156,14 +166,26 @@ class IdentifyOptions(Options):
     positions: str = "link"
     geometry: str | None = None
     geometry_joints: Sequence[int] | None = None
+    geometry_frames: Sequence[str] | None = None
+
+    @property
+    def geometry_kinds(self) -> tuple[str, ...]:
+        """The geometric kinds of ``geometry`` (``"joint_zero,length"`` -> both)."""
+        return tuple(k.strip() for k in self.geometry.split(",")) if self.geometry else ()
 
     def __post_init__(self) -> None:
         if self.positions not in POSITION_SIDES:
             raise OptionError(f"positions {self.positions!r}: one of {', '.join(POSITION_SIDES)}")
         if self.geometry_joints is not None and self.geometry is None:
             raise OptionError("--geometry-joints chooses the joints of --geometry joint_zero: add --geometry joint_zero")
-        if self.geometry is not None and self.geometry not in GEOMETRY_KINDS:
-            raise OptionError(f"--geometry {self.geometry!r}: one of {', '.join(GEOMETRY_KINDS)}")
+        bad = [k for k in self.geometry_kinds if k not in GEOMETRY_KINDS]
+        if bad or (self.geometry is not None and not self.geometry_kinds):
+            raise OptionError(f"--geometry {self.geometry!r}: one of {', '.join(GEOMETRY_KINDS)} or both, "
+                              "comma-separated (joint_zero,length)")
+        if self.geometry_joints is not None and "joint_zero" not in self.geometry_kinds:
+            raise OptionError("--geometry-joints chooses the joints of --geometry joint_zero: add joint_zero")
+        if self.geometry_frames is not None and "length" not in self.geometry_kinds:
+            raise OptionError("--geometry-frames chooses the lengths of --geometry length: add --geometry length")
         if self.geometry is not None and (self.method in ("iv", "didim") or self.gains):
             raise OptionError(f"--geometry {self.geometry} is fitted with IDIM-OLS, -WLS or -TLS without gains: "
                               f"not with {'--gains ' + str(self.gains) if self.gains else '--method ' + self.method}")
@@ -297,7 +319,7 @@ class IdentifyResults(Results):
         if self.elasticity is not None:
             text += "\n\n" + self.elasticity.summary()
         if self.robot_out is not None:
-            names = {"joint_zero": "joint zeros of joints", "elastic": "elastic K, D of frames",
+            names = {"joint_zero": "joint zeros of joints", "length": "link lengths (frame, field)", "elastic": "elastic K, D of frames",
                      "friction_law": "friction-law scales of frames"}
             text += (f"\n\nRobot file written (-o): {self.robot_out['path']} (from {self.robot_out['robot_file']}): "
                      + "; ".join(f"{names[k]} {', '.join(map(str, v))}" for k, v in self.robot_out["written"].items())
@@ -305,13 +327,15 @@ class IdentifyResults(Results):
         return text + "\n\n" + data_text(self.reports)
 
     # ---- the corrected robot file ----------------------------------------------------------------------
-    def written_quantities(self) -> dict[str, list[int]]:
+    def written_quantities(self) -> dict[str, list]:
         """What ``-o/--robot-out`` writes into the robot file, each only when this run identified it:
         ``joint_zero`` (1-based joints, ``--geometry joint_zero``), ``elastic`` (frames whose ``K``, ``D`` the
         two-encoder fit estimated), ``friction_law`` (frames whose law's scale was fitted)."""
-        out: dict[str, list[int]] = {}
+        out: dict[str, list] = {}
         if self.geometry is not None and len(self.geometry.joints):
             out["joint_zero"] = [j + 1 for j in self.geometry.joints]
+        if self.geometry is not None and self.geometry.lengths:
+            out["length"] = [f"{f}{fl}" for f, fl in self.geometry.lengths]
         if self.elasticity is not None and self.elasticity.joints:
             out["elastic"] = list(self.elasticity.joints)
         laws = [f.law.frame for f in self.friction_laws if f.fitted and f.law.scale_name is not None]
@@ -347,6 +371,17 @@ class IdentifyResults(Results):
                     "written into a robot file; fit the other joints only (--geometry-joints)")
             head.append("  joint zeros (--geometry joint_zero) added to theta/r: "
                         + add_zeros(text, self.robot, self.geometry.offset_map()))
+        if "length" in what:
+            assert self.geometry is not None
+            wild = self.geometry.implausible_lengths()
+            if wild:
+                raise IdentificationError(
+                    f"-o/--robot-out: {self.robot.file}: " + ", ".join(f"frame {f} field {fl} error {1e3 * v:+.1f} mm"
+                                                                      for f, fl, v in wild)
+                    + " is beyond the plausible link-length error (50 mm or 10 % of the reach): not written into a "
+                    "robot file; fit the other lengths only (--geometry-frames)")
+            head.append("  link-length errors (--geometry length) added to d/r: "
+                        + add_lengths(text, self.geometry.length_map()))
         if "elastic" in what:
             est = self.elasticity
             assert est is not None
@@ -368,7 +403,7 @@ class IdentifyResults(Results):
         head.append("  [nominal] unchanged: the identified base parameters are not the standard ones")
         write_robot_toml(text.text(head), path, overwrite=force)
         out = replace(self, robot_out={"path": str(path), "robot_file": str(text.path), "written": what})
-        if "joint_zero" in what:
+        if "joint_zero" in what or "length" in what:
             assert self.geometry is not None
             out = replace(out, geometry=replace(self.geometry, robot_out=str(path)))
         return out
@@ -491,7 +526,8 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
     geo = None
     if opts.geometry:  # the joint zeros first: everything after runs at the corrected angles
         geo = _fit_geometry(opts, robot, model, unloaded, loaded, asm_opts, known)
-        unloaded, loaded, held_back = (shift_zeros(x, geo.joints, geo.offsets) for x in (unloaded, loaded, held_back))
+        unloaded, loaded, held_back = (apply_geometry(model, robot, geo, x, asm_opts)
+                                       for x in (unloaded, loaded, held_back))
     streamed = streams(opts)
     model, law_fits = _declared_friction(robot, model, unloaded, replace(asm_opts, payload_columns=False), opts)
     asm_u = _assemble(model, unloaded, replace(asm_opts, payload_columns=False), streamed)
@@ -545,16 +581,20 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Iden
 
 def _fit_geometry(opts: IdentifyOptions, robot, model: IdentificationModel, unloaded, loaded, asm_opts,
                   known) -> GeometryFit:
-    """``geometry="joint_zero"``: the zeros of the visible joints by Gauss-Newton alternating with the linear
-    fit of the same estimator on the same rows (in memory)."""
-    js = (visible_zero_joints(model) if opts.geometry_joints is None
-          else tuple(int(j) - 1 for j in opts.geometry_joints))
+    """``geometry``: the zeros of the visible joints and/or the visible link lengths by Gauss-Newton alternating
+    with the linear fit of the same estimator on the same rows (in memory)."""
+    kinds = opts.geometry_kinds
+    js: tuple[int, ...] = ()
+    if "joint_zero" in kinds:
+        js = check_zero_joints(model, zero_identifiability(model),
+                               None if opts.geometry_joints is None else [int(j) - 1 for j in opts.geometry_joints])
+    ls = parse_lengths(opts.geometry_frames, robot, length_identifiability(robot, model=model)) if "length" in kinds else ()
     trajs = (*unloaded, *loaded)
+    problem = GeometryProblem(unloaded=tuple(unloaded), loaded=tuple(loaded), options=asm_opts, joints=js, lengths=ls)
 
-    def systems_at(q0):
-        su = assemble(model, shift_zeros(unloaded, js, q0), replace(asm_opts, payload_columns=False)).system
-        sl = (assemble(model, shift_zeros(loaded, js, q0), replace(asm_opts, payload_columns=True)).system
-              if loaded else None)
+    def assemble_at(tu, tl):
+        su = assemble(model, tu, replace(asm_opts, payload_columns=False)).system
+        sl = assemble(model, tl, replace(asm_opts, payload_columns=True)).system if tl else None
         return su, sl
 
     def fit_at(su, sl):
@@ -563,7 +603,7 @@ def _fit_geometry(opts: IdentifyOptions, robot, model: IdentificationModel, unlo
             return fit_with_known_payload(su, sl, known, method=opts.method)
         return fit(su, method=opts.method)
 
-    g = fit_zeros(model, systems_at, fit_at, joints=js)
+    g = fit_geometry(model, robot, problem, assemble_at, fit_at, kinds=kinds)
     return replace(g, robot_file=str(robot.file))
 
 
@@ -651,7 +691,7 @@ def _validate(opts: IdentifyOptions, robot, model, res, res_u, validate, held_ba
                   if validate else ((), ()))
     vtr = tuple(_positions(opts, robot, vtr))
     if geometry is not None:
-        vtr = shift_zeros(vtr, geometry.joints, geometry.offsets)
+        vtr = apply_geometry(model, robot, geometry, vtr, asm_opts)
     vtr = tuple(held_back) + tuple(vtr)
     asm_v = _assemble(model, vtr, replace(asm_opts, min_velocity=None,
                                           payload_columns=bool(opts.validate_loaded) or has_payload), streamed)

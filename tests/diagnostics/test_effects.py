@@ -47,8 +47,10 @@ CASES = [
 
 
 #: kinds whose end-to-end tests run on the independent simulator of the truth bench instead (bench/truthsim.py:
-#: a neighbour's torque in a channel; a LuGre friction that holds at rest, which needs recordings with pauses)
-COVERED_ELSEWHERE = {"crosstalk": "test_crosstalk_held.py", "held_friction": "test_crosstalk_held.py"}
+#: a neighbour's torque in a channel; a LuGre friction that holds at rest, which needs recordings with pauses;
+#: a link-length error, which needs the arm built with the true geometry)
+COVERED_ELSEWHERE = {"crosstalk": "test_crosstalk_held.py", "held_friction": "test_crosstalk_held.py",
+                     "link_length": "test_link_length.py"}
 
 
 def test_every_kind_is_covered():
