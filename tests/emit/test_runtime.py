@@ -233,3 +233,27 @@ def test_generated_package_source_has_no_runtime_copies():
         init = (pkg / "__init__.py").read_text()
         assert "from symoro_gen.runtime import GeneratedModel" in init
         assert "def _evaluate" not in init and "ctypes" not in init and "subprocess" not in init
+
+
+@pytest.mark.skipif(not HAVE_CC, reason="no C compiler on this machine")
+def test_a_length_with_a_number_added_compiles_and_matches_the_numeric_model(tmp_path, monkeypatch):
+    """``d = "D2 + 0.005"`` (what ``identify -o`` writes for a fitted link-length error) makes a definition of the
+    generated code a pure number: the SIMD kernel must broadcast it to every lane (a plain ``double`` does not
+    initialise a vector) and the compiled regressor equals the numeric Newton-Euler regressor."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.delenv("SYMORO_BACKEND", raising=False)
+    text = (ROOT / "robots" / "scara.toml").read_text()
+    text = text.replace('name = "scara"', 'name = "scara_len"').replace('d = "D2"', 'd = "D2 + 0.005"')
+    robot_file = tmp_path / "scara_len.toml"
+    robot_file.write_text(text)
+    assert main(["generate", str(robot_file), "--out", str(tmp_path / "pkgs")]) == 0
+    assert main(["build", str(tmp_path / "pkgs" / "scara_len")]) == 0
+    m = import_package(tmp_path / "pkgs" / "scara_len")
+    robot = load_robot(str(robot_file))
+    q, dq, ddq = _states(robot.n_joints)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CBackendWarning)
+        W = np.asarray(m.standard_regressor(q, dq, ddq))
+    assert m.BACKEND == "c"
+    W_num, _ = numeric_regressor(robot, q, dq, ddq)
+    assert np.allclose(W.reshape(W_num.shape), W_num, atol=1e-10)

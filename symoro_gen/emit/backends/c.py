@@ -93,7 +93,10 @@ def _vector_defs(graph: ExprGraph, memo: dict[Any, str] | None = None) -> list[s
                 lines.append(f"        sym_vsincos({print_expr(a, C_VECTOR, memo)}, &{sn}, &{cs});")
                 done.add(a)
             continue
-        lines.append(f"        const sym_vd {s.name} = {print_expr(e, C_VECTOR, memo)};")
+        value = print_expr(e, C_VECTOR, memo)
+        if not e.free_symbols:   # a number (e.g. a length written "RL3 + 0.005"): broadcast to every lane
+            value = f"(sym_vd){{0}} + {value}"
+        lines.append(f"        const sym_vd {s.name} = {value};")
     return lines
 
 
