@@ -53,7 +53,7 @@ from .frame import build_frame, common_bandwidth
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
            "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "JointZeroFit",
            "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints", "LENGTH_STEP",
-           "describe_length", "description_of", "length_column", "length_joint", "link_length_ready",
+           "describe_length", "description_of", "emitted_length_column", "length_column", "length_joint", "link_length_ready",
            "visible_lengths"]
 
 def invisible_zero_note(model: IdentificationModel) -> list[str]:
@@ -283,22 +283,51 @@ LENGTH_STEP = 1e-6
 
 def length_column(frame, ctx_model: IdentificationModel, theta, f: int, fld: str) -> np.ndarray:
     """``(d tau / d L) chi`` of the MDH length ``fld`` of frame ``f`` on the rows of every joint (shape (r, 1)):
-    the central difference of the numeric Newton-Euler torque at the standard parameters of the current fit
-    (:func:`standard_from_fit`), evaluated at full rate on the frame's signals and decimated in parallel with
+    the generated package's emitted derivative (:func:`emitted_length_column`) or, without one or on loaded
+    experiments, the central difference of the numeric Newton-Euler torque, at the standard parameters of the
+    current fit (:func:`standard_from_fit`), evaluated at full rate on the frame's signals and decimated in parallel with
     ``W`` (a :class:`.frame.Frame`). A length error ``e`` adds ``e`` times this column (Khalil & Dombre 2002,
     ch. 11: the calibration model linearised in the parameter errors)."""
     robot = description_of(ctx_model)
     assert robot is not None   # families exist only with a description (link_length_ready)
     chi, pay = standard_from_fit(ctx_model, robot, theta)
     plus, minus = _pair(robot, f, fld)
+    emitted = emitted_length_column(ctx_model, robot, chi, f, fld)
 
     def fn(ex, a: int, b: int) -> np.ndarray:
         p = pay if ex.loaded else None
         q, dq, ddq = ex.q[a:b], ex.dq[a:b], ex.ddq[a:b]
+        if emitted is not None and p is None:
+            return emitted(q, dq, ddq)[:, :, None]
         d = (inverse_dynamics(plus, q, dq, ddq, chi, p) - inverse_dynamics(minus, q, dq, ddq, chi, p)) / (2 * LENGTH_STEP)
         return d[:, :, None]
 
     return frame.full_rate_columns_batched(fn, 1)
+
+
+def emitted_length_column(model: IdentificationModel, robot, chi_std: np.ndarray, f: int, fld: str):
+    """``(q, dq, ddq) -> (d tau / d L) chi`` (shape (N, n)) from the generated package's emitted derivative of the
+    standard regressor (``geometry_columns``, :mod:`symoro_gen.emit.geometry`), or None when the model has none
+    (a model built in memory, a wrapper, a package whose manifest omits it) or its standard parameters are not the
+    description's: the caller then differentiates the numeric Newton-Euler model. A constant the generator
+    dropped (derivative identically 0) gives zeros. Without payload only: the emitted derivative has no payload
+    columns."""
+    columns = getattr(model, "geometry_columns", None)
+    names = tuple(getattr(model, "GEOMETRY_NAMES", ()))
+    std = tuple(getattr(model, "STANDARD_NAMES", ()))
+    if columns is None or not names or set(std) != set(robot.standard_names):
+        return None
+    by = dict(zip(robot.standard_names, chi_std))
+    chi_m = np.array([float(by[nm]) for nm in std])
+    name = f"{fld}{int(f)}"
+    k = names.index(name) if name in names else None
+
+    def col(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        if k is None:
+            return np.zeros(np.shape(q))
+        return np.asarray(columns(q, dq, ddq, chi_m))[:, :, k]
+
+    return col
 
 
 def describe_length(frame: int, fld: str, value: float, std: float) -> dict:

@@ -649,9 +649,9 @@ def length_sensitivity(robot, chi_std, q, dq, ddq, frame: int, fld: str, *, h: f
                        chi_payload=None) -> np.ndarray:
     """``d tau / d L`` (shape (N, n)) of the MDH length ``L`` = ``fld`` (``d`` or ``r``) of frame ``frame``, at
     the standard parameters ``chi_std``: a central difference (step ``h`` [m]) of the numeric Newton-Euler
-    torque (:func:`symoro_gen.dynamics.numeric.inverse_dynamics`) at the perturbed geometry. The generated
-    models do not emit ``d Y / d g`` (their regressor is symbolic in the joint variables only, the geometry
-    substituted), so a length error is differentiated on the standard parameters, not the base ones: the
+    torque (:func:`symoro_gen.dynamics.numeric.inverse_dynamics`) at the perturbed geometry: it needs only the
+    description (the emitted ``d Y_std / d g`` of a generated package, :mod:`symoro_gen.emit.geometry`, is the
+    same column, and the loop's :func:`symoro_gen.diagnostics.geometry.emitted_length_column` uses it). A length error is differentiated on the standard parameters, not the base ones: the
     base-parameter regrouping itself depends on the lengths (Khalil & Dombre 2002, ch. 12)."""
     plus = inverse_dynamics(perturbed_robot(robot, frame, fld, h), q, dq, ddq, chi_std, chi_payload)
     minus = inverse_dynamics(perturbed_robot(robot, frame, fld, -h), q, dq, ddq, chi_std, chi_payload)
