@@ -284,6 +284,7 @@ class _Eval:
     rel_before: np.ndarray
     rel_after: np.ndarray
     reason: str = ""
+    score_se: float = math.nan
 
 
 def _rel_err(e, y, joint, n):
@@ -321,6 +322,8 @@ class _Scorer:
         self.rel_before = _rel_err(D.e_v, self.yv, V.system.joint, n)
         self.lev0 = np.einsum("ij,ij->i", D.U, D.U)
         self.Avw = D.Av * D.wv[:, None]
+        self.vblocks = time_blocks(V.row_experiment, V.row_index, N_SCORE_BLOCKS)
+        self.jv = np.asarray(V.system.joint, int)
 
     def rss(self, X: np.ndarray) -> float:
         """Weighted identification residual sum of squares with the columns X added."""
@@ -387,7 +390,18 @@ class _Scorer:
         var = max(float(np.sum(Sv * Cb)), float(np.mean((ev1 * wv) ** 2)) * m)
         z = (dec + m) / (2.0 * math.sqrt(max(var, 1e-300)))
         after = _rel_err(ev1, self.yv, self.V.system.joint, self.n)
-        return _Eval(0, score, pval, float(z), ident, self.rel_before, after)
+        return _Eval(0, score, pval, float(z), ident, self.rel_before, after, score_se=self.score_se(ev1))
+
+    def score_se(self, ev1: np.ndarray) -> float:
+        """Standard error of the acceptance score of a candidate leaving the acceptance residual ``ev1``: the
+        score is a sum over :data:`N_SCORE_BLOCKS` contiguous time blocks of every experiment's acceptance rows
+        (all joints of a sample in one block) of the rows' shares ``(e_i^2 - e1_i^2) / ||rho_j||^2``; its
+        standard error is ``sqrt(K) std(d_k)`` (blocks long against the residual's correlation time are nearly
+        independent, as :func:`.expert.no_worse`)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.where(self.rv0[self.jv] > 0, (self.D.e_v ** 2 - ev1 ** 2) / self.rv0[self.jv], 0.0)
+        d = np.bincount(self.vblocks, weights=share, minlength=N_SCORE_BLOCKS)
+        return float(math.sqrt(d.size) * np.std(d, ddof=1))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -1278,7 +1292,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
             cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, ev.score,
                                 ev.p_value, ev.z, thr, ev.ident, not reason and not fam.placebo,
                                 "; ".join(reason), search, tuple(float(x) for x in ev.rel_before),
-                                tuple(float(x) for x in ev.rel_after))
+                                tuple(float(x) for x in ev.rel_after), score_se=ev.score_se)
             if cs.eligible:
                 eligible.append((ev.score, fam, ev, X_best, Xv_best, cs))
         (placebos if fam.placebo else tried).append(cs)
@@ -1294,7 +1308,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
     owned = {j for _, fam, *_ in eligible for j in _own(fam, n)}
     new_stop = frozenset(int(j) for j, *_ in hits if j is not None and j not in owned and j not in stopped)
     eligible = [e for e in eligible if e[1].joint is None or not (set(_own(e[1], n)) & (stopped | new_stop))]
-    eligible = _rank(eligible)
+    eligible, tried = _simplest_within_se(_rank(eligible), tried, n)
     return _Round(tried=tuple(tried), placebos=tuple(placebos), placebo_hits=tuple(hits), eligible=tuple(eligible),
                   ctx=ctx, scorer=scorer, stopped=new_stop)
 
@@ -1322,6 +1336,48 @@ def _rank(eligible: list) -> list:
         out += sorted(eligible[i:j], key=lambda t: "composed" in dict(t[1].info))   # stable: plain first
         i = j
     return out
+
+
+#: contiguous time blocks per experiment of the acceptance data for the standard error of a candidate's score
+#: (:meth:`_Scorer.score_se`)
+N_SCORE_BLOCKS = 10
+
+
+def _n_params(fam: Family, X: np.ndarray, cs: CandidateScore) -> int:
+    """Parameters a candidate fits: its columns' coefficients and its searched parameters (an order, a
+    velocity scale, a step time); a friction-law replacement has one searched shape parameter (tanh ``v``,
+    Stribeck ``vs``, Dahl ``vp``, power ``delta``) per column (:func:`_law_columns`)."""
+    if fam.kind == LAW_KIND:
+        return 2 * int(X.shape[1])
+    return int(X.shape[1]) + len(cs.search)
+
+
+def _simplest_within_se(eligible: list, tried: list, n: int) -> tuple[list, list]:
+    """The one-standard-error rule (Hastie, Tibshirani & Friedman 2009, *The Elements of Statistical
+    Learning*, sec. 7.10; Breiman et al. 1984): among the eligible candidates whose acceptance score is within
+    one standard error of the best's (:meth:`_Scorer.score_se`, of the best) and that compete with it for the
+    same residual (their own joints overlap the best's, :func:`_own`), the one with the fewest parameters
+    (:func:`_n_params`; ties by score) goes first - a smaller answer beats a larger curve fit when the held-out
+    data cannot tell them apart. A candidate of other joints is no rival: it competes in the next round. The chosen candidate's record says over which (``chosen_over``);
+    ``eligible`` is ranked (:func:`_rank`), ``tried`` holds the same records."""
+    if len(eligible) < 2:
+        return eligible, tried
+    s0, se0 = eligible[0][0], eligible[0][2].score_se
+    if not math.isfinite(se0):
+        return eligible, tried
+    own0 = set(_own(eligible[0][1], n))
+    near = [i for i, e in enumerate(eligible) if e[0] >= s0 - se0 and own0 & set(_own(e[1], n))]
+    k = [_n_params(e[1], e[3], e[5]) for e in eligible]
+    pick = min(near, key=lambda i: (k[i], -eligible[i][0], i))
+    if pick == 0 or k[pick] >= k[0]:
+        return eligible, tried
+    cs0, cs = eligible[0][5], eligible[pick][5]
+    note = (f"chosen over {cs0.label}{' ' + cs0.variant if cs0.variant else ''} (score {s0:.3f} within 1 SE "
+            f"{se0:.3f}: {cs.score:.3f}; {k[pick]} vs {k[0]} parameters)")
+    new = replace(cs, chosen_over=note)
+    tried = [new if c is cs else c for c in tried]
+    lead = eligible[pick][:5] + (new,)
+    return [lead] + [e for i, e in enumerate(eligible) if i != pick], tried
 
 
 #: non-significant composed candidates kept in the report per round (the best by adjusted p-value)
@@ -1465,7 +1521,8 @@ def _score_composed_round(data: _Data, base: _Baseline, state: _State, D: _Desig
             reason.append("not better than a placebo")
         cs = CandidateScore(rnd, c.effect, r.description, c.joint, None, fam.variant, ev.score, r.p_adjusted, ev.z,
                             cfg.significance, ev.ident, not reason, "; ".join(reason), search,
-                            tuple(float(x) for x in ev.rel_before), tuple(float(x) for x in ev.rel_after))
+                            tuple(float(x) for x in ev.rel_before), tuple(float(x) for x in ev.rel_after),
+                            score_se=ev.score_se)
         tried.append(cs)
         if cs.eligible:
             eligible.append((ev.score, fam, ev, X, Xv, cs))
@@ -1486,7 +1543,8 @@ def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: Dia
         value = _refine(fam, ev.member, F, scored.ctx, scored.scorer)
         X, Xv = fam.build_at(F, scored.ctx, value), fam.build_at(V, scored.ctx, value)
     added = state.added + (_Added(fam, value, X, Xv),)
-    meta = dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd)
+    meta = dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd,
+                chosen_over=_cs.chosen_over)
     F, V, added, res, names, A, Av = _refit(data, F, V, added)
     th = np.array([res.value(nm) for nm in names])
     return replace(state, F=F, V=V, added=added, res=res, effects_meta=state.effects_meta + (meta,),
@@ -2011,7 +2069,8 @@ def _loop_effects(state: _State, res: IdentificationResult, cfg: DiagnoseSetting
                               z_validation=meta["z"], round=meta["round"], reveal=REVEAL.get(fam.kind, fam.reveal),
                               reveal_joint=fam.reveal_joint if fam.reveal_joint is not None else fam.joint,
                               modulation=None if comp is None else comp.modulation, selection_frequency=freq, ci=ci,
-                              description=desc, ci_level=max(CI_LEVEL, 1.0 - cfg.significance) if st else None))
+                              description=desc, ci_level=max(CI_LEVEL, 1.0 - cfg.significance) if st else None,
+                              chosen_over=meta.get("chosen_over", "")))
     return effects
 
 
