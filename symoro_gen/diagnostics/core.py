@@ -13,7 +13,10 @@ on rows the fit never saw, contiguous in time, with no filter edge inside them. 
 refitted on all identification data. The friction laws are chosen by their own time-blocked
 cross-validation on the identification data; the other changes of the model outside the effect list
 (the declared law static (0) in a joint's rest segments, sign(dq) smoothed) are candidates of their
-joint tested on the acceptance data (:func:`_accept_notes`) and reported as effects when accepted.
+joint tested on the acceptance data (:func:`_accept_notes`) and reported as effects when accepted; on a
+joint whose identification data never rest, "static (0) at rest" changes none of their samples and cannot be
+tested: it is applied untested as a prior (:func:`_static_prior`, the minimax prediction of a static friction
+torque in [-Fs, Fs]) and reported as such, never as an effect.
 Last, per joint, the final model may not be worse than the declared one on the acceptance data beyond
 the 95 % circular block-bootstrap band of the declared model's error (:func:`_never_worse`,
 :mod:`.bootstrap`, Künsch 1989, Politis & Romano 1992): where it is, the changes touching the joint are
@@ -45,7 +48,9 @@ The steps:
    velocity and acceleration, drawn with ``rng``: a calibration of the null that does not rest on a
    noise model and that also catches coincidental fits of deterministic artefacts repeated in the
    validation data);
-4. the eligible candidate with the best validation score is added (its searched parameter refined
+4. the eligible candidate with the best validation score is added - or, among the candidates of its joints
+   whose score is within one standard error of the best's, the one with the fewest parameters
+   (:func:`_simplest_within_se`, the one-standard-error rule) - (its searched parameter refined
    continuously between grid points), the model re-identified (OLS, :data:`SELECT_METHOD`), the model
    torque and the columns linearised around the fit rebuilt (fixed point), and the loop goes on
    until nothing is eligible or ``max_effects``.
@@ -72,7 +77,8 @@ Known limits
   artefacts as well as physical effects; the motion placebos guard against the coincidental ones.
 * The loop fits its candidates on the leading part of the identification data only: an effect that
   appears only in the trailing acceptance share (a step late in the recording), or a condition met only
-  there or only in the validation data (rests), gives no evidence and is not added. On short recordings the
+  there gives no evidence and is not added; rests met only in the validation data get the static prior
+  (above), not a tested effect. On short recordings the
   acceptance share holds few decimated rows per joint (10 s at 100 Hz: 16 after the filter edges), too few
   for its HAC ``z``: a change of the model is eligible only with :data:`MIN_ACCEPTANCE_ROWS` acceptance rows
   on each of its joints, so a short recording names nothing (before that rule one of 30 clean simulated
@@ -636,6 +642,7 @@ class _LawRecord:
     p_value: float
     smoothing: bool = False   # a tanh at a scale below MIN_LAW_SCALE: sign(dq) smoothed, not reported as an effect
     round: int = 0   # the loop's round the replacement won (0: applied before the loop, a joint without friction)
+    prior: bool = False   # static (0) at rest applied untested: the identification data never rest (_accept_notes)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1093,6 +1100,12 @@ def _static_at_rest(data: _Data, V: Frame, laws: Sequence[_LawRecord]) -> list[s
             tot = sum(ex.n_samples for ex in fr.experiments)
             shares.append(sum(int(rest_mask(ex)[:, j].sum()) for ex in fr.experiments) / max(tot, 1))
         if not any(shares):
+            continue
+        if r.prior:
+            out.append(f"joint {j + 1}: sliding friction static (0) in rest segments, untested (the identification "
+                       f"data never rest): {100 * shares[1]:.1f} % of the validation samples rest, outside the "
+                       "identification data's domain; the static torque there lies anywhere in [-Fs, Fs] and 0 "
+                       "is the prediction of least worst-case error")
             continue
         out.append(f"joint {j + 1}: sliding friction static (0) in rest segments: {100 * shares[0]:.1f} % of the "
                    f"identification samples, {100 * shares[1]:.1f} % of the validation samples")
@@ -2212,12 +2225,13 @@ class _NoteTest:
     gain: float
     accepted: bool
     rest_share: tuple[float, float]   # share of the fit / acceptance samples at rest
+    prior: bool = False   # not accepted, but its static (0) at rest applied untested (no rest to test it on)
 
     def to_dict(self) -> dict:
         j = self.record.choice.joint
         return {"kind": self.kind, "joint": j + 1, "z": self.z, "p_value": self.p_value, "gain": self.gain,
                 "accepted": self.accepted, "rest_share_fit": self.rest_share[0],
-                "rest_share_acceptance": self.rest_share[1]}
+                "rest_share_acceptance": self.rest_share[1], "prior": self.prior}
 
 
 def _rest_share(fr: Frame, j: int) -> float:
@@ -2232,7 +2246,9 @@ def _accept_notes(data0: _Data, laws: Sequence[_LawRecord], cfg: DiagnoseSetting
     candidates of their joint: kept only when the model with the change predicts the joint's acceptance
     rows better than the model without it (:func:`_paired_held_out`: ``z`` above the Bonferroni critical
     value over the joints at ``cfg.significance``, and the error norm lowered by ``min_rel_improvement``,
-    the effects' thresholds). A rejected one leaves the joint's declared law as declared."""
+    the effects' thresholds). A rejected one leaves the joint's declared law as declared - unless the joint
+    never rests in the identification data (fit and acceptance parts): then its static (0) at rest is
+    untestable, and applied without test as a prior (:func:`_static_prior`), its sign smoothing left out."""
     notes = [r for r in laws if r.smoothing]
     if not notes:
         return tuple(laws), ()
@@ -2247,12 +2263,32 @@ def _accept_notes(data0: _Data, laws: Sequence[_LawRecord], cfg: DiagnoseSetting
         rows = np.equal(d_new.Vs.joint, j)
         z, p, gain = _paired_held_out(_held_out(d_old)[rows], _held_out(d_new)[rows], d_new.V.row_experiment[rows])
         ok = bool(z > zcrit and gain >= cfg.min_rel_improvement and not _few_acceptance_rows(d_new.V, [j]))
-        if not ok:
-            kept.remove(r)
         shares = (_rest_share(data0.F, j), _rest_share(data0.V, j))
-        kind = "static_friction_at_rest" if shares[0] > 0 or shares[1] > 0 else "sign_smoothing"
-        out.append(_NoteTest(r, kind, z, p, gain, ok, shares))
+        prior = not ok and shares == (0.0, 0.0)
+        if prior:
+            kept[kept.index(r)] = _static_prior(r)
+        elif not ok:
+            kept.remove(r)
+        kind = "static_friction_at_rest" if shares[0] > 0 or shares[1] > 0 or prior else "sign_smoothing"
+        out.append(_NoteTest(r, kind, z, p, gain, ok, shares, prior))
     return tuple(kept), tuple(out)
+
+
+def _static_prior(r: _LawRecord) -> _LawRecord:
+    """The note ``r`` reduced to its static (0) at rest, applied without test on a joint whose identification
+    data never rest: the declared law on the sliding velocity (``sign(dq)`` not smoothed).
+
+    At standstill Coulomb friction is set-valued: the torque it holds lies anywhere in ``[-Fs, Fs]`` and is not
+    a function of the velocity (Armstrong-Hélouvry, Dupont & Canudas de Wit 1994, sec. 2.1). Identification
+    data without a rest say nothing of it: a prediction there is outside their domain and the data cannot
+    choose it. The declared ``Fs sign(dq)`` of a velocity that is noise predicts ``+Fs`` or ``-Fs`` at
+    random, an error up to ``2 Fs``; ``0`` is the minimax prediction (worst-case error ``Fs``, the centre of
+    the set; the expert's ``tanh(dq/v)`` is 0 there too). On data without rests the two columns are equal, so
+    the prior changes nothing identified and nothing on the acceptance data (the never-worse guard holds by
+    construction); it changes only the predictions at rest, which the report lists as such
+    (``settings["static_at_rest"]``, the note's ``prior``)."""
+    ch = r.choice
+    return replace(r, choice=replace(ch, coulomb=replace(ch.coulomb, smooth=None)), prior=True)
 
 
 def _note_effect(t: _NoteTest, res: IdentificationResult) -> Effect:
