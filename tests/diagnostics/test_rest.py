@@ -173,13 +173,15 @@ def _following_the_velocity_sign(model, tr: Trajectory, fs: np.ndarray) -> Traje
     return Trajectory(t=tr.t, q=tr.q, tau=tau, source=tr.source + " (friction at rest = FS sign(dq))")
 
 
-def _at_rest_rms(rep, fs, j):
-    """RMS of the raw validation residual of joint ``j`` in its rest segments (and their sample count)."""
+def _at_rest_rms(rep, j, rests_of=None):
+    """RMS of the raw validation residual of joint ``j`` in its rest segments (those of ``rests_of``'s
+    validation frame, default ``rep``'s), their sample count, and the RMS on the joint's moving samples."""
     raw = rep.plot_data["valid_raw"]
     e, jj, ridx = raw["e"], raw["joint"], raw["index"]
-    (ex,) = rep.plot_data["vframe"].experiments
-    m = (jj == j) & rest_mask(ex)[ridx, j]
-    return float(np.sqrt(np.mean(e[m] ** 2))), int(m.sum())
+    (ex,) = (rests_of or rep).plot_data["vframe"].experiments
+    rest = rest_mask(ex)[ridx, j]
+    m, mv = (jj == j) & rest, (jj == j) & ~rest
+    return float(np.sqrt(np.mean(e[m] ** 2))), int(m.sum()), float(np.sqrt(np.mean(e[mv] ** 2)))
 
 
 def test_a_note_without_rests_to_test_it_on_is_applied_as_the_minimax_prior(monkeypatch):
@@ -214,18 +216,19 @@ def test_a_note_without_rests_to_test_it_on_is_applied_as_the_minimax_prior(monk
     np.testing.assert_allclose(rep.acceptance["final_rel_err"], off_rule.acceptance["final_rel_err"], rtol=1e-9)
     monkeypatch.undo()
     for j in coulomb:
-        rms, k = _at_rest_rms(rep, fs, j)
-        rms_off, _ = _at_rest_rms(off_rule, fs, j)
+        rms, k, _ = _at_rest_rms(rep, j)
+        rms_off, _, _ = _at_rest_rms(off_rule, j, rests_of=rep)   # its frame was built with the detector off
         assert k > 1000
         assert rms < 0.5 * fs[j] + 3 * NOISE_TAU, (j, rms, fs[j])
         assert rms < rms_off, (j, rms, rms_off)
 
-    # the worst case: the torque at rest is the declared law's FS sign(dq); 0 misses it by FS, never more
+    # the worst case: the torque at rest is the declared law's FS sign(dq); 0 misses it by FS, never more (plus
+    # the model's own error, the same as while moving: the prior does not touch the identified parameters)
     model, ident, valid, off, _, fs = stop_and_go(2, at_rest="zero")
     worst = _run(model, ident, _following_the_velocity_sign(model, valid, fs))
     for j in coulomb:
-        rms, _ = _at_rest_rms(worst, fs, j)
-        assert rms < fs[j] + 3 * NOISE_TAU, (j, rms, fs[j])
+        rms, _, moving = _at_rest_rms(worst, j)
+        assert rms < fs[j] + moving, (j, rms, fs[j], moving)
 
 
 def test_static_at_rest_cuts_the_validation_error_where_the_robot_rests(monkeypatch):
