@@ -291,6 +291,7 @@ class _Eval:
     rel_after: np.ndarray
     reason: str = ""
     score_se: float = math.nan
+    score_blocks: np.ndarray | None = None   # the score's shares per acceptance time block (sum = score)
 
 
 def _rel_err(e, y, joint, n):
@@ -396,18 +397,22 @@ class _Scorer:
         var = max(float(np.sum(Sv * Cb)), float(np.mean((ev1 * wv) ** 2)) * m)
         z = (dec + m) / (2.0 * math.sqrt(max(var, 1e-300)))
         after = _rel_err(ev1, self.yv, self.V.system.joint, self.n)
-        return _Eval(0, score, pval, float(z), ident, self.rel_before, after, score_se=self.score_se(ev1))
+        d = self.score_blocks(ev1)
+        return _Eval(0, score, pval, float(z), ident, self.rel_before, after, score_se=_block_se(d), score_blocks=d)
 
-    def score_se(self, ev1: np.ndarray) -> float:
-        """Standard error of the acceptance score of a candidate leaving the acceptance residual ``ev1``: the
-        score is a sum over :data:`N_SCORE_BLOCKS` contiguous time blocks of every experiment's acceptance rows
-        (all joints of a sample in one block) of the rows' shares ``(e_i^2 - e1_i^2) / ||rho_j||^2``; its
-        standard error is ``sqrt(K) std(d_k)`` (blocks long against the residual's correlation time are nearly
-        independent, as :func:`.expert.no_worse`)."""
+    def score_blocks(self, ev1: np.ndarray) -> np.ndarray:
+        """The acceptance score of a candidate leaving the acceptance residual ``ev1`` as a sum over
+        :data:`N_SCORE_BLOCKS` contiguous time blocks of every experiment's acceptance rows (all joints of a
+        sample in one block) of the rows' shares ``(e_i^2 - e1_i^2) / ||rho_j||^2``: the block sums."""
         with np.errstate(divide="ignore", invalid="ignore"):
             share = np.where(self.rv0[self.jv] > 0, (self.D.e_v ** 2 - ev1 ** 2) / self.rv0[self.jv], 0.0)
-        d = np.bincount(self.vblocks, weights=share, minlength=N_SCORE_BLOCKS)
-        return float(math.sqrt(d.size) * np.std(d, ddof=1))
+        return np.bincount(self.vblocks, weights=share, minlength=N_SCORE_BLOCKS)
+
+
+def _block_se(d: np.ndarray) -> float:
+    """Standard error ``sqrt(K) std(d_k)`` of a sum of ``K`` block sums ``d_k`` (blocks long against the
+    residual's correlation time are nearly independent, as :func:`.expert.no_worse`)."""
+    return float(math.sqrt(d.size) * np.std(d, ddof=1))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -1368,25 +1373,29 @@ def _n_params(fam: Family, X: np.ndarray, cs: CandidateScore) -> int:
 def _simplest_within_se(eligible: list, tried: list, n: int) -> tuple[list, list]:
     """The one-standard-error rule (Hastie, Tibshirani & Friedman 2009, *The Elements of Statistical
     Learning*, sec. 7.10; Breiman et al. 1984): among the eligible candidates whose acceptance score is within
-    one standard error of the best's (:meth:`_Scorer.score_se`, of the best) and that compete with it for the
+    one standard error of the best's - the standard error of the paired difference of the two scores over the
+    acceptance time blocks (:meth:`_Scorer.score_blocks`, as the friction-law stage's rule in
+    :mod:`.friction`: both scores are read on the same rows) - and that compete with it for the
     same residual (their own joints overlap the best's, :func:`_own`), the one with the fewest parameters
     (:func:`_n_params`; ties by score) goes first - a smaller answer beats a larger curve fit when the held-out
     data cannot tell them apart. A candidate of other joints is no rival: it competes in the next round. The chosen candidate's record says over which (``chosen_over``);
     ``eligible`` is ranked (:func:`_rank`), ``tried`` holds the same records."""
     if len(eligible) < 2:
         return eligible, tried
-    s0, se0 = eligible[0][0], eligible[0][2].score_se
-    if not math.isfinite(se0):
+    s0, d0 = eligible[0][0], eligible[0][2].score_blocks
+    if d0 is None:
         return eligible, tried
     own0 = set(_own(eligible[0][1], n))
-    near = [i for i, e in enumerate(eligible) if e[0] >= s0 - se0 and own0 & set(_own(e[1], n))]
+    se = [math.inf if e[2].score_blocks is None else _block_se(d0 - e[2].score_blocks) for e in eligible]
+    near = [i for i, e in enumerate(eligible) if e[0] >= s0 - se[i] and own0 & set(_own(e[1], n))]
     k = [_n_params(e[1], e[3], e[5]) for e in eligible]
     pick = min(near, key=lambda i: (k[i], -eligible[i][0], i))
     if pick == 0 or k[pick] >= k[0]:
         return eligible, tried
+    se0 = se[pick]
     cs0, cs = eligible[0][5], eligible[pick][5]
-    note = (f"chosen over {cs0.label}{' ' + cs0.variant if cs0.variant else ''} (score {s0:.3f} within 1 SE "
-            f"{se0:.3f}: {cs.score:.3f}; {k[pick]} vs {k[0]} parameters)")
+    note = (f"chosen over {cs0.label}{' ' + cs0.variant if cs0.variant else ''} (score {s0:.3f} vs {cs.score:.3f}, "
+            f"within 1 SE {se0:.3f} of the difference; {k[pick]} vs {k[0]} parameters)")
     new = replace(cs, chosen_over=note)
     tried = [new if c is cs else c for c in tried]
     lead = eligible[pick][:5] + (new,)
