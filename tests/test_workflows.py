@@ -26,7 +26,7 @@ from .golden.inputs import write_inputs
 GOLDEN = Path(__file__).resolve().parent / "golden"
 NEW_KEYS = {"generator", "schema_version", "provenance", "robot_id", "plausibility", "bounded_bodies", "verdict",
             "positions", "elasticity", "robot_file", "declared_friction_laws", "robot_out",
-            "verdict_reason", "alternatives", "degenerate", "cond_degenerate"}
+            "verdict_reason", "alternatives", "degenerate", "cond_degenerate", "score_se", "chosen_over", "prior"}
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,10 @@ on rows the fit never saw, contiguous in time, with no filter edge inside them. 
 refitted on all identification data. The friction laws are chosen by their own time-blocked
 cross-validation on the identification data; the other changes of the model outside the effect list
 (the declared law static (0) in a joint's rest segments, sign(dq) smoothed) are candidates of their
-joint tested on the acceptance data (:func:`_accept_notes`) and reported as effects when accepted.
+joint tested on the acceptance data (:func:`_accept_notes`) and reported as effects when accepted; on a
+joint whose identification data never rest, "static (0) at rest" changes none of their samples and cannot be
+tested: it is applied untested as a prior (:func:`_static_prior`, the minimax prediction of a static friction
+torque in [-Fs, Fs]) and reported as such, never as an effect.
 Last, per joint, the final model may not be worse than the declared one on the acceptance data beyond
 the 95 % circular block-bootstrap band of the declared model's error (:func:`_never_worse`,
 :mod:`.bootstrap`, Künsch 1989, Politis & Romano 1992): where it is, the changes touching the joint are
@@ -45,7 +48,9 @@ The steps:
    velocity and acceleration, drawn with ``rng``: a calibration of the null that does not rest on a
    noise model and that also catches coincidental fits of deterministic artefacts repeated in the
    validation data);
-4. the eligible candidate with the best validation score is added (its searched parameter refined
+4. the eligible candidate with the best validation score is added - or, among the candidates of its joints
+   whose score is within one standard error of the best's, the one with the fewest parameters
+   (:func:`_simplest_within_se`, the one-standard-error rule) - (its searched parameter refined
    continuously between grid points), the model re-identified (OLS, :data:`SELECT_METHOD`), the model
    torque and the columns linearised around the fit rebuilt (fixed point), and the loop goes on
    until nothing is eligible or ``max_effects``.
@@ -72,7 +77,8 @@ Known limits
   artefacts as well as physical effects; the motion placebos guard against the coincidental ones.
 * The loop fits its candidates on the leading part of the identification data only: an effect that
   appears only in the trailing acceptance share (a step late in the recording), or a condition met only
-  there or only in the validation data (rests), gives no evidence and is not added. On short recordings the
+  there gives no evidence and is not added; rests met only in the validation data get the static prior
+  (above), not a tested effect. On short recordings the
   acceptance share holds few decimated rows per joint (10 s at 100 Hz: 16 after the filter edges), too few
   for its HAC ``z``: a change of the model is eligible only with :data:`MIN_ACCEPTANCE_ROWS` acceptance rows
   on each of its joints, so a short recording names nothing (before that rule one of 30 clean simulated
@@ -285,6 +291,8 @@ class _Eval:
     rel_before: np.ndarray
     rel_after: np.ndarray
     reason: str = ""
+    score_se: float = math.nan
+    score_blocks: np.ndarray | None = None   # the score's shares per acceptance time block (sum = score)
 
 
 def _rel_err(e, y, joint, n):
@@ -322,6 +330,8 @@ class _Scorer:
         self.rel_before = _rel_err(D.e_v, self.yv, V.system.joint, n)
         self.lev0 = np.einsum("ij,ij->i", D.U, D.U)
         self.Avw = D.Av * D.wv[:, None]
+        self.vblocks = time_blocks(V.row_experiment, V.row_index, N_SCORE_BLOCKS)
+        self.jv = np.asarray(V.system.joint, int)
 
     def rss(self, X: np.ndarray) -> float:
         """Weighted identification residual sum of squares with the columns X added."""
@@ -388,7 +398,22 @@ class _Scorer:
         var = max(float(np.sum(Sv * Cb)), float(np.mean((ev1 * wv) ** 2)) * m)
         z = (dec + m) / (2.0 * math.sqrt(max(var, 1e-300)))
         after = _rel_err(ev1, self.yv, self.V.system.joint, self.n)
-        return _Eval(0, score, pval, float(z), ident, self.rel_before, after)
+        d = self.score_blocks(ev1)
+        return _Eval(0, score, pval, float(z), ident, self.rel_before, after, score_se=_block_se(d), score_blocks=d)
+
+    def score_blocks(self, ev1: np.ndarray) -> np.ndarray:
+        """The acceptance score of a candidate leaving the acceptance residual ``ev1`` as a sum over
+        :data:`N_SCORE_BLOCKS` contiguous time blocks of every experiment's acceptance rows (all joints of a
+        sample in one block) of the rows' shares ``(e_i^2 - e1_i^2) / ||rho_j||^2``: the block sums."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.where(self.rv0[self.jv] > 0, (self.D.e_v ** 2 - ev1 ** 2) / self.rv0[self.jv], 0.0)
+        return np.bincount(self.vblocks, weights=share, minlength=N_SCORE_BLOCKS)
+
+
+def _block_se(d: np.ndarray) -> float:
+    """Standard error ``sqrt(K) std(d_k)`` of a sum of ``K`` block sums ``d_k`` (blocks long against the
+    residual's correlation time are nearly independent, as :func:`.expert.no_worse`)."""
+    return float(math.sqrt(d.size) * np.std(d, ddof=1))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -623,6 +648,7 @@ class _LawRecord:
     p_value: float
     smoothing: bool = False   # a tanh at a scale below MIN_LAW_SCALE: sign(dq) smoothed, not reported as an effect
     round: int = 0   # the loop's round the replacement won (0: applied before the loop, a joint without friction)
+    prior: bool = False   # static (0) at rest applied untested: the identification data never rest (_accept_notes)
 
 
 @dataclass(frozen=True, eq=False)
@@ -1081,6 +1107,12 @@ def _static_at_rest(data: _Data, V: Frame, laws: Sequence[_LawRecord]) -> list[s
             shares.append(sum(int(rest_mask(ex)[:, j].sum()) for ex in fr.experiments) / max(tot, 1))
         if not any(shares):
             continue
+        if r.prior:
+            out.append(f"joint {j + 1}: sliding friction static (0) in rest segments, untested (the identification "
+                       f"data never rest): {100 * shares[1]:.1f} % of the validation samples rest, outside the "
+                       "identification data's domain; the static torque there lies anywhere in [-Fs, Fs] and 0 "
+                       "is the prediction of least worst-case error")
+            continue
         out.append(f"joint {j + 1}: sliding friction static (0) in rest segments: {100 * shares[0]:.1f} % of the "
                    f"identification samples, {100 * shares[1]:.1f} % of the validation samples")
     return out
@@ -1280,7 +1312,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
             cs = CandidateScore(rnd, fam.kind, fam.label, fam.joint, fam.partner, fam.variant, ev.score,
                                 ev.p_value, ev.z, thr, ev.ident, not reason and not fam.placebo,
                                 "; ".join(reason), search, tuple(float(x) for x in ev.rel_before),
-                                tuple(float(x) for x in ev.rel_after))
+                                tuple(float(x) for x in ev.rel_after), score_se=ev.score_se)
             if cs.eligible:
                 eligible.append((ev.score, fam, ev, X_best, Xv_best, cs))
         (placebos if fam.placebo else tried).append(cs)
@@ -1296,7 +1328,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
     owned = {j for _, fam, *_ in eligible for j in _own(fam, n)}
     new_stop = frozenset(int(j) for j, *_ in hits if j is not None and j not in owned and j not in stopped)
     eligible = [e for e in eligible if e[1].joint is None or not (set(_own(e[1], n)) & (stopped | new_stop))]
-    eligible = _rank(eligible)
+    eligible, tried = _simplest_within_se(_rank(eligible), tried, n)
     return _Round(tried=tuple(tried), placebos=tuple(placebos), placebo_hits=tuple(hits), eligible=tuple(eligible),
                   ctx=ctx, scorer=scorer, stopped=new_stop)
 
@@ -1324,6 +1356,52 @@ def _rank(eligible: list) -> list:
         out += sorted(eligible[i:j], key=lambda t: "composed" in dict(t[1].info))   # stable: plain first
         i = j
     return out
+
+
+#: contiguous time blocks per experiment of the acceptance data for the standard error of a candidate's score
+#: (:meth:`_Scorer.score_se`)
+N_SCORE_BLOCKS = 10
+
+
+def _n_params(fam: Family, X: np.ndarray, cs: CandidateScore) -> int:
+    """Parameters a candidate fits: its columns' coefficients and its searched parameters (an order, a
+    velocity scale, a step time); a friction-law replacement has one searched shape parameter (tanh ``v``,
+    Stribeck ``vs``, Dahl ``vp``, power ``delta``) per column (:func:`_law_columns`)."""
+    if fam.kind == LAW_KIND:
+        return 2 * int(X.shape[1])
+    return int(X.shape[1]) + len(cs.search)
+
+
+def _simplest_within_se(eligible: list, tried: list, n: int) -> tuple[list, list]:
+    """The one-standard-error rule (Hastie, Tibshirani & Friedman 2009, *The Elements of Statistical
+    Learning*, sec. 7.10; Breiman et al. 1984): among the eligible candidates whose acceptance score is within
+    one standard error of the best's - the standard error of the paired difference of the two scores over the
+    acceptance time blocks (:meth:`_Scorer.score_blocks`, as the friction-law stage's rule in
+    :mod:`.friction`: both scores are read on the same rows) - and that compete with it for the
+    same residual (their own joints overlap the best's, :func:`_own`), the one with the fewest parameters
+    (:func:`_n_params`; ties by score) goes first - a smaller answer beats a larger curve fit when the held-out
+    data cannot tell them apart. A candidate of other joints is no rival: it competes in the next round. The chosen candidate's record says over which (``chosen_over``);
+    ``eligible`` is ranked (:func:`_rank`), ``tried`` holds the same records."""
+    if len(eligible) < 2:
+        return eligible, tried
+    s0, d0 = eligible[0][0], eligible[0][2].score_blocks
+    if d0 is None:
+        return eligible, tried
+    own0 = set(_own(eligible[0][1], n))
+    se = [math.inf if e[2].score_blocks is None else _block_se(d0 - e[2].score_blocks) for e in eligible]
+    near = [i for i, e in enumerate(eligible) if e[0] >= s0 - se[i] and own0 & set(_own(e[1], n))]
+    k = [_n_params(e[1], e[3], e[5]) for e in eligible]
+    pick = min(near, key=lambda i: (k[i], -eligible[i][0], i))
+    if pick == 0 or k[pick] >= k[0]:
+        return eligible, tried
+    se0 = se[pick]
+    cs0, cs = eligible[0][5], eligible[pick][5]
+    note = (f"chosen over {cs0.label}{' ' + cs0.variant if cs0.variant else ''} (score {s0:.3f} vs {cs.score:.3f}, "
+            f"within 1 SE {se0:.3f} of the difference; {k[pick]} vs {k[0]} parameters)")
+    new = replace(cs, chosen_over=note)
+    tried = [new if c is cs else c for c in tried]
+    lead = eligible[pick][:5] + (new,)
+    return [lead] + [e for i, e in enumerate(eligible) if i != pick], tried
 
 
 #: non-significant composed candidates kept in the report per round (the best by adjusted p-value)
@@ -1466,7 +1544,8 @@ def _score_composed_round(data: _Data, base: _Baseline, state: _State, D: _Desig
             reason.append("not better than a placebo")
         cs = CandidateScore(rnd, c.effect, r.description, c.joint, None, fam.variant, ev.score, r.p_adjusted, ev.z,
                             cfg.significance, ev.ident, not reason, "; ".join(reason), search,
-                            tuple(float(x) for x in ev.rel_before), tuple(float(x) for x in ev.rel_after))
+                            tuple(float(x) for x in ev.rel_before), tuple(float(x) for x in ev.rel_after),
+                            score_se=ev.score_se)
         tried.append(cs)
         if cs.eligible:
             eligible.append((ev.score, fam, ev, X, Xv, cs))
@@ -1487,7 +1566,8 @@ def _stage_accept(data: _Data, state: _State, scored: _Round, rnd: int, cfg: Dia
         value = _refine(fam, ev.member, F, scored.ctx, scored.scorer)
         X, Xv = fam.build_at(F, scored.ctx, value), fam.build_at(V, scored.ctx, value)
     added = state.added + (_Added(fam, value, X, Xv),)
-    meta = dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd)
+    meta = dict(family=fam, value=value, score=ev.score, p=ev.p_value, z=ev.z, round=rnd,
+                chosen_over=_cs.chosen_over)
     F, V, added, res, names, A, Av = _refit(data, F, V, added)
     th = np.array([res.value(nm) for nm in names])
     return replace(state, F=F, V=V, added=added, res=res, effects_meta=state.effects_meta + (meta,),
@@ -2012,7 +2092,8 @@ def _loop_effects(state: _State, res: IdentificationResult, cfg: DiagnoseSetting
                               z_validation=meta["z"], round=meta["round"], reveal=REVEAL.get(fam.kind, fam.reveal),
                               reveal_joint=fam.reveal_joint if fam.reveal_joint is not None else fam.joint,
                               modulation=None if comp is None else comp.modulation, selection_frequency=freq, ci=ci,
-                              description=desc, ci_level=max(CI_LEVEL, 1.0 - cfg.significance) if st else None))
+                              description=desc, ci_level=max(CI_LEVEL, 1.0 - cfg.significance) if st else None,
+                              chosen_over=meta.get("chosen_over", "")))
     return effects
 
 
@@ -2154,12 +2235,13 @@ class _NoteTest:
     gain: float
     accepted: bool
     rest_share: tuple[float, float]   # share of the fit / acceptance samples at rest
+    prior: bool = False   # not accepted, but its static (0) at rest applied untested (no rest to test it on)
 
     def to_dict(self) -> dict:
         j = self.record.choice.joint
         return {"kind": self.kind, "joint": j + 1, "z": self.z, "p_value": self.p_value, "gain": self.gain,
                 "accepted": self.accepted, "rest_share_fit": self.rest_share[0],
-                "rest_share_acceptance": self.rest_share[1]}
+                "rest_share_acceptance": self.rest_share[1], "prior": self.prior}
 
 
 def _rest_share(fr: Frame, j: int) -> float:
@@ -2174,7 +2256,9 @@ def _accept_notes(data0: _Data, laws: Sequence[_LawRecord], cfg: DiagnoseSetting
     candidates of their joint: kept only when the model with the change predicts the joint's acceptance
     rows better than the model without it (:func:`_paired_held_out`: ``z`` above the Bonferroni critical
     value over the joints at ``cfg.significance``, and the error norm lowered by ``min_rel_improvement``,
-    the effects' thresholds). A rejected one leaves the joint's declared law as declared."""
+    the effects' thresholds). A rejected one leaves the joint's declared law as declared - unless the joint
+    never rests in the identification data (fit and acceptance parts): then its static (0) at rest is
+    untestable, and applied without test as a prior (:func:`_static_prior`), its sign smoothing left out."""
     notes = [r for r in laws if r.smoothing]
     if not notes:
         return tuple(laws), ()
@@ -2189,12 +2273,32 @@ def _accept_notes(data0: _Data, laws: Sequence[_LawRecord], cfg: DiagnoseSetting
         rows = np.equal(d_new.Vs.joint, j)
         z, p, gain = _paired_held_out(_held_out(d_old)[rows], _held_out(d_new)[rows], d_new.V.row_experiment[rows])
         ok = bool(z > zcrit and gain >= cfg.min_rel_improvement and not _few_acceptance_rows(d_new.V, [j]))
-        if not ok:
-            kept.remove(r)
         shares = (_rest_share(data0.F, j), _rest_share(data0.V, j))
-        kind = "static_friction_at_rest" if shares[0] > 0 or shares[1] > 0 else "sign_smoothing"
-        out.append(_NoteTest(r, kind, z, p, gain, ok, shares))
+        prior = not ok and shares == (0.0, 0.0)
+        if prior:
+            kept[kept.index(r)] = _static_prior(r)
+        elif not ok:
+            kept.remove(r)
+        kind = "static_friction_at_rest" if shares[0] > 0 or shares[1] > 0 or prior else "sign_smoothing"
+        out.append(_NoteTest(r, kind, z, p, gain, ok, shares, prior))
     return tuple(kept), tuple(out)
+
+
+def _static_prior(r: _LawRecord) -> _LawRecord:
+    """The note ``r`` reduced to its static (0) at rest, applied without test on a joint whose identification
+    data never rest: the declared law on the sliding velocity (``sign(dq)`` not smoothed).
+
+    At standstill Coulomb friction is set-valued: the torque it holds lies anywhere in ``[-Fs, Fs]`` and is not
+    a function of the velocity (Armstrong-Hélouvry, Dupont & Canudas de Wit 1994, sec. 2.1). Identification
+    data without a rest say nothing of it: a prediction there is outside their domain and the data cannot
+    choose it. The declared ``Fs sign(dq)`` of a velocity that is noise predicts ``+Fs`` or ``-Fs`` at
+    random, an error up to ``2 Fs``; ``0`` is the minimax prediction (worst-case error ``Fs``, the centre of
+    the set; the expert's ``tanh(dq/v)`` is 0 there too). On data without rests the two columns are equal, so
+    the prior changes nothing identified and nothing on the acceptance data (the never-worse guard holds by
+    construction); it changes only the predictions at rest, which the report lists as such
+    (``settings["static_at_rest"]``, the note's ``prior``)."""
+    ch = r.choice
+    return replace(r, choice=replace(ch, coulomb=replace(ch.coulomb, smooth=None)), prior=True)
 
 
 def _note_effect(t: _NoteTest, res: IdentificationResult) -> Effect:

@@ -68,6 +68,11 @@ class CandidateScore:
         Best value of the searched parameter (e.g. ``{"vs": 0.05}``).
     val_rel_err_before, val_rel_err_after : tuple of float
         Validation relative error norms per joint without and with the candidate.
+    score_se : float or None
+        Standard error of ``score`` (contiguous time blocks of the acceptance data).
+    chosen_over : str
+        When the one-standard-error rule put it first in its round: over which better-scoring candidate, with
+        the scores and the numbers of parameters; empty otherwise.
     """
 
     round: int
@@ -86,6 +91,8 @@ class CandidateScore:
     search: dict = field(default_factory=dict)
     val_rel_err_before: tuple = ()
     val_rel_err_after: tuple = ()
+    score_se: float | None = None
+    chosen_over: str = ""
 
     def to_dict(self) -> dict:
         return {"round": self.round, "kind": self.kind, "label": self.label, "joint": _j(self.joint),
@@ -93,7 +100,8 @@ class CandidateScore:
                 "p_value": _f(self.p_value), "z_validation": _f(self.z_validation),
                 "threshold": _f(self.threshold), "identifiability": _f(self.identifiability),
                 "eligible": self.eligible, "reason": self.reason,
-                "search": {k: _f(v) for k, v in self.search.items()}}
+                "search": {k: _f(v) for k, v in self.search.items()}, "score_se": _f(self.score_se),
+                "chosen_over": self.chosen_over or None}
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,6 +144,9 @@ class Effect:
         ``eligible``, ``search``), best first.
     verdict_reason : str
         Why that verdict, in words (with what it fits like and what to check).
+    chosen_over : str
+        When its round's one-standard-error rule chose it over a better-scoring candidate with more
+        parameters: that candidate, the scores and the numbers of parameters; empty otherwise.
     """
 
     kind: str
@@ -163,6 +174,7 @@ class Effect:
     plausibility: Plausibility | None = None
     alternatives: tuple = ()
     verdict_reason: str = ""
+    chosen_over: str = ""
 
     def to_dict(self) -> dict:
         return {"kind": self.kind, "joint": _j(self.joint), "partner": _j(self.partner), "variant": self.variant,
@@ -175,7 +187,7 @@ class Effect:
                 "physical": {k: _f(v) for k, v in self.physical.items()},
                 "score": _f(self.score), "p_value": _f(self.p_value), "z_validation": _f(self.z_validation),
                 "round": self.round, "verdict": self.verdict or None,
-                "verdict_reason": self.verdict_reason or None,
+                "verdict_reason": self.verdict_reason or None, "chosen_over": self.chosen_over or None,
                 "plausibility": None if self.plausibility is None else {
                     "score": _f(self.plausibility.score), "reasons": list(self.plausibility.reasons)},
                 "alternatives": [{**a, "score": _f(a.get("score")), "remaining": _f(a.get("remaining")),
@@ -397,6 +409,8 @@ class ResidualReport:
                 L.append(f" {i}. {e.kind} on {who}" + (f" ({e.modulation})" if e.modulation else "") + f"{tag}: {ev}")
                 if e.description:
                     L.append(f"      {e.description}")
+                if e.chosen_over:
+                    L.append(f"      {e.chosen_over}")
                 L += [f"      {x}" for x in e.verdict_lines()]
                 for n, v, p in zip(e.names, e.values, e.rel_std_pct):
                     L.append(f"      {n:<28}{v:>12.4g}  %sigma {p:8.2f}")
@@ -420,6 +434,7 @@ class ResidualReport:
                 L.append(f"  {c.label + (' ' + c.variant if c.variant and c.kind != 'coupling' else ''):<22}"
                          f"{c.score:>8.3f}{c.p_value:>11.2e}{c.threshold:>10.1e}{c.z_validation:>8.1f}  "
                          f"{'eligible' if c.eligible else c.reason}")
+            L += [f"  {c.label}: {c.chosen_over}" for c in self.tried if c.round == r and c.chosen_over]
         L += self._estimator_lines()
         L += self._unexplained_lines()
         left = [s for s in self.structure_after if s.significant]
