@@ -197,6 +197,27 @@ def friction_law_terms(robot: RobotDescription, j: int, vals) -> tuple[dict[str,
                                   f"FS{j} (the sliding Coulomb level Fc){hump}; damping = FV{j}")
 
 
+def floating_base_open(vals, report: list | None) -> list[str]:
+    """The opening of a floating base's body (``base = "floating"``, docs/floating-base.md): ``base_link`` at the
+    world origin with a ``<freejoint name="base"/>`` and the base link's inertial from ``XX0 .. M0`` (a negligible
+    mass, said in the file, when they are all zero: MuJoCo needs one on a moving body).
+
+    MuJoCo's free joint: ``qpos`` = the position of the body origin and its quaternion ``w x y z`` (body axes to
+    world axes), ``qvel`` = the linear velocity of the origin in world axes, then the angular velocity in body
+    axes; its generalised force is the force in world axes and the moment in body axes (MuJoCo's documentation,
+    "Floating objects"). The model's free-flyer conventions (Pinocchio's) differ in the quaternion's order and in
+    the linear velocity's axes (docs/floating-base.md#export)."""
+    out = ['    <body name="base_link" pos="0 0 0">', '      <freejoint name="base"/>']
+    inert = inertial_of(vals, 0, report, "export-mjcf")
+    if inert is None:
+        inert = (1e-9, np.zeros(3), 1e-12 * np.eye(3))
+        out.append("      <!-- the base link has no inertial parameters: negligible mass written -->")
+    m, c, Ic = inert
+    full = (Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2])
+    out.append(f'      <inertial pos="{_v(c)}" mass="{xml_float(m)}" fullinertia="{_v(full)}"/>')
+    return out
+
+
 def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, notes=(), report: list | None = None,
                 timestep: float = 0.001, integrator: str = "RK4", motors: bool = True) -> str:
     """MJCF text of ``robot`` (conventions in the module docstring).
@@ -301,9 +322,10 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
             body(ch, depth + 1)
         out.append(f"{ind}</body>")
 
-    out.extend(site_lines(0, "    "))
+    out += site_lines(0, "    ") + (floating_base_open(vals, report) if robot.floating else [])
     for row in children.get(0, ()):
-        body(row, 2)
+        body(row, 3 if robot.floating else 2)
+    out += ["    </body>"] if robot.floating else []  # a floating base's body
     out.append("  </worldbody>")
     out += _tendons(robot)
     out += _equalities(robot, timestep)
