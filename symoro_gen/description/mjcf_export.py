@@ -46,6 +46,8 @@ Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
   opposite to the rotor; the motor drives the rotor. Without a declared ``IA`` the rotor gets the armature
   :func:`rotor_armature` (the spring's natural frequency ``1 / (20 timestep)``, said in a comment), so that the
   integrator resolves it. At rest under gravity the deflection is ``tau / K`` ([LWR4-TLS] eq. 17);
+* a floating base (``base = "floating"``): the link bodies are nested in a body ``base_link`` with a
+  ``<freejoint/>`` and the base link's inertial (:func:`floating_base_open`, MuJoCo's free-joint conventions);
 * joint ``range`` from the robot file's ``[limits]`` (``q_min``, ``q_max``; a passive joint's
   ``passive_q_min``, ``passive_q_max``) when present, ``gravity`` from the robot file; ``integrator="RK4"``,
   ``timestep`` 1 ms (options).
@@ -68,7 +70,8 @@ from .urdf_export import (
     xml_float,
 )
 
-__all__ = ["LOOP_AXIS_POINT", "LOOP_SOLIMP", "export_mjcf", "loop_sites", "quat_from_matrix", "rotor_armature"]
+__all__ = ["LOOP_AXIS_POINT", "LOOP_SOLIMP", "export_mjcf", "floating_base_open", "loop_sites", "quat_from_matrix",
+           "rotor_armature"]
 
 #: distance [m] along a loop's cut axis of the second pair of sites held together by a ``connect``
 LOOP_AXIS_POINT = 0.1

@@ -21,6 +21,9 @@ the joint and listed by :func:`drive_terms` (the command line writes them to a s
 ``<limit>`` from the robot file's ``[limits]`` when it has one (a passive joint's ``lower upper`` from
 ``passive_q_min, passive_q_max``; else +-pi / +-10 m, effort 1000).
 
+A floating base (``base = "floating"``, docs/floating-base.md#export) gets a ``world`` link and a ``floating``
+joint to ``base_link``, which carries the base link's inertial (``XX0 .. M0``): :func:`floating_root`.
+
 Each link is written physically meaningful: mass >= ``min_mass``, inertia at the centre of mass
 symmetric positive definite and satisfying the triangle inequalities (eigenvalues raised as needed);
 a link whose given values were changed so is reported (``report`` list or a warning), never silently.

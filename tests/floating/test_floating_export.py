@@ -30,6 +30,7 @@ from symoro_gen.description.mdh import row_transform
 from symoro_gen.description.mjcf_export import export_mjcf
 from symoro_gen.description.urdf import import_urdf_text
 from symoro_gen.description.urdf_export import export_urdf
+from symoro_gen.errors import ModelError
 from symoro_gen.params import INERTIAL_KINDS
 from symoro_gen.workflows import export as export_workflow
 from tests.oracles.pinocchio_model import max_relative_error
@@ -193,3 +194,10 @@ def test_export_params_apply_to_the_base_body():
     assert back.nominal is not None
     for n in base:
         assert back.nominal.get(n, 0.0) == float(f"{new[n]:.12g}"), n  # the importer writes 12 digits
+
+
+def test_export_from_identified_base_parameters_is_refused_naming_the_file_and_option():
+    robot, _ = _robot_and_values(drive=())
+    for export in (export_workflow.export_urdf, export_workflow.export_mjcf):
+        with pytest.raises(ModelError, match=r"--from .*quadruped\.toml: base = \"floating\".*--params"):
+            export(robot, from_result={"robot": robot.name, "parameters": {"names": [], "values": []}})
