@@ -25,6 +25,7 @@ import pinocchio as pin
 import pytest
 
 import symoro_gen
+from symoro_gen.cli import main
 from symoro_gen.description import parse_robot_text
 from symoro_gen.description.mdh import row_transform
 from symoro_gen.description.mjcf_export import export_mjcf
@@ -201,3 +202,16 @@ def test_export_from_identified_base_parameters_is_refused_naming_the_file_and_o
     for export in (export_workflow.export_urdf, export_workflow.export_mjcf):
         with pytest.raises(ModelError, match=r"--from .*quadruped\.toml: base = \"floating\".*--params"):
             export(robot, from_result={"robot": robot.name, "parameters": {"names": [], "values": []}})
+
+
+def test_cli_exports_a_floating_robot(tmp_path):
+    """``symoro-gen export-urdf`` / ``export-mjcf`` of the robot file write the free root (read back by Pinocchio
+    and MuJoCo as a 6-DoF base)."""
+    urdf, mjcf = tmp_path / "quad.urdf", tmp_path / "quad.xml"
+    assert main(["export-urdf", str(QUADRUPED), "-o", str(urdf)]) == 0
+    assert main(["export-mjcf", str(QUADRUPED), "-o", str(mjcf)]) == 0
+    model = pin.buildModelFromXML(urdf.read_text())
+    assert model.joints[1].shortname() == "JointModelFreeFlyer" and model.nv == 6 + 12
+    mujoco = pytest.importorskip("mujoco", reason="the 'mjcf' extra (mujoco wheel) is not installed")
+    mj = mujoco.MjModel.from_xml_path(str(mjcf))
+    assert mj.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE and mj.nv == 6 + 12
