@@ -46,6 +46,8 @@ Conventions (MDH frames -> MuJoCo bodies; Khalil & Kleinfinger 1986):
   opposite to the rotor; the motor drives the rotor. Without a declared ``IA`` the rotor gets the armature
   :func:`rotor_armature` (the spring's natural frequency ``1 / (20 timestep)``, said in a comment), so that the
   integrator resolves it. At rest under gravity the deflection is ``tau / K`` ([LWR4-TLS] eq. 17);
+* a floating base (``base = "floating"``): the link bodies are nested in a body ``base_link`` with a
+  ``<freejoint/>`` and the base link's inertial (:func:`floating_base_open`, MuJoCo's free-joint conventions);
 * joint ``range`` from the robot file's ``[limits]`` (``q_min``, ``q_max``; a passive joint's
   ``passive_q_min``, ``passive_q_max``) when present, ``gravity`` from the robot file; ``integrator="RK4"``,
   ``timestep`` 1 ms (options).
@@ -68,7 +70,8 @@ from .urdf_export import (
     xml_float,
 )
 
-__all__ = ["LOOP_AXIS_POINT", "LOOP_SOLIMP", "export_mjcf", "loop_sites", "quat_from_matrix", "rotor_armature"]
+__all__ = ["LOOP_AXIS_POINT", "LOOP_SOLIMP", "export_mjcf", "floating_base_open", "loop_sites", "quat_from_matrix",
+           "rotor_armature"]
 
 #: distance [m] along a loop's cut axis of the second pair of sites held together by a ``connect``
 LOOP_AXIS_POINT = 0.1
@@ -197,6 +200,27 @@ def friction_law_terms(robot: RobotDescription, j: int, vals) -> tuple[dict[str,
                                   f"FS{j} (the sliding Coulomb level Fc){hump}; damping = FV{j}")
 
 
+def floating_base_open(vals, report: list | None) -> list[str]:
+    """The opening of a floating base's body (``base = "floating"``, docs/floating-base.md): ``base_link`` at the
+    world origin with a ``<freejoint name="base"/>`` and the base link's inertial from ``XX0 .. M0`` (a negligible
+    mass, said in the file, when they are all zero: MuJoCo needs one on a moving body).
+
+    MuJoCo's free joint: ``qpos`` = the position of the body origin and its quaternion ``w x y z`` (body axes to
+    world axes), ``qvel`` = the linear velocity of the origin in world axes, then the angular velocity in body
+    axes; its generalised force is the force in world axes and the moment in body axes (MuJoCo's documentation,
+    "Floating objects"). The model's free-flyer conventions (Pinocchio's) differ in the quaternion's order and in
+    the linear velocity's axes (docs/floating-base.md#export)."""
+    out = ['    <body name="base_link" pos="0 0 0">', '      <freejoint name="base"/>']
+    inert = inertial_of(vals, 0, report, "export-mjcf")
+    if inert is None:
+        inert = (1e-9, np.zeros(3), 1e-12 * np.eye(3))
+        out.append("      <!-- the base link has no inertial parameters: negligible mass written -->")
+    m, c, Ic = inert
+    full = (Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2])
+    out.append(f'      <inertial pos="{_v(c)}" mass="{xml_float(m)}" fullinertia="{_v(full)}"/>')
+    return out
+
+
 def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, notes=(), report: list | None = None,
                 timestep: float = 0.001, integrator: str = "RK4", motors: bool = True) -> str:
     """MJCF text of ``robot`` (conventions in the module docstring).
@@ -301,9 +325,10 @@ def export_mjcf(robot: RobotDescription, chi_std=None, chi_payload=None, *, note
             body(ch, depth + 1)
         out.append(f"{ind}</body>")
 
-    out.extend(site_lines(0, "    "))
+    out += site_lines(0, "    ") + (floating_base_open(vals, report) if robot.floating else [])
     for row in children.get(0, ()):
-        body(row, 2)
+        body(row, 3 if robot.floating else 2)
+    out += ["    </body>"] if robot.floating else []  # a floating base's body
     out.append("  </worldbody>")
     out += _tendons(robot)
     out += _equalities(robot, timestep)

@@ -21,6 +21,9 @@ the joint and listed by :func:`drive_terms` (the command line writes them to a s
 ``<limit>`` from the robot file's ``[limits]`` when it has one (a passive joint's ``lower upper`` from
 ``passive_q_min, passive_q_max``; else +-pi / +-10 m, effort 1000).
 
+A floating base (``base = "floating"``, docs/floating-base.md#export) gets a ``world`` link and a ``floating``
+joint to ``base_link``, which carries the base link's inertial (``XX0 .. M0``): :func:`floating_root`.
+
 Each link is written physically meaningful: mass >= ``min_mass``, inertia at the centre of mass
 symmetric positive definite and satisfying the triangle inequalities (eigenvalues raised as needed);
 a link whose given values were changed so is reported (``report`` list or a warning), never silently.
@@ -167,21 +170,11 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
     out = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>",
            f"  <!-- exported by symoro_gen from {robot.file.split('/')[-1]} ({xml_comment(robot.source[:120])}) -->"]
     out += [f"  <!-- {xml_comment(n)} -->" for n in notes]
-    out.append('  <link name="base_link"/>')
+    out += floating_root(robot, vals, report) if robot.floating else ['  <link name="base_link"/>']
     for row in robot.rows:
         j = row.j
         out.append(f'  <link name="link{j}">')
-        inert = inertial_of(vals, j, report, "export-urdf")
-        if inert is not None:
-            m, c, Ic = inert
-            out += [
-                "    <inertial>",
-                f'      <origin xyz="{xml_float(c[0])} {xml_float(c[1])} {xml_float(c[2])}" rpy="0 0 0"/>',
-                f'      <mass value="{xml_float(m)}"/>',
-                f'      <inertia ixx="{xml_float(Ic[0, 0])}" ixy="{xml_float(Ic[0, 1])}" ixz="{xml_float(Ic[0, 2])}" '
-                f'iyy="{xml_float(Ic[1, 1])}" iyz="{xml_float(Ic[1, 2])}" izz="{xml_float(Ic[2, 2])}"/>',
-                "    </inertial>",
-            ]
+        out += inertial_lines(inertial_of(vals, j, report, "export-urdf"))
         out.append("  </link>")
         T = constant_transform(robot, j)
         rpy = rpy_from_matrix(T[:3, :3])
@@ -216,6 +209,41 @@ def export_urdf(robot: RobotDescription, chi_std=None, chi_payload=None, *, para
     out += _loop_elements(robot)
     out.append("</robot>")
     return "\n".join(out) + "\n"
+
+
+def inertial_lines(inert) -> list[str]:
+    """The ``<inertial>`` element of a link (mass, centre of mass, inertia at the centre of mass in link axes);
+    none for ``None``."""
+    if inert is None:
+        return []
+    m, c, Ic = inert
+    return [
+        "    <inertial>",
+        f'      <origin xyz="{xml_float(c[0])} {xml_float(c[1])} {xml_float(c[2])}" rpy="0 0 0"/>',
+        f'      <mass value="{xml_float(m)}"/>',
+        f'      <inertia ixx="{xml_float(Ic[0, 0])}" ixy="{xml_float(Ic[0, 1])}" ixz="{xml_float(Ic[0, 2])}" '
+        f'iyy="{xml_float(Ic[1, 1])}" iyz="{xml_float(Ic[1, 2])}" izz="{xml_float(Ic[2, 2])}"/>',
+        "    </inertial>",
+    ]
+
+
+def floating_root(robot: RobotDescription, vals: dict, report: list | None) -> list[str]:
+    """The root of a floating-base robot (``base = "floating"``, docs/floating-base.md): a ``world`` link and a
+    ``floating`` joint ``base_joint`` (identity origin) to ``base_link``, frame 0, which carries the base link's
+    inertial from ``XX0 .. M0`` (made physical as every link's, :func:`inertial_of`).
+
+    This is the URDF habit that :func:`symoro_gen.description.urdf.import_urdf` reads back as a floating base
+    (the child of a ``floating`` joint that is the root link's only joint) and that Pinocchio's URDF parser
+    builds as a ``JointModelFreeFlyer`` (its ``q``: position, quaternion ``x y z w``, the model's conventions)."""
+    return ['  <link name="world"/>',
+            '  <joint name="base_joint" type="floating">',
+            '    <parent link="world"/>',
+            '    <child link="base_link"/>',
+            '    <origin xyz="0 0 0" rpy="0 0 0"/>',
+            "  </joint>",
+            '  <link name="base_link">',
+            *inertial_lines(inertial_of(vals, 0, report, "export-urdf")),
+            "  </link>"]
 
 
 def _loop_elements(robot: RobotDescription) -> list[str]:
