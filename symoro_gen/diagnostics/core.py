@@ -455,6 +455,23 @@ def _build_one(fam: Family, frame: Frame, ctx: FitContext, value) -> np.ndarray:
     return fam.build(frame, ctx)[0]
 
 
+#: relative differences of p-values and scores below this are rounding, not evidence: a grid member must beat the
+#: best so far by more to replace it (on a flat objective every member scores the same to ~1e-10, and the
+#: member reported would otherwise be decided by the last bits of the arithmetic)
+MEMBER_TIE_RTOL = 1e-6
+
+
+def _better_member(one: _Eval, best: _Eval | None) -> bool:
+    """Whether grid member ``one`` replaces ``best``: a smaller p-value, or the same p-value and a larger score,
+    each beyond :data:`MEMBER_TIE_RTOL`; ties keep the earlier member (deterministic)."""
+    if best is None:
+        return True
+    tol_p = MEMBER_TIE_RTOL * best.p_value
+    if one.p_value != best.p_value and abs(one.p_value - best.p_value) > tol_p:
+        return one.p_value < best.p_value
+    return one.score > best.score + MEMBER_TIE_RTOL * abs(best.score)
+
+
 def _refine(fam: Family, member: int, F: Frame, ctx: FitContext, scorer: _Scorer,
             xatol: float = REFINE_XATOL) -> float:
     """Continuous 1-D search (log scale, bounded by the grid neighbours) of the searched parameter,
@@ -1256,8 +1273,7 @@ def _stage_score(data: _Data, base: _Baseline, state: _State, rnd: int, cfg: Dia
                 reasons.append(one)
                 continue
             one.member = i
-            if (best is None or one.p_value < best.p_value
-                    or (one.p_value == best.p_value and one.score > best.score)):
+            if _better_member(one, best):
                 best = one
         if best is not None:
             best.p_value = bonferroni(best.p_value, fam.n_members)
