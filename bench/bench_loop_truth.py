@@ -25,7 +25,7 @@ recording and validates on another (a different excitation and noise):
     + per-joint tanh Coulomb + viscous + offset), per joint, with ``no_worse``.
 13. LuGre friction on joint 4 where its pre-sliding regime is identifiable: LWR4 at 1 kHz (``--lugre-rate``),
     the Coulomb friction of joint 4 replaced by LuGre's bristles (Canudas de Wit, Olsson, Astrom & Lischinsky
-    1995 eq. 1-4, ``sigma1 = 0``: ``Fc = 0.3``, ``Fs = 0.8`` N m, ``vs = 0.07`` rad/s, ``sigma0 = 2e4`` N m/rad),
+    1995 eq. 1-4, ``sigma1 = 0``: ``Fc = 0.3``, ``Fs = 0.8`` N m, ``vs = 0.07`` rad/s, ``sigma0 = 4e3`` N m/rad),
     integrated here (:func:`lugre_torque`: 16 sub-steps per sample on the analytic excitation's velocity,
     not the package's state simulation); the loop with ``presliding_law`` on. Right: the first effect is the
     ``lugre`` friction law of joint 4, its ``Fs - Fc`` within 3 sigma of 0.5 with sigma below a third of it;
@@ -46,7 +46,7 @@ only) on N seeds (``--seed`` .. ``--seed + N - 1``; each its own excitations and
 seeds named anything, and what: the false-positive rate of the loop on data its declared model explains.
 
     PYTHONPATH=. python bench/bench_loop_truth.py --clean-seeds 30 --seconds 15 --rate 250
-    PYTHONPATH=. python bench/bench_loop_truth.py --cases 13 --lugre-seconds 20 --lugre-clean-seeds 2
+    PYTHONPATH=. python bench/bench_loop_truth.py --cases 13 --lugre-seconds 60 --lugre-clean-seeds 2
 """
 from __future__ import annotations
 
@@ -348,7 +348,7 @@ def print_cobot(r: dict) -> None:
 LAST_CASE = 13
 #: case 13: joint (0-based) and its LuGre friction (Fc, Fs [N m], vs [rad/s], sigma0 [N m/rad])
 LUGRE_JOINT = 3
-LUGRE = (0.3, 0.8, 0.07, 2e4)
+LUGRE = (0.3, 0.8, 0.07, 4e3)
 #: sub-steps per sample interval of :func:`lugre_torque`
 LUGRE_SUBSTEPS = 16
 
@@ -525,8 +525,8 @@ def main(argv=None) -> int:
                     help="Coulomb law of case 12: tanh(dq/0.03) (0 at rest) or LuGre bristles (holds at rest)")
     ap.add_argument("--sigma-tau", type=float, default=0.05, help="torque noise [N m] (default 0.05)")
     ap.add_argument("--lugre-rate", type=float, default=1000.0, help="sampling rate [Hz] of case 13 (default 1000)")
-    ap.add_argument("--lugre-seconds", type=float, default=20.0,
-                    help="identification recording of case 13 [s] (validation: half as long); default 20")
+    ap.add_argument("--lugre-seconds", type=float, default=60.0,
+                    help="identification recording of case 13 [s] (validation: half as long); default 60")
     ap.add_argument("--lugre-clean-seeds", type=int, default=1,
                     help="case 13: clean controls (no LuGre) at the same rate, on this many seeds (default 1)")
     ap.add_argument("--seed", type=int, default=0, help="base seed (case k uses 1000 seed + k)")

@@ -24,15 +24,13 @@ Pre-sliding (offered on data sampled at :data:`DAHL_MIN_RATE_HZ` or more only, `
       ``x0`` the law is ``sign(dq)``. Below 1 kHz the pre-sliding regime (milliseconds after each reversal)
       is not resolved and a fitted ``sigma0`` is not identifiable (docs/friction-dynamic.md, the study at
       reversals): the law is not offered there;
-    * ``lugre``     ``(Fc + (Fs - Fc) exp(-(dq/vs)^2)) phi(t)``: the LuGre law ([COAL1995] eq. 1-4, bristle damping
-      ``sigma1 = 0``) whose sliding part is the Stribeck law, in the loop's linear form: the Dahl state ``phi``
-      above in place of ``sign(dq)`` in both Stribeck columns (``phi`` and ``exp(-(dq/vs)^2) phi``, linear in
-      ``Fc`` and ``Fs - Fc`` for fixed ``vs`` and ``x0``). At constant velocity it is the Stribeck law; after a
-      reversal the friction rises from ``-Fs`` over the displacement ``x0`` with the slope ``2 Fs / x0``, as
-      LuGre's ``2 sigma0`` with ``x0 = Fs / sigma0`` (LuGre's relaxation length ``g(v) / sigma0`` at the low
-      speeds of a reversal): reported ``sigma0 = Fs / x0``. Searched by coordinate descent: ``vp`` as for Dahl,
-      ``vs`` on the velocity grid at that ``vp``, then ``vp`` again at that ``vs``. Offered with Dahl, on the
-      same rule (``LawSearch.rate_hz`` at :data:`DAHL_MIN_RATE_HZ` or more);
+    * ``lugre``     the LuGre law ([COAL1995] eq. 1-4, bristle damping ``sigma1 = 0``), whose sliding part is the
+      Stribeck law, linear in ``Fc`` and ``Fs - Fc`` (:func:`lugre_columns`): for fixed ``vs``, ``x0 = Fs / sigma0``
+      and ``q = (Fs - Fc) / Fs`` the bristle state ``sigma0 z`` is ``Fc a + (Fs - Fc) b``, ``a`` and ``b`` two
+      states relaxing to ``sign(dq)`` and ``exp(-(dq/vs)^2) sign(dq)`` over LuGre's relaxation length
+      ``g(v) / sigma0``. Reported ``sigma0 = Fs / x0``. Searched by coordinate descent: ``vp = x0 fs`` as for
+      Dahl, ``vs`` on the velocity grid at that ``vp``, then (twice) ``q`` from the fitted magnitudes and ``vp``
+      again. Offered with Dahl, on the same rule (``LawSearch.rate_hz`` at :data:`DAHL_MIN_RATE_HZ` or more);
 Viscous laws
     * ``linear``    ``Fv dq`` (declared);
     * ``power``     ``Fv |dq|^delta sign(dq)``, ``delta`` on a grid then refined.
@@ -135,6 +133,8 @@ __all__ = [
 
 #: the pre-sliding laws the stage can offer (at DAHL_MIN_RATE_HZ or more)
 PRESLIDING_LAWS = ("dahl", "lugre")
+#: passes of the LuGre search over its ratio q = (Fs - Fc) / Fs (:meth:`_LawSelection._lugre`)
+LUGRE_PASSES = 2
 #: Coulomb laws with the two columns of Stribeck's (``Fc``, ``Fs - Fc``)
 STRIBECK_LIKE = ("stribeck", "lugre")
 #: sampling rate from which the Dahl law is offered (``fit_presliding``'s rule, docs/friction-dynamic.md)
@@ -257,6 +257,8 @@ class LawFit:
         ``sign`` and Stribeck: velocity scale ``v`` of the ``tanh(dq/v)`` replacing ``sign(dq)``.
     vp : float or None
         LuGre: its pre-sliding scale ``vp = x0 fs`` (``param`` is its ``vs``); the Dahl law's is ``param``.
+    q : float
+        LuGre: ``(Fs - Fc) / Fs`` of its relaxation length (:func:`lugre_columns`).
     """
 
     law: str
@@ -264,11 +266,12 @@ class LawFit:
     cv_rel_err: float
     smooth: float | None = None
     vp: float | None = None
+    q: float = 0.0
 
     @property
     def shape(self):
-        """The law's shape parameter as :func:`_coulomb` takes it: ``(vs, vp)`` for LuGre, else ``param``."""
-        return (self.param, self.vp) if self.law == "lugre" else self.param
+        """The law's shape parameter as :func:`_coulomb` takes it: ``(vs, vp, q)`` for LuGre, else ``param``."""
+        return (self.param, self.vp, self.q) if self.law == "lugre" else self.param
 
     @property
     def label(self) -> str:
@@ -420,28 +423,46 @@ def dahl_column(dq: np.ndarray, vp: float) -> np.ndarray:
     return out
 
 
-def lugre_columns(dq: np.ndarray, vs: float, vp: float) -> np.ndarray:
+def lugre_columns(dq: np.ndarray, vs: float, vp: float, q: float = 0.0) -> np.ndarray:
     """The two Coulomb columns (N, 2) of the loop's LuGre law (module docstring) along the ordered full-rate
-    velocity ``dq`` of one experiment: ``phi`` and ``exp(-(dq/vs)^2) phi``, ``phi`` the Dahl state
-    :func:`dahl_column` at ``vp`` (coefficients ``Fc`` and ``Fs - Fc``)."""
+    velocity ``dq`` of one experiment, coefficients ``Fc`` and ``Fs - Fc``: the states ``a`` and ``b`` of
+    ``da/dx = (sign(v) - a) / (x0 h(v))`` and ``db/dx = (e(v) sign(v) - b) / (x0 h(v))``, ``e(v) = exp(-(v/vs)^2)``,
+    ``h(v) = 1 - q (1 - e(v))`` with ``q = (Fs - Fc) / Fs``, ``x0 = vp / fs = Fs / sigma0``. Then
+    ``Fc a + (Fs - Fc) b = sigma0 z``, LuGre's friction with ``sigma1 = 0`` (relaxation length ``g(v) / sigma0 =
+    x0 h(v)``), integrated like :func:`symoro_gen.simulate.friction_state.lugre_state`: the velocity held over
+    each interval at the mean of its two samples, ``e`` and ``h`` at the mean of their two ends, ``a = b = 0`` at
+    the start. ``q = 0`` is the Dahl state :func:`dahl_column` in both (``phi`` and ``e phi`` at sliding)."""
     v = np.asarray(dq, float)
-    if not vs > 0:
-        raise ValueError(f"lugre_columns: vs must be > 0, got {vs!r}")
-    phi = dahl_column(v, vp)
-    return np.column_stack([phi, np.exp(-(v / float(vs)) ** 2) * phi])
+    if not vs > 0 or not vp > 0 or not 0.0 <= q < 1.0:
+        raise ValueError(f"lugre_columns: vs ({vs!r}) and vp ({vp!r}) must be > 0 and q ({q!r}) in [0, 1)")
+    out = np.zeros((v.size, 2))
+    if v.size < 2:
+        return out
+    e = np.exp(-(v / float(vs)) ** 2)
+    vm = 0.5 * (v[1:] + v[:-1])
+    em = 0.5 * (e[1:] + e[:-1])
+    hm = 1.0 - q * (1.0 - em)
+    sg = np.sign(vm)
+    decay = np.exp(-np.abs(vm) / (float(vp) * hm))
+    a = b = 0.0
+    for k, (s_, d_, e_) in enumerate(zip(sg.tolist(), decay.tolist(), em.tolist()), start=1):
+        a = s_ + (a - s_) * d_
+        b = e_ * s_ + (b - e_ * s_) * d_
+        out[k, 0], out[k, 1] = a, b
+    return out
 
 
 def _coulomb(law: str, dq: np.ndarray, param, smooth: float | None) -> np.ndarray:
     """:func:`coulomb_columns`, and the pre-sliding ``dahl`` (:func:`dahl_column`, ``param = vp``) and ``lugre``
-    (:func:`lugre_columns`, ``param = (vs, vp)``) laws."""
+    (:func:`lugre_columns`, ``param = (vs, vp, q)``) laws."""
     if law == "dahl":
         if param is None:
             raise TypeError("the 'dahl' friction law needs its scale vp")
         return dahl_column(dq, float(param))[:, None]
     if law == "lugre":
         if not isinstance(param, tuple) or None in param:
-            raise TypeError("the 'lugre' friction law needs its scales (vs, vp)")
-        return lugre_columns(dq, float(param[0]), float(param[1]))
+            raise TypeError("the 'lugre' friction law needs its scales (vs, vp, q)")
+        return lugre_columns(dq, float(param[0]), float(param[1]), float(param[2]))
     return coulomb_columns(law, dq, param, smooth)
 
 
@@ -691,13 +712,25 @@ class _LawSelection:
 
     def _lugre(self, vlaw: str, vpar: float | None) -> LawFit:
         """The LuGre law's scales by coordinate descent (module docstring): ``vp`` of the Dahl state, ``vs`` on
-        the velocity grid at it, ``vp`` again at that ``vs``."""
+        the velocity grid at it, then :data:`LUGRE_PASSES` times ``q = (Fs - Fc) / Fs`` from the fitted
+        magnitudes and ``vp`` again at ``(vs, q)``."""
         vp_grid = float(self.search.rate_hz or 0.0) * np.asarray(DAHL_X0_GRID)
         vp, _ = _search(partial(self._coulomb_error, "dahl", vlaw=vlaw, vpar=vpar, smooth=None), vp_grid,
                         self.search.refine)
-        vs, _ = _search(lambda v: self.err("lugre", (v, vp), vlaw, vpar), self.grid, self.search.refine)
-        vp, e = _search(lambda x: self.err("lugre", (vs, x), vlaw, vpar), vp_grid, self.search.refine)
-        return LawFit("lugre", vs, e, None, vp)
+        vs, e = _search(lambda v: self.err("lugre", (v, vp, 0.0), vlaw, vpar), self.grid, self.search.refine)
+        q = 0.0
+        for _ in range(LUGRE_PASSES):
+            q = self.lugre_ratio((vs, vp, q), vlaw, vpar)
+            vp, e = _search(lambda x, q=q: self.err("lugre", (vs, x, q), vlaw, vpar), vp_grid, self.search.refine)
+        return LawFit("lugre", vs, e, None, vp, q)
+
+    def lugre_ratio(self, shape: tuple, vlaw: str, vpar: float | None) -> float:
+        """``(Fs - Fc) / Fs`` of the LuGre law at ``shape`` fitted on all rows (with the whole model), in [0, 0.95]."""
+        X = _law_columns(self.columns, ("lugre", shape, vlaw, vpar, None), 3)
+        M = np.hstack([self.cv.A, X]) * self.cv.w[:, None]
+        theta = np.linalg.lstsq(M, self.cv.y * self.cv.w, rcond=None)[0][-3:]
+        fs = float(theta[0] + theta[1])
+        return float(np.clip(theta[1] / fs, 0.0, 0.95)) if fs != 0 else 0.0
 
     def _coulomb_error(self, law: str, v: float, *, vlaw: str, vpar: float | None, smooth: float | None) -> float:
         return self.err(law, v, vlaw, vpar, smooth)
@@ -726,7 +759,7 @@ class _LawSelection:
                 best_c = c2
                 best_v = self.choose_viscous(c2)
                 if best_v.law == "linear":
-                    best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err, c2.smooth, c2.vp)
+                    best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err, c2.smooth, c2.vp, c2.q)
         return best_c, best_v
 
 

@@ -52,25 +52,26 @@ def test_lugre_columns_without_dip_are_the_simulated_dahl_friction(sigma0):
     np.testing.assert_allclose(FC * C[:, 0], dahl_friction(t, v, fc=FC, sigma0=sigma0), atol=1e-9)
 
 
-@pytest.mark.parametrize("sigma0, tol", [(1e4, 0.03), (1e5, 0.005)])
-def test_lugre_columns_follow_the_simulated_lugre_friction(sigma0, tol):
-    """With ``x0 = Fs / sigma0`` the law ``Fc phi + (Fs - Fc) exp(-(v/vs)^2) phi`` is within ``tol`` N m RMS of the
-    simulated LuGre friction (the static Stribeck law is 0.2-0.35 N m off: the pre-sliding transients), and its
-    rise after each reversal has LuGre's slope ``2 sigma0`` (first sample after the reversal, within 10 %)."""
+@pytest.mark.parametrize("sigma0", [1e3, 1e4, 1e5])
+def test_lugre_columns_are_the_simulated_lugre_friction(sigma0):
+    """With ``x0 = Fs / sigma0`` and ``q = (Fs - Fc) / Fs``, ``Fc a + (Fs - Fc) b`` is the LuGre friction of the
+    state simulation (``sigma1 = 0``; the static Stribeck law is 0.2-0.5 N m RMS off: the pre-sliding
+    transients), and its rise after each reversal has LuGre's slope ``2 sigma0`` (first interval of the new
+    sign, within 10 %; the interval's displacement small against ``x0``: not at ``sigma0 = 1e3`` here)."""
     t, v = _motion()
     ref = lugre_friction(t, v, fc=FC, fs=FS, vs=VS, sigma0=sigma0)
-    C = lugre_columns(v, VS, FS / sigma0 * FS_RATE)
+    C = lugre_columns(v, VS, FS / sigma0 * FS_RATE, (FS - FC) / FS)
     got = FC * C[:, 0] + (FS - FC) * C[:, 1]
+    np.testing.assert_allclose(got, ref, atol=1e-9)
     static = FC * np.sign(v) + (FS - FC) * np.exp(-(v / VS) ** 2) * np.sign(v)
-    rms = float(np.sqrt(np.mean((got - ref) ** 2)))
-    assert rms < tol < 0.5 * float(np.sqrt(np.mean((static - ref) ** 2))), rms
+    assert float(np.sqrt(np.mean((static - ref) ** 2))) > 0.15
+    if sigma0 < 1e4:
+        return
     vm = 0.5 * (v[1:] + v[:-1])
     k = np.flatnonzero(np.sign(vm[1:]) != np.sign(vm[:-1])) + 1          # interval index of the new sign
     k = k[(k > 10) & (k < v.size - 2)]
-    dx = np.abs(vm[k])                                               # displacement over that interval
-    for F in (got, ref):
-        slope = np.abs(F[k + 1] - F[k]) / (dx / FS_RATE)
-        np.testing.assert_allclose(slope, 2 * sigma0, rtol=0.1)
+    slope = np.abs(got[k + 1] - got[k]) / (np.abs(vm[k]) / FS_RATE)
+    np.testing.assert_allclose(slope, 2 * sigma0, rtol=0.1)
 
 
 def test_lugre_is_offered_from_one_kilohertz_only():
@@ -83,8 +84,9 @@ def test_lugre_is_offered_from_one_kilohertz_only():
 @pytest.mark.slow
 def test_selection_finds_the_lugre_law_and_its_scales():
     """On one joint's friction simulated by LuGre (1 kHz, noise 0.01 N m), the selection with every law picks
-    LuGre over the static laws and Dahl, with vs within 20 % and the pre-sliding displacement x0 within 30 %
-    of the truth; without the pre-sliding laws it picks the Stribeck law."""
+    LuGre over the static laws and Dahl, with vs within 10 %, the pre-sliding displacement x0 = Fs / sigma0 and
+    q = (Fs - Fc) / Fs within 10 % of the truth and the magnitudes within 2 %; without the pre-sliding laws it
+    picks the Stribeck law."""
     rng = np.random.default_rng(3)
     t, v = _motion(20.0)
     sigma0, fv = 2e4, 0.5
@@ -95,10 +97,11 @@ def test_selection_finds_the_lugre_law_and_its_scales():
     laws = ("sign", "tanh", "stribeck", "linear", "power", "dahl", "lugre")
     ch = select_friction(A, y, joint, 0, v, blocks, search=LawSearch(laws=laws, rate_hz=FS_RATE))
     assert ch.coulomb.law == "lugre", [c.label for c in ch.candidates]
-    assert ch.coulomb.param == pytest.approx(VS, rel=0.2)
-    assert ch.x0 == pytest.approx(FS / sigma0, rel=0.3)
-    assert ch.coefficients["Fs"] == pytest.approx(FS, rel=0.05)
-    assert ch.coefficients["Fc"] == pytest.approx(FC, rel=0.05)
+    assert ch.coulomb.param == pytest.approx(VS, rel=0.1)
+    assert ch.x0 == pytest.approx(FS / sigma0, rel=0.1)
+    assert ch.coulomb.q == pytest.approx((FS - FC) / FS, rel=0.1)
+    assert ch.coefficients["Fs"] == pytest.approx(FS, rel=0.02)
+    assert ch.coefficients["Fc"] == pytest.approx(FC, rel=0.02)
     static = select_friction(A, y, joint, 0, v, blocks, search=LawSearch(rate_hz=FS_RATE))
     assert static.coulomb.law == "stribeck"
     assert ch.names() == ("FS1", "FSS1", "FV1")
