@@ -721,8 +721,11 @@ class _LawSelection:
         q = 0.0
         for _ in range(LUGRE_PASSES):
             q = self.lugre_ratio((vs, vp, q), vlaw, vpar)
-            vp, e = _search(lambda x, q=q: self.err("lugre", (vs, x, q), vlaw, vpar), vp_grid, self.search.refine)
+            vp, e = _search(partial(self._lugre_vp_error, vs, q=q, vlaw=vlaw, vpar=vpar), vp_grid, self.search.refine)
         return LawFit("lugre", vs, e, None, vp, q)
+
+    def _lugre_vp_error(self, vs: float, vp: float, *, q: float, vlaw: str, vpar: float | None) -> float:
+        return self.err("lugre", (vs, vp, q), vlaw, vpar)
 
     def lugre_ratio(self, shape: tuple, vlaw: str, vpar: float | None) -> float:
         """``(Fs - Fc) / Fs`` of the LuGre law at ``shape`` fitted on all rows (with the whole model), in [0, 0.95]."""
