@@ -534,9 +534,9 @@ class DiagnoseSettings:
         candidates still compete there in the rounds (docs/loop-plausibility.md, "Declared friction laws").
     presliding_law : bool
         The friction-law stage also tries the pre-sliding Dahl and LuGre laws (:func:`.friction.dahl_column`,
-        :func:`.friction.lugre_columns`) on data sampled at :data:`.friction.DAHL_MIN_RATE_HZ` or more. Off by default: on the TX40 recording (5 kHz)
-        it displaced the joint-1 friction law the loop names without it (the README run: joint-1 validation
-        error 0.179 with the Dahl law tried; docs/loop-plausibility.md reports 0.080 with the static law).
+        :func:`.friction.lugre_columns`) on data sampled at :data:`.friction.DAHL_MIN_RATE_HZ` or more. Off by
+        default: on the TX40 recording (5 kHz) they displace the joint-1 friction law the loop names without
+        them (joint-1 validation error 0.180 with Dahl and LuGre tried, 0.080 without; docs/friction-dynamic.md).
     """
 
     method: str = "ols"
