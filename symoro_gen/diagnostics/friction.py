@@ -29,8 +29,8 @@ Pre-sliding (offered on data sampled at :data:`DAHL_MIN_RATE_HZ` or more only, `
       and ``q = (Fs - Fc) / Fs`` the bristle state ``sigma0 z`` is ``Fc a + (Fs - Fc) b``, ``a`` and ``b`` two
       states relaxing to ``sign(dq)`` and ``exp(-(dq/vs)^2) sign(dq)`` over LuGre's relaxation length
       ``g(v) / sigma0``. Reported ``sigma0 = Fs / x0``. Searched by coordinate descent: ``vp = x0 fs`` as for
-      Dahl, ``vs`` on the velocity grid at that ``vp``, then (twice) ``q`` from the fitted magnitudes and ``vp``
-      again. Offered with Dahl, on the same rule (``LawSearch.rate_hz`` at :data:`DAHL_MIN_RATE_HZ` or more);
+      Dahl, ``vs`` on the velocity grid at that ``vp``, then (:data:`LUGRE_PASSES` times) ``q`` from the fitted
+      magnitudes, ``vs`` and ``vp`` again. Offered with Dahl, on the same rule (``LawSearch.rate_hz`` at :data:`DAHL_MIN_RATE_HZ` or more);
 Viscous laws
     * ``linear``    ``Fv dq`` (declared);
     * ``power``     ``Fv |dq|^delta sign(dq)``, ``delta`` on a grid then refined.
@@ -134,7 +134,7 @@ __all__ = [
 #: the pre-sliding laws the stage can offer (at DAHL_MIN_RATE_HZ or more)
 PRESLIDING_LAWS = ("dahl", "lugre")
 #: passes of the LuGre search over its ratio q = (Fs - Fc) / Fs (:meth:`_LawSelection._lugre`)
-LUGRE_PASSES = 2
+LUGRE_PASSES = 3
 #: Coulomb laws with the two columns of Stribeck's (``Fc``, ``Fs - Fc``)
 STRIBECK_LIKE = ("stribeck", "lugre")
 #: sampling rate from which the Dahl law is offered (``fit_presliding``'s rule, docs/friction-dynamic.md)
@@ -713,7 +713,7 @@ class _LawSelection:
     def _lugre(self, vlaw: str, vpar: float | None) -> LawFit:
         """The LuGre law's scales by coordinate descent (module docstring): ``vp`` of the Dahl state, ``vs`` on
         the velocity grid at it, then :data:`LUGRE_PASSES` times ``q = (Fs - Fc) / Fs`` from the fitted
-        magnitudes and ``vp`` again at ``(vs, q)``."""
+        magnitudes, ``vs`` again at ``(vp, q)`` and ``vp`` again at ``(vs, q)``."""
         vp_grid = float(self.search.rate_hz or 0.0) * np.asarray(DAHL_X0_GRID)
         vp, _ = _search(partial(self._coulomb_error, "dahl", vlaw=vlaw, vpar=vpar, smooth=None), vp_grid,
                         self.search.refine)
@@ -721,10 +721,15 @@ class _LawSelection:
         q = 0.0
         for _ in range(LUGRE_PASSES):
             q = self.lugre_ratio((vs, vp, q), vlaw, vpar)
+            vs, e = _search(partial(self._lugre_vs_error, vp=vp, q=q, vlaw=vlaw, vpar=vpar), self.grid,
+                            self.search.refine)
             vp, e = _search(partial(self._lugre_vp_error, vs, q=q, vlaw=vlaw, vpar=vpar), vp_grid, self.search.refine)
         return LawFit("lugre", vs, e, None, vp, q)
 
     def _lugre_vp_error(self, vs: float, vp: float, *, q: float, vlaw: str, vpar: float | None) -> float:
+        return self.err("lugre", (vs, vp, q), vlaw, vpar)
+
+    def _lugre_vs_error(self, vs: float, *, vp: float, q: float, vlaw: str, vpar: float | None) -> float:
         return self.err("lugre", (vs, vp, q), vlaw, vpar)
 
     def lugre_ratio(self, shape: tuple, vlaw: str, vpar: float | None) -> float:
