@@ -25,6 +25,14 @@ recording and validates on another (a different excitation and noise):
     ``Fc tanh(dq / 0.03)``, 11-18 % of every file at rest (pauses), three files of 50 s (identify on 1-2,
     validate on 3); the loop against the plain expert model (``diagnostics/expert.py``: base parameters
     + per-joint tanh Coulomb + viscous + offset), per joint, with ``no_worse``.
+13. LuGre friction on joint 4 where its pre-sliding regime is identifiable: LWR4 at 1 kHz (``--lugre-rate``),
+    the Coulomb friction of joint 4 replaced by LuGre's bristles (Canudas de Wit, Olsson, Astrom & Lischinsky
+    1995 eq. 1-4, ``sigma1 = 0``: ``Fc = 0.3``, ``Fs = 0.8`` N m, ``vs = 0.07`` rad/s, ``sigma0 = 4e3`` N m/rad),
+    integrated here (:func:`lugre_torque`: 16 sub-steps per sample on the analytic excitation's velocity,
+    not the package's state simulation); the loop with ``presliding_law`` on. Right: the first effect is the
+    ``lugre`` friction law of joint 4, its ``Fs - Fc`` within 3 sigma of 0.5 with sigma below a third of it;
+    and the same robot without the LuGre friction (the declared law, the clean control at 1 kHz, on
+    ``--lugre-clean-seeds`` seeds) has nothing named.
 
 For each case it prints the truth, the effects in the order reported (kind, joint, label, modulation,
 ``verdict`` when the report has one), whether the right cause - or, for a kind the loop has no name for
@@ -40,6 +48,7 @@ only) on N seeds (``--seed`` .. ``--seed + N - 1``; each its own excitations and
 seeds named anything, and what: the false-positive rate of the loop on data its declared model explains.
 
     PYTHONPATH=. python bench/bench_loop_truth.py --clean-seeds 30 --seconds 15 --rate 250
+    PYTHONPATH=. python bench/bench_loop_truth.py --cases 14 --lugre-seconds 60 --lugre-clean-seeds 2
 """
 from __future__ import annotations
 
@@ -49,7 +58,7 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -353,6 +362,129 @@ def print_cobot(r: dict) -> None:
 
 
 # ------------------------------------------------------------------------------------------------
+# case 14: LuGre friction where its pre-sliding regime is identifiable (1 kHz)
+# ------------------------------------------------------------------------------------------------
+#: the last case number
+LAST_CASE = 14
+#: case 14: joint (0-based) and its LuGre friction (Fc, Fs [N m], vs [rad/s], sigma0 [N m/rad])
+LUGRE_JOINT = 3
+LUGRE = (0.3, 0.8, 0.07, 4e3)
+#: sub-steps per sample interval of :func:`lugre_torque`
+LUGRE_SUBSTEPS = 16
+
+
+def lugre_torque(t: np.ndarray, v: np.ndarray, fc: float, fs: float, vs: float, sigma0: float) -> np.ndarray:
+    """LuGre friction ``sigma0 z`` (Canudas de Wit, Olsson, Astrom & Lischinsky 1995, eq. 1-4 with
+    ``sigma1 = 0``): ``dz/dt = v - sigma0 |v| z / g(v)``, ``g(v) = Fc + (Fs - Fc) exp(-(v/vs)^2)``, ``z(0) = 0``.
+    Each sample interval is cut into :data:`LUGRE_SUBSTEPS` sub-steps with the velocity interpolated linearly
+    and held at each sub-step's centre, where the equation is linear in ``z`` and integrated exactly."""
+    z = 0.0
+    out = np.zeros(v.size)
+    frac = (np.arange(LUGRE_SUBSTEPS) + 0.5) / LUGRE_SUBSTEPS
+    for k in range(1, v.size):
+        h = (t[k] - t[k - 1]) / LUGRE_SUBSTEPS
+        for vv in v[k - 1] + (v[k] - v[k - 1]) * frac:
+            g = fc + (fs - fc) * math.exp(-(vv / vs) ** 2)
+            target = g * math.copysign(1.0, vv) / sigma0 if vv != 0 else z
+            z = target + (z - target) * math.exp(-sigma0 * abs(vv) * h / g)
+        out[k] = sigma0 * z
+    return out
+
+
+@dataclass
+class LuGreTruth(Truth):
+    """:class:`truthsim.Truth` with LuGre friction added on some joints (their ``FS`` set to 0 by the caller)."""
+
+    lugre: dict = field(default_factory=dict)             # j -> (Fc, Fs, vs, sigma0)
+
+    def friction(self, t: np.ndarray, dq: np.ndarray, tau_r: np.ndarray, T: float) -> np.ndarray:
+        f = super().friction(t, dq, tau_r, T)
+        for j, (fc, fs, vs, s0) in self.lugre.items():
+            f[:, j] += lugre_torque(t, dq[:, j], fc, fs, vs, s0)
+        return f
+
+
+def _lugre_run(a, model, robot, chi, rigid: Rigid, seed: int, lugre: bool) -> dict:
+    """One identification + validation pair at ``a.lugre_rate`` (LuGre on joint 4 or the clean control) and
+    the loop with the pre-sliding laws on."""
+    rng = np.random.default_rng(seed)
+    base = lwr4_truth(robot, chi, a.sigma_tau)
+    truth = LuGreTruth(FV=base.FV, FS=base.FS.copy(), OFF=base.OFF, sigma_tau=a.sigma_tau)
+    if lugre:
+        truth.FS[LUGRE_JOINT] = 0.0
+        truth.lugre[LUGRE_JOINT] = LUGRE
+    t0 = time.perf_counter()
+    ident, _ = record(robot, rigid, sum_of_sines(robot, rng), truth, a.lugre_seconds, a.lugre_rate, rng,
+                      "case13-ident")
+    valid, _ = record(robot, rigid, sum_of_sines(robot, rng), truth, VALID_SHARE * a.lugre_seconds, a.lugre_rate,
+                      rng, "case13-valid")
+    t_sim = time.perf_counter() - t0
+    rep = diagnose(model, [ident], DiagnoseSettings(presliding_law=True), validation=[valid],
+                   rng=np.random.default_rng(seed))
+    effects = []
+    for e in rep.effects:
+        d = dict(kind=_kind(e), joint=None if _j(e) is None else _j(e) + 1, label=str(getattr(e, "label", "")),
+                 variant=str(getattr(e, "variant", "")), verdict=verdict_of(e), physical=_physical(e),
+                 params={str(nm): (float(v), float(s)) for nm, v, s in zip(e.names, e.values, e.std)})
+        effects.append(d)
+    return dict(seed=seed, effects=effects, seconds_sim=t_sim, seconds_loop=time.perf_counter() - t0 - t_sim,
+                before_valid=[float(x) for x in rep.before_validation_rel_err],
+                after_valid=[float(x) for x in rep.after_validation_rel_err])
+
+
+def lugre_right(r: dict) -> tuple[bool, str]:
+    """Case 14's judgement of the injected run: the first effect is joint 4's ``lugre`` law, ``Fs - Fc`` (its
+    ``FSS4``) within 3 sigma of the truth and sigma below a third of the truth."""
+    if not r["effects"]:
+        return False, "nothing named"
+    e = r["effects"][0]
+    if not (e["kind"] == "friction_law" and e["joint"] == LUGRE_JOINT + 1 and e["variant"].startswith("lugre")):
+        return False, f"first effect {e['kind']} j{e['joint']} ({e['variant']})"
+    fc, fs, _, s0 = LUGRE
+    val, sd = e["params"].get(f"FSS{LUGRE_JOINT + 1}", (math.nan, math.nan))
+    ok = abs(val - (fs - fc)) <= 3 * sd and sd < (fs - fc) / 3
+    return ok, (f"Fs - Fc = {val:.4g} ± {sd:.2g} (truth {fs - fc:g}: {abs(val - (fs - fc)) / sd:.1f} sigma), "
+                f"vs = {e['physical'].get('vs', math.nan):.3g} (truth {LUGRE[2]:g}), "
+                f"sigma0 = {e['physical'].get('sigma0', math.nan):.3g} (truth {s0:g})")
+
+
+def run_lugre(a, model, robot, chi, rigid: Rigid) -> dict:
+    """Case 14: LuGre on joint 4 at ``a.lugre_rate``, and the clean control at that rate on
+    ``a.lugre_clean_seeds`` seeds."""
+    inj = _lugre_run(a, model, robot, chi, rigid, a.seed * 1000 + 13, True)
+    ok, why = lugre_right(inj)
+    clean = [_lugre_run(a, model, robot, chi, rigid, (a.seed + k) * 1000 + 113, False)
+             for k in range(a.lugre_clean_seeds)]
+    fc, fs, vs, s0 = LUGRE
+    return dict(case=14, title=f"LuGre friction j{LUGRE_JOINT + 1} at {a.lugre_rate:g} Hz (pre-sliding laws on)",
+                truth=f"joint {LUGRE_JOINT + 1}: LuGre Fc = {fc:g}, Fs = {fs:g} N m, vs = {vs:g} rad/s, sigma0 = "
+                      f"{s0:g} N m/rad in place of its Coulomb friction; {a.lugre_seconds:g} s + "
+                      f"{VALID_SHARE * a.lugre_seconds:g} s at {a.lugre_rate:g} Hz",
+                injected=inj, right=ok, why=why, clean=clean,
+                clean_named=sum(bool(c["effects"]) for c in clean), right_first=ok)
+
+
+def print_lugre(r: dict) -> None:
+    print(f"\n== case 14: {r['title']}")
+    print(f"   truth: {r['truth']}")
+    inj = r["injected"]
+    for i, e in enumerate(inj["effects"], 1):
+        phys = ", ".join(f"{k} = {x:.4g}" for k, x in e["physical"].items())
+        print(f"   {i}. {e['kind']} j{e['joint'] or '-'} ({e['label']}, {e['variant']}) verdict={e['verdict']}"
+              + (f" [{phys}]" if phys else ""))
+    if not inj["effects"]:
+        print("   (no effect named)")
+    print(f"   right (lugre law of joint {LUGRE_JOINT + 1} first, Fs - Fc within 3 sigma, sigma < a third): "
+          f"{'YES' if r['right'] else 'no'}: {r['why']}")
+    print("   validation rel. err. before: " + " ".join(f"{x:.4f}" for x in inj["before_valid"]))
+    print("   validation rel. err. after:  " + " ".join(f"{x:.4f}" for x in inj["after_valid"]))
+    for c in r["clean"]:
+        named = "; ".join(f"{e['kind']} j{e['joint'] or '-'} ({e['variant']})" for e in c["effects"]) or "nothing named"
+        print(f"   clean control (rng seed {c['seed']}): {named}   [diagnose {c['seconds_loop']:.0f} s]")
+    print(f"   simulation {inj['seconds_sim']:.1f} s, diagnose {inj['seconds_loop']:.1f} s")
+
+
+# ------------------------------------------------------------------------------------------------
 # the clean bench: the clean control on many seeds
 # ------------------------------------------------------------------------------------------------
 def run_clean_seeds(a, model, robot, chi, rigid: Rigid) -> dict:
@@ -393,15 +525,15 @@ def parse_cases(text: str) -> list[int]:
             out += list(range(lo, hi + 1))
         else:
             out.append(int(part))
-    bad = [c for c in out if not 1 <= c <= 13]
+    bad = [c for c in out if not 1 <= c <= LAST_CASE]
     if bad:
-        raise SystemExit(f"--cases: unknown case(s) {bad}; the cases are 1-13")
+        raise SystemExit(f"--cases: unknown case(s) {bad}; the cases are 1-{LAST_CASE}")
     return out
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", default="1-13", help="e.g. 1,2,5 or 1-11 (default all, 1-13)")
+    ap.add_argument("--cases", default=f"1-{LAST_CASE}", help=f"e.g. 1,2,5 or 1-11 (default all, 1-{LAST_CASE})")
     ap.add_argument("--seconds", type=float, default=30.0,
                     help="identification recording [s] (validation: half as long); default 30")
     ap.add_argument("--rate", type=float, default=500.0, help="sampling rate [Hz] of cases 1-11 (default 500)")
@@ -412,6 +544,11 @@ def main(argv=None) -> int:
     ap.add_argument("--cobot-friction", choices=("tanh", "lugre"), default="tanh",
                     help="Coulomb law of case 12: tanh(dq/0.03) (0 at rest) or LuGre bristles (holds at rest)")
     ap.add_argument("--sigma-tau", type=float, default=0.05, help="torque noise [N m] (default 0.05)")
+    ap.add_argument("--lugre-rate", type=float, default=1000.0, help="sampling rate [Hz] of case 14 (default 1000)")
+    ap.add_argument("--lugre-seconds", type=float, default=60.0,
+                    help="identification recording of case 14 [s] (validation: half as long); default 60")
+    ap.add_argument("--lugre-clean-seeds", type=int, default=1,
+                    help="case 14: clean controls (no LuGre) at the same rate, on this many seeds (default 1)")
     ap.add_argument("--seed", type=int, default=0, help="base seed (case k uses 1000 seed + k)")
     ap.add_argument("--clean-seeds", type=int, default=0,
                     help="run only the clean control (case 11) on this many seeds and count what is named")
@@ -456,6 +593,10 @@ def main(argv=None) -> int:
     if 12 in wanted:
         r = run_cobot(a)
         print_cobot(r)
+        results.append(r)
+    if 14 in wanted:
+        r = run_lugre(a, model, robot, chi, rigid)
+        print_lugre(r)
         results.append(r)
     single = [r for r in results if 1 <= r["case"] <= 10 or r["case"] == 13]
     x = sum(r["right_first"] for r in single)

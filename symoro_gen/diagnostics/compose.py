@@ -28,6 +28,13 @@ declared model's (friction, offset, rotor inertia) or a plain candidate's accept
 position ripple): pass it in ``A``. The step is not centred. A composed column (almost) in the span of
 ``A`` (less than ``IDENTIFIABILITY_TOL`` of its norm outside) is skipped.
 
+The composed ``coulomb`` by ``abs_tau`` is the load-dependent friction ``mu |tau_hat_j| sign(dq_j)`` of the
+plain ``load_friction`` candidate (:mod:`.candidates`; Armstrong-Helouvry, Dupont & Canudas de Wit 1994,
+sec. 2.1: the normal force in the gear teeth grows with the transmitted torque) with the signal centred:
+``c sign(dq_j) (|tau_hat_j| - m) / s`` is ``(c / s) |tau_hat_j| sign(dq_j)`` plus a change ``-c m / s`` of
+the declared ``FS_j``. Named, it is reported in that law's parametrization (:func:`as_load_friction`):
+kind ``load_friction``, ``mu = c / s`` and its standard deviation ``sigma_c / s``.
+
 Each composed candidate is named in words (:meth:`Composed.describe`), e.g. "viscous friction of joint 3
 growing with |tau_hat3|", "constant (gravity-like) torque on joint 2 appearing at t = 12.1 s".
 
@@ -70,8 +77,10 @@ __all__ = [
     "Composed",
     "ComposedResult",
     "RowSignals",
+    "as_load_friction",
     "holm",
     "library",
+    "load_friction_mu",
     "score_composed",
 ]
 
@@ -552,3 +561,41 @@ def _merge_aliases(res: list[ComposedResult], sig: RowSignals) -> list[ComposedR
         out.append(r)
     return out
 
+
+
+def load_friction_mu(c: Composed, value: float, std: float) -> tuple[float, float] | None:
+    """``(mu, sigma_mu)`` of a composed ``coulomb`` by ``abs_tau`` candidate with its fitted coefficient
+    ``value`` (standard deviation ``std``): ``mu = value / scale`` (module docstring; the standardisation fixed,
+    :meth:`Composed.standardised_on`). None for any other composed candidate or without a fixed scale."""
+    if c.effect != "coulomb" or c.signal != "abs_tau" or c.scale is None or not float(c.scale) > 0:
+        return None
+    s = float(c.scale)
+    return float(value) / s, float(std) / s
+
+
+def as_load_friction(effect, c: Composed | None):
+    """A reported effect (:class:`.report.Effect`) of the composed ``coulomb`` by ``abs_tau`` candidate ``c``
+    in the parametrization of the load-dependent friction (module docstring): kind ``load_friction``, first
+    parameter ``mu`` (value, standard deviation, confidence interval divided by the signal's scale; the
+    relative standard deviation unchanged), the
+    composed coefficient's name and the change of ``FS<j>`` it implies in ``physical``. Any other effect
+    unchanged. Its rating (verdict, alternatives) is the composed candidate's: the same law."""
+    if c is None:
+        return effect
+    k = len(c.names())
+    got = load_friction_mu(c, float(effect.values[0]), float(effect.std[0])) if len(effect.values) >= k else None
+    if got is None or k != 1:
+        return effect
+    mu, sd = got
+    s = float(c.scale or 1.0)
+    values = np.r_[mu, np.asarray(effect.values, float)[1:]]
+    std = np.r_[sd, np.asarray(effect.std, float)[1:]]
+    name = effect.names[0]
+    ci = {("mu" if nm == name else nm): ((lo / s, hi / s) if nm == name else (lo, hi))
+          for nm, (lo, hi) in dict(effect.ci or {}).items()}
+    phys = dict(effect.physical or {}) | {"mu": mu, "mu_std": sd, "composed_coefficient": float(effect.values[0]),
+                                          "fs_change": -float(effect.values[0]) * float(c.center or 0.0) / s}
+    desc = (f"load-dependent friction of joint {c.joint + 1}: mu |\u03c4\u0302{c.joint + 1}| sign(dq{c.joint + 1}), "
+            f"mu = {mu:.3g} \u00b1 {sd:.2g} (found as the composed {effect.description or name})")
+    return replace(effect, kind="load_friction", names=("mu",) + tuple(effect.names[1:]), values=values, std=std,
+                   physical=phys, ci=ci, description=desc)

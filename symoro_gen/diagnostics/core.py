@@ -116,7 +116,7 @@ from .candidates import (
     nuisance_columns,
     placebo_families,
 )
-from .compose import Composed, RowSignals, score_composed
+from .compose import Composed, RowSignals, as_load_friction, score_composed
 from .compose import library as composed_library
 from .frame import Experiment, Frame, attach_model_torque, build_frame, common_bandwidth, model_torque, split_holdout
 from .friction import (
@@ -576,10 +576,10 @@ class DiagnoseSettings:
         whose declared law has the Stribeck term already (its ``FSS<j>`` column). The loop's other
         candidates still compete there in the rounds (docs/loop-plausibility.md, "Declared friction laws").
     presliding_law : bool
-        The friction-law stage also tries the pre-sliding Dahl law (:func:`.friction.dahl_column`) on data
-        sampled at :data:`.friction.DAHL_MIN_RATE_HZ` or more. Off by default: on the TX40 recording (5 kHz)
-        it displaced the joint-1 friction law the loop names without it (the README run: joint-1 validation
-        error 0.179 with the Dahl law tried; docs/loop-plausibility.md reports 0.080 with the static law).
+        The friction-law stage also tries the pre-sliding Dahl and LuGre laws (:func:`.friction.dahl_column`,
+        :func:`.friction.lugre_columns`) on data sampled at :data:`.friction.DAHL_MIN_RATE_HZ` or more. Off by
+        default: on the TX40 recording (5 kHz) they displace the joint-1 friction law the loop names without
+        them (joint-1 validation error 0.180 with Dahl and LuGre tried, 0.080 without; docs/friction-dynamic.md).
     """
 
     method: str = "ols"
@@ -998,7 +998,7 @@ def _declared_law_kept(jf: _JointFriction, ch: FrictionChoice, Y: np.ndarray, J:
 
 def _law_search(F: Frame, jf: _JointFriction) -> LawSearch:
     """The laws the friction-law stage tries on joint ``jf.j``: every static law, and (``jf.presliding``) the
-    pre-sliding Dahl law when every experiment is sampled at one rate of :data:`.friction.DAHL_MIN_RATE_HZ` or
+    pre-sliding Dahl and LuGre laws when every experiment is sampled at one rate of :data:`.friction.DAHL_MIN_RATE_HZ` or
     more (:mod:`.friction`: below it the pre-sliding regime is not resolved)."""
     rates = {float(ex.settings.fs) for ex in F.experiments}
     laws = COULOMB_LAWS + VISCOUS_LAWS + (PRESLIDING_LAWS if jf.presliding else ())
@@ -1155,6 +1155,9 @@ def _law_columns(ch: FrictionChoice) -> tuple[list[int], tuple[str, ...]]:
     elif ch.coulomb.law == "dahl":
         idx.append(0)
         params.append("FSd")
+    elif ch.coulomb.law == "lugre":   # the Dahl state and its Stribeck dip (friction.lugre_columns)
+        idx += [0, 1]
+        params += ["FSl", "FSSl"]
     if ch.viscous.law == "power":
         idx.append(len(ch.names()) - 1)
         params.append("FVp")
@@ -1188,7 +1191,7 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     # a joint whose friction-law stage chose a Stribeck law already has the Stribeck column: the loop's
     # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
     # coefficients then split the effect between them with opposite signs)
-    stribeck_law = {r.choice.joint for r in laws if not r.smoothing and r.choice.coulomb.law == "stribeck"}
+    stribeck_law = {r.choice.joint for r in laws if not r.smoothing and r.choice.coulomb.law in ("stribeck", "lugre")}
     # ... and so has a joint whose declared law (robot file: stribeck, lugre) carries FSS<j>
     stribeck_law |= {j for j in cfg.declared_laws if f"FSS{j + 1}" in data.decl}
     families = [f for f in families if not (f.kind == "stribeck" and f.joint in stribeck_law)]
@@ -1658,7 +1661,7 @@ def _accept_law(data0: _Data, data: _Data, base: _Baseline, state: _State, joint
     laws = tuple(r for r in base.laws if r.choice.joint != joint) + (rec,)
     data = replace(_apply_laws(data0, laws), doubtful_laws=data.doubtful_laws)
     fams = base.families
-    if rec.choice.coulomb.law == "stribeck":
+    if rec.choice.coulomb.law in ("stribeck", "lugre"):
         fams = tuple(f for f in fams if not (f.kind == "stribeck" and f.joint == joint))
     base = replace(base, laws=laws, families=fams)
     F, V, added, res, _, _, _ = _refit(data, data.F, data.V, state.added)   # frames with the new columns
@@ -1994,6 +1997,9 @@ def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
     if x0 is not None and x0 > 0:   # Dahl: pre-sliding displacement and stiffness sigma0 = Fc / x0
         phys["x0"] = x0
         phys["sigma0"] = abs(float(res.value(ch.names()[0]))) / x0
+        if ch.coulomb.law == "lugre":   # LuGre: vs, and sigma0 = Fs / x0 (friction.lugre_columns)
+            phys["vs"] = float(ch.coulomb.param or math.nan)
+            phys["sigma0"] = abs(float(res.value(ch.names()[0])) + float(res.value(ch.names()[1]))) / x0
     desc = ch.describe()
     if rec.added:
         desc = (f"joint {ch.joint + 1} declared without friction: added {ch.coulomb.label} Coulomb + "
@@ -2030,6 +2036,9 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     effects = rate_effects(effects, scales, state.tried, impossible=impossible,
                            law_ratings={r.choice.joint: (law_plausibility(r.choice, scales), law_alternatives(r.choice))
                                         for r in base.laws if not r.smoothing})
+    # the composed Coulomb x |tau_hat_j| named in the load-dependent friction's parametrization (mu), rated as found
+    composed_of = {m["family"].label: dict(m["family"].info).get("composed") for m in state.effects_meta}
+    effects = [as_load_friction(e, composed_of.get(e.label)) for e in effects]
     F = state.F
     final_resid = Y - A @ np.array([res.value(nm) for nm in names])
     unexpl = _unexplained(F, final_resid, A) if cfg.unexplained else ()

@@ -24,6 +24,13 @@ Pre-sliding (offered on data sampled at :data:`DAHL_MIN_RATE_HZ` or more only, `
       ``x0`` the law is ``sign(dq)``. Below 1 kHz the pre-sliding regime (milliseconds after each reversal)
       is not resolved and a fitted ``sigma0`` is not identifiable (docs/friction-dynamic.md, the study at
       reversals): the law is not offered there;
+    * ``lugre``     the LuGre law ([COAL1995] eq. 1-4, bristle damping ``sigma1 = 0``), whose sliding part is the
+      Stribeck law, linear in ``Fc`` and ``Fs - Fc`` (:func:`lugre_columns`): for fixed ``vs``, ``x0 = Fs / sigma0``
+      and ``q = (Fs - Fc) / Fs`` the bristle state ``sigma0 z`` is ``Fc a + (Fs - Fc) b``, ``a`` and ``b`` two
+      states relaxing to ``sign(dq)`` and ``exp(-(dq/vs)^2) sign(dq)`` over LuGre's relaxation length
+      ``g(v) / sigma0``. Reported ``sigma0 = Fs / x0``. Searched by coordinate descent: ``vp = x0 fs`` as for
+      Dahl, ``vs`` on the velocity grid at that ``vp``, then (:data:`LUGRE_PASSES` times) ``q`` from the fitted
+      magnitudes, ``vs`` and ``vp`` again. Offered with Dahl, on the same rule (``LawSearch.rate_hz`` at :data:`DAHL_MIN_RATE_HZ` or more);
 Viscous laws
     * ``linear``    ``Fv dq`` (declared);
     * ``power``     ``Fv |dq|^delta sign(dq)``, ``delta`` on a grid then refined.
@@ -89,6 +96,7 @@ from ..description.friction_law import (
     viscous_columns,
 )
 from ..errors import IdentificationError
+from ..identification.friction_law import JointColumns, LawSplicedModel
 from ..model import IdentificationModel
 from .stability import N_FOLDS, BlockedLS, wls_basis
 
@@ -99,6 +107,7 @@ __all__ = [
     "DELTA_GRID",
     "MIN_GAIN",
     "PRESLIDING_LAWS",
+    "STRIBECK_LIKE",
     "REST_MIN_PERIODS",
     "REST_NOISE_MULTIPLE",
     "VISCOUS_LAWS",
@@ -108,6 +117,7 @@ __all__ = [
     "LawSearch",
     "coulomb_columns",
     "dahl_column",
+    "lugre_columns",
     "friction_column_indices",
     "law_declarations",
     "law_errors",
@@ -122,7 +132,11 @@ __all__ = [
 ]
 
 #: the pre-sliding laws the stage can offer (at DAHL_MIN_RATE_HZ or more)
-PRESLIDING_LAWS = ("dahl",)
+PRESLIDING_LAWS = ("dahl", "lugre")
+#: passes of the LuGre search over its ratio q = (Fs - Fc) / Fs (:meth:`_LawSelection._lugre`)
+LUGRE_PASSES = 3
+#: Coulomb laws with the two columns of Stribeck's (``Fc``, ``Fs - Fc``)
+STRIBECK_LIKE = ("stribeck", "lugre")
 #: sampling rate from which the Dahl law is offered (``fit_presliding``'s rule, docs/friction-dynamic.md)
 DAHL_MIN_RATE_HZ = 1000.0
 #: pre-sliding displacements x0 = Fc / sigma0 searched [rad or m] (sigma0 from 1e2 to 1e6 times Fc)
@@ -241,12 +255,23 @@ class LawFit:
         Out-of-fold relative error norm of the joint's rows.
     smooth : float or None
         ``sign`` and Stribeck: velocity scale ``v`` of the ``tanh(dq/v)`` replacing ``sign(dq)``.
+    vp : float or None
+        LuGre: its pre-sliding scale ``vp = x0 fs`` (``param`` is its ``vs``); the Dahl law's is ``param``.
+    q : float
+        LuGre: ``(Fs - Fc) / Fs`` of its relaxation length (:func:`lugre_columns`).
     """
 
     law: str
     param: float | None
     cv_rel_err: float
     smooth: float | None = None
+    vp: float | None = None
+    q: float = 0.0
+
+    @property
+    def shape(self):
+        """The law's shape parameter as :func:`_coulomb` takes it: ``(vs, vp, q)`` for LuGre, else ``param``."""
+        return (self.param, self.vp, self.q) if self.law == "lugre" else self.param
 
     @property
     def label(self) -> str:
@@ -258,6 +283,8 @@ class LawFit:
             return f"power(delta={self.param:.3g})"
         if self.law == "dahl":
             return f"dahl(vp={self.param:.3g})"
+        if self.law == "lugre":
+            return f"lugre(vs={self.param:.3g},vp={self.vp:.3g})"
         return self.law
 
 
@@ -292,10 +319,11 @@ class FrictionChoice:
 
     @property
     def x0(self) -> float | None:
-        """Dahl law: the pre-sliding displacement ``x0 = vp / fs`` [rad or m] (None otherwise)."""
-        if self.coulomb.law != "dahl" or self.coulomb.param is None or not self.rate_hz:
+        """Dahl and LuGre laws: the pre-sliding displacement ``x0 = vp / fs`` [rad or m] (None otherwise)."""
+        vp = {"dahl": self.coulomb.param, "lugre": self.coulomb.vp}.get(self.coulomb.law)
+        if vp is None or not self.rate_hz:
             return None
-        return float(self.coulomb.param) / float(self.rate_hz)
+        return float(vp) / float(self.rate_hz)
 
     @property
     def declared_cv_rel_err(self) -> float:
@@ -312,13 +340,13 @@ class FrictionChoice:
 
     def columns(self, dq: np.ndarray) -> np.ndarray:
         """Columns of the chosen laws at velocities ``dq``: Coulomb column(s) then the viscous one."""
-        return np.hstack([_coulomb(self.coulomb.law, dq, self.coulomb.param, self.coulomb.smooth),
+        return np.hstack([_coulomb(self.coulomb.law, dq, self.coulomb.shape, self.coulomb.smooth),
                           viscous_columns(self.viscous.law, dq, self.viscous.param)])
 
     def names(self) -> tuple[str, ...]:
         """Parameter names of :meth:`columns` (``FS3``, ``FSS3``, ``FV3`` for joint 3)."""
         j = self.joint + 1
-        c = (f"FS{j}", f"FSS{j}") if self.coulomb.law == "stribeck" else (f"FS{j}",)
+        c = (f"FS{j}", f"FSS{j}") if self.coulomb.law in STRIBECK_LIKE else (f"FS{j}",)
         return c + (f"FV{j}",)
 
     def describe(self) -> str:
@@ -334,6 +362,11 @@ class FrictionChoice:
             fc = self.coefficients.get("Fc")
             s0 = f", sigma0 = {abs(fc) / self.x0:.3g}" if fc is not None and self.x0 > 0 else ""
             parts.append(f"Coulomb \u2192 Dahl (pre-sliding), x0 = {self.x0:.3g}{s0}")
+        elif self.coulomb.law == "lugre" and self.x0 is not None:
+            fs = self.coefficients.get("Fs")
+            s0 = f", sigma0 = {abs(fs) / self.x0:.3g}" if fs is not None and self.x0 > 0 else ""
+            parts.append(f"Coulomb \u2192 LuGre (pre-sliding, Stribeck sliding part), vs = {self.coulomb.param:.3g} "
+                         f"{self.unit}, x0 = {self.x0:.3g}{s0}")
         if self.viscous.law == "power":
             parts.append(f"viscous \u2192 |dq|^\u03b4, \u03b4 = {self.viscous.param:.3g}")
         if not parts:
@@ -390,12 +423,46 @@ def dahl_column(dq: np.ndarray, vp: float) -> np.ndarray:
     return out
 
 
-def _coulomb(law: str, dq: np.ndarray, param: float | None, smooth: float | None) -> np.ndarray:
-    """:func:`coulomb_columns`, and the pre-sliding ``dahl`` law (:func:`dahl_column`)."""
+def lugre_columns(dq: np.ndarray, vs: float, vp: float, q: float = 0.0) -> np.ndarray:
+    """The two Coulomb columns (N, 2) of the loop's LuGre law (module docstring) along the ordered full-rate
+    velocity ``dq`` of one experiment, coefficients ``Fc`` and ``Fs - Fc``: the states ``a`` and ``b`` of
+    ``da/dx = (sign(v) - a) / (x0 h(v))`` and ``db/dx = (e(v) sign(v) - b) / (x0 h(v))``, ``e(v) = exp(-(v/vs)^2)``,
+    ``h(v) = 1 - q (1 - e(v))`` with ``q = (Fs - Fc) / Fs``, ``x0 = vp / fs = Fs / sigma0``. Then
+    ``Fc a + (Fs - Fc) b = sigma0 z``, LuGre's friction with ``sigma1 = 0`` (relaxation length ``g(v) / sigma0 =
+    x0 h(v)``), integrated like :func:`symoro_gen.simulate.friction_state.lugre_state`: the velocity held over
+    each interval at the mean of its two samples, ``e`` and ``h`` at the mean of their two ends, ``a = b = 0`` at
+    the start. ``q = 0`` is the Dahl state :func:`dahl_column` in both (``phi`` and ``e phi`` at sliding)."""
+    v = np.asarray(dq, float)
+    if not vs > 0 or not vp > 0 or not 0.0 <= q < 1.0:
+        raise ValueError(f"lugre_columns: vs ({vs!r}) and vp ({vp!r}) must be > 0 and q ({q!r}) in [0, 1)")
+    out = np.zeros((v.size, 2))
+    if v.size < 2:
+        return out
+    e = np.exp(-(v / float(vs)) ** 2)
+    vm = 0.5 * (v[1:] + v[:-1])
+    em = 0.5 * (e[1:] + e[:-1])
+    hm = 1.0 - q * (1.0 - em)
+    sg = np.sign(vm)
+    decay = np.exp(-np.abs(vm) / (float(vp) * hm))
+    a = b = 0.0
+    for k, (s_, d_, e_) in enumerate(zip(sg.tolist(), decay.tolist(), em.tolist()), start=1):
+        a = s_ + (a - s_) * d_
+        b = e_ * s_ + (b - e_ * s_) * d_
+        out[k, 0], out[k, 1] = a, b
+    return out
+
+
+def _coulomb(law: str, dq: np.ndarray, param, smooth: float | None) -> np.ndarray:
+    """:func:`coulomb_columns`, and the pre-sliding ``dahl`` (:func:`dahl_column`, ``param = vp``) and ``lugre``
+    (:func:`lugre_columns`, ``param = (vs, vp, q)``) laws."""
     if law == "dahl":
         if param is None:
             raise TypeError("the 'dahl' friction law needs its scale vp")
         return dahl_column(dq, float(param))[:, None]
+    if law == "lugre":
+        if not isinstance(param, tuple) or None in param:
+            raise TypeError("the 'lugre' friction law needs its scales (vs, vp, q)")
+        return lugre_columns(dq, float(param[0]), float(param[1]), float(param[2]))
     return coulomb_columns(law, dq, param, smooth)
 
 
@@ -449,9 +516,17 @@ class LawSearch:
     rate_hz: float | None = None
 
     @property
+    def fast(self) -> bool:
+        """Sampled at :data:`DAHL_MIN_RATE_HZ` or more (a rate from time stamps is within rounding of 1000 Hz)."""
+        return self.rate_hz is not None and self.rate_hz >= DAHL_MIN_RATE_HZ * (1 - 1e-6)
+
+    @property
     def dahl(self) -> bool:
-        # (a rate from time stamps is within rounding of 1000 Hz)
-        return "dahl" in self.laws and self.rate_hz is not None and self.rate_hz >= DAHL_MIN_RATE_HZ * (1 - 1e-6)
+        return "dahl" in self.laws and self.fast
+
+    @property
+    def lugre(self) -> bool:
+        return "lugre" in self.laws and self.fast
 
 
 def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq: np.ndarray, blocks: np.ndarray, *,
@@ -585,7 +660,7 @@ class _LawSelection:
         self.tried: list[LawFit] = []
 
     def oof(self, claw, cpar, vlaw="linear", vpar=None, smooth=None) -> np.ndarray:
-        pc = 2 if claw == "stribeck" else 1
+        pc = 2 if claw in STRIBECK_LIKE else 1
         X = _law_columns(self.columns, (claw, cpar, vlaw, vpar, smooth), pc + 1)
         return self.cv.oof_residual(X)[self.rows]
 
@@ -627,21 +702,57 @@ class _LawSelection:
             self.tried.append(fit)
             if self.better(fit, args, best, best_args):
                 best, best_args = fit, args
+        if "lugre" in self.search.laws and self.search.lugre:
+            fit = self._lugre(vlaw, vpar)
+            args = ("lugre", fit.shape, vlaw, vpar, None)
+            self.tried.append(fit)
+            if self.better(fit, args, best, best_args):
+                best, best_args = fit, args
         return best
+
+    def _lugre(self, vlaw: str, vpar: float | None) -> LawFit:
+        """The LuGre law's scales by coordinate descent (module docstring): ``vp`` of the Dahl state, ``vs`` on
+        the velocity grid at it, then :data:`LUGRE_PASSES` times ``q = (Fs - Fc) / Fs`` from the fitted
+        magnitudes, ``vs`` again at ``(vp, q)`` and ``vp`` again at ``(vs, q)``."""
+        vp_grid = float(self.search.rate_hz or 0.0) * np.asarray(DAHL_X0_GRID)
+        vp, _ = _search(partial(self._coulomb_error, "dahl", vlaw=vlaw, vpar=vpar, smooth=None), vp_grid,
+                        self.search.refine)
+        vs, e = _search(lambda v: self.err("lugre", (v, vp, 0.0), vlaw, vpar), self.grid, self.search.refine)
+        q = 0.0
+        for _ in range(LUGRE_PASSES):
+            q = self.lugre_ratio((vs, vp, q), vlaw, vpar)
+            vs, e = _search(partial(self._lugre_vs_error, vp=vp, q=q, vlaw=vlaw, vpar=vpar), self.grid,
+                            self.search.refine)
+            vp, e = _search(partial(self._lugre_vp_error, vs, q=q, vlaw=vlaw, vpar=vpar), vp_grid, self.search.refine)
+        return LawFit("lugre", vs, e, None, vp, q)
+
+    def _lugre_vp_error(self, vs: float, vp: float, *, q: float, vlaw: str, vpar: float | None) -> float:
+        return self.err("lugre", (vs, vp, q), vlaw, vpar)
+
+    def _lugre_vs_error(self, vs: float, *, vp: float, q: float, vlaw: str, vpar: float | None) -> float:
+        return self.err("lugre", (vs, vp, q), vlaw, vpar)
+
+    def lugre_ratio(self, shape: tuple, vlaw: str, vpar: float | None) -> float:
+        """``(Fs - Fc) / Fs`` of the LuGre law at ``shape`` fitted on all rows (with the whole model), in [0, 0.95]."""
+        X = _law_columns(self.columns, ("lugre", shape, vlaw, vpar, None), 3)
+        M = np.hstack([self.cv.A, X]) * self.cv.w[:, None]
+        theta = np.linalg.lstsq(M, self.cv.y * self.cv.w, rcond=None)[0][-3:]
+        fs = float(theta[0] + theta[1])
+        return float(np.clip(theta[1] / fs, 0.0, 0.95)) if fs != 0 else 0.0
 
     def _coulomb_error(self, law: str, v: float, *, vlaw: str, vpar: float | None, smooth: float | None) -> float:
         return self.err(law, v, vlaw, vpar, smooth)
 
     def choose_viscous(self, c: LawFit) -> LawFit:
-        best = LawFit("linear", None, self.err(c.law, c.param, smooth=c.smooth))
+        best = LawFit("linear", None, self.err(c.law, c.shape, smooth=c.smooth))
         delta_grid = self.search.delta_grid
         if "power" in self.search.laws and len(delta_grid):
-            d, e = _search(lambda d: self.err(c.law, c.param, "power", d, c.smooth), np.asarray(delta_grid, float),
+            d, e = _search(lambda d: self.err(c.law, c.shape, "power", d, c.smooth), np.asarray(delta_grid, float),
                            self.search.refine)
             fit = LawFit("power", d, e)
             self.tried.append(fit)
-            if self.better(fit, (c.law, c.param, "power", d, c.smooth), best,
-                           (c.law, c.param, "linear", None, c.smooth)):
+            if self.better(fit, (c.law, c.shape, "power", d, c.smooth), best,
+                           (c.law, c.shape, "linear", None, c.smooth)):
                 best = fit
         return best
 
@@ -656,7 +767,7 @@ class _LawSelection:
                 best_c = c2
                 best_v = self.choose_viscous(c2)
                 if best_v.law == "linear":
-                    best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err, c2.smooth)
+                    best_c = LawFit(c2.law, c2.param, best_v.cv_rel_err, c2.smooth, c2.vp, c2.q)
         return best_c, best_v
 
 
@@ -665,14 +776,14 @@ def _law_coefficients(A: np.ndarray, y: np.ndarray, weights: np.ndarray | None,
                       choice: FrictionChoice) -> dict[str, float]:
     """Coefficients of the chosen laws on all rows (weighted LS of the whole model): ``Fc`` (and ``Fs``
     for Stribeck), ``Fv``."""
-    X = columns(choice.columns, 2 + (choice.coulomb.law == "stribeck"))
+    X = columns(choice.columns, 2 + (choice.coulomb.law in STRIBECK_LIKE))
     w = np.ones(y.size) if weights is None else np.asarray(weights, float)
     M = np.hstack([A, X]) * w[:, None]
     _, pinv, _ = wls_basis(M)
     theta = pinv @ (y * w)
     bx = theta[A.shape[1]:]
     coef = {"Fc": float(bx[0]), "Fv": float(bx[-1])}
-    if choice.coulomb.law == "stribeck":
+    if choice.coulomb.law in STRIBECK_LIKE:
         coef["Fs"] = float(bx[0] + bx[1])
     return coef
 
@@ -695,63 +806,33 @@ def replaced_friction_columns(model: IdentificationModel, choices: Sequence[Fric
     columns : callable
         ``columns(q, dq, ddq) -> (N, n, len(names))`` per-sample regressor.
     """
-    names = tuple(model.BASE_NAMES)
-    drop = sorted(i for ch in choices for part in friction_column_indices(names, ch.joint) for i in part)
-    keep = [i for i in range(len(names)) if i not in set(drop)]
-    out_names = tuple(names[i] for i in keep) + tuple(nm for ch in choices for nm in ch.names())
-
-    def columns(q, dq, ddq):
-        R = np.asarray(model.regressor(q, dq, ddq), float)
-        parts = [R[:, :, keep]]
-        for ch in choices:
-            C = np.zeros((R.shape[0], R.shape[1], len(ch.names())))
-            C[:, ch.joint, :] = ch.columns(np.asarray(dq, float)[:, ch.joint])
-            parts.append(C)
-        return np.concatenate(parts, axis=2)
-    return out_names, columns
+    spliced = LawModel(model, choices)
+    return tuple(spliced.BASE_NAMES), spliced.regressor
 
 
-class LawModel:
+def _ones(dq: np.ndarray) -> np.ndarray:
+    return np.ones((np.shape(dq)[0], 1))
+
+
+class LawModel(LawSplicedModel):
     """The declared model with the friction laws of ``choices`` in place of its ``FS``/``FV`` columns, and
     an offset column ``OFF<j>`` for each joint of ``offsets`` (joints declared without friction or offset
     get the expert's terms: Coulomb law, viscous law, offset).
 
-    It satisfies :class:`symoro_gen.model.IdentificationModel` (``BASE_NAMES`` are the new columns;
-    every other attribute, the payload regressor included, is the declared model's), so the model torque
-    of a fit (:func:`symoro_gen.observations.full_rate_torque`) is that of the chosen laws.
+    The column splice is :class:`symoro_gen.identification.friction_law.LawSplicedModel` (shared with
+    ``identify``'s declared laws); this adds the loop's choices, offsets and :meth:`sliding_torque`. It
+    satisfies :class:`symoro_gen.model.IdentificationModel` (``BASE_NAMES`` are the new columns; every other
+    attribute, the payload regressor included, is the declared model's), so the model torque of a fit
+    (:func:`symoro_gen.observations.full_rate_torque`) is that of the chosen laws.
     """
 
     def __init__(self, model: IdentificationModel, choices: Sequence[FrictionChoice], offsets: Sequence[int] = ()):
-        self._model = model
         self.choices = tuple(choices)
         self.offsets = tuple(int(j) for j in offsets)
-        names = tuple(model.BASE_NAMES)
-        drop = {i for ch in self.choices for part in friction_column_indices(names, ch.joint) for i in part}
-        self._keep = [i for i in range(len(names)) if i not in drop]
-        self.BASE_NAMES = (tuple(names[i] for i in self._keep) + tuple(nm for ch in self.choices for nm in ch.names())
-                           + tuple(f"OFF{j + 1}" for j in self.offsets))
-
-    def __getattr__(self, name):
-        return getattr(self._model, name)
-
-    def regressor(self, q, dq, ddq) -> np.ndarray:
-        q, dq, ddq = (np.asarray(x, float) for x in (q, dq, ddq))
-        single = q.ndim == 1
-        if single:
-            q, dq, ddq = q[None], dq[None], ddq[None]
-        R = np.asarray(self._model.regressor(q, dq, ddq), float)
-        parts = [R[:, :, self._keep]]
-        for ch in self.choices:
-            C = np.zeros((R.shape[0], R.shape[1], len(ch.names())))
-            C[:, ch.joint, :] = ch.columns(dq[:, ch.joint])
-            parts.append(C)
-        if self.offsets:
-            C = np.zeros((R.shape[0], R.shape[1], len(self.offsets)))
-            for i, j in enumerate(self.offsets):
-                C[:, j, i] = 1.0
-            parts.append(C)
-        out = np.concatenate(parts, axis=2)
-        return out[0] if single else out
+        entries = [JointColumns(ch.joint, ch.names(), ch.columns, (f"FS{ch.joint + 1}", f"FV{ch.joint + 1}"))
+                   for ch in self.choices]
+        entries += [JointColumns(j, (f"OFF{j + 1}",), _ones) for j in self.offsets]
+        super().__init__(model, entries)
 
     def sliding_torque(self, theta: Mapping[str, float], dq: np.ndarray) -> np.ndarray:
         """Torque (N, n) of the chosen friction laws alone at velocities ``dq`` (N, n), parameters by name
@@ -835,6 +916,8 @@ def _declared_kind(kind: str, values: Mapping[str, float]) -> tuple[str, str] | 
     has = {k for k in ("v", "vs", "delta", "sigma0") if k in values and math.isfinite(float(values[k]))}
     if kind == "stribeck":
         return ("stribeck", "vs") if "vs" in has else None
+    if kind == "friction_law" and has == {"vs", "sigma0"}:
+        return ("lugre", "vs")   # the LuGre law: its Stribeck scale, sigma0 added to the line
     if kind != "friction_law" or len(has) != 1:
         return None
     (name,) = has
@@ -864,6 +947,9 @@ def law_declarations(robot, effects: Sequence) -> list[LawDeclaration]:
             continue
         shown = float(f"{scale:.{DECLARATION_DIGITS}g}")
         line = f'friction_law = {{kind = "{law}", {name} = {shown:g}}}'
+        s0 = float(values.get("sigma0", math.nan))
+        if law == "lugre" and PRESLIDING_BOUNDS["sigma0"][0] < s0 <= PRESLIDING_BOUNDS["sigma0"][1]:
+            line = line[:-1] + f", sigma0 = {float(f'{s0:.{DECLARATION_DIGITS}g}'):g}}}"
         out.append(LawDeclaration(frame=frame, joint=int(e.joint), law=law, scale_name=name, scale=scale,
                                   verdict=str(getattr(e, "verdict", "") or ""), label=str(e.label), line=line))
     return out

@@ -23,8 +23,9 @@ deviation above :data:`MAX_REL_STD`), is reported and keeps its declared scale: 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -35,7 +36,8 @@ from ..observations.assembly import assemble
 from ..observations.fused import model_column_map
 from ..observations.options import AssemblyOptions
 
-__all__ = ["MAX_REL_STD", "LawDeclaredModel", "ScaleFit", "declared_laws", "refine_scales"]
+__all__ = ["MAX_REL_STD", "JointColumns", "LawDeclaredModel", "LawSplicedModel", "ScaleFit", "declared_laws",
+           "refine_scales"]
 
 #: a scale whose relative standard deviation exceeds this is "not determined by the data"
 MAX_REL_STD = 0.5
@@ -109,34 +111,57 @@ class ScaleFit:
                        f"{self.iterations} Gauss-Newton steps); {mags}")
 
 
-class LawDeclaredModel:
-    """The model with the declared friction laws in place of their joints' ``FS``/``FV`` columns.
+@dataclass(frozen=True)
+class JointColumns:
+    """Columns spliced into one joint's rows of a regressor by :class:`LawSplicedModel`.
 
-    It satisfies :class:`symoro_gen.model.IdentificationModel`: ``BASE_NAMES`` are the declared model's
-    without the replaced ``FS<j>``, ``FV<j>``, then each law's :meth:`FrictionLaw.names`; every other
-    attribute (payload regressor included) is the declared model's.
+    Attributes
+    ----------
+    joint : int
+        0-based model joint whose rows receive the columns (the other joints' rows get 0).
+    names : tuple of str
+        Names of the new columns, appended to ``BASE_NAMES`` in order.
+    columns : callable
+        ``columns(dq_j) -> (N, len(names))`` at the joint's velocities ``dq_j`` (N,).
+    drop : tuple of str
+        Columns of the wrapped model this law replaces (``FS<j>``, ``FV<j>``); absent names are ignored.
     """
 
-    def __init__(self, model: IdentificationModel, laws: Sequence[tuple[int, FrictionLaw]],
-                 scales: Sequence[float] | None = None) -> None:
+    joint: int
+    names: tuple[str, ...]
+    columns: Callable[[np.ndarray], np.ndarray]
+    drop: tuple[str, ...] = ()
+
+
+class LawSplicedModel:
+    """A model whose friction columns of some joints are replaced by a law's columns: the one regressor splice
+    shared by ``identify``'s declared laws (:class:`LawDeclaredModel`) and the diagnosis loop's chosen laws
+    (:class:`symoro_gen.diagnostics.friction.LawModel`).
+
+    The columns named in the entries' ``drop`` are removed from the wrapped model's regressor; each entry's
+    columns are appended (in order) on its joint's rows. The magnitudes of the new columns stay linear
+    parameters of the IDIM fit ([GB-gains] eq. 16-22). It satisfies
+    :class:`symoro_gen.model.IdentificationModel`: ``BASE_NAMES`` are the kept names then the entries'
+    names; every other attribute (payload regressor included) is the wrapped model's.
+    """
+
+    def __init__(self, model: IdentificationModel, entries: Sequence[JointColumns]) -> None:
         self._model = model
-        self.laws = tuple(laws)
-        given = scales if scales is not None else [lw.scale for _, lw in self.laws]
-        self.scales = tuple(math.nan if x is None else float(x) for x in given)
+        self.entries = tuple(entries)
         names = tuple(model.BASE_NAMES)
-        drop = set()
-        for _, lw in self.laws:
-            for nm in (f"FS{lw.frame}", f"FV{lw.frame}"):
-                if nm in names:
-                    drop.add(names.index(nm))
-        self._keep = [i for i in range(len(names)) if i not in drop]
-        self.BASE_NAMES = tuple(names[i] for i in self._keep) + tuple(nm for _, lw in self.laws for nm in lw.names())
+        drop = {nm for e in self.entries for nm in e.drop}
+        self._keep = [i for i, nm in enumerate(names) if nm not in drop]
+        self.BASE_NAMES = tuple(names[i] for i in self._keep) + tuple(nm for e in self.entries for nm in e.names)
 
     def __getattr__(self, name):
+        if name.startswith("__") or name in ("_model", "entries", "_keep"):
+            raise AttributeError(name)
         return getattr(self._model, name)
 
-    def with_scales(self, scales: Sequence[float]) -> LawDeclaredModel:
-        return LawDeclaredModel(self._model, self.laws, scales)
+    @property
+    def wrapped(self) -> IdentificationModel:
+        """The model whose columns are replaced."""
+        return self._model
 
     def regressor(self, q, dq, ddq) -> np.ndarray:
         q, dq, ddq = (np.asarray(x, float) for x in (q, dq, ddq))
@@ -145,12 +170,33 @@ class LawDeclaredModel:
             q, dq, ddq = q[None], dq[None], ddq[None]
         R = np.asarray(self._model.regressor(q, dq, ddq), float)
         parts = [R[:, :, self._keep]]
-        for (j, lw), s in zip(self.laws, self.scales):
-            C = np.zeros((R.shape[0], R.shape[1], len(lw.names())))
-            C[:, j, :] = lw.columns(dq[:, j], s)
+        for e in self.entries:
+            C = np.zeros((R.shape[0], R.shape[1], len(e.names)))
+            C[:, e.joint, :] = e.columns(dq[:, e.joint])
             parts.append(C)
         out = np.concatenate(parts, axis=2)
         return out[0] if single else out
+
+
+class LawDeclaredModel(LawSplicedModel):
+    """The model with the declared friction laws in place of their joints' ``FS``/``FV`` columns.
+
+    It satisfies :class:`symoro_gen.model.IdentificationModel`: ``BASE_NAMES`` are the declared model's
+    without the replaced ``FS<j>``, ``FV<j>``, then each law's :meth:`FrictionLaw.names`; every other
+    attribute (payload regressor included) is the declared model's (:class:`LawSplicedModel`).
+    """
+
+    def __init__(self, model: IdentificationModel, laws: Sequence[tuple[int, FrictionLaw]],
+                 scales: Sequence[float] | None = None) -> None:
+        self.laws = tuple(laws)
+        given = scales if scales is not None else [lw.scale for _, lw in self.laws]
+        self.scales = tuple(math.nan if x is None else float(x) for x in given)
+        super().__init__(model, [JointColumns(j, lw.names(), partial(lw.columns, scale=s),
+                                              (f"FS{lw.frame}", f"FV{lw.frame}"))
+                                 for (j, lw), s in zip(self.laws, self.scales)])
+
+    def with_scales(self, scales: Sequence[float]) -> LawDeclaredModel:
+        return LawDeclaredModel(self._model, self.laws, scales)
 
 
 def declared_laws(robot, model: IdentificationModel) -> list[tuple[int, FrictionLaw]]:

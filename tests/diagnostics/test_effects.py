@@ -65,13 +65,10 @@ def _id(c):
 
 
 #: known regressions (measured, with the reason); the spring of SCARA joint 1 (slope -4.59 after a third-round
-#: composed ripple under the acceptance split) passes since the friction-law stage competes in the loop's rounds
-XFAIL: dict[str, str] = {
-    "load_friction-lwr4-j2": "named first as the composed 'smooth Coulomb friction of joint 2 growing with |tau_hat2|' "
-                             "(verdict cause): the same law mu |tau_hat2| sign(dq2), but reported as kind 'coulomb' "
-                             "with its values in the composed parametrization, not as load_friction with mu (since "
-                             "the score's nuisance columns are bounded, 6935ea7)",
-}
+#: composed ripple under the acceptance split) passes since the friction-law stage competes in the loop's rounds;
+#: the load-dependent friction of LWR4 joint 2, found as the composed Coulomb x |tau_hat2|, is reported as
+#: load_friction with mu (compose.as_load_friction)
+XFAIL: dict[str, str] = {}
 
 
 @pytest.mark.slow
