@@ -53,7 +53,7 @@ from .frame import build_frame, common_bandwidth
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
            "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "JointZeroFit",
            "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints", "LENGTH_STEP",
-           "describe_length", "description_of", "emitted_length_column", "length_column", "length_joint", "link_length_ready",
+           "describe_length", "description_of", "emitted_length_column", "rigid_model", "length_column", "length_joint", "link_length_ready",
            "visible_lengths"]
 
 def invisible_zero_note(model: IdentificationModel) -> list[str]:
@@ -229,9 +229,23 @@ def description_of(model: IdentificationModel):
     return desc
 
 
+def rigid_model(model: IdentificationModel) -> IdentificationModel:
+    """The model under any friction-law wrappers (``wrapped``, :class:`symoro_gen.identification.friction_law.
+    LawSplicedModel`): they replace friction columns only, which no length changes, so the length column is the
+    rigid model's at the fit's kept base parameters (a replaced friction parameter counts as 0 there: its
+    standard column does not depend on the geometry)."""
+    seen = 0
+    while hasattr(model, "wrapped") and seen < 8:
+        model = model.wrapped
+        seen += 1
+    return model
+
+
 def link_length_ready(model: IdentificationModel) -> bool:
     """Whether the loop can build ``link_length`` columns for this model: its robot description is found and
-    its base parameters are the generated model's (a declared friction law replaces some: no)."""
+    the base parameters of the rigid model under any friction-law wrapper (:func:`rigid_model`) are the
+    generated model's."""
+    model = rigid_model(model)
     if description_of(model) is None:
         return False
     try:
@@ -290,9 +304,9 @@ def length_column(frame, ctx_model: IdentificationModel, theta, f: int, fld: str
     ch. 11: the calibration model linearised in the parameter errors)."""
     robot = description_of(ctx_model)
     assert robot is not None   # families exist only with a description (link_length_ready)
-    chi, pay = standard_from_fit(ctx_model, robot, theta)
+    chi, pay = standard_from_fit(rigid_model(ctx_model), robot, theta)
     plus, minus = _pair(robot, f, fld)
-    emitted = emitted_length_column(ctx_model, robot, chi, f, fld)
+    emitted = emitted_length_column(rigid_model(ctx_model), robot, chi, f, fld)
 
     def fn(ex, a: int, b: int) -> np.ndarray:
         p = pay if ex.loaded else None

@@ -87,6 +87,7 @@ def test_the_emitted_length_column_is_the_numeric_newton_euler_difference(robot_
             assert np.abs(got - fd).max() <= 1e-6 * scale, (robot_name, f, fld, np.abs(got - fd).max())
 
 
+@pytest.mark.slow
 def test_the_loop_names_a_link_length():
     """r of frame 3 of the LWR4 5 mm longer on the simulated arm: the loop names ``link_length3r`` first, verdict
     cause, the value within 3 sigma of 5 mm and sigma below a third of it."""

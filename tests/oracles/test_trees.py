@@ -271,7 +271,7 @@ def test_tree_strategy_branches_anywhere():
 
     def draws(pred):
         text = find(mdh_trees(2, 14), lambda t: pred(parse_robot_text(t)),
-                    settings=settings(max_examples=2000, database=None, phases=[Phase.generate],
+                    settings=settings(max_examples=2000, database=None, deadline=None, phases=[Phase.generate],
                                       suppress_health_check=list(HealthCheck)))
         return parse_robot_text(text)
 
