@@ -184,6 +184,7 @@ def _at_rest_rms(rep, j, rests_of=None):
     return float(np.sqrt(np.mean(e[m] ** 2))), int(m.sum()), float(np.sqrt(np.mean(e[mv] ** 2)))
 
 
+@pytest.mark.slow   # over 5 s on this machine (CI runs the slow tests after `make test`)
 def test_a_note_without_rests_to_test_it_on_is_applied_as_the_minimax_prior(monkeypatch):
     """Identification data without a rest (the moving part), validation data that stop and go: the note's
     static (0) at rest is untestable on the identification data (neither their fit nor their acceptance part
@@ -231,6 +232,7 @@ def test_a_note_without_rests_to_test_it_on_is_applied_as_the_minimax_prior(monk
         assert rms < fs[j] + moving, (j, rms, fs[j], moving)
 
 
+@pytest.mark.slow   # over 5 s on this machine (CI runs the slow tests after `make test`)
 def test_static_at_rest_cuts_the_validation_error_where_the_robot_rests(monkeypatch):
     """Identification data that stop and go too (a moving part, then rests: the acceptance data at the end
     of each experiment hold rests), validation data that stop and go: with the rule the loop's Coulomb

@@ -81,6 +81,7 @@ def test_failed_emission_leaves_previous_package_intact(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.iterdir()] == ["scara"], "no temporary folder left behind"
 
 
+@pytest.mark.slow   # over 5 s on this machine (CI runs the slow tests after `make test`)
 def test_symbolic_geometry_is_substituted_in_code_but_kept_in_relations(tmp_path):
     text = (ROOT / "robots" / "rx90.toml").read_text().replace("D3 = 0.45", "D3 = 0.5")
     robot = parse_robot_text(text, file="rx90_variant.toml")
@@ -114,6 +115,7 @@ def test_written_files_have_ordinary_permissions(tmp_path):
     assert (tmp_path / "x.json").stat().st_mode & 0o777 == 0o644
 
 
+@pytest.mark.slow   # over 5 s on this machine (CI runs the slow tests after `make test`)
 @pytest.mark.parametrize("alpha", ["pi/3", "pi/4", "-pi/6"])
 def test_irrational_constant_angles_generate_in_every_backend(tmp_path, alpha):
     """alpha = pi/3 puts sqrt(3)/2 in the model: each backend prints it as a literal (the C vector
