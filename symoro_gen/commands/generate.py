@@ -12,8 +12,7 @@ from .. import progress
 from ..atomic import Target, check_outputs
 from ..baseparams.regroup import group_base_parameters
 from ..description import load_robot
-from ..dynamics.newton_euler import build_regressor
-from ..emit.package import check_name, check_replaceable, emit_from
+from ..emit.package import check_name, check_replaceable, emit_from, model_regressor
 from ..loader import generated_dir
 from ..progress import stage_callback
 from .common import ROBOT_HELP
@@ -39,7 +38,7 @@ def run(args) -> int:
     check_replaceable(out / robot.name, robot.name, args.force, robot_file=robot.file)
     # the steps of emit_robot, one bar over them; through the module: tests replace progress.progress_bar
     with progress.progress_bar(generation_steps(robot), f"{robot.name}", unit="step") as bar:
-        reg = build_regressor(robot, progress=stage_callback(bar, prefix=f"{robot.name}: newton-euler "))
+        reg = model_regressor(robot, progress=stage_callback(bar, prefix=f"{robot.name}: newton-euler "))
         bar.set_description(f"{robot.name}: base parameters")
         bp = group_base_parameters(reg)
         bar.update(1)

@@ -176,6 +176,9 @@ class RobotDescription:
     #: ``"fixed"`` (frame 0 is the ground) or ``"floating"`` (frame 0 is a free body with 6 degrees of
     #: freedom whose 10 inertial parameters are unknowns; :mod:`symoro_gen.dynamics.floating`)
     base: str = "fixed"
+    #: the contact frames of a floating base (top-level ``contacts``: frame numbers, in the file's order),
+    #: whose pose and Jacobian its generated package emits (:mod:`symoro_gen.emit.floating`)
+    contacts: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "values", MappingProxyType(dict(self.values)))

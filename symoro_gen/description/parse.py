@@ -46,7 +46,7 @@ from .model import (
 )
 
 TOP_KEYS = {"name", "source", "gravity", "payload", "drive", "values", "frames", "nominal", "drive_chain", "limits",
-            "loops", "loop_reference", "elastic", "base"}
+            "loops", "loop_reference", "elastic", "base", "contacts"}
 FRAME_REQUIRED = ("j", "ant", "sigma", "alpha", "d", "theta", "r")
 FRAME_OPTIONAL = ("mu", "gamma", "b", "drive", "mimic", "name", "elastic", "friction_law")
 CHAIN_KEYS = {"ratios", "coupling", "offsets", "directions"}
@@ -209,6 +209,8 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
     if not bad_sigma:
         elastic = parse_elastic(doc.get("elastic"), fr.entries, rows, bad)
 
+    contacts = _read_contacts(doc, rows, base, bad) if "contacts" in doc and not bad_sigma else ()
+
     if probs.found:
         raise RobotFileError(probs.found)
     return RobotDescription(
@@ -229,6 +231,7 @@ def parse_robot_text(text: str, file: str = "<string>") -> RobotDescription:
         friction_laws=friction_laws,
         elastic=elastic,
         base=base,
+        contacts=contacts,
     )
 
 
@@ -248,6 +251,29 @@ def _read_header(doc: dict, file: str, bad: Callable[[str, str, str], None]
         bad("top level", "gravity", f"must be a list of 3 numbers (finite, {_FINITE}), got {gravity!r}")
         gravity = [0.0, 0.0, -9.81]
     return name, source, (float(gravity[0]), float(gravity[1]), float(gravity[2]))
+
+
+def _read_contacts(doc: dict, rows: list, base: str, bad: Callable[[str, str, str], None]) -> tuple[int, ...]:
+    """The top-level ``contacts`` of a floating base: the frames (each a frame number ``j`` or a frame's
+    ``name``) whose pose and Jacobian its generated package emits (docs/robot-file.md, "Floating base")."""
+    raw = doc["contacts"]
+    if base != "floating":
+        bad("top level", "contacts", 'contact frames are for a floating base (base = "floating")')
+        return ()
+    if not isinstance(raw, list):
+        bad("top level", "contacts", f"must be a list of frame numbers or frame names, got {raw!r}")
+        return ()
+    by_name = {r.name: r.j for r in rows if r.name is not None}
+    out: list[int] = []
+    for i, c in enumerate(raw):
+        j = by_name.get(c) if isinstance(c, str) else (c if isinstance(c, int) and not isinstance(c, bool) else None)
+        if j is None or not 1 <= j <= len(rows):
+            bad("top level", f"contacts[{i}]", f"{c!r} is not a frame number (1..{len(rows)}) or a frame's name")
+        elif j in out:
+            bad("top level", f"contacts[{i}]", f"frame {j} is listed twice")
+        else:
+            out.append(j)
+    return tuple(out)
 
 
 #: the values of the top-level ``base`` field (docs/robot-file.md, "Floating base")

@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..atomic import ordinary_mode, same_file
 from ..baseparams.regroup import BaseParameterMap, group_base_parameters
 from ..description.model import RobotDescription
+from ..dynamics.floating import build_floating_regressor
 from ..dynamics.graph import ExprGraph
 from ..dynamics.newton_euler import SymbolicRegressor, build_regressor
 from ..errors import ModelError, Problem, RobotFileError
@@ -49,6 +50,7 @@ from .backends.c import c_source
 from .backends.casadi import casadi_function, casadi_source
 from .backends.numpy import kernel_source, load_kernel
 from .closedloop import closed_loop_files
+from .floating import floating_package_files, floating_relations_markdown
 from .geometry import geometry_files
 from .optimize import optimize
 from .printing import OpCount, graph_ops, relation_text
@@ -264,9 +266,18 @@ def emit_robot(robot: RobotDescription, out_dir: str | os.PathLike[str], *,
     """
     check_name(robot)
     check_replaceable(Path(out_dir) / robot.name, robot.name, force, robot_file=robot.file)
-    reg = build_regressor(robot, progress=progress)
+    reg = model_regressor(robot, progress=progress)
     bp = group_base_parameters(reg)
     return emit_from(reg, bp, out_dir, force=force, source_base=source_base)
+
+
+def model_regressor(robot: RobotDescription, *, progress: Callable[[str, int], object] | None = None
+                    ) -> SymbolicRegressor:
+    """The symbolic regressor a package is generated from: Newton-Euler from rest for a fixed base,
+    from the base's motion for a floating one (:func:`symoro_gen.dynamics.floating.build_floating_regressor`)."""
+    if robot.floating:
+        return build_floating_regressor(robot, progress=progress)
+    return build_regressor(robot, progress=progress)
 
 
 def base_graph(reg: SymbolicRegressor, bp: BaseParameterMap, substituted: ExprGraph | None = None) -> ExprGraph:
@@ -307,15 +318,11 @@ def robot_file_path(robot_file: str, base: str | os.PathLike[str]) -> str | None
         return Path(f).as_posix()
 
 
-def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: str | None = None
-                  ) -> tuple[dict[str, str], OpCount]:
-    """The files of the generated package of ``reg.robot`` (name -> text), and the base op count;
-    ``robot_path``: the robot file as the manifest records it (:func:`robot_file_path`)."""
+def _fixed_code_files(reg: SymbolicRegressor, bp: BaseParameterMap, graphs: dict[str, ExprGraph],
+                      names: dict[str, tuple[str, ...]], header: str, rel: tuple[Any, ...]
+                      ) -> tuple[dict[str, str], dict[str, Any]]:
+    """The code files of a fixed-base package and the manifest's ``geometry_derivative`` entry."""
     robot = reg.robot
-    check_name(robot)
-    subs = robot.geometry_subs()
-    header = _header(robot)
-    graphs, names = model_graphs(reg, bp)
     printed: dict[Any, str] = {}  # NumPy text of each expression, shared by the three kernels
     n = robot.n_joints
     qs = (robot.q, robot.dq, robot.ddq)
@@ -331,7 +338,6 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: s
         header=header, robot=robot.name, kernel=casadi_source(graphs["base"], names["base"], "base_casadi", *qs))
     geo_files, geo_manifest = geometry_files(robot, header)
     files.update(geo_files)
-    rel = _relations(bp, subs)
     files["__init__.py"] = _MODULE_TEMPLATE.format(
         header=header,
         robot=robot.name,
@@ -350,12 +356,35 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: s
         geometry_note=("GEOMETRY_NAMES" if geo_files else "not generated for this robot: manifest.json, "
                        "geometry_derivative.omitted"),
     )
+    return files, geo_manifest
+
+
+def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: str | None = None
+                  ) -> tuple[dict[str, str], OpCount]:
+    """The files of the generated package of ``reg.robot`` (name -> text), and the base op count;
+    ``robot_path``: the robot file as the manifest records it (:func:`robot_file_path`)."""
+    robot = reg.robot
+    check_name(robot)
+    subs = robot.geometry_subs()
+    header = _header(robot)
+    n = robot.n_joints
+    graphs, names = model_graphs(reg, bp)
+    rel = _relations(bp, subs)
+    if robot.floating:  # Pinocchio's free-flyer inputs, 6 + n rows, contact frames (emit.floating)
+        files, floating_manifest = floating_package_files(reg, bp, graphs, names, header,
+                                                          _relations_code(rel, tuple(bp.base_names)))
+        geo_manifest = floating_manifest.pop("geometry_derivative")
+    else:
+        files, geo_manifest = _fixed_code_files(reg, bp, graphs, names, header, rel)
+        floating_manifest = {}
     counted: dict[Any, OpCount] = {}  # each expression counted once across the three graphs
     all_ops = {k: graph_ops(graphs[k], counted) for k in ("base", "standard", "payload")}
     ops = all_ops["base"]
     memo: dict[Any, Any] = {}  # each factor's text, shared by the relations
     texts = {k: relation_text(bp.relations[k], memo) for k in bp.base_names}  # printed once, used twice
     files["base_parameters.md"] = relations_markdown(robot, bp, ops, texts)
+    if robot.floating:
+        files["base_parameters.md"] += "\n" + floating_relations_markdown(bp)
     files.update(closed_loop_files(robot, bp))  # closed loops: their groupings, beside the tree's
     manifest = {
         "generator": "symoro_gen",
@@ -376,6 +405,7 @@ def package_files(reg: SymbolicRegressor, bp: BaseParameterMap, *, robot_path: s
         "c_functions": {k: f"{robot.name}_{k}_regressor" for k in ("base", "standard", "payload")},
         "files": sorted(list(files) + ["manifest.json"]),
         "geometry_derivative": geo_manifest,
+        **floating_manifest,
     }
     if robot.loops:  # closed loops: this package is the tree model; symoro_gen.closedloop projects it
         manifest["closed_loops"] = len(robot.loops)

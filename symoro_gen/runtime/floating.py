@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 import sympy as sp
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from ..baseparams.regroup import BaseParameterMap, group_base_parameters
 from ..description.model import RobotDescription
@@ -29,42 +29,15 @@ from ..dynamics.floating import build_floating_regressor
 from ..dynamics.graph import ExprGraph
 from ..emit.backends.casadi import casadi_function
 from ..emit.backends.numpy import kernel_source, load_kernel
+from ..emit.floating import floating_kernels
 from ..emit.optimize import optimize
 from .batch import evaluate_kernel
+from .floating_package import QUATERNION_TOL as QUATERNION_TOL
+from .floating_package import FloatingContract
+from .floating_package import floating_states as floating_states
 
-#: a unit quaternion's norm may differ from 1 by this much (rounding of logged values)
-QUATERNION_TOL = 1e-6
 #: relative size below which a column's part orthogonal to the columns before it counts as zero
 RANK_RTOL = 1e-9
-
-
-def floating_states(robot: str, n: int, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike
-                    ) -> tuple[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]], bool]:
-    """``((q, dq, ddq) as (N, 7 + n), (N, 6 + n), (N, 6 + n) float arrays, one_sample)``.
-
-    Raises
-    ------
-    ValueError
-        A shape (naming the robot, the argument and the shape expected), or a quaternion ``q[:, 3:7]``
-        that is not of unit norm (naming the first such sample).
-    """
-    arrs = []
-    for name, x, size in (("q", q, 7 + n), ("dq", dq, 6 + n), ("ddq", ddq, 6 + n)):
-        a = np.asarray(x, dtype=float)
-        if a.ndim == 1 and a.shape[0] == size:
-            a = a[None, :]
-        elif not (a.ndim == 2 and a.shape[1] == size):
-            raise ValueError(f"{robot}: {name} must have shape (N, {size}) or ({size},) for a floating base with "
-                             f"{n} joints, got {a.shape}")
-        arrs.append(a)
-    if not arrs[0].shape[0] == arrs[1].shape[0] == arrs[2].shape[0]:
-        raise ValueError(f"{robot}: q, dq, ddq have different sample counts {[a.shape[0] for a in arrs]}")
-    norm = np.linalg.norm(arrs[0][:, 3:7], axis=1)
-    off = np.flatnonzero(np.abs(norm - 1.0) > QUATERNION_TOL)
-    if off.size:
-        raise ValueError(f"{robot}: q[:, 3:7] must be a unit quaternion (x y z w); sample {off[0]} has norm "
-                         f"{norm[off[0]]:.9g}")
-    return (arrs[0], arrs[1], arrs[2]), np.ndim(q) == 1
 
 
 def _kernel(graph: ExprGraph, n_rows: int, names: tuple[str, ...],
@@ -104,8 +77,11 @@ def numeric_base(W: NDArray[np.float64], rtol: float = RANK_RTOL) -> tuple[NDArr
     return kept_arr, K
 
 
-class FloatingModel:
+class FloatingModel(FloatingContract):
     """The identification model of a floating-base robot (module docstring), built from its description.
+
+    The evaluation is :class:`~symoro_gen.runtime.floating_package.FloatingContract`'s, shared with the
+    generated package (:class:`~symoro_gen.runtime.floating_package.GeneratedFloatingModel`).
 
     Attributes
     ----------
@@ -120,9 +96,9 @@ class FloatingModel:
         ``6 + n``: rows per sample of every regressor (base wrench ``FX0 FY0 FZ0 MX0 MY0 MZ0``, then joints).
     STANDARD_NAMES, BASE_NAMES, PAYLOAD_NAMES : tuple of str
         ``BASE_NAMES``: the kept standard columns, suffixed ``R`` when others are regrouped onto them.
+    CONTACT_FRAMES : tuple of str
+        The robot file's contact frames (``frame_transform``, ``frame_jacobian``).
     """
-
-    FLOATING = True
 
     def __init__(self, robot: RobotDescription) -> None:
         if not robot.floating:
@@ -131,48 +107,39 @@ class FloatingModel:
         self.ROBOT = robot.name
         self.N_JOINTS = robot.n_joints
         self.N_ROWS = 6 + robot.n_joints
-        self.STANDARD_NAMES: tuple[str, ...] = tuple(reg.standard_names)
-        self.PAYLOAD_NAMES: tuple[str, ...] = tuple(reg.payload_names)
+        self.STANDARD_NAMES = tuple(reg.standard_names)
+        self.PAYLOAD_NAMES = tuple(reg.payload_names)
         full = reg.graph.substituted(robot.geometry_subs())
         n_in = (7 + self.N_JOINTS, 6 + self.N_JOINTS)
         inputs = (full.inputs[:n_in[0]], full.inputs[n_in[0]:n_in[0] + n_in[1]],
                   full.inputs[n_in[0] + n_in[1]:n_in[0] + 2 * n_in[1]])
         memo: dict[Any, Any] = {}
-        self._kernels = {}
+        self._kernels: dict[str, Callable[..., Any]] = {}
         self._inputs = inputs
-        for key, names in (("standard", self.STANDARD_NAMES), ("payload", self.PAYLOAD_NAMES)):
-            g = optimize(full.pruned({k for k in full.outputs if k[1] in set(names)}), memo)
-            self._kernels[key] = _kernel(g, self.N_ROWS, names, inputs, f"floating_{key}")
-            if key == "standard":
-                self._standard_graph = g
+        graphs: dict[str, ExprGraph] = {}
+        names = {"standard": self.STANDARD_NAMES, "payload": self.PAYLOAD_NAMES}
+        for key, cols in names.items():
+            graphs[key] = optimize(full.pruned({k for k in full.outputs if k[1] in set(cols)}), memo)
+        self._standard_graph = graphs["standard"]
+        graphs.pop("base", None)
+        graphs, names, rows = floating_kernels(reg, graphs, names)
+        self._graphs, self._names, self._rows = graphs, names, rows
+        for key, g in graphs.items():
+            self._kernels[key] = _kernel(g, rows[key], names[key], inputs, f"floating_{key}")
+        self.CONTACT_FRAMES = tuple(robot.row(j).name or f"frame{j}" for j in robot.contacts)
         self.base_map: BaseParameterMap = group_base_parameters(reg)
-        self.BASE_NAMES: tuple[str, ...] = tuple(self.base_map.base_names)
+        self.BASE_NAMES = tuple(self.base_map.base_names)
         self._kept = np.array([self.STANDARD_NAMES.index(k) for k in self.base_map.kept], dtype=np.intp)
         self._K = self.base_map.matrix()
 
-    def _eval(self, key: str, n_cols: int, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
-        (qa, dqa, ddqa), one = floating_states(self.ROBOT, self.N_JOINTS, q, dq, ddq)
-        res = evaluate_kernel(self._kernels[key], self.N_ROWS, n_cols, qa, dqa, ddqa,
-                              np.empty((qa.shape[0], self.N_ROWS, n_cols)))
-        return res[0] if one else res
-
-    def standard_regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
-        """Standard regressor ``(N, 6 + n, n_st)`` (``(6 + n, n_st)`` for 1-D inputs)."""
-        return self._eval("standard", len(self.STANDARD_NAMES), q, dq, ddq)
-
-    def payload_regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
-        """Payload regressor ``(N, 6 + n, 10)`` (0 columns without payload)."""
-        return self._eval("payload", len(self.PAYLOAD_NAMES), q, dq, ddq)
-
-    def regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
-        """Base regressor ``(N, 6 + n, nb)``: the kept standard columns."""
-        out: NDArray[np.float64] = self.standard_regressor(q, dq, ddq)[..., self._kept]
-        return out
-
-    def base_parameters(self, chi_std: ArrayLike) -> NDArray[np.float64]:
-        """Base parameters of standard ones, ``K @ chi_std`` (the closed-form relations, ``base_map``)."""
-        out: NDArray[np.float64] = self._K @ np.asarray(chi_std, float)
-        return out
+    def _fill(self, kind: str, q: NDArray[np.float64], dq: NDArray[np.float64], ddq: NDArray[np.float64],
+              res: NDArray[np.float64]) -> None:
+        if kind == "base":  # the kept standard columns
+            std = np.zeros((q.shape[0], self.N_ROWS, len(self.STANDARD_NAMES)))
+            evaluate_kernel(self._kernels["standard"], self.N_ROWS, std.shape[2], q, dq, ddq, std)
+            res[...] = std[..., self._kept]
+        else:
+            evaluate_kernel(self._kernels[kind], res.shape[1], res.shape[2], q, dq, ddq, res)
 
     def casadi_regressor(self) -> Any:
         """``casadi.Function regressor_<robot>(q, dq, ddq) -> Y``: the base regressor ``(6 + n) x nb`` of one
@@ -181,10 +148,20 @@ class FloatingModel:
         g = self._standard_graph.pruned({k for k in self._standard_graph.outputs if k[1] in set(kept)})
         return casadi_function(g, self.N_ROWS, kept, f"regressor_{self.ROBOT}", *self._inputs)
 
-    def torque(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike, chi_std: ArrayLike,
-               chi_payload: ArrayLike | None = None) -> NDArray[np.float64]:
-        """Base wrench and joint torques ``(N, 6 + n)`` (``(6 + n,)`` for 1-D inputs)."""
-        y: NDArray[np.float64] = self.regressor(q, dq, ddq) @ self.base_parameters(chi_std)
-        if chi_payload is not None:
-            y = y + self.payload_regressor(q, dq, ddq) @ np.asarray(chi_payload, float)
-        return y
+    def _casadi_frame(self, what: str, frame: str | int) -> Any:
+        import casadi as ca  # heavy; only needed when a CasADi function is asked for
+
+        k = self.contact_index(frame)
+        kind = f"contact{k}_{what}"
+        name = f"{what}_{self.ROBOT}_contact{k}"
+        f = casadi_function(self._graphs[kind], self._rows[kind], self._names[kind], name, *self._inputs)
+        q, z = ca.SX.sym("q", 7 + self.N_JOINTS), ca.SX.zeros(6 + self.N_JOINTS)
+        return ca.Function(name, [q], [f(q, z, z)], ["q"], ["Y"])
+
+    def casadi_frame_transform(self, frame: str | int) -> Any:
+        """``casadi.Function transform_<robot>_contact<k>(q) -> T`` (4 x 4): :meth:`frame_transform`."""
+        return self._casadi_frame("transform", frame)
+
+    def casadi_frame_jacobian(self, frame: str | int) -> Any:
+        """``casadi.Function jacobian_<robot>_contact<k>(q) -> J`` (6 x (6 + n)): :meth:`frame_jacobian`."""
+        return self._casadi_frame("jacobian", frame)

@@ -102,9 +102,13 @@ def _vector_defs(graph: ExprGraph, memo: dict[Any, str] | None = None) -> list[s
 
 def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str, q: Sequence[sp.Symbol],
                dq: Sequence[sp.Symbol], ddq: Sequence[sp.Symbol], memo: dict[Any, str] | None = None, *,
-               vector: bool = True) -> str:
+               vector: bool = True, strides: tuple[int, int, int] | None = None) -> str:
     """C source of the batch function ``func_name`` (SIMD loop + scalar remainder; the scalar loop only when
-    ``vector`` is False); ``memo``: see :func:`~symoro_gen.emit.printing.print_expr`."""
+    ``vector`` is False); ``memo``: see :func:`~symoro_gen.emit.printing.print_expr`. ``strides``: the
+    sizes of one sample of ``q``, ``dq``, ``ddq`` (default ``n_rows`` each; a floating base's are
+    ``7 + n, 6 + n, 6 + n``)."""
+    sq, sdq, sddq = (n_rows,) * 3 if strides is None else strides
+    size = {"q": sq, "dq": sdq, "ddq": sddq}
     col = {n: k for k, n in enumerate(col_names)}
     nc = len(col_names)
     entries = {(i, col[nm]): e for (i, nm), e in graph.outputs.items()}
@@ -112,7 +116,7 @@ def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_nam
 
     scalar = [f"static void {func_name}_scalar{sig}", "{", "    for (long s = 0; s < N; ++s) {",
               f"        double* o = out + s * {n_rows * nc};"]
-    scalar += _inputs(graph, q, dq, ddq, "double", lambda a, i: f"{a}[s * {n_rows} + {i}]")
+    scalar += _inputs(graph, q, dq, ddq, "double", lambda a, i: f"{a}[s * {size[a]} + {i}]")
     scalar += [f"        const double {s.name} = {print_expr(e, C_SCALAR, memo)};" for s, e in graph.defs]
     for i in range(n_rows):
         for k in range(nc):
@@ -124,7 +128,7 @@ def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_nam
         return "\n".join(scalar + [""])
 
     simd = [f"void {func_name}{sig}", "{", "    long s = 0;", "    for (; s + SYM_LANES <= N; s += SYM_LANES) {"]
-    simd += _inputs(graph, q, dq, ddq, "sym_vd", lambda a, i: f"sym_vload({a} + s * {n_rows} + {i}, {n_rows})")
+    simd += _inputs(graph, q, dq, ddq, "sym_vd", lambda a, i: f"sym_vload({a} + s * {size[a]} + {i}, {size[a]})")
     simd += _vector_defs(graph, memo)
     for (i, k), e in sorted(entries.items()):
         if e.free_symbols:
@@ -137,7 +141,7 @@ def c_function(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_nam
         v = "0.0" if e is None else (f"o{i}_{k}[l]" if e.free_symbols else print_expr(e, C_SCALAR, memo))
         simd.append(f"            o[{x}] = {v};")
     simd += ["        }", "    }",
-             f"    {func_name}_scalar(N - s, q + s * {n_rows}, dq + s * {n_rows}, ddq + s * {n_rows}, out + s * {n_rows * nc});",
+             f"    {func_name}_scalar(N - s, q + s * {sq}, dq + s * {sdq}, ddq + s * {sddq}, out + s * {n_rows * nc});",
              "}"]
     fallback = [f"void {func_name}{sig}", f"{{ {func_name}_scalar(N, q, dq, ddq, out); }}"]
     return "\n".join(scalar + ["", "#ifdef SYM_SIMD"] + simd + ["#else"] + fallback + ["#endif", ""])
