@@ -15,7 +15,9 @@ or ``load_model(robot_description)`` all return an :class:`~symoro_gen.model.Ide
 A closed-loop robot (``[[loops]]`` in its robot file) is generated as its tree (the package's
 ``manifest.json`` says ``closed_loops``) and returned wrapped in
 :class:`symoro_gen.closedloop.ClosedLoopModel` (the tree model projected on the actuated joints); a floating-base
-robot (``base = "floating"``) gets a :class:`symoro_gen.runtime.floating.FloatingModel`, built in memory.
+robot (``base = "floating"``) gets its generated package (``symoro-gen generate`` writes it; a
+:class:`symoro_gen.runtime.floating_package.GeneratedFloatingModel`) when one from the same file exists, else a
+:class:`symoro_gen.runtime.floating.FloatingModel` built in memory (the same contract; never written by this function).
 """
 from __future__ import annotations
 
@@ -153,8 +155,22 @@ def _import_checked(folder: Path, robot: RobotDescription | None = None) -> Iden
     return _closed(robot, model, folder)
 
 
+def _floating_package(robot: RobotDescription) -> Path | None:
+    """The generated package of a floating-base robot file, when ``generate`` wrote one from this file
+    (same sha256): in the repository's ``generated/``, beside the file, or in the cache; else None."""
+    f = Path(robot.file)
+    places = [generated_dir(), cache_dir() / robot.file_hash[:16]]
+    if robot.file and f.is_file():
+        places.insert(1, f.resolve().parent / "generated")
+    return next((p / robot.name for p in places
+                 if _is_package(p / robot.name) and _manifest_sha(p / robot.name) == robot.file_hash), None)
+
+
 def _model_of_robot(robot: RobotDescription) -> IdentificationModel:
-    if robot.floating:  # first layer of floating bases: built in memory, no generated package yet
+    if robot.floating:  # its generated package (`symoro-gen generate`) when there is one, else built in memory
+        found = _floating_package(robot)
+        if found is not None:
+            return _import_checked(found, robot)
         from .runtime.floating import FloatingModel  # sympy: only for floating-base robots
 
         return check_model(FloatingModel(robot))
