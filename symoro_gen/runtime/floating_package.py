@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .batch import evaluate_kernel
 from .ccompile import CBuildError
+from .inputs import output_array
 from .model import GeneratedModel
 
 #: a unit quaternion's norm may differ from 1 by this much (rounding of logged values)
@@ -84,24 +85,28 @@ class FloatingContract:
         ``contact<k>_transform``, ``contact<k>_jacobian``) on (N, size) inputs."""
         raise NotImplementedError
 
-    def _run(self, kind: str, shape: tuple[int, int], q: ArrayLike, dq: ArrayLike, ddq: ArrayLike
-             ) -> NDArray[np.float64]:
+    def _run(self, kind: str, shape: tuple[int, int], q: ArrayLike, dq: ArrayLike, ddq: ArrayLike,
+             out: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         (Q, DQ, DDQ), one = floating_states(self.ROBOT, self.N_JOINTS, q, dq, ddq)
-        res = np.zeros((Q.shape[0],) + shape)
+        res = np.zeros((Q.shape[0],) + shape) if out is None else output_array(self.ROBOT, (Q.shape[0],) + shape, out)
         self._fill(kind, Q, DQ, DDQ, res)
         return res[0] if one else res
 
-    def standard_regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
-        """Standard regressor ``(N, 6 + n, n_st)`` (``(6 + n, n_st)`` for 1-D inputs)."""
-        return self._run("standard", (self.N_ROWS, len(self.STANDARD_NAMES)), q, dq, ddq)
+    def standard_regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike,
+                           out: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+        """Standard regressor ``(N, 6 + n, n_st)`` (``(6 + n, n_st)`` for 1-D inputs); ``out``: a
+        preallocated C-contiguous float64 array of that shape (N, ...), as for every regressor."""
+        return self._run("standard", (self.N_ROWS, len(self.STANDARD_NAMES)), q, dq, ddq, out)
 
-    def payload_regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
+    def payload_regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike,
+                          out: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """Payload regressor ``(N, 6 + n, 10)`` (0 columns without payload)."""
-        return self._run("payload", (self.N_ROWS, len(self.PAYLOAD_NAMES)), q, dq, ddq)
+        return self._run("payload", (self.N_ROWS, len(self.PAYLOAD_NAMES)), q, dq, ddq, out)
 
-    def regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
+    def regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike,
+                  out: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """Base regressor ``(N, 6 + n, nb)``: the kept standard columns."""
-        return self._run("base", (self.N_ROWS, len(self.BASE_NAMES)), q, dq, ddq)
+        return self._run("base", (self.N_ROWS, len(self.BASE_NAMES)), q, dq, ddq, out)
 
     def base_parameters(self, chi_std: ArrayLike) -> NDArray[np.float64]:
         """Base parameters of standard ones, ``K @ chi_std`` (the closed-form relations); ``chi_std`` of

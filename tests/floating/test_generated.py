@@ -265,7 +265,7 @@ def test_unknown_contact_frame_is_named(small, monkeypatch):
     pkg = import_package(small[1])
     q = np.r_[np.zeros(3), 0, 0, 0, 1, np.zeros(4)]
     assert pkg.frame_transform("tip", q).shape == (4, 4)
-    with pytest.raises(KeyError, match="'hand' is not a contact frame.*tip, foot, frame2"):
+    with pytest.raises(KeyError, match=r"'hand' is not a contact frame.*tip, foot, frame2"):
         pkg.frame_jacobian("hand", q)
 
 
@@ -287,7 +287,7 @@ def test_contacts_errors_name_the_file_and_field(tmp_path, line, field, message)
 def test_contacts_need_a_floating_base(tmp_path):
     f = tmp_path / "fixed.toml"
     f.write_text(SMALL.replace('base = "floating"', 'base = "fixed"'))
-    with pytest.raises(RobotFileError, match="contacts.*floating base"):
+    with pytest.raises(RobotFileError, match=r"contacts.*floating base"):
         load_robot(f)
 
 
