@@ -50,6 +50,10 @@ def run(args) -> int:
             f"{m.robot}: {m.n_standard} standard -> {m.n_base} base parameters; base regressor "
             f"{m.base_ops.mul} mul, {m.base_ops.div} div, {m.base_ops.add} add -> {m.path}"
         )
+        if robot.floating:
+            contacts = ", ".join(robot.row(j).name or f"frame{j}" for j in robot.contacts) or "none"
+            print(f"{m.robot}: floating base: {6 + robot.n_joints} rows per sample (base wrench first); "
+                  f"contact frames: {contacts}")
         if robot.constrained:
             print(f"{m.robot}: {len(robot.loops)} closed loop(s), {len(robot.couplings)} coupled joint(s): this "
                   f"package is the tree model; load_model() projects it on the {len(robot.actuated)} actuated joints "
