@@ -230,8 +230,8 @@ def build_regressor(robot: RobotDescription, *, progress=None, symbolic_gravity:
     """
     if robot.floating != (base is not None):
         raise ValueError(f"{robot.file}: base = {robot.base!r}: " + (
-            "the fixed-base model does not apply (no generated package of a floating-base robot yet: "
-            "load_model(<robot file>) builds its model in memory, docs/floating-base.md)" if robot.floating
+            "the fixed-base model does not apply (symoro_gen.dynamics.floating.build_floating_regressor builds "
+            "it; `generate` and load_model(<robot file>) take the file, docs/floating-base.md)" if robot.floating
             else "a fixed base has no base motion"))
     if base is not None and symbolic_gravity:
         raise ValueError(f"{robot.file}: a floating base takes gravity through its orientation, not as symbols")
