@@ -23,6 +23,7 @@ from symoro_gen.description import load_robot
 from symoro_gen.description.model import FIXED
 from symoro_gen.emit.package import emit_robot
 from symoro_gen.errors import RobotFileError
+from symoro_gen.identification.floating import wrench_at_base
 from symoro_gen.loader import import_package, load_model
 from symoro_gen.runtime import ccompile
 from symoro_gen.runtime.floating import FloatingModel
@@ -315,3 +316,41 @@ def test_humanoid_package_generated_within_a_minute(tmp_path, quick_c):
     assert elapsed < 60.0
     errs = _check_package(f, pkg, n_samples=5)
     print("humanoid_test:", ", ".join(f"{k} {v:.1e}" for k, v in errs.items()))
+
+
+def test_contact_jacobian_and_transform_carry_a_wrench_alike(small, monkeypatch):
+    """The two ways ``ContactWrench`` carries a contact wrench to the base rows agree on the package's
+    kernels: ``J_c[:, :6]^T f`` (the LOCAL Jacobian) equals ``wrench_at_base`` of the frame's pose in base
+    axes (``frame_transform`` with the base at the origin), [F2008] sec. 2.8; and the world pose is the base
+    pose of ``q`` times that one."""
+    monkeypatch.setenv("SYMORO_BACKEND", "numpy")
+    robot_file, path = small
+    pkg = import_package(path)
+    robot = load_robot(robot_file)
+    rng = np.random.default_rng(11)
+    q, _, _ = random_floating_states(robot, 6, rng)
+    at_origin = q.copy()
+    at_origin[:, :7] = [0, 0, 0, 0, 0, 0, 1]
+    f = rng.normal(size=(6, 6))
+    for k in range(len(pkg.CONTACT_FRAMES)):
+        J = pkg.frame_jacobian(k, q)
+        T0 = pkg.frame_transform(k, at_origin)
+        via_j = np.einsum("kij,ki->kj", J[:, :, :6], f)
+        assert _relative(via_j, wrench_at_base(T0, f)) <= 1e-12
+        base = np.array([pin.XYZQUATToSE3(x[:7]).homogeneous for x in q])
+        assert _relative(pkg.frame_transform(k, q), base @ T0) <= 1e-12
+
+
+def test_load_model_by_name_and_folder(small, monkeypatch):
+    """``load_model("<name>")`` (the package in the generated folder) and ``load_model(<package folder>)``
+    return the floating package; without a package, the robot file gives the in-memory FloatingModel."""
+    monkeypatch.setenv("SYMORO_BACKEND", "numpy")
+    robot_file, path = small
+    monkeypatch.setenv("SYMORO_GENERATED", str(path.parent))
+    for source in ("floater_test", path):
+        m = load_model(source)
+        assert isinstance(m._MODEL, GeneratedFloatingModel) and m.FLOATING and m.N_ROWS == 10
+    other = robot_file.parent / "elsewhere" / "floater.toml"
+    other.parent.mkdir()
+    other.write_text(SMALL + "\n# another file, another hash\n")
+    assert isinstance(load_model(other), FloatingModel)
