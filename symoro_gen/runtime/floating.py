@@ -1,4 +1,4 @@
-"""The run-time model of a floating-base robot (first layer: built in memory, NumPy kernels and a CasADi function).
+"""The run-time model of a floating-base robot built in memory (NumPy kernels and CasADi functions).
 
 :class:`FloatingModel` evaluates the floating-base Newton-Euler model of :mod:`symoro_gen.dynamics.floating`
 through the same optimised graph and the same NumPy kernel printer as a fixed-base package
@@ -6,7 +6,10 @@ through the same optimised graph and the same NumPy kernel printer as a fixed-ba
 without writing files. Its calls take Pinocchio's free-flyer conventions (``q`` of size ``7 + n`` with the
 unit quaternion ``x y z w`` at ``q[3:7]``, ``dq`` and ``ddq`` of size ``6 + n``, base velocities and
 accelerations in base axes) and return ``6 + n`` rows per sample, the base wrench first (force, then
-moment about the base origin, in base axes). ``FLOATING`` is True.
+moment about the base origin, in base axes). ``FLOATING`` is True. The evaluation, and the contact
+frames' poses and Jacobians (:mod:`symoro_gen.emit.floating`), are those of
+:class:`~symoro_gen.runtime.floating_package.FloatingContract`, shared with the generated package of the
+same robot (``symoro-gen generate``), which ``load_model`` returns when there is one.
 
 Base parameters: the closed-form rules of :func:`symoro_gen.baseparams.regroup.group_base_parameters`
 ([GK1990]) on the floating tree, where what regroups onto frame 0 stays on the base link (``base_map``: the
