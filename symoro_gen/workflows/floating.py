@@ -1,0 +1,253 @@
+"""``identify`` of a floating-base robot: floating-base logs -> the identifiable combinations of one kind of rows.
+
+:func:`symoro_gen.workflows.identify.identify` (and ``symoro-gen identify``) comes here for a robot file with
+``base = "floating"``. Each log (:mod:`symoro_gen.preprocessing.floating`: its columns, and the filters: joints
+band-passed as for fixed bases, the base orientation used as logged, its rates from the gyroscope or the pose) is
+one experiment: its states give the standard regressor ``W`` (N, 6 + n, p) of the
+:class:`~symoro_gen.runtime.floating.FloatingModel`, its torques and contact wrenches (carried by the frames'
+Jacobians, :func:`~symoro_gen.identification.floating.frame_jacobian`) the right-hand sides ``Y``; both are
+decimated in parallel ([GB-gains] eq. 15-16) and the samples the filters' edges reach are dropped. The
+experiments' rows are stacked, reduced to the numeric rank of ``kind``'s rows and fitted by IDIM-OLS or -WLS
+(:mod:`symoro_gen.identification.floating`, [AVN2014]). The statistics are the fixed-base ones ([GB-gains]
+eq. 17-22); ``rel_err`` is given per row position (the 6 base-wrench rows, then each joint).
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..description.identity import robot_id
+from ..errors import DataFileError, OptionError, Problem
+from ..identification.floating import (
+    KINDS,
+    ROWS,
+    ContactWrench,
+    FloatingIdentification,
+    FloatingMeasurements,
+    fit_system,
+    frame_jacobian,
+    frame_number,
+    measured_rows,
+    stacked_system,
+)
+from ..identification.result import json_float
+from ..preprocessing.filtering import parallel_decimate
+from ..preprocessing.floating import FloatingSignals, filter_floating, read_floating
+from .base import SCHEMA_VERSION, Options, Results, provenance
+
+__all__ = ["FloatingIdentifyResults", "identify_floating_logs", "BASE_ROWS", "refused_options"]
+
+#: the names of the 6 base-wrench rows (force, then moment about the base origin, base axes)
+BASE_ROWS = ("FX0", "FY0", "FZ0", "MX0", "MY0", "MZ0")
+FLOATING_METHODS = ("ols", "wls")
+
+
+@dataclass(frozen=True, eq=False)
+class FloatingRows:
+    """One experiment's rows: ``W`` (k, 6 + n, p), ``Y`` (k, 6 + n) decimated and trimmed; the full-rate ones
+    (``W_full``, ``Y_full``) for the raw-error metric; the signals they came from."""
+
+    signals: FloatingSignals
+    W: NDArray[np.float64]
+    Y: NDArray[np.float64]
+    W_full: NDArray[np.float64]
+    Y_full: NDArray[np.float64]
+
+
+def refused_options(opts: Any, validate_loaded: bool, loaded: Sequence) -> list[str]:
+    """The ``identify`` options a floating-base robot does not take (their flags)."""
+    checks = (("--loaded", bool(loaded)), ("--validate-loaded", validate_loaded or opts.validate_loaded),
+              ("--payload", bool(opts.payload)), ("--gains", opts.gains is not None), ("--essential", opts.essential),
+              ("--min-velocity", opts.min_velocity is not None), ("--drop-unexcited", opts.drop_unexcited),
+              ("--drop-saturated", opts.drop_saturated), ("--reference", opts.reference is not None),
+              ("--physical", opts.physical), ("--geometry", opts.geometry is not None),
+              ("--positions motor", opts.positions != "link"), ("--validate-fraction", opts.validate_fraction is not None),
+              ("data-format options (--columns, --dt, --resample...)", not opts.data_format.is_plain),
+              (f"--method {opts.method}", opts.method not in FLOATING_METHODS))
+    return [flag for flag, given in checks if given]
+
+
+def experiment_rows(model: Any, robot: Any, sig: FloatingSignals, need_tau: bool) -> FloatingRows:
+    """``W``, ``Y`` of one filtered recording, decimated in parallel and trimmed (module docstring)."""
+    rec, st = sig.recording, sig.settings
+    contacts = []
+    for name, wrench in rec.contacts.items():
+        try:
+            j = frame_number(robot, name)
+        except ValueError as exc:
+            raise DataFileError([Problem(rec.source, "header", f"{name}_fx", str(exc))]) from None
+        contacts.append(ContactWrench(name, wrench, jacobian=frame_jacobian(robot, sig.q[:, 7:], j)[1]))
+    meas = FloatingMeasurements(sig.q, sig.dq, sig.ddq, tau=rec.tau, contacts=tuple(contacts))
+    try:
+        Y = measured_rows(model, meas, need_tau)
+    except ValueError as exc:
+        raise DataFileError([Problem(rec.source, "header", "tau1", str(exc))]) from None
+    W = model.standard_regressor(sig.q, sig.dq, sig.ddq)
+    Yd, Wd = parallel_decimate(Y, W, st.n_d, ftype=st.ftype, cutoff_ratio=st.cutoff_ratio, source=rec.source)
+    N = rec.n_samples
+    idx = np.arange(Yd.shape[0]) * st.n_d
+    half = 10 * st.n_d if st.n_d > 1 else 0  # the FIR's half length (20 n_d + 1 taps); IIR: the edges only
+    keep = (idx - half >= st.edge_samples) & (idx + half <= N - 1 - st.edge_samples)
+    if not keep.any():
+        raise DataFileError([Problem(rec.source, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
+                                     f"{st.edge_samples} dropped at each edge (cut-off {st.cutoff_hz:.4g} Hz, "
+                                     f"n_d = {st.n_d})")])
+    e = st.edge_samples
+    return FloatingRows(sig, Wd[keep], Yd[keep], W[e:N - e], Y[e:N - e])
+
+
+def _read(model: Any, robot: Any, files: Sequence, opts: Any, need_tau: bool) -> list[FloatingRows]:
+    out: list[FloatingRows] = []
+    probs: list[Problem] = []
+    for f in files:
+        if not isinstance(f, (str, os.PathLike)):
+            raise OptionError(f"identify: a floating-base robot's data are log files (docs/floating-base.md), got "
+                              f"{type(f).__name__}")
+        try:
+            rec = read_floating(f, model.N_JOINTS)
+            sig = filter_floating(rec, robot.gravity, cutoff_hz=opts.cutoff, n_d=opts.decimate)
+            out.append(experiment_rows(model, robot, sig, need_tau))
+        except DataFileError as exc:
+            probs.extend(exc.problems)
+    if probs:
+        raise DataFileError(probs)
+    return out
+
+
+def _rel_err(Y: NDArray[np.float64], Yhat: NDArray[np.float64]) -> list[float]:
+    num, den = np.linalg.norm(Y - Yhat, axis=0), np.linalg.norm(Y, axis=0)
+    return [float(a / b) if b > 0 else float("nan") for a, b in zip(num, den)]
+
+
+def _errors(fit: FloatingIdentification, rows: Sequence[FloatingRows], sel: slice) -> tuple[list[float], list[float]]:
+    """Per row position: the relative error norm on the decimated rows and on the full-rate (raw) rows."""
+    cols, x = fit.columns, fit.result.values
+    W = np.concatenate([r.W[:, sel][:, :, cols] for r in rows])
+    Y = np.concatenate([r.Y[:, sel] for r in rows])
+    Wf = np.concatenate([r.W_full[:, sel][:, :, cols] for r in rows])
+    Yf = np.concatenate([r.Y_full[:, sel] for r in rows])
+    return _rel_err(Y, W @ x), _rel_err(Yf, Wf @ x)
+
+
+@dataclass(frozen=True, eq=False)
+class FloatingIdentifyResults(Results):
+    """What ``identify`` found for a floating-base robot (see :meth:`to_dict`, docs/json-output.md)."""
+
+    command = "identify"
+
+    robot: Any
+    model: Any
+    options: Options
+    fit: FloatingIdentification
+    kind: str
+    weighting: str
+    rows: tuple[FloatingRows, ...]
+    row_names: tuple[str, ...]
+    rel_err: tuple[list[float], list[float]]
+    validation: Mapping[str, Any] | None
+    inputs: tuple[Any, ...]
+
+    @property
+    def result(self) -> Any:
+        """The fixed-base :class:`~symoro_gen.identification.result.IdentificationResult` of the fit."""
+        return self.fit.result
+
+    def combinations(self, chi_std: Any) -> NDArray[np.float64]:
+        """``K @ chi_std``: what the identified values estimate."""
+        return self.fit.combinations(chi_std)
+
+    def _files(self) -> list[dict]:
+        out = []
+        for r in self.rows:
+            s, st = r.signals, r.signals.settings
+            out.append({"file": s.recording.source, "rows_read": s.recording.n_samples, "rows": int(r.Y.shape[0]),
+                        "contacts": list(s.recording.contacts), "torques": s.recording.tau is not None,
+                        "orientation": s.orientation, "acceleration": s.acceleration, "cutoff_hz": st.cutoff_hz,
+                        "n_d": st.n_d, "edge_samples": st.edge_samples, "unused": list(s.recording.unused)})
+        return out
+
+    def to_dict(self) -> dict:
+        """Exactly the JSON of ``symoro-gen identify --json`` for a floating-base robot: the fixed-base keys
+        (``rel_err`` and ``rel_err_raw`` per row position) and ``floating``."""
+        res = self.fit.result
+        out: dict[str, Any] = {"generator": "symoro-gen identify", "schema_version": SCHEMA_VERSION,
+                               "robot": self.robot.name, "robot_id": robot_id(self.robot),
+                               "data": [r.signals.recording.source for r in self.rows], "loaded": []}
+        out.update(res.to_dict())
+        out["rel_err"] = [json_float(v) for v in self.rel_err[0]]
+        out["rel_err_raw"] = [json_float(v) for v in self.rel_err[1]]
+        out["rel_err_basis"] = {"rows": "per row position (" + " ".join(self.row_names) + "): on the filtered, decimated "
+                                "system", "raw": "the model at full rate on the filtered states against the raw "
+                                "measured torques and wrenches"}
+        K = self.fit.relations
+        out["floating"] = {
+            "kind": self.kind, "weighting": self.weighting, "rows": list(self.row_names),
+            "not_identifiable": list(self.fit.not_identifiable),
+            "standard_names": list(self.model.STANDARD_NAMES),
+            "relations": [[json_float(v) for v in row] for row in K],
+            "files": self._files()}
+        if self.validation is not None:
+            v = self.validation
+            out["validation"] = {"data": list(v["data"]), "rel_err": [json_float(x) for x in v["rel_err"]],
+                                 "rel_err_raw": [json_float(x) for x in v["rel_err_raw"]],
+                                 "rel_err_basis": out["rel_err_basis"]}
+        out["provenance"] = provenance(self.options, self.inputs)
+        return out
+
+    def summary(self) -> str:
+        """Exactly the text ``symoro-gen identify`` prints for a floating-base robot."""
+        res = self.fit.result
+        head = (f"Floating-base identification of {self.robot.name}: the {self.kind} rows "
+                f"({' '.join(self.row_names)}), {len(res.names)} identifiable combinations of the "
+                f"{len(self.model.STANDARD_NAMES)} standard parameters (the values estimate K chi_std; "
+                f"floating.relations in the JSON)")
+        lines = [head, "", res.summary(), ""]
+        if self.fit.not_identifiable:
+            lines.append("Not identifiable from these rows: " + " ".join(self.fit.not_identifiable))
+        lines.append("Relative error norm per row (" + " ".join(self.row_names) + "):")
+        lines.append("  filtered, decimated: " + "  ".join(f"{x:.4f}" for x in self.rel_err[0]))
+        lines.append("  raw, full rate:      " + "  ".join(f"{x:.4f}" for x in self.rel_err[1]))
+        if self.validation is not None:
+            lines.append("Validation (" + ", ".join(map(str, self.validation["data"])) + "):")
+            lines.append("  filtered, decimated: " + "  ".join(f"{x:.4f}" for x in self.validation["rel_err"]))
+            lines.append("  raw, full rate:      " + "  ".join(f"{x:.4f}" for x in self.validation["rel_err_raw"]))
+        lines.append("")
+        lines.append("Data (floating-base logs):")
+        for f in self._files():
+            lines.append(f"  {f['file']}: {f['rows_read']} samples -> {f['rows']} rows; contacts "
+                         f"{', '.join(f['contacts']) or 'none'}; torques {'yes' if f['torques'] else 'no'}; base rates "
+                         f"from the {f['orientation']}, acceleration from the {f['acceleration']}; cut-off "
+                         f"{f['cutoff_hz']:.4g} Hz, n_d = {f['n_d']}, {f['edge_samples']} edge samples dropped"
+                         + (f"; unused columns {', '.join(f['unused'])}" if f["unused"] else ""))
+        return "\n".join(lines)
+
+
+def identify_floating_logs(robot: Any, model: Any, data: Sequence, validate: Sequence, opts: Any
+                           ) -> FloatingIdentifyResults:
+    """The floating-base branch of :func:`symoro_gen.workflows.identify.identify` (module docstring).
+
+    ``opts.kind``: ``"base"``, ``"joints"`` or ``"both"`` (default: ``"both"`` when every log has joint torques,
+    else ``"base"``); ``opts.weighting``: WLS groups (``"kind"`` or ``"row"``)."""
+    kind = opts.kind
+    if kind is not None and kind not in KINDS:
+        raise OptionError(f"--kind {kind!r}: one of {', '.join(KINDS)}")
+    rows = _read(model, robot, data, opts, need_tau=kind in ("joints", "both"))
+    if kind is None:
+        kind = "both" if all(r.signals.recording.tau is not None for r in rows) else "base"
+    sel = ROWS[kind]
+    W = np.concatenate([r.W for r in rows])
+    Y = np.concatenate([r.Y for r in rows])
+    fit = fit_system(model, stacked_system(model, W, Y, kind, opts.weighting), opts.method)
+    names = (*BASE_ROWS, *(f"tau{j + 1}" for j in range(model.N_JOINTS)))[sel]
+    validation = None
+    if validate:
+        vrows = _read(model, robot, validate, opts, need_tau=kind != "base")
+        e, e_raw = _errors(fit, vrows, sel)
+        validation = {"data": [str(v) for v in validate], "rel_err": e, "rel_err_raw": e_raw}
+    return FloatingIdentifyResults(robot, model, opts, fit, kind, opts.weighting, tuple(rows), tuple(names),
+                                   _errors(fit, rows, sel), validation, (*data, *validate))
