@@ -134,6 +134,17 @@ def _errors(fit: FloatingIdentification, rows: Sequence[FloatingRows], sel: slic
     return _rel_err(Y, W @ x), _rel_err(Yf, Wf @ x)
 
 
+def error_basis(rows: Sequence[FloatingRows], row_names: Sequence[str]) -> dict:
+    """``rel_err_basis`` of the JSON (the fixed-base keys): what the two relative errors are computed on."""
+    return {"rel_err": "per row position (" + " ".join(row_names) + "): ||rho||/||Y|| on the filtered, decimated "
+                       "system (W and the measured rows decimated in parallel)",
+            "rel_err_raw": "per row position: the model at full rate on the filtered states against the raw measured "
+                           "rows (joint torques and contact wrenches carried by the frames' Jacobians)",
+            "cutoff_hz": [r.signals.settings.cutoff_hz for r in rows], "n_d": [r.signals.settings.n_d for r in rows],
+            "min_velocity": None, "rows": int(sum(r.Y.shape[0] for r in rows)),
+            "samples": int(sum(r.Y_full.shape[0] for r in rows))}
+
+
 @dataclass(frozen=True, eq=False)
 class FloatingIdentifyResults(Results):
     """What ``identify`` found for a floating-base robot (see :meth:`to_dict`, docs/json-output.md)."""
@@ -181,9 +192,7 @@ class FloatingIdentifyResults(Results):
         out.update(res.to_dict())
         out["rel_err"] = [json_float(v) for v in self.rel_err[0]]
         out["rel_err_raw"] = [json_float(v) for v in self.rel_err[1]]
-        out["rel_err_basis"] = {"rows": "per row position (" + " ".join(self.row_names) + "): on the filtered, decimated "
-                                "system", "raw": "the model at full rate on the filtered states against the raw "
-                                "measured torques and wrenches"}
+        out["rel_err_basis"] = error_basis(self.rows, self.row_names)
         K = self.fit.relations
         out["floating"] = {
             "kind": self.kind, "weighting": self.weighting, "rows": list(self.row_names),
@@ -195,7 +204,7 @@ class FloatingIdentifyResults(Results):
             v = self.validation
             out["validation"] = {"data": list(v["data"]), "rel_err": [json_float(x) for x in v["rel_err"]],
                                  "rel_err_raw": [json_float(x) for x in v["rel_err_raw"]],
-                                 "rel_err_basis": out["rel_err_basis"]}
+                                 "rel_err_basis": error_basis(v["rows"], self.row_names)}
         out["provenance"] = provenance(self.options, self.inputs)
         return out
 
@@ -248,6 +257,6 @@ def identify_floating_logs(robot: Any, model: Any, data: Sequence, validate: Seq
     if validate:
         vrows = _read(model, robot, validate, opts, need_tau=kind != "base")
         e, e_raw = _errors(fit, vrows, sel)
-        validation = {"data": [str(v) for v in validate], "rel_err": e, "rel_err_raw": e_raw}
+        validation = {"data": [str(v) for v in validate], "rel_err": e, "rel_err_raw": e_raw, "rows": tuple(vrows)}
     return FloatingIdentifyResults(robot, model, opts, fit, kind, opts.weighting, tuple(rows), tuple(names),
                                    _errors(fit, rows, sel), validation, (*data, *validate))
