@@ -239,10 +239,21 @@ def stacked_system(model: FloatingModel, W: NDArray[np.float64], Y: NDArray[np.f
     kept, K = numeric_base(Wr)
     if kept.size == 0:
         raise IdentificationError(f"{model.ROBOT}: the {kind} rows identify no parameter")
-    names = tuple(model.STANDARD_NAMES[i] for i in kept)
+    names = combination_names(model.STANDARD_NAMES, kept, K)
     absent = tuple(n for i, n in enumerate(model.STANDARD_NAMES) if not np.any(K[:, i]))
     system = ObservationSystem(W=Wr[:, kept], Y=Yr, names=names, joint=rows_group)
     return FloatingSystem(kind, system, K, absent, kept)
+
+
+def combination_names(standard: Sequence[str], kept: NDArray[np.intp], K: NDArray[np.float64]) -> tuple[str, ...]:
+    """The identified combinations' names: a standard parameter's name where its row of ``K`` is that parameter
+    alone, else its name with ``R`` (regrouped, as the fixed-base base parameters ``XX2R``): only the first are
+    standard values (``export-urdf --params`` takes them)."""
+    out = []
+    for r, i in enumerate(kept):
+        alone = np.count_nonzero(np.abs(K[r]) > 1e-12 * np.abs(K[r]).max()) == 1 and abs(K[r, i] - 1) < 1e-12
+        out.append(standard[i] if alone else standard[i] + "R")
+    return tuple(out)
 
 
 def identify_floating(model: FloatingModel, data: FloatingMeasurements, kind: str = "base", method: str = "wls",
