@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..description.mdh import joint_sign, row_transform
 from ..description.model import REVOLUTE, RobotDescription
-from ..errors import IdentificationError
+from ..errors import IdentificationError, ModelError
 from ..runtime.floating import FloatingModel, floating_states, numeric_base
 from .estimators import fit_ols, fit_wls, tolerance_keywords
 from .observation import ObservationSystem
@@ -329,3 +329,37 @@ def _skew(p: NDArray[np.float64]) -> NDArray[np.float64]:
     S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -p[..., 2], p[..., 1], -p[..., 0]
     S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = p[..., 2], -p[..., 1], p[..., 0]
     return S
+
+
+@dataclass(frozen=True, eq=False)
+class RelationsModel:
+    """The identified combinations of a floating-base ``identify`` JSON as a model with base parameters: its
+    ``BASE_NAMES`` the combinations' names, ``base_parameters(chi_std) = K chi_std`` with the JSON's relations ``K``
+    (``floating.relations``). What :func:`~symoro_gen.identification.physical.standard_set_from_result` needs to
+    find a physically consistent standard set reproducing them (``export-urdf/-mjcf --from``)."""
+
+    ROBOT: str
+    STANDARD_NAMES: tuple[str, ...]
+    BASE_NAMES: tuple[str, ...]
+    relations: NDArray[np.float64]
+    PAYLOAD_NAMES: tuple[str, ...] = ()
+
+    @classmethod
+    def from_result(cls, robot: RobotDescription, result: Any, source: str) -> RelationsModel:
+        """From the JSON of a floating-base identification (``source`` names it in errors)."""
+        try:
+            fl = result["floating"]
+            K = np.array(fl["relations"], float)
+            names = tuple(result["parameters"]["names"])
+            standard = tuple(fl["standard_names"])
+        except (KeyError, TypeError, ValueError):
+            raise ModelError(f"{source}: not a floating-base result of `symoro-gen identify` (no 'floating' "
+                             f"relations) for the floating-base robot {robot.file or robot.name}") from None
+        if standard != tuple(robot.standard_names) or K.shape != (len(names), len(standard)):
+            raise ModelError(f"{source}: its standard parameters ('floating.standard_names') are not those of "
+                             f"{robot.file or robot.name}")
+        return cls(robot.name, standard, names, K)
+
+    def base_parameters(self, chi_std: ArrayLike) -> NDArray[np.float64]:
+        out: NDArray[np.float64] = np.asarray(chi_std, float) @ self.relations.T
+        return out

@@ -238,15 +238,24 @@ def test_so3_log_inverts_exp():
     assert np.abs(quaternion_matrices(quat) - R).max() < 1e-12
 
 
-def test_identify_base_rows_from_an_imu_log(hopper, cli):
-    """The hopper, contacts at its foot frame and at its knee (frame 2): the base rows alone (no torque column in
-    the log) recover every base-row combination within 3 sigma through the command line."""
+@pytest.fixture(scope="module")
+def hopper_fit(hopper):
+    """The hopper, contacts at its foot frame and at its knee (frame 2), a log without torque column, identified
+    through the command line: ``(robot, folder, chi_true, result path)``."""
+    from tests.conftest import CliRunner
+
     robot, d = hopper
     log = d / "walk.csv"
     chi = simulate_log(robot, log, seed=3, duration=12.0, fs=200.0, contacts={"frame2": 2, "foot": 3},
                        torques=False)
     out = d / "walk.json"
-    cli("identify", str(robot.file), str(log), "--method", "wls", "--json", str(out))
+    CliRunner()("identify", str(robot.file), str(log), "--method", "wls", "--json", str(out))
+    return robot, d, chi, out
+
+
+def test_identify_base_rows_from_an_imu_log(hopper_fit):
+    """The base rows alone (no torque column in the log) recover every base-row combination within 3 sigma."""
+    robot, _, chi, out = hopper_fit
     res = json.loads(out.read_text())
     assert res["floating"]["kind"] == "base"  # no torques: the base rows
     assert res["floating"]["rows"] == ["FX0", "FY0", "FZ0", "MX0", "MY0", "MZ0"]
@@ -254,6 +263,42 @@ def test_identify_base_rows_from_an_imu_log(hopper, cli):
     assert set(res["floating"]["not_identifiable"]) == drive
     assert res["floating"]["files"][0]["orientation"] == "gyroscope"
     _check_within(res, chi)
+
+
+def test_export_from_a_floating_result(hopper_fit, cli):
+    """``export-urdf --from`` a floating-base result: a physically consistent standard set whose combinations
+    ``K chi`` are the identified values. Checked with Pinocchio's RNEA on the exported URDF (its ``floating`` joint
+    a free-flyer): its base-wrench rows at random states equal ``W_base[:, kept] @ values``, the rows the
+    identified values predict (to the sidecar's base error when the set is not exact)."""
+    from symoro_gen.loader import load_model
+
+    from .pinocchio_floating import random_floating_states
+
+    robot, d, _, out = hopper_fit
+    res = json.loads(out.read_text())
+    urdf = d / "identified.urdf"
+    cli("export-urdf", str(robot.file), "--from", str(out), "-o", str(urdf))
+    sidecar = json.loads(Path(str(urdf) + ".json").read_text())
+    pmodel = pin.buildModelFromXML(urdf.read_text())
+    assert pmodel.joints[1].shortname() == "JointModelFreeFlyer"
+    pmodel.gravity.linear = np.asarray(robot.gravity, float)
+    data = pmodel.createData()
+    idx_q = [pmodel.joints[pmodel.getJointId(f"joint{r.j}")].idx_q for r in robot.joints]
+    idx_v = [pmodel.joints[pmodel.getJointId(f"joint{r.j}")].idx_v for r in robot.joints]
+    q, dq, ddq = random_floating_states(robot, 20, np.random.default_rng(5))
+    pin_rows = []
+    for k in range(q.shape[0]):
+        qp, vp, ap = np.zeros(pmodel.nq), np.zeros(pmodel.nv), np.zeros(pmodel.nv)
+        qp[:7], vp[:6], ap[:6] = q[k, :7], dq[k, :6], ddq[k, :6]
+        qp[idx_q], vp[idx_v], ap[idx_v] = q[k, 7:], dq[k, 6:], ddq[k, 6:]
+        pin_rows.append(pin.rnea(pmodel, data, qp, vp, ap)[:6])
+    model = load_model(robot.file)
+    kept = [model.STANDARD_NAMES.index(n.removesuffix("R")) for n in res["parameters"]["names"]]
+    predicted = model.standard_regressor(q, dq, ddq)[:, :6, kept] @ np.array(res["parameters"]["values"])
+    err = np.abs(np.array(pin_rows) - predicted).max() / np.abs(predicted).max()
+    print(f"export-urdf --from (exact: {sidecar['exact']}, base error {sidecar['base_error']:.2e}): Pinocchio's base "
+          f"rows vs the identified values' prediction, max relative error {err:.2e}")
+    assert err < (1e-6 if sidecar["exact"] else 0.05)
 
 
 def test_log_errors_name_file_and_column(hopper, tmp_path):
