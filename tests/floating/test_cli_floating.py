@@ -383,3 +383,19 @@ def test_identify_base_rows_from_a_mocap_pose(quadruped):
     drive = {n for n in res.model.STANDARD_NAMES if n.rstrip("0123456789") in ("IA", "FV", "FS", "OFF")}
     assert set(res.fit.not_identifiable) == drive
     _check_within(res.to_dict(), chi)
+
+
+def test_parquet_log_reads_as_the_csv(hopper_fit, tmp_path):
+    """The same log as Parquet (pyarrow, columns by name) reads to the same arrays as the CSV."""
+    pa = pytest.importorskip("pyarrow")
+    pq = pytest.importorskip("pyarrow.parquet")
+    _, d, _, _ = hopper_fit
+    csv = read_floating(d / "walk.csv", 2)
+    names = (d / "walk.csv").read_text().split("\n", 1)[0].split(",")
+    table = np.loadtxt(d / "walk.csv", delimiter=",", skiprows=1)
+    pq.write_table(pa.table({n: table[:, i] for i, n in enumerate(names)}), tmp_path / "walk.parquet")
+    par = read_floating(tmp_path / "walk.parquet", 2)
+    assert set(par.contacts) == set(csv.contacts) == {"frame2", "foot"}
+    for field in ("t", "quaternion", "q", "gyro", "accel"):
+        assert np.array_equal(getattr(par, field), getattr(csv, field)), field
+    assert par.tau is None and par.position is None
