@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from ..description.identity import robot_id
 from ..errors import DataFileError, OptionError, Problem
@@ -40,7 +41,8 @@ from ..preprocessing.filtering import parallel_decimate
 from ..preprocessing.floating import FloatingSignals, filter_floating, read_floating
 from .base import SCHEMA_VERSION, Options, Results, provenance
 
-__all__ = ["FloatingIdentifyResults", "identify_floating_logs", "BASE_ROWS", "refused_options"]
+__all__ = ["FloatingIdentifyResults", "FloatingDiagnoseResults", "identify_floating_logs", "diagnose_floating_logs",
+           "contact_checks", "BASE_ROWS", "refused_options"]
 
 #: the names of the 6 base-wrench rows (force, then moment about the base origin, base axes)
 BASE_ROWS = ("FX0", "FY0", "FZ0", "MX0", "MY0", "MZ0")
@@ -57,6 +59,9 @@ class FloatingRows:
     Y: NDArray[np.float64]
     W_full: NDArray[np.float64]
     Y_full: NDArray[np.float64]
+    #: per contact frame, (k, 6 + n, 7) decimated with W: ``J_c^T e_i`` (a constant offset of the sensor's six
+    #: components, in its axes) and ``J_c^T f_c`` (a gain error of the sensor), the candidates of :func:`contact_checks`
+    sensor_columns: Mapping[str, NDArray[np.float64]] = field(default_factory=dict)
 
 
 def refused_options(opts: Any, validate_loaded: bool, loaded: Sequence) -> list[str]:
@@ -76,19 +81,28 @@ def experiment_rows(model: Any, robot: Any, sig: FloatingSignals, need_tau: bool
     """``W``, ``Y`` of one filtered recording, decimated in parallel and trimmed (module docstring)."""
     rec, st = sig.recording, sig.settings
     contacts = []
+    sensor = []
     for name, wrench in rec.contacts.items():
         try:
             j = frame_number(robot, name)
         except ValueError as exc:
             raise DataFileError([Problem(rec.source, "header", f"{name}_fx", str(exc))]) from None
-        contacts.append(ContactWrench(name, wrench, jacobian=frame_jacobian(robot, sig.q[:, 7:], j)[1]))
+        J = frame_jacobian(robot, sig.q[:, 7:], j)[1]
+        contacts.append(ContactWrench(name, wrench, jacobian=J))
+        Jt = np.transpose(J, (0, 2, 1))  # (N, 6 + n, 6): J^T e_i, then J^T f
+        sensor.append(np.concatenate([Jt, np.einsum("kir,kr->ki", Jt, wrench)[:, :, None]], axis=2))
     meas = FloatingMeasurements(sig.q, sig.dq, sig.ddq, tau=rec.tau, contacts=tuple(contacts))
     try:
         Y = measured_rows(model, meas, need_tau)
     except ValueError as exc:
         raise DataFileError([Problem(rec.source, "header", "tau1", str(exc))]) from None
     W = model.standard_regressor(sig.q, sig.dq, sig.ddq)
+    p = W.shape[2]
+    if sensor:
+        W = np.concatenate([W, *sensor], axis=2)
     Yd, Wd = parallel_decimate(Y, W, st.n_d, ftype=st.ftype, cutoff_ratio=st.cutoff_ratio, source=rec.source)
+    cols = {name: Wd[:, :, p + 7 * k:p + 7 * (k + 1)] for k, name in enumerate(rec.contacts)}
+    Wd, W = Wd[:, :, :p], W[:, :, :p]
     N = rec.n_samples
     idx = np.arange(Yd.shape[0]) * st.n_d
     half = 10 * st.n_d if st.n_d > 1 else 0  # the FIR's half length (20 n_d + 1 taps); IIR: the edges only
@@ -98,7 +112,7 @@ def experiment_rows(model: Any, robot: Any, sig: FloatingSignals, need_tau: bool
                                      f"{st.edge_samples} dropped at each edge (cut-off {st.cutoff_hz:.4g} Hz, "
                                      f"n_d = {st.n_d})")])
     e = st.edge_samples
-    return FloatingRows(sig, Wd[keep], Yd[keep], W[e:N - e], Y[e:N - e])
+    return FloatingRows(sig, Wd[keep], Yd[keep], W[e:N - e], Y[e:N - e], {c: v[keep] for c, v in cols.items()})
 
 
 def _read(model: Any, robot: Any, files: Sequence, opts: Any, need_tau: bool) -> list[FloatingRows]:
@@ -260,3 +274,192 @@ def identify_floating_logs(robot: Any, model: Any, data: Sequence, validate: Seq
         validation = {"data": [str(v) for v in validate], "rel_err": e, "rel_err_raw": e_raw, "rows": tuple(vrows)}
     return FloatingIdentifyResults(robot, model, opts, fit, kind, opts.weighting, tuple(rows), tuple(names),
                                    _errors(fit, rows, sel), validation, (*data, *validate))
+
+
+# ---- the loop on floating systems: contact-sensor offsets and gains, per kind of rows ---------------------------------
+def _rank(A: NDArray[np.float64]) -> int:
+    s = np.linalg.svd(A, compute_uv=False)
+    return int(np.sum(s > s[0] * max(A.shape) * np.finfo(float).eps * 1e3)) if s.size else 0
+
+
+def _stack(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(k, rows, c) -> (rows * k, c): rows grouped by row position, as :func:`stacked_system` stacks them."""
+    out: NDArray[np.float64] = x.transpose(1, 0, 2).reshape(-1, x.shape[2])
+    return out
+
+
+def _candidate(A: NDArray[np.float64], y: NDArray[np.float64], C: NDArray[np.float64], rss0: float,
+               r0: int) -> dict[str, Any]:
+    """Nested least squares: ``y ~ A`` against ``y ~ [A C]``; the F test of the added columns ([GB-gains] eq.
+    17-19 statistics, Seber & Lee 2003 sec. 4.3 for the F test) and their estimates."""
+    A1 = np.hstack([A, C])
+    r1 = _rank(A1)
+    m = C.shape[1]
+    if r1 - r0 < m:
+        return {"identifiable": False, "reason": f"{m - (r1 - r0)} of its {m} column(s) lie in the span of the "
+                "inertial columns: a scale or an offset the parameters absorb (e.g. the gain of a contact that "
+                "carries the whole wrench)"}
+    x, *_ = np.linalg.lstsq(A1, y, rcond=None)
+    res = y - A1 @ x
+    dof = y.size - r1
+    rss1 = float(res @ res)
+    F = ((rss0 - rss1) / m) / (rss1 / dof)
+    cov = rss1 / dof * np.linalg.pinv(A1.T @ A1)
+    est = x[A.shape[1]:]
+    std = np.sqrt(np.diag(cov)[A.shape[1]:])
+    return {"identifiable": True, "F": float(F), "p_value": float(stats.f.sf(F, m, dof)),
+            "estimate": [float(v) for v in est], "std": [float(v) for v in std],
+            "rss_drop_pct": float(100 * (rss0 - rss1) / rss0) if rss0 > 0 else 0.0}
+
+
+def contact_checks(model: Any, rows: Sequence[FloatingRows], kind: str, significance: float) -> list[dict[str, Any]]:
+    """Per contact frame, on the rows of ``kind``: a constant offset of its sensor (6 components, in its axes) and
+    a gain error (one scale of its 6 components), tested by nested F tests in forward selection (the loop's rule:
+    the most significant candidate below ``significance / number of candidates`` (Bonferroni) is accepted, its
+    columns added, the others tested again; stop when none is).
+
+    An offset ``o`` (``f_measured = f + o``) adds ``J_c^T o`` to the rows; a gain ``g`` (``f_measured = (1 + g) f``)
+    adds ``gamma J_c^T f_measured`` with ``gamma = g / (1 + g)``; ``estimate`` is ``o`` (N, N m) or ``g``, as last
+    tested (for an accepted one: from the last fit, with every accepted effect). Each entry has ``accepted`` and
+    ``round`` (the round it was accepted in, 1-based, or None). On the base rows the gains are relative: their sum
+    is the measured base wrench, a common scale of all sensors is the inertial parameters' scale."""
+    if kind not in ("base", "joints"):
+        raise OptionError(f"contact checks run on one kind of rows: base or joints, not {kind!r}")
+    sel = ROWS[kind]
+    W = np.concatenate([r.W for r in rows])
+    Y = np.concatenate([r.Y for r in rows])
+    fs = stacked_system(model, W, Y, kind, "kind")
+    A, y = fs.system.W, fs.system.Y
+    cands: list[tuple[dict[str, Any], NDArray[np.float64]]] = []
+    for frame in rows[0].sensor_columns:
+        C = _stack(np.concatenate([r.sensor_columns[frame][:, sel, :] for r in rows]))
+        for effect, cols in (("offset", slice(0, 6)), ("gain", slice(6, 7))):
+            cands.append(({"kind": kind, "frame": frame, "effect": effect, "accepted": False, "round": None,
+                           "components": ["fx", "fy", "fz", "mx", "my", "mz"] if effect == "offset" else ["g"]},
+                          C[:, cols]))
+    level = significance / max(len(cands), 1)
+    done = False
+    rnd = 0
+    while not done:
+        x0, *_ = np.linalg.lstsq(A, y, rcond=None)
+        rss0, r0 = float(np.sum((y - A @ x0) ** 2)), _rank(A)
+        best: tuple[dict[str, Any], NDArray[np.float64]] | None = None
+        gains_left = [e for e, _ in cands if e["effect"] == "gain" and not e["accepted"]]
+        for entry, C in cands:
+            if entry["accepted"]:
+                continue
+            if kind == "base" and entry["effect"] == "gain" and len(gains_left) == 1:
+                # the base rows are the sum of the contact wrenches: a common scale of every sensor is the
+                # inertial parameters' scale, so the gains are relative and the last one is not identifiable
+                entry.update(identifiable=False, reason="the base rows see the sensors' gains relative to each "
+                             "other only (a common scale is the parameters' scale): the other gains are accepted")
+                continue
+            entry.update(_candidate(A, y, C, rss0, r0))
+            if entry["identifiable"] and entry["effect"] == "gain":
+                gam, sg = entry["estimate"][0], entry["std"][0]
+                entry["estimate"], entry["std"] = [gam / (1 - gam)], [sg / (1 - gam) ** 2]
+            if entry["identifiable"] and entry["p_value"] < level and (
+                    best is None or entry["p_value"] < best[0]["p_value"]):
+                best = (entry, C)
+        done = best is None
+        if best is not None:
+            rnd += 1
+            best[0]["accepted"], best[0]["round"] = True, rnd
+            A = np.hstack([A, best[1]])
+    _final_estimates([(e, C) for e, C in cands if e["accepted"]], A, y)
+    return [e for e, _ in cands]
+
+
+def _final_estimates(accepted: list, A: NDArray[np.float64], y: NDArray[np.float64]) -> None:
+    """The accepted effects' estimates and standard deviations from the last fit, with all of them (the
+    accepted columns are the last of ``A``, in order)."""
+    if not accepted:
+        return
+    x, *_ = np.linalg.lstsq(A, y, rcond=None)
+    res = y - A @ x
+    cov = float(res @ res) / (y.size - _rank(A)) * np.linalg.pinv(A.T @ A)
+    k = A.shape[1] - sum(C.shape[1] for _, C in accepted)
+    for entry, C in accepted:
+        m = C.shape[1]
+        est, std = x[k:k + m], np.sqrt(np.diag(cov)[k:k + m])
+        if entry["effect"] == "gain":
+            est, std = est / (1 - est), std / (1 - est) ** 2
+        entry["estimate"], entry["std"] = [float(v) for v in est], [float(v) for v in std]
+        k += m
+
+
+@dataclass(frozen=True, eq=False)
+class FloatingDiagnoseResults(Results):
+    """``diagnose`` of a floating-base robot: the contact-sensor checks per kind of rows (docs/floating-base.md)."""
+
+    command = "diagnose"
+
+    robot: Any
+    model: Any
+    options: Options
+    rows: tuple[FloatingRows, ...]
+    checks: tuple[dict[str, Any], ...]
+    significance: float
+    inputs: tuple[Any, ...]
+
+    @property
+    def found(self) -> list[dict[str, Any]]:
+        """The accepted checks, per kind in the order of acceptance."""
+        return [c for c in self.checks if c["accepted"]]
+
+    def to_dict(self) -> dict:
+        """The JSON of ``symoro-gen diagnose --json`` for a floating-base robot (docs/json-output.md)."""
+        n = sum(1 for c in self.checks if c["kind"] == "base")
+        return {"generator": "symoro-gen diagnose", "schema_version": SCHEMA_VERSION, "robot": self.robot.name,
+                "robot_id": robot_id(self.robot), "data": [r.signals.recording.source for r in self.rows],
+                "floating": {"significance": self.significance, "level": self.significance / max(n, 1),
+                             "checks": [{k: (json_float(v) if isinstance(v, float) else v) for k, v in c.items()}
+                                        for c in self.checks],
+                             "found": [f"{c['kind']}:{c['frame']}:{c['effect']}" for c in self.found]},
+                "provenance": provenance(self.options, self.inputs)}
+
+    def summary(self) -> str:
+        """The text ``symoro-gen diagnose`` prints for a floating-base robot."""
+        n = sum(1 for c in self.checks if c["kind"] == "base")
+        lines = [f"Contact-sensor checks of {self.robot.name} (per kind of rows: an offset of each sensor's six "
+                 f"components, a gain of each sensor; nested F tests in forward selection, level "
+                 f"{self.significance:g} / {n} candidates = {self.significance / max(n, 1):.3g}):"]
+        for c in self.checks:
+            head = f"  {c['kind']:6s} {c['frame']:>10s} {c['effect']:6s}"
+            if not c["identifiable"]:
+                lines.append(f"{head}  not identifiable: {c['reason']}")
+                continue
+            vals = ", ".join(f"{n} {v:+.4g} +- {s:.2g}" for n, v, s in zip(c["components"], c["estimate"], c["std"]))
+            mark = f"FOUND ({c['round']})" if c["accepted"] else "         "
+            lines.append(f"{head}  {mark} p = {c['p_value']:.3g}, residual -{c['rss_drop_pct']:.2g} %: {vals}")
+        found = self.found
+        lines.append("")
+        lines.append("Found: " + ("; ".join(f"{c['effect']} of the sensor at {c['frame']} (from the {c['kind']} rows)"
+                                            for c in found) if found else "nothing beyond the noise"))
+        return "\n".join(lines)
+
+    def write_plots(self, folder: Any, *, force: bool = False) -> list:
+        raise OptionError("--plots is not available for a floating-base robot yet")
+
+    def report(self, path: Any, *, force: bool = False) -> Any:
+        raise OptionError("--report is not available for a floating-base robot yet")
+
+
+def diagnose_floating_logs(robot: Any, model: Any, data: Sequence, opts: Any) -> FloatingDiagnoseResults:
+    """The floating-base branch of :func:`symoro_gen.workflows.diagnose.diagnose`: :func:`contact_checks` on the
+    base rows, and on the joint rows when every log has joint torques."""
+    rows = _read(model, robot, data, opts, need_tau=False)
+    has_tau = all(r.signals.recording.tau is not None for r in rows)
+    frames = [tuple(r.sensor_columns) for r in rows]
+    if any(f != frames[0] for f in frames):
+        raise DataFileError([Problem(r.signals.recording.source, "header", "<frame>_fx", f"contact frames "
+                                     f"{', '.join(f) or 'none'}, the first log's are {', '.join(frames[0]) or 'none'}: "
+                                     "diagnose checks the same sensors in every log") for r, f in zip(rows, frames)
+                             if f != frames[0]])
+    if not frames[0]:
+        raise OptionError(f"diagnose: {robot.file or robot.name}: the logs have no contact wrench column "
+                          "(<frame>_fx ...): nothing to check on a floating-base robot yet")
+    checks = contact_checks(model, rows, "base", opts.significance)
+    if has_tau:
+        checks += contact_checks(model, rows, "joints", opts.significance)
+    return FloatingDiagnoseResults(robot, model, opts, tuple(rows), tuple(checks), opts.significance, tuple(data))

@@ -23,7 +23,7 @@ from symoro_gen.description import load_robot
 from symoro_gen.errors import DataFileError, OptionError
 from symoro_gen.identification.floating import frame_jacobian
 from symoro_gen.preprocessing.floating import quaternion_matrices, read_floating, so3_log
-from symoro_gen.workflows import identify
+from symoro_gen.workflows import diagnose, identify
 from tests.oracles.pinocchio_model import constant_placement
 
 from .pinocchio_floating import build_floating_pinocchio, pin_floating_torque, random_floating_parameters
@@ -399,3 +399,36 @@ def test_parquet_log_reads_as_the_csv(hopper_fit, tmp_path):
     for field in ("t", "quaternion", "q", "gyro", "accel"):
         assert np.array_equal(getattr(par, field), getattr(csv, field)), field
     assert par.tau is None and par.position is None
+
+
+@pytest.mark.slow
+def test_diagnose_names_a_sensor_offset_and_a_gain(hopper, cli):
+    """The loop on a floating base: contacts at the thigh (frame 1) and the foot; the thigh's sensor reads 5 N too
+    much along its z, the foot's 5 % too much. ``diagnose`` finds the offset from the base rows (first), the
+    foot's gain from the joint rows (absolute there: the torques are not scaled; on the base rows only relative
+    gains are seen), each within 4 sigma; on the same log without the errors it finds nothing."""
+    robot, d = hopper
+    clean = d / "sensors.csv"
+    simulate_log(robot, clean, seed=3, duration=12.0, fs=200.0, contacts={"frame1": 1, "foot": 3})
+    names = clean.read_text().split("\n", 1)[0].split(",")
+    table = np.loadtxt(clean, delimiter=",", skiprows=1)
+    table[:, names.index("frame1_fz")] += 5.0
+    for c in ("fx", "fy", "fz", "mx", "my", "mz"):
+        table[:, names.index(f"foot_{c}")] *= 1.05
+    bad = d / "sensors_bad.csv"
+    np.savetxt(bad, table, delimiter=",", header=",".join(names), comments="")
+    out = d / "diag.json"
+    cli("diagnose", str(robot.file), str(bad), "--json", str(out))
+    res = json.loads(out.read_text())["floating"]
+    by = {(c["kind"], c["frame"], c["effect"]): c for c in res["checks"]}
+    off = by[("base", "frame1", "offset")]
+    assert off["accepted"] and off["round"] == 1
+    est, std = np.array(off["estimate"]), np.array(off["std"])
+    # fz: 5 N in the scale of the foot's sensor (the base rows see relative gains: up to the 5 %)
+    assert abs(est[2] - 5.0) < 0.3
+    assert np.all(np.abs(np.delete(est, 2)) < 4 * np.delete(std, 2))
+    gain = by[("joints", "foot", "gain")]
+    assert gain["accepted"] and gain["round"] == 1
+    assert abs(gain["estimate"][0] - 0.05) < 4 * gain["std"][0]
+    assert not by[("joints", "frame1", "gain")]["accepted"]
+    assert diagnose(robot.file, [str(clean)]).found == []
