@@ -289,9 +289,13 @@ def _stack(x: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _candidate(A: NDArray[np.float64], y: NDArray[np.float64], C: NDArray[np.float64], rss0: float,
-               r0: int) -> dict[str, Any]:
+               r0: int, band: float = 1.0) -> dict[str, Any]:
     """Nested least squares: ``y ~ A`` against ``y ~ [A C]``; the F test of the added columns ([GB-gains] eq.
-    17-19 statistics, Seber & Lee 2003 sec. 4.3 for the F test) and their estimates."""
+    17-19 statistics, Seber & Lee 2003 sec. 4.3 for the F test) and their estimates.
+
+    ``band``: the share of the decimated band the decimation filter passes (``cutoff_ratio``, 0.8; 1 without
+    decimation). White noise decimated so has its spectrum flat over that share only, so the residual variance
+    is ``band`` times the level the slow columns see: the F statistic is multiplied, the covariance divided, by it."""
     A1 = np.hstack([A, C])
     r1 = _rank(A1)
     m = C.shape[1]
@@ -303,8 +307,8 @@ def _candidate(A: NDArray[np.float64], y: NDArray[np.float64], C: NDArray[np.flo
     res = y - A1 @ x
     dof = y.size - r1
     rss1 = float(res @ res)
-    F = ((rss0 - rss1) / m) / (rss1 / dof)
-    cov = rss1 / dof * np.linalg.pinv(A1.T @ A1)
+    F = band * ((rss0 - rss1) / m) / (rss1 / dof)
+    cov = rss1 / dof / band * np.linalg.pinv(A1.T @ A1)
     est = x[A.shape[1]:]
     std = np.sqrt(np.diag(cov)[A.shape[1]:])
     return {"identifiable": True, "F": float(F), "p_value": float(stats.f.sf(F, m, dof)),
@@ -338,6 +342,7 @@ def contact_checks(model: Any, rows: Sequence[FloatingRows], kind: str, signific
                            "components": ["fx", "fy", "fz", "mx", "my", "mz"] if effect == "offset" else ["g"]},
                           C[:, cols]))
     level = significance / max(len(cands), 1)
+    band = min(r.signals.settings.cutoff_ratio if r.signals.settings.n_d > 1 else 1.0 for r in rows)
     done = False
     rnd = 0
     while not done:
@@ -354,7 +359,7 @@ def contact_checks(model: Any, rows: Sequence[FloatingRows], kind: str, signific
                 entry.update(identifiable=False, reason="the base rows see the sensors' gains relative to each "
                              "other only (a common scale is the parameters' scale): the other gains are accepted")
                 continue
-            entry.update(_candidate(A, y, C, rss0, r0))
+            entry.update(_candidate(A, y, C, rss0, r0, band))
             if entry["identifiable"] and entry["effect"] == "gain":
                 gam, sg = entry["estimate"][0], entry["std"][0]
                 entry["estimate"], entry["std"] = [gam / (1 - gam)], [sg / (1 - gam) ** 2]
@@ -366,18 +371,18 @@ def contact_checks(model: Any, rows: Sequence[FloatingRows], kind: str, signific
             rnd += 1
             best[0]["accepted"], best[0]["round"] = True, rnd
             A = np.hstack([A, best[1]])
-    _final_estimates([(e, C) for e, C in cands if e["accepted"]], A, y)
+    _final_estimates([(e, C) for e, C in cands if e["accepted"]], A, y, band)
     return [e for e, _ in cands]
 
 
-def _final_estimates(accepted: list, A: NDArray[np.float64], y: NDArray[np.float64]) -> None:
+def _final_estimates(accepted: list, A: NDArray[np.float64], y: NDArray[np.float64], band: float) -> None:
     """The accepted effects' estimates and standard deviations from the last fit, with all of them (the
     accepted columns are the last of ``A``, in order)."""
     if not accepted:
         return
     x, *_ = np.linalg.lstsq(A, y, rcond=None)
     res = y - A @ x
-    cov = float(res @ res) / (y.size - _rank(A)) * np.linalg.pinv(A.T @ A)
+    cov = float(res @ res) / (y.size - _rank(A)) / band * np.linalg.pinv(A.T @ A)
     k = A.shape[1] - sum(C.shape[1] for _, C in accepted)
     for entry, C in accepted:
         m = C.shape[1]
