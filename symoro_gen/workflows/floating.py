@@ -222,6 +222,17 @@ class FloatingIdentifyResults(Results):
         out["provenance"] = provenance(self.options, self.inputs)
         return out
 
+    def _fit_text(self) -> str:
+        """The fixed-base fit's text, its per-group errors named by row group (kind or row position), not joint."""
+        if self.weighting == "row":
+            groups = list(self.row_names)
+        else:
+            groups = [g for g, on in (("base rows", self.kind != "joints"), ("joint rows", self.kind != "base")) if on]
+        text = self.fit.result.summary()
+        for k, g in enumerate(groups):
+            text = text.replace(f"joint {k + 1}: ", f"{g}: ")
+        return text
+
     def summary(self) -> str:
         """Exactly the text ``symoro-gen identify`` prints for a floating-base robot."""
         res = self.fit.result
@@ -229,7 +240,7 @@ class FloatingIdentifyResults(Results):
                 f"({' '.join(self.row_names)}), {len(res.names)} identifiable combinations of the "
                 f"{len(self.model.STANDARD_NAMES)} standard parameters (the values estimate K chi_std; "
                 f"floating.relations in the JSON)")
-        lines = [head, "", res.summary(), ""]
+        lines = [head, "", self._fit_text(), ""]
         if self.fit.not_identifiable:
             lines.append("Not identifiable from these rows: " + " ".join(self.fit.not_identifiable))
         lines.append("Relative error norm per row (" + " ".join(self.row_names) + "):")
