@@ -31,12 +31,15 @@ def options_from_args(args) -> IdentifyOptions:
         bounded_bodies=getattr(args, "bounded_bodies", False), data_format=format_from_args(args),
         geometry=getattr(args, "geometry", None), geometry_joints=getattr(args, "geometry_joints", None),
         geometry_frames=getattr(args, "geometry_frames", None),
-        positions=getattr(args, "positions", "link"))
+        positions=getattr(args, "positions", "link"), kind=getattr(args, "kind", None),
+        weighting=getattr(args, "weighting", "kind"))
 
 
 def run(args) -> int:
     """Run ``identify``: the workflow, then its outputs; 0 on success."""
     if args.report:  # before the long computation: a bad suffix or a missing matplotlib fails at once
+        if load_robot(args.robot).floating:
+            raise OptionError(f"{args.robot}: --report is not available for a floating-base robot yet (use --json)")
         check_report_path(args.report)
         require_matplotlib()
     opts = options_from_args(args)
@@ -134,6 +137,12 @@ def add_parser(sub) -> None:
                    help="side of the logged positions: link (default) or motor (q_m/N, e.g. the LWR4's): then the "
                         "declared elastic joints' link positions are q = positions - tau/K (robot file: elastic = "
                         "{K = ...}; LWR4 paper eq. 17), velocities and accelerations from them")
+    fl = p.add_argument_group("floating-base robots (base = \"floating\"; logs of docs/floating-base.md)")
+    fl.add_argument("--kind", choices=("base", "joints", "both"),
+                    help="rows identified: the 6 base-wrench rows (no joint torque needed), the joint rows, or both "
+                         "(default: both when every log has joint torques, else base)")
+    fl.add_argument("--weighting", choices=("kind", "row"), default="kind",
+                    help="WLS groups: each kind of rows (default) or each row position")
     p.add_argument("--json", help="write the results as JSON here")
     p.add_argument("--report", metavar="OUT.html|OUT.md",
                    help="write a report here: tables and plots, one self-contained .html page or .md with its "

@@ -41,7 +41,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import IdentificationError
+from ..description.mdh import joint_sign, row_transform
+from ..description.model import REVOLUTE, RobotDescription
+from ..errors import IdentificationError, ModelError
 from ..runtime.floating import FloatingModel, floating_states, numeric_base
 from .estimators import fit_ols, fit_wls, tolerance_keywords
 from .observation import ObservationSystem
@@ -51,6 +53,8 @@ from .result import IdentificationResult
 KINDS = ("base", "joints", "both")
 #: row groups of the WLS weighting: one per kind, or one per row position (6 base rows, then each joint)
 WEIGHTINGS = ("kind", "row")
+#: the rows of each kind among the ``6 + n`` rows of a sample
+ROWS = {"base": slice(0, 6), "joints": slice(6, None), "both": slice(None)}
 
 
 @dataclass(frozen=True)
@@ -124,6 +128,7 @@ class FloatingSystem:
     system: ObservationSystem
     relations: NDArray[np.float64]
     not_identifiable: tuple[str, ...]
+    columns: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,6 +139,7 @@ class FloatingIdentification:
     result: IdentificationResult
     relations: NDArray[np.float64]
     not_identifiable: tuple[str, ...]
+    columns: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
 
     def combinations(self, chi_std: ArrayLike) -> NDArray[np.float64]:
         """``K @ chi_std``: what ``result.values`` estimates, for given standard parameters."""
@@ -207,7 +213,18 @@ def floating_system(model: FloatingModel, data: FloatingMeasurements, kind: str 
     (q, dq, ddq), _ = floating_states(model.ROBOT, model.N_JOINTS, data.q, data.dq, data.ddq)
     W = model.standard_regressor(q, dq, ddq)
     Y = measured_rows(model, data, need_tau=kind != "base")
-    sel = {"base": slice(0, 6), "joints": slice(6, None), "both": slice(None)}[kind]
+    return stacked_system(model, W, Y, kind, weighting)
+
+
+def stacked_system(model: FloatingModel, W: NDArray[np.float64], Y: NDArray[np.float64], kind: str = "base",
+                   weighting: str = "kind") -> FloatingSystem:
+    """The system of ``kind`` from samples already evaluated: the standard regressor ``W`` (N, 6 + n, p) and
+    the right-hand sides ``Y`` (N, 6 + n), e.g. decimated in parallel ([GB-gains] eq. 15-16)."""
+    if kind not in KINDS:
+        raise IdentificationError(f"{model.ROBOT}: kind must be one of {KINDS}, got {kind!r}")
+    if weighting not in WEIGHTINGS:
+        raise IdentificationError(f"{model.ROBOT}: weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+    sel = ROWS[kind]
     W, Y = W[:, sel, :], Y[:, sel]
     position = np.arange(model.N_ROWS)[sel]
     if weighting == "row":
@@ -222,10 +239,21 @@ def floating_system(model: FloatingModel, data: FloatingMeasurements, kind: str 
     kept, K = numeric_base(Wr)
     if kept.size == 0:
         raise IdentificationError(f"{model.ROBOT}: the {kind} rows identify no parameter")
-    names = tuple(model.STANDARD_NAMES[i] for i in kept)
+    names = combination_names(model.STANDARD_NAMES, kept, K)
     absent = tuple(n for i, n in enumerate(model.STANDARD_NAMES) if not np.any(K[:, i]))
     system = ObservationSystem(W=Wr[:, kept], Y=Yr, names=names, joint=rows_group)
-    return FloatingSystem(kind, system, K, absent)
+    return FloatingSystem(kind, system, K, absent, kept)
+
+
+def combination_names(standard: Sequence[str], kept: NDArray[np.intp], K: NDArray[np.float64]) -> tuple[str, ...]:
+    """The identified combinations' names: a standard parameter's name where its row of ``K`` is that parameter
+    alone, else its name with ``R`` (regrouped, as the fixed-base base parameters ``XX2R``): only the first are
+    standard values (``export-urdf --params`` takes them)."""
+    out = []
+    for r, i in enumerate(kept):
+        alone = np.count_nonzero(np.abs(K[r]) > 1e-12 * np.abs(K[r]).max()) == 1 and abs(K[r, i] - 1) < 1e-12
+        out.append(standard[i] if alone else standard[i] + "R")
+    return tuple(out)
 
 
 def identify_floating(model: FloatingModel, data: FloatingMeasurements, kind: str = "base", method: str = "wls",
@@ -233,11 +261,105 @@ def identify_floating(model: FloatingModel, data: FloatingMeasurements, kind: st
     """IDIM-OLS or -WLS of ``kind``'s rows alone (or of both kinds, each weighted by its own sigma with WLS)
     on the system of :func:`floating_system`; ``tolerances``: those of the fixed-base estimators."""
     tol = tolerance_keywords("identify_floating", tolerances)
-    fs = floating_system(model, data, kind, weighting)
+    return fit_system(model, floating_system(model, data, kind, weighting), method, **tol)
+
+
+def fit_system(model: FloatingModel, fs: FloatingSystem, method: str = "wls", **tol: Any) -> FloatingIdentification:
+    """IDIM-OLS or -WLS of a system of :func:`floating_system` or :func:`stacked_system`."""
     if method == "ols":
         res = fit_ols(fs.system, **tol)
     elif method == "wls":
         res = fit_wls(fs.system, **tol)
     else:
         raise IdentificationError(f"{model.ROBOT}: method must be 'ols' or 'wls', got {method!r}")
-    return FloatingIdentification(kind, res, fs.relations, fs.not_identifiable)
+    return FloatingIdentification(fs.kind, res, fs.relations, fs.not_identifiable, fs.columns)
+
+
+def frame_number(robot: RobotDescription, frame: str) -> int:
+    """The frame ``frame`` names: the ``name`` of a ``[[frames]]`` entry, or ``frame<j>`` (``frame0``: the base)."""
+    for row in robot.rows:
+        if row.name is not None and str(row.name) == frame:
+            return row.j
+    if frame.startswith("frame") and frame[5:].isdigit() and int(frame[5:]) <= len(robot.rows):
+        return int(frame[5:])
+    names = [str(r.name) for r in robot.rows if r.name is not None]
+    raise IdentificationError(f"{robot.file or robot.name}: no frame {frame!r} (frames are named frame0..frame"
+                              f"{len(robot.rows)}" + (f" or {', '.join(names)}" if names else "") + ")")
+
+
+def frame_jacobian(robot: RobotDescription, q_joints: ArrayLike, frame: int
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(T_0c (N, 4, 4), J_c (N, 6, 6 + n))``: the pose of MDH frame ``frame`` in base axes and its Jacobian in
+    its own axes (Pinocchio's ``LOCAL``, free-flyer columns first) at joint positions ``q_joints`` (N, n).
+
+    Forward kinematics by the MDH transforms (:func:`~symoro_gen.description.mdh.row_transform`, [KK1986]);
+    the columns ([F2008] sec. 2.9): base linear velocity ``R^T``, base angular velocity ``R^T [p]x^T``;
+    a revolute joint ``i`` on the path with axis ``a_i`` (its frame's z, signed as ``q`` enters ``theta``) at
+    ``p_i``: ``R^T (a_i x (p - p_i))`` and ``R^T a_i``; a prismatic one ``R^T a_i`` and 0."""
+    qj = np.atleast_2d(np.asarray(q_joints, float))
+    N = qj.shape[0]
+    col = {r.j: k for k, r in enumerate(robot.joints)}
+    subs = robot.geometry_subs()
+    T: dict[int, NDArray[np.float64]] = {0: np.broadcast_to(np.eye(4), (N, 4, 4))}
+    path = [*robot.ancestors(frame), frame] if frame else [0]
+    for j in sorted(set(path) - {0}):
+        row = robot.row(j)
+        T[j] = T[row.ant] @ row_transform(row, subs, qj[:, col[j]] if j in col else np.zeros(N))
+    Tc = np.array(T[frame])
+    R, p = Tc[:, :3, :3], Tc[:, :3, 3]
+    Rt = np.transpose(R, (0, 2, 1))
+    J = np.zeros((N, 6, 6 + len(robot.joints)))
+    J[:, :3, :3] = Rt
+    J[:, :3, 3:6] = -Rt @ _skew(p)
+    J[:, 3:, 3:6] = Rt
+    for j in path:
+        if j not in col:
+            continue
+        a = T[j][:, :3, 2] * joint_sign(robot.row(j))
+        if robot.row(j).sigma == REVOLUTE:
+            J[:, :3, 6 + col[j]] = np.einsum("kij,kj->ki", Rt, np.cross(a, p - T[j][:, :3, 3]))
+            J[:, 3:, 6 + col[j]] = np.einsum("kij,kj->ki", Rt, a)
+        else:
+            J[:, :3, 6 + col[j]] = np.einsum("kij,kj->ki", Rt, a)
+    return Tc, J
+
+
+def _skew(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    S = np.zeros(p.shape[:-1] + (3, 3))
+    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -p[..., 2], p[..., 1], -p[..., 0]
+    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = p[..., 2], -p[..., 1], p[..., 0]
+    return S
+
+
+@dataclass(frozen=True, eq=False)
+class RelationsModel:
+    """The identified combinations of a floating-base ``identify`` JSON as a model with base parameters: its
+    ``BASE_NAMES`` the combinations' names, ``base_parameters(chi_std) = K chi_std`` with the JSON's relations ``K``
+    (``floating.relations``). What :func:`~symoro_gen.identification.physical.standard_set_from_result` needs to
+    find a physically consistent standard set reproducing them (``export-urdf/-mjcf --from``)."""
+
+    ROBOT: str
+    STANDARD_NAMES: tuple[str, ...]
+    BASE_NAMES: tuple[str, ...]
+    relations: NDArray[np.float64]
+    PAYLOAD_NAMES: tuple[str, ...] = ()
+
+    @classmethod
+    def from_result(cls, robot: RobotDescription, result: Any, source: str) -> RelationsModel:
+        """From the JSON of a floating-base identification (``source`` names it in errors)."""
+        try:
+            fl = result["floating"]
+            K = np.array(fl["relations"], float)
+            names = tuple(result["parameters"]["names"])
+            standard = tuple(fl["standard_names"])
+        except (KeyError, TypeError, ValueError):
+            raise ModelError(f"{source}: not a floating-base result of `symoro-gen identify` (no 'floating' "
+                             f"relations) for the floating-base robot {robot.file or robot.name}") from None
+        if standard != tuple(robot.standard_names) or K.shape != (len(names), len(standard)):
+            raise ModelError(f"{source}: its standard parameters ('floating.standard_names') are not those of "
+                             f"{robot.file or robot.name}")
+        return cls(robot.name, standard, names, K)
+
+    def base_parameters(self, chi_std: ArrayLike) -> NDArray[np.float64]:
+        out: NDArray[np.float64] = np.asarray(chi_std, float) @ self.relations.T
+        return out

@@ -107,6 +107,8 @@ class FloatingModel(FloatingContract):
         if not robot.floating:
             raise ValueError(f"{robot.file}: base = {robot.base!r}; FloatingModel needs base = \"floating\"")
         reg = build_floating_regressor(robot)
+        #: the description it was built from (the workflows take the model in place of its robot file)
+        self.robot = robot
         self.ROBOT = robot.name
         self.N_JOINTS = robot.n_joints
         self.N_ROWS = 6 + robot.n_joints

@@ -55,6 +55,7 @@ from .base import (
     resolve_robot,
     torque_limits,
 )
+from .floating import diagnose_floating_logs
 from .identify import check_payload
 from .reporting import ReportContent, write_report
 
@@ -281,7 +282,7 @@ def refuse_still_joints(trajectories) -> None:
 
 # ---- the workflow ---------------------------------------------------------------------------------------
 def diagnose(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLike = None, method: str = "ols",
-             options: DiagnoseOptions | None = None, **kwargs: Any) -> DiagnoseResults:
+             options: DiagnoseOptions | None = None, **kwargs: Any) -> Any:
     """Find what the declared model misses in the residual, add it, re-identify, report errors before/after.
 
     Parameters
@@ -303,6 +304,8 @@ def diagnose(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
     Returns
     -------
     DiagnoseResults
+        Or, for a floating-base robot, :class:`~symoro_gen.workflows.floating.FloatingDiagnoseResults` (the
+        contact-sensor offsets and gains per kind of rows).
     """
     opts = DiagnoseOptions.resolve("diagnose", options, dict(kwargs, method=method) if options is None else kwargs)
     if options is not None and method not in ("ols", options.method):
@@ -310,11 +313,16 @@ def diagnose(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
     return _run(robot, data, validate, loaded, opts)
 
 
-def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> DiagnoseResults:
+def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> Any:
     robot, model = resolve_robot(robot_like)
     data, validate, loaded_data = listed(data), listed(validate), listed(loaded_data)
     if not data:
         raise OptionError("diagnose: no identification data given")
+    if robot.floating:  # the contact-sensor checks per kind of rows (workflows/floating.py)
+        if validate or loaded_data or opts.payload:
+            raise OptionError(f"{robot.file or robot.name}: diagnose of a floating-base robot takes its logs, "
+                              "--cutoff, --decimate and --significance; not --validate, --loaded or --payload")
+        return diagnose_floating_logs(robot, model, data, opts)
     ident, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
     loaded, rep_l = (as_trajectories(list(loaded_data), opts.data_format, robot, loaded=True)
                      if loaded_data else ((), ()))

@@ -151,13 +151,13 @@ def _values(robot: RobotDescription, result: ResultLike, command: str) -> _Value
     """The standard and payload values, header notes and sidecar of an export from an identification (refused
     when it is another robot's: :func:`~symoro_gen.description.identity.check_result_robot`)."""
     doc, src = _result_dict(result)
-    if robot.floating:
-        raise ModelError(f"{command} --from {src}: {robot.file}: base = \"floating\": the physically consistent "
-                         "standard set from identified base parameters is for fixed bases; give the identified "
-                         "standard parameters with --params (export-urdf; docs/floating-base.md#export)")
     check_result_robot(doc, robot, option="--from", source=src, command=command)
     name = Path(src).name if isinstance(result, (str, os.PathLike)) else src
-    _, model = model_for(robot)
+    if robot.floating:  # the identified combinations and their relations K, from the result itself
+        model = importlib.import_module("symoro_gen.identification.floating").RelationsModel.from_result(
+            robot, doc, src)
+    else:
+        _, model = model_for(robot)
     nominal = dict(zip(robot.standard_names, robot.nominal_vector() or ()))
     sb, payload = _standard_set_from_result(model, doc, nominal, source=src)
     vals = sb.as_dict()

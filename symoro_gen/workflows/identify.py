@@ -30,6 +30,8 @@ from ..identification import identify as fit
 from ..identification.didim import identify_didim
 from ..identification.elastic import POSITION_SIDES, StiffnessEstimate, estimate_stiffness, link_side
 from ..identification.estimators import drop_unexcited, with_unexcited
+from ..identification.floating import KINDS as FLOATING_KINDS
+from ..identification.floating import WEIGHTINGS
 from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_laws, refine_scales
 from ..identification.geometry import (
     GEOMETRY_KINDS,
@@ -75,6 +77,7 @@ from .base import (
     resolve_robot,
     torque_limits,
 )
+from .floating import identify_floating_logs, refused_options
 from .reporting import ReportContent, build_report, write_report
 
 __all__ = ["IdentifyOptions", "IdentifyResults", "check_payload", "identify", "robot_out_refusal"]
@@ -138,6 +141,11 @@ class IdentifyOptions(Options):
     positions : {"link", "motor"}
         The logged positions are link-side (default) or motor-side ``q_m / N``: then the declared elastic
         joints' link positions are ``positions - tau / K`` (:func:`symoro_gen.identification.elastic.link_side`).
+    kind : {"base", "joints", "both"}, optional
+        A floating-base robot only: the rows identified (default ``"both"`` when every log has joint torques,
+        else ``"base"``; :mod:`symoro_gen.workflows.floating`).
+    weighting : {"kind", "row"}
+        A floating-base robot only: the WLS groups, each kind of rows or each row position.
     """
 
     method: str = "wls"
@@ -167,6 +175,8 @@ class IdentifyOptions(Options):
     geometry: str | None = None
     geometry_joints: Sequence[int] | None = None
     geometry_frames: Sequence[str] | None = None
+    kind: str | None = None
+    weighting: str = "kind"
 
     @property
     def geometry_kinds(self) -> tuple[str, ...]:
@@ -211,6 +221,10 @@ class IdentifyOptions(Options):
                 raise OptionError(f"{', '.join(given)}: only act with --method iv or didim (the closed-loop "
                                   f"simulation), not with --method {self.method}: add --method iv or didim, or "
                                   f"leave {'them' if len(given) > 1 else 'it'} out")
+        if self.kind not in (None, *FLOATING_KINDS):
+            raise OptionError(f"--kind {self.kind!r}: one of {', '.join(FLOATING_KINDS)} (floating-base robots)")
+        if self.weighting not in WEIGHTINGS:
+            raise OptionError(f"--weighting {self.weighting!r}: one of {', '.join(WEIGHTINGS)} (floating-base robots)")
         object.__setattr__(self, "payload", dict(self.payload or {}))
         if self.data_format is None:
             object.__setattr__(self, "data_format", LogFormat())
@@ -470,7 +484,7 @@ def robot_out_refusal(robot, friction_laws: Sequence[ScaleFit] = ()) -> str:
 
 
 def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLike = None,
-             method: str = "wls", options: IdentifyOptions | None = None, **kwargs: Any) -> IdentifyResults:
+             method: str = "wls", options: IdentifyOptions | None = None, **kwargs: Any) -> Any:
     """Identify a robot's base parameters (and gains) from recordings; validate on others.
 
     Parameters
@@ -491,6 +505,8 @@ def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
     Returns
     -------
     IdentifyResults
+        Or, for a floating-base robot (``base = "floating"``: logs of docs/floating-base.md, ``kind=`` the rows),
+        a :class:`~symoro_gen.workflows.floating.FloatingIdentifyResults`.
     """
     opts = IdentifyOptions.resolve("identify", options, dict(kwargs, method=method) if options is None else kwargs)
     if options is not None and method not in ("wls", options.method):
@@ -498,11 +514,21 @@ def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
     return _run(robot, data, validate, loaded, opts)
 
 
-def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> IdentifyResults:
+def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Any:
     robot, model = resolve_robot(robot_like)
     data, validate, loaded_data = listed(data), listed(validate), listed(loaded_data)
     if not data:
         raise OptionError("identify: no identification data given")
+    if robot.floating:
+        refused = refused_options(opts, opts.validate_loaded, loaded_data)
+        if refused:
+            raise OptionError(f"{robot.file or robot.name}: a floating-base robot is identified with --kind, "
+                              f"--weighting, --method ols|wls, --cutoff, --decimate and --validate; not with "
+                              f"{', '.join(refused)}")
+        return identify_floating_logs(robot, model, data, validate, opts)
+    if opts.kind is not None or opts.weighting != "kind":
+        raise OptionError(f"--kind and --weighting choose the rows of a floating-base robot; {robot.name} has a "
+                          "fixed base")
     unloaded, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
     unloaded = _positions(opts, robot, unloaded)
     held_back: tuple = ()

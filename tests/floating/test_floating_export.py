@@ -197,10 +197,12 @@ def test_export_params_apply_to_the_base_body():
         assert back.nominal.get(n, 0.0) == float(f"{new[n]:.12g}"), n  # the importer writes 12 digits
 
 
-def test_export_from_identified_base_parameters_is_refused_naming_the_file_and_option():
+def test_export_from_a_result_without_floating_relations_is_refused_naming_the_file():
+    """``--from`` takes a floating-base identification (its ``floating.relations``; tests/floating/test_cli_floating.py);
+    a result without them is refused, naming the source and the robot file."""
     robot, _ = _robot_and_values(drive=())
     for export in (export_workflow.export_urdf, export_workflow.export_mjcf):
-        with pytest.raises(ModelError, match=r"--from .*quadruped\.toml: base = \"floating\".*--params"):
+        with pytest.raises(ModelError, match=r"result.*no 'floating' relations.*quadruped\.toml"):
             export(robot, from_result={"robot": robot.name, "parameters": {"names": [], "values": []}})
 
 
