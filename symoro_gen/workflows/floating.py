@@ -77,6 +77,19 @@ def refused_options(opts: Any, validate_loaded: bool, loaded: Sequence) -> list[
     return [flag for flag, given in checks if given]
 
 
+def contact_jacobian(model: Any, robot: Any, name: str, frame: int, q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Jacobian ``(N, 6, 6 + n)`` of contact frame ``frame`` in its own axes (Pinocchio's ``LOCAL``): the
+    model's emitted kernel when the robot file declares the frame in ``contacts`` (a generated package or
+    :class:`~symoro_gen.runtime.floating.FloatingModel`), else the MDH forward kinematics of
+    :func:`~symoro_gen.identification.floating.frame_jacobian` (the same matrix; the LOCAL Jacobian does not
+    depend on the base's pose)."""
+    declared = tuple(getattr(model, "CONTACT_FRAMES", ()))
+    for key in (name, f"frame{frame}"):
+        if key in declared:
+            return np.asarray(model.frame_jacobian(key, q), float).reshape(len(q), 6, -1)
+    return frame_jacobian(robot, q[:, 7:], frame)[1]
+
+
 def experiment_rows(model: Any, robot: Any, sig: FloatingSignals, need_tau: bool) -> FloatingRows:
     """``W``, ``Y`` of one filtered recording, decimated in parallel and trimmed (module docstring)."""
     rec, st = sig.recording, sig.settings
@@ -87,7 +100,7 @@ def experiment_rows(model: Any, robot: Any, sig: FloatingSignals, need_tau: bool
             j = frame_number(robot, name)
         except ValueError as exc:
             raise DataFileError([Problem(rec.source, "header", f"{name}_fx", str(exc))]) from None
-        J = frame_jacobian(robot, sig.q[:, 7:], j)[1]
+        J = contact_jacobian(model, robot, name, j, sig.q)
         contacts.append(ContactWrench(name, wrench, jacobian=J))
         Jt = np.transpose(J, (0, 2, 1))  # (N, 6 + n, 6): J^T e_i, then J^T f
         sensor.append(np.concatenate([Jt, np.einsum("kir,kr->ki", Jt, wrench)[:, :, None]], axis=2))

@@ -228,6 +228,29 @@ def test_frame_jacobian_is_pinocchios(hopper):
             assert np.abs(T[0] - (data.oMi[1].inverse() * data.oMi[jid]).homogeneous).max() < 1e-12
 
 
+def test_declared_contacts_use_the_models_kernel(tmp_path):
+    """A contact frame the robot file declares (``contacts``) takes its Jacobian from the model's kernel, any
+    other from the MDH forward kinematics: the two routes give the same LOCAL Jacobian, whatever the base pose."""
+    from symoro_gen.loader import load_model
+    from symoro_gen.workflows.floating import contact_jacobian
+
+    f = tmp_path / "hopper.toml"
+    f.write_text(HOPPER.replace('base = "floating"\n', 'base = "floating"\ncontacts = ["foot", 2]\n', 1))
+    robot, model = load_robot(f), load_model(f)
+    assert set(model.CONTACT_FRAMES) == {"foot", "frame2"}
+    rng = np.random.default_rng(4)
+    quat = rng.normal(size=(5, 4))
+    q = np.concatenate([rng.normal(size=(5, 3)), quat / np.linalg.norm(quat, axis=1, keepdims=True),
+                        rng.uniform(-3, 3, (5, robot.n_joints))], axis=1)
+    for name, j in (("foot", 3), ("frame2", 2)):
+        J_model = contact_jacobian(model, robot, name, j, q)
+        J_mdh = frame_jacobian(robot, q[:, 7:], j)[1]
+        assert J_model.shape == J_mdh.shape == (5, 6, 6 + robot.n_joints)
+        assert np.abs(J_model - J_mdh).max() < 1e-12
+    J_other = contact_jacobian(model, robot, "frame1", 1, q)
+    assert np.abs(J_other - frame_jacobian(robot, q[:, 7:], 1)[1]).max() == 0
+
+
 def test_so3_log_inverts_exp():
     rng = np.random.default_rng(2)
     r = rng.normal(size=(20, 3))
