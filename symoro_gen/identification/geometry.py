@@ -24,7 +24,12 @@ model's regressor has the file's geometry substituted, so its torque ``tau(L + e
 Newton-Euler at the standard parameters of the current fit, :func:`standard_from_fit`) is taken out of the
 recordings (:func:`correct_lengths`) and the same Gauss-Newton (:func:`gauss_newton`, one unknown per zero and
 per length) fits ``e`` with the base parameters (:func:`fit_geometry`); which lengths torque data can see:
-:func:`length_identifiability`.
+:func:`length_identifiability`. The Gauss-Newton column of a length is the assembly (affine in the torque) of
+the torque field ``d tau / d L`` (:func:`length_torque_field`): the generated package's emitted ``dY_std/dg``
+(:mod:`symoro_gen.emit.geometry`) at the file's geometry, i.e. the first iteration, where it is exact; the central
+difference of the numeric Newton-Euler model once an iterate has moved the lengths (the emitted derivative is
+that of the nominal geometry only), so the last linearisation (sigma, the stopping test) is the derivative at
+the estimate.
 
 The corrected robot file (:func:`corrected_robot_text`): the fitted zeros added to the constant part of the
 frames' ``theta`` (revolute) or ``r`` (prismatic): ``theta = "q"`` becomes ``theta = "q + q0"``, the rest of the
