@@ -46,6 +46,7 @@ from functools import partial
 from typing import Any
 
 import numpy as np
+from sympy import sympify
 
 from ..description.mdh import row_values
 from ..description.rewrite import RobotText, format_number
@@ -962,6 +963,27 @@ def _lengthened(robot, lengths: Sequence[tuple[int, str]], values: Sequence[floa
     return out
 
 
+_NUMERIC: dict = {}   # id(robot) -> (robot, the same robot with its geometry substituted)
+
+
+def numeric_geometry(robot):
+    """``robot`` with its geometric constants substituted into the MDH rows (numbers and the joint variables
+    only, ``values`` empty): the same numeric Newton-Euler torque (:func:`inverse_dynamics` substitutes the same
+    values), without the symbolic substitution on every call, which costs more than the recursion on a few
+    thousand samples. Cached per robot (the last few)."""
+    got = _NUMERIC.get(id(robot))
+    if got is not None and got[0] is robot:
+        return got[1]
+    subs = robot.geometry_subs()
+    fields = ("gamma", "b", "alpha", "d", "theta", "r")
+    rows = tuple(dc_replace(r, **{f: sympify(getattr(r, f)).xreplace(subs) for f in fields}) for r in robot.rows)
+    out = dc_replace(robot, rows=rows, values={})
+    if len(_NUMERIC) > 16:
+        _NUMERIC.clear()
+    _NUMERIC[id(robot)] = (robot, out)
+    return out
+
+
 def correct_lengths(model: IdentificationModel, robot, trajectories: Sequence[Any], options: Any,
                     lengths: Sequence[tuple[int, str]], values: Sequence[float] | np.ndarray, chi_std: np.ndarray,
                     chi_payload: np.ndarray | None = None) -> tuple[Any, ...]:
@@ -972,7 +994,7 @@ def correct_lengths(model: IdentificationModel, robot, trajectories: Sequence[An
     are left as recorded."""
     if not len(lengths) or not np.any(np.asarray(values) != 0):
         return tuple(trajectories)
-    moved = _lengthened(robot, lengths, values)
+    moved, robot = numeric_geometry(_lengthened(robot, lengths, values)), numeric_geometry(robot)
     out = []
     for tr in trajectories:
         st = observation_settings(tr, options)
@@ -1000,7 +1022,7 @@ def length_torque_field(model: IdentificationModel, robot, trajectories: Sequenc
     nominal = not np.any(np.asarray(values, float) != 0)
     emitted = emitted_length_column(model, robot, chi_std, f, fld) if nominal else None
     moved = _lengthened(robot, lengths, values)
-    plus, minus = perturbed_robot(moved, f, fld, h), perturbed_robot(moved, f, fld, -h)
+    plus, minus = (numeric_geometry(perturbed_robot(moved, f, fld, x)) for x in (h, -h))
     out = []
     for tr in trajectories:
         st = observation_settings(tr, options)
