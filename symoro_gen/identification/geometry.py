@@ -64,7 +64,7 @@ __all__ = ["GEOMETRY_KINDS", "LENGTH_VISIBILITY_TOL", "MAX_LENGTH_M", "MAX_LENGT
            "fit_geometry", "gauss_newton", "length_identifiability", "length_identifiability_text",
            "length_plausible", "parse_lengths", "standard_from_fit", "JOINT_ZERO_STEP", "LENGTH_FIELDS", "length_sensitivity", "length_visibility", "perturbed_robot", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
            "add_zeros", "corrected_robot_text", "fit_zeros", "joint_zero_column", "joint_zero_secant", "joint_zero_visibility",
-           "regressor_secant", "revolute_joints", "shift_zeros", "visible_zero_joints", "zero_identifiability",
+           "regressor_secant", "revolute_joints", "emitted_length_column", "length_torque_field", "numeric_geometry", "Tangent", "shift_zeros", "visible_zero_joints", "zero_identifiability",
            "zero_shares"]
 
 #: the geometric parameters ``identify --geometry`` can fit
