@@ -14,7 +14,7 @@ torque(q, dq, ddq, chi_std[, chi_payload]) -> (N, n) joint torques
 nominal_parameters(), nominal_payload() -> nominal vectors of the robot file, or None
 casadi_regressor()                    -> casadi.Function (q, dq, ddq) -> base regressor (n x nb)
 build()                               -> compile the C kernels of regressor_sda10f.c now
-geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry (not generated for this robot: manifest.json, geometry_derivative.omitted)
+geometry_derivative(q, dq, ddq)       -> (N, n, n_st, n_g) dY_std/dg at the nominal geometry (GEOMETRY_NAMES)
 geometry_columns(q, dq, ddq, chi_std) -> (N, n, n_g) the columns (dY_std/dg) chi_std
 GEOMETRY_NAMES                        -> the geometric constants g (d<j>, r<j>, alpha<j>, theta<j>)
 BACKEND                               -> "c" or "numpy" (see symoro_gen.runtime.GeneratedModel.backend)
@@ -38,7 +38,7 @@ PAYLOAD_NAMES = ()
 GEOMETRY = {'D2': 0.09996, 'RL2': 0.253, 'RL3': -0.0123, 'RL4': 0.35, 'RL5': 0.007, 'RL6': -0.3486, 'RL7': -0.007}
 GRAVITY = (0.0, 0.0, -9.81)
 # geometric constants of geometry_derivative (imported from _geometry.py on first use)
-GEOMETRY_NAMES = ()
+GEOMETRY_NAMES = ('alpha1', 'd2', 'r2', 'alpha2', 'theta2', 'd3', 'r3', 'alpha3', 'theta3', 'd4', 'r4', 'alpha4', 'theta4', 'd5', 'r5', 'alpha5', 'theta5', 'd6', 'r6', 'alpha6', 'theta6', 'd7', 'r7', 'alpha7', 'theta7', 'd8', 'r8', 'alpha8', 'theta8', 'd9', 'r9', 'alpha9', 'theta9', 'd10', 'r10', 'alpha10', 'theta10', 'd11', 'r11', 'alpha11', 'theta11', 'd12', 'r12', 'alpha12', 'theta12', 'd13', 'r13', 'alpha13', 'theta13', 'd14', 'r14', 'alpha14', 'theta14', 'd15', 'r15', 'alpha15', 'theta15')
 ROBOT_FILE_SHA256 = 'd2380cfcd43f270cfd1b86d858465be8693842b563492fec5ecf753f9a2f0e35'
 _NOMINAL = None
 _NOMINAL_PAYLOAD = None
@@ -204,7 +204,7 @@ _RELATIONS = (
 
 _MODEL = _GeneratedModel(_Path(__file__).resolve().parent, ROBOT, N_JOINTS, STANDARD_NAMES, BASE_NAMES,
                          PAYLOAD_NAMES, _RELATIONS, _kernels, _casadi.base_casadi,
-                         geometry=None)
+                         geometry=(__name__ + "._geometry", GEOMETRY_NAMES))
 geometry_derivative = _MODEL.geometry_derivative
 geometry_columns = _MODEL.geometry_columns
 casadi_geometry_columns = _MODEL.casadi_geometry_columns

@@ -37,6 +37,7 @@ from ..errors import SymoroError
 from ..identification.geometry import (
     JOINT_ZERO_STEP,
     VISIBILITY_TOL,
+    emitted_length_column,
     joint_zero_column,
     joint_zero_secant,
     joint_zero_visibility,
@@ -317,31 +318,6 @@ def length_column(frame, ctx_model: IdentificationModel, theta, f: int, fld: str
         return d[:, :, None]
 
     return frame.full_rate_columns_batched(fn, 1)
-
-
-def emitted_length_column(model: IdentificationModel, robot, chi_std: np.ndarray, f: int, fld: str):
-    """``(q, dq, ddq) -> (d tau / d L) chi`` (shape (N, n)) from the generated package's emitted derivative of the
-    standard regressor (``geometry_columns``, :mod:`symoro_gen.emit.geometry`), or None when the model has none
-    (a model built in memory, a wrapper, a package whose manifest omits it) or its standard parameters are not the
-    description's: the caller then differentiates the numeric Newton-Euler model. A constant the generator
-    dropped (derivative identically 0) gives zeros. Without payload only: the emitted derivative has no payload
-    columns."""
-    columns = getattr(model, "geometry_columns", None)
-    names = tuple(getattr(model, "GEOMETRY_NAMES", ()))
-    std = tuple(getattr(model, "STANDARD_NAMES", ()))
-    if columns is None or not names or set(std) != set(robot.standard_names):
-        return None
-    by = dict(zip(robot.standard_names, chi_std))
-    chi_m = np.array([float(by[nm]) for nm in std])
-    name = f"{fld}{int(f)}"
-    k = names.index(name) if name in names else None
-
-    def col(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
-        if k is None:
-            return np.zeros(np.shape(q))
-        return np.asarray(columns(q, dq, ddq, chi_m))[:, :, k]
-
-    return col
 
 
 def describe_length(frame: int, fld: str, value: float, std: float) -> dict:

@@ -24,7 +24,12 @@ model's regressor has the file's geometry substituted, so its torque ``tau(L + e
 Newton-Euler at the standard parameters of the current fit, :func:`standard_from_fit`) is taken out of the
 recordings (:func:`correct_lengths`) and the same Gauss-Newton (:func:`gauss_newton`, one unknown per zero and
 per length) fits ``e`` with the base parameters (:func:`fit_geometry`); which lengths torque data can see:
-:func:`length_identifiability`.
+:func:`length_identifiability`. The Gauss-Newton column of a length is the assembly (affine in the torque) of
+the torque field ``d tau / d L`` (:func:`length_torque_field`): the generated package's emitted ``dY_std/dg``
+(:mod:`symoro_gen.emit.geometry`) at the file's geometry, i.e. the first iteration, where it is exact; the central
+difference of the numeric Newton-Euler model once an iterate has moved the lengths (the emitted derivative is
+that of the nominal geometry only), so the last linearisation (sigma, the stopping test) is the derivative at
+the estimate.
 
 The corrected robot file (:func:`corrected_robot_text`): the fitted zeros added to the constant part of the
 frames' ``theta`` (revolute) or ``r`` (prismatic): ``theta = "q"`` becomes ``theta = "q + q0"``, the rest of the
@@ -41,6 +46,7 @@ from functools import partial
 from typing import Any
 
 import numpy as np
+from sympy import sympify
 
 from ..description.mdh import row_values
 from ..description.rewrite import RobotText, format_number
@@ -58,7 +64,7 @@ __all__ = ["GEOMETRY_KINDS", "LENGTH_VISIBILITY_TOL", "MAX_LENGTH_M", "MAX_LENGT
            "fit_geometry", "gauss_newton", "length_identifiability", "length_identifiability_text",
            "length_plausible", "parse_lengths", "standard_from_fit", "JOINT_ZERO_STEP", "LENGTH_FIELDS", "length_sensitivity", "length_visibility", "perturbed_robot", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
            "add_zeros", "corrected_robot_text", "fit_zeros", "joint_zero_column", "joint_zero_secant", "joint_zero_visibility",
-           "regressor_secant", "revolute_joints", "shift_zeros", "visible_zero_joints", "zero_identifiability",
+           "regressor_secant", "revolute_joints", "emitted_length_column", "length_torque_field", "numeric_geometry", "Tangent", "shift_zeros", "visible_zero_joints", "zero_identifiability",
            "zero_shares"]
 
 #: the geometric parameters ``identify --geometry`` can fit
@@ -481,12 +487,21 @@ def _weights(res: Any, S: ObservationSystem) -> np.ndarray:
     return w
 
 
+#: ``(c, g, fit, S) -> column c of d (W chi - Y) / d g on the rows of S``, or None for the central difference
+Tangent = Callable[[int, np.ndarray, Any, ObservationSystem], "np.ndarray | None"]
+
+
 def _jacobian(systems_at: GeneralSystemsAt, res: Any, g: np.ndarray, S: ObservationSystem, h: float,
-              labels: Sequence[str]) -> np.ndarray:
-    """``d (W chi - Y) / d g`` on the rows of ``S`` at the fit ``res``: central differences of the assembled
-    prediction minus the assembled measurement (a joint zero moves the angles, a length the torque)."""
+              labels: Sequence[str], tangent: Tangent | None = None) -> np.ndarray:
+    """``d (W chi - Y) / d g`` on the rows of ``S`` at the fit ``res``: the column ``tangent`` gives, else central
+    differences of the assembled prediction minus the assembled measurement (a joint zero moves the angles, a
+    length the torque)."""
     D = np.zeros((S.W.shape[0], g.size))
     for c in range(g.size):
+        col = tangent(c, g, res, S) if tangent is not None else None
+        if col is not None:
+            D[:, c] = col
+            continue
         e = np.zeros(g.size)
         e[c] = h
         Sp, Sm = _stacked(*systems_at(g + e, res)), _stacked(*systems_at(g - e, res))
@@ -499,11 +514,13 @@ def _jacobian(systems_at: GeneralSystemsAt, res: Any, g: np.ndarray, S: Observat
 
 
 def gauss_newton(systems_at: GeneralSystemsAt, fit_at: FitAt, labels: Sequence[str], *, max_iterations: int = 20,
-                 step_fraction: float = STEP_FRACTION, h: float = ASSEMBLY_STEP) -> GaussNewton:
+                 step_fraction: float = STEP_FRACTION, h: float = ASSEMBLY_STEP,
+                 tangent: Tangent | None = None) -> GaussNewton:
     """Gauss-Newton on geometric corrections ``g`` (one per label), alternating with the linear fit of ``chi``.
 
     At each iteration: ``chi`` fitted at the current ``g``; the sensitivity ``D_c = d (W chi - Y)/d g_c`` by a
-    central difference of the assembled rows (step ``h``); ``[W, D]`` solved for the corrections on the rows
+    central difference of the assembled rows (step ``h``), or the column ``tangent`` returns (the link lengths:
+    :func:`length_tangent`); ``[W, D]`` solved for the corrections on the rows
     weighted as the fit weights them (WLS: ``1/sigma_j``); a step taken only when the weighted residual of the
     linear fit at the new ``g`` does not rise (halved up to :data:`MAX_HALVINGS` times otherwise: Gauss-Newton
     with step halving, Dennis & Schnabel 1983, ch. 6); stop when every ``|step| <= step_fraction sigma``.
@@ -524,7 +541,7 @@ def gauss_newton(systems_at: GeneralSystemsAt, fit_at: FitAt, labels: Sequence[s
         else:
             su, sl, res = cached
         S = _stacked(su, sl)
-        D = _jacobian(systems_at, res, g, S, h, labels)
+        D = _jacobian(systems_at, res, g, S, h, labels, tangent)
         w = _weights(res, S)
         cols = np.flatnonzero(np.linalg.norm(S.W, axis=0) > 0)
         A = np.hstack([S.W[:, cols], D]) * w[:, None]
@@ -658,6 +675,32 @@ def length_sensitivity(robot, chi_std, q, dq, ddq, frame: int, fld: str, *, h: f
     return (np.asarray(plus) - np.asarray(minus)) / (2 * h)
 
 
+def emitted_length_column(model: IdentificationModel, robot, chi_std: np.ndarray, f: int, fld: str
+                          ) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None:
+    """``(q, dq, ddq) -> (d tau / d L) chi`` (shape (N, n)) from the generated package's emitted derivative of the
+    standard regressor at the nominal geometry (``geometry_columns``, :mod:`symoro_gen.emit.geometry`), or None
+    when the model has none (a model built in memory, a wrapper, a package whose manifest omits it) or its
+    standard parameters are not the description's: the caller then differentiates the numeric Newton-Euler
+    model (:func:`length_sensitivity`). A constant the generator dropped (derivative identically 0) gives zeros.
+    Without payload only: the emitted derivative has no payload columns."""
+    columns = getattr(model, "geometry_columns", None)
+    names = tuple(getattr(model, "GEOMETRY_NAMES", ()))
+    std = tuple(getattr(model, "STANDARD_NAMES", ()))
+    if columns is None or not names or set(std) != set(robot.standard_names):
+        return None
+    by = dict(zip(robot.standard_names, chi_std))
+    chi_m = np.array([float(by[nm]) for nm in std])
+    name = f"{fld}{int(f)}"
+    k = names.index(name) if name in names else None
+
+    def col(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        if k is None:
+            return np.zeros(np.shape(q))
+        return np.asarray(columns(q, dq, ddq, chi_m))[:, :, k]
+
+    return col
+
+
 def length_visibility(robot, frame: int, fld: str, *, rng: np.random.Generator | None = None,
                       n_samples: int = 30, n_theta: int = 3) -> float:
     """Share of the length sensitivity's norm outside the span of the standard regressor at the nominal
@@ -786,6 +829,16 @@ def _massless(robot, frame: int) -> bool:
     return True
 
 
+def _nominal_length_column(robot, model: IdentificationModel | None, chi: np.ndarray, q, dq, ddq, frame: int,
+                           fld: str) -> np.ndarray:
+    """``d tau / d L`` at the nominal geometry: the emitted derivative of ``model`` (:func:`emitted_length_column`)
+    when it has one, else the central difference of the numeric Newton-Euler model (:func:`length_sensitivity`)."""
+    emitted = emitted_length_column(model, robot, chi, frame, fld) if model is not None else None
+    if emitted is not None:
+        return emitted(q, dq, ddq)
+    return length_sensitivity(robot, chi, q, dq, ddq, frame, fld)
+
+
 def _length_shares(robot, tol: float, rng: np.random.Generator, n_samples: int, n_theta: int,
                    model: IdentificationModel | None = None) -> tuple[LengthVisibility, ...]:
     n = robot.n_joints
@@ -806,10 +859,8 @@ def _length_shares(robot, tol: float, rng: np.random.Generator, n_samples: int, 
             out.append(LengthVisibility(frame, fld, 0.0, False, LENGTH_ZERO_REASON))
             continue
         shares, zero, cols = [], True, []
-        plus, minus = perturbed_robot(robot, frame, fld, 1e-6), perturbed_robot(robot, frame, fld, -1e-6)
         for chi, B in zip(chis, bases):
-            col = ((inverse_dynamics(plus, q, dq, ddq, chi) - inverse_dynamics(minus, q, dq, ddq, chi))
-                   / 2e-6).reshape(-1)
+            col = _nominal_length_column(robot, model, chi, q, dq, ddq, frame, fld).reshape(-1)
             cols.append(col)
             nc = float(np.linalg.norm(col))
             if nc <= 1e-9 * max(float(np.linalg.norm(W @ chi)), 1e-300):
@@ -871,6 +922,24 @@ def parse_lengths(spec: Sequence[str] | None, robot, vis: Sequence[LengthVisibil
     return tuple(out)
 
 
+_PINV: dict = {}   # id(model) -> (model, pinv of its base-from-standard map): constant, computed once
+
+
+def _base_pinv(model: IdentificationModel) -> np.ndarray:
+    """``pinv(K)`` of the model's base-from-standard map ``K`` (base, standard), computed once per model."""
+    got = _PINV.get(id(model))
+    if got is not None and got[0] is model:
+        return got[1]
+    K = np.asarray(model.base_parameters(np.eye(len(tuple(model.STANDARD_NAMES)))), float).T   # (base, standard)
+    if K.shape[0] != len(tuple(model.BASE_NAMES)):
+        raise IdentificationError(f"{model.ROBOT}: the base parameters of the model ({len(tuple(model.BASE_NAMES))}) "
+                                  f"are not its base_parameters map's ({K.shape[0]}): no standard parameters for "
+                                  "the length sensitivity (a declared friction law replaces base columns)")
+    P = np.linalg.pinv(K)
+    _PINV[id(model)] = (model, P)
+    return P
+
+
 def standard_from_fit(model: IdentificationModel, robot, theta: Mapping[str, float]
                       ) -> tuple[np.ndarray, np.ndarray | None]:
     """Standard parameters (``robot.standard_names`` order) whose base parameters are the fit's (minimum norm:
@@ -878,13 +947,8 @@ def standard_from_fit(model: IdentificationModel, robot, theta: Mapping[str, flo
     Any other choice differs by a null-space vector whose length sensitivity lies in the span of the
     regressor, which the linear part of the fit absorbs."""
     std_names = tuple(model.STANDARD_NAMES)
-    K = np.asarray(model.base_parameters(np.eye(len(std_names))), float).T   # (base, standard)
-    if K.shape[0] != len(tuple(model.BASE_NAMES)):
-        raise IdentificationError(f"{model.ROBOT}: the base parameters of the model ({len(tuple(model.BASE_NAMES))}) "
-                                  f"are not its base_parameters map's ({K.shape[0]}): no standard parameters for "
-                                  "the length sensitivity (a declared friction law replaces base columns)")
     chi_b = np.array([float(theta.get(nm, 0.0)) for nm in model.BASE_NAMES])
-    chi = np.linalg.pinv(K) @ chi_b
+    chi = _base_pinv(model) @ chi_b
     by = dict(zip(std_names, chi))
     chi_std = np.array([float(by.get(nm, 0.0)) for nm in robot.standard_names])
     pay = tuple(robot.payload_names)
@@ -899,6 +963,27 @@ def _lengthened(robot, lengths: Sequence[tuple[int, str]], values: Sequence[floa
     return out
 
 
+_NUMERIC: dict = {}   # id(robot) -> (robot, the same robot with its geometry substituted)
+
+
+def numeric_geometry(robot):
+    """``robot`` with its geometric constants substituted into the MDH rows (numbers and the joint variables
+    only, ``values`` empty): the same numeric Newton-Euler torque (:func:`inverse_dynamics` substitutes the same
+    values), without the symbolic substitution on every call, which costs more than the recursion on a few
+    thousand samples. Cached per robot (the last few)."""
+    got = _NUMERIC.get(id(robot))
+    if got is not None and got[0] is robot:
+        return got[1]
+    subs = robot.geometry_subs()
+    fields = ("gamma", "b", "alpha", "d", "theta", "r")
+    rows = tuple(dc_replace(r, **{f: sympify(getattr(r, f)).xreplace(subs) for f in fields}) for r in robot.rows)
+    out = dc_replace(robot, rows=rows, values={})
+    if len(_NUMERIC) > 16:
+        _NUMERIC.clear()
+    _NUMERIC[id(robot)] = (robot, out)
+    return out
+
+
 def correct_lengths(model: IdentificationModel, robot, trajectories: Sequence[Any], options: Any,
                     lengths: Sequence[tuple[int, str]], values: Sequence[float] | np.ndarray, chi_std: np.ndarray,
                     chi_payload: np.ndarray | None = None) -> tuple[Any, ...]:
@@ -909,7 +994,7 @@ def correct_lengths(model: IdentificationModel, robot, trajectories: Sequence[An
     are left as recorded."""
     if not len(lengths) or not np.any(np.asarray(values) != 0):
         return tuple(trajectories)
-    moved = _lengthened(robot, lengths, values)
+    moved, robot = numeric_geometry(_lengthened(robot, lengths, values)), numeric_geometry(robot)
     out = []
     for tr in trajectories:
         st = observation_settings(tr, options)
@@ -920,6 +1005,41 @@ def correct_lengths(model: IdentificationModel, robot, trajectories: Sequence[An
             tau[st.edge_samples + a:st.edge_samples + b] -= d
         out.append(dc_replace(tr, tau=tau))
     return tuple(out)
+
+
+def length_torque_field(model: IdentificationModel, robot, trajectories: Sequence[Any], options: Any,
+                        lengths: Sequence[tuple[int, str]], values: Sequence[float] | np.ndarray, i: int,
+                        chi_std: np.ndarray, chi_payload: np.ndarray | None = None, *, h: float = 1e-6
+                        ) -> tuple[np.ndarray, ...]:
+    """Per recording, ``d tau / d L_i`` of length ``i`` at the lengths ``L_file + values`` (shape of ``tau``;
+    zero on the edge samples the assembly drops), evaluated on the band-pass kinematics as
+    :func:`correct_lengths` evaluates the torque it takes out. At the nominal geometry (every ``values`` 0) on
+    an unloaded recording it is the generated package's emitted derivative (:func:`emitted_length_column`: exact,
+    no difference step); elsewhere (the lengths moved by an iterate, a loaded payload, a package without the
+    derivative) the central difference (step ``h`` [m]) of the numeric Newton-Euler torque at ``L_file + values``,
+    the column the central difference of the assembled rows in :func:`gauss_newton` took before."""
+    f, fld = lengths[i]
+    nominal = not np.any(np.asarray(values, float) != 0)
+    emitted = emitted_length_column(model, robot, chi_std, f, fld) if nominal else None
+    moved = _lengthened(robot, lengths, values)
+    plus, minus = (numeric_geometry(perturbed_robot(moved, f, fld, x)) for x in (h, -h))
+    out = []
+    for tr in trajectories:
+        st = observation_settings(tr, options)
+        T = np.zeros(np.shape(tr.tau))
+        pay = chi_payload if tr.loaded else None
+        for a, b, q, dq, ddq in iter_kinematics(model, tr, options, st):
+            if emitted is not None and pay is None:
+                d = emitted(q, dq, ddq)
+            else:
+                d = (inverse_dynamics(plus, q, dq, ddq, chi_std, pay) - inverse_dynamics(minus, q, dq, ddq, chi_std, pay)) / (2 * h)
+            T[st.edge_samples + a:st.edge_samples + b] = d
+        out.append(T)
+    return tuple(out)
+
+
+def _minus_torque(trajectories: Sequence[Any], fields: Sequence[np.ndarray], s: float) -> tuple[Any, ...]:
+    return tuple(dc_replace(tr, tau=np.asarray(tr.tau, float) - s * T) for tr, T in zip(trajectories, fields))
 
 
 AssembleAt = Callable[[Sequence[Any], Sequence[Any]], tuple[ObservationSystem, ObservationSystem | None]]
@@ -966,9 +1086,35 @@ def fit_geometry(model: IdentificationModel, robot, problem: GeometryProblem, as
         return assemble_at(problem.corrected(model, robot, problem.unloaded, g, chi),
                            problem.corrected(model, robot, problem.loaded, g, chi))
 
+    shifted: dict = {}   # the recordings at the zeros of g, no length torque taken out, and their rows
+
+    def tangent(c: int, g: np.ndarray, res: Any, S: ObservationSystem) -> np.ndarray | None:
+        """Column ``c`` of a length: ``A T`` of the assembly's linear map ``A`` of the torque and the length's
+        torque field ``T`` (:func:`length_torque_field`), as the rows of the recordings with ``s T`` taken out
+        minus those without, over ``s``: the assembly is affine in the torque, so this forward difference is
+        exact whatever ``s`` (no truncation error), and the recordings need not be corrected first."""
+        if c < len(js) or res is None:
+            return None
+        key = g[:len(js)].tobytes()
+        if shifted.get("key") != key:
+            tu, tl = (problem.corrected(model, robot, t, g, None) for t in (problem.unloaded, problem.loaded))
+            shifted.update(key=key, tu=tu, tl=tl, S=_stacked(*assemble_at(tu, tl)))
+        tu, tl, S0 = shifted["tu"], shifted["tl"], shifted["S"]
+        chi, pay = standard_from_fit(model, robot, res.parameter_map())
+        i = c - len(js)
+        fu, fl = (length_torque_field(model, robot, t, problem.options, ls, g[len(js):], i, chi, pay) for t in (tu, tl))
+        s = ASSEMBLY_STEP
+        Sp = _stacked(*assemble_at(_minus_torque(tu, fu, s), _minus_torque(tl, fl, s)))
+        for X in (S0, Sp):
+            if X.W.shape != S.W.shape or not np.array_equal(X.joint, S.joint):
+                raise IdentificationError(f"--geometry: the rows selected change with {labels[c]} "
+                                          "(row selection by torque saturation?)")
+        return ((res.predict(Sp) - res.scaled_measurements(Sp)) - (res.predict(S0) - res.scaled_measurements(S0))) / s
+
     if labels:
         # the lengths are in metres, the zeros in radians: the same difference step suits both (ASSEMBLY_STEP)
-        gn = gauss_newton(systems_at, fit_at, labels, max_iterations=max_iterations, step_fraction=step_fraction)
+        gn = gauss_newton(systems_at, fit_at, labels, max_iterations=max_iterations, step_fraction=step_fraction,
+                          tangent=tangent if ls else None)
         g, sd, it, conv, steps = gn.g, gn.std, gn.iterations, gn.converged, gn.steps
         chi = standard_from_fit(model, robot, gn.fit.parameter_map()) if ls else (None, None)
     else:

@@ -17,7 +17,9 @@ import sympy as sp
 
 from symoro_gen.description import load_robot
 from symoro_gen.dynamics.numeric import inverse_dynamics
+from symoro_gen.emit import geometry as emit_geometry
 from symoro_gen.emit.geometry import geometry_files
+from symoro_gen.emit.package import emit_robot
 from symoro_gen.errors import ModelError
 from symoro_gen.loader import import_package
 from symoro_gen.runtime import ccompile
@@ -55,7 +57,8 @@ def _case(name: str, seed: int = 0, N: int = 6):
     return robot, q, dq, ddq, chi
 
 
-@pytest.mark.parametrize("name", ["scara", "rx90", "tx40", pytest.param("lwr4", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("name", ["scara", "rx90", "tx40", pytest.param("lwr4", marks=pytest.mark.slow),
+                                  pytest.param("sda10f", marks=pytest.mark.slow)])
 def test_columns_match_central_differences_of_numeric_newton_euler(name):
     """(dY_std/dg) chi == (tau(g + h) - tau(g - h)) / 2h of the numeric Newton-Euler model (no symbolic code),
     every kept constant to 1e-6 relative; every dropped constant has no effect on the torque."""
@@ -139,18 +142,24 @@ def test_numpy_c_and_casadi_agree(name, tmp_path, monkeypatch):
     assert np.abs(Gx - Gn).max() <= 1e-10 * scale
 
 
-def test_dropped_constants_and_manifest():
+def test_dropped_constants_and_manifest(monkeypatch, tmp_path):
     """The base frame's own offsets (d1, r1 and theta1, with gravity along z0) move the whole robot without
-    changing its dynamics: dropped, and listed in the manifest; a robot with more frames than the limit has
-    no derivative, and says why."""
+    changing its dynamics: dropped, and listed in the manifest; every shipped robot has the derivative (the
+    SDA10F's 15 frames are within the limit); a robot with more frames than the limit has none, and says why."""
     man = json.loads((ROOT / "generated" / "rx90" / "manifest.json").read_text())["geometry_derivative"]
     assert {"d1", "r1", "theta1"} <= set(man["dropped"])
     assert "alpha1" not in man["dropped"]  # tilting joint 1's axis changes the gravity torque
     assert set(man["names"]).isdisjoint(man["dropped"])
-    big = json.loads((ROOT / "generated" / "sda10f" / "manifest.json").read_text())["geometry_derivative"]
-    assert "omitted" in big
+    for pkg in sorted((ROOT / "generated").iterdir()):
+        if (pkg / "manifest.json").exists():
+            geo = json.loads((pkg / "manifest.json").read_text())["geometry_derivative"]
+            assert "omitted" not in geo and (pkg / geo["c_file"]).exists(), pkg.name
+    monkeypatch.setattr(emit_geometry, "MAX_FRAMES", 3)
+    emit_robot(load_robot("scara"), tmp_path)
+    small = json.loads((tmp_path / "scara" / "manifest.json").read_text())["geometry_derivative"]
+    assert "more than 3" in small["omitted"] and not (tmp_path / "scara" / "geometry_scara.c").exists()
     with pytest.raises(ModelError, match="no geometry derivative"):
-        import_package(ROOT / "generated" / "sda10f").geometry_derivative(np.zeros(15), np.zeros(15), np.zeros(15))
+        import_package(tmp_path / "scara").geometry_derivative(np.zeros(4), np.zeros(4), np.zeros(4))
 
 
 def test_generation_is_deterministic():
