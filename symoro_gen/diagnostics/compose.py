@@ -295,7 +295,7 @@ class Composed:
             X[rows, k] = E[:, 0] * ((x - x.mean()) / sd if sd > 0 else 0.0)
         return X
 
-    def magnitude(self, sig: RowSignals, coefficients: Sequence[float]) -> dict[str, float]:
+    def magnitude(self, sig: RowSignals, coefficients: Sequence[float] | np.ndarray) -> dict[str, float]:
         """The size of the fitted term on the joint's rows of ``sig``, in the units of its plain kind's prior
         (:func:`.plausibility.effect_plausibility`): ``{"amplitude": A}`` for a ripple - ``A`` the 98th
         percentile over the rows of the local amplitude ``|(a_s m + p_s, a_c m + p_c)|`` of ``sin k q_j, cos k
