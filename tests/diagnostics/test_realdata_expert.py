@@ -54,6 +54,11 @@ _WORSE = {
             "global OLS residual); with the expert's weights the declared model itself gives j1 2.955 and j4 0.159 "
             "(j4 at the edge of 2 SE); no candidate passes at 100 Hz (the tanh law of j1 lowers the friction "
             "stage's CV error 11 %, inside the fold scatter; j4's gain sits in 3 of 20 time blocks, p 0.06)",
+    "lwr4": "loop worse than the expert under WLS on joint 4, raw metric, at the edge of the noise band (rel^2 "
+            "+3.3e-5 against 2 SE 3.1e-5; 0.019 against 0.018): since composed effects are rated on their magnitude "
+            "joint 7 gets a spring instead of the q1-modulated ripple, the shared base parameters move and joint 4's "
+            "block SE halves; no effect of the loop is on joint 4 (docs/results.md, the composed ripple's magnitude "
+            "prior on the LWR4)",
 }
 
 
