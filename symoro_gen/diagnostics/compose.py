@@ -295,6 +295,33 @@ class Composed:
             X[rows, k] = E[:, 0] * ((x - x.mean()) / sd if sd > 0 else 0.0)
         return X
 
+    def magnitude(self, sig: RowSignals, coefficients: Sequence[float] | np.ndarray) -> dict[str, float]:
+        """The size of the fitted term on the joint's rows of ``sig``, in the units of its plain kind's prior
+        (:func:`.plausibility.effect_plausibility`): ``{"amplitude": A}`` for a ripple - ``A`` the 98th
+        percentile over the rows of the local amplitude ``|(a_s m + p_s, a_c m + p_c)|`` of ``sin k q_j, cos k
+        q_j`` (``a``: the modulated coefficients, ``m`` the standardised signal, ``p`` the plain coefficients
+        when the term carries them, the model lacking the plain effect) -, ``{"torque": T}`` for the other effects,
+        ``T`` the 98th percentile of the torque ``|E (a m + p)|`` the term adds (``E`` the effect's column:
+        ``1``, ``sign dq_j``, ``dq_j``, ``ddq_j``). The 98th percentile, as the joint's torque range ``tau98``
+        it is judged against. ``coefficients``: the modulated ones (:meth:`names` order), then the plain ones
+        if any. Empty when the signal cannot be evaluated on ``sig`` (a model torque or temperature
+        missing) or the joint has no rows."""
+        rows = np.flatnonzero(sig.joint == self.joint)
+        k = len(self.names())
+        b = np.asarray(coefficients, float)
+        if rows.size == 0 or b.size not in (k, 2 * k):
+            return {}
+        try:
+            m = self._signal(sig, rows)
+        except IdentificationError:
+            return {}
+        p = b[k:] if b.size == 2 * k else np.zeros(k)
+        local = m[:, None] * b[None, :k] + p[None, :]     # the effect's coefficients at each row
+        if self.effect == "ripple":
+            return {"amplitude": float(np.quantile(np.hypot(local[:, 0], local[:, 1]), 0.98))}
+        E = self._effect(sig, rows)[:, 0]
+        return {"torque": float(np.quantile(np.abs(E * local[:, 0]), 0.98))}
+
     def names(self) -> tuple[str, ...]:
         """Coefficient names, e.g. ``viscous3*abs_tau3``."""
         j = self.joint + 1

@@ -1463,6 +1463,15 @@ def _composed_family(c: Composed, plain: bool) -> Family:
                   depends_on_fit=c.signal in ("abs_tau", "tau"), info=(("composed", c), ("plain", plain)))
 
 
+def _composed_physical(c: Composed, F: Frame, vals: np.ndarray) -> dict[str, float]:
+    """The physical reading of a composed effect with coefficients ``vals`` (its family's names): its ripple order
+    or step time, and its magnitude on the rows of ``F`` (:meth:`.compose.Composed.magnitude`, rated by
+    :func:`.plausibility.effect_plausibility` against its plain kind's prior)."""
+    out = ({"order": float(c.order)} if c.order is not None else {}) | (
+        {"t_step": float(c.step_time)} if c.step_time is not None else {})
+    return out | c.magnitude(_row_sig(F), vals)
+
+
 def _composed_v(base: _Baseline, F: Frame) -> list[float]:
     """Velocity scale of the smooth Coulomb effect of each joint: the chosen law's, else the noise floor."""
     dq_noise = np.max([ex.dq_noise for ex in F.experiments], axis=0)
@@ -1689,10 +1698,13 @@ def _candidate_rating(data: _Data, state: _State, scored: _Round, rnd: int, cfg:
     if _implausible_effects(data, trial.added, trial.res):
         return None, fam.label, trial
     comp = dict(fam.info).get("composed")
-    if comp is not None:   # a composed effect: no prior on its magnitude (effect_plausibility rates it 1)
-        return Plausibility(1.0), fam.label, trial
-    ad = trial.added[-1]
     vals = np.array([trial.res.value(nm) for nm in fam.names()])
+    if comp is not None:   # a composed effect: its magnitude against its plain kind's prior
+        phys = _composed_physical(comp, trial.F, vals)
+        pl = effect_plausibility(fam.kind, fam.joint, {}, phys, scales, variant=fam.variant,
+                                 modulation=comp.modulation)
+        return pl, fits_like(fam.kind, fam.joint, phys, comp.describe(vals[:len(comp.names())])), trial
+    ad = trial.added[-1]
     std = np.array([trial.res.std[trial.res.index(nm)] for nm in fam.names()])
     phys = describe_params(fam, ad.value, vals, std)
     delays = [a.family.joint for a in trial.added if a.family.kind == "time_delay"
@@ -2103,9 +2115,7 @@ def _loop_effects(state: _State, res: IdentificationResult, cfg: DiagnoseSetting
         vals, std, pct = res.values[idx], res.std[idx], res.rel_std_pct[idx]
         info = dict(fam.info)
         comp = info.get("composed")
-        phys = describe_params(fam, mem, vals, std) if comp is None else (
-            {"order": float(comp.order)} if comp.order is not None else {}) | (
-            {"t_step": float(comp.step_time)} if comp.step_time is not None else {})
+        phys = describe_params(fam, mem, vals, std) if comp is None else _composed_physical(comp, state.F, vals)
         st = stab.get(fam.key)
         freq = None if st is None else min(x.frequency for x in st.values())
         ci = {} if st is None else {nm: (float(lo), float(hi)) for nm, lo, hi in

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 __all__ = [
-    "ALTERNATIVE_EXPLAINS", "CLOSE_ALTERNATIVE", "CLOSE_REMAINING", "CROSSTALK_TYPICAL", "DEFLECTION_BAND",
+    "ALTERNATIVE_EXPLAINS", "CLOSE_ALTERNATIVE", "CLOSE_REMAINING", "COMPOSED_TORQUE_SHARE", "CROSSTALK_TYPICAL", "DEFLECTION_BAND",
     "DELAY_ABSURD_PERIOD_SHARE",
     "DELAY_TYPICAL_PERIODS", "DELAY_TYPICAL_S", "EXPLAINS_REMAINING", "GAIN_TOLERANCE", "LAW_GAIN_MIN", "PLAUSIBLE",
     "POWER_BAND", "STRIBECK_BAND", "STRIBECK_EXCESS_SHARE", "STRIBECK_SPEED_SHARE", "SYNONYMS", "VELOCITY_RESOLUTION",
@@ -268,7 +268,7 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
     tau = float(np.max(scales.tau98)) if j is None else float(scales.tau98[j])
     tau = tau if tau > 0 else 1.0
     if modulation is not None:
-        return r.done("composed effect: no prior on its magnitude, rated on its evidence only")
+        return _rate_composed(r, kind, j, physical, scales, tau)
     if kind == "time_delay":
         _rate_delay(r, j, physical, params, scales, delay_joints)
     elif kind == "gain":
@@ -363,6 +363,39 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
             if float(params.get(nm, 0.0)) < 0:
                 r.factor(NEGATIVE_FRICTION_FACTOR, f"negative friction of the shared motor ({nm})")
     return r.done()
+
+
+#: composed effects (:mod:`.compose`) rated on their magnitude like their plain kind: a ripple's local amplitude as a
+#: ``position_ripple``'s, a constant's torque as an ``offset``'s (TORQUE_SHARE), a Coulomb or viscous term's torque as
+#: a friction torque (FRICTION_SHARE, as ``held_friction`` and the Stribeck excess); an inertia term has no
+#: magnitude prior (a ``rotor_inertia`` only a sign one)
+COMPOSED_TORQUE_SHARE = {"constant": TORQUE_SHARE, "coulomb": FRICTION_SHARE, "viscous": FRICTION_SHARE}
+
+
+def _rate_composed(r: _Rating, kind: str, j: int | None, physical: Mapping[str, float], scales: ArmScales,
+                   tau: float) -> Plausibility:
+    """A composed effect (``kind`` its effect: ``ripple``, ``constant``, ``coulomb``, ``viscous``, ``inertia``) rated
+    on its magnitude (:meth:`.compose.Composed.magnitude`: ``amplitude`` or ``torque`` in ``physical``) with the
+    prior of its plain kind (:data:`COMPOSED_TORQUE_SHARE`): a modulated term the data would have named as an
+    implausible plain term is no more plausible for its modulation. Without a magnitude, rated on its evidence."""
+    if kind == "ripple" and "amplitude" in physical:
+        amp = float(physical["amplitude"])
+        r.factor(band_factor(amp / tau, 0.0, TORQUE_SHARE, SHARE_WIDTH),
+                 f"a ripple of {amp:.3g} N m (its largest local amplitude) is large against the torque range "
+                 f"{tau:.3g} N m", f"a position-dependent torque of {_who(j)} the robot file lacks")
+        k = physical.get("order")
+        g = scales.gear_ratios.get(j) if j is not None else None
+        if k is not None and g and float(k) != 1.0:
+            ok = any(abs(float(k) - m * g) < 0.5 or abs(float(k) * m - g) < 0.5 for m in (1, 2))
+            r.factor(1.0 if ok else 0.7, f"order {float(k):g} is not a multiple or divisor of the gear ratio {g:g}")
+        return r.done()
+    share = COMPOSED_TORQUE_SHARE.get(kind)
+    if share is not None and "torque" in physical:
+        t = float(physical["torque"])
+        r.factor(band_factor(t / tau, 0.0, share, SHARE_WIDTH),
+                 f"a modulated {kind} torque of {t:.3g} N m is large against the torque range {tau:.3g} N m")
+        return r.done()
+    return r.done("composed effect: no prior on its magnitude, rated on its evidence only")
 
 
 def _rate_delay(r: _Rating, j: int | None, physical: Mapping[str, float], params: Mapping[str, float],

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from symoro_gen.diagnostics import diagnose
+from symoro_gen.diagnostics.compose import Composed, RowSignals
 from symoro_gen.diagnostics.plausibility import (
     PLAUSIBLE,
     ArmScales,
@@ -357,3 +358,47 @@ def test_an_implausible_best_gives_way_to_a_plausible_alternative(monkeypatch, v
     # alone in its round, an implausible Stribeck term leaves nothing to add
     k1, passed1, _ = core._plausible_pick(None, state, _round_of(strib), 1, None, sc)
     assert k1 is None and passed1["candidate"] == "stribeck1"
+
+
+def _ripple_rows(seed=0, n=4000):
+    """Signals of one joint (joint 2 of 3) sweeping two turns, modulated by joint 1's position."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 20.0, n)
+    q = np.column_stack([np.sin(0.7 * t) + 0.1 * rng.standard_normal(n), 2.0 * np.pi * t / 10.0, 0.2 * t])
+    dq = np.gradient(q, t, axis=0)
+    return RowSignals(np.full(n, 1), t, q, dq, np.gradient(dq, t, axis=0))
+
+
+def test_composed_ripple_magnitude_is_its_largest_local_amplitude():
+    """The local amplitude of ``(a m + p) . (sin 3 q2, cos 3 q2)`` at each row, written out independently of
+    :meth:`Composed.magnitude` from the signal's own mean and standard deviation: its 98th percentile."""
+    sig = _ripple_rows()
+    c = Composed("ripple", 1, "q_other", source=0, order=3).standardised_on(sig)
+    a, p = np.array([0.3, -0.4]), np.array([0.1, 0.2])
+    x = sig.q[:, 0]
+    m = (x - x.mean()) / x.std()
+    want = np.quantile(np.hypot(a[0] * m + p[0], a[1] * m + p[1]), 0.98)
+    assert c.magnitude(sig, np.r_[a, p])["amplitude"] == pytest.approx(want, rel=1e-12)
+    # without plain coefficients (a plain ripple of that order already in the model): the modulation alone
+    assert c.magnitude(sig, a)["amplitude"] == pytest.approx(0.5 * np.quantile(np.abs(m), 0.98), rel=1e-12)
+    # a constant changing with q1: the torque it adds, |b m + p|
+    k = Composed("constant", 1, "step", step_time=10.0)
+    step = (sig.t >= 10.0).astype(float)
+    assert k.magnitude(sig, [0.7, -0.2])["torque"] == pytest.approx(np.quantile(np.abs(0.7 * step - 0.2), 0.98))
+    assert k.magnitude(sig, [0.7, -0.2, 1.0]) == {}   # coefficients that are not the term's
+
+
+def test_a_composed_ripple_gets_the_plain_ripples_amplitude_prior():
+    """A composed ripple is judged like a ``position_ripple`` of its largest local amplitude (docs/loop-plausibility.md:
+    at most 0.3 tau98, log-width ln 2): the LWR4 joint-7 figures, 0.41 N m against a torque range of 0.574 N m, are
+    implausible under either name; 0.1 N m is plausible under both; without a magnitude no prior applies."""
+    sc = replace(_scales(n=7), tau98=np.full(7, 0.574))
+    for amp, ok in ((0.411, False), (0.1, True)):
+        plain = effect_plausibility("position_ripple", 6, {}, {"amplitude": amp, "k": 1.0}, sc)
+        comp = effect_plausibility("ripple", 6, {}, {"amplitude": amp, "order": 3.0}, sc, modulation="q_other:q1")
+        assert comp.score == pytest.approx(plain.score) and (comp.score >= PLAUSIBLE) == ok, (amp, comp, plain)
+    assert effect_plausibility("ripple", 6, {}, {"order": 3.0}, sc, modulation="q_other:q1").score == 1.0
+    # a modulated constant as an offset (0.3 tau98), a modulated friction torque as a friction one (0.5 tau98)
+    assert effect_plausibility("constant", 6, {}, {"torque": 0.4}, sc, modulation="step:t=3").score < PLAUSIBLE
+    assert effect_plausibility("coulomb", 6, {}, {"torque": 0.25}, sc, modulation="abs_tau").score == 1.0
+    assert effect_plausibility("viscous", 6, {}, {"torque": 0.9}, sc, modulation="time").score < PLAUSIBLE

@@ -49,7 +49,16 @@ def _load(shared_data, arm):
 _WORSE = {
     "med7": "loop worse than the expert on the validation data under WLS: joints 1 and 4 (filtered and raw); the "
             "loop keeps nothing there (its final model is the declared one: filt j1 3.232, j4 0.164, expert 2.969, "
-            "0.143), and the static-at-rest prior does not apply (the identification part rests 56 %)",
+            "0.143). Measured (docs/results.md, Med 7 joints 1 and 4): the two WLS fits weight the joints "
+            "differently (the loop sigma_j of each joint's own OLS fit, RX-90 eq. 22; the expert sigma_j of the "
+            "global OLS residual); with the expert's weights the declared model itself gives j1 2.955 and j4 0.159 "
+            "(j4 at the edge of 2 SE); no candidate passes at 100 Hz (the tanh law of j1 lowers the friction "
+            "stage's CV error 11 %, inside the fold scatter; j4's gain sits in 3 of 20 time blocks, p 0.06)",
+    "lwr4": "loop worse than the expert under WLS on joint 4, raw metric, at the edge of the noise band (rel^2 "
+            "+3.3e-5 against 2 SE 3.1e-5; 0.019 against 0.018): since composed effects are rated on their magnitude "
+            "joint 7 gets a spring instead of the q1-modulated ripple, the shared base parameters move and joint 4's "
+            "block SE halves; no effect of the loop is on joint 4 (docs/results.md, the composed ripple's magnitude "
+            "prior on the LWR4)",
 }
 
 
