@@ -82,3 +82,25 @@ def test_batched_full_rate_columns_equal_the_whole_recording_ones(scara_frame):
     ref = F.full_rate_columns(lambda e: {k: whole[:, k, :] for k in range(n)}, P)
     np.testing.assert_allclose(D[:, :P], ref, rtol=0, atol=1e-12 * np.abs(ref).max())
     assert np.abs(ref).max() > 0
+
+
+def test_batched_columns_bound_the_callbacks_work(scara_frame):
+    """The callback of ``full_rate_columns_batched`` is called on at most ``call_samples`` samples at a time
+    (its own work arrays are bounded, whatever it returns), and the columns do not depend on that split: the
+    same as one call over each whole stretch and as the unbatched ``full_rate_columns``."""
+    _, _, F = scara_frame
+    ex = F.experiments[0]
+    n, p = F.n_joints, 2
+    sizes = []
+
+    def cols(e, a, b):
+        sizes.append(b - a)
+        return np.stack([np.cos(e.q[a:b]) * e.ddq[a:b], np.abs(e.dq[a:b]) ** 1.5], axis=2)
+
+    ref = F.full_rate_columns(lambda e: {k: cols(e, 0, e.n_samples)[:, k, :] for k in range(n)}, p)
+    for call in (1, 37, 256, 10 ** 9):
+        sizes.clear()
+        got = F.full_rate_columns_batched(cols, p, call_samples=call)
+        assert max(sizes) == min(call, ex.n_samples)
+        assert sum(sizes) == ex.n_samples      # one stretch: every sample evaluated once
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
