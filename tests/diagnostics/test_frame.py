@@ -4,7 +4,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from symoro_gen.diagnostics.frame import T_ORIGIN_KEY, attach_model_torque, build_frame, common_bandwidth, split_holdout
+from symoro_gen.diagnostics.frame import (
+    T_ORIGIN_KEY,
+    attach_model_torque,
+    build_frame,
+    common_bandwidth,
+    model_torque,
+    split_holdout,
+)
 
 from .simdata import recording
 
@@ -104,3 +111,16 @@ def test_batched_columns_bound_the_callbacks_work(scara_frame):
         assert max(sizes) == min(call, ex.n_samples)
         assert sum(sizes) == ex.n_samples      # one stretch: every sample evaluated once
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+
+
+def test_model_torque_does_not_depend_on_the_regressor_batches(scara_frame):
+    """``IDM(q, dq, ddq) chi`` in regressor calls of a few samples (bounded transient) equals one call over the
+    whole recording, and the regressor's own product with ``chi``."""
+    model, _, F = scara_frame
+    ex = F.experiments[0]
+    theta = {nm: 0.1 * (i + 1) for i, nm in enumerate(F.system.names)}
+    chi = np.array([theta.get(nm, 0.0) for nm in model.BASE_NAMES])
+    whole = np.asarray(model.regressor(ex.q, ex.dq, ex.ddq), float) @ chi
+    for batch in (7, 1024, 10 ** 9):
+        np.testing.assert_allclose(model_torque(model, theta, ex.q, ex.dq, ex.ddq, batch=batch), whole,
+                                   rtol=0, atol=1e-12 * np.abs(whole).max())
