@@ -124,3 +124,24 @@ def test_model_torque_does_not_depend_on_the_regressor_batches(scara_frame):
     for batch in (7, 1024, 10 ** 9):
         np.testing.assert_allclose(model_torque(model, theta, ex.q, ex.dq, ex.ddq, batch=batch), whole,
                                    rtol=0, atol=1e-12 * np.abs(whole).max())
+
+
+def test_frame_rows_are_the_streamed_engines_rows():
+    """The diagnosis frame's ``W`` and ``Y`` are the rows ``identify``'s streaming path folds
+    (:func:`symoro_gen.observations.iter_chunks`, block after block, several Butterworth blocks here),
+    regrouped per joint: one assembly engine for both."""
+    from dataclasses import replace
+
+    from symoro_gen.observations import iter_chunks
+
+    model, tr = recording("scara", 23, duration=60.0, noise_q=1e-4)
+    F = build_frame(model, [tr], chunk_samples=400)
+    chunks = list(iter_chunks(model, [tr], replace(F.assembly.options, keep_signals=False), progress=False))
+    assert len(chunks) > 2
+    n = F.n_joints
+    W = np.concatenate([c.W[c.joint == j] for j in range(n) for c in chunks])
+    Y = np.concatenate([c.Y[c.joint == j] for j in range(n) for c in chunks])
+    assert W.shape == F.system.W.shape
+    scale = np.abs(F.system.W).max(axis=0) + 1e-300
+    np.testing.assert_allclose(W / scale, F.system.W / scale, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(Y, F.system.Y, rtol=0, atol=1e-12 * np.abs(F.system.Y).max())
