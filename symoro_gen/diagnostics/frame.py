@@ -14,6 +14,13 @@ these signals; their columns are evaluated at full rate and decimated in paralle
 FIR/IIR filter as ``W`` and ``Y`` (RX-90 paper eq. 15), so ``Y = [W X] [chi; beta]`` keeps holding
 after decimation.
 
+Memory: the frame holds the decimated system and row signals, and the full-rate band-pass ``q, dq, ddq``
+(and model torque) of every experiment, which the candidates read whole (rest segments, friction laws,
+composed signals). Every decimation of full-rate columns goes by bounded stretches of samples
+(:meth:`Experiment.decimate_stretches`: the FIR window of each stretch, the same numbers as one pass), and
+the callbacks of :meth:`Frame.full_rate_columns_batched` see at most ``FULL_RATE_CALL_SAMPLES`` samples per
+call, so no transient copy of all columns at every sample is made on top of those signals.
+
 Rows are grouped per joint as in the assembly: all rows of joint 1 (experiment after experiment),
 then joint 2...
 """
