@@ -14,6 +14,13 @@ these signals; their columns are evaluated at full rate and decimated in paralle
 FIR/IIR filter as ``W`` and ``Y`` (RX-90 paper eq. 15), so ``Y = [W X] [chi; beta]`` keeps holding
 after decimation.
 
+Memory: the frame holds the decimated system and row signals, and the full-rate band-pass ``q, dq, ddq``
+(and model torque) of every experiment, which the candidates read whole (rest segments, friction laws,
+composed signals). Every decimation of full-rate columns goes by bounded stretches of samples
+(:meth:`Experiment.decimate_stretches`: the FIR window of each stretch, the same numbers as one pass), and
+the callbacks of :meth:`Frame.full_rate_columns_batched` see at most ``FULL_RATE_CALL_SAMPLES`` samples per
+call, so no transient copy of all columns at every sample is made on top of those signals.
+
 Rows are grouped per joint as in the assembly: all rows of joint 1 (experiment after experiment),
 then joint 2...
 """
@@ -56,6 +63,10 @@ def _fir_taps(n_d: int, cutoff_ratio: float) -> np.ndarray:
 
 #: bytes of the full-rate columns of one stretch of samples (:meth:`Frame.full_rate_columns_batched`)
 FULL_RATE_BATCH_BYTES = 16 * 2 ** 20
+#: most full-rate samples per call of the callback of :meth:`Frame.full_rate_columns_batched`: its own work
+#: arrays are bounded too, not only the columns it returns (the emitted geometry derivative of a 7-joint arm
+#: holds ~2,000 products per sample and joint before contracting them with the parameters: ~30 MB here)
+FULL_RATE_CALL_SAMPLES = 256
 
 __all__ = ["Experiment", "Frame", "build_frame", "frame_from_assembly", "attach_model_torque", "model_torque",
            "split_holdout", "common_bandwidth", "noise_gains", "T_ORIGIN_KEY"]
@@ -123,6 +134,41 @@ class Experiment:
             return fir_decimate(np.ascontiguousarray(x), _fir_taps(st.n_d, st.cutoff_ratio), st.n_d)
         return decimate(x, st.n_d, ftype=st.ftype, cutoff_ratio=st.cutoff_ratio, source=self.source)
 
+    def decimate_stretches(self, fill: Callable[[np.ndarray, int, int], None], width: int, *,
+                           batch_bytes: int = FULL_RATE_BATCH_BYTES) -> np.ndarray:
+        """:meth:`decimate` of ``width`` full-rate columns that ``fill(dst, a, b)`` writes for samples ``a:b``
+        into ``dst`` (b - a, width), without the full-rate array of the whole experiment.
+
+        The FIR decimation (:func:`symoro_gen.preprocessing.filtering.fir_decimate`) is a sum over a window
+        of ``L`` full-rate samples per kept sample (RX-90 paper sec. 4, parallel decimation), so the kept
+        samples of a stretch need the columns of that stretch and of ``L - 1`` samples around it only: the
+        stretches' zero-padded buffers (at most ``batch_bytes`` each, at least the filter window) go through
+        the same grouped products as the whole array, and the outputs are the same numbers. Without a FIR
+        decimation (``ftype="iir"``, ``n_d = 1``) the whole array is built and decimated."""
+        st = self.settings
+        N = self.n_samples
+        if not (st.ftype == "fir" and st.n_d > 1):
+            full = np.empty((N, width))
+            fill(full, 0, N)
+            return self.decimate(full)
+        h = _fir_taps(st.n_d, st.cutoff_ratio)
+        n_d, L = st.n_d, h.size
+        half, group = (L - 1) // 2, fir_group_size(st.n_d)
+        n_out = -(-N // n_d)
+        # outputs per stretch: a multiple of the FIR group, with its samples within batch_bytes
+        per = max(group, (max(batch_bytes // (8 * max(width, 1)), L) // n_d) // group * group)
+        dec = np.empty((n_out, width))
+        for k0 in range(0, n_out, per):
+            k1 = min(n_out, k0 + per)
+            rows = fir_buffer_length(k1 - k0, n_d, L, group)
+            lo = k0 * n_d - half                # sample of the first buffer row
+            a, b = max(lo, 0), min(lo + rows, N)
+            buf = np.zeros((rows, width))
+            if b > a:
+                fill(buf[a - lo:b - lo], a, b)
+            dec[k0:k1] = fir_decimate_padded(buf, h, n_d, k1 - k0, group)
+        return dec
+
 
 @dataclass(frozen=True, eq=False)
 class Frame:
@@ -187,15 +233,16 @@ class Frame:
             if not parts:
                 continue
             keys = sorted(parts)
-            full = np.concatenate([np.asarray(parts[j], float).reshape(ex.n_samples, p) for j in keys], axis=1)
-            dec = ex.decimate(full)
+            cols = [np.asarray(parts[j], float).reshape(ex.n_samples, p) for j in keys]
+            dec = ex.decimate_stretches(functools.partial(_copy_columns, cols), len(keys) * p)
             for i, j in enumerate(keys):
                 m = (self.row_experiment == e) & (self.system.joint == j)
                 X[m] = dec[self.row_index[m], i * p:(i + 1) * p]
         return X
 
     def full_rate_columns_batched(self, fn: Callable[[Experiment, int, int], np.ndarray], p: int, *,
-                                  batch_bytes: int = FULL_RATE_BATCH_BYTES) -> np.ndarray:
+                                  batch_bytes: int = FULL_RATE_BATCH_BYTES,
+                                  call_samples: int = FULL_RATE_CALL_SAMPLES) -> np.ndarray:
         """:meth:`full_rate_columns` of columns on the rows of *every* joint, evaluated at full rate over
         bounded stretches of samples instead of the whole recording.
 
@@ -214,6 +261,10 @@ class Frame:
             Number of columns.
         batch_bytes : int
             Size of the full-rate array of one stretch (at least the filter window).
+        call_samples : int
+            Most samples per call of ``fn`` (a stretch is filled by consecutive calls): bounds the memory
+            ``fn`` itself uses, which the size of what it returns does not tell. ``fn`` is a function of each
+            sample's signals, so the columns do not depend on how the samples are split.
 
         Returns
         -------
@@ -221,29 +272,12 @@ class Frame:
         """
         X = np.zeros((self.n_rows, p))
         for e, ex in enumerate(self.experiments):
-            st = ex.settings
             n = ex.q.shape[1]
-            if not (st.ftype == "fir" and st.n_d > 1):
-                dec = ex.decimate(np.asarray(fn(ex, 0, ex.n_samples), float).reshape(ex.n_samples, n * p))
-                self._scatter(X, e, dec, n, p)
-                continue
-            h = _fir_taps(st.n_d, st.cutoff_ratio)
-            n_d, L, N = st.n_d, h.size, ex.n_samples
-            half, group = (L - 1) // 2, fir_group_size(st.n_d)
-            n_out = -(-N // n_d)
-            # outputs per stretch: a multiple of the FIR group, with its samples within batch_bytes
-            per = max(group, (max(batch_bytes // (8 * n * p), L) // n_d) // group * group)
-            dec = np.empty((n_out, n * p))
-            for k0 in range(0, n_out, per):
-                k1 = min(n_out, k0 + per)
-                rows = fir_buffer_length(k1 - k0, n_d, L, group)
-                lo = k0 * n_d - half                # sample of the first buffer row
-                a, b = max(lo, 0), min(lo + rows, N)
-                buf = np.zeros((rows, n * p))
-                if b > a:
-                    buf[a - lo:b - lo] = np.asarray(fn(ex, a, b), float).reshape(b - a, n * p)
-                dec[k0:k1] = fir_decimate_padded(buf, h, n_d, k1 - k0, group)
-            self._scatter(X, e, dec, n, p)
+
+            def fill(dst: np.ndarray, a: int, b: int, ex: Experiment = ex) -> None:
+                _fill_columns(dst, fn, ex, a, b, call_samples)
+
+            self._scatter(X, e, ex.decimate_stretches(fill, n * p, batch_bytes=batch_bytes), n, p)
         return X
 
     def _scatter(self, X: np.ndarray, e: int, dec: np.ndarray, n: int, p: int) -> None:
@@ -268,6 +302,25 @@ class Frame:
         out = {k: v[rows] for k, v in self.sig.items()}
         out["experiment"] = self.row_experiment[rows]
         return out
+
+
+def _fill_columns(dst: np.ndarray, fn: Callable[[Experiment, int, int], np.ndarray], ex: Experiment, a: int, b: int,
+                  call_samples: int) -> None:
+    """``dst`` (b - a, n p) from ``fn(ex, a2, b2)`` over consecutive ranges of at most ``call_samples`` samples."""
+    step = max(1, int(call_samples))
+    for a2 in range(a, b, step):
+        b2 = min(b, a2 + step)
+        dst[a2 - a:b2 - a] = np.asarray(fn(ex, a2, b2), float).reshape(b2 - a2, dst.shape[1])
+
+
+def _copy_columns(arrays: Sequence[np.ndarray], dst: np.ndarray, a: int, b: int) -> None:
+    """Samples ``a:b`` of the full-rate ``arrays`` side by side into ``dst`` (a fill of
+    :meth:`Experiment.decimate_stretches`)."""
+    c = 0
+    for x in arrays:
+        w = x.shape[1]
+        dst[:, c:c + w] = x[a:b]
+        c += w
 
 
 def common_bandwidth(trajectories: Sequence[Trajectory], **kw) -> float:
@@ -301,7 +354,7 @@ def _row_signals(exps, keys, row_exp, row_idx, n) -> dict:
     r = row_exp.size
     sig = {k: np.zeros((r, n)) for k in keys}
     for e, ex in enumerate(exps):
-        dec = ex.decimate(np.concatenate([getattr(ex, k) for k in keys], axis=1))
+        dec = ex.decimate_stretches(functools.partial(_copy_columns, [getattr(ex, k) for k in keys]), n * len(keys))
         if dec.shape[0] != ex.n_rows:
             raise IdentificationError(f"{ex.source}: {dec.shape[0]} decimated samples, the assembler kept "
                                       f"{ex.n_rows} rows per joint: cannot line the signals up")

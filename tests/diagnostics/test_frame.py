@@ -4,7 +4,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from symoro_gen.diagnostics.frame import T_ORIGIN_KEY, attach_model_torque, build_frame, common_bandwidth, split_holdout
+from symoro_gen.diagnostics.frame import (
+    T_ORIGIN_KEY,
+    attach_model_torque,
+    build_frame,
+    common_bandwidth,
+    model_torque,
+    split_holdout,
+)
 
 from .simdata import recording
 
@@ -82,3 +89,59 @@ def test_batched_full_rate_columns_equal_the_whole_recording_ones(scara_frame):
     ref = F.full_rate_columns(lambda e: {k: whole[:, k, :] for k in range(n)}, P)
     np.testing.assert_allclose(D[:, :P], ref, rtol=0, atol=1e-12 * np.abs(ref).max())
     assert np.abs(ref).max() > 0
+
+
+def test_batched_columns_bound_the_callbacks_work(scara_frame):
+    """The callback of ``full_rate_columns_batched`` is called on at most ``call_samples`` samples at a time
+    (its own work arrays are bounded, whatever it returns), and the columns do not depend on that split: the
+    same as one call over each whole stretch and as the unbatched ``full_rate_columns``."""
+    _, _, F = scara_frame
+    ex = F.experiments[0]
+    n, p = F.n_joints, 2
+    sizes = []
+
+    def cols(e, a, b):
+        sizes.append(b - a)
+        return np.stack([np.cos(e.q[a:b]) * e.ddq[a:b], np.abs(e.dq[a:b]) ** 1.5], axis=2)
+
+    ref = F.full_rate_columns(lambda e: {k: cols(e, 0, e.n_samples)[:, k, :] for k in range(n)}, p)
+    for call in (1, 37, 256, 10 ** 9):
+        sizes.clear()
+        got = F.full_rate_columns_batched(cols, p, call_samples=call)
+        assert max(sizes) == min(call, ex.n_samples)
+        assert sum(sizes) == ex.n_samples      # one stretch: every sample evaluated once
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+
+
+def test_model_torque_does_not_depend_on_the_regressor_batches(scara_frame):
+    """``IDM(q, dq, ddq) chi`` in regressor calls of a few samples (bounded transient) equals one call over the
+    whole recording, and the regressor's own product with ``chi``."""
+    model, _, F = scara_frame
+    ex = F.experiments[0]
+    theta = {nm: 0.1 * (i + 1) for i, nm in enumerate(F.system.names)}
+    chi = np.array([theta.get(nm, 0.0) for nm in model.BASE_NAMES])
+    whole = np.asarray(model.regressor(ex.q, ex.dq, ex.ddq), float) @ chi
+    for batch in (7, 1024, 10 ** 9):
+        np.testing.assert_allclose(model_torque(model, theta, ex.q, ex.dq, ex.ddq, batch=batch), whole,
+                                   rtol=0, atol=1e-12 * np.abs(whole).max())
+
+
+def test_frame_rows_are_the_streamed_engines_rows():
+    """The diagnosis frame's ``W`` and ``Y`` are the rows ``identify``'s streaming path folds
+    (:func:`symoro_gen.observations.iter_chunks`, block after block, several Butterworth blocks here),
+    regrouped per joint: one assembly engine for both."""
+    from dataclasses import replace
+
+    from symoro_gen.observations import iter_chunks
+
+    model, tr = recording("scara", 23, duration=60.0, noise_q=1e-4)
+    F = build_frame(model, [tr], chunk_samples=400)
+    chunks = list(iter_chunks(model, [tr], replace(F.assembly.options, keep_signals=False), progress=False))
+    assert len(chunks) > 2
+    n = F.n_joints
+    W = np.concatenate([c.W[c.joint == j] for j in range(n) for c in chunks])
+    Y = np.concatenate([c.Y[c.joint == j] for j in range(n) for c in chunks])
+    assert W.shape == F.system.W.shape
+    scale = np.abs(F.system.W).max(axis=0) + 1e-300
+    np.testing.assert_allclose(W / scale, F.system.W / scale, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(Y, F.system.Y, rtol=0, atol=1e-12 * np.abs(F.system.Y).max())
