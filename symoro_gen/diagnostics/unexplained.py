@@ -303,7 +303,9 @@ def _oof(X, e, folds, seed):
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
     # one thread: the trees are small, and OpenMP threads spinning on a busy machine cost far more than
-    # they save (measured: 2.4 s per fit with all cores on a loaded 2-core machine, ~0.1 s with one)
+    # they save (measured: 2.4 s per fit with all cores on a loaded 2-core machine, ~0.1 s with one).
+    # scikit-learn (and its OpenMP runtime) is loaded first: threadpoolctl limits only the loaded libraries
+    binned_hgb_class()
     with threadpool_limits(limits=1, user_api="openmp"):
         f = FoldFits(X, e, folds, seed).finish()
     return f.pred, f.models
@@ -514,6 +516,7 @@ def greedy_round(residual: np.ndarray, features: np.ndarray, names: Sequence[str
     best: tuple[float, int] | None = None
     results: dict[int, Unexplained] = {}
     unflagged: dict[int, tuple[float, list[FoldFits]]] = {}
+    binned_hgb_class()   # loads scikit-learn's OpenMP runtime before the one-thread limit (:func:`_oof`)
     with threadpool_limits(limits=1, user_api="openmp"):
         for k, j in enumerate(joints):
             f = fits[j] = FoldFits(X, E[:, j], folds, seed)
