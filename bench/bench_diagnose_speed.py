@@ -13,9 +13,15 @@ that loads the recording from a temporary ``.npz``; its wall and CPU time are pr
 peak resident memory is read by the parent from ``resource.getrusage(RUSAGE_CHILDREN).ru_maxrss`` (one
 intermediate process per run, so the figure is that run's own).
 
-    PYTHONPATH=. python bench/bench_diagnose_speed.py [--case rx90 lwr4] [--scale 1.0]
+    PYTHONPATH=. python bench/bench_diagnose_speed.py [--case rx90 lwr4] [--scale 1.0] [--stages]
 
-``--scale`` shortens the recordings (e.g. 0.2 for a quick look).
+``--scale`` shortens the recordings (e.g. 0.2 for a quick look). ``--stages`` also prints the CPU time of
+each stage of ``diagnose`` and its counts of model fits (a second diagnose run, with the stage functions of
+:mod:`symoro_gen.diagnostics.core` wrapped by timers; nested stages are listed under their parent): the
+out-of-fold least-squares solves (``BlockedLS.oof_residual``, one per candidate and fold set), the
+friction-law stage's simulated-noise placebos and its law selections (the placebo's re-runs included), and
+the unexplained stage's tree fits (``FoldFits.step``, one fold each), against the one least-squares solve of
+``identify``.
 """
 from __future__ import annotations
 
@@ -67,6 +73,59 @@ def simulate(case: str, scale: float, path: Path, seed: int = 1) -> str:
             + ", ".join(f"{k} joint {j + 1}" for k, j, _ in effects))
 
 
+#: stage functions of ``symoro_gen.diagnostics.core`` timed by ``--stages`` (name shown, function name; the
+#: indented ones run inside the one above them)
+STAGES = (("assemble", "_stage_assemble"), ("friction laws", "_stage_friction"),
+          ("  of which the law's noise placebo", "_law_beats_noise"), ("baseline", "_stage_baseline"),
+          ("loop", "_stage_loop"), ("  of which scoring", "_stage_score"),
+          ("    of which the composed library", "_score_composed_round"), ("stability", "_stage_stability"),
+          ("report", "_stage_report"), ("  of which unexplained", "_unexplained"))
+#: methods whose calls ``--stages`` counts (shown name, module, class, method)
+COUNTED = (("out-of-fold LS solves", "symoro_gen.diagnostics.stability", "BlockedLS", "oof_residual"),
+           ("noise placebos (<= 19 selections each)", "symoro_gen.diagnostics.stability", None,
+            "simulated_noise_placebo"),
+           ("friction-law selections", "symoro_gen.diagnostics.friction", None, "select_friction"),
+           ("tree fits (one fold)", "symoro_gen.diagnostics.unexplained", "FoldFits", "step"))
+
+
+def _instrument() -> tuple[dict, dict]:
+    """Wrap the stage functions (:data:`STAGES`) by CPU timers and the counted methods (:data:`COUNTED`) by
+    counters; return the two dicts they fill."""
+    import functools
+    import importlib
+
+    import symoro_gen.diagnostics.core as core
+
+    cpu: dict = {}
+    calls: dict = {}
+
+    def timer(name, fn):
+        @functools.wraps(fn)
+        def run(*a, **k):
+            c = time.process_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                cpu[name] = cpu.get(name, 0.0) + time.process_time() - c
+        return run
+
+    def counter(name, fn):
+        @functools.wraps(fn)
+        def run(*a, **k):
+            calls[name] = calls.get(name, 0) + 1
+            return fn(*a, **k)
+        return run
+
+    for shown, fn_name in STAGES:
+        setattr(core, fn_name, timer(shown, getattr(core, fn_name)))
+    for shown, mod, cls, meth in COUNTED:
+        owner = getattr(importlib.import_module(mod), cls) if cls else importlib.import_module(mod)
+        setattr(owner, meth, counter(shown, getattr(owner, meth)))
+        if cls is None and hasattr(core, meth):   # a module function: also where core imported it
+            setattr(core, meth, getattr(owner, meth))
+    return cpu, calls
+
+
 def worker(command: str, path: str) -> None:
     """Run ``identify`` or ``diagnose`` on the recording; print a JSON line with the times."""
     import symoro_gen
@@ -77,6 +136,10 @@ def worker(command: str, path: str) -> None:
     tr = Trajectory(t=d["t"], q=d["q"], tau=d["tau"], source=f"simulated {d['name']}")
     w0, c0 = time.perf_counter(), time.process_time()
     info: dict = {}
+    stages = None
+    if command == "diagnose-stages":
+        stages = _instrument()
+        w0, c0 = time.perf_counter(), time.process_time()
     if command == "identify":
         symoro_gen.identify(model, tr, method="ols")
     else:
@@ -84,6 +147,8 @@ def worker(command: str, path: str) -> None:
         info["effects"] = [e.label for e in rep.effects]
         info["unexplained"] = [u.joint for u in rep.unexplained if u.flagged]
     info.update(wall=time.perf_counter() - w0, cpu=time.process_time() - c0)
+    if stages is not None:
+        info.update(stage_cpu=stages[0], counts=stages[1])
     print("RESULT " + json.dumps(info))
 
 
@@ -109,6 +174,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--scale", type=float, default=1.0)
+    ap.add_argument("--stages", action="store_true", help="also time each stage of diagnose (a second run)")
     ap.add_argument("--worker", nargs=2, metavar=("COMMAND", "NPZ"), help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker:
@@ -132,6 +198,14 @@ def main(argv=None) -> int:
             print(f"  ratio diagnose/identify (wall) {ratio:.1f} (target <= {TARGET_RATIO:g}), CPU ratio "
                   f"{diag['cpu'] / max(ident['cpu'], 1e-9):.1f}; peak RSS {rss:.2f} GB (target <= {TARGET_RSS_GB:g}) "
                   f"{'OK' if good else 'MISSED'}", flush=True)
+            if a.stages:
+                st = measured("diagnose-stages", str(path))
+                print(f"  diagnose by stage ({st['cpu']:.1f} s CPU in all):")
+                for shown, _ in STAGES:
+                    if shown in st["stage_cpu"]:
+                        print(f"    {shown:<38} {st['stage_cpu'][shown]:7.1f} s CPU")
+                print("  counts: " + ", ".join(f"{k} {v}" for k, v in st["counts"].items())
+                      + "; identify: 1 least-squares solve", flush=True)
     return 0 if ok else 1
 
 

@@ -34,6 +34,12 @@ again; the carriers are tested last, on a residual that keeps their whole missin
 its own null (that joint's residual block-permuted). A residual longer than ``MAX_TREE_SAMPLES`` samples
 is thinned in time before the trees see it.
 
+A round that adds a carrier passes on its decision only (each joint it tested is tested again), so its
+fits stop once that decision is settled (:func:`greedy_round`, the sequential Monte Carlo rule of Besag &
+Clifford 1991): the out-of-fold ``R^2`` can only fall as folds are added, so a joint's fit stops when it
+can no longer beat the flagged joint found before it, and a null fit when it can no longer unflag its
+joint. The carriers, flags and every reported number are those of the complete search.
+
 Which signals
 -------------
 For a flagged joint, the permutation importance of each signal (Breiman 2001; each column permuted
@@ -55,7 +61,7 @@ import numpy as np
 
 from .stability import N_FOLDS, blocked_folds, time_blocks
 
-__all__ = ["MIN_SHARE", "NULL_MARGIN", "Unexplained", "refit_without", "rows_to_samples", "signal_matrix", "unexplained_by_joint",
+__all__ = ["MIN_SHARE", "NULL_MARGIN", "FoldFits", "Unexplained", "greedy_round", "refit_without", "rows_to_samples", "signal_matrix", "unexplained_by_joint",
            "unexplained_structure"]
 
 #: smallest share of residual variance ever flagged
@@ -250,20 +256,59 @@ def binned_hgb_class():
     return FoldBinnedHGB
 
 
+class FoldFits:
+    """Out-of-fold predictions of one target, grown one fold at a time (the folds partition the rows).
+
+    After ``k`` folds the sum of squared out-of-fold errors ``SSE_k`` only grows with the next folds, so
+    ``1 - SSE_k / SST`` (:meth:`bound`) is an upper bound of the out-of-fold ``R^2`` that the remaining folds
+    can only lower: the greedy rounds of :func:`unexplained_by_joint` stop a fit once this bound settles
+    the round's decision. Completed (:meth:`finish`), the predictions are those of the plain loop over the
+    folds, model for model."""
+
+    def __init__(self, X: np.ndarray, e: np.ndarray, folds: Sequence, seed: int):
+        self.X, self.e, self.folds, self.seed = X, e, folds, seed
+        self.pred = np.empty_like(e)
+        self.models: list = []
+        self.sse = 0.0
+        self.sst = float(np.sum((e - e.mean()) ** 2))
+
+    @property
+    def done(self) -> bool:
+        return len(self.models) == len(self.folds)
+
+    def step(self) -> None:
+        """Fit the next fold (call under one OpenMP thread, :func:`_oof`)."""
+        tr, te = self.folds[len(self.models)]
+        m = binned_hgb_class()(random_state=self.seed, **HGB_PARAMS).fit(self.X[tr], self.e[tr])
+        self.pred[te] = m.predict(self.X[te])
+        self.models.append(m)
+        self.sse += float(np.sum((self.e[te] - self.pred[te]) ** 2))
+
+    def bound(self) -> float:
+        """Upper bound of the completed fit's out-of-fold ``R^2`` (exact once :attr:`done`, to rounding)."""
+        return 1.0 - self.sse / self.sst if self.sst > 0 else 0.0
+
+    def finish(self) -> FoldFits:
+        while not self.done:
+            self.step()
+        return self
+
+    def share(self) -> float:
+        """Out-of-fold ``R^2`` clipped to [0, 1] (the folds completed first)."""
+        self.finish()
+        return float(np.clip(_r2(self.e, self.pred), 0.0, 1.0))
+
+
 def _oof(X, e, folds, seed):
     from threadpoolctl import threadpool_limits  # type: ignore[import-untyped]
 
-    hgb = binned_hgb_class()
-    pred = np.empty_like(e)
-    models = []
     # one thread: the trees are small, and OpenMP threads spinning on a busy machine cost far more than
-    # they save (measured: 2.4 s per fit with all cores on a loaded 2-core machine, ~0.1 s with one)
+    # they save (measured: 2.4 s per fit with all cores on a loaded 2-core machine, ~0.1 s with one).
+    # scikit-learn (and its OpenMP runtime) is loaded first: threadpoolctl limits only the loaded libraries
+    binned_hgb_class()
     with threadpool_limits(limits=1, user_api="openmp"):
-        for tr, te in folds:
-            m = hgb(random_state=seed, **HGB_PARAMS).fit(X[tr], e[tr])
-            pred[te] = m.predict(X[te])
-            models.append(m)
-    return pred, models
+        f = FoldFits(X, e, folds, seed).finish()
+    return f.pred, f.models
 
 
 def _r2(e, pred):
@@ -295,6 +340,26 @@ def _block_permute(e, experiment, rng):
         blocks = [ex[i:i + L] for i in range(0, idx.size, L)]
         out[idx] = np.concatenate([blocks[i] for i in rng.permutation(len(blocks))])
     return out
+
+
+def _tree_rows(residual, features, names, experiment, order, n_folds):
+    """Residual (s, n), features, experiment of each sample and the time-blocked folds the trees see: the
+    samples thinned to every ``ceil(s / MAX_TREE_SAMPLES)``-th one (in time order within each experiment)."""
+    E = np.asarray(residual, float)
+    if E.ndim == 1:
+        E = E[:, None]
+    X = np.asarray(features, float)
+    s = E.shape[0]
+    if X.shape[0] != s or len(names) != X.shape[1]:
+        raise ValueError(f"unexplained_structure: residual {E.shape}, features {X.shape} and {len(names)} names disagree")
+    experiment = np.zeros(s, int) if experiment is None else np.asarray(experiment)
+    order = np.arange(s) if order is None else np.asarray(order)
+    stride = -(-s // MAX_TREE_SAMPLES)
+    if stride > 1:
+        keep = np.concatenate([np.flatnonzero(experiment == x)[np.argsort(order[experiment == x], kind="stable")][::stride]
+                               for x in np.unique(experiment)])
+        E, X, experiment, order = E[keep], X[keep], experiment[keep], order[keep]
+    return E, X, experiment, blocked_folds(time_blocks(experiment, order, n_folds))
 
 
 def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Sequence[str], *,
@@ -334,23 +399,8 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
     list of Unexplained
         One per joint analysed (``flagged`` says which go to the JSON ``unexplained`` list).
     """
-    E = np.asarray(residual, float)
-    if E.ndim == 1:
-        E = E[:, None]
-    X = np.asarray(features, float)
-    s, n = E.shape
-    if X.shape[0] != s or len(names) != X.shape[1]:
-        raise ValueError(f"unexplained_structure: residual {E.shape}, features {X.shape} and {len(names)} names disagree")
-    experiment = np.zeros(s, int) if experiment is None else np.asarray(experiment)
-    order = np.arange(s) if order is None else np.asarray(order)
-    # samples thinned to every ceil(s / MAX_TREE_SAMPLES)-th one (in time order within each experiment)
-    # before the trees see them
-    stride = -(-s // MAX_TREE_SAMPLES)
-    if stride > 1:
-        keep = np.concatenate([np.flatnonzero(experiment == x)[np.argsort(order[experiment == x], kind="stable")][::stride]
-                               for x in np.unique(experiment)])
-        E, X, experiment, order = E[keep], X[keep], experiment[keep], order[keep]
-    folds = blocked_folds(time_blocks(experiment, order, n_folds))
+    E, X, experiment, folds = _tree_rows(residual, features, names, experiment, order, n_folds)
+    n = E.shape[1]
     rng = np.random.default_rng(seed)
     out = []
     for j in (range(n) if joints is None else joints):
@@ -383,6 +433,115 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
                 sigs = tuple(names[c] for c in ordr[:MAX_SIGNALS] if imp[c] >= IMPORTANCE_SHARE * tot)
         out.append(Unexplained(int(j) + 1, share, float(thr), bool(flagged), sigs))
     return out
+
+
+#: rounding guard of the fold bounds' comparisons (a sum of squares accumulated fold by fold against the
+#: whole one)
+BOUND_TOL = 1e-9
+
+
+class _Draws:
+    """The block permutations of a round, drawn from one stream in the order :func:`unexplained_structure`
+    draws them: ``n_null`` for each joint whose share exceeds ``min_share``, in joint order. A joint whose
+    share fit was stopped early is completed first unless its bound already puts it at or below
+    ``min_share`` (then it draws nothing, as in the plain test)."""
+
+    def __init__(self, joints, fits, experiment, rng, n_null, min_share):
+        self.joints, self.fits, self.experiment, self.rng = list(joints), fits, experiment, rng
+        self.n_null, self.min_share = n_null, min_share
+        self.perms: dict[int, list] = {}
+        self.drawn = 0
+
+    def of(self, k: int) -> list:
+        """Permutations of ``joints[k]`` (after those of the joints before it)."""
+        while self.drawn <= k:
+            f = self.fits[self.joints[self.drawn]]
+            if not f.done and f.bound() > self.min_share - BOUND_TOL:
+                f.finish()
+            if f.done and f.share() > self.min_share:
+                self.perms[self.joints[self.drawn]] = [_block_permute(f.e, self.experiment, self.rng)
+                                                       for _ in range(self.n_null)]
+            self.drawn += 1
+        return self.perms[self.joints[k]]
+
+
+def _null_flags(X, share, perms, folds, seed, null_margin) -> tuple[bool, list[FoldFits]]:
+    """Whether a joint of out-of-fold share ``share`` stays flagged against its nulls, each null fit stopped
+    once its bound can no longer reach ``share - null_margin``; the first null that unflags ends the test."""
+    nulls = []
+    for es in perms:
+        g = FoldFits(X, es, folds, seed)
+        nulls.append(g)
+        while not g.done and max(g.bound(), 0.0) + null_margin >= share - BOUND_TOL:
+            g.step()
+        if g.done and g.share() + null_margin >= share:
+            return False, nulls
+    return True, nulls
+
+
+def greedy_round(residual: np.ndarray, features: np.ndarray, names: Sequence[str], *, experiment: np.ndarray,
+                 order: np.ndarray, joints: Sequence[int], n_folds: int = N_FOLDS, n_null: int = N_NULL,
+                 min_share: float = MIN_SHARE, null_margin: float = NULL_MARGIN, seed: int = 0
+                 ) -> tuple[list[Unexplained] | None, int | None]:
+    """One round of the carrier search of :func:`unexplained_by_joint`: the flagged joint with the largest
+    share (the first in joint order on ties), or, when no joint is flagged, the results of
+    ``unexplained_structure(..., signals=False)`` number for number.
+
+    A round that finds a carrier only passes on its decision (every joint it tested is tested again, in the
+    next round or among the carriers), so its fits stop as soon as the decision is settled - the sequential
+    Monte Carlo test's rule of sampling only until the decision is certain (Besag & Clifford, "Sequential
+    Monte Carlo p-values", Biometrika 78, 1991), here on the folds of each out-of-fold fit, whose ``R^2``
+    can only fall as folds are added (:meth:`FoldFits.bound`):
+
+    * a joint's fit stops once its bound is below the share of a flagged joint found before it (it can no
+      longer be the carrier), and a joint whose share does not exceed that flagged share gets no null fits;
+    * a null fit stops once its bound plus ``null_margin`` is below the joint's share (it can no longer
+      unflag it); the first null that unflags the joint ends its test.
+
+    The permutations come from the stream and in the order of :func:`unexplained_structure` (:class:`_Draws`);
+    when no joint is flagged, every fit is completed (no share fit stopped, the unflagging nulls' tests
+    finished), so the results are the plain test's (``tests/diagnostics/test_unexplained_speed.py``).
+
+    Returns
+    -------
+    (results, None) when no joint is flagged (one per joint of ``joints``, in that order), else
+    (None, carrier) with the carrier 0-based.
+    """
+    from threadpoolctl import threadpool_limits
+
+    E, X, experiment, folds = _tree_rows(residual, features, names, experiment, order, n_folds)
+    joints = list(joints)
+    fits: dict[int, FoldFits] = {}
+    draws = _Draws(joints, fits, experiment, np.random.default_rng(seed), n_null, min_share)
+    best: tuple[float, int] | None = None
+    results: dict[int, Unexplained] = {}
+    unflagged: dict[int, tuple[float, list[FoldFits]]] = {}
+    binned_hgb_class()   # loads scikit-learn's OpenMP runtime before the one-thread limit (:func:`_oof`)
+    with threadpool_limits(limits=1, user_api="openmp"):
+        for k, j in enumerate(joints):
+            f = fits[j] = FoldFits(X, E[:, j], folds, seed)
+            while not f.done and (best is None or f.bound() >= best[0] - BOUND_TOL):
+                f.step()
+            if not f.done:
+                continue
+            share = f.share()
+            if share <= min_share:
+                results[j] = Unexplained(int(j) + 1, share, float(max(min_share, null_margin)), False, ())
+                continue
+            if best is not None and share <= best[0]:
+                continue
+            flagged, nulls = _null_flags(X, share, draws.of(k), folds, seed, null_margin)
+            if flagged:
+                best = (share, j)
+            else:
+                unflagged[j] = (share, nulls)
+        if best is not None:
+            return None, best[1]
+        for j, (share, nulls) in unflagged.items():
+            nulls += [FoldFits(X, es, folds, seed) for es in draws.of(joints.index(j))[len(nulls):]]
+            thr = max(min_share, max(g.share() for g in nulls) + null_margin)
+            results[j] = Unexplained(int(j) + 1, share, float(thr), bool(share > thr), ())
+    return [results[j] for j in joints], None
 
 
 def unexplained_by_joint(resid: np.ndarray, A: np.ndarray, joint: np.ndarray, experiment: np.ndarray,
@@ -424,19 +583,17 @@ def unexplained_by_joint(resid: np.ndarray, A: np.ndarray, joint: np.ndarray, ex
         r = refit_without(resid, A, joint, carriers)
         E, e_exp, e_idx = rows_to_samples(r, joint, experiment, index)
         others = [j for j in range(n) if j not in carriers]
-        res = unexplained_structure(E, features, names, experiment=e_exp, order=e_idx, seed=seed, joints=others,
-                                    signals=False, **kw)
-        found.update({u.joint - 1: u for u in res})
-        new = [u for u in res if u.flagged]
-        if not new or len(others) == 1:
-            # the joints outside the carriers: flagged ones only when no carrier can be added (the signals
-            # they depend on are computed then)
-            if new:
-                found.update({u.joint - 1: u for u in unexplained_structure(
-                    E, features, names, experiment=e_exp, order=e_idx, seed=seed, joints=[u.joint - 1 for u in new],
-                    **kw)})
+        res, carrier = greedy_round(E, features, names, experiment=e_exp, order=e_idx, joints=others, seed=seed,
+                                    **kw)
+        if carrier is None:
+            found.update({u.joint - 1: u for u in res or ()})
             break
-        carriers.append(max(new, key=lambda u: u.share).joint - 1)
+        if len(others) == 1:
+            # the last joint outside the carriers is flagged: tested again with the signals it depends on
+            found.update({u.joint - 1: u for u in unexplained_structure(
+                E, features, names, experiment=e_exp, order=e_idx, seed=seed, joints=[carrier], **kw)})
+            break
+        carriers.append(carrier)
     if carriers:
         found.update({u.joint - 1: u for u in unexplained_structure(E, features, names, experiment=e_exp,
                                                                      order=e_idx, seed=seed, joints=carriers, **kw)})
