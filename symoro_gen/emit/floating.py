@@ -34,7 +34,7 @@ from ..dynamics.graph import ExprGraph, GraphBuilder
 from ..dynamics.newton_euler import SymbolicRegressor
 from .backends.c import PRELUDE, c_function
 from .backends.casadi import casadi_source
-from .backends.numpy import kernel_source
+from .backends.numpy import MODULE_TAIL, kernel_source
 from .optimize import optimize
 
 #: kinds of regressor of a floating package, in the order of its C functions
@@ -214,23 +214,7 @@ casadi_regressor = _MODEL.casadi_regressor
 casadi_frame_transform = _MODEL.casadi_frame_transform
 casadi_frame_jacobian = _MODEL.casadi_frame_jacobian
 build = _MODEL.build
-
-
-def nominal_parameters():
-    """Standard vector of the robot file's nominal values (STANDARD_NAMES order), or None."""
-    return None if _NOMINAL is None else _np.array(_NOMINAL, dtype=float)
-
-
-def nominal_payload():
-    """Payload parameters of the robot file's nominal values (PAYLOAD_NAMES order), or None."""
-    return None if _NOMINAL_PAYLOAD is None else _np.array(_NOMINAL_PAYLOAD, dtype=float)
-
-
-def __getattr__(name):
-    if name == "BACKEND":
-        return _MODEL.backend
-    raise AttributeError(f"module {{__name__!r}} has no attribute {{name!r}}")
-'''
+''' + MODULE_TAIL
 
 _CASADI_TEMPLATE = '''{header}"""CasADi constructions of `{robot}` (generated from the expression graphs).
 

@@ -48,7 +48,7 @@ from ..runtime.batch import evaluate
 from ..version import __version__
 from .backends.c import c_source
 from .backends.casadi import casadi_function, casadi_source
-from .backends.numpy import kernel_source, load_kernel
+from .backends.numpy import MODULE_TAIL, kernel_source, load_kernel
 from .closedloop import closed_loop_files
 from .floating import floating_package_files, floating_relations_markdown
 from .geometry import geometry_files
@@ -223,23 +223,7 @@ base_parameters = _MODEL.base_parameters
 torque = _MODEL.torque
 casadi_regressor = _MODEL.casadi_regressor
 build = _MODEL.build
-
-
-def nominal_parameters():
-    """Standard vector of the robot file's nominal values (STANDARD_NAMES order), or None."""
-    return None if _NOMINAL is None else _np.array(_NOMINAL, dtype=float)
-
-
-def nominal_payload():
-    """Payload parameters of the robot file's nominal values (PAYLOAD_NAMES order), or None."""
-    return None if _NOMINAL_PAYLOAD is None else _np.array(_NOMINAL_PAYLOAD, dtype=float)
-
-
-def __getattr__(name):
-    if name == "BACKEND":
-        return _MODEL.backend
-    raise AttributeError(f"module {{__name__!r}} has no attribute {{name!r}}")
-'''
+''' + MODULE_TAIL
 
 _CASADI_TEMPLATE = '''{header}"""CasADi construction of the base regressor of `{robot}` (generated from the expression graph).
 

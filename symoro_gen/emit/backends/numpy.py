@@ -11,6 +11,24 @@ import sympy as sp
 from ...dynamics.graph import ExprGraph
 from ..printing import NUMPY, print_expr
 
+#: the end of every generated package's ``__init__.py`` (fixed and floating base): the nominal values and
+#: ``BACKEND``; a ``str.format`` template like the rest of the module (braces doubled)
+MODULE_TAIL = "\n\n" + '''def nominal_parameters():
+    """Standard vector of the robot file's nominal values (STANDARD_NAMES order), or None."""
+    return None if _NOMINAL is None else _np.array(_NOMINAL, dtype=float)
+
+
+def nominal_payload():
+    """Payload parameters of the robot file's nominal values (PAYLOAD_NAMES order), or None."""
+    return None if _NOMINAL_PAYLOAD is None else _np.array(_NOMINAL_PAYLOAD, dtype=float)
+
+
+def __getattr__(name):
+    if name == "BACKEND":
+        return _MODEL.backend
+    raise AttributeError(f"module {{__name__!r}} has no attribute {{name!r}}")
+'''
+
 
 def kernel_source(graph: ExprGraph, n_rows: int, col_names: Sequence[str], func_name: str,
                   inputs_q: Sequence[sp.Symbol], inputs_dq: Sequence[sp.Symbol],
