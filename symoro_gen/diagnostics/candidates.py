@@ -72,10 +72,10 @@ from ..params import DRIVE_KINDS, split_name
 from .frame import Experiment, Frame, attach_model_torque, model_torque
 from .friction import rest_mask
 from .geometry import (
+    LengthColumns,
     decimated_zero_matrix,
     describe_length,
     describe_zero,
-    length_column,
     length_joint,
     link_length_ready,
     revolute_joints,
@@ -479,9 +479,11 @@ def _link_length_families(ks: set[str], model: IdentificationModel | None) -> li
     if "link_length" not in ks or model is None or not link_length_ready(model):
         return []
     out = []
-    for f, fld in visible_lengths(model):
-        def build(fr, ctx, f=f, fld=fld):   # the model checked by link_length_ready: its base names
-            return [length_column(fr, model, ctx.theta, f, fld)]
+    lengths = visible_lengths(model)
+    shared = LengthColumns(model, lengths)   # one full-rate pass per round for every length
+    for i, (f, fld) in enumerate(lengths):
+        def build(fr, ctx, i=i):   # the model checked by link_length_ready: its base names
+            return [shared.column(fr, ctx.theta, i)]
 
         out.append(Family("link_length", length_joint(model, f), (fld,), build, variant=fld, reveal="q",
                           depends_on_fit=True, info=(("frame", f), ("field", fld))))

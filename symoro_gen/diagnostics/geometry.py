@@ -38,6 +38,7 @@ from ..identification.geometry import (
     JOINT_ZERO_STEP,
     VISIBILITY_TOL,
     emitted_length_column,
+    emitted_length_columns,
     joint_zero_column,
     joint_zero_secant,
     joint_zero_visibility,
@@ -54,7 +55,7 @@ from .frame import build_frame, common_bandwidth
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
            "joint_zero_visibility", "invisible_zero_note", "regressor_secant", "JointZeroFit",
            "decimated_zero_matrix", "fit_joint_zeros", "revolute_joints", "visible_zero_joints", "LENGTH_STEP",
-           "describe_length", "description_of", "emitted_length_column", "rigid_model", "length_column", "length_joint", "link_length_ready",
+           "describe_length", "description_of", "emitted_length_column", "rigid_model", "length_column", "length_columns", "LengthColumns", "length_joint", "link_length_ready",
            "visible_lengths"]
 
 def invisible_zero_note(model: IdentificationModel) -> list[str]:
@@ -296,28 +297,55 @@ def _pair(robot, frame: int, fld: str):
 LENGTH_STEP = 1e-6
 
 
-def length_column(frame, ctx_model: IdentificationModel, theta, f: int, fld: str) -> np.ndarray:
-    """``(d tau / d L) chi`` of the MDH length ``fld`` of frame ``f`` on the rows of every joint (shape (r, 1)):
-    the generated package's emitted derivative (:func:`emitted_length_column`) or, without one or on loaded
-    experiments, the central difference of the numeric Newton-Euler torque, at the standard parameters of the
-    current fit (:func:`standard_from_fit`), evaluated at full rate on the frame's signals and decimated in parallel with
-    ``W`` (a :class:`.frame.Frame`). A length error ``e`` adds ``e`` times this column (Khalil & Dombre 2002,
-    ch. 11: the calibration model linearised in the parameter errors)."""
+def length_columns(frame, ctx_model: IdentificationModel, theta, lengths: Sequence[tuple[int, str]]) -> np.ndarray:
+    """``(d tau / d L_i) chi`` of each MDH length ``(frame, field)`` of ``lengths`` on the rows of every joint (shape
+    (r, len(lengths))): the generated package's emitted derivative (:func:`emitted_length_columns`, one evaluation
+    for every length) or, without one or on loaded experiments, the central difference of the numeric
+    Newton-Euler torque, at the standard parameters of the current fit (:func:`standard_from_fit`), evaluated at
+    full rate on the frame's signals and decimated in parallel with ``W`` (a :class:`.frame.Frame`). A length
+    error ``e`` adds ``e`` times its column (Khalil & Dombre 2002, ch. 11: the calibration model linearised in
+    the parameter errors)."""
     robot = description_of(ctx_model)
     assert robot is not None   # families exist only with a description (link_length_ready)
     chi, pay = standard_from_fit(rigid_model(ctx_model), robot, theta)
-    plus, minus = _pair(robot, f, fld)
-    emitted = emitted_length_column(rigid_model(ctx_model), robot, chi, f, fld)
+    pairs = [_pair(robot, f, fld) for f, fld in lengths]
+    emitted = emitted_length_columns(rigid_model(ctx_model), robot, chi, lengths)
 
     def fn(ex, a: int, b: int) -> np.ndarray:
         p = pay if ex.loaded else None
         q, dq, ddq = ex.q[a:b], ex.dq[a:b], ex.ddq[a:b]
         if emitted is not None and p is None:
-            return emitted(q, dq, ddq)[:, :, None]
-        d = (inverse_dynamics(plus, q, dq, ddq, chi, p) - inverse_dynamics(minus, q, dq, ddq, chi, p)) / (2 * LENGTH_STEP)
-        return d[:, :, None]
+            return emitted(q, dq, ddq)
+        return np.stack([(inverse_dynamics(plus, q, dq, ddq, chi, p) - inverse_dynamics(minus, q, dq, ddq, chi, p))
+                         / (2 * LENGTH_STEP) for plus, minus in pairs], axis=2)
 
-    return frame.full_rate_columns_batched(fn, 1)
+    return frame.full_rate_columns_batched(fn, len(lengths))
+
+
+def length_column(frame, ctx_model: IdentificationModel, theta, f: int, fld: str) -> np.ndarray:
+    """The column (shape (r, 1)) of the one length ``fld`` of frame ``f``: :func:`length_columns`."""
+    return length_columns(frame, ctx_model, theta, [(f, fld)])
+
+
+class LengthColumns:
+    """The columns of a set of lengths (:func:`length_columns`), built once for all of them per frame and fit.
+
+    The loop's link-length families of one round share a frame and a fit (``theta``), and the emitted derivative
+    evaluates every geometric constant at once: one full-rate pass serves every length instead of one pass each.
+    Holds the last frame, fit and columns only (the decimated rows: ``r x len(lengths)``)."""
+
+    def __init__(self, model: IdentificationModel, lengths: Sequence[tuple[int, str]]):
+        self.model, self.lengths = model, tuple(lengths)
+        self._frame: object | None = None
+        self._theta: dict | None = None
+        self._X: np.ndarray | None = None
+
+    def column(self, frame, theta: dict, i: int) -> np.ndarray:
+        """The column (shape (r, 1)) of ``lengths[i]`` on ``frame`` at the fit ``theta``."""
+        if self._X is None or self._frame is not frame or self._theta != theta:
+            self._X = length_columns(frame, self.model, theta, self.lengths)
+            self._frame, self._theta = frame, dict(theta)
+        return self._X[:, i:i + 1].copy()
 
 
 def describe_length(frame: int, fld: str, value: float, std: float) -> dict:

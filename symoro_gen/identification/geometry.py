@@ -60,7 +60,7 @@ from ..params import INERTIAL_KINDS, split_name
 from .systems import stack_systems
 
 __all__ = ["GEOMETRY_KINDS", "LENGTH_VISIBILITY_TOL", "MAX_LENGTH_M", "MAX_LENGTH_REACH", "GaussNewton",
-           "GeometryProblem", "check_zero_joints", "LengthVisibility", "add_lengths", "apply_geometry", "arm_reach", "correct_lengths",
+           "GeometryProblem", "check_zero_joints", "emitted_length_columns", "LengthVisibility", "add_lengths", "apply_geometry", "arm_reach", "correct_lengths",
            "fit_geometry", "gauss_newton", "length_identifiability", "length_identifiability_text",
            "length_plausible", "parse_lengths", "standard_from_fit", "JOINT_ZERO_STEP", "LENGTH_FIELDS", "length_sensitivity", "length_visibility", "perturbed_robot", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
            "add_zeros", "corrected_robot_text", "fit_zeros", "joint_zero_column", "joint_zero_secant", "joint_zero_visibility",
@@ -675,14 +675,15 @@ def length_sensitivity(robot, chi_std, q, dq, ddq, frame: int, fld: str, *, h: f
     return (np.asarray(plus) - np.asarray(minus)) / (2 * h)
 
 
-def emitted_length_column(model: IdentificationModel, robot, chi_std: np.ndarray, f: int, fld: str
-                          ) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None:
-    """``(q, dq, ddq) -> (d tau / d L) chi`` (shape (N, n)) from the generated package's emitted derivative of the
-    standard regressor at the nominal geometry (``geometry_columns``, :mod:`symoro_gen.emit.geometry`), or None
-    when the model has none (a model built in memory, a wrapper, a package whose manifest omits it) or its
-    standard parameters are not the description's: the caller then differentiates the numeric Newton-Euler
-    model (:func:`length_sensitivity`). A constant the generator dropped (derivative identically 0) gives zeros.
-    Without payload only: the emitted derivative has no payload columns."""
+def emitted_length_columns(model: IdentificationModel, robot, chi_std: np.ndarray, lengths: Sequence[tuple[int, str]]
+                           ) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None:
+    """``(q, dq, ddq) -> (d tau / d L_i) chi`` (shape (N, n, len(lengths))) of each MDH length ``(frame, field)`` of
+    ``lengths``, from one evaluation of the generated package's emitted derivative of the standard regressor at the
+    nominal geometry (``geometry_columns``, :mod:`symoro_gen.emit.geometry`), or None when the model has none (a
+    model built in memory, a wrapper, a package whose manifest omits it) or its standard parameters are not the
+    description's: the caller then differentiates the numeric Newton-Euler model (:func:`length_sensitivity`). A
+    constant the generator dropped (derivative identically 0) gives zeros. Without payload only: the emitted
+    derivative has no payload columns."""
     columns = getattr(model, "geometry_columns", None)
     names = tuple(getattr(model, "GEOMETRY_NAMES", ()))
     std = tuple(getattr(model, "STANDARD_NAMES", ()))
@@ -690,13 +691,31 @@ def emitted_length_column(model: IdentificationModel, robot, chi_std: np.ndarray
         return None
     by = dict(zip(robot.standard_names, chi_std))
     chi_m = np.array([float(by[nm]) for nm in std])
-    name = f"{fld}{int(f)}"
-    k = names.index(name) if name in names else None
+    ks = [names.index(f"{fld}{int(f)}") if f"{fld}{int(f)}" in names else None for f, fld in lengths]
+
+    def cols(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        out = np.zeros(np.shape(q) + (len(ks),))
+        if any(k is not None for k in ks):
+            full = np.asarray(columns(q, dq, ddq, chi_m))
+            for i, k in enumerate(ks):
+                if k is not None:
+                    out[:, :, i] = full[:, :, k]
+        return out
+
+    return cols
+
+
+def emitted_length_column(model: IdentificationModel, robot, chi_std: np.ndarray, f: int, fld: str
+                          ) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None:
+    """``(q, dq, ddq) -> (d tau / d L) chi`` (shape (N, n)) of the one length ``fld`` of frame ``f``: the column of
+    :func:`emitted_length_columns`, or None when the model has no emitted derivative."""
+    cols = emitted_length_columns(model, robot, chi_std, [(f, fld)])
+    if cols is None:
+        return None
 
     def col(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
-        if k is None:
-            return np.zeros(np.shape(q))
-        return np.asarray(columns(q, dq, ddq, chi_m))[:, :, k]
+        out: np.ndarray = cols(q, dq, ddq)[:, :, 0]
+        return out
 
     return col
 

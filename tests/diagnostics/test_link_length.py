@@ -16,16 +16,22 @@ import symoro_gen
 from symoro_gen.description import load_robot
 from symoro_gen.diagnostics import DiagnoseSettings, diagnose
 from symoro_gen.diagnostics.candidates import MAX_LINK_LENGTH_M, Family, implausible
+from symoro_gen.diagnostics.frame import build_frame, common_bandwidth
 from symoro_gen.diagnostics.geometry import (
+    LengthColumns,
     describe_length,
     description_of,
     emitted_length_column,
+    length_column,
     length_joint,
     link_length_ready,
+    visible_lengths,
 )
 from symoro_gen.diagnostics.plausibility import fits_like
 from symoro_gen.dynamics.numeric import inverse_dynamics
-from symoro_gen.identification.geometry import perturbed_robot
+from symoro_gen.identification.geometry import LENGTH_FIELDS, perturbed_robot
+
+from .simdata import recording
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -57,6 +63,33 @@ def test_the_models_robot_file_is_found():
     assert robot is not None and robot.n_joints == 7
     assert link_length_ready(model)
     assert length_joint(model, 3) == 2 and length_joint(model, 1) == 0
+
+
+def test_one_pass_serves_every_length():
+    """The loop's link-length families share one full-rate pass per frame and fit (``LengthColumns``): each
+    column equals the column built for that length alone (``length_column``) to rounding, a second family of the
+    same round reuses the pass, and a new fit rebuilds it."""
+    model, tr = recording("rx90", 21, noise_q=1e-4, duration=3.0)
+    F = build_frame(model, [tr], dynamics_bandwidth_hz=common_bandwidth([tr]))
+    robot = description_of(model)
+    assert robot is not None
+    lengths = visible_lengths(model)
+    assert len(lengths) >= 2 and all(fld in LENGTH_FIELDS for _, fld in lengths)
+    rng = np.random.default_rng(2)
+    theta = {nm: float(v) for nm, v in zip(model.BASE_NAMES, rng.normal(size=len(model.BASE_NAMES)))}
+    shared = LengthColumns(model, lengths)
+    cols = [shared.column(F, theta, i) for i in range(len(lengths))]
+    first = shared._X
+    for (f, fld), col in list(zip(lengths, cols))[:3]:
+        alone = length_column(F, model, theta, f, fld)
+        assert col.shape == alone.shape == (F.n_rows, 1)
+        scale = max(1.0, float(np.abs(alone).max()))
+        assert np.abs(col - alone).max() <= 1e-12 * scale, (f, fld)
+    assert shared.column(F, theta, 0) is not first and shared._X is first   # reused: same frame, same fit
+    theta2 = {nm: 2 * v for nm, v in theta.items()}
+    again = shared.column(F, theta2, 0)
+    assert shared._X is not first
+    assert np.abs(again - length_column(F, model, theta2, *lengths[0])).max() <= 1e-12 * max(1.0, float(np.abs(again).max()))
 
 
 @pytest.mark.slow
