@@ -330,22 +330,23 @@ def length_column(frame, ctx_model: IdentificationModel, theta, f: int, fld: str
 class LengthColumns:
     """The columns of a set of lengths (:func:`length_columns`), built once for all of them per frame and fit.
 
-    The loop's link-length families of one round share a frame and a fit (``theta``), and the emitted derivative
-    evaluates every geometric constant at once: one full-rate pass serves every length instead of one pass each.
-    Holds the last frame, fit and columns only (the decimated rows: ``r x len(lengths)``)."""
+    The loop's link-length families of one round share a fit (``theta``) and a few frames (the identification
+    rows, the held-out ones), and the emitted derivative evaluates every geometric constant at once: one
+    full-rate pass per frame serves every length instead of one pass each. Holds the columns of the last
+    ``keep`` (frame, fit) pairs only (decimated rows: ``r x len(lengths)`` each)."""
 
-    def __init__(self, model: IdentificationModel, lengths: Sequence[tuple[int, str]]):
-        self.model, self.lengths = model, tuple(lengths)
-        self._frame: object | None = None
-        self._theta: dict | None = None
-        self._X: np.ndarray | None = None
+    def __init__(self, model: IdentificationModel, lengths: Sequence[tuple[int, str]], keep: int = 4):
+        self.model, self.lengths, self.keep = model, tuple(lengths), keep
+        self._held: list[tuple[object, dict, np.ndarray]] = []
 
     def column(self, frame, theta: dict, i: int) -> np.ndarray:
         """The column (shape (r, 1)) of ``lengths[i]`` on ``frame`` at the fit ``theta``."""
-        if self._X is None or self._frame is not frame or self._theta != theta:
-            self._X = length_columns(frame, self.model, theta, self.lengths)
-            self._frame, self._theta = frame, dict(theta)
-        return self._X[:, i:i + 1].copy()
+        for fr, th, X in self._held:
+            if fr is frame and th == theta:
+                return X[:, i:i + 1].copy()
+        X = length_columns(frame, self.model, theta, self.lengths)
+        self._held = [*self._held[-(self.keep - 1):], (frame, dict(theta), X)] if self.keep > 1 else [(frame, dict(theta), X)]
+        return X[:, i:i + 1].copy()
 
 
 def describe_length(frame: int, fld: str, value: float, std: float) -> dict:

@@ -79,16 +79,16 @@ def test_one_pass_serves_every_length():
     theta = {nm: float(v) for nm, v in zip(model.BASE_NAMES, rng.normal(size=len(model.BASE_NAMES)))}
     shared = LengthColumns(model, lengths)
     cols = [shared.column(F, theta, i) for i in range(len(lengths))]
-    first = shared._X
+    first = shared._held[-1][2]
     for (f, fld), col in list(zip(lengths, cols))[:3]:
         alone = length_column(F, model, theta, f, fld)
         assert col.shape == alone.shape == (F.n_rows, 1)
         scale = max(1.0, float(np.abs(alone).max()))
         assert np.abs(col - alone).max() <= 1e-12 * scale, (f, fld)
-    assert shared.column(F, theta, 0) is not first and shared._X is first   # reused: same frame, same fit
+    assert shared.column(F, theta, 0) is not first and len(shared._held) == 1   # reused: same frame, same fit
     theta2 = {nm: 2 * v for nm, v in theta.items()}
     again = shared.column(F, theta2, 0)
-    assert shared._X is not first
+    assert len(shared._held) == 2 and shared._held[-1][2] is not first
     assert np.abs(again - length_column(F, model, theta2, *lengths[0])).max() <= 1e-12 * max(1.0, float(np.abs(again).max()))
 
 
