@@ -45,7 +45,7 @@ from ..description.mdh import joint_sign, row_transform
 from ..description.model import REVOLUTE, RobotDescription
 from ..errors import IdentificationError, ModelError
 from ..runtime.floating import FloatingModel, floating_states, numeric_base
-from .estimators import fit_ols, fit_wls, tolerance_keywords
+from .estimators import REL_STD_WARN_PCT, Options, fit_ols, fit_wls, poorly_identified_warnings, tolerance_keywords
 from .observation import ObservationSystem
 from .result import IdentificationResult, relative_std_pct
 
@@ -278,12 +278,13 @@ def fit_system(model: FloatingModel, fs: FloatingSystem, method: str = "wls", ba
     else:
         raise IdentificationError(f"{model.ROBOT}: method must be 'ols' or 'wls', got {method!r}")
     if fs.samples:
-        res = with_sample_covariance(res, fs.system, fs.samples, band)
+        res = with_sample_covariance(res, fs.system, fs.samples, band,
+                                     tol.get("rel_std_warn_pct", REL_STD_WARN_PCT))
     return FloatingIdentification(fs.kind, res, fs.relations, fs.not_identifiable, fs.columns)
 
 
 def with_sample_covariance(res: IdentificationResult, system: ObservationSystem, samples: int,
-                           band: float = 1.0) -> IdentificationResult:
+                           band: float = 1.0, rel_std_warn_pct: float = REL_STD_WARN_PCT) -> IdentificationResult:
     """``res`` with the covariance of its estimates from the rows' noise correlated within a sample.
 
     The estimates are unchanged. The OLS/WLS covariance ``sigma^2 (A'A)^-1`` (RX-90 eq. 20, ``A`` the weighted
@@ -306,7 +307,8 @@ def with_sample_covariance(res: IdentificationResult, system: ObservationSystem,
     ``band`` of the decimated band the decimation filter passes (``cutoff_ratio``) only; the residuals' variance is
     ``band`` times the level the slowly varying columns see, so the covariance is divided by ``band`` (as the
     loop's candidate tests on floating systems do). Serial correlation is not estimated from the residuals: the
-    fit removes the residuals' low-frequency part, where the columns are.
+    fit removes the residuals' low-frequency part, where the columns are. The warning naming the poorly identified
+    parameters is made again from the new standard deviations (``rel_std_warn_pct``).
     """
     if (res.residual is None or system.W.shape[0] % samples or res.sigma <= 0 or res.values.size != system.W.shape[1]
             or not np.all(np.isfinite(res.cov))):
@@ -327,7 +329,9 @@ def with_sample_covariance(res: IdentificationResult, system: ObservationSystem,
     cov = bread @ (T.T @ T) @ bread / band
     cov = 0.5 * (cov + cov.T)
     std = np.where(np.isfinite(res.std), np.sqrt(np.clip(np.diag(cov), 0.0, None)), res.std)
-    return replace(res, cov=cov, std=std, rel_std_pct=relative_std_pct(res.values, std))
+    warnings = [w for w in res.warnings if "poorly identified (%sigma" not in w]
+    warnings += poorly_identified_warnings(res.names, res.values, std, Options(rel_std_warn_pct=rel_std_warn_pct))
+    return replace(res, cov=cov, std=std, rel_std_pct=relative_std_pct(res.values, std), warnings=tuple(warnings))
 
 
 def frame_number(robot: RobotDescription, frame: str) -> int:
