@@ -24,7 +24,8 @@ in standard order (:func:`~symoro_gen.runtime.floating.numeric_base`, Gram-Schmi
 relations ``K`` of the others, so that the identified values estimate ``K @ chi_std``. Standard parameters
 whose column of ``K`` is zero are reported as not identifiable from those rows. The fit is the fixed-base
 estimators' (:func:`~symoro_gen.identification.estimators.fit_ols`, :func:`~.estimators.fit_wls`), with
-their statistics ([GB-gains] eq. 17-22).
+their statistics ([GB-gains] eq. 17-22) but the covariance of :func:`with_sample_covariance`: the rows of one
+sample share their noise (a contact wrench's through ``J_c^T``), the fit takes them as independent.
 
 Base accelerations from an IMU: the model takes Pinocchio's spatial acceleration of the base
 (``a - omega x v`` in base axes for a classical acceleration ``a`` of the base origin);

@@ -62,3 +62,16 @@ def test_independent_rows_keep_the_usual_covariance():
     print("independent rows:", np.round(naive, 2), "within-sample:", np.round(sandwich, 2))
     assert np.all(np.abs(naive - 1) < 0.25)
     assert np.all(np.abs(sandwich - 1) < 0.25)
+
+
+def test_poorly_identified_warning_uses_the_new_sigma():
+    """A parameter of true value 0 is poorly identified; its warning quotes the %sigma of the new covariance."""
+    rng = np.random.default_rng(5)
+    L = np.linalg.cholesky(np.full((M, M), 0.8) + 0.2 * np.eye(M))
+    W, joint, chi, noise = _system(rng, L)
+    chi[3] = 1e-6
+    system = ObservationSystem(W=W, Y=W @ chi + noise[0], names=tuple(f"p{i}" for i in range(C)), joint=joint)
+    new = with_sample_covariance(fit_wls(system), system, N)
+    poorly = [w for w in new.warnings if "poorly identified" in w]
+    assert len(poorly) == 1
+    assert f"p3 ({new.rel_std_pct[3]:.3g}%)" in poorly[0]
