@@ -24,7 +24,8 @@ in standard order (:func:`~symoro_gen.runtime.floating.numeric_base`, Gram-Schmi
 relations ``K`` of the others, so that the identified values estimate ``K @ chi_std``. Standard parameters
 whose column of ``K`` is zero are reported as not identifiable from those rows. The fit is the fixed-base
 estimators' (:func:`~symoro_gen.identification.estimators.fit_ols`, :func:`~.estimators.fit_wls`), with
-their statistics ([GB-gains] eq. 17-22).
+their statistics ([GB-gains] eq. 17-22) but the covariance of :func:`with_sample_covariance`: the rows of one
+sample share their noise (a contact wrench's through ``J_c^T``), the fit takes them as independent.
 
 Base accelerations from an IMU: the model takes Pinocchio's spatial acceleration of the base
 (``a - omega x v`` in base axes for a classical acceleration ``a`` of the base origin);
@@ -35,7 +36,7 @@ passed directly. Payload columns are not used yet.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -45,9 +46,9 @@ from ..description.mdh import joint_sign, row_transform
 from ..description.model import REVOLUTE, RobotDescription
 from ..errors import IdentificationError, ModelError
 from ..runtime.floating import FloatingModel, floating_states, numeric_base
-from .estimators import fit_ols, fit_wls, tolerance_keywords
+from .estimators import REL_STD_WARN_PCT, Options, fit_ols, fit_wls, poorly_identified_warnings, tolerance_keywords
 from .observation import ObservationSystem
-from .result import IdentificationResult
+from .result import IdentificationResult, relative_std_pct
 
 #: the row kinds of :func:`floating_system`
 KINDS = ("base", "joints", "both")
@@ -129,6 +130,8 @@ class FloatingSystem:
     relations: NDArray[np.float64]
     not_identifiable: tuple[str, ...]
     columns: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    #: the number of samples ``N``: row ``r N + s`` of the system is row position ``r`` of sample ``s``
+    samples: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -242,7 +245,7 @@ def stacked_system(model: FloatingModel, W: NDArray[np.float64], Y: NDArray[np.f
     names = combination_names(model.STANDARD_NAMES, kept, K)
     absent = tuple(n for i, n in enumerate(model.STANDARD_NAMES) if not np.any(K[:, i]))
     system = ObservationSystem(W=Wr[:, kept], Y=Yr, names=names, joint=rows_group)
-    return FloatingSystem(kind, system, K, absent, kept)
+    return FloatingSystem(kind, system, K, absent, kept, W.shape[0])
 
 
 def combination_names(standard: Sequence[str], kept: NDArray[np.intp], K: NDArray[np.float64]) -> tuple[str, ...]:
@@ -264,15 +267,72 @@ def identify_floating(model: FloatingModel, data: FloatingMeasurements, kind: st
     return fit_system(model, floating_system(model, data, kind, weighting), method, **tol)
 
 
-def fit_system(model: FloatingModel, fs: FloatingSystem, method: str = "wls", **tol: Any) -> FloatingIdentification:
-    """IDIM-OLS or -WLS of a system of :func:`floating_system` or :func:`stacked_system`."""
+def fit_system(model: FloatingModel, fs: FloatingSystem, method: str = "wls", band: float = 1.0,
+               **tol: Any) -> FloatingIdentification:
+    """IDIM-OLS or -WLS of a system of :func:`floating_system` or :func:`stacked_system`; the covariance of
+    :func:`with_sample_covariance` (``band``: the share of the decimated band the decimation filter passes,
+    1 for samples not decimated)."""
     if method == "ols":
         res = fit_ols(fs.system, **tol)
     elif method == "wls":
         res = fit_wls(fs.system, **tol)
     else:
         raise IdentificationError(f"{model.ROBOT}: method must be 'ols' or 'wls', got {method!r}")
+    if fs.samples:
+        res = with_sample_covariance(res, fs.system, fs.samples, band,
+                                     tol.get("rel_std_warn_pct", REL_STD_WARN_PCT))
     return FloatingIdentification(fs.kind, res, fs.relations, fs.not_identifiable, fs.columns)
+
+
+def with_sample_covariance(res: IdentificationResult, system: ObservationSystem, samples: int,
+                           band: float = 1.0, rel_std_warn_pct: float = REL_STD_WARN_PCT) -> IdentificationResult:
+    """``res`` with the covariance of its estimates from the rows' noise correlated within a sample.
+
+    The estimates are unchanged. The OLS/WLS covariance ``sigma^2 (A'A)^-1`` (RX-90 eq. 20, ``A`` the weighted
+    system) takes the rows as independent, but a contact wrench's noise reaches several rows of one sample through
+    ``J_c^T f_c`` (base rows and joint rows), and an IMU's through the base's columns of ``W``. With the weighted
+    residuals ``E`` (N samples x m row positions) and the weighted rows ``A_s`` (m x c) of sample ``s``, the
+    within-sample covariance is pooled over the samples, ``S = E'E / N * R / (R - c)`` (``R = N m`` rows; the
+    factor ``R / (R - c)`` makes its trace unbiased for independent rows as eq. 19's ``r - c``), and
+
+        ``cov = (A'A)^-1 (sum_s A_s' S A_s) (A'A)^-1``,
+
+    the sandwich of White (1980) and Liang & Zeger (1986) with a common within-cluster (here: within-sample)
+    covariance in place of each cluster's ``e_s e_s'``: the latter (the cluster-robust estimate) has rank at most
+    ``N`` and is unreliable when the combinations are nearly as many as the (decimated) samples, the common
+    ``S`` (m (m + 1) / 2 entries from ``R`` residuals) is not; what it leaves out is the noise's covariance
+    changing with the configuration (``J_c`` with ``q``). For independent rows of equal variance per row
+    position ``S`` is diagonal and the sandwich is the usual covariance with per-position variances.
+
+    ``band``: samples decimated in parallel ([GB-gains] eq. 15-16) keep white noise's spectrum flat over the share
+    ``band`` of the decimated band the decimation filter passes (``cutoff_ratio``) only; the residuals' variance is
+    ``band`` times the level the slowly varying columns see, so the covariance is divided by ``band`` (as the
+    loop's candidate tests on floating systems do). Serial correlation is not estimated from the residuals: the
+    fit removes the residuals' low-frequency part, where the columns are. The warning naming the poorly identified
+    parameters is made again from the new standard deviations (``rel_std_warn_pct``).
+    """
+    if (res.residual is None or system.W.shape[0] % samples or res.sigma <= 0 or res.values.size != system.W.shape[1]
+            or not np.all(np.isfinite(res.cov))):
+        return res
+    m = system.W.shape[0] // samples
+    c = res.values.size
+    w = np.ones(system.W.shape[0]) if res.joint_sigma is None else 1.0 / res.joint_sigma[system.joint]
+    A = (system.W * w[:, None]).reshape(m, samples, c)
+    E = (res.residual * w).reshape(m, samples).T
+    n_rows = m * samples
+    if n_rows <= c:
+        return res
+    S = E.T @ E / samples * n_rows / (n_rows - c)
+    vals, vecs = np.linalg.eigh(S)
+    half = vecs * np.sqrt(np.clip(vals, 0.0, None))            # S = half half'
+    T = np.einsum("ij,isc->jsc", half, A).reshape(-1, c)        # half' A_s, stacked
+    bread = res.cov / res.sigma ** 2                            # (A'A)^-1 as the fit inverted it
+    cov = bread @ (T.T @ T) @ bread / band
+    cov = 0.5 * (cov + cov.T)
+    std = np.where(np.isfinite(res.std), np.sqrt(np.clip(np.diag(cov), 0.0, None)), res.std)
+    warnings = [w for w in res.warnings if "poorly identified (%sigma" not in w]
+    warnings += poorly_identified_warnings(res.names, res.values, std, Options(rel_std_warn_pct=rel_std_warn_pct))
+    return replace(res, cov=cov, std=std, rel_std_pct=relative_std_pct(res.values, std), warnings=tuple(warnings))
 
 
 def frame_number(robot: RobotDescription, frame: str) -> int:

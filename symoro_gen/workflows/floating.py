@@ -289,7 +289,8 @@ def identify_floating_logs(robot: Any, model: Any, data: Sequence, validate: Seq
     sel = ROWS[kind]
     W = np.concatenate([r.W for r in rows])
     Y = np.concatenate([r.Y for r in rows])
-    fit = fit_system(model, stacked_system(model, W, Y, kind, opts.weighting), opts.method)
+    band = min(r.signals.settings.cutoff_ratio if r.signals.settings.n_d > 1 else 1.0 for r in rows)
+    fit = fit_system(model, stacked_system(model, W, Y, kind, opts.weighting), opts.method, band)
     names = (*BASE_ROWS, *(f"tau{j + 1}" for j in range(model.N_JOINTS)))[sel]
     validation = None
     if validate:
