@@ -84,7 +84,7 @@ def _pinocchio_rows(urdf: str, world: bool, robot, q, dq, ddq) -> np.ndarray:
     return np.array(out)
 
 
-@pytest.mark.parametrize("world", [True, False])
+@pytest.mark.parametrize("world", [True, pytest.param(False, marks=pytest.mark.slow)])
 def test_floating_urdf_import_matches_pinocchio(tmp_path, world):
     urdf = quadruped_urdf(world)
     text = import_urdf_text(urdf, file="quad.urdf", floating=None if world else True)
