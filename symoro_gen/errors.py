@@ -6,7 +6,15 @@ Messages name the file, the frame/line/joint and the field at fault.
 """
 from __future__ import annotations
 
+import difflib
+import functools
+import inspect
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from typing import ParamSpec, TypeVar
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
 
 
 class SymoroError(Exception):
@@ -92,3 +100,29 @@ class ShapeError(SymoroError, TypeError):
 
 class RobotFileWarning(UserWarning):
     """A robot file is valid but something in it is probably not what was meant (names file and field)."""
+
+
+def check_option_names(names: Iterable[str], valid: Sequence[str], what: str) -> None:
+    """Raise :class:`OptionError` for the first name not in ``valid``, naming the nearest valid one
+    (:func:`difflib.get_close_matches`), else listing them all."""
+    for name in names:
+        if name in valid:
+            continue
+        near = difflib.get_close_matches(name, valid, n=1, cutoff=0.5)
+        hint = f"; did you mean {near[0]!r}?" if near else f"; valid options: {', '.join(valid)}"
+        raise OptionError(f"{what}: unknown option {name!r}{hint}")
+
+
+def named_options(fn: Callable[_P, _R]) -> Callable[_P, _R]:
+    """``fn`` whose keyword arguments are checked by :func:`check_option_names` against its own parameter
+    names before the call: a misspelt option raises :class:`OptionError` naming the nearest one instead of
+    Python's bare ``TypeError`` (the signature, and what :func:`inspect.signature` shows, stay ``fn``'s)."""
+    valid = tuple(p.name for p in inspect.signature(fn).parameters.values()
+                  if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY))
+
+    @functools.wraps(fn)
+    def checked(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        check_option_names(kwargs, valid, fn.__name__)
+        return fn(*args, **kwargs)
+
+    return checked

@@ -382,3 +382,91 @@ def test_observations_do_not_import_later_stages():
                        check=False)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.strip() == "[]", r.stdout
+
+
+# ------------------------------------------------------------------------------------------------
+# The library's layout: commands are leaves, one reader, a generic report toolkit.
+# ------------------------------------------------------------------------------------------------
+
+def _reachable(edges: dict[str, dict[str, list[str]]], start: str) -> dict[str, str]:
+    """Every module ``start`` imports, directly or through others: module -> the module that imports it."""
+    seen: dict[str, str] = {}
+    todo = [start]
+    while todo:
+        a = todo.pop()
+        for b in edges.get(a, {}):
+            if b not in seen and b != start:
+                seen[b] = a
+                todo.append(b)
+    return seen
+
+
+def _registered_commands() -> dict[str, str]:
+    """``command -> module`` of the sub-commands ``cli.py`` registers (its ``_leaf("<module>")`` calls in the
+    ``_COMMANDS`` mapping), read from the source."""
+    tree = ast.parse((PKG / "cli.py").read_text())
+    out = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            for k, v in zip(node.keys, node.values):
+                if (isinstance(k, ast.Constant) and isinstance(v, ast.Call) and isinstance(v.func, ast.Name)
+                        and v.func.id == "_leaf" and isinstance(v.args[0], ast.Constant)):
+                    out[str(k.value)] = str(v.args[0].value)
+    return out
+
+
+def test_commands_are_leaves_one_module_per_command():
+    """``symoro_gen/commands/<name>.py`` is one command each, every registered command has its module, and no
+    module of the package imports a command module (cli.py registers them by name, with importlib; the
+    commands share only ``commands.common``)."""
+    edges, _ = _import_graph()
+    registered = _registered_commands()
+    assert {"identify", "diagnose", "inspect", "excite", "fleet", "export-urdf"} <= set(registered), registered
+    modules = {m.rpartition(".")[2] for m in edges if m.startswith("symoro_gen.commands.")} - {"common"}
+    assert modules == set(registered.values()), (sorted(modules), registered)
+    commands = {f"symoro_gen.commands.{m}" for m in modules}
+    found = [f"{a} imports {b} ({', '.join(w)})" for a, bs in edges.items() for b, w in bs.items() if b in commands]
+    assert not found, "command modules are leaves:\n" + "\n".join(found)
+
+
+def test_report_toolkit_is_generic():
+    """``symoro_gen.report`` (documents, tables, plots) depends on no stage: neither directly nor through
+    another module does it import identification, diagnostics, observations or the workflows."""
+    edges, _ = _import_graph()
+    stages = ("symoro_gen.identification", "symoro_gen.diagnostics", "symoro_gen.observations", "symoro_gen.workflows")
+    report_modules = [m for m in edges if m == "symoro_gen.report" or m.startswith("symoro_gen.report.")]
+    assert len(report_modules) >= 3, report_modules
+    found = [f"{m} -> ... {via} -> {b}" for m in report_modules for b, via in _reachable(edges, m).items()
+             if b.startswith(stages)]
+    assert not found, "\n".join(found)
+
+
+#: calls that parse a data file, by (module alias, function): only the readers (preprocessing/readers) make them
+FILE_PARSERS = {("np", "loadtxt"), ("np", "genfromtxt"), ("np", "load"), ("numpy", "load"), ("pd", "read_csv"),
+                ("pandas", "read_csv"), ("sio", "loadmat"), ("io", "loadmat"), ("pq", "read_table"),
+                ("pq", "ParquetFile"), ("csv", "reader"), ("csv", "DictReader")}
+#: the modules outside the readers that parse a file that is not a recording: module -> what it reads
+OTHER_FILES_OK = {"identification/reference.py": "a published table of base parameters (--reference CSV)"}
+
+
+def test_one_reader_for_every_recording():
+    """Recordings are read by one front door, ``read_recording`` (``symoro_gen.preprocessing.readers``, one
+    module per format): identify, diagnose and inspect read through ``workflows.base`` and the fleet through
+    ``fleet.files``, which import it; and no other module parses a data file itself."""
+    edges, _ = _import_graph()
+    readers = "symoro_gen.preprocessing.readers"
+    for user in ("symoro_gen.workflows.identify", "symoro_gen.workflows.diagnose", "symoro_gen.workflows.inspect",
+                 "symoro_gen.fleet.files"):
+        assert readers in _reachable(edges, user), f"{user} does not read through {readers}"
+    assert readers in edges["symoro_gen.workflows.base"] and readers in edges["symoro_gen.fleet.files"]
+    found = []
+    for _, f in _modules():
+        rel = f.relative_to(PKG).as_posix()
+        if rel.startswith("preprocessing/readers/") or rel in OTHER_FILES_OK:
+            continue
+        for node in ast.walk(ast.parse(f.read_text())):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and isinstance(node.func.value, ast.Name) and (node.func.value.id, node.func.attr) in FILE_PARSERS):
+                found.append(f"{rel}:{node.lineno} {node.func.value.id}.{node.func.attr}")
+    assert not found, "data files parsed outside the readers:\n" + "\n".join(found)
+    assert all((PKG / rel).is_file() for rel in OTHER_FILES_OK), OTHER_FILES_OK

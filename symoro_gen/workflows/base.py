@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import hashlib
 import html
@@ -29,7 +28,7 @@ import numpy as np
 from .. import __version__
 from ..atomic import check_outputs, json_output, write_output_text
 from ..description.model import RobotDescription
-from ..errors import ModelError, OptionError, SymoroError
+from ..errors import ModelError, OptionError, SymoroError, check_option_names
 from ..loader import REPO_ROOT, model_for
 from ..model import IdentificationModel
 from ..preprocessing.motion import hold_still, noise_level_joints, saturation_warnings, still_warnings
@@ -48,16 +47,6 @@ SCHEMA_VERSION = 2
 
 #: what a workflow accepts as data: a path, a Trajectory, ``(t, q, tau)`` arrays or a mapping with those keys
 DataLike = Any
-
-
-def check_option_names(names: Iterable[str], valid: Sequence[str], what: str) -> None:
-    """Raise :class:`OptionError` for the first name not in ``valid``, naming the nearest valid one."""
-    for name in names:
-        if name in valid:
-            continue
-        near = difflib.get_close_matches(name, valid, n=1, cutoff=0.5)
-        hint = f"; did you mean {near[0]!r}?" if near else f"; valid options: {', '.join(valid)}"
-        raise OptionError(f"{what}: unknown option {name!r}{hint}")
 
 
 def _jsonable(x: Any) -> Any:

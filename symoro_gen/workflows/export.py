@@ -34,7 +34,7 @@ from ..description.model import RobotDescription
 from ..description.par import export_par as par_text
 from ..description.urdf_export import drive_terms, link_values
 from ..description.urdf_export import export_urdf as urdf_text
-from ..errors import ModelError, OptionError
+from ..errors import ModelError, OptionError, named_options
 from ..loader import model_for
 
 __all__ = ["ExportResults", "export_mjcf", "export_par", "export_urdf"]
@@ -206,6 +206,7 @@ def _identified_parameters(params: ResultLike, robot: RobotDescription) -> dict[
         raise ModelError(f"{src}: not a result of `symoro-gen identify` ({exc})") from None
 
 
+@named_options
 def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = None) -> ExportResults:
     """The robot as URDF (``symoro-gen export-urdf``).
 
@@ -229,6 +230,7 @@ def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = N
     return _finish("export-urdf", desc, text, changed, v, inputs=(from_result, params))
 
 
+@named_options
 def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.001) -> ExportResults:
     """The robot as a MuJoCo MJCF model (``symoro-gen export-mjcf``); ``from_result`` as for :func:`export_urdf`,
     ``timestep`` MuJoCo's [s]."""
@@ -243,6 +245,7 @@ def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.00
     return _finish("export-mjcf", desc, text, changed, v, inputs=(from_result,))
 
 
+@named_options
 def export_par(robot) -> ExportResults:
     """The robot as a SYMORO+/OpenSYMORO ``.par`` file (``symoro-gen export-par``)."""
     desc = _description(robot)

@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("rosbags")
 
 from symoro_gen.description import load_robot
-from symoro_gen.errors import DataFileError, OutputError, RobotFileError
+from symoro_gen.errors import DataFileError, OptionError, OutputError, RobotFileError
 from symoro_gen.loader import model_for
 from symoro_gen.preprocessing.readers import LogFormat, read_recording
 from symoro_gen.preprocessing.readers.bag import (
@@ -430,7 +430,7 @@ def test_bag_options_checked_and_in_a_format_file(rec, tmp_path):
         make_format(bag={"stamp": "arrival"})
     tr = rec["tr"]
     p = write_bag(replace(tr, t=tr.t[:40], q=tr.q[:40], tau=tr.tau[:40], dq=tr.dq[:40]), tmp_path / "o.mcap", NAMES)
-    with pytest.raises(TypeError, match="unknown ROS bag option"):
+    with pytest.raises(OptionError, match="read_recording: unknown option 'topics'; did you mean 'topic'"):
         read_recording(p, robot=rec["robot"], topics="/joint_states")
     with pytest.raises(DataFileError, match="a ROS bag has no columns"):
         read_recording(p, LogFormat(columns=(("q", "1:5"), ("tau", "5:9"))), robot=rec["robot"])

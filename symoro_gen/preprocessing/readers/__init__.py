@@ -30,7 +30,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ...errors import DataFileError, Problem
+from ...errors import DataFileError, Problem, check_option_names
 from ...progress import progress_updates
 from ..trajectory import Trajectory
 from .arrays import ARRAY_SUFFIXES, read_array_file
@@ -47,7 +47,7 @@ from .common import (
     step_stats,
 )
 from .logs import log_trajectories, time_order_hint
-from .options import LoadReport, LogFormat, make_format, parse_columns, read_format_file
+from .options import BAG_KEYS, LoadReport, LogFormat, make_format, parse_columns, read_format_file
 from .parquet import PARQUET_SUFFIXES, is_parquet, read_parquet_file
 from .plain import plain_trajectory
 from .split import DataSpec, parse_data_spec, read_split
@@ -61,6 +61,8 @@ __all__ = [
 ]
 
 PathOrSpec = str | os.PathLike | DataSpec
+#: the named keywords of :func:`read_recording` (besides the ROS bag options): a misspelt one is named
+READ_OPTIONS = ("fmt", "robot", "n_joints", "drive_chain", "loaded", "start", "stop", "base_dir")
 
 
 def _read_columns(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors: Sequence[tuple[str, str]],
@@ -231,7 +233,8 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
         group by row group; the experiment is named ``path[start:stop]``.
     **bag
         ROS bags (:mod:`.bag`): ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic`` override the
-        fields of the same names of ``fmt`` (None: not given).
+        fields of the same names of ``fmt`` (None: not given); any other name raises
+        :class:`~symoro_gen.errors.OptionError` naming the nearest option.
 
     Returns
     -------
@@ -245,6 +248,7 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     """
     fmt = fmt or LogFormat()
     if bag:
+        check_option_names(bag, (*READ_OPTIONS, *BAG_KEYS), "read_recording")
         fmt = _with_bag_options(fmt, bag)
     if robot is None and n_joints is None:
         raise TypeError("read_recording: give n_joints or robot")

@@ -1,0 +1,110 @@
+"""The library's promises across every public entry point of ``symoro_gen`` (its ``__init__`` exports):
+a misspelt option raises :class:`~symoro_gen.errors.OptionError` naming the nearest valid one; ``plot()`` and
+``report()`` without matplotlib name the extra to install; the scripts' contract on the real LWR4 recording
+(``identify("lwr4", [f1, f3], validate=[f2], method="wls").to_dict()["validation"]["rel_err"]`` is the list
+of the command's JSON)."""
+from __future__ import annotations
+
+import inspect
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import symoro_gen
+from symoro_gen.errors import OptionError
+
+from .golden.inputs import write_inputs
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    return write_inputs(tmp_path_factory.mktemp("contract"))[0]
+
+
+#: one misspelt option per public entry point: (call, the keyword given, the name it should suggest)
+MISSPELT = [
+    ("identify", lambda rec, **kw: symoro_gen.identify("scara", rec, **kw), "metod", "method"),
+    ("diagnose", lambda rec, **kw: symoro_gen.diagnose("scara", rec, **kw), "max_efects", "max_effects"),
+    ("inspect", lambda rec, **kw: symoro_gen.inspect("scara", rec, **kw), "cutof", "cutoff"),
+    ("excite", lambda rec, **kw: symoro_gen.excite("scara", **kw), "duraton", "duration"),
+    ("fleet", lambda rec, **kw: symoro_gen.fleet("scara", [rec], by="{robot}/{day}.csv", **kw), "alpah", "alpha"),
+    ("read_recording", lambda rec, **kw: symoro_gen.read_recording(rec, **kw), "n_joint", "n_joints"),
+    ("read_recording", lambda rec, **kw: symoro_gen.read_recording(rec, n_joints=4, **kw), "topik", "topic"),
+    ("export_urdf", lambda rec, **kw: symoro_gen.export_urdf("scara", **kw), "from_results", "from_result"),
+    ("export_mjcf", lambda rec, **kw: symoro_gen.export_mjcf("scara", **kw), "time_step", "timestep"),
+    ("export_par", lambda rec, **kw: symoro_gen.export_par("scara", **kw), "robots", "robot"),
+]
+
+
+@pytest.mark.parametrize(("what", "call", "given", "nearest"), MISSPELT, ids=[f"{m[0]}-{m[2]}" for m in MISSPELT])
+def test_a_misspelt_option_names_the_nearest(recording, what, call, given, nearest):
+    """Every entry point checks its keyword names before any work and names the nearest valid one (an
+    :class:`OptionError`, a ``ValueError``: the same as a bad option value)."""
+    with pytest.raises(OptionError, match=f"^{what}: unknown option '{given}'; did you mean '{nearest}'"):
+        call(recording, **{given: 1})
+
+
+def test_named_options_keeps_the_signature():
+    """The exports' keyword check leaves their signature as written (no ``**kwargs``: help() and IDEs show
+    the options) and passes the valid keywords through unchanged."""
+    params = inspect.signature(symoro_gen.export_mjcf).parameters
+    assert list(params) == ["robot", "from_result", "timestep"]
+    assert all(p.kind is not p.VAR_KEYWORD for p in params.values())
+    with pytest.raises(OptionError, match="timestep -1"):
+        symoro_gen.export_mjcf("scara", timestep=-1)
+
+
+@pytest.mark.slow
+def test_plot_and_report_without_matplotlib_name_the_extra(recording, tmp_path):
+    """On an install without the 'plots' extra (matplotlib hidden in a fresh interpreter), ``plot()`` and
+    ``report()`` of inspect, excite and diagnose raise :class:`MissingDependencyError` naming the extra, and
+    write nothing (identify: tests/test_workflows.py)."""
+    code = (
+        "import sys; sys.modules['matplotlib'] = None\n"
+        "import symoro_gen\n"
+        "a, out = sys.argv[1], sys.argv[2]\n"
+        "res = {'inspect': symoro_gen.inspect('scara', a),\n"
+        "       'excite': symoro_gen.excite('scara', duration=2, harmonics=3, rate=50, starts=1, pool=1, max_iter=5,\n"
+        "                                   refine=0),\n"
+        "       'diagnose': symoro_gen.diagnose('scara', a, candidates=('offset',), max_effects=1)}\n"
+        "for k, r in res.items():\n"
+        "    for name, call in (('plot', r.plot), ('report', lambda: r.report(f'{out}/{k}.html'))):\n"
+        "        try:\n"
+        "            call()\n"
+        "            print(k, name, 'no error')\n"
+        "        except Exception as exc:\n"
+        "            print(k, name, type(exc).__name__, exc, exc.hint if getattr(exc, 'hint', None) else '')\n")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, "-c", code, str(recording), str(tmp_path)], capture_output=True, text=True,
+                       env=env, check=False, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    lines = r.stdout.splitlines()
+    assert [line.split()[:2] for line in lines] == [[k, m] for k in ("inspect", "excite", "diagnose")
+                                                   for m in ("plot", "report")], lines
+    assert all(line.split()[2] == "MissingDependencyError" and "[plots]" in line for line in lines), lines
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+def test_the_scripts_contract_on_the_real_lwr4(shared_data, cli, tmp_path):
+    """``symoro_gen.identify("lwr4", [f1, f3], validate=[f2], method="wls")`` on the FloBaRoID recordings (files 1
+    and 2 repeat one trajectory, 3 is another: shared/data/README.md): ``to_dict()["validation"]["rel_err"]`` is
+    the per-joint list the command's JSON holds, one relative error per joint of the LWR4, each below 1 (the
+    model explains most of each joint's torque on the repeated trajectory)."""
+    hw = shared_data / "kuka_lwr4_flobaroid" / "data" / "KUKA" / "HW"
+    f1, f2, f3 = (hw / f"measurements_{k}.npz" for k in (1, 2, 3))
+    if not all(f.is_file() for f in (f1, f2, f3)):
+        pytest.skip(f"the LWR4 recordings are not in {hw}")
+    out = tmp_path / "lwr4.json"
+    cli("--quiet", "identify", "lwr4", f1, f3, "--validate", f2, "--method", "wls", "--json", out)
+    res = symoro_gen.identify("lwr4", [f1, f3], validate=[f2], method="wls")
+    rel = res.to_dict()["validation"]["rel_err"]
+    assert rel == json.loads(out.read_text())["validation"]["rel_err"]
+    assert len(rel) == 7 and all(0 < x < 1 for x in rel), rel
