@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -470,3 +471,15 @@ def test_one_reader_for_every_recording():
                 found.append(f"{rel}:{node.lineno} {node.func.value.id}.{node.func.attr}")
     assert not found, "data files parsed outside the readers:\n" + "\n".join(found)
     assert all((PKG / rel).is_file() for rel in OTHER_FILES_OK), OTHER_FILES_OK
+
+
+#: an issue tracker's number in prose ("issue 12", "issue #12", "#12"): features are named instead
+ISSUE_NUMBER = re.compile(r"issue *#?[0-9]|#[0-9]{2}\b", re.IGNORECASE)
+
+
+def test_no_issue_numbers_in_the_package():
+    """Docstrings, comments and messages of the package name the feature, not a tracker's issue number."""
+    found = [f"{f.relative_to(PKG).as_posix()}:{k}: {line.strip()}" for _, f in _modules()
+             for k, line in enumerate(f.read_text().splitlines(), start=1) if ISSUE_NUMBER.search(line)]
+    assert not found, "\n".join(found)
+    assert ISSUE_NUMBER.search("see issue 10") and ISSUE_NUMBER.search("(#12)") and not ISSUE_NUMBER.search("#1f77b4")

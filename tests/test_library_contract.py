@@ -18,6 +18,7 @@ import symoro_gen
 from symoro_gen.errors import OptionError
 
 from .golden.inputs import write_inputs
+from .test_import_layout import ISSUE_NUMBER
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -108,3 +109,34 @@ def test_the_scripts_contract_on_the_real_lwr4(shared_data, cli, tmp_path):
     rel = res.to_dict()["validation"]["rel_err"]
     assert rel == json.loads(out.read_text())["validation"]["rel_err"]
     assert len(rel) == 7 and all(0 < x < 1 for x in rel), rel
+
+
+def _python_blocks(text: str) -> list[list[str]]:
+    """The lines of each fenced ```python block of a Markdown text."""
+    blocks, current = [], None
+    for line in text.splitlines():
+        if current is None and line.strip() == "```python":
+            current = []
+        elif current is not None and line.strip() == "```":
+            blocks.append(current)
+            current = None
+        elif current is not None:
+            current.append(line)
+    return blocks
+
+
+def test_readme_stays_a_front_page():
+    """README.md: at most 300 lines, what the package is and a tour, the Python API in about a dozen lines,
+    links into docs/ and no results tables (those live in docs/results.md) nor issue numbers; docs/ free of
+    issue numbers too (features are named)."""
+    readme = (ROOT / "README.md").read_text()
+    lines = readme.splitlines()
+    assert len(lines) <= 300, len(lines)
+    assert not [x for x in lines if x.lstrip().startswith("|") and x.rstrip().endswith("|")], "a table in README.md"
+    blocks = _python_blocks(readme)
+    assert blocks and all(len([x for x in b if x.strip()]) <= 12 for b in blocks), blocks
+    assert "symoro-gen identify" in readme and "symoro-gen diagnose" in readme and "(docs/" in readme
+    found = [f"{p.relative_to(ROOT)}:{k}" for p in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")),
+                                                    *sorted((ROOT / "docs").rglob("*.json"))]
+             for k, line in enumerate(p.read_text().splitlines(), start=1) if ISSUE_NUMBER.search(line)]
+    assert not found, found
