@@ -483,3 +483,31 @@ def test_no_issue_numbers_in_the_package():
              for k, line in enumerate(f.read_text().splitlines(), start=1) if ISSUE_NUMBER.search(line)]
     assert not found, "\n".join(found)
     assert ISSUE_NUMBER.search("see issue 10") and ISSUE_NUMBER.search("(#12)") and not ISSUE_NUMBER.search("#1f77b4")
+
+
+#: the ``# type: ignore`` comments the package keeps, per file: (most allowed, why mypy cannot see it). A new one
+#: needs its entry here; the counts only fall (a fixed file may drop below its count).
+TYPE_IGNORES_OK: dict[str, tuple[int, str]] = {
+    "model.py": (1, "as_model returns an object checked attribute by attribute against the Protocol"),
+    "observations/fused.py": (1, "generated models take out= (not in the IdentificationModel Protocol)"),
+    "emit/printing.py": (1, "subclass of SymPy's untyped printer"),
+    "preprocessing/readers/parquet.py": (1, "pyarrow has no type information"),
+    "fleet/files.py": (1, "pyarrow has no type information"),
+    "fleet/worker.py": (1, "the WorkerPlugin base falls back to object without the fleet extra"),
+    "diagnostics/stats.py": (1, "threadpoolctl has no type information"),
+    "diagnostics/unexplained.py": (1, "threadpoolctl has no type information"),
+}
+
+
+def test_type_checking_is_not_switched_off():
+    """mypy checks every module: no ``ignore_errors`` in pyproject.toml, and no ``# type: ignore`` beyond the
+    ones listed in TYPE_IGNORES_OK with their reason (``warn_unused_ignores`` removes the stale ones)."""
+    config = (PKG.parent / "pyproject.toml").read_text()
+    assert "[tool.mypy]" in config and not re.search(r"^\s*ignore_errors\s*=", config, re.MULTILINE)
+    counts: dict[str, int] = {}
+    for _, f in _modules():
+        n = len(re.findall(r"#\s*type:\s*ignore", f.read_text()))
+        if n:
+            counts[f.relative_to(PKG).as_posix()] = n
+    over = {rel: n for rel, n in counts.items() if n > TYPE_IGNORES_OK.get(rel, (0, ""))[0]}
+    assert not over, f"new `# type: ignore` comments (fix the type, or list the file with its reason): {over}"
