@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 import symoro_gen
+from symoro_gen import workflows
 from symoro_gen.errors import OptionError
 
 from .golden.inputs import write_inputs
@@ -140,3 +141,11 @@ def test_readme_stays_a_front_page():
                                                     *sorted((ROOT / "docs").rglob("*.json"))]
              for k, line in enumerate(p.read_text().splitlines(), start=1) if ISSUE_NUMBER.search(line)]
     assert not found, found
+
+
+def test_callable_packages_show_the_workflows_signature():
+    """``symoro_gen.excite`` and ``symoro_gen.fleet`` are packages callable as their workflows: what
+    :func:`inspect.signature` (help, IDEs, Jupyter's ``?``) shows is the workflow's signature, not ``*args``."""
+    assert inspect.signature(symoro_gen.excite) == inspect.signature(workflows.excite)
+    assert inspect.signature(symoro_gen.fleet) == inspect.signature(workflows.fleet)
+    assert "by" in inspect.signature(symoro_gen.fleet).parameters

@@ -60,6 +60,7 @@ workflow, whichever was imported first); the command is :mod:`symoro_gen.command
 from __future__ import annotations
 
 import importlib
+import inspect
 import sys
 import types
 from typing import Any
@@ -172,6 +173,11 @@ class _ExcitePackage(types.ModuleType):
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         """``symoro_gen.excite(robot, **options)``: :func:`symoro_gen.workflows.excite.excite`."""
         return importlib.import_module("symoro_gen.workflows.excite").excite(*args, **kwargs)
+
+    @property
+    def __signature__(self) -> inspect.Signature:
+        """The workflow's own signature (its named options), for :func:`inspect.signature`, ``help`` and IDEs."""
+        return inspect.signature(importlib.import_module("symoro_gen.workflows.excite").excite)
 
 
 sys.modules[__name__].__class__ = _ExcitePackage

@@ -15,6 +15,7 @@ The names below are imported on first use (PEP 562): a Dask worker unpickling a 
 from __future__ import annotations
 
 import importlib
+import inspect
 import sys
 import types
 from typing import TYPE_CHECKING, Any
@@ -59,6 +60,11 @@ class _FleetPackage(types.ModuleType):
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         """``symoro_gen.fleet(robot, logs, by=..., **options)``: :func:`symoro_gen.workflows.fleet.fleet`."""
         return importlib.import_module("symoro_gen.workflows.fleet").fleet(*args, **kwargs)
+
+    @property
+    def __signature__(self) -> inspect.Signature:
+        """The workflow's own signature (its named options), for :func:`inspect.signature`, ``help`` and IDEs."""
+        return inspect.signature(importlib.import_module("symoro_gen.workflows.fleet").fleet)
 
 
 sys.modules[__name__].__class__ = _FleetPackage
