@@ -5,7 +5,12 @@ Every module of ``symoro_gen`` is imported alone, as the first module of the pac
 interpreter state (a circle shows up as an ImportError on a partially initialised module for some entry
 point, and only for that one). No module hides an import of the package's own modules inside a function
 (the habit that hid the circles) except the ones listed in ``LAZY_OK`` with their reason; lazy imports of
-heavy optional third-party packages (matplotlib, casadi, scikit-learn, tqdm) are allowed anywhere."""
+heavy optional third-party packages (matplotlib, casadi, scikit-learn, tqdm) are allowed anywhere.
+
+The library's layout as well: the commands are leaves (one module each, imported by no module), the report
+toolkit imports no stage, recordings are read only through the readers; mypy is not switched off; no issue
+numbers in the source. Every check walks the installed package, ``symoro_gen/``, only (not bench/, research/
+or tests/)."""
 from __future__ import annotations
 
 import ast
