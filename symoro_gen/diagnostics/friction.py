@@ -662,7 +662,7 @@ class _LawSelection:
     def oof(self, claw, cpar, vlaw="linear", vpar=None, smooth=None) -> np.ndarray:
         pc = 2 if claw in STRIBECK_LIKE else 1
         X = _law_columns(self.columns, (claw, cpar, vlaw, vpar, smooth), pc + 1)
-        return self.cv.oof_residual(X)[self.rows]
+        return self.cv.oof_residual(X, self.rows)
 
     def err(self, *a, **k) -> float:
         e = self.oof(*a, **k)
