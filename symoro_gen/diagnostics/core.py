@@ -1091,7 +1091,9 @@ def _law_beats_noise(ch: FrictionChoice, jf: _JointFriction, Y, J, blocks, F: Fr
     search = _law_search(F, jf)
 
     def gain(y):
-        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols, search=search), dq_all)
+        # a replicate's gain needs the choice and its CV errors only, not the chosen laws' coefficients
+        return _law_gain(select_friction(A, y, J, j, np.zeros(Y.size), blocks, columns=cols, search=search,
+                                         coefficients=False), dq_all)
     return simulated_noise_placebo(gain, fitted, Y - fitted, J * 100000 + F.row_experiment, F.row_experiment,
                                    _law_gain(ch, dq_all), rng=np.random.default_rng(7919 + j))
 

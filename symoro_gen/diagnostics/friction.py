@@ -532,7 +532,8 @@ class LawSearch:
 def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq: np.ndarray, blocks: np.ndarray, *,
                     weights: np.ndarray | None = None,
                     columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray] | None = None,
-                    search: LawSearch | None = None, unit: str = "rad/s") -> FrictionChoice:
+                    search: LawSearch | None = None, unit: str = "rad/s",
+                    coefficients: bool = True) -> FrictionChoice:
     """Choose the Coulomb and viscous laws of joint ``j`` by time-blocked cross-validation.
 
     Parameters
@@ -561,6 +562,9 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
         ``sign`` (default :class:`LawSearch`: every law, :data:`MIN_GAIN`, no floor).
     unit : str
         Velocity unit in the description.
+    coefficients : bool
+        Fit the chosen laws' coefficients on all rows (``FrictionChoice.coefficients``); False leaves them
+        empty (a simulated-noise placebo replicate needs the choice and its CV errors only).
 
     Returns
     -------
@@ -587,6 +591,8 @@ def select_friction(A: np.ndarray, y: np.ndarray, joint: np.ndarray, j: int, dq:
     best_c, best_v = sel.coordinate_descent()
     n_folds = len(sel.cv.folds)
     choice = FrictionChoice(j, best_c, best_v, tuple(sel.tried), {}, n_folds, unit, search.rate_hz)
+    if not coefficients:
+        return choice
     coef = _law_coefficients(A, y, weights, cols, choice)
     return FrictionChoice(j, best_c, best_v, tuple(sel.tried), coef, n_folds, unit, search.rate_hz)
 
@@ -662,7 +668,7 @@ class _LawSelection:
     def oof(self, claw, cpar, vlaw="linear", vpar=None, smooth=None) -> np.ndarray:
         pc = 2 if claw in STRIBECK_LIKE else 1
         X = _law_columns(self.columns, (claw, cpar, vlaw, vpar, smooth), pc + 1)
-        return self.cv.oof_residual(X)[self.rows]
+        return self.cv.oof_residual(X, self.rows)
 
     def err(self, *a, **k) -> float:
         e = self.oof(*a, **k)

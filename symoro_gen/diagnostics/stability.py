@@ -40,12 +40,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import partial
 
 import numpy as np
 from scipy import special as ssp
 
-from .stats import contiguous_runs, f_sf, hac_covariance, hac_lag, rows_times, segments_of
+from .stats import contiguous_runs, f_sf, hac_covariance, hac_lag, segments_of
 
 __all__ = [
     "MIN_SELECTION_FREQUENCY",
@@ -190,41 +189,82 @@ class _ColumnFactors:
     local: np.ndarray      # positions of S within the fold's training rows
     Xw_S: np.ndarray       # (|S|, p)
     Ginv: np.ndarray       # (p, p) inverse of Xp^T Xp
-    D: np.ndarray          # (r_test, p)
+    D: np.ndarray          # (r_test, p) on the reported test rows
+    test: np.ndarray       # row indices of the reported test rows (shared with the fold's support)
+    test_pos: np.ndarray   # their positions within the fold's test rows
 
     @property
     def nbytes(self) -> int:
         return self.local.nbytes + self.Xw_S.nbytes + self.Ginv.nbytes + self.D.nbytes
 
     @staticmethod
-    def build(A: np.ndarray, X: np.ndarray, nonzero: np.ndarray, f: _Fold,
-              outside: Callable[[np.ndarray], np.ndarray]) -> _ColumnFactors | None:
-        """``outside(nz)``: ``U_S'^T U_S'`` of the training rows outside the mask ``nz`` (kept per support);
-        ``nonzero``: the rows where ``X`` is not zero. ``pinv_S Xw_S = VS c`` (``pinv = VS U^T``)."""
-        tr_idx = np.flatnonzero(f.train)
-        nz = nonzero[tr_idx]
-        local = np.flatnonzero(nz)
-        Xw_S = X[tr_idx[local]] * f.w[local][:, None]
+    def build(A: np.ndarray, X: np.ndarray, f: _Fold, sup: _FoldSupport) -> _ColumnFactors | None:
+        """``sup``: the fold's rows where ``X`` is not zero and the test rows reported (:class:`_FoldSupport`,
+        kept per support). ``pinv_S Xw_S = VS c`` (``pinv = VS U^T``)."""
+        Xw_S = X[sup.rows_S] * sup.w_S[:, None]
         # U_S = U[local] by its contiguous runs (one joint's training rows: one or two runs), not copied
-        runs = contiguous_runs(local)
+        runs = sup.runs
         if runs is None:
-            U_S = f.U[local]
+            U_S = f.U[sup.local]
             c = U_S.T @ Xw_S
             Xp_S = Xw_S - U_S @ c
         else:
             c = sum((f.U[a:b].T @ Xw_S[i:i + b - a] for i, a, b in runs), np.zeros((f.U.shape[1], X.shape[1])))
             Xp_S = np.concatenate([Xw_S[i:i + b - a] - f.U[a:b] @ c for i, a, b in runs]) if runs else Xw_S
-        G = Xp_S.T @ Xp_S + c.T @ outside(nz) @ c
+        G = Xp_S.T @ Xp_S + c.T @ sup.outside @ c
         d = np.sqrt(np.diag(G))
         if not np.all(d > 0):
             return None
         Gs = G / np.outer(d, d)
-        if np.linalg.cond(Gs) > MAX_GRAM_COND:
+        if _condition(Gs) > MAX_GRAM_COND:
             return None
         Ginv = np.linalg.inv(Gs) / np.outer(d, d)
-        D = X[f.test] - rows_times(A, f.test, f.VS @ c)
-        return _ColumnFactors(local, Xw_S, Ginv, D)
+        v = f.VS @ c
+        if sup.test_runs is None:
+            D = X[sup.test] - A[sup.test] @ v
+        else:      # A[test] @ v on the test rows' contiguous runs (stats.rows_times)
+            D = X[sup.test]
+            for i, a, b in sup.test_runs:
+                D[i:i + b - a] -= A[a:b] @ v
+        return _ColumnFactors(sup.local, Xw_S, Ginv, D, sup.test, sup.test_pos)
 
+
+def _condition(G: np.ndarray) -> float:
+    """``numpy.linalg.cond(G)`` (2-norm: largest over smallest singular value, ``inf`` for a singular
+    ``G``) without its argument handling: one small SVD per fold and added column set."""
+    s = np.linalg.svd(G, compute_uv=False)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = float(s[0] / s[-1])
+    return math.inf if math.isnan(k) else k
+
+
+@dataclass(frozen=True, eq=False)
+class _FoldSupport:
+    """The rows of one fold that a set of added columns touches, kept per support: every law of a joint's
+    friction search, on every ``y`` of its simulated-noise placebo, is zero outside the same rows."""
+
+    local: np.ndarray      # positions of S (training rows where X is not zero) within the fold's training rows
+    rows_S: np.ndarray     # row indices of S
+    w_S: np.ndarray        # weights of S
+    runs: list | None      # contiguous runs of ``local`` (stats.contiguous_runs)
+    outside: np.ndarray    # U_S'^T U_S' over the training rows outside S
+    test: np.ndarray       # row indices of the test rows reported (all, or those asked for)
+    test_pos: np.ndarray   # their positions within the fold's test rows
+    test_runs: list | None
+
+    @staticmethod
+    def build(f: _Fold, nonzero: np.ndarray, report: np.ndarray | None) -> _FoldSupport:
+        """``nonzero``: rows where the columns are not zero; ``report``: mask of the rows whose residual is
+        wanted (None: all)."""
+        tr_idx = np.flatnonzero(f.train)
+        nz = nonzero[tr_idx]
+        local = np.flatnonzero(nz)
+        U_o = f.U[~nz]
+        te_idx = np.flatnonzero(f.test)
+        pos = np.arange(te_idx.size) if report is None else np.flatnonzero(report[te_idx])
+        test = te_idx[pos]
+        return _FoldSupport(local, tr_idx[local], f.w[local], contiguous_runs(local), U_o.T @ U_o, test, pos,
+                            contiguous_runs(test))
 
 
 class _ColumnCache:
@@ -234,35 +274,33 @@ class _ColumnCache:
     def __init__(self) -> None:
         self._d: dict = {}
         self._bytes = 0
-        self._outside: dict = {}
+        self._supports: dict = {}
 
-    def outside(self, k: int, f: _Fold, nz: np.ndarray) -> np.ndarray:
-        """``U_S'^T U_S'`` of fold ``k`` for the training rows outside ``nz`` (a candidate of one joint
-        has the rows of that joint: a few supports per fold set)."""
-        key = (k, _fingerprint(nz.astype(float)))
-        hit = self._outside.get(key)
-        if hit is not None and np.array_equal(hit[0], nz):
-            return hit[1]
-        U_o = f.U[~nz]
-        M = U_o.T @ U_o
-        if len(self._outside) > 64:
-            self._outside.clear()
-        self._outside[key] = (nz.copy(), M)
-        return M
+    def support(self, k: int, f: _Fold, nonzero: np.ndarray, report: np.ndarray | None,
+                key: tuple) -> _FoldSupport:
+        """:class:`_FoldSupport` of fold ``k`` for the rows ``nonzero`` and the reported rows ``report``
+        (``key``: digests of both; a candidate of one joint has the rows of that joint: a few supports per
+        fold set)."""
+        hit = self._supports.get((k, key))
+        if hit is not None:
+            return hit
+        if len(self._supports) > 64:
+            self._supports.clear()
+        sup = self._supports[(k, key)] = _FoldSupport.build(f, nonzero, report)
+        return sup
 
-
-    def get(self, X: np.ndarray) -> list | None:
-        hit = self._d.get(_fingerprint(X))
+    def get(self, X: np.ndarray, tag: str | None = None) -> list | None:
+        hit = self._d.get((_fingerprint(X), tag))
         return hit[1] if hit is not None and np.array_equal(hit[0], X) else None
 
-    def put(self, X: np.ndarray, facs: list) -> None:
+    def put(self, X: np.ndarray, facs: list, tag: str | None = None) -> None:
         size = X.nbytes + sum(fc.nbytes for fc in facs if fc is not None)
         if size > COLUMN_CACHE_BYTES:
             return
         while self._d and self._bytes + size > COLUMN_CACHE_BYTES:
             old = self._d.pop(next(iter(self._d)))
             self._bytes -= old[2]
-        self._d[_fingerprint(X)] = (X.copy(), facs, size)
+        self._d[(_fingerprint(X), tag)] = (X.copy(), facs, size)
         self._bytes += size
 
 
@@ -314,34 +352,44 @@ class BlockedLS:
             c = U.T @ yw
             self.folds.append(_Fold(tr, te, wt, U, VS, yw - U @ c, A[te] @ (VS @ c), rank))
 
-    def oof_residual(self, X: np.ndarray | None = None) -> np.ndarray:
+    def oof_residual(self, X: np.ndarray | None = None, rows: np.ndarray | None = None) -> np.ndarray:
         """Out-of-fold residual ``y - prediction`` of every row (each row predicted by the fold that
-        holds it out), with the columns ``X`` (r, p) added to ``A``.
+        holds it out), with the columns ``X`` (r, p) added to ``A``; with ``rows`` (a boolean mask), only
+        those rows' residuals (``oof_residual(X)[rows]``, computed on those rows only).
 
         Equal to :meth:`oof_residual_direct` (to rounding): the fold's factors of ``X`` that do not
         depend on ``y`` (:class:`_ColumnFactors`) are computed on the rows where ``X`` is not zero and
         kept for the next ``y`` fitted with the same ``A``, weights, blocks and ``X`` (the friction-law
-        search and its simulated-noise placebo evaluate the same columns on many ``y``)."""
+        search and its simulated-noise placebo evaluate the same columns on many ``y``); the rows where
+        ``X`` is not zero and the fold's reported test rows (:class:`_FoldSupport`) are kept per support."""
         if X is None or not X.shape[1]:
-            return self.oof_residual_direct(X)
+            out = self.oof_residual_direct(X)
+            return out if rows is None else out[rows]
         X = np.asarray(X, float)
-        facs = self._columns.get(X)
+        report = None if rows is None else np.asarray(rows, bool)
+        tag = None if report is None else _digest(np.packbits(report))
+        facs = self._columns.get(X, tag)
         if facs is None:
             cc = self._columns
             nonzero = X[:, 0] != 0.0
             for i in range(1, X.shape[1]):
                 nonzero |= X[:, i] != 0.0
-            facs = [_ColumnFactors.build(self.A, X, nonzero, f, partial(cc.outside, k, f))
+            key = (_digest(np.packbits(nonzero)), tag)
+            facs = [_ColumnFactors.build(self.A, X, f, cc.support(k, f, nonzero, report, key))
                     for k, f in enumerate(self.folds)]
-            self._columns.put(X, facs)
+            self._columns.put(X, facs, tag)
         out = np.empty(self.y.size)
         for f, fc in zip(self.folds, facs):
             if fc is None:     # ill-conditioned added columns: the rank-revealing solve
                 out[f.test] = self.y[f.test] - self._fold_prediction(f, X)
                 continue
             b = fc.Ginv @ (fc.Xw_S.T @ f.e0[fc.local])
-            out[f.test] = self.y[f.test] - (f.pred0 + fc.D @ b)
-        return out
+            if report is None:
+                out[f.test] = self.y[f.test] - (f.pred0 + fc.D @ b)
+            else:
+                te = fc.test
+                out[te] = self.y[te] - (f.pred0[fc.test_pos] + fc.D @ b)
+        return out if report is None else out[report]
 
     def _fold_prediction(self, f: _Fold, X: np.ndarray | None) -> np.ndarray:
         pred = f.pred0
