@@ -448,12 +448,26 @@ def lugre_columns(dq: np.ndarray, vs: float, vp: float, q: float = 0.0) -> np.nd
     hm = 1.0 - q * (1.0 - em)
     sg = np.sign(vm)
     decay = np.exp(-np.abs(vm) / (float(vp) * hm))
-    a = b = 0.0
-    for k, (s_, d_, e_) in enumerate(zip(sg.tolist(), decay.tolist(), em.tolist()), start=1):
-        a = s_ + (a - s_) * d_
-        b = e_ * s_ + (b - e_ * s_) * d_
-        out[k, 0], out[k, 1] = a, b
+    gain = -np.expm1(-np.abs(vm) / (float(vp) * hm))     # 1 - decay
+    out[1:, 0] = _affine_scan(decay, sg * gain)
+    out[1:, 1] = _affine_scan(decay, em * sg * gain)
     return out
+
+
+def _affine_scan(d: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``x_k = d_k x_{k-1} + u_k`` from ``x_0 = 0`` for every ``k`` (the state recursion of :func:`lugre_columns`,
+    ``a_k = s + (a_{k-1} - s) d_k``), by the parallel prefix scan of the affine maps ``x -> d x + u`` (Hillis &
+    Steele 1986; Blelloch 1990, sec. 1.4: first-order linear recurrences): ``log2 N`` vectorised passes, each
+    composing a map with the one ``2^i`` steps before it. The products of ``d`` only fall (``0 <= d <= 1``), so
+    nothing overflows."""
+    D = np.array(d, float, copy=True)
+    U = np.array(u, float, copy=True)
+    s = 1
+    while s < U.size:
+        U[s:] = D[s:] * U[:-s] + U[s:]
+        D[s:] = D[s:] * D[:-s]
+        s *= 2
+    return U
 
 
 def _coulomb(law: str, dq: np.ndarray, param, smooth: float | None) -> np.ndarray:
