@@ -67,6 +67,14 @@ Static at rest
     in identification and validation alike: the model predicts no friction torque it cannot know, where
     ``sign(dq)`` would switch between ``+Fc`` and ``-Fc`` on the velocity's wander at standstill.
 
+Standard deviations with the shape estimated
+    A law's constants are linear for a fixed shape (``v``, ``vs``, ``vp``, ``delta``), and the shape is searched.
+    The σ of a constant at the searched shape held fixed leaves out the shape's own uncertainty (on the SCARA
+    LuGre case 3.2 times too narrow for ``Fs - Fc``, which falls with ``vs``). :func:`shape_uncertainty` gives
+    the linearised covariance of the nonlinear least squares (Seber & Wild 1989, sec. 2.1) on the final fit's
+    design with the derivatives of the law's torque in its shape, and :func:`shape_physical` the shape's σ
+    (``vs_std``, ``x0_std``, ``sigma0_std``, ...); the report uses both (docs/friction-dynamic.md).
+
 Declaring what the loop found
     A law the loop names as a cause (an effect of kind ``friction_law``, or the loop's ``stribeck``
     candidate: a dip ``exp(-(dq/vs)^2) sign(dq)`` beside the declared ``sign(dq)`` and ``dq``, the Stribeck
