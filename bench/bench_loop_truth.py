@@ -444,8 +444,9 @@ def lugre_right(r: dict) -> tuple[bool, str]:
     val, sd = e["params"].get(f"FSS{LUGRE_JOINT + 1}", (math.nan, math.nan))
     ok = abs(val - (fs - fc)) <= 3 * sd and sd < (fs - fc) / 3
     return ok, (f"Fs - Fc = {val:.4g} ± {sd:.2g} (truth {fs - fc:g}: {abs(val - (fs - fc)) / sd:.1f} sigma), "
-                f"vs = {e['physical'].get('vs', math.nan):.3g} (truth {LUGRE[2]:g}), "
-                f"sigma0 = {e['physical'].get('sigma0', math.nan):.3g} (truth {s0:g})")
+                f"vs = {e['physical'].get('vs', math.nan):.3g} ± {e['physical'].get('vs_std', math.nan):.2g} "
+                f"(truth {LUGRE[2]:g}), sigma0 = {e['physical'].get('sigma0', math.nan):.4g} ± "
+                f"{e['physical'].get('sigma0_std', math.nan):.2g} (truth {s0:g})")
 
 
 def run_lugre(a, model, robot, chi, rigid: Rigid) -> dict:
