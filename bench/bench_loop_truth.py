@@ -444,8 +444,9 @@ def lugre_right(r: dict) -> tuple[bool, str]:
     val, sd = e["params"].get(f"FSS{LUGRE_JOINT + 1}", (math.nan, math.nan))
     ok = abs(val - (fs - fc)) <= 3 * sd and sd < (fs - fc) / 3
     return ok, (f"Fs - Fc = {val:.4g} ± {sd:.2g} (truth {fs - fc:g}: {abs(val - (fs - fc)) / sd:.1f} sigma), "
-                f"vs = {e['physical'].get('vs', math.nan):.3g} (truth {LUGRE[2]:g}), "
-                f"sigma0 = {e['physical'].get('sigma0', math.nan):.3g} (truth {s0:g})")
+                f"vs = {e['physical'].get('vs', math.nan):.3g} ± {e['physical'].get('vs_std', math.nan):.2g} "
+                f"(truth {LUGRE[2]:g}), sigma0 = {e['physical'].get('sigma0', math.nan):.4g} ± "
+                f"{e['physical'].get('sigma0_std', math.nan):.2g} (truth {s0:g})")
 
 
 def run_lugre(a, model, robot, chi, rigid: Rigid) -> dict:
@@ -453,14 +454,20 @@ def run_lugre(a, model, robot, chi, rigid: Rigid) -> dict:
     ``a.lugre_clean_seeds`` seeds."""
     inj = _lugre_run(a, model, robot, chi, rigid, a.seed * 1000 + 13, True)
     ok, why = lugre_right(inj)
-    clean = [_lugre_run(a, model, robot, chi, rigid, (a.seed + k) * 1000 + 113, False)
-             for k in range(a.lugre_clean_seeds)]
+    print(f"case 14, injected (diagnose {inj['seconds_loop']:.0f} s): right {'YES' if ok else 'no'}: {why}", flush=True)
+    clean = []
+    for k in range(a.lugre_clean_seeds):
+        c = _lugre_run(a, model, robot, chi, rigid, (a.seed + k) * 1000 + 113, False)
+        clean.append(c)
+        named = "; ".join(f"{e['kind']} j{e['joint'] or '-'} ({e['variant']}, {e['verdict']})" for e in c["effects"])
+        print(f"case 14, clean {k + 1}/{a.lugre_clean_seeds} (rng seed {c['seed']}, diagnose "
+              f"{c['seconds_loop']:.0f} s): {named or 'nothing named'}", flush=True)
     fc, fs, vs, s0 = LUGRE
     return dict(case=14, title=f"LuGre friction j{LUGRE_JOINT + 1} at {a.lugre_rate:g} Hz (pre-sliding laws on)",
                 truth=f"joint {LUGRE_JOINT + 1}: LuGre Fc = {fc:g}, Fs = {fs:g} N m, vs = {vs:g} rad/s, sigma0 = "
                       f"{s0:g} N m/rad in place of its Coulomb friction; {a.lugre_seconds:g} s + "
                       f"{VALID_SHARE * a.lugre_seconds:g} s at {a.lugre_rate:g} Hz",
-                injected=inj, right=ok, why=why, clean=clean,
+                injected=inj, right=ok, why=why, clean=clean, rate=a.lugre_rate,
                 clean_named=sum(bool(c["effects"]) for c in clean), right_first=ok)
 
 
@@ -482,6 +489,10 @@ def print_lugre(r: dict) -> None:
         named = "; ".join(f"{e['kind']} j{e['joint'] or '-'} ({e['variant']})" for e in c["effects"]) or "nothing named"
         print(f"   clean control (rng seed {c['seed']}): {named}   [diagnose {c['seconds_loop']:.0f} s]")
     print(f"   simulation {inj['seconds_sim']:.1f} s, diagnose {inj['seconds_loop']:.1f} s")
+    if r["clean"]:
+        cause = sum(any(e["verdict"] == "cause" for e in c["effects"]) for c in r["clean"])
+        print(f"   clean controls at {r['rate']:g} Hz: {r['clean_named']}/{len(r['clean'])} seeds named anything "
+              f"({cause} with verdict cause)")
 
 
 # ------------------------------------------------------------------------------------------------

@@ -131,6 +131,8 @@ from .friction import (
     friction_column_indices,
     rest_mask,
     select_friction,
+    shape_physical,
+    shape_uncertainty,
     sliding_frame,
     sliding_velocity,
     velocity_grid,
@@ -1995,11 +1997,24 @@ def _unexplained(F: Frame, resid: np.ndarray, A: np.ndarray, seed: int = 0) -> t
     return tuple(res)
 
 
-def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
-    """The friction-law stage's choice of one joint as an effect of kind ``friction_law``."""
+def _law_effect(rec: _LawRecord, res: IdentificationResult, F: Frame | None = None, A: np.ndarray | None = None,
+                fit_names: Sequence[str] = ()) -> Effect:
+    """The friction-law stage's choice of one joint as an effect of kind ``friction_law``. Given the fit's frame,
+    design ``A`` and its column names, the standard deviations are those with the law's searched shape estimated
+    too (:func:`.friction.shape_uncertainty`), and the shape's own are reported (:func:`.friction.shape_physical`)."""
     ch = rec.choice
     names = ch.names() + ((f"OFF{ch.joint + 1}",) if rec.offset else ())
     idx = [res.index(nm) for nm in names]
+    std, pct = res.std[idx], res.rel_std_pct[idx]
+    unc = None
+    if F is not None and A is not None and all(nm in fit_names for nm in names):
+        w = None if res.joint_sigma is None else 1.0 / np.asarray(res.joint_sigma, float)[F.system.joint]
+        unc = shape_uncertainty(ch, lambda c: F.full_rate_columns(_sliding_law_columns(c), len(c.names())), A,
+                                [list(fit_names).index(nm) for nm in names], res.values[idx], std, w)
+    if unc is not None:
+        std = unc.law_std
+        with np.errstate(divide="ignore"):
+            pct = 100.0 * std / np.abs(res.values[idx])
     phys = {"cv_rel_err_declared": ch.declared_cv_rel_err, "cv_rel_err": ch.cv_rel_err}
     if ch.coulomb.law in ("tanh", "stribeck") and ch.coulomb.param is not None:
         phys["v" if ch.coulomb.law == "tanh" else "vs"] = float(ch.coulomb.param)
@@ -2014,6 +2029,8 @@ def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
         if ch.coulomb.law == "lugre":   # LuGre: vs, and sigma0 = Fs / x0 (friction.lugre_columns)
             phys["vs"] = float(ch.coulomb.param or math.nan)
             phys["sigma0"] = abs(float(res.value(ch.names()[0])) + float(res.value(ch.names()[1]))) / x0
+    if unc is not None:
+        phys.update(shape_physical(ch, unc, res.values[idx]))
     desc = ch.describe()
     if rec.added:
         desc = (f"joint {ch.joint + 1} declared without friction: added {ch.coulomb.label} Coulomb + "
@@ -2021,8 +2038,8 @@ def _law_effect(rec: _LawRecord, res: IdentificationResult) -> Effect:
                 f"{ch.declared_cv_rel_err:.4g} -> {ch.cv_rel_err:.4g})")
     gain = 1.0 - ch.cv_rel_err / ch.declared_cv_rel_err if ch.declared_cv_rel_err > 0 else 0.0
     return Effect(kind="friction_law", label=f"friction_law{ch.joint + 1}", variant=f"{ch.coulomb.label}+{ch.viscous.label}",
-                  joint=ch.joint, partner=None, names=names, values=res.values[idx], std=res.std[idx],
-                  rel_std_pct=res.rel_std_pct[idx], physical=phys, score=float(gain), p_value=rec.p_value,
+                  joint=ch.joint, partner=None, names=names, values=res.values[idx], std=std,
+                  rel_std_pct=pct, physical=phys, score=float(gain), p_value=rec.p_value,
                   z_validation=math.nan, reveal="dq", reveal_joint=ch.joint, modulation=None,
                   selection_frequency=rec.frequency, ci={}, description=desc, round=rec.round)
 
@@ -2039,7 +2056,7 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     val0_raw = _validation_rel_err_raw(data0, state.V, base.res0, ())
     raw_keep: dict = {}
     val1_raw = _validation_rel_err_raw(data, state.V, res, state.added, keep=raw_keep)
-    effects = [_law_effect(r, res) for r in base.laws if not r.smoothing]
+    effects = [_law_effect(r, res, data.F, A, names) for r in base.laws if not r.smoothing]
     effects += _loop_effects(state, res, cfg, stab or {})
     effects.sort(key=lambda e: e.round)   # in the order added (a friction law in the round it won)
     final_bad = _implausible_effects(data, state.added, res)

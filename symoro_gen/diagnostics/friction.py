@@ -67,6 +67,14 @@ Static at rest
     in identification and validation alike: the model predicts no friction torque it cannot know, where
     ``sign(dq)`` would switch between ``+Fc`` and ``-Fc`` on the velocity's wander at standstill.
 
+Standard deviations with the shape estimated
+    A law's constants are linear for a fixed shape (``v``, ``vs``, ``vp``, ``delta``), and the shape is searched.
+    The σ of a constant at the searched shape held fixed leaves out the shape's own uncertainty (on the SCARA
+    LuGre case 3.2 times too narrow for ``Fs - Fc``, which falls with ``vs``). :func:`shape_uncertainty` gives
+    the linearised covariance of the nonlinear least squares (Seber & Wild 1989, sec. 2.1) on the final fit's
+    design with the derivatives of the law's torque in its shape, and :func:`shape_physical` the shape's σ
+    (``vs_std``, ``x0_std``, ``sigma0_std``, ...); the report uses both (docs/friction-dynamic.md).
+
 Declaring what the loop found
     A law the loop names as a cause (an effect of kind ``friction_law``, or the loop's ``stribeck``
     candidate: a dip ``exp(-(dq/vs)^2) sign(dq)`` beside the declared ``sign(dq)`` and ``dq``, the Stribeck
@@ -121,6 +129,10 @@ __all__ = [
     "friction_column_indices",
     "law_declarations",
     "law_errors",
+    "shape_parameters",
+    "shape_physical",
+    "shape_uncertainty",
+    "ShapeUncertainty",
     "replaced_friction_columns",
     "rest_mask",
     "rest_segments",
@@ -444,12 +456,26 @@ def lugre_columns(dq: np.ndarray, vs: float, vp: float, q: float = 0.0) -> np.nd
     hm = 1.0 - q * (1.0 - em)
     sg = np.sign(vm)
     decay = np.exp(-np.abs(vm) / (float(vp) * hm))
-    a = b = 0.0
-    for k, (s_, d_, e_) in enumerate(zip(sg.tolist(), decay.tolist(), em.tolist()), start=1):
-        a = s_ + (a - s_) * d_
-        b = e_ * s_ + (b - e_ * s_) * d_
-        out[k, 0], out[k, 1] = a, b
+    gain = -np.expm1(-np.abs(vm) / (float(vp) * hm))     # 1 - decay
+    out[1:, 0] = _affine_scan(decay, sg * gain)
+    out[1:, 1] = _affine_scan(decay, em * sg * gain)
     return out
+
+
+def _affine_scan(d: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``x_k = d_k x_{k-1} + u_k`` from ``x_0 = 0`` for every ``k`` (the state recursion of :func:`lugre_columns`,
+    ``a_k = s + (a_{k-1} - s) d_k``), by the parallel prefix scan of the affine maps ``x -> d x + u`` (Hillis &
+    Steele 1986; Blelloch 1990, sec. 1.4: first-order linear recurrences): ``log2 N`` vectorised passes, each
+    composing a map with the one ``2^i`` steps before it. The products of ``d`` only fall (``0 <= d <= 1``), so
+    nothing overflows."""
+    D = np.array(d, float, copy=True)
+    U = np.array(u, float, copy=True)
+    s = 1
+    while s < U.size:
+        U[s:] = D[s:] * U[:-s] + U[s:]
+        D[s:] = D[s:] * D[:-s]
+        s *= 2
+    return U
 
 
 def _coulomb(law: str, dq: np.ndarray, param, smooth: float | None) -> np.ndarray:
@@ -792,6 +818,161 @@ def _law_coefficients(A: np.ndarray, y: np.ndarray, weights: np.ndarray | None,
     if choice.coulomb.law in STRIBECK_LIKE:
         coef["Fs"] = float(bx[0] + bx[1])
     return coef
+
+
+#: relative step of the central differences of a law's columns in its shape parameters (:func:`shape_uncertainty`)
+SHAPE_STEP = 1e-3
+
+
+def shape_parameters(choice: FrictionChoice) -> tuple[str, ...]:
+    """The searched shape parameters of the chosen laws: ``v`` (tanh), ``vs`` (Stribeck), ``vp`` (Dahl), ``vs`` and
+    ``vp`` (LuGre: its ``q = (Fs - Fc) / Fs`` follows the magnitudes, :func:`lugre_columns`), ``delta`` (power).
+    The ``tanh`` smoothing of a Stribeck law's ``sign`` is not one (a floor, not fitted to the law)."""
+    out = {"tanh": ("v",), "stribeck": ("vs",), "dahl": ("vp",), "lugre": ("vs", "vp")}.get(choice.coulomb.law, ())
+    return out + (("delta",) if choice.viscous.law == "power" else ())
+
+
+def _shape_value(choice: FrictionChoice, name: str) -> float:
+    if name == "delta":
+        return float(choice.viscous.param or math.nan)
+    if name == "q":
+        return float(choice.coulomb.q)
+    if name == "vp" and choice.coulomb.law == "lugre":
+        return float(choice.coulomb.vp or math.nan)
+    return float(choice.coulomb.param or math.nan)
+
+
+def _with_shape(choice: FrictionChoice, name: str, value: float) -> FrictionChoice:
+    """``choice`` with one shape parameter (:func:`shape_parameters`, or LuGre's ``q``) set to ``value``."""
+    c, v = choice.coulomb, choice.viscous
+    if name == "delta":
+        v = replace(v, param=value)
+    elif name == "q":
+        c = replace(c, q=value)
+    elif name == "vp" and c.law == "lugre":
+        c = replace(c, vp=value)
+    else:
+        c = replace(c, param=value)
+    return replace(choice, coulomb=c, viscous=v)
+
+
+def _shape_derivative(choice: FrictionChoice, columns: Callable[[FrictionChoice], np.ndarray], coef: np.ndarray,
+                      name: str) -> np.ndarray:
+    """``d(columns(choice) @ coef) / d name`` by central differences (relative step :data:`SHAPE_STEP`; additive for
+    ``delta`` and ``q``, one-sided at ``q = 0``)."""
+    x = _shape_value(choice, name)
+    h = SHAPE_STEP if name in ("delta", "q") else SHAPE_STEP * abs(x)
+    lo, hi = x - h, x + h
+    if name == "q" and lo < 0.0:
+        lo = x
+    return (columns(_with_shape(choice, name, hi)) - columns(_with_shape(choice, name, lo))) @ coef / (hi - lo)
+
+
+@dataclass(frozen=True)
+class ShapeUncertainty:
+    """The law's constants and searched shape estimated together: the linearised covariance of the nonlinear least
+    squares (Seber & Wild 1989, *Nonlinear Regression*, sec. 2.1; Bates & Watts 1988, sec. 2.3), ``s^2 (J^T J)^-1``
+    with ``J`` the fit's design and the derivatives of the law's torque in its shape parameters.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The shape parameters (:func:`shape_parameters`).
+    values, std : ndarray
+        Their values and standard deviations.
+    law_std : ndarray
+        Standard deviations of the constants asked for (the law's columns, in the order given), the shape
+        estimated too.
+    cov : ndarray
+        Covariance of the constants asked for then the shape parameters.
+    """
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    std: np.ndarray
+    law_std: np.ndarray
+    cov: np.ndarray
+
+
+def shape_uncertainty(choice: FrictionChoice, columns: Callable[[FrictionChoice], np.ndarray], A: np.ndarray,
+                      idx: Sequence[int], values: np.ndarray, std: np.ndarray, weights: np.ndarray | None = None
+                      ) -> ShapeUncertainty | None:
+    """The standard deviations of a fitted law's constants with its shape estimated too (:class:`ShapeUncertainty`).
+
+    ``A`` (r, c) is the design of the fit, ``idx`` the columns whose standard deviation is asked for (the law's,
+    :meth:`FrictionChoice.names` first in that order), ``values`` and ``std`` (len(idx)) their estimates and
+    standard deviations from the fit at the shape held, ``weights`` (r) the fit's row weights (WLS).
+    ``columns(choice) -> (r, p)`` evaluates the law's columns on the rows. The fit's ``s^2`` is read from ``std``
+    (``std_i^2 / [(A^T A)^-1]_ii``), so the estimator's own scale is kept: only the design gains the derivative
+    columns. For LuGre, ``q = (Fs - Fc) / Fs`` of the relaxation length follows the magnitudes (the chain rule adds
+    ``d/dq`` times ``dq/dFc`` and ``dq/d(Fs - Fc)`` to their two columns) unless the search clipped it. None when
+    the law has no searched shape or a design is singular."""
+    names = shape_parameters(choice)
+    p = len(choice.names())
+    idx = [int(i) for i in idx]
+    std = np.asarray(std, float)
+    if not names or len(idx) < p or not np.all(np.isfinite(std)) or not np.all(std > 0):
+        return None
+    coef = np.asarray(values, float)[:p]
+    D = np.column_stack([_shape_derivative(choice, columns, coef, nm) for nm in names])
+    Af = np.array(A, float, copy=True)
+    q = float(choice.coulomb.q)
+    if choice.coulomb.law == "lugre" and 0.0 < q < 0.95:
+        fc, d = float(coef[0]), float(coef[1])
+        fs = fc + d
+        if fs != 0.0:
+            dX = _shape_derivative(choice, columns, coef, "q")
+            Af[:, idx[0]] += dX * (-d / fs ** 2)
+            Af[:, idx[1]] += dX * (fc / fs ** 2)
+    w = np.ones(A.shape[0]) if weights is None else np.asarray(weights, float)
+    held = _scaled_inverse(A * w[:, None])
+    free = _scaled_inverse(np.hstack([Af, D]) * w[:, None])
+    if held is None or free is None:
+        return None
+    s2 = float(np.median(std ** 2 / np.diag(held)[idx]))
+    sel = idx + list(range(A.shape[1], A.shape[1] + len(names)))
+    cov = s2 * free[np.ix_(sel, sel)]
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return ShapeUncertainty(names, np.array([_shape_value(choice, nm) for nm in names]), sd[len(idx):],
+                            sd[:len(idx)], cov)
+
+
+def _scaled_inverse(M: np.ndarray) -> np.ndarray | None:
+    """``(M^T M)^-1`` computed on the columns scaled to unit norm (None when singular)."""
+    n = np.linalg.norm(M, axis=0)
+    if not np.all(n > 0):
+        return None
+    G = (M / n).T @ (M / n)
+    try:
+        Gi = np.linalg.inv(G)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(Gi)) or np.linalg.cond(G) > 1e14:
+        return None
+    return Gi / np.outer(n, n)
+
+
+def shape_physical(choice: FrictionChoice, unc: ShapeUncertainty, values: np.ndarray) -> dict[str, float]:
+    """The standard deviations of the law's reported shape (``physical`` of its effect): ``v_std``, ``vs_std``,
+    ``delta_std``; for the pre-sliding laws ``x0_std`` (``x0 = vp / fs``) and ``sigma0_std`` (``sigma0 = |F| / x0``,
+    ``F`` = ``Fc`` for Dahl, ``Fs = Fc + (Fs - Fc)`` for LuGre; first-order propagation of :attr:`ShapeUncertainty.cov`).
+    ``values`` are the law's constants (:meth:`FrictionChoice.names` order)."""
+    out = {f"{nm}_std": float(s) for nm, s in zip(unc.names, unc.std) if nm != "vp"}
+    if "vp" not in unc.names or not choice.rate_hz:
+        return out
+    k = len(unc.law_std) + unc.names.index("vp")
+    fs = float(choice.rate_hz)
+    x0 = float(unc.values[unc.names.index("vp")]) / fs
+    out["x0_std"] = float(unc.std[unc.names.index("vp")]) / fs
+    g = np.zeros(unc.cov.shape[0])
+    force = float(values[0]) + (float(values[1]) if choice.coulomb.law == "lugre" else 0.0)
+    sgn = 1.0 if force >= 0 else -1.0
+    g[0] = sgn / x0
+    if choice.coulomb.law == "lugre":
+        g[1] = sgn / x0
+    g[k] = -abs(force) / x0 ** 2 / fs
+    out["sigma0_std"] = float(np.sqrt(max(float(g @ unc.cov @ g), 0.0)))
+    return out
 
 
 def law_errors(choice: FrictionChoice) -> dict[str, float]:
