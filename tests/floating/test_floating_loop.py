@@ -1,0 +1,126 @@
+"""``diagnose`` of a floating-base robot: the fixed-base loop on its base-wrench and joint rows
+(docs/floating-base.md, "The loop per kind of rows").
+
+The truth is the Pinocchio-simulated log of :func:`tests.floating.test_cli_floating.simulate_log` (free-flyer RNEA,
+two contact wrenches, IMU and joint noise). A drive effect the robot file does not declare is added to one joint's
+logged torque: the loop must name it on that joint's row with its value within 3 standard deviations, and name
+nothing on the same robot's clean log.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from symoro_gen.description import load_robot, parse_robot_text
+from symoro_gen.identification.floating import RowsAsJoints
+from symoro_gen.runtime.floating import FloatingModel, numeric_base
+from symoro_gen.workflows import diagnose
+from symoro_gen.workflows.floating import row_name, signal_name
+
+from .pinocchio_floating import pin_floating_torque, random_floating_parameters, random_floating_states
+from .test_cli_floating import HOPPER, simulate_log
+
+HERE = Path(__file__).parent
+#: the quadruped with its fl knee (frame 3, the third joint) declared with a rotor inertia only: no friction, no
+#: offset in the model (nor in the simulated truth, :func:`random_floating_parameters` draws the declared terms)
+KNEE = 3
+CONTACTS = {"frame6": 6, "frame9": 9}
+
+
+def test_rows_as_joints_is_pinocchios_free_flyer():
+    """The adapter's regressor (rotation vector in, quaternion to the model) times the identified combinations
+    ``K chi`` is Pinocchio's free-flyer RNEA with the drive terms, on every row; the drive terms are named on their
+    row (``FV<7 + c>`` for the joint in column ``c``)."""
+    robot = parse_robot_text(HOPPER)
+    model = FloatingModel(robot)
+    rng = np.random.default_rng(4)
+    q, dq, ddq = random_floating_states(robot, 40, rng)
+    chi = random_floating_parameters(robot, rng)
+    W = np.asarray(model.standard_regressor(q, dq, ddq), float)
+    rows = RowsAsJoints.of(model, robot, W)
+    kept, K = numeric_base(W.transpose(1, 0, 2).reshape(-1, W.shape[2]))
+    assert np.array_equal(rows.kept, kept)
+    pred = rows.regressor(RowsAsJoints.signals(q), dq, ddq) @ (K @ chi)
+    truth = pin_floating_torque(robot, q, dq, ddq, chi)
+    assert np.max(np.abs(pred - truth)) < 1e-8 * np.max(np.abs(truth))
+    assert 6 + robot.n_joints == rows.N_JOINTS
+    drive = {n for n in rows.BASE_NAMES if n.rstrip("0123456789") in ("IA", "FV", "FS", "OFF")}
+    assert drive == {f"{k}{7 + c}" for k in ("IA", "FV", "FS", "OFF") for c in range(robot.n_joints)}
+
+
+def test_row_and_signal_names():
+    """Row positions and the loop's signals read on the floating robot (base coordinates, then joints)."""
+    assert [row_name(i) for i in (0, 5, 6, 17)] == ["FX0", "MZ0", "tau1", "tau12"]
+    assert signal_name("q3") == "q[z]" and signal_name("dq4") == "dq[rx]" and signal_name("ddq9") == "ddq3"
+    assert signal_name("tau_hat6") == "tau_hat[MZ0]" and signal_name("tau_hat8") == "tau_hat[tau2]"
+    assert signal_name("t") == "t"
+
+
+def _quadruped(d: Path):
+    text = (HERE / "quadruped.toml").read_text()
+    anchor = f"[[frames]]  # fl knee\nj = {KNEE}\n"
+    assert anchor in text
+    (d / "quad.toml").write_text(text.replace(anchor, anchor + 'drive = ["IA"]\n'))
+    return load_robot(d / "quad.toml")
+
+
+def _log(robot, d: Path, seed: int, duration: float, effect: str | None) -> Path:
+    """The simulated log, with ``effect`` added to the knee's logged torque (the motor's torque: the rigid body's
+    and the drive's); its velocity from the logged positions (the simulated motion is smooth)."""
+    path = d / f"quad_{seed}_{effect}.csv"
+    simulate_log(robot, path, seed=seed, duration=duration, fs=200.0, contacts=CONTACTS)
+    if effect is None:
+        return path
+    names = path.read_text().split("\n", 1)[0].split(",")
+    table = np.loadtxt(path, delimiter=",", skiprows=1)
+    col = names.index(f"tau{KNEE}")
+    dq = np.gradient(table[:, names.index(f"q{KNEE}")], table[:, 0])
+    table[:, col] += 2.0 if effect == "offset" else 1.5 * dq + 1.0 * np.sign(dq)
+    np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
+    return path
+
+
+def _effects(res) -> dict:
+    loop = res.to_dict()["floating"]["loop"]
+    print(res.summary())
+    return {(e["row"], e["kind"]): e for e in loop["effects"]}
+
+
+@pytest.mark.slow
+def test_loop_names_a_knee_offset(tmp_path):
+    """A 2 N m offset on the knee's torque: named on row tau3 (round 1), within 3 sigma; nothing else named."""
+    robot = _quadruped(tmp_path)
+    res = diagnose(robot.file, [str(_log(robot, tmp_path, 11, 30.0, "offset"))])
+    eff = _effects(res)
+    assert set(eff) == {("tau3", "offset")}
+    e = eff[("tau3", "offset")]
+    (name, value), = e["params"].items()
+    assert abs(value - 2.0) < 3 * e["std"][name]
+    assert e["verdict"] == "cause"
+
+
+@pytest.mark.slow
+def test_loop_names_knee_friction(tmp_path):
+    """Viscous (1.5 N m s/rad) and Coulomb (1 N m) friction on the knee, declared without: the friction-law
+    stage names them on row tau3, each within 3 sigma; no other row gets an effect."""
+    robot = _quadruped(tmp_path)
+    res = diagnose(robot.file, [str(_log(robot, tmp_path, 11, 15.0, "friction"))])
+    eff = _effects(res)
+    assert {row for row, _ in eff} == {"tau3"}
+    law = next(e for (row, _), e in eff.items() if row == "tau3")
+    for name, truth in ((f"FV{6 + KNEE}", 1.5), (f"FS{6 + KNEE}", 1.0)):
+        assert abs(law["params"][name] - truth) < 3 * law["std"][name], name
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [11, 12, 13])
+def test_loop_names_nothing_on_a_clean_log(tmp_path, seed):
+    """The same robot, no effect added: no effect named on any row (the contact checks find nothing either)."""
+    robot = _quadruped(tmp_path)
+    res = diagnose(robot.file, [str(_log(robot, tmp_path, seed, 15.0, None))])
+    assert _effects(res) == {}
+    assert res.found == []
+    loop = res.to_dict()["floating"]["loop"]
+    assert [u["row"] for u in loop["unexplained"]] == loop["rows"]
