@@ -599,9 +599,9 @@ def diagnose_floating_logs(robot: Any, model: Any, data: Sequence, opts: Any) ->
                                      f"{', '.join(f) or 'none'}, the first log's are {', '.join(frames[0]) or 'none'}: "
                                      "diagnose checks the same sensors in every log") for r, f in zip(rows, frames)
                              if f != frames[0]])
-    if not frames[0]:
-        raise OptionError(f"diagnose: {robot.file or robot.name}: the logs have no contact wrench column "
-                          "(<frame>_fx ...): nothing to check on a floating-base robot yet")
+    if not frames[0] and not has_tau:
+        raise OptionError(f"diagnose: {robot.file or robot.name}: the logs have neither contact wrench columns "
+                          "(<frame>_fx ...) nor joint torques (tau1 ...): nothing to check on a floating-base robot")
     checks = contact_checks(model, rows, "base", opts.significance)
     loop: dict[str, Any] | None = None
     report: ResidualReport | None = None
