@@ -58,6 +58,60 @@ def test_row_and_signal_names():
     assert signal_name("t") == "t"
 
 
+def _hopper(d: Path):
+    """The hopper of the command-line tests with its knee (frame 2) declared with a rotor inertia only."""
+    anchor = "[[frames]]\nj = 2\n"
+    assert anchor in HOPPER
+    (d / "hopper.toml").write_text(HOPPER.replace(anchor, anchor + 'drive = ["IA"]\n'))
+    return load_robot(d / "hopper.toml")
+
+
+def _hopper_log(robot, d: Path, seed: int, duration: float, friction: bool) -> Path:
+    path = d / f"hopper_{seed}_{friction}.csv"
+    simulate_log(robot, path, seed=seed, duration=duration, fs=200.0, contacts={"frame1": 1, "foot": 3})
+    if friction:
+        names = path.read_text().split("\n", 1)[0].split(",")
+        table = np.loadtxt(path, delimiter=",", skiprows=1)
+        dq = np.gradient(table[:, names.index("q2")], table[:, 0])
+        table[:, names.index("tau2")] += 1.5 * dq + 1.0 * np.sign(dq)
+        np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
+    return path
+
+
+def test_hopper_clean_log_names_nothing(tmp_path):
+    """The loop end to end on a short clean log of the hopper (8 s): no effect on any row, no unexplained
+    structure, every row reported (the other seeds in the slow test below)."""
+    robot = _hopper(tmp_path)
+    res = diagnose(robot.file, [str(_hopper_log(robot, tmp_path, 3, 8.0, False))])
+    loop = res.to_dict()["floating"]["loop"]
+    assert loop["rows"] == ["FX0", "FY0", "FZ0", "MX0", "MY0", "MZ0", "tau1", "tau2"]
+    assert loop["effects"] == [] and not any(u["flagged"] for u in loop["unexplained"])
+    assert len(loop["rel_err_after"]) == 8
+    assert "Residual analysis per row" in res.summary()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 4, 5])
+def test_hopper_clean_logs_name_nothing(tmp_path, seed):
+    robot = _hopper(tmp_path)
+    res = diagnose(robot.file, [str(_hopper_log(robot, tmp_path, seed, 8.0, False))])
+    loop = res.to_dict()["floating"]["loop"]
+    assert loop["effects"] == [] and not any(u["flagged"] for u in loop["unexplained"])
+
+
+@pytest.mark.slow
+def test_hopper_knee_friction(tmp_path):
+    """Friction on the hopper's knee, whose row also carries the foot's contact wrench (16 s log): named on row
+    tau2 by the friction-law stage, FV and FS within 3 sigma."""
+    robot = _hopper(tmp_path)
+    res = diagnose(robot.file, [str(_hopper_log(robot, tmp_path, 1, 16.0, True))])
+    eff = _effects(res)
+    assert {row for row, _ in eff} == {"tau2"}
+    law = next(iter(eff.values()))
+    for name, truth in (("FV8", 1.5), ("FS8", 1.0)):
+        assert abs(law["params"][name] - truth) < 3 * law["std"][name], name
+
+
 def _quadruped(d: Path):
     text = (HERE / "quadruped.toml").read_text()
     anchor = f"[[frames]]  # fl knee\nj = {KNEE}\n"
