@@ -8,6 +8,7 @@ nothing on the same robot's clean log.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +19,13 @@ from symoro_gen.identification.floating import RowsAsJoints
 from symoro_gen.runtime.floating import FloatingModel, numeric_base
 from symoro_gen.workflows import diagnose
 from symoro_gen.workflows.floating import row_name, signal_name
+from tests.docs.jsonschema_lite import validate
 
 from .pinocchio_floating import pin_floating_torque, random_floating_parameters, random_floating_states
 from .test_cli_floating import HOPPER, simulate_log
 
 HERE = Path(__file__).parent
+SCHEMA = json.loads((HERE.parents[1] / "docs" / "schemas" / "diagnose.schema.json").read_text())
 #: the quadruped with its fl knee (frame 3, the third joint) declared with a rotor inertia only: no friction, no
 #: offset in the model (nor in the simulated truth, :func:`random_floating_parameters` draws the declared terms)
 KNEE = 3
@@ -83,7 +86,10 @@ def test_hopper_clean_log_names_nothing(tmp_path):
     structure, every row reported (the other seeds in the slow test below)."""
     robot = _hopper(tmp_path)
     res = diagnose(robot.file, [str(_hopper_log(robot, tmp_path, 3, 8.0, False))])
-    loop = res.to_dict()["floating"]["loop"]
+    d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
+    errs = validate(d, SCHEMA["$defs"]["floating_diagnose"], root=SCHEMA)
+    assert not errs, errs[:5]
+    loop = d["floating"]["loop"]
     assert loop["rows"] == ["FX0", "FY0", "FZ0", "MX0", "MY0", "MZ0", "tau1", "tau2"]
     assert loop["effects"] == [] and not any(u["flagged"] for u in loop["unexplained"])
     assert len(loop["rel_err_after"]) == 8
@@ -166,6 +172,7 @@ def test_loop_names_a_knee_offset(quad30, tmp_path):
     robot, clean = quad30
     res = diagnose(robot.file, [str(_with_effect(clean, "offset", tmp_path / "offset.csv"))])
     eff = _effects(res)
+    assert not validate(res.to_dict(), SCHEMA["$defs"]["floating_diagnose"], root=SCHEMA)
     assert set(eff) == {("tau3", "offset")}
     e = eff[("tau3", "offset")]
     (name, value), = e["params"].items()
