@@ -503,6 +503,25 @@ def loop_dict(report: ResidualReport) -> dict[str, Any]:
             "warnings": list(report.warnings)}
 
 
+def ambiguous(rows: Sequence[FloatingRows], checks: Sequence[Mapping[str, Any]],
+              loop: Mapping[str, Any] | None) -> list[str]:
+    """The sensor effects accepted on the joint rows that share a row with a drive effect of the loop: the sensor's
+    wrench reaches that joint's row (its Jacobian's column there is not zero), so the two explain the same residual
+    and the two selections, run side by side, may each take part of it (docs/floating-base.md)."""
+    if loop is None:
+        return []
+    out = []
+    for c in checks:
+        if c["kind"] != "joints" or not c["accepted"]:
+            continue
+        reach = np.any(np.concatenate([r.sensor_columns[c["frame"]][:, 6:, :6] for r in rows]) != 0, axis=(0, 2))
+        named = [e for e in loop["effects"] if e["joint"] is not None and e["joint"] > 6 and reach[e["joint"] - 7]]
+        out += [f"the {c['effect']} of the sensor at {c['frame']} and {e['label']} on row {e['row']}: the sensor's "
+                "wrench reaches that row, both may share one cause (check the sensor against a known load)"
+                for e in named]
+    return out
+
+
 def _loop_lines(loop: Mapping[str, Any] | None, note: str) -> list[str]:
     if loop is None:
         return ["", f"Residual analysis per row (the fixed-base loop): not run: {note}"]
@@ -518,6 +537,7 @@ def _loop_lines(loop: Mapping[str, Any] | None, note: str) -> list[str]:
                      + (f" (signals {', '.join(u['signals'][:4])})" if u["signals"] else ""))
     if not loop["effects"] and not flagged:
         lines.append("  nothing beyond the noise on any row")
+    lines += [f"  ambiguous: {a}" for a in loop.get("ambiguous", ())]
     lines.append("  validation rel. error per row before -> after: " + "  ".join(
         f"{r} {a:.4f}->{b:.4f}" for r, a, b in zip(loop["rows"], loop["rel_err_before"], loop["rel_err_after"])
         if a is not None and b is not None))
@@ -610,6 +630,7 @@ def diagnose_floating_logs(robot: Any, model: Any, data: Sequence, opts: Any) ->
         checks += contact_checks(model, rows, "joints", opts.significance)
         _, report = row_loop(robot, model, rows, opts.significance)
         loop = loop_dict(report)
+        loop["ambiguous"] = ambiguous(rows, checks, loop)
     else:
         note = ("the logs have no joint torques (tau1..): the base rows depend on the joints' motion, the loop "
                 "analyses both kinds of rows together")

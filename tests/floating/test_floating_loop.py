@@ -106,6 +106,31 @@ def test_hopper_clean_logs_name_nothing(tmp_path, seed):
 
 
 @pytest.mark.slow
+def test_hopper_knee_offset_is_flagged_ambiguous(tmp_path):
+    """A 2 N m offset on the hopper's knee (declared without one), whose row the foot's wrench reaches (16 s log):
+    the loop names it on row tau2 within 3 sigma; a sensor gain the contact checks accept on the joint rows for
+    the same residual is reported as ambiguous with it."""
+    robot = _hopper(tmp_path)
+    path = _hopper_log(robot, tmp_path, 2, 16.0, False)
+    names = path.read_text().split("\n", 1)[0].split(",")
+    table = np.loadtxt(path, delimiter=",", skiprows=1)
+    table[:, names.index("tau2")] += 2.0
+    np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
+    res = diagnose(robot.file, [str(path)])
+    eff = _effects(res)
+    assert set(eff) == {("tau2", "offset")}
+    (name, value), = eff[("tau2", "offset")]["params"].items()
+    assert abs(value - 2.0) < 3 * eff[("tau2", "offset")]["std"][name]
+    assert not validate(res.to_dict(), SCHEMA["$defs"]["floating_diagnose"], root=SCHEMA)
+    loop = res.to_dict()["floating"]["loop"]
+    # the foot's sensor reaches the knee's row, the thigh's (frame 1, above the knee) does not
+    found = {c["frame"] for c in res.found if c["kind"] == "joints"}
+    assert "foot" in found
+    assert [a.split(" and ")[0] for a in loop["ambiguous"]] == ["the gain of the sensor at foot"]
+    assert "row tau2" in loop["ambiguous"][0]
+
+
+@pytest.mark.slow
 def test_hopper_knee_friction(tmp_path):
     """Friction on the hopper's knee, whose row also carries the foot's contact wrench (16 s log): named on row
     tau2 by the friction-law stage, FV and FS within 3 sigma."""
