@@ -162,13 +162,15 @@ def _log(robot, d: Path, seed: int, duration: float, effect: str | None) -> Path
 def _with_effect(path: Path, effect: str, out: Path | None = None) -> Path:
     """``path`` with ``effect`` on a torque: ``offset`` (2 N m on the knee), ``friction`` (viscous 1.5 N m s/rad and
     Coulomb 1 N m on the knee, its velocity from the logged positions: the simulated motion is smooth) or ``gain``
-    (joint 2's torque read 10 % too high)."""
+    (joint 2's torque read 10 % too high) or ``ripple`` (``sin(4 q2)`` N m on joint 2's torque)."""
     names = path.read_text().split("\n", 1)[0].split(",")
     table = np.loadtxt(path, delimiter=",", skiprows=1)
     col = names.index(f"tau{KNEE}")
     dq = np.gradient(table[:, names.index(f"q{KNEE}")], table[:, 0])
     if effect == "gain":
         table[:, names.index("tau2")] *= 1.1
+    elif effect == "ripple":
+        table[:, names.index("tau2")] += np.sin(4 * table[:, names.index("q2")])
     else:
         table[:, col] += 2.0 if effect == "offset" else 1.5 * dq + 1.0 * np.sign(dq)
     out = out or path
@@ -216,6 +218,20 @@ def test_loop_names_a_torque_gain(quad30, tmp_path):
     e = eff[("tau2", "gain")]
     (name, value), = e["params"].items()
     assert abs(value - 0.1) < 3 * e["std"][name]
+
+
+@pytest.mark.slow
+def test_loop_names_a_position_ripple(quad30, tmp_path):
+    """A ripple ``sin(4 q2)`` N m on joint 2's torque: ``position_ripple`` of order 4 on row tau2, its sine and
+    cosine amplitudes (1 and 0) within 3 sigma; no other effect."""
+    robot, clean = quad30
+    res = diagnose(robot.file, [str(_with_effect(clean, "ripple", tmp_path / "ripple.csv"))])
+    eff = _effects(res)
+    assert set(eff) == {("tau2", "position_ripple")}
+    e = eff[("tau2", "position_ripple")]
+    assert e["physical"]["k"] == 4
+    for name, truth in (("position_ripple8.a_sin", 1.0), ("position_ripple8.a_cos", 0.0)):
+        assert abs(e["params"][name] - truth) < 3 * e["std"][name], name
 
 
 @pytest.mark.slow
