@@ -162,7 +162,7 @@ def _log(robot, d: Path, seed: int, duration: float, effect: str | None) -> Path
 def _with_effect(path: Path, effect: str, out: Path | None = None) -> Path:
     """``path`` with ``effect`` on a torque: ``offset`` (2 N m on the knee), ``friction`` (viscous 1.5 N m s/rad and
     Coulomb 1 N m on the knee, its velocity from the logged positions: the simulated motion is smooth) or ``gain``
-    (joint 2's torque read 10 % too high) or ``ripple`` (``sin(4 q2)`` N m on joint 2's torque)."""
+    (joint 2's torque read 10 % too high) ``ripple`` (``sin(4 q2)`` N m on joint 2's torque) or ``delay`` (joint 2's torque logged 10 ms late)."""
     names = path.read_text().split("\n", 1)[0].split(",")
     table = np.loadtxt(path, delimiter=",", skiprows=1)
     col = names.index(f"tau{KNEE}")
@@ -171,6 +171,8 @@ def _with_effect(path: Path, effect: str, out: Path | None = None) -> Path:
         table[:, names.index("tau2")] *= 1.1
     elif effect == "ripple":
         table[:, names.index("tau2")] += np.sin(4 * table[:, names.index("q2")])
+    elif effect == "delay":
+        table[:, names.index("tau2")] = np.interp(table[:, 0] - 0.01, table[:, 0], table[:, names.index("tau2")])
     else:
         table[:, col] += 2.0 if effect == "offset" else 1.5 * dq + 1.0 * np.sign(dq)
     out = out or path
@@ -232,6 +234,18 @@ def test_loop_names_a_position_ripple(quad30, tmp_path):
     assert e["physical"]["k"] == 4
     for name, truth in (("position_ripple8.a_sin", 1.0), ("position_ripple8.a_cos", 0.0)):
         assert abs(e["params"][name] - truth) < 3 * e["std"][name], name
+
+
+@pytest.mark.slow
+def test_loop_names_a_time_delay(quad30, tmp_path):
+    """Joint 2's torque logged 10 ms late (linear interpolation of the log): ``time_delay`` on row tau2, the delay
+    within 3 sigma of 10 ms; no other effect."""
+    robot, clean = quad30
+    res = diagnose(robot.file, [str(_with_effect(clean, "delay", tmp_path / "delay.csv"))])
+    eff = _effects(res)
+    assert set(eff) == {("tau2", "time_delay")}
+    e = eff[("tau2", "time_delay")]
+    assert abs(e["params"]["time_delay8.d"] - 0.01) < 3 * e["std"]["time_delay8.d"]
 
 
 @pytest.mark.slow
