@@ -577,6 +577,11 @@ class DiagnoseSettings:
         is offered, :func:`_stage_friction`), and the loop's Stribeck candidate is not offered on a joint
         whose declared law has the Stribeck term already (its ``FSS<j>`` column). The loop's other
         candidates still compete there in the rounds (docs/loop-plausibility.md, "Declared friction laws").
+    effect_joints : tuple of int, optional
+        Joints (0-based columns) the friction-law stage and the candidate families are offered on; default
+        (None): every joint. The other joints' rows stay in every fit and in the ``unexplained`` check: a
+        floating-base robot's base-wrench rows, diagnosed as the first six "joints" of its rows
+        (:class:`~symoro_gen.identification.floating.RowsAsJoints`), have no drive for an effect to act on.
     presliding_law : bool
         The friction-law stage also tries the pre-sliding Dahl and LuGre laws (:func:`.friction.dahl_column`,
         :func:`.friction.lugre_columns`) on data sampled at :data:`.friction.DAHL_MIN_RATE_HZ` or more. Off by
@@ -601,6 +606,11 @@ class DiagnoseSettings:
     declared_elastic: tuple[int, ...] = ()
     declared_laws: tuple[int, ...] = ()
     presliding_law: bool = False
+    effect_joints: tuple[int, ...] | None = None
+
+    def offered(self, j: int) -> bool:
+        """Joint ``j`` (0-based) takes the friction-law stage and the candidate families (``effect_joints``)."""
+        return self.effect_joints is None or j in self.effect_joints
 
     def __post_init__(self) -> None:
         if self.method.lower() not in ("ols", "wls", "tls"):
@@ -882,7 +892,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
     doubtful: list[dict] = []
     scales = ArmScales.of_frame(F)
     for j in range(n):
-        if j in cfg.declared_laws:
+        if j in cfg.declared_laws or not cfg.offered(j):
             continue   # the robot file declares this joint's law: kept as declared (scales refined already)
         jf = replace(_joint_friction(F, W, names, j, float(dq_noise[j])), presliding=cfg.presliding_law)
         try:
@@ -1192,6 +1202,7 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     # (on the loop's own data: the leading part of the identification experiments)
     res_start = _fit(data.F.system, SELECT_METHOD)
     families = make_families(data.F, cfg.candidates, model=data.model)
+    families = [f for f in families if all(cfg.offered(j) for j in _affected(f, data.n))]
     # a joint whose friction-law stage chose a Stribeck law already has the Stribeck column: the loop's
     # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
     # coefficients then split the effect between them with opposite signs)

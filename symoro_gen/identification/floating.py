@@ -35,12 +35,14 @@ passed directly. Payload columns are not used yet.
 """
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
 
 from ..description.mdh import joint_sign, row_transform
 from ..description.model import REVOLUTE, RobotDescription
@@ -333,6 +335,85 @@ def with_sample_covariance(res: IdentificationResult, system: ObservationSystem,
     warnings = [w for w in res.warnings if "poorly identified (%sigma" not in w]
     warnings += poorly_identified_warnings(res.names, res.values, std, Options(rel_std_warn_pct=rel_std_warn_pct))
     return replace(res, cov=cov, std=std, rel_std_pct=relative_std_pct(res.values, std), warnings=tuple(warnings))
+
+
+#: the drive terms of one joint in the standard names (``FV3``: frame 3's viscous friction)
+_DRIVE_NAME = re.compile(r"^(IA|FV|FS|OFF)(\d+)$")
+
+
+@dataclass(frozen=True, eq=False)
+class RowsAsJoints:
+    """The rows of a floating-base model as the "joints" of a fixed-base
+    :class:`~symoro_gen.model.IdentificationModel`, so that the fixed-base loop (:func:`symoro_gen.diagnostics.diagnose`)
+    analyses the residual of each equation kind ([AVN2014]: the base-link and the joint equations of motion).
+
+    Joints ``0..5`` are the base-wrench rows (``FX0 .. MZ0``), ``6 + c`` the joint row of column ``c``: the base
+    rows depend on the joints' motion, so both kinds come together (logs with joint torques). Each sample's
+    signals, as :meth:`regressor` takes them: ``q`` (N, 6 + n) the base position and the rotation vector of its orientation (the quaternion's SO(3) log,
+    [F2008] sec. 2.3), then the joint positions; ``dq``, ``ddq`` the free-flyer velocity and spatial acceleration
+    (Pinocchio's, base axes), then the joints'. The measured side of each row (the "torque") is
+    ``S^T tau + sum_c J_c^T f_c`` (:func:`measured_rows`): the contact wrenches moved to the measured side, so the
+    joint rows read ``tau_j + J_c,j^T f_c = Y_j chi`` as a fixed-base joint ``tau_j = Y_j chi``.
+
+    The columns are the numeric base ``kept`` of those rows (:func:`stacked_system`), named as the identified
+    combinations, with the drive terms renamed to their row: ``FV<j>`` of the joint in column ``c`` is
+    ``FV<7 + c>`` here, the name the fixed-base loop gives the friction, offset and inertia of joint ``6 + c``."""
+
+    model: FloatingModel
+    kept: NDArray[np.intp]
+    names: tuple[str, ...]
+
+    @classmethod
+    def of(cls, model: FloatingModel, robot: RobotDescription, W: NDArray[np.float64]) -> RowsAsJoints:
+        """The numeric base of the rows of the samples' standard regressor ``W`` (k, 6 + n, p)."""
+        col = {r.j: c for c, r in enumerate(robot.joints)}
+        Wr = W.transpose(1, 0, 2).reshape(-1, W.shape[2])
+        kept, K = numeric_base(Wr)
+        names = []
+        for nm in combination_names(model.STANDARD_NAMES, kept, K):
+            m = _DRIVE_NAME.match(nm)
+            names.append(f"{m.group(1)}{7 + col[int(m.group(2))]}" if m and int(m.group(2)) in col else nm)
+        return cls(model, kept, tuple(names))
+
+    @property
+    def ROBOT(self) -> str:  # noqa: N802 - the generated contract's names
+        return str(self.model.ROBOT)
+
+    @property
+    def N_JOINTS(self) -> int:  # noqa: N802
+        return int(self.model.N_ROWS)
+
+    @property
+    def BASE_NAMES(self) -> tuple[str, ...]:  # noqa: N802
+        return self.names
+
+    @property
+    def STANDARD_NAMES(self) -> tuple[str, ...]:  # noqa: N802
+        return tuple(self.model.STANDARD_NAMES)
+
+    @property
+    def PAYLOAD_NAMES(self) -> tuple[str, ...]:  # noqa: N802
+        return ()
+
+    def model_state(self, q: ArrayLike) -> NDArray[np.float64]:
+        """``q`` (N, 6 + n) of :meth:`regressor` -> the floating model's ``q`` (N, 7 + n), quaternion ``x y z w``."""
+        q = np.atleast_2d(np.asarray(q, float))
+        out: NDArray[np.float64] = np.hstack([q[:, :3], Rotation.from_rotvec(np.array(q[:, 3:6])).as_quat(), q[:, 6:]])
+        return out
+
+    @staticmethod
+    def signals(q: ArrayLike) -> NDArray[np.float64]:
+        """The floating model's ``q`` (N, 7 + n) -> the position part of :meth:`regressor`'s signals (N, 6 + n)."""
+        q = np.atleast_2d(np.asarray(q, float))
+        out: NDArray[np.float64] = np.hstack([q[:, :3], Rotation.from_quat(np.array(q[:, 3:7])).as_rotvec(), q[:, 7:]])
+        return out
+
+    def regressor(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
+        """(N, 6 + n, len(names)): the standard regressor's kept columns."""
+        dq, ddq = (np.atleast_2d(np.asarray(x, float)) for x in (dq, ddq))
+        W = np.asarray(self.model.standard_regressor(self.model_state(q), dq, ddq), float)
+        out: NDArray[np.float64] = W[:, :, self.kept]
+        return out
 
 
 def frame_number(robot: RobotDescription, frame: str) -> int:

@@ -23,6 +23,8 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from ..description.identity import robot_id
+from ..diagnostics.core import DiagnoseSettings, diagnose
+from ..diagnostics.report import ResidualReport
 from ..errors import DataFileError, OptionError, Problem
 from ..identification.floating import (
     KINDS,
@@ -30,6 +32,7 @@ from ..identification.floating import (
     ContactWrench,
     FloatingIdentification,
     FloatingMeasurements,
+    RowsAsJoints,
     fit_system,
     frame_jacobian,
     frame_number,
@@ -37,12 +40,14 @@ from ..identification.floating import (
     stacked_system,
 )
 from ..identification.result import json_float
+from ..observations.options import AssemblyOptions
 from ..preprocessing.filtering import parallel_decimate
 from ..preprocessing.floating import FloatingSignals, filter_floating, read_floating
+from ..preprocessing.trajectory import Trajectory
 from .base import SCHEMA_VERSION, Options, Results, provenance
 
 __all__ = ["FloatingIdentifyResults", "FloatingDiagnoseResults", "identify_floating_logs", "diagnose_floating_logs",
-           "contact_checks", "BASE_ROWS", "refused_options"]
+           "contact_checks", "row_loop", "BASE_ROWS", "LOOP_CANDIDATES", "refused_options"]
 
 #: the names of the 6 base-wrench rows (force, then moment about the base origin, base axes)
 BASE_ROWS = ("FX0", "FY0", "FZ0", "MX0", "MY0", "MZ0")
@@ -418,6 +423,127 @@ def _final_estimates(accepted: list, A: NDArray[np.float64], y: NDArray[np.float
         k += m
 
 
+#: the fixed-base loop's candidate kinds offered on a floating robot's joint rows (besides the friction-law stage
+#: and the ``unexplained`` check): those of a drive, whose signals the joint rows have (docs/floating-base.md)
+LOOP_CANDIDATES = ("stribeck", "position_ripple", "time_delay", "gain", "offset")
+#: the base coordinates of the loop's signals (:class:`~symoro_gen.identification.floating.RowsAsJoints`)
+BASE_SIGNALS = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def row_trajectories(rows: Sequence[FloatingRows]) -> list[Trajectory]:
+    """Each log as a fixed-base :class:`~symoro_gen.preprocessing.trajectory.Trajectory` of the ``6 + n`` rows
+    (:class:`~symoro_gen.identification.floating.RowsAsJoints`): the filtered states as recorded derivatives
+    (the base's rates come from the IMU or the pose, not from differentiating a position), the measured rows
+    ``S^T tau + sum_c J_c^T f_c`` as the torques; the samples the floating filters' edges reach are dropped."""
+    out = []
+    for r in rows:
+        sig = r.signals
+        N, e = sig.q.shape[0], sig.settings.edge_samples
+        keep = slice(e, N - e)
+        out.append(Trajectory(t=sig.recording.t[keep], q=RowsAsJoints.signals(sig.q[keep]), tau=r.Y_full,
+                              dq=sig.dq[keep], ddq=sig.ddq[keep], source=sig.recording.source))
+    return out
+
+
+def row_loop(robot: Any, model: Any, rows: Sequence[FloatingRows], significance: float,
+             seed: int = 0) -> tuple[RowsAsJoints, ResidualReport]:
+    """The fixed-base loop (:func:`symoro_gen.diagnostics.diagnose`) on the rows of the floating-base logs
+    ``rows`` (every log with joint torques), each row position a "joint" of
+    :class:`~symoro_gen.identification.floating.RowsAsJoints`: the friction-law stage and the candidates of
+    :data:`LOOP_CANDIDATES` on the joint rows, the ``unexplained`` check on every row (the base-wrench rows
+    included), the same acceptance (the last share of each log, never the validation data) and plausibility.
+
+    The logs' filtered states are the recorded derivatives of the assembly (no second filter), decimated with
+    the floating filters' ``n_d`` and cut-off ([GB-gains] eq. 15-16)."""
+    adapter = RowsAsJoints.of(model, robot, np.concatenate([r.W for r in rows]))
+    st = [r.signals.settings for r in rows]
+    assembly = AssemblyOptions(use_recorded_derivatives=True, cutoff_hz=min(s.cutoff_hz for s in st),
+                               n_d=min(s.n_d for s in st), ftype=st[0].ftype, cutoff_ratio=st[0].cutoff_ratio,
+                               dynamics_bandwidth_hz=max(s.dynamics_bandwidth_hz for s in st))
+    cfg = DiagnoseSettings(candidates=LOOP_CANDIDATES, significance=significance, friction_laws=True,
+                           composed=False, effect_joints=tuple(range(6, 6 + model.N_JOINTS)))
+    report = diagnose(adapter, row_trajectories(rows), cfg, rng=np.random.default_rng(seed), assembly=assembly)
+    return adapter, report
+
+
+def row_name(i: int) -> str:
+    """The name of row position ``i`` (0-based) of the ``6 + n`` rows: a base-wrench row or ``tau<j>``."""
+    return BASE_ROWS[i] if i < 6 else f"tau{i - 5}"
+
+
+def signal_name(name: str) -> str:
+    """A signal of the loop's rows (``q3``, ``ddq8``, ``tau_hat9``...) named on the floating robot: a base
+    coordinate (``q[rz]``, ``dq[x]`` the base velocity in base axes) or a joint's (``q2`` of joint 2)."""
+    stem = name.rstrip("0123456789")
+    k = name[len(stem):]
+    if not k or stem.startswith("tau"):
+        return name if not k else f"{stem}[{row_name(int(k) - 1)}]"
+    k_ = int(k)
+    return f"{stem}[{BASE_SIGNALS[k_ - 1]}]" if k_ <= 6 else f"{stem}{k_ - 6}"
+
+
+def loop_dict(report: ResidualReport) -> dict[str, Any]:
+    """``floating.loop`` of the diagnose JSON: per row position, the effects the fixed-base loop named and the
+    ``unexplained`` check (docs/json-output.md)."""
+    rows = [row_name(i) for i in range(report.n_joints)]
+    effects = []
+    for e in report.effects:
+        d = e.to_dict()
+        d["row"] = row_name(e.joint) if e.joint is not None else None
+        effects.append(d)
+    unexplained = [{"row": row_name(u.joint - 1), "share": json_float(u.share),
+                    "threshold": json_float(u.threshold), "flagged": bool(u.flagged),
+                    "signals": [signal_name(x) for x in u.signals]} for u in report.unexplained]
+    return {"rows": rows, "effects": effects, "unexplained": unexplained,
+            "found": [f"{d['row']}:{d['kind']}" for d in effects],
+            "rel_err_before": [json_float(v) for v in report.before_validation_rel_err],
+            "rel_err_after": [json_float(v) for v in report.after_validation_rel_err],
+            "acceptance": "the last share of each log (held out from the fits of the candidates); the validation "
+                          "errors are those of the last share of each log, held out from the final fit",
+            "warnings": list(report.warnings)}
+
+
+def ambiguous(rows: Sequence[FloatingRows], checks: Sequence[Mapping[str, Any]],
+              loop: Mapping[str, Any] | None) -> list[str]:
+    """The sensor effects accepted on the joint rows that share a row with a drive effect of the loop: the sensor's
+    wrench reaches that joint's row (its Jacobian's column there is not zero), so the two explain the same residual
+    and the two selections, run side by side, may each take part of it (docs/floating-base.md)."""
+    if loop is None:
+        return []
+    out = []
+    for c in checks:
+        if c["kind"] != "joints" or not c["accepted"]:
+            continue
+        reach = np.any(np.concatenate([r.sensor_columns[c["frame"]][:, 6:, :6] for r in rows]) != 0, axis=(0, 2))
+        named = [e for e in loop["effects"] if e["joint"] is not None and e["joint"] > 6 and reach[e["joint"] - 7]]
+        out += [f"the {c['effect']} of the sensor at {c['frame']} and {e['label']} on row {e['row']}: the sensor's "
+                "wrench reaches that row, both may share one cause (check the sensor against a known load)"
+                for e in named]
+    return out
+
+
+def _loop_lines(loop: Mapping[str, Any] | None, note: str) -> list[str]:
+    if loop is None:
+        return ["", f"Residual analysis per row (the fixed-base loop): not run: {note}"]
+    lines = ["", "Residual analysis per row (the fixed-base loop on the base-wrench and joint rows: friction law, "
+             + ", ".join(LOOP_CANDIDATES) + " on the joint rows; unexplained structure on every row):"]
+    for d in loop["effects"]:
+        vals = ", ".join(f"{n} {v:+.4g} +- {d['std'][n]:.2g}" for n, v in d["params"].items() if v is not None
+                         and d["std"].get(n) is not None)
+        lines.append(f"  {d['row']:6s} {d['label']} (round {d['round']}, verdict {d['verdict'] or '-'}): {vals}")
+    flagged = [u for u in loop["unexplained"] if u["flagged"]]
+    for u in flagged:
+        lines.append(f"  {u['row']:6s} unexplained structure: out-of-fold R^2 {u['share']:.3f} > {u['threshold']:.3f}"
+                     + (f" (signals {', '.join(u['signals'][:4])})" if u["signals"] else ""))
+    if not loop["effects"] and not flagged:
+        lines.append("  nothing beyond the noise on any row")
+    lines += [f"  ambiguous: {a}" for a in loop.get("ambiguous", ())]
+    lines.append("  validation rel. error per row before -> after: " + "  ".join(
+        f"{r} {a:.4f}->{b:.4f}" for r, a, b in zip(loop["rows"], loop["rel_err_before"], loop["rel_err_after"])
+        if a is not None and b is not None))
+    return lines
+
+
 @dataclass(frozen=True, eq=False)
 class FloatingDiagnoseResults(Results):
     """``diagnose`` of a floating-base robot: the contact-sensor checks per kind of rows (docs/floating-base.md)."""
@@ -431,6 +557,11 @@ class FloatingDiagnoseResults(Results):
     checks: tuple[dict[str, Any], ...]
     significance: float
     inputs: tuple[Any, ...]
+    #: ``floating.loop`` of the JSON (:func:`loop_dict`), None when the loop did not run (``loop_note`` says why)
+    loop: Mapping[str, Any] | None = None
+    loop_note: str = ""
+    #: the fixed-base loop's report on the rows (the joint numbers are row positions, 0-5 the base rows)
+    loop_report: ResidualReport | None = None
 
     @property
     def found(self) -> list[dict[str, Any]]:
@@ -445,7 +576,8 @@ class FloatingDiagnoseResults(Results):
                 "floating": {"significance": self.significance, "level": self.significance / max(n, 1),
                              "checks": [{k: (json_float(v) if isinstance(v, float) else v) for k, v in c.items()}
                                         for c in self.checks],
-                             "found": [f"{c['kind']}:{c['frame']}:{c['effect']}" for c in self.found]},
+                             "found": [f"{c['kind']}:{c['frame']}:{c['effect']}" for c in self.found],
+                             "loop": self.loop, "loop_note": self.loop_note or None},
                 "provenance": provenance(self.options, self.inputs)}
 
     def summary(self) -> str:
@@ -466,6 +598,7 @@ class FloatingDiagnoseResults(Results):
         lines.append("")
         lines.append("Found: " + ("; ".join(f"{c['effect']} of the sensor at {c['frame']} (from the {c['kind']} rows)"
                                             for c in found) if found else "nothing beyond the noise"))
+        lines += _loop_lines(self.loop, self.loop_note)
         return "\n".join(lines)
 
     def write_plots(self, folder: Any, *, force: bool = False) -> list:
@@ -486,10 +619,20 @@ def diagnose_floating_logs(robot: Any, model: Any, data: Sequence, opts: Any) ->
                                      f"{', '.join(f) or 'none'}, the first log's are {', '.join(frames[0]) or 'none'}: "
                                      "diagnose checks the same sensors in every log") for r, f in zip(rows, frames)
                              if f != frames[0]])
-    if not frames[0]:
-        raise OptionError(f"diagnose: {robot.file or robot.name}: the logs have no contact wrench column "
-                          "(<frame>_fx ...): nothing to check on a floating-base robot yet")
+    if not frames[0] and not has_tau:
+        raise OptionError(f"diagnose: {robot.file or robot.name}: the logs have neither contact wrench columns "
+                          "(<frame>_fx ...) nor joint torques (tau1 ...): nothing to check on a floating-base robot")
     checks = contact_checks(model, rows, "base", opts.significance)
+    loop: dict[str, Any] | None = None
+    report: ResidualReport | None = None
+    note = ""
     if has_tau:
         checks += contact_checks(model, rows, "joints", opts.significance)
-    return FloatingDiagnoseResults(robot, model, opts, tuple(rows), tuple(checks), opts.significance, tuple(data))
+        _, report = row_loop(robot, model, rows, opts.significance)
+        loop = loop_dict(report)
+        loop["ambiguous"] = ambiguous(rows, checks, loop)
+    else:
+        note = ("the logs have no joint torques (tau1..): the base rows depend on the joints' motion, the loop "
+                "analyses both kinds of rows together")
+    return FloatingDiagnoseResults(robot, model, opts, tuple(rows), tuple(checks), opts.significance, tuple(data),
+                                   loop, note, report)
