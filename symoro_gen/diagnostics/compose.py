@@ -538,15 +538,12 @@ def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np
     groups = sig.joint if groups is None else groups
     fams = library(sig, **library_kw) if families is None else families
     tester = _Tester(A, y, w, np.asarray(sig.joint), groups)
+    outs = _tests_by_plain(tester, fams, sig)
     rows = []
-    plains: dict = {}   # the plain effect's design: (effect, joint, ripple order, Coulomb scale, time-like signal)
-    for fam in fams:
+    for f, fam in enumerate(fams):
         best = None
-        for c in fam:
-            key = (c.effect, c.joint, c.order if c.effect == "ripple" else None, c.coulomb_v, c.signal in TIME_SIGNALS)
-            if key not in plains:
-                plains[key] = tester.with_plain(np.hstack([c.plain_columns(sig), c.confounder_columns(sig)]))
-            out = tester(c.columns(sig), c.joint, base=plains[key])
+        for i, c in enumerate(fam):
+            out = outs[f, i]
             if out is None:
                 continue
             if best is None or out[0] < best[1][0] or (out[0] == best[1][0] and out[2] > best[1][2]):
@@ -562,6 +559,35 @@ def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np
     res.sort(key=lambda r: (r.p_adjusted, -r.rss_drop))
     return _merge_aliases(res, sig)
 
+
+def _plain_key(c: Composed) -> tuple:
+    """What the plain effect's design of a test depends on: effect, joint, ripple order, Coulomb scale, and whether
+    the modulation is time-like (the confounders, :meth:`Composed.confounder_columns`)."""
+    return (c.effect, c.joint, c.order if c.effect == "ripple" else None, c.coulomb_v, c.signal in TIME_SIGNALS)
+
+
+def _tests_by_plain(tester: _Tester, fams: Sequence[Sequence[Composed]], sig: RowSignals) -> dict:
+    """``tester(c.columns(sig), c.joint, base)`` of every member ``i`` of every family ``f``, as ``{(f, i): out}``.
+
+    The tests are run grouped by plain design (:func:`_plain_key`, in the order the designs first appear, each
+    built from its first member as before), and each design is dropped once its group is done: a design holds
+    the model's basis augmented by the plain columns, an (r, rank) array per design - keeping every design
+    of the library alive made the memory of a round grow by dozens of times the decimated system. The tests
+    themselves are the same computations, so the outputs are the same numbers."""
+    groups: dict[tuple, list[tuple[int, int]]] = {}
+    for f, fam in enumerate(fams):
+        for i, c in enumerate(fam):
+            groups.setdefault(_plain_key(c), []).append((f, i))
+    outs: dict = {}
+    for members in groups.values():
+        f0, i0 = members[0]
+        c0 = fams[f0][i0]
+        base = tester.with_plain(np.hstack([c0.plain_columns(sig), c0.confounder_columns(sig)]))
+        for f, i in members:
+            c = fams[f][i]
+            outs[f, i] = tester(c.columns(sig), c.joint, base=base)
+        del base
+    return outs
 
 def _merge_aliases(res: list[ComposedResult], sig: RowSignals) -> list[ComposedResult]:
     """Fold results whose modulating signals are indistinguishable on the data into the best-ranked one."""

@@ -87,7 +87,7 @@ Known limits
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -1803,21 +1803,48 @@ def _full_rate_frame(V: Frame) -> Frame:
             E.append(np.full(ex.n_samples, e))
             R.append(np.arange(ex.n_samples))
     joint, row_exp, row_idx = np.concatenate(J), np.concatenate(E), np.concatenate(R)
-    sig: dict[str, np.ndarray] = {}
-    for k in keys:   # all joints' signals at each row's sample
-        full = np.zeros((joint.size, n))
+
+    def build(k: str) -> np.ndarray:   # all joints' signals at each row's sample ("t": the row's time)
+        full = np.zeros(joint.size) if k == "t" else np.zeros((joint.size, n))
         for e, ex in enumerate(exps):
             m = row_exp == e
             full[m] = getattr(ex, k)[row_idx[m]]
-        sig[k] = full
-    t = np.zeros(joint.size)
+        return full
+
+    tau_own = np.zeros(joint.size)
     for e, ex in enumerate(exps):
         m = row_exp == e
-        t[m] = ex.t[row_idx[m]]
-    sig["t"] = t
-    tau_own = sig["tau"][np.arange(joint.size), joint]
+        tau_own[m] = ex.tau[row_idx[m], joint[m]]
     system = ObservationSystem(np.zeros((joint.size, 0)), tau_own, (), joint)
-    return Frame(system=system, experiments=exps, row_experiment=row_exp, row_index=row_idx, sig=sig)
+    return Frame(system=system, experiments=exps, row_experiment=row_exp, row_index=row_idx,
+                 sig=_LazyRowSignals(tuple(keys) + ("t",), build))
+
+
+class _LazyRowSignals(Mapping):
+    """The row signals of a full-rate frame (:func:`_full_rate_frame`), each built on its first access and kept.
+
+    A full-rate frame has a row per sample *and joint*, so each (r, n) signal holds every full-rate sample
+    ``n`` times (``n^2`` values per sample: 50 MB per signal for 7 joints and a minute at 1 kHz); most effect
+    columns are built from the experiments' full-rate signals and never read them, so they are built only
+    for the columns that do (the same numbers as building them all up front)."""
+
+    def __init__(self, keys: tuple[str, ...], build: Callable[[str], np.ndarray]):
+        self._keys = keys
+        self._build = build
+        self._done: dict[str, np.ndarray] = {}
+
+    def __getitem__(self, k: str) -> np.ndarray:
+        if k not in self._keys:
+            raise KeyError(k)
+        if k not in self._done:
+            self._done[k] = self._build(k)
+        return self._done[k]
+
+    def __iter__(self):
+        return iter(self._keys)
+
+    def __len__(self) -> int:
+        return len(self._keys)
 
 
 def _validation_rel_err_raw(data: _Data, V: Frame, res: IdentificationResult, added: Sequence[_Added],
