@@ -9,7 +9,7 @@ import numpy as np
 
 import symoro_gen
 from symoro_gen.description import load_robot, parse_robot_text
-from symoro_gen.diagnostics import inject_effect
+from symoro_gen.diagnostics import inject_effect, stability
 from symoro_gen.preprocessing.trajectory import Trajectory
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, true_torques
 
@@ -71,3 +71,28 @@ def recording(name: str, seed: int, kind: str | None = None, joint: int | None =
     taum = taum + noise_tau * rng.standard_normal(q.shape)
     src = f"{name} seed {seed}" + (f" + {kind}" if kind else "")
     return model, Trajectory(t=t, q=qm, tau=taum, source=src)
+
+
+def friction_selection_case(seed: int = 11, s: int = 500):
+    """A small stacked system for the friction-law selection: 3 joints of ``s`` rows, a random model design
+    ``A`` (joint 2's rows without its last two columns), five time blocks, a columns hook that evaluates a
+    law on joint 2's velocity rows, and the noise-free measured side: the model part plus a tanh Coulomb and
+    a viscous friction on joint 2. Returns ``(J, dq_rows, A, blocks, hook, signal, rng)``; the caller adds
+    its noise from ``rng``."""
+    rng = np.random.default_rng(seed)
+    n = 3
+    J = np.repeat(np.arange(n), s)
+    t = np.arange(s) * 0.01
+    dq = np.column_stack([np.sin(2 * np.pi * 0.3 * t + k) * (1 + 0.2 * k) for k in range(n)])
+    dq_rows = dq.T.reshape(-1)
+    A = rng.standard_normal((n * s, 6))
+    A[J == 1, 4:] = 0.0
+    blocks = stability.time_blocks(np.zeros(n * s, int), np.tile(np.arange(s), n), 5)
+
+    def hook(f, p):
+        X = np.zeros((n * s, p))
+        X[J == 1] = np.asarray(f(dq_rows[J == 1]), float).reshape(-1, p)
+        return X
+
+    signal = A @ rng.standard_normal(6) + np.where(J == 1, 0.8 * np.tanh(dq_rows / 0.1) + 0.3 * dq_rows, 0.0)
+    return J, dq_rows, A, blocks, hook, signal, rng

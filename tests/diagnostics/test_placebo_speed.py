@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from symoro_gen.diagnostics import friction, stability
+from tests.diagnostics.simdata import friction_selection_case
 
 
 def _joint_design(seed: int, n: int = 4, s: int = 250, k: int = 12):
@@ -58,24 +59,8 @@ def test_oof_residual_on_reported_rows_equals_the_straightforward_solve(seed):
 
 
 def _friction_case(seed: int = 11):
-    rng = np.random.default_rng(seed)
-    n, s = 3, 500
-    J = np.repeat(np.arange(n), s)
-    t = np.arange(s) * 0.01
-    dq = np.column_stack([np.sin(2 * np.pi * 0.3 * t + k) * (1 + 0.2 * k) for k in range(n)])
-    dq_rows = dq.T.reshape(-1)
-    A = rng.standard_normal((n * s, 6))
-    A[J == 1, 4:] = 0.0
-    blocks = stability.time_blocks(np.zeros(n * s, int), np.tile(np.arange(s), n), 5)
-
-    def hook(f, p):
-        X = np.zeros((n * s, p))
-        X[J == 1] = np.asarray(f(dq_rows[J == 1]), float).reshape(-1, p)
-        return X
-
-    y = A @ rng.standard_normal(6) + np.where(J == 1, 0.8 * np.tanh(dq_rows / 0.1) + 0.3 * dq_rows, 0.0)
-    y = y + 0.05 * rng.standard_normal(n * s)
-    return J, dq_rows, A, blocks, hook, y
+    J, dq_rows, A, blocks, hook, signal, rng = friction_selection_case(seed)
+    return J, dq_rows, A, blocks, hook, signal + 0.05 * rng.standard_normal(signal.size)
 
 
 def test_noise_placebo_with_kept_factors_equals_one_that_keeps_nothing(monkeypatch):

@@ -12,6 +12,7 @@ from scipy import stats as sst
 from symoro_gen.diagnostics import stability
 from symoro_gen.diagnostics.candidates import make_families
 from symoro_gen.diagnostics.stats import f_sf, hac_covariance, segments_of, single_threaded_blas, wald_test
+from tests.diagnostics.simdata import friction_selection_case
 
 
 def test_f_and_chi2_tails_equal_scipy_stats():
@@ -185,28 +186,13 @@ def test_friction_law_selection_with_kept_columns_equals_a_fresh_one(monkeypatch
     from symoro_gen.diagnostics import friction
     from symoro_gen.diagnostics.friction import select_friction
 
-    rng = np.random.default_rng(11)
-    n, s = 3, 600
-    J = np.repeat(np.arange(n), s)
-    t = np.arange(s) * 0.01
-    dq = np.column_stack([np.sin(2 * np.pi * 0.3 * t + k) * (1 + 0.2 * k) for k in range(n)])
-    dq_rows = dq.T.reshape(-1)
-    A = rng.standard_normal((n * s, 6))
-    A[J == 1, 4:] = 0.0
-    blocks = stability.time_blocks(np.zeros(n * s, int), np.tile(np.arange(s), n), 5)
-
-    def hook(f, p):
-        X = np.zeros((n * s, p))
-        X[J == 1] = np.asarray(f(dq_rows[J == 1]), float).reshape(-1, p)
-        return X
+    J, dq_rows, A, blocks, hook, signal, rng = friction_selection_case(11, 600)
 
     def run(y):
         ch = select_friction(A, y, J, 1, dq_rows, blocks, columns=hook)
         return ch.coulomb, ch.viscous, [(c.law, c.param, c.cv_rel_err) for c in ch.candidates]
 
-    base = A @ rng.standard_normal(6)
-    tanh = np.where(J == 1, 0.8 * np.tanh(dq_rows / 0.1) + 0.3 * dq_rows, 0.0)
-    ys = [base + tanh + 0.05 * rng.standard_normal(n * s) for _ in range(3)]
+    ys = [signal + 0.05 * rng.standard_normal(signal.size) for _ in range(3)]
     kept = [run(y) for y in ys]                     # the 2nd and 3rd hit the kept columns and factors
     monkeypatch.setattr(friction, "LAW_COLUMNS_BYTES", 0)
     monkeypatch.setattr(stability, "COLUMN_CACHE_BYTES", 0)
