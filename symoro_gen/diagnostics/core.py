@@ -587,13 +587,6 @@ class DiagnoseSettings:
         :func:`.friction.lugre_columns`) on data sampled at :data:`.friction.DAHL_MIN_RATE_HZ` or more. Off by
         default: on the TX40 recording (5 kHz) they displace the joint-1 friction law the loop names without
         them (joint-1 validation error 0.180 with Dahl and LuGre tried, 0.080 without; docs/friction-dynamic.md).
-    covariance : callable, optional
-        ``covariance(res, system, row_experiment, row_index) -> IdentificationResult``: the reported (final) fit
-        ``res`` of ``system`` (the identification rows with every effect's columns) with the covariance and
-        standard deviations of its estimates replaced, each row labelled by its experiment and its sample there
-        (:class:`.frame.Frame`). Default (None): the estimator's own (rows independent). A floating-base robot's
-        rows share one sample's contact noise: its loop gives the within-sample sandwich of the floating
-        identification (:func:`~symoro_gen.identification.floating.within_sample_covariance`).
     """
 
     method: str = "ols"
@@ -614,8 +607,6 @@ class DiagnoseSettings:
     declared_laws: tuple[int, ...] = ()
     presliding_law: bool = False
     effect_joints: tuple[int, ...] | None = None
-    covariance: Callable[[IdentificationResult, ObservationSystem, np.ndarray, np.ndarray],
-                         IdentificationResult] | None = None
 
     def offered(self, j: int) -> bool:
         """Joint ``j`` (0-based) takes the friction-law stage and the candidate families (``effect_joints``)."""
@@ -2099,9 +2090,6 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     Y = data.F.system.Y
     data0 = data if data0 is None else data0
     state, res, names, A, Av = _final_fit(data, base, state, cfg)
-    if cfg.covariance is not None:
-        res = cfg.covariance(res, ObservationSystem(A, Y, names, data.F.system.joint), data.F.row_experiment,
-                             data.F.row_index)
     val1 = res.rel_err_on(ObservationSystem(Av, data.Vs.Y, names, data.Vs.joint))
     val0_raw = _validation_rel_err_raw(data0, state.V, base.res0, ())
     raw_keep: dict = {}

@@ -313,35 +313,17 @@ def with_sample_covariance(res: IdentificationResult, system: ObservationSystem,
     fit removes the residuals' low-frequency part, where the columns are. The warning naming the poorly identified
     parameters is made again from the new standard deviations (``rel_std_warn_pct``).
     """
-    if system.W.shape[0] % samples:
+    if (res.residual is None or system.W.shape[0] % samples or res.sigma <= 0 or res.values.size != system.W.shape[1]
+            or not np.all(np.isfinite(res.cov))):
         return res
     m = system.W.shape[0] // samples
-    return within_sample_covariance(res, system, np.repeat(np.arange(m), samples), np.tile(np.arange(samples), m),
-                                    band, rel_std_warn_pct)
-
-
-def within_sample_covariance(res: IdentificationResult, system: ObservationSystem, position: ArrayLike,
-                             sample: ArrayLike, band: float = 1.0,
-                             rel_std_warn_pct: float = REL_STD_WARN_PCT) -> IdentificationResult:
-    """:func:`with_sample_covariance` for rows in any order: row ``i`` of ``system`` is row position
-    ``position[i]`` (``0 .. m - 1``: a base-wrench row or a joint's) of the sample labelled ``sample[i]`` (any
-    integers). The sandwich is the same (White 1980, Liang & Zeger 1986, with the within-sample covariance ``S``
-    pooled over the samples); a row position a sample lacks counts as a zero residual and a zero row. ``res``
-    is returned unchanged when it has no residual, no positive ``sigma``, a covariance that is not finite, or no
-    more rows than parameters. The fixed-base loop's reported fit on a floating robot's rows
-    (:func:`symoro_gen.workflows.floating.row_loop`) takes its standard deviations from here."""
-    position = np.asarray(position, int)
-    _, sample = np.unique(np.asarray(sample), return_inverse=True)
-    n_rows, c = system.W.shape
-    if (res.residual is None or res.sigma <= 0 or res.values.size != c or not np.all(np.isfinite(res.cov))
-            or n_rows <= c or position.shape != (n_rows,) or sample.shape != (n_rows,)):
+    c = res.values.size
+    w = np.ones(system.W.shape[0]) if res.joint_sigma is None else 1.0 / res.joint_sigma[system.joint]
+    A = (system.W * w[:, None]).reshape(m, samples, c)
+    E = (res.residual * w).reshape(m, samples).T
+    n_rows = m * samples
+    if n_rows <= c:
         return res
-    m, samples = int(position.max()) + 1, int(sample.max()) + 1
-    w = np.ones(n_rows) if res.joint_sigma is None else 1.0 / res.joint_sigma[system.joint]
-    A = np.zeros((m, samples, c))
-    A[position, sample] = system.W * w[:, None]
-    E = np.zeros((samples, m))
-    E[sample, position] = res.residual * w
     S = E.T @ E / samples * n_rows / (n_rows - c)
     vals, vecs = np.linalg.eigh(S)
     half = vecs * np.sqrt(np.clip(vals, 0.0, None))            # S = half half'

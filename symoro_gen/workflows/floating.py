@@ -16,7 +16,6 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import partial
 from typing import Any
 
 import numpy as np
@@ -39,11 +38,9 @@ from ..identification.floating import (
     frame_number,
     measured_rows,
     stacked_system,
-    within_sample_covariance,
 )
-from ..identification.result import IdentificationResult, json_float
+from ..identification.result import json_float
 from ..observations.options import AssemblyOptions
-from ..observations.system import ObservationSystem
 from ..preprocessing.filtering import parallel_decimate
 from ..preprocessing.floating import FloatingSignals, filter_floating, read_floating
 from ..preprocessing.trajectory import Trajectory
@@ -457,33 +454,16 @@ def row_loop(robot: Any, model: Any, rows: Sequence[FloatingRows], significance:
     included), the same acceptance (the last share of each log, never the validation data) and plausibility.
 
     The logs' filtered states are the recorded derivatives of the assembly (no second filter), decimated with
-    the floating filters' ``n_d`` and cut-off ([GB-gains] eq. 15-16). The effects' standard deviations are those
-    of the floating identification: the within-sample sandwich (:func:`row_covariance`), not the rows taken as
-    independent."""
+    the floating filters' ``n_d`` and cut-off ([GB-gains] eq. 15-16)."""
     adapter = RowsAsJoints.of(model, robot, np.concatenate([r.W for r in rows]))
     st = [r.signals.settings for r in rows]
     assembly = AssemblyOptions(use_recorded_derivatives=True, cutoff_hz=min(s.cutoff_hz for s in st),
                                n_d=min(s.n_d for s in st), ftype=st[0].ftype, cutoff_ratio=st[0].cutoff_ratio,
                                dynamics_bandwidth_hz=max(s.dynamics_bandwidth_hz for s in st))
-    band = assembly.cutoff_ratio if assembly.n_d > 1 else 1.0
     cfg = DiagnoseSettings(candidates=LOOP_CANDIDATES, significance=significance, friction_laws=True,
-                           composed=False, effect_joints=tuple(range(6, 6 + model.N_JOINTS)),
-                           covariance=partial(row_covariance, band=band))
+                           composed=False, effect_joints=tuple(range(6, 6 + model.N_JOINTS)))
     report = diagnose(adapter, row_trajectories(rows), cfg, rng=np.random.default_rng(seed), assembly=assembly)
     return adapter, report
-
-
-def row_covariance(res: IdentificationResult, system: ObservationSystem, row_experiment: NDArray[np.int_],
-                   row_index: NDArray[np.int_], band: float = 1.0) -> IdentificationResult:
-    """The loop's reported fit on the rows (the ``covariance`` of
-    :class:`~symoro_gen.diagnostics.core.DiagnoseSettings`) with the covariance of the floating identification:
-    the sandwich with the within-sample covariance of the ``6 + n`` row positions
-    (:func:`~symoro_gen.identification.floating.within_sample_covariance`; White 1980, Liang & Zeger 1986), a
-    sample being one decimated instant (``row_index``) of one log (``row_experiment``), a row position the loop's
-    "joint". ``band``: the share of the decimated band the decimation filter passes, as in ``identify``."""
-    index = np.asarray(row_index, int)
-    sample = np.asarray(row_experiment, int) * (int(index.max(initial=0)) + 1) + index
-    return within_sample_covariance(res, system, system.joint, sample, band)
 
 
 def row_name(i: int) -> str:
