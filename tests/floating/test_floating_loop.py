@@ -143,6 +143,38 @@ def test_hopper_knee_friction(tmp_path):
         assert abs(law["params"][name] - truth) < 3 * law["std"][name], name
 
 
+def _knee_friction_z(tmp_path, seed: int) -> dict[str, float]:
+    """The error of the knee's friction law named on row tau2 over its reported standard deviation, per constant
+    (the truth: FV 1.5 N m s/rad, FS 1 N m, no offset), on an 8 s log of the hopper."""
+    tmp_path.mkdir(exist_ok=True)
+    robot = _hopper(tmp_path)
+    res = diagnose(robot.file, [str(_hopper_log(robot, tmp_path, seed, 8.0, True))])
+    eff = _effects(res)
+    assert set(eff) == {("tau2", "friction_law")}
+    law = eff[("tau2", "friction_law")]
+    truth = {"FV8": 1.5, "FS8": 1.0, "OFF8": 0.0}
+    assert {"FV8", "FS8"} <= set(law["params"]) <= set(truth)
+    return {nm: (law["params"][nm] - truth[nm]) / law["std"][nm] for nm in law["params"]}
+
+
+def test_hopper_knee_friction_short_log(tmp_path):
+    """Friction on the hopper's knee, 8 s log (seed 1: its estimates are the farthest from the truth of seeds 1 to
+    12, FV 1.71, FS 0.79): named on row tau2, each constant within 3 sigma of the truth. The loop's standard
+    deviations take the rows as independent; the within-sample sandwich of ``identify`` was measured to be
+    optimistic here (docs/floating-base.md)."""
+    z = _knee_friction_z(tmp_path, 1)
+    assert all(abs(v) < 3 for v in z.values()), z
+
+
+@pytest.mark.slow
+def test_hopper_knee_friction_sigma_over_seeds(tmp_path):
+    """The same over 8 s logs of seeds 2 to 6: every constant within 3 sigma, and the mean of z^2 over them (at
+    most 15, correlated within a law) below 2: the standard deviations are not optimistic."""
+    z = [v for seed in range(2, 7) for v in _knee_friction_z(tmp_path / str(seed), seed).values()]
+    assert max(abs(v) for v in z) < 3, z
+    assert float(np.mean(np.square(z))) < 2.0, z
+
+
 def _quadruped(d: Path):
     text = (HERE / "quadruped.toml").read_text()
     anchor = f"[[frames]]  # fl knee\nj = {KNEE}\n"
