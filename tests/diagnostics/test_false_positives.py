@@ -31,6 +31,7 @@ def test_no_false_positive_scara():
     assert not found, f"false positives on clean data: {found}"
 
 
+@pytest.mark.slow
 def test_no_false_positive_scara_bare_model():
     """The SCARA declared without rotor inertia and offset, simulated without them: nothing added either
     (rotor_inertia and offset candidates are then identifiable and tested)."""

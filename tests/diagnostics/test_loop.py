@@ -42,6 +42,7 @@ FAMILIES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(FAMILIES))
 def test_composed_family_is_named_and_cuts_the_error(name):
     j, effect, modulation, f = FAMILIES[name]
@@ -69,6 +70,7 @@ def _play(x, half_width):
     return out
 
 
+@pytest.mark.slow
 def test_effect_outside_the_library_is_reported_as_unexplained():
     """A backlash (play) hysteresis on joint 2 - in no candidate of the library - is left in the residual
     and shows in ``unexplained`` on joint 2, with the signals it depends on."""

@@ -100,6 +100,7 @@ def test_repr_html_tables(stribeck_report):
     assert "<table" in html and "stribeck" in html
 
 
+@pytest.mark.slow
 def test_progress_bar_over_candidates(monkeypatch, capsys):
     """With bars forced on, diagnose reports its candidate rounds on stderr; off by default."""
     from symoro_gen.progress import progress_mode

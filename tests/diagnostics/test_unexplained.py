@@ -139,6 +139,7 @@ def test_refit_without_the_carrier_leaves_the_other_joints_untouched_by_its_effe
         refit_without(y[:-1], A, J, [0])
 
 
+@pytest.mark.slow
 def test_white_noise_residual_is_not_flagged_over_30_seeds():
     rng = np.random.default_rng(5)
     t, q, dq, ddq = fourier_trajectory(2, 12.0, 0.04, rng, base_frequency_hz=0.1)
