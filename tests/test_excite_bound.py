@@ -19,6 +19,9 @@ from symoro_gen.excite import (
 )
 from symoro_gen.loader import model_for
 
+#: the excitation relaxation is research (``research/``, not installed): its bound tests run with the slow set
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def scara():
