@@ -96,3 +96,17 @@ def friction_selection_case(seed: int = 11, s: int = 500):
 
     signal = A @ rng.standard_normal(6) + np.where(J == 1, 0.8 * np.tanh(dq_rows / 0.1) + 0.3 * dq_rows, 0.0)
     return J, dq_rows, A, blocks, hook, signal, rng
+
+
+def joint_design_case(seed: int, n: int = 4, s: int = 250, k: int = 12):
+    """A random stacked design of ``n`` joints of ``s`` rows and ``k`` columns (the last three absent from
+    joint 4's rows), row weights in [0.5, 2] and five time blocks, for the blocked least-squares tests.
+    Returns ``(rng, joint, A, w, blocks)``; the caller draws more from ``rng``."""
+    rng = np.random.default_rng(seed)
+    r = n * s
+    joint = np.repeat(np.arange(n), s)
+    A = rng.standard_normal((r, k))
+    A[joint == 3, 9:] = 0.0                      # parameters absent from a joint's rows
+    w = rng.uniform(0.5, 2.0, r)
+    blocks = stability.time_blocks(np.zeros(r, int), np.tile(np.arange(s), n), 5)
+    return rng, joint, A, w, blocks

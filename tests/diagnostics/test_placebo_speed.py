@@ -8,18 +8,11 @@ import numpy as np
 import pytest
 
 from symoro_gen.diagnostics import friction, stability
-from tests.diagnostics.simdata import friction_selection_case
+from tests.diagnostics.simdata import friction_selection_case, joint_design_case
 
 
 def _joint_design(seed: int, n: int = 4, s: int = 250, k: int = 12):
-    rng = np.random.default_rng(seed)
-    r = n * s
-    joint = np.repeat(np.arange(n), s)
-    A = rng.standard_normal((r, k))
-    A[joint == 3, 9:] = 0.0                      # parameters absent from a joint's rows
-    w = rng.uniform(0.5, 2.0, r)
-    blocks = stability.time_blocks(np.zeros(r, int), np.tile(np.arange(s), n), 5)
-    return rng, joint, A, w, blocks
+    return joint_design_case(seed, n, s, k)
 
 
 @pytest.mark.parametrize("seed", [0, 1])

@@ -12,7 +12,7 @@ from scipy import stats as sst
 from symoro_gen.diagnostics import stability
 from symoro_gen.diagnostics.candidates import make_families
 from symoro_gen.diagnostics.stats import f_sf, hac_covariance, segments_of, single_threaded_blas, wald_test
-from tests.diagnostics.simdata import friction_selection_case
+from tests.diagnostics.simdata import friction_selection_case, joint_design_case
 
 
 def test_f_and_chi2_tails_equal_scipy_stats():
@@ -147,14 +147,9 @@ def test_blocked_ls_column_factors_equal_the_straightforward_solve(seed):
     X is not zero and reused for every y - equals the rank-revealing solve on all training rows (and an
     independent refit of each fold), for columns on one joint's rows, on all rows, nearly collinear
     columns (which take the rank-revealing path) and a y changed under kept factors."""
-    rng = np.random.default_rng(seed)
     n, s, k = 4, 250, 12
     r = n * s
-    joint = np.repeat(np.arange(n), s)
-    A = rng.standard_normal((r, k))
-    A[joint == 3, 9:] = 0.0                      # parameters absent from a joint's rows
-    w = rng.uniform(0.5, 2.0, r)
-    blocks = stability.time_blocks(np.zeros(r, int), np.tile(np.arange(s), n), 5)
+    rng, joint, A, w, blocks = joint_design_case(seed, n, s, k)
     one = np.zeros((r, 2))
     one[joint == 1] = rng.standard_normal((s, 2))
     dense = rng.standard_normal((r, 3))
