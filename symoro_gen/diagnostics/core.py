@@ -2301,10 +2301,16 @@ def _paired_held_out(e_old: np.ndarray, e_new: np.ndarray, groups: np.ndarray) -
     """Paired held-out test of a change of the model on one joint's acceptance rows (in time order,
     ``groups`` the experiments): the squared-error decrease ``d_i = e_old_i^2 - e_new_i^2`` summed, with the
     HAC (Newey-West, :func:`.stats.hac_covariance`) variance of that sum (the rows are autocorrelated):
-    ``z = sum d / sqrt(Var)``; one-sided p-value; ``gain`` the relative decrease of the error norm."""
+    ``z = sum d / sqrt(Var)``; one-sided p-value; ``gain`` the relative decrease of the error norm.
+
+    Two models whose residuals agree to rounding (``1e-9`` of the largest residual: a change that moves
+    nothing on these rows, e.g. static friction at rest on rows that never rest) are the same model: ``z = 0``,
+    ``p = 0.5``, ``gain = 0`` - not the ratio of two rounding errors."""
     d = e_old ** 2 - e_new ** 2
     if d.size < 2:
         return 0.0, 1.0, 0.0
+    if float(np.max(np.abs(e_new - e_old))) <= 1e-9 * float(np.max(np.abs(e_old))):
+        return 0.0, 0.5, 0.0
     segs = segments_of(groups, d.size)
     L = hac_lag(d, groups)
     var = float(hac_covariance((d - d.mean())[:, None], max_lag=L, segments=segs)[0, 0])
