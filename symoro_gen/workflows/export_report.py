@@ -9,6 +9,7 @@ MJCF export, those the file holds after the exporter made a body physically cons
 """
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -162,6 +163,6 @@ def export_report(res: ExportResults) -> Report:
     return Report(f"{what} export of {res.robot.name}", tuple(blocks), footer=f"symoro_gen {__version__}")
 
 
-def write_export_report(path: str | Path, res: ExportResults, *, force: bool = False) -> Path:
+def write_export_report(path: str | os.PathLike[str], res: ExportResults, *, force: bool = False) -> Path:
     """Write the export's report as ``.html`` (self-contained) or ``.md`` (images beside it)."""
     return write_report_files(export_report(res), path, force=force)
