@@ -93,6 +93,7 @@ class Results:
     """Base of the workflows' results: a subclass sets :attr:`command` and implements :meth:`to_dict`,
     :meth:`summary`, and where it has them :meth:`report` and :meth:`figures`."""
 
+    __slots__ = ()   # no state of its own: a subclass is a frozen dataclass, or a tuple (RecordingResults)
     command: ClassVar[str] = ""
 
     def to_dict(self) -> dict:  # pragma: no cover - abstract
