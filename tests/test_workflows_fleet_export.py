@@ -201,15 +201,17 @@ def _hide_matplotlib(monkeypatch) -> None:
 
 
 def test_reports_without_matplotlib_name_the_extra(tiny_fleet, monkeypatch, tmp_path):
-    """Without matplotlib, ``plot()`` and ``report()`` of an export and ``report()`` of a fleet run in which no
-    robot is flagged (its report would have no figure) raise :class:`MissingDependencyError` naming the 'plots'
+    """Without matplotlib, ``plot()`` and ``report()`` of an export and of ``read_recording``, and ``report()`` of a
+    fleet run in which no robot is flagged (its report would have no figure) raise :class:`MissingDependencyError` naming the 'plots'
     extra, and write nothing."""
     fleet = symoro_gen.fleet("scara", tiny_fleet, by=BY, scheduler="threads:1")
     assert not fleet.flagged
     exported = symoro_gen.export_par("scara")
+    recording = symoro_gen.read_recording(sorted(tiny_fleet.rglob("*.parquet"))[0], n_joints=4)
     _hide_matplotlib(monkeypatch)
     for call in (exported.plot, lambda: exported.report(tmp_path / "e.html"),
-                 lambda: fleet.report(tmp_path / "f.html"), lambda: fleet.report(tmp_path / "f.md")):
+                 lambda: fleet.report(tmp_path / "f.html"), lambda: fleet.report(tmp_path / "f.md"),
+                 recording.plot, lambda: recording.report(tmp_path / "r.html")):
         with pytest.raises(MissingDependencyError) as err:
             call()
         assert "[plots]" in (err.value.hint or "")
