@@ -461,7 +461,8 @@ def row_loop(robot: Any, model: Any, rows: Sequence[FloatingRows], significance:
                                n_d=min(s.n_d for s in st), ftype=st[0].ftype, cutoff_ratio=st[0].cutoff_ratio,
                                dynamics_bandwidth_hz=max(s.dynamics_bandwidth_hz for s in st))
     cfg = DiagnoseSettings(candidates=LOOP_CANDIDATES, significance=significance, friction_laws=True,
-                           composed=False, effect_joints=tuple(range(6, 6 + model.N_JOINTS)))
+                           composed=False, effect_joints=tuple(range(6, 6 + model.N_JOINTS)),
+                           unexplained_weighted=True)
     report = diagnose(adapter, row_trajectories(rows), cfg, rng=np.random.default_rng(seed), assembly=assembly)
     return adapter, report
 
