@@ -52,7 +52,7 @@ def test_weighted_residual_is_the_wls_fit():
     A = rng.standard_normal((n * s, p))
     y = A @ rng.standard_normal(p) + np.array([2.0, 0.05, 0.3])[J] * rng.standard_normal(n * s)
     r = y - A @ np.linalg.lstsq(A, y, rcond=None)[0]
-    rms = np.array([np.sqrt(np.mean(r[J == j] ** 2)) for j in range(n)])
+    rms = np.array([np.sqrt(np.mean(r[np.equal(J, j)] ** 2)) for j in range(n)])
     w = 1.0 / rms[J]
     ref = w * y - (A * w[:, None]) @ np.linalg.lstsq(A * w[:, None], w * y, rcond=None)[0]
     rw, Aw = joint_weighted_residual(r, A, J)
