@@ -1,5 +1,5 @@
 """A floating-base robot's contact sensors as candidates of the fixed-base loop on its rows (docs/floating-base.md,
-"The loop: contact sensors and drives in one selection").
+"Contact sensors and drives in one selection").
 
 :class:`ContactRows` is :class:`~symoro_gen.identification.floating.RowsAsJoints` (the ``6 + n`` rows of each sample as
 the "joints" of a fixed-base model) with the logs' contact wrenches, so that the loop
