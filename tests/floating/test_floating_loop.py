@@ -181,6 +181,21 @@ def test_drive_gain_on_a_row_a_contact_reaches(tmp_path):
     assert abs(e["params"]["gain8.gamma"] - 0.1) < 3 * e["std"]["gain8.gamma"]
 
 
+@pytest.mark.slow
+def test_drive_delay_on_a_row_a_contact_reaches(tmp_path):
+    """The knee's torque logged 10 ms late on the hopper (16 s log, seed 1; linear interpolation of the log): the
+    delay column is the drive torque's derivative alone, so ``time_delay`` is named on row tau2 within 3 sigma of
+    10 ms (on the row's model torque, as before, nothing was named)."""
+    robot = _hopper(tmp_path)
+    clean = _hopper_log(robot, tmp_path, 1, 16.0, False)
+    path = _edited(clean, tmp_path / "delay.csv", lambda n, t: t.__setitem__(
+        (slice(None), n.index("tau2")), np.interp(t[:, 0] - 0.01, t[:, 0], t[:, n.index("tau2")])))
+    eff = _effects(diagnose(robot.file, [str(path)]))
+    assert set(eff) == {("tau2", "time_delay")}
+    e = eff[("tau2", "time_delay")]
+    assert abs(e["params"]["time_delay8.d"] - 0.01) < 3 * e["std"]["time_delay8.d"]
+
+
 def test_contact_candidates_reach_the_rows_of_the_path(tmp_path):
     """The contact sensors' candidates act on the rows their wrench reaches: the base rows and the joints between
     the base and the contact frame (the thigh's, frame 1, reaches tau1 only; the foot's both joints); the drive
