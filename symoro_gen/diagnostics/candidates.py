@@ -83,7 +83,7 @@ from .geometry import (
     visible_zero_joints,
 )
 
-__all__ = ["KINDS", "ALL", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
+__all__ = ["KINDS", "ALL", "CONTACT_KINDS", "Family", "FitContext", "make_families", "placebo_families", "describe_params",
            "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "MAX_ZERO_OFFSET_DEG",
            "MAX_LINK_LENGTH_M",
            "MAX_CROSSTALK",
@@ -93,6 +93,12 @@ KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity",
          "drift", "coupling", "rotor_inertia", "offset", "joint_zero", "crosstalk",
          "held_friction", "link_length")
 ALL = KINDS
+#: the effects of a contact sensor on a floating-base robot's rows (not in :data:`KINDS`: a model that has contact
+#: sensors offers them itself, ``candidate_families`` of :func:`make_families`): ``contact_offset`` a constant
+#: offset ``o`` of the sensor's six components in its axes (``f_measured = f + o``, columns ``J_c^T e_i``),
+#: ``contact_gain`` a gain error (``f_measured = (1 + g) f``, column ``J_c^T f_measured``, coefficient
+#: ``gamma = g / (1 + g)``); their variant is the contact frame's name
+CONTACT_KINDS = ("contact_offset", "contact_gain")
 
 #: signal against which each kind is best seen (plots and the structure table)
 REVEAL = {"stribeck": "dq", "load_friction": "tau_hat", "position_ripple": "q", "spring": "q",
@@ -181,6 +187,11 @@ class Family:
     self_consistent : bool
         The searched parameter is the coefficient itself (a secant column): after each fit the column
         is rebuilt at the fitted coefficient (fixed point).
+    rows : tuple of int, optional
+        The joints (0-based) whose rows the columns act on and whose validation error must improve, when
+        the family declares them itself (a contact sensor's offset or gain on a floating-base robot's rows,
+        :data:`CONTACT_KINDS`: every row its wrench reaches); default (None): ``joint`` (and a shared
+        partner), or every joint.
     """
 
     kind: str
@@ -198,6 +209,7 @@ class Family:
     info: tuple = ()
     build_at: Callable | None = None
     self_consistent: bool = False
+    rows: tuple[int, ...] | None = None
 
     @property
     def key(self) -> tuple:
@@ -213,6 +225,8 @@ class Family:
 
     @property
     def label(self) -> str:
+        if self.kind in CONTACT_KINDS:
+            return f"{self.kind}[{self.variant}]"   # contact_gain[foot]: the sensor of contact frame foot
         if self.kind == "coupling":
             assert self.joint is not None and self.partner is not None  # a coupling names both joints
             a, b = self.joint + 1, self.partner + 1
@@ -259,7 +273,9 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
     model : IdentificationModel, optional
         The generated model: ``joint_zero`` families only for the joints whose zero the torque can see
         (:func:`.geometry.visible_zero_joints`) and with the joint's kind (angle or length); without it, on
-        every joint, read as angles.
+        every joint, read as angles. A model with a method ``candidate_families(frame, kinds, families)``
+        returns the final list from the library's ``families`` (it may replace some and add its own, e.g.
+        :data:`CONTACT_KINDS`).
     """
     bad = [k for k in kinds if k not in KINDS]
     if bad:
@@ -278,6 +294,11 @@ def make_families(frame: Frame, kinds: Sequence[str] = ALL, *, ripple_orders: Se
     out += _link_length_families(ks, model)
     out += _crosstalk_families(n, ks)
     out += _all_joint_families(n, ks)
+    # a model with more to offer (a floating-base robot's rows: its contact sensors, and the gain and delay of a
+    # drive on the drive's own torque where a contact wrench shares its row) gives the final list itself
+    offer = getattr(model, "candidate_families", None)
+    if callable(offer):
+        out = list(offer(frame, ks, out))
     # columns that do not depend on the fit are the same in every round (the frames keep their q, dq,
     # ddq, t arrays when the model torque is re-attached): build them once per frame
     return [f if f.depends_on_fit else replace(f, build=_memo_build(f.build)) for f in out]
@@ -839,7 +860,13 @@ def implausible(family: Family, values, *, f_dyn: float) -> str | None:
     that makes any effect implausible (:mod:`.core`)."""
     v = [float(x) for x in values]
     k = family.kind
-    if k == "gain":
+    if k == "contact_gain":
+        lo, hi = GAIN_SCALE_RANGE
+        scale = 1.0 / (1.0 - v[0]) if v[0] != 1 else math.inf   # f_measured = (1 + g) f, gamma = g / (1 + g)
+        if not lo <= scale <= hi:
+            return (f"gain scale {scale:.3g} of the sensor at {family.variant} outside [{lo:g}, {hi:g}] (a sign or "
+                    "units error of its wrench in the data, if it is real)")
+    elif k == "gain":
         lo, hi = GAIN_SCALE_RANGE
         scale = 1.0 + v[0]
         if not lo <= scale <= hi:
@@ -895,6 +922,11 @@ def describe_params(family: Family, value, values: np.ndarray, std: np.ndarray) 
     elif k == "gain":
         out["scale"] = 1.0 + v[0]
         out["g"] = 1.0 / (1.0 + v[0]) if v[0] != -1 else math.inf
+    elif k == "contact_gain":   # gamma = g / (1 + g) of f_measured = (1 + g) f
+        g = v[0] / (1.0 - v[0]) if v[0] != 1 else math.inf
+        out["g"] = g
+        out["scale"] = 1.0 + g
+        out["g_std"] = float(np.asarray(std, float).reshape(-1)[0]) / (1.0 - v[0]) ** 2 if v[0] != 1 else math.inf
     elif k == "position_ripple":
         out["amplitude"] = math.hypot(v[0], v[1])
         out["phase_rad"] = math.atan2(v[1], v[0])

@@ -420,6 +420,8 @@ def _block_se(d: np.ndarray) -> float:
 
 # ------------------------------------------------------------------------------------------------
 def _affected(fam: Family, n: int) -> list[int]:
+    if fam.rows is not None:
+        return list(fam.rows)
     if fam.joint is None:
         return list(range(n))
     if fam.kind == "elasticity":
@@ -432,7 +434,10 @@ def _affected(fam: Family, n: int) -> list[int]:
 
 def _own(fam: Family, n: int) -> list[int]:
     """Joints whose validation error must improve (the effect's own joints; elasticity of one joint
-    changes the torque of all, and so does a link length: the torque of every joint it carries)."""
+    changes the torque of all, and so does a link length: the torque of every joint it carries; a family that
+    declares its rows, those: a contact sensor's, every row its wrench reaches)."""
+    if fam.rows is not None:
+        return list(fam.rows)
     if fam.joint is None or fam.kind in ("elasticity", "link_length"):
         return list(range(n))
     out = [fam.joint]
@@ -581,7 +586,9 @@ class DiagnoseSettings:
         Joints (0-based columns) the friction-law stage and the candidate families are offered on; default
         (None): every joint. The other joints' rows stay in every fit and in the ``unexplained`` check: a
         floating-base robot's base-wrench rows, diagnosed as the first six "joints" of its rows
-        (:class:`~symoro_gen.identification.floating.RowsAsJoints`), have no drive for an effect to act on.
+        (:class:`~symoro_gen.identification.floating.RowsAsJoints`), have no drive for an effect to act on. A
+        family that declares its rows (``Family.rows``: a contact sensor's offset or gain, which the model
+        offers, :func:`.candidates.make_families`) is offered on them whatever this says.
     unexplained_weighted : bool
         The ``unexplained`` stage tests each joint on the residual of the final model refitted with each joint's
         rows weighted by the inverse of its own residual standard deviation (the per-joint WLS of [GB-gains]
@@ -1235,7 +1242,8 @@ def _stage_baseline(data0: _Data, data: _Data, laws: tuple[_LawRecord, ...], cfg
     # (on the loop's own data: the leading part of the identification experiments)
     res_start = _fit(data.F.system, SELECT_METHOD)
     families = make_families(data.F, cfg.candidates, model=data.model)
-    families = [f for f in families if all(cfg.offered(j) for j in _affected(f, data.n))]
+    # (a family that declares its rows, a contact sensor's, acts where its model says: on the base rows too)
+    families = [f for f in families if f.rows is not None or all(cfg.offered(j) for j in _affected(f, data.n))]
     # a joint whose friction-law stage chose a Stribeck law already has the Stribeck column: the loop's
     # Stribeck candidate there would be the same column at a neighbouring vs (collinear, the two
     # coefficients then split the effect between them with opposite signs)

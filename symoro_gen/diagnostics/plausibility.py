@@ -279,6 +279,16 @@ def effect_plausibility(kind: str, joint: int | None, params: Mapping[str, float
                      f"(±{100 * GAIN_TOLERANCE:g} %)",
                      f"the torque constant / gear ratio of {_who(j)} in the data conversion, a payload or inertia "
                      "error of the links it carries")
+    elif kind == "contact_gain":
+        s = float(physical.get("scale", 1.0))
+        if s > 0:
+            r.factor(band_factor(math.exp(abs(math.log(s))), 0.0, 1.0 + GAIN_TOLERANCE, GAIN_WIDTH),
+                     f"a wrench scale of ×{s:.3g} of the sensor at {variant} is beyond the few-% tolerance of a "
+                     f"calibrated force-torque sensor (±{100 * GAIN_TOLERANCE:g} %)",
+                     f"the sensor at {variant} against a known load")
+    elif kind == "contact_offset":
+        return r.done(f"offset of the sensor at {variant}: no prior on its magnitude (a force-torque sensor's zero "
+                      "drifts with temperature and mounting)")
     elif kind == "elasticity":
         _rate_stiffness(r, j, physical, tau)
     elif kind == "stribeck":
@@ -628,6 +638,10 @@ def fits_like(kind: str, joint: int | None, physical: Mapping[str, float], descr
         return f"a {1e3 * float(physical['delay_s']):.3g} ms delay on {who}" + (" only" if one_joint_delay else "")
     if kind == "gain" and "scale" in physical:
         return f"a torque scale ×{float(physical['scale']):.3g} on {who}"
+    if kind == "contact_gain" and "scale" in physical:
+        return f"a wrench scale ×{float(physical['scale']):.4g} of a contact sensor ({description})"
+    if kind == "contact_offset":
+        return f"a constant offset of a contact sensor ({description})"
     if kind == "elasticity" and "K_Nm_per_rad" in physical:
         return f"a stiffness of {float(physical['K_Nm_per_rad']):.3g} N m/rad of {who}"
     if kind == "stribeck" and "vs" in physical:

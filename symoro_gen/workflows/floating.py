@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from ..description.identity import robot_id
+from ..diagnostics.candidates import CONTACT_KINDS
 from ..diagnostics.core import DiagnoseSettings, diagnose
 from ..diagnostics.report import ResidualReport
 from ..errors import DataFileError, OptionError, Problem
@@ -45,6 +46,7 @@ from ..preprocessing.filtering import parallel_decimate
 from ..preprocessing.floating import FloatingSignals, filter_floating, read_floating
 from ..preprocessing.trajectory import Trajectory
 from .base import SCHEMA_VERSION, Options, Results, provenance
+from .contact_candidates import ContactLog, ContactRows
 
 __all__ = ["FloatingIdentifyResults", "FloatingDiagnoseResults", "identify_floating_logs", "diagnose_floating_logs",
            "contact_checks", "row_loop", "BASE_ROWS", "LOOP_CANDIDATES", "refused_options"]
@@ -67,6 +69,8 @@ class FloatingRows:
     #: per contact frame, (k, 6 + n, 7) decimated with W: ``J_c^T e_i`` (a constant offset of the sensor's six
     #: components, in its axes) and ``J_c^T f_c`` (a gain error of the sensor), the candidates of :func:`contact_checks`
     sensor_columns: Mapping[str, NDArray[np.float64]] = field(default_factory=dict)
+    #: the same at full rate on the rows of ``W_full`` (the loop's contact-sensor candidates, :class:`ContactRows`)
+    sensor_full: Mapping[str, NDArray[np.float64]] = field(default_factory=dict)
 
 
 def refused_options(opts: Any, validate_loaded: bool, loaded: Sequence) -> list[str]:
@@ -120,8 +124,9 @@ def experiment_rows(model: Any, robot: Any, sig: FloatingSignals, need_tau: bool
         W = np.concatenate([W, *sensor], axis=2)
     Yd, Wd = parallel_decimate(Y, W, st.n_d, ftype=st.ftype, cutoff_ratio=st.cutoff_ratio, source=rec.source)
     cols = {name: Wd[:, :, p + 7 * k:p + 7 * (k + 1)] for k, name in enumerate(rec.contacts)}
+    N, e = rec.n_samples, sig.settings.edge_samples
+    full = {name: W[e:N - e, :, p + 7 * k:p + 7 * (k + 1)] for k, name in enumerate(rec.contacts)}
     Wd, W = Wd[:, :, :p], W[:, :, :p]
-    N = rec.n_samples
     idx = np.arange(Yd.shape[0]) * st.n_d
     half = 10 * st.n_d if st.n_d > 1 else 0  # the FIR's half length (20 n_d + 1 taps); IIR: the edges only
     keep = (idx - half >= st.edge_samples) & (idx + half <= N - 1 - st.edge_samples)
@@ -129,8 +134,8 @@ def experiment_rows(model: Any, robot: Any, sig: FloatingSignals, need_tau: bool
         raise DataFileError([Problem(rec.source, f"rows 1-{N}", "", f"too short to filter and decimate: {N} samples, "
                                      f"{st.edge_samples} dropped at each edge (cut-off {st.cutoff_hz:.4g} Hz, "
                                      f"n_d = {st.n_d})")])
-    e = st.edge_samples
-    return FloatingRows(sig, Wd[keep], Yd[keep], W[e:N - e], Y[e:N - e], {c: v[keep] for c, v in cols.items()})
+    return FloatingRows(sig, Wd[keep], Yd[keep], W[e:N - e], Y[e:N - e], {c: v[keep] for c, v in cols.items()},
+                        full)
 
 
 def _read(model: Any, robot: Any, files: Sequence, opts: Any, need_tau: bool) -> list[FloatingRows]:
@@ -450,15 +455,20 @@ def row_loop(robot: Any, model: Any, rows: Sequence[FloatingRows], significance:
     """The fixed-base loop (:func:`symoro_gen.diagnostics.diagnose`) on the rows of the floating-base logs
     ``rows`` (every log with joint torques), each row position a "joint" of
     :class:`~symoro_gen.identification.floating.RowsAsJoints`: the friction-law stage and the candidates of
-    :data:`LOOP_CANDIDATES` on the joint rows, the ``unexplained`` check on every row (the base-wrench rows
-    included), the same acceptance (the last share of each log, never the validation data) and plausibility.
+    :data:`LOOP_CANDIDATES` on the joint rows, each contact sensor's offset and gain on the rows its wrench
+    reaches (:class:`~symoro_gen.workflows.contact_candidates.ContactRows`, in the same rounds: sensor and drive
+    explanations compete), the ``unexplained`` check on every row (the base-wrench rows included), the same
+    acceptance (the last share of each log, never the validation data) and plausibility.
     The ``unexplained`` check tests the per-row weighted refit's residual (``unexplained_weighted``): the
     base-wrench rows' noise (contact sensors, and the IMU's through the base's columns) is 10 to 40 times the
     quiet joint rows' in variance, and the unweighted fit's error would leave a smooth ``-A_k delta`` on those.
 
     The logs' filtered states are the recorded derivatives of the assembly (no second filter), decimated with
     the floating filters' ``n_d`` and cut-off ([GB-gains] eq. 15-16)."""
-    adapter = RowsAsJoints.of(model, robot, np.concatenate([r.W for r in rows]))
+    logs = [ContactLog(r.signals.recording.source, r.signals.recording.t[
+        r.signals.settings.edge_samples:r.signals.q.shape[0] - r.signals.settings.edge_samples], r.sensor_full)
+        for r in rows]
+    adapter = ContactRows.with_contacts(RowsAsJoints.of(model, robot, np.concatenate([r.W for r in rows])), logs)
     st = [r.signals.settings for r in rows]
     assembly = AssemblyOptions(use_recorded_derivatives=True, cutoff_hz=min(s.cutoff_hz for s in st),
                                n_d=min(s.n_d for s in st), ftype=st[0].ftype, cutoff_ratio=st[0].cutoff_ratio,
@@ -494,12 +504,14 @@ def loop_dict(report: ResidualReport) -> dict[str, Any]:
     for e in report.effects:
         d = e.to_dict()
         d["row"] = row_name(e.joint) if e.joint is not None else None
+        if e.kind in CONTACT_KINDS:   # a contact sensor's effect: on every row its wrench reaches
+            d["frame"] = e.variant
         effects.append(d)
     unexplained = [{"row": row_name(u.joint - 1), "share": json_float(u.share),
                     "threshold": json_float(u.threshold), "flagged": bool(u.flagged),
                     "signals": [signal_name(x) for x in u.signals]} for u in report.unexplained]
     return {"rows": rows, "effects": effects, "unexplained": unexplained,
-            "found": [f"{d['row']}:{d['kind']}" for d in effects],
+            "found": [f"{d.get('frame') or d['row']}:{d['kind']}" for d in effects],
             "rel_err_before": [json_float(v) for v in report.before_validation_rel_err],
             "rel_err_after": [json_float(v) for v in report.after_validation_rel_err],
             "acceptance": "the last share of each log (held out from the fits of the candidates); the validation "
@@ -507,41 +519,23 @@ def loop_dict(report: ResidualReport) -> dict[str, Any]:
             "warnings": list(report.warnings)}
 
 
-def ambiguous(rows: Sequence[FloatingRows], checks: Sequence[Mapping[str, Any]],
-              loop: Mapping[str, Any] | None) -> list[str]:
-    """The sensor effects accepted on the joint rows that share a row with a drive effect of the loop: the sensor's
-    wrench reaches that joint's row (its Jacobian's column there is not zero), so the two explain the same residual
-    and the two selections, run side by side, may each take part of it (docs/floating-base.md)."""
-    if loop is None:
-        return []
-    out = []
-    for c in checks:
-        if c["kind"] != "joints" or not c["accepted"]:
-            continue
-        reach = np.any(np.concatenate([r.sensor_columns[c["frame"]][:, 6:, :6] for r in rows]) != 0, axis=(0, 2))
-        named = [e for e in loop["effects"] if e["joint"] is not None and e["joint"] > 6 and reach[e["joint"] - 7]]
-        out += [f"the {c['effect']} of the sensor at {c['frame']} and {e['label']} on row {e['row']}: the sensor's "
-                "wrench reaches that row, both may share one cause (check the sensor against a known load)"
-                for e in named]
-    return out
-
-
 def _loop_lines(loop: Mapping[str, Any] | None, note: str) -> list[str]:
     if loop is None:
         return ["", f"Residual analysis per row (the fixed-base loop): not run: {note}"]
     lines = ["", "Residual analysis per row (the fixed-base loop on the base-wrench and joint rows: friction law, "
-             + ", ".join(LOOP_CANDIDATES) + " on the joint rows; unexplained structure on every row):"]
+             + ", ".join(LOOP_CANDIDATES) + " on the joint rows; each contact sensor's offset and gain on the rows its "
+             "wrench reaches, in the same selection; unexplained structure on every row):"]
     for d in loop["effects"]:
         vals = ", ".join(f"{n} {v:+.4g} +- {d['std'][n]:.2g}" for n, v in d["params"].items() if v is not None
                          and d["std"].get(n) is not None)
-        lines.append(f"  {d['row']:6s} {d['label']} (round {d['round']}, verdict {d['verdict'] or '-'}): {vals}")
+        where = d["row"] or f"sensor {d.get('frame')}"
+        lines.append(f"  {where:6s} {d['label']} (round {d['round']}, verdict {d['verdict'] or '-'}): {vals}")
     flagged = [u for u in loop["unexplained"] if u["flagged"]]
     for u in flagged:
         lines.append(f"  {u['row']:6s} unexplained structure: out-of-fold R^2 {u['share']:.3f} > {u['threshold']:.3f}"
                      + (f" (signals {', '.join(u['signals'][:4])})" if u["signals"] else ""))
     if not loop["effects"] and not flagged:
         lines.append("  nothing beyond the noise on any row")
-    lines += [f"  ambiguous: {a}" for a in loop.get("ambiguous", ())]
     lines.append("  validation rel. error per row before -> after: " + "  ".join(
         f"{r} {a:.4f}->{b:.4f}" for r, a, b in zip(loop["rows"], loop["rel_err_before"], loop["rel_err_after"])
         if a is not None and b is not None))
@@ -587,6 +581,10 @@ class FloatingDiagnoseResults(Results):
     def summary(self) -> str:
         """The text ``symoro-gen diagnose`` prints for a floating-base robot."""
         n = sum(1 for c in self.checks if c["kind"] == "base")
+        if self.loop is not None:   # the sensors are candidates of the loop's own selection
+            return "\n".join([f"Diagnosis of {self.robot.name} (floating base): the contact sensors' offsets and gains "
+                              "compete with the drive effects in the loop's selection below",
+                              *_loop_lines(self.loop, self.loop_note)])
         lines = [f"Contact-sensor checks of {self.robot.name} (per kind of rows: an offset of each sensor's six "
                  f"components, a gain of each sensor; nested F tests in forward selection, level "
                  f"{self.significance:g} / {n} candidates = {self.significance / max(n, 1):.3g}):"]
@@ -613,8 +611,9 @@ class FloatingDiagnoseResults(Results):
 
 
 def diagnose_floating_logs(robot: Any, model: Any, data: Sequence, opts: Any) -> FloatingDiagnoseResults:
-    """The floating-base branch of :func:`symoro_gen.workflows.diagnose.diagnose`: :func:`contact_checks` on the
-    base rows, and on the joint rows when every log has joint torques."""
+    """The floating-base branch of :func:`symoro_gen.workflows.diagnose.diagnose`: when every log has joint torques,
+    the loop on the rows (:func:`row_loop`), the contact sensors' offsets and gains among its candidates; else
+    :func:`contact_checks` on the base rows (the loop does not run there)."""
     rows = _read(model, robot, data, opts, need_tau=False)
     has_tau = all(r.signals.recording.tau is not None for r in rows)
     frames = [tuple(r.sensor_columns) for r in rows]
@@ -626,16 +625,16 @@ def diagnose_floating_logs(robot: Any, model: Any, data: Sequence, opts: Any) ->
     if not frames[0] and not has_tau:
         raise OptionError(f"diagnose: {robot.file or robot.name}: the logs have neither contact wrench columns "
                           "(<frame>_fx ...) nor joint torques (tau1 ...): nothing to check on a floating-base robot")
-    checks = contact_checks(model, rows, "base", opts.significance)
+    checks: list[dict[str, Any]] = []
     loop: dict[str, Any] | None = None
     report: ResidualReport | None = None
     note = ""
     if has_tau:
-        checks += contact_checks(model, rows, "joints", opts.significance)
+        # the contact sensors' offsets and gains are candidates of the loop's own selection (row_loop)
         _, report = row_loop(robot, model, rows, opts.significance)
         loop = loop_dict(report)
-        loop["ambiguous"] = ambiguous(rows, checks, loop)
     else:
+        checks = contact_checks(model, rows, "base", opts.significance)
         note = ("the logs have no joint torques (tau1..): the base rows depend on the joints' motion, the loop "
                 "analyses both kinds of rows together")
     return FloatingDiagnoseResults(robot, model, opts, tuple(rows), tuple(checks), opts.significance, tuple(data),
