@@ -156,6 +156,7 @@ from .report import CandidateScore, Effect, ResidualReport
 from .stability import (
     N_FOLDS,
     BlockedLS,
+    clear_fold_cache,
     coefficient_ci,
     ols_wls_agreement,
     sided_selection,
@@ -2617,9 +2618,12 @@ def diagnose(model: IdentificationModel, trajectories, settings: DiagnoseSetting
     del data    # the loop's frames with their model torque: the report's are rebuilt on all the data
     notes = tuple(replace(t, accepted=t.accepted and any(t.record is r for r in laws)) for t in notes)
     full = replace(_apply_laws(full0, laws), doubtful_laws=doubtful)
+    clear_fold_cache()   # the loop's fold bases: the report's designs are other ones
     state = _transfer(full, state)
     release_freed_memory()
     report = _stage_report(full, replace(base, laws=laws), state, cfg, data0=full0, stab=stab, stab_msgs=msgs)
-    return _with_acceptance(report, full0, data0, notes, guard, cfg)
+    report = _with_acceptance(report, full0, data0, notes, guard, cfg)
+    clear_fold_cache()   # nothing of the diagnosis is kept once it returns
+    return report
 
 
