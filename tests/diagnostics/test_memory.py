@@ -121,3 +121,20 @@ def test_release_freed_memory_returns_the_fragmented_heap():
     freed = count * size
     assert kept - after > 0.5 * freed, (before, kept, after)
     assert len(alive) == count
+
+
+@pytest.mark.slow
+def test_diagnose_keeps_no_fold_bases_once_it_returns():
+    """The blocked least squares keep the fold bases of their last design for the next fit on it (module
+    cache); a diagnosis leaves that cache empty when it returns, so none of its designs stays alive
+    (measured: its out-of-fold bases and column factors are the largest arrays of the loop after ``W``).
+    The cache is filled during the loop (checked by a fit on the frame before the call)."""
+    from symoro_gen.diagnostics import diagnose, stability
+
+    model, tr = recording("scara", 21, noise_q=1e-4)
+    F = build_frame(model, [tr], dynamics_bandwidth_hz=common_bandwidth([tr]))
+    stability.BlockedLS(F.system.W, F.system.Y, stability.time_blocks(F.row_experiment, F.row_index, 5))
+    assert stability._FOLD_CACHE
+    rep = diagnose(model, [tr])
+    assert rep.n_joints == model.N_JOINTS
+    assert not stability._FOLD_CACHE
