@@ -110,7 +110,7 @@ def test_release_freed_memory_returns_the_fragmented_heap():
     release_freed_memory()
     count, size = 1024, 64 * 1024            # 64 MB of transients
     transient, alive = [], []
-    for i in range(count):
+    for _ in range(count):
         transient.append(np.ones(size // 8))  # written: its pages are resident
         alive.append(np.ones(512))            # small arrays (above numpy's cache of small buffers) pin the heap
     before = _rss_bytes()
