@@ -139,6 +139,7 @@ from .friction import (
     viscous_columns,
 )
 from .geometry import invisible_zero_note
+from .memory import release_freed_memory
 from .plausibility import (
     PLAUSIBLE,
     ArmScales,
@@ -155,6 +156,7 @@ from .report import CandidateScore, Effect, ResidualReport
 from .stability import (
     N_FOLDS,
     BlockedLS,
+    clear_fold_cache,
     coefficient_ci,
     ols_wls_agreement,
     sided_selection,
@@ -912,6 +914,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
     for j in range(n):
         if j in cfg.declared_laws or not cfg.offered(j):
             continue   # the robot file declares this joint's law: kept as declared (scales refined already)
+        release_freed_memory()   # the previous joint's transients (.memory)
         jf = replace(_joint_friction(F, W, names, j, float(dq_noise[j])), presliding=cfg.presliding_law)
         try:
             ch = select_friction(jf.A, Y, J, j, np.zeros(Y.size), blocks, columns=jf.cols, search=_law_search(F, jf))
@@ -1678,6 +1681,7 @@ def _stage_loop(data0: _Data, data: _Data, base: _Baseline, cfg: DiagnoseSetting
         laws_only = n_eff >= cfg.max_effects
         if laws_only and not state.pending:
             break
+        release_freed_memory()   # the previous round's transients (.memory)
         scored = _stage_score(data, base, state, rnd, cfg, rng, laws_only=laws_only)
         state = replace(state, tried=state.tried + scored.tried, placebos=state.placebos + scored.placebos,
                         placebo_hits=state.placebo_hits + scored.placebo_hits,
@@ -2648,21 +2652,34 @@ def diagnose(model: IdentificationModel, trajectories, settings: DiagnoseSetting
     # (never the validation data); the notes they bring pass the acceptance test below
     # (a replacement that fits but is implausible is not applied: kept in doubtful_laws for the report)
     # (a plausible replacement of a declared law is pending: it competes in the loop's rounds)
+    # the heap's freed pages go back to the system after each stage (.memory: the resident set follows the
+    # arrays alive, not the transients of the stages before)
+    release_freed_memory()
     chosen, laws, pending = _stage_friction(full0, cfg) if cfg.friction_laws else (full0, (), ())
+    doubtful = chosen.doubtful_laws
+    del chosen
+    release_freed_memory()
     laws, notes = _accept_notes(data0, laws, cfg)
     data = _apply_laws(data0, laws)
     base = _stage_baseline(full0, data, laws, cfg)
+    release_freed_memory()
     data, base, state = _stage_loop(data0, data, base, cfg, rng, pending)
+    release_freed_memory()
     laws = base.laws
     stab: _StabilityInfo = {}
     msgs: list[str] = []
     if cfg.stability:
         state, stab, msgs = _stage_stability(data, state, cfg)
     data, laws, state, guard = _never_worse(data0, data, laws, state)
+    del data    # the loop's frames with their model torque: the report's are rebuilt on all the data
     notes = tuple(replace(t, accepted=t.accepted and any(t.record is r for r in laws)) for t in notes)
-    full = replace(_apply_laws(full0, laws), doubtful_laws=chosen.doubtful_laws)
+    full = replace(_apply_laws(full0, laws), doubtful_laws=doubtful)
+    clear_fold_cache()   # the loop's fold bases: the report's designs are other ones
     state = _transfer(full, state)
+    release_freed_memory()
     report = _stage_report(full, replace(base, laws=laws), state, cfg, data0=full0, stab=stab, stab_msgs=msgs)
-    return _with_acceptance(report, full0, data0, notes, guard, cfg)
+    report = _with_acceptance(report, full0, data0, notes, guard, cfg)
+    clear_fold_cache()   # nothing of the diagnosis is kept once it returns
+    return report
 
 

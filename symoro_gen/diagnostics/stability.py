@@ -150,6 +150,13 @@ class _Fold:
 _FOLD_CACHE: dict = {}
 
 
+def clear_fold_cache() -> None:
+    """Drop the fold bases and column factors kept for the next :class:`BlockedLS` of the same design (the
+    diagnosis clears them once its loop is done: the report's designs are other ones, and nothing of a
+    diagnosis stays alive after it returns)."""
+    _FOLD_CACHE.clear()
+
+
 def _digest(x: np.ndarray) -> str:
     """BLAKE2b digest of an array's bytes (its contents, for the fold cache: equal digests mean equal
     arrays for any practical purpose)."""

@@ -88,3 +88,53 @@ def test_full_rate_frame_builds_its_row_signals_on_access(scara_frame):
     one_signal = n * M * n * 8
     peak = _peak(lambda: _full_rate_frame(F))
     assert peak < 4 * one_signal, (peak, one_signal)
+
+
+def _rss_bytes() -> int:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    raise AssertionError("no VmRSS line")
+
+
+def test_release_freed_memory_returns_the_fragmented_heap():
+    """Arrays of 64 KB (below glibc's smallest mmap threshold, 128 KB: always in the heap) freed between
+    small arrays still alive leave a heap whose top cannot shrink; ``malloc_trim(0)`` hands the free
+    pages back, so the resident set falls by most of what was freed (the loop's transients between
+    stages, :mod:`symoro_gen.diagnostics.memory`)."""
+    from symoro_gen.diagnostics.memory import _malloc_trim, release_freed_memory
+
+    if _malloc_trim() is None:
+        pytest.skip("no glibc malloc_trim in this process")
+    release_freed_memory()
+    count, size = 1024, 64 * 1024            # 64 MB of transients
+    transient, alive = [], []
+    for _ in range(count):
+        transient.append(np.ones(size // 8))  # written: its pages are resident
+        alive.append(np.ones(512))            # small arrays (above numpy's cache of small buffers) pin the heap
+    before = _rss_bytes()
+    del transient
+    kept = _rss_bytes()
+    assert release_freed_memory()
+    after = _rss_bytes()
+    freed = count * size
+    assert kept - after > 0.5 * freed, (before, kept, after)
+    assert len(alive) == count
+
+
+@pytest.mark.slow
+def test_diagnose_keeps_no_fold_bases_once_it_returns():
+    """The blocked least squares keep the fold bases of their last design for the next fit on it (module
+    cache); a diagnosis leaves that cache empty when it returns, so none of its designs stays alive
+    (measured: its out-of-fold bases and column factors are the largest arrays of the loop after ``W``).
+    The cache is filled during the loop (checked by a fit on the frame before the call)."""
+    from symoro_gen.diagnostics import diagnose, stability
+
+    model, tr = recording("scara", 21, noise_q=1e-4)
+    F = build_frame(model, [tr], dynamics_bandwidth_hz=common_bandwidth([tr]))
+    stability.BlockedLS(F.system.W, F.system.Y, stability.time_blocks(F.row_experiment, F.row_index, 5))
+    assert stability._FOLD_CACHE
+    rep = diagnose(model, [tr])
+    assert rep.n_joints == model.N_JOINTS
+    assert not stability._FOLD_CACHE
