@@ -509,7 +509,7 @@ class _Tester:
         (:func:`.stats.hac_covariance` of the stacked scores, whose diagonal blocks are each candidate's) are one
         matrix product over the stacked columns instead of one per candidate. The same formulas as
         :meth:`__call__` (HC3-scaled scores, the Wald tests of the HAC and white-noise covariances); the sums
-        are ordered differently, so the numbers agree to rounding (``tests/diagnostics/test_speed.py``)."""
+        are ordered differently, so the numbers agree to rounding (``tests/diagnostics/test_compose_speed.py``)."""
         U, e0, lev0, rank, rss_joint = base
         m, p = len(Xs), Xs[0].shape[1]
         r = e0.size
