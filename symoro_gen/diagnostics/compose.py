@@ -502,50 +502,54 @@ class _Tester:
         drop = 1.0 - float(np.sum(e[m] ** 2)) / max(rss_joint[j], 1e-300)
         return pv, b, drop
 
-    def batch(self, Xs: Sequence[np.ndarray], j: int, base) -> list:
-        """``[self(X, j, base=base) for X in Xs]`` for candidates of joint ``j`` with the same number of columns
-        ``p``, computed together: the products with the basis (``U^T X`` on the joint's rows, ``U (U^T X)``), the
-        Gram matrices (the diagonal ``p x p`` blocks of the stacked columns' Gram matrix) and the HAC sums
-        (:func:`.stats.hac_covariance` of the stacked scores, whose diagonal blocks are each candidate's) are one
-        matrix product over the stacked columns instead of one per candidate. The same formulas as
-        :meth:`__call__` (HC3-scaled scores, the Wald tests of the HAC and white-noise covariances); the sums
-        are ordered differently, so the numbers agree to rounding (``tests/diagnostics/test_compose_speed.py``)."""
+    def batch(self, X: np.ndarray, p: int, j: int, base) -> list:
+        """``[self(X_i, j, base=base) for X_i in X's blocks of p columns]``: the candidates of joint ``j`` with ``p``
+        columns each, stacked in ``X`` (r, m p; overwritten), tested together. The products with the basis
+        (``U^T X`` on the joint's rows, ``U (U^T X)``), the Gram matrices (the diagonal ``p x p`` blocks of the
+        stacked columns' Gram matrix) and the HAC sums (:func:`.stats.hac_covariance` of the stacked scores,
+        whose diagonal blocks are each candidate's) are one matrix product over the stacked columns instead of
+        one per candidate. The same formulas as :meth:`__call__` (HC3-scaled scores, the Wald tests of the HAC
+        and white-noise covariances, None for a column in the span or a singular Gram matrix); the sums are
+        ordered differently, so the numbers agree to rounding (``tests/diagnostics/test_compose_speed.py``)."""
         U, e0, lev0, rank, rss_joint = base
-        m, p = len(Xs), Xs[0].shape[1]
-        r = e0.size
-        Xw = np.hstack(Xs) * self.w[:, None]
-        Xp = Xw - U @ span_product(U, Xw)
-        sq = np.einsum("ij,ij->j", Xp, Xp).reshape(m, p)
-        ok = np.all(sq > IDENTIFIABILITY_TOL ** 2 * np.maximum(np.einsum("ij,ij->j", Xw, Xw), 1e-300).reshape(m, p),
-                    axis=1)
+        r, m = e0.size, X.shape[1] // p
+        X *= self.w[:, None]
+        norm = np.maximum(np.einsum("ij,ij->j", X, X), 1e-300)
+        X -= U @ span_product(U, X)         # the stacked columns projected out of the model's span
+        # a column (almost) in the span of the model is "already in the model" (as in __call__)
+        ok = np.all((np.einsum("ij,ij->j", X, X) > IDENTIFIABILITY_TOL ** 2 * norm).reshape(m, p), axis=1)
         out: list = [None] * m
-        idx = np.flatnonzero(ok)
-        k = idx.size
-        if not k:
+        if not ok.any():
             return out
-        if k < m:
-            Xp = Xp.reshape(r, m, p)[:, idx].reshape(r, k * p)
-        Gfull = Xp.T @ Xp
-        blocks = [slice(i * p, (i + 1) * p) for i in range(k)]
+        Gfull = X.T @ X
+        G = np.stack([Gfull[i * p:(i + 1) * p, i * p:(i + 1) * p] for i in range(m)])
+        Ginv = np.zeros_like(G)
         try:
-            Ginv = np.linalg.inv(np.stack([Gfull[s, s] for s in blocks]))
-        except np.linalg.LinAlgError:   # a singular Gram matrix: the candidates one by one
-            return [self(X, j, base=base) for X in Xs]
-        b = np.einsum("kij,kj->ki", Ginv, (Xp.T @ e0).reshape(k, p))
-        X3 = Xp.reshape(r, k, p)
+            Ginv[ok] = np.linalg.inv(G[ok])
+        except np.linalg.LinAlgError:     # a singular Gram matrix: that candidate is skipped, as in __call__
+            for i in np.flatnonzero(ok):
+                try:
+                    Ginv[i] = np.linalg.inv(G[i])
+                except np.linalg.LinAlgError:
+                    ok[i] = False
+        X3 = X.reshape(r, m, p)
+        b = np.einsum("kij,kj->ki", Ginv, (X.T @ e0).reshape(m, p))
         e = e0[:, None] - sum(X3[:, :, a] * b[:, a] for a in range(p))
         dof = max(r - rank - p, 1)
         # diag(Xp Ginv Xp^T) of each candidate: p^2 products of its columns (p is 1 or 2 in the library)
         lev = sum(X3[:, :, a] * X3[:, :, c] * Ginv[:, a, c] for a in range(p) for c in range(p)) + lev0[:, None]
-        e3 = e / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0)
-        Sfull = hac_covariance((X3 * e3[:, :, None]).reshape(r, k * p), max_lag=self.lag, segments=self.segs)
+        X3 *= (e / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0))[:, :, None]     # the HC3-scaled scores
+        del lev
+        S = hac_covariance(X, max_lag=self.lag, segments=self.segs)
         eT = np.ascontiguousarray(e.T)   # each candidate's residual, its sums of squares taken as in __call__
+        del e
         rows = self.joint == j
-        for n, i in enumerate(idx):
-            Ch = Ginv[n] @ Sfull[blocks[n], blocks[n]] @ Ginv[n] * (r / dof)
-            Ci = Ginv[n] * float(eT[n] @ eT[n]) / dof
-            pv = max(wald_test(b[n], Ch, dof)[1], wald_test(b[n], Ci, dof)[1])
-            out[i] = (pv, b[n], 1.0 - float(np.sum(eT[n][rows] ** 2)) / max(rss_joint[j], 1e-300))
+        for i in np.flatnonzero(ok):
+            blk = slice(i * p, (i + 1) * p)
+            Ch = Ginv[i] @ S[blk, blk] @ Ginv[i] * (r / dof)
+            Ci = Ginv[i] * float(eT[i] @ eT[i]) / dof
+            pv = max(wald_test(b[i], Ch, dof)[1], wald_test(b[i], Ci, dof)[1])
+            out[i] = (pv, b[i], 1.0 - float(np.sum(eT[i][rows] ** 2)) / max(rss_joint[j], 1e-300))
         return out
 
 
@@ -636,15 +640,17 @@ def _tests_by_plain(tester: _Tester, fams: Sequence[Sequence[Composed]], sig: Ro
         by_width: dict[int, list] = {}
         for f, i in members:
             by_width.setdefault(len(fams[f][i].names()), []).append((f, i))
-        # at most BATCH_COLUMNS stacked columns (and a quarter of the basis's) at a time: a batch's arrays
+        # at most BATCH_COLUMNS stacked columns (and half the basis's) at a time: a batch's arrays
         # stay a fraction of the basis held beside them
-        width = min(BATCH_COLUMNS, max(1, base[0].shape[1] // 4))
+        width = min(BATCH_COLUMNS, max(1, base[0].shape[1] // 2))
         for p, keys in by_width.items():
             size = max(1, width // p)
             for s in range(0, len(keys), size):
                 chunk = keys[s:s + size]
-                got = tester.batch([fams[f][i].columns(sig) for f, i in chunk], c0.joint, base)
-                outs.update(zip(chunk, got))
+                X = np.empty((sig.n_rows, p * len(chunk)))
+                for n, (f, i) in enumerate(chunk):
+                    X[:, n * p:(n + 1) * p] = fams[f][i].columns(sig)
+                outs.update(zip(chunk, tester.batch(X, p, c0.joint, base)))
         del base
     return outs
 

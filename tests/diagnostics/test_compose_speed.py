@@ -98,7 +98,7 @@ def test_batched_composed_tests_equal_the_tests_one_at_a_time_and_a_refit(seed, 
     P[joint == j, 0] = rng.standard_normal(int((joint == j).sum()))      # a plain effect partialled out
     Xs = _candidates(rng, joint, j, p, m, P)
     base = tester.with_plain(P)
-    got = tester.batch(Xs, j, base)
+    got = tester.batch(np.hstack(Xs), p, j, base)
     one = [tester(X, j, base=base) for X in Xs]
     assert len(got) == m
     if m > 2:
@@ -122,7 +122,7 @@ def test_nearly_in_span_candidate_is_skipped_by_both_paths():
     X_out = np.zeros((joint.size, 1))
     X_out[rows, 0] = rng.standard_normal(int(rows.sum()))
     base = tester.with_plain(P)
-    got = tester.batch([X_out, X_in, X_out * 2.0], 0, base)
+    got = tester.batch(np.hstack([X_out, X_in, X_out * 2.0]), 1, 0, base)
     assert got[1] is None and tester(X_in, 0, base=base) is None
     _same(got[0], tester(X_out, 0, base=base))
     _same(got[2], tester(X_out * 2.0, 0, base=base))
