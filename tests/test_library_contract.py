@@ -5,6 +5,7 @@ a misspelt option raises :class:`~symoro_gen.errors.OptionError` naming the near
 of the command's JSON)."""
 from __future__ import annotations
 
+import hashlib
 import inspect
 import json
 import os
@@ -12,11 +13,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import symoro_gen
 from symoro_gen import workflows
-from symoro_gen.errors import OptionError
+from symoro_gen.errors import OptionError, OutputError
 
 from .golden.inputs import write_inputs
 from .test_import_layout import ISSUE_NUMBER
@@ -149,3 +151,50 @@ def test_callable_packages_show_the_workflows_signature():
     assert inspect.signature(symoro_gen.excite) == inspect.signature(workflows.excite)
     assert inspect.signature(symoro_gen.fleet) == inspect.signature(workflows.fleet)
     assert "by" in inspect.signature(symoro_gen.fleet).parameters
+
+
+def test_read_recording_is_the_readers_pair_and_a_results_object(recording, cli, tmp_path):
+    """``symoro_gen.read_recording`` returns the reader's pair (unpacks, compares and indexes as the tuple
+    ``(trajectories, load_report)`` of :func:`symoro_gen.preprocessing.readers.read_recording`) as a frozen results
+    object: ``summary()`` is the ``Data:`` block ``symoro-gen identify`` prints for the file, ``to_dict()["data"]``
+    the file's entry of that command's JSON, with ``schema_version`` and the file's sha256 in ``provenance``."""
+    from symoro_gen.preprocessing.readers import read_recording as reader
+    from symoro_gen.workflows import SCHEMA_VERSION
+
+    res = symoro_gen.read_recording(recording, n_joints=4)
+    trajectories, load = reader(recording, n_joints=4)
+    got_t, got_load = res
+    assert isinstance(res, tuple) and len(res) == 2 and got_load == load and res[1] == load
+    assert len(got_t) == len(trajectories) and all(
+        np.array_equal(a.q, b.q) and np.array_equal(a.tau, b.tau) for a, b in zip(got_t, trajectories))
+    with pytest.raises(AttributeError):
+        res.note = "mine"  # no attribute can be set (a tuple without __dict__)
+    out = tmp_path / "id.json"
+    r = cli("identify", "scara", recording, "--method", "wls", "--json", out)
+    assert r.out.rstrip("\n").endswith(res.summary()) and res.summary().startswith("Data:")
+    d = res.to_dict()
+    assert d["data"] == json.loads(out.read_text())["data"]
+    assert d["schema_version"] == SCHEMA_VERSION and d["generator"] == "symoro-gen read_recording"
+    digest = hashlib.sha256(Path(recording).read_bytes()).hexdigest()
+    assert d["provenance"]["inputs"] == [{"path": str(recording), "sha256": digest}]
+    assert d["experiments"] == [{"source": str(recording), "samples": int(t.n_samples), "t_start": float(t.t[0]),
+                                 "t_end": float(t.t[-1]), "joints": 4, "loaded": False} for t in trajectories]
+    assert res._repr_html_().startswith('<pre class="symoro-gen-read_recording">')
+
+
+def test_read_recording_plot_and_report(recording, tmp_path):
+    """``plot()``: one figure per experiment and joint (q and tau against t); ``report(path)`` writes them, never
+    over the recording read."""
+    pytest.importorskip("matplotlib")
+    res = symoro_gen.read_recording(recording, n_joints=4)
+    figs = res.plot()
+    assert len(figs) == 4 and all(len(f.axes) == 2 for f in figs)
+    line = figs[0].axes[0].lines[0]
+    assert np.array_equal(line.get_ydata(), res.trajectories[0].q[:, 0][::max(1, res.trajectories[0].n_samples
+                                                                                // 4000)])
+    page = res.report(tmp_path / "r.html").read_text()
+    assert page.count("<img") == 4 and "Signals per joint" in page
+    link = tmp_path / "rec.html"
+    link.symlink_to(recording)
+    with pytest.raises(OutputError):
+        res.report(link, force=True)

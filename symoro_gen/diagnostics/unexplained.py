@@ -34,6 +34,14 @@ again; the carriers are tested last, on a residual that keeps their whole missin
 its own null (that joint's residual block-permuted). A residual longer than ``MAX_TREE_SAMPLES`` samples
 is thinned in time before the trees see it.
 
+Joints of unequal noise
+-----------------------
+The same spread comes from the noise when the joints' noise levels differ by an order of magnitude: the
+unweighted fit's estimation error, driven by the noisy joints' rows, leaves a smooth ``-A_k delta`` on the quiet
+joints, which are then flagged on clean data. :func:`joint_weighted_residual` gives the residual of the per-joint
+weighted refit ([GB-gains] eq. 22), on which each joint keeps its own residual; the loop tests it when
+``DiagnoseSettings.unexplained_weighted`` is set (a floating-base robot's rows, docs/floating-base.md).
+
 A round that adds a carrier passes on its decision only (each joint it tested is tested again), so its
 fits stop once that decision is settled (:func:`greedy_round`, the sequential Monte Carlo rule of Besag &
 Clifford 1991): the out-of-fold ``R^2`` can only fall as folds are added, so a joint's fit stops when it
@@ -61,7 +69,8 @@ import numpy as np
 
 from .stability import N_FOLDS, blocked_folds, time_blocks
 
-__all__ = ["MIN_SHARE", "NULL_MARGIN", "FoldFits", "Unexplained", "greedy_round", "permutation_importance", "refit_without",
+__all__ = ["MIN_SHARE", "NULL_MARGIN", "FoldFits", "Unexplained", "greedy_round", "joint_weighted_residual",
+           "permutation_importance", "refit_without",
            "rows_to_samples", "signal_matrix", "unexplained_by_joint", "unexplained_structure"]
 
 #: smallest share of residual variance ever flagged
@@ -210,6 +219,38 @@ def refit_without(resid: np.ndarray, A: np.ndarray, joint: np.ndarray, carriers:
     N = np.linalg.svd(V1.T, full_matrices=True)[2][V1.shape[1]:].T if V1.shape[1] else np.eye(A.shape[1])
     g2 = N @ np.linalg.lstsq(Ac @ N, resid[inC] - Ac @ g1, rcond=None)[0] if N.shape[1] else 0.0
     return resid - A @ (g1 + g2)
+
+
+def joint_weighted_residual(resid: np.ndarray, A: np.ndarray, joint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The residual and design of the per-joint weighted least-squares refit (IDIM-WLS, [GB-gains] eq. 22),
+    weighted: each joint's rows divided by the RMS of its residual ``resid`` (the first step's ``Y - A theta``),
+    and ``resid`` refitted on the weighted design (the correction is linear in ``resid``: the refit starts from
+    ``theta``).
+
+    Where the joints' noise levels differ by an order of magnitude, the unweighted fit's estimation error
+    ``delta``, driven by the noisy joints' rows, leaves ``-A_k delta`` - a smooth function of the motion that
+    the trees predict - on the residual of each quiet joint ``k`` coupled to them: the quiet joints are then
+    flagged on a clean log (a floating-base robot's joint rows beside its base-wrench rows, which carry the
+    contact sensors' noise and, through the base's columns, the IMU's). On the weighted refit each joint's
+    rows count by their own noise, and the quiet joints keep their own residual. A joint's weight is a
+    constant of its residual, so its out-of-fold ``R^2`` does not depend on it; the weighted design makes
+    :func:`refit_without` weighted too (pass both to :func:`unexplained_by_joint`).
+
+    Returns
+    -------
+    (ndarray (r,), ndarray (r, p))
+        The weighted residual of the refit and the weighted design.
+    """
+    resid, A, joint = np.asarray(resid, float), np.asarray(A, float), np.asarray(joint)
+    if A.shape[0] != resid.shape[0] or joint.shape[0] != resid.shape[0]:
+        raise ValueError(f"joint_weighted_residual: residual ({resid.shape[0]} rows), design {A.shape} and joint "
+                         f"({joint.shape[0]} rows) disagree")
+    rms = np.zeros(int(joint.max()) + 1)
+    np.add.at(rms, joint, resid ** 2)
+    rms = np.sqrt(rms / np.maximum(np.bincount(joint, minlength=rms.size), 1))
+    w = 1.0 / np.where(rms > 0, rms, 1.0)[joint]
+    rw, Aw = resid * w, A * w[:, None]
+    return rw - Aw @ np.linalg.lstsq(Aw, rw, rcond=None)[0], Aw
 
 
 #: fitted bin mappers and binned training matrices of the folds' feature rows (:func:`binned_hgb_class`), keyed

@@ -17,7 +17,7 @@ from ..report.document import (
     Table,
     write_report_files,
 )
-from ..report.plots import figure_and_axes, figure_png
+from ..report.plots import figure_and_axes, figure_png, require_matplotlib
 
 if TYPE_CHECKING:  # the engine's result holds report() and figures(), which call this module
     from .engine import FleetResult
@@ -61,7 +61,17 @@ def flag_figures(res: FleetResult) -> list[Figure]:
 
 
 def fleet_report(res: FleetResult, *, plots: bool = True) -> Report:
-    """The :class:`~symoro_gen.report.Report` of a fleet run."""
+    """The :class:`~symoro_gen.report.Report` of a fleet run (``plots``: with the flagged parameters' figures,
+    which need the 'plots' extra: without matplotlib :class:`~symoro_gen.report.MissingDependencyError` names it,
+    whether or not a robot is flagged, as every report of the library).
+
+    Raises
+    ------
+    MissingDependencyError
+        ``plots`` and matplotlib is not installed.
+    """
+    if plots:
+        require_matplotlib()
     blocks: list = [Paragraph(res.summary().splitlines()[0])]
     blocks.append(Heading("Flags"))
     if not res.flagged:

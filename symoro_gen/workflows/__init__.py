@@ -11,6 +11,7 @@ frozen results object (``summary()``, ``to_dict()``, ``report(path)``, ``plot()`
 ``export_urdf``         robot (and an identification) -> URDF text, notes, sidecar
 ``export_mjcf``         robot (and an identification) -> MuJoCo MJCF text, notes, sidecar
 ``export_par``          robot -> SYMORO+/OpenSYMORO .par text
+``read_recording``      one DATA file -> its experiments and what reading did (the readers' pair, a results object)
 ======================  ==================================================================
 
 The names are imported on first use (PEP 562): each workflow loads only what it needs (the exports stay free
@@ -34,6 +35,7 @@ if TYPE_CHECKING:
     from .fleet import FleetOptions, FleetResults, fleet
     from .identify import IdentifyOptions, IdentifyResults, identify
     from .inspect import InspectOptions, InspectResults, inspect
+    from .read import RecordingResults, read_recording
 
 _WHERE = {
     "SCHEMA_VERSION": "base", "Options": "base", "Results": "base",
@@ -43,12 +45,13 @@ _WHERE = {
     "ExciteOptions": "excite", "ExciteResults": "excite", "excite": "excite",
     "FleetOptions": "fleet", "FleetResults": "fleet", "fleet": "fleet",
     "ExportResults": "export", "export_urdf": "export", "export_mjcf": "export", "export_par": "export",
+    "RecordingResults": "read", "read_recording": "read",
 }
 
 __all__ = ["SCHEMA_VERSION", "DiagnoseOptions", "DiagnoseResults", "ExciteOptions", "ExciteResults", "ExportResults",
            "FleetOptions", "FleetResults", "IdentifyOptions", "IdentifyResults", "InspectOptions", "InspectResults",
-           "Options", "Results", "diagnose", "excite", "export_mjcf", "export_par", "export_urdf", "fleet",
-           "identify", "inspect"]
+           "Options", "RecordingResults", "Results", "diagnose", "excite", "export_mjcf", "export_par", "export_urdf",
+           "fleet", "identify", "inspect", "read_recording"]
 
 
 def __getattr__(name: str) -> Any:

@@ -12,12 +12,9 @@
 from __future__ import annotations
 
 import dataclasses
-import functools
-import hashlib
 import html
 import json
 import os
-import subprocess
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -25,25 +22,21 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .. import __version__
 from ..atomic import check_outputs, json_output, write_output_text
 from ..description.model import RobotDescription
 from ..errors import ModelError, OptionError, SymoroError, check_option_names
-from ..loader import REPO_ROOT, model_for
+from ..loader import model_for
 from ..model import IdentificationModel
 from ..preprocessing.motion import hold_still, noise_level_joints, saturation_warnings, still_warnings
 from ..preprocessing.readers import DataWarning, LoadReport, LogFormat, read_recordings
 from ..preprocessing.trajectory import Trajectory
 from ..report.document import report_targets
 from ..report.plots import require_matplotlib
+from .provenance import SCHEMA_VERSION, file_sha256, package_commit, provenance_block
 
 __all__ = ["SCHEMA_VERSION", "DataLike", "Options", "Results", "as_trajectories", "check_option_names", "listed",
            "file_sha256", "package_commit", "provenance", "resolve_robot", "recording_warnings", "held_still",
            "torque_limits"]
-
-#: version of the JSON written by the commands and returned by ``Results.to_dict()`` (docs/json-output.md):
-#: 2 added ``schema_version`` and ``provenance``
-SCHEMA_VERSION = 2
 
 #: what a workflow accepts as data: a path, a Trajectory, ``(t, q, tau)`` arrays or a mapping with those keys
 DataLike = Any
@@ -100,6 +93,7 @@ class Results:
     """Base of the workflows' results: a subclass sets :attr:`command` and implements :meth:`to_dict`,
     :meth:`summary`, and where it has them :meth:`report` and :meth:`figures`."""
 
+    __slots__ = ()   # no state of its own: a subclass is a frozen dataclass, or a tuple (RecordingResults)
     command: ClassVar[str] = ""
 
     def to_dict(self) -> dict:  # pragma: no cover - abstract
@@ -290,42 +284,11 @@ def _group(trajs: Sequence[Trajectory], reps: Sequence[LoadReport]) -> list[list
     return out
 
 
-def file_sha256(path: str | os.PathLike[str]) -> str | None:
-    """sha256 of a file's bytes (None when it is not a readable file)."""
-    h = hashlib.sha256()
-    try:
-        with open(path, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
-    except OSError:
-        return None
-    return h.hexdigest()
-
-
-@functools.lru_cache(maxsize=1)
-def package_commit() -> str | None:
-    """The git commit of the checkout the package runs from (None outside a git checkout)."""
-    if not (REPO_ROOT / ".git").exists():
-        return None
-    try:
-        out = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "HEAD"], capture_output=True, text=True,
-                             timeout=5, check=False)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout.strip() or None if out.returncode == 0 else None
-
-
 def provenance(options: Options, inputs: Iterable = (), seeds: Mapping[str, Any] | None = None) -> dict:
-    """The JSON's provenance block: package version and commit, every option, each input file with its sha256
-    (in-memory data as its source name, hash null), the seeds used."""
-    files = []
-    for x in inputs:
-        if _is_path(x):
-            files.append({"path": os.fspath(x), "sha256": file_sha256(x)})
-        else:
-            files.append({"path": str(getattr(x, "source", "<in memory>")), "sha256": None})
-    return {"package": {"name": "symoro_gen", "version": __version__, "commit": package_commit()},
-            "options": options.as_dict(), "inputs": files, "seeds": dict(seeds or {})}
+    """The JSON's provenance block (:func:`~symoro_gen.workflows.provenance.provenance_block`) of a workflow's
+    options: package version and commit, every option, each input file with its sha256 (in-memory data as its
+    source name, hash null), the seeds used."""
+    return provenance_block(options.as_dict(), inputs, seeds)
 
 
 def dumps(obj: Mapping) -> str:

@@ -11,7 +11,8 @@ identified base parameters (the 'physical' extra); ``res.sidecar`` then holds th
 body moved from nominal (written as ``OUT.json`` beside the file). These workflows stay free of SciPy (the light
 commands start without it): the identification stack is loaded only when ``from_result`` is given
 (:func:`_standard_set_from_result`), and the results are not :class:`~symoro_gen.workflows.base.Results`
-(whose module loads the data readers) but offer the same ``summary()``, ``to_dict()``, ``json_text()``.
+(whose module loads the data readers) but offer the same ``summary()``, ``to_dict()`` (with ``schema_version``
+and ``provenance``), ``json_text()``, ``_repr_html_()``, ``plot()`` and ``report(path)``.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ import importlib
 import json
 import math
 import os
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +38,10 @@ from ..description.urdf_export import drive_terms, link_values
 from ..description.urdf_export import export_urdf as urdf_text
 from ..errors import ModelError, OptionError, named_options
 from ..loader import model_for
+from ..report.document import check_report_path, report_targets
+from ..report.plots import require_matplotlib
+from .export_report import bodies_figure, write_export_report
+from .provenance import SCHEMA_VERSION, provenance_block
 
 __all__ = ["ExportResults", "export_mjcf", "export_par", "export_urdf"]
 
@@ -60,7 +66,14 @@ class ExportResults:
         What the exporter changed to write a valid file (the command's ``note:`` lines on standard error).
     sidecar : dict, optional
         With ``from_result``: the robot, the result's file, whether the regrouping is exact, the bodies, the drive
-        terms and the changed links (the command's ``OUTPUT.json``).
+        terms and the changed links (the command's ``OUTPUT.json``, which :meth:`to_dict` is).
+    inputs : tuple
+        What the export read besides the robot file (an identification result: a path, a mapping or a results
+        object; None when not given).
+    options : mapping
+        The options of the call, JSON-ready (the provenance block's ``options``).
+    values : mapping, optional
+        ``name -> value`` of every standard (and payload) parameter the export wrote (:meth:`plot`, :meth:`report`).
     """
 
     command: str
@@ -69,6 +82,8 @@ class ExportResults:
     notes: tuple[str, ...] = ()
     sidecar: Mapping[str, Any] | None = field(default=None, repr=False)
     inputs: tuple[Any, ...] = ()             # the files read besides the robot file (an identification result)
+    options: Mapping[str, Any] = field(default_factory=dict, repr=False)
+    values: Mapping[str, float] | None = field(default=None, repr=False)
 
     def summary(self) -> str:
         """The text (what the command prints without ``-o``)."""
@@ -80,16 +95,32 @@ class ExportResults:
     def _repr_html_(self) -> str:
         return f'<pre class="symoro-gen-{self.command}">{html.escape(self.text)}</pre>'
 
+    def provenance(self) -> dict:
+        """The provenance block (:func:`~symoro_gen.workflows.provenance.provenance_block`): package version and
+        commit, the options, the robot file and the identification read (each with its sha256; one given in
+        memory as ``<in memory>``, hash null)."""
+        given = [x for x in self.inputs if x is not None]
+        robot_file = getattr(self.robot, "file", None)
+        return provenance_block(self.options, [*([robot_file] if robot_file else []), *given])
+
     def to_dict(self) -> dict:
-        """The sidecar as the command writes it (``generator`` first); without an identification, the robot
-        and the changed links."""
+        """The sidecar as the command writes it (``generator`` first, then ``schema_version``, the sidecar's keys
+        and ``provenance`` last); without an identification (no sidecar file), the robot and the changed links
+        with the same ``schema_version`` and ``provenance``."""
         body = dict(self.sidecar) if self.sidecar is not None else {"robot": self.robot.name,
                                                                     "changed_links": list(self.notes)}
-        return {"generator": f"symoro-gen {self.command}", **body}
+        return {"generator": f"symoro-gen {self.command}", "schema_version": SCHEMA_VERSION, **body,
+                "provenance": self.provenance()}
 
     def json_text(self) -> str:
         """The sidecar's JSON text (:meth:`to_dict`)."""
         return json_output(self.to_dict(), self.command)
+
+    def _input_files(self) -> list[tuple[str, str | os.PathLike[str]]]:
+        robot_file = getattr(self.robot, "file", None)
+        inputs: list[tuple[str, str | os.PathLike[str]]] = [
+            ("input", x) for x in self.inputs if isinstance(x, (str, os.PathLike))]
+        return [*inputs, *([("robot file", robot_file)] if robot_file else [])]
 
     def write(self, path: str | os.PathLike[str], *, force: bool = False) -> list[Path]:
         """Write the text to ``path`` and, with a sidecar, ``PATH.json``; an existing file symoro-gen did not
@@ -98,9 +129,7 @@ class ExportResults:
         outs = {"-o/--output": Path(path)}
         if self.sidecar is not None:
             outs["-o/--output (its .json)"] = Path(str(path) + ".json")
-        robot_file = getattr(self.robot, "file", None)
-        inputs = [("input", x) for x in self.inputs if isinstance(x, (str, os.PathLike))]
-        check_outputs(outs, [*inputs, *([("robot file", robot_file)] if robot_file else [])], force=force)
+        check_outputs(outs, self._input_files(), force=force)
         write_output_text(Path(path), self.text, force=force, label="-o/--output")
         out = [Path(path)]
         if self.sidecar is not None:
@@ -108,6 +137,26 @@ class ExportResults:
             write_output_text(side, self.json_text(), force=force, label="-o/--output (its .json)")
             out.append(side)
         return out
+
+    def figures(self) -> list:
+        """The figure of :meth:`plot`: every body's mass, centre-of-mass shift and inertia as exported beside the
+        robot file's nominal values (:func:`~symoro_gen.workflows.export_report.bodies_figure`)."""
+        return [bodies_figure(self).figure]
+
+    def plot(self) -> list:
+        """Matplotlib figures of the export (needs the 'plots' extra: without it
+        :class:`~symoro_gen.report.MissingDependencyError` names it)."""
+        require_matplotlib()
+        return self.figures()
+
+    def report(self, path: str | os.PathLike[str], *, force: bool = False) -> Path:
+        """Write the export's report (``.html`` self-contained or ``.md`` with its image beside it): the bodies
+        against nominal (table and figure), the drive terms, the notes and the exported text; needs the 'plots'
+        extra. An existing file symoro-gen did not write is replaced only with ``force``; an input never."""
+        require_matplotlib()
+        check_report_path(path)
+        check_outputs(dict(report_targets("report", path)), self._input_files(), force=force)
+        return write_export_report(path, self, force=force)
 
 
 @dataclass(frozen=True)
@@ -182,13 +231,35 @@ def _values(robot: RobotDescription, result: ResultLike, command: str) -> _Value
     return _Values(chi, pay, tuple(notes), sidecar)
 
 
+def _option_json(x: Any) -> Any:
+    """An export's option for the provenance block: a path as text, names and values as given, a result given
+    in memory (its content or a results object) as ``<in memory>``."""
+    if x is None or isinstance(x, (bool, int, float, str)):
+        return x
+    if isinstance(x, os.PathLike):
+        return os.fspath(x)
+    if isinstance(x, Mapping) and "parameters" not in x and all(isinstance(v, (int, float)) for v in x.values()):
+        return {str(k): float(v) for k, v in x.items()}
+    return "<in memory>"
+
+
+def _written_values(robot: RobotDescription, v: _Values, params: dict[str, float] | None = None) -> dict:
+    """Every standard and payload parameter the export writes (the exporter itself warns about ignored names)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return link_values(robot, v.chi, v.payload, params=params)
+
+
 def _finish(command: str, robot: RobotDescription, text: str, changed: list[str], v: _Values,
-            inputs: tuple[Any, ...] = ()) -> ExportResults:
+            inputs: tuple[Any, ...] = (), options: Mapping[str, Any] | None = None,
+            params: dict[str, float] | None = None) -> ExportResults:
     sidecar = None
+    vals = _written_values(robot, v, params)
     if v.sidecar is not None:
         sidecar = dict(v.sidecar, drive=drive_terms(robot, link_values(robot, v.chi, v.payload)),
                        drive_note=DRIVE_NOTE, changed_links=list(changed))
-    return ExportResults(command, robot, text, tuple(changed), sidecar, inputs=inputs)
+    opts = {k: _option_json(x) for k, x in (options or {}).items()}
+    return ExportResults(command, robot, text, tuple(changed), sidecar, inputs=inputs, options=opts, values=vals)
 
 
 def _identified_parameters(params: ResultLike, robot: RobotDescription) -> dict[str, float]:
@@ -227,7 +298,8 @@ def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = N
     named = _identified_parameters(params, desc) if params is not None else None
     changed: list[str] = []
     text = urdf_text(desc, v.chi, v.payload, params=named, notes=v.header, report=changed)
-    return _finish("export-urdf", desc, text, changed, v, inputs=(from_result, params))
+    return _finish("export-urdf", desc, text, changed, v, inputs=(from_result, params),
+                   options={"params": params, "from_result": from_result}, params=named)
 
 
 @named_options
@@ -242,11 +314,12 @@ def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.00
         desc = with_identified_laws(desc, _result_dict(from_result)[0])
     changed: list[str] = []
     text = mjcf_text(desc, v.chi, v.payload, notes=v.header, report=changed, timestep=timestep)
-    return _finish("export-mjcf", desc, text, changed, v, inputs=(from_result,))
+    return _finish("export-mjcf", desc, text, changed, v, inputs=(from_result,),
+                   options={"from_result": from_result, "timestep": timestep})
 
 
 @named_options
 def export_par(robot) -> ExportResults:
     """The robot as a SYMORO+/OpenSYMORO ``.par`` file (``symoro-gen export-par``)."""
     desc = _description(robot)
-    return ExportResults("export-par", desc, par_text(desc))
+    return _finish("export-par", desc, par_text(desc), [], _Values())

@@ -452,6 +452,9 @@ def row_loop(robot: Any, model: Any, rows: Sequence[FloatingRows], significance:
     :class:`~symoro_gen.identification.floating.RowsAsJoints`: the friction-law stage and the candidates of
     :data:`LOOP_CANDIDATES` on the joint rows, the ``unexplained`` check on every row (the base-wrench rows
     included), the same acceptance (the last share of each log, never the validation data) and plausibility.
+    The ``unexplained`` check tests the per-row weighted refit's residual (``unexplained_weighted``): the
+    base-wrench rows' noise (contact sensors, and the IMU's through the base's columns) is 10 to 40 times the
+    quiet joint rows' in variance, and the unweighted fit's error would leave a smooth ``-A_k delta`` on those.
 
     The logs' filtered states are the recorded derivatives of the assembly (no second filter), decimated with
     the floating filters' ``n_d`` and cut-off ([GB-gains] eq. 15-16)."""
@@ -461,7 +464,8 @@ def row_loop(robot: Any, model: Any, rows: Sequence[FloatingRows], significance:
                                n_d=min(s.n_d for s in st), ftype=st[0].ftype, cutoff_ratio=st[0].cutoff_ratio,
                                dynamics_bandwidth_hz=max(s.dynamics_bandwidth_hz for s in st))
     cfg = DiagnoseSettings(candidates=LOOP_CANDIDATES, significance=significance, friction_laws=True,
-                           composed=False, effect_joints=tuple(range(6, 6 + model.N_JOINTS)))
+                           composed=False, effect_joints=tuple(range(6, 6 + model.N_JOINTS)),
+                           unexplained_weighted=True)
     report = diagnose(adapter, row_trajectories(rows), cfg, rng=np.random.default_rng(seed), assembly=assembly)
     return adapter, report
 
