@@ -100,6 +100,8 @@ ALIAS_CORRELATION = 0.995
 IDENTIFIABILITY_TOL = 1e-3
 #: floor of 1 - h_ii in the HC3 scaling of the residual
 MIN_ONE_MINUS_LEVERAGE = 0.05
+#: most stacked columns of the composed tests computed together (:meth:`_Tester.batch`)
+BATCH_COLUMNS = 64
 
 _EFFECT_WORDS = {"viscous": "viscous friction", "coulomb": "Coulomb friction", "ripple": "position ripple",
                  "constant": "constant (gravity-like) torque", "inertia": "inertia"}
@@ -500,6 +502,56 @@ class _Tester:
         drop = 1.0 - float(np.sum(e[m] ** 2)) / max(rss_joint[j], 1e-300)
         return pv, b, drop
 
+    def batch(self, X: np.ndarray, p: int, j: int, base) -> list:
+        """``[self(X_i, j, base=base) for X_i in X's blocks of p columns]``: the candidates of joint ``j`` with ``p``
+        columns each, stacked in ``X`` (r, m p; overwritten), tested together. The products with the basis
+        (``U^T X`` on the joint's rows, ``U (U^T X)``), the Gram matrices (the diagonal ``p x p`` blocks of the
+        stacked columns' Gram matrix) and the HAC sums (:func:`.stats.hac_covariance` of the stacked scores,
+        whose diagonal blocks are each candidate's) are one matrix product over the stacked columns instead of
+        one per candidate. The same formulas as :meth:`__call__` (HC3-scaled scores, the Wald tests of the HAC
+        and white-noise covariances, None for a column in the span or a singular Gram matrix); the sums are
+        ordered differently, so the numbers agree to rounding (``tests/diagnostics/test_compose_speed.py``)."""
+        U, e0, lev0, rank, rss_joint = base
+        r, m = e0.size, X.shape[1] // p
+        X *= self.w[:, None]
+        norm = np.maximum(np.einsum("ij,ij->j", X, X), 1e-300)
+        X -= U @ span_product(U, X)         # the stacked columns projected out of the model's span
+        # a column (almost) in the span of the model is "already in the model" (as in __call__)
+        ok = np.all((np.einsum("ij,ij->j", X, X) > IDENTIFIABILITY_TOL ** 2 * norm).reshape(m, p), axis=1)
+        out: list = [None] * m
+        if not ok.any():
+            return out
+        Gfull = X.T @ X
+        G = np.stack([Gfull[i * p:(i + 1) * p, i * p:(i + 1) * p] for i in range(m)])
+        Ginv = np.zeros_like(G)
+        try:
+            Ginv[ok] = np.linalg.inv(G[ok])
+        except np.linalg.LinAlgError:     # a singular Gram matrix: that candidate is skipped, as in __call__
+            for i in np.flatnonzero(ok):
+                try:
+                    Ginv[i] = np.linalg.inv(G[i])
+                except np.linalg.LinAlgError:
+                    ok[i] = False
+        X3 = X.reshape(r, m, p)
+        b = np.einsum("kij,kj->ki", Ginv, (X.T @ e0).reshape(m, p))
+        e = e0[:, None] - sum(X3[:, :, a] * b[:, a] for a in range(p))
+        dof = max(r - rank - p, 1)
+        # diag(Xp Ginv Xp^T) of each candidate: p^2 products of its columns (p is 1 or 2 in the library)
+        lev = sum(X3[:, :, a] * X3[:, :, c] * Ginv[:, a, c] for a in range(p) for c in range(p)) + lev0[:, None]
+        X3 *= (e / np.clip(1.0 - lev, MIN_ONE_MINUS_LEVERAGE, 1.0))[:, :, None]     # the HC3-scaled scores
+        del lev
+        S = hac_covariance(X, max_lag=self.lag, segments=self.segs)
+        eT = np.ascontiguousarray(e.T)   # each candidate's residual, its sums of squares taken as in __call__
+        del e
+        rows = self.joint == j
+        for i in np.flatnonzero(ok):
+            blk = slice(i * p, (i + 1) * p)
+            Ch = Ginv[i] @ S[blk, blk] @ Ginv[i] * (r / dof)
+            Ci = Ginv[i] * float(eT[i] @ eT[i]) / dof
+            pv = max(wald_test(b[i], Ch, dof)[1], wald_test(b[i], Ci, dof)[1])
+            out[i] = (pv, b[i], 1.0 - float(np.sum(eT[i][rows] ** 2)) / max(rss_joint[j], 1e-300))
+        return out
+
 
 @single_threaded_blas
 def score_composed(A: np.ndarray, y: np.ndarray, sig: RowSignals, *, weights: np.ndarray | None = None,
@@ -572,8 +624,10 @@ def _tests_by_plain(tester: _Tester, fams: Sequence[Sequence[Composed]], sig: Ro
     The tests are run grouped by plain design (:func:`_plain_key`, in the order the designs first appear, each
     built from its first member as before), and each design is dropped once its group is done: a design holds
     the model's basis augmented by the plain columns, an (r, rank) array per design - keeping every design
-    of the library alive made the memory of a round grow by dozens of times the decimated system. The tests
-    themselves are the same computations, so the outputs are the same numbers."""
+    of the library alive made the memory of a round grow by dozens of times the decimated system. Within a
+    group, the members with the same number of columns are tested together (:meth:`_Tester.batch`, at most
+    :data:`BATCH_COLUMNS` stacked columns at a time): the same formulas as one test at a time, equal to
+    rounding."""
     groups: dict[tuple, list[tuple[int, int]]] = {}
     for f, fam in enumerate(fams):
         for i, c in enumerate(fam):
@@ -583,9 +637,20 @@ def _tests_by_plain(tester: _Tester, fams: Sequence[Sequence[Composed]], sig: Ro
         f0, i0 = members[0]
         c0 = fams[f0][i0]
         base = tester.with_plain(np.hstack([c0.plain_columns(sig), c0.confounder_columns(sig)]))
+        by_width: dict[int, list] = {}
         for f, i in members:
-            c = fams[f][i]
-            outs[f, i] = tester(c.columns(sig), c.joint, base=base)
+            by_width.setdefault(len(fams[f][i].names()), []).append((f, i))
+        # at most BATCH_COLUMNS stacked columns (and half the basis's) at a time: a batch's arrays
+        # stay a fraction of the basis held beside them
+        width = min(BATCH_COLUMNS, max(1, base[0].shape[1] // 2))
+        for p, keys in by_width.items():
+            size = max(1, width // p)
+            for s in range(0, len(keys), size):
+                chunk = keys[s:s + size]
+                X = np.empty((sig.n_rows, p * len(chunk)))
+                for n, (f, i) in enumerate(chunk):
+                    X[:, n * p:(n + 1) * p] = fams[f][i].columns(sig)
+                outs.update(zip(chunk, tester.batch(X, p, c0.joint, base)))
         del base
     return outs
 

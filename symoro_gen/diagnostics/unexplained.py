@@ -69,7 +69,8 @@ import numpy as np
 
 from .stability import N_FOLDS, blocked_folds, time_blocks
 
-__all__ = ["MIN_SHARE", "NULL_MARGIN", "FoldFits", "Unexplained", "greedy_round", "joint_weighted_residual", "refit_without",
+__all__ = ["MIN_SHARE", "NULL_MARGIN", "FoldFits", "Unexplained", "greedy_round", "joint_weighted_residual",
+           "permutation_importance", "refit_without",
            "rows_to_samples", "signal_matrix", "unexplained_by_joint", "unexplained_structure"]
 
 #: smallest share of residual variance ever flagged
@@ -454,25 +455,38 @@ def unexplained_structure(residual: np.ndarray, features: np.ndarray, names: Seq
         flagged = share > thr
         sigs: tuple = ()
         if flagged and signals:
-            base = _r2(e, pred)
-            imp = np.zeros(X.shape[1])
             rng_imp = np.random.default_rng([seed, int(j)])   # the null draws do not depend on ``signals``
-            from threadpoolctl import threadpool_limits
-
-            with threadpool_limits(limits=1, user_api="openmp"):
-                for c in range(X.shape[1]):
-                    p2 = np.empty_like(e)
-                    for (_tr, te), m in zip(folds, models):
-                        Xt = X[te].copy()
-                        Xt[:, c] = rng_imp.permutation(Xt[:, c])
-                        p2[te] = m.predict(Xt)
-                    imp[c] = max(base - _r2(e, p2), 0.0)
+            imp = permutation_importance(X, e, folds, models, _r2(e, pred), rng_imp)
             tot = imp.sum()
             if tot > 0:
                 ordr = np.argsort(-imp)
                 sigs = tuple(names[c] for c in ordr[:MAX_SIGNALS] if imp[c] >= IMPORTANCE_SHARE * tot)
         out.append(Unexplained(int(j) + 1, share, float(thr), bool(flagged), sigs))
     return out
+
+
+def permutation_importance(X: np.ndarray, e: np.ndarray, folds: Sequence, models: Sequence, base: float,
+                           rng: np.random.Generator) -> np.ndarray:
+    """Drop of the out-of-fold ``R^2`` (from ``base``) when each column of ``X`` is permuted in the held-out
+    block of every fold (Breiman 2001), at least 0. The permutations are drawn column by column, fold by fold
+    from ``rng``; each fold's model then predicts its held-out rows with every column permuted in one call
+    (the rows stacked, one block per column): a tree ensemble predicts each row on its own, so the predictions
+    are those of one call per column and fold, value for value (``tests/diagnostics/test_unexplained_speed.py``).
+    """
+    from threadpoolctl import threadpool_limits
+
+    ncol = X.shape[1]
+    perms = [[rng.permutation(X[te, c]) for _tr, te in folds] for c in range(ncol)]
+    P = np.empty((ncol, e.size))
+    with threadpool_limits(limits=1, user_api="openmp"):
+        for k, ((_tr, te), m) in enumerate(zip(folds, models)):
+            Xt = X[te]
+            n = Xt.shape[0]
+            Xs = np.tile(Xt, (ncol, 1))
+            for c in range(ncol):
+                Xs[c * n:(c + 1) * n, c] = perms[c][k]
+            P[:, te] = m.predict(Xs).reshape(ncol, n)
+    return np.array([max(base - _r2(e, P[c]), 0.0) for c in range(ncol)])
 
 
 #: rounding guard of the fold bounds' comparisons (a sum of squares accumulated fold by fold against the

@@ -6,6 +6,8 @@
 * :func:`symoro_gen.diagnostics.unexplained.binned_hgb_class` bins equal training rows once: its trees must
   predict exactly what scikit-learn's own ``HistGradientBoostingRegressor`` predicts (same settings, same
   seed), for several targets fitted on the same rows (the cache's hits) and on other rows (its misses).
+* :func:`symoro_gen.diagnostics.unexplained.permutation_importance` predicts every permuted column of a fold in
+  one call: the importances must be those of one prediction per column and fold, value for value.
 """
 from __future__ import annotations
 
@@ -116,3 +118,35 @@ def test_fold_bound_only_falls_to_the_complete_share():
     np.testing.assert_array_equal(f.pred, pred)
     assert np.all(np.diff(bounds) <= 0)
     assert bounds[-1] == pytest.approx(1 - np.sum((E[:, 0] - pred) ** 2) / np.sum((E[:, 0] - E[:, 0].mean()) ** 2))
+
+
+def test_stacked_permutation_importance_is_the_column_by_column_loop():
+    """The importances from one stacked prediction per fold equal, bit for bit, the loop that permutes one column
+    of one fold's held-out rows at a time and predicts it (the same draws, in the same order)."""
+    rng = np.random.default_rng(5)
+    s = 500
+    X = np.column_stack([rng.standard_normal((s, 5)), np.linspace(0.0, 5.0, s)])
+    e = np.sin(2 * X[:, 0]) * X[:, 1] + 0.2 * X[:, 5] + 0.1 * rng.standard_normal(s)
+    folds = blocked_folds(time_blocks(np.zeros(s, int), np.arange(s), 5))
+    U.binned_hgb_class()                  # scikit-learn loaded before the one-thread limit
+    with threadpool_limits(limits=1, user_api="openmp"):
+        fits = U.FoldFits(X, e, folds, 0).finish()
+    models = fits.models
+
+    def r2(p):
+        return 1.0 - float(np.sum((e - p) ** 2)) / float(np.sum((e - e.mean()) ** 2))
+
+    base = r2(fits.pred)
+    got = U.permutation_importance(X, e, folds, models, base, np.random.default_rng([0, 2]))
+    ref = np.zeros(X.shape[1])
+    draws = np.random.default_rng([0, 2])
+    with threadpool_limits(limits=1, user_api="openmp"):
+        for c in range(X.shape[1]):
+            p2 = np.empty_like(e)
+            for (_tr, te), m in zip(folds, models):
+                Xt = X[te].copy()
+                Xt[:, c] = draws.permutation(Xt[:, c])
+                p2[te] = m.predict(Xt)
+            ref[c] = max(base - r2(p2), 0.0)
+    np.testing.assert_array_equal(got, ref)
+    assert ref[0] > 0.1 and ref[1] > 0.01      # the signals the residual depends on matter
