@@ -38,8 +38,6 @@ def options_from_args(args) -> IdentifyOptions:
 def run(args) -> int:
     """Run ``identify``: the workflow, then its outputs; 0 on success."""
     if args.report:  # before the long computation: a bad suffix or a missing matplotlib fails at once
-        if load_robot(args.robot).floating:
-            raise OptionError(f"{args.robot}: --report is not available for a floating-base robot yet (use --json)")
         check_report_path(args.report)
         require_matplotlib()
     opts = options_from_args(args)

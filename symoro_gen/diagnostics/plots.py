@@ -13,7 +13,7 @@ from ..atomic import check_replaceable, mark_png, write_bytes_atomic, written_by
 from ..report import Figure, MissingDependencyError, require_matplotlib
 from .render import diagnosis_blocks
 
-__all__ = ["existing_plots", "write_plots"]
+__all__ = ["existing_plots", "write_figures", "write_plots"]
 
 #: every figure of a diagnosis is named ``diagnosis-*.png``; older ones in the folder are replaced
 STEM = "diagnosis-"
@@ -44,6 +44,13 @@ def write_plots(report, folder, *, force: bool = False) -> list[Path]:
     except MissingDependencyError:
         return []
     figures = [b for b in diagnosis_blocks(report, [], plots=True) if isinstance(b, Figure)]
+    return write_figures(figures, folder, force=force)
+
+
+def write_figures(figures: list[Figure], folder, *, force: bool = False) -> list[Path]:
+    """Write ``figures`` (named ``diagnosis-*``) as ``folder/<name>.png``, after the rule of :func:`write_plots`:
+    an existing ``diagnosis-*.png`` symoro-gen did not write stops everything without ``force``, and those of an
+    earlier diagnosis that these figures do not replace are removed."""
     folder = Path(folder)
     for old in existing_plots(folder):  # replaced or removed below: only symoro-gen's, unless force
         check_replaceable(old, force, label="plot")

@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from scipy import stats
 from ..description.identity import robot_id
 from ..diagnostics.candidates import CONTACT_KINDS
 from ..diagnostics.core import DiagnoseSettings, diagnose
+from ..diagnostics.plots import write_figures
 from ..diagnostics.report import ResidualReport
 from ..errors import DataFileError, OptionError, Problem
 from ..identification.floating import (
@@ -45,8 +47,10 @@ from ..observations.options import AssemblyOptions
 from ..preprocessing.filtering import parallel_decimate
 from ..preprocessing.floating import FloatingSignals, filter_floating, read_floating
 from ..preprocessing.trajectory import Trajectory
+from ..report.plots import MissingDependencyError
 from .base import SCHEMA_VERSION, Options, Results, provenance
 from .contact_candidates import ContactLog, ContactRows
+from .floating_report import diagnose_figures, identify_figures, write_floating_report
 
 __all__ = ["FloatingIdentifyResults", "FloatingDiagnoseResults", "identify_floating_logs", "diagnose_floating_logs",
            "contact_checks", "row_loop", "BASE_ROWS", "LOOP_CANDIDATES", "refused_options"]
@@ -161,6 +165,16 @@ def _rel_err(Y: NDArray[np.float64], Yhat: NDArray[np.float64]) -> list[float]:
     return [float(a / b) if b > 0 else float("nan") for a, b in zip(num, den)]
 
 
+def predicted_rows(fit: FloatingIdentification, rows: Sequence[FloatingRows], sel: slice
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The measured rows ``Y`` (k, m) of the row positions ``sel`` of the decimated system and the model's
+    ``W chi`` with the identified combinations (the rows :func:`_errors` compares)."""
+    W = np.concatenate([r.W[:, sel][:, :, fit.columns] for r in rows])
+    Y = np.concatenate([r.Y[:, sel] for r in rows])
+    Yhat: NDArray[np.float64] = W @ fit.result.values
+    return Y, Yhat
+
+
 def _errors(fit: FloatingIdentification, rows: Sequence[FloatingRows], sel: slice) -> tuple[list[float], list[float]]:
     """Per row position: the relative error norm on the decimated rows and on the full-rate (raw) rows."""
     cols, x = fit.columns, fit.result.values
@@ -209,7 +223,8 @@ class FloatingIdentifyResults(Results):
         """``K @ chi_std``: what the identified values estimate."""
         return self.fit.combinations(chi_std)
 
-    def _files(self) -> list[dict]:
+    def files(self) -> list[dict]:
+        """Per identification log: what was read and how it was filtered (``floating.files`` of the JSON)."""
         out = []
         for r in self.rows:
             s, st = r.signals, r.signals.settings
@@ -236,7 +251,7 @@ class FloatingIdentifyResults(Results):
             "not_identifiable": list(self.fit.not_identifiable),
             "standard_names": list(self.model.STANDARD_NAMES),
             "relations": [[json_float(v) for v in row] for row in K],
-            "files": self._files()}
+            "files": self.files()}
         if self.validation is not None:
             v = self.validation
             out["validation"] = {"data": list(v["data"]), "rel_err": [json_float(x) for x in v["rel_err"]],
@@ -275,13 +290,31 @@ class FloatingIdentifyResults(Results):
             lines.append("  raw, full rate:      " + "  ".join(f"{x:.4f}" for x in self.validation["rel_err_raw"]))
         lines.append("")
         lines.append("Data (floating-base logs):")
-        for f in self._files():
+        for f in self.files():
             lines.append(f"  {f['file']}: {f['rows_read']} samples -> {f['rows']} rows; contacts "
                          f"{', '.join(f['contacts']) or 'none'}; torques {'yes' if f['torques'] else 'no'}; base rates "
                          f"from the {f['orientation']}, acceleration from the {f['acceleration']}; cut-off "
                          f"{f['cutoff_hz']:.4g} Hz, n_d = {f['n_d']}, {f['edge_samples']} edge samples dropped"
                          + (f"; unused columns {', '.join(f['unused'])}" if f["unused"] else ""))
         return "\n".join(lines)
+
+    def row_predictions(self, validation: bool = False) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(Y, W chi)`` (k, rows identified) on the decimated rows of the identification logs, or of the
+        validation logs with ``validation`` (:func:`predicted_rows`)."""
+        if validation and self.validation is None:
+            raise OptionError("row_predictions(validation=True): this result has no validation logs")
+        rows = self.validation["rows"] if validation and self.validation is not None else self.rows
+        return predicted_rows(self.fit, rows, ROWS[self.kind])
+
+    def figures(self) -> list:
+        """Each row's measured and modelled values (on the validation logs when given), the relative error per
+        row, the combinations with 2 sigma bars (:func:`~symoro_gen.workflows.floating_report.identify_figures`)."""
+        return [f.figure for f in identify_figures(self)]
+
+    def report(self, path: Any, *, force: bool = False) -> Path:
+        """The summary, the errors per row, the combinations with their standard deviations and the figures,
+        ``.html`` or ``.md`` (:func:`~symoro_gen.workflows.floating_report.identify_report`)."""
+        return write_floating_report(path, self, force=force)
 
 
 def identify_floating_logs(robot: Any, model: Any, data: Sequence, validate: Sequence, opts: Any
@@ -603,11 +636,30 @@ class FloatingDiagnoseResults(Results):
         lines += _loop_lines(self.loop, self.loop_note)
         return "\n".join(lines)
 
-    def write_plots(self, folder: Any, *, force: bool = False) -> list:
-        raise OptionError("--plots is not available for a floating-base robot yet")
+    @property
+    def level(self) -> float:
+        """The contact checks' Bonferroni level: ``significance`` over the number of candidates."""
+        return self.significance / max(sum(1 for c in self.checks if c["kind"] == "base"), 1)
 
-    def report(self, path: Any, *, force: bool = False) -> Any:
-        raise OptionError("--report is not available for a floating-base robot yet")
+    def figures(self) -> list:
+        """The validation error per row before and after the loop with the effects named per row, or the contact
+        checks' p-values (:func:`~symoro_gen.workflows.floating_report.diagnose_figures`)."""
+        return [f.figure for f in diagnose_figures(self)]
+
+    def write_plots(self, folder: Any, *, force: bool = False) -> list[Path]:
+        """The figures as ``diagnosis-*.png`` files in ``folder`` (``--plots``:
+        :func:`~symoro_gen.diagnostics.plots.write_figures`; empty without matplotlib)."""
+        try:
+            figures = diagnose_figures(self)
+        except MissingDependencyError:
+            return []
+        return write_figures(figures, folder, force=force)
+
+    def report(self, path: Any, *, force: bool = False) -> Path:
+        """The effects with their verdicts, the unexplained check, the errors per row before and after (or the
+        contact checks) and the figures, ``.html`` or ``.md``
+        (:func:`~symoro_gen.workflows.floating_report.diagnose_report`)."""
+        return write_floating_report(path, self, force=force)
 
 
 def diagnose_floating_logs(robot: Any, model: Any, data: Sequence, opts: Any) -> FloatingDiagnoseResults:
