@@ -321,7 +321,9 @@ def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> Any:
     if robot.floating:  # the contact-sensor checks per kind of rows (workflows/floating.py)
         if validate or loaded_data or opts.payload:
             raise OptionError(f"{robot.file or robot.name}: diagnose of a floating-base robot takes its logs, "
-                              "--cutoff, --decimate and --significance; not --validate, --loaded or --payload")
+                              "--cutoff, --decimate, --significance and the outputs --json, --report, --plots; "
+                              "not --validate (the loop validates on the last share of each log), --loaded or "
+                              "--payload (the logs have no payload columns)")
         return diagnose_floating_logs(robot, model, data, opts)
     ident, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
     loaded, rep_l = (as_trajectories(list(loaded_data), opts.data_format, robot, loaded=True)
