@@ -26,6 +26,7 @@ from .. import __version__
 from ..report.document import (
     Figure,
     Heading,
+    ItemList,
     Paragraph,
     Preformatted,
     Report,
@@ -207,8 +208,8 @@ def _effect_where(d: Mapping[str, Any]) -> str:
 
 
 def loop_errors_figure(name: str, title: str, loop: Mapping[str, Any], *, dpi: int = DPI) -> Figure:
-    """The loop's validation error per row before and after, each effect's label written above its row (a contact
-    sensor's effect, on every row its wrench reaches, in the upper left corner)."""
+    """The loop's validation error per row before and after, each effect's label (and verdict) written above its
+    row (a contact sensor's effect, on every row its wrench reaches, in the upper left corner)."""
     fig, axes = figure_and_axes(1, 1, ax_h=2.4, gap=0.0, top=0.35, bottom=0.45, dpi=dpi, right=2.6)
     ax = axes[0][0]
     rows = list(loop["rows"])
@@ -219,10 +220,11 @@ def loop_errors_figure(name: str, title: str, loop: Mapping[str, Any], *, dpi: i
     per_row: dict[str, list[str]] = {}
     sensors = []
     for d in loop["effects"]:
+        label = d["label"] + (f" ({d['verdict']})" if d.get("verdict") else "")
         if d.get("row"):
-            per_row.setdefault(d["row"], []).append(d["label"])
+            per_row.setdefault(d["row"], []).append(label)
         else:
-            sensors.append(d["label"])
+            sensors.append(label)
     for row, labels in per_row.items():
         i = rows.index(row)
         ax.text(i, 1.02 * top, "\n".join(labels), ha="center", va="bottom", fontsize=7, rotation=0)
@@ -304,6 +306,10 @@ def diagnose_report(res: FloatingDiagnoseResults, *, plots: bool = True) -> Repo
     if loop is not None:
         blocks += [Heading("Effects"), _effects_table(loop) if loop["effects"] else
                    Paragraph("No effect beyond the noise on any row.")]
+        reasons = [f"{d['label']}: {d['verdict']}, {d['verdict_reason']}" for d in loop["effects"]
+                   if d.get("verdict_reason")]
+        if reasons:
+            blocks += [ItemList(tuple(reasons))]
         flagged = [u for u in loop["unexplained"] if u["flagged"]]
         blocks += [Heading("Unexplained structure"),
                    Table(("row", "out-of-fold R²", "threshold", "flagged", "signals"),

@@ -149,7 +149,7 @@ def test_diagnose_plot_names_the_effect_on_its_row(hopper, tmp_path):
     eff = loop["effects"][0]
     (pname, value), = eff["params"].items()
     assert f"{pname} {fmt_value(value)} ± {fmt_value(eff['std'][pname])}" in html
-    assert f"<td>{eff['verdict']}</td>" in html
+    assert f"<td>{eff['verdict']}</td>" in html and eff["verdict_reason"].split(",")[0] in html
     files = res.write_plots(tmp_path / "plots")
     assert [p.name for p in files] == ["diagnosis-floating-rows.png"]
 
@@ -204,3 +204,25 @@ def test_report_path_rules(fitted, tmp_path):
     with pytest.raises(ReportError):
         fitted.report(tmp_path / "r.txt")
     assert not list(Path(tmp_path).iterdir())
+
+
+def test_quadruped_joint_rows_plot_and_report(tmp_path):
+    """The quadruped-like tree (12 joints, contacts at two knees), its joint rows with a validation log: one
+    subplot per joint row, each giving the validation error of the JSON; the Markdown report's table holds every
+    combination's value and sigma."""
+    robot = load_robot(Path(__file__).parent / "quadruped.toml")
+    contacts = {"frame3": 3, "frame9": 9}
+    simulate_log(robot, tmp_path / "a.csv", seed=11, duration=10.0, fs=200.0, contacts=contacts)
+    simulate_log(robot, tmp_path / "b.csv", seed=11, duration=6.0, fs=200.0, contacts=contacts)
+    res = identify(robot.file, [str(tmp_path / "a.csv")], validate=[str(tmp_path / "b.csv")], kind="joints")
+    d = res.to_dict()
+    assert d["floating"]["rows"] == [f"tau{j}" for j in range(1, 13)]
+    curves = res.plot()[0]
+    axes = [ax for ax in curves.axes if ax.get_visible()]
+    assert len(axes) == 12
+    for ax, err in zip(axes, d["validation"]["rel_err"]):
+        m, y = (np.asarray(line.get_ydata()) for line in ax.lines[:2])
+        assert _rel(m, y) == pytest.approx(err, rel=1e-9)
+    md = res.report(tmp_path / "q.md").read_text()
+    for name, v, s in zip(d["parameters"]["names"], d["parameters"]["values"], d["parameters"]["std"]):
+        assert f"| {name} | {fmt_value(v)} | {fmt_value(s)} |" in md
