@@ -49,6 +49,9 @@ P_FLOOR = 1e-300
 #: the bar colours of the error series: light the identification logs, dark the validation ones
 SERIES_COLORS = ("#bdbdbd", "#64b5f6", "#616161", "#0d47a1")
 
+#: the row kinds of ``--kind`` in words
+_KIND_WORDS = {"base": "base-wrench", "joints": "joint", "both": "base-wrench and joint"}
+
 
 def _stride(m: int, max_points: int) -> int:
     return max(1, int(math.ceil(m / max(int(max_points), 1))))
@@ -149,7 +152,7 @@ def identify_figures(res: FloatingIdentifyResults, *, dpi: int = DPI) -> list[Fi
     share = "validation logs" if on_validation else "identification logs"
     err = res.validation["rel_err"] if res.validation is not None else res.rel_err[0]
     r = res.fit.result
-    return [rows_figure("floating-rows", f"{res.robot.name}: the {res.kind} rows, measured and modelled ({share})",
+    return [rows_figure("floating-rows", f"{res.robot.name}: the {_KIND_WORDS.get(res.kind, res.kind)} rows, measured and modelled ({share})",
                         Y, Yhat, res.row_names, err, dpi=dpi),
             row_errors_figure("floating-row-errors", f"{res.robot.name}: relative error norm per row", res.row_names,
                               _error_series(res), dpi=dpi),
@@ -179,7 +182,7 @@ def identify_report(res: FloatingIdentifyResults, *, plots: bool = True) -> Repo
     combinations with their standard deviations, the figures, the not identifiable parameters, the text."""
     r = res.fit.result
     files = res.files()
-    intro = (f"The {res.kind} rows ({' '.join(res.row_names)}) of {res.robot.name} identified by "
+    intro = (f"The {_KIND_WORDS.get(res.kind, res.kind)} rows ({' '.join(res.row_names)}) of {res.robot.name} identified by "
              f"{r.method.upper()} ({res.weighting} weighting): {len(r.names)} identifiable combinations of the "
              f"{len(res.model.STANDARD_NAMES)} standard parameters, from {len(files)} log(s)"
              + (f", validated on {', '.join(map(str, res.validation['data']))}" if res.validation else "") + ".")
