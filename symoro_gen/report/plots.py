@@ -110,7 +110,8 @@ def _grid(n: int) -> tuple[int, int]:
 
 def torque_figure(name: str, title: str, measured: np.ndarray, reconstructed: np.ndarray, joint: np.ndarray,
                   n_joints: int, *, rel_err: Sequence[float] | None = None, ylabel: str = "torque [N·m]",
-                  caption: str | None = None, max_points: int = MAX_POINTS, dpi: int = DPI) -> Figure:
+                  caption: str | None = None, max_points: int = MAX_POINTS, dpi: int = DPI,
+                  panels: Sequence[str] | None = None) -> Figure:
     """Measured and reconstructed torque, one subplot per joint, against the sample number.
 
     Parameters
@@ -126,6 +127,8 @@ def torque_figure(name: str, title: str, measured: np.ndarray, reconstructed: np
         Default: the title and what the curves are.
     max_points : int
         Most samples drawn per curve.
+    panels : sequence of str, optional
+        Each subplot's name (default ``joint j``; a floating-base robot's row names).
 
     Returns
     -------
@@ -149,7 +152,7 @@ def torque_figure(name: str, title: str, measured: np.ndarray, reconstructed: np
         idx = np.arange(rows.size)[::k]
         ax.plot(idx, measured[rows][::k], color=MEASURED, lw=1.0, label="measured")
         ax.plot(idx, reconstructed[rows][::k], color=RECONSTRUCTED, lw=1.0, ls="--", label="reconstructed (IDM)")
-        t = f"joint {j + 1}"
+        t = panels[j] if panels is not None else f"joint {j + 1}"
         if rel_err is not None and j < len(rel_err) and np.isfinite(rel_err[j]):
             t += f"   ‖ρ‖/‖Y‖ = {rel_err[j]:.4f}"
         ax.set_title(t, fontsize=10, loc="left")

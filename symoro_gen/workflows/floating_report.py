@@ -34,7 +34,7 @@ from ..report.document import (
     check_report_path,
     write_report_files,
 )
-from ..report.plots import DPI, MAX_POINTS, figure_and_axes, figure_png, require_matplotlib
+from ..report.plots import DPI, MAX_POINTS, figure_and_axes, figure_png, require_matplotlib, torque_figure
 from ..report.tables import fmt_err, fmt_pct, fmt_value, is_poor, warnings_block
 
 if TYPE_CHECKING:  # the results objects hold report() and figures(), which call this module
@@ -43,7 +43,6 @@ if TYPE_CHECKING:  # the results objects hold report() and figures(), which call
 __all__ = ["rows_figure", "row_errors_figure", "parameters_figure", "identify_figures", "identify_report",
            "loop_errors_figure", "checks_figure", "diagnose_figures", "P_FLOOR", "diagnose_report", "write_floating_report"]
 
-MEASURED, MODEL = "#1f77b4", "#d62728"
 #: the smallest p-value drawn (``-log10 p`` at most 300): an F test's p underflows to 0 for a gross effect
 P_FLOOR = 1e-300
 #: the bar colours of the error series: light the identification logs, dark the validation ones
@@ -53,41 +52,20 @@ SERIES_COLORS = ("#bdbdbd", "#64b5f6", "#616161", "#0d47a1")
 _KIND_WORDS = {"base": "base-wrench", "joints": "joint", "both": "base-wrench and joint"}
 
 
-def _stride(m: int, max_points: int) -> int:
-    return max(1, int(math.ceil(m / max(int(max_points), 1))))
-
-
 def rows_figure(name: str, title: str, Y: np.ndarray, Yhat: np.ndarray, row_names: Sequence[str],
                 rel_err: Sequence[float], *, max_points: int = MAX_POINTS, dpi: int = DPI) -> Figure:
-    """Measured rows ``Y`` and the model's ``W chi`` (both ``(k, m)``), one subplot per row position, against the
-    decimated sample; each subplot titled with its row's relative error norm ``rel_err``."""
-    m = len(row_names)
-    ncols = 1 if m <= 3 else 2
-    nrows = int(math.ceil(m / ncols))
-    fig, axes = figure_and_axes(nrows, ncols, ax_h=1.2, gap=0.6, top=0.6, bottom=0.85, dpi=dpi)
-    k = _stride(Y.shape[0], max_points)
-    idx = np.arange(Y.shape[0])[::k]
-    for i in range(nrows * ncols):
-        ax = axes[i // ncols][i % ncols]
-        if i >= m:
-            ax.set_visible(False)
-            continue
-        ax.plot(idx, Y[::k, i], color=MEASURED, lw=1.0, label="measured")
-        ax.plot(idx, Yhat[::k, i], color=MODEL, lw=1.0, ls="--", label="model W chi")
-        err = rel_err[i] if i < len(rel_err) else float("nan")
-        ax.set_title(f"{row_names[i]}" + (f"   ‖ρ‖/‖Y‖ = {err:.4f}" if np.isfinite(err) else ""), fontsize=10,
-                     loc="left")
-        ax.grid(True, color="#e0e0e0", lw=0.6)
-        ax.tick_params(labelsize=8)
-        ax.set_ylabel("N or N·m", fontsize=8)
-    fig.suptitle(title, fontsize=11, y=1 - 0.12 / fig.get_figheight(), va="top")
-    handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", bbox_to_anchor=(0.5, 0.04 / fig.get_figheight()), ncol=2,
-               fontsize=8, frameon=False)
+    """Measured rows ``Y`` and the model's ``W chi`` (both ``(m, k)``: samples by row positions), one subplot per
+    row position, against the decimated sample (:func:`symoro_gen.report.plots.torque_figure`, its panels named by
+    row); each subplot titled with its row's relative error norm ``rel_err``."""
+    Y, Yhat = np.asarray(Y, float), np.asarray(Yhat, float)
+    k = len(row_names)
+    stride = max(1, math.ceil(Y.shape[0] / max(int(max_points), 1)))
     cap = (f"{title}. Blue: the measured row (joint torques and contact wrenches carried by the frames' Jacobians); "
            "red dashed: the model with the identified combinations; x axis: decimated samples, logs one after the "
-           "other" + (f" (one sample in {k} drawn)" if k > 1 else "") + ".")
-    return Figure(name, figure_png(fig, dpi), cap, figure=fig)
+           "other" + (f" (one sample in {stride} drawn)" if stride > 1 else "") + ".")
+    return torque_figure(name, title, Y.ravel(), Yhat.ravel(), np.tile(np.arange(k), Y.shape[0]), k,
+                         rel_err=list(rel_err), ylabel="N or N·m", caption=cap, max_points=max_points, dpi=dpi,
+                         panels=row_names)
 
 
 def _bars(ax, labels: Sequence[str], series: Sequence[tuple[str, Sequence[float]]]) -> None:
