@@ -14,6 +14,7 @@ peak resident memory is read by the parent from ``resource.getrusage(RUSAGE_CHIL
 intermediate process per run, so the figure is that run's own).
 
     PYTHONPATH=. python bench/bench_diagnose_speed.py [--case rx90 lwr4] [--scale 1.0] [--stages]
+        [--commands [--anchor-tree DIR]]
 
 ``--scale`` shortens the recordings (e.g. 0.2 for a quick look). ``--stages`` also prints the CPU time of
 each stage of ``diagnose`` and its counts of model fits (a second diagnose run, with the stage functions of
@@ -22,6 +23,14 @@ out-of-fold least-squares solves (``BlockedLS.oof_residual``, one per candidate 
 friction-law stage's simulated-noise placebos and its law selections (the placebo's re-runs included), and
 the unexplained stage's tree fits (``FoldFits.step``, one fold each), against the one least-squares solve of
 ``identify``.
+
+``--commands`` also times the two commands as a user runs them (``python -m symoro_gen identify NAME
+rec.npz --method ols`` and ``python -m symoro_gen diagnose NAME rec.npz``, interpreter start, imports, loading
+and printed report included; wall time, best of ``--repeat`` runs each after one warm-up run that fills the
+bytecode caches). ``--anchor-tree DIR`` runs ``identify`` from another checkout of the project (e.g. a
+``git worktree`` of the commit the target was stated on), so the anchor is measured in the same run. CPU
+time (user + system of the command's process) is printed beside the wall time: on a shared machine it is
+the steadier of the two.
 """
 from __future__ import annotations
 
@@ -170,11 +179,49 @@ def measured(command: str, path: str) -> dict:
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
+def command_time(argv: list[str], tree: Path, repeat: int) -> tuple[float, float, float]:
+    """Best wall and CPU time [s] of ``python -m symoro_gen *argv`` run from ``tree`` (after one warm-up run)
+    and the largest peak RSS [GB] of those runs."""
+    code = ("import resource, subprocess, sys, time\n"
+            "w = time.perf_counter()\n"
+            f"p = subprocess.run([sys.executable, '-m', 'symoro_gen', *{argv!r}], capture_output=True, text=True)\n"
+            "w = time.perf_counter() - w\n"
+            "if p.returncode not in (0, 3):\n"
+            "    sys.stderr.write(p.stdout[-2000:] + p.stderr[-3000:]); sys.exit(1)\n"
+            "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+            "print(w, u.ru_utime + u.ru_stime, u.ru_maxrss)\n")
+    env = {**__import__("os").environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1"}
+    best, cpu, rss = float("inf"), float("inf"), 0.0
+    for k in range(repeat + 1):
+        p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=str(tree), env=env)
+        if p.returncode:
+            raise RuntimeError(f"{' '.join(argv)} failed in {tree}:\n{p.stderr[-3000:]}")
+        w, c, kb = p.stdout.split()
+        if k:                                   # the first run is the warm-up
+            best, cpu, rss = min(best, float(w)), min(cpu, float(c)), max(rss, int(kb) / 2 ** 20)
+    return best, cpu, rss
+
+
+def commands(name: str, path: Path, anchor: Path, repeat: int) -> None:
+    """Print the wall times of the two commands as a user runs them, and their ratio."""
+    iw, ic, _ = command_time(["identify", name, str(path), "--method", "ols"], anchor, repeat)
+    dw, dc, rss = command_time(["diagnose", name, str(path)], ROOT, repeat)
+    where = "" if anchor.resolve() == ROOT else f" (from {anchor})"
+    print(f"  commands: identify{where} {iw:.1f} s wall {ic:.1f} s CPU, diagnose {dw:.1f} s wall {dc:.1f} s CPU, "
+          f"peak RSS {rss:.2f} GB; ratio {dw / iw:.1f} wall, {dc / ic:.1f} CPU (target <= {TARGET_RATIO:g})",
+          flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--stages", action="store_true", help="also time each stage of diagnose (a second run)")
+    ap.add_argument("--commands", action="store_true",
+                    help="also time `python -m symoro_gen identify|diagnose` end to end, as a user runs them")
+    ap.add_argument("--anchor-tree", type=Path, default=ROOT,
+                    help="checkout whose `identify` is the anchor of --commands (default: this one)")
+    ap.add_argument("--repeat", type=int, default=2, help="timed runs of each command (best kept)")
     ap.add_argument("--worker", nargs=2, metavar=("COMMAND", "NPZ"), help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker:
@@ -198,6 +245,9 @@ def main(argv=None) -> int:
             print(f"  ratio diagnose/identify (wall) {ratio:.1f} (target <= {TARGET_RATIO:g}), CPU ratio "
                   f"{diag['cpu'] / max(ident['cpu'], 1e-9):.1f}; peak RSS {rss:.2f} GB (target <= {TARGET_RSS_GB:g}) "
                   f"{'OK' if good else 'MISSED'}", flush=True)
+            if a.commands:
+                name = CASES[case][0]
+                commands(name, path, a.anchor_tree, a.repeat)
             if a.stages:
                 st = measured("diagnose-stages", str(path))
                 print(f"  diagnose by stage ({st['cpu']:.1f} s CPU in all):")
