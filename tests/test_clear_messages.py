@@ -97,6 +97,20 @@ def test_the_readme_install_routes_carry_what_the_commands_need():
     assert '".[test,plots]"' in (ROOT / "Makefile").read_text() or '".[test]"' in (ROOT / "Makefile").read_text()
 
 
+def test_the_readme_requirements_name_every_optional_extra():
+    """The README's Requirements list every optional extra of ``pyproject.toml`` by name (``bags``, which reads
+    ROS bags, was missing), so a user installing by hand sees which extra a command needs."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+
+    extras = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"])
+    requirements = (ROOT / "README.md").read_text().split("## Requirements", 1)[1].split("\n## ", 1)[0]
+    named = set(re.findall(r"`([a-z]+)` \(", requirements))
+    assert extras - {"test", "all"} <= named, f"extras not named in the README's Requirements: {sorted(extras - named)}"
+
+
 @pytest.mark.parametrize("extra, named", [
     (("--kp", "100", "--kd", "10"), "--kp, --kd"),
     (("--bandwidth", "5"), "--bandwidth"),
