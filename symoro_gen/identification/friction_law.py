@@ -151,10 +151,11 @@ class LawSplicedModel:
         names = tuple(model.BASE_NAMES)
         drop = {nm for e in self.entries for nm in e.drop}
         self._keep = [i for i, nm in enumerate(names) if nm not in drop]
+        self._runs = _index_runs(self._keep)
         self.BASE_NAMES = tuple(names[i] for i in self._keep) + tuple(nm for e in self.entries for nm in e.names)
 
     def __getattr__(self, name):
-        if name.startswith("__") or name in ("_model", "entries", "_keep"):
+        if name.startswith("__") or name in ("_model", "entries", "_keep", "_runs"):
             raise AttributeError(name)
         return getattr(self._model, name)
 
@@ -169,13 +170,30 @@ class LawSplicedModel:
         if single:
             q, dq, ddq = q[None], dq[None], ddq[None]
         R = np.asarray(self._model.regressor(q, dq, ddq), float)
-        parts = [R[:, :, self._keep]]
+        # the kept columns copied by their contiguous runs and each entry's columns written on its joint's rows
+        # of one output array (no gathered copy, no per-entry zero block, no concatenation)
+        out = np.empty((R.shape[0], R.shape[1], len(self.BASE_NAMES)))
+        for o, a, b in self._runs:
+            out[:, :, o:o + b - a] = R[:, :, a:b]
+        c = len(self._keep)
+        out[:, :, c:] = 0.0
         for e in self.entries:
-            C = np.zeros((R.shape[0], R.shape[1], len(e.names)))
-            C[:, e.joint, :] = e.columns(dq[:, e.joint])
-            parts.append(C)
-        out = np.concatenate(parts, axis=2)
+            k = len(e.names)
+            out[:, e.joint, c:c + k] = e.columns(dq[:, e.joint])
+            c += k
         return out[0] if single else out
+
+
+def _index_runs(idx: Sequence[int]) -> list[tuple[int, int, int]]:
+    """``(output position, start, stop)`` of the contiguous runs of the increasing indices ``idx``."""
+    runs: list[tuple[int, int, int]] = []
+    for pos, i in enumerate(idx):
+        if runs and runs[-1][2] == i:
+            o, a, _ = runs[-1]
+            runs[-1] = (o, a, i + 1)
+        else:
+            runs.append((pos, i, i + 1))
+    return runs
 
 
 class LawDeclaredModel(LawSplicedModel):
