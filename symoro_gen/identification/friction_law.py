@@ -198,7 +198,8 @@ class LawSplicedModel:
         buf = self._scratch.get(key)
         if buf is None or buf.shape[0] < q.shape[0] or buf.shape[1:] != (n, nb):
             buf = self._scratch[key] = np.empty((q.shape[0], n, nb))
-        return np.asarray(self._model.regressor(q, dq, ddq, out=buf[:q.shape[0]]), float)
+        fill: Callable[..., np.ndarray] = self._model.regressor     # takes ``out`` (checked by _takes_out)
+        return np.asarray(fill(q, dq, ddq, out=buf[:q.shape[0]]), float)
 
 
 #: largest wrapped regressor written into the buffer :class:`LawSplicedModel` keeps per thread
