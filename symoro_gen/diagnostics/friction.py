@@ -665,8 +665,10 @@ class _FullRatePieces:
     replicate of the simulated-noise placebo. A piece is the very array the column's definition
     (:func:`coulomb_columns`, :func:`viscous_columns`) computes, so the columns are the same numbers.
 
-    Keyed by the identity of the velocity array, which is kept (its id stays unique while it is held);
-    the least recently used pieces are dropped beyond :data:`FULL_RATE_PIECES_BYTES`."""
+    Keyed by the identity of the velocity array, which is kept (its id stays unique while it is held), and
+    only for a read-only array (the friction stage's hook passes its sliding velocities so): a writeable one
+    could change between two calls, its pieces are computed afresh. The least recently used pieces are
+    dropped beyond :data:`FULL_RATE_PIECES_BYTES`."""
 
     def __init__(self) -> None:
         self._d: dict = {}
@@ -677,6 +679,8 @@ class _FullRatePieces:
         self._bytes = 0
 
     def get(self, v: np.ndarray, key: tuple, make: Callable[[], np.ndarray]) -> np.ndarray:
+        if v.flags.writeable:
+            return make()
         k = (id(v), key)
         hit = self._d.pop(k, None)
         if hit is not None and hit[0] is v:
