@@ -127,6 +127,7 @@ from .friction import (
     LawFit,
     LawModel,
     LawSearch,
+    clear_law_columns,
     coulomb_columns,
     friction_column_indices,
     rest_mask,
@@ -943,6 +944,7 @@ def _stage_friction(data: _Data, cfg: DiagnoseSettings
         if kr is not None:
             recs.append(kr[0])
             W, names = kr[1], kr[2]
+    clear_law_columns()   # the searches' law columns and full-rate pieces (the last joint's)
     if not recs:
         return replace(data, doubtful_laws=tuple(doubtful)), (), tuple(pending)
     return replace(_apply_laws(data, recs), doubtful_laws=tuple(doubtful)), tuple(recs), tuple(pending)
@@ -994,9 +996,20 @@ def _joint_friction(F: Frame, W: np.ndarray, names: list[str], j: int, dq_noise:
 
 def _sliding_columns(F: Frame, j: int) -> Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray]:
     """The ``columns`` hook of :func:`.friction.select_friction` for joint ``j``: the laws of sliding
-    friction, evaluated on the sliding velocity (0 in the joint's rest segments) at full rate."""
+    friction, evaluated on the sliding velocity (0 in the joint's rest segments) at full rate. The sliding
+    velocity of each experiment is computed once and kept by the hook (the searches evaluate many laws on it,
+    and the friction module keeps pieces of the law columns per velocity array)."""
+    vel: dict[int, np.ndarray] = {}
+
+    def sliding(e: int, ex: Experiment) -> np.ndarray:
+        v = vel.get(e)
+        if v is None:
+            v = vel[e] = sliding_velocity(ex, j)
+            v.setflags(write=False)
+        return v
+
     def cols(f: Callable[[np.ndarray], np.ndarray], p: int) -> np.ndarray:
-        return F.full_rate_columns(lambda ex: {j: f(sliding_velocity(ex, j))}, p)
+        return F.full_rate_columns(lambda ex: {j: f(sliding(id(ex), ex))}, p)
     return cols
 
 

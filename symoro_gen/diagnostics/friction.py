@@ -101,6 +101,7 @@ from ..description.friction_law import (
     SCALE_BOUNDS,
     VISCOUS_LAWS,
     coulomb_columns,
+    law_parameter,
     viscous_columns,
 )
 from ..errors import IdentificationError
@@ -124,6 +125,7 @@ __all__ = [
     "LawFit",
     "LawSearch",
     "coulomb_columns",
+    "clear_law_columns",
     "dahl_column",
     "lugre_columns",
     "friction_column_indices",
@@ -650,6 +652,97 @@ def _velocity_search_grid(dq_rows: np.ndarray, search: LawSearch) -> np.ndarray:
 _LAW_COLUMNS: dict = {}
 #: bytes of law columns kept
 LAW_COLUMNS_BYTES = 32 * 2 ** 20
+#: bytes of full-rate pieces of the law columns kept (:class:`_FullRatePieces`): 48 pieces of a 7-joint
+#: 1 kHz recording of 100 s (the Stribeck grid's ``exp`` pieces of every replicate stay)
+FULL_RATE_PIECES_BYTES = 32 * 2 ** 20
+
+
+class _FullRatePieces:
+    """Full-rate factors of the law columns (``sign(v)``, ``|v|``, ``tanh(v / s)``, ``exp(-(v / vs)^2)``) kept per
+    velocity array, so that a law evaluated again on the same velocities computes only what is new: the
+    searches of :func:`select_friction` evaluate ``tanh(v / s)`` at one ``s`` as the ``tanh`` law and again as the
+    smoothed ``sign`` of every Stribeck law, and ``exp(-(v / vs)^2)`` at every ``vs`` of the grid on each
+    replicate of the simulated-noise placebo. A piece is the very array the column's definition
+    (:func:`coulomb_columns`, :func:`viscous_columns`) computes, so the columns are the same numbers.
+
+    Keyed by the identity of the velocity array, which is kept (its id stays unique while it is held), and
+    only for a read-only array (the friction stage's hook passes its sliding velocities so): a writeable one
+    could change between two calls, its pieces are computed afresh. The least recently used pieces are
+    dropped beyond :data:`FULL_RATE_PIECES_BYTES`."""
+
+    def __init__(self) -> None:
+        self._d: dict = {}
+        self._bytes = 0
+
+    def clear(self) -> None:
+        self._d.clear()
+        self._bytes = 0
+
+    def get(self, v: np.ndarray, key: tuple, make: Callable[[], np.ndarray]) -> np.ndarray:
+        if v.flags.writeable:
+            return make()
+        k = (id(v), key)
+        hit = self._d.pop(k, None)
+        if hit is not None and hit[0] is v:
+            self._d[k] = hit              # the most recently used last
+            return hit[1]
+        if hit is not None:
+            self._bytes -= hit[2]
+        x = make()
+        size = x.nbytes
+        if size <= FULL_RATE_PIECES_BYTES:
+            while self._d and self._bytes + size > FULL_RATE_PIECES_BYTES:
+                old = self._d.pop(next(iter(self._d)))
+                self._bytes -= old[2]
+            self._d[k] = (v, x, size)
+            self._bytes += size
+        return x
+
+
+_PIECES = _FullRatePieces()
+
+
+def clear_law_columns() -> None:
+    """Drop the law columns and full-rate pieces kept by the friction-law searches (:func:`_law_columns`); the
+    friction-law stage calls it when it is done."""
+    _LAW_COLUMNS.clear()
+    _PIECES.clear()
+
+
+def _smooth_sign(v: np.ndarray, smooth: float | None) -> np.ndarray:
+    """``sign(v)``, or ``tanh(v / smooth)``, as :func:`coulomb_columns` computes it."""
+    if smooth is None:
+        return _PIECES.get(v, ("sign",), lambda: np.sign(v))
+    s = float(smooth)
+    return _PIECES.get(v, ("tanh", s), lambda: np.tanh(v / s))
+
+
+def _law_values(args: tuple, v: np.ndarray, p: int) -> np.ndarray:
+    """``np.hstack([_coulomb(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)])`` for ``args = (claw, cpar,
+    vlaw, vpar, smooth)``, the same numbers (the definitions' expressions, term by term), from the pieces kept
+    for ``v`` (:class:`_FullRatePieces`)."""
+    claw, cpar, vlaw, vpar, smooth = args
+    v = np.asarray(v, float)
+    if claw in ("dahl", "lugre") or v.ndim != 1 or vlaw not in VISCOUS_LAWS:
+        return np.hstack([_coulomb(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)])
+    out = np.empty((v.size, p))
+    if claw == "sign":
+        out[:, 0] = _smooth_sign(v, smooth)
+    elif claw == "tanh":
+        out[:, 0] = _smooth_sign(v, law_parameter(claw, cpar))
+    elif claw == "stribeck":
+        s = _smooth_sign(v, smooth)
+        vs = law_parameter(claw, cpar)
+        out[:, 0] = s
+        out[:, 1] = _PIECES.get(v, ("exp", vs), lambda: np.exp(-(v / vs) ** 2)) * s
+    else:
+        return np.hstack([_coulomb(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)])
+    if vlaw == "linear":
+        out[:, p - 1] = v
+    else:
+        out[:, p - 1] = (_PIECES.get(v, ("abs",), lambda: np.abs(v)) ** law_parameter(vlaw, vpar)
+                         * _PIECES.get(v, ("sign",), lambda: np.sign(v)))
+    return out
 
 
 def _law_columns(columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np.ndarray], args: tuple,
@@ -657,11 +750,12 @@ def _law_columns(columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np
     """``columns`` of the law ``args = (claw, cpar, vlaw, vpar, smooth)``, kept for the same hook: the
     columns depend on the law and the velocities only, not on ``y``, and the simulated-noise placebo
     re-runs the same selection (the same grid) on many ``y``; the hook builds them at full rate and
-    decimates them, which costs more than the fit. Only the non-zero rows are kept (one joint's)."""
-    claw, cpar, vlaw, vpar, smooth = args
+    decimates them, which costs more than the fit. Only the non-zero rows are kept (one joint's).
+    The full-rate values come from the pieces kept per velocity array (:func:`_law_values`)."""
     memo = _LAW_COLUMNS.get("memo") if _LAW_COLUMNS.get("hook") is columns else None
     if memo is None:
         _LAW_COLUMNS.clear()
+        _PIECES.clear()
         memo = _LAW_COLUMNS["memo"] = {}
         _LAW_COLUMNS["hook"] = columns
     hit = memo.get(args)
@@ -669,7 +763,7 @@ def _law_columns(columns: Callable[[Callable[[np.ndarray], np.ndarray], int], np
         X = np.zeros((hit[2], p))
         X[hit[0]] = hit[1]
         return X
-    X = columns(lambda v: np.hstack([_coulomb(claw, v, cpar, smooth), viscous_columns(vlaw, v, vpar)]), p)
+    X = columns(partial(_law_values, args, p=p), p)
     rows = np.flatnonzero(np.any(X != 0.0, axis=1))
     size = rows.nbytes + rows.size * p * 8
     if _LAW_COLUMNS.get("bytes", 0) + size <= LAW_COLUMNS_BYTES:     # the first selection's grid stays
@@ -690,11 +784,20 @@ class _LawSelection:
         self.fold_of = fold_of
         self.fold_ids = np.unique(fold_of)
         self.tried: list[LawFit] = []
+        self._oof: dict = {}
 
     def oof(self, claw, cpar, vlaw="linear", vpar=None, smooth=None) -> np.ndarray:
+        """Out-of-fold residual of the joint's rows with the law's columns, kept per law (the one-standard-error
+        rule and the viscous search ask again for laws already scored)."""
+        args = (claw, cpar, vlaw, vpar, smooth)
+        hit = self._oof.get(args)
+        if hit is not None:
+            return hit
         pc = 2 if claw in STRIBECK_LIKE else 1
-        X = _law_columns(self.columns, (claw, cpar, vlaw, vpar, smooth), pc + 1)
-        return self.cv.oof_residual(X, self.rows)
+        X = _law_columns(self.columns, args, pc + 1)
+        e = self._oof[args] = self.cv.oof_residual(X, self.rows)
+        e.setflags(write=False)
+        return e
 
     def err(self, *a, **k) -> float:
         e = self.oof(*a, **k)

@@ -22,7 +22,9 @@ deviation above :data:`MAX_REL_STD`), is reported and keeps its declared scale: 
 """
 from __future__ import annotations
 
+import inspect
 import math
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
@@ -151,10 +153,13 @@ class LawSplicedModel:
         names = tuple(model.BASE_NAMES)
         drop = {nm for e in self.entries for nm in e.drop}
         self._keep = [i for i, nm in enumerate(names) if nm not in drop]
+        self._runs = _index_runs(self._keep)
         self.BASE_NAMES = tuple(names[i] for i in self._keep) + tuple(nm for e in self.entries for nm in e.names)
+        self._into = _takes_out(model.regressor)
+        self._scratch: dict[int, np.ndarray] = {}
 
     def __getattr__(self, name):
-        if name.startswith("__") or name in ("_model", "entries", "_keep"):
+        if name.startswith("__") or name in ("_model", "entries", "_keep", "_runs", "_into", "_scratch"):
             raise AttributeError(name)
         return getattr(self._model, name)
 
@@ -168,14 +173,57 @@ class LawSplicedModel:
         single = q.ndim == 1
         if single:
             q, dq, ddq = q[None], dq[None], ddq[None]
-        R = np.asarray(self._model.regressor(q, dq, ddq), float)
-        parts = [R[:, :, self._keep]]
+        R = self._wrapped_regressor(q, dq, ddq)
+        # the kept columns copied by their contiguous runs and each entry's columns written on its joint's rows
+        # of one output array (no gathered copy, no per-entry zero block, no concatenation)
+        out = np.empty((R.shape[0], R.shape[1], len(self.BASE_NAMES)))
+        for o, a, b in self._runs:
+            out[:, :, o:o + b - a] = R[:, :, a:b]
+        c = len(self._keep)
+        out[:, :, c:] = 0.0
         for e in self.entries:
-            C = np.zeros((R.shape[0], R.shape[1], len(e.names)))
-            C[:, e.joint, :] = e.columns(dq[:, e.joint])
-            parts.append(C)
-        out = np.concatenate(parts, axis=2)
+            k = len(e.names)
+            out[:, e.joint, c:c + k] = e.columns(dq[:, e.joint])
+            c += k
         return out[0] if single else out
+
+    def _wrapped_regressor(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        """The wrapped model's regressor of (N, n) states; written into a buffer kept per thread when the model
+        takes ``out`` (a generated model) and it is at most :data:`SPLICE_SCRATCH_BYTES`: the splice copies it,
+        so it never leaves this call, and a batch of the next call reuses its pages."""
+        n, nb = q.shape[1], len(self._model.BASE_NAMES)
+        if not self._into or q.shape[0] * n * nb * 8 > SPLICE_SCRATCH_BYTES:
+            return np.asarray(self._model.regressor(q, dq, ddq), float)
+        key = threading.get_ident()
+        buf = self._scratch.get(key)
+        if buf is None or buf.shape[0] < q.shape[0] or buf.shape[1:] != (n, nb):
+            buf = self._scratch[key] = np.empty((q.shape[0], n, nb))
+        fill: Callable[..., np.ndarray] = self._model.regressor     # takes ``out`` (checked by _takes_out)
+        return np.asarray(fill(q, dq, ddq, out=buf[:q.shape[0]]), float)
+
+
+#: largest wrapped regressor written into the buffer :class:`LawSplicedModel` keeps per thread
+SPLICE_SCRATCH_BYTES = 8 * 2 ** 20
+
+
+def _takes_out(fn: Callable) -> bool:
+    """``fn`` has an ``out`` parameter (the generated models' ``regressor(q, dq, ddq, out=None)``)."""
+    try:
+        return "out" in inspect.signature(fn).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def _index_runs(idx: Sequence[int]) -> list[tuple[int, int, int]]:
+    """``(output position, start, stop)`` of the contiguous runs of the increasing indices ``idx``."""
+    runs: list[tuple[int, int, int]] = []
+    for pos, i in enumerate(idx):
+        if runs and runs[-1][2] == i:
+            o, a, _ = runs[-1]
+            runs[-1] = (o, a, i + 1)
+        else:
+            runs.append((pos, i, i + 1))
+    return runs
 
 
 class LawDeclaredModel(LawSplicedModel):
