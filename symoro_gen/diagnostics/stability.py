@@ -251,7 +251,7 @@ def _within_condition(Gs: np.ndarray, limit: float) -> bool:
     if p <= 3 and bool(np.all(np.isfinite(Gs))):
         if p == 1:
             if Gs[0, 0] != 0.0:
-                return 1.0 <= limit
+                return limit >= 1.0
         else:
             if p == 2:
                 det = Gs[0, 0] * Gs[1, 1] - Gs[0, 1] * Gs[1, 0]
