@@ -151,10 +151,17 @@ class LawSplicedModel:
         names = tuple(model.BASE_NAMES)
         drop = {nm for e in self.entries for nm in e.drop}
         self._keep = [i for i, nm in enumerate(names) if nm not in drop]
+        # (position in the output, first, end) of each contiguous run of kept columns
+        self._runs: list[tuple[int, int, int]] = []
+        for pos, i in enumerate(self._keep):
+            if self._runs and self._runs[-1][2] == i:
+                self._runs[-1] = (self._runs[-1][0], self._runs[-1][1], i + 1)
+            else:
+                self._runs.append((pos, i, i + 1))
         self.BASE_NAMES = tuple(names[i] for i in self._keep) + tuple(nm for e in self.entries for nm in e.names)
 
     def __getattr__(self, name):
-        if name.startswith("__") or name in ("_model", "entries", "_keep"):
+        if name.startswith("__") or name in ("_model", "entries", "_keep", "_runs"):
             raise AttributeError(name)
         return getattr(self._model, name)
 
@@ -169,12 +176,17 @@ class LawSplicedModel:
         if single:
             q, dq, ddq = q[None], dq[None], ddq[None]
         R = np.asarray(self._model.regressor(q, dq, ddq), float)
-        parts = [R[:, :, self._keep]]
+        # one output array: the kept columns copied by their contiguous runs, each entry's block zeroed and its
+        # columns written on its joint's rows (the same numbers as concatenating the parts, without the copies)
+        out = np.empty((R.shape[0], R.shape[1], len(self.BASE_NAMES)))
+        for i, a, b in self._runs:
+            out[:, :, i:i + b - a] = R[:, :, a:b]
+        c = len(self._keep)
         for e in self.entries:
-            C = np.zeros((R.shape[0], R.shape[1], len(e.names)))
-            C[:, e.joint, :] = e.columns(dq[:, e.joint])
-            parts.append(C)
-        out = np.concatenate(parts, axis=2)
+            k = len(e.names)
+            out[:, :, c:c + k] = 0.0
+            out[:, e.joint, c:c + k] = e.columns(dq[:, e.joint])
+            c += k
         return out[0] if single else out
 
 
