@@ -223,7 +223,7 @@ class _ColumnFactors:
         if not np.all(d > 0):
             return None
         Gs = G / np.outer(d, d)
-        if not _within_condition(Gs, MAX_GRAM_COND):
+        if _condition(Gs) > MAX_GRAM_COND:
             return None
         Ginv = np.linalg.inv(Gs) / np.outer(d, d)
         v = f.VS @ c
@@ -234,34 +234,6 @@ class _ColumnFactors:
             for i, a, b in sup.test_runs:
                 D[i:i + b - a] -= A[a:b] @ v
         return _ColumnFactors(sup.local, Xw_S, Ginv, D, sup.test, sup.test_pos)
-
-
-def _within_condition(Gs: np.ndarray, limit: float) -> bool:
-    """Whether ``_condition(Gs) <= limit`` for a Gram matrix ``Gs`` scaled to a unit diagonal: decided by a
-    bound where it can, by the SVD of :func:`_condition` otherwise (the same answer, without an SVD per fold
-    and column set of the friction-law search).
-
-    The eigenvalues of a symmetric positive semi-definite ``p x p`` matrix with unit diagonal sum to its trace
-    ``p`` (so ``lambda_max <= p``) and multiply to its determinant (so ``det <= lambda_min lambda_max^(p-1)``):
-    ``cond = lambda_max / lambda_min <= p^p / det`` (Horn & Johnson 2013, *Matrix Analysis*, 2nd ed.,
-    sec. 1.2). Where ``p^p / det`` is below half the limit (room for the rounding of ``det`` and of the SVD's
-    smallest singular value) the condition number is within it; a ``1 x 1`` matrix has condition number 1.
-    Otherwise, for ``p > 3`` and for entries that are not finite, the SVD decides."""
-    p = Gs.shape[0]
-    if p <= 3 and bool(np.all(np.isfinite(Gs))):
-        if p == 1:
-            if Gs[0, 0] != 0.0:
-                return limit >= 1.0
-        else:
-            if p == 2:
-                det = Gs[0, 0] * Gs[1, 1] - Gs[0, 1] * Gs[1, 0]
-            else:
-                det = (Gs[0, 0] * (Gs[1, 1] * Gs[2, 2] - Gs[1, 2] * Gs[2, 1])
-                       - Gs[0, 1] * (Gs[1, 0] * Gs[2, 2] - Gs[1, 2] * Gs[2, 0])
-                       + Gs[0, 2] * (Gs[1, 0] * Gs[2, 1] - Gs[1, 1] * Gs[2, 0]))
-            if det > 0 and float(p) ** p / float(det) <= 0.5 * limit:
-                return True
-    return _condition(Gs) <= limit
 
 
 def _condition(G: np.ndarray) -> float:
