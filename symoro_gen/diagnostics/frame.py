@@ -143,7 +143,8 @@ class Experiment:
         of ``L`` full-rate samples per kept sample (RX-90 paper sec. 4, parallel decimation), so the kept
         samples of a stretch need the columns of that stretch and of ``L - 1`` samples around it only: the
         stretches' zero-padded buffers (at most ``batch_bytes`` each, at least the filter window) go through
-        the same grouped products as the whole array, and the outputs are the same numbers. Without a FIR
+        the same grouped products as the whole array, and the outputs are the same numbers. ``fill`` writes every
+        entry of ``dst`` (only the buffer's padding is zeroed). Without a FIR
         decimation (``ftype="iir"``, ``n_d = 1``) the whole array is built and decimated."""
         st = self.settings
         N = self.n_samples
@@ -163,9 +164,13 @@ class Experiment:
             rows = fir_buffer_length(k1 - k0, n_d, L, group)
             lo = k0 * n_d - half                # sample of the first buffer row
             a, b = max(lo, 0), min(lo + rows, N)
-            buf = np.zeros((rows, width))
+            buf = np.empty((rows, width))   # zero padding outside the samples only: fill writes every other row
             if b > a:
+                buf[:a - lo] = 0.0
+                buf[b - lo:] = 0.0
                 fill(buf[a - lo:b - lo], a, b)
+            else:
+                buf[:] = 0.0
             dec[k0:k1] = fir_decimate_padded(buf, h, n_d, k1 - k0, group)
         return dec
 
