@@ -17,7 +17,8 @@ intermediate process per run, so the figure is that run's own).
         [--commands [--anchor-tree DIR]]
 
 ``--scale`` shortens the recordings (e.g. 0.2 for a quick look). ``--stages`` also prints the CPU time of
-each stage of ``diagnose`` and its counts of model fits (a second diagnose run, with the stage functions of
+each stage of ``diagnose``, the peak resident memory a stage raised (``ru_maxrss`` before and after each call:
+the stage listed with the run's peak is where it is made), and its counts of model fits (a second diagnose run, with the stage functions of
 :mod:`symoro_gen.diagnostics.core` wrapped by timers; nested stages are listed under their parent): the
 out-of-fold least-squares solves (``BlockedLS.oof_residual``, one per candidate and fold set), the
 friction-law stage's simulated-noise placebos and its law selections (the placebo's re-runs included), and
@@ -97,25 +98,31 @@ COUNTED = (("out-of-fold LS solves", "symoro_gen.diagnostics.stability", "Blocke
            ("tree fits (one fold)", "symoro_gen.diagnostics.unexplained", "FoldFits", "step"))
 
 
-def _instrument() -> tuple[dict, dict]:
+def _instrument() -> tuple[dict, dict, dict]:
     """Wrap the stage functions (:data:`STAGES`) by CPU timers and the counted methods (:data:`COUNTED`) by
-    counters; return the two dicts they fill."""
+    counters; return the three dicts they fill (CPU per stage, calls, and for each stage during which the
+    process's peak resident memory rose, the highest peak it reached: where the run's peak RSS is made)."""
     import functools
     import importlib
+    import resource
 
     import symoro_gen.diagnostics.core as core
 
     cpu: dict = {}
     calls: dict = {}
+    peak: dict = {}   # stage -> most of the process's peak resident memory [kB] a call of it raised
 
     def timer(name, fn):
         @functools.wraps(fn)
         def run(*a, **k):
-            c = time.process_time()
+            c, m = time.process_time(), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
             try:
                 return fn(*a, **k)
             finally:
                 cpu[name] = cpu.get(name, 0.0) + time.process_time() - c
+                m2 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+                if m2 > m:
+                    peak[name] = max(peak.get(name, 0), m2)
         return run
 
     def counter(name, fn):
@@ -132,7 +139,7 @@ def _instrument() -> tuple[dict, dict]:
         setattr(owner, meth, counter(shown, getattr(owner, meth)))
         if cls is None and hasattr(core, meth):   # a module function: also where core imported it
             setattr(core, meth, getattr(owner, meth))
-    return cpu, calls
+    return cpu, calls, peak
 
 
 def worker(command: str, path: str) -> None:
@@ -157,7 +164,7 @@ def worker(command: str, path: str) -> None:
         info["unexplained"] = [u.joint for u in rep.unexplained if u.flagged]
     info.update(wall=time.perf_counter() - w0, cpu=time.process_time() - c0)
     if stages is not None:
-        info.update(stage_cpu=stages[0], counts=stages[1])
+        info.update(stage_cpu=stages[0], counts=stages[1], stage_peak_kb=stages[2])
     print("RESULT " + json.dumps(info))
 
 
@@ -253,7 +260,9 @@ def main(argv=None) -> int:
                 print(f"  diagnose by stage ({st['cpu']:.1f} s CPU in all):")
                 for shown, _ in STAGES:
                     if shown in st["stage_cpu"]:
-                        print(f"    {shown:<38} {st['stage_cpu'][shown]:7.1f} s CPU")
+                        pk = st["stage_peak_kb"].get(shown)
+                        print(f"    {shown:<38} {st['stage_cpu'][shown]:7.1f} s CPU"
+                              + (f", raised the peak RSS to {pk / 2 ** 20:.2f} GB" if pk else ""))
                 print("  counts: " + ", ".join(f"{k} {v}" for k, v in st["counts"].items())
                       + "; identify: 1 least-squares solve", flush=True)
     return 0 if ok else 1

@@ -1688,12 +1688,15 @@ def _stage_loop(data0: _Data, data: _Data, base: _Baseline, cfg: DiagnoseSetting
     F, V, added = _relinearise(data, data.F, data.V, (), base.res_start)
     state = _State(F=F, V=V, added=added, res=base.res_start, pending=tuple(pending),
                    round_resid=((_residual_of(base.res_start), data.Vs.Y - base.res_start.predict(data.Vs)),))
+    del F, V, added   # held by the state only: a later round's state lets them go
     n_eff = 0
     scales = replace(ArmScales.of_frame(data.F), f_max=data.fdyn)
     for rnd in range(1, cfg.max_effects + len(pending) + 1):
         laws_only = n_eff >= cfg.max_effects
         if laws_only and not state.pending:
             break
+        # the elasticity columns' cache holds the previous round's frames, whose fit contexts no round uses again
+        clear_elasticity_cache()
         release_freed_memory()   # the previous round's transients (.memory)
         scored = _stage_score(data, base, state, rnd, cfg, rng, laws_only=laws_only)
         state = replace(state, tried=state.tried + scored.tried, placebos=state.placebos + scored.placebos,
@@ -1709,27 +1712,37 @@ def _stage_loop(data0: _Data, data: _Data, base: _Baseline, cfg: DiagnoseSetting
             return data, base, replace(state, stopped_at_max=n_eff >= cfg.max_effects)
         if scored.eligible[first][1].kind == LAW_KIND:
             data, base, state = _accept_law(data0, data, base, state, scored.eligible[first][1].joint, rnd)
+            del scored, trials   # the round's frames (model torque at full rate) before the next round's
             continue
-        # the best eligible candidate whose re-identified model leaves every effect physically possible
-        # (candidates.implausible: e.g. a gain and a delay of one joint fitted jointly into a negative
-        # scale and a 0.4 s lead); the ones passed over are reported
-        new, rejected = None, []
-        order = [first] + [k for k in range(min(len(scored.eligible), MAX_IMPLAUSIBLE_TRIES)) if k != first]
-        for pick in order:
-            if scored.eligible[pick][1].kind == LAW_KIND:
-                continue
-            trial = trials.get(pick) or _stage_accept(data, state, scored, rnd, cfg, pick=pick)
-            why = _implausible_effects(data, trial.added, trial.res)
-            if not why:
-                new = trial
-                break
-            rejected.append({"candidate": scored.eligible[pick][1].label, "round": rnd, "reasons": why})
+        new, rejected = _first_possible(data, state, scored, rnd, cfg, first, trials)
+        # the round's scorer and trial fits hold frames with their own model torque at full rate (three
+        # arrays of the recording's size each): dropped before the next round builds its own (.memory)
+        del scored, trials
         state = replace(state if new is None else new,
                         implausible=state.implausible + tuple(rejected))
         if new is None:
             return data, base, state
         n_eff += 1
     return data, base, replace(state, stopped_at_max=n_eff >= cfg.max_effects)
+
+
+def _first_possible(data: _Data, state: _State, scored: _Round, rnd: int, cfg: DiagnoseSettings, first: int,
+                    trials: dict[int, _State]) -> tuple[_State | None, list[dict]]:
+    """The state with the best eligible candidate (``first``, then the others by score) whose re-identified
+    model leaves every effect physically possible (:func:`.candidates.implausible`: e.g. a gain and a delay of
+    one joint fitted jointly into a negative scale and a 0.4 s lead), None when there is none; the ones passed
+    over, as records for ``implausible``. ``trials`` holds the re-identifications already computed."""
+    rejected: list[dict] = []
+    order = [first] + [k for k in range(min(len(scored.eligible), MAX_IMPLAUSIBLE_TRIES)) if k != first]
+    for pick in order:
+        if scored.eligible[pick][1].kind == LAW_KIND:
+            continue
+        trial = trials.get(pick) or _stage_accept(data, state, scored, rnd, cfg, pick=pick)
+        why = _implausible_effects(data, trial.added, trial.res)
+        if not why:
+            return trial, rejected
+        rejected.append({"candidate": scored.eligible[pick][1].label, "round": rnd, "reasons": why})
+    return None, rejected
 
 
 def _accept_law(data0: _Data, data: _Data, base: _Baseline, state: _State, joint: int, rnd: int
