@@ -37,8 +37,10 @@ from ..errors import SymoroError
 from ..identification.geometry import (
     JOINT_ZERO_STEP,
     VISIBILITY_TOL,
+    LengthTerms,
     emitted_length_column,
     emitted_length_columns,
+    emitted_length_terms,
     joint_zero_column,
     joint_zero_secant,
     joint_zero_visibility,
@@ -331,22 +333,73 @@ class LengthColumns:
     """The columns of a set of lengths (:func:`length_columns`), built once for all of them per frame and fit.
 
     The loop's link-length families of one round share a fit (``theta``) and a few frames (the identification
-    rows, the held-out ones), and the emitted derivative evaluates every geometric constant at once: one
-    full-rate pass per frame serves every length instead of one pass each. Holds the columns of the last
-    ``keep`` (frame, fit) pairs only (decimated rows: ``r x len(lengths)`` each)."""
+    rows, the held-out ones), and the emitted derivative evaluates every geometric constant at once. The column
+    is linear in the parameters, ``(d tau / d L) chi = (dY_std / dL) chi``, and so is the parallel decimation
+    (a FIR filter and a down-sampling): the decimation of the product is the product of the decimated entries of
+    ``dY_std / dL`` (:class:`symoro_gen.identification.geometry.LengthTerms`, only those the generated kernel
+    evaluates, for these lengths). Those are decimated once per frame (its signal arrays; at most ``keep`` frames
+    held, ``r x s`` float64 each, ``s`` the entries: 163 for the 11 lengths of the LWR4) and each fit's columns are
+    one product with them. Without the emitted derivative, or on loaded experiments (the emitted derivative has no
+    payload columns), every fit's columns are evaluated at full rate (:func:`length_columns`). The columns of the
+    last ``keep`` (frame, fit) pairs are held too (decimated rows: ``r x len(lengths)`` each)."""
 
     def __init__(self, model: IdentificationModel, lengths: Sequence[tuple[int, str]], keep: int = 4):
         self.model, self.lengths, self.keep = model, tuple(lengths), keep
         self._held: list[tuple[object, dict, np.ndarray]] = []
+        self._terms: list[LengthTerms | None] = []     # [the emitted entries or None], built on first use
+        self._decimated: list[tuple[tuple, np.ndarray]] = []   # [(frame arrays, decimated entries)], last kept last
 
     def column(self, frame, theta: dict, i: int) -> np.ndarray:
         """The column (shape (r, 1)) of ``lengths[i]`` on ``frame`` at the fit ``theta``."""
         for fr, th, X in self._held:
             if fr is frame and th == theta:
                 return X[:, i:i + 1].copy()
-        X = length_columns(frame, self.model, theta, self.lengths)
+        X = self._columns(frame, theta)
         self._held = [*self._held[-(self.keep - 1):], (frame, dict(theta), X)] if self.keep > 1 else [(frame, dict(theta), X)]
         return X[:, i:i + 1].copy()
+
+    def _columns(self, frame, theta: dict) -> np.ndarray:
+        got = self._decimated_terms(frame)
+        if got is None:
+            return length_columns(frame, self.model, theta, self.lengths)
+        terms, T = got
+        robot = description_of(self.model)
+        chi, _ = standard_from_fit(rigid_model(self.model), robot, theta)
+        X: np.ndarray = T @ terms.matrix(chi)
+        return X
+
+    def _decimated_terms(self, frame) -> tuple[LengthTerms, np.ndarray] | None:
+        """The emitted entries of ``dY_std / dL`` on the frame's rows, decimated in parallel with ``W``; None
+        without the emitted derivative or with a loaded experiment."""
+        if any(ex.loaded for ex in frame.experiments):
+            return None
+        if not self._terms:
+            robot = description_of(self.model)
+            self._terms.append(None if robot is None else emitted_length_terms(rigid_model(self.model), robot,
+                                                                               self.lengths))
+        terms = self._terms[0]
+        if terms is None:
+            return None
+        key = _signal_arrays(frame)
+        for arrs, T in self._decimated:
+            if len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
+                return terms, T
+
+        def fn(ex, a: int, b: int) -> np.ndarray:
+            return terms.values(ex.q[a:b], ex.dq[a:b], ex.ddq[a:b])
+
+        T = frame.full_rate_columns_batched(fn, terms.standard.size)
+        T.setflags(write=False)
+        self._decimated = [*self._decimated[-(self.keep - 1):], (key, T)] if self.keep > 1 else [(key, T)]
+        return terms, T
+
+
+def _signal_arrays(frame) -> tuple:
+    """The arrays the decimated entries of a frame are built from (held with them: their identities key them)."""
+    arrs = [frame.row_experiment, frame.row_index, frame.system.joint]
+    for ex in frame.experiments:
+        arrs += [ex.t, ex.q, ex.dq, ex.ddq]
+    return tuple(arrs)
 
 
 def describe_length(frame: int, fld: str, value: float, std: float) -> dict:
