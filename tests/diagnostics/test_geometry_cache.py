@@ -178,3 +178,24 @@ def test_geometry_terms_are_the_derivatives_entries():
     assert not rest.any() and np.abs(values).max() > 0
     one, _ = terms(q[0], dq[0], ddq[0])
     np.testing.assert_array_equal(one, values[0])
+
+
+def test_each_full_rate_sample_is_evaluated_once(rx90_frame):
+    """The decimation's stretches overlap by the filter window; the geometry builders' callback is reused there:
+    every sample evaluated once (short stretches: many overlaps) and the columns the same numbers as without."""
+    _, F = rx90_frame
+    ex = F.experiments[0]
+    assert ex.settings.ftype == "fir" and ex.settings.n_d > 1
+    seen = np.zeros(ex.n_samples, int)
+
+    def cols(e, a, b):
+        seen[a:b] += 1
+        x = np.stack([np.sin(e.q[a:b] * (i + 1)) * e.dq[a:b] ** i for i in range(3)], axis=2)
+        return x * (1.0 + np.arange(F.n_joints))[None, :, None]
+
+    plain = F.full_rate_columns_batched(cols, 3, batch_bytes=1, call_samples=7)
+    assert seen.max() > 1   # the overlaps evaluated again without the reuse
+    seen[:] = 0
+    once = F.full_rate_columns_batched(dgeo._SampleReuse(cols), 3, batch_bytes=1, call_samples=7)
+    assert seen.min() == seen.max() == 1
+    np.testing.assert_array_equal(once, plain)
