@@ -372,8 +372,8 @@ class LengthColumns:
     is linear in the parameters, ``(d tau / d L) chi = (dY_std / dL) chi``, and so is the parallel decimation
     (a FIR filter and a down-sampling): the decimation of the product is the product of the decimated entries of
     ``dY_std / dL`` (:class:`symoro_gen.identification.geometry.LengthTerms`, only those the generated kernel
-    evaluates, for these lengths). Those are decimated once per frame (its signal arrays, across rounds: the last
-    two frames held, ``r x s`` float64 each, ``s`` the entries: 163 for the 11 lengths of the
+    evaluates, for these lengths). Those are decimated once per frame from its second fit on (its signal arrays,
+    across rounds: the last two frames held, ``r x s`` float64 each, ``s`` the entries: 163 for the 11 lengths of the
     LWR4) and each fit's columns are one product with them. Without the emitted derivative, or on loaded experiments (the emitted derivative has no
     payload columns), every fit's columns are evaluated at full rate (:func:`length_columns`). The columns of the
     last ``keep`` (frame, fit) pairs are held too (decimated rows: ``r x len(lengths)`` each)."""
@@ -413,6 +413,12 @@ class LengthColumns:
             if (mdl is rigid and lengths == self.lengths and len(arrs) == len(key)
                     and all(a is b for a, b in zip(arrs, key))):
                 return (terms, T) if terms is not None else None
+        if not any(len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)) for arrs in _LENGTH_SEEN):
+            # a frame's first fit: its columns at full rate (a frame the loop uses once, the last round's, is
+            # never worth the wider build, which would land on the loop's memory high-water mark)
+            _LENGTH_SEEN.append(key)
+            del _LENGTH_SEEN[:-_LENGTH_TERMS_SIZE]
+            return None
         del _LENGTH_TERMS[:-(_LENGTH_TERMS_SIZE - 1) or len(_LENGTH_TERMS)]   # the oldest freed before the build
         robot = description_of(self.model)
         terms = None if robot is None else emitted_length_terms(rigid, robot, self.lengths)
@@ -439,6 +445,7 @@ _TERMS_BATCH_BYTES = 4 * 2 ** 20
 #: identification and acceptance frames of a round
 _LENGTH_TERMS_SIZE = 2
 _LENGTH_TERMS: list = []   # [(rigid model, lengths, frame arrays, LengthTerms or None, decimated entries)]
+_LENGTH_SEEN: list = []    # [frame arrays] of the frames whose columns were built at full rate once
 
 
 def _signal_arrays(frame) -> tuple:

@@ -55,17 +55,19 @@ def test_kept_length_entries_give_a_changed_fits_columns(rx90_frame, monkeypatch
     theta = {nm: float(v) for nm, v in zip(model.BASE_NAMES, rng.normal(size=len(model.BASE_NAMES)))}
     first = np.hstack([shared.column(F, theta, i) for i in range(len(lengths))])
     _close(first, length_columns(F, model, theta, lengths), 1e-9)
+    theta2 = {nm: v * (1.0 + rng.uniform(-0.5, 0.5)) for nm, v in theta.items()}   # another fit: entries kept
+    again = np.hstack([shared.column(F, theta2, i) for i in range(len(lengths))])
+    _close(again, length_columns(F, model, theta2, lengths), 1e-9)
     passes = []
     real = type(F).full_rate_columns_batched
     monkeypatch.setattr(type(F), "full_rate_columns_batched", lambda *a, **k: passes.append(1) or real(*a, **k))
-    theta2 = {nm: v * (1.0 + rng.uniform(-0.5, 0.5)) for nm, v in theta.items()}   # another fit, same frame
-    again = np.hstack([shared.column(F, theta2, i) for i in range(len(lengths))])
     theta3 = {nm: -v for nm, v in theta.items()}
+    third = shared.column(F, theta3, 1)
     next_round = LengthColumns(model, lengths).column(F, theta3, 0)   # the next round's families: new objects
     monkeypatch.undo()
     assert not passes   # the other fits' columns are products with the kept entries
     _close(next_round, length_columns(F, model, theta3, lengths[:1]), 1e-9)
-    _close(again, length_columns(F, model, theta2, lengths), 1e-9)
+    _close(third, length_columns(F, model, theta3, lengths[1:2]), 1e-9)
     assert float(np.abs(again - first).max()) > 1e-3 * float(np.abs(first).max())   # the fit did change them
 
 
