@@ -79,6 +79,7 @@ from .geometry import (
     length_joint,
     link_length_ready,
     revolute_joints,
+    rigid_model,
     visible_lengths,
     visible_zero_joints,
 )
@@ -540,36 +541,43 @@ def _joint_zero_build(frame: Frame, ctx: FitContext, m: int, c: float) -> np.nda
     declared regressor (``c = 0``: the tangent, :func:`.geometry.regressor_secant`) evaluated at full rate and
     decimated in parallel with ``W`` (so that it shares W's filter edges: on the decimated signals the edge
     rows differ and the part of the column outside W's span is concentrated there), times the declared
-    parameters of the current fit. The decimated matrix does not depend on the fit and is kept per frame."""
-    names = tuple(ctx.model.BASE_NAMES) + tuple(getattr(ctx.model, "PAYLOAD_NAMES", ()))
-    D = _zero_matrix(frame, ctx.model, m, c)
+    parameters of the current fit. The column is linear in the parameters and so is the decimation: the
+    decimated tangent does not depend on the fit and is kept per frame (:func:`_zero_matrix`)."""
+    D, names = _zero_matrix(frame, ctx.model, m, c)
     th = np.array([float(ctx.theta.get(nm, 0.0)) for nm in names])
-    # the Coulomb columns sign(dq) do not depend on q: their derivative is 0 whatever the fit
     return (D @ th).reshape(-1, 1)
 
 
-#: decimated regressor tangents kept (per frame and joint; each the size of ``W``): the joints of the
-#: identification and acceptance frames of a 7-joint arm, and one more; the secants of the fixed point (an
-#: accepted effect's, a few per round) are recomputed
+#: decimated regressor tangents kept (per frame and joint; each at most the size of ``W``, only its columns
+#: that the angle changes): the joints of the identification and acceptance frames of a 7-joint arm, and one
+#: more; the secants of the fixed point (an accepted effect's, a few per round) are recomputed
 _ZERO_CACHE_SIZE = 15
-_ZERO_CACHE: list = []   # [(frame arrays, joint, parameter names, matrix)], most recent last
+_ZERO_CACHE: list = []   # [(frame arrays, joint, parameter names, matrix, its columns' names)], most recent last
 
 
-def _zero_matrix(frame: Frame, model: IdentificationModel, m: int, c: float) -> np.ndarray:
+def _zero_matrix(frame: Frame, model: IdentificationModel, m: int, c: float) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The decimated secant (``c = 0``: tangent) of the regressor in joint m's angle and the names of its
+    columns: those of the rigid model under any friction law (:func:`.geometry.rigid_model`; a law's columns
+    are functions of the velocity, their derivative in the angle is 0, and the columns it replaces, ``FS``
+    and ``FV``, are too), so that a law chosen during the loop, which renames the parameters, leaves the kept
+    tangent valid; only the columns that are not 0 on every row are kept (the Coulomb, viscous, offset and
+    rotor-inertia columns, and the inertial ones of the links before joint m, are)."""
+    rigid = rigid_model(model)
+    names = tuple(rigid.BASE_NAMES) + tuple(getattr(rigid, "PAYLOAD_NAMES", ()))
     if c != 0.0:
-        return decimated_zero_matrix(frame, model, m, c)
+        return decimated_zero_matrix(frame, rigid, m, c), names
     key = _frame_key(frame)
-    # the columns are the model's parameters: a friction law applied during the loop changes them on the
-    # same frame (its columns differ, the kinematics do not)
-    names = tuple(model.BASE_NAMES) + tuple(getattr(model, "PAYLOAD_NAMES", ()))
-    for arrs, jj, nms, D in _ZERO_CACHE:
+    for arrs, jj, nms, D, kept in _ZERO_CACHE:
         if jj == m and nms == names and len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
-            return D
-    D = decimated_zero_matrix(frame, model, m, c)
+            return D, kept
+    full = decimated_zero_matrix(frame, rigid, m, c)
+    cols = np.flatnonzero(np.any(full != 0.0, axis=0))
+    D = np.ascontiguousarray(full[:, cols])
     D.setflags(write=False)
-    _ZERO_CACHE.append((key, m, names, D))
+    kept = tuple(names[k] for k in cols)
+    _ZERO_CACHE.append((key, m, names, D, kept))
     del _ZERO_CACHE[:-_ZERO_CACHE_SIZE]
-    return D
+    return D, kept
 
 
 def _all_joint_families(n: int, ks: set[str]) -> list[Family]:

@@ -37,8 +37,10 @@ from ..errors import SymoroError
 from ..identification.geometry import (
     JOINT_ZERO_STEP,
     VISIBILITY_TOL,
+    LengthTerms,
     emitted_length_column,
     emitted_length_columns,
+    emitted_length_terms,
     joint_zero_column,
     joint_zero_secant,
     joint_zero_visibility,
@@ -50,6 +52,7 @@ from ..identification.geometry import (
     visible_zero_joints,
 )
 from ..model import IdentificationModel
+from ..preprocessing.filtering import decimation_filter
 from .frame import build_frame, common_bandwidth
 
 __all__ = ["JOINT_ZERO_STEP", "VISIBILITY_TOL", "describe_zero", "joint_zero_column", "joint_zero_secant",
@@ -99,7 +102,41 @@ def decimated_zero_matrix(frame, model: IdentificationModel, j: int, c: float = 
         return out
 
     # over bounded stretches of samples: the full-rate tangent of a 7-joint arm at 1 kHz is ~20 times W
-    return frame.full_rate_columns_batched(f, p)
+    return frame.full_rate_columns_batched(_SampleReuse(f), p)
+
+
+class _SampleReuse:
+    """``fn(ex, a, b)`` (columns of samples ``a:b``, a function of each sample's signals) that evaluates each
+    sample once over the consecutive stretches of :meth:`.frame.Frame.full_rate_columns_batched`: a stretch's
+    buffer starts the filter window (``L - 1`` samples, 1600 for a decimation by 80) before the end of the
+    previous one, so a wide set of columns (short stretches) would evaluate most samples twice. The samples of
+    the last ``keep`` evaluated ones are taken from them (the same numbers: each sample's columns do not depend on
+    the others). The samples kept are those of the window (``L`` from the experiment's filter settings): a few
+    MB (1601 samples of the LWR4's 163 length entries on 7 joints: 15 MB)."""
+
+    def __init__(self, fn):
+        self.fn, self.keep = fn, 0
+        self._ex: object = None
+        self._chunks: list[tuple[int, np.ndarray]] = []   # contiguous (first sample, values), oldest first
+
+    def __call__(self, ex, a: int, b: int) -> np.ndarray:
+        if ex is not self._ex:
+            st = ex.settings
+            fir = st.ftype == "fir" and st.n_d > 1
+            self.keep = decimation_filter(st.n_d, ftype="fir", cutoff_ratio=st.cutoff_ratio).size if fir else 0
+            self._ex, self._chunks = ex, []
+        end = self._chunks[-1][0] + self._chunks[-1][1].shape[0] if self._chunks else a
+        start = self._chunks[0][0] if self._chunks else a
+        if not start <= a <= end:
+            self._chunks, end = [], a
+        parts = [v[max(a - c, 0):min(b, end) - c] for c, v in self._chunks if c + v.shape[0] > a and c < min(b, end)]
+        if b > end:
+            fresh = np.asarray(self.fn(ex, end, b), float)
+            parts.append(fresh)
+            self._chunks.append((end, fresh))
+            while self._chunks and self._chunks[0][0] + self._chunks[0][1].shape[0] <= b - self.keep:
+                self._chunks.pop(0)
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
 @dataclass(frozen=True)
@@ -331,9 +368,15 @@ class LengthColumns:
     """The columns of a set of lengths (:func:`length_columns`), built once for all of them per frame and fit.
 
     The loop's link-length families of one round share a fit (``theta``) and a few frames (the identification
-    rows, the held-out ones), and the emitted derivative evaluates every geometric constant at once: one
-    full-rate pass per frame serves every length instead of one pass each. Holds the columns of the last
-    ``keep`` (frame, fit) pairs only (decimated rows: ``r x len(lengths)`` each)."""
+    rows, the held-out ones), and the emitted derivative evaluates every geometric constant at once. The column
+    is linear in the parameters, ``(d tau / d L) chi = (dY_std / dL) chi``, and so is the parallel decimation
+    (a FIR filter and a down-sampling): the decimation of the product is the product of the decimated entries of
+    ``dY_std / dL`` (:class:`symoro_gen.identification.geometry.LengthTerms`, only those the generated kernel
+    evaluates, for these lengths). Those are decimated once per frame from its second fit on (its signal arrays,
+    across rounds: the last two frames held, ``r x s`` float64 each, ``s`` the entries: 163 for the 11 lengths of the
+    LWR4) and each fit's columns are one product with them. Without the emitted derivative, or on loaded experiments (the emitted derivative has no
+    payload columns), every fit's columns are evaluated at full rate (:func:`length_columns`). The columns of the
+    last ``keep`` (frame, fit) pairs are held too (decimated rows: ``r x len(lengths)`` each)."""
 
     def __init__(self, model: IdentificationModel, lengths: Sequence[tuple[int, str]], keep: int = 4):
         self.model, self.lengths, self.keep = model, tuple(lengths), keep
@@ -344,9 +387,73 @@ class LengthColumns:
         for fr, th, X in self._held:
             if fr is frame and th == theta:
                 return X[:, i:i + 1].copy()
-        X = length_columns(frame, self.model, theta, self.lengths)
+        X = self._columns(frame, theta)
         self._held = [*self._held[-(self.keep - 1):], (frame, dict(theta), X)] if self.keep > 1 else [(frame, dict(theta), X)]
         return X[:, i:i + 1].copy()
+
+    def _columns(self, frame, theta: dict) -> np.ndarray:
+        got = self._decimated_terms(frame)
+        if got is None:
+            return length_columns(frame, self.model, theta, self.lengths)
+        terms, T = got
+        robot = description_of(self.model)
+        chi, _ = standard_from_fit(rigid_model(self.model), robot, theta)
+        X: np.ndarray = T @ terms.matrix(chi)
+        return X
+
+    def _decimated_terms(self, frame) -> tuple[LengthTerms, np.ndarray] | None:
+        """The emitted entries of ``dY_std / dL`` on the frame's rows, decimated in parallel with ``W`` (kept
+        across rounds, whose families are new objects: :data:`_LENGTH_TERMS`); None without the emitted
+        derivative or with a loaded experiment."""
+        if any(ex.loaded for ex in frame.experiments):
+            return None
+        rigid = rigid_model(self.model)
+        key = _signal_arrays(frame)
+        for mdl, lengths, arrs, terms, T in _LENGTH_TERMS:
+            if (mdl is rigid and lengths == self.lengths and len(arrs) == len(key)
+                    and all(a is b for a, b in zip(arrs, key))):
+                return (terms, T) if terms is not None else None
+        if not any(len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)) for arrs in _LENGTH_SEEN):
+            # a frame's first fit: its columns at full rate (a frame the loop uses once, the last round's, is
+            # never worth the wider build, which would land on the loop's memory high-water mark)
+            _LENGTH_SEEN.append(key)
+            del _LENGTH_SEEN[:-_LENGTH_TERMS_SIZE]
+            return None
+        del _LENGTH_TERMS[:-(_LENGTH_TERMS_SIZE - 1) or len(_LENGTH_TERMS)]   # the oldest freed before the build
+        robot = description_of(self.model)
+        terms = None if robot is None else emitted_length_terms(rigid, robot, self.lengths)
+        T = np.zeros((0, 0))
+        if terms is not None:
+            def fn(ex, a: int, b: int, terms: LengthTerms = terms) -> np.ndarray:
+                return terms.values(ex.q[a:b], ex.dq[a:b], ex.ddq[a:b])
+
+            # short stretches and calls: the entries are ~15 times as wide as the columns (the reuse of the
+            # filter window's samples keeps the kernel's evaluations at one per sample)
+            T = frame.full_rate_columns_batched(_SampleReuse(fn), terms.standard.size, batch_bytes=_TERMS_BATCH_BYTES,
+                                                call_samples=64)
+            T.setflags(write=False)
+        _LENGTH_TERMS.append((rigid, self.lengths, key, terms, T))
+        del _LENGTH_TERMS[:-_LENGTH_TERMS_SIZE]
+        return (terms, T) if terms is not None else None
+
+
+#: full-rate bytes of a stretch of the entries of ``dY_std / dL`` decimated at once (the frame's default is 16 MB)
+_TERMS_BATCH_BYTES = 4 * 2 ** 20
+
+#: decimated entries of ``dY_std / dL`` kept (per model, lengths and frame; ``r x s`` float64 each, ``s`` the
+#: entries: 163 for the 11 visible lengths of the LWR4, 6.6 MB on the 120 s bench's identification frame): the
+#: identification and acceptance frames of a round
+_LENGTH_TERMS_SIZE = 2
+_LENGTH_TERMS: list = []   # [(rigid model, lengths, frame arrays, LengthTerms or None, decimated entries)]
+_LENGTH_SEEN: list = []    # [frame arrays] of the frames whose columns were built at full rate once
+
+
+def _signal_arrays(frame) -> tuple:
+    """The arrays the decimated entries of a frame are built from (held with them: their identities key them)."""
+    arrs = [frame.row_experiment, frame.row_index, frame.system.joint]
+    for ex in frame.experiments:
+        arrs += [ex.t, ex.q, ex.dq, ex.ddq]
+    return tuple(arrs)
 
 
 def describe_length(frame: int, fld: str, value: float, std: float) -> dict:

@@ -57,10 +57,11 @@ from ..observations.assembly import iter_kinematics, observation_settings
 from ..observations.raw import full_rate_torque
 from ..observations.system import ObservationSystem
 from ..params import INERTIAL_KINDS, split_name
+from ..runtime.model import geometry_terms_of
 from .systems import stack_systems
 
 __all__ = ["GEOMETRY_KINDS", "LENGTH_VISIBILITY_TOL", "MAX_LENGTH_M", "MAX_LENGTH_REACH", "GaussNewton",
-           "GeometryProblem", "check_zero_joints", "emitted_length_columns", "LengthVisibility", "add_lengths", "apply_geometry", "arm_reach", "correct_lengths",
+           "GeometryProblem", "check_zero_joints", "emitted_length_columns", "emitted_length_terms", "LengthTerms", "LengthVisibility", "add_lengths", "apply_geometry", "arm_reach", "correct_lengths",
            "fit_geometry", "gauss_newton", "length_identifiability", "length_identifiability_text",
            "length_plausible", "parse_lengths", "standard_from_fit", "JOINT_ZERO_STEP", "LENGTH_FIELDS", "length_sensitivity", "length_visibility", "perturbed_robot", "STEP_FRACTION", "VISIBILITY_TOL", "GeometryFit", "ZeroVisibility",
            "add_zeros", "corrected_robot_text", "fit_zeros", "joint_zero_column", "joint_zero_secant", "joint_zero_visibility",
@@ -703,6 +704,63 @@ def emitted_length_columns(model: IdentificationModel, robot, chi_std: np.ndarra
         return out
 
     return cols
+
+
+@dataclass(frozen=True)
+class LengthTerms:
+    """The entries of the emitted ``dY_std/dg`` (:meth:`symoro_gen.runtime.model.GeneratedModel.geometry_terms`)
+    that the columns ``(d tau / d L_i) chi`` of a list of MDH lengths ``L_i`` are made of, so that maps linear in
+    the torque (the decimation of the observation rows) are applied to them once and the columns of any
+    parameter vector ``chi`` follow by one product (:meth:`matrix`): ``(d tau / d L_i) chi =
+    sum_s values[..., s] chi[standard[s]]`` over the entries ``s`` with ``length[s] == i``.
+
+    Attributes
+    ----------
+    values : callable
+        ``(q, dq, ddq) -> (N, n, s)``: the entries at each sample, on each joint's torque.
+    standard : ndarray of int, shape (s,)
+        Index of each entry's standard parameter in the description's ``standard_names``.
+    length : ndarray of int, shape (s,)
+        Index of each entry's length in the list (a length the generator dropped, derivative identically 0, has
+        none: its column is 0).
+    n_lengths : int
+    """
+
+    values: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+    standard: np.ndarray
+    length: np.ndarray
+    n_lengths: int
+
+    def matrix(self, chi_std: np.ndarray) -> np.ndarray:
+        """``M`` (s, n_lengths) with ``values @ M`` the columns at the standard parameters ``chi_std`` (the
+        description's order, as :func:`standard_from_fit` returns them)."""
+        M = np.zeros((self.standard.size, self.n_lengths))
+        M[np.arange(self.standard.size), self.length] = np.asarray(chi_std, float)[self.standard]
+        return M
+
+
+def emitted_length_terms(model: IdentificationModel, robot, lengths: Sequence[tuple[int, str]]) -> LengthTerms | None:
+    """The :class:`LengthTerms` of the lengths ``(frame, field)`` from the generated package's emitted derivative
+    (:func:`symoro_gen.runtime.model.geometry_terms_of`), or None when the model has none or its standard
+    parameters are not the description's (as :func:`emitted_length_columns`). Without payload only."""
+    terms = geometry_terms_of(model)
+    names = tuple(getattr(model, "GEOMETRY_NAMES", ()))
+    std = tuple(getattr(model, "STANDARD_NAMES", ()))
+    if terms is None or not names or set(std) != set(robot.standard_names):
+        return None
+    ks = {names.index(f"{fld}{int(f)}"): i for i, (f, fld) in enumerate(lengths) if f"{fld}{int(f)}" in names}
+    n = int(model.N_JOINTS)
+    _, pairs = terms(np.zeros((1, n)), np.zeros((1, n)), np.zeros((1, n)))
+    sel = np.flatnonzero(np.isin(pairs[:, 1], list(ks)))
+    to_robot = {nm: k for k, nm in enumerate(robot.standard_names)}
+    standard = np.array([to_robot[std[int(pairs[s, 0])]] for s in sel], dtype=int)
+    length = np.array([ks[int(pairs[s, 1])] for s in sel], dtype=int)
+
+    def values(q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        out: np.ndarray = terms(q, dq, ddq)[0][:, :, sel]
+        return out
+
+    return LengthTerms(values, standard, length, len(lengths))
 
 
 def emitted_length_column(model: IdentificationModel, robot, chi_std: np.ndarray, f: int, fld: str

@@ -274,6 +274,19 @@ class GeneratedModel:
             evaluate_kernel(geo.geometry_kernel, n, len(pairs), Q, DQ, DDQ, compact)
         return compact, pairs, one
 
+    def geometry_terms(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike
+                       ) -> tuple[NDArray[np.float64], NDArray[np.int_]]:
+        """The entries of ``dY_std/dg`` the emitted kernel evaluates, every other one being identically 0
+        (:mod:`symoro_gen.emit.geometry` drops them): their values, shape (N, n, n_pairs) ((n, n_pairs) for 1-D
+        inputs), and their ``(standard index, geometry index)`` pairs, shape (n_pairs, 2).
+
+        :meth:`geometry_derivative` is these values scattered into the dense array, :meth:`geometry_columns`
+        their product with ``chi_std``; a caller that needs the derivative for many parameter vectors (or
+        linear maps of it, such as a decimation) keeps these few columns instead of either.
+        """
+        compact, pairs, one = self._geometry_compact(q, dq, ddq)
+        return (compact[0] if one else compact), pairs
+
     def geometry_derivative(self, q: ArrayLike, dq: ArrayLike, ddq: ArrayLike) -> NDArray[np.float64]:
         """``dY_std/dg`` at the nominal geometry: shape (N, n, len(STANDARD_NAMES), len(GEOMETRY_NAMES))
         ((n, n_st, n_g) for 1-D inputs).
@@ -309,3 +322,15 @@ class GeneratedModel:
         geo = self._geometry_module()
         return build_geometry_function(geo.geometry_casadi, f"geometry_{self.ROBOT}", self.N_JOINTS,
                                        len(self.STANDARD_NAMES), len(self.GEOMETRY_NAMES), geo.GEOMETRY_PAIRS)
+
+
+def geometry_terms_of(model: Any) -> Callable[[ArrayLike, ArrayLike, ArrayLike],
+                                             tuple[NDArray[np.float64], NDArray[np.int_]]] | None:
+    """:meth:`GeneratedModel.geometry_terms` of ``model``: a :class:`GeneratedModel`, or a generated package
+    (whose ``geometry_columns`` is the bound method of the :class:`GeneratedModel` behind it); None for any
+    other model (built in memory, a wrapper) or a package without the emitted derivative."""
+    owner = model if isinstance(model, GeneratedModel) else getattr(getattr(model, "geometry_columns", None),
+                                                                     "__self__", None)
+    if not isinstance(owner, GeneratedModel) or owner._geometry is None:
+        return None
+    return owner.geometry_terms
