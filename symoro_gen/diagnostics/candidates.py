@@ -88,7 +88,7 @@ __all__ = ["KINDS", "ALL", "CONTACT_KINDS", "Family", "FitContext", "make_famili
            "nuisance_columns", "implausible", "GAIN_SCALE_RANGE", "MAX_DELAY_PHASE", "MAX_ZERO_OFFSET_DEG",
            "MAX_LINK_LENGTH_M",
            "MAX_CROSSTALK",
-           "clear_elasticity_cache"]
+           "clear_elasticity_cache", "clear_loop_caches"]
 
 KINDS = ("stribeck", "load_friction", "position_ripple", "spring", "elasticity", "time_delay", "gain",
          "drift", "coupling", "rotor_inertia", "offset", "joint_zero", "crosstalk",
@@ -732,6 +732,16 @@ def _gain_column(frame: Frame, ctx: FitContext, j: int) -> np.ndarray:
 
 
 _UNSHIFTED: dict = {}   # one-entry cache of the unshifted model torque (frame, context) of the elasticity secant
+
+
+def clear_loop_caches() -> None:
+    """Forget what the loop's candidate builds keep by frame identity: the decimated joint-zero tangents
+    (:data:`_ZERO_CACHE`) and the elasticity secant's model torques (:func:`clear_elasticity_cache`, which hold
+    the frames themselves). The diagnosis calls it once the loop's frames are done with: the report builds its
+    columns on other frames, so these would only hold memory through its refits (a cache miss recomputes the
+    same numbers)."""
+    _ZERO_CACHE.clear()
+    clear_elasticity_cache()
 
 
 def clear_elasticity_cache() -> None:

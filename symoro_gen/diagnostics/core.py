@@ -110,6 +110,7 @@ from .candidates import (
     Family,
     FitContext,
     clear_elasticity_cache,
+    clear_loop_caches,
     describe_params,
     implausible,
     make_families,
@@ -2698,6 +2699,7 @@ def diagnose(model: IdentificationModel, trajectories, settings: DiagnoseSetting
         state, stab, msgs = _stage_stability(data, state, cfg)
     data, laws, state, guard = _never_worse(data0, data, laws, state)
     del data    # the loop's frames with their model torque: the report's are rebuilt on all the data
+    clear_loop_caches()   # the joint-zero tangents kept on the loop's frames (.candidates)
     notes = tuple(replace(t, accepted=t.accepted and any(t.record is r for r in laws)) for t in notes)
     full = replace(_apply_laws(full0, laws), doubtful_laws=doubtful)
     clear_fold_cache()   # the loop's fold bases: the report's designs are other ones
@@ -2706,6 +2708,7 @@ def diagnose(model: IdentificationModel, trajectories, settings: DiagnoseSetting
     report = _stage_report(full, replace(base, laws=laws), state, cfg, data0=full0, stab=stab, stab_msgs=msgs)
     report = _with_acceptance(report, full0, data0, notes, guard, cfg)
     clear_fold_cache()   # nothing of the diagnosis is kept once it returns
+    clear_loop_caches()
     return report
 
 

@@ -114,14 +114,17 @@ def blocked_folds(blocks: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(blocks != b, blocks == b) for b in np.unique(blocks)]
 
 
-def wls_basis(Aw: np.ndarray):
-    """Orthonormal basis U, pseudo-inverse and rank of the weighted design (shared by the candidate fits)."""
+def wls_basis(Aw: np.ndarray, pinv: bool = True):
+    """Orthonormal basis U, pseudo-inverse and rank of the weighted design (shared by the candidate fits).
+
+    With ``pinv=False`` the pseudo-inverse is not formed (None in its place): a caller that needs the basis
+    only (the composed tests, :mod:`.compose`) does not allocate that array, as large as ``U``, at the peak."""
     if Aw.shape[1] == 0:
-        return np.zeros((Aw.shape[0], 0)), np.zeros((0, Aw.shape[0])), 0
+        return np.zeros((Aw.shape[0], 0)), (np.zeros((0, Aw.shape[0])) if pinv else None), 0
     U, s, Vt = np.linalg.svd(Aw, full_matrices=False)
     rank = int(np.sum(s > RANK_TOL * s[0])) if s.size and s[0] > 0 else 0
     U, s, Vt = U[:, :rank], s[:rank], Vt[:rank]
-    return U, (Vt.T / s) @ U.T, rank
+    return U, ((Vt.T / s) @ U.T if pinv else None), rank
 
 
 def _wls_factors(Aw: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
