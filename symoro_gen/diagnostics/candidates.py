@@ -566,7 +566,7 @@ def _zero_matrix(frame: Frame, model: IdentificationModel, m: int, c: float) -> 
     names = tuple(rigid.BASE_NAMES) + tuple(getattr(rigid, "PAYLOAD_NAMES", ()))
     if c != 0.0:
         return decimated_zero_matrix(frame, rigid, m, c), names
-    key = _frame_key(frame)
+    key = frame.signal_arrays()
     for arrs, jj, nms, D, kept in _ZERO_CACHE:
         if jj == m and nms == names and len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
             return D, kept
@@ -613,14 +613,6 @@ def _all_joint_families(n: int, ks: set[str]) -> list[Family]:
 _MEMO_FRAMES = 3
 
 
-def _frame_key(frame: Frame) -> tuple:
-    """The arrays a fit-independent candidate column is built from (their identities)."""
-    arrs = [frame.row_experiment, frame.row_index, frame.system.joint]
-    for ex in frame.experiments:
-        arrs += [ex.t, ex.q, ex.dq, ex.ddq]
-    return tuple(arrs)
-
-
 def _memo_build(build: Callable) -> Callable:
     """``build(frame, ctx)`` remembered per frame (keyed on the identity of its signal arrays, held so that
     an identity is not reused) for a family whose columns do not depend on the fit: the decimation of
@@ -628,7 +620,7 @@ def _memo_build(build: Callable) -> Callable:
     cache: list = []   # [(arrays, columns)], most recent last
 
     def run(frame: Frame, ctx: FitContext):
-        key = _frame_key(frame)
+        key = frame.signal_arrays()
         for arrs, cols in cache:
             if len(arrs) == len(key) and all(a is b for a, b in zip(arrs, key)):
                 return list(cols)

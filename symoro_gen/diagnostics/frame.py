@@ -300,6 +300,15 @@ class Frame:
                 X[rows] = np.asarray(fn(j, rows), float).reshape(rows.size, p)
         return X
 
+    def signal_arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays the frame's rows and full-rate signals are (row experiment, row index, joint, and each
+        experiment's ``t q dq ddq``): caches of columns that are functions of these alone key on their
+        identities (and hold them, so that an identity is not reused)."""
+        arrs = [self.row_experiment, self.row_index, self.system.joint]
+        for ex in self.experiments:
+            arrs += [ex.t, ex.q, ex.dq, ex.ddq]
+        return tuple(arrs)
+
     def samples(self) -> dict[str, np.ndarray]:
         """Decimated signals per sample (one entry per decimated sample, not per row):
         arrays (s, n) and ``t`` (s,), plus ``experiment`` (s,) - rows of joint 0 define the samples."""

@@ -408,7 +408,7 @@ class LengthColumns:
         if any(ex.loaded for ex in frame.experiments):
             return None
         rigid = rigid_model(self.model)
-        key = _signal_arrays(frame)
+        key = frame.signal_arrays()
         for mdl, lengths, arrs, terms, T in _LENGTH_TERMS:
             if (mdl is rigid and lengths == self.lengths and len(arrs) == len(key)
                     and all(a is b for a, b in zip(arrs, key))):
@@ -446,14 +446,6 @@ _TERMS_BATCH_BYTES = 4 * 2 ** 20
 _LENGTH_TERMS_SIZE = 2
 _LENGTH_TERMS: list = []   # [(rigid model, lengths, frame arrays, LengthTerms or None, decimated entries)]
 _LENGTH_SEEN: list = []    # [frame arrays] of the frames whose columns were built at full rate once
-
-
-def _signal_arrays(frame) -> tuple:
-    """The arrays the decimated entries of a frame are built from (held with them: their identities key them)."""
-    arrs = [frame.row_experiment, frame.row_index, frame.system.joint]
-    for ex in frame.experiments:
-        arrs += [ex.t, ex.q, ex.dq, ex.ddq]
-    return tuple(arrs)
 
 
 def describe_length(frame: int, fld: str, value: float, std: float) -> dict:
