@@ -33,6 +33,7 @@ import math
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -266,20 +267,24 @@ def _names(v, where, key) -> tuple[str, ...]:
     return out
 
 
-def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=None, max_gap=None,
-                drop_bad_rows=None, format_file=None, dt_overrides_time=None, skip_rows=None, reshape=None,
-                bag: Mapping | None = None, mm=None) -> LogFormat:
-    """A :class:`LogFormat` from options (None: not given) over a format file's keys; ``bag``: the ROS bag
-    options by key (:data:`BAG_KEYS`: ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``)."""
+def make_format(*, format_file=None, bag: Mapping | None = None, **options: Any) -> LogFormat:
+    """A :class:`LogFormat` from the data options by key (None: not given) over a format file's keys.
+
+    ``options``: the keys of :data:`FORMAT_KEYS` but the ROS bag ones (``columns``, ``dt``, ``dt_overrides_time``,
+    ``tau_scale``, ``deg``, ``mm``, ``resample``, ``max_gap``, ``drop_bad_rows``, ``skip_rows``, ``reshape``; an
+    unknown name raises :class:`TypeError` naming the allowed ones); ``bag``: the ROS bag options by key
+    (:data:`BAG_KEYS`: ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``)."""
+    data_keys = [k for k in FORMAT_KEYS if k not in BAG_KEYS]
+    unknown = [k for k in options if k not in data_keys]
+    if unknown:
+        raise TypeError(f"make_format: unknown option(s) {', '.join(unknown)} (allowed: {', '.join(data_keys)})")
     bag = dict(bag or {})
     unknown = [k for k in bag if k not in BAG_KEYS]
     if unknown:
         raise TypeError(f"unknown ROS bag option(s) {', '.join(unknown)} (allowed: {', '.join(BAG_KEYS)})")
     base = read_format_file(format_file) if format_file else {}
     origin = str(format_file) if format_file else "command line"
-    given = dict(columns=columns, dt=dt, tau_scale=tau_scale, deg=deg, mm=mm, resample=resample, max_gap=max_gap,
-                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time, skip_rows=skip_rows,
-                 reshape=reshape, **{k: bag.get(k) for k in BAG_KEYS})
+    given = {**{k: options.get(k) for k in data_keys}, **{k: bag.get(k) for k in BAG_KEYS}}
     where = {k: ("command line" if v is not None else origin) for k, v in given.items()}
     merged = {k: (v if v is not None else base.get(k)) for k, v in given.items()}
     cols = parse_columns(merged["columns"], where=f"{where['columns']}: columns") if merged["columns"] else ()
