@@ -1,19 +1,26 @@
 """Recordings that used to give silent wrong results: a joint stuck at its encoder noise, q and tau given the
-same columns, ``--deg`` on a prismatic joint, a saturated torque, ``--dt`` beside a time column. Each one is
+same columns, ``--deg`` on a prismatic joint, a prismatic joint in millimetres (``--mm``), a saturated torque, ``--dt`` beside a time column. Each one is
 now a warning naming the file, the joint and the option that fixes it (exit 0, also in the JSON), or an error
 naming the file, the field and the option; with the option, the simulated truth comes back within 3 sigma."""
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import json
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import symoro_gen
+from symoro_gen.description import load_robot
+from symoro_gen.errors import DataFileError
 from symoro_gen.loader import model_for
+from symoro_gen.paths import robots_dir
+from symoro_gen.preprocessing import LogFormat, make_format, read_recording
 from symoro_gen.preprocessing.motion import noise_level_joints, saturation_mask
 from symoro_gen.preprocessing.readers import DataWarning
 from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording, write_recording_csv
@@ -136,6 +143,101 @@ def test_deg_leaves_the_prismatic_joint_in_metres(clean, cli, tmp_path):
     np.testing.assert_allclose(p_deg["values"], p_ref["values"], rtol=1e-6, atol=1e-9)
     h = cli.subprocess("identify", "--help").stdout
     assert "revolute joints" in " ".join(h.split()) and "prismatic joints stay in m" in " ".join(h.split())
+
+
+# ---- --mm converts the prismatic joints' positions only --------------------------------------------------------
+def _millimetres(files, folder, *, deg=False):
+    """The first clean recording with the prismatic joint 3's position in mm (and, ``deg``, the revolute joints'
+    in degrees): the raw columns and the file."""
+    a = np.loadtxt(files[0], delimiter=",", skiprows=1)
+    head = Path(files[0]).read_text().splitlines()[0]
+    b = a.copy()
+    b[:, 3] *= 1e3                                       # q3 (prismatic) in mm; tau3 (a force, N) as it is
+    if deg:
+        b[:, [1, 2, 4]] = np.rad2deg(b[:, [1, 2, 4]])
+    path = folder / ("mm_deg.csv" if deg else "mm.csv")
+    np.savetxt(path, b, delimiter=",", header=head, comments="", fmt="%.17g")
+    return a, b, path
+
+
+def test_mm_warned_without_the_option_and_identifies_as_metres_with_it(clean, cli, tmp_path):
+    files, _ = clean
+    _, _, path = _millimetres(files, tmp_path)
+    _, _, both = _millimetres(files, tmp_path, deg=True)
+    with pytest.warns(DataWarning) as caught:
+        cli("--quiet", "identify", "scara", path, "--json", tmp_path / "raw.json")
+    (w,) = [str(x.message) for x in caught if "column q3" in str(x.message)]
+    assert re.search(r"mm\.csv, column q3: max \|q\| = [0-9.]+ > 5 m for a prismatic joint: positions in mm\? "
+                     r"\(expected m; --mm reads millimetres\)", w), w
+    ref, got, got2 = tmp_path / "ref.json", tmp_path / "mm.json", tmp_path / "both.json"
+    cli("--quiet", "identify", "scara", files[0], "--json", ref)
+    with warnings.catch_warnings(record=True) as after:
+        warnings.simplefilter("always")
+        cli("--quiet", "identify", "scara", path, "--mm", "--json", got)
+    assert not [str(x.message) for x in after if issubclass(x.category, DataWarning)]
+    cli("--quiet", "identify", "scara", both, "--mm", "--deg", "--json", got2)
+    p_ref, p_mm, p_both = (json.loads(f.read_text())["parameters"] for f in (ref, got, got2))
+    assert p_ref["names"] == p_mm["names"] == p_both["names"]
+    np.testing.assert_allclose(p_mm["values"], p_ref["values"], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(p_both["values"], p_ref["values"], rtol=1e-6, atol=1e-9)
+    assert json.loads(got.read_text())["data"][0]["options"] == ["--mm"]
+    # without the option the millimetres are read as metres: another (wrong) model
+    p_raw = json.loads((tmp_path / "raw.json").read_text())["parameters"]
+    assert np.max(np.abs(np.subtract(p_raw["values"], p_ref["values"])) / np.asarray(p_ref["std"])) > 100
+    with pytest.raises(SystemExit) as ex, contextlib.redirect_stdout(io.StringIO()) as out:
+        cli("inspect", "--help", capture=False)
+    h = " ".join(out.getvalue().split())
+    assert ex.value.code == 0
+    assert "--mm" in h and "prismatic joints are logged in millimetres" in h
+
+
+def test_mm_in_the_python_api_leaves_revolute_joints_and_forces(clean, tmp_path):
+    files, _ = clean
+    a, b, path = _millimetres(files, tmp_path)
+    robot = load_robot("scara")
+    (tr,), rep = read_recording(path, make_format(mm=True), robot=robot)
+    np.testing.assert_array_equal(tr.q[:, [0, 1, 3]], b[:, [1, 2, 4]])   # revolute joints untouched
+    np.testing.assert_allclose(tr.q[:, 2], a[:, 3], rtol=1e-15)          # q3 back in metres
+    np.testing.assert_array_equal(tr.tau, b[:, 5:9])                     # the prismatic joint's force untouched
+    assert rep.options == ("--mm",)
+    fmt_file = tmp_path / "lab.toml"
+    fmt_file.write_text("mm = true\n")
+    assert make_format(format_file=fmt_file).mm and not make_format(format_file=fmt_file, mm=False).mm
+    ref = symoro_gen.identify("scara", files[0], method="ols").to_dict()["parameters"]
+    got = symoro_gen.identify("scara", path, method="ols", data_format=LogFormat(mm=True)).to_dict()["parameters"]
+    np.testing.assert_allclose(got["values"], ref["values"], rtol=1e-6, atol=1e-9)
+
+
+def test_mm_needs_a_prismatic_joint_on_the_joint_side(clean, tmp_path):
+    """--mm that would convert nothing is an error naming the file and why: no robot (no joint types), a robot
+    without a prismatic joint, a drive chain (motor angles) without a link-side q_link column; with q_link, the
+    link side of the prismatic joint is converted."""
+    files, _ = clean
+    a, b, path = _millimetres(files, tmp_path)
+    with pytest.raises(DataFileError, match=r"mm\.csv.*field 'mm'.*no robot"):
+        read_recording(path, make_format(mm=True), n_joints=4)
+    six = tmp_path / "six.csv"
+    np.savetxt(six, np.column_stack([a[:, 0], np.zeros((a.shape[0], 12))]), delimiter=",", comments="",
+               header=",".join(["t"] + [f"q{j}" for j in range(1, 7)] + [f"tau{j}" for j in range(1, 7)]))
+    with pytest.raises(DataFileError, match="the robot has no prismatic joint"):
+        read_recording(six, make_format(mm=True), robot=load_robot("rx90"))
+    text = (robots_dir() / "scara.toml").read_text()
+    chained = tmp_path / "scara_chain.toml"
+    chained.write_text(text.replace('name = "scara"', 'name = "scara_chain"')
+                       + "\n[drive_chain]\nratios = [10, 10, 1000, 10]\n")
+    robot = load_robot(chained)
+    ratios = np.array([10.0, 10.0, 1000.0, 10.0])
+    head = ",".join(["t"] + [f"m{j}" for j in range(4)] + [f"tau{j}" for j in range(4)] + [f"l{j}" for j in range(4)])
+    log = tmp_path / "motor.csv"
+    np.savetxt(log, np.column_stack([a[:, 0], a[:, 1:5] * ratios, a[:, 5:9] / ratios, b[:, 1:5]]), delimiter=",",
+               header=head, comments="", fmt="%.17g")
+    motor = "t=t,q=m0:m3,tau=tau0:tau3"
+    with pytest.raises(DataFileError, match="drive chain makes the logged q, dq, ddq motor angles"):
+        read_recording(log, make_format(columns=motor, mm=True), robot=robot, drive_chain=robot.drive_chain)
+    (tr,), _ = read_recording(log, make_format(columns=motor + ",q_link=l0:l3", mm=True), robot=robot,
+                              drive_chain=robot.drive_chain)
+    np.testing.assert_allclose(tr.q, a[:, 1:5], rtol=1e-12, atol=1e-15)      # link side, q3 in m
+    np.testing.assert_allclose(tr.deflection, 0.0, atol=1e-12)               # the motor side mapped by the ratios
 
 
 # ---- saturated torque -------------------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ __all__ = ["add_data_options", "format_from_args", "load_data", "data_block", "d
 
 
 def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = False) -> None:
-    """Add ``--format --columns --dt --dt-overrides-time --tau-scale --deg --resample --max-gap --drop-bad-rows
+    """Add ``--format --columns --dt --dt-overrides-time --tau-scale --deg --mm --resample --max-gap --drop-bad-rows
     --skip-rows --reshape``, the ROS bag options ``--topic --stamp --prefix --joint-names --reference-topic`` (and,
     with ``validate_fraction``, ``--validate-fraction``) to a command's parser."""
     g = p.add_argument_group("reading the DATA files (docs/data-files.md)")
@@ -37,6 +37,9 @@ def add_data_options(p: argparse.ArgumentParser, *, validate_fraction: bool = Fa
                    "(one per joint or one for all), e.g. current x torque constant x ratio")
     g.add_argument("--deg", action="store_true", default=None, help="positions of the revolute joints are logged "
                    "in degrees (converted to rad; prismatic joints stay in m, the robot file gives the joint types)")
+    g.add_argument("--mm", action="store_true", default=None, help="positions of the prismatic joints are logged "
+                   "in millimetres (converted to m; revolute joints and the prismatic joints' forces untouched; with "
+                   "a drive chain only a link-side q_link column)")
     g.add_argument("--resample", action="store_true", default=None,
                    help="resample irregular time stamps on a uniform grid at the median step (cubic for q, linear "
                         "for the rest); steps longer than --max-gap split the file into experiments")
@@ -74,6 +77,7 @@ def format_from_args(args) -> LogFormat:
     """The :class:`LogFormat` of parsed arguments (over ``--format FILE``)."""
     return make_format(columns=getattr(args, "columns", None), dt=getattr(args, "dt", None),
                        tau_scale=getattr(args, "tau_scale", None), deg=getattr(args, "deg", None),
+                       mm=getattr(args, "mm", None),
                        resample=getattr(args, "resample", None), max_gap=getattr(args, "max_gap", None),
                        drop_bad_rows=getattr(args, "drop_bad_rows", None), format_file=getattr(args, "format", None),
                        dt_overrides_time=getattr(args, "dt_overrides_time", None),

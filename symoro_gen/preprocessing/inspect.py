@@ -71,7 +71,12 @@ class ExperimentStats:
 
 @dataclass(frozen=True)
 class Inspection:
-    """What :func:`inspect_recordings` found."""
+    """What :func:`inspect_recordings` found.
+
+    ``warnings`` are the findings that may spoil an identification (bad rows, irregular steps, standstill,
+    saturation, conditioning); what reading a file did (rows skipped, a dump reshaped, a file split, joints
+    ignored) is in the load reports' ``notes`` (``files``), printed once under ``Data:``, not repeated here.
+    """
 
     files: tuple[LoadReport, ...]
     experiments: tuple[ExperimentStats, ...]
@@ -199,8 +204,7 @@ def inspect_recordings(model: IdentificationModel, trajectories: Sequence[Trajec
             warn.append(f"{r.file}: {r.rows_dropped} bad row(s) dropped")
         if r.step_jitter > 0.5 and not r.resampled:
             warn.append(f"{r.file}: irregular time steps (up to {100 * r.step_jitter:.3g} % of the median step)")
-        for note in r.notes:
-            warn.append(f"{r.file}: {note}")
+        # the load report's notes are printed once, under "Data:" (and in the JSON's data[].notes): not warnings
     n = model.N_JOINTS if hasattr(model, "N_JOINTS") else (trajectories[0].n_joints if trajectories else 0)
     for j in range(n):
         still = [e.joints[j].standstill for e in exps if j < len(e.joints)]

@@ -714,7 +714,7 @@ def _position_checks(file: str, t: np.ndarray, q: np.ndarray, types: list[int], 
         if types[j] == 1:
             if qa.max() > lim.max_abs_prismatic:
                 msgs.append(f"{file}, column q{j + 1}: max |q| = {qa.max():.4g} > {lim.max_abs_prismatic:g} m "
-                            "for a prismatic joint: positions in mm? (expected m)")
+                            "for a prismatic joint: positions in mm? (expected m; --mm reads millimetres)")
             continue
         if qa.max() > lim.max_abs_position:
             msgs.append(f"{file}, column q{j + 1}: max |q| = {qa.max():.4g} > {lim.max_abs_position:.4g} rad: "

@@ -3,7 +3,8 @@ options), and the :class:`~.options.LoadReport` of what was done.
 
 Order of the operations (each one echoed in the report): rows with bad values dropped
 (``drop_bad_rows``), degrees -> radians (``deg``: the revolute joints only, by the robot's joint types; with
-a drive chain every motor-side position, all angles), ``tau_scale``, resampling and splitting at gaps, the robot's
+a drive chain every motor-side position, all angles), millimetres -> metres (``mm``: the prismatic joints'
+positions on the joint side), ``tau_scale``, resampling and splitting at gaps, the robot's
 drive chain (motor -> joint side), then ``q_link`` replaces ``q``.
 """
 from __future__ import annotations
@@ -98,17 +99,55 @@ def _drop_bad_rows(c: RawColumns, fmt: LogFormat) -> tuple[np.ndarray, tuple[str
     return ~drop, dropped
 
 
+def _unit_joints(fmt: LogFormat, n: int, source: str, joint_types: Sequence[int] | None, motor_side: bool,
+                roles: Sequence[str]) -> dict[str, tuple[list[int], list[int]]]:
+    """Per position role present (``roles``), the 0-based joints ``deg`` converts from degrees and those ``mm``
+    converts from millimetres.
+
+    ``deg``: the revolute joints by ``joint_types`` (every joint without them); on the motor side (``motor_side``,
+    a drive chain) every joint of ``q``, ``dq``, ``ddq``, which are motor angles, and the revolute ones of the
+    link-side ``q_link``. ``mm``: the prismatic joints (``sigma = 1``), of the joint-side roles only (with a drive
+    chain, ``q_link``).
+
+    Raises
+    ------
+    DataFileError
+        ``mm`` without joint types, on a robot without a prismatic joint, or with a drive chain and no ``q_link``
+        column: the option would convert nothing.
+    """
+    every = list(range(n))
+    types = list(joint_types) if joint_types is not None else None
+    revolute = every if types is None else [j for j in every if types[j] == 0]
+    prismatic = [] if types is None else [j for j in every if types[j] == 1]
+    out: dict[str, tuple[list[int], list[int]]] = {}
+    for r in (x for x in POSITION_ROLES if x in roles):
+        motor = motor_side and r != "q_link"
+        deg = (every if motor else revolute) if fmt.deg else []
+        out[r] = (deg, [] if motor or not fmt.mm else prismatic)
+    if fmt.mm:
+        why = ("the reader was given no robot (its joint types say which joints are prismatic)" if types is None
+               else "the robot has no prismatic joint" if not prismatic
+               else "the robot's drive chain makes the logged q, dq, ddq motor angles; --mm converts a link-side "
+                    "q_link column only, and there is none (give the drive chain's ratio per metre instead)"
+               if not any(mm for _, mm in out.values()) else "")
+        if why:
+            raise DataFileError([Problem(source, "", "mm", f"--mm (prismatic positions in millimetres): {why}")])
+    return out
+
+
 def _convert_units(vals: dict[str, np.ndarray], fmt: LogFormat, n: int, source: str,
-                   angular: Sequence[int] | None = None) -> None:
-    """``deg`` (positions to radians: the joints ``angular``, 0-based, default every joint) and
-    ``tau_scale`` (the logged signal to N m), in place."""
-    if fmt.deg:
-        js = list(range(n)) if angular is None else list(angular)
-        for r in POSITION_ROLES:
-            if r in vals and js:
-                v = np.array(vals[r], float)
-                v[:, js] = np.deg2rad(v[:, js])
-                vals[r] = v
+                   joints: dict[str, tuple[list[int], list[int]]] | None = None) -> None:
+    """``deg`` (positions to radians) and ``mm`` (prismatic positions to metres) on the joints of each role
+    ``joints`` gives (:func:`_unit_joints`; default: ``deg`` on every joint), and ``tau_scale`` (the logged
+    signal to N m), in place."""
+    if joints is None:
+        joints = {r: (list(range(n)) if fmt.deg else [], []) for r in POSITION_ROLES}
+    for r, (deg, mm) in joints.items():
+        if r in vals and (deg or mm):
+            v = np.array(vals[r], float)
+            v[:, deg] = np.deg2rad(v[:, deg])
+            v[:, mm] = 1e-3 * v[:, mm]
+            vals[r] = v
     if fmt.tau_scale:
         s = np.asarray(fmt.tau_scale, float)
         if s.size not in (1, n):
@@ -311,10 +350,10 @@ def log_trajectories(c: RawColumns, fmt: LogFormat, *, n: int, dt: float | None,
     keep, more = _drop_out_of_order(c, keep, fmt, dt)
     dropped += more
     vals = {r: col.values[keep] for r, col in c.cols.items()}
-    # --deg converts angles: the revolute joints (the robot's joint types), or every motor-side position
-    angular = None if joint_types is None or drive_chain is not None else [j for j, sg in enumerate(joint_types)
-                                                                            if sg == 0]
-    _convert_units(vals, fmt, n, c.source, angular)
+    # --deg converts angles: the revolute joints (the robot's joint types), or every motor-side position;
+    # --mm the prismatic joints' positions on the joint side
+    joints = _unit_joints(fmt, n, c.source, joint_types, drive_chain is not None, tuple(vals))
+    _convert_units(vals, fmt, n, c.source, joints)
     t = _time_base(c, vals, keep, dt, fmt)
     d = np.diff(t)
     resets = _resets(t) if fmt.resample else np.zeros(0, int)

@@ -8,6 +8,7 @@ resampling, bad rows), as command-line options or a TOML file with the same keys
     dt_overrides_time = false           # dt replaces a time column (without it, both are an error)
     tau_scale = [0.5, 0.5, 0.3]         # logged signal -> N m (one per joint, or one for all)
     deg = false                         # positions (q, q_link, dq, ddq) logged in degrees
+    mm = false                          # positions of the prismatic joints logged in millimetres
     resample = false                    # irregular time stamps -> uniform grid at the median step
     max_gap = 0.05                      # [s] longer steps split the file (default 5 median steps)
     drop_bad_rows = false               # drop malformed / non-finite / absurd rows, counted
@@ -32,6 +33,7 @@ import math
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -46,8 +48,8 @@ __all__ = ["LogFormat", "LoadReport", "parse_columns", "read_format_file", "make
 
 #: default ``max_gap`` in median steps
 MAX_GAP_STEPS = 5
-FORMAT_KEYS = ("columns", "dt", "dt_overrides_time", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows",
-               "skip_rows", "reshape", "topic", "stamp", "prefix", "joint_names", "reference_topic")
+FORMAT_KEYS = ("columns", "dt", "dt_overrides_time", "tau_scale", "deg", "mm", "resample", "max_gap",
+               "drop_bad_rows", "skip_rows", "reshape", "topic", "stamp", "prefix", "joint_names", "reference_topic")
 #: the keys that only ROS bags use (:mod:`.bag`)
 BAG_KEYS = ("topic", "stamp", "prefix", "joint_names", "reference_topic")
 STAMPS = ("header", "log")
@@ -76,6 +78,11 @@ class LogFormat:
     deg : bool
         Revolute joints' positions (and velocities, accelerations) logged in degrees; prismatic joints'
         stay in metres.
+    mm : bool
+        Prismatic joints' positions (and velocities, accelerations) logged in millimetres (mm/s, mm/s^2);
+        revolute joints' stay as they are, and the force column of a prismatic joint is not touched
+        (``tau_scale`` rescales it). Needs the robot's joint types; with a drive chain only ``q_link`` (the
+        link side) is converted, the motor-side positions being motor angles.
     resample : bool
         Resample irregular time stamps on a uniform grid at the median step (linear interpolation,
         cubic for positions); steps longer than ``max_gap`` split the file.
@@ -108,6 +115,7 @@ class LogFormat:
     dt: float | None = None
     tau_scale: tuple[float, ...] | None = None
     deg: bool = False
+    mm: bool = False
     resample: bool = False
     max_gap: float | None = None
     drop_bad_rows: bool = False
@@ -129,7 +137,7 @@ class LogFormat:
     def is_plain(self) -> bool:
         """Nothing beyond ``dt``: the plain reading (:func:`~symoro_gen.preprocessing.readers.load_trajectory`)
         reads the file as is."""
-        return not (self.columns or self.tau_scale or self.deg or self.resample or self.drop_bad_rows
+        return not (self.columns or self.tau_scale or self.deg or self.mm or self.resample or self.drop_bad_rows
                     or self.skip_rows or self.reshape)
 
     def options(self) -> tuple[str, ...]:
@@ -143,6 +151,8 @@ class LogFormat:
             out.append("--tau-scale " + ",".join(f"{v:g}" for v in self.tau_scale))
         if self.deg:
             out.append("--deg")
+        if self.mm:
+            out.append("--mm")
         if self.resample:
             out.append("--resample" + (f" --max-gap {self.max_gap:g}" if self.max_gap is not None else ""))
         if self.drop_bad_rows:
@@ -243,7 +253,7 @@ def read_format_file(path) -> dict:
         raise DataFileError([Problem(path, "", bad[0], f"unknown key (allowed: {', '.join(FORMAT_KEYS)})")])
     if isinstance(d.get("columns"), dict):
         d["columns"] = ",".join(f"{k}={v}" for k, v in d["columns"].items())
-    for k in ("deg", "resample", "drop_bad_rows", "dt_overrides_time"):
+    for k in ("deg", "mm", "resample", "drop_bad_rows", "dt_overrides_time"):
         if k in d and not isinstance(d[k], bool):
             raise DataFileError([Problem(path, "", k, f"{d[k]!r}: must be true or false")])
     return d
@@ -257,20 +267,24 @@ def _names(v, where, key) -> tuple[str, ...]:
     return out
 
 
-def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=None, max_gap=None,
-                drop_bad_rows=None, format_file=None, dt_overrides_time=None, skip_rows=None, reshape=None,
-                bag: Mapping | None = None) -> LogFormat:
-    """A :class:`LogFormat` from options (None: not given) over a format file's keys; ``bag``: the ROS bag
-    options by key (:data:`BAG_KEYS`: ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``)."""
+def make_format(*, format_file=None, bag: Mapping | None = None, **options: Any) -> LogFormat:
+    """A :class:`LogFormat` from the data options by key (None: not given) over a format file's keys.
+
+    ``options``: the keys of :data:`FORMAT_KEYS` but the ROS bag ones (``columns``, ``dt``, ``dt_overrides_time``,
+    ``tau_scale``, ``deg``, ``mm``, ``resample``, ``max_gap``, ``drop_bad_rows``, ``skip_rows``, ``reshape``; an
+    unknown name raises :class:`TypeError` naming the allowed ones); ``bag``: the ROS bag options by key
+    (:data:`BAG_KEYS`: ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``)."""
+    data_keys = [k for k in FORMAT_KEYS if k not in BAG_KEYS]
+    unknown = [k for k in options if k not in data_keys]
+    if unknown:
+        raise TypeError(f"make_format: unknown option(s) {', '.join(unknown)} (allowed: {', '.join(data_keys)})")
     bag = dict(bag or {})
     unknown = [k for k in bag if k not in BAG_KEYS]
     if unknown:
         raise TypeError(f"unknown ROS bag option(s) {', '.join(unknown)} (allowed: {', '.join(BAG_KEYS)})")
     base = read_format_file(format_file) if format_file else {}
     origin = str(format_file) if format_file else "command line"
-    given = dict(columns=columns, dt=dt, tau_scale=tau_scale, deg=deg, resample=resample, max_gap=max_gap,
-                 drop_bad_rows=drop_bad_rows, dt_overrides_time=dt_overrides_time, skip_rows=skip_rows,
-                 reshape=reshape, **{k: bag.get(k) for k in BAG_KEYS})
+    given = {**{k: options.get(k) for k in data_keys}, **{k: bag.get(k) for k in BAG_KEYS}}
     where = {k: ("command line" if v is not None else origin) for k, v in given.items()}
     merged = {k: (v if v is not None else base.get(k)) for k, v in given.items()}
     cols = parse_columns(merged["columns"], where=f"{where['columns']}: columns") if merged["columns"] else ()
@@ -286,6 +300,7 @@ def make_format(*, columns=None, dt=None, tau_scale=None, deg=None, resample=Non
         tau_scale=(_floats(merged["tau_scale"], where["tau_scale"], "tau_scale") if merged["tau_scale"] is not None
                    else None),
         deg=bool(merged["deg"]),
+        mm=bool(merged["mm"]),
         resample=bool(merged["resample"]),
         max_gap=_positive(merged["max_gap"], where["max_gap"], "max_gap") if merged["max_gap"] is not None else None,
         drop_bad_rows=bool(merged["drop_bad_rows"]),

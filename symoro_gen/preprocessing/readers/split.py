@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,17 +27,22 @@ import numpy as np
 
 from ...errors import DataFileError, Problem
 from .arrays import load_npy
-from .common import Column, RawColumns, fmt_names, raise_malformed
+from .common import Column, RawColumns, fmt_names, raise_malformed, warn_data
 from .options import RESHAPE_ORDERS
 from .text import read_table
 
-__all__ = ["DataSpec", "parse_data_spec", "read_split", "one_per_line", "roughness", "SMOOTH_MAX",
-           "ORDER_CONTRAST"]
+__all__ = ["DataSpec", "parse_data_spec", "read_split", "one_per_line", "roughness", "level_share", "SMOOTH_MAX",
+           "ORDER_CONTRAST", "LEVELS_TELL", "LEVELS_NONE"]
 
 #: largest roughness (:func:`roughness`) of signals called smooth
 SMOOTH_MAX = 0.1
 #: the other order of a one-value-per-line file must be at least this many times rougher
 ORDER_CONTRAST = 10.0
+#: a one-value-per-line file whose roughness tells no order is in the other files' order unless its joints' levels
+#: (:func:`level_share`) explain at least LEVELS_TELL of its variance in the other order and at most LEVELS_NONE
+#: in theirs
+LEVELS_TELL = 0.9
+LEVELS_NONE = 0.01
 
 
 @dataclass(frozen=True)
@@ -244,6 +250,104 @@ def _add(out: RawColumns, role: str, path: str, a, names, lines, unp, fields) ->
         out.bad_fields = fields if bad is None or bad.shape != fields.shape else (bad | fields)
 
 
+def level_share(x: np.ndarray) -> float:
+    """Share of the variance of ``(N, n)`` values that their column means explain (between-column sum of squares
+    over the total sum of squares, 0 to 1). Read in its order, a file whose joints sit at distinct levels (torque
+    offsets, gravity) has a large share; read in the other order every column holds all the joints alike (a
+    share near 0). Used only on files whose :func:`roughness` tells no order (noise about the joints' levels)."""
+    x = np.asarray(x, float)
+    dev = x - np.nanmean(x)
+    tot = float(np.nansum(dev ** 2))
+    between = float(np.sum(np.sum(np.isfinite(x), axis=0) * np.nanmean(dev, axis=0) ** 2))
+    return between / tot if tot > 0 else 0.0
+
+
+def _repeated_stamps(path: str, a, lines, unp, fields, n: int, orders: Mapping[str, str], probs: list[Problem]):
+    """A one-column ``t=`` file holding each sample's stamp once per joint, in one of the other files' orders (the
+    one whose ``n`` copies agree): ``(a, lines, unp, fields, note)``, or None with a problem."""
+    for order in dict.fromkeys(orders.values()):
+        x = _order(a[:, 0], n, order)
+        spread = float(np.nanmax(np.abs(x - x[:, :1]))) if x.size else 0.0
+        scale = float(np.nanmax(np.abs(x))) if x.size else 0.0
+        if spread <= 1e-9 * max(scale, 1.0):
+            break
+    else:
+        probs.append(Problem(path, f"rows 1-{a.shape[0]}", "t", f"one value per line like the other "
+                             f"files ({order}), but the {n} stamps of a sample differ (by up to "
+                             f"{spread:.3g}): expected one stamp per sample, repeated for each joint"))
+        return None
+    take = slice(None, None, n) if order == "sample-major" else slice(0, a.shape[0] // n)
+    lines = lines[take] if lines is not None else None
+    unp = _order(unp[:, 0], n, order)[:, :1]
+    fields = np.asarray(_order(fields, n, order).any(axis=1), bool) if fields is not None else None
+    note = f"{path} (t): one value per line, the stamp of each sample repeated for the {n} joints ({order}, as the " \
+           "other files)"
+    return x[:, :1], lines, unp, fields, note
+
+
+def _read_pending(out: RawColumns, pending: list[tuple], orders: dict[str, str], n: int, probs: list[Problem]
+                  ) -> None:
+    """One-value-per-line files whose roughness tells no order: the order of the other files, when they agree,
+    unless the file's joints' levels (:func:`level_share`) say the other order beyond doubt (at least
+    ``LEVELS_TELL`` of its variance in that order, at most ``LEVELS_NONE`` in the others'): a file of another
+    layout, read in its own (:func:`_check_layouts` then warns)."""
+    known = set(orders.values())
+    for role, path, a, names, lines, unp, fields in pending:
+        if len(known) != 1:
+            _reshaped(role, path, a, names, lines, unp, fields, n, None, "", probs)
+            continue
+        (order,) = known
+        how = f"as {', '.join(f'{r}=' for r in orders)}: its own data do not tell"
+        if a.shape[0] % n == 0:
+            other = next(o for o in RESHAPE_ORDERS if o != order)
+            share = {o: level_share(_order(a[:, 0], n, o)) for o in (order, other)}
+            if share[other] >= LEVELS_TELL and share[order] <= LEVELS_NONE:
+                how = (f"found from the levels of its joints: their means explain {100 * share[other]:.3g} % of its "
+                       f"variance in this order, {100 * share[order]:.2g} % in the other; not {order} as "
+                       f"{', '.join(f'{r}=' for r in orders)}")
+                order = other
+        got = _reshaped(role, path, a, names, lines, unp, fields, n, order, how, probs)
+        if got is not None:
+            x, nm, ln, up, fl, note, orders[role] = got
+            out.notes.append(note)
+            _add(out, role, path, x, nm, ln, up, fl)
+
+
+def _joint_numbers(names: list[str]) -> list[int] | None:
+    """The joint number in each of a header's names (``q1 .. q6``, ``tau_0 .. tau_5``, ``j3_pos``): the one number
+    that differs from name to name, when every name has the same count of numbers and those are distinct."""
+    nums = [[int(x) for x in re.findall(r"\d+", nm)] for nm in names]
+    if len(names) < 2 or not nums[0] or any(len(x) != len(nums[0]) for x in nums):
+        return None
+    varying = [k for k in range(len(nums[0])) if len({x[k] for x in nums}) > 1]
+    if len(varying) != 1:
+        return None
+    out = [x[varying[0]] for x in nums]
+    return out if len(set(out)) == len(out) else None
+
+
+def _check_layouts(spec: DataSpec, orders: Mapping[str, str], headers: Mapping[str, tuple[str, list[str]]],
+                   probs: list[Problem]) -> None:
+    """Files of one recording in different layouts, where the files themselves tell: one-value-per-line files
+    found (each from its own data) in different orders, a warning naming each file and its order (each is read
+    in its own); headers numbering the joints in different orders, a problem naming both files and orders
+    (every file's columns are read in order, joint 1 first)."""
+    if len(set(orders.values())) > 1:
+        warn_data(f"{spec.text}: the files of this split recording have different layouts: "
+                  + ", ".join(f"{spec.files[r]} ({r}) {o}" for r, o in orders.items())
+                  + "; each is read in the order its own data show (the load report's notes say how), but a "
+                  "logger writes its dumps one way: check the files (a noisy file whose joints sit at distinct "
+                  "levels can look smooth in the wrong order); --reshape ORDER reads every file in one order")
+    ranked = {r: (path, nm, np.argsort(nums).tolist()) for r, (path, nm) in headers.items()
+              if (nums := _joint_numbers(nm)) is not None}
+    if len({tuple(rk) for _, _, rk in ranked.values()}) > 1:
+        probs.append(Problem(spec.text, "header", ", ".join(ranked), "the files' headers number the joints in "
+                             "different orders: " + "; ".join(f"{path} ({r}): {', '.join(nm)}" for r, (path, nm, _)
+                                                             in ranked.items())
+                             + ": the columns of every file are read in order (joint 1 first): put each file's "
+                             "columns in the robot's joint order"))
+
+
 def read_split(spec: DataSpec, n: int, dt: float | None, probs: list[Problem], *, strict: bool,
                skip_rows: int = 0, reshape: str | None = None) -> RawColumns:
     """The files of a split recording, one role each (rows aligned across files). ``strict`` (the plain
@@ -253,6 +357,7 @@ def read_split(spec: DataSpec, n: int, dt: float | None, probs: list[Problem], *
     out = RawColumns(spec.text, "split")
     orders: dict[str, str] = {}
     pending: list[tuple] = []
+    headers: dict[str, tuple[str, list[str]]] = {}
     roles = sorted(spec.files, key=lambda r: r == "t")  # the t= file last: it follows the others' layout
     for role in roles:
         path = spec.files[role]
@@ -260,6 +365,8 @@ def read_split(spec: DataSpec, n: int, dt: float | None, probs: list[Problem], *
         out.notes += [f"{path}: {x}" for x in notes]
         if role == "t" and a.shape[1] == 1 and names == ["column 1"]:
             names = ["t"]  # a headerless t= file: its one column is the time (named so in messages)
+        if role != "t" and names != [f"column {c + 1}" for c in range(len(names))]:
+            headers[role] = (path, list(names))
         want = 1 if role == "t" else n
         if role != "t" and a.shape[1] == 1 and n > 1:
             got = _reshaped(role, path, a, names, lines, unp, fields, n, reshape, "--reshape" if reshape else "",
@@ -275,22 +382,11 @@ def read_split(spec: DataSpec, n: int, dt: float | None, probs: list[Problem], *
         if role == "t" and orders and a.shape[1] == 1:
             sizes = {c.values.shape[0] for c in out.cols.values()}
             if len(sizes) == 1 and a.shape[0] == n * sizes.pop():
-                order = next(iter(orders.values()))
-                x = _order(a[:, 0], n, order)
-                spread = float(np.nanmax(np.abs(x - x[:, :1]))) if x.size else 0.0
-                scale = float(np.nanmax(np.abs(x))) if x.size else 0.0
-                if spread > 1e-9 * max(scale, 1.0):
-                    probs.append(Problem(path, f"rows 1-{a.shape[0]}", "t", f"one value per line like the other "
-                                         f"files ({order}), but the {n} stamps of a sample differ (by up to "
-                                         f"{spread:.3g}): expected one stamp per sample, repeated for each joint"))
+                got_t = _repeated_stamps(path, a, lines, unp, fields, n, orders, probs)
+                if got_t is None:
                     continue
-                take = slice(None, None, n) if order == "sample-major" else slice(0, a.shape[0] // n)
-                lines = lines[take] if lines is not None else None
-                unp = _order(unp[:, 0], n, order)[:, :1]
-                fields = np.asarray(_order(fields, n, order).any(axis=1), bool) if fields is not None else None
-                a = x[:, :1]
-                out.notes.append(f"{path} (t): one value per line, the stamp of each sample repeated for the {n} "
-                                 f"joints ({order}, as the other files)")
+                a, lines, unp, fields, note = got_t
+                out.notes.append(note)
         if a.shape[1] != want:
             below_header = lines is not None and lines.size > 0 and lines[0] > 1
             probs.append(Problem(path, "header" if below_header else "", role,
@@ -298,20 +394,8 @@ def read_split(spec: DataSpec, n: int, dt: float | None, probs: list[Problem], *
                                  f"expected {want}" + (f" ({role} of {n} joints)" if role != "t" else " (time)")))
             continue
         _add(out, role, path, a, names, lines, unp, fields)
-    if pending:  # one-value-per-line files whose order the data do not tell: the order of the others, if one
-        known = set(orders.values())
-        for role, path, a, names, lines, unp, fields in pending:
-            if len(known) == 1:
-                order = known.pop()
-                known.add(order)
-                got = _reshaped(role, path, a, names, lines, unp, fields, n, order,
-                                f"as {', '.join(f'{r}=' for r in orders)}: its own data do not tell", probs)
-                if got is not None:
-                    x, nm, ln, up, fl, note, _ = got
-                    out.notes.append(note)
-                    _add(out, role, path, x, nm, ln, up, fl)
-            else:
-                _reshaped(role, path, a, names, lines, unp, fields, n, None, "", probs)
+    _read_pending(out, pending, orders, n, probs)
+    _check_layouts(spec, orders, headers, probs)
     out.cols = {r: out.cols[r] for r in spec.files if r in out.cols}  # in the order of the spec
     lens = {role: c.values.shape[0] for role, c in out.cols.items()}
     if len(set(lens.values())) > 1:
