@@ -367,7 +367,7 @@ def _model_ref(model) -> tuple[object, IdentificationModel, RobotDescription | N
     ``generated/<name>/`` written from another file must not give the fleet another model than ``identify``
     has on the same log. The tasks then receive the folder of that package (workers import it once), or the
     robot file when the model is not a plain package (closed loops: built from the file). A generated package
-    folder is used as it is (its drive chain: ``robots/<ROBOT>.toml``'s, :func:`_drive_chain`).
+    folder is used as it is (its drive chain and joint types: ``robots/<ROBOT>.toml``'s, :func:`_robot_file_of`).
     """
     if isinstance(model, (str, os.PathLike)):
         path = os.fspath(model)
@@ -409,7 +409,8 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
         More keywords of the log reader (:func:`~symoro_gen.fleet.files.read_experiments`); ``drive_chain``:
         default the robot file's ``[drive_chain]`` (motor-side logs mapped to the joint side, as ``identify``
         does; found from the robot name or file, or ``robots/<ROBOT>.toml`` for a model object), ``None`` to read
-        the logs as they are.
+        the logs as they are; ``joint_types``: default the same robot file's (each joint's ``sigma``: the joints
+        ``--deg`` and ``--mm`` convert).
     kernel : callable
         The per-file task, ``kernel(model_ref, log, options, load_kw) -> Partial`` (default
         :func:`~symoro_gen.fleet.kernel.process_file`).
@@ -429,8 +430,11 @@ def identify_fleet(model: str | IdentificationModel, logs: Iterable, by: str, op
     if opts.tau_limits is None and robot is not None:
         opts = dataclasses.replace(opts, tau_limits=torque_limits(robot))
     load_kw = {"fmt": fo.data_format, **(load_kw or {})}
+    desc = robot if robot is not None else _robot_file_of(mdl)
     if "drive_chain" not in load_kw:
-        load_kw["drive_chain"] = robot.drive_chain if robot is not None else _drive_chain(mdl)
+        load_kw["drive_chain"] = desc.drive_chain if desc is not None else None
+    if "joint_types" not in load_kw:   # --deg/--mm convert the revolute/prismatic joints, as identify does
+        load_kw["joint_types"] = [int(j.sigma) for j in desc.model_joints] if desc is not None else None
     plain = plain_format(load_kw.get("fmt"))
     files = segments(discover(logs, by), fo.segment_samples if plain else None)
     t0 = time.perf_counter()
@@ -535,12 +539,12 @@ def _estimates(day_p: dict, robot_p: dict, fleet_p: Partial, groups: dict, skipp
     return names, fleet, days, robots
 
 
-def _drive_chain(mdl):
-    """The ``[drive_chain]`` of ``robots/<ROBOT>.toml`` for a model object whose robot file is not known, None
-    when it has none or no such file is found."""
+def _robot_file_of(mdl) -> RobotDescription | None:
+    """The description of ``robots/<ROBOT>.toml`` for a model object whose robot file is not known (its drive
+    chain and joint types), None when no such file is found."""
     if getattr(mdl, "ROBOT", None):
         try:
-            return load_robot(str(mdl.ROBOT)).drive_chain
+            return load_robot(str(mdl.ROBOT))
         except (SymoroError, OSError, ValueError):
             return None
     return None

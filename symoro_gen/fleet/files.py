@@ -191,17 +191,20 @@ def plain_format(fmt: LogFormat | None) -> bool:
 
 
 def read_experiments(path: str, n_joints: int, *, fmt: LogFormat | None = None, drive_chain=None,
-                     loaded: bool = False, start: int = 0, stop: int = -1) -> tuple[Trajectory, ...]:
+                     joint_types: Sequence[int] | None = None, loaded: bool = False, start: int = 0,
+                     stop: int = -1) -> tuple[Trajectory, ...]:
     """The experiments of one log, read as ``identify`` reads its DATA files
     (:func:`~symoro_gen.preprocessing.readers.read_recording`).
 
     ``fmt``: the :class:`~symoro_gen.preprocessing.readers.LogFormat` of the command line's data options
     (``--columns --tau-scale --deg --dt --resample --drop-bad-rows``, docs/data-files.md; a log may then
     split at gaps); ``start``, ``stop``: a segment of a Parquet log; ``drive_chain`` (the robot file's
-    ``[drive_chain]``): motor-side data mapped to the joint side, the same function as ``identify``.
+    ``[drive_chain]``): motor-side data mapped to the joint side, the same function as ``identify``;
+    ``joint_types`` (each joint's ``sigma``): which joints ``--deg`` (revolute) and ``--mm`` (prismatic) convert,
+    as ``identify`` converts them from the robot file.
     """
-    trajs, _ = read_recording(path, fmt, n_joints=n_joints, drive_chain=drive_chain, loaded=loaded, start=start,
-                              stop=stop)
+    trajs, _ = read_recording(path, fmt, n_joints=n_joints, drive_chain=drive_chain, joint_types=joint_types,
+                              loaded=loaded, start=start, stop=stop)
     return trajs
 
 

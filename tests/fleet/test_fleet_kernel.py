@@ -175,15 +175,17 @@ def test_column_map_reproduces_every_entry():
 def test_parquet_logs_honour_the_data_options(tmp_path, threads_client, cli):
     """A Parquet log with its own column names, positions in degrees and torques as a scaled signal, read
     with --columns --deg --tau-scale (the options of every command that reads data), gives the numbers of
-    the plain log."""
+    the plain log. The SCARA's joint 3 is prismatic: --deg leaves it in metres, as identify reads it."""
     simulate_fleet(tmp_path / "plain", "scara", n_robots=2, n_days=1, duration=4.0, drifts=(), seed=4)
     pa = pytest.importorskip("pyarrow")
     import pyarrow.parquet as pq
 
+    sigma = [j.sigma for j in load_robot("scara").model_joints]
+    assert sigma == [0, 0, 1, 0]
     for r in ("r00", "r01"):
         tr = read_log(str(tmp_path / "plain" / r / "d00.parquet"), 4)
         cols = {"time": tr.t}
-        cols.update({f"pos_{j}": np.rad2deg(tr.q[:, j]) for j in range(4)})
+        cols.update({f"pos_{j}": np.rad2deg(tr.q[:, j]) if sigma[j] == 0 else tr.q[:, j] for j in range(4)})
         cols.update({f"cur_{j}": tr.tau[:, j] / 2.5 for j in range(4)})
         cols["temperature"] = np.full(tr.n_samples, 40.0)
         (tmp_path / "raw" / r).mkdir(parents=True)
@@ -205,6 +207,30 @@ def test_parquet_logs_honour_the_data_options(tmp_path, threads_client, cli):
                        atol=1e-10)
     with pytest.raises(Exception, match="no log could be used"):
         identify_fleet("scara", [tmp_path / "raw"], BY, client=threads_client)
+
+
+def test_mm_converts_the_prismatic_joint_as_identify_does(tmp_path, threads_client, cli):
+    """A SCARA log whose prismatic joint 3 is in millimetres: the fleet with --mm gives the plain log's numbers
+    and identify's on the same file with the same option (the workers convert the joints the robot file says
+    are prismatic); without --mm the numbers are others."""
+    simulate_fleet(tmp_path / "plain", "scara", n_robots=1, n_days=1, duration=4.0, drifts=(), seed=5)
+    (tmp_path / "mm" / "r00").mkdir(parents=True)
+    tr = read_log(str(tmp_path / "plain" / "r00" / "d00.parquet"), 4)
+    q = tr.q.copy()
+    q[:, 2] *= 1000.0
+    write_parquet(tmp_path / "mm" / "r00" / "d00.parquet", Trajectory(t=tr.t, q=q, tau=tr.tau, source="mm"))
+    plain = identify_fleet("scara", [tmp_path / "plain"], BY, client=threads_client).days["r00"]["d00"]
+    got = identify_fleet("scara", [tmp_path / "mm"], BY, FleetOptions(data_format=make_format(mm=True)),
+                         client=threads_client).days["r00"]["d00"]
+    assert np.linalg.norm(got.values - plain.values) <= 1e-8 * np.linalg.norm(plain.values)
+    raw = identify_fleet("scara", [tmp_path / "mm"], BY, client=threads_client).days["r00"]["d00"]
+    assert np.linalg.norm(raw.values - plain.values) > 1e-3 * np.linalg.norm(plain.values)
+    out = tmp_path / "id.json"
+    cli("identify", "scara", tmp_path / "mm" / "r00" / "d00.parquet", "--mm", "--method", "wls", "--json", out)
+    ident = json.loads(out.read_text())["parameters"]
+    by_name = dict(zip(ident["names"], ident["values"]))
+    mine = np.array([by_name[nm] for nm in got.names])
+    assert np.linalg.norm(got.values - mine) <= 1e-8 * np.linalg.norm(mine)
 
 
 def test_motor_side_logs_go_through_the_robots_drive_chain(tmp_path, threads_client):

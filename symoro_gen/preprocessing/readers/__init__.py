@@ -62,7 +62,7 @@ __all__ = [
 
 PathOrSpec = str | os.PathLike | DataSpec
 #: the named keywords of :func:`read_recording` (besides the ROS bag options): a misspelt one is named
-READ_OPTIONS = ("fmt", "robot", "n_joints", "drive_chain", "loaded", "start", "stop", "base_dir")
+READ_OPTIONS = ("fmt", "robot", "n_joints", "drive_chain", "loaded", "start", "stop", "base_dir", "joint_types")
 
 
 def _read_columns(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors: Sequence[tuple[str, str]],
@@ -215,7 +215,7 @@ def load_trajectories(paths: Iterable, *, progress=None, **kwargs) -> tuple[Traj
 
 def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None, n_joints: int | None = None,
                    drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None,
-                   **bag: Any) -> tuple[tuple[Trajectory, ...], LoadReport]:
+                   joint_types: Sequence[int] | None = None, **bag: Any) -> tuple[tuple[Trajectory, ...], LoadReport]:
     """Read one DATA file (or split-file spec) with a :class:`LogFormat`.
 
     Parameters
@@ -226,6 +226,10 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
         Default: the file's own names (the plain reading, as :func:`load_trajectory`).
     robot, n_joints, drive_chain, base_dir
         As for :func:`load_trajectory`.
+    joint_types : sequence of int, optional
+        Each joint's MDH ``sigma`` (0 revolute, 1 prismatic), which ``--deg`` and ``--mm`` convert; default the
+        robot's (none without a robot). For a caller that has the joint types but not the robot description
+        (the fleet's workers).
     loaded : bool
         Payload mounted during this experiment.
     start, stop : int
@@ -253,12 +257,15 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     if robot is None and n_joints is None:
         raise TypeError("read_recording: give n_joints or robot")
     n = _joint_count(robot, n_joints)
+    types = _joint_types(robot) if joint_types is None else [int(s) for s in joint_types]
+    if len(types or ()) not in (0, n):
+        raise ValueError(f"read_recording: {len(types or ())} joint types given for {n} joints")
     spec = parse_data_spec(path, base_dir=base_dir)
     if not spec.is_split and is_bag(spec.files["file"]):
         if stop >= 0:
             raise ValueError(f"{spec.text}: only Parquet logs are read by segment (start, stop)")
         return read_bag(spec.files["file"], fmt, n=n, robot=robot, dt=fmt.dt, loaded=loaded,
-                        drive_chain=drive_chain, joint_types=_joint_types(robot))
+                        drive_chain=drive_chain, joint_types=types)
     if spec.dt is not None and fmt.dt is not None and not math.isclose(spec.dt, fmt.dt, rel_tol=1e-12):
         raise DataFileError([Problem(spec.text, "", "dt", f"the spec says dt = {spec.dt:g} s, --dt {fmt.dt:g}: "
                                      "give the sampling period once")])
@@ -270,7 +277,6 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
                                      f"and {given} gives a sampling period ({dt:g} s): leave {key} out to use the "
                                      "t= file, or give --dt-overrides-time to ignore the t= file")],
                             hint="--dt is the sampling period of files without time stamps")
-    joint_types = _joint_types(robot)
     if fmt.is_plain and stop < 0 and (spec.is_split or not is_parquet(spec.files["file"])):
         probs: list[Problem] = []
         raw = _read_columns(spec, n, mapping=None, selectors=(), dt=dt, probs=probs, strict=True)
@@ -278,7 +284,7 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
         t_lines = raw.cols["t"].lines if t_raw is not None else None
         try:
             tr = plain_trajectory(raw, probs, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
-                                  joint_types=joint_types, dt_overrides_time=fmt.dt_overrides_time)
+                                  joint_types=types, dt_overrides_time=fmt.dt_overrides_time)
         except DataFileError as exc:  # time out of order: the option that fixes it (--skip-rows ...)
             if t_raw is None or not any("not strictly increasing" in p.message for p in exc.problems):
                 raise
@@ -297,7 +303,7 @@ def read_recording(path: PathOrSpec, fmt: LogFormat | None = None, *, robot=None
     if probs:
         raise DataFileError(probs)
     trajs, rep = log_trajectories(raw, fmt, n=n, dt=dt, loaded=loaded, drive_chain=drive_chain,
-                                  joint_types=joint_types)
+                                  joint_types=types)
     return trajs, _ignored_bag_options(rep, fmt)
 
 
