@@ -225,3 +225,31 @@ def test_read_recording_takes_the_robot_as_identify_does_and_applies_its_drive_c
     assert np.allclose(tr.q, q, atol=1e-9) and np.allclose(tr.tau, tau, atol=1e-9)
     (ref,), _ = as_trajectories(spec, None, robot)
     assert np.array_equal(tr.q, ref.q) and np.array_equal(tr.tau, ref.tau)
+
+
+def test_data_options_by_name_as_the_commands_flags(recording, cli, tmp_path):
+    """The data options are named as the command's flags (``--columns``, ``--dt``, ``--tau-scale``...: docs/
+    data-files.md) from Python too: ``identify(..., columns=..., dt=..., tau_scale=...)`` reads a headerless log
+    without a time column as ``symoro-gen identify ... --columns ... --dt ... --tau-scale ...`` does (the same
+    parameters as the command's JSON), and as ``data_format=LogFormat(...)`` does; both at once is an error."""
+    from symoro_gen.preprocessing.readers import make_format
+
+    a = np.loadtxt(recording, delimiter=",", skiprows=1)
+    log = tmp_path / "log.txt"  # no header, no time column: tau scaled by 1/2, then two status columns
+    np.savetxt(log, np.column_stack([a[:, 1:5], 0.5 * a[:, 5:9], np.zeros((len(a), 2))]))
+    dt = float(np.median(np.diff(a[:, 0])))
+    flags = dict(columns="q=0:4,tau=4:8", dt=dt, tau_scale=2.0)
+    res = symoro_gen.identify("scara", log, method="wls", **flags)
+    out = tmp_path / "id.json"
+    cli("identify", "scara", log, "--method", "wls", "--columns", "q=0:4,tau=4:8", "--dt", repr(dt),
+        "--tau-scale", "2", "--json", out)
+    want = json.loads(out.read_text())["parameters"]["values"]
+    assert np.allclose(res.to_dict()["parameters"]["values"], want, rtol=1e-9, atol=1e-12)
+    same = symoro_gen.identify("scara", log, method="wls", data_format=make_format(**flags))
+    assert np.array_equal(same.result.values, res.result.values)
+    direct = symoro_gen.identify("scara", recording, method="wls")
+    assert np.allclose(res.result.values, direct.result.values, rtol=1e-6, atol=1e-9)
+    ins = symoro_gen.inspect("scara", log, **flags)
+    assert ins.usable
+    with pytest.raises(OptionError, match="data_format"):
+        symoro_gen.identify("scara", log, dt=dt, data_format=make_format(dt=dt))
