@@ -253,3 +253,22 @@ def test_data_options_by_name_as_the_commands_flags(recording, cli, tmp_path):
     assert ins.usable
     with pytest.raises(OptionError, match="data_format"):
         symoro_gen.identify("scara", log, dt=dt, data_format=make_format(dt=dt))
+
+
+@pytest.mark.parametrize("workflow", ["identify", "diagnose"])
+def test_payload_as_the_commands_items_or_a_mapping(workflow):
+    """``payload=`` takes what ``--payload NAME=VALUE ...`` takes (a list of items, or one string of them) as well as
+    a mapping, with the same values as the command's parser; a malformed item raises the command's error naming
+    it (not a bare ``ValueError`` of ``dict()``)."""
+    from symoro_gen.commands.common import parse_payload
+    from symoro_gen.errors import IdentificationError
+
+    cls = {"identify": workflows.IdentifyOptions, "diagnose": workflows.DiagnoseOptions}[workflow]
+    items = ["M7=2.5", "MX7=0.125", "XX7=1e-3"]
+    want = parse_payload(items)
+    assert cls.create(workflow, payload=items).payload == want
+    assert cls.create(workflow, payload=" ".join(items)).payload == want
+    assert cls.create(workflow, payload=want).payload == want
+    for bad, named in (("M7", "M7"), (["M7=heavy"], "heavy"), ([("M7", 2.5)], "M7")):
+        with pytest.raises(IdentificationError, match=named):
+            cls.create(workflow, payload=bad)
