@@ -52,6 +52,11 @@ def diagnosis_plot_series(diagnosis) -> dict | None:
     return out
 
 
+def _fmt_given(x) -> str:
+    """A value that may not apply (None or NaN: a friction law has no validation z; null in the JSON): '-'."""
+    return fmt_value(x if x is not None and np.isfinite(x) else None)
+
+
 def residual_position(effect, ser: Mapping) -> int | None:
     """Where the residual after ``effect`` is in ``ser["rounds"]`` (its residual before it the one before), or
     None when it has none there (a friction law or a note: not an effect of the loop's rounds). ``rounds[k]`` is
@@ -119,7 +124,7 @@ def diagnosis_blocks(diag, notes: list, *, plots: bool = True, max_points: int =
             phys = ", ".join(f"{k} = {fmt_value(v)}" for k, v in (e.physical or {}).items())
             pl = getattr(e, "plausibility", None)
             rows.append((str(i), e.kind, _effect_who(e), params, phys, fmt_value(e.score), f"{e.p_value:.2e}",
-                         fmt_value(e.z_validation), getattr(e, "verdict", "") or "-",
+                         _fmt_given(e.z_validation), getattr(e, "verdict", "") or "-",
                          "-" if pl is None else f"{float(pl.score):.2f}"))
         B.append(Table(("#", "Effect", "Where", "Parameters (value, %σ)", "Physical reading", "Score", "p",
                         "z_val", "Verdict", "Plausibility"), tuple(rows), "Effects added, in order",

@@ -171,3 +171,25 @@ def test_each_effect_plot_shows_its_own_residual_change_on_the_real_lwr4(shared_
     names = [b.name for b in diagnosis_blocks(rep, [], plots=True) if isinstance(b, Figure)]
     assert [n for n in names if n.startswith("diagnosis-effect-")] == [
         f"diagnosis-effect-{i}-{e.kind.replace('_', '-')}" for i, e in enumerate(rep.effects, 1) if e in loop]
+
+
+def test_effects_table_shows_no_nan_where_the_json_has_no_number(diagnosis):
+    """An effect without a validation z (a friction law, chosen by cross-validation: ``z_validation`` NaN, null in
+    the JSON) shows '-' in the report's effects table, as every other value the JSON leaves out; a z the JSON
+    has is shown as a number."""
+    import dataclasses
+    import math
+
+    from symoro_gen.diagnostics.render import diagnosis_html
+
+    from .test_repr_html import parse
+
+    e0 = diagnosis.effects[0]
+    rep = dataclasses.replace(diagnosis, effects=(dataclasses.replace(e0, z_validation=math.nan),
+                                                  *diagnosis.effects))
+    table = next(t for t in parse(diagnosis_html(rep)).tables if t[0][1][:2] == ["#", "Effect"])
+    col = table[0][1].index("z_val")
+    zs = [row[1][col] for row in table[1:]]
+    json_z = [e["z_validation"] for e in rep.to_dict()["effects"]]
+    assert json_z[0] is None and zs[0] == "-"
+    assert all(float(z) == pytest.approx(j, rel=1e-3) for z, j in zip(zs[1:], json_z[1:]))
