@@ -173,7 +173,10 @@ def diagnosis_blocks(diag, notes: list, *, plots: bool = True, max_points: int =
     for i, e in enumerate(diag.effects, 1):
         k = residual_position(e, ser)
         if k is None:
-            notes.append(f"effect {i} ({e.kind}): no residual of round {getattr(e, 'round', i)} in the plot data")
+            notes.append(f"effect {i} ({e.kind}): no residual figure (a friction law changes the model's own "
+                         "friction columns, chosen by cross-validation: its errors are in the effects table)"
+                         if e.kind == "friction_law" else
+                         f"effect {i} ({e.kind}): no residual of round {getattr(e, 'round', i)} in the plot data")
             continue
         (rb, rvb), (ra, rva) = ser["rounds"][k - 1], ser["rounds"][k]
         j = e.joint
