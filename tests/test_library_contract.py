@@ -35,6 +35,11 @@ def recording(tmp_path_factory) -> Path:
 MISSPELT = [
     ("identify", lambda rec, **kw: symoro_gen.identify("scara", rec, **kw), "metod", "method"),
     ("diagnose", lambda rec, **kw: symoro_gen.diagnose("scara", rec, **kw), "max_efects", "max_effects"),
+    # the workflows' own keywords (data given beside the options) are named too
+    ("identify", lambda rec, **kw: symoro_gen.identify("scara", rec, **kw), "valdate", "validate"),
+    ("diagnose", lambda rec, **kw: symoro_gen.diagnose("scara", rec, **kw), "valdate", "validate"),
+    ("diagnose", lambda rec, **kw: symoro_gen.diagnose("scara", rec, **kw), "loadded", "loaded"),
+    ("excite", lambda rec, **kw: symoro_gen.excite("scara", **kw), "ouptut", "output"),
     ("inspect", lambda rec, **kw: symoro_gen.inspect("scara", rec, **kw), "cutof", "cutoff"),
     ("excite", lambda rec, **kw: symoro_gen.excite("scara", **kw), "duraton", "duration"),
     ("fleet", lambda rec, **kw: symoro_gen.fleet("scara", [rec], by="{robot}/{day}.csv", **kw), "alpah", "alpha"),

@@ -74,19 +74,27 @@ class Options:
         files (a ``data_format`` field) also takes the data options by their flags' names (``columns``, ``dt``,
         ``tau_scale``, ``format`` for ``--format FILE.toml``...: :data:`DATA_FORMAT_OPTIONS`), made into its
         ``data_format`` as the commands make it (:func:`~symoro_gen.preprocessing.readers.make_format`)."""
+        return cls._from_names(what, given)
+
+    @classmethod
+    def _from_names(cls, what: str, given: Mapping[str, Any], keywords: Sequence[str] = ()):
         names = cls.option_names()
         if "data_format" in names:
             given = _with_data_format(what, given)
-        check_option_names(given, names + (DATA_FORMAT_OPTIONS if "data_format" in names else ()), what)
+        # the workflow's own keywords (validate=, loaded=...) never reach here but for a misspelling: named too
+        check_option_names(given, names + (DATA_FORMAT_OPTIONS if "data_format" in names else ()) + tuple(keywords),
+                           what)
         return cls(**given)
 
     @classmethod
-    def resolve(cls, what: str, options: Options | None, given: Mapping[str, Any]):
+    def resolve(cls, what: str, options: Options | None, given: Mapping[str, Any], keywords: Sequence[str] = ()):
         """A workflow's options: ``options`` as given, or made from the keywords ``given`` (:meth:`create`);
-        both at once is an :class:`OptionError`."""
+        both at once is an :class:`OptionError`. ``keywords``: the workflow's own keyword arguments, which a
+        misspelt name is matched against as well."""
         if options is None:
-            return cls.create(what, **given)
+            return cls._from_names(what, given, keywords)
         if given:
+            check_option_names(given, cls.option_names() + tuple(keywords), what)
             raise OptionError(f"{what}: give the options either as options= or by name, not both")
         return options
 

@@ -308,7 +308,8 @@ def diagnose(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
         Or, for a floating-base robot, :class:`~symoro_gen.workflows.floating.FloatingDiagnoseResults` (the
         contact-sensor offsets and gains per kind of rows).
     """
-    opts = DiagnoseOptions.resolve("diagnose", options, dict(kwargs, method=method) if options is None else kwargs)
+    opts = DiagnoseOptions.resolve("diagnose", options, dict(kwargs, method=method) if options is None else kwargs,
+                                   keywords=("validate", "loaded", "options"))
     if options is not None and method not in ("ols", options.method):
         opts = replace(options, method=method)
     return _run(robot, data, validate, loaded, opts)

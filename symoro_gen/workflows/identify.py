@@ -508,7 +508,8 @@ def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
         Or, for a floating-base robot (``base = "floating"``: logs of docs/floating-base.md, ``kind=`` the rows),
         a :class:`~symoro_gen.workflows.floating.FloatingIdentifyResults`.
     """
-    opts = IdentifyOptions.resolve("identify", options, dict(kwargs, method=method) if options is None else kwargs)
+    opts = IdentifyOptions.resolve("identify", options, dict(kwargs, method=method) if options is None else kwargs,
+                                   keywords=("validate", "loaded", "options"))
     if options is not None and method not in ("wls", options.method):
         opts = replace(options, method=method)
     return _run(robot, data, validate, loaded, opts)
