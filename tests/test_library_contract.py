@@ -277,3 +277,28 @@ def test_payload_as_the_commands_items_or_a_mapping(workflow):
     for bad, named in (("M7", "M7"), (["M7=heavy"], "heavy"), ([("M7", 2.5)], "M7")):
         with pytest.raises(IdentificationError, match=named):
             cls.create(workflow, payload=bad)
+
+
+def test_the_poorly_identified_warning_names_an_option_that_exists():
+    """The warning on parameters with a large %sigma points to the essential parameters by the option that computes
+    them (a flag of ``identify``, an option of ``symoro_gen.identify``), and that option, given, leaves only
+    parameters within the limit."""
+    import re
+
+    from symoro_gen.description import load_robot
+    from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
+
+    rng = np.random.default_rng(2)
+    robot, model = load_robot("rx90"), symoro_gen.load_model("rx90")
+    chi = np.asarray(random_physical_parameters(robot, rng))
+    t, q, dq, ddq = fourier_trajectory(robot.n_joints, 3.0, 0.005, rng)  # short: some parameters poorly seen
+    rec = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.5, rng=rng)
+    res = symoro_gen.identify("rx90", (rec.t, rec.q, rec.tau), method="wls")
+    hint = [w for w in res.to_dict()["warnings"] if "poorly identified" in w]
+    assert hint, res.to_dict()["warnings"]
+    flag = re.search(r"consider the essential parameters \((--[a-z-]+)\)", hint[0])
+    assert flag, hint[0]
+    name = flag.group(1)[2:].replace("-", "_")
+    assert name in workflows.IdentifyOptions.option_names()
+    ess = symoro_gen.identify("rx90", (rec.t, rec.q, rec.tau), method="wls", **{name: True})
+    assert not [w for w in ess.to_dict()["warnings"] if "poorly identified" in w]
