@@ -29,6 +29,7 @@ from ..loader import model_for
 from ..model import IdentificationModel
 from ..preprocessing.motion import hold_still, noise_level_joints, saturation_warnings, still_warnings
 from ..preprocessing.readers import BAG_KEYS, DataWarning, LoadReport, LogFormat, make_format, read_recordings
+from ..preprocessing.readers.options import FORMAT_KEYS
 from ..preprocessing.trajectory import Trajectory
 from ..report.document import report_targets
 from ..report.plots import require_matplotlib
@@ -104,8 +105,7 @@ class Options:
 
 
 #: the data options of the commands (``--format --columns --dt``... and the ROS bag options), by their Python names
-DATA_FORMAT_OPTIONS = ("format", "columns", "dt", "tau_scale", "deg", "resample", "max_gap", "drop_bad_rows",
-                       "dt_overrides_time", "skip_rows", "reshape", *BAG_KEYS)
+DATA_FORMAT_OPTIONS = ("format", *FORMAT_KEYS)
 
 
 def _with_data_format(what: str, given: Mapping[str, Any]) -> dict[str, Any]:
