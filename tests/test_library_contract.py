@@ -302,3 +302,29 @@ def test_the_poorly_identified_warning_names_an_option_that_exists():
     assert name in workflows.IdentifyOptions.option_names()
     ess = symoro_gen.identify("rx90", (rec.t, rec.q, rec.tau), method="wls", **{name: True})
     assert not [w for w in ess.to_dict()["warnings"] if "poorly identified" in w]
+
+
+@pytest.mark.parametrize("command", ["identify", "diagnose", "inspect", "excite", "fleet"])
+def test_every_flag_of_the_command_has_its_python_name(command):
+    """docs/tutorial-python.md: the options are named as the command's flags without their dashes. Every flag of
+    the command is an option of the workflow (its options class, its own keywords, or a data option made into
+    ``data_format``), but those that name an output, which are results methods (``write_json``, ``report``,
+    ``write_plots``, ``write_plot``, ``write_robot``), and the command line's own ``--quiet``/``--debug``."""
+    import argparse
+
+    from symoro_gen.cli import build_parser
+    from symoro_gen.workflows.base import DATA_FORMAT_OPTIONS
+
+    fn = getattr(symoro_gen, command)
+    opts = {"identify": workflows.IdentifyOptions, "diagnose": workflows.DiagnoseOptions,
+            "inspect": workflows.InspectOptions, "excite": workflows.ExciteOptions,
+            "fleet": workflows.FleetOptions}[command]
+    parser = build_parser(command)
+    sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+    leaf = sub.choices[command] if sub is not None else parser
+    flags = {a.dest for a in leaf._actions if a.dest != "help"}
+    names = set(opts.option_names()) | set(inspect.signature(fn).parameters)
+    if "data_format" in names:
+        names |= set(DATA_FORMAT_OPTIONS)
+    outputs = {"json", "report", "plots", "plot", "robot_out", "force", "quiet", "debug"}
+    assert flags - names - outputs == set()
