@@ -10,7 +10,7 @@ A payload (fixed link, sigma = 2) has only the 10 inertial ones.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 from .errors import IdentificationError
 
@@ -61,6 +61,29 @@ def split_name(name: str) -> tuple[str, int, bool]:
         if base.startswith(kind) and base[len(kind):].isdigit():
             return kind, int(base[len(kind):]), regrouped
     raise ValueError(f"not a standard parameter name: {name!r}")
+
+
+def parse_payload(items: Iterable[str] | None) -> dict[str, float]:
+    """``--payload NAME=VALUE ...`` as a mapping (the message names the item at fault)."""
+    out: dict[str, float] = {}
+    for it in items or ():
+        if not isinstance(it, str) or "=" not in it:
+            raise IdentificationError(f"--payload {it!r}: expected NAME=VALUE, e.g. M8=4.6136")
+        k, v = it.split("=", 1)
+        k = k.strip()
+        try:
+            out[k] = float(v)
+        except ValueError:
+            raise IdentificationError(f"--payload {k}={v!r}: value is not a number") from None
+    return out
+
+
+def payload_mapping(payload: Mapping[str, float] | Iterable[str] | str | None) -> dict[str, float]:
+    """Known payload parameters given from Python: a mapping ``{name: value}``, or the command's ``NAME=VALUE``
+    items (a list of them, or one string of them separated by blanks) read by :func:`parse_payload`."""
+    if isinstance(payload, Mapping):
+        return dict(payload)
+    return parse_payload(payload.split() if isinstance(payload, str) else payload)
 
 
 def check_payload(payload: Mapping[str, float] | None, names: Sequence[str]) -> dict[str, float]:

@@ -35,6 +35,11 @@ def recording(tmp_path_factory) -> Path:
 MISSPELT = [
     ("identify", lambda rec, **kw: symoro_gen.identify("scara", rec, **kw), "metod", "method"),
     ("diagnose", lambda rec, **kw: symoro_gen.diagnose("scara", rec, **kw), "max_efects", "max_effects"),
+    # the workflows' own keywords (data given beside the options) are named too
+    ("identify", lambda rec, **kw: symoro_gen.identify("scara", rec, **kw), "valdate", "validate"),
+    ("diagnose", lambda rec, **kw: symoro_gen.diagnose("scara", rec, **kw), "valdate", "validate"),
+    ("diagnose", lambda rec, **kw: symoro_gen.diagnose("scara", rec, **kw), "loadded", "loaded"),
+    ("excite", lambda rec, **kw: symoro_gen.excite("scara", **kw), "ouptut", "output"),
     ("inspect", lambda rec, **kw: symoro_gen.inspect("scara", rec, **kw), "cutof", "cutoff"),
     ("excite", lambda rec, **kw: symoro_gen.excite("scara", **kw), "duraton", "duration"),
     ("fleet", lambda rec, **kw: symoro_gen.fleet("scara", [rec], by="{robot}/{day}.csv", **kw), "alpah", "alpha"),
@@ -198,3 +203,128 @@ def test_read_recording_plot_and_report(recording, tmp_path):
     link.symlink_to(recording)
     with pytest.raises(OutputError):
         res.report(link, force=True)
+
+
+@pytest.mark.parametrize("as_given", ["name", "description", "model"])
+def test_read_recording_takes_the_robot_as_identify_does_and_applies_its_drive_chain(as_given, tmp_path):
+    """``symoro_gen.read_recording(path, robot=...)`` reads a file as the commands read their DATA: the robot as a
+    name, a :class:`RobotDescription` or a loaded model (as ``identify`` takes it), and the robot file's
+    ``[drive_chain]`` maps a motor-side recording to the joint side. Checked on the TX40 (gear ratios, the coupled
+    wrist, zero offsets): motor-side signals made from known joint-side ones by the inverse mapping are read back
+    as those joint-side signals, and as ``identify`` reads the same file."""
+    from symoro_gen.description import load_robot
+    from symoro_gen.preprocessing.drive_chain import joint_to_motor
+    from symoro_gen.workflows.base import as_trajectories
+
+    robot = load_robot("tx40")
+    rng = np.random.default_rng(5)
+    t = np.arange(200) * 0.002
+    q = 0.3 * np.sin(2 * np.pi * np.outer(t, rng.uniform(0.2, 1.0, 6)) + rng.uniform(0, 6, 6))
+    tau = rng.normal(size=(200, 6))
+    q_m, tau_m = joint_to_motor(robot.drive_chain, q=q, tau=tau)[:2]
+    np.savetxt(tmp_path / "pos.csv", q_m, delimiter=",")
+    np.savetxt(tmp_path / "cur.csv", tau_m, delimiter=",")
+    spec = f"q={tmp_path / 'pos.csv'},tau={tmp_path / 'cur.csv'},dt=0.002"
+    given = {"name": "tx40", "description": robot, "model": symoro_gen.load_model("tx40")}[as_given]
+    (tr,), _ = symoro_gen.read_recording(spec, robot=given)
+    assert np.allclose(tr.q, q, atol=1e-9) and np.allclose(tr.tau, tau, atol=1e-9)
+    (ref,), _ = as_trajectories(spec, None, robot)
+    assert np.array_equal(tr.q, ref.q) and np.array_equal(tr.tau, ref.tau)
+
+
+def test_data_options_by_name_as_the_commands_flags(recording, cli, tmp_path):
+    """The data options are named as the command's flags (``--columns``, ``--dt``, ``--tau-scale``...: docs/
+    data-files.md) from Python too: ``identify(..., columns=..., dt=..., tau_scale=...)`` reads a headerless log
+    without a time column as ``symoro-gen identify ... --columns ... --dt ... --tau-scale ...`` does (the same
+    parameters as the command's JSON), and as ``data_format=LogFormat(...)`` does; both at once is an error."""
+    from symoro_gen.preprocessing.readers import make_format
+
+    a = np.loadtxt(recording, delimiter=",", skiprows=1)
+    log = tmp_path / "log.txt"  # no header, no time column: tau scaled by 1/2, then two status columns
+    np.savetxt(log, np.column_stack([a[:, 1:5], 0.5 * a[:, 5:9], np.zeros((len(a), 2))]))
+    dt = float(np.median(np.diff(a[:, 0])))
+    flags = dict(columns="q=0:4,tau=4:8", dt=dt, tau_scale=2.0)
+    res = symoro_gen.identify("scara", log, method="wls", **flags)
+    out = tmp_path / "id.json"
+    cli("identify", "scara", log, "--method", "wls", "--columns", "q=0:4,tau=4:8", "--dt", repr(dt),
+        "--tau-scale", "2", "--json", out)
+    want = json.loads(out.read_text())["parameters"]["values"]
+    assert np.allclose(res.to_dict()["parameters"]["values"], want, rtol=1e-9, atol=1e-12)
+    same = symoro_gen.identify("scara", log, method="wls", data_format=make_format(**flags))
+    assert np.array_equal(same.result.values, res.result.values)
+    direct = symoro_gen.identify("scara", recording, method="wls")
+    assert np.allclose(res.result.values, direct.result.values, rtol=1e-6, atol=1e-9)
+    ins = symoro_gen.inspect("scara", log, **flags)
+    assert ins.usable
+    with pytest.raises(OptionError, match="data_format"):
+        symoro_gen.identify("scara", log, dt=dt, data_format=make_format(dt=dt))
+
+
+@pytest.mark.parametrize("workflow", ["identify", "diagnose"])
+def test_payload_as_the_commands_items_or_a_mapping(workflow):
+    """``payload=`` takes what ``--payload NAME=VALUE ...`` takes (a list of items, or one string of them) as well as
+    a mapping, with the same values as the command's parser; a malformed item raises the command's error naming
+    it (not a bare ``ValueError`` of ``dict()``)."""
+    from symoro_gen.commands.common import parse_payload
+    from symoro_gen.errors import IdentificationError
+
+    cls = {"identify": workflows.IdentifyOptions, "diagnose": workflows.DiagnoseOptions}[workflow]
+    items = ["M7=2.5", "MX7=0.125", "XX7=1e-3"]
+    want = parse_payload(items)
+    assert cls.create(workflow, payload=items).payload == want
+    assert cls.create(workflow, payload=" ".join(items)).payload == want
+    assert cls.create(workflow, payload=want).payload == want
+    for bad, named in (("M7", "M7"), (["M7=heavy"], "heavy"), ([("M7", 2.5)], "M7")):
+        with pytest.raises(IdentificationError, match=named):
+            cls.create(workflow, payload=bad)
+
+
+def test_the_poorly_identified_warning_names_an_option_that_exists():
+    """The warning on parameters with a large %sigma points to the essential parameters by the option that computes
+    them (a flag of ``identify``, an option of ``symoro_gen.identify``), and that option, given, leaves only
+    parameters within the limit."""
+    import re
+
+    from symoro_gen.description import load_robot
+    from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
+
+    rng = np.random.default_rng(2)
+    robot, model = load_robot("rx90"), symoro_gen.load_model("rx90")
+    chi = np.asarray(random_physical_parameters(robot, rng))
+    t, q, dq, ddq = fourier_trajectory(robot.n_joints, 3.0, 0.005, rng)  # short: some parameters poorly seen
+    rec = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.5, rng=rng)
+    res = symoro_gen.identify("rx90", (rec.t, rec.q, rec.tau), method="wls")
+    hint = [w for w in res.to_dict()["warnings"] if "poorly identified" in w]
+    assert hint, res.to_dict()["warnings"]
+    flag = re.search(r"consider the essential parameters \((--[a-z-]+)\)", hint[0])
+    assert flag, hint[0]
+    name = flag.group(1)[2:].replace("-", "_")
+    assert name in workflows.IdentifyOptions.option_names()
+    ess = symoro_gen.identify("rx90", (rec.t, rec.q, rec.tau), method="wls", **{name: True})
+    assert not [w for w in ess.to_dict()["warnings"] if "poorly identified" in w]
+
+
+@pytest.mark.parametrize("command", ["identify", "diagnose", "inspect", "excite", "fleet"])
+def test_every_flag_of_the_command_has_its_python_name(command):
+    """docs/tutorial-python.md: the options are named as the command's flags without their dashes. Every flag of
+    the command is an option of the workflow (its options class, its own keywords, or a data option made into
+    ``data_format``), but those that name an output, which are results methods (``write_json``, ``report``,
+    ``write_plots``, ``write_plot``, ``write_robot``), and the command line's own ``--quiet``/``--debug``."""
+    import argparse
+
+    from symoro_gen.cli import build_parser
+    from symoro_gen.workflows.base import DATA_FORMAT_OPTIONS
+
+    fn = getattr(symoro_gen, command)
+    opts = {"identify": workflows.IdentifyOptions, "diagnose": workflows.DiagnoseOptions,
+            "inspect": workflows.InspectOptions, "excite": workflows.ExciteOptions,
+            "fleet": workflows.FleetOptions}[command]
+    parser = build_parser(command)
+    sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+    leaf = sub.choices[command] if sub is not None else parser
+    flags = {a.dest for a in leaf._actions if a.dest != "help"}
+    names = set(opts.option_names()) | set(inspect.signature(fn).parameters)
+    if "data_format" in names:
+        names |= set(DATA_FORMAT_OPTIONS)
+    outputs = {"json", "report", "plots", "plot", "robot_out", "force", "quiet", "debug"}
+    assert flags - names - outputs == set()

@@ -9,8 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..atomic import FORCE_HELP, write_output_text
-from ..errors import IdentificationError
-from ..params import check_payload
+from ..params import check_payload, parse_payload
 
 if TYPE_CHECKING:  # the export workflows load SymPy: this module stays light
     from ..workflows.export import ExportResults
@@ -19,21 +18,6 @@ __all__ = ["ROBOT_HELP", "add_output_options", "emit_text", "parse_payload", "pa
            "write_export"]
 
 ROBOT_HELP = "robot name in robots/ or path to a robot .toml file"
-
-
-def parse_payload(items: Iterable[str] | None) -> dict[str, float]:
-    """``--payload NAME=VALUE ...`` as a mapping (the message names the item at fault)."""
-    out: dict[str, float] = {}
-    for it in items or ():
-        if "=" not in it:
-            raise IdentificationError(f"--payload {it!r}: expected NAME=VALUE, e.g. M8=4.6136")
-        k, v = it.split("=", 1)
-        k = k.strip()
-        try:
-            out[k] = float(v)
-        except ValueError:
-            raise IdentificationError(f"--payload {k}={v!r}: value is not a number") from None
-    return out
 
 
 def payload_values(items: Iterable[str] | None, names: Sequence[str]) -> dict[str, float]:

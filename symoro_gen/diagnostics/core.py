@@ -2204,7 +2204,10 @@ def _stage_report(data: _Data, base: _Baseline, state: _State, cfg: DiagnoseSett
     if base.res0.residual is not None:
         rounds[0] = (np.asarray(base.res0.residual), data0.Vs.Y - base.res0.predict(data0.Vs))
     rounds[-1] = (final_resid, e_valid)
+    # round_resid[k] is the residual after the first k effects kept (the stability stage may have dropped some,
+    # and a friction law winning a round adds none): the round each of them was named in, to find its pair
     plot_data = {"frame": F, "vframe": state.V, "round_resid": rounds,
+                 "effect_rounds": tuple(int(m["round"]) for m in state.effects_meta),
                  "valid_filtered": dict(e=e_valid, y=Vs.Y, joint=Vs.joint,
                                         experiment=state.V.row_experiment, index=state.V.row_index),
                  "valid_raw": raw_keep}

@@ -31,7 +31,8 @@ def diagnosis_plot_series(diagnosis) -> dict | None:
     -------
     dict or None
         ``Y``, ``joint``, ``sig`` (identification), ``Yv``, ``jointv``, ``sigv`` (validation),
-        ``rounds`` (list of (r_id, r_val)).
+        ``rounds`` (list of (r_id, r_val)), ``effect_rounds`` (the round each loop effect kept was named in, in
+        the order of ``rounds[1:]``; None when the diagnosis does not say).
     """
     pd = getattr(diagnosis, "plot_data", None)
     if not isinstance(pd, Mapping):
@@ -42,12 +43,30 @@ def diagnosis_plot_series(diagnosis) -> dict | None:
     try:
         out = {"Y": np.asarray(F.system.Y), "joint": np.asarray(F.system.joint), "sig": F.sig,
                "Yv": np.asarray(V.system.Y), "jointv": np.asarray(V.system.joint), "sigv": V.sig,
-               "rounds": [(np.asarray(a, float), np.asarray(b, float)) for a, b in rr]}
+               "rounds": [(np.asarray(a, float), np.asarray(b, float)) for a, b in rr],
+               "effect_rounds": pd.get("effect_rounds")}
     except (AttributeError, TypeError, ValueError):
         return None
     if not out["rounds"] or any(a.shape != out["Y"].shape or b.shape != out["Yv"].shape for a, b in out["rounds"]):
         return None
     return out
+
+
+def _fmt_given(x) -> str:
+    """A value that may not apply (None or NaN: a friction law has no validation z; null in the JSON): '-'."""
+    return fmt_value(x if x is not None and np.isfinite(x) else None)
+
+
+def residual_position(effect, ser: Mapping) -> int | None:
+    """Where the residual after ``effect`` is in ``ser["rounds"]`` (its residual before it the one before), or
+    None when it has none there (a friction law or a note: not an effect of the loop's rounds). ``rounds[k]`` is
+    the residual after the first ``k`` loop effects kept, which is not round ``k`` once the stability stage has
+    dropped an effect or a friction law has won a round."""
+    k = int(getattr(effect, "round", 0) or 0)
+    order = ser.get("effect_rounds")
+    if order is not None:
+        k = list(order).index(k) + 1 if k in order and effect.kind != "friction_law" else 0
+    return k if 1 <= k < len(ser["rounds"]) else None
 
 
 def _signal(sig, key: str, rows: np.ndarray, joint: int) -> np.ndarray | None:
@@ -105,7 +124,7 @@ def diagnosis_blocks(diag, notes: list, *, plots: bool = True, max_points: int =
             phys = ", ".join(f"{k} = {fmt_value(v)}" for k, v in (e.physical or {}).items())
             pl = getattr(e, "plausibility", None)
             rows.append((str(i), e.kind, _effect_who(e), params, phys, fmt_value(e.score), f"{e.p_value:.2e}",
-                         fmt_value(e.z_validation), getattr(e, "verdict", "") or "-",
+                         _fmt_given(e.z_validation), getattr(e, "verdict", "") or "-",
                          "-" if pl is None else f"{float(pl.score):.2f}"))
         B.append(Table(("#", "Effect", "Where", "Parameters (value, %σ)", "Physical reading", "Score", "p",
                         "z_val", "Verdict", "Plausibility"), tuple(rows), "Effects added, in order",
@@ -152,9 +171,12 @@ def diagnosis_blocks(diag, notes: list, *, plots: bool = True, max_points: int =
         notes.append("residual plots of the diagnosis are not available (the diagnosis carries no plot data)")
         return B
     for i, e in enumerate(diag.effects, 1):
-        k = int(getattr(e, "round", i))
-        if not (1 <= k < len(ser["rounds"])):
-            notes.append(f"effect {i} ({e.kind}): no residual of round {k} in the plot data")
+        k = residual_position(e, ser)
+        if k is None:
+            notes.append(f"effect {i} ({e.kind}): no residual figure (a friction law changes the model's own "
+                         "friction columns, chosen by cross-validation: its errors are in the effects table)"
+                         if e.kind == "friction_law" else
+                         f"effect {i} ({e.kind}): no residual of round {getattr(e, 'round', i)} in the plot data")
             continue
         (rb, rvb), (ra, rva) = ser["rounds"][k - 1], ser["rounds"][k]
         j = e.joint

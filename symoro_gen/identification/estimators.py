@@ -290,17 +290,23 @@ def _inf_std_for_null(std: np.ndarray, Vt: np.ndarray, rank: int, opts: Options)
     return std
 
 
-def poorly_identified_warnings(names, values, std, opts: Options, keep: Sequence[str] = ()) -> list[str]:
+#: what the poorly-identified warning suggests: the essential parameters of ``identify --essential`` ([LWR4-TLS]
+#: Sec. IV-B)
+ESSENTIAL_HINT = "consider the essential parameters (--essential)"
+
+
+def poorly_identified_warnings(names, values, std, opts: Options, keep: Sequence[str] = (),
+                               hint: str = ESSENTIAL_HINT) -> list[str]:
     """The warning naming the parameters whose relative standard deviation exceeds the limit (``keep``
-    excepted), or no warning."""
+    excepted), with ``hint`` (the option that helps; empty: none), or no warning."""
     pct = relative_std_pct(values, std)
     bad = [(n, p) for n, p in zip(names, pct) if p > opts.rel_std_warn_pct and n not in keep]
     if not bad:
         return []
     bad.sort(key=lambda t: -t[1])
     listed = ", ".join(f"{n} ({p:.3g}%)" if math.isfinite(p) else f"{n} (inf)" for n, p in bad)
-    return [f"{len(bad)} parameter(s) poorly identified (%sigma > {opts.rel_std_warn_pct:g}): {listed}; "
-            f"consider the essential parameters (essential_parameters)"]
+    return [f"{len(bad)} parameter(s) poorly identified (%sigma > {opts.rel_std_warn_pct:g}): {listed}"
+            + (f"; {hint}" if hint else "")]
 
 
 # ---------------------------------------------------------------------------- cores

@@ -333,7 +333,8 @@ def with_sample_covariance(res: IdentificationResult, system: ObservationSystem,
     cov = 0.5 * (cov + cov.T)
     std = np.where(np.isfinite(res.std), np.sqrt(np.clip(np.diag(cov), 0.0, None)), res.std)
     warnings = [w for w in res.warnings if "poorly identified (%sigma" not in w]
-    warnings += poorly_identified_warnings(res.names, res.values, std, Options(rel_std_warn_pct=rel_std_warn_pct))
+    warnings += poorly_identified_warnings(res.names, res.values, std, Options(rel_std_warn_pct=rel_std_warn_pct),
+                                           hint="")  # a floating base has no --essential
     return replace(res, cov=cov, std=std, rel_std_pct=relative_std_pct(res.values, std), warnings=tuple(warnings))
 
 

@@ -28,7 +28,8 @@ from ..errors import ModelError, OptionError, SymoroError, check_option_names
 from ..loader import model_for
 from ..model import IdentificationModel
 from ..preprocessing.motion import hold_still, noise_level_joints, saturation_warnings, still_warnings
-from ..preprocessing.readers import DataWarning, LoadReport, LogFormat, read_recordings
+from ..preprocessing.readers import BAG_KEYS, DataWarning, LoadReport, LogFormat, make_format, read_recordings
+from ..preprocessing.readers.options import FORMAT_KEYS
 from ..preprocessing.trajectory import Trajectory
 from ..report.document import report_targets
 from ..report.plots import require_matplotlib
@@ -70,23 +71,58 @@ class Options:
 
     @classmethod
     def create(cls, what: str, **given: Any):
-        """The options from keywords, every name checked (:func:`check_option_names`)."""
-        check_option_names(given, cls.option_names(), what)
+        """The options from keywords, every name checked (:func:`check_option_names`). A workflow that reads DATA
+        files (a ``data_format`` field) also takes the data options by their flags' names (``columns``, ``dt``,
+        ``tau_scale``, ``format`` for ``--format FILE.toml``...: :data:`DATA_FORMAT_OPTIONS`), made into its
+        ``data_format`` as the commands make it (:func:`~symoro_gen.preprocessing.readers.make_format`)."""
+        return cls._from_names(what, given)
+
+    @classmethod
+    def _from_names(cls, what: str, given: Mapping[str, Any], keywords: Sequence[str] = ()):
+        names = cls.option_names()
+        if "data_format" in names:
+            given = _with_data_format(what, given)
+        # the workflow's own keywords (validate=, loaded=...) never reach here but for a misspelling: named too
+        check_option_names(given, names + (DATA_FORMAT_OPTIONS if "data_format" in names else ()) + tuple(keywords),
+                           what)
         return cls(**given)
 
     @classmethod
-    def resolve(cls, what: str, options: Options | None, given: Mapping[str, Any]):
+    def resolve(cls, what: str, options: Options | None, given: Mapping[str, Any], keywords: Sequence[str] = ()):
         """A workflow's options: ``options`` as given, or made from the keywords ``given`` (:meth:`create`);
-        both at once is an :class:`OptionError`."""
+        both at once is an :class:`OptionError`. ``keywords``: the workflow's own keyword arguments, which a
+        misspelt name is matched against as well."""
         if options is None:
-            return cls.create(what, **given)
+            return cls._from_names(what, given, keywords)
         if given:
+            check_option_names(given, cls.option_names() + tuple(keywords), what)
             raise OptionError(f"{what}: give the options either as options= or by name, not both")
         return options
 
     def as_dict(self) -> dict:
         """Every option, JSON-ready (the provenance block's ``options``)."""
         return {f.name: _jsonable(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+
+#: the data options of the commands (``--format --columns --dt``... and the ROS bag options), by their Python names
+DATA_FORMAT_OPTIONS = ("format", *FORMAT_KEYS)
+
+
+def _with_data_format(what: str, given: Mapping[str, Any]) -> dict[str, Any]:
+    """``given`` with its data options (:data:`DATA_FORMAT_OPTIONS`) made into ``data_format``."""
+    flags = {k: v for k, v in given.items() if k in DATA_FORMAT_OPTIONS}
+    if not flags:
+        return dict(given)
+    if given.get("data_format") is not None:
+        raise OptionError(f"{what}: give the data options either by name ({', '.join(flags)}) or as data_format=, "
+                          "not both")
+    rest = {k: v for k, v in given.items() if k not in DATA_FORMAT_OPTIONS}
+    cols = flags.pop("columns", None)
+    if isinstance(cols, Mapping):
+        cols = ",".join(f"{role}={sel}" for role, sel in cols.items())
+    bag = {k: flags.pop(k) for k in BAG_KEYS if k in flags}
+    rest["data_format"] = make_format(columns=cols, format_file=flags.pop("format", None), bag=bag, **flags)
+    return rest
 
 
 class Results:

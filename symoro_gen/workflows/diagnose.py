@@ -40,6 +40,7 @@ from ..identification.estimators import still_joints
 from ..identification.friction_law import LawDeclaredModel, ScaleFit, declared_laws, refine_scales
 from ..model import IdentificationModel
 from ..observations.options import AssemblyOptions
+from ..params import payload_mapping
 from ..preprocessing.cli import data_notes, data_text
 from ..preprocessing.readers import LoadReport, LogFormat
 from ..report import Figure, require_matplotlib
@@ -88,7 +89,7 @@ class DiagnoseOptions(Options):
         Butterworth cut-off of q [Hz] and decimation factor (default: the papers' rules, [GB-gains] eq. 14-16).
     seed : int
         Seed of the placebo candidates.
-    payload : mapping of str to float
+    payload : mapping of str to float, or the command's NAME=VALUE items
         Known payload parameters (``{"M8": 4.6136}``); needs ``loaded`` recordings.
     drop_saturated : bool
         Leave out the rows of each joint whose torque is at its limit (``[limits] tau_max`` of the robot file,
@@ -134,7 +135,7 @@ class DiagnoseOptions(Options):
             v = getattr(self, attr)
             if v is not None and not ok(v):
                 raise OptionError(f"{flag} {v:g}: {what}")
-        object.__setattr__(self, "payload", dict(self.payload or {}))
+        object.__setattr__(self, "payload", payload_mapping(self.payload))
         if self.data_format is None:
             object.__setattr__(self, "data_format", LogFormat())
 
@@ -307,7 +308,8 @@ def diagnose(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
         Or, for a floating-base robot, :class:`~symoro_gen.workflows.floating.FloatingDiagnoseResults` (the
         contact-sensor offsets and gains per kind of rows).
     """
-    opts = DiagnoseOptions.resolve("diagnose", options, dict(kwargs, method=method) if options is None else kwargs)
+    opts = DiagnoseOptions.resolve("diagnose", options, dict(kwargs, method=method) if options is None else kwargs,
+                                   keywords=("validate", "loaded", "options"))
     if options is not None and method not in ("ols", options.method):
         opts = replace(options, method=method)
     return _run(robot, data, validate, loaded, opts)

@@ -330,7 +330,7 @@ def excite(robot, *, output: str | os.PathLike[str] | None = None, force: bool =
     -------
     ExciteResults
     """
-    opts = ExciteOptions.resolve("excite", options, kwargs)
+    opts = ExciteOptions.resolve("excite", options, kwargs, keywords=("output", "force", "options"))
     cfg, note = opts.settings()  # every option checked before the model is loaded
     desc, model = resolve_robot(robot)
     check_size(opts, int(model.N_JOINTS), len(model.BASE_NAMES))

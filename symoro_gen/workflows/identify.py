@@ -59,7 +59,7 @@ from ..model import IdentificationModel
 from ..observations.assembly import Assembly, assemble
 from ..observations.options import AssemblyOptions
 from ..observations.system import ObservationSystem
-from ..params import check_payload
+from ..params import check_payload, payload_mapping
 from ..preprocessing.cli import data_text
 from ..preprocessing.readers import LoadReport, LogFormat
 from ..preprocessing.trajectory import hold_back, note_hold_back
@@ -96,7 +96,7 @@ class IdentifyOptions(Options):
         The validation recordings carry the payload.
     validate_fraction : float, optional
         Hold back the last share (0 < F < 1) of each identification recording for validation.
-    payload : mapping of str to float
+    payload : mapping of str to float, or the command's NAME=VALUE items
         Known payload parameters (``{"M8": 4.6136}``).
     gains : {"sensor", "drive"}, optional
         Also identify torque-sensor (IDIM-TLS) or drive gains.
@@ -225,7 +225,7 @@ class IdentifyOptions(Options):
             raise OptionError(f"--kind {self.kind!r}: one of {', '.join(FLOATING_KINDS)} (floating-base robots)")
         if self.weighting not in WEIGHTINGS:
             raise OptionError(f"--weighting {self.weighting!r}: one of {', '.join(WEIGHTINGS)} (floating-base robots)")
-        object.__setattr__(self, "payload", dict(self.payload or {}))
+        object.__setattr__(self, "payload", payload_mapping(self.payload))
         if self.data_format is None:
             object.__setattr__(self, "data_format", LogFormat())
 
@@ -508,7 +508,8 @@ def identify(robot, data: DataLike, *, validate: DataLike = None, loaded: DataLi
         Or, for a floating-base robot (``base = "floating"``: logs of docs/floating-base.md, ``kind=`` the rows),
         a :class:`~symoro_gen.workflows.floating.FloatingIdentifyResults`.
     """
-    opts = IdentifyOptions.resolve("identify", options, dict(kwargs, method=method) if options is None else kwargs)
+    opts = IdentifyOptions.resolve("identify", options, dict(kwargs, method=method) if options is None else kwargs,
+                                   keywords=("validate", "loaded", "options"))
     if options is not None and method not in ("wls", options.method):
         opts = replace(options, method=method)
     return _run(robot, data, validate, loaded, opts)

@@ -109,7 +109,7 @@ def inspect(robot, data: DataLike, *, options: InspectOptions | None = None, **k
     InspectResults
         ``usable`` is False (and ``inspection.errors`` says why) when the data cannot identify the robot.
     """
-    opts = InspectOptions.resolve("inspect", options, kwargs)
+    opts = InspectOptions.resolve("inspect", options, kwargs, keywords=("options",))
     desc, model = resolve_robot(robot)
     items = listed(data)
     if not items:

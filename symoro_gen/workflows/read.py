@@ -19,6 +19,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from ..description import RobotDescription, load_robot
 from ..errors import DataFileError
 from ..preprocessing.cli import data_block, data_text
 from ..preprocessing.inspect import signal_figures
@@ -27,7 +28,7 @@ from ..preprocessing.readers import read_recording as read_one
 from ..preprocessing.trajectory import Trajectory
 from ..report.document import Figure, Heading, Paragraph, Report, Table, write_report_files
 from ..report.plots import figure_png, require_matplotlib
-from .base import SCHEMA_VERSION, Results
+from .base import SCHEMA_VERSION, Results, resolve_robot
 from .provenance import provenance_block
 
 __all__ = ["RecordingResults", "read_recording"]
@@ -114,12 +115,23 @@ def _spec_files(spec: str) -> list[str]:
         return [text]
 
 
+def _description(robot) -> RobotDescription | None:
+    """The robot description of ``robot`` given as the workflows take it (None: none given)."""
+    if robot is None or isinstance(robot, RobotDescription):
+        return robot
+    if isinstance(robot, (str, os.PathLike)):
+        return load_robot(robot)
+    return resolve_robot(robot)[0]
+
+
 def read_recording(path, fmt: LogFormat | None = None, *, robot=None, n_joints: int | None = None,
                    drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None,
                    **bag: Any) -> RecordingResults:
     """Read one DATA file (or split-file spec): :func:`symoro_gen.preprocessing.readers.read_recording`, the same
-    arguments (``fmt`` a :class:`LogFormat`; ``robot`` or ``n_joints``; ``drive_chain``, ``loaded``, ``start``,
-    ``stop``, ``base_dir``; a ROS bag's ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``; any
+    arguments (``fmt`` a :class:`LogFormat`; ``robot`` — a name, a robot file, a :class:`RobotDescription` or a
+    loaded model, as ``identify`` takes it — or ``n_joints``; ``drive_chain`` (default: the robot file's
+    ``[drive_chain]``, so that a motor-side recording is read at the joint side as the commands read it),
+    ``loaded``, ``start``, ``stop``, ``base_dir``; a ROS bag's ``topic``, ``stamp``, ``prefix``, ``joint_names``, ``reference_topic``; any
     other name raises :class:`~symoro_gen.errors.OptionError` naming the nearest), the same errors.
 
     Returns
@@ -128,6 +140,9 @@ def read_recording(path, fmt: LogFormat | None = None, *, robot=None, n_joints: 
         The reader's pair ``(trajectories, load_report)``, with ``summary()``, ``to_dict()``, ``plot()``,
         ``report(path)``.
     """
+    robot = _description(robot)
+    if drive_chain is None and robot is not None:
+        drive_chain = robot.drive_chain
     trajectories, load = read_one(path, fmt, robot=robot, n_joints=n_joints, drive_chain=drive_chain,
                                   loaded=loaded, start=start, stop=stop, base_dir=base_dir, **bag)
     return RecordingResults(trajectories, load)

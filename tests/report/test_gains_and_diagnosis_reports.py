@@ -141,3 +141,55 @@ def test_diagnosis_html_tables_without_plots(diagnosis):
     assert [float(x) for x in errs[4][1][1:]] == pytest.approx(diagnosis.after_validation_rel_err, abs=6e-5)
     effects = next(t for t in p.tables if t[0][1][:3] == ["#", "Effect", "Where"])
     assert [(c[1], c[2]) for _, c in effects[1:]] == [(e.kind, f"joint {e.joint + 1}") for e in diagnosis.effects]
+
+
+@pytest.mark.slow
+def test_each_effect_plot_shows_its_own_residual_change_on_the_real_lwr4(shared_data):
+    """On the real LWR4 the stability stage drops effects the loop named (only WLS names them): the effects kept
+    were named in rounds 1, 3, 5..., while the residuals behind the plots are after the first 1, 2, 3... effects
+    kept. Every loop effect still gets its figure, drawn from the residual just before and just after it: the
+    figure's pair is the one whose change on the effect's own joint is the largest of all pairs (adding the
+    effect's columns is what changes that joint), and its 'after' residual of the last effect is the final one."""
+    import symoro_gen
+    from symoro_gen.diagnostics.render import diagnosis_blocks, diagnosis_plot_series, residual_position
+    from symoro_gen.report import Figure
+
+    d = shared_data / "kuka_lwr4_flobaroid/data/KUKA/HW"
+    res = symoro_gen.diagnose("lwr4", [d / "measurements_1.npz", d / "measurements_3.npz"],
+                              validate=[d / "measurements_2.npz"])
+    rep = res.residual
+    ser = diagnosis_plot_series(rep)
+    loop = [e for e in rep.effects if e.kind != "friction_law" and e.round >= 1]
+    assert loop and len(ser["rounds"]) == len(loop) + 1
+    positions = [residual_position(e, ser) for e in loop]
+    assert positions == list(range(1, len(loop) + 1))
+    for e, k in zip(loop, positions):
+        rows = ser["joint"] == e.joint
+        drop = [np.linalg.norm(ser["rounds"][m - 1][0][rows]) - np.linalg.norm(ser["rounds"][m][0][rows])
+                for m in range(1, len(ser["rounds"]))]
+        assert int(np.argmax(drop)) + 1 == k, (e.label, drop)
+    names = [b.name for b in diagnosis_blocks(rep, [], plots=True) if isinstance(b, Figure)]
+    assert [n for n in names if n.startswith("diagnosis-effect-")] == [
+        f"diagnosis-effect-{i}-{e.kind.replace('_', '-')}" for i, e in enumerate(rep.effects, 1) if e in loop]
+
+
+def test_effects_table_shows_no_nan_where_the_json_has_no_number(diagnosis):
+    """An effect without a validation z (a friction law, chosen by cross-validation: ``z_validation`` NaN, null in
+    the JSON) shows '-' in the report's effects table, as every other value the JSON leaves out; a z the JSON
+    has is shown as a number."""
+    import dataclasses
+    import math
+
+    from symoro_gen.diagnostics.render import diagnosis_html
+
+    from .test_repr_html import parse
+
+    e0 = diagnosis.effects[0]
+    rep = dataclasses.replace(diagnosis, effects=(dataclasses.replace(e0, z_validation=math.nan),
+                                                  *diagnosis.effects))
+    table = next(t for t in parse(diagnosis_html(rep)).tables if t[0][1][:2] == ["#", "Effect"])
+    col = table[0][1].index("z_val")
+    zs = [row[1][col] for row in table[1:]]
+    json_z = [e["z_validation"] for e in rep.to_dict()["effects"]]
+    assert json_z[0] is None and zs[0] == "-"
+    assert all(float(z) == pytest.approx(j, rel=1e-3) for z, j in zip(zs[1:], json_z[1:]))
