@@ -245,6 +245,15 @@ def _long_pieces(pieces: list[Piece], source: str, N: int) -> tuple[list[Piece],
     return kept, notes
 
 
+def _own_names(c: RawColumns, qrole: str, drive_chain) -> dict[str, list[str]]:
+    """The file's names of the columns the unit checks see: ``q`` (or ``q_link``), ``tau``, ``t``; none for
+    ``q`` and ``tau`` after a drive chain, whose joint values mix the motor columns (``q_link`` is not mapped)."""
+    roles = {"t": "t", "q": qrole, "tau": "tau"}
+    if drive_chain is not None:
+        roles = {k: v for k, v in roles.items() if k == "t" or v == "q_link"}
+    return {k: c.cols[v].names for k, v in roles.items() if v in c.cols}
+
+
 def _experiments(kept: list[Piece], c: RawColumns, *, n: int, loaded: bool, drive_chain, joint_types,
                  meta: dict[str, Any]) -> list[Trajectory]:
     """One trajectory per piece: drive chain, ``q_link`` for ``q`` (the deflection kept), unit checks."""
@@ -261,9 +270,10 @@ def _experiments(kept: list[Piece], c: RawColumns, *, n: int, loaded: bool, driv
             q = vv["q_link"]
         src = c.source if len(kept) == 1 else f"{c.source} [experiment {k + 1}/{len(kept)}]"
         if k == 0:
-            files = {"t": c.cols["t"].file if "t" in c.cols else c.source, "q": c.cols["q"].file,
+            qrole = "q_link" if "q_link" in vv else "q"
+            files = {"t": c.cols["t"].file if "t" in c.cols else c.source, "q": c.cols[qrole].file,
                      "tau": c.cols["tau"].file}
-            for msg in unit_checks(files, tt, q, tau, joint_types, DEFAULT_CHECKS):
+            for msg in unit_checks(files, tt, q, tau, joint_types, DEFAULT_CHECKS, _own_names(c, qrole, drive_chain)):
                 warn_data(msg)
         trajs.append(Trajectory(t=tt, q=q, tau=tau, dq=dq, ddq=ddq, source=src, loaded=bool(loaded),
                                 meta={**meta, "experiment": k + 1}, deflection=defl))
