@@ -1,0 +1,142 @@
+"""Damaged and unusual files as users bring them, through the command line: a header without data, a trailing
+delimiter on every line, quoted header names, positions in degrees behind a ``--columns`` mapping, and an
+export pointed at a result file that is missing or is not JSON. Each refusal names the file (and the line or
+column); each file that is only unusual is read to the same numbers as its plain form."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from symoro_gen.preprocessing.readers import DataWarning, load_trajectory, make_format, read_recording
+
+N_J = 4  # the SCARA
+DT = 0.002
+
+
+def _signals(N=400, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(N) * DT
+    f = rng.uniform(0.3, 1.5, (2, N_J))
+    q = 0.6 * np.sin(2 * np.pi * f[0] * t[:, None] + rng.uniform(0, 6, N_J))
+    q[:, 2] *= 0.1  # joint 3 of the SCARA is prismatic: metres
+    tau = 2.0 * np.sin(2 * np.pi * f[1] * t[:, None]) + 0.3
+    return t, q, tau
+
+
+def _header(prefix_q="q", prefix_tau="tau", first=1):
+    return ["t"] + [f"{prefix_q}{j}" for j in range(first, first + N_J)] + \
+        [f"{prefix_tau}{j}" for j in range(first, first + N_J)]
+
+
+def _write(path, names, data, delim=",", line_end=""):
+    lines = [delim.join(names) + line_end] + [delim.join(f"{x:.12g}" for x in row) + line_end for row in data]
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
+
+
+# ---- a header and no data ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("options", [[], ["--drop-bad-rows"]])
+def test_header_without_data_is_named_as_such(cli, tmp_path, options):
+    """A log whose recording never started (the header line alone, or a header and comment lines) is refused
+    saying that it has no data rows, naming the file and the header line, not as an empty row range."""
+    f = tmp_path / "run.csv"
+    f.write_text(",".join(_header()) + "\n# logger stopped\n\n")
+    r = cli("inspect", "scara", f, *options, rc=2)
+    assert f"{f}" in r.err and "no data rows" in r.err and "line 1" in r.err
+    assert "rows 1-0" not in r.err and "Traceback" not in r.err
+
+
+def test_header_without_data_in_a_split_recording(cli, tmp_path):
+    q = tmp_path / "q.csv"
+    q.write_text("J1,J2,J3,J4\n")
+    tau = tmp_path / "tau.csv"
+    tau.write_text("J1,J2,J3,J4\n" + "\n".join("1,2,3,4" for _ in range(100)) + "\n")
+    r = cli("inspect", "scara", f"q={q},tau={tau},dt=0.01", rc=2)
+    assert f"{q}" in r.err and "no data rows" in r.err
+    assert "rows 1-0" not in r.err
+
+
+# ---- a trailing delimiter, quoted names ----------------------------------------------------------------------
+@pytest.mark.parametrize("kind", ["trailing", "quoted", "trailing-crlf"])
+def test_trailing_delimiter_and_quoted_names_read_as_the_plain_file(tmp_path, kind):
+    """Loggers that end every line with the delimiter (``1,2,3,``), and spreadsheets that quote the header
+    names (``"t","q1",...``, RFC 4180): the same numbers as the plain file, every column by its own name."""
+    t, q, tau = _signals()
+    data = np.column_stack([t, q, tau])
+    plain = _write(tmp_path / "plain.csv", _header(), data)
+    if kind == "quoted":
+        other = _write(tmp_path / "other.csv", [f'"{n}"' for n in _header()], data)
+    else:
+        other = _write(tmp_path / "other.csv", _header(), data, line_end="," + ("\r" if "crlf" in kind else ""))
+    ref = load_trajectory(plain, n_joints=N_J)
+    got = load_trajectory(other, n_joints=N_J)
+    for a in ("t", "q", "tau"):
+        np.testing.assert_array_equal(getattr(got, a), getattr(ref, a))
+    assert got.meta["columns"] == ref.meta["columns"]
+    (tr,), rep = read_recording(other, make_format(columns="t=t,q=q1:q4,tau=tau1:tau4"), n_joints=N_J)
+    np.testing.assert_array_equal(tr.q, ref.q)
+    assert rep.rows_dropped == 0
+
+
+def test_an_empty_column_that_is_not_trailing_is_still_an_error(cli, tmp_path):
+    """Only the column that every line leaves empty after its last delimiter is a trailing delimiter; an
+    empty cell elsewhere stays an error naming its row and column."""
+    t, q, tau = _signals()
+    data = np.column_stack([t, q, tau])
+    f = _write(tmp_path / "holes.csv", _header(), data, line_end=",")
+    lines = (tmp_path / "holes.csv").read_text().split("\n")
+    cells = lines[10].split(",")
+    cells[3] = ""  # q3 of data row 9
+    lines[10] = ",".join(cells)
+    (tmp_path / "holes.csv").write_text("\n".join(lines))
+    r = cli("inspect", "scara", f, rc=2)
+    assert "row" in r.err and "(lines 11)" in r.err and "'q3'" in r.err
+
+
+# ---- unit warnings name the file's own column ----------------------------------------------------------------
+def test_degrees_warning_names_the_mapped_column(cli, tmp_path):
+    """With ``--columns q=pos_0:pos_3`` the warning about positions in degrees names the file's column
+    (``pos_0``) and the joint, not a ``q1`` the file does not have."""
+    t, q, tau = _signals()
+    deg = q.copy()
+    deg[:, [0, 1, 3]] = np.degrees(deg[:, [0, 1, 3]]) * 20  # beyond 4 pi even for small motions
+    names = ["time"] + [f"pos_{j}" for j in range(N_J)] + [f"trq_{j}" for j in range(N_J)]
+    f = _write(tmp_path / "log.csv", names, np.column_stack([t, deg, tau]))
+    with pytest.warns(DataWarning) as rec:
+        cli("inspect", "scara", f, "--columns", "t=time,q=pos_0:pos_3,tau=trq_0:trq_3")
+    warns = [str(w.message) for w in rec if "degrees" in str(w.message)]
+    assert len(warns) == 3, warns
+    for j, w in zip((0, 1, 3), warns):
+        assert w.startswith(f"{f}, column pos_{j} (joint {j + 1}): max |q|")
+    assert not any("column q1" in w for w in warns)
+
+
+def test_degrees_warning_of_the_plain_header_unchanged(cli, tmp_path):
+    t, q, tau = _signals()
+    deg = q.copy()
+    deg[:, 0] = np.degrees(deg[:, 0]) * 20
+    f = _write(tmp_path / "deg.csv", _header(), np.column_stack([t, deg, tau]))
+    with pytest.warns(DataWarning, match=rf"{f}, column q1: max \|q\|"):
+        cli("inspect", "scara", f)
+
+
+# ---- an export pointed at a result that is not one -----------------------------------------------------------
+@pytest.mark.parametrize("what", ["missing", "text", "folder"])
+def test_export_from_a_missing_or_non_json_result(cli, tmp_path, what):
+    """``export-urdf --from`` a path that does not exist, a text file or a folder: the error says which, names
+    the file, and the hint is about the identify result, not about generating the model."""
+    src = tmp_path / "result.json"
+    if what == "text":
+        src.write_text("IDIM-WLS identification: 10 equations\n")
+    elif what == "folder":
+        src.mkdir()
+    for cmd in (["export-urdf", "scara", "--from", src], ["export-urdf", "scara", "--params", src],
+                ["export-mjcf", "scara", "--from", src]):
+        r = cli(*cmd, "-o", tmp_path / "out.xml", rc=2)
+        first = r.err_lines[0]
+        assert f"{src}" in first
+        expected = {"missing": "file not found", "text": "not JSON (line 1", "folder": "a folder"}[what]
+        assert expected in first, r.err
+        assert "Errno" not in r.err and "generate" not in r.err_lines[1]
+        assert "identify" in r.err_lines[1]
+        assert not (tmp_path / "out.xml").exists()
