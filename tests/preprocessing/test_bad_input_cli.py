@@ -4,6 +4,8 @@ export pointed at a result file that is missing or is not JSON. Each refusal nam
 column); each file that is only unusual is read to the same numbers as its plain form."""
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 
@@ -140,3 +142,54 @@ def test_export_from_a_missing_or_non_json_result(cli, tmp_path, what):
         assert "Errno" not in r.err and "generate" not in r.err_lines[1]
         assert "identify" in r.err_lines[1]
         assert not (tmp_path / "out.xml").exists()
+
+
+# ---- a --reference table that is not one ---------------------------------------------------------------------
+def _scara_recording(tmp_path):
+    from symoro_gen import load_model
+    from symoro_gen.description import load_robot
+    from symoro_gen.simulate import fourier_trajectory, random_physical_parameters, simulate_recording
+
+    rng = np.random.default_rng(3)
+    robot, model = load_robot("scara"), load_model("scara")
+    t, q, dq, ddq = fourier_trajectory(N_J, 4.0, DT, rng)
+    rec = simulate_recording(model, t, q, dq, ddq, np.asarray(random_physical_parameters(robot, rng)),
+                             noise_tau=0.01, rng=rng)
+    return _write(tmp_path / "rec.csv", _header(), np.column_stack([rec.t, rec.q, rec.tau]))
+
+
+@pytest.mark.parametrize("what", ["empty", "bad-number", "missing", "folder"])
+def test_a_bad_reference_table_is_refused_before_the_identification(cli, tmp_path, monkeypatch, what):
+    """``identify --reference`` a table that is empty, has a non-numeric estimate, does not exist or is a
+    folder: refused naming the file (and the line), with a hint about the table, before anything is fitted
+    (an empty table used to print nothing at all)."""
+    wf = importlib.import_module("symoro_gen.workflows.identify")  # the module (the package exports a function)
+    rec = _scara_recording(tmp_path)
+    ref = tmp_path / "ref.csv"
+    if what == "empty":
+        ref.write_text("\n")
+    elif what == "bad-number":
+        ref.write_text("ZZ1R,1.25,0.98\nfv1,8.1O,0.51\n")
+    elif what == "folder":
+        ref.mkdir()
+
+    def no_fit(*a, **k):
+        raise AssertionError("the identification ran before the reference table was read")
+
+    monkeypatch.setattr(wf, "fit", no_fit)
+    r = cli("identify", "scara", rec, "--method", "ols", "--reference", ref, rc=2)
+    first, hint = r.err_lines[0], r.err_lines[1]
+    assert f"{ref}" in first
+    expected = {"empty": "no rows", "bad-number": "line 2", "missing": "file not found", "folder": "a folder"}[what]
+    assert expected in first, r.err
+    assert "reference" in hint and "CSV with header t,q1" not in hint
+
+
+def test_a_good_reference_table_is_compared(cli, tmp_path):
+    """The same table, well formed: every row beside our estimate (the check above does not refuse it)."""
+    rec = _scara_recording(tmp_path)
+    ref = tmp_path / "ref.csv"
+    ref.write_text("Izz1 + Ia1 + ...,1.25,0.98\nfv1,8.1,0.51\nnot a parameter,3.0,1.0\n")
+    r = cli("identify", "scara", rec, "--method", "ols", "--reference", ref)
+    assert f"Beside the reference table {ref}" in r.out
+    assert "of 2 comparable parameters agree within 2 sigma" in r.out
