@@ -321,12 +321,20 @@ def _force(label: str) -> str:
     return "--force" if _cli(label) else "force=True"
 
 
+def _refuse_folder(label: str, t: Target) -> None:
+    """A file output never replaces a folder, ``--force`` or not (the write would fail once the work is done)."""
+    if not t.folder and t.owner != "caller" and t.path.is_dir() and not t.path.is_symlink():
+        raise OutputError(f"{label} {t.path}: a folder exists there; a file output never replaces a folder, even "
+                          f"with {_force(label)}", f"choose another path for {label.split(' (')[0]}")
+
+
 def _refuse_existing(label: str, t: Target) -> None:
     p = t.path
     if not (p.exists() or p.is_symlink()):
         return
     if t.owner == "caller":
         return
+    _refuse_folder(label, t)
     if t.owner == "never":
         raise OutputError(f"{label} {p}: the file exists; not overwritten ({_force(label)} replaces it)", _force_hint(label))
     if p.is_dir() and not p.is_symlink():
@@ -352,8 +360,10 @@ def check_replaceable(path: str | os.PathLike[str], force: bool = False, *, fold
     OutputError
         Naming ``label`` and the path.
     """
+    t = Target(Path(path), folder=folder, owner=owner)
+    _refuse_folder(label, t)
     if not force:
-        _refuse_existing(label, Target(Path(path), folder=folder, owner=owner))
+        _refuse_existing(label, t)
 
 
 def _target(t: str | os.PathLike[str] | Target) -> Target:
@@ -402,8 +412,9 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike[str] | Target | None],
                 if x.folder and inside(y.path, x.path):
                     raise OutputError(f"{ly} {y.path} is inside the folder {x.path} that {lx} replaces whole",
                                       "give each output its own path")
-    if not force:
-        for label, t in outs:
+    for label, t in outs:
+        _refuse_folder(label, t)
+        if not force:
             _refuse_existing(label, t)
 
 

@@ -193,3 +193,24 @@ def test_a_good_reference_table_is_compared(cli, tmp_path):
     r = cli("identify", "scara", rec, "--method", "ols", "--reference", ref)
     assert f"Beside the reference table {ref}" in r.out
     assert "of 2 comparable parameters agree within 2 sigma" in r.out
+
+
+# ---- an output pointed at a folder ---------------------------------------------------------------------------
+@pytest.mark.parametrize("force", [False, True])
+def test_a_file_output_pointed_at_a_folder_is_refused_before_any_work(cli, tmp_path, force):
+    """``--json DIR``, ``--report DIR``, ``-o DIR``: a file output never replaces a folder, with or without
+    ``--force``, and this is said before any work (nothing printed on stdout, the folder left as it was),
+    not as an OS error once the work is done."""
+    t, q, tau = _signals()
+    rec = _write(tmp_path / "rec.csv", _header(), np.column_stack([t, q, tau]))
+    folder = tmp_path / "out"
+    folder.mkdir()
+    (folder / "keep.txt").write_text("mine\n")
+    extra = ["--force"] if force else []
+    for cmd in (["inspect", "scara", rec, "--json", folder], ["inspect", "scara", rec, "--report", folder],
+                ["export-par", "scara", "-o", folder], ["import-urdf", tmp_path / "none.urdf", "-o", folder]):
+        r = cli(*cmd, *extra, rc=2)
+        assert r.out == "", r.out
+        assert f"{folder}: a folder exists there" in r.err_lines[0], r.err
+        assert "--force" not in r.err_lines[1]
+        assert sorted(p.name for p in folder.iterdir()) == ["keep.txt"]
