@@ -214,3 +214,48 @@ def test_a_file_output_pointed_at_a_folder_is_refused_before_any_work(cli, tmp_p
         assert f"{folder}: a folder exists there" in r.err_lines[0], r.err
         assert "--force" not in r.err_lines[1]
         assert sorted(p.name for p in folder.iterdir()) == ["keep.txt"]
+
+
+# ---- a bad row dropped from a recording timed by --dt ----------------------------------------------------------
+def _no_time_with_a_hole(tmp_path, row=150):
+    """A 500 Hz log without a time column (the LBR Med's layout) whose data row ``row`` (1-based) has a NaN."""
+    t, q, tau = _signals()
+    names = [f"q_{j}" for j in range(N_J)] + [f"tau_{j}" for j in range(N_J)]
+    f = _write(tmp_path / "log.csv", names, np.column_stack([q, tau]))
+    lines = (tmp_path / "log.csv").read_text().split("\n")
+    cells = lines[row].split(",")
+    cells[5] = "nan"  # tau_1 of data row `row` (file line row + 1)
+    lines[row] = ",".join(cells)
+    (tmp_path / "log.csv").write_text("\n".join(lines))
+    return f, t, q, tau
+
+
+def test_dropping_a_row_of_a_dt_timed_log_keeps_the_later_samples_at_their_times(cli, tmp_path):
+    """Without a time column the time of data row k is (k - 1) dt. Dropping a bad row must not pull every
+    later sample one step earlier (a silent shift and a doubled step in the derivatives): without --resample
+    the hole is an error naming the row, as a gap in a time column is; with it the row is interpolated and
+    every other sample keeps its own value at its own time."""
+    f, t, q, tau = _no_time_with_a_hole(tmp_path, row=150)
+    cols = "q=q_0:q_3,tau=tau_0:tau_3"
+    r = cli("inspect", "scara", f, "--columns", cols, "--dt", DT, "--drop-bad-rows", rc=2)
+    assert f"{f}, rows 150 (lines 151)" in r.err_lines[0] and "dropped" in r.err_lines[0], r.err
+    assert "--resample" in r.err
+    (tr,), rep = read_recording(f, make_format(columns=cols, dt=DT, drop_bad_rows=True, resample=True),
+                                n_joints=N_J)
+    m = tr.n_samples  # the resampling grid may stop one rounding short of the last stamp
+    assert rep.rows_dropped == 1 and m in (t.size - 1, t.size)
+    np.testing.assert_allclose(tr.t, t[:m] - t[0], atol=1e-12)
+    keep = np.arange(m) != 149
+    np.testing.assert_allclose(tr.q[keep], q[:m][keep], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(tr.tau[keep], tau[:m][keep], rtol=0, atol=1e-9)
+    assert abs(tr.q[149] - q[149]).max() < 1e-4  # cubic through smooth neighbours
+
+
+def test_dropping_leading_rows_of_a_dt_timed_log_needs_no_resampling(tmp_path):
+    """Bad rows at the very start (a logger's first, half-written row) leave no hole: the rest is read."""
+    f, t, q, tau = _no_time_with_a_hole(tmp_path, row=1)
+    (tr,), rep = read_recording(f, make_format(columns="q=q_0:q_3,tau=tau_0:tau_3", dt=DT, drop_bad_rows=True),
+                                n_joints=N_J)
+    assert rep.rows_dropped == 1 and tr.n_samples == t.size - 1
+    np.testing.assert_allclose(tr.q, q[1:], atol=1e-9)
+    np.testing.assert_allclose(np.diff(tr.t), DT, rtol=1e-9)

@@ -199,7 +199,27 @@ def _time_base(c: RawColumns, vals: dict[str, np.ndarray], keep: np.ndarray, dt:
         _checked_time(c, t, keep, fmt)
         return t
     assert dt is not None  # without a time column dt is required (checked when the columns were chosen)
-    return np.arange(int(keep.sum())) * float(dt)
+    return _dt_time(c, keep, float(dt), fmt)
+
+
+def _dt_time(c: RawColumns, keep: np.ndarray, dt: float, fmt: LogFormat) -> np.ndarray:
+    """The time of the kept rows of a log timed by ``dt``: data row ``k`` is at ``k dt`` (from the first kept
+    one), so that rows dropped inside the recording leave a hole, bridged by ``resample`` and an error
+    without it (as a gap in a time column is), never closed by moving the later samples one step earlier."""
+    rows = np.flatnonzero(keep)
+    holes = np.flatnonzero(np.diff(rows) > 1)
+    if holes.size and not fmt.resample:
+        lines = next((col.lines for col in c.cols.values() if col.lines is not None), None)
+        missing = np.zeros(c.n_rows, bool)
+        for k in holes:
+            missing[rows[k] + 1:rows[k + 1]] = True
+        where = fmt_ranges(runs(missing), lines)
+        raise DataFileError([Problem(c.source, where, "t", f"{int(missing.sum())} row(s) dropped inside a recording "
+                                     f"timed by dt = {dt:g} s (no time column): the samples after them would be "
+                                     "shifted one step earlier per row dropped")],
+                            hint="give --resample to interpolate across the dropped rows (each sample keeps its time); "
+                                 "or fix the rows")
+    return (rows - rows[0]) * dt if rows.size else np.zeros(0)
 
 
 def resample(t: np.ndarray, arrays: dict[str, np.ndarray], h: float, max_gap: float
