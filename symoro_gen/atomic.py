@@ -300,11 +300,14 @@ class Target:
         When an existing target may be replaced without ``force``: ``"marked"`` when symoro-gen wrote it
         (:func:`written_by_symoro`, :func:`folder_written_by_symoro`), ``"never"`` (robot files,
         recordings), ``"caller"``: the writer decides (generated packages, ``emit.package``).
+    into : bool
+        A folder the command writes files into, not replaced whole (``diagnose --plots DIR``).
     """
 
     path: Path
     folder: bool = False
     owner: Owner = "marked"
+    into: bool = False
 
 
 def _cli(label: str) -> bool:
@@ -326,6 +329,14 @@ def _refuse_folder(label: str, t: Target) -> None:
     if not t.folder and t.owner != "caller" and t.path.is_dir() and not t.path.is_symlink():
         raise OutputError(f"{label} {t.path}: a folder exists there; a file output never replaces a folder, even "
                           f"with {_force(label)}", f"choose another path for {label.split(' (')[0]}")
+
+
+def _refuse_file(label: str, t: Target) -> None:
+    """A folder output (replaced whole, or written into) never replaces a file, ``--force`` or not."""
+    if (t.folder or t.into) and t.path.exists() and not t.path.is_dir():
+        raise OutputError(f"{label} {t.path}: a file exists there; {label.split(' (')[0]} writes a folder, which "
+                          f"never replaces a file, even with {_force(label)}",
+                          f"choose another path for {label.split(' (')[0]}")
 
 
 def _refuse_existing(label: str, t: Target) -> None:
@@ -362,6 +373,7 @@ def check_replaceable(path: str | os.PathLike[str], force: bool = False, *, fold
     """
     t = Target(Path(path), folder=folder, owner=owner)
     _refuse_folder(label, t)
+    _refuse_file(label, t)
     if not force:
         _refuse_existing(label, t)
 
@@ -414,6 +426,7 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike[str] | Target | None],
                                       "give each output its own path")
     for label, t in outs:
         _refuse_folder(label, t)
+        _refuse_file(label, t)
         if not force:
             _refuse_existing(label, t)
 

@@ -197,7 +197,7 @@ def command_outputs(args) -> dict[str, str | os.PathLike[str] | Target | None]:
     if getattr(args, "plots", None):  # diagnose --plots DIR: written into; its diagnosis-*.png replaced or removed
         from .diagnostics.plots import existing_plots
 
-        outputs["--plots"] = Target(Path(args.plots), owner="caller")
+        outputs["--plots"] = Target(Path(args.plots), owner="caller", into=True)
         outputs.update({f"--plots ({p.name})": p for p in existing_plots(args.plots)})
     return outputs
 

@@ -259,3 +259,27 @@ def test_dropping_leading_rows_of_a_dt_timed_log_needs_no_resampling(tmp_path):
     assert rep.rows_dropped == 1 and tr.n_samples == t.size - 1
     np.testing.assert_allclose(tr.q, q[1:], atol=1e-9)
     np.testing.assert_allclose(np.diff(tr.t), DT, rtol=1e-9)
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_a_folder_output_pointed_at_a_file_is_refused_before_any_work(cli, tmp_path, monkeypatch, force):
+    """``diagnose --plots FILE`` and a Markdown report whose image folder is a file: refused before the
+    diagnosis runs (it used to fail with 'cannot write FILE: File exists' once the loop was done), the file
+    left as it was."""
+    wf = importlib.import_module("symoro_gen.workflows.diagnose")
+
+    def no_run(*a, **k):
+        raise AssertionError("the diagnosis ran before the outputs were checked")
+
+    monkeypatch.setattr(wf, "run_loop", no_run)
+    t, q, tau = _signals()
+    rec = _write(tmp_path / "rec.csv", _header(), np.column_stack([t, q, tau]))
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine\n")
+    extra = ["--force"] if force else []
+    r = cli("diagnose", "scara", rec, "--plots", notes, *extra, rc=2)
+    assert r.out == "" and f"--plots {notes}: a file exists there" in r.err_lines[0], r.err
+    (tmp_path / "rep_files").write_text("mine\n")
+    r = cli("inspect", "scara", rec, "--report", tmp_path / "rep.md", *extra, rc=2)
+    assert r.out == "" and f"{tmp_path / 'rep_files'}: a file exists there" in r.err_lines[0], r.err
+    assert notes.read_text() == "mine\n" and (tmp_path / "rep_files").read_text() == "mine\n"
