@@ -332,8 +332,9 @@ def _refuse_folder(label: str, t: Target) -> None:
 
 
 def _refuse_file(label: str, t: Target) -> None:
-    """A folder output (replaced whole, or written into) never replaces a file, ``--force`` or not."""
-    if (t.folder or t.into) and t.path.exists() and not t.path.is_dir():
+    """A folder output (replaced whole, or written into) never replaces a file, ``--force`` or not; the writers
+    that decide themselves (``owner="caller"``: ``generate``'s package) are left to do so."""
+    if ((t.folder and t.owner != "caller") or t.into) and t.path.exists() and not t.path.is_dir():
         raise OutputError(f"{label} {t.path}: a file exists there; {label.split(' (')[0]} writes a folder, which "
                           f"never replaces a file, even with {_force(label)}",
                           f"choose another path for {label.split(' (')[0]}")
