@@ -5,6 +5,7 @@ column); each file that is only unusual is read to the same numbers as its plain
 from __future__ import annotations
 
 import importlib
+import warnings
 
 import numpy as np
 import pytest
@@ -283,3 +284,24 @@ def test_a_folder_output_pointed_at_a_file_is_refused_before_any_work(cli, tmp_p
     r = cli("inspect", "scara", rec, "--report", tmp_path / "rep.md", *extra, rc=2)
     assert r.out == "" and f"{tmp_path / 'rep_files'}: a file exists there" in r.err_lines[0], r.err
     assert notes.read_text() == "mine\n" and (tmp_path / "rep_files").read_text() == "mine\n"
+
+
+# ---- a torque column that holds no measurement ----------------------------------------------------------------
+def test_a_constant_torque_column_is_warned_about_by_identify(cli, tmp_path):
+    """A torque column that never changes (a channel the logger did not record: zeros) is no measured torque:
+    ``identify`` used to fit it silently (estimates 0, error norms nan, no word about the column); it now
+    warns, naming the file, the joint and the file's column. A measured torque, even small, is not flagged."""
+    rec = _scara_recording(tmp_path)
+    a = np.loadtxt(rec, delimiter=",", skiprows=1)
+    a[:, 1 + N_J + 2] = 0.0  # tau3
+    names = ["t"] + [f"q{j}" for j in range(1, N_J + 1)] + [f"trq{j}" for j in range(1, N_J + 1)]
+    f = _write(tmp_path / "zero.csv", names, a)
+    with pytest.warns(DataWarning) as got:
+        cli("identify", "scara", f, "--method", "ols", "--columns", "t=t,q=q1:q4,tau=trq1:trq4")
+    msgs = [str(w.message) for w in got if "constant" in str(w.message)]
+    assert len(msgs) == 1, [str(w.message) for w in got]
+    assert msgs[0].startswith(f"{f}: the torque of joint 3 (column trq3) is constant (0 in every sample)")
+    with warnings.catch_warnings(record=True) as clean:
+        warnings.simplefilter("always")
+        cli("identify", "scara", rec, "--method", "ols")
+    assert not [w for w in clean if "constant" in str(w.message)]
