@@ -305,3 +305,30 @@ def test_a_constant_torque_column_is_warned_about_by_identify(cli, tmp_path):
         warnings.simplefilter("always")
         cli("identify", "scara", rec, "--method", "ols")
     assert not [w for w in clean if "constant" in str(w.message)]
+
+
+def test_med7_recording_with_a_nan_row_keeps_its_time_base(shared_data, tmp_path):
+    """The LBR Med 7 log (100 Hz, no time column) with one torque cell made NaN, as a logger drops a packet:
+    with --drop-bad-rows --resample every other sample is read at its own time with its own values (the
+    recording as shipped is the reference), and the hole is refused without --resample."""
+    src = shared_data / "kuka_lbr_med7_lbrstack" / "data" / "measurements.csv"
+    if not src.is_file():
+        pytest.skip(f"{src} absent")
+    lines = src.read_text().split("\n")
+    cells = lines[801].split(",")
+    cells[9] = "NaN"  # tau_2 of data row 801
+    lines[801] = ",".join(cells)
+    bad = tmp_path / "measurements.csv"
+    bad.write_text("\n".join(lines))
+    cols = "q=q_0:q_6,tau=tau_0:tau_6"
+    (ref,), _ = read_recording(str(src), make_format(columns=cols, dt=0.01), n_joints=7)
+    with pytest.raises(Exception, match=r"rows 801 \(lines 802\), field 't': 1 row\(s\) dropped"):
+        read_recording(str(bad), make_format(columns=cols, dt=0.01, drop_bad_rows=True), n_joints=7)
+    (tr,), rep = read_recording(str(bad), make_format(columns=cols, dt=0.01, drop_bad_rows=True, resample=True),
+                                n_joints=7)
+    m = tr.n_samples
+    assert rep.rows_dropped == 1 and m >= ref.n_samples - 1
+    keep = np.arange(m) != 800
+    np.testing.assert_allclose(tr.t, ref.t[:m], atol=1e-9)
+    np.testing.assert_allclose(tr.q[keep], ref.q[:m][keep], atol=1e-9)
+    np.testing.assert_allclose(tr.tau[keep], ref.tau[:m][keep], atol=1e-9)
