@@ -332,3 +332,21 @@ def test_med7_recording_with_a_nan_row_keeps_its_time_base(shared_data, tmp_path
     np.testing.assert_allclose(tr.t, ref.t[:m], atol=1e-9)
     np.testing.assert_allclose(tr.q[keep], ref.q[:m][keep], atol=1e-9)
     np.testing.assert_allclose(tr.tau[keep], ref.tau[:m][keep], atol=1e-9)
+
+
+# ---- a clock coarser than the sampling --------------------------------------------------------------------------
+@pytest.mark.parametrize("options", [[], ["--resample"]])
+def test_repeated_time_stamps_get_the_hint_that_fixes_them(cli, tmp_path, options):
+    """A 500 Hz log stamped by a 4 ms clock (each stamp twice, none going back) is not a clock that restarts:
+    the hint names the repeated stamps and the option that reads the file (--dt at the sampling period with
+    --dt-overrides-time), with the period estimated from the file; following it reads every row."""
+    t, q, tau = _signals(N=600)
+    stamps = np.floor(t / (2 * DT) + 1e-9) * (2 * DT)
+    f = _write(tmp_path / "coarse.csv", _header(), np.column_stack([stamps, q, tau]))
+    r = cli("inspect", "scara", f, *options, rc=2)
+    hint = r.err_lines[-1]
+    assert "restarts" not in hint and "repeated" in hint and "--dt-overrides-time" in hint, r.err
+    assert "--dt 0.002 " in hint, hint
+    (tr,), rep = read_recording(f, make_format(dt=DT, dt_overrides_time=True), n_joints=N_J)
+    assert tr.n_samples == t.size
+    np.testing.assert_allclose(tr.q, q, atol=1e-9)

@@ -75,8 +75,16 @@ def _order_problem(t: np.ndarray) -> tuple[np.ndarray, str]:
 def time_order_hint(t: np.ndarray) -> str:
     """The option that fixes a time column that is not strictly increasing: ``--skip-rows`` for garbage rows at
     the start, ``--drop-bad-rows`` for a few isolated ones, ``--resample`` (splits at the reset) for a clock
-    that restarts."""
-    bad, kind = _order_problem(np.asarray(t, float))
+    that restarts, ``--dt --dt-overrides-time`` for stamps that repeat without ever going back (a clock that
+    ticks more coarsely than the samples come)."""
+    t = np.asarray(t, float)
+    bad, kind = _order_problem(t)
+    d = np.diff(t)
+    if kind == "reset" and not (d < 0).any():
+        period = (t[-1] - t[0]) / (t.size - 1)
+        return (f"{int((d == 0).sum())} repeated time stamp(s), none going back: the clock ticks more coarsely "
+                f"than the samples come; --dt {period:.3g} --dt-overrides-time times each row by the sampling "
+                f"period instead ({period:.3g} s: the file's duration over its rows)")
     if kind == "leading":
         return SKIP_HINT.format(k=int(bad.sum()))
     if kind == "isolated":
