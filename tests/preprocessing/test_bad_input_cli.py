@@ -350,3 +350,14 @@ def test_repeated_time_stamps_get_the_hint_that_fixes_them(cli, tmp_path, option
     (tr,), rep = read_recording(f, make_format(dt=DT, dt_overrides_time=True), n_joints=N_J)
     assert tr.n_samples == t.size
     np.testing.assert_allclose(tr.q, q, atol=1e-9)
+
+
+def test_an_npz_member_of_python_objects_is_named(cli, tmp_path):
+    """An ``.npz`` whose torque array was saved as Python objects (a list of arrays, a dict): the error names the
+    file and that array (never loaded: unpickling runs code), not 'an archive without readable members'."""
+    t, q, tau = _signals()
+    f = tmp_path / "obj.npz"
+    np.savez(f, t=t, q=q, tau=np.array([tau, tau[:-1]], dtype=object))
+    r = cli("inspect", "scara", f, rc=2)
+    assert f"{f}, field 'tau': " in r.err_lines[0] and "Python objects" in r.err_lines[0], r.err
+    assert "allow_pickle" not in r.err
