@@ -361,3 +361,34 @@ def test_an_npz_member_of_python_objects_is_named(cli, tmp_path):
     r = cli("inspect", "scara", f, rc=2)
     assert f"{f}, field 'tau': " in r.err_lines[0] and "Python objects" in r.err_lines[0], r.err
     assert "allow_pickle" not in r.err
+
+
+# ---- one recording given twice ---------------------------------------------------------------------------------
+def test_a_recording_given_twice_is_refused_and_validation_on_it_warned(cli, tmp_path):
+    """``identify ROBOT a.csv ./a.csv`` (a shell glob and the name typed again) counts every equation twice: the
+    standard deviations come out sqrt(2) too small, silently. Refused before any work, naming both spellings;
+    a split recording is the same when its q file is. ``--validate`` on an identification file is no held-out
+    validation: warned, naming the file."""
+    rec = _scara_recording(tmp_path)
+    other = tmp_path / "sub"
+    other.mkdir()
+    alias = other / ".." / "rec.csv"
+    for cmd in ("identify", "diagnose", "inspect"):
+        r = cli(cmd, "scara", rec, alias, rc=2)
+        assert r.out == "" and "given twice" in r.err_lines[0] and str(alias) in r.err_lines[0], r.err
+    r = cli("identify", "scara", rec, "--loaded", alias, rc=2)
+    assert "given twice" in r.err_lines[0]
+    a = np.loadtxt(rec, delimiter=",", skiprows=1)
+    np.savetxt(tmp_path / "q.csv", a[:, 1:1 + N_J], delimiter=",")
+    np.savetxt(tmp_path / "tau.csv", a[:, 1 + N_J:], delimiter=",")
+    spec = f"q={tmp_path / 'q.csv'},tau={tmp_path / 'tau.csv'},dt={DT}"
+    r = cli("identify", "scara", spec, spec.replace(",dt=", ",fs=").replace(f"{DT}", f"{1 / DT:g}"), rc=2)
+    assert "given twice" in r.err_lines[0]
+    with pytest.warns(DataWarning, match=r"--validate .*rec\.csv is also an identification recording"):
+        r = cli("identify", "scara", rec, "--method", "ols", "--validate", alias)
+    # two different recordings are fine, and so are two split recordings sharing a t= file
+    np.savetxt(tmp_path / "t.csv", a[:, 0], delimiter=",")
+    half = tmp_path / "q2.csv"
+    np.savetxt(half, a[:, 1:1 + N_J], delimiter=",")
+    cli("identify", "scara", f"q={tmp_path / 'q.csv'},tau={tmp_path / 'tau.csv'},t={tmp_path / 't.csv'}",
+        f"q={half},tau={tmp_path / 'tau.csv'},t={tmp_path / 't.csv'}", "--method", "ols")
