@@ -300,11 +300,14 @@ class Target:
         When an existing target may be replaced without ``force``: ``"marked"`` when symoro-gen wrote it
         (:func:`written_by_symoro`, :func:`folder_written_by_symoro`), ``"never"`` (robot files,
         recordings), ``"caller"``: the writer decides (generated packages, ``emit.package``).
+    into : bool
+        A folder the command writes files into, not replaced whole (``diagnose --plots DIR``).
     """
 
     path: Path
     folder: bool = False
     owner: Owner = "marked"
+    into: bool = False
 
 
 def _cli(label: str) -> bool:
@@ -321,12 +324,29 @@ def _force(label: str) -> str:
     return "--force" if _cli(label) else "force=True"
 
 
+def _refuse_folder(label: str, t: Target) -> None:
+    """A file output never replaces a folder, ``--force`` or not (the write would fail once the work is done)."""
+    if not t.folder and t.owner != "caller" and t.path.is_dir() and not t.path.is_symlink():
+        raise OutputError(f"{label} {t.path}: a folder exists there; a file output never replaces a folder, even "
+                          f"with {_force(label)}", f"choose another path for {label.split(' (')[0]}")
+
+
+def _refuse_file(label: str, t: Target) -> None:
+    """A folder output (replaced whole, or written into) never replaces a file, ``--force`` or not; the writers
+    that decide themselves (``owner="caller"``: ``generate``'s package) are left to do so."""
+    if ((t.folder and t.owner != "caller") or t.into) and t.path.exists() and not t.path.is_dir():
+        raise OutputError(f"{label} {t.path}: a file exists there; {label.split(' (')[0]} writes a folder, which "
+                          f"never replaces a file, even with {_force(label)}",
+                          f"choose another path for {label.split(' (')[0]}")
+
+
 def _refuse_existing(label: str, t: Target) -> None:
     p = t.path
     if not (p.exists() or p.is_symlink()):
         return
     if t.owner == "caller":
         return
+    _refuse_folder(label, t)
     if t.owner == "never":
         raise OutputError(f"{label} {p}: the file exists; not overwritten ({_force(label)} replaces it)", _force_hint(label))
     if p.is_dir() and not p.is_symlink():
@@ -352,8 +372,11 @@ def check_replaceable(path: str | os.PathLike[str], force: bool = False, *, fold
     OutputError
         Naming ``label`` and the path.
     """
+    t = Target(Path(path), folder=folder, owner=owner)
+    _refuse_folder(label, t)
+    _refuse_file(label, t)
     if not force:
-        _refuse_existing(label, Target(Path(path), folder=folder, owner=owner))
+        _refuse_existing(label, t)
 
 
 def _target(t: str | os.PathLike[str] | Target) -> Target:
@@ -402,8 +425,10 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike[str] | Target | None],
                 if x.folder and inside(y.path, x.path):
                     raise OutputError(f"{ly} {y.path} is inside the folder {x.path} that {lx} replaces whole",
                                       "give each output its own path")
-    if not force:
-        for label, t in outs:
+    for label, t in outs:
+        _refuse_folder(label, t)
+        _refuse_file(label, t)
+        if not force:
             _refuse_existing(label, t)
 
 

@@ -31,6 +31,7 @@ def data(tmp_path_factory):
     tr = simulate_recording(model, t, q, dq, ddq, chi, noise_q=1e-5, noise_tau=0.01, rng=rng)
     d = tmp_path_factory.mktemp("data")
     write_recording_csv(d / "good.csv", tr)
+    write_recording_csv(d / "loaded.csv", tr)  # --loaded: another recording than the DATA one
     head = (d / "good.csv").read_text().splitlines()[0]
     a = np.column_stack([tr.t, tr.q, tr.tau])
     a[10, 2] = np.nan
@@ -44,7 +45,7 @@ def data(tmp_path_factory):
 
 
 def _case(d: Path):
-    good, nan, afile = str(d / "good.csv"), str(d / "nan.csv"), d / "a_file"
+    good, nan, afile, loaded = str(d / "good.csv"), str(d / "nan.csv"), d / "a_file", str(d / "loaded.csv")
     out_under_file = str(afile / "out.json")
     return {
         # name: (argv, substrings of the error line)
@@ -63,9 +64,9 @@ def _case(d: Path):
         "identify: missing data": (["identify", "scara", str(d / "missing.csv")], ["missing.csv", "file not found"]),
         "identify: NaN in data": (["identify", "scara", nan], ["nan.csv", "rows 11", "q2", "NaN"]),
         "identify: wrong robot for data": (["identify", "rx90", good], ["good.csv", "q*", "tau*", "6 joints"]),
-        "identify: bad --payload": (["identify", "scara", good, "--loaded", good, "--payload", "M5"],
+        "identify: bad --payload": (["identify", "scara", good, "--loaded", loaded, "--payload", "M5"],
                                     ["--payload", "NAME=VALUE"]),
-        "identify: --payload on a robot without payload": (["identify", "scara", good, "--loaded", good,
+        "identify: --payload on a robot without payload": (["identify", "scara", good, "--loaded", loaded,
                                                              "--payload", "M5=1"], ["--payload M5", "not a payload"]),
         "identify: bad --cutoff": (["identify", "scara", good, "--cutoff", "-5"], ["--cutoff -5", "positive"]),
         "identify: bad --decimate": (["identify", "scara", good, "--decimate", "0"], ["--decimate 0"]),

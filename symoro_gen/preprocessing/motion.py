@@ -31,7 +31,8 @@ import numpy as np
 from .trajectory import Trajectory
 
 __all__ = ["NOISE_MOTION_FACTOR", "SATURATION_RUN", "noise_sigma", "motion_rms", "noise_level_joints",
-           "hold_still", "saturation_mask", "still_warnings", "saturation_warnings", "still_text", "saturation_text"]
+           "hold_still", "saturation_mask", "still_warnings", "saturation_warnings", "still_text", "saturation_text",
+           "constant_torque_warnings"]
 
 #: a joint whose position RMS is below this factor x its noise moves at the noise level
 NOISE_MOTION_FACTOR = 30.0
@@ -145,6 +146,25 @@ def saturation_text(tau, tau_max: Sequence[float] | None = None) -> str | None:
            else f"plateaus of >= {SATURATION_RUN} samples")
     what = ", ".join(f"tau{j + 1} at its limit {100 * share[j]:.1f} % of the samples" for j in js)
     return f"{what} ({how})"
+
+
+def constant_torque_warnings(trajectories: Sequence[Trajectory]) -> list[str]:
+    """One warning per recording and joint whose torque is the same in every sample: no measured torque (a
+    channel the logger did not record, the wrong column), naming the file, the joint and the file's column. A
+    measured torque varies (noise at least, and the gravity and inertial loads of any motion) [GB-gains] eq. 4."""
+    out = []
+    for tr in trajectories:
+        tau = np.asarray(tr.tau, float)
+        if tau.shape[0] < 2:
+            continue
+        cols = (tr.meta or {}).get("columns", {}).get("tau")
+        own = cols if cols and not (tr.meta or {}).get("drive_chain") and len(cols) == tau.shape[1] else None
+        for j in np.flatnonzero(np.ptp(tau, axis=0) == 0):
+            col = f" (column {own[j]})" if own else ""
+            out.append(f"{tr.source}: the torque of joint {j + 1}{col} is constant ({tau[0, j]:g} in every sample): "
+                       "not a measured torque (a channel not logged, or the wrong column?); its equations fit "
+                       "nothing")
+    return out
 
 
 def still_warnings(trajectories: Sequence[Trajectory], *, held: bool = False, option: bool = True) -> list[str]:

@@ -27,7 +27,13 @@ from ..description.model import RobotDescription
 from ..errors import ModelError, OptionError, SymoroError, check_option_names
 from ..loader import model_for
 from ..model import IdentificationModel
-from ..preprocessing.motion import hold_still, noise_level_joints, saturation_warnings, still_warnings
+from ..preprocessing.motion import (
+    constant_torque_warnings,
+    hold_still,
+    noise_level_joints,
+    saturation_warnings,
+    still_warnings,
+)
 from ..preprocessing.readers import BAG_KEYS, DataWarning, LoadReport, LogFormat, make_format, read_recordings
 from ..preprocessing.readers.options import FORMAT_KEYS
 from ..preprocessing.trajectory import Trajectory
@@ -293,13 +299,14 @@ def torque_limits(robot) -> tuple[float, ...] | None:
 
 def recording_warnings(robot, trajectories: Sequence[Trajectory], *, held: bool, dropped: bool,
                        unexcited_option: bool = True) -> tuple[str, ...]:
-    """The warnings on recordings a workflow identifies from: joints that move at the noise level and torques at
-    their limit (:mod:`symoro_gen.preprocessing.motion`), each naming the file, the joint and the option that
-    fixes it (``held``: ``--drop-unexcited`` given; ``dropped``: ``--drop-saturated`` given;
+    """The warnings on recordings a workflow identifies from: joints that move at the noise level, torques at
+    their limit and torques that never change (:mod:`symoro_gen.preprocessing.motion`), each naming the file,
+    the joint and the option that fixes it (``held``: ``--drop-unexcited`` given; ``dropped``: ``--drop-saturated`` given;
     ``unexcited_option`` False: the command has no ``--drop-unexcited``). Each is also
     issued as a :class:`~symoro_gen.preprocessing.readers.DataWarning` (printed by the command line)."""
     msgs = (*still_warnings(trajectories, held=held, option=unexcited_option),
-            *saturation_warnings(trajectories, torque_limits(robot), dropped=dropped))
+            *saturation_warnings(trajectories, torque_limits(robot), dropped=dropped),
+            *constant_torque_warnings(trajectories))
     for m in msgs:
         warnings.warn(m, DataWarning, stacklevel=3)
     return msgs

@@ -173,20 +173,46 @@ def _description(robot) -> RobotDescription:
     return robot if isinstance(robot, RobotDescription) else load_robot(robot)
 
 
+_RESULT_HINT = "give the JSON file that `symoro-gen identify ROBOT DATA... --json OUT.json` wrote"
+
+
+def _read_result_file(src: str) -> Any:
+    """The JSON content of a result file; a missing file, a folder, unreadable or non-JSON text is an error
+    naming the file and what it is instead (the line and column of the first JSON error)."""
+    path = Path(src)
+    if path.is_dir():
+        what = "a folder, not a result file"
+    elif not path.exists():
+        what = "file not found"
+    else:
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            what = f"cannot read: {exc.strerror or exc}"
+        except UnicodeDecodeError:
+            what = "not JSON (not even UTF-8 text)"
+        except json.JSONDecodeError as exc:
+            what = f"not JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+    raise _not_a_result(f"{src}: {what}; expected the JSON result of `symoro-gen identify`")
+
+
+def _not_a_result(message: str) -> ModelError:
+    err = ModelError(message)
+    err.hint = _RESULT_HINT
+    return err
+
+
 def _result_dict(result: ResultLike) -> tuple[dict, str]:
     """``(JSON content, source name)`` of an identification result given as a path, a mapping or a results
     object (``to_dict()``)."""
     if isinstance(result, (str, os.PathLike)):
         src = os.fspath(result)
-        try:
-            doc = json.loads(Path(src).read_text())
-        except (OSError, ValueError) as exc:
-            raise ModelError(f"{src}: not a result of `symoro-gen identify` ({exc})") from None
+        doc = _read_result_file(src)
     else:
         src = "the identification result"
         doc = result.to_dict() if hasattr(result, "to_dict") else result
     if not isinstance(doc, dict):
-        raise ModelError(f"{src}: not a result of `symoro-gen identify` (a JSON object is expected)")
+        raise _not_a_result(f"{src}: not a result of `symoro-gen identify` (a JSON object is expected)")
     return doc, src
 
 
@@ -274,7 +300,7 @@ def _identified_parameters(params: ResultLike, robot: RobotDescription) -> dict[
         p = doc["parameters"]
         return {n: v for n, v in zip(p["names"], p["values"]) if v is not None}
     except (KeyError, TypeError) as exc:
-        raise ModelError(f"{src}: not a result of `symoro-gen identify` ({exc})") from None
+        raise _not_a_result(f"{src}: not a result of `symoro-gen identify` (no {exc})") from None
 
 
 @named_options

@@ -50,7 +50,7 @@ from ..identification.iv import identify_iv
 from ..identification.payload import fit_with_known_payload_factors, identify_payload
 from ..identification.physical import identify_physical
 from ..identification.plausibility import Plausibility, body_boxes, check_base, check_standard
-from ..identification.reference import compare_with_reference, format_comparison
+from ..identification.reference import compare_with_reference, format_comparison, read_reference
 from ..identification.render import IdentificationBlocks
 from ..identification.result import basis_text, json_float
 from ..identification.streaming import STREAM_CHUNK_MB, StreamedAssembly, stream_assembly
@@ -530,6 +530,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Any:
     if opts.kind is not None or opts.weighting != "kind":
         raise OptionError(f"--kind and --weighting choose the rows of a floating-base robot; {robot.name} has a "
                           "fixed base")
+    ref_table = read_reference(opts.reference) if opts.reference else None  # refused before any work
     unloaded, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
     unloaded = _positions(opts, robot, unloaded)
     held_back: tuple = ()
@@ -592,8 +593,8 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Any:
     if validation is not None:
         reports += validation.pop("reports")
     rows = None
-    if opts.reference:
-        rows = tuple(compare_with_reference(res, opts.reference))
+    if ref_table is not None:
+        rows = tuple(compare_with_reference(res, ref_table))
     inputs = (*data, *loaded_data, *validate) + ((opts.reference,) if opts.reference else ())
     return IdentifyResults(robot=robot, model=model, options=opts, result=res, data=data, loaded=loaded_data,
                            validate=validate, reports=tuple(reports),

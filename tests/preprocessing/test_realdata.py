@@ -53,7 +53,7 @@ def test_tx40_split_recording_to_joint_side(shared_data):
         warnings.simplefilter("always")
         load_trajectory(spec, robot=robot, base_dir=tx40 / "data")
     msgs = [str(w.message) for w in rec if issubclass(w.category, DataWarning)]
-    assert len(msgs) == 6 and any("pos_read_data.csv, column q4: max |q| = 201.1" in m and "motor-side" in m
+    assert len(msgs) == 6 and any("pos_read_data.csv, column Joint_4 (joint 4): max |q| = 201.1" in m and "motor-side" in m
                                   for m in msgs)
     assert (tr.n_samples, tr.n_joints) == (45000, 6)
     assert tr.dt == pytest.approx(2e-4)

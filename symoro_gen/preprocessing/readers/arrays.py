@@ -85,12 +85,28 @@ def load_mat(path: str, **kwargs) -> dict:
                                  "CSV/NPZ") from None
 
 
+def _npz_member(path: str, z, key: str) -> np.ndarray:
+    """One array of an open ``.npz``; an array of Python objects (pickled) is refused by name, never loaded
+    (unpickling runs code)."""
+    try:
+        return np.asarray(z[key])
+    except ValueError as exc:
+        if "pickle" not in str(exc):
+            raise
+        raise DataFileError([Problem(path, "", key, "an array of Python objects (pickled), not of numbers; not "
+                                     "loaded (unpickling can run code)")],
+                            hint="save numeric arrays: numpy.savez(path, t=t, q=q, tau=tau) with each an (N,) or "
+                                 "(N, n) float array") from None
+
+
 def load_arrays(path: str, kind: str) -> dict[str, np.ndarray]:
     """Every array of an ``.npz`` (``kind="npz"``) or ``.mat`` file by name."""
     if kind == "npz":
         try:
             with np.load(path, allow_pickle=False) as z:
-                return {k: np.asarray(z[k]) for k in z.files}
+                return {k: _npz_member(path, z, k) for k in z.files}
+        except DataFileError:  # a member named (a ValueError too)
+            raise
         except FileNotFoundError:
             raise DataFileError([Problem(path, "", "", "file not found")]) from None
         except _ARCHIVE_ERRORS as exc:

@@ -1044,9 +1044,10 @@ def write_messages(path: str | os.PathLike, topics: Mapping[str, Sequence[BagMes
         The ``rosbags`` library is missing (the ``bags`` extra).
     """
     out = Path(path)
-    check_replaceable(out, force, owner="never", label="bag")
-    _rosbags(str(out))
     suffix = out.suffix.lower()
+    # a path without a storage file's suffix is a rosbag2 folder (a folder output)
+    check_replaceable(out, force, owner="never", label="bag", folder=suffix not in (".bag", ".mcap", ".db3"))
+    _rosbags(str(out))
     kind = {".bag": "ros1", ".mcap": "mcap", ".db3": "sqlite3"}.get(suffix, storage)
     if kind not in ("ros1", "mcap", "sqlite3"):
         raise ValueError(f"storage {storage!r}: expected 'mcap' or 'sqlite3'")

@@ -706,43 +706,62 @@ def step_regime_changes(t, irregular=None, *, window: int = REGIME_WINDOW, tol: 
 # ---------------------------------------------------------------------------------------------
 # units
 # ---------------------------------------------------------------------------------------------
-def _position_checks(file: str, t: np.ndarray, q: np.ndarray, types: list[int], dt: float, lim: DataChecks
-                     ) -> list[str]:
+def _column_label(role: str, j: int, names: Sequence[str] | None) -> str:
+    """How a warning names joint ``j``'s (0-based) column of a role: the file's own name of it (``pos_0
+    (joint 1)``; an array's ``positions[joint 1]``), ``q1`` when the file calls it so or when the values are
+    not one column of the file (the drive chain mixed them)."""
+    own = f"{role}{j + 1}"
+    if names is None or j >= len(names) or names[j] == own:
+        return own
+    return names[j] if "joint" in names[j] else f"{names[j]} (joint {j + 1})"
+
+
+def _position_checks(file: str, t: np.ndarray, q: np.ndarray, types: list[int], dt: float, lim: DataChecks,
+                     names: Sequence[str] | None = None) -> list[str]:
     msgs: list[str] = []
     for j in range(q.shape[1]):
+        col = _column_label("q", j, names)
         qa = np.abs(q[:, j])
         if types[j] == 1:
             if qa.max() > lim.max_abs_prismatic:
-                msgs.append(f"{file}, column q{j + 1}: max |q| = {qa.max():.4g} > {lim.max_abs_prismatic:g} m "
+                msgs.append(f"{file}, column {col}: max |q| = {qa.max():.4g} > {lim.max_abs_prismatic:g} m "
                             "for a prismatic joint: positions in mm? (expected m; --mm reads millimetres)")
             continue
         if qa.max() > lim.max_abs_position:
-            msgs.append(f"{file}, column q{j + 1}: max |q| = {qa.max():.4g} > {lim.max_abs_position:.4g} rad: "
+            msgs.append(f"{file}, column {col}: max |q| = {qa.max():.4g} > {lim.max_abs_position:.4g} rad: "
                         "positions in degrees (or motor-side without a drive chain)? (expected rad, joint side; "
                         "--deg reads degrees)")
         elif t.size > 2 and dt > 0:
             v = np.abs(np.diff(q[:, j])) / dt
             v99 = float(np.percentile(v, 99))
             if v99 > lim.max_abs_velocity:
-                msgs.append(f"{file}, column q{j + 1}: velocity {v99:.4g} rad/s (99th percentile) > "
+                msgs.append(f"{file}, column {col}: velocity {v99:.4g} rad/s (99th percentile) > "
                             f"{lim.max_abs_velocity:g} rad/s: positions in degrees (--deg) or t not in seconds?")
     return msgs
 
 
 def unit_checks(src_files: Mapping[str, str], t: np.ndarray, q: np.ndarray, tau: np.ndarray,
-                joint_types: Sequence[int] | None, lim: DataChecks) -> list[str]:
-    """Messages of the values that look like unit mix-ups (warned about, kept), naming file and column."""
+                joint_types: Sequence[int] | None, lim: DataChecks,
+                names: Mapping[str, Sequence[str]] | None = None) -> list[str]:
+    """Messages of the values that look like unit mix-ups (warned about, kept), naming file and column.
+
+    ``names``: the file's own names of the ``q`` and ``tau`` columns (a ``--columns`` mapping, a split file's
+    header, an array's key), used in the messages; without them the columns are called ``q1``, ``tau1``...
+    """
+    names = names or {}
     msgs: list[str] = []
     n = q.shape[1]
     types = list(joint_types) if joint_types is not None else [0] * n
     dt = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
     if t.size > 1 and dt > lim.max_dt:
-        msgs.append(f"{src_files['t']}, column t: median sampling period {dt:.6g} s > {lim.max_dt:g} s: "
+        tcol = (names.get("t") or ["t"])[0]
+        msgs.append(f"{src_files['t']}, column {tcol}: median sampling period {dt:.6g} s > {lim.max_dt:g} s: "
                     "time in milliseconds or in samples? (expected seconds)")
-    msgs += _position_checks(src_files["q"], t, q, types, dt, lim)
+    msgs += _position_checks(src_files["q"], t, q, types, dt, lim, names.get("q"))
     ta = np.abs(tau).max(axis=0) if tau.size else np.zeros(n)
     for j in range(n):
         if ta[j] > lim.max_abs_torque:
-            msgs.append(f"{src_files['tau']}, column tau{j + 1}: max |tau| = {ta[j]:.4g} > {lim.max_abs_torque:g} N m: "
+            col = _column_label("tau", j, names.get("tau"))
+            msgs.append(f"{src_files['tau']}, column {col}: max |tau| = {ta[j]:.4g} > {lim.max_abs_torque:g} N m: "
                         "torques in N mm or mN m? (expected N m or N; --tau-scale rescales)")
     return msgs

@@ -76,8 +76,16 @@ def _order_problem(t: np.ndarray) -> tuple[np.ndarray, str]:
 def time_order_hint(t: np.ndarray) -> str:
     """The option that fixes a time column that is not strictly increasing: ``--skip-rows`` for garbage rows at
     the start, ``--drop-bad-rows`` for a few isolated ones, ``--resample`` (splits at the reset) for a clock
-    that restarts."""
-    bad, kind = _order_problem(np.asarray(t, float))
+    that restarts, ``--dt --dt-overrides-time`` for stamps that repeat without ever going back (a clock that
+    ticks more coarsely than the samples come)."""
+    t = np.asarray(t, float)
+    bad, kind = _order_problem(t)
+    d = np.diff(t)
+    if kind == "reset" and not (d < 0).any():
+        period = (t[-1] - t[0]) / (t.size - 1)
+        return (f"{int((d == 0).sum())} repeated time stamp(s), none going back: the clock ticks more coarsely "
+                f"than the samples come; --dt {period:.3g} --dt-overrides-time times each row by the sampling "
+                f"period instead ({period:.3g} s: the file's duration over its rows)")
     if kind == "leading":
         return SKIP_HINT.format(k=int(bad.sum()))
     if kind == "isolated":
@@ -238,7 +246,27 @@ def _time_base(c: RawColumns, vals: dict[str, np.ndarray], keep: np.ndarray, dt:
         _checked_time(c, t, keep, fmt)
         return t
     assert dt is not None  # without a time column dt is required (checked when the columns were chosen)
-    return np.arange(int(keep.sum())) * float(dt)
+    return _dt_time(c, keep, float(dt), fmt)
+
+
+def _dt_time(c: RawColumns, keep: np.ndarray, dt: float, fmt: LogFormat) -> np.ndarray:
+    """The time of the kept rows of a log timed by ``dt``: data row ``k`` is at ``k dt`` (from the first kept
+    one), so that rows dropped inside the recording leave a hole, bridged by ``resample`` and an error
+    without it (as a gap in a time column is), never closed by moving the later samples one step earlier."""
+    rows = np.flatnonzero(keep)
+    holes = np.flatnonzero(np.diff(rows) > 1)
+    if holes.size and not fmt.resample:
+        lines = next((col.lines for col in c.cols.values() if col.lines is not None), None)
+        missing = np.zeros(c.n_rows, bool)
+        for k in holes:
+            missing[rows[k] + 1:rows[k + 1]] = True
+        where = fmt_ranges(runs(missing), lines)
+        raise DataFileError([Problem(c.source, where, "t", f"{int(missing.sum())} row(s) dropped inside a recording "
+                                     f"timed by dt = {dt:g} s (no time column): the samples after them would be "
+                                     "shifted one step earlier per row dropped")],
+                            hint="give --resample to interpolate across the dropped rows (each sample keeps its time); "
+                                 "or fix the rows")
+    return (rows - rows[0]) * dt if rows.size else np.zeros(0)
 
 
 def resample(t: np.ndarray, arrays: dict[str, np.ndarray], h: float, max_gap: float
@@ -284,6 +312,15 @@ def _long_pieces(pieces: list[Piece], source: str, N: int) -> tuple[list[Piece],
     return kept, notes
 
 
+def _own_names(c: RawColumns, qrole: str, drive_chain) -> dict[str, list[str]]:
+    """The file's names of the columns the unit checks see: ``q`` (or ``q_link``), ``tau``, ``t``; none for
+    ``q`` and ``tau`` after a drive chain, whose joint values mix the motor columns (``q_link`` is not mapped)."""
+    roles = {"t": "t", "q": qrole, "tau": "tau"}
+    if drive_chain is not None:
+        roles = {k: v for k, v in roles.items() if k == "t" or v == "q_link"}
+    return {k: c.cols[v].names for k, v in roles.items() if v in c.cols}
+
+
 def _experiments(kept: list[Piece], c: RawColumns, *, n: int, loaded: bool, drive_chain, joint_types,
                  meta: dict[str, Any]) -> list[Trajectory]:
     """One trajectory per piece: drive chain, ``q_link`` for ``q`` (the deflection kept), unit checks."""
@@ -300,9 +337,10 @@ def _experiments(kept: list[Piece], c: RawColumns, *, n: int, loaded: bool, driv
             q = vv["q_link"]
         src = c.source if len(kept) == 1 else f"{c.source} [experiment {k + 1}/{len(kept)}]"
         if k == 0:
-            files = {"t": c.cols["t"].file if "t" in c.cols else c.source, "q": c.cols["q"].file,
+            qrole = "q_link" if "q_link" in vv else "q"
+            files = {"t": c.cols["t"].file if "t" in c.cols else c.source, "q": c.cols[qrole].file,
                      "tau": c.cols["tau"].file}
-            for msg in unit_checks(files, tt, q, tau, joint_types, DEFAULT_CHECKS):
+            for msg in unit_checks(files, tt, q, tau, joint_types, DEFAULT_CHECKS, _own_names(c, qrole, drive_chain)):
                 warn_data(msg)
         trajs.append(Trajectory(t=tt, q=q, tau=tau, dq=dq, ddq=ddq, source=src, loaded=bool(loaded),
                                 meta={**meta, "experiment": k + 1}, deflection=defl))

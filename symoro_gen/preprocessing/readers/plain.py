@@ -89,7 +89,9 @@ def plain_trajectory(raw: RawColumns, probs: list[Problem], *, n: int, dt: float
         q, tau, dq, ddq = motor_to_joint(drive_chain, q, tau, dq, ddq)
     src_files = {"t": raw.cols["t"].file if "t" in raw.cols else raw.source,
                  "q": raw.cols["q"].file, "tau": raw.cols["tau"].file}
-    for msg in unit_checks(src_files, t, q, tau, joint_types, checks):
+    own = ("t",) if drive_chain is not None else ("t", "q", "tau")  # the drive chain mixes the columns
+    names = {r: raw.cols[r].names for r in own if r in raw.cols}
+    for msg in unit_checks(src_files, t, q, tau, joint_types, checks, names):
         warn_data(msg)
     meta = {
         "format": raw.fmt,

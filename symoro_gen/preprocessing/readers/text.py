@@ -28,11 +28,32 @@ def _delimiter(line: str) -> str | None:
     return None
 
 
+def _unquoted(s: str) -> str:
+    """A field without the double quotes RFC 4180 allows around it (``"q1"`` -> ``q1``)."""
+    return s[1:-1].replace('""', '"').strip() if len(s) >= 2 and s[0] == s[-1] == '"' else s
+
+
 def _number(s: str) -> float | None:
     try:
-        return float(s)
+        return float(_unquoted(s))
     except ValueError:
         return None
+
+
+def _trailing_delimiter(lines: list[str], delim: str | None) -> bool:
+    """The first line (the header, or the first row) and most rows end with the delimiter: a logger's trailing
+    ``,`` (or ``;``, tab) after the last field, not an empty last column. It is then taken off every line
+    that has it (a truncated row without it stays a row with too few fields). With blanks as separators a
+    trailing blank is no field at all."""
+    if delim is None or not lines:
+        return False
+    ends = [ln.rstrip(" \r").endswith(delim) for ln in lines]
+    return ends[0] and 2 * sum(ends[1:]) > len(ends) - 1
+
+
+def _without_trailing(ln: str, delim: str | None) -> str:
+    s = ln.rstrip(" \r")
+    return s[:-1] if delim and s.endswith(delim) else ln
 
 
 def _read_lines(path: str) -> list[str]:
@@ -77,16 +98,25 @@ def read_table(path: str, skip_rows: int = 0) -> Table:
     if first_i is None:
         raise DataFileError([Problem(path, "line 1", "", "empty file (no header, no data)")])
     delim = _delimiter(lines[first_i])
+    rows = [(i + 1, ln) for i, ln in enumerate(lines[first_i:], start=first_i)
+            if ln.strip() and (i == first_i or not ln.lstrip().startswith("#"))]
+    trailing = _trailing_delimiter([ln for _, ln in rows], delim)
+
+    def fields(ln: str) -> list[str]:
+        return [s.strip() for s in (ln.split(delim) if delim else ln.split())]
 
     def split(ln: str) -> list[str]:
-        return [s.strip() for s in (ln.split(delim) if delim else ln.split())]
+        return fields(_without_trailing(ln, delim) if trailing else ln)
 
     head = split(lines[first_i])
     has_header = not all(_number(x) is not None for x in head)
+    if has_header:
+        head = [_unquoted(x) for x in head]
+        rows = rows[1:]
+        if not rows:
+            raise DataFileError([Problem(path, f"header (line {first_i + 1})", "", "no data rows: the file has a "
+                                         "header line and nothing below it (blank and # comment lines aside)")])
     ncol = len(head)
-    start = first_i + 1 if has_header else first_i
-    rows = [(i + 1, ln) for i, ln in enumerate(lines[start:], start=start)
-            if ln.strip() and not ln.lstrip().startswith("#")]
     notes = []
     if skip_rows:
         if skip_rows >= len(rows):
@@ -99,7 +129,7 @@ def read_table(path: str, skip_rows: int = 0) -> Table:
         if not has_header:  # the skipped rows do not set the number of fields
             ncol = len(split(rows[0][1]))
     N = len(rows)
-    body = [ln for _, ln in rows]
+    body = [_without_trailing(ln, delim) if trailing else ln for _, ln in rows]
     tab = Table(path, head if has_header else None, np.full((N, ncol), np.nan), np.array([i for i, _ in rows], int),
                 np.zeros(N, bool), np.zeros((N, ncol), bool), first_line=first_i + 1 if has_header or not N
                 else int(rows[0][0]), notes=notes)
@@ -114,7 +144,7 @@ def read_table(path: str, skip_rows: int = 0) -> Table:
             return tab
     except ValueError:
         pass
-    _parse_rows(tab, body, split)
+    _parse_rows(tab, body, fields)
     return tab
 
 
