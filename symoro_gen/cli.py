@@ -211,43 +211,6 @@ def check_command_outputs(args) -> None:
         check_outputs(outputs, command_inputs(args), force=bool(getattr(args, "force", False)))
 
 
-def _recordings(args, attr: str) -> list[tuple[str, str]]:
-    """``(argument, file that identifies the recording)`` of a DATA-like option: the file itself, or a split
-    recording's ``q=`` file (two recordings may share a ``t=`` file)."""
-    from .preprocessing.readers import parse_data_spec
-
-    out = []
-    for item in getattr(args, attr, None) or []:
-        try:
-            files = parse_data_spec(item).files
-        except SymoroError:
-            files = {}  # the command says what is wrong with it
-        out.append((str(item), str(files.get("q", item))))
-    return out
-
-
-def check_repeated_recordings(args) -> None:
-    """One recording given twice among DATA and ``--loaded`` (a shell glob and the name typed again) would count
-    its equations twice, the standard deviations sqrt(2) too small: refused before any work. A ``--validate``
-    recording that is also an identification one is no held-out validation: warned about."""
-    if getattr(args, "command", "") not in ("identify", "diagnose", "inspect"):
-        return
-    from .atomic import same_file
-
-    ident = [("DATA", *r) for r in _recordings(args, "data")] + [("--loaded", *r) for r in _recordings(args, "loaded")]
-    for i, (la, a, fa) in enumerate(ident):
-        for lb, b, fb in ident[i + 1:]:
-            if Path(fa).exists() and same_file(fa, fb):
-                raise OptionError(f"{lb} {b}: that recording is given twice (also as {la} {a}): its equations would "
-                                  "count twice and the standard deviations come out sqrt(2) too small")
-    for v, fv in _recordings(args, "validate"):
-        if any(Path(fa).exists() and same_file(fa, fv) for _, _, fa in ident):
-            from .preprocessing.readers import DataWarning
-
-            warnings.warn(f"--validate {v} is also an identification recording: its errors are not on held-out "
-                          "data", DataWarning, stacklevel=2)
-
-
 def _os_error_message(exc: OSError, args) -> str:
     """``cannot write OUT: reason`` when the failure is about an output the user named."""
     names = [str(x) for x in (exc.filename, exc.filename2) if x is not None]
@@ -346,7 +309,6 @@ def main(argv=None) -> int:
             warnings.formatwarning = _format_warning
             _check_options(args)
             check_command_outputs(args)
-            check_repeated_recordings(args)
             with progress_mode("off" if args.quiet else "auto"):
                 status = int(args.func(args) or 0)
             sys.stdout.flush()

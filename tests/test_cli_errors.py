@@ -174,3 +174,17 @@ def test_closed_pipe_is_not_an_error(cli):
     p.stdout.close()  # nobody reads
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141 and err == "", err
+
+
+def test_a_misspelt_robot_name_gets_the_nearest_and_the_help_shows_each_geometry_choice_once(cli, tmp_path):
+    """``LWR4`` or ``rx9`` for a robot: the error names the nearest known robot (a name far from all gets the list
+    only); ``identify --help`` shows the --geometry choices once each (argparse printed the accepted spellings,
+    both orders of the pair included)."""
+    for typed, near in (("LWR4", "lwr4"), ("rx9", "rx90")):
+        r = cli("identify", typed, tmp_path / "x.csv", rc=2)
+        assert f"did you mean {near}?" in r.err, r.err
+    r = cli("identify", "zzzz", tmp_path / "x.csv", rc=2)
+    assert "did you mean" not in r.err and "known robots: lwr4" in r.err
+    out = cli.subprocess("identify", "--help").stdout
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith("--geometry "))
+    assert line.count("joint_zero") == 2 and "length,joint_zero" not in line, line

@@ -114,6 +114,7 @@ def add_parser(sub) -> None:
                         "children (plus a margin; so its centre of mass too) and its mass within a factor 3 of a "
                         "non-zero nominal mass (docs/plausibility.md)")
     p.add_argument("--geometry", choices=("joint_zero", "length", "joint_zero,length", "length,joint_zero"),
+                   metavar="joint_zero|length|joint_zero,length",
                    help="also identify geometric parameters: joint_zero = the encoder zeros of the joints torque "
                         "data can see, length = the MDH lengths d, r it can see (joint_zero,length: both; "
                         "Gauss-Newton alternating with the linear fit; the others are reported as not "

@@ -5,6 +5,7 @@ naming file, frame and field.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import math
 import os
@@ -64,8 +65,10 @@ def resolve_robot_path(name_or_path: str | os.PathLike) -> Path:
     cand = robots_dir() / f"{name_or_path}.toml"
     if not cand.exists():
         known = sorted(x.stem for x in robots_dir().glob("*.toml"))
+        near = difflib.get_close_matches(str(name_or_path).lower(), known, n=1, cutoff=0.6)
+        mean = f"did you mean {near[0]}? " if near else ""
         raise RobotFileError(
-            [Problem(str(name_or_path), "", "", f"no such robot; known robots: {', '.join(known) or 'none'}")]
+            [Problem(str(name_or_path), "", "", f"no such robot; {mean}known robots: {', '.join(known) or 'none'}")]
         )
     return cand
 

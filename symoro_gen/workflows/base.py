@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..atomic import check_outputs, json_output, write_output_text
+from ..atomic import check_outputs, json_output, same_file, write_output_text
 from ..description.model import RobotDescription
 from ..errors import ModelError, OptionError, SymoroError, check_option_names
 from ..loader import model_for
@@ -34,7 +34,15 @@ from ..preprocessing.motion import (
     saturation_warnings,
     still_warnings,
 )
-from ..preprocessing.readers import BAG_KEYS, DataWarning, LoadReport, LogFormat, make_format, read_recordings
+from ..preprocessing.readers import (
+    BAG_KEYS,
+    DataWarning,
+    LoadReport,
+    LogFormat,
+    make_format,
+    parse_data_spec,
+    read_recordings,
+)
 from ..preprocessing.readers.options import FORMAT_KEYS
 from ..preprocessing.trajectory import Trajectory
 from ..report.document import report_targets
@@ -261,6 +269,47 @@ def listed(x) -> tuple:
             isinstance(x, tuple) and len(x) == 3 and not all(_is_path(i) for i in x)):
         return (x,)
     return tuple(x)
+
+
+def _recording_key(item) -> tuple[str, Any]:
+    """What identifies a recording: the file (a split recording's ``q=`` file: two recordings may share a ``t=``
+    file), or the object given in memory."""
+    if not _is_path(item):
+        return ("object", id(item))
+    try:
+        return ("file", str(parse_data_spec(item).files.get("q", item)))
+    except SymoroError:
+        return ("file", str(item))  # the reader says what is wrong with it
+
+
+def _same_recording(a: tuple[str, Any], b: tuple[str, Any]) -> bool:
+    if a[0] != b[0]:
+        return False
+    return a[1] == b[1] if a[0] == "object" else (Path(a[1]).exists() and same_file(a[1], b[1]))
+
+
+def refuse_repeated_recordings(data: Sequence, loaded: Sequence = (), validate: Sequence = ()) -> None:
+    """One recording given twice among the identification and the loaded data (a shell glob and the name typed
+    again, one in-memory recording listed twice) would count its equations twice and its standard deviations
+    come out sqrt(2) too small: refused before it is read. A validation recording that is also an identification
+    one is no held-out validation: warned about."""
+    ident = [("identification", it, _recording_key(it), k) for k, it in enumerate(data)]
+    ident += [("loaded", it, _recording_key(it), k) for k, it in enumerate(loaded)]
+
+    def shown(k: int) -> str:
+        what, item, _, pos = ident[k]
+        return f"{what} data " + (str(item) if _is_path(item) else f"item {pos + 1} (in memory)")
+
+    for i, (_, _, ka, _) in enumerate(ident):
+        for j in range(i + 1, len(ident)):
+            if _same_recording(ka, ident[j][2]):
+                raise OptionError(f"{shown(j)}: that recording is given twice (also as {shown(i)}): its equations "
+                                  "would count twice and the standard deviations come out sqrt(2) too small")
+    for v in validate:
+        kv = _recording_key(v)
+        if any(_same_recording(ka, kv) for _, _, ka, _ in ident):
+            warnings.warn(f"validation recording {v if _is_path(v) else '(in memory)'} is also an identification "
+                          "recording: its errors are not on held-out data", DataWarning, stacklevel=3)
 
 
 def as_trajectories(data, fmt: LogFormat | None, robot, *, loaded: bool = False

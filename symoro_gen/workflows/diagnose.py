@@ -53,6 +53,7 @@ from .base import (
     listed,
     provenance,
     recording_warnings,
+    refuse_repeated_recordings,
     resolve_robot,
     torque_limits,
 )
@@ -327,6 +328,7 @@ def _run(robot_like, data, validate, loaded_data, opts: DiagnoseOptions) -> Any:
                               "not --validate (the loop validates on the last share of each log), --loaded or "
                               "--payload (the logs have no payload columns)")
         return diagnose_floating_logs(robot, model, data, opts)
+    refuse_repeated_recordings(data, loaded_data, validate)
     ident, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
     loaded, rep_l = (as_trajectories(list(loaded_data), opts.data_format, robot, loaded=True)
                      if loaded_data else ((), ()))

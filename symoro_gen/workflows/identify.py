@@ -74,6 +74,7 @@ from .base import (
     listed,
     provenance,
     recording_warnings,
+    refuse_repeated_recordings,
     resolve_robot,
     torque_limits,
 )
@@ -531,6 +532,7 @@ def _run(robot_like, data, validate, loaded_data, opts: IdentifyOptions) -> Any:
         raise OptionError(f"--kind and --weighting choose the rows of a floating-base robot; {robot.name} has a "
                           "fixed base")
     ref_table = read_reference(opts.reference) if opts.reference else None  # refused before any work
+    refuse_repeated_recordings(data, loaded_data, validate)
     unloaded, reports = as_trajectories(list(data), opts.data_format, robot, loaded=False)
     unloaded = _positions(opts, robot, unloaded)
     held_back: tuple = ()

@@ -23,7 +23,17 @@ from ..preprocessing.inspect import Inspection, inspect_recordings, inspection_r
 from ..preprocessing.readers import LogFormat
 from ..preprocessing.trajectory import Trajectory
 from ..report.document import write_report_files
-from .base import SCHEMA_VERSION, DataLike, Options, Results, as_trajectories, listed, provenance, resolve_robot
+from .base import (
+    SCHEMA_VERSION,
+    DataLike,
+    Options,
+    Results,
+    as_trajectories,
+    listed,
+    provenance,
+    refuse_repeated_recordings,
+    resolve_robot,
+)
 
 __all__ = ["InspectOptions", "InspectResults", "inspect"]
 
@@ -114,6 +124,7 @@ def inspect(robot, data: DataLike, *, options: InspectOptions | None = None, **k
     items = listed(data)
     if not items:
         raise OptionError("inspect: no data given")
+    refuse_repeated_recordings(items)
     trajs, reports = as_trajectories(list(items), opts.data_format, desc, loaded=False)
     insp = inspect_recordings(model, trajs, reports, cutoff_hz=opts.cutoff, n_d=opts.decimate)
     return InspectResults(robot=desc, model=model, options=opts, inspection=insp, trajectories=tuple(trajs),

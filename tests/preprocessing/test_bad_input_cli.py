@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -384,7 +385,7 @@ def test_a_recording_given_twice_is_refused_and_validation_on_it_warned(cli, tmp
     spec = f"q={tmp_path / 'q.csv'},tau={tmp_path / 'tau.csv'},dt={DT}"
     r = cli("identify", "scara", spec, spec.replace(",dt=", ",fs=").replace(f"{DT}", f"{1 / DT:g}"), rc=2)
     assert "given twice" in r.err_lines[0]
-    with pytest.warns(DataWarning, match=r"--validate .*rec\.csv is also an identification recording"):
+    with pytest.warns(DataWarning, match=r"validation recording .*rec\.csv is also an identification recording"):
         r = cli("identify", "scara", rec, "--method", "ols", "--validate", alias)
     # two different recordings are fine, and so are two split recordings sharing a t= file
     np.savetxt(tmp_path / "t.csv", a[:, 0], delimiter=",")
@@ -392,3 +393,30 @@ def test_a_recording_given_twice_is_refused_and_validation_on_it_warned(cli, tmp
     np.savetxt(half, a[:, 1:1 + N_J], delimiter=",")
     cli("identify", "scara", f"q={tmp_path / 'q.csv'},tau={tmp_path / 'tau.csv'},t={tmp_path / 't.csv'}",
         f"q={half},tau={tmp_path / 'tau.csv'},t={tmp_path / 't.csv'}", "--method", "ols")
+
+
+def test_a_recording_given_twice_from_python_is_refused(tmp_path):
+    """The library calls refuse a recording given twice as the commands do (a path and another spelling of it,
+    one in-memory recording listed twice, a file among the identification and the loaded data), before reading
+    it; two distinct recordings with the same samples are two experiments; validation on an identification
+    recording is warned about."""
+    import symoro_gen
+    from symoro_gen.errors import OptionError
+
+    rec = _scara_recording(tmp_path)
+    (tmp_path / "sub").mkdir()
+    alias = tmp_path / "sub" / ".." / "rec.csv"
+    for call in (symoro_gen.identify, symoro_gen.diagnose, symoro_gen.inspect):
+        with pytest.raises(OptionError, match="given twice") as exc:
+            call("scara", [rec, alias])
+        assert str(alias) in str(exc.value)
+    (tr,), _ = read_recording(rec, n_joints=N_J)
+    with pytest.raises(OptionError, match=r"identification data item 2 \(in memory\): that recording is given twice"):
+        symoro_gen.identify("scara", [tr, tr], method="ols")
+    with pytest.raises(OptionError, match=r"loaded data .*given twice"):
+        symoro_gen.identify("scara", rec, loaded=alias, method="ols")
+    copy = tmp_path / "copy.csv"
+    copy.write_bytes(Path(rec).read_bytes())
+    symoro_gen.identify("scara", [rec, copy], method="ols")      # two files: two experiments, as given (no error)
+    with pytest.warns(DataWarning, match=r"validation recording .*rec\.csv is also an identification recording"):
+        symoro_gen.identify("scara", rec, validate=alias, method="ols")
