@@ -194,6 +194,16 @@ def test_diagnose_command_matches_the_golden_output(inputs, diagnosed):
     assert _normalise_text(text, a.parent) == _normalise_text((GOLDEN / "diagnose.txt").read_text(), "/tmp/golden/in")
 
 
+def test_diagnose_report_says_what_the_text_says_when_nothing_is_added(diagnosed, tmp_path):
+    """The HTML report of a diagnosis that adds nothing gives the text's reason, on the held-out acceptance data
+    (the loop never reads the validation data)."""
+    pytest.importorskip("matplotlib")
+    text, _, _, res = diagnosed
+    sentence = next(ln for ln in text.splitlines() if ln.startswith("No effect added"))
+    assert "acceptance" in sentence
+    assert sentence in res.report(tmp_path / "d.html").read_text()
+
+
 def test_diagnose_api_is_the_command(diagnosed):
     text, written, plots, res = diagnosed
     assert isinstance(res, symoro_gen.DiagnoseResults) and res.options == symoro_gen.DiagnoseOptions()

@@ -138,7 +138,7 @@ def diagnosis_blocks(diag, notes: list, *, plots: bool = True, max_points: int =
                 B.append(Paragraph(f"Effect {i} ({e.kind} on {_effect_who(e)}): " + " — ".join(lines)))
     else:
         B.append(Paragraph("No effect added: no candidate was significant on the identification data and better "
-                           "than noise on the validation data."))
+                           "than noise on the held-out acceptance data (the end of each identification experiment)."))
     for r in sorted({c.round for c in diag.tried}):
         best = sorted((c for c in diag.tried if c.round == r and c.score is not None), key=lambda c: -c.score)
         best = best[:N_CANDIDATES]
