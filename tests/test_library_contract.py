@@ -328,3 +328,15 @@ def test_every_flag_of_the_command_has_its_python_name(command):
         names |= set(DATA_FORMAT_OPTIONS)
     outputs = {"json", "report", "plots", "plot", "robot_out", "force", "quiet", "debug"}
     assert flags - names - outputs == set()
+
+
+def test_one_recordings_arrays_given_as_a_list_get_the_tuple_hint():
+    """``identify(robot, [t, q, tau])``: a list is several recordings, so its first item is a bare array; the
+    error says to give one recording's arrays as a tuple, and the tuple is then read."""
+    t = np.arange(400) * 0.01
+    q = 0.5 * np.sin(np.outer(t, [1.0, 1.3, 0.7, 1.9]))
+    q[:, 2] *= 0.1
+    tau = np.cos(np.outer(t, [1.1, 0.9, 1.7, 1.2]))
+    with pytest.raises(OptionError, match=r"got ndarray: a list is read as several recordings; give one .*tuple"):
+        symoro_gen.inspect("scara", [t, q, tau])
+    assert symoro_gen.inspect("scara", (t, q, tau)).trajectories[0].n_samples == t.size

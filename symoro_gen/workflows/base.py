@@ -245,8 +245,10 @@ def _trajectory_of(item, n: int, loaded: bool, k: int) -> Trajectory:
     elif isinstance(item, tuple) and len(item) == 3:
         t, q, tau = item
     else:
+        hint = (": a list is read as several recordings; give one recording's arrays as a (t, q, tau) tuple"
+                if isinstance(item, np.ndarray) else "")
         raise OptionError(f"data item {k + 1}: expected a path, a Trajectory, a (t, q, tau) tuple or a mapping "
-                          f"with those keys, got {type(item).__name__}")
+                          f"with those keys, got {type(item).__name__}{hint}")
     t, q, tau = (np.asarray(a, float) for a in (t, q, tau))
     q, tau = (a.reshape(-1, 1) if a.ndim == 1 else a for a in (q, tau))
     if t.ndim != 1 or q.shape != (t.size, n) or tau.shape != (t.size, n):
