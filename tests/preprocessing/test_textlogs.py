@@ -351,3 +351,18 @@ def test_inspect_report_lists_the_outlier_steps(cli, tmp_path):
     cli("--quiet", "inspect", "scara", f, "--resample", "--report", html)
     page = html.read_text()
     assert "Time steps as logged" in page and "4: 601: 0.0088, 1201: 0.0088" in page and "splits the file" in page
+
+
+@pytest.mark.parametrize("t0, h", [(0.1, 0.1), (0.3, 0.01), (12.345, 0.002), (1.1, 0.0002)])
+def test_resampling_a_uniform_log_keeps_its_last_sample(t0, h):
+    """Stamps written as decimals ``t0 + k h`` (as a logger prints them): the uniform grid's last point may pass
+    the last stamp by rounding; it is that stamp's sample, kept (it was dropped in about a quarter of such
+    logs), and every resampled value is the logged one."""
+    from symoro_gen.preprocessing.readers.logs import resample
+
+    for n in (7, 100, 333, 1001):
+        t = np.array([float(f"{t0 + k * h:.10g}") for k in range(n)])
+        x = {"q": np.sin(3 * t)[:, None], "tau": np.cos(2 * t)[:, None]}
+        (grid, seg), = resample(t, x, h, 10 * h)[0]
+        assert grid.size == n, (t0, h, n)
+        assert np.allclose(seg["q"][:, 0], x["q"][:, 0], atol=1e-9) and np.allclose(seg["tau"], x["tau"], atol=1e-9)

@@ -283,14 +283,17 @@ def resample(t: np.ndarray, arrays: dict[str, np.ndarray], h: float, max_gap: fl
             continue
         m = int(math.floor((ts[-1] - ts[0]) / h + 1e-9)) + 1
         grid = ts[0] + h * np.arange(m)
-        grid = grid[grid <= ts[-1]]
+        # the last grid point may pass the last stamp by rounding (ts[0] + h (m - 1) for a stamp written as
+        # k h): it is that stamp's sample, not one past the recording
+        grid = grid[grid <= ts[-1] + 1e-9 * h]
+        at = np.minimum(grid, ts[-1])
         seg = {}
         for role, v in arrays.items():
             x = v[a:b]
             if role in ("q", "q_link") and ts.size >= 4:
-                seg[role] = scipy.interpolate.CubicSpline(ts, x, axis=0)(grid)
+                seg[role] = scipy.interpolate.CubicSpline(ts, x, axis=0)(at)
             else:
-                seg[role] = scipy.interpolate.interp1d(ts, x, axis=0, assume_sorted=True)(grid)
+                seg[role] = scipy.interpolate.interp1d(ts, x, axis=0, assume_sorted=True)(at)
         out.append((grid, seg))
     return out, int((d > max_gap).sum())
 
