@@ -156,12 +156,16 @@ class Inspection:
 
 
 def _at_bound(x: np.ndarray) -> float:
-    """Share of the samples equal to the column's minimum or maximum (values stuck at a bound)."""
+    """Share of the samples stuck at the column's minimum or maximum: the samples at an extreme that more than
+    one sample reaches (a plateau, as a clipped signal makes); a single sample at each extreme, as every signal
+    has, counts as none."""
     lo, hi = x.min(), x.max()
     if hi - lo <= 0:
         return 1.0
     tol = 1e-9 * (hi - lo)
-    return float(np.mean((x <= lo + tol) | (x >= hi - tol)))
+    at_lo, at_hi = x <= lo + tol, x >= hi - tol
+    stuck = (at_lo if at_lo.sum() > 1 else False) | (at_hi if at_hi.sum() > 1 else False)
+    return float(np.mean(stuck))
 
 
 def _experiment_stats(tr: Trajectory, cutoff_hz, n_d) -> ExperimentStats:
