@@ -420,3 +420,15 @@ def test_a_recording_given_twice_from_python_is_refused(tmp_path):
     symoro_gen.identify("scara", [rec, copy], method="ols")      # two files: two experiments, as given (no error)
     with pytest.warns(DataWarning, match=r"validation recording .*rec\.csv is also an identification recording"):
         symoro_gen.identify("scara", rec, validate=alias, method="ols")
+
+
+@pytest.mark.parametrize("header, named", [("t,q1,q1,q3,q4,tau1,tau2,tau3,tau4", "q1 (columns 2 and 3)"),
+                                           ("t,q1,q2,q2,q3,q4,tau1,tau2,tau3,tau4", "q2 (columns 3 and 4)")])
+def test_a_header_naming_a_joint_twice_is_refused_naming_both_columns(cli, tmp_path, header, named):
+    """``q1,q1``: was reported as 'missing q2'; ``q2,q2`` beside q1..q4: one of the two was read, silently. Either
+    way the file cannot say which column is the joint's: an error naming the name and both columns."""
+    width = header.count(",") + 1
+    rows = np.column_stack([np.arange(50) * DT] + [np.zeros(50)] * (width - 1))
+    f = _write(tmp_path / "dup.csv", header.split(","), rows)
+    r = cli("inspect", "scara", f, rc=2)
+    assert "names a q column twice" in r.err and named in r.err and "dup.csv" in r.err, r.err

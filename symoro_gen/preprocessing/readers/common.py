@@ -305,11 +305,19 @@ def _template_columns(path: str, names: list[str], n: int, role: str, spec: str,
                       ) -> list[int] | None:
     where = "header (line 1)"
     rx = template_regex(spec)
-    found = {}
+    found: dict[int, int] = {}
+    repeated: list[str] = []
     for i, nm in enumerate(names):
         m = rx.match(nm)
         if m:
-            found[int(m.group(1))] = i
+            j = int(m.group(1))
+            if j in found:   # which of the two is the joint's? the file cannot say: neither is read
+                repeated.append(f"{spec.format(j=j)} (columns {found[j] + 1} and {i + 1})")
+            found[j] = i
+    if repeated:
+        probs.append(Problem(path, where, spec.replace("{j}", "*"),
+                             f"the header names a {role} column twice: {', '.join(repeated)}"))
+        return None
     if not found:
         if role in ("q", "tau"):
             probs.append(Problem(path, where, spec.replace("{j}", "*"),
