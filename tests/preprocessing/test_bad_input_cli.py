@@ -432,3 +432,17 @@ def test_a_header_naming_a_joint_twice_is_refused_naming_both_columns(cli, tmp_p
     f = _write(tmp_path / "dup.csv", header.split(","), rows)
     r = cli("inspect", "scara", f, rc=2)
     assert "names a q column twice" in r.err and named in r.err and "dup.csv" in r.err, r.err
+
+
+def test_an_unknown_format_lists_every_suffix_the_readers_read(cli, tmp_path):
+    """The unknown-format error lists every suffix a reader takes (it omitted .tsv, .dat and .pq)."""
+    from symoro_gen.preprocessing.readers.arrays import ARRAY_SUFFIXES
+    from symoro_gen.preprocessing.readers.bag import BAG_SUFFIXES
+    from symoro_gen.preprocessing.readers.parquet import PARQUET_SUFFIXES
+    from symoro_gen.preprocessing.readers.text import TEXT_SUFFIXES
+
+    f = tmp_path / "log.xyz"
+    f.write_text("t,q1\n0,0\n")
+    err = cli("inspect", "scara", f, rc=2).err
+    assert "unknown data format '.xyz'" in err
+    assert all(s in err for s in (*TEXT_SUFFIXES, *ARRAY_SUFFIXES, *PARQUET_SUFFIXES, *BAG_SUFFIXES)), err

@@ -112,9 +112,9 @@ def _read_file(spec: DataSpec, n: int, *, mapping: Mapping | None, selectors: Se
                               skip_rows=skip_rows)
     if suffix in ARRAY_SUFFIXES:
         return read_array_file(file, suffix[1:], n, mapping=mapping, selectors=selectors, dt=dt, probs=probs)
-    raise DataFileError([Problem(file, "", "", f"unknown data format {suffix!r} "
-                                 "(expected .csv, .txt, .npz, .mat, .parquet, a ROS bag .mcap/.db3/.bag or a "
-                                 "q=...,tau=... spec)")])
+    known = ", ".join((*TEXT_SUFFIXES, *ARRAY_SUFFIXES, *PARQUET_SUFFIXES))
+    raise DataFileError([Problem(file, "", "", f"unknown data format {suffix!r} (expected {known}, a ROS bag "
+                                 f"{'/'.join(BAG_SUFFIXES)} or a q=...,tau=... spec)")])
 
 
 def _joint_count(robot, n_joints: int | None) -> int:
