@@ -346,7 +346,6 @@ def _refuse_existing(label: str, t: Target) -> None:
         return
     if t.owner == "caller":
         return
-    _refuse_folder(label, t)
     if t.owner == "never":
         raise OutputError(f"{label} {p}: the file exists; not overwritten ({_force(label)} replaces it)", _force_hint(label))
     if p.is_dir() and not p.is_symlink():

@@ -23,6 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..atomic import check_outputs, json_output, same_file, write_output_text
+from ..description import load_robot
 from ..description.model import RobotDescription
 from ..errors import ModelError, OptionError, SymoroError, check_option_names
 from ..loader import model_for
@@ -205,6 +206,16 @@ class Results:
         """Matplotlib figures of the result (needs the 'plots' extra)."""
         require_matplotlib()
         return self.figures()
+
+
+def robot_description(robot) -> RobotDescription:
+    """The description of ``robot`` as the workflows take it: a :class:`RobotDescription`, a name or robot file
+    (read, no model loaded), or a model (its description, :func:`resolve_robot`)."""
+    if isinstance(robot, RobotDescription):
+        return robot
+    if isinstance(robot, (str, os.PathLike)):
+        return load_robot(robot)
+    return resolve_robot(robot)[0]
 
 
 def resolve_robot(robot) -> tuple[RobotDescription, IdentificationModel]:

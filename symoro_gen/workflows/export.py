@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 from ..atomic import check_outputs, json_output, write_output_text
-from ..description import load_robot
 from ..description.friction_law import with_identified_laws
 from ..description.identity import check_result_robot
 from ..description.mjcf_export import export_mjcf as mjcf_text
@@ -40,6 +39,7 @@ from ..errors import ModelError, OptionError, named_options
 from ..loader import model_for
 from ..report.document import check_report_path, report_targets
 from ..report.plots import require_matplotlib
+from .base import robot_description
 from .export_report import bodies_figure, write_export_report
 from .provenance import SCHEMA_VERSION, provenance_block
 
@@ -167,10 +167,6 @@ class _Values:
     payload: list[float] | None = None
     header: tuple[str, ...] = ()
     sidecar: dict | None = None
-
-
-def _description(robot) -> RobotDescription:
-    return robot if isinstance(robot, RobotDescription) else load_robot(robot)
 
 
 _RESULT_HINT = "give the JSON file that `symoro-gen identify ROBOT DATA... --json OUT.json` wrote"
@@ -317,7 +313,7 @@ def export_urdf(robot, *, params: ResultLike = None, from_result: ResultLike = N
         An identification: every body from a physically consistent standard set whose regrouping gives its
         base parameters (the 'physical' extra); fills :attr:`ExportResults.sidecar`.
     """
-    desc = _description(robot)
+    desc = robot_description(robot)
     if params is not None and from_result is not None:
         raise ModelError("export-urdf: give --from RESULT.json or --params RESULT.json, not both")
     v = _values(desc, from_result, "export-urdf") if from_result is not None else _Values()
@@ -334,7 +330,7 @@ def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.00
     ``timestep`` MuJoCo's [s]."""
     if not (math.isfinite(timestep) and timestep > 0):
         raise OptionError(f"export_mjcf: timestep {timestep!r}: must be a positive number of seconds (MuJoCo's step)")
-    desc = _description(robot)
+    desc = robot_description(robot)
     v = _values(desc, from_result, "export-mjcf") if from_result is not None else _Values()
     if from_result is not None:     # the friction-law scales the identification fitted
         desc = with_identified_laws(desc, _result_dict(from_result)[0])
@@ -347,5 +343,5 @@ def export_mjcf(robot, *, from_result: ResultLike = None, timestep: float = 0.00
 @named_options
 def export_par(robot) -> ExportResults:
     """The robot as a SYMORO+/OpenSYMORO ``.par`` file (``symoro-gen export-par``)."""
-    desc = _description(robot)
+    desc = robot_description(robot)
     return _finish("export-par", desc, par_text(desc), [], _Values())

@@ -19,7 +19,6 @@ import os
 from pathlib import Path
 from typing import Any
 
-from ..description import RobotDescription, load_robot
 from ..errors import DataFileError
 from ..preprocessing.cli import data_block, data_text
 from ..preprocessing.inspect import signal_figures
@@ -28,7 +27,7 @@ from ..preprocessing.readers import read_recording as read_one
 from ..preprocessing.trajectory import Trajectory
 from ..report.document import Figure, Heading, Paragraph, Report, Table, write_report_files
 from ..report.plots import figure_png, require_matplotlib
-from .base import SCHEMA_VERSION, Results, resolve_robot
+from .base import SCHEMA_VERSION, Results, robot_description
 from .provenance import provenance_block
 
 __all__ = ["RecordingResults", "read_recording"]
@@ -115,15 +114,6 @@ def _spec_files(spec: str) -> list[str]:
         return [text]
 
 
-def _description(robot) -> RobotDescription | None:
-    """The robot description of ``robot`` given as the workflows take it (None: none given)."""
-    if robot is None or isinstance(robot, RobotDescription):
-        return robot
-    if isinstance(robot, (str, os.PathLike)):
-        return load_robot(robot)
-    return resolve_robot(robot)[0]
-
-
 def read_recording(path, fmt: LogFormat | None = None, *, robot=None, n_joints: int | None = None,
                    drive_chain=None, loaded: bool = False, start: int = 0, stop: int = -1, base_dir=None,
                    **bag: Any) -> RecordingResults:
@@ -140,7 +130,7 @@ def read_recording(path, fmt: LogFormat | None = None, *, robot=None, n_joints: 
         The reader's pair ``(trajectories, load_report)``, with ``summary()``, ``to_dict()``, ``plot()``,
         ``report(path)``.
     """
-    robot = _description(robot)
+    robot = None if robot is None else robot_description(robot)
     if drive_chain is None and robot is not None:
         drive_chain = robot.drive_chain
     trajectories, load = read_one(path, fmt, robot=robot, n_joints=n_joints, drive_chain=drive_chain,

@@ -26,7 +26,7 @@ __all__ = [
     "DEFAULT_CHECKS", "Column", "Table", "RawColumns", "time_conflict", "warn_data", "runs", "number_runs", "fmt_ranges",
     "fmt_names", "open_problem", "not_text_problem", "malformed_problems", "raise_malformed", "resolve_csv_columns",
     "select_columns", "shared_columns", "table_columns", "check_values", "bad_rows", "check_time", "step_regime_changes",
-    "unit_checks", "StepStats", "step_stats", "out_of_order_rows", "SKIP_HINT",
+    "unit_checks", "unit_check_names", "StepStats", "step_stats", "out_of_order_rows", "SKIP_HINT",
     "LEADING_ROWS", "leading_rows_hint",
 ]
 
@@ -746,6 +746,16 @@ def _position_checks(file: str, t: np.ndarray, q: np.ndarray, types: list[int], 
                 msgs.append(f"{file}, column {col}: velocity {v99:.4g} rad/s (99th percentile) > "
                             f"{lim.max_abs_velocity:g} rad/s: positions in degrees (--deg) or t not in seconds?")
     return msgs
+
+
+def unit_check_names(c: RawColumns, qrole: str = "q", drive_chain=None) -> dict[str, list[str]]:
+    """The file's names of the columns :func:`unit_checks` sees (its ``names``): ``t``, ``q`` (read from the role
+    ``qrole``, ``q`` or ``q_link``) and ``tau``; none for ``q`` and ``tau`` after a drive chain, whose joint values
+    mix the motor columns (``q_link`` is not mapped)."""
+    roles = {"t": "t", "q": qrole, "tau": "tau"}
+    if drive_chain is not None:
+        roles = {k: v for k, v in roles.items() if k == "t" or v == "q_link"}
+    return {k: c.cols[v].names for k, v in roles.items() if v in c.cols}
 
 
 def unit_checks(src_files: Mapping[str, str], t: np.ndarray, q: np.ndarray, tau: np.ndarray,

@@ -39,6 +39,7 @@ from .common import (
     runs,
     step_stats,
     time_conflict,
+    unit_check_names,
     unit_checks,
     warn_data,
 )
@@ -144,12 +145,9 @@ def _unit_joints(fmt: LogFormat, n: int, source: str, joint_types: Sequence[int]
 
 
 def _convert_units(vals: dict[str, np.ndarray], fmt: LogFormat, n: int, source: str,
-                   joints: dict[str, tuple[list[int], list[int]]] | None = None) -> None:
+                   joints: dict[str, tuple[list[int], list[int]]]) -> None:
     """``deg`` (positions to radians) and ``mm`` (prismatic positions to metres) on the joints of each role
-    ``joints`` gives (:func:`_unit_joints`; default: ``deg`` on every joint), and ``tau_scale`` (the logged
-    signal to N m), in place."""
-    if joints is None:
-        joints = {r: (list(range(n)) if fmt.deg else [], []) for r in POSITION_ROLES}
+    ``joints`` gives (:func:`_unit_joints`), and ``tau_scale`` (the logged signal to N m), in place."""
     for r, (deg, mm) in joints.items():
         if r in vals and (deg or mm):
             v = np.array(vals[r], float)
@@ -315,15 +313,6 @@ def _long_pieces(pieces: list[Piece], source: str, N: int) -> tuple[list[Piece],
     return kept, notes
 
 
-def _own_names(c: RawColumns, qrole: str, drive_chain) -> dict[str, list[str]]:
-    """The file's names of the columns the unit checks see: ``q`` (or ``q_link``), ``tau``, ``t``; none for
-    ``q`` and ``tau`` after a drive chain, whose joint values mix the motor columns (``q_link`` is not mapped)."""
-    roles = {"t": "t", "q": qrole, "tau": "tau"}
-    if drive_chain is not None:
-        roles = {k: v for k, v in roles.items() if k == "t" or v == "q_link"}
-    return {k: c.cols[v].names for k, v in roles.items() if v in c.cols}
-
-
 def _experiments(kept: list[Piece], c: RawColumns, *, n: int, loaded: bool, drive_chain, joint_types,
                  meta: dict[str, Any]) -> list[Trajectory]:
     """One trajectory per piece: drive chain, ``q_link`` for ``q`` (the deflection kept), unit checks."""
@@ -343,7 +332,7 @@ def _experiments(kept: list[Piece], c: RawColumns, *, n: int, loaded: bool, driv
             qrole = "q_link" if "q_link" in vv else "q"
             files = {"t": c.cols["t"].file if "t" in c.cols else c.source, "q": c.cols[qrole].file,
                      "tau": c.cols["tau"].file}
-            for msg in unit_checks(files, tt, q, tau, joint_types, DEFAULT_CHECKS, _own_names(c, qrole, drive_chain)):
+            for msg in unit_checks(files, tt, q, tau, joint_types, DEFAULT_CHECKS, unit_check_names(c, qrole, drive_chain)):
                 warn_data(msg)
         trajs.append(Trajectory(t=tt, q=q, tau=tau, dq=dq, ddq=ddq, source=src, loaded=bool(loaded),
                                 meta={**meta, "experiment": k + 1}, deflection=defl))

@@ -27,6 +27,7 @@ from .common import (
     check_time,
     check_values,
     time_conflict,
+    unit_check_names,
     unit_checks,
     warn_data,
 )
@@ -89,9 +90,7 @@ def plain_trajectory(raw: RawColumns, probs: list[Problem], *, n: int, dt: float
         q, tau, dq, ddq = motor_to_joint(drive_chain, q, tau, dq, ddq)
     src_files = {"t": raw.cols["t"].file if "t" in raw.cols else raw.source,
                  "q": raw.cols["q"].file, "tau": raw.cols["tau"].file}
-    own = ("t",) if drive_chain is not None else ("t", "q", "tau")  # the drive chain mixes the columns
-    names = {r: raw.cols[r].names for r in own if r in raw.cols}
-    for msg in unit_checks(src_files, t, q, tau, joint_types, checks, names):
+    for msg in unit_checks(src_files, t, q, tau, joint_types, checks, unit_check_names(raw, "q", drive_chain)):
         warn_data(msg)
     meta = {
         "format": raw.fmt,
